@@ -1,0 +1,37 @@
+#pragma once
+// Loading surfaces and fibres from files, and the checks every loaded mesh goes through.
+#include <string>
+#include <vector>
+
+#include "fibremss/Geometry.h"
+
+namespace fibremss {
+
+/// What the checks found that a run can live with (each a sentence naming file and element).
+struct MeshReport {
+  std::vector<std::string> warnings;  ///< open edges, inconsistent orientation, ...
+  size_t openEdges = 0;               ///< edges used by one triangle only
+  size_t nonManifoldEdges = 0;        ///< edges used by more than two triangles
+  size_t degenerateTriangles = 0;     ///< zero-area or repeated-vertex triangles
+  size_t inconsistentEdges = 0;       ///< edges both of whose triangles run the same way
+};
+
+/// Loads a triangle surface: legacy VTK (.vtk, ASCII or BINARY POLYDATA) by FibreMSS's own
+/// reader, any other format through assimp. Coordinates are scaled by `scale` (file units to
+/// metres). Throws InputError (file, element, expectation) for unreadable input or fatal
+/// defects (NaN/inf, out-of-range indices, no triangles); `report` gets the rest.
+TriangleMesh loadSurface(const std::string& path, double scale = 1.0, MeshReport* report = nullptr);
+
+/// Loads fibre polylines: legacy VTK LINES (two-point segments are chained into polylines)
+/// or OBJ `l` elements. Throws InputError for unreadable input, empty or single-point fibres.
+FibreSet loadFibres(const std::string& path, double scale = 1.0);
+
+/// Checks a surface; throws InputError for fatal defects, returns the warnings.
+MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source);
+
+/// Checks fibres against their muscle surface (points outside it beyond `tolerance` metres
+/// are warnings naming the fibre); throws InputError for NaN/inf or empty fibres.
+std::vector<std::string> checkFibres(const FibreSet& fibres, const TriangleMesh& surface,
+                                     const std::string& source, double tolerance);
+
+}  // namespace fibremss

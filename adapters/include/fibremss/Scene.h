@@ -1,0 +1,59 @@
+#pragma once
+// A scene: bones with motions, muscles, model parameters, collision settings and outputs,
+// read from JSON (a file or a built-in scene) and resolved into the plugin's inputs.
+#include <LinearMath/btTransform.h>
+
+#include <string>
+#include <vector>
+
+#include "fibremss/Parameters.h"
+#include "fibremss/Preparation.h"
+
+namespace fibremss {
+
+/// Rigid motion of one bone over the scene's poses, relative to its rest pose.
+struct BoneMotion {
+  std::vector<btTransform> poses;  ///< one transform per pose (empty: the bone stays at rest)
+};
+
+/// What a run writes (paths relative to the run's --out directory).
+struct OutputSettings {
+  int frameEvery = 1;         ///< write a frame every k-th step (0: none)
+  bool writeSurfaces = true;  ///< deformed muscle surfaces in frames
+  bool writeParticles = true; ///< particles with radii in frames
+  bool writeFibres = true;    ///< deformed fibres in frames
+};
+
+/// A scene resolved into what preparation and simulation take; all SI.
+struct LoadedScene {
+  std::string name;                   ///< scene name (built-in name or file stem)
+  std::string source;                 ///< the file it came from, or "built-in"
+  std::string json;                   ///< the complete scene, every default filled in
+  std::vector<BoneInput> bones;       ///< bones, meshes loaded or generated
+  std::vector<MuscleInput> muscles;   ///< muscles, surfaces and fibres loaded or generated
+  std::vector<BoneMotion> motions;    ///< one per bone
+  int poseCount = 1;                  ///< number of poses (simulation steps) in the motion
+  std::vector<double> poseLabels;     ///< per pose, e.g. the sweep angle in degrees
+  SimulationParameters simulation;    ///< solver settings
+  OutputSettings outputs;             ///< output settings
+
+  /// Transform of bone b at pose p (identity where the bone has no motion).
+  btTransform bonePose(size_t bone, int pose) const;
+};
+
+/// Built-in scene names with a one-line description each.
+struct BuiltInScene {
+  std::string name;
+  std::string description;
+};
+std::vector<BuiltInScene> builtInScenes();
+
+/// The JSON text of a built-in scene (throws InputError for an unknown name).
+std::string exportBuiltInScene(const std::string& name);
+
+/// Loads a scene by built-in name or .json path and applies `key=value` overrides
+/// (e.g. "resolution=40", "simulation.iterations=100"). Throws InputError naming the file
+/// and field for unknown fields, wrong types and bad values.
+LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::string>& overrides = {});
+
+}  // namespace fibremss

@@ -1,0 +1,61 @@
+#pragma once
+// The metrics of one run of one method on one scene: the same fields for FibreMSS,
+// btSoftBody and FEM, written to summary.json by `run` and `compare`.
+#include <LinearMath/btVector3.h>
+
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace fibremss {
+
+/// Median milliseconds per iteration spent in each part of a FibreMSS step (seed 004 Table 1).
+struct PartTiming {
+  double mss = 0;       ///< spring forces + integration
+  double muscleCd = 0;  ///< muscle–muscle collision detection
+  double boneCd = 0;    ///< muscle–bone collision detection
+  double response = 0;  ///< collision response
+  double output = 0;    ///< fibres, surfaces, measures (per iteration share)
+};
+
+/// One run's results. NaN marks a metric that does not apply or was not measured.
+struct RunMetrics {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+
+  std::string scene;       ///< scene name
+  std::string method;      ///< "fibremss", "btsoftbody", "fem", "fibremss:<variant>", ...
+  std::string integrator;  ///< integrator name where it applies
+  size_t particles = 0;           ///< particles / nodes
+  size_t springs = 0;             ///< springs / links / tetrahedra
+  size_t boundaryParticles = 0;   ///< colliding particles
+  size_t boneSpheres = 0;         ///< bone spheres (FibreMSS)
+  int steps = 0;                  ///< simulation steps (poses) run
+  long iterations = 0;            ///< solver iterations in total
+  double msPerStep = kNone;       ///< median wall time of one step
+  double msPerIteration = kNone;  ///< median wall time of one iteration
+  PartTiming timing;              ///< per-part breakdown (FibreMSS)
+  double maxPenetrationMm = kNone;      ///< surface vertices into bones' true meshes
+  double meanPenetrationMm = kNone;     ///< mean over penetrating vertices
+  double volumeChangePct = kNone;       ///< final muscle volume against rest
+  double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
+  double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
+  double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
+  bool nan = false;                     ///< a NaN or inf appeared
+  bool exploded = false;                ///< stability criteria violated
+  int failedStep = -1;                  ///< step where it failed, -1 if none
+  bool interrupted = false;             ///< stopped by the user (Ctrl-C)
+  double peakMemoryMb = kNone;          ///< peak resident set of the process
+  double wallSeconds = 0;               ///< whole run
+
+  /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods).
+  std::vector<std::vector<btVector3>> poseSurfaces;
+};
+
+/// JSON object with the summary keys (snake_case; NaN written as null; no poseSurfaces).
+nlohmann::json toJson(const RunMetrics& metrics);
+/// Reads what toJson wrote (missing keys keep their defaults).
+RunMetrics runMetricsFromJson(const nlohmann::json& object);
+
+}  // namespace fibremss

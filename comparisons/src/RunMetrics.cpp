@@ -1,0 +1,89 @@
+#include "fibremss/RunMetrics.h"
+
+#include <cmath>
+
+namespace fibremss {
+namespace {
+
+nlohmann::json number(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+double numberOr(const nlohmann::json& object, const char* key, double fallback) {
+  auto it = object.find(key);
+  if (it == object.end() || !it->is_number()) return fallback;
+  return it->get<double>();
+}
+
+}  // namespace
+
+nlohmann::json toJson(const RunMetrics& m) {
+  return {
+      {"scene", m.scene},
+      {"method", m.method},
+      {"integrator", m.integrator},
+      {"particles", m.particles},
+      {"springs", m.springs},
+      {"boundary_particles", m.boundaryParticles},
+      {"bone_spheres", m.boneSpheres},
+      {"steps", m.steps},
+      {"iterations", m.iterations},
+      {"ms_per_step", number(m.msPerStep)},
+      {"ms_per_iteration", number(m.msPerIteration)},
+      {"timing",
+       {{"mss", m.timing.mss},
+        {"muscle_cd", m.timing.muscleCd},
+        {"bone_cd", m.timing.boneCd},
+        {"response", m.timing.response},
+        {"output", m.timing.output}}},
+      {"max_penetration_mm", number(m.maxPenetrationMm)},
+      {"mean_penetration_mm", number(m.meanPenetrationMm)},
+      {"volume_change_pct", number(m.volumeChangePct)},
+      {"spring_deviation_ratio", number(m.springDeviationRatio)},
+      {"rms_to_fem_mm", number(m.rmsToFemMm)},
+      {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
+      {"nan", m.nan},
+      {"exploded", m.exploded},
+      {"failed_step", m.failedStep},
+      {"interrupted", m.interrupted},
+      {"peak_memory_mb", number(m.peakMemoryMb)},
+      {"wall_seconds", m.wallSeconds},
+  };
+}
+
+RunMetrics runMetricsFromJson(const nlohmann::json& o) {
+  RunMetrics m;
+  m.scene = o.value("scene", m.scene);
+  m.method = o.value("method", m.method);
+  m.integrator = o.value("integrator", m.integrator);
+  m.particles = o.value("particles", m.particles);
+  m.springs = o.value("springs", m.springs);
+  m.boundaryParticles = o.value("boundary_particles", m.boundaryParticles);
+  m.boneSpheres = o.value("bone_spheres", m.boneSpheres);
+  m.steps = o.value("steps", m.steps);
+  m.iterations = o.value("iterations", m.iterations);
+  m.msPerStep = numberOr(o, "ms_per_step", m.msPerStep);
+  m.msPerIteration = numberOr(o, "ms_per_iteration", m.msPerIteration);
+  if (auto t = o.find("timing"); t != o.end() && t->is_object()) {
+    m.timing.mss = numberOr(*t, "mss", 0);
+    m.timing.muscleCd = numberOr(*t, "muscle_cd", 0);
+    m.timing.boneCd = numberOr(*t, "bone_cd", 0);
+    m.timing.response = numberOr(*t, "response", 0);
+    m.timing.output = numberOr(*t, "output", 0);
+  }
+  m.maxPenetrationMm = numberOr(o, "max_penetration_mm", m.maxPenetrationMm);
+  m.meanPenetrationMm = numberOr(o, "mean_penetration_mm", m.meanPenetrationMm);
+  m.volumeChangePct = numberOr(o, "volume_change_pct", m.volumeChangePct);
+  m.springDeviationRatio = numberOr(o, "spring_deviation_ratio", m.springDeviationRatio);
+  m.rmsToFemMm = numberOr(o, "rms_to_fem_mm", m.rmsToFemMm);
+  m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
+  m.nan = o.value("nan", m.nan);
+  m.exploded = o.value("exploded", m.exploded);
+  m.failedStep = o.value("failed_step", m.failedStep);
+  m.interrupted = o.value("interrupted", m.interrupted);
+  m.peakMemoryMb = numberOr(o, "peak_memory_mb", m.peakMemoryMb);
+  m.wallSeconds = numberOr(o, "wall_seconds", m.wallSeconds);
+  return m;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,40 @@
+#pragma once
+// Accuracy measures shared by every method (FibreMSS, btSoftBody, FEM), so that all are
+// measured the same way (method.md §7; comparisons issue).
+#include <LinearMath/btTransform.h>
+#include <LinearMath/btVector3.h>
+
+#include <span>
+
+#include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
+
+namespace fibremss {
+
+/// Depth of points inside bones' true triangle meshes.
+struct Penetration {
+  double maxMm = 0;        ///< deepest point [mm]
+  double meanMm = 0;       ///< mean depth over the penetrating points [mm] (0 if none)
+  size_t penetrating = 0;  ///< points with depth > 0
+  size_t points = 0;       ///< points tested
+};
+
+/// Penetration of world-space points into each bone (bone b's rest-frame mesh `bones[b]`
+/// placed at `boneTransforms[b]`); a point's depth is max(0, −signed distance), deepest bone.
+Penetration measurePenetration(std::span<const btVector3> points,
+                               std::span<const MeshDistance* const> bones,
+                               std::span<const btTransform> boneTransforms);
+
+/// Merges two penetration results (max of max, mean weighted by penetrating counts).
+Penetration combine(const Penetration& a, const Penetration& b);
+
+/// Volume change of a deformed surface against its rest volume, in percent.
+double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> deformedVertices);
+
+/// Spring-deviation ratio Σ|l − L0| / Σ L0 over `springs` at `positions`.
+double springDeviationRatio(std::span<const Spring> springs, std::span<const btVector3> positions);
+
+/// Root-mean-square distance between corresponding points, in millimetres.
+double rmsDistanceMm(std::span<const btVector3> a, std::span<const btVector3> b);
+
+}  // namespace fibremss

@@ -1,0 +1,73 @@
+#pragma once
+// The prepared, immutable description of muscles and bones (Jolt's "shared settings"): made
+// once by preparation, shared read-only by every simulation instance, never changed by a step.
+// Particle data is structure-of-arrays; everything refers to particles by index.
+#include <LinearMath/btScalar.h>
+#include <LinearMath/btVector3.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "fibremss/Geometry.h"
+
+namespace fibremss {
+
+/// One spring between particles a < b.
+struct Spring {
+  uint32_t a;            ///< first particle index (a < b)
+  uint32_t b;            ///< second particle index
+  btScalar restLength;   ///< L0 [m]
+  btScalar stiffness;    ///< k = κ / L0 [N/m]
+};
+
+/// Bit flags per particle.
+enum ParticleFlag : uint8_t {
+  kBoundary = 1,  ///< closest particle of at least one surface vertex: collides
+  kFixed = 2,     ///< attached to a bone: moves rigidly with it, never integrated
+};
+
+/// A prepared muscle in its rest pose (world coordinates of the rest pose).
+struct MuscleSettings {
+  std::string name;                      ///< muscle name from the scene
+
+  // Particles, structure-of-arrays, all of size particleCount().
+  std::vector<btVector3> restPositions;  ///< rest position [m]
+  std::vector<btScalar> radii;           ///< collision sphere radius [m] (0 if not boundary)
+  std::vector<uint8_t> flags;            ///< ParticleFlag bits
+  std::vector<int32_t> fixedBone;        ///< bone index a fixed particle follows, else -1
+  std::vector<int32_t> nearestBone;      ///< bone whose motion pre-transforms it (-1: none)
+
+  std::vector<uint32_t> boundaryParticles;  ///< indices of boundary particles, ascending
+  std::vector<uint32_t> fixedParticles;     ///< indices of fixed particles, ascending
+
+  btScalar particleMass = 0;  ///< the same for every particle [kg]
+  btScalar damping = 0;       ///< spring damping coefficient c [N·s/m]
+
+  std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
+
+  // Fibres: fibre f is particles fibreParticles[fibreOffsets[f] .. fibreOffsets[f+1]).
+  std::vector<uint32_t> fibreParticles;  ///< particle indices in fibre order
+  std::vector<uint32_t> fibreOffsets{0};  ///< fibreCount()+1 entries
+
+  TriangleMesh restSurface;  ///< the muscle's surface at rest, for output
+  int skinNeighbours = 3;    ///< particles per surface vertex (N closest)
+  std::vector<uint32_t> skinParticles;  ///< restSurface.vertices.size() × skinNeighbours
+  std::vector<btScalar> skinWeights;    ///< weights matching skinParticles (sum to 1 per vertex)
+
+  size_t particleCount() const { return restPositions.size(); }
+  size_t fibreCount() const { return fibreOffsets.size() - 1; }
+  bool isFixed(uint32_t i) const { return flags[i] & kFixed; }
+  bool isBoundary(uint32_t i) const { return flags[i] & kBoundary; }
+};
+
+/// A prepared rigid bone; coordinates are those of the rest pose, which is the bone frame:
+/// the bone's current world transform maps rest coordinates to current ones.
+struct BoneSettings {
+  std::string name;                    ///< bone name from the scene
+  TriangleMesh mesh;                   ///< the true triangle mesh at rest
+  std::vector<btVector3> sphereCentres;  ///< collision spheres, bone frame [m]
+  std::vector<btScalar> sphereRadii;     ///< their radii [m]
+};
+
+}  // namespace fibremss

@@ -1,0 +1,49 @@
+#pragma once
+// Preparation (method.md §2, §3, §6): from bone meshes, muscle surfaces and fibres to the
+// particles, springs, radii, bone spheres and fixed particles a simulation starts from.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/Parameters.h"
+
+namespace fibremss {
+
+/// A bone as given: its closed mesh in the rest pose.
+struct BoneInput {
+  std::string name;              ///< unique name
+  TriangleMesh mesh;             ///< rest-pose mesh [m]
+  BoneSphereParameters spheres;  ///< sphere generation settings
+};
+
+/// A muscle as given: its surface and fibres in the rest pose.
+struct MuscleInput {
+  std::string name;            ///< unique name
+  TriangleMesh surface;        ///< closed surface [m]
+  FibreSet fibres;             ///< polylines from attachment to attachment [m]
+  MuscleParameters parameters; ///< resolution, attachment distance, springs
+};
+
+/// What preparation measured and decided; printed by `fibremss check`.
+struct PreparationReport {
+  double seconds = 0;                 ///< wall time of the whole preparation
+  std::vector<std::string> warnings;  ///< things a user should know (radii shrunk, ...)
+  /// Per muscle: fraction of surface vertices inside some particle sphere (0..1).
+  std::vector<double> surfaceCoverage;
+};
+
+/// Everything a simulation needs, immutable once made.
+struct PreparedScene {
+  std::vector<std::shared_ptr<const BoneSettings>> bones;      ///< same order as the inputs
+  std::vector<std::shared_ptr<const MuscleSettings>> muscles;  ///< same order as the inputs
+  PreparationReport report;
+};
+
+/// Prepares all bodies together (radii shrink needs all of them). `seed` makes the fibre
+/// jitter and sphere thinning reproducible. Throws InputError for unusable input.
+PreparedScene prepareScene(const std::vector<BoneInput>& bones,
+                           const std::vector<MuscleInput>& muscles, uint32_t seed);
+
+}  // namespace fibremss

@@ -1,0 +1,56 @@
+#include "fibremss/Parameters.h"
+
+#include <array>
+#include <utility>
+
+namespace fibremss {
+namespace {
+
+template <typename Enum, size_t N>
+const char* nameOf(const std::array<std::pair<Enum, const char*>, N>& names, Enum value) {
+  for (const auto& [candidate, name] : names)
+    if (candidate == value) return name;
+  return "unknown";
+}
+
+template <typename Enum, size_t N>
+bool valueOf(const std::array<std::pair<Enum, const char*>, N>& names, const std::string& name,
+             Enum& value) {
+  for (const auto& [candidate, candidateName] : names)
+    if (name == candidateName) {
+      value = candidate;
+      return true;
+    }
+  return false;
+}
+
+constexpr std::array<std::pair<SpringLayout, const char*>, 4> kLayouts{{
+    {SpringLayout::NearestNeighbours, "nearest"},
+    {SpringLayout::Delaunay, "delaunay"},
+    {SpringLayout::Lattice6, "lattice6"},
+    {SpringLayout::Lattice26, "lattice26"},
+}};
+constexpr std::array<std::pair<Integrator, const char*>, 2> kIntegrators{{
+    {Integrator::Verlet, "verlet"},
+    {Integrator::SemiImplicitEuler, "semi-implicit-euler"},
+}};
+constexpr std::array<std::pair<StopRule, const char*>, 3> kStopRules{{
+    {StopRule::Iterations, "iterations"},
+    {StopRule::Converged, "converged"},
+    {StopRule::TimeBudget, "budget"},
+}};
+
+}  // namespace
+
+const char* toString(SpringLayout layout) { return nameOf(kLayouts, layout); }
+const char* toString(Integrator integrator) { return nameOf(kIntegrators, integrator); }
+const char* toString(StopRule rule) { return nameOf(kStopRules, rule); }
+bool fromString(const std::string& name, SpringLayout& layout) {
+  return valueOf(kLayouts, name, layout);
+}
+bool fromString(const std::string& name, Integrator& integrator) {
+  return valueOf(kIntegrators, name, integrator);
+}
+bool fromString(const std::string& name, StopRule& rule) { return valueOf(kStopRules, name, rule); }
+
+}  // namespace fibremss
