@@ -62,7 +62,8 @@ struct SimulationParameters {
   bool rebuildEveryStep = false; ///< thesis behaviour: rebuild trees and state each step
   bool muscleMuscle = true;      ///< collide muscles with each other
   bool muscleBone = true;        ///< collide muscles with bones
-  uint32_t seed = 1;             ///< seed for every random choice (jitter, thinning)
+  uint32_t seed = 1;             ///< seed for every random choice (jitter, thinning, noise)
+  btScalar initialNoise = 0;     ///< random displacement of free particles at start [m]
 };
 
 const char* toString(SpringLayout layout);

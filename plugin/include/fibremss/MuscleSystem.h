@@ -1,0 +1,114 @@
+#pragma once
+// The FibreMSS solver: muscles (prepared MuscleSettings plus per-muscle state) and bones
+// (BoneSettings plus a current transform), stepped as in method.md §5. It is independent of
+// any world class; MuscleWorld and MuscleAction put it inside a Bullet world.
+#include <LinearMath/btIDebugDraw.h>
+#include <LinearMath/btTransform.h>
+#include <LinearMath/btVector3.h>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/Parameters.h"
+
+class btCollisionObject;
+
+namespace fibremss {
+
+/// Identifies a muscle in a MuscleSystem; stale after removal (generation changes).
+struct MuscleHandle {
+  uint32_t index = UINT32_MAX;  ///< slot
+  uint32_t generation = 0;      ///< slot generation at creation
+  bool valid() const { return index != UINT32_MAX; }
+};
+
+/// Identifies a bone in a MuscleSystem.
+struct BoneHandle {
+  uint32_t index = UINT32_MAX;  ///< slot
+  uint32_t generation = 0;      ///< slot generation at creation
+  bool valid() const { return index != UINT32_MAX; }
+};
+
+/// Milliseconds spent in each part of the last step, summed over its iterations.
+struct StepTiming {
+  double mss = 0;       ///< spring forces + dt + integration
+  double muscleCd = 0;  ///< muscle–muscle collision detection
+  double boneCd = 0;    ///< muscle–bone collision detection
+  double response = 0;  ///< collision response
+  double output = 0;    ///< fibres, surfaces
+  double total = 0;     ///< the whole step
+};
+
+/// What the last step did.
+struct StepStats {
+  int iterations = 0;            ///< iterations run
+  btScalar lastTimeStep = 0;     ///< dt of the last iteration [s]
+  btScalar meanDisplacement = 0; ///< mean free-particle displacement in the last iteration [m]
+  size_t contacts = 0;           ///< sphere pairs found overlapping in the last iteration
+  StepTiming timing;             ///< per-part wall time
+  bool nan = false;              ///< a NaN or inf appeared
+  bool exploded = false;         ///< a spring beyond 3× its rest length
+};
+
+/// What debugDraw draws (bit flags).
+enum DebugDrawFlag : int {
+  kDrawParticles = 1,    ///< boundary particle spheres
+  kDrawSprings = 2,      ///< springs
+  kDrawFibres = 4,       ///< fibres
+  kDrawBoneSpheres = 8,  ///< bone spheres
+  kDrawContacts = 16,    ///< colliding pairs of the last iteration
+};
+
+class MuscleSystem {
+ public:
+  explicit MuscleSystem(const SimulationParameters& parameters = {});
+  ~MuscleSystem();
+  MuscleSystem(const MuscleSystem&) = delete;
+  MuscleSystem& operator=(const MuscleSystem&) = delete;
+
+  /// Adds a bone. With `body`, its world transform is read at every step (a kinematic
+  /// btRigidBody or any collision object whose transform maps rest to current coordinates);
+  /// without, setBoneTransform moves it.
+  BoneHandle addBone(std::shared_ptr<const BoneSettings> settings,
+                     const btCollisionObject* body = nullptr);
+  void removeBone(BoneHandle bone);
+  /// Target transform (rest → current) reached at the end of the next step.
+  void setBoneTransform(BoneHandle bone, const btTransform& transform);
+  btTransform boneTransform(BoneHandle bone) const;
+
+  /// Adds a muscle; `bones[i]` is the handle of the settings' bone index i (fixedBone,
+  /// nearestBone). Its particles start at their rest positions moved by their nearest bone.
+  MuscleHandle addMuscle(std::shared_ptr<const MuscleSettings> settings,
+                         std::span<const BoneHandle> bones);
+  void removeMuscle(MuscleHandle muscle);
+  bool contains(MuscleHandle muscle) const;
+
+  /// One simulation step: bones move from their last to their target transforms split over
+  /// the iterations; pre-transform; iterations of forces, integration, collision detection and
+  /// response until the stop rule says; then output (fibres, surfaces).
+  void step();
+
+  const StepStats& lastStep() const;
+  SimulationParameters& parameters();
+  const SimulationParameters& parameters() const;
+
+  std::span<const btVector3> positions(MuscleHandle muscle) const;  ///< current particles
+  const MuscleSettings& settings(MuscleHandle muscle) const;
+  /// The deformed surface vertices (method.md §7), as of the last step.
+  std::span<const btVector3> surface(MuscleHandle muscle) const;
+  /// Handles of all muscles / bones currently in the system, in insertion order.
+  std::vector<MuscleHandle> muscles() const;
+  std::vector<BoneHandle> bones() const;
+
+  /// Draws particles, springs, fibres, bone spheres, contacts (DebugDrawFlag bits).
+  void debugDraw(btIDebugDraw* drawer, int flags = kDrawParticles | kDrawBoneSpheres) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace fibremss
