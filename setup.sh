@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The two set-up commands of README.md, for a fresh Debian 12 machine (as root, or with sudo):
+#   ./setup.sh run    install what is missing, build, run the main comparison job
+#   ./setup.sh test   install what is missing, build (float and double Bullet), run ctest
+set -euo pipefail
+cd "$(dirname "$0")"
+
+packages=(cmake make g++ pkg-config ccache libbullet-dev libeigen3-dev libassimp-dev
+  nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev libtbb-dev libgtest-dev
+  libgmock-dev libbenchmark-dev gnuplot-nox)
+
+install_missing() {
+  local missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  echo "setup: installing ${missing[*]}"
+  local sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+jobs=$(nproc)
+
+build() {  # build DIR [cmake options...]
+  local dir=$1
+  shift
+  cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=Release "$@"
+  cmake --build "$dir" -j"$jobs"
+}
+
+case "${1:-}" in
+  run)
+    install_missing
+    build build
+    build/bin/fibremss compare thigh13 --set resolution=20 --out results/thigh13
+    echo "setup: report in results/thigh13/report.md (plot: results/thigh13/speed_vs_error.png)"
+    ;;
+  test)
+    install_missing
+    build build -DFIBREMSS_WERROR=ON
+    ctest --test-dir build -j"$jobs" --output-on-failure --timeout 900
+    # The same suite against Bullet's double-precision variant.
+    build build-double -DFIBREMSS_WERROR=ON -DFIBREMSS_DOUBLE=ON
+    ctest --test-dir build-double -j"$jobs" --output-on-failure --timeout 900
+    ;;
+  *)
+    echo "usage: $0 run|test" >&2
+    exit 2
+    ;;
+esac
