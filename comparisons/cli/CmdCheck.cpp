@@ -1,4 +1,178 @@
-// PLACEHOLDER until the owning work lands: replaced by the real `fibremss check`.
-#include "Commands.h"
+// `fibremss check SCENE`: load and prepare a scene, print its statistics (text or --json),
+// optionally write the prepared rest state for ParaView (--out DIR).
+#include <chrono>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
 
-void fibremss::cli::addCheckCommand(CLI::App& app) { app.add_subcommand("check", "(not built yet)"); }
+#include "Commands.h"
+#include "SceneArgs.h"
+#include "fibremss/Output.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss::cli {
+namespace {
+
+struct CheckArgs {
+  SceneArgs scene;
+  bool json = false;
+  std::string out;
+};
+
+/// A file-name-safe version of a body name.
+std::string fileStem(const std::string& name) {
+  std::string stem = name;
+  for (char& c : stem)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
+  return stem;
+}
+
+PolyData meshData(const TriangleMesh& mesh) {
+  PolyData data;
+  data.points = mesh.vertices;
+  data.triangles = mesh.triangles;
+  return data;
+}
+
+/// Writes surfaces, fibres, particles (radius, fixed, boundary) and bone spheres, plus rest.pvd.
+void writeRestState(const std::string& directory, const PreparedScene& prepared) {
+  namespace fs = std::filesystem;
+  PvdCollection collection;
+  int part = 0;
+  auto add = [&](const std::string& file, const PolyData& data) {
+    writeVtp((fs::path(directory) / file).string(), data);
+    collection.add(0.0, file, part++);
+  };
+  for (const auto& muscle : prepared.muscles) {
+    const std::string stem = "muscle-" + fileStem(muscle->name);
+    add(stem + "-surface.vtp", meshData(muscle->restSurface));
+
+    PolyData fibres;
+    fibres.points = muscle->restPositions;
+    fibres.lineIndices = muscle->fibreParticles;
+    fibres.lineOffsets = muscle->fibreOffsets;
+    add(stem + "-fibres.vtp", fibres);
+
+    PolyData particles;
+    particles.points = muscle->restPositions;
+    particles.pointsAsVertices = true;
+    std::vector<float> radius, fixed, boundary;
+    for (size_t i = 0; i < muscle->particleCount(); ++i) {
+      radius.push_back(float(muscle->radii[i]));
+      fixed.push_back(muscle->isFixed(uint32_t(i)) ? 1.f : 0.f);
+      boundary.push_back(muscle->isBoundary(uint32_t(i)) ? 1.f : 0.f);
+    }
+    particles.pointScalars = {{"radius", radius}, {"fixed", fixed}, {"boundary", boundary}};
+    add(stem + "-particles.vtp", particles);
+  }
+  for (const auto& bone : prepared.bones) {
+    const std::string stem = "bone-" + fileStem(bone->name);
+    add(stem + "-mesh.vtp", meshData(bone->mesh));
+    PolyData spheres;
+    spheres.points = bone->sphereCentres;
+    spheres.pointsAsVertices = true;
+    spheres.pointScalars = {
+        {"radius", std::vector<float>(bone->sphereRadii.begin(), bone->sphereRadii.end())}};
+    add(stem + "-spheres.vtp", spheres);
+  }
+  collection.write((fs::path(directory) / "rest.pvd").string());
+}
+
+void runCheck(const CheckArgs& args) {
+  using Clock = std::chrono::steady_clock;
+  const auto loadStart = Clock::now();
+  const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
+  const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
+  for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
+
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  for (const auto& warning : prepared.report.warnings)
+    std::cerr << "fibremss: warning: " << warning << "\n";
+
+  nlohmann::ordered_json muscles = nlohmann::ordered_json::array();
+  nlohmann::ordered_json bones = nlohmann::ordered_json::array();
+  size_t particles = 0, boundary = 0, fixed = 0, springs = 0, spheres = 0;
+  for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    const MuscleSettings& muscle = *prepared.muscles[m];
+    nlohmann::ordered_json entry{{"name", muscle.name},
+                                 {"particles", muscle.particleCount()},
+                                 {"boundary_particles", muscle.boundaryParticles.size()},
+                                 {"fixed_particles", muscle.fixedParticles.size()},
+                                 {"springs", muscle.springs.size()},
+                                 {"fibres", muscle.fibreCount()}};
+    if (m < prepared.report.surfaceCoverage.size())
+      entry["surface_coverage"] = prepared.report.surfaceCoverage[m];
+    muscles.push_back(entry);
+    particles += muscle.particleCount();
+    boundary += muscle.boundaryParticles.size();
+    fixed += muscle.fixedParticles.size();
+    springs += muscle.springs.size();
+  }
+  for (const auto& bone : prepared.bones) {
+    bones.push_back({{"name", bone->name},
+                     {"spheres", bone->sphereCentres.size()},
+                     {"triangles", bone->mesh.triangles.size()}});
+    spheres += bone->sphereCentres.size();
+  }
+
+  if (!args.out.empty()) writeRestState(args.out, prepared);
+
+  if (args.json) {
+    nlohmann::ordered_json result{{"scene", scene.name},
+                                  {"particles", particles},
+                                  {"boundary_particles", boundary},
+                                  {"fixed_particles", fixed},
+                                  {"springs", springs},
+                                  {"bone_spheres", spheres},
+                                  {"poses", scene.poseCount},
+                                  {"load_seconds", loadSeconds},
+                                  {"preparation_seconds", prepared.report.seconds},
+                                  {"muscles", muscles},
+                                  {"bones", bones},
+                                  {"warnings", prepared.report.warnings}};
+    for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
+    std::cout << result.dump(2) << "\n";
+    return;
+  }
+  std::cout << "scene " << scene.name << " (" << scene.source << "): " << scene.bones.size()
+            << " bones, " << scene.muscles.size() << " muscles, " << scene.poseCount << " poses\n";
+  std::cout << std::left << std::setw(24) << "muscle" << std::right << std::setw(10) << "particles"
+            << std::setw(10) << "boundary" << std::setw(8) << "fixed" << std::setw(10) << "springs"
+            << std::setw(10) << "coverage"
+            << "\n";
+  for (const auto& m : muscles) {
+    std::cout << std::left << std::setw(24) << m["name"].get<std::string>() << std::right
+              << std::setw(10) << m["particles"].get<size_t>() << std::setw(10)
+              << m["boundary_particles"].get<size_t>() << std::setw(8)
+              << m["fixed_particles"].get<size_t>() << std::setw(10) << m["springs"].get<size_t>();
+    if (m.contains("surface_coverage"))
+      std::cout << std::setw(9) << std::fixed << std::setprecision(1)
+                << 100 * m["surface_coverage"].get<double>() << "%" << std::defaultfloat;
+    std::cout << "\n";
+  }
+  for (const auto& b : bones)
+    std::cout << std::left << std::setw(24) << ("bone " + b["name"].get<std::string>())
+              << std::right << std::setw(10) << b["spheres"].get<size_t>() << " spheres\n";
+  std::cout << "total: " << particles << " particles, " << boundary << " boundary, " << fixed
+            << " fixed, " << springs << " springs, " << spheres << " bone spheres\n";
+  std::cout << std::setprecision(3) << "load " << loadSeconds << " s, preparation "
+            << prepared.report.seconds << " s\n";
+  if (!args.out.empty()) std::cout << "rest state written to " << args.out << "/rest.pvd\n";
+}
+
+}  // namespace
+
+void addCheckCommand(CLI::App& app) {
+  auto args = std::make_shared<CheckArgs>();
+  auto* command = app.add_subcommand(
+      "check", "Prepare a scene and print its statistics (particles, springs, spheres, time)");
+  addSceneArgs(*command, args->scene);
+  command->add_flag("--json", args->json, "Print the statistics as one JSON object");
+  command->add_option("--out", args->out, "Write the prepared rest state (.vtp + rest.pvd) here");
+  command->callback([args] { runCheck(*args); });
+}
+
+}  // namespace fibremss::cli

@@ -1,4 +1,117 @@
-// PLACEHOLDER until the owning work lands: replaced by the real `fibremss compare`.
-#include "Commands.h"
+// `fibremss compare SCENE`: the same scene through FibreMSS, its self-reference, the
+// btSoftBody baseline and the FEM reference, measured the same way; writes summary.json,
+// report.md and the speed-against-error plot.
+#include <cstdio>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <string>
 
-void fibremss::cli::addCompareCommand(CLI::App& app) { app.add_subcommand("compare", "(not built yet)"); }
+#include "Commands.h"
+#include "SceneArgs.h"
+#include "fibremss/CompareReport.h"
+#include "fibremss/Progress.h"
+
+namespace fibremss::cli {
+namespace {
+
+struct CompareArgs {
+  SceneArgs scene;                   ///< SCENE and --set overrides
+  std::vector<std::string> methods;  ///< --methods (default: all four)
+  std::string out;                   ///< --out DIR (default: compare-<scene>)
+  CompareOptions options;            ///< baseline and reference settings
+};
+
+/// The command line exactly as typed (from /proc), for the report.
+std::string commandLine() {
+  std::ifstream in("/proc/self/cmdline", std::ios::binary);
+  std::string raw((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string line;
+  size_t start = 0;
+  for (size_t end; (end = raw.find('\0', start)) != std::string::npos; start = end + 1) {
+    std::string arg = raw.substr(start, end - start);
+    if (start == 0) arg = "fibremss";  // the program, whatever its path
+    if (arg.find_first_of(" \"'$;&|<>*?") != std::string::npos) arg = "'" + arg + "'";
+    line += (line.empty() ? "" : " ") + arg;
+  }
+  return line;
+}
+
+void compare(CompareArgs& args) {
+  if (!args.methods.empty()) args.options.methods = args.methods;
+  for (const std::string& method : args.options.methods) parseMethod(method);  // fail early
+
+  std::unique_ptr<ProgressBar> bar;
+  std::string current;
+  args.options.log = [&](const std::string& line) {
+    if (bar) bar->finish();
+    bar.reset();
+    std::fprintf(stderr, "%s\n", line.c_str());
+  };
+  args.options.progress = [&](const MethodProgress& p) {
+    if (!bar || current != p.method) {
+      if (bar) bar->finish();
+      bar = std::make_unique<ProgressBar>(p.method, p.steps);
+      current = p.method;
+    }
+    bar->update(p.step, p.iterations, p.seconds);
+  };
+  const Comparison comparison = runComparison(args.scene.scene, args.scene.overrides, args.options);
+  if (bar) bar->finish();
+
+  const std::string out = args.out.empty() ? "compare-" + comparison.scene : args.out;
+  const nlohmann::json summary = summaryJson(comparison, commandLine());
+  const std::vector<std::string> files = writeComparison(summary, out);
+
+  std::printf("%-28s %10s %10s %10s %10s %10s\n", "method", "ms/step", "max pen mm", "volume %",
+              "RMS FEM mm", "RMS self mm");
+  for (const RunMetrics& run : comparison.runs) {
+    std::printf("%-28s %10.3g %10.3g %10.3g %10.3g %10.3g%s\n", run.method.c_str(), run.msPerStep,
+                run.maxPenetrationMm, run.volumeChangePct, run.rmsToFemMm, run.rmsToSelfReferenceMm,
+                run.failedStep >= 0 ? "  FAILED" : "");
+  }
+  std::printf("wrote");
+  for (const std::string& file : files) std::printf(" %s/%s", out.c_str(), file.c_str());
+  std::printf("\n");
+}
+
+}  // namespace
+
+void addCompareCommand(CLI::App& app) {
+  auto args = std::make_shared<CompareArgs>();
+  CLI::App* command = app.add_subcommand(
+      "compare",
+      "Run a scene through FibreMSS, its self-reference (dt/8, 8x iterations), the btSoftBody "
+      "baseline and the Bullet FEM reference, measured the same way; write summary.json, "
+      "report.md and speed_vs_error.png/.svg (plus penetration_vs_step for sweeps) to --out.");
+  addSceneArgs(*command, args->scene);
+  command
+      ->add_option("--methods", args->methods,
+                   "Comma-separated methods: fibremss, self-reference, btsoftbody, fem, "
+                   "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant); default all "
+                   "four")
+      ->delimiter(',');
+  command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
+  command
+      ->add_option("--fem-cells", args->options.fem.mesher.targetCells,
+                   "FEM: voxels per muscle (each 6 tetrahedra)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command
+      ->add_option("--fem-substeps", args->options.fem.substepsPerPose, "FEM: world steps per pose")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command
+      ->add_option("--softbody-substeps", args->options.softBody.substepsPerPose,
+                   "btSoftBody: world steps per pose")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command
+      ->add_option("--softbody-iterations", args->options.softBody.positionIterations,
+                   "btSoftBody: position solver iterations per world step")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command->callback([args] { compare(*args); });
+}
+
+}  // namespace fibremss::cli

@@ -14,12 +14,21 @@ struct MeshReport {
   size_t nonManifoldEdges = 0;        ///< edges used by more than two triangles
   size_t degenerateTriangles = 0;     ///< zero-area or repeated-vertex triangles
   size_t inconsistentEdges = 0;       ///< edges both of whose triangles run the same way
+  size_t duplicateTriangles = 0;      ///< triangles over the same three vertices as an earlier one
+  size_t unusedVertices = 0;          ///< vertices no triangle uses
+  bool insideOut = false;  ///< closed, consistently oriented, negative volume (loadSurface flips)
+  size_t reorientedTriangles = 0;  ///< triangles loadSurface turned over (consistent, outward)
+
+  /// Every edge shared by exactly two triangles.
+  bool closed() const { return openEdges == 0 && nonManifoldEdges == 0; }
 };
 
 /// Loads a triangle surface: legacy VTK (.vtk, ASCII or BINARY POLYDATA) by FibreMSS's own
 /// reader, any other format through assimp. Coordinates are scaled by `scale` (file units to
 /// metres). Throws InputError (file, element, expectation) for unreadable input or fatal
-/// defects (NaN/inf, out-of-range indices, no triangles); `report` gets the rest.
+/// defects (NaN/inf, out-of-range indices, no triangles); `report` gets the rest. Triangles
+/// turned over in the file are turned back so that each connected part is consistently
+/// oriented and closed parts face outward (counted in report->reorientedTriangles).
 TriangleMesh loadSurface(const std::string& path, double scale = 1.0, MeshReport* report = nullptr);
 
 /// Loads fibre polylines: legacy VTK LINES (two-point segments are chained into polylines)

@@ -18,10 +18,10 @@ struct BoneMotion {
 
 /// What a run writes (paths relative to the run's --out directory).
 struct OutputSettings {
-  int frameEvery = 1;         ///< write a frame every k-th step (0: none)
-  bool writeSurfaces = true;  ///< deformed muscle surfaces in frames
-  bool writeParticles = true; ///< particles with radii in frames
-  bool writeFibres = true;    ///< deformed fibres in frames
+  int frameEvery = 1;          ///< write a frame every k-th step (0: none)
+  bool writeSurfaces = true;   ///< deformed muscle surfaces in frames
+  bool writeParticles = true;  ///< particles with radii in frames
+  bool writeFibres = true;     ///< deformed fibres in frames
 };
 
 /// A scene resolved into what preparation and simulation take; all SI.
@@ -29,6 +29,8 @@ struct LoadedScene {
   std::string name;                   ///< scene name (built-in name or file stem)
   std::string source;                 ///< the file it came from, or "built-in"
   std::string json;                   ///< the complete scene, every default filled in
+  std::string description;            ///< one line saying what the scene shows
+  double unitScale = 1;               ///< metres per scene unit (0.001 for "mm")
   std::vector<BoneInput> bones;       ///< bones, meshes loaded or generated
   std::vector<MuscleInput> muscles;   ///< muscles, surfaces and fibres loaded or generated
   std::vector<BoneMotion> motions;    ///< one per bone
@@ -36,6 +38,7 @@ struct LoadedScene {
   std::vector<double> poseLabels;     ///< per pose, e.g. the sweep angle in degrees
   SimulationParameters simulation;    ///< solver settings
   OutputSettings outputs;             ///< output settings
+  std::vector<std::string> warnings;  ///< things found while loading that a run can live with
 
   /// Transform of bone b at pose p (identity where the bone has no motion).
   btTransform bonePose(size_t bone, int pose) const;
@@ -48,12 +51,14 @@ struct BuiltInScene {
 };
 std::vector<BuiltInScene> builtInScenes();
 
-/// The JSON text of a built-in scene (throws InputError for an unknown name).
+/// The JSON text of a built-in scene, every default filled in (throws InputError for an
+/// unknown name). Loading it again gives the same scene.
 std::string exportBuiltInScene(const std::string& name);
 
 /// Loads a scene by built-in name or .json path and applies `key=value` overrides
 /// (e.g. "resolution=40", "simulation.iterations=100"). Throws InputError naming the file
 /// and field for unknown fields, wrong types and bad values.
-LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::string>& overrides = {});
+LoadedScene loadScene(const std::string& nameOrPath,
+                      const std::vector<std::string>& overrides = {});
 
 }  // namespace fibremss

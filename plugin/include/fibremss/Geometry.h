@@ -14,7 +14,7 @@ namespace fibremss {
 
 /// A triangle surface; triangles are counter-clockwise seen from outside (outward normals).
 struct TriangleMesh {
-  std::vector<btVector3> vertices;                  ///< vertex positions
+  std::vector<btVector3> vertices;                 ///< vertex positions
   std::vector<std::array<uint32_t, 3>> triangles;  ///< vertex indices, three per triangle
 
   bool empty() const { return triangles.empty(); }
@@ -56,8 +56,9 @@ class MeshDistance {
 
   struct Closest {
     btScalar distance = std::numeric_limits<btScalar>::infinity();  ///< unsigned, >= 0
-    btVector3 point{0, 0, 0};                                         ///< closest surface point
+    btVector3 point{0, 0, 0};                                       ///< closest surface point
     uint32_t triangle = UINT32_MAX;  ///< triangle holding it, UINT32_MAX when none in range
+    bool inside = false;  ///< p is inside the mesh (the sign signedDistance() would give)
   };
   /// Closest surface point within maxDistance (none found: distance stays infinite).
   Closest closest(const btVector3& p,

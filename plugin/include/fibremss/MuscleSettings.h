@@ -15,10 +15,10 @@ namespace fibremss {
 
 /// One spring between particles a < b.
 struct Spring {
-  uint32_t a;            ///< first particle index (a < b)
-  uint32_t b;            ///< second particle index
-  btScalar restLength;   ///< L0 [m]
-  btScalar stiffness;    ///< k = κ / L0 [N/m]
+  uint32_t a;           ///< first particle index (a < b)
+  uint32_t b;           ///< second particle index
+  btScalar restLength;  ///< L0 [m]
+  btScalar stiffness;   ///< k = κ / L0 [N/m]
 };
 
 /// Bit flags per particle.
@@ -29,7 +29,7 @@ enum ParticleFlag : uint8_t {
 
 /// A prepared muscle in its rest pose (world coordinates of the rest pose).
 struct MuscleSettings {
-  std::string name;                      ///< muscle name from the scene
+  std::string name;  ///< muscle name from the scene
 
   // Particles, structure-of-arrays, all of size particleCount().
   std::vector<btVector3> restPositions;  ///< rest position [m]
@@ -47,11 +47,11 @@ struct MuscleSettings {
   std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
 
   // Fibres: fibre f is particles fibreParticles[fibreOffsets[f] .. fibreOffsets[f+1]).
-  std::vector<uint32_t> fibreParticles;  ///< particle indices in fibre order
+  std::vector<uint32_t> fibreParticles;   ///< particle indices in fibre order
   std::vector<uint32_t> fibreOffsets{0};  ///< fibreCount()+1 entries
 
-  TriangleMesh restSurface;  ///< the muscle's surface at rest, for output
-  int skinNeighbours = 3;    ///< particles per surface vertex (N closest)
+  TriangleMesh restSurface;             ///< the muscle's surface at rest, for output
+  int skinNeighbours = 3;               ///< particles per surface vertex (N closest)
   std::vector<uint32_t> skinParticles;  ///< restSurface.vertices.size() × skinNeighbours
   std::vector<btScalar> skinWeights;    ///< weights matching skinParticles (sum to 1 per vertex)
 
@@ -64,8 +64,8 @@ struct MuscleSettings {
 /// A prepared rigid bone; coordinates are those of the rest pose, which is the bone frame:
 /// the bone's current world transform maps rest coordinates to current ones.
 struct BoneSettings {
-  std::string name;                    ///< bone name from the scene
-  TriangleMesh mesh;                   ///< the true triangle mesh at rest
+  std::string name;                      ///< bone name from the scene
+  TriangleMesh mesh;                     ///< the true triangle mesh at rest
   std::vector<btVector3> sphereCentres;  ///< collision spheres, bone frame [m]
   std::vector<btScalar> sphereRadii;     ///< their radii [m]
 };

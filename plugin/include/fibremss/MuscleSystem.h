@@ -44,13 +44,16 @@ struct StepTiming {
 
 /// What the last step did.
 struct StepStats {
-  int iterations = 0;            ///< iterations run
-  btScalar lastTimeStep = 0;     ///< dt of the last iteration [s]
-  btScalar meanDisplacement = 0; ///< mean free-particle displacement in the last iteration [m]
-  size_t contacts = 0;           ///< sphere pairs found overlapping in the last iteration
-  StepTiming timing;             ///< per-part wall time
-  bool nan = false;              ///< a NaN or inf appeared
-  bool exploded = false;         ///< a spring beyond 3× its rest length
+  int iterations = 0;             ///< iterations run
+  btScalar lastTimeStep = 0;      ///< dt of the last iteration [s]
+  btScalar meanDisplacement = 0;  ///< mean free-particle displacement in the last iteration [m]
+  size_t contacts = 0;            ///< sphere pairs found overlapping in the last iteration
+  size_t candidates = 0;          ///< sphere pairs the broad phase reported in the last iteration
+  btScalar springDeviationRatio = 0;  ///< Σ|l−L0| / ΣL0 over all muscles, last iteration
+  StepTiming timing;                  ///< per-part wall time
+  bool nan = false;                   ///< a NaN or inf appeared
+  bool exploded = false;              ///< a spring beyond 3× its rest length in the last iteration
+  size_t overstretchedSprings = 0;    ///< springs beyond 3× their rest length, last iteration
 };
 
 /// What debugDraw draws (bit flags).

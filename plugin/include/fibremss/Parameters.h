@@ -19,24 +19,24 @@ enum class SpringLayout : uint8_t {
 /// Springs and masses of one muscle (method.md §3).
 struct SpringParameters {
   SpringLayout layout = SpringLayout::NearestNeighbours;  ///< spring layout
-  int neighbours = 18;          ///< N for the N-nearest layout
-  btScalar kappa = 1.0;         ///< material constant κ [N]; spring stiffness k = κ / L0
-  btScalar damping = -1;        ///< damping coefficient c [N·s/m]; < 0: Zeleny's estimate
-  btScalar density = 1060;      ///< muscle density [kg/m³]; mass = density·volume / particles
+  int neighbours = 18;                                    ///< N for the N-nearest layout
+  btScalar kappa = 1.0;     ///< material constant κ [N]; spring stiffness k = κ / L0
+  btScalar damping = -1;    ///< damping coefficient c [N·s/m]; < 0: Zeleny's estimate
+  btScalar density = 1060;  ///< muscle density [kg/m³]; mass = density·volume / particles
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).
 struct BoneSphereParameters {
-  btScalar thinning = 0;        ///< fraction of root vertices skipped at random (0..1)
-  btScalar maxRadius = 0;       ///< spheres larger than this are dropped (0: no limit) [m]
+  btScalar thinning = 0;   ///< fraction of root vertices skipped at random (0..1)
+  btScalar maxRadius = 0;  ///< spheres larger than this are dropped (0: no limit) [m]
 };
 
 /// Preparation of one muscle (method.md §2).
 struct MuscleParameters {
-  int resolution = 40;                 ///< particles per fibre
-  btScalar attachmentDistance = 0.004; ///< particles closer than this to a bone are fixed [m]
-  int skinNeighbours = 3;              ///< N closest particles that move each surface vertex
-  SpringParameters springs;            ///< spring layout and material
+  int resolution = 40;                  ///< particles per fibre
+  btScalar attachmentDistance = 0.004;  ///< particles closer than this to a bone are fixed [m]
+  int skinNeighbours = 3;               ///< N closest particles that move each surface vertex
+  SpringParameters springs;             ///< spring layout and material
 };
 
 /// Integrator by name; the integrator issue adds more.
@@ -44,26 +44,27 @@ enum class Integrator : uint8_t { Verlet, SemiImplicitEuler };
 
 /// When the iterations of one step stop (method.md §4).
 enum class StopRule : uint8_t {
-  Iterations,   ///< a fixed number of iterations
-  Converged,    ///< mean displacement below epsilon (or iteration cap reached)
-  TimeBudget,   ///< wall-clock budget per step spent (or iteration cap reached)
+  Iterations,  ///< a fixed number of iterations
+  Converged,   ///< mean displacement below epsilon (or iteration cap reached)
+  TimeBudget,  ///< wall-clock budget per step spent (or iteration cap reached)
 };
 
 /// How the solver steps (method.md §4–§5).
 struct SimulationParameters {
   Integrator integrator = Integrator::Verlet;  ///< time integrator
-  bool adaptiveTimeStep = true;  ///< eq 5.1 bound per iteration; else fixed timeStep
-  btScalar timeStep = 1e-3;      ///< fixed dt, or the upper clamp of the adaptive dt [s]
-  btScalar minTimeStep = 1e-5;   ///< lower clamp of the adaptive dt [s]
+  bool adaptiveTimeStep = true;                ///< eq 5.1 bound per iteration; else fixed timeStep
+  btScalar timeStep = 1e-3;     ///< fixed dt, or the upper clamp of the adaptive dt [s]
+  btScalar minTimeStep = 1e-5;  ///< lower clamp of the adaptive dt [s]
   StopRule stopRule = StopRule::Iterations;  ///< when a step's iterations end
-  int iterations = 70;           ///< iterations per step (the cap for the other rules)
-  btScalar epsilon = 1e-6;       ///< convergence threshold: mean displacement [m]
-  btScalar budgetMs = 10;        ///< time budget per step [ms]
-  bool rebuildEveryStep = false; ///< thesis behaviour: rebuild trees and state each step
-  bool muscleMuscle = true;      ///< collide muscles with each other
-  bool muscleBone = true;        ///< collide muscles with bones
-  uint32_t seed = 1;             ///< seed for every random choice (jitter, thinning, noise)
-  btScalar initialNoise = 0;     ///< random displacement of free particles at start [m]
+  int iterations = 70;                       ///< iterations per step (the cap for the other rules)
+  btScalar epsilon = 1e-6;                   ///< convergence threshold: mean displacement [m]
+  btScalar budgetMs = 10;                    ///< time budget per step [ms]
+  bool rebuildEveryStep = false;  ///< thesis behaviour: rebuild trees and state each step
+  btScalar motionFraction = 0.5;  ///< bones reach their target after this share of `iterations`
+  bool muscleMuscle = true;       ///< collide muscles with each other
+  bool muscleBone = true;         ///< collide muscles with bones
+  uint32_t seed = 1;              ///< seed for every random choice (jitter, thinning, noise)
+  btScalar initialNoise = 0;      ///< random displacement of free particles at start [m]
 };
 
 const char* toString(SpringLayout layout);

@@ -20,12 +20,12 @@ struct BoneInput {
 
 /// A muscle as given: its surface and fibres in the rest pose.
 struct MuscleInput {
-  std::string name;            ///< unique name
-  TriangleMesh surface;        ///< closed surface [m]
-  FibreSet fibres;             ///< polylines from attachment to attachment [m]
-  MuscleParameters parameters; ///< resolution, attachment distance, springs
-  int fibreGridColumns = 0;    ///< > 0: fibres form a row-major grid with this many columns
-                               ///< (needed by the lattice layouts)
+  std::string name;             ///< unique name
+  TriangleMesh surface;         ///< closed surface [m]
+  FibreSet fibres;              ///< polylines from attachment to attachment [m]
+  MuscleParameters parameters;  ///< resolution, attachment distance, springs
+  int fibreGridColumns = 0;     ///< > 0: fibres form a row-major grid with this many columns
+                                ///< (needed by the lattice layouts)
 };
 
 /// What preparation measured and decided; printed by `fibremss check`.

@@ -1,0 +1,83 @@
+#pragma once
+// The finite-element reference built from a prepared scene: each muscle's surface
+// tetrahedralized (TetMesher.h), a btSoftBody of those tetrahedra with Bullet's Neo-Hookean
+// force in a btDeformableMultiBodyDynamicsWorld, nodes near the attachments pinned and moved
+// with their bones, contact with the bones' true triangle meshes. It is the accuracy
+// reference, not a speed competitor.
+#include <BulletSoftBody/btSoftBody.h>
+#include <LinearMath/btTransform.h>
+
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "fibremss/Preparation.h"
+#include "fibremss/TetMesher.h"
+
+class btDeformableMultiBodyDynamicsWorld;
+
+namespace fibremss {
+
+/// Material and solver of the reference: Neo-Hookean, nearly incompressible (ν = 0.45).
+/// Young's modulus 0 (default) matches the muscles' spring networks: springs k = κ/L0 filling
+/// volume V are as stiff as E ≈ Σ κ·L0 / (3V) (exact for a cubic lattice pulled along an axis),
+/// so the FEM and FibreMSS model the same material and their difference is the method's;
+/// FibreMSS's default κ = 1 N gives a few hundred kPa, a contracted muscle. One E serves all
+/// muscles (Bullet merges Neo-Hookean forces into the first one added).
+/// Lamé μ = E/(2(1+ν)), λ = Eν/((1+ν)(1−2ν)).
+struct FemDefinition {
+  btScalar youngsModulus = 0;     ///< E [Pa]; 0: matched to the muscles' springs (above)
+  btScalar poissonRatio = 0.45f;  ///< ν (0.5 is incompressible)
+  btScalar damping = 0.001f;      ///< Neo-Hookean damping [s]: damping stress = damping × (μ, λ)
+                                  ///< terms of the strain rate (0.1 s would be treacle)
+  btScalar density = 1060;        ///< muscle density [kg/m³]; node mass = ρ·(adjacent volume)/4
+  btScalar poseDuration = 0.07f;  ///< simulated time of one pose [s]
+  int substepsPerPose = 50;       ///< world steps per pose (dt = poseDuration / substeps: 1.4 ms
+                                  ///< per 70 ms pose; Bullet's default deformable solve blows up
+                                  ///< at 5 ms for these stiffnesses)
+  TetMesherDefinition mesher;     ///< voxel size of the tetrahedral meshes
+  bool boneContact = true;        ///< SDF_RD contact of nodes with the bones' triangle meshes
+  bool muscleContact = false;     ///< VF_DD contact between muscles (boundary faces)
+  btScalar attachmentDistance = 0;  ///< nodes this close to a fixed particle are pinned to its
+                                    ///< bone [m]; 0: one voxel edge
+  btScalar sdfVoxelSize = 0.003f;   ///< btSparseSdf voxel edge [m]
+  /// Bullet units per metre inside the reference's world (see SoftBodyDefinition: Bullet
+  /// extrudes mesh triangles by 0.06 units for soft contact). Lengths are scaled by it, the
+  /// Lamé parameters divided by it, masses and time kept, so the motion in metres is the same.
+  btScalar lengthScale = 100;
+};
+
+/// The reference world: one deformable btSoftBody per muscle, a kinematic btRigidBody with a
+/// btBvhTriangleMeshShape per bone, in a btDeformableMultiBodyDynamicsWorld without gravity.
+class FemScene {
+ public:
+  /// Bodies start at the poses `boneTransforms` (one per bone; rest pose when empty).
+  FemScene(const PreparedScene& scene, std::span<const btTransform> boneTransforms,
+           const FemDefinition& definition = {});
+  ~FemScene();
+  FemScene(const FemScene&) = delete;
+  FemScene& operator=(const FemScene&) = delete;
+
+  /// One pose: bones move to `targets` over the substeps, pinned nodes follow them.
+  void stepPose(std::span<const btTransform> targets);
+
+  size_t muscleCount() const;
+  size_t nodeCount() const;                     ///< nodes of all muscles
+  size_t tetrahedronCount() const;              ///< tetrahedra of all muscles
+  size_t pinnedCount() const;                   ///< pinned nodes of all muscles
+  const TetMesh& tetMesh(size_t muscle) const;  ///< rest mesh
+  /// Node positions of one muscle, as of the last step.
+  std::span<const btVector3> nodePositions(size_t muscle) const;
+  /// The muscle's surface vertices, embedded in the tetrahedra (barycentric).
+  void surface(size_t muscle, std::vector<btVector3>& out) const;
+  btSoftBody& body(size_t muscle);
+  btDeformableMultiBodyDynamicsWorld& world();
+  const FemDefinition& definition() const;
+  double youngsModulus() const;  ///< E used for all muscles [Pa]
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace fibremss

@@ -1,0 +1,88 @@
+#pragma once
+// The btSoftBody baseline built from a prepared scene: the same particles as nodes (same
+// masses), the same springs as links, fixed particles pinned and moved with their bones,
+// kinematic bone bodies with their true triangle meshes, soft–soft collision by clusters.
+#include <BulletSoftBody/btSoftBody.h>
+#include <LinearMath/btTransform.h>
+
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/Preparation.h"
+
+class btSoftRigidDynamicsWorld;
+
+namespace fibremss {
+
+/// How the baseline is built and stepped.
+///
+/// Stiffness mapping: a FibreMSS spring k = κ/L0 between two particles of mass m removes, in
+/// one explicit step of dt, the fraction f = min(1, 2·k·dt²/m) of its length error (reduced
+/// mass m/2). btSoftBody's position solver applies m_kLST = s of the error per iteration, so
+/// after n = positionIterations iterations (1−s)ⁿ of it is left: s = 1 − (1 − f)^(1/n).
+/// Links are grouped into `stiffnessLevels` materials (s rounded to the level's centre).
+/// Damping: btSoftBody's kDP removes that fraction of node velocity per step; c·dt/m (clamped
+/// to [0, 1]) is the velocity a FibreMSS damper of coefficient c removes in one step.
+struct SoftBodyDefinition {
+  int substepsPerPose = 20;       ///< world steps per pose; bones and pins interpolated
+  btScalar poseDuration = 0.07f;  ///< simulated time of one pose [s]
+  int positionIterations = 4;     ///< m_cfg.piterations (links, per world step)
+  int clusterIterations = 2;      ///< m_cfg.citerations (cluster contacts, per world step)
+  int clustersPerMuscle = 24;     ///< k-means clusters for soft–soft (CL_SS) collision
+  bool softSoftCollision = true;  ///< CL_SS between muscles (no self-collision)
+  bool boneCollision = true;      ///< SDF_RS against the bones' triangle meshes
+  int stiffnessLevels = 16;       ///< distinct link materials per muscle
+  btScalar sdfVoxelSize =
+      0.003f;  ///< btSparseSdf voxel edge [m] (Bullet's 0.25 is for metres-sized toys)
+  /// Bullet units per metre inside the baseline's world. Bullet extrudes every bone triangle
+  /// into a slab ±0.06 units thick for soft–mesh collision (btSoftBodyConcaveCollisionAlgorithm,
+  /// hard-coded): in metres that is ±60 mm and pushes every node near a bone; in centimetres
+  /// (100) it is ±0.6 mm. Inputs and outputs stay in metres.
+  btScalar lengthScale = 100;
+};
+
+/// Deformed surface vertices of a muscle from its particle positions (method.md §7): every
+/// skin particle j carries the vertex's rest offset rotated with the particle's nearest bone,
+/// vertex = Σ w_j (x_j + R_j (v0 − X_j)). A rigid motion of everything is reproduced exactly.
+void skinSurface(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                 std::span<const btTransform> boneTransforms, std::vector<btVector3>& out);
+
+/// Initial particle positions: rest positions moved by the nearest (fixed: own) bone.
+std::vector<btVector3> posedParticles(const MuscleSettings& muscle,
+                                      std::span<const btTransform> boneTransforms);
+
+/// The baseline world: one btSoftBody per muscle, one kinematic btRigidBody per bone, in a
+/// btSoftRigidDynamicsWorld (btSoftBodyRigidBodyCollisionConfiguration, no gravity).
+class SoftBodyScene {
+ public:
+  /// Bodies start at the poses `boneTransforms` (one per bone; rest pose when empty).
+  SoftBodyScene(const PreparedScene& scene, std::span<const btTransform> boneTransforms,
+                const SoftBodyDefinition& definition = {});
+  ~SoftBodyScene();
+  SoftBodyScene(const SoftBodyScene&) = delete;
+  SoftBodyScene& operator=(const SoftBodyScene&) = delete;
+
+  /// One pose: bones move from their current transforms to `targets` over the substeps,
+  /// pinned nodes follow them, the world steps `substepsPerPose` times.
+  void stepPose(std::span<const btTransform> targets);
+
+  size_t muscleCount() const;
+  size_t nodeCount() const;  ///< nodes of all muscles
+  size_t linkCount() const;  ///< links of all muscles
+  /// Node positions of one muscle (particle order, metres), as of the last step.
+  std::span<const btVector3> positions(size_t muscle) const;
+  /// The muscle's deformed surface (skinSurface of the node positions).
+  void surface(size_t muscle, std::vector<btVector3>& out) const;
+  std::span<const btTransform> boneTransforms() const;
+  btSoftBody& body(size_t muscle);    ///< in Bullet units (definition().lengthScale per metre)
+  btSoftRigidDynamicsWorld& world();  ///< in Bullet units
+  const SoftBodyDefinition& definition() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace fibremss

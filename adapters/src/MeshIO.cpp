@@ -1,0 +1,197 @@
+// loadSurface() and loadFibres(): pick the reader by extension and content, then check.
+#include "fibremss/MeshIO.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <utility>
+
+#include "MeshIOInternal.h"
+#include "fibremss/Error.h"
+
+namespace fibremss {
+namespace meshio {
+
+void requireNonEmptyFile(const std::string& path) {
+  std::error_code error;
+  const auto status = std::filesystem::status(path, error);
+  if (error || !std::filesystem::exists(status)) {
+    throw InputError(path, "", "cannot open: the file does not exist");
+  }
+  if (!std::filesystem::is_regular_file(status)) {
+    throw InputError(path, "", "cannot open: expected a regular file");
+  }
+  if (std::filesystem::file_size(path, error) == 0 && !error) {
+    throw InputError(path, "", "the file is empty; expected a mesh");
+  }
+}
+
+std::string readWholeFile(const std::string& path) {
+  requireNonEmptyFile(path);
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw InputError(path, "", std::string("cannot open: ") + std::strerror(errno));
+  std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  if (file.bad()) throw InputError(path, "", "cannot read the file");
+  if (bytes.empty()) throw InputError(path, "", "the file is empty; expected a mesh");
+  return bytes;
+}
+
+void requireScale(const std::string& path, double scale) {
+  if (!(scale > 0) || !std::isfinite(scale)) {
+    throw InputError(path, "scale",
+                     "expected a positive finite unit scale, found " + std::to_string(scale));
+  }
+}
+
+bool parseReal(std::string_view text, double& value) {
+  if (text.size() > 1 && text[0] == '+' && text[1] != '-') text.remove_prefix(1);
+  const char* end = text.data() + text.size();
+  const auto [stop, error] = std::from_chars(text.data(), end, value);
+  if (text.empty() || stop != end) return false;
+  if (error == std::errc::result_out_of_range) {
+    const size_t exponent = text.find_first_of("eE");
+    const bool tiny = exponent != std::string_view::npos && exponent + 1 < text.size() &&
+                      text[exponent + 1] == '-';
+    value = tiny ? 0.0 : std::numeric_limits<double>::infinity();
+    return true;
+  }
+  return error == std::errc();
+}
+
+std::string quoted(std::string_view text) {
+  constexpr size_t kLongest = 40;
+  std::string result = "'";
+  for (size_t i = 0; i < std::min(text.size(), kLongest); ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c >= 0x20 && c < 0x7f) {
+      result += static_cast<char>(c);
+    } else {
+      constexpr char kHex[] = "0123456789abcdef";
+      result += "\\x";
+      result += kHex[c >> 4];
+      result += kHex[c & 15];
+    }
+  }
+  if (text.size() > kLongest) result += "...";
+  return result + "'";
+}
+
+FibreSet chainPolylines(const std::string& path, const std::vector<btVector3>& points,
+                        const IndexPolylines& lines) {
+  FibreSet fibres;
+  uint32_t lastIndex = UINT32_MAX;  // last point index of the fibre being built
+  for (size_t line = 0; line < lines.size(); ++line) {
+    const uint32_t begin = lines.offsets[line], end = lines.offsets[line + 1];
+    if (end - begin < 2) {
+      throw InputError(path, lines.origins[line],
+                       end == begin ? "empty polyline; expected at least two points per fibre"
+                                    : "a single point; expected at least two points per fibre");
+    }
+    uint32_t first = begin;
+    if (lines.indices[begin] == lastIndex) {
+      ++first;  // continues the previous polyline: share its end point
+    } else if (fibres.points.size() != fibres.offsets.back()) {
+      fibres.offsets.push_back(static_cast<uint32_t>(fibres.points.size()));
+    }
+    for (uint32_t k = first; k < end; ++k) fibres.points.push_back(points[lines.indices[k]]);
+    lastIndex = lines.indices[end - 1];
+  }
+  if (fibres.points.size() != fibres.offsets.back()) {
+    fibres.offsets.push_back(static_cast<uint32_t>(fibres.points.size()));
+  }
+  return fibres;
+}
+
+}  // namespace meshio
+
+namespace {
+
+std::string lowerExtension(const std::string& path) {
+  std::string extension = std::filesystem::path(path).extension().string();
+  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return extension;
+}
+
+/// Legacy VTK by extension, or by content for files named otherwise.
+bool isLegacyVtk(const std::string& path, const std::string& extension) {
+  if (extension == ".vtk") return true;
+  std::ifstream file(path, std::ios::binary);
+  char head[32] = {};
+  file.read(head, sizeof head);
+  return meshio::looksLikeLegacyVtk(std::string_view(head, static_cast<size_t>(file.gcount())));
+}
+
+}  // namespace
+
+TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* report) {
+  meshio::requireScale(path, scale);
+  TriangleMesh mesh;
+  std::vector<std::string> readerWarnings;
+  if (isLegacyVtk(path, lowerExtension(path))) {
+    const std::string bytes = meshio::readWholeFile(path);
+    meshio::VtkPolyData data = meshio::readLegacyVtk(path, bytes, scale);
+    if (data.triangles.empty()) {
+      throw InputError(path, "",
+                       "expected a surface (POLYGONS or TRIANGLE_STRIPS), found no triangles" +
+                           std::string(data.lines.size() > 0 ? " (only LINES: fibres?)" : ""));
+    }
+    mesh.vertices = std::move(data.points);
+    mesh.triangles = std::move(data.triangles);
+    for (const std::string& warning : data.warnings)
+      readerWarnings.push_back(path + ": " + warning);
+  } else {
+    meshio::requireNonEmptyFile(path);  // the same messages as for VTK files
+    mesh = meshio::readAssimpSurface(path, scale);
+  }
+  MeshReport checked = checkSurface(mesh, path);
+  size_t nonOrientableParts = 0;
+  checked.reorientedTriangles = meshio::orientConsistently(mesh, nonOrientableParts);
+  if (checked.reorientedTriangles > 0) {
+    checked.warnings.push_back(path + ": " + std::to_string(checked.reorientedTriangles) +
+                               " triangles turned over so that the orientation is consistent "
+                               "and closed parts face outward");
+  }
+  if (nonOrientableParts > 0) {
+    checked.warnings.push_back(path + ": " + std::to_string(nonOrientableParts) +
+                               " connected parts cannot be oriented consistently; left as read");
+  }
+  if (report) {
+    readerWarnings.insert(readerWarnings.end(), std::make_move_iterator(checked.warnings.begin()),
+                          std::make_move_iterator(checked.warnings.end()));
+    checked.warnings = std::move(readerWarnings);
+    *report = std::move(checked);
+  }
+  return mesh;
+}
+
+FibreSet loadFibres(const std::string& path, double scale) {
+  meshio::requireScale(path, scale);
+  const std::string extension = lowerExtension(path);
+  const std::string bytes = meshio::readWholeFile(path);
+  FibreSet fibres;
+  if (extension == ".vtk" || meshio::looksLikeLegacyVtk(bytes)) {
+    const meshio::VtkPolyData data = meshio::readLegacyVtk(path, bytes, scale);
+    if (data.lines.size() == 0) {
+      throw InputError(path, "", "expected fibres as LINES cells, found none");
+    }
+    fibres = meshio::chainPolylines(path, data.points, data.lines);
+  } else if (extension == ".obj") {
+    const meshio::ObjPolylines data = meshio::readObjPolylines(path, bytes, scale);
+    fibres = meshio::chainPolylines(path, data.points, data.lines);
+  } else {
+    throw InputError(path, "",
+                     "expected fibres in legacy VTK (.vtk, LINES) or OBJ (.obj, `l` polylines), "
+                     "found the extension " +
+                         meshio::quoted(extension));
+  }
+  meshio::validateFibres(fibres, path);
+  return fibres;
+}
+
+}  // namespace fibremss

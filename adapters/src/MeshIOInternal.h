@@ -1,0 +1,94 @@
+#pragma once
+// Internal to the loaders: the raw readers behind loadSurface()/loadFibres() and the helpers
+// they share. Readers throw InputError naming file, line or byte offset, and what was expected.
+#include <LinearMath/btVector3.h>
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "fibremss/Geometry.h"
+
+namespace fibremss::meshio {
+
+/// Polylines as point indices (CSR) with a human-readable origin per polyline for messages.
+struct IndexPolylines {
+  std::vector<uint32_t> indices;     ///< point indices, polyline after polyline
+  std::vector<uint32_t> offsets{0};  ///< polyline i: [offsets[i], offsets[i+1])
+  std::vector<std::string> origins;  ///< e.g. "LINES cell 4 (line 57)", one per polyline
+
+  size_t size() const { return offsets.size() - 1; }
+};
+
+/// What the legacy VTK reader found: points, triangles from POLYGONS and TRIANGLE_STRIPS,
+/// and the LINES cells.
+struct VtkPolyData {
+  std::vector<btVector3> points;                   ///< scaled point coordinates
+  std::vector<std::array<uint32_t, 3>> triangles;  ///< fan-triangulated polygons and strips
+  IndexPolylines lines;                            ///< LINES cells, unchained
+  std::vector<std::string> warnings;               ///< cells skipped (fewer than 3 points, ...)
+};
+
+/// Points and `l` polylines of an OBJ file.
+struct ObjPolylines {
+  std::vector<btVector3> points;  ///< scaled `v` coordinates
+  IndexPolylines lines;           ///< `l` elements, unchained
+};
+
+/// Throws InputError when the file is missing, not a regular file or empty.
+void requireNonEmptyFile(const std::string& path);
+
+/// The whole file; throws InputError as requireNonEmptyFile() does, or when unreadable.
+std::string readWholeFile(const std::string& path);
+
+/// True when the bytes start like a legacy VTK file ("# vtk DataFile Version").
+bool looksLikeLegacyVtk(std::string_view bytes);
+
+/// Legacy VTK POLYDATA, ASCII or BINARY (big-endian), classic or 5.1 OFFSETS layout.
+VtkPolyData readLegacyVtk(const std::string& path, std::string_view bytes, double scale);
+
+/// OBJ `v` and `l` statements (other statements are ignored, unknown ones are errors).
+ObjPolylines readObjPolylines(const std::string& path, std::string_view bytes, double scale);
+
+/// A surface through assimp: all meshes merged, triangulated, identical vertices joined.
+TriangleMesh readAssimpSurface(const std::string& path, double scale);
+
+/// Fibres from polylines: a polyline that starts at the point where the previous one ended
+/// continues it (files that store fibres as two-point segments). Throws InputError for empty
+/// and single-point polylines, naming their origin.
+FibreSet chainPolylines(const std::string& path, const std::vector<btVector3>& points,
+                        const IndexPolylines& lines);
+
+/// One use of an edge by a triangle; `forward` when the triangle runs from the lower index.
+struct EdgeUse {
+  uint64_t key;       ///< lower vertex index << 32 | higher vertex index
+  uint32_t triangle;  ///< the triangle using the edge
+  bool forward;       ///< the triangle runs the edge from the lower index to the higher
+};
+
+/// The edges of every triangle without a repeated vertex, sorted by key then triangle.
+std::vector<EdgeUse> sortedEdgeUses(const TriangleMesh& mesh);
+
+/// Turns triangles over so that every edge shared by exactly two triangles is run in opposite
+/// directions; each connected part keeps the orientation most of its triangles have, and a
+/// closed part is then turned outward. Parts that cannot be oriented (Moebius-like) are left
+/// as they are and counted in `nonOrientableParts`. Returns the number of triangles turned.
+size_t orientConsistently(TriangleMesh& mesh, size_t& nonOrientableParts);
+
+/// Throws InputError unless `scale` is a positive finite number.
+void requireScale(const std::string& path, double scale);
+
+/// Throws InputError for structurally broken sets, empty, single-point, zero-length fibres and
+/// non-finite points, naming the fibre.
+void validateFibres(const FibreSet& fibres, const std::string& source);
+
+/// Parses the whole of `text` as a number as C's strtod would (a leading '+' allowed; too
+/// small rounds to 0, too large becomes infinity); false when it is not a number.
+bool parseReal(std::string_view text, double& value);
+
+/// `text` quoted for a message: printable ASCII kept, other bytes as \xNN, long text cut.
+std::string quoted(std::string_view text);
+
+}  // namespace fibremss::meshio

@@ -1,0 +1,258 @@
+#include "fibremss/SoftBodyBuilder.h"
+
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
+#include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "SoftBodyBones.h"
+
+namespace fibremss {
+
+void skinSurface(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                 std::span<const btTransform> boneTransforms, std::vector<btVector3>& out) {
+  const auto& rest = muscle.restSurface.vertices;
+  const size_t n = static_cast<size_t>(muscle.skinNeighbours);
+  out.resize(rest.size());
+  for (size_t v = 0; v < rest.size(); ++v) {
+    btVector3 sum(0, 0, 0);
+    for (size_t k = 0; k < n; ++k) {
+      const uint32_t j = muscle.skinParticles[v * n + k];
+      const int32_t bone = muscle.nearestBone[j];
+      const btVector3 offset = rest[v] - muscle.restPositions[j];
+      const btVector3 carried = bone >= 0 && static_cast<size_t>(bone) < boneTransforms.size()
+                                    ? positions[j] + boneTransforms[bone].getBasis() * offset
+                                    : positions[j] + offset;
+      sum += carried * muscle.skinWeights[v * n + k];
+    }
+    out[v] = sum;
+  }
+}
+
+std::vector<btVector3> posedParticles(const MuscleSettings& muscle,
+                                      std::span<const btTransform> boneTransforms) {
+  std::vector<btVector3> posed(muscle.restPositions);
+  for (size_t i = 0; i < posed.size(); ++i) {
+    const int32_t bone = muscle.fixedBone[i] >= 0 ? muscle.fixedBone[i] : muscle.nearestBone[i];
+    if (bone >= 0 && static_cast<size_t>(bone) < boneTransforms.size()) {
+      posed[i] = boneTransforms[bone] * posed[i];
+    }
+  }
+  return posed;
+}
+
+struct SoftBodyScene::Impl {
+  SoftBodyDefinition definition;
+  std::unique_ptr<btSoftBodyRigidBodyCollisionConfiguration> configuration;
+  std::unique_ptr<btCollisionDispatcher> dispatcher;
+  std::unique_ptr<btDbvtBroadphase> broadphase;
+  std::unique_ptr<btSequentialImpulseConstraintSolver> solver;
+  std::unique_ptr<btSoftRigidDynamicsWorld> world;
+
+  std::vector<KinematicBone> bones;
+  std::vector<btTransform> boneTransforms;
+
+  struct Muscle {
+    std::shared_ptr<const MuscleSettings> settings;
+    btSoftBody* body = nullptr;  // owned; removed from the world before deletion
+    std::vector<btVector3> positions;
+  };
+  std::vector<Muscle> muscles;
+  size_t links = 0;
+
+  ~Impl() {
+    for (Muscle& m : muscles) {
+      world->removeSoftBody(m.body);
+      delete m.body;
+    }
+    for (KinematicBone& b : bones) world->removeRigidBody(b.body.get());
+  }
+
+  void addBone(const BoneSettings& settings, const btTransform& transform) {
+    bones.emplace_back(settings, scaledTransform(transform, definition.lengthScale),
+                       definition.lengthScale);
+    if (definition.boneCollision) world->addRigidBody(bones.back().body.get());
+  }
+
+  void addMuscle(std::shared_ptr<const MuscleSettings> settings) {
+    const MuscleSettings& s = *settings;
+    const btScalar dt = definition.poseDuration / static_cast<btScalar>(definition.substepsPerPose);
+    Muscle muscle;
+    muscle.settings = settings;
+    muscle.positions = posedParticles(s, boneTransforms);
+    std::vector<btVector3> scaled;
+    for (const btVector3& x : muscle.positions) scaled.push_back(x * definition.lengthScale);
+    std::vector<btScalar> masses(s.particleCount(), s.particleMass);
+    for (uint32_t i : s.fixedParticles) masses[i] = 0;  // pinned: moved by us with the bone
+    muscle.body = new btSoftBody(&world->getWorldInfo(), static_cast<int>(s.particleCount()),
+                                 scaled.data(), masses.data());
+    btSoftBody& body = *muscle.body;
+
+    // Stiffness levels: s per link from k, dt, m and the iteration count (see the header);
+    // each level's material gets the mean s of its links.
+    const int levels = std::max(1, definition.stiffnessLevels);
+    const int n = std::max(1, definition.positionIterations);
+    const double mass = s.particleMass > 0 ? s.particleMass : 1;
+    std::vector<int> linkLevel(s.springs.size());
+    std::vector<double> levelSum(levels, 0);
+    std::vector<int> levelCount(levels, 0);
+    for (size_t i = 0; i < s.springs.size(); ++i) {
+      const double f = std::min(1.0, 2.0 * s.springs[i].stiffness * dt * dt / mass);
+      const double perIteration = 1.0 - std::pow(1.0 - f, 1.0 / n);
+      linkLevel[i] = std::clamp(static_cast<int>(perIteration * levels), 0, levels - 1);
+      levelSum[linkLevel[i]] += perIteration;
+      ++levelCount[linkLevel[i]];
+    }
+    std::vector<btSoftBody::Material*> materials(levels, nullptr);
+    for (int level = 0; level < levels; ++level) {
+      if (levelCount[level] == 0) continue;
+      materials[level] = body.appendMaterial();
+      materials[level]->m_kLST = static_cast<btScalar>(levelSum[level] / levelCount[level]);
+    }
+    for (size_t i = 0; i < s.springs.size(); ++i) {
+      body.appendLink(static_cast<int>(s.springs[i].a), static_cast<int>(s.springs[i].b),
+                      materials[linkLevel[i]]);
+    }
+    links += s.springs.size();
+
+    body.m_cfg.piterations = definition.positionIterations;
+    body.m_cfg.citerations = definition.clusterIterations;
+    body.m_cfg.kDP = static_cast<btScalar>(std::clamp(s.damping * dt / mass, 0.0, 1.0));
+    body.m_cfg.kCHR = 1;  // rigid contact hardness
+    body.m_cfg.kKHR = 1;  // kinematic contact hardness
+    body.m_cfg.kSHR = 1;  // soft contact hardness
+    body.m_cfg.collisions = 0;
+    if (definition.boneCollision) body.m_cfg.collisions |= btSoftBody::fCollision::SDF_RS;
+    if (definition.softSoftCollision) {
+      body.m_cfg.collisions |= btSoftBody::fCollision::CL_SS;
+      body.generateClusters(
+          std::min<int>(definition.clustersPerMuscle, static_cast<int>(s.particleCount())));
+    }
+    // Collision margin: the mean radius of the colliding particles (FibreMSS's spheres).
+    double radius = 0;
+    for (uint32_t i : s.boundaryParticles) radius += s.radii[i];
+    if (!s.boundaryParticles.empty()) radius /= static_cast<double>(s.boundaryParticles.size());
+    body.getCollisionShape()->setMargin(
+        static_cast<btScalar>(std::max(radius, 1e-4) * definition.lengthScale));
+    world->addSoftBody(muscle.body);
+    muscles.push_back(std::move(muscle));
+  }
+
+  void movePins(const Muscle& muscle) const {
+    const MuscleSettings& s = *muscle.settings;
+    for (uint32_t i : s.fixedParticles) {
+      btSoftBody::Node& node = muscle.body->m_nodes[static_cast<int>(i)];
+      node.m_x = boneTransforms[s.fixedBone[i]] * s.restPositions[i] * definition.lengthScale;
+      node.m_q = node.m_x;
+      node.m_v.setZero();
+    }
+  }
+};
+
+SoftBodyScene::SoftBodyScene(const PreparedScene& scene,
+                             std::span<const btTransform> boneTransforms,
+                             const SoftBodyDefinition& definition)
+    : impl_(std::make_unique<Impl>()) {
+  if (!boneTransforms.empty() && boneTransforms.size() != scene.bones.size()) {
+    throw std::invalid_argument("SoftBodyScene: bone transforms do not match the bones");
+  }
+  if (definition.substepsPerPose < 1 || definition.poseDuration <= 0 ||
+      definition.lengthScale <= 0) {
+    throw std::invalid_argument(
+        "SoftBodyScene: substepsPerPose, poseDuration and lengthScale must be > 0");
+  }
+  Impl& m = *impl_;
+  m.definition = definition;
+  m.configuration = std::make_unique<btSoftBodyRigidBodyCollisionConfiguration>();
+  m.dispatcher = std::make_unique<btCollisionDispatcher>(m.configuration.get());
+  m.broadphase = std::make_unique<btDbvtBroadphase>();
+  m.solver = std::make_unique<btSequentialImpulseConstraintSolver>();
+  m.world = std::make_unique<btSoftRigidDynamicsWorld>(m.dispatcher.get(), m.broadphase.get(),
+                                                       m.solver.get(), m.configuration.get());
+  m.world->setGravity(btVector3(0, 0, 0));
+  btSoftBodyWorldInfo& info = m.world->getWorldInfo();
+  info.m_gravity.setZero();
+  info.air_density = 0;
+  info.m_sparsesdf.Initialize();
+  info.m_sparsesdf.setDefaultVoxelsz(definition.sdfVoxelSize * definition.lengthScale);
+
+  m.boneTransforms.assign(scene.bones.size(), btTransform::getIdentity());
+  if (!boneTransforms.empty())
+    m.boneTransforms.assign(boneTransforms.begin(), boneTransforms.end());
+  for (size_t b = 0; b < scene.bones.size(); ++b) m.addBone(*scene.bones[b], m.boneTransforms[b]);
+  for (const auto& muscle : scene.muscles) m.addMuscle(muscle);
+}
+
+SoftBodyScene::~SoftBodyScene() = default;
+
+void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
+  Impl& m = *impl_;
+  if (targets.size() != m.bones.size()) {
+    throw std::invalid_argument("SoftBodyScene::stepPose: bone transforms do not match the bones");
+  }
+  const int substeps = m.definition.substepsPerPose;
+  const btScalar dt = m.definition.poseDuration / static_cast<btScalar>(substeps);
+  const std::vector<btTransform> from = m.boneTransforms;
+  for (int k = 1; k <= substeps; ++k) {
+    const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
+    for (size_t b = 0; b < m.bones.size(); ++b) {
+      m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
+      m.bones[b].body->setWorldTransform(
+          scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
+    }
+    for (const Impl::Muscle& muscle : m.muscles) m.movePins(muscle);
+    m.world->stepSimulation(dt, 0);
+  }
+  for (Impl::Muscle& muscle : m.muscles) {
+    for (size_t i = 0; i < muscle.positions.size(); ++i) {
+      muscle.positions[i] =
+          muscle.body->m_nodes[static_cast<int>(i)].m_x / m.definition.lengthScale;
+    }
+  }
+  m.world->getWorldInfo().m_sparsesdf.GarbageCollect();
+}
+
+size_t SoftBodyScene::muscleCount() const {
+  return impl_->muscles.size();
+}
+
+size_t SoftBodyScene::nodeCount() const {
+  size_t n = 0;
+  for (const auto& muscle : impl_->muscles) n += muscle.positions.size();
+  return n;
+}
+
+size_t SoftBodyScene::linkCount() const {
+  return impl_->links;
+}
+
+std::span<const btVector3> SoftBodyScene::positions(size_t muscle) const {
+  return impl_->muscles.at(muscle).positions;
+}
+
+void SoftBodyScene::surface(size_t muscle, std::vector<btVector3>& out) const {
+  const auto& m = impl_->muscles.at(muscle);
+  skinSurface(*m.settings, m.positions, impl_->boneTransforms, out);
+}
+
+std::span<const btTransform> SoftBodyScene::boneTransforms() const {
+  return impl_->boneTransforms;
+}
+
+btSoftBody& SoftBodyScene::body(size_t muscle) {
+  return *impl_->muscles.at(muscle).body;
+}
+
+btSoftRigidDynamicsWorld& SoftBodyScene::world() {
+  return *impl_->world;
+}
+
+const SoftBodyDefinition& SoftBodyScene::definition() const {
+  return impl_->definition;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,60 @@
+#pragma once
+// Runs a loaded, prepared scene through FibreMSS: one solver step per pose of the scene's
+// motion, measured every step the way every method is measured (Measures.h), optionally
+// writing ParaView frames. Used by `fibremss run` and `fibremss compare`.
+#include <atomic>
+#include <functional>
+#include <string>
+
+#include "fibremss/Measures.h"
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/RunMetrics.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss {
+
+/// Where a run is, passed to the progress callback after every step.
+struct RunProgress {
+  int step = 0;                         ///< steps done (1 after the first)
+  int steps = 0;                        ///< steps planned
+  long iterations = 0;                  ///< solver iterations so far
+  double seconds = 0;                   ///< wall time since the run started
+  const StepStats* lastStep = nullptr;  ///< statistics of the step just done
+};
+
+/// How to run. The defaults run every pose of the scene without writing anything.
+struct FibreRunOptions {
+  std::string outDir;   ///< write frames and run.pvd here ("": write nothing)
+  int frameEvery = -1;  ///< a frame every k-th step (the first and last included); < 0: the scene's
+                        ///< outputs.frameEvery; 0: no frames
+  int steps = -1;       ///< steps to run (< 0: one per pose); steps past the last pose hold it
+  std::string method = "fibremss";  ///< method name written to the metrics
+  bool keepPoseSurfaces = true;     ///< fill RunMetrics::poseSurfaces (for RMS between methods)
+  std::function<void(const RunProgress&)> progress;  ///< called after every step (may be empty)
+  const std::atomic<bool>* cancel = nullptr;  ///< when it becomes true the run stops after the
+                                              ///< current step, metrics.interrupted set
+};
+
+/// What a FibreMSS run measures beyond RunMetrics.
+struct FibreRunDetails {
+  /// The boundary particles' collision spheres in the bones' true meshes: per sphere
+  /// max(0, radius − signed distance of its centre), deepest bone; over all steps.
+  Penetration spherePenetration;
+  int frames = 0;  ///< frames written
+  /// Median wall time of measuring one step [ms]; not part of RunMetrics::timing, which is the
+  /// method's own cost (an application embedding FibreMSS does not measure).
+  double measureMsPerStep = RunMetrics::kNone;
+};
+
+/// Runs the scene. Step s sets every bone to the scene's pose min(s, poseCount−1), steps the
+/// solver and measures: penetration of the muscle surfaces' vertices into the bones' true meshes
+/// (max over steps; mean over all penetrating vertices of all steps), and at the last step run
+/// the volume change (all muscles together) and the spring-deviation ratio. Stops at the first
+/// step with a NaN or an explosion (failedStep). Throws std::runtime_error if frames cannot be
+/// written.
+/// `details`, when given, receives what RunMetrics has no place for.
+RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
+                       const FibreRunOptions& options = {}, FibreRunDetails* details = nullptr);
+
+}  // namespace fibremss

@@ -1,0 +1,384 @@
+#include "fibremss/CompareReport.h"
+
+#include <sys/utsname.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "fibremss/Error.h"
+#include "fibremss/Output.h"
+
+namespace fibremss {
+namespace {
+
+/// A number for tables: "—" where null, otherwise 3 significant digits.
+std::string cell(const nlohmann::json& value) {
+  if (!value.is_number()) return "—";
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", value.get<double>());
+  return text;
+}
+
+std::string field(const nlohmann::json& run, const char* key) {
+  auto it = run.find(key);
+  return it == run.end() ? "—" : cell(*it);
+}
+
+std::string text(const nlohmann::json& run, const char* key) {
+  auto it = run.find(key);
+  return it != run.end() && it->is_string() ? it->get<std::string>() : "";
+}
+
+std::string joined(const nlohmann::json& list, const char* separator) {
+  std::string out;
+  if (!list.is_array()) return out;
+  for (const auto& item : list) {
+    if (!out.empty()) out += separator;
+    out += item.is_string() ? item.get<std::string>() : item.dump();
+  }
+  return out;
+}
+
+double number(const nlohmann::json& run, const char* key) {
+  auto it = run.find(key);
+  return it != run.end() && it->is_number() ? it->get<double>() : NAN;
+}
+
+/// A label for plots: method, plus scene overrides when runs differ by them.
+std::string runLabel(const nlohmann::json& run) {
+  std::string label = text(run, "method");
+  const std::string overrides = joined(run.value("scene_overrides", nlohmann::json::array()), " ");
+  if (!overrides.empty()) label += " (" + overrides + ")";
+  return label;
+}
+
+/// gnuplot string literal.
+std::string quoted(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+void runGnuplot(const std::string& script, const std::string& scriptPath) {
+  writeFileAtomically(scriptPath, script);
+  const std::string command = "gnuplot " + quoted(scriptPath) + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
+  std::string output;
+  char buffer[256];
+  while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
+  const int status = pclose(pipe);
+  if (status != 0) {
+    throw std::runtime_error("gnuplot failed on " + scriptPath + " (exit " +
+                             std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) +
+                             "): " + output);
+  }
+}
+
+/// Sets both terminals in turn: the same plot as PNG and SVG.
+std::string bothTerminals(const std::string& stem, const std::string& body) {
+  return "set terminal pngcairo size 1000,650 enhanced font 'DejaVu Sans,10'\nset output " +
+         quoted(stem + ".png") + "\n" + body +
+         "set terminal svg size 1000,650 enhanced font 'DejaVu Sans,10'\nset output " +
+         quoted(stem + ".svg") + "\n" + body + "unset output\n";
+}
+
+std::string speedVsErrorScript(const nlohmann::json& runs, const std::string& stem) {
+  std::ostringstream data, body;
+  int points = 0;
+  for (const auto& run : runs) {
+    const double ms = number(run, "ms_per_step"), rms = number(run, "rms_to_fem_mm");
+    if (!(ms > 0) || !(rms > 0)) continue;  // log axes; the FEM run itself has 0
+    data << ms << " " << rms << " " << quoted(runLabel(run)) << "\n";
+    ++points;
+  }
+  body << "set title 'Speed against error (one point per run; the FEM reference is the zero)'\n"
+       << "set xlabel 'ms per step (median wall time, log)'\n"
+       << "set ylabel 'RMS surface distance to FEM [mm] (log)'\n"
+       << "set logscale xy\nset grid\nset key off\n";
+  if (points == 0) {
+    body << "set xrange [0.1:1000]\nset yrange [0.01:100]\n"
+         << "set label 1 'no run has both a time and an RMS to a FEM run' at graph 0.5,0.5 "
+            "center\nplot 1/0 notitle\nunset label 1\n";
+  } else {
+    body << "set offsets graph 0.15, graph 0.15, graph 0.15, graph 0.15\n"
+         << "plot $runs using 1:2 with points pt 7 ps 1.5 lc rgb '#1f77b4', "
+            "$runs using 1:2:3 with labels offset char 0,1.2 font ',9'\n";
+  }
+  return "$runs << EOD\n" + data.str() + "EOD\n" + bothTerminals(stem, body.str());
+}
+
+std::string penetrationScript(const nlohmann::json& runs, const std::string& stem) {
+  std::map<std::string, std::map<double, double>> byMethod;  // method → step_deg → max mm
+  for (const auto& run : runs) {
+    const double step = number(run, "step_deg"), depth = number(run, "max_penetration_mm");
+    if (std::isfinite(step) && std::isfinite(depth)) byMethod[text(run, "method")][step] = depth;
+  }
+  std::string blocks;
+  std::ostringstream plot;
+  int index = 0;
+  for (const auto& [method, points] : byMethod) {
+    blocks += "$m" + std::to_string(index) + " << EOD\n";
+    for (const auto& [step, depth] : points) {
+      blocks += std::to_string(step) + " " + std::to_string(depth) + "\n";
+    }
+    blocks += "EOD\n";
+    plot << (index ? ", " : "plot ") << "$m" << index << " using 1:2 with linespoints pt 7 title "
+         << quoted(method);
+    ++index;
+  }
+  std::string body =
+      "set title 'Hip sweep: deepest muscle surface vertex in a bone against the step size'\n"
+      "set xlabel 'step\\_deg [degrees per pose]'\nset ylabel 'max penetration [mm]'\n"
+      "set grid\nset key top left\nset offsets graph 0.05, graph 0.05, graph 0.1, 0\n" +
+      plot.str() + "\n";
+  return blocks + bothTerminals(stem, body);
+}
+
+bool anySweep(const nlohmann::json& runs) {
+  for (const auto& run : runs) {
+    if (std::isfinite(number(run, "step_deg"))) return true;
+  }
+  return false;
+}
+
+std::string describeMethods() {
+  return R"(## How each method was measured
+
+Every method runs the same prepared scene (the same particles, springs, fixed particles and
+surfaces) over every pose of the scene's motion, one step per pose, and is measured by the
+same code (`Measures.h`):
+
+- **ms_per_step**: median wall time of one step (bones moved, solver run, surfaces made);
+  **ms_per_iteration**: ms_per_step divided by the iterations of a step (FibreMSS: solver
+  iterations; btSoftBody: world substeps × position iterations; FEM: world substeps).
+- **max/mean_penetration_mm**: depth of the muscle surface vertices inside the bones' true
+  triangle meshes (signed distance in each bone's rest frame), max over all steps; mean over
+  the penetrating vertices of all steps.
+- **volume_change_pct**: volume of the deformed surfaces against rest at the last step (all
+  muscles together). **spring_deviation_ratio**: Σ|l − L0| / Σ L0 over the springs at the last
+  step (spring models only).
+- **rms_to_fem_mm / rms_to_self_reference_mm**: root mean square distance of corresponding
+  surface vertices to the FEM / self-reference run at the same pose, over all poses both
+  reached. **nan / exploded**: a non-finite position, or a spring (FEM: tetrahedron edge)
+  beyond 3× its rest length. **peak_memory_mb**: peak resident set of the process after the
+  run (getrusage; it includes every run before it in the same process).
+
+Methods:
+
+- **fibremss**: the scene's own settings (integrator, iterations, adaptive dt).
+  **fibremss:k=v**: a variant with those scene overrides.
+- **self-reference**: FibreMSS with dt/8 (and min dt/8) and 8× the iterations, the same
+  simulated time per step.
+- **btsoftbody**: `btSoftBody` in a `btSoftRigidDynamicsWorld`: the same particles as nodes
+  (same masses), the springs as links (stiffness mapped to `m_kLST` per link from k = κ/L0,
+  the substep and the iteration count), fixed particles pinned (mass 0) and moved with their
+  bones every substep, bones as kinematic bodies with `btBvhTriangleMeshShape` (SDF_RS),
+  soft–soft collision by clusters (CL_SS); run in centimetres because Bullet extrudes mesh
+  triangles by a fixed 0.06 units. The simulated time of a pose is FibreMSS's iterations × dt.
+- **fem**: each muscle's surface voxelized and split into positively oriented tetrahedra,
+  `btDeformableNeoHookeanForce` (E = 30 kPa, ν = 0.45, nearly incompressible) in a
+  `btDeformableMultiBodyDynamicsWorld`, nodes near fixed particles pinned and moved with their
+  bones, node contact with the bones' meshes (SDF_RD), surface vertices embedded in the
+  tetrahedra. It is the accuracy reference, not a speed competitor.
+)";
+}
+
+std::string table1(const nlohmann::json& runs) {
+  std::ostringstream out;
+  std::vector<const nlohmann::json*> rows;
+  for (const auto& run : runs) {
+    double thesis[4];
+    const int resolution = static_cast<int>(number(run, "resolution"));
+    if (text(run, "method") == "fibremss" && text(run, "scene").rfind("thigh13", 0) == 0 &&
+        thesisTable1(resolution, thesis)) {
+      rows.push_back(&run);
+    }
+  }
+  if (rows.empty()) return "";
+  out << "\n## Seed 004 Table 1: seconds for 500 iterations (thigh13, FibreMSS default)\n\n"
+      << "The thesis measured a Core2Duo 1.86 GHz; ours is this machine. Ratio = thesis / "
+         "ours (how many times faster).\n\n"
+      << "| resolution | part | FibreMSS [s] | thesis [s] | ratio |\n|---|---|---|---|---|\n";
+  const char* parts[4] = {"MSS", "muscle CD", "bone CD", "total"};
+  for (const nlohmann::json* run : rows) {
+    double thesis[4];
+    const int resolution = static_cast<int>(number(*run, "resolution"));
+    thesisTable1(resolution, thesis);
+    const auto& timing = run->value("timing", nlohmann::json::object());
+    const double ours[4] = {number(timing, "mss") * 0.5, number(timing, "muscle_cd") * 0.5,
+                            number(timing, "bone_cd") * 0.5,
+                            number(*run, "ms_per_iteration") * 0.5};
+    for (int p = 0; p < 4; ++p) {
+      char line[200];
+      std::snprintf(line, sizeof line, "| %d | %s | %.3g | %.2f | %.3g |\n", resolution, parts[p],
+                    ours[p], thesis[p], ours[p] > 0 ? thesis[p] / ours[p] : NAN);
+      out << line;
+    }
+  }
+  out << "\nFibreMSS parts are medians per iteration × 500; total is the median ms per "
+         "iteration × 500 (it includes the response and the output).\n";
+  return out.str();
+}
+
+}  // namespace
+
+nlohmann::json machineJson() {
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  std::string line, model = "unknown";
+  int cores = 0;
+  while (std::getline(cpuinfo, line)) {
+    if (line.rfind("processor", 0) == 0) ++cores;
+    if (line.rfind("model name", 0) == 0 && model == "unknown") {
+      model = line.substr(line.find(':') + 1);
+      model.erase(0, model.find_first_not_of(' '));
+    }
+  }
+  utsname name{};
+  std::string os = uname(&name) == 0 ? std::string(name.sysname) + " " + name.release : "";
+  return {{"cpu", model}, {"cores", cores}, {"os", os}};
+}
+
+nlohmann::json summaryJson(const Comparison& comparison, const std::string& command) {
+  nlohmann::json runs = nlohmann::json::array();
+  for (const RunMetrics& run : comparison.runs) {
+    nlohmann::json object = toJson(run);
+    object["scene_overrides"] = comparison.overrides;
+    object["resolution"] = comparison.resolution;
+    object["step_deg"] = std::isfinite(comparison.stepDeg) ? nlohmann::json(comparison.stepDeg)
+                                                           : nlohmann::json(nullptr);
+    runs.push_back(std::move(object));
+  }
+  return {{"scene", comparison.scene},
+          {"machine", machineJson()},
+          {"command", command},
+          {"runs", std::move(runs)}};
+}
+
+nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
+                              const std::vector<std::string>& sources) {
+  nlohmann::json runs = nlohmann::json::array(), commands = nlohmann::json::array();
+  std::set<std::string> scenes;
+  nlohmann::json machine;
+  for (size_t i = 0; i < summaries.size(); ++i) {
+    const auto& summary = summaries[i];
+    if (!summary.is_object() || !summary.contains("runs") || !summary["runs"].is_array()) {
+      throw InputError(i < sources.size() ? sources[i] : "summary", "runs",
+                       "a summary.json written by `fibremss compare` (an object with \"runs\")");
+    }
+    for (const auto& run : summary["runs"]) runs.push_back(run);
+    if (summary.contains("scene") && summary["scene"].is_string()) {
+      scenes.insert(summary["scene"].get<std::string>());
+    }
+    if (summary.contains("command")) commands.push_back(summary["command"]);
+    if (machine.is_null() && summary.contains("machine")) machine = summary["machine"];
+  }
+  std::string scene;
+  for (const std::string& s : scenes) scene += (scene.empty() ? "" : ", ") + s;
+  return {{"scene", scene}, {"machine", machine}, {"command", commands}, {"runs", runs}};
+}
+
+nlohmann::json readSummary(const std::string& path) {
+  std::filesystem::path file(path);
+  if (std::filesystem::is_directory(file)) file /= "summary.json";
+  std::ifstream in(file);
+  if (!in) throw InputError(file.string(), "", "cannot open (expected a summary.json)");
+  nlohmann::json summary = nlohmann::json::parse(in, nullptr, false);
+  if (summary.is_discarded()) throw InputError(file.string(), "", "not valid JSON");
+  return summary;
+}
+
+bool thesisTable1(int resolution, double seconds[4]) {
+  static const std::map<int, std::array<double, 4>> table = {{20, {18.66, 8.15, 30.03, 56.84}},
+                                                             {40, {39.97, 13.50, 37.43, 90.9}},
+                                                             {60, {60.53, 24.00, 56.03, 140.56}},
+                                                             {80, {80.70, 29.53, 67.10, 177.33}}};
+  auto it = table.find(resolution);
+  if (it == table.end()) return false;
+  for (int i = 0; i < 4; ++i) seconds[i] = it->second[i];
+  return true;
+}
+
+std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std::string>& plots) {
+  std::ostringstream out;
+  const nlohmann::json& runs = summary["runs"];
+  out << "# FibreMSS comparison: " << summary.value("scene", std::string("?")) << "\n\n";
+  const nlohmann::json& machine = summary.value("machine", nlohmann::json::object());
+  out << "- Machine: " << (machine.is_object() ? machine.value("cpu", std::string("?")) : "?")
+      << ", " << (machine.is_object() ? machine.value("cores", 0) : 0) << " logical cores, "
+      << (machine.is_object() ? machine.value("os", std::string("")) : "") << "\n";
+  const nlohmann::json& command = summary.value("command", nlohmann::json());
+  if (command.is_string()) {
+    out << "- Command: `" << command.get<std::string>() << "`\n";
+  } else if (command.is_array()) {
+    out << "- Merged from:\n";
+    for (const auto& c : command)
+      out << "  - `" << (c.is_string() ? c.get<std::string>() : c.dump()) << "`\n";
+  }
+  out << "\n## Runs\n\n"
+      << "| method | scene | overrides | particles/nodes | springs/links/tets | steps | ms/step | "
+         "ms/iteration | max pen. [mm] | mean pen. [mm] | volume [%] | RMS to FEM [mm] | RMS to "
+         "self-ref. [mm] | spring dev. | failed | peak MB | wall [s] |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& run : runs) {
+    std::string failed = "no";
+    if (run.value("nan", false)) failed = "NaN";
+    if (run.value("exploded", false)) failed = "exploded";
+    if (failed != "no") failed += " at step " + std::to_string(run.value("failed_step", -1));
+    if (run.value("interrupted", false)) failed = "interrupted";
+    out << "| " << text(run, "method") << " | " << text(run, "scene") << " | "
+        << joined(run.value("scene_overrides", nlohmann::json::array()), " ") << " | "
+        << run.value("particles", 0) << " | " << run.value("springs", 0) << " | "
+        << run.value("steps", 0) << " | " << field(run, "ms_per_step") << " | "
+        << field(run, "ms_per_iteration") << " | " << field(run, "max_penetration_mm") << " | "
+        << field(run, "mean_penetration_mm") << " | " << field(run, "volume_change_pct") << " | "
+        << field(run, "rms_to_fem_mm") << " | " << field(run, "rms_to_self_reference_mm") << " | "
+        << field(run, "spring_deviation_ratio") << " | " << failed << " | "
+        << field(run, "peak_memory_mb") << " | " << field(run, "wall_seconds") << " |\n";
+  }
+  out << "\n— : does not apply or was not measured (e.g. no FEM run to compare with).\n";
+  for (const std::string& plot : plots) {
+    if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {
+      out << "\n![" << plot << "](" << plot << ")\n";
+    }
+  }
+  out << table1(runs) << "\n" << describeMethods();
+  return out.str();
+}
+
+std::vector<std::string> writeComparison(const nlohmann::json& summary, const std::string& outDir) {
+  std::filesystem::create_directories(outDir);
+  const std::filesystem::path dir = std::filesystem::absolute(outDir);
+  std::vector<std::string> written;
+  writeFileAtomically((dir / "summary.json").string(), summary.dump(2) + "\n");
+  written.push_back("summary.json");
+
+  std::vector<std::string> plots;
+  const nlohmann::json& runs = summary["runs"];
+  runGnuplot(speedVsErrorScript(runs, (dir / "speed_vs_error").string()),
+             (dir / "speed_vs_error.gp").string());
+  plots.push_back("speed_vs_error.png");
+  plots.push_back("speed_vs_error.svg");
+  if (anySweep(runs)) {
+    runGnuplot(penetrationScript(runs, (dir / "penetration_vs_step").string()),
+               (dir / "penetration_vs_step.gp").string());
+    plots.push_back("penetration_vs_step.png");
+    plots.push_back("penetration_vs_step.svg");
+  }
+  writeFileAtomically((dir / "report.md").string(), reportMarkdown(summary, plots));
+  written.push_back("report.md");
+  written.insert(written.end(), plots.begin(), plots.end());
+  return written;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,364 @@
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <map>
+
+#include "fibremss/Compare.h"
+#include "fibremss/Error.h"
+#include "fibremss/FibreRun.h"
+#include "fibremss/Measures.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+double median(std::vector<double> values) {
+  if (values.empty()) return RunMetrics::kNone;
+  std::sort(values.begin(), values.end());
+  const size_t middle = values.size() / 2;
+  return values.size() % 2 ? values[middle] : 0.5 * (values[middle - 1] + values[middle]);
+}
+
+/// Peak resident set of the process so far (getrusage), in MB.
+double peakMemoryMb() {
+  rusage usage{};
+  if (getrusage(RUSAGE_SELF, &usage) != 0) return RunMetrics::kNone;
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // Linux: kilobytes
+}
+
+bool allFinite(std::span<const btVector3> points) {
+  return std::all_of(points.begin(), points.end(), [](const btVector3& p) {
+    return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
+  });
+}
+
+std::vector<btTransform> posesAt(const LoadedScene& scene, int pose) {
+  std::vector<btTransform> transforms;
+  for (size_t b = 0; b < scene.bones.size(); ++b) transforms.push_back(scene.bonePose(b, pose));
+  return transforms;
+}
+
+/// What the pose loop needs from a simulated method.
+struct Simulated {
+  std::function<void(std::span<const btTransform>)> step;        ///< one pose
+  std::function<void(size_t, std::vector<btVector3>&)> surface;  ///< muscle's surface
+  std::function<bool()> exploded;                                ///< after a step
+  std::function<double()> springDeviation;                       ///< at the end
+  long iterationsPerStep = 1;                                    ///< for ms/iteration
+};
+
+/// Runs every pose and measures it the way runFibreMSS does: surface penetration into the
+/// bones' true meshes over all steps, volume change and spring deviation at the last step.
+void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Simulated& sim,
+              const MethodRunOptions& options, Clock::time_point start, RunMetrics& metrics) {
+  std::vector<MeshDistance> boneDistances;
+  for (const auto& bone : prepared.bones) boneDistances.emplace_back(bone->mesh);
+  std::vector<const MeshDistance*> bones;
+  for (const MeshDistance& d : boneDistances) bones.push_back(&d);
+
+  const int steps = std::max(scene.poseCount, 1);
+  std::vector<double> msPerStep;
+  Penetration penetration;
+  std::vector<btVector3> poseSurface, muscleSurface;
+  for (int s = 0; s < steps; ++s) {
+    if (options.cancel && options.cancel->load()) {
+      metrics.interrupted = true;
+      break;
+    }
+    const std::vector<btTransform> transforms = posesAt(scene, s);
+    const auto stepStart = Clock::now();
+    sim.step(transforms);
+    msPerStep.push_back(secondsSince(stepStart) * 1000);
+    metrics.steps = s + 1;
+    metrics.iterations += sim.iterationsPerStep;
+
+    poseSurface.clear();
+    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+      sim.surface(m, muscleSurface);
+      poseSurface.insert(poseSurface.end(), muscleSurface.begin(), muscleSurface.end());
+    }
+    metrics.nan = !allFinite(poseSurface);
+    metrics.exploded = !metrics.nan && sim.exploded();
+    if (!metrics.nan)
+      penetration = combine(penetration, measurePenetration(poseSurface, bones, transforms));
+    metrics.poseSurfaces.push_back(poseSurface);
+    if (options.progress) {
+      options.progress({metrics.method, s + 1, steps, metrics.iterations, secondsSince(start)});
+    }
+    if (metrics.nan || metrics.exploded) {
+      metrics.failedStep = s;
+      break;
+    }
+  }
+  metrics.msPerStep = median(msPerStep);
+  metrics.msPerIteration = metrics.msPerStep / static_cast<double>(sim.iterationsPerStep);
+  if (metrics.steps > 0 && !metrics.nan) {
+    metrics.maxPenetrationMm = penetration.maxMm;
+    metrics.meanPenetrationMm = penetration.meanMm;
+    // Volume change of all muscles together (rest-volume weighted), as runFibreMSS.
+    double restVolume = 0, change = 0;
+    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+      const TriangleMesh& rest = prepared.muscles[m]->restSurface;
+      if (rest.empty()) continue;
+      const double volume = meshVolume(rest);
+      sim.surface(m, muscleSurface);
+      change += volume * volumeChangePercent(rest, muscleSurface);
+      restVolume += volume;
+    }
+    if (restVolume != 0) metrics.volumeChangePct = change / restVolume;
+    metrics.springDeviationRatio = sim.springDeviation();
+  }
+  metrics.peakMemoryMb = peakMemoryMb();
+  metrics.wallSeconds = secondsSince(start);
+}
+
+/// True when some pair (a, b) is longer than 3× its rest length (FibreMSS's criterion).
+template <class Pairs>
+bool beyondThreeTimes(const Pairs& pairs, std::span<const btVector3> positions) {
+  for (const auto& [a, b, rest] : pairs) {
+    if ((positions[a] - positions[b]).length() > 3 * rest) return true;
+  }
+  return false;
+}
+
+std::vector<std::string> split(const std::string& text, char separator) {
+  std::vector<std::string> parts;
+  size_t start = 0;
+  for (size_t end; (end = text.find(separator, start)) != std::string::npos; start = end + 1) {
+    parts.push_back(text.substr(start, end - start));
+  }
+  parts.push_back(text.substr(start));
+  return parts;
+}
+
+/// The first "step_deg" of a sweep motion anywhere in the scene JSON (NaN if none).
+double sweepStep(const nlohmann::json& node) {
+  if (node.is_object()) {
+    if (auto it = node.find("step_deg"); it != node.end() && it->is_number()) {
+      return it->get<double>();
+    }
+  }
+  if (node.is_object() || node.is_array()) {
+    for (const auto& child : node) {
+      const double step = sweepStep(child);
+      if (!std::isnan(step)) return step;
+    }
+  }
+  return RunMetrics::kNone;
+}
+
+}  // namespace
+
+double poseDuration(const SimulationParameters& simulation) {
+  const int iterations = simulation.stopRule == StopRule::Iterations
+                             ? simulation.iterations
+                             : std::min(simulation.iterations, kPoseIterationsCap);
+  return static_cast<double>(simulation.timeStep) * iterations;
+}
+
+RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
+                       const SoftBodyDefinition& definition, const MethodRunOptions& options) {
+  const auto start = Clock::now();
+  RunMetrics metrics;
+  metrics.scene = scene.name;
+  metrics.method = "btsoftbody";
+  metrics.integrator = "btSoftBody position solver";
+  SoftBodyScene sim(prepared, posesAt(scene, 0), definition);
+  metrics.particles = sim.nodeCount();
+  metrics.springs = sim.linkCount();
+  for (const auto& muscle : prepared.muscles)
+    metrics.boundaryParticles += muscle->boundaryParticles.size();
+
+  std::vector<std::vector<std::tuple<uint32_t, uint32_t, btScalar>>> springs;
+  double restLengths = 0;
+  for (const auto& muscle : prepared.muscles) {
+    springs.emplace_back();
+    for (const Spring& s : muscle->springs) {
+      springs.back().emplace_back(s.a, s.b, s.restLength);
+      restLengths += s.restLength;
+    }
+  }
+  Simulated simulated;
+  simulated.step = [&](std::span<const btTransform> t) { sim.stepPose(t); };
+  simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
+  simulated.exploded = [&] {
+    for (size_t m = 0; m < springs.size(); ++m) {
+      if (beyondThreeTimes(springs[m], sim.positions(m))) return true;
+    }
+    return false;
+  };
+  simulated.springDeviation = [&] {
+    double deviation = 0;
+    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+      double lengths = 0;
+      for (const Spring& s : prepared.muscles[m]->springs) lengths += s.restLength;
+      if (lengths > 0) {
+        deviation += lengths * springDeviationRatio(prepared.muscles[m]->springs, sim.positions(m));
+      }
+    }
+    return restLengths > 0 ? deviation / restLengths : RunMetrics::kNone;
+  };
+  simulated.iterationsPerStep =
+      static_cast<long>(definition.substepsPerPose) * definition.positionIterations;
+  runPoses(scene, prepared, simulated, options, start, metrics);
+  return metrics;
+}
+
+RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
+                  const FemDefinition& definition, const MethodRunOptions& options) {
+  const auto start = Clock::now();
+  RunMetrics metrics;
+  metrics.scene = scene.name;
+  metrics.method = "fem";
+  metrics.integrator = "Neo-Hookean FEM, btDeformableBodySolver (implicit)";
+  FemScene sim(prepared, posesAt(scene, 0), definition);
+  metrics.particles = sim.nodeCount();
+  metrics.springs = sim.tetrahedronCount();
+
+  // Tetrahedron edges with their rest lengths, for the explosion criterion.
+  std::vector<std::vector<std::tuple<uint32_t, uint32_t, btScalar>>> edges(sim.muscleCount());
+  for (size_t m = 0; m < sim.muscleCount(); ++m) {
+    const TetMesh& mesh = sim.tetMesh(m);
+    for (const auto& t : mesh.tetrahedra) {
+      for (int a = 0; a < 4; ++a) {
+        for (int b = a + 1; b < 4; ++b) {
+          edges[m].emplace_back(t[a], t[b], mesh.nodes[t[a]].distance(mesh.nodes[t[b]]));
+        }
+      }
+    }
+  }
+  Simulated simulated;
+  simulated.step = [&](std::span<const btTransform> t) { sim.stepPose(t); };
+  simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
+  simulated.exploded = [&] {
+    for (size_t m = 0; m < edges.size(); ++m) {
+      if (beyondThreeTimes(edges[m], sim.nodePositions(m))) return true;
+    }
+    return false;
+  };
+  simulated.springDeviation = [] { return RunMetrics::kNone; };  // not a spring model
+  simulated.iterationsPerStep = definition.substepsPerPose;
+  runPoses(scene, prepared, simulated, options, start, metrics);
+  return metrics;
+}
+
+double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b) {
+  const size_t poses = std::min(a.poseSurfaces.size(), b.poseSurfaces.size());
+  if (poses == 0) return RunMetrics::kNone;
+  double sum = 0;
+  for (size_t p = 0; p < poses; ++p) {
+    if (a.poseSurfaces[p].size() != b.poseSurfaces[p].size()) return RunMetrics::kNone;
+    const double rms = rmsDistanceMm(a.poseSurfaces[p], b.poseSurfaces[p]);
+    sum += rms * rms;
+  }
+  return std::sqrt(sum / static_cast<double>(poses));
+}
+
+void fillRms(std::vector<RunMetrics>& runs) {
+  const RunMetrics* fem = nullptr;
+  const RunMetrics* self = nullptr;
+  for (const RunMetrics& run : runs) {
+    if (run.method == "fem") fem = &run;
+    if (run.method == "self-reference") self = &run;
+  }
+  for (RunMetrics& run : runs) {
+    if (fem) run.rmsToFemMm = rmsBetweenRuns(run, *fem);
+    if (self) run.rmsToSelfReferenceMm = rmsBetweenRuns(run, *self);
+  }
+}
+
+MethodSpec parseMethod(const std::string& name) {
+  MethodSpec spec;
+  spec.name = name;
+  const size_t colon = name.find(':');
+  spec.family = name.substr(0, colon);
+  if (spec.family != "fibremss" && spec.family != "self-reference" && spec.family != "btsoftbody" &&
+      spec.family != "fem") {
+    throw InputError("--methods", name,
+                     "unknown method; expected fibremss, self-reference, btsoftbody, fem or "
+                     "fibremss:<key>=<value>[+<key>=<value>...]");
+  }
+  if (colon == std::string::npos) return spec;
+  if (spec.family != "fibremss") {
+    throw InputError("--methods", name, "only fibremss takes variants (fibremss:<key>=<value>)");
+  }
+  for (const std::string& part : split(name.substr(colon + 1), '+')) {
+    if (part.find('=') == std::string::npos || part.front() == '=') {
+      throw InputError("--methods", name,
+                       "variant part '" + part + "' is not <key>=<value> (parts joined by '+')");
+    }
+    spec.overrides.push_back(part);
+  }
+  return spec;
+}
+
+Comparison runComparison(const std::string& sceneNameOrPath,
+                         const std::vector<std::string>& overrides, const CompareOptions& options) {
+  std::vector<MethodSpec> specs;
+  for (const std::string& method : options.methods) specs.push_back(parseMethod(method));
+  auto log = [&](const std::string& line) {
+    if (options.log) options.log(line);
+  };
+  const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
+  log("preparing " + scene.name);
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const double duration = poseDuration(scene.simulation);
+
+  Comparison comparison;
+  comparison.scene = scene.name;
+  comparison.overrides = overrides;
+  if (!scene.muscles.empty()) comparison.resolution = scene.muscles.front().parameters.resolution;
+  comparison.stepDeg = sweepStep(nlohmann::json::parse(scene.json, nullptr, false));
+  std::vector<RunMetrics>& runs = comparison.runs;
+  for (const MethodSpec& spec : specs) {
+    if (options.cancel && options.cancel->load()) break;
+    log("running " + spec.name);
+    MethodRunOptions methodOptions{options.progress, options.cancel};
+    FibreRunOptions fibreOptions;
+    fibreOptions.method = spec.name;
+    fibreOptions.cancel = options.cancel;
+    fibreOptions.frameEvery = 0;
+    if (options.progress) {
+      fibreOptions.progress = [&](const RunProgress& p) {
+        options.progress({spec.name, p.step, p.steps, p.iterations, p.seconds});
+      };
+    }
+    if (spec.family == "fibremss" && spec.overrides.empty()) {
+      runs.push_back(runFibreMSS(scene, prepared, fibreOptions));
+    } else if (spec.family == "fibremss") {
+      std::vector<std::string> all = overrides;
+      all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
+      const LoadedScene variant = loadScene(sceneNameOrPath, all);
+      const PreparedScene variantPrepared =
+          prepareScene(variant.bones, variant.muscles, variant.simulation.seed);
+      runs.push_back(runFibreMSS(variant, variantPrepared, fibreOptions));
+    } else if (spec.family == "self-reference") {
+      LoadedScene reference = scene;
+      const int f = std::max(1, options.selfReferenceFactor);
+      reference.simulation.timeStep /= static_cast<btScalar>(f);
+      reference.simulation.minTimeStep /= static_cast<btScalar>(f);
+      reference.simulation.iterations *= f;
+      runs.push_back(runFibreMSS(reference, prepared, fibreOptions));
+    } else if (spec.family == "btsoftbody") {
+      SoftBodyDefinition definition = options.softBody;
+      definition.poseDuration = static_cast<btScalar>(duration);
+      runs.push_back(runSoftBody(scene, prepared, definition, methodOptions));
+    } else {
+      FemDefinition definition = options.fem;
+      definition.poseDuration = static_cast<btScalar>(duration);
+      runs.push_back(runFem(scene, prepared, definition, methodOptions));
+    }
+  }
+  fillRms(runs);
+  return comparison;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,62 @@
+#pragma once
+// Narrow phase and response of the sphere collision (method.md §6), internal: exact sphere
+// tests on the leaf pairs the trees report, pushes accumulated from the starting positions and
+// applied after all pairs.
+#include <LinearMath/btVector3.h>
+
+#include <vector>
+
+#include "MuscleState.h"
+
+namespace fibremss {
+
+/// Ends of the contacts found in one iteration, kept for debug drawing; fixed capacity.
+struct ContactLog {
+  std::vector<btVector3> ends;  ///< two points per contact, allocated up front
+  size_t stored = 0;            ///< contacts stored (≤ ends.size() / 2)
+  size_t found = 0;             ///< contacts found, stored or not
+  size_t candidates = 0;        ///< leaf pairs the broad phase reported
+
+  void clear() { stored = found = candidates = 0; }
+  void add(const btVector3& a, const btVector3& b) {
+    ++found;
+    if (2 * stored + 1 < ends.size()) {
+      ends[2 * stored] = a;
+      ends[2 * stored + 1] = b;
+      ++stored;
+    }
+  }
+};
+
+/// Overlap of spheres (a, ra) and (b, rb): false when apart; else the unit direction from b to
+/// a (+x when the centres coincide) and the overlap depth ra + rb − |a − b| > 0.
+inline bool sphereOverlap(const btVector3& a, btScalar ra, const btVector3& b, btScalar rb,
+                          btVector3& direction, btScalar& depth) {
+  const btVector3 d = a - b;
+  const btScalar reach = ra + rb;
+  const btScalar distance2 = d.length2();
+  if (distance2 >= reach * reach) return false;
+  const btScalar distance = btSqrt(distance2);
+  direction = distance > SIMD_EPSILON * reach ? d / distance : btVector3(1, 0, 0);
+  depth = reach - distance;
+  return true;
+}
+
+/// Refits a muscle's tree to its boundary spheres (same topology, tight bounds).
+void refitTree(MuscleState& muscle);
+/// Re-inserts every leaf (the thesis' rebuild each step).
+void rebuildTree(MuscleState& muscle);
+
+/// Muscle–muscle pairs of two different muscles: half the overlap each, the whole one to the
+/// free particle when the other is fixed, nothing when both are fixed.
+void collideMuscles(MuscleState& a, MuscleState& b, ContactLog& log);
+/// Muscle–bone pairs: the whole overlap to the free particle; the bone's tree must have been
+/// placed at its current transform.
+void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
+                       ContactLog& log);
+
+/// Moves every pushed particle by its accumulated push and zeroes its velocity
+/// (previous = position); clears the pushes.
+void applyPushes(MuscleState& muscle, bool zeroVelocities);
+
+}  // namespace fibremss

@@ -1,0 +1,107 @@
+#include "CollisionTrees.h"
+
+#include <algorithm>
+
+namespace fibremss {
+
+void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+                       std::span<const btScalar> radii) {
+  tree_.clear();
+  leaves_.clear();
+  leaves_.reserve(indices.size());
+  for (uint32_t index : indices) {
+    btDbvtNode* leaf = tree_.insert(btDbvtVolume::FromCR(centres[index], radii[index]), nullptr);
+    leaf->dataAsInt = static_cast<int>(index);
+    leaves_.push_back(leaf);
+  }
+  // Top-down optimisation gives a balanced tree to start from; it keeps the leaf nodes.
+  if (!leaves_.empty()) tree_.optimizeTopDown();
+  inner_.reserve(leaves_.size());
+  pending_.reserve(leaves_.size());
+  orderInnerNodes();
+  // Warm the persistent traversal stack so that the first collideTrees() does not allocate.
+  tree_.m_stkStack.resize(btDbvt::DOUBLE_STACKSIZE);
+}
+
+void SphereTree::refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+                       std::span<const btScalar> radii) {
+  for (size_t k = 0; k < leaves_.size(); ++k)
+    leaves_[k]->volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]]);
+  for (btDbvtNode* node : inner_)
+    Merge(node->childs[0]->volume, node->childs[1]->volume, node->volume);
+}
+
+void SphereTree::rebuild(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+                         std::span<const btScalar> radii) {
+  for (size_t k = 0; k < leaves_.size(); ++k) {
+    btDbvtVolume volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]]);
+    tree_.update(leaves_[k], volume);  // remove and insert: reuses the freed node
+  }
+  orderInnerNodes();
+}
+
+void SphereTree::orderInnerNodes() {
+  // Depth first from the root lists parents before children; reversed, children come first.
+  inner_.clear();
+  pending_.clear();
+  if (tree_.m_root && tree_.m_root->isinternal()) pending_.push_back(tree_.m_root);
+  while (!pending_.empty()) {
+    btDbvtNode* node = pending_.back();
+    pending_.pop_back();
+    inner_.push_back(node);
+    for (btDbvtNode* child : node->childs)
+      if (child->isinternal()) pending_.push_back(child);
+  }
+  std::reverse(inner_.begin(), inner_.end());
+}
+
+void collideTrees(SphereTree& stackOwner, const btDbvtNode* a, const btDbvtNode* b,
+                  btDbvt::ICollide& policy) {
+  stackOwner.tree().collideTTpersistentStack(a, b, policy);
+}
+
+void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const btScalar> radii) {
+  nodes_.clear();
+  bounds_.clear();
+  centres_.clear();
+  if (centres.empty()) return;
+  btDbvt tree;
+  for (size_t k = 0; k < centres.size(); ++k)
+    tree.insert(btDbvtVolume::FromCR(centres[k], radii[k]), nullptr)->dataAsInt =
+        static_cast<int>(k);
+  tree.optimizeTopDown();
+  // Flatten depth first; a parent's index is below its children's.
+  std::vector<std::pair<const btDbvtNode*, int32_t>> pending{{tree.m_root, 0}};
+  nodes_.emplace_back();
+  while (!pending.empty()) {
+    const auto [node, index] = pending.back();
+    pending.pop_back();
+    if (node->isleaf()) {
+      nodes_[index].sphere = node->dataAsInt;
+      continue;
+    }
+    for (int c = 0; c < 2; ++c) {
+      const auto child = static_cast<int32_t>(nodes_.size());
+      nodes_[index].children[c] = child;
+      nodes_.emplace_back();
+      pending.emplace_back(node->childs[c], child);
+    }
+  }
+  bounds_.resize(nodes_.size());
+  centres_.resize(centres.size());
+  place(btTransform::getIdentity(), centres, radii);
+}
+
+void BoneSphereTree::place(const btTransform& boneToWorld, std::span<const btVector3> centres,
+                           std::span<const btScalar> radii) {
+  for (size_t k = 0; k < centres.size(); ++k) centres_[k] = boneToWorld * centres[k];
+  for (size_t n = nodes_.size(); n-- > 0;) {
+    const Node& node = nodes_[n];
+    if (node.sphere >= 0)
+      bounds_[n] = btDbvtVolume::FromCR(centres_[node.sphere], radii[node.sphere]);
+    else
+      Merge(bounds_[node.children[0]], bounds_[node.children[1]], bounds_[n]);
+  }
+}
+
+}  // namespace fibremss

@@ -1,0 +1,127 @@
+#pragma once
+// Sphere trees for the broad phase (method.md §6) on Bullet's btDbvt: one tree per body, leaves
+// are sphere bounds whose dataAsInt is the sphere's index (a particle or a bone sphere), never a
+// pointer. Internal to the plugin; exposed to tests through this header.
+#include <BulletCollision/BroadphaseCollision/btDbvt.h>
+#include <LinearMath/btTransform.h>
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace fibremss {
+
+/// One btDbvt over spheres; leaf k holds the sphere `indices[k]` given to build(). Refit keeps the
+/// topology (method.md §6: refit every iteration, rebuild only when asked): a leaf's bounds
+/// are its sphere's, an inner node's the union of its children's, recomputed bottom-up in O(n).
+/// Re-inserting moved leaves (btDbvt::update with a velocity margin) was measured 2–3× slower at
+/// thigh13: while bones move, most spheres leave their fattened bounds every iteration.
+class SphereTree {
+ public:
+  SphereTree() = default;
+  SphereTree(const SphereTree&) = delete;
+  SphereTree& operator=(const SphereTree&) = delete;
+
+  /// Inserts one leaf per listed sphere and optimises the tree top-down. Allocates.
+  void build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+             std::span<const btScalar> radii);
+  /// Tight bounds for the spheres' current centres, same topology. No allocation.
+  void refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+             std::span<const btScalar> radii);
+  /// Re-inserts every leaf at its sphere (the thesis' rebuild each step): a new topology fitted
+  /// to the current shape. No allocation.
+  void rebuild(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+               std::span<const btScalar> radii);
+
+  const btDbvtNode* root() const { return tree_.m_root; }
+  size_t leafCount() const { return leaves_.size(); }
+  /// The Bullet tree (its persistent traversal stack is reused by collideTrees()).
+  btDbvt& tree() { return tree_; }
+
+ private:
+  /// Lists the inner nodes children-first into inner_.
+  void orderInnerNodes();
+
+  btDbvt tree_;                       ///< the Bullet tree
+  std::vector<btDbvtNode*> leaves_;   ///< leaf of the k-th sphere, owned by tree_
+  std::vector<btDbvtNode*> inner_;    ///< inner nodes, every child before its parent
+  std::vector<btDbvtNode*> pending_;  ///< scratch of orderInnerNodes, sized at build
+};
+
+/// Reports every leaf pair of two trees in the same frame whose bounds overlap
+/// (btDbvt::collideTTpersistentStack: collideTT reusing `stackOwner`'s stack, so no allocation).
+void collideTrees(SphereTree& stackOwner, const btDbvtNode* a, const btDbvtNode* b,
+                  btDbvt::ICollide& policy);
+
+/// A bone's spheres in a static tree: built once by btDbvt in the bone frame, its topology never
+/// changes; place() re-expresses every node's bounds in world coordinates for the bone's current
+/// transform (leaves: the transformed spheres, tight; inner nodes: merged children), O(nodes)
+/// per moving bone and no allocation. Queries then run in world space against the muscle trees,
+/// with boxes tighter than a muscle box rotated into the bone frame would be.
+class BoneSphereTree {
+ public:
+  /// One node; children come after their parent, so a reverse sweep refits bottom-up.
+  struct Node {
+    int32_t children[2] = {-1, -1};  ///< child nodes, or -1 for a leaf
+    int32_t sphere = -1;             ///< the leaf's sphere index
+  };
+
+  /// Builds the tree over the spheres (bone frame) and places it at the identity. Allocates.
+  void build(std::span<const btVector3> centres, std::span<const btScalar> radii);
+  /// World bounds and sphere centres for the bone at `boneToWorld`.
+  void place(const btTransform& boneToWorld, std::span<const btVector3> centres,
+             std::span<const btScalar> radii);
+
+  bool empty() const { return nodes_.empty(); }
+  const Node& node(int32_t n) const { return nodes_[n]; }
+  const btDbvtVolume& bounds(int32_t n) const { return bounds_[n]; }
+  /// Sphere centres in world coordinates as of the last place().
+  const btVector3& centre(int32_t sphere) const { return centres_[sphere]; }
+
+ private:
+  std::vector<Node> nodes_;           ///< node 0 is the root
+  std::vector<btDbvtVolume> bounds_;  ///< world bounds per node
+  std::vector<btVector3> centres_;    ///< world sphere centres
+};
+
+/// A muscle tree node paired with a bone tree node, on the traversal stack.
+struct MuscleBoneNodes {
+  const btDbvtNode* muscle;  ///< node of the muscle's btDbvt
+  int32_t bone;              ///< node of the bone tree
+};
+/// A reusable traversal stack for collideWithBone.
+using MuscleBoneStack = std::vector<MuscleBoneNodes>;
+
+/// Calls onPair(muscleLeaf, sphere) for every muscle leaf whose bounds overlap the bounds of a
+/// bone sphere (both in world space), descending both trees like btDbvt::collideTT.
+template <typename OnPair>
+void collideWithBone(MuscleBoneStack& stack, const btDbvtNode* muscleRoot,
+                     const BoneSphereTree& bone, OnPair&& onPair) {
+  if (!muscleRoot || bone.empty()) return;
+  stack.clear();
+  stack.push_back({muscleRoot, 0});
+  while (!stack.empty()) {
+    const MuscleBoneNodes pair = stack.back();
+    stack.pop_back();
+    if (!Intersect(pair.muscle->volume, bone.bounds(pair.bone))) continue;
+    const BoneSphereTree::Node& b = bone.node(pair.bone);
+    if (pair.muscle->isinternal()) {
+      if (b.sphere < 0) {
+        stack.push_back({pair.muscle->childs[0], b.children[0]});
+        stack.push_back({pair.muscle->childs[1], b.children[0]});
+        stack.push_back({pair.muscle->childs[0], b.children[1]});
+        stack.push_back({pair.muscle->childs[1], b.children[1]});
+      } else {
+        stack.push_back({pair.muscle->childs[0], pair.bone});
+        stack.push_back({pair.muscle->childs[1], pair.bone});
+      }
+    } else if (b.sphere < 0) {
+      stack.push_back({pair.muscle, b.children[0]});
+      stack.push_back({pair.muscle, b.children[1]});
+    } else {
+      onPair(pair.muscle, b.sphere);
+    }
+  }
+}
+
+}  // namespace fibremss

@@ -1,0 +1,58 @@
+#pragma once
+// Per-body state of a MuscleSystem (internal): everything a step changes, structure-of-arrays,
+// allocated once when the body is added. The immutable settings are shared, never copied.
+#include <LinearMath/btTransform.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "CollisionTrees.h"
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/MuscleSystem.h"
+
+class btCollisionObject;
+
+namespace fibremss {
+
+/// A bone: settings, the transforms of one step and its sphere tree (static topology, bounds
+/// placed at the current transform).
+struct BoneState {
+  std::shared_ptr<const BoneSettings> settings;   ///< shared, immutable
+  const btCollisionObject* body = nullptr;        ///< transform source, or null (setBoneTransform)
+  btTransform last = btTransform::getIdentity();  ///< at the end of the previous step
+  btTransform target = btTransform::getIdentity();   ///< to reach at the end of this step
+  btTransform current = btTransform::getIdentity();  ///< in the running iteration
+  btTransform delta = btTransform::getIdentity();    ///< current · previous-iteration⁻¹
+  bool moving = false;  ///< delta differs from the identity in this iteration
+  BoneSphereTree tree;  ///< bone spheres, static topology, bounds placed in world space
+};
+
+/// A muscle: settings plus the state a step changes.
+struct MuscleState {
+  std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
+  std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
+  std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
+
+  // Particles, structure-of-arrays, size particleCount().
+  std::vector<btVector3> positions;      ///< x(t) [m]
+  std::vector<btVector3> previous;       ///< x(t−dt) [m]
+  std::vector<btVector3> velocities;     ///< for velocity-based integrators [m/s]
+  std::vector<btVector3> forces;         ///< spring forces of this iteration [N]
+  std::vector<btVector3> springVectors;  ///< x_b − x_a of a block of springs (scratch) [m]
+  std::vector<btScalar> springFactors;   ///< k·(l − L0)/l of a block of springs (scratch)
+  std::vector<btVector3> pushes;         ///< collision pushes accumulated this iteration [m]
+  std::vector<uint32_t> pushCounts;      ///< pairs that pushed each particle this iteration
+  std::vector<btScalar> stepRadius;      ///< r of eq 5.1: own radius, or the mean for inner ones
+  std::vector<uint32_t> freeParticles;   ///< indices of particles that are not fixed
+
+  btScalar stableTimeStep = 0;  ///< largest dt for which damped Verlet stays stable [s]
+  btScalar meanRadius = 0;      ///< mean boundary radius [m]
+  double restLengthSum = 0;     ///< Σ L0 over the springs [m]
+  SphereTree tree;              ///< boundary particle spheres, world frame, refit each iteration
+
+  std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
+  std::vector<btVector3> surface;           ///< deformed surface vertices (output)
+};
+
+}  // namespace fibremss

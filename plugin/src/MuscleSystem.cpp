@@ -1,0 +1,188 @@
+#include "fibremss/MuscleSystem.h"
+
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
+
+#include <random>
+#include <stdexcept>
+#include <string>
+
+#include "MuscleSystemImpl.h"
+#include "Skin.h"
+#include "SpringForces.h"
+#include "TimeStep.h"
+
+namespace fibremss {
+
+MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->parameters = parameters;
+}
+
+MuscleSystem::~MuscleSystem() = default;
+
+BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
+                                 const btCollisionObject* body) {
+  if (!settings) throw std::invalid_argument("MuscleSystem::addBone: null settings");
+  if (settings->sphereCentres.size() != settings->sphereRadii.size())
+    throw std::invalid_argument("MuscleSystem::addBone: bone '" + settings->name +
+                                "' has different numbers of sphere centres and radii");
+  auto state = std::make_unique<BoneState>();
+  state->body = body;
+  if (body) state->last = state->target = state->current = body->getWorldTransform();
+  state->tree.build(settings->sphereCentres, settings->sphereRadii);
+  state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
+  state->settings = std::move(settings);
+  return impl_->bones.add<BoneHandle>(std::move(state));
+}
+
+void MuscleSystem::removeBone(BoneHandle bone) {
+  impl_->bones.remove(bone);
+}
+
+void MuscleSystem::setBoneTransform(BoneHandle bone, const btTransform& transform) {
+  impl_->bone(bone).target = transform;
+}
+
+btTransform MuscleSystem::boneTransform(BoneHandle bone) const {
+  return impl_->bone(bone).current;
+}
+
+MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> settings,
+                                     std::span<const BoneHandle> bones) {
+  if (!settings) throw std::invalid_argument("MuscleSystem::addMuscle: null settings");
+  const MuscleSettings& s = *settings;
+  const std::string where = "MuscleSystem::addMuscle: muscle '" + s.name + "': ";
+  const size_t n = s.particleCount();
+  if (s.radii.size() != n || s.flags.size() != n || s.fixedBone.size() != n ||
+      s.nearestBone.size() != n)
+    throw std::invalid_argument(where + "particle arrays differ in size");
+  if (!(s.particleMass > 0)) throw std::invalid_argument(where + "particle mass must be > 0");
+  for (size_t i = 0; i < n; ++i) {
+    const int32_t limit = static_cast<int32_t>(bones.size());
+    if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)
+      throw std::invalid_argument(where + "particle " + std::to_string(i) + " refers to bone " +
+                                  std::to_string(std::max(s.fixedBone[i], s.nearestBone[i])) +
+                                  " but only " + std::to_string(bones.size()) +
+                                  " bone handles were given");
+    if (s.isFixed(static_cast<uint32_t>(i)) && s.fixedBone[i] < 0)
+      throw std::invalid_argument(where + "fixed particle " + std::to_string(i) + " has no bone");
+  }
+  for (const Spring& spring : s.springs)
+    if (spring.a >= n || spring.b >= n)
+      throw std::invalid_argument(where + "a spring refers to a particle beyond " +
+                                  std::to_string(n));
+  const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
+  const bool skinned = !s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
+                       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount;
+  for (uint32_t p : s.boundaryParticles)
+    if (p >= n) throw std::invalid_argument(where + "boundary particle beyond the particles");
+
+  auto state = std::make_unique<MuscleState>();
+  state->bones.assign(bones.begin(), bones.end());
+  state->boneSlots.assign(bones.size(), -1);
+  state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
+  state->positions.resize(n);
+  state->previous.resize(n);
+  state->velocities.assign(n, btVector3(0, 0, 0));
+  state->forces.assign(n, btVector3(0, 0, 0));
+  state->springVectors.resize(std::min(s.springs.size(), kSpringBlock));
+  state->springFactors.resize(std::min(s.springs.size(), kSpringBlock));
+  state->pushes.assign(n, btVector3(0, 0, 0));
+  state->pushCounts.assign(n, 0);
+  for (uint32_t i = 0; i < n; ++i)
+    if (!s.isFixed(i)) state->freeParticles.push_back(i);
+
+  double radiusSum = 0;
+  for (uint32_t p : s.boundaryParticles) radiusSum += s.radii[p];
+  if (!s.boundaryParticles.empty()) radiusSum /= static_cast<double>(s.boundaryParticles.size());
+  if (!(radiusSum > 0)) {
+    // No collision spheres: half the mean spring length bounds the motion per iteration.
+    double lengthSum = 0;
+    for (const Spring& spring : s.springs) lengthSum += spring.restLength;
+    radiusSum = s.springs.empty() ? 1e-3 : 0.5 * lengthSum / static_cast<double>(s.springs.size());
+  }
+  state->meanRadius = static_cast<btScalar>(radiusSum);
+  state->stepRadius.resize(n);
+  for (uint32_t i = 0; i < n; ++i)
+    state->stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? s.radii[i] : state->meanRadius;
+  state->stableTimeStep = stableTimeStep(s);
+  for (const Spring& spring : s.springs) state->restLengthSum += spring.restLength;
+
+  state->settings = settings;
+  impl_->resolveBones(*state);
+  impl_->placeAtBones(*state);
+  ++impl_->musclesAdded;
+  if (impl_->parameters.initialNoise > 0) {
+    std::seed_seq seed{impl_->parameters.seed, impl_->musclesAdded};
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<btScalar> noise(-impl_->parameters.initialNoise,
+                                                   impl_->parameters.initialNoise);
+    for (uint32_t i : state->freeParticles) {
+      const btVector3 offset(noise(random), noise(random), noise(random));
+      state->positions[i] += offset;
+      state->previous[i] = state->positions[i];
+    }
+  }
+  state->tree.build(s.boundaryParticles, state->positions, s.radii);
+  if (skinned) {
+    state->surface.resize(s.restSurface.vertices.size());
+    deformSurface(s, state->positions, state->boneTransforms, state->surface);
+  }
+
+  size_t boundaryTotal = s.boundaryParticles.size();
+  for (uint32_t slot : impl_->muscles.order)
+    boundaryTotal += impl_->muscles.states[slot]->settings->boundaryParticles.size();
+  impl_->contacts.ends.resize(std::max(impl_->contacts.ends.size(), 4 * boundaryTotal));
+  impl_->stack.reserve(4096);
+  return impl_->muscles.add<MuscleHandle>(std::move(state));
+}
+
+void MuscleSystem::removeMuscle(MuscleHandle muscle) {
+  impl_->muscles.remove(muscle);
+}
+
+bool MuscleSystem::contains(MuscleHandle muscle) const {
+  return impl_->muscles.find(muscle) != nullptr;
+}
+
+void MuscleSystem::step() {
+  impl_->step();
+}
+
+const StepStats& MuscleSystem::lastStep() const {
+  return impl_->stats;
+}
+SimulationParameters& MuscleSystem::parameters() {
+  return impl_->parameters;
+}
+const SimulationParameters& MuscleSystem::parameters() const {
+  return impl_->parameters;
+}
+
+std::span<const btVector3> MuscleSystem::positions(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).positions;
+}
+
+const MuscleSettings& MuscleSystem::settings(MuscleHandle muscle) const {
+  return *impl_->muscle(muscle).settings;
+}
+
+std::span<const btVector3> MuscleSystem::surface(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).surface;
+}
+
+std::vector<MuscleHandle> MuscleSystem::muscles() const {
+  std::vector<MuscleHandle> handles;
+  for (uint32_t slot : impl_->muscles.order)
+    handles.push_back({slot, impl_->muscles.generations[slot]});
+  return handles;
+}
+
+std::vector<BoneHandle> MuscleSystem::bones() const {
+  std::vector<BoneHandle> handles;
+  for (uint32_t slot : impl_->bones.order)
+    handles.push_back({slot, impl_->bones.generations[slot]});
+  return handles;
+}
+
+}  // namespace fibremss

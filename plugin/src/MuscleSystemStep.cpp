@@ -1,0 +1,249 @@
+// One MuscleSystem step (method.md §5). Bones move from their last to their target transform
+// over the first motionFraction·iterations iterations (translation lerp, rotation slerp); in each
+// of those iterations every free particle is moved by its nearest bone's motion of that iteration
+// (the pre-transform, x and x(t−dt) alike, split like the bones so that muscles and bones stay in
+// step) and fixed particles are set to T·rest. Then per iteration: spring forces → dt (eq 5.1 or
+// fixed) → integration → tree refit → muscle–muscle and muscle–bone pairs → response. The thesis
+// mode (rebuildEveryStep) instead jumps the bones, restarts particles from rest moved by their
+// nearest bone, and rebuilds the trees. Output: deformed surfaces.
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "Integrators.h"
+#include "MuscleSystemImpl.h"
+#include "Skin.h"
+#include "SpringForces.h"
+#include "TimeStep.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double millisecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+/// Rigid transform a share `s` of the way from `from` to `to`: linear translation, slerp rotation.
+btTransform interpolate(const btTransform& from, const btTransform& to, btScalar s) {
+  const btVector3 origin = from.getOrigin().lerp(to.getOrigin(), s);
+  const btQuaternion rotation = from.getRotation().slerp(to.getRotation(), s);
+  return btTransform(rotation, origin);
+}
+
+}  // namespace
+
+// Maps the muscle's bone indices to slots (-1 for removed bones) and copies their transforms.
+void MuscleSystem::Impl::resolveBones(MuscleState& state) const {
+  for (size_t b = 0; b < state.bones.size(); ++b) {
+    const BoneState* bone = bones.find(state.bones[b]);
+    state.boneSlots[b] = bone ? static_cast<int32_t>(state.bones[b].index) : -1;
+    state.boneTransforms[b] = bone ? bone->current : btTransform::getIdentity();
+  }
+}
+
+// Rest positions moved by the nearest bone (fixed ones by their bone); no velocity.
+void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
+  const MuscleSettings& settings = *state.settings;
+  for (size_t i = 0; i < settings.particleCount(); ++i) {
+    const int32_t bone = settings.isFixed(static_cast<uint32_t>(i)) ? settings.fixedBone[i]
+                                                                    : settings.nearestBone[i];
+    state.positions[i] = bone >= 0 ? state.boneTransforms[bone] * settings.restPositions[i]
+                                   : settings.restPositions[i];
+    state.previous[i] = state.positions[i];
+    state.velocities[i].setZero();
+  }
+}
+
+// Moves free particles by their nearest bone's motion in this iteration, x and x(t−dt) alike,
+// so the motion injects no velocity.
+void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities) const {
+  const MuscleSettings& settings = *state.settings;
+  for (uint32_t i : state.freeParticles) {
+    const int32_t b = settings.nearestBone[i];
+    if (b < 0 || state.boneSlots[b] < 0) continue;
+    const BoneState& bone = *bones.states[state.boneSlots[b]];
+    if (!bone.moving) continue;
+    state.positions[i] = bone.delta * state.positions[i];
+    state.previous[i] = bone.delta * state.previous[i];
+    if (rotateVelocities) state.velocities[i] = bone.delta.getBasis() * state.velocities[i];
+  }
+}
+
+// Fixed particles sit exactly on their bone: x = T · rest.
+void MuscleSystem::Impl::followFixed(MuscleState& state) const {
+  const MuscleSettings& settings = *state.settings;
+  for (uint32_t i : settings.fixedParticles) {
+    const int32_t b = settings.fixedBone[i];
+    if (b < 0 || state.boneSlots[b] < 0) continue;
+    state.previous[i] = state.positions[i];
+    state.positions[i] = state.boneTransforms[b] * settings.restPositions[i];
+  }
+}
+
+// Bones to `share` of the way from last to target (exactly the target when arriving).
+void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    const btTransform before = bone.current;
+    bone.current = arrive ? bone.target : interpolate(bone.last, bone.target, share);
+    bone.delta = bone.current * before.inverse();
+    bone.moving = !(bone.current == before);
+    if (bone.moving)
+      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+  }
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    for (size_t b = 0; b < state.bones.size(); ++b)
+      if (state.boneSlots[b] >= 0)
+        state.boneTransforms[b] = bones.states[state.boneSlots[b]]->current;
+    pretransform(state, integratorFor(parameters.integrator).usesVelocities());
+    followFixed(state);
+  }
+}
+
+// The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
+btScalar MuscleSystem::Impl::timeStep() const {
+  if (!parameters.adaptiveTimeStep) return parameters.timeStep;
+  btScalar dt = parameters.timeStep;
+  for (uint32_t slot : muscles.order)
+    dt = std::min(dt, adaptiveTimeStep(*muscles.states[slot], previousDt));
+  return std::max(dt, parameters.minTimeStep);
+}
+
+void MuscleSystem::Impl::collide() {
+  Clock::time_point start = Clock::now();
+  contacts.clear();
+  const bool any = parameters.muscleMuscle || parameters.muscleBone;
+  if (any)
+    for (uint32_t slot : muscles.order) {
+      MuscleState& state = *muscles.states[slot];
+      refitTree(state);
+    }
+  if (parameters.muscleMuscle)
+    for (size_t a = 0; a < muscles.order.size(); ++a)
+      for (size_t b = a + 1; b < muscles.order.size(); ++b)
+        collideMuscles(*muscles.states[muscles.order[a]], *muscles.states[muscles.order[b]],
+                       contacts);
+  stats.timing.muscleCd += millisecondsSince(start);
+
+  start = Clock::now();
+  if (parameters.muscleBone)
+    for (uint32_t muscleSlot : muscles.order)
+      for (uint32_t boneSlot : bones.order)
+        collideMuscleBone(*muscles.states[muscleSlot], *bones.states[boneSlot], stack, contacts);
+  stats.timing.boneCd += millisecondsSince(start);
+
+  start = Clock::now();
+  const bool zeroVelocities = integratorFor(parameters.integrator).usesVelocities();
+  if (any)
+    for (uint32_t slot : muscles.order) applyPushes(*muscles.states[slot], zeroVelocities);
+  stats.contacts = contacts.found;
+  stats.candidates = contacts.candidates;
+  stats.timing.response += millisecondsSince(start);
+}
+
+void MuscleSystem::Impl::step() {
+  const Clock::time_point stepStart = Clock::now();
+  stats = StepStats{};
+  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
+  const int cap = std::max(1, parameters.iterations);
+
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    if (bone.body) bone.target = bone.body->getWorldTransform();
+  }
+  // The thesis rebuilt everything each step: bones jump, particles restart from rest.
+  const bool rebuild = parameters.rebuildEveryStep;
+  int motionIterations = 0;
+  if (rebuild) {
+    for (uint32_t slot : bones.order) {
+      BoneState& bone = *bones.states[slot];
+      bone.current = bone.last = bone.target;
+      bone.moving = false;
+      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+    }
+  } else {
+    motionIterations =
+        std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
+  }
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    resolveBones(state);
+    if (rebuild) {
+      placeAtBones(state);
+      rebuildTree(state);
+    }
+  }
+
+  int iteration = 0;
+  while (true) {
+    ++iteration;
+    Clock::time_point start = Clock::now();
+    if (iteration <= motionIterations)
+      moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
+
+    double deviation = 0;
+    double restSum = 0;
+    // Judged on the last iteration: tearing while bones move heals.
+    stats.exploded = false;
+    stats.overstretchedSprings = 0;
+    for (uint32_t slot : muscles.order) {
+      const SpringForceResult forces = springForces(*muscles.states[slot]);
+      deviation += forces.deviation;
+      stats.exploded = stats.exploded || forces.exploded;
+      stats.overstretchedSprings += forces.overstretched;
+      restSum += muscles.states[slot]->restLengthSum;
+    }
+    stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
+
+    const btScalar dt = timeStep();
+    double displacement = 0;
+    size_t freeCount = 0;
+    for (uint32_t slot : muscles.order) {
+      MuscleState& state = *muscles.states[slot];
+      const IntegrationResult result =
+          integrator.advance(state, dt, previousDt > 0 ? previousDt : dt);
+      displacement += result.displacement;
+      freeCount += state.freeParticles.size();
+      if (!result.finite) stats.nan = true;
+    }
+    stats.lastTimeStep = previousDt = dt;
+    stats.meanDisplacement =
+        freeCount ? static_cast<btScalar>(displacement / static_cast<double>(freeCount)) : 0;
+    stats.timing.mss += millisecondsSince(start);
+
+    collide();
+
+    const bool arrived = iteration >= motionIterations;
+    bool stop = iteration >= cap;
+    if (parameters.stopRule == StopRule::Converged)
+      stop = stop || (arrived && stats.meanDisplacement < parameters.epsilon);
+    else if (parameters.stopRule == StopRule::TimeBudget)
+      stop = stop || millisecondsSince(stepStart) >= parameters.budgetMs;
+    if (stop) {
+      // A spent budget ends the step where it is: the bones jump the rest of the way.
+      if (!arrived) moveBones(1, true);
+      break;
+    }
+  }
+  stats.iterations = iteration;
+
+  const Clock::time_point outputStart = Clock::now();
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    if (!state.surface.empty())
+      deformSurface(*state.settings, state.positions, state.boneTransforms, state.surface);
+  }
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.last = bone.current = bone.target;
+    bone.moving = false;
+  }
+  stats.timing.output = millisecondsSince(outputStart);
+  stats.timing.total = millisecondsSince(stepStart);
+}
+
+}  // namespace fibremss

@@ -1,0 +1,67 @@
+#include "fibremss/MuscleWorld.h"
+
+#include <BulletDynamics/Dynamics/btRigidBody.h>
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace fibremss {
+
+MuscleWorld::MuscleWorld(btDispatcher* dispatcher, btBroadphaseInterface* broadphase,
+                         btConstraintSolver* solver, btCollisionConfiguration* configuration,
+                         const SimulationParameters& parameters, btSoftBodySolver* softSolver)
+    : btSoftRigidDynamicsWorld(dispatcher, broadphase, solver, configuration, softSolver),
+      muscles_(parameters) {}
+
+MuscleWorld::~MuscleWorld() = default;
+
+BoneHandle MuscleWorld::addBone(btCollisionObject* body,
+                                std::shared_ptr<const BoneSettings> settings) {
+  if (!body) throw std::invalid_argument("MuscleWorld::addBone: a bone needs a collision object");
+  const bool addHere = body->getBroadphaseHandle() == nullptr;
+  BoneHandle handle = muscles_.addBone(std::move(settings), body);
+  if (addHere) {
+    if (btRigidBody* rigid = btRigidBody::upcast(body))
+      addRigidBody(rigid);
+    else
+      addCollisionObject(body);
+  }
+  bones_.push_back({handle, body, addHere});
+  return handle;
+}
+
+bool MuscleWorld::removeBone(BoneHandle bone) {
+  auto it = std::find_if(bones_.begin(), bones_.end(), [&](const Bone& b) {
+    return b.handle.index == bone.index && b.handle.generation == bone.generation;
+  });
+  if (it == bones_.end()) return false;
+  muscles_.removeBone(bone);
+  if (it->addedHere) removeCollisionObject(it->body);
+  bones_.erase(it);
+  return true;
+}
+
+MuscleHandle MuscleWorld::addMuscle(std::shared_ptr<const MuscleSettings> settings,
+                                    std::span<const BoneHandle> bones) {
+  return muscles_.addMuscle(std::move(settings), bones);
+}
+
+bool MuscleWorld::removeMuscle(MuscleHandle muscle) {
+  if (!muscles_.contains(muscle)) return false;
+  muscles_.removeMuscle(muscle);
+  return true;
+}
+
+void MuscleWorld::internalSingleStepSimulation(btScalar timeStep) {
+  btSoftRigidDynamicsWorld::internalSingleStepSimulation(timeStep);
+  muscles_.step();
+  ++muscleSteps_;
+}
+
+void MuscleWorld::debugDrawWorld() {
+  btSoftRigidDynamicsWorld::debugDrawWorld();
+  if (btIDebugDraw* drawer = getDebugDrawer(); drawer && muscleDebugFlags_ != 0)
+    muscles_.debugDraw(drawer, muscleDebugFlags_);
+}
+
+}  // namespace fibremss

@@ -1,0 +1,275 @@
+// prepareScene(): bones first (distance trees and spheres), then every muscle on its own
+// (particles, springs, fixed and boundary particles, radii, skinning), then the scene-wide
+// radius shrinking. Bones and muscles are prepared in parallel; every random choice comes
+// from a generator seeded by (seed, body), so the result does not depend on the threads.
+#include "fibremss/Preparation.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <thread>
+
+#include "PreparationInternal.h"
+#include "fibremss/Error.h"
+
+namespace fibremss {
+namespace {
+
+using detail::KdTree;
+
+enum RandomStream : uint32_t { kFibreJitter = 1, kSphereThinning = 2 };
+
+/// Runs task(i) for i in [0, count) on up to hardware_concurrency threads; rethrows the
+/// exception of the lowest failing i.
+template <typename Task>
+void parallelFor(size_t count, Task task) {
+  std::vector<std::exception_ptr> errors(count);
+  std::atomic<size_t> next{0};
+  auto worker = [&] {
+    for (size_t i = next++; i < count; i = next++) try {
+        task(i);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+  };
+  const size_t threads = std::min<size_t>(count, std::max(1u, std::thread::hardware_concurrency()));
+  std::vector<std::thread> pool;
+  for (size_t t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (auto& thread : pool) thread.join();
+  for (const auto& error : errors)
+    if (error) std::rethrow_exception(error);
+}
+
+btScalar boxDistance(const btVector3& p, const btVector3& lower, const btVector3& upper) {
+  const btVector3 below = lower - p, above = p - upper;
+  btVector3 outside(0, 0, 0);
+  outside.setMax(below);
+  outside.setMax(above);
+  return outside.length();
+}
+
+/// A bone as preparation sees it: its distance tree and bounds.
+struct BoneShape {
+  std::unique_ptr<MeshDistance> distance;
+  btVector3 lower{0, 0, 0}, upper{0, 0, 0};
+};
+
+/// The closest bone surface point: which bone, how far, and whether p is inside that bone.
+struct NearestBone {
+  int32_t bone = -1;
+  btScalar distance = std::numeric_limits<btScalar>::infinity();
+  bool inside = false;
+};
+
+/// Bones are tried nearest-box first so that the distance limit prunes the others at their root.
+NearestBone nearestBone(const btVector3& p, const std::vector<BoneShape>& bones,
+                        std::vector<std::pair<btScalar, uint32_t>>& order) {
+  order.clear();
+  for (uint32_t b = 0; b < bones.size(); ++b)
+    order.emplace_back(boxDistance(p, bones[b].lower, bones[b].upper), b);
+  std::sort(order.begin(), order.end());
+  NearestBone best;
+  for (const auto& [boxDistanceToBone, b] : order) {
+    if (boxDistanceToBone > best.distance) break;
+    const MeshDistance::Closest closest = bones[b].distance->closest(p, best.distance);
+    if (closest.triangle != UINT32_MAX && (best.bone < 0 || closest.distance < best.distance))
+      best = {static_cast<int32_t>(b), closest.distance, closest.inside};
+  }
+  return best;
+}
+
+/// Indices in range and finite coordinates: what every later stage relies on.
+void checkMesh(const std::string& source, const std::string& field, const TriangleMesh& mesh) {
+  if (mesh.empty()) throw InputError(source, field, "the mesh has no triangles");
+  for (size_t v = 0; v < mesh.vertices.size(); ++v)
+    if (!std::isfinite(mesh.vertices[v].length2()))
+      throw InputError(source, field + " vertex " + std::to_string(v),
+                       "coordinates must be finite numbers");
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    for (uint32_t index : mesh.triangles[t])
+      if (index >= mesh.vertices.size())
+        throw InputError(source, field + " triangle " + std::to_string(t),
+                         "vertex index " + std::to_string(index) + " is out of range (" +
+                             std::to_string(mesh.vertices.size()) + " vertices)");
+}
+
+void checkFibres(const std::string& source, const FibreSet& fibres) {
+  if (fibres.offsets.empty() || fibres.offsets.front() != 0 ||
+      fibres.offsets.back() != fibres.points.size() ||
+      !std::is_sorted(fibres.offsets.begin(), fibres.offsets.end()))
+    throw InputError(source, "fibres", "fibre offsets do not match the fibre points");
+  for (size_t i = 0; i < fibres.points.size(); ++i)
+    if (!std::isfinite(fibres.points[i].length2()))
+      throw InputError(source, "fibre point " + std::to_string(i),
+                       "coordinates must be finite numbers");
+}
+
+std::string join(const std::vector<std::string>& parts) {
+  std::string joined;
+  for (const auto& part : parts) joined += (joined.empty() ? "" : "; ") + part;
+  return joined;
+}
+
+/// Fixed particles, nearest bones and the warnings about attachments.
+void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones,
+                   const std::vector<BoneInput>& boneInputs, MuscleSettings& muscle,
+                   std::vector<std::string>& warnings) {
+  const size_t n = muscle.particleCount();
+  const btScalar attachment = input.parameters.attachmentDistance;
+  muscle.fixedBone.assign(n, -1);
+  muscle.nearestBone.assign(n, -1);
+  muscle.fixedParticles.clear();
+  if (bones.empty()) return;
+  std::vector<std::pair<btScalar, uint32_t>> order;
+  std::vector<size_t> insideCount(bones.size(), 0);
+  for (uint32_t i = 0; i < n; ++i) {
+    const btVector3& p = muscle.restPositions[i];
+    const NearestBone nearest = nearestBone(p, bones, order);
+    muscle.nearestBone[i] = nearest.bone;
+    if (nearest.bone < 0) continue;
+    if (nearest.distance < attachment) {
+      muscle.fixedBone[i] = nearest.bone;
+      muscle.flags[i] |= kFixed;
+      muscle.fixedParticles.push_back(i);
+    }
+    // Fibre ends reaching into their bone are normal; a free particle inside is not.
+    if (nearest.inside && !muscle.isFixed(i)) ++insideCount[nearest.bone];
+  }
+  for (size_t b = 0; b < bones.size(); ++b)
+    if (insideCount[b] > 0)
+      warnings.push_back(detail::muscleSource(input) + ": " + std::to_string(insideCount[b]) +
+                         " free (not fixed) particles lie inside bone '" + boneInputs[b].name +
+                         "' at rest; collisions will push them out");
+  if (muscle.fixedParticles.empty())
+    warnings.push_back(detail::muscleSource(input) +
+                       ": no particle is within the attachment distance of a bone, so the "
+                       "muscle is attached to nothing");
+  // Fibre ends touching a bone whose last particle (ΔL − δ short of the end) stays free.
+  size_t looseEnds = 0;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+    const auto fibre = input.fibres.fibre(f);
+    const uint32_t last = muscle.fibreParticles[muscle.fibreOffsets[f + 1] - 1];
+    if (!muscle.isFixed(last) && nearestBone(fibre.back(), bones, order).distance < attachment)
+      ++looseEnds;
+  }
+  if (looseEnds > 0)
+    warnings.push_back(detail::muscleSource(input) + ": " + std::to_string(looseEnds) + " of " +
+                       std::to_string(muscle.fibreCount()) +
+                       " fibres end on a bone but their last particle is not fixed (it lies "
+                       "up to one sample spacing before the end; raise the resolution or the "
+                       "attachment distance)");
+}
+
+MuscleSettings prepareMuscle(const MuscleInput& input, size_t index, uint32_t seed,
+                             const std::vector<BoneShape>& bones,
+                             const std::vector<BoneInput>& boneInputs,
+                             std::vector<std::string>& warnings) {
+  const std::string source = detail::muscleSource(input);
+  checkMesh(source, "surface", input.surface);
+  checkFibres(source, input.fibres);
+  const MuscleParameters& parameters = input.parameters;
+  if (!(parameters.attachmentDistance >= 0))
+    throw InputError(source, "attachment_distance", "must not be negative");
+  if (!(parameters.springs.density > 0))
+    throw InputError(source, "springs.density", "must be positive");
+  if (parameters.skinNeighbours < 1)
+    throw InputError(source, "skin_neighbours", "must be at least 1");
+
+  MuscleSettings muscle;
+  muscle.name = input.name;
+  muscle.restSurface = input.surface;
+  std::mt19937 random = detail::bodyRandom(seed, kFibreJitter, index);
+  detail::sampleFibres(input, random, muscle);
+  const size_t n = muscle.particleCount();
+  muscle.flags.assign(n, 0);
+
+  const btScalar volume = meshVolume(input.surface);
+  if (!(std::abs(volume) > 0))
+    throw InputError(source, "surface", "encloses no volume (open or flat surface?)");
+  if (volume < 0)
+    warnings.push_back(source + ": the surface's normals point inward (negative volume)");
+  muscle.particleMass = parameters.springs.density * std::abs(volume) / btScalar(n);
+
+  const KdTree particles(muscle.restPositions);
+  muscle.springs = detail::buildSprings(input, muscle.restPositions, particles);
+  muscle.damping = parameters.springs.damping >= 0
+                       ? parameters.springs.damping
+                       : detail::zelenyDamping(muscle.springs, muscle.particleMass);
+  attachToBones(input, bones, boneInputs, muscle, warnings);
+  detail::bindSurface(muscle, particles, parameters.skinNeighbours);
+  return muscle;
+}
+
+}  // namespace
+
+PreparedScene prepareScene(const std::vector<BoneInput>& bones,
+                           const std::vector<MuscleInput>& muscles, uint32_t seed) {
+  const auto start = std::chrono::steady_clock::now();
+  PreparedScene scene;
+
+  std::vector<BoneShape> shapes(bones.size());
+  std::vector<BoneSettings> boneSettings(bones.size());
+  std::vector<detail::BoneSphereReport> sphereReports(bones.size());
+  parallelFor(bones.size(), [&](size_t b) {
+    checkMesh("bone '" + bones[b].name + "'", "mesh", bones[b].mesh);
+    shapes[b].distance = std::make_unique<MeshDistance>(bones[b].mesh);
+    pointBounds(bones[b].mesh.vertices, shapes[b].lower, shapes[b].upper);
+    boneSettings[b].name = bones[b].name;
+    boneSettings[b].mesh = bones[b].mesh;
+    std::mt19937 random = detail::bodyRandom(seed, kSphereThinning, b);
+    sphereReports[b] =
+        detail::makeBoneSpheres(bones[b], *shapes[b].distance, random, boneSettings[b]);
+  });
+
+  std::vector<MuscleSettings> muscleSettings(muscles.size());
+  std::vector<std::vector<std::string>> muscleWarnings(muscles.size());
+  parallelFor(muscles.size(), [&](size_t m) {
+    muscleSettings[m] = prepareMuscle(muscles[m], m, seed, shapes, bones, muscleWarnings[m]);
+  });
+
+  std::vector<std::string>& warnings = scene.report.warnings;
+  for (size_t b = 0; b < bones.size(); ++b) {
+    const detail::BoneSphereReport& r = sphereReports[b];
+    std::vector<std::string> notes;
+    if (r.degenerateTriangles)
+      notes.push_back(std::to_string(r.degenerateTriangles) + " zero-area triangles ignored");
+    if (r.capped)
+      notes.push_back(std::to_string(r.capped) +
+                      " spheres capped (longest edge over 3 mean edge lengths)");
+    if (r.pulledBack)
+      notes.push_back(std::to_string(r.pulledBack) +
+                      " sphere centres pulled back inside a thin part");
+    if (r.dropped) notes.push_back(std::to_string(r.dropped) + " spheres dropped");
+    if (boneSettings[b].sphereCentres.empty()) notes.push_back("no collision spheres at all");
+    if (!notes.empty()) warnings.push_back("bone '" + bones[b].name + "': " + join(notes));
+  }
+  for (const auto& list : muscleWarnings) warnings.insert(warnings.end(), list.begin(), list.end());
+
+  const detail::ShrinkReport shrink = detail::shrinkRadii(muscleSettings, boneSettings);
+  size_t sphereCount = 0;
+  for (const auto& muscle : muscleSettings) sphereCount += muscle.boundaryParticles.size();
+  if (shrink.muscleSpheresShrunk > 0 || shrink.boneSpheresShrunk > 0)
+    warnings.push_back("radii: " + std::to_string(shrink.muscleSpheresShrunk) + " of " +
+                       std::to_string(sphereCount) +
+                       " muscle spheres shrunk so that no two bodies overlap at rest (" +
+                       std::to_string(shrink.muscleSpheresZeroed) + " to radius 0); " +
+                       std::to_string(shrink.boneSpheresShrunk) +
+                       " bone spheres shrunk around muscle particles inside them");
+
+  scene.report.surfaceCoverage.assign(muscles.size(), 0);
+  parallelFor(muscles.size(), [&](size_t m) {
+    scene.report.surfaceCoverage[m] = detail::surfaceCoverage(muscleSettings[m]);
+  });
+  for (auto& bone : boneSettings)
+    scene.bones.push_back(std::make_shared<const BoneSettings>(std::move(bone)));
+  for (auto& muscle : muscleSettings)
+    scene.muscles.push_back(std::make_shared<const MuscleSettings>(std::move(muscle)));
+  scene.report.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return scene;
+}
+
+}  // namespace fibremss

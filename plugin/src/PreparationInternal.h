@@ -1,0 +1,69 @@
+#pragma once
+// The stages of preparation (method.md §2, §3, §6), one file each; prepareScene() in
+// Preparation.cpp runs them in order. Internal to the library.
+#include <cstdint>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "PreparationKdTree.h"
+#include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/Preparation.h"
+
+namespace fibremss::detail {
+
+/// "muscle 'name'": the source named in InputErrors about a muscle.
+std::string muscleSource(const MuscleInput& muscle);
+
+/// A generator for one body's random choices, independent of the other bodies (so results do
+/// not depend on the order or the thread that prepares them).
+std::mt19937 bodyRandom(uint32_t seed, uint32_t kind, size_t bodyIndex);
+
+/// Fibre sampling (FibreSampling.cpp): fills restPositions, fibreParticles and fibreOffsets of
+/// `out`. Particle i of fibre f gets index f·resolution + i.
+void sampleFibres(const MuscleInput& muscle, std::mt19937& random, MuscleSettings& out);
+
+/// Springs of the muscle's layout (Springs.cpp), sorted by (a, b), a < b, no duplicates;
+/// rest length = distance, k = κ / L0. Throws InputError for unusable layouts or coincident
+/// particles.
+std::vector<Spring> buildSprings(const MuscleInput& muscle, std::span<const btVector3> positions,
+                                 const KdTree& particles);
+
+/// Zeleny's damping estimate c = √(4·k̄·2m) (000 eq 2.11), k̄ the mean spring stiffness.
+btScalar zelenyDamping(std::span<const Spring> springs, btScalar particleMass);
+
+/// Boundary particles, initial radii and skinning from the surface vertices (Radii.cpp):
+/// sets the kBoundary flags, boundaryParticles, radii (mean distance of the vertices that
+/// chose the particle), skinNeighbours, skinParticles and skinWeights.
+void bindSurface(MuscleSettings& muscle, const KdTree& particles, int skinNeighbours);
+
+/// What radius shrinking did (Radii.cpp).
+struct ShrinkReport {
+  size_t muscleSpheresShrunk = 0;  ///< muscle spheres made smaller
+  size_t muscleSpheresZeroed = 0;  ///< of these, shrunk to radius 0
+  size_t boneSpheresShrunk = 0;    ///< bone spheres that held a muscle particle's centre
+};
+
+/// Shrinks sphere radii until no sphere of one body overlaps a sphere of another body at rest
+/// (fixed particles are not tested against their own bone). Bone spheres shrink only when a
+/// muscle particle's centre lies inside them.
+ShrinkReport shrinkRadii(std::vector<MuscleSettings>& muscles, std::vector<BoneSettings>& bones);
+
+/// Fraction of surface vertices inside some sphere of the muscle.
+double surfaceCoverage(const MuscleSettings& muscle);
+
+/// What bone sphere generation did (BoneSpheres.cpp).
+struct BoneSphereReport {
+  size_t degenerateTriangles = 0;  ///< zero-area triangles ignored
+  size_t capped = 0;               ///< spheres whose longest edge was capped
+  size_t dropped = 0;              ///< spheres dropped (maxRadius, no usable normal)
+  size_t pulledBack = 0;           ///< centres moved back inside a thin part of the bone
+  size_t thinned = 0;              ///< roots skipped by thinning
+};
+
+/// Bone spheres by the two-ring heuristic (method.md §6); fills sphereCentres/sphereRadii.
+BoneSphereReport makeBoneSpheres(const BoneInput& bone, const MeshDistance& distance,
+                                 std::mt19937& random, BoneSettings& out);
+
+}  // namespace fibremss::detail

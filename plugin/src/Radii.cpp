@@ -1,0 +1,180 @@
+// Muscle sphere radii (method.md §6): every surface vertex chooses its closest particle; the
+// chosen ones are the boundary particles, each with the mean distance to its vertices as
+// radius. Then radii shrink until no two bodies overlap at rest.
+#include <algorithm>
+#include <cmath>
+
+#include "PreparationInternal.h"
+
+namespace fibremss::detail {
+namespace {
+
+/// Shrinking leaves this relative gap so that touching spheres stay apart after rounding.
+constexpr btScalar kClearance = btScalar(1) - btScalar(1e-5);
+
+/// One boundary particle of some muscle, in the scene-wide lists used for shrinking.
+struct SphereRef {
+  uint32_t muscle;
+  uint32_t particle;
+};
+
+btScalar maxOf(std::span<const btScalar> values) {
+  btScalar result = 0;
+  for (btScalar v : values) result = std::max(result, v);
+  return result;
+}
+
+}  // namespace
+
+void bindSurface(MuscleSettings& muscle, const KdTree& particles, int skinNeighbours) {
+  const size_t particleCount = muscle.particleCount();
+  const auto& vertices = muscle.restSurface.vertices;
+  const size_t k = std::clamp<size_t>(skinNeighbours, 1, particleCount);
+  muscle.skinNeighbours = static_cast<int>(k);
+  muscle.skinParticles.assign(vertices.size() * k, 0);
+  muscle.skinWeights.assign(vertices.size() * k, 0);
+  std::vector<double> distanceSum(particleCount, 0.0);
+  std::vector<uint32_t> chosenBy(particleCount, 0);
+  std::vector<uint32_t> indices(k);
+  std::vector<btScalar> distances2(k);
+  std::vector<double> weights(k);
+  for (size_t v = 0; v < vertices.size(); ++v) {
+    const size_t found = particles.nearest(vertices[v], k, indices.data(), distances2.data());
+    distanceSum[indices[0]] += std::sqrt(distances2[0]);
+    ++chosenBy[indices[0]];
+    // Inverse-distance weights; a vertex sitting on a particle follows that particle alone.
+    double total = 0;
+    for (size_t j = 0; j < found; ++j) {
+      const double distance = std::sqrt(double(distances2[j]));
+      weights[j] = distances2[0] > 0 ? 1.0 / distance : (j == 0 ? 1.0 : 0.0);
+      total += weights[j];
+    }
+    for (size_t j = 0; j < found; ++j) {
+      muscle.skinParticles[v * k + j] = indices[j];
+      muscle.skinWeights[v * k + j] = static_cast<btScalar>(weights[j] / total);
+    }
+  }
+  muscle.radii.assign(particleCount, 0);
+  muscle.boundaryParticles.clear();
+  for (uint32_t i = 0; i < particleCount; ++i) {
+    if (chosenBy[i] == 0) continue;
+    muscle.flags[i] |= kBoundary;
+    muscle.radii[i] = static_cast<btScalar>(distanceSum[i] / chosenBy[i]);
+    muscle.boundaryParticles.push_back(i);
+  }
+}
+
+ShrinkReport shrinkRadii(std::vector<MuscleSettings>& muscles, std::vector<BoneSettings>& bones) {
+  ShrinkReport report;
+  std::vector<SphereRef> spheres;
+  std::vector<btVector3> centres;
+  for (uint32_t m = 0; m < muscles.size(); ++m)
+    for (uint32_t i : muscles[m].boundaryParticles) {
+      spheres.push_back({m, i});
+      centres.push_back(muscles[m].restPositions[i]);
+    }
+  auto radiusOf = [&](const SphereRef& s) -> btScalar& {
+    return muscles[s.muscle].radii[s.particle];
+  };
+  auto exempt = [&](const SphereRef& s, uint32_t bone) {
+    return muscles[s.muscle].fixedBone[s.particle] == int32_t(bone);
+  };
+  std::vector<btScalar> original(spheres.size());
+  for (size_t s = 0; s < spheres.size(); ++s) original[s] = radiusOf(spheres[s]);
+
+  // All bone spheres in one list, remembering their bone.
+  std::vector<btVector3> boneCentres;
+  std::vector<std::pair<uint32_t, uint32_t>> boneSpheres;  // (bone, sphere)
+  for (uint32_t b = 0; b < bones.size(); ++b)
+    for (uint32_t s = 0; s < bones[b].sphereCentres.size(); ++s) {
+      boneCentres.push_back(bones[b].sphereCentres[s]);
+      boneSpheres.emplace_back(b, s);
+    }
+  std::vector<std::pair<uint32_t, btScalar>> found;
+  if (!boneCentres.empty()) {
+    const KdTree boneTree(boneCentres);
+    auto boneRadius = [&](uint32_t k) -> btScalar& {
+      return bones[boneSpheres[k].first].sphereRadii[boneSpheres[k].second];
+    };
+    // 1. A muscle sphere whose centre lies inside a bone sphere cannot shrink out of it: the
+    //    bone sphere shrinks instead.
+    btScalar maxBone = 0;
+    for (uint32_t k = 0; k < boneSpheres.size(); ++k) maxBone = std::max(maxBone, boneRadius(k));
+    std::vector<uint8_t> boneShrunk(boneSpheres.size(), 0);
+    for (size_t s = 0; s < spheres.size(); ++s) {
+      boneTree.within(centres[s], maxBone, found);
+      for (const auto& [k, distance2] : found) {
+        if (exempt(spheres[s], boneSpheres[k].first)) continue;
+        const btScalar distance = std::sqrt(distance2);
+        if (distance < boneRadius(k)) {
+          boneRadius(k) = distance * kClearance;
+          boneShrunk[k] = 1;
+        }
+      }
+    }
+    report.boneSpheresShrunk = std::count(boneShrunk.begin(), boneShrunk.end(), 1);
+    // 2. Muscle spheres against bone spheres: bones do not give way.
+    maxBone = 0;
+    for (uint32_t k = 0; k < boneSpheres.size(); ++k) maxBone = std::max(maxBone, boneRadius(k));
+    for (size_t s = 0; s < spheres.size(); ++s) {
+      btScalar& radius = radiusOf(spheres[s]);
+      boneTree.within(centres[s], radius + maxBone, found);
+      for (const auto& [k, distance2] : found) {
+        if (exempt(spheres[s], boneSpheres[k].first)) continue;
+        const btScalar distance = std::sqrt(distance2);
+        if (distance < radius + boneRadius(k))
+          radius = std::max(btScalar(0), (distance - boneRadius(k)) * kClearance);
+      }
+    }
+  }
+  // 3. Muscle against muscle: both spheres of an overlapping pair shrink by the same factor
+  //    d / (rA + rB), computed from the radii before this pass, so one pass clears all pairs.
+  if (muscles.size() > 1 && !spheres.empty()) {
+    std::vector<btScalar> before(spheres.size());
+    for (size_t s = 0; s < spheres.size(); ++s) before[s] = radiusOf(spheres[s]);
+    const btScalar maxMuscle = maxOf(before);
+    const KdTree muscleTree(centres);
+    for (size_t s = 0; s < spheres.size(); ++s) {
+      if (before[s] <= 0) continue;
+      muscleTree.within(centres[s], before[s] + maxMuscle, found);
+      btScalar& radius = radiusOf(spheres[s]);
+      for (const auto& [t, distance2] : found) {
+        if (spheres[t].muscle == spheres[s].muscle) continue;
+        const btScalar sum = before[s] + before[t];
+        const btScalar distance = std::sqrt(distance2);
+        if (distance < sum) radius = std::min(radius, before[s] * (distance / sum) * kClearance);
+      }
+    }
+  }
+  for (size_t s = 0; s < spheres.size(); ++s) {
+    const btScalar radius = radiusOf(spheres[s]);
+    if (radius < original[s]) ++report.muscleSpheresShrunk;
+    if (radius <= 0 && original[s] > 0) ++report.muscleSpheresZeroed;
+  }
+  return report;
+}
+
+double surfaceCoverage(const MuscleSettings& muscle) {
+  const auto& vertices = muscle.restSurface.vertices;
+  if (vertices.empty()) return 0;
+  std::vector<btVector3> centres;
+  std::vector<btScalar> radii;
+  for (uint32_t i : muscle.boundaryParticles) {
+    centres.push_back(muscle.restPositions[i]);
+    radii.push_back(muscle.radii[i]);
+  }
+  const KdTree tree(centres);
+  const btScalar maxRadius = maxOf(radii);
+  std::vector<std::pair<uint32_t, btScalar>> found;
+  size_t covered = 0;
+  for (const btVector3& v : vertices) {
+    tree.within(v, maxRadius, found);
+    covered += std::any_of(found.begin(), found.end(), [&](const auto& hit) {
+      // On the sphere counts as inside: the vertex that set a radius lies exactly on it.
+      return hit.second <= radii[hit.first] * radii[hit.first] * (1 + 1e-5f);
+    });
+  }
+  return double(covered) / vertices.size();
+}
+
+}  // namespace fibremss::detail

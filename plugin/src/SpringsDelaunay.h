@@ -1,0 +1,19 @@
+#pragma once
+// Delaunay tetrahedralization edges through qhull (reentrant C API). Internal to preparation.
+#include <LinearMath/btVector3.h>
+
+#include <cstdint>
+#include <span>
+#include <utility>
+#include <vector>
+
+#include "fibremss/Preparation.h"
+
+namespace fibremss::detail {
+
+/// Edges (i < j, unsorted, may repeat) of the Delaunay tetrahedra of `positions`; throws
+/// InputError naming the muscle when qhull cannot triangulate (e.g. all points coplanar).
+std::vector<std::pair<uint32_t, uint32_t>> delaunayEdges(const MuscleInput& muscle,
+                                                         std::span<const btVector3> positions);
+
+}  // namespace fibremss::detail

@@ -1,0 +1,28 @@
+#pragma once
+// The adaptive time step (method.md §4, thesis eq 5.1), internal.
+#include <LinearMath/btScalar.h>
+
+#include "MuscleState.h"
+
+namespace fibremss {
+
+/// The largest dt ≥ 0 with |F|·dt² − c·|Δx|·dt + m·(|Δx| − r) ≤ 0 (thesis eq 5.1: no particle
+/// moves farther than r in one Verlet iteration), where |Δx| = speed·dt is the displacement the
+/// particle makes over this dt at its current speed: (|F| − c·v)·dt² + m·v·dt − m·r ≤ 0. With a
+/// fixed dt this is eq 5.1 as printed; written with the speed it stays right when dt changes.
+/// Infinity when every dt satisfies it.
+btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, btScalar mass,
+                             btScalar damping);
+
+/// The minimum of largestSafeTimeStep over the free particles of a muscle, r being a particle's
+/// radius (boundary) or the muscle's mean radius (inner particles, which never collide but
+/// should not outrun their neighbours either), speed = |x − x_prev| / previousDt; also capped
+/// by the muscle's stability bound.
+btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt);
+
+/// The largest dt for which damped Verlet (and semi-implicit Euler) is stable for every particle
+/// of the settings, from a Gershgorin bound 2·Σk/m on the stiffness: λ·dt² + 2(c/m)·dt < 4,
+/// times a safety factor. Eq 5.1 alone does not bound the oscillation of stiff springs.
+btScalar stableTimeStep(const MuscleSettings& settings);
+
+}  // namespace fibremss

@@ -1,0 +1,99 @@
+// The small built-in scenes: fusiform, pinch, sphere-denoise, sphere-planes.
+#include "BuiltInParts.h"
+
+namespace fibremss::builtin {
+
+Json fusiformScene() {
+  // Two horizontal bars 320 mm apart, a 293 mm spindle between them whose ends sit 1.5 mm
+  // inside the bars; the lower bar moves down 30 mm in three poses (a stretch test).
+  Json scene = header("fusiform", "one spindle-shaped muscle between two bars");
+  const TubeDefinition upper = boneTube({{-60, 160, 0}, {60, 160, 0}}, {15, 15});
+  const TubeDefinition lower = boneTube({{-60, -160, 0}, {60, -160, 0}}, {15, 15});
+  std::vector<btTransform> poses;
+  for (int i = 0; i < 3; ++i)
+    poses.emplace_back(btQuaternion::getIdentity(), btVector3(0, btScalar(-15 * i), 0));
+  scene["bones"] = Json::array(
+      {bone("upper", tubeGenerator(upper)), bone("lower", tubeGenerator(lower), keyframes(poses))});
+  const TubeDefinition muscle =
+      muscleTube({{0, 146.5, 0}, {0, 75, 0}, {0, 0, 0}, {0, -75, 0}, {0, -146.5, 0}},
+                 {{6, 6}, {14, 14}, {20, 20}, {14, 14}, {6, 6}});
+  scene["muscles"] = Json::array({tubeMuscle("fusiform", muscle)});
+  return scene;
+}
+
+Json pinchScene() {
+  // Blade A (upper, z > 0) moves down and blade B (lower, z < 0) moves up; they pass each other
+  // with a 2 mm gap at z = 0 where the muscle lies, attached at its left end under A and its
+  // right end on top of B.
+  Json scene = header("pinch", "a muscle between two bones passing each other like shear blades");
+  const btVector3 sizeA(120, 20, 30);
+  Json bladeA{{"type", "box"},
+              {"centre", vec({-30, 22, 16})},
+              {"size", vec(sizeA)},
+              {"divisions", Json::array({24, 4, 6})}};
+  Json bladeB{{"type", "box"},
+              {"centre", vec({30, -22, -16})},
+              {"size", vec(sizeA)},
+              {"divisions", Json::array({24, 4, 6})}};
+  std::vector<btTransform> down, up;
+  for (int i = 0; i <= 6; ++i) {
+    down.emplace_back(btQuaternion::getIdentity(), btVector3(0, btScalar(-7 * i), 0));
+    up.emplace_back(btQuaternion::getIdentity(), btVector3(0, btScalar(7 * i), 0));
+  }
+  scene["bones"] = Json::array(
+      {bone("blade-a", bladeA, keyframes(down)), bone("blade-b", bladeB, keyframes(up))});
+  // Ends 1.5 mm inside the blades' facing sides (A's bottom at y = 12, B's top at y = -12).
+  // Its body keeps 5 mm from both blades at rest, clear of the attachment distance.
+  const TubeDefinition muscle =
+      muscleTube({{-80, 13.5, 12}, {-55, 0, 5}, {0, 0, 0}, {55, 0, -5}, {80, -13.5, -12}},
+                 {{4, 4}, {6, 6}, {7, 7}, {6, 6}, {4, 4}});
+  scene["muscles"] = Json::array({tubeMuscle("pinched", muscle)});
+  return scene;
+}
+
+namespace {
+
+Json sphereMuscle() {
+  // 64 chords × resolution 60 = 3840 particles (seed 002's sphere had 3840 vertices).
+  return Json{{"name", "sphere"},
+              {"surface",
+               {{"generator",
+                 {{"type", "ellipsoid"},
+                  {"centre", vec({0, 0, 0})},
+                  {"radii", vec({30, 30, 30})},
+                  {"subdivisions", 3}}}}},
+              {"fibres", {{"generator", {{"type", "chords"}, {"axis", vec({0, 0, 1})}}}}},
+              {"fibre_count", 64},
+              {"resolution", 60},
+              {"attachment_distance", 0}};
+}
+
+}  // namespace
+
+Json sphereDenoiseScene() {
+  Json scene =
+      header("sphere-denoise", "a sphere of 3840 particles perturbed by 1.5 mm of noise, no bones");
+  scene["muscles"] = Json::array({sphereMuscle()});
+  scene["simulation"] = {
+      {"stop", "converged"}, {"epsilon", 0.001}, {"iterations", 5000}, {"initial_noise", 1.5}};
+  return scene;
+}
+
+Json spherePlanesScene() {
+  // Planes (thin boxes) 0.5 mm off the sphere; 3 mm of noise pushes particles into them.
+  Json scene = header("sphere-planes", "a soft noisy sphere trapped between two immobile planes");
+  auto plane = [](double y) {
+    return Json{{"type", "box"},
+                {"centre", vec({0, btScalar(y), 0})},
+                {"size", vec({120, 4, 120})},
+                {"divisions", Json::array({12, 1, 12})}};
+  };
+  scene["bones"] =
+      Json::array({bone("plane-top", plane(32.5)), bone("plane-bottom", plane(-32.5))});
+  scene["muscles"] = Json::array({sphereMuscle()});
+  scene["simulation"] = {
+      {"stop", "converged"}, {"epsilon", 0.001}, {"iterations", 5000}, {"initial_noise", 3.0}};
+  return scene;
+}
+
+}  // namespace fibremss::builtin

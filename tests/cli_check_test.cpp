@@ -1,0 +1,143 @@
+// `fibremss scenes` and `fibremss check` run as a user runs them (the built CLI).
+// `check` prepares the scene, so these tests need the preparation (prepareScene) linked in.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "fibremss/Scene.h"
+
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+namespace {
+
+struct Result {
+  int status = -1;
+  std::string out;  ///< standard output (standard error goes to the test log)
+};
+
+Result run(const std::string& arguments) {
+  Result result;
+  const std::string command = std::string("\"") + FIBREMSS_CLI + "\" " + arguments;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return result;
+  std::array<char, 4096> buffer;
+  size_t read;
+  while ((read = fread(buffer.data(), 1, buffer.size(), pipe)) > 0)
+    result.out.append(buffer.data(), read);
+  const int status = pclose(pipe);
+  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+}  // namespace
+
+TEST(CliScenes, ListsEveryBuiltInScene) {
+  const Result result = run("scenes");
+  ASSERT_EQ(result.status, 0);
+  for (const auto& scene : fibremss::builtInScenes())
+    EXPECT_NE(result.out.find(scene.name + " "), std::string::npos) << scene.name;
+  EXPECT_EQ(std::count(result.out.begin(), result.out.end(), '\n'),
+            long(fibremss::builtInScenes().size()));
+}
+
+TEST(CliScenes, ExportPrintsLoadableJson) {
+  const Result result = run("scenes --export fusiform");
+  ASSERT_EQ(result.status, 0);
+  const Json scene = Json::parse(result.out);
+  EXPECT_EQ(scene["name"], "fusiform");
+  EXPECT_EQ(scene["muscles"].size(), 1u);
+  EXPECT_TRUE(scene["muscles"][0]["surface"].contains("generator"));
+  EXPECT_NE(run("scenes --export no-such-scene 2>/dev/null").status, 0);
+}
+
+// Needs prepareScene (the preparation work) in libfibremss.
+TEST(CliCheck, JsonStatisticsOfFusiform) {
+  const Result result = run("check fusiform --json");
+  ASSERT_EQ(result.status, 0) << result.out;
+  const Json stats = Json::parse(result.out);
+  for (const char* key :
+       {"particles", "boundary_particles", "fixed_particles", "springs", "bone_spheres"})
+    ASSERT_TRUE(stats.contains(key)) << key;
+  const fibremss::LoadedScene scene = fibremss::loadScene("fusiform");
+  const auto& muscle = scene.muscles.at(0);
+  // Every fibre sampled at `resolution` particles.
+  EXPECT_EQ(stats["particles"].get<size_t>(),
+            muscle.fibres.fibreCount() * size_t(muscle.parameters.resolution));
+  ASSERT_EQ(stats["muscles"].size(), scene.muscles.size());
+  ASSERT_EQ(stats["bones"].size(), scene.bones.size());
+  size_t particles = 0, boundary = 0, fixed = 0, springs = 0, spheres = 0;
+  for (const auto& m : stats["muscles"]) {
+    particles += m["particles"].get<size_t>();
+    boundary += m["boundary_particles"].get<size_t>();
+    fixed += m["fixed_particles"].get<size_t>();
+    springs += m["springs"].get<size_t>();
+    EXPECT_LT(m["boundary_particles"].get<size_t>(), m["particles"].get<size_t>());
+    EXPECT_GT(m["fixed_particles"].get<size_t>(), 0u);  // attached at both bars
+  }
+  for (const auto& b : stats["bones"]) spheres += b["spheres"].get<size_t>();
+  EXPECT_EQ(particles, stats["particles"].get<size_t>());
+  EXPECT_EQ(boundary, stats["boundary_particles"].get<size_t>());
+  EXPECT_EQ(fixed, stats["fixed_particles"].get<size_t>());
+  EXPECT_EQ(springs, stats["springs"].get<size_t>());
+  EXPECT_EQ(spheres, stats["bone_spheres"].get<size_t>());
+  EXPECT_GT(spheres, 0u);
+  // N-nearest springs: at least N/2 per particle (each pair is counted once).
+  EXPECT_GE(springs, particles * size_t(muscle.parameters.springs.neighbours) / 2);
+
+  // --set reaches the check: half the resolution, half the particles.
+  const Result half = run("check fusiform --set resolution=20 --json");
+  ASSERT_EQ(half.status, 0);
+  EXPECT_EQ(Json::parse(half.out)["particles"].get<size_t>(), muscle.fibres.fibreCount() * 20);
+}
+
+TEST(CliCheck, TextOutputAndRestState) {
+  const fs::path out = fs::temp_directory_path() / "fibremss_cli_check_test";
+  fs::remove_all(out);
+  const Result result = run("check fusiform --out \"" + out.string() + "\"");
+  ASSERT_EQ(result.status, 0) << result.out;
+  EXPECT_NE(result.out.find("total:"), std::string::npos);
+  EXPECT_NE(result.out.find("preparation"), std::string::npos);
+  EXPECT_TRUE(fs::exists(out / "rest.pvd"));
+  EXPECT_TRUE(fs::exists(out / "muscle-fusiform-particles.vtp"));
+  EXPECT_TRUE(fs::exists(out / "muscle-fusiform-surface.vtp"));
+  EXPECT_TRUE(fs::exists(out / "muscle-fusiform-fibres.vtp"));
+  EXPECT_TRUE(fs::exists(out / "bone-upper-mesh.vtp"));
+  EXPECT_TRUE(fs::exists(out / "bone-lower-spheres.vtp"));
+}
+
+TEST(CliCheck, BadInputFailsWithAMessage) {
+  EXPECT_EQ(run("check no-such-scene 2>/dev/null").status, 2);
+  EXPECT_EQ(run("check fusiform --set resolution=0 2>/dev/null").status, 2);
+  EXPECT_EQ(run("check fusiform --set no_such_key=1 2>/dev/null").status, 2);
+}
+
+// Every built-in scene passes `fibremss check` (at a small resolution to keep the test short).
+TEST(CliCheck, EveryBuiltInScenePrepares) {
+  for (const auto& builtIn : fibremss::builtInScenes()) {
+    const Result result = run("check " + builtIn.name + " --set resolution=10 --json 2>/dev/null");
+    ASSERT_EQ(result.status, 0) << builtIn.name;
+    const Json stats = Json::parse(result.out);
+    size_t fibres = 0;
+    for (const auto& muscle : fibremss::loadScene(builtIn.name).muscles)
+      fibres += muscle.fibres.fibreCount();
+    EXPECT_EQ(stats["particles"].get<size_t>(), fibres * 10) << builtIn.name;
+    EXPECT_GT(stats["boundary_particles"].get<size_t>(), 0u) << builtIn.name;
+    EXPECT_GT(stats["springs"].get<size_t>(), 0u) << builtIn.name;
+    if (!fibremss::loadScene(builtIn.name).bones.empty()) {
+      EXPECT_GT(stats["bone_spheres"].get<size_t>(), 0u) << builtIn.name;
+    }
+  }
+}
+
+TEST(CliScenes, ExportAppliesOverrides) {
+  const Result result = run("scenes --export thigh13 --set resolution=80 --set kappa=3");
+  ASSERT_EQ(result.status, 0);
+  const Json scene = Json::parse(result.out);
+  for (const auto& muscle : scene["muscles"]) EXPECT_EQ(muscle["resolution"], 80);
+  EXPECT_EQ(scene["model"]["kappa"], 3.0);
+}

@@ -1,0 +1,317 @@
+// The comparison runner, its report and the `compare` / `merge` commands.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "fibremss/Compare.h"
+#include "fibremss/CompareReport.h"
+#include "fibremss/Error.h"
+
+namespace fibremss {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string readFile(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+/// A fresh directory under the test's working directory.
+fs::path scratch(const std::string& name) {
+  const fs::path dir = fs::current_path() / ("comparison_test_" + name);
+  fs::remove_all(dir);
+  return dir;
+}
+
+/// XML well-formedness: one root, every tag closed in order, quoted attributes, valid
+/// references; declarations, comments, CDATA and doctype skipped.
+bool wellFormedXml(const std::string& xml, std::string& problem) {
+  std::vector<std::string> open;
+  bool rootSeen = false;
+  size_t i = 0;
+  auto fail = [&](const std::string& what) {
+    problem = what + " at offset " + std::to_string(i);
+    return false;
+  };
+  while (i < xml.size()) {
+    if (xml[i] == '&') {
+      const size_t end = xml.find(';', i);
+      if (end == std::string::npos || end - i > 10) return fail("bad reference");
+      const std::string name = xml.substr(i + 1, end - i - 1);
+      if (name != "lt" && name != "gt" && name != "amp" && name != "quot" && name != "apos" &&
+          (name.empty() || name[0] != '#')) {
+        return fail("unknown entity &" + name + ";");
+      }
+      i = end + 1;
+      continue;
+    }
+    if (xml[i] != '<') {
+      if (open.empty() && !std::isspace(static_cast<unsigned char>(xml[i]))) {
+        return fail("text outside the root");
+      }
+      ++i;
+      continue;
+    }
+    auto skipTo = [&](const char* end) {
+      const size_t found = xml.find(end, i);
+      if (found == std::string::npos) return false;
+      i = found + std::char_traits<char>::length(end);
+      return true;
+    };
+    if (xml.compare(i, 4, "<!--") == 0) {
+      if (!skipTo("-->")) return fail("unterminated comment");
+      continue;
+    }
+    if (xml.compare(i, 9, "<![CDATA[") == 0) {
+      if (!skipTo("]]>")) return fail("unterminated CDATA");
+      continue;
+    }
+    if (xml.compare(i, 2, "<?") == 0) {
+      if (!skipTo("?>")) return fail("unterminated declaration");
+      continue;
+    }
+    if (xml.compare(i, 2, "<!") == 0) {
+      if (!skipTo(">")) return fail("unterminated doctype");
+      continue;
+    }
+    // A tag: scan to its '>' outside quotes.
+    size_t j = i + 1;
+    char quote = 0;
+    for (; j < xml.size() && (quote || xml[j] != '>'); ++j) {
+      if (quote && xml[j] == quote) {
+        quote = 0;
+      } else if (!quote && (xml[j] == '"' || xml[j] == '\'')) {
+        quote = xml[j];
+      } else if (!quote && xml[j] == '<') {
+        return fail("'<' inside a tag");
+      }
+    }
+    if (j >= xml.size()) return fail("unterminated tag");
+    std::string tag = xml.substr(i + 1, j - i - 1);
+    const bool closing = !tag.empty() && tag[0] == '/';
+    const bool selfClosing = !tag.empty() && tag.back() == '/';
+    std::string name = tag.substr(closing ? 1 : 0);
+    name = name.substr(0, name.find_first_of(" \t\r\n/"));
+    if (name.empty()) return fail("tag without a name");
+    if (closing) {
+      if (open.empty() || open.back() != name) return fail("</" + name + "> does not match");
+      open.pop_back();
+    } else {
+      if (open.empty() && rootSeen) return fail("second root element <" + name + ">");
+      rootSeen = true;
+      if (!selfClosing) open.push_back(name);
+    }
+    i = j + 1;
+  }
+  if (!open.empty()) return fail("<" + open.back() + "> never closed");
+  if (!rootSeen) return fail("no element");
+  return true;
+}
+
+TEST(WellFormedXml, AcceptsAndRejectsKnownDocuments) {
+  std::string problem;
+  EXPECT_TRUE(wellFormedXml(
+      "<?xml version=\"1.0\"?>\n<!-- c --><svg a=\"1 > 0\"><g><text>x &amp; y</text></g><p/></svg>",
+      problem))
+      << problem;
+  EXPECT_FALSE(wellFormedXml("<svg><g></svg></g>", problem));
+  EXPECT_FALSE(wellFormedXml("<svg><g></g>", problem));
+  EXPECT_FALSE(wellFormedXml("<svg>a & b</svg>", problem));
+  EXPECT_FALSE(wellFormedXml("<a></a><b></b>", problem));
+}
+
+TEST(ParseMethod, KnowsTheFamiliesAndVariants) {
+  EXPECT_EQ(parseMethod("fem").family, "fem");
+  const MethodSpec variant = parseMethod("fibremss:integrator=semi-implicit-euler+iterations=200");
+  EXPECT_EQ(variant.family, "fibremss");
+  EXPECT_EQ(variant.overrides,
+            (std::vector<std::string>{"integrator=semi-implicit-euler", "iterations=200"}));
+  EXPECT_THROW(parseMethod("bullet"), InputError);
+  EXPECT_THROW(parseMethod("fem:iterations=3"), InputError);
+  EXPECT_THROW(parseMethod("fibremss:iterations"), InputError);
+}
+
+TEST(RmsBetweenRuns, CombinesPosesAsTheRootMeanSquare) {
+  // Pose 0 shifted by 1 mm, pose 1 by 3 mm: sqrt((1 + 9) / 2) mm.
+  RunMetrics a, b;
+  const std::vector<btVector3> rest = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.02f, 0}};
+  for (const btScalar shift : {0.001f, 0.003f}) {
+    a.poseSurfaces.push_back(rest);
+    std::vector<btVector3> moved;
+    for (const btVector3& p : rest) moved.push_back(p + btVector3(0, 0, shift));
+    b.poseSurfaces.push_back(moved);
+  }
+  EXPECT_NEAR(rmsBetweenRuns(a, b), std::sqrt(5.0), 1e-4);
+  b.poseSurfaces.pop_back();  // only the common pose counts
+  EXPECT_NEAR(rmsBetweenRuns(a, b), 1.0, 1e-4);
+  EXPECT_TRUE(std::isnan(rmsBetweenRuns(a, RunMetrics{})));
+
+  std::vector<RunMetrics> runs(2);
+  runs[0].method = "fibremss";
+  runs[0].poseSurfaces = b.poseSurfaces;
+  runs[1].method = "fem";
+  runs[1].poseSurfaces = a.poseSurfaces;
+  fillRms(runs);
+  EXPECT_NEAR(runs[0].rmsToFemMm, 1.0, 1e-4);
+  EXPECT_EQ(runs[1].rmsToFemMm, 0.0);
+  EXPECT_TRUE(std::isnan(runs[0].rmsToSelfReferenceMm));
+}
+
+void expectFinite(double value, const std::string& what) {
+  EXPECT_TRUE(std::isfinite(value)) << what << " = " << value;
+}
+
+class EveryMethod : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(EveryMethod, GivesFiniteMetrics) {
+  const LoadedScene scene = loadScene(GetParam());
+  CompareOptions options;  // all four methods
+  const Comparison comparison = runComparison(GetParam(), {}, options);
+  ASSERT_EQ(comparison.runs.size(), 4u);
+  for (const RunMetrics& run : comparison.runs) {
+    SCOPED_TRACE(run.method);
+    EXPECT_EQ(run.steps, std::max(scene.poseCount, 1));
+    EXPECT_FALSE(run.nan);
+    EXPECT_FALSE(run.exploded);
+    EXPECT_EQ(run.failedStep, -1);
+    EXPECT_GT(run.particles, 0u);
+    EXPECT_GT(run.msPerStep, 0);
+    expectFinite(run.msPerIteration, "ms per iteration");
+    expectFinite(run.maxPenetrationMm, "max penetration");
+    expectFinite(run.meanPenetrationMm, "mean penetration");
+    expectFinite(run.volumeChangePct, "volume change");
+    expectFinite(run.rmsToFemMm, "RMS to FEM");
+    expectFinite(run.rmsToSelfReferenceMm, "RMS to self-reference");
+    expectFinite(run.peakMemoryMb, "peak memory");
+    EXPECT_GE(run.maxPenetrationMm, run.meanPenetrationMm);
+    if (run.method == "fem") {
+      EXPECT_TRUE(std::isnan(run.springDeviationRatio)) << "FEM has no springs";
+      EXPECT_EQ(run.rmsToFemMm, 0);
+    } else {
+      expectFinite(run.springDeviationRatio, "spring deviation");
+    }
+    ASSERT_EQ(run.poseSurfaces.size(), static_cast<size_t>(run.steps));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(BuiltInScenes, EveryMethod, ::testing::Values("fusiform", "sphere-planes"),
+                         [](const auto& param) {
+                           std::string name = param.param;
+                           std::erase(name, '-');
+                           return name;
+                         });
+
+TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
+  const fs::path out = scratch("cli");
+  const std::string command = std::string(FIBREMSS_CLI) +
+                              " compare fusiform --set resolution=12 --methods fibremss,fem "
+                              "--out " +
+                              out.string() + " > " + (out.string() + ".log") + " 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << readFile(out.string() + ".log");
+  for (const char* file :
+       {"summary.json", "report.md", "speed_vs_error.png", "speed_vs_error.svg"}) {
+    ASSERT_TRUE(fs::exists(out / file)) << file;
+    EXPECT_GT(fs::file_size(out / file), 0u) << file;
+  }
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
+  EXPECT_EQ(summary["scene"], "fusiform");
+  EXPECT_TRUE(summary["machine"].contains("cpu"));
+  EXPECT_GT(summary["machine"]["cores"].get<int>(), 0);
+  EXPECT_NE(summary["command"].get<std::string>().find("compare fusiform"), std::string::npos);
+  ASSERT_EQ(summary["runs"].size(), 2u);
+  const nlohmann::json expectedKeys = toJson(RunMetrics{});
+  for (const auto& run : summary["runs"]) {
+    for (const auto& [key, value] : expectedKeys.items()) EXPECT_TRUE(run.contains(key)) << key;
+    for (const char* key : {"scene_overrides", "resolution", "step_deg"}) {
+      EXPECT_TRUE(run.contains(key)) << key;
+    }
+    EXPECT_EQ(run["resolution"], 12);
+    EXPECT_TRUE(run["ms_per_step"].is_number());
+  }
+  EXPECT_EQ(summary["runs"][0]["method"], "fibremss");
+  EXPECT_TRUE(summary["runs"][0]["rms_to_fem_mm"].is_number());
+
+  std::string problem;
+  EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
+  const std::string png = readFile(out / "speed_vs_error.png");
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("| fibremss |"), std::string::npos);
+  EXPECT_NE(report.find("| fem |"), std::string::npos);
+  EXPECT_NE(report.find("compare fusiform"), std::string::npos);
+  EXPECT_NE(report.find("How each method was measured"), std::string::npos);
+}
+
+TEST(CompareCommand, RejectsAnUnknownMethodWithExitCode2) {
+  const fs::path out = scratch("bad_method");
+  const std::string command = std::string(FIBREMSS_CLI) +
+                              " compare fusiform --methods fibremss,nonsense --out " +
+                              out.string() + " > /dev/null 2>&1";
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 2);
+  EXPECT_FALSE(fs::exists(out / "summary.json"));
+}
+
+/// A hand-made summary: thigh13 at resolution 20 with known part timings, and a sweep run.
+nlohmann::json madeSummary(double stepDeg, double msPerIteration) {
+  RunMetrics run;
+  run.scene = "thigh13";
+  run.method = "fibremss";
+  run.msPerStep = 70 * msPerIteration;
+  run.msPerIteration = msPerIteration;
+  run.timing = {10, 2, 4, 1, 0.5};
+  run.maxPenetrationMm = stepDeg / 2;
+  run.rmsToFemMm = 3;
+  nlohmann::json object = toJson(run);
+  object["scene_overrides"] = {"resolution=20"};
+  object["resolution"] = 20;
+  object["step_deg"] = stepDeg;
+  return {{"scene", "thigh13"},
+          {"machine", machineJson()},
+          {"command", "fibremss compare thigh13 --set step_deg=" + std::to_string(stepDeg)},
+          {"runs", {object}}};
+}
+
+TEST(MergeAndReport, MergedReportHasTable1RatiosAndTheSweepPlot) {
+  const fs::path a = scratch("merge_a"), b = scratch("merge_b"), out = scratch("merged");
+  writeComparison(madeSummary(2, 20), a.string());
+  writeComparison(madeSummary(10, 20), b.string());
+  const std::string command = std::string(FIBREMSS_CLI) + " merge " + a.string() + " " +
+                              (b / "summary.json").string() + " --out " + out.string() +
+                              " > /dev/null 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0);
+  const nlohmann::json merged = nlohmann::json::parse(readFile(out / "summary.json"));
+  ASSERT_EQ(merged["runs"].size(), 2u);
+  EXPECT_EQ(merged["command"].size(), 2u);
+  std::string problem;
+  for (const char* svg : {"speed_vs_error.svg", "penetration_vs_step.svg"}) {
+    ASSERT_TRUE(fs::exists(out / svg)) << svg;
+    EXPECT_TRUE(wellFormedXml(readFile(out / svg), problem)) << svg << ": " << problem;
+  }
+  // MSS 10 ms per iteration → 5 s per 500; thesis 18.66 s → ratio 3.73.
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("Seed 004 Table 1"), std::string::npos);
+  EXPECT_NE(report.find("| 20 | MSS | 5 | 18.66 | 3.73 |"), std::string::npos) << report;
+  EXPECT_NE(report.find("| 20 | total | 10 | 56.84 | 5.68 |"), std::string::npos) << report;
+}
+
+TEST(MergeAndReport, RejectsSomethingThatIsNotASummary) {
+  const fs::path dir = scratch("not_summary");
+  fs::create_directories(dir);
+  std::ofstream(dir / "summary.json") << "{\"scene\": \"x\"}";
+  EXPECT_THROW(mergeSummaries({readSummary(dir.string())}, {dir.string()}), InputError);
+  EXPECT_THROW(readSummary((dir / "missing").string()), InputError);
+}
+
+}  // namespace
+}  // namespace fibremss

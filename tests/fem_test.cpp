@@ -1,0 +1,224 @@
+// The FEM reference and its tetrahedral mesher, and the btSoftBody baseline, on small scenes
+// made here with known geometry.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "fibremss/Error.h"
+#include "fibremss/FemBuilder.h"
+#include "fibremss/Measures.h"
+#include "fibremss/SoftBodyBuilder.h"
+#include "fibremss/TetMesher.h"
+#include "support/PrepFixtures.h"
+
+namespace fibremss {
+namespace {
+
+using testing::boxMesh;
+using testing::sphereMesh;
+
+double surfaceArea(const TriangleMesh& mesh) {
+  double area = 0;
+  for (const auto& t : mesh.triangles) {
+    area += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]])
+                      .cross(mesh.vertices[t[2]] - mesh.vertices[t[0]])
+                      .length();
+  }
+  return area;
+}
+
+TEST(TetMesher, SphereGivesPositiveTetrahedraWhoseVolumeMatchesTheSurface) {
+  const TriangleMesh sphere = sphereMesh(btVector3(0.1f, -0.2f, 0.3f), 0.05f, 3);
+  const double surfaceVolume = meshVolume(sphere);
+  const double area = surfaceArea(sphere);
+  double previousError = INFINITY;
+  for (const int cells : {300, 2500}) {
+    const TetMesh mesh = tetrahedralize(sphere, {.targetCells = cells});
+    ASSERT_FALSE(mesh.tetrahedra.empty());
+    for (const auto& t : mesh.tetrahedra) {
+      ASSERT_GT(
+          tetrahedronVolume(mesh.nodes[t[0]], mesh.nodes[t[1]], mesh.nodes[t[2]], mesh.nodes[t[3]]),
+          0);
+    }
+    // Voxels count by their centres, so only voxels within half a voxel diagonal of the
+    // surface can be wrong: |error| <= area · h·√3/2.
+    const double error = std::abs(totalVolume(mesh) - surfaceVolume);
+    EXPECT_LE(error, area * mesh.cellSize * std::sqrt(3.0) / 2) << cells << " cells";
+    // and in practice far less: within 5 % at ~300 voxels
+    EXPECT_LE(error / surfaceVolume, 0.05) << cells << " cells";
+    EXPECT_LT(error, previousError) << "finer voxels must fit better";
+    previousError = error;
+  }
+}
+
+TEST(TetMesher, EveryTetrahedronIsPositiveOnAThinBox) {
+  const TriangleMesh box = boxMesh(btVector3(0, 0, 0), btVector3(0.2f, 0.01f, 0.03f));
+  const TetMesh mesh = tetrahedralize(box, {.targetCells = 50, .minCells = 40});
+  EXPECT_GE(mesh.tetrahedra.size(), 6u * 40);
+  for (const auto& t : mesh.tetrahedra) {
+    ASSERT_GT(
+        tetrahedronVolume(mesh.nodes[t[0]], mesh.nodes[t[1]], mesh.nodes[t[2]], mesh.nodes[t[3]]),
+        0);
+  }
+}
+
+TEST(TetMesher, RejectsAnInsideOutSurface) {
+  TriangleMesh inverted = sphereMesh(btVector3(0, 0, 0), 0.05f, 1);
+  for (auto& t : inverted.triangles) std::swap(t[1], t[2]);
+  EXPECT_THROW(tetrahedralize(inverted), InputError);
+}
+
+TEST(TetEmbedding, ReproducesPointsAndFollowsAffineMaps) {
+  const TriangleMesh sphere = sphereMesh(btVector3(0, 0, 0), 0.04f, 2);
+  const TetMesh mesh = tetrahedralize(sphere, {.targetCells = 200});
+  const TetEmbedding embedding = embed(mesh, sphere.vertices);
+  std::vector<btVector3> out;
+  embeddedPositions(mesh, embedding, mesh.nodes, out);
+  EXPECT_LT(rmsDistanceMm(out, sphere.vertices), 1e-3);
+  // Barycentric weights (also extrapolated ones) reproduce any affine map of the nodes.
+  const btMatrix3x3 stretch(1.2f, 0.1f, 0, 0, 0.9f, 0, 0.05f, 0, 1.1f);
+  const btVector3 shift(0.01f, 0.02f, -0.03f);
+  std::vector<btVector3> nodes, expected;
+  for (const btVector3& n : mesh.nodes) nodes.push_back(stretch * n + shift);
+  for (const btVector3& v : sphere.vertices) expected.push_back(stretch * v + shift);
+  embeddedPositions(mesh, embedding, nodes, out);
+  EXPECT_LT(rmsDistanceMm(out, expected), 1e-3);
+}
+
+/// A box muscle 60 × 20 × 20 mm along +x from a bone box on its −x side: 7 × 3 × 3 particles
+/// 10 mm apart, springs to all neighbours within 1.8 cells, the x = 0 layer fixed to the bone,
+/// each surface vertex skinned by its three nearest particles.
+PreparedScene rodScene() {
+  auto bone = std::make_shared<BoneSettings>();
+  bone->name = "bone";
+  bone->mesh = boxMesh(btVector3(-0.05f, -0.02f, -0.02f), btVector3(-0.001f, 0.02f, 0.02f));
+  auto muscle = std::make_shared<MuscleSettings>();
+  MuscleSettings& m = *muscle;
+  m.name = "rod";
+  m.restSurface = boxMesh(btVector3(0, -0.01f, -0.01f), btVector3(0.06f, 0.01f, 0.01f));
+  for (int i = 0; i < 7; ++i) {
+    for (int j = -1; j <= 1; ++j) {
+      for (int k = -1; k <= 1; ++k) {
+        m.restPositions.emplace_back(0.01f * i, 0.008f * j, 0.008f * k);
+        const bool fixed = i == 0;
+        const auto index = static_cast<uint32_t>(m.restPositions.size() - 1);
+        m.flags.push_back(fixed ? kFixed | kBoundary : kBoundary);
+        m.fixedBone.push_back(fixed ? 0 : -1);
+        m.nearestBone.push_back(0);
+        m.radii.push_back(0.004f);
+        m.boundaryParticles.push_back(index);
+        if (fixed) m.fixedParticles.push_back(index);
+      }
+    }
+  }
+  m.particleMass = 1060 * 0.06f * 0.02f * 0.02f / static_cast<btScalar>(m.particleCount());
+  m.damping = 0.05f;
+  for (uint32_t a = 0; a < m.particleCount(); ++a) {
+    for (uint32_t b = a + 1; b < m.particleCount(); ++b) {
+      const btScalar length = m.restPositions[a].distance(m.restPositions[b]);
+      if (length < 0.018f) m.springs.push_back({a, b, length, 1.0f / length});
+    }
+  }
+  m.skinNeighbours = 3;
+  for (const btVector3& v : m.restSurface.vertices) {
+    std::vector<std::pair<btScalar, uint32_t>> byDistance;
+    for (uint32_t p = 0; p < m.particleCount(); ++p) {
+      byDistance.emplace_back(v.distance(m.restPositions[p]), p);
+    }
+    std::partial_sort(byDistance.begin(), byDistance.begin() + 3, byDistance.end());
+    for (int n = 0; n < 3; ++n) {
+      m.skinParticles.push_back(byDistance[n].second);
+      m.skinWeights.push_back(btScalar(1) / 3);
+    }
+  }
+  PreparedScene scene;
+  scene.bones.push_back(bone);
+  scene.muscles.push_back(muscle);
+  return scene;
+}
+
+std::vector<btVector3> restSurfaceAt(const PreparedScene& scene, const btTransform& transform) {
+  std::vector<btVector3> moved;
+  for (const btVector3& v : scene.muscles[0]->restSurface.vertices) moved.push_back(transform * v);
+  return moved;
+}
+
+bool finite(std::span<const btVector3> points) {
+  for (const btVector3& p : points) {
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) return false;
+  }
+  return true;
+}
+
+TEST(SkinSurface, ReproducesARigidMotionExactly) {
+  const PreparedScene scene = rodScene();
+  const MuscleSettings& m = *scene.muscles[0];
+  const btTransform motion(btQuaternion(btVector3(0, 0, 1), 0.4f), btVector3(0.01f, 0, 0.02f));
+  std::vector<btVector3> particles;
+  for (const btVector3& p : m.restPositions) particles.push_back(motion * p);
+  std::vector<btVector3> surface;
+  skinSurface(m, particles, {&motion, 1}, surface);
+  EXPECT_LT(rmsDistanceMm(surface, restSurfaceAt(scene, motion)), 1e-3);
+}
+
+TEST(FemScene, StaysAtRestWithoutMotion) {
+  const PreparedScene scene = rodScene();
+  const btTransform rest = btTransform::getIdentity();
+  FemScene fem(scene, {&rest, 1}, {.mesher = {.targetCells = 60}});
+  EXPECT_GT(fem.pinnedCount(), 0u);
+  EXPECT_LT(fem.pinnedCount(), fem.nodeCount());
+  for (int pose = 0; pose < 3; ++pose) fem.stepPose({&rest, 1});
+  std::vector<btVector3> surface;
+  fem.surface(0, surface);
+  EXPECT_LT(rmsDistanceMm(surface, restSurfaceAt(scene, rest)), 0.01);
+}
+
+TEST(FemScene, FollowsATranslatedBone) {
+  // The bone moves 10 mm along y: the attached end goes with it and the free end follows
+  // elastically, so the surface ends between rest and the translated rest, closer to the
+  // latter than the rest pose is (10 mm), with the volume nearly kept.
+  const PreparedScene scene = rodScene();
+  const btTransform rest = btTransform::getIdentity();
+  const btTransform moved(btQuaternion::getIdentity(), btVector3(0, 0.01f, 0));
+  FemScene fem(scene, {&rest, 1}, {.mesher = {.targetCells = 60}});
+  for (int pose = 0; pose < 6; ++pose) fem.stepPose({&moved, 1});
+  std::vector<btVector3> surface;
+  fem.surface(0, surface);
+  ASSERT_TRUE(finite(surface));
+  EXPECT_LT(rmsDistanceMm(surface, restSurfaceAt(scene, moved)), 10.0);
+  EXPECT_LT(std::abs(volumeChangePercent(scene.muscles[0]->restSurface, surface)), 10.0);
+}
+
+TEST(SoftBodyScene, StaysAtRestWithoutMotion) {
+  const PreparedScene scene = rodScene();
+  const btTransform rest = btTransform::getIdentity();
+  SoftBodyScene soft(scene, {&rest, 1});
+  EXPECT_EQ(soft.nodeCount(), scene.muscles[0]->particleCount());
+  EXPECT_EQ(soft.linkCount(), scene.muscles[0]->springs.size());
+  for (int pose = 0; pose < 3; ++pose) soft.stepPose({&rest, 1});
+  std::vector<btVector3> surface;
+  soft.surface(0, surface);
+  EXPECT_LT(rmsDistanceMm(surface, restSurfaceAt(scene, rest)), 0.01);
+}
+
+TEST(SoftBodyScene, PinnedNodesMoveWithTheirBoneAndTheRestFollows) {
+  const PreparedScene scene = rodScene();
+  const MuscleSettings& m = *scene.muscles[0];
+  const btTransform rest = btTransform::getIdentity();
+  const btTransform moved(btQuaternion::getIdentity(), btVector3(0, 0.01f, 0));
+  SoftBodyScene soft(scene, {&rest, 1});
+  for (int pose = 0; pose < 6; ++pose) soft.stepPose({&moved, 1});
+  const auto positions = soft.positions(0);
+  ASSERT_TRUE(finite(positions));
+  for (uint32_t i : m.fixedParticles) {
+    EXPECT_LT(positions[i].distance(moved * m.restPositions[i]), 1e-6f);
+  }
+  // The free end moved towards the bone's displacement.
+  const btVector3 tip = positions[m.particleCount() - 5];  // centre of the x = 60 mm layer
+  EXPECT_GT(tip.y(), 0.002f);
+  EXPECT_LT(springDeviationRatio(m.springs, positions), 0.1);
+}
+
+}  // namespace
+}  // namespace fibremss

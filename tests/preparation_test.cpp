@@ -1,0 +1,672 @@
+// Preparation (method.md §2, §3, §6) on small fixtures whose answers are known: particle
+// counts and positions, spring layouts, fixed and boundary particles, radii, bone spheres.
+#include "fibremss/Preparation.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include "../plugin/src/PreparationInternal.h"
+#include "fibremss/Error.h"
+#include "support/PrepFixtures.h"
+
+namespace fibremss {
+namespace {
+
+using testing::boxMesh;
+using testing::bruteDistance;
+using testing::sphereMesh;
+using testing::tubeMesh;
+
+/// A box muscle [x0, x1] × [y − w, y + w] × [−w, w] with straight fibres along x on a
+/// rows × columns grid (row-major), inset from the surface.
+MuscleInput gridMuscle(const std::string& name, btScalar x0, btScalar x1, btScalar y, btScalar w,
+                       int rows, int columns, int resolution) {
+  MuscleInput muscle;
+  muscle.name = name;
+  muscle.surface = boxMesh({x0, y - w, -w}, {x1, y + w, w});
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < columns; ++c) {
+      const btScalar fy = y - w + (c + btScalar(0.5)) * 2 * w / columns;
+      const btScalar fz = -w + (r + btScalar(0.5)) * 2 * w / rows;
+      const std::vector<btVector3> line = {{x0, fy, fz}, {(x0 + x1) / 2, fy, fz}, {x1, fy, fz}};
+      muscle.fibres.addFibre(line);
+    }
+  muscle.fibreGridColumns = columns;
+  muscle.parameters.resolution = resolution;
+  muscle.parameters.attachmentDistance = 0.004f;
+  return muscle;
+}
+
+/// A tube muscle along x of radius `radius` with fibres on a square grid inside the circle.
+MuscleInput tubeMuscle(const std::string& name, btScalar x0, btScalar x1, btScalar radius,
+                       int resolution) {
+  MuscleInput muscle;
+  muscle.name = name;
+  muscle.surface = tubeMesh(x0, x1, radius, 24, 12);
+  const int grid = 6;
+  // Small deterministic offsets break the grid's symmetry: no surface vertex is equally close
+  // to two particles, so "the closest particle" has one answer.
+  std::mt19937 random(42);
+  std::uniform_real_distribution<btScalar> wobble(-0.05f * radius, 0.05f * radius);
+  for (int r = 0; r < grid; ++r)
+    for (int c = 0; c < grid; ++c) {
+      const btScalar fy = radius * (-0.75f + 1.5f * c / (grid - 1)) + wobble(random);
+      const btScalar fz = radius * (-0.75f + 1.5f * r / (grid - 1)) + wobble(random);
+      if (fy * fy + fz * fz > 0.8f * radius * radius) continue;
+      const std::vector<btVector3> line = {{x0, fy, fz}, {x1, fy, fz}};
+      muscle.fibres.addFibre(line);
+    }
+  muscle.parameters.resolution = resolution;
+  return muscle;
+}
+
+BoneInput boxBone(const std::string& name, const btVector3& lower, const btVector3& upper) {
+  BoneInput bone;
+  bone.name = name;
+  bone.mesh = boxMesh(lower, upper);
+  return bone;
+}
+
+BoneInput sphereBone(const std::string& name, const btVector3& centre, btScalar radius) {
+  BoneInput bone;
+  bone.name = name;
+  bone.mesh = sphereMesh(centre, radius, 3);
+  return bone;
+}
+
+void expectWellFormedSprings(const MuscleSettings& muscle, btScalar kappa) {
+  ASSERT_FALSE(muscle.springs.empty());
+  for (size_t s = 0; s < muscle.springs.size(); ++s) {
+    const Spring& spring = muscle.springs[s];
+    ASSERT_LT(spring.a, spring.b);
+    ASSERT_LT(spring.b, muscle.particleCount());
+    if (s > 0) {
+      const Spring& previous = muscle.springs[s - 1];
+      ASSERT_TRUE(previous.a < spring.a || (previous.a == spring.a && previous.b < spring.b))
+          << "springs not strictly sorted at " << s;
+    }
+    const btScalar distance =
+        (muscle.restPositions[spring.a] - muscle.restPositions[spring.b]).length();
+    EXPECT_NEAR(spring.restLength, distance, 1e-7);
+    EXPECT_NEAR(spring.stiffness * spring.restLength, kappa, kappa * 1e-5);
+  }
+}
+
+PreparedScene prepareOne(const MuscleInput& muscle, std::vector<BoneInput> bones = {},
+                         uint32_t seed = 1) {
+  return prepareScene(bones, {muscle}, seed);
+}
+
+TEST(FibreSampling, EqualStepsAfterAJitteredSecondParticle) {
+  const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 2, 3, 11);
+  const PreparedScene scene = prepareOne(input);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  ASSERT_EQ(muscle.particleCount(), 2u * 3u * 11u);
+  ASSERT_EQ(muscle.fibreCount(), 6u);
+  const btScalar step = 0.1f / 10;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+    ASSERT_EQ(muscle.fibreOffsets[f + 1] - muscle.fibreOffsets[f], 11u);
+    const auto fibre = input.fibres.fibre(f);
+    auto particle = [&](int k) {
+      return muscle.restPositions[muscle.fibreParticles[muscle.fibreOffsets[f] + k]];
+    };
+    EXPECT_LT((particle(0) - fibre.front()).length(), 1e-7);
+    const btScalar jitter = (particle(1) - particle(0)).length();
+    EXPECT_GT(jitter, 0);
+    EXPECT_LT(jitter, step);
+    for (int k = 2; k < 11; ++k) {
+      EXPECT_NEAR((particle(k) - particle(k - 1)).length(), step, 1e-6);
+      // On the straight fibre, in order and on the line.
+      EXPECT_GT(particle(k).x(), particle(k - 1).x());
+      EXPECT_NEAR(particle(k).y(), fibre.front().y(), 1e-7);
+    }
+    // The last particle lies ΔL − δ before the fibre end.
+    EXPECT_NEAR(fibre.back().x() - particle(10).x(), step - jitter, 1e-6);
+  }
+}
+
+TEST(FibreSampling, SameSeedSameResultOtherSeedOtherJitter) {
+  const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 2, 2, 8);
+  const PreparedScene a = prepareOne(input, {}, 5), b = prepareOne(input, {}, 5),
+                      c = prepareOne(input, {}, 6);
+  EXPECT_EQ(a.muscles[0]->restPositions, b.muscles[0]->restPositions);
+  EXPECT_EQ(a.muscles[0]->radii, b.muscles[0]->radii);
+  ASSERT_EQ(a.muscles[0]->springs.size(), b.muscles[0]->springs.size());
+  for (size_t s = 0; s < a.muscles[0]->springs.size(); ++s) {
+    EXPECT_EQ(a.muscles[0]->springs[s].a, b.muscles[0]->springs[s].a);
+    EXPECT_EQ(a.muscles[0]->springs[s].b, b.muscles[0]->springs[s].b);
+  }
+  EXPECT_NE(a.muscles[0]->restPositions, c.muscles[0]->restPositions);
+  // Fibres within one muscle get their own jitter.
+  const auto& p = a.muscles[0]->restPositions;
+  EXPECT_NE(p[1].x(), p[8 + 1].x());
+}
+
+TEST(FibreSampling, RejectsUnusableFibres) {
+  MuscleInput input = gridMuscle("calf", 0, 0.1f, 0, 0.01f, 1, 2, 1);
+  EXPECT_THROW(prepareOne(input), InputError);  // resolution 1
+  input.parameters.resolution = 5;
+  const std::vector<btVector3> point = {{0.05f, 0, 0}};
+  input.fibres.addFibre(point);
+  input.fibreGridColumns = 0;
+  try {
+    prepareOne(input);
+    FAIL() << "expected InputError";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("calf"), std::string::npos) << error.what();
+    EXPECT_NE(error.where().find("fibre 2"), std::string::npos) << error.what();
+  }
+}
+
+TEST(Preparation, RejectsBrokenMeshesAndFibres) {
+  MuscleInput input = gridMuscle("thigh", 0, 0.1f, 0, 0.01f, 1, 2, 5);
+  input.surface.triangles.push_back({0, 1, 99});
+  EXPECT_THROW(prepareOne(input), InputError);
+  input = gridMuscle("thigh", 0, 0.1f, 0, 0.01f, 1, 2, 5);
+  input.fibres.points[1].setX(std::numeric_limits<btScalar>::quiet_NaN());
+  EXPECT_THROW(prepareOne(input), InputError);
+  input = gridMuscle("thigh", 0, 0.1f, 0, 0.01f, 1, 2, 5);
+  input.surface.triangles.clear();
+  EXPECT_THROW(prepareOne(input), InputError);
+  BoneInput bone = boxBone("femur", {-1, -1, -1}, {-0.5f, -0.5f, -0.5f});
+  bone.mesh.vertices[3].setY(std::numeric_limits<btScalar>::infinity());
+  try {
+    prepareOne(gridMuscle("thigh", 0, 0.1f, 0, 0.01f, 1, 2, 5), {bone});
+    FAIL() << "expected InputError";
+  } catch (const InputError& error) {
+    EXPECT_NE(error.source().find("femur"), std::string::npos) << error.what();
+    EXPECT_NE(error.where().find("vertex 3"), std::string::npos) << error.what();
+  }
+}
+
+TEST(Springs, LatticeCountsMatchTheGrid) {
+  const int rows = 3, columns = 4, samples = 5;
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, rows, columns, samples);
+  input.parameters.springs.layout = SpringLayout::Lattice6;
+  const PreparedScene six = prepareOne(input);
+  const size_t expected6 = size_t(rows - 1) * columns * samples +
+                           size_t(rows) * (columns - 1) * samples +
+                           size_t(rows) * columns * (samples - 1);
+  EXPECT_EQ(six.muscles[0]->springs.size(), expected6);
+  expectWellFormedSprings(*six.muscles[0], input.parameters.springs.kappa);
+
+  input.parameters.springs.layout = SpringLayout::Lattice26;
+  const PreparedScene all = prepareOne(input);
+  // Ordered pairs within Chebyshev distance 1 per axis: 3n − 2; drop self pairs, halve.
+  const size_t cells = size_t(rows) * columns * samples;
+  const size_t expected26 =
+      (size_t(3 * rows - 2) * (3 * columns - 2) * (3 * samples - 2) - cells) / 2;
+  EXPECT_EQ(all.muscles[0]->springs.size(), expected26);
+  expectWellFormedSprings(*all.muscles[0], input.parameters.springs.kappa);
+  // Lattice6 neighbours are one step apart in exactly one grid direction.
+  for (const Spring& s : six.muscles[0]->springs) {
+    const uint32_t fa = s.a / samples, fb = s.b / samples, ka = s.a % samples, kb = s.b % samples;
+    const int dr = std::abs(int(fa / columns) - int(fb / columns));
+    const int dc = std::abs(int(fa % columns) - int(fb % columns));
+    const int dk = std::abs(int(ka) - int(kb));
+    EXPECT_EQ(dr + dc + dk, 1);
+  }
+}
+
+TEST(Springs, LatticeNeedsAGrid) {
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 2, 3, 4);
+  input.parameters.springs.layout = SpringLayout::Lattice26;
+  input.fibreGridColumns = 0;
+  EXPECT_THROW(prepareOne(input), InputError);
+  input.fibreGridColumns = 4;  // 6 fibres do not fill rows of 4
+  EXPECT_THROW(prepareOne(input), InputError);
+}
+
+TEST(Springs, NearestNeighboursOnALine) {
+  const int n = 12;
+  MuscleInput input = gridMuscle("line", 0, 0.1f, 0, 0.005f, 1, 1, n);
+  input.parameters.springs.neighbours = 2;
+  const PreparedScene two = prepareOne(input);
+  // Spacing δ, ΔL, ΔL, ...: the chain, plus (0, 2) and (n−3, n−1) from the ends' 2 nearest.
+  std::set<std::pair<uint32_t, uint32_t>> expected;
+  for (uint32_t i = 0; i + 1 < n; ++i) expected.emplace(i, i + 1);
+  expected.emplace(0, 2);
+  expected.emplace(n - 3, n - 1);
+  std::set<std::pair<uint32_t, uint32_t>> actual;
+  for (const Spring& s : two.muscles[0]->springs) actual.emplace(s.a, s.b);
+  EXPECT_EQ(actual, expected);
+  expectWellFormedSprings(*two.muscles[0], input.parameters.springs.kappa);
+
+  input.parameters.springs.neighbours = 1;
+  const PreparedScene one = prepareOne(input);
+  std::set<std::pair<uint32_t, uint32_t>> pairs;
+  for (const Spring& s : one.muscles[0]->springs) {
+    EXPECT_EQ(s.b, s.a + 1);  // a nearest neighbour on a line is an adjacent particle
+    pairs.emplace(s.a, s.b);
+  }
+  EXPECT_TRUE(pairs.count({0, 1}));
+  EXPECT_TRUE(pairs.count({n - 2, n - 1}));
+  EXPECT_GE(pairs.size(), size_t(n) / 2);  // each spring serves at most two particles
+}
+
+TEST(Springs, NearestNeighboursNeedsFewerNeighboursThanParticles) {
+  MuscleInput input = gridMuscle("small", 0, 0.1f, 0, 0.01f, 1, 2, 4);
+  input.parameters.springs.neighbours = 8;  // 8 particles
+  try {
+    prepareOne(input);
+    FAIL() << "expected InputError";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("small"), std::string::npos);
+  }
+  input.parameters.springs.neighbours = 7;
+  const PreparedScene scene = prepareOne(input);
+  EXPECT_EQ(scene.muscles[0]->springs.size(), 8u * 7u / 2u);  // every pair
+}
+
+TEST(Springs, NearestNeighbourUnionContainsEveryParticlesNearest) {
+  const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 8);
+  const PreparedScene scene = prepareOne(input);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  expectWellFormedSprings(muscle, input.parameters.springs.kappa);
+  std::set<std::pair<uint32_t, uint32_t>> pairs;
+  for (const Spring& s : muscle.springs) pairs.emplace(s.a, s.b);
+  std::vector<int> degree(muscle.particleCount(), 0);
+  for (const Spring& s : muscle.springs) ++degree[s.a], ++degree[s.b];
+  const int n = input.parameters.springs.neighbours;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
+    EXPECT_GE(degree[i], n);  // its own N nearest at least
+    // Brute force: the strictly nearest other particle is linked.
+    btScalar best = 1e9f;
+    uint32_t nearest = i;
+    for (uint32_t j = 0; j < muscle.particleCount(); ++j)
+      if (j != i && (muscle.restPositions[j] - muscle.restPositions[i]).length() < best) {
+        best = (muscle.restPositions[j] - muscle.restPositions[i]).length();
+        nearest = j;
+      }
+    EXPECT_TRUE(pairs.count({std::min(i, nearest), std::max(i, nearest)})) << i;
+  }
+}
+
+TEST(Springs, DelaunayOfCubeCornersAndCentre) {
+  // Tetrahedra: the centre with each of the 12 hull triangles. Edges: 8 to the centre, 12
+  // cube edges and one diagonal per face.
+  MuscleInput input;
+  input.name = "cube";
+  input.parameters.springs.layout = SpringLayout::Delaunay;
+  std::vector<btVector3> points;
+  for (int i = 0; i < 8; ++i)
+    points.emplace_back(i & 1 ? 1.f : 0.f, i & 2 ? 1.f : 0.f, i & 4 ? 1.f : 0.f);
+  points.emplace_back(0.5f, 0.5f, 0.5f);
+  const detail::KdTree tree(points);
+  const std::vector<Spring> springs = detail::buildSprings(input, points, tree);
+  EXPECT_EQ(springs.size(), 8u + 12u + 6u);
+  int toCentre = 0, cubeEdges = 0, faceDiagonals = 0;
+  for (const Spring& s : springs) {
+    EXPECT_LT(s.a, s.b);
+    if (s.b == 8) {
+      ++toCentre;
+      continue;
+    }
+    const int differing = __builtin_popcount(s.a ^ s.b);
+    cubeEdges += differing == 1;
+    faceDiagonals += differing == 2;
+    EXPECT_NE(differing, 3) << "a space diagonal crosses the centre's tetrahedra";
+  }
+  EXPECT_EQ(toCentre, 8);
+  EXPECT_EQ(cubeEdges, 12);
+  EXPECT_EQ(faceDiagonals, 6);
+}
+
+TEST(Springs, DelaunayContainsTheNearestNeighbourGraph) {
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 4, 9);
+  input.parameters.springs.layout = SpringLayout::Delaunay;
+  const PreparedScene scene = prepareOne(input);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  expectWellFormedSprings(muscle, input.parameters.springs.kappa);
+  std::set<std::pair<uint32_t, uint32_t>> pairs;
+  for (const Spring& s : muscle.springs) pairs.emplace(s.a, s.b);
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
+    btScalar best = 1e9f, second = 1e9f;
+    uint32_t nearest = i;
+    for (uint32_t j = 0; j < muscle.particleCount(); ++j) {
+      const btScalar d = (muscle.restPositions[j] - muscle.restPositions[i]).length();
+      if (j == i) continue;
+      if (d < best) {
+        second = best;
+        best = d;
+        nearest = j;
+      } else if (d < second) {
+        second = d;
+      }
+    }
+    if (second - best < 1e-6f) continue;  // a tie: either may be the Delaunay edge
+    EXPECT_TRUE(pairs.count({std::min(i, nearest), std::max(i, nearest)})) << i;
+  }
+}
+
+TEST(Springs, DelaunayRejectsCoplanarParticles) {
+  MuscleInput input;
+  input.name = "flat";
+  input.parameters.springs.layout = SpringLayout::Delaunay;
+  std::vector<btVector3> points;
+  for (int i = 0; i < 9; ++i) points.emplace_back(i % 3, i / 3, 0);
+  const detail::KdTree tree(points);
+  EXPECT_THROW(detail::buildSprings(input, points, tree), InputError);
+}
+
+TEST(Springs, CoincidentParticlesAreAnError) {
+  MuscleInput input = gridMuscle("twin", 0, 0.1f, 0, 0.01f, 1, 2, 6);
+  input.fibres.addFibre(input.fibres.fibre(0));  // fibre 2 starts where fibre 0 starts
+  input.fibreGridColumns = 0;
+  input.parameters.springs.neighbours = 4;
+  try {
+    prepareOne(input);
+    FAIL() << "expected InputError";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("twin"), std::string::npos);
+    EXPECT_NE(error.where().find("particles 0 and 12"), std::string::npos) << error.what();
+  }
+}
+
+TEST(Preparation, MassAndDamping) {
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 2, 2, 10);
+  input.parameters.springs.density = 1000;
+  const PreparedScene scene = prepareOne(input);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  const double volume = 0.1 * 0.02 * 0.02;
+  EXPECT_NEAR(muscle.particleMass, 1000 * volume / 40, 1e-9);
+  double meanK = 0;
+  for (const Spring& s : muscle.springs) meanK += s.stiffness;
+  meanK /= muscle.springs.size();
+  EXPECT_NEAR(muscle.damping, std::sqrt(8 * meanK * muscle.particleMass), 1e-4 * muscle.damping);
+  input.parameters.springs.damping = 0.25f;
+  EXPECT_FLOAT_EQ(prepareOne(input).muscles[0]->damping, 0.25f);
+}
+
+TEST(Preparation, FixedParticlesAreThoseWithinTheAttachmentDistance) {
+  // Fibres run from one bone to the other; a third bone sits beside the muscle.
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 25);
+  input.parameters.attachmentDistance = 0.006f;
+  const std::vector<BoneInput> bones = {
+      boxBone("left", {-0.03f, -0.02f, -0.02f}, {0, 0.02f, 0.02f}),
+      boxBone("right", {0.1f, -0.02f, -0.02f}, {0.13f, 0.02f, 0.02f}),
+      sphereBone("side", {0.05f, 0.03f, 0}, 0.02f)};
+  const PreparedScene scene = prepareScene(bones, {input}, 3);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  size_t fixed = 0, checked = 0;
+  std::vector<size_t> perBone(3, 0);
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
+    btScalar best = 1e9f;
+    int nearest = -1;
+    for (size_t b = 0; b < bones.size(); ++b) {
+      const btScalar d = bruteDistance(bones[b].mesh, muscle.restPositions[i]);
+      if (d < best) best = d, nearest = int(b);
+    }
+    if (std::abs(best - input.parameters.attachmentDistance) < 1e-6f) continue;  // a tie
+    ++checked;
+    EXPECT_EQ(muscle.nearestBone[i], nearest) << i;
+    const bool shouldFix = best < input.parameters.attachmentDistance;
+    EXPECT_EQ(muscle.isFixed(i), shouldFix) << i << " at " << best;
+    EXPECT_EQ(muscle.fixedBone[i], shouldFix ? nearest : -1) << i;
+    if (shouldFix) ++fixed, ++perBone[nearest];
+  }
+  EXPECT_GT(checked, muscle.particleCount() * 9 / 10);
+  EXPECT_EQ(muscle.fixedParticles.size(), fixed);
+  EXPECT_TRUE(std::is_sorted(muscle.fixedParticles.begin(), muscle.fixedParticles.end()));
+  for (size_t f = 0; f < muscle.fibreCount(); ++f)  // every fibre starts on the left bone
+    EXPECT_EQ(muscle.fixedBone[muscle.fibreParticles[muscle.fibreOffsets[f]]], 0);
+  EXPECT_GE(perBone[0], 9u);
+  EXPECT_GT(perBone[2], 0u);  // the side bone catches particles of the nearest column
+}
+
+/// The number that starts the warning containing `text` after "muscle 'name': " (0 if none).
+size_t warnedCount(const PreparedScene& scene, const std::string& text) {
+  for (const auto& warning : scene.report.warnings)
+    if (warning.find(text) != std::string::npos)
+      return std::stoul(warning.substr(warning.find("': ") + 3));
+  return 0;
+}
+
+TEST(Preparation, WarnsAboutFibreEndsLeftLoose) {
+  // At resolution 5 the last particle lies ΔL − δ before the end, often beyond the
+  // attachment distance of the end bone.
+  const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 5);
+  const std::vector<BoneInput> bones = {
+      boxBone("left", {-0.03f, -0.02f, -0.02f}, {0, 0.02f, 0.02f}),
+      boxBone("right", {0.1f, -0.02f, -0.02f}, {0.13f, 0.02f, 0.02f})};
+  size_t total = 0;
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    const PreparedScene scene = prepareScene(bones, {input}, seed);
+    const MuscleSettings& muscle = *scene.muscles[0];
+    size_t loose = 0;
+    for (size_t f = 0; f < muscle.fibreCount(); ++f)
+      loose += !muscle.isFixed(muscle.fibreParticles[muscle.fibreOffsets[f + 1] - 1]);
+    EXPECT_EQ(warnedCount(scene, "fibres end on a bone"), loose) << "seed " << seed;
+    total += loose;
+  }
+  EXPECT_GT(total, 0u);  // (ΔL − δ) > 4 mm for 84 % of fibres: some are loose
+}
+
+TEST(Preparation, WarnsAboutFreeParticlesInsideABone) {
+  const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 20);
+  const BoneInput bone = sphereBone("cyst", {0.05f, 0, 0}, 0.009f);
+  const PreparedScene scene = prepareScene({bone}, {input}, 1);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  const MeshDistance distance(bone.mesh);
+  size_t inside = 0;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i)
+    inside += !muscle.isFixed(i) && distance.signedDistance(muscle.restPositions[i]) < 0;
+  ASSERT_GT(inside, 0u);
+  EXPECT_EQ(warnedCount(scene, "particles lie inside bone 'cyst'"), inside);
+}
+
+TEST(Preparation, BoundaryParticlesAndRadiiFromSurfaceVertices) {
+  const MuscleInput input = tubeMuscle("tube", 0, 0.12f, 0.02f, 12);
+  const PreparedScene scene = prepareOne(input);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  const auto& vertices = muscle.restSurface.vertices;
+  // Brute force: every vertex chooses its closest particle.
+  std::vector<double> sum(muscle.particleCount(), 0);
+  std::vector<int> count(muscle.particleCount(), 0);
+  for (const btVector3& v : vertices) {
+    uint32_t best = 0;
+    for (uint32_t i = 1; i < muscle.particleCount(); ++i)
+      if ((muscle.restPositions[i] - v).length2() < (muscle.restPositions[best] - v).length2())
+        best = i;
+    sum[best] += (muscle.restPositions[best] - v).length();
+    ++count[best];
+  }
+  std::vector<uint32_t> boundary;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
+    EXPECT_EQ(muscle.isBoundary(i), count[i] > 0) << i;
+    if (count[i] == 0) {
+      EXPECT_EQ(muscle.radii[i], 0);
+      continue;
+    }
+    boundary.push_back(i);
+    EXPECT_NEAR(muscle.radii[i], sum[i] / count[i], 1e-6) << i;  // nothing to shrink against
+  }
+  EXPECT_EQ(muscle.boundaryParticles, boundary);
+  // Each boundary particle covers at least its nearest vertex (the minimum distance is at most
+  // the mean), so coverage >= boundary particles / vertices.
+  ASSERT_EQ(scene.report.surfaceCoverage.size(), 1u);
+  const double coverage = scene.report.surfaceCoverage[0];
+  EXPECT_GE(coverage, double(boundary.size()) / vertices.size());
+  EXPECT_LE(coverage, 1.0);
+  // Brute force, with the sphere shrunk and grown a hair: vertices on a sphere are ties.
+  auto coveredFraction = [&](btScalar scale) {
+    size_t covered = 0;
+    for (const btVector3& v : vertices)
+      for (uint32_t i : boundary)
+        if ((muscle.restPositions[i] - v).length() <= muscle.radii[i] * scale) {
+          ++covered;
+          break;
+        }
+    return double(covered) / vertices.size();
+  };
+  EXPECT_GE(coverage, coveredFraction(1 - 1e-4f));
+  EXPECT_LE(coverage, coveredFraction(1 + 1e-4f));
+}
+
+TEST(Preparation, SkinningUsesTheClosestParticles) {
+  MuscleInput input = tubeMuscle("tube", 0, 0.12f, 0.02f, 10);
+  input.parameters.skinNeighbours = 4;
+  const PreparedScene scene = prepareOne(input);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  ASSERT_EQ(muscle.skinNeighbours, 4);
+  const auto& vertices = muscle.restSurface.vertices;
+  ASSERT_EQ(muscle.skinParticles.size(), vertices.size() * 4);
+  ASSERT_EQ(muscle.skinWeights.size(), vertices.size() * 4);
+  for (size_t v = 0; v < vertices.size(); ++v) {
+    std::vector<btScalar> distances;
+    for (const btVector3& p : muscle.restPositions) distances.push_back((p - vertices[v]).length());
+    std::vector<btScalar> sorted = distances;
+    std::sort(sorted.begin(), sorted.end());
+    double weightSum = 0;
+    for (int j = 0; j < 4; ++j) {
+      const uint32_t particle = muscle.skinParticles[v * 4 + j];
+      EXPECT_LE(distances[particle], sorted[3] + 1e-7f);
+      EXPECT_GT(muscle.skinWeights[v * 4 + j], 0);
+      weightSum += muscle.skinWeights[v * 4 + j];
+      if (j > 0) {  // nearer particles weigh more
+        EXPECT_LE(muscle.skinWeights[v * 4 + j], muscle.skinWeights[v * 4 + j - 1] + 1e-6f);
+      }
+    }
+    EXPECT_NEAR(weightSum, 1.0, 1e-5);
+  }
+}
+
+/// Every pair of spheres from different bodies is apart (fixed particles excepted against
+/// their own bone).
+void expectNoInterBodyOverlap(const PreparedScene& scene) {
+  for (size_t m = 0; m < scene.muscles.size(); ++m) {
+    const MuscleSettings& a = *scene.muscles[m];
+    for (uint32_t i : a.boundaryParticles) {
+      const btVector3& p = a.restPositions[i];
+      for (size_t n = m + 1; n < scene.muscles.size(); ++n) {
+        const MuscleSettings& b = *scene.muscles[n];
+        for (uint32_t j : b.boundaryParticles)
+          ASSERT_GE((p - b.restPositions[j]).length(), a.radii[i] + b.radii[j])
+              << a.name << " " << i << " vs " << b.name << " " << j;
+      }
+      for (size_t bone = 0; bone < scene.bones.size(); ++bone) {
+        if (a.fixedBone[i] == int32_t(bone)) continue;
+        const BoneSettings& settings = *scene.bones[bone];
+        for (size_t s = 0; s < settings.sphereCentres.size(); ++s)
+          ASSERT_GE((p - settings.sphereCentres[s]).length(), a.radii[i] + settings.sphereRadii[s])
+              << a.name << " " << i << " vs bone " << settings.name << " sphere " << s;
+      }
+    }
+  }
+}
+
+TEST(Preparation, RestPoseHasNoOverlapBetweenBodies) {
+  // Two tubes side by side closer than their spheres reach, a bone at one end of both and a
+  // round bone pressed against them.
+  std::vector<MuscleInput> muscles = {tubeMuscle("a", 0, 0.12f, 0.02f, 12),
+                                      tubeMuscle("b", 0, 0.12f, 0.02f, 12)};
+  for (auto& v : muscles[1].surface.vertices) v += btVector3(0, 0.041f, 0);
+  for (auto& p : muscles[1].fibres.points) p += btVector3(0, 0.041f, 0);
+  const std::vector<BoneInput> bones = {boxBone("end", {-0.03f, -0.03f, -0.03f}, {0, 0.07f, 0.03f}),
+                                        sphereBone("knob", {0.06f, 0.02f, 0.035f}, 0.02f)};
+  const PreparedScene scene = prepareScene(bones, muscles, 9);
+  expectNoInterBodyOverlap(scene);
+  size_t fixed = 0;
+  for (const auto& muscle : scene.muscles) fixed += muscle->fixedParticles.size();
+  EXPECT_GT(fixed, 0u);  // the exemption was exercised
+  bool reported = false;
+  for (const auto& warning : scene.report.warnings)
+    reported |= warning.find("muscle spheres shrunk") != std::string::npos;
+  EXPECT_TRUE(reported);
+  for (double coverage : scene.report.surfaceCoverage) {
+    EXPECT_GT(coverage, 0);
+    EXPECT_LE(coverage, 1);
+  }
+}
+
+TEST(BoneSpheres, CentresLieInsideTheBone) {
+  for (const BoneInput& bone : {sphereBone("ball", {0.1f, 0.2f, 0.3f}, 0.03f),
+                                boxBone("block", {0, 0, 0}, {0.05f, 0.03f, 0.02f}),
+                                // A thin plate: inward offsets by the longest edge cross it.
+                                boxBone("plate", {0, 0, 0}, {0.1f, 0.1f, 0.002f})}) {
+    const PreparedScene scene = prepareScene({bone}, {}, 1);
+    const BoneSettings& settings = *scene.bones[0];
+    ASSERT_FALSE(settings.sphereCentres.empty()) << bone.name;
+    ASSERT_EQ(settings.sphereCentres.size(), settings.sphereRadii.size());
+    const MeshDistance distance(bone.mesh);
+    for (size_t s = 0; s < settings.sphereCentres.size(); ++s) {
+      const btVector3& centre = settings.sphereCentres[s];
+      EXPECT_LE(distance.signedDistance(centre), 1e-6f) << bone.name << " sphere " << s;
+      EXPECT_GT(settings.sphereRadii[s], 0);
+    }
+    bool pulledBack = false;
+    for (const auto& warning : scene.report.warnings)
+      pulledBack |= warning.find("pulled back") != std::string::npos;
+    EXPECT_TRUE(pulledBack || bone.name == "ball") << bone.name;  // coarse boxes are thin
+  }
+}
+
+TEST(BoneSpheres, TwoRingRootsOnASphere) {
+  const btScalar radius = 0.03f;
+  const BoneInput bone = sphereBone("ball", {0, 0, 0}, radius);
+  const PreparedScene scene = prepareScene({bone}, {}, 1);
+  const BoneSettings& settings = *scene.bones[0];
+  // On a regular mesh the longest edge through a root is about the mean edge: every sphere
+  // sits Lmax inside and reaches Lmax·(√2 − 1) outside the surface.
+  for (size_t s = 0; s < settings.sphereCentres.size(); ++s) {
+    const btScalar depth = radius - settings.sphereCentres[s].length();
+    const btScalar lmax = settings.sphereRadii[s] / std::sqrt(2.f);
+    EXPECT_NEAR(depth, lmax, 0.02f * lmax);
+  }
+  // Two-rings are disjoint from other roots, so there are far fewer spheres than vertices
+  // but at least vertices / (largest two-ring size).
+  const size_t vertices = bone.mesh.vertices.size();
+  EXPECT_LT(settings.sphereCentres.size(), vertices / 4);
+  EXPECT_GE(settings.sphereCentres.size(), vertices / 19);
+}
+
+TEST(BoneSpheres, DegenerateTrianglesCannotMakeHugeSpheres) {
+  BoneInput bone = sphereBone("ball", {0, 0, 0}, 0.03f);
+  // A sliver: a far-away vertex joined to two neighbours by a zero-area triangle, and a long
+  // thin triangle made of existing vertices.
+  bone.mesh.vertices.push_back(bone.mesh.vertices[0] * 30.f);
+  const uint32_t far = static_cast<uint32_t>(bone.mesh.vertices.size() - 1);
+  bone.mesh.triangles.push_back({0, far, far});
+  const PreparedScene scene = prepareScene({bone}, {}, 1);
+  const BoneSettings& settings = *scene.bones[0];
+  double edgeSum = 0;
+  size_t edges = 0;
+  for (const auto& t : bone.mesh.triangles)
+    if (t[1] != t[2])
+      for (int k = 0; k < 3; ++k)
+        edgeSum += (bone.mesh.vertices[t[k]] - bone.mesh.vertices[t[(k + 1) % 3]]).length(),
+            ++edges;
+  const double meanEdge = edgeSum / edges;
+  for (btScalar r : settings.sphereRadii) EXPECT_LE(r, 3 * meanEdge * std::sqrt(2.0) * 1.001);
+  bool reported = false;
+  for (const auto& warning : scene.report.warnings)
+    reported |= warning.find("zero-area") != std::string::npos;
+  EXPECT_TRUE(reported);
+}
+
+TEST(BoneSpheres, ThinningAndMaxRadius) {
+  BoneInput bone = sphereBone("ball", {0, 0, 0}, 0.03f);
+  const size_t full = prepareScene({bone}, {}, 1).bones[0]->sphereCentres.size();
+  bone.spheres.thinning = 0.5f;
+  const auto a = prepareScene({bone}, {}, 1).bones[0];
+  const auto b = prepareScene({bone}, {}, 1).bones[0];
+  const auto c = prepareScene({bone}, {}, 2).bones[0];
+  EXPECT_LT(a->sphereCentres.size(), full);
+  EXPECT_GT(a->sphereCentres.size(), 0u);
+  EXPECT_EQ(a->sphereCentres, b->sphereCentres);
+  EXPECT_NE(a->sphereCentres, c->sphereCentres);
+  bone.spheres.thinning = 0;
+  const btScalar typical = prepareScene({bone}, {}, 1).bones[0]->sphereRadii.front();
+  bone.spheres.maxRadius = typical;
+  const auto capped = prepareScene({bone}, {}, 1).bones[0];
+  EXPECT_FALSE(capped->sphereRadii.empty());
+  for (btScalar r : capped->sphereRadii) EXPECT_LE(r, typical);
+  bone.spheres.thinning = 1;
+  EXPECT_THROW(prepareScene({bone}, {}, 1), InputError);
+}
+
+}  // namespace
+}  // namespace fibremss

@@ -1,0 +1,336 @@
+// `fibremss run`: the summary has every key with sensible values, the frames are complete
+// ParaView files, Ctrl-C stops cleanly with the summary saying so, bad input is an error.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "fibremss/FibreRun.h"
+#include "fibremss/Progress.h"
+#include "support/Process.h"
+
+namespace fibremss {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::runProcess;
+using testing::TemporaryDirectory;
+
+std::string readFile(const fs::path& path) {
+  std::ifstream file(path, std::ios::binary);
+  std::stringstream text;
+  text << file.rdbuf();
+  return text.str();
+}
+
+std::string trimmed(std::string text) {
+  while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.pop_back();
+  return text;
+}
+
+/// A .vtp is well formed: a closed PolyData VTKFile whose Points array holds 3 finite numbers
+/// per point and whose piece has at least one point.
+void expectWellFormedVtp(const fs::path& path) {
+  SCOPED_TRACE(path.string());
+  const std::string text = readFile(path);
+  ASSERT_NE(text.find("<VTKFile type=\"PolyData\""), std::string::npos);
+  EXPECT_TRUE(trimmed(text).ends_with("</VTKFile>"));
+  std::smatch match;
+  ASSERT_TRUE(std::regex_search(text, match, std::regex("NumberOfPoints=\"([0-9]+)\"")));
+  const size_t points = std::stoul(match[1]);
+  EXPECT_GT(points, 0u);
+  const size_t pointsTag = text.find("<Points>");
+  ASSERT_NE(pointsTag, std::string::npos);
+  const size_t begin = text.find('>', text.find("<DataArray", pointsTag)) + 1;
+  const size_t end = text.find("</DataArray>", begin);
+  ASSERT_NE(end, std::string::npos);
+  std::istringstream numbers(text.substr(begin, end - begin));
+  size_t count = 0;
+  std::string token;
+  while (numbers >> token) {
+    const double value = std::strtod(token.c_str(), nullptr);
+    EXPECT_TRUE(std::isfinite(value)) << token;
+    ++count;
+  }
+  EXPECT_EQ(count, 3 * points);
+}
+
+/// The .pvd is a closed Collection; returns the files it lists (relative to it) by timestep.
+std::multimap<double, std::string> pvdDataSets(const fs::path& pvd) {
+  const std::string text = readFile(pvd);
+  EXPECT_NE(text.find("<VTKFile type=\"Collection\""), std::string::npos);
+  EXPECT_TRUE(trimmed(text).ends_with("</VTKFile>"));
+  std::multimap<double, std::string> sets;
+  const std::regex dataSet("<DataSet[^>]*timestep=\"([^\"]+)\"[^>]*file=\"([^\"]+)\"");
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), dataSet);
+       it != std::sregex_iterator(); ++it)
+    sets.emplace(std::stod((*it)[1]), (*it)[2]);
+  return sets;
+}
+
+std::string cli() {
+  return FIBREMSS_CLI;
+}
+
+TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
+  TemporaryDirectory out("fibremss_run_cli");
+  const auto result =
+      runProcess(cli() + " run fusiform --steps 2 --frame-every 1 --out " + out.path().string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  EXPECT_EQ(summary.at("scene"), "fusiform");
+  EXPECT_EQ(summary.at("method"), "fibremss");
+  EXPECT_FALSE(summary.at("integrator").get<std::string>().empty());
+  EXPECT_EQ(summary.at("steps"), 2);
+  for (const char* key :
+       {"particles", "springs", "boundary_particles", "bone_spheres", "iterations"})
+    EXPECT_GT(summary.at(key).get<double>(), 0) << key;
+  EXPECT_LE(summary.at("boundary_particles").get<double>(), summary.at("particles").get<double>());
+  for (const char* key : {"ms_per_iteration", "max_penetration_mm", "mean_penetration_mm",
+                          "volume_change_pct", "spring_deviation_ratio"}) {
+    ASSERT_TRUE(summary.at(key).is_number()) << key << " is " << summary.at(key);
+    EXPECT_TRUE(std::isfinite(summary.at(key).get<double>())) << key;
+  }
+  EXPECT_GT(summary.at("ms_per_iteration").get<double>(), 0);
+  EXPECT_GE(summary.at("max_penetration_mm").get<double>(),
+            summary.at("mean_penetration_mm").get<double>());
+  EXPECT_GE(summary.at("mean_penetration_mm").get<double>(), 0);
+  EXPECT_GE(summary.at("spring_deviation_ratio").get<double>(), 0);
+  double partSum = 0;
+  for (const char* part : {"mss", "muscle_cd", "bone_cd", "response", "output"}) {
+    const double ms = summary.at("timing").at(part).get<double>();
+    EXPECT_TRUE(std::isfinite(ms) && ms >= 0) << part;
+    partSum += ms;
+  }
+  EXPECT_GT(partSum, 0);
+  EXPECT_EQ(summary.at("nan"), false);
+  EXPECT_EQ(summary.at("interrupted"), false);
+  EXPECT_EQ(summary.at("failed_step"), -1);
+
+  const auto sets = pvdDataSets(out.path() / "run.pvd");
+  EXPECT_EQ(sets.count(0.0), sets.count(1.0));
+  EXPECT_GT(sets.count(0.0), 0u);
+  std::set<std::string> files;
+  for (const auto& [time, file] : sets) {
+    files.insert(file);
+    ASSERT_TRUE(fs::exists(out.path() / file)) << file;
+    expectWellFormedVtp(out.path() / file);
+  }
+  EXPECT_EQ(files.size(), sets.size());  // every frame its own file
+  // The complete scene is kept for reproducing the run.
+  EXPECT_NO_THROW(nlohmann::json::parse(readFile(out.path() / "scene.json")));
+}
+
+TEST(RunCli, PrintsJsonWithoutWritingAnything) {
+  const auto result = runProcess(cli() + " run fusiform --steps 1 --json");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(result.output);
+  EXPECT_EQ(summary.at("steps"), 1);
+  EXPECT_GT(summary.at("iterations").get<long>(), 0);
+}
+
+TEST(RunCli, UnknownSceneIsAnErrorNamingIt) {
+  const auto result = runProcess(cli() + " run no-such-scene-xyz 2>&1");
+  EXPECT_NE(result.exitCode, 0);
+  EXPECT_NE(result.output.find("no-such-scene-xyz"), std::string::npos) << result.output;
+}
+
+// Verlet at a fixed dt far beyond its stability bound (ω·dt ≫ 2 for these springs) must blow up.
+const char* const kUnstable = " --set resolution=10 --set time_step=fixed --set dt=0.05";
+
+TEST(RunCli, AnUnstableRunFailsWithExitCode3AndSaysWhere) {
+  TemporaryDirectory out("fibremss_run_cli_unstable");
+  const auto result =
+      runProcess(cli() + " run fusiform" + kUnstable + " --steps 5 --out " + out.path().string());
+  EXPECT_EQ(result.exitCode, 3) << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  EXPECT_TRUE(summary.at("nan").get<bool>() || summary.at("exploded").get<bool>());
+  const int failed = summary.at("failed_step");
+  EXPECT_GE(failed, 0);
+  EXPECT_EQ(summary.at("steps"), failed + 1);  // stopped at the failing step
+  if (failed == 0) return;                     // no frame before the failure
+  for (const auto& [time, file] : pvdDataSets(out.path() / "run.pvd")) {
+    EXPECT_LT(time, failed);  // no frame of the broken state
+    expectWellFormedVtp(out.path() / file);
+  }
+}
+
+TEST(RunCli, AnOutputDirectoryThatCannotBeMadeIsAnError) {
+  TemporaryDirectory out("fibremss_run_cli_blocked");
+  const fs::path blocker = out.path() / "file";
+  std::ofstream(blocker) << "a file where the output directory should go";
+  const auto result =
+      runProcess(cli() + " run fusiform --steps 1 --out " + (blocker / "out").string() + " 2>&1");
+  EXPECT_NE(result.exitCode, 0);
+  EXPECT_NE(result.output.find("error"), std::string::npos) << result.output;
+}
+
+TEST(RunCli, InterruptStopsAfterTheCurrentStepWithValidFiles) {
+  TemporaryDirectory out("fibremss_run_cli_interrupt");
+  const std::string outDir = out.path().string();
+  const std::string program = cli();
+  const pid_t child = fork();
+  ASSERT_NE(child, -1);
+  if (child == 0) {
+    std::freopen("/dev/null", "w", stdout);
+    execl(program.c_str(), program.c_str(), "run", "fusiform", "--steps", "100000", "--frame-every",
+          "1", "--out", outDir.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait for the first frame, so the signal arrives while steps run (not during preparation).
+  const fs::path pvd = out.path() / "run.pvd";
+  for (int i = 0; i < 1200 && !fs::exists(pvd); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const bool started = fs::exists(pvd);
+  kill(child, SIGINT);
+  int status = 0;
+  waitpid(child, &status, 0);
+  ASSERT_TRUE(started) << "no frame appeared within two minutes";
+  ASSERT_TRUE(WIFEXITED(status)) << "the run did not exit by itself after SIGINT";
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  EXPECT_EQ(summary.at("interrupted"), true);
+  EXPECT_GE(summary.at("steps").get<int>(), 1);
+  EXPECT_LT(summary.at("steps").get<int>(), 100000);
+  for (const auto& [time, file] : pvdDataSets(pvd)) expectWellFormedVtp(out.path() / file);
+  for (const auto& entry : fs::recursive_directory_iterator(out.path()))
+    EXPECT_EQ(entry.path().string().find(".tmp."), std::string::npos) << entry.path();
+}
+
+TEST(Progress, LineShowsBarStepsRateAndTimeLeft) {
+  // 5 of 10 steps in 2 s: 1000 iterations / 2 s, and 5 more steps at 0.4 s each.
+  EXPECT_EQ(ProgressBar::format("job", 5, 10, 1000, 2.0, 10),
+            "job [#####-----] 5/10 steps, 500 it/s, 2.0 s left");
+  EXPECT_EQ(ProgressBar::format("job", 10, 10, 30, 12.0, 0),
+            "job 10/10 steps, 2.5 it/s, 12 s in all");
+  EXPECT_EQ(formatDuration(185), "3 min 05 s");
+  EXPECT_EQ(formatDuration(7800), "2 h 10 min");
+}
+
+std::string written(std::FILE* file) {
+  std::rewind(file);
+  std::string text;
+  for (int c; (c = std::fgetc(file)) != EOF;) text += static_cast<char>(c);
+  return text;
+}
+
+TEST(Progress, PlainLinesWhenNotATerminalRedrawnLineOnOne) {
+  std::FILE* plain = std::tmpfile();
+  ASSERT_NE(plain, nullptr);
+  ProgressBar log("job", 2, plain, false);
+  log.update(1, 10, 1.0);
+  log.update(2, 20, 2.0);
+  log.finish();
+  EXPECT_EQ(written(plain),
+            "job 1/2 steps, 10 it/s, 1.0 s left\njob 2/2 steps, 10 it/s, 2.0 s in all\n");
+  std::fclose(plain);
+
+  std::FILE* terminal = std::tmpfile();
+  ASSERT_NE(terminal, nullptr);
+  ProgressBar bar("job", 2, terminal, true);
+  bar.update(1, 10, 1.0);
+  bar.update(2, 20, 2.0);  // the last step is always drawn
+  bar.finish();
+  const std::string text = written(terminal);
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\r'), 2);
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1);
+  EXPECT_TRUE(text.ends_with("2/2 steps, 10 it/s, 2.0 s in all\x1b[K\n")) << text;
+  std::fclose(terminal);
+}
+
+/// The runner's API as `fibremss compare` uses it, on a small fusiform.
+class FibreRunTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scene_ = new LoadedScene(loadScene("fusiform", {"resolution=10"}));
+    prepared_ = new PreparedScene(prepareScene(scene_->bones, scene_->muscles, 1));
+  }
+  static void TearDownTestSuite() {
+    delete prepared_;
+    delete scene_;
+  }
+  static LoadedScene* scene_;
+  static PreparedScene* prepared_;
+};
+LoadedScene* FibreRunTest::scene_ = nullptr;
+PreparedScene* FibreRunTest::prepared_ = nullptr;
+
+TEST_F(FibreRunTest, RunsOneStepPerPoseAndReportsProgress) {
+  ASSERT_GE(scene_->poseCount, 2);
+  std::vector<int> reported;
+  FibreRunOptions options;
+  options.progress = [&](const RunProgress& p) {
+    reported.push_back(p.step);
+    EXPECT_EQ(p.steps, scene_->poseCount);
+    ASSERT_NE(p.lastStep, nullptr);
+    EXPECT_EQ(p.iterations, static_cast<long>(reported.size()) * p.lastStep->iterations);
+  };
+  const RunMetrics metrics = runFibreMSS(*scene_, *prepared_, options);
+  EXPECT_EQ(metrics.steps, scene_->poseCount);
+  ASSERT_EQ(reported.size(), static_cast<size_t>(scene_->poseCount));
+  for (size_t i = 0; i < reported.size(); ++i) EXPECT_EQ(reported[i], static_cast<int>(i) + 1);
+  ASSERT_EQ(metrics.poseSurfaces.size(), static_cast<size_t>(scene_->poseCount));
+  EXPECT_EQ(metrics.poseSurfaces.front().size(),
+            prepared_->muscles.front()->restSurface.vertices.size());
+  size_t particles = 0;
+  for (const auto& muscle : prepared_->muscles) particles += muscle->particleCount();
+  EXPECT_EQ(metrics.particles, particles);
+  EXPECT_FALSE(metrics.interrupted);
+  EXPECT_EQ(metrics.failedStep, -1);
+}
+
+TEST_F(FibreRunTest, StepsBeyondTheMotionHoldTheLastPoseAndTheMuscleSettles) {
+  FibreRunOptions shortRun, longRun;
+  shortRun.steps = scene_->poseCount;
+  longRun.steps = scene_->poseCount + 6;
+  const RunMetrics a = runFibreMSS(*scene_, *prepared_, shortRun);
+  const RunMetrics b = runFibreMSS(*scene_, *prepared_, longRun);
+  EXPECT_EQ(b.steps, longRun.steps);
+  // Holding the pose, the springs relax further towards rest.
+  EXPECT_LT(b.springDeviationRatio, a.springDeviationRatio);
+}
+
+TEST_F(FibreRunTest, ACancelFlagStopsAfterTheCurrentStep) {
+  std::atomic<bool> cancel{false};
+  FibreRunOptions options;
+  options.steps = 50;
+  options.cancel = &cancel;
+  options.progress = [&](const RunProgress& p) {
+    if (p.step == 2) cancel = true;
+  };
+  const RunMetrics metrics = runFibreMSS(*scene_, *prepared_, options);
+  EXPECT_TRUE(metrics.interrupted);
+  EXPECT_EQ(metrics.steps, 2);
+}
+
+TEST_F(FibreRunTest, FramesEveryKthStepPlusTheLast) {
+  TemporaryDirectory out("fibremss_fibre_run_frames");
+  FibreRunOptions options;
+  options.outDir = out.path().string();
+  options.steps = 6;
+  options.frameEvery = 4;
+  FibreRunDetails details;
+  runFibreMSS(*scene_, *prepared_, options, &details);
+  EXPECT_EQ(details.frames, 3);  // steps 0 and 4, and the last one, 5
+  std::set<double> times;
+  for (const auto& [time, file] : pvdDataSets(out.path() / "run.pvd")) times.insert(time);
+  EXPECT_EQ(times, (std::set<double>{0.0, 4.0, 5.0}));
+}
+
+}  // namespace
+}  // namespace fibremss

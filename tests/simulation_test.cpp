@@ -1,0 +1,577 @@
+// MuscleSystem dynamics (method.md §4–§5): spring oscillation and damping against the analytic
+// solutions, relaxation, fixed particles following bones, determinism, no allocation in step().
+#include <LinearMath/btAlignedAllocator.h>
+#include <LinearMath/btIDebugDraw.h>
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <numbers>
+#include <vector>
+
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/Scene.h"
+
+namespace {
+
+// Counts every allocation of the process (operator new and Bullet's allocator) while armed.
+std::atomic<bool> countAllocations{false};
+std::atomic<long> allocations{0};
+
+void* countingMalloc(size_t size) {
+  if (countAllocations) ++allocations;
+  return std::malloc(size);
+}
+
+}  // namespace
+
+void* operator new(size_t size) {
+  if (countAllocations) ++allocations;
+  if (void* p = std::malloc(size ? size : 1)) return p;
+  throw std::bad_alloc();
+}
+// Out of line, so that the compiler does not pair the replaced new with free().
+[[gnu::noinline]] void release(void* p) noexcept {
+  std::free(p);
+}
+void operator delete(void* p) noexcept {
+  release(p);
+}
+void operator delete(void* p, size_t) noexcept {
+  release(p);
+}
+
+namespace fibremss {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+/// A bone without spheres (attachments only) or with the given spheres.
+std::shared_ptr<BoneSettings> makeBone(std::vector<btVector3> centres = {},
+                                       std::vector<btScalar> radii = {}) {
+  auto bone = std::make_shared<BoneSettings>();
+  bone->name = "bone";
+  bone->sphereCentres = std::move(centres);
+  bone->sphereRadii = std::move(radii);
+  return bone;
+}
+
+/// Particles at `points` (no springs yet), all boundary spheres of `radius` (0: none collide).
+std::shared_ptr<MuscleSettings> makeMuscle(const std::vector<btVector3>& points, btScalar mass,
+                                           btScalar damping, btScalar radius = 0) {
+  auto muscle = std::make_shared<MuscleSettings>();
+  muscle->name = "muscle";
+  muscle->restPositions = points;
+  muscle->radii.assign(points.size(), radius);
+  muscle->flags.assign(points.size(), radius > 0 ? kBoundary : 0);
+  muscle->fixedBone.assign(points.size(), -1);
+  muscle->nearestBone.assign(points.size(), -1);
+  if (radius > 0)
+    for (uint32_t i = 0; i < points.size(); ++i) muscle->boundaryParticles.push_back(i);
+  muscle->particleMass = mass;
+  muscle->damping = damping;
+  return muscle;
+}
+
+void fix(MuscleSettings& muscle, uint32_t particle, int32_t bone) {
+  muscle.flags[particle] |= kFixed;
+  muscle.fixedBone[particle] = bone;
+  muscle.fixedParticles.push_back(particle);
+}
+
+void addSpring(MuscleSettings& muscle, uint32_t a, uint32_t b, btScalar stiffness,
+               btScalar restLength = -1) {
+  if (restLength < 0) restLength = (muscle.restPositions[b] - muscle.restPositions[a]).length();
+  muscle.springs.push_back({std::min(a, b), std::max(a, b), restLength, stiffness});
+}
+
+SimulationParameters fixedStep(btScalar dt) {
+  SimulationParameters parameters;
+  parameters.adaptiveTimeStep = false;
+  parameters.timeStep = dt;
+  parameters.iterations = 1;
+  return parameters;
+}
+
+/// A fixed particle at the origin and a free one at x = restLength + amplitude; returns the free
+/// particle's x − restLength after each of `steps` iterations of dt.
+std::vector<double> springTrajectory(btScalar stiffness, btScalar mass, btScalar damping,
+                                     btScalar dt, int steps, Integrator integrator) {
+  const btScalar restLength = 0.01, amplitude = 0.001;
+  auto muscle = makeMuscle({{0, 0, 0}, {restLength + amplitude, 0, 0}}, mass, damping);
+  fix(*muscle, 0, 0);
+  addSpring(*muscle, 0, 1, stiffness, restLength);
+  SimulationParameters parameters = fixedStep(dt);
+  parameters.integrator = integrator;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(muscle, std::span(&bone, 1));
+  std::vector<double> trajectory;
+  for (int s = 0; s < steps; ++s) {
+    system.step();
+    trajectory.push_back(system.positions(handle)[1].x() - restLength);
+  }
+  return trajectory;
+}
+
+/// Mean period from the upward zero crossings (linear interpolation between samples).
+double measuredPeriod(const std::vector<double>& x, double dt) {
+  std::vector<double> crossings;
+  for (size_t i = 1; i < x.size(); ++i)
+    if (x[i - 1] < 0 && x[i] >= 0) crossings.push_back((i - 1 + x[i - 1] / (x[i - 1] - x[i])) * dt);
+  if (crossings.size() < 2) return 0;
+  return (crossings.back() - crossings.front()) / static_cast<double>(crossings.size() - 1);
+}
+
+class SpringTest : public ::testing::TestWithParam<Integrator> {};
+
+TEST_P(SpringTest, OscillatesAtNaturalFrequency) {
+  const btScalar k = 100, m = 0.01, dt = 1e-4;  // ω = 100 rad/s, ω·dt = 0.01
+  const double omega = std::sqrt(k / m);
+  const int steps = static_cast<int>(6 * 2 * kPi / omega / dt);
+  const std::vector<double> x = springTrajectory(k, m, 0, dt, steps, GetParam());
+  const double period = measuredPeriod(x, dt);
+  EXPECT_NEAR(period, 2 * kPi / omega, 0.01 * 2 * kPi / omega);
+  // Undamped: the amplitude stays (within the sampling of the peaks).
+  double late = 0;
+  for (size_t i = x.size() - x.size() / 6; i < x.size(); ++i) late = std::max(late, std::abs(x[i]));
+  EXPECT_NEAR(late, 0.001, 0.01 * 0.001);
+}
+
+TEST_P(SpringTest, DampedDecaysAsAnalyticSolution) {
+  const btScalar k = 100, m = 0.01, dt = 1e-4;  // ω·dt = 0.01
+  const double omega = std::sqrt(k / m);
+  const double zeta = 0.2;
+  const btScalar c = static_cast<btScalar>(zeta * 2 * std::sqrt(k * m));
+  const double omegaD = omega * std::sqrt(1 - zeta * zeta);
+  const int steps = static_cast<int>(3 * 2 * kPi / omegaD / dt);
+  const std::vector<double> x = springTrajectory(k, m, c, dt, steps, GetParam());
+  double worst = 0;
+  for (size_t i = 0; i < x.size(); ++i) {
+    const double t = static_cast<double>(i + 1) * dt;
+    const double exact =
+        0.001 * std::exp(-zeta * omega * t) *
+        (std::cos(omegaD * t) + zeta / std::sqrt(1 - zeta * zeta) * std::sin(omegaD * t));
+    worst = std::max(worst, std::abs(x[i] - exact));
+  }
+  EXPECT_LT(worst, 0.01 * 0.001);
+  // After three periods the amplitude is e^(−ζω·3T) of the start: far below it.
+  EXPECT_LT(std::abs(x.back()),
+            0.001 * std::exp(-zeta * omega * 3 * 2 * kPi / omegaD) * 1.05 + 0.01 * 0.001);
+}
+
+INSTANTIATE_TEST_SUITE_P(Integrators, SpringTest,
+                         ::testing::Values(Integrator::Verlet, Integrator::SemiImplicitEuler),
+                         [](const auto& integrator) {
+                           return integrator.param == Integrator::Verlet ? "Verlet"
+                                                                         : "SemiImplicitEuler";
+                         });
+
+/// A box of nx × ny × nz particles (along z the "fibres"), 26-neighbour springs with k = κ/L0 and
+/// rest lengths of a lattice of `restSpacing`, positions stretched by `zStretch` along z; the z = 0
+/// layer is fixed to bone 0, every particle's nearest bone is 0. Boundary: all, radius
+/// restSpacing/2.
+std::shared_ptr<MuscleSettings> makeBox(int nx, int ny, int nz, btScalar restSpacing,
+                                        btScalar zStretch, btScalar kappa, btScalar mass,
+                                        btScalar damping, btVector3 origin = {0, 0, 0}) {
+  std::vector<btVector3> points;
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x)
+        points.push_back(origin + btVector3(x, y, z * zStretch) * restSpacing);
+  auto muscle = makeMuscle(points, mass, damping, restSpacing / 2);
+  auto index = [&](int x, int y, int z) { return static_cast<uint32_t>((z * ny + y) * nx + x); };
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        muscle->nearestBone[index(x, y, z)] = 0;
+        if (z == 0) fix(*muscle, index(x, y, z), 0);
+        for (int dz = -1; dz <= 1; ++dz)
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+              const int X = x + dx, Y = y + dy, Z = z + dz;
+              if (X < 0 || Y < 0 || Z < 0 || X >= nx || Y >= ny || Z >= nz) continue;
+              const uint32_t a = index(x, y, z), b = index(X, Y, Z);
+              if (b <= a) continue;
+              const btScalar rest =
+                  restSpacing * std::sqrt(static_cast<btScalar>(dx * dx + dy * dy + dz * dz));
+              addSpring(*muscle, a, b, kappa / rest, rest);
+            }
+      }
+  std::sort(muscle->springs.begin(), muscle->springs.end(),
+            [](const Spring& s, const Spring& t) { return s.a != t.a ? s.a < t.a : s.b < t.b; });
+  return muscle;
+}
+
+/// Zeleny's estimate c = √(4·k̄·2m) for the box (method.md §3).
+btScalar zelenyDamping(const MuscleSettings& muscle) {
+  double sum = 0;
+  for (const Spring& s : muscle.springs) sum += s.stiffness;
+  return static_cast<btScalar>(
+      std::sqrt(4 * sum / muscle.springs.size() * 2 * muscle.particleMass));
+}
+
+TEST(Relaxation, StretchedBoxRelaxesAndSettles) {
+  // 5 mm rest spacing stretched by 20 %, particle mass 3e-5 kg: a typical muscle.
+  auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  MuscleSystem system;  // default parameters: adaptive dt, 70 iterations
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(box, std::span(&bone, 1));
+  std::vector<double> ratios;
+  for (int s = 0; s < 12; ++s) {
+    system.step();
+    ASSERT_FALSE(system.lastStep().nan);
+    ASSERT_FALSE(system.lastStep().exploded);
+    ratios.push_back(system.lastStep().springDeviationRatio);
+  }
+  (void)handle;
+  EXPECT_LT(ratios.front(), 0.2);  // the stretch was 20 %
+  EXPECT_LT(ratios[4], 0.1 * 0.2);
+  EXPECT_LT(ratios.back(), 0.01 * 0.2);
+  EXPECT_LE(ratios.back(),
+            ratios[ratios.size() - 2] + 1e-4);  // settled, not oscillating up
+}
+
+TEST(Relaxation, StretchedFusiformMuscleRelaxesAndSettles) {
+  // The built-in scene: the lower bar pulls the muscle 30 mm longer over its poses, then holds.
+  const LoadedScene scene = loadScene("fusiform");
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  MuscleSystem system(scene.simulation);
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  const MuscleHandle muscle = system.addMuscle(prepared.muscles.at(0), bones);
+  const MuscleSettings& settings = *prepared.muscles[0];
+  std::vector<double> ratios;
+  for (int step = 1; step < scene.poseCount + 12; ++step) {
+    const int pose = std::min(step, scene.poseCount - 1);
+    for (size_t b = 0; b < bones.size(); ++b)
+      system.setBoneTransform(bones[b], scene.bonePose(b, pose));
+    system.step();
+    ASSERT_FALSE(system.lastStep().nan) << "step " << step;
+    ASSERT_FALSE(system.lastStep().exploded) << "step " << step;
+    for (uint32_t i : settings.fixedParticles) {
+      const btTransform bone = system.boneTransform(bones[settings.fixedBone[i]]);
+      ASSERT_EQ(system.positions(muscle)[i], bone * settings.restPositions[i]);
+    }
+    if (step >= scene.poseCount - 1) ratios.push_back(system.lastStep().springDeviationRatio);
+  }
+  ASSERT_GT(ratios.front(), 0.01);  // really stretched
+  // Once the bar holds still the deviation falls every step, ever more slowly: it settles.
+  for (size_t k = 1; k < ratios.size(); ++k) EXPECT_LE(ratios[k], ratios[k - 1]) << k;
+  const double firstChange = ratios[0] - ratios[1];
+  const double lastChange = ratios[ratios.size() - 2] - ratios.back();
+  EXPECT_LT(lastChange, 0.5 * firstChange);
+}
+
+TEST(Relaxation, OneStepOfSeventyIterationsRelaxesMostOfTheStretch) {
+  auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  system.addMuscle(box, std::span(&bone, 1));
+  system.step();
+  EXPECT_EQ(system.lastStep().iterations, 70);
+  EXPECT_LT(system.lastStep().springDeviationRatio, 0.5 * 0.2);
+}
+
+TEST(BoneMotion, FixedParticlesSitExactlyOnTheirBoneAfterEveryStep) {
+  auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  for (int rule = 0; rule < 2; ++rule) {
+    SimulationParameters parameters;
+    parameters.iterations = 20;
+    parameters.rebuildEveryStep = rule == 1;
+    MuscleSystem system(parameters);
+    const BoneHandle bone = system.addBone(makeBone());
+    const MuscleHandle handle = system.addMuscle(box, std::span(&bone, 1));
+    for (int s = 1; s <= 10; ++s) {
+      const btTransform target(btQuaternion(btVector3(1, 2, 3).normalized(), 0.1 * s),
+                               btVector3(0.002 * s, -0.001 * s, 0.003));
+      system.setBoneTransform(bone, target);
+      system.step();
+      const btTransform placed = system.boneTransform(bone);
+      for (uint32_t i : box->fixedParticles) {
+        const btVector3 expected = placed * box->restPositions[i];
+        const btVector3 actual = system.positions(handle)[i];
+        ASSERT_EQ(actual.x(), expected.x()) << "step " << s << " particle " << i;
+        ASSERT_EQ(actual.y(), expected.y());
+        ASSERT_EQ(actual.z(), expected.z());
+      }
+      // The bone reached its target at the end of the step.
+      EXPECT_NEAR((placed.getOrigin() - target.getOrigin()).length(), 0, 1e-7);
+      EXPECT_NEAR(placed.getRotation().angleShortestPath(target.getRotation()), 0, 1e-5);
+    }
+  }
+}
+
+TEST(BoneMotion, RigidMotionKeepsARestingMuscleAtRest) {
+  // The pre-transform moves every particle with its nearest bone: a muscle at rest on one bone
+  // stays rigidly attached, springs unstretched.
+  auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(box, std::span(&bone, 1));
+  const btTransform target(btQuaternion(btVector3(0, 1, 0), 0.7), btVector3(0.05, 0, 0.02));
+  system.setBoneTransform(bone, target);
+  system.step();
+  EXPECT_LT(system.lastStep().springDeviationRatio, 1e-5);
+  for (size_t i = 0; i < box->particleCount(); ++i)
+    EXPECT_LT((system.positions(handle)[i] - target * box->restPositions[i]).length(), 1e-6);
+}
+
+TEST(Output, SurfaceFollowsRigidMotionExactly) {
+  auto box = makeBox(2, 2, 3, 0.005, 1, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  // A surface: three vertices near the box, skinned to three particles each.
+  box->restSurface.vertices = {{-0.001, 0, 0}, {0.006, 0.006, 0.011}, {0.003, -0.001, 0.005}};
+  box->skinNeighbours = 3;
+  box->skinParticles = {0, 1, 2, 11, 10, 9, 4, 5, 0};
+  box->skinWeights = {0.5, 0.3, 0.2, 0.6, 0.2, 0.2, 1.0 / 3, 1.0 / 3, 1.0 / 3};
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(box, std::span(&bone, 1));
+  ASSERT_EQ(system.surface(handle).size(), 3u);
+  for (size_t v = 0; v < 3; ++v)
+    EXPECT_LT((system.surface(handle)[v] - box->restSurface.vertices[v]).length(), 1e-9);
+  const btTransform target(btQuaternion(btVector3(1, 0, 0), 0.5), btVector3(0, 0.01, 0));
+  system.setBoneTransform(bone, target);
+  system.step();
+  for (size_t v = 0; v < 3; ++v)
+    EXPECT_LT((system.surface(handle)[v] - target * box->restSurface.vertices[v]).length(), 1e-6);
+}
+
+TEST(Output, SurfaceFollowsParticleDisplacement) {
+  // One free particle, no springs: moved by a collision, its only vertex moves with it.
+  auto a = makeMuscle({{0, 0, 0}}, 1e-5, 0, 0.002);
+  a->restSurface.vertices = {{0.003, 0, 0}};
+  a->skinNeighbours = 1;
+  a->skinParticles = {0};
+  a->skinWeights = {1};
+  auto b = makeMuscle({{0.003, 0, 0}}, 1e-5, 0, 0.002);
+  fix(*b, 0, 0);
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle ha = system.addMuscle(a, std::span(&bone, 1));
+  system.addMuscle(b, std::span(&bone, 1));
+  system.step();
+  const btVector3 moved = system.positions(ha)[0];
+  EXPECT_NEAR(moved.x(), -0.001,
+              1e-7);  // pushed the whole overlap by the fixed sphere
+  EXPECT_LT((system.surface(ha)[0] - (btVector3(0.003, 0, 0) + moved)).length(), 1e-9);
+}
+
+/// Two overlapping noisy boxes and a bone sphere, run for some steps; all positions.
+std::vector<btVector3> noisyRun(Integrator integrator) {
+  SimulationParameters parameters;
+  parameters.integrator = integrator;
+  parameters.initialNoise = 0.0005;
+  parameters.seed = 7;
+  parameters.iterations = 30;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
+  auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
+  auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
+  a->damping = b->damping = zelenyDamping(*a);
+  const MuscleHandle ha = system.addMuscle(a, std::span(&bone, 1));
+  const MuscleHandle hb = system.addMuscle(b, std::span(&bone, 1));
+  for (int s = 0; s < 8; ++s) {
+    system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
+    system.step();
+  }
+  std::vector<btVector3> all(system.positions(ha).begin(), system.positions(ha).end());
+  all.insert(all.end(), system.positions(hb).begin(), system.positions(hb).end());
+  return all;
+}
+
+TEST(Determinism, SameInputGivesBitwiseIdenticalPositions) {
+  for (Integrator integrator : {Integrator::Verlet, Integrator::SemiImplicitEuler}) {
+    const std::vector<btVector3> first = noisyRun(integrator);
+    const std::vector<btVector3> second = noisyRun(integrator);
+    ASSERT_EQ(first.size(), second.size());
+    EXPECT_EQ(std::memcmp(first.data(), second.data(), first.size() * sizeof(btVector3)), 0);
+  }
+}
+
+TEST(Allocation, StepAllocatesNothing) {
+  btAlignedAllocSetCustom(countingMalloc, std::free);
+  {
+    SimulationParameters parameters;
+    parameters.iterations = 20;
+    for (bool rebuild : {false, true}) {
+      parameters.rebuildEveryStep = rebuild;
+      MuscleSystem system(parameters);
+      const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
+      auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
+      auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
+      a->damping = b->damping = zelenyDamping(*a);
+      system.addMuscle(a, std::span(&bone, 1));
+      system.addMuscle(b, std::span(&bone, 1));
+      allocations = 0;
+      countAllocations = true;
+      for (int s = 0; s < 10; ++s) {
+        system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
+        system.step();
+      }
+      countAllocations = false;
+      EXPECT_GT(system.lastStep().contacts, 0u);  // collision ran
+      EXPECT_EQ(allocations.load(), 0) << (rebuild ? "rebuild" : "animation") << " mode";
+    }
+  }
+  btAlignedAllocSetCustom(nullptr, nullptr);
+}
+
+TEST(StopRules, ConvergedStopsEarlyOnceTheBonesArrived) {
+  auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  SimulationParameters parameters;
+  parameters.stopRule = StopRule::Converged;
+  parameters.iterations = 500;
+  parameters.epsilon = 1e-7;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone());
+  system.addMuscle(box, std::span(&bone, 1));
+  system.step();  // at rest: converges as soon as the bones arrived
+  EXPECT_LT(system.lastStep().iterations, 500);
+  EXPECT_LT(system.lastStep().meanDisplacement, parameters.epsilon);
+}
+
+TEST(StopRules, ASpentBudgetEndsTheStepWithTheBonesAtTheirTarget) {
+  auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
+  box->damping = zelenyDamping(*box);
+  SimulationParameters parameters;
+  parameters.stopRule = StopRule::TimeBudget;
+  parameters.budgetMs = 0;  // spent after the first iteration
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(box, std::span(&bone, 1));
+  const btTransform target(btQuaternion(btVector3(0, 1, 0), 0.3), btVector3(0.01, 0, 0));
+  system.setBoneTransform(bone, target);
+  system.step();
+  EXPECT_EQ(system.lastStep().iterations, 1);
+  for (uint32_t i : box->fixedParticles)
+    EXPECT_EQ(system.positions(handle)[i], target * box->restPositions[i]);
+}
+
+/// A bone sphere (radius 5 mm) sweeping from x = −10 mm to +2 mm in one step over a free particle
+/// (radius 1 mm) at the origin; returns the particle's final x.
+double sweptParticle(bool rebuildEveryStep) {
+  SimulationParameters parameters;
+  parameters.iterations = 20;
+  parameters.motionFraction = 1;
+  parameters.rebuildEveryStep = rebuildEveryStep;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone({{0, 0, 0}}, {0.005}));
+  system.setBoneTransform(bone, btTransform(btQuaternion::getIdentity(), {-0.01, 0, 0}));
+  system.step();
+  const MuscleHandle particle = system.addMuscle(makeMuscle({{0, 0, 0}}, 1e-5, 0, 0.001), {});
+  system.setBoneTransform(bone, btTransform(btQuaternion::getIdentity(), {0.002, 0, 0}));
+  system.step();
+  return system.positions(particle)[0].x();
+}
+
+TEST(BoneMotion, BonesMoveContinuouslyOverTheIterations) {
+  // Split over 20 iterations (0.6 mm each) the sphere pushes the particle ahead of it.
+  EXPECT_NEAR(sweptParticle(false), 0.002 + 0.006, 1e-6);
+  // The thesis' jump puts the sphere's centre past the particle, which is pushed out behind.
+  EXPECT_NEAR(sweptParticle(true), 0.002 - 0.006, 1e-6);
+}
+
+TEST(Explosion, FlagsNanAndExplodedSprings) {
+  // A fixed dt far beyond stability blows a stiff spring up.
+  auto muscle = makeMuscle({{0, 0, 0}, {0.012, 0, 0}}, 1e-5, 0);
+  fix(*muscle, 0, 0);
+  addSpring(*muscle, 0, 1, 1000, 0.01);
+  SimulationParameters parameters = fixedStep(1e-3);
+  parameters.iterations = 100;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone());
+  system.addMuscle(muscle, std::span(&bone, 1));
+  system.step();
+  EXPECT_TRUE(system.lastStep().exploded);
+  EXPECT_EQ(system.lastStep().overstretchedSprings, 1u);
+  EXPECT_TRUE(system.lastStep().nan);  // ω·dt = 10: it grows past the float range
+  // The same spring with the adaptive step stays sane.
+  MuscleSystem adaptive;
+  const BoneHandle bone2 = adaptive.addBone(makeBone());
+  adaptive.addMuscle(muscle, std::span(&bone2, 1));
+  for (int s = 0; s < 5; ++s) adaptive.step();
+  EXPECT_FALSE(adaptive.lastStep().exploded);
+  EXPECT_EQ(adaptive.lastStep().overstretchedSprings, 0u);
+  EXPECT_FALSE(adaptive.lastStep().nan);
+}
+
+/// Counts what debugDraw draws.
+class CountingDrawer final : public btIDebugDraw {
+ public:
+  using btIDebugDraw::drawSphere;
+  void drawLine(const btVector3&, const btVector3&, const btVector3&) override { ++lines; }
+  void drawSphere(const btVector3&, btScalar, const btVector3&) override { ++spheres; }
+  void drawContactPoint(const btVector3&, const btVector3&, btScalar, int,
+                        const btVector3&) override {}
+  void reportErrorWarning(const char*) override {}
+  void draw3dText(const btVector3&, const char*) override {}
+  void setDebugMode(int) override {}
+  int getDebugMode() const override { return 0; }
+  int lines = 0;
+  int spheres = 0;
+};
+
+TEST(DebugDraw, DrawsWhatTheFlagsSay) {
+  auto box = makeBox(2, 2, 3, 0.005, 1, 1.0, 3e-5, 0);
+  box->fibreParticles = {0, 4, 8, 1, 5, 9};
+  box->fibreOffsets = {0, 3, 6};
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone({{0, 0, 0.014}, {1, 1, 1}}, {0.003, 0.001}));
+  system.addMuscle(box, std::span(&bone, 1));
+  system.step();
+  const int contacts = static_cast<int>(system.lastStep().contacts);
+  ASSERT_GT(contacts, 0);  // the first bone sphere touches the free top layer
+  const std::vector<std::pair<int, std::pair<int, int>>> expectations{
+      {kDrawParticles, {0, static_cast<int>(box->boundaryParticles.size())}},
+      {kDrawSprings, {static_cast<int>(box->springs.size()), 0}},
+      {kDrawFibres, {4, 0}},
+      {kDrawBoneSpheres, {0, 2}},
+      {kDrawContacts, {contacts, 0}}};
+  for (const auto& [flag, counts] : expectations) {
+    CountingDrawer drawer;
+    system.debugDraw(&drawer, flag);
+    EXPECT_EQ(drawer.lines, counts.first) << "flag " << flag;
+    EXPECT_EQ(drawer.spheres, counts.second) << "flag " << flag;
+  }
+}
+
+TEST(Handles, RemovedHandlesGoStale) {
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  auto muscle = makeMuscle({{0, 0, 0}}, 1e-5, 0);
+  const MuscleHandle first = system.addMuscle(muscle, std::span(&bone, 1));
+  system.removeMuscle(first);
+  EXPECT_FALSE(system.contains(first));
+  const MuscleHandle second = system.addMuscle(muscle, std::span(&bone, 1));
+  EXPECT_TRUE(system.contains(second));
+  EXPECT_EQ(second.index, first.index);
+  EXPECT_NE(second.generation, first.generation);
+  EXPECT_THROW(system.positions(first), std::out_of_range);
+  EXPECT_EQ(system.muscles().size(), 1u);
+  system.step();
+}
+
+TEST(Handles, BadSettingsAreRejected) {
+  MuscleSystem system;
+  auto muscle = makeMuscle({{0, 0, 0}, {0.01, 0, 0}}, 1e-5, 0);
+  fix(*muscle, 0, 0);
+  EXPECT_THROW(system.addMuscle(muscle, {}),
+               std::invalid_argument);  // bone 0 not given
+  auto massless = makeMuscle({{0, 0, 0}}, 0, 0);
+  EXPECT_THROW(system.addMuscle(massless, {}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace fibremss
