@@ -12,10 +12,12 @@ struct SceneArgs {
 };
 
 inline void addSceneArgs(CLI::App& command, SceneArgs& args) {
-  command.add_option("scene", args.scene, "Built-in scene name (see `fibremss scenes`) or .json file")
+  command
+      .add_option("scene", args.scene, "Built-in scene name (see `fibremss scenes`) or .json file")
       ->required();
-  command.add_option("--set", args.overrides,
-                     "Override a scene parameter, e.g. --set resolution=40 (repeatable)")
+  command
+      .add_option("--set", args.overrides,
+                  "Override a scene parameter, e.g. --set resolution=40 (repeatable)")
       ->allow_extra_args(false);
 }
 

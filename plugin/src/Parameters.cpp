@@ -42,15 +42,23 @@ constexpr std::array<std::pair<StopRule, const char*>, 3> kStopRules{{
 
 }  // namespace
 
-const char* toString(SpringLayout layout) { return nameOf(kLayouts, layout); }
-const char* toString(Integrator integrator) { return nameOf(kIntegrators, integrator); }
-const char* toString(StopRule rule) { return nameOf(kStopRules, rule); }
+const char* toString(SpringLayout layout) {
+  return nameOf(kLayouts, layout);
+}
+const char* toString(Integrator integrator) {
+  return nameOf(kIntegrators, integrator);
+}
+const char* toString(StopRule rule) {
+  return nameOf(kStopRules, rule);
+}
 bool fromString(const std::string& name, SpringLayout& layout) {
   return valueOf(kLayouts, name, layout);
 }
 bool fromString(const std::string& name, Integrator& integrator) {
   return valueOf(kIntegrators, name, integrator);
 }
-bool fromString(const std::string& name, StopRule& rule) { return valueOf(kStopRules, name, rule); }
+bool fromString(const std::string& name, StopRule& rule) {
+  return valueOf(kStopRules, name, rule);
+}
 
 }  // namespace fibremss

@@ -18,11 +18,11 @@ void writeFileAtomically(const std::string& path, std::string_view content);
 
 /// Points with optional vertices, polylines and triangles, and per-point data arrays.
 struct PolyData {
-  std::vector<btVector3> points;                       ///< point coordinates
-  bool pointsAsVertices = false;                       ///< emit every point as a vertex cell
-  std::vector<uint32_t> lineIndices;                   ///< polylines: point indices, CSR
-  std::vector<uint32_t> lineOffsets{0};                ///< polyline i: [offsets[i], offsets[i+1])
-  std::vector<std::array<uint32_t, 3>> triangles;      ///< triangle cells
+  std::vector<btVector3> points;                   ///< point coordinates
+  bool pointsAsVertices = false;                   ///< emit every point as a vertex cell
+  std::vector<uint32_t> lineIndices;               ///< polylines: point indices, CSR
+  std::vector<uint32_t> lineOffsets{0};            ///< polyline i: [offsets[i], offsets[i+1])
+  std::vector<std::array<uint32_t, 3>> triangles;  ///< triangle cells
   std::vector<std::pair<std::string, std::vector<float>>> pointScalars;  ///< named arrays
 };
 
