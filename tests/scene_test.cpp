@@ -90,6 +90,14 @@ TEST(Scene, DefaultsFilledIn) {
   EXPECT_EQ(scene.simulation.iterations, simulation.iterations);
   EXPECT_FLOAT_EQ(scene.simulation.epsilon, simulation.epsilon);
   EXPECT_EQ(scene.simulation.seed, simulation.seed);
+  EXPECT_FLOAT_EQ(scene.simulation.budgetMs, simulation.budgetMs);
+  EXPECT_FLOAT_EQ(scene.simulation.deviationEpsilon, simulation.deviationEpsilon);
+  EXPECT_EQ(scene.simulation.rebuildEveryStep, simulation.rebuildEveryStep);
+  EXPECT_EQ(scene.simulation.blendedPretransform, simulation.blendedPretransform);
+  EXPECT_FLOAT_EQ(scene.simulation.motionFraction, simulation.motionFraction);
+  EXPECT_FLOAT_EQ(scene.simulation.initialNoise, simulation.initialNoise);
+  EXPECT_FLOAT_EQ(muscle.parameters.springs.dampingScale, muscleDefaults.springs.dampingScale);
+  EXPECT_FLOAT_EQ(muscle.parameters.springs.density, muscleDefaults.springs.density);
   EXPECT_TRUE(scene.simulation.muscleMuscle);
   EXPECT_TRUE(scene.simulation.muscleBone);
   EXPECT_EQ(scene.outputs.frameEvery, 1);
@@ -127,6 +135,9 @@ TEST(Scene, OverrideForms) {
     EXPECT_EQ(muscle.fibres.fibreCount(), 16u);
   }
   EXPECT_EQ(scene.simulation.iterations, 33);
+  EXPECT_EQ(loadScene(path, {"stop=spring-deviation"}).simulation.stopRule,
+            fibremss::StopRule::SpringDeviation);
+  EXPECT_FLOAT_EQ(loadScene(path, {"motion_fraction=0.25"}).simulation.motionFraction, 0.25f);
   EXPECT_EQ(scene.simulation.integrator, fibremss::Integrator::SemiImplicitEuler);
   EXPECT_FALSE(scene.simulation.muscleBone);
 

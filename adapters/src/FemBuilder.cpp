@@ -61,6 +61,10 @@ struct FemScene::Impl {
   }
 
   ~Impl() {
+    // Removing a body ends its pairs, and each ending pair scans every SDF bucket once per
+    // cached triangle: empty the SDF down to one bucket first.
+    world->getWorldInfo().m_sparsesdf.Reset();
+    world->getWorldInfo().m_sparsesdf.Initialize(1, 1);
     for (Muscle& m : muscles) {
       world->removeSoftBodyForce(m.body);
       world->removeSoftBody(m.body);
@@ -165,6 +169,9 @@ struct FemScene::Impl {
     body.m_cfg.kCHR = 1;  // contact hardness with rigid bodies
     body.m_cfg.kDF = 0;   // frictionless, as FibreMSS's response
     body.m_sleepingThreshold = 0;
+    // Bullet collides deformable faces pairwise unless told not to: minutes per pose on thigh13.
+    body.m_softSoftCollision = definition.muscleContact;
+    body.m_useSelfCollision = false;
 
     // Start posed: every node moved by its nearest particle's bone.
     for (size_t n = 0; n < nodes; ++n) {
@@ -230,7 +237,7 @@ FemScene::FemScene(const PreparedScene& scene, std::span<const btTransform> bone
   m.world->setGravity(btVector3(0, 0, 0));
   btSoftBodyWorldInfo& info = m.world->getWorldInfo();
   info.m_gravity.setZero();
-  info.m_sparsesdf.Initialize();
+  info.m_sparsesdf.Initialize(kSdfBuckets, kSdfMaxCells);
   info.m_sparsesdf.setDefaultVoxelsz(definition.sdfVoxelSize * definition.lengthScale);
 
   m.boneTransforms.assign(scene.bones.size(), btTransform::getIdentity());

@@ -7,8 +7,10 @@
 #include <set>
 #include <sstream>
 
+#include "SceneAnatomy.h"
 #include "SceneFields.h"
 #include "SceneShapes.h"
+#include "SceneValidation.h"
 #include "fibremss/BuiltInScenes.h"
 #include "fibremss/Error.h"
 #include "fibremss/MeshIO.h"
@@ -135,11 +137,11 @@ std::vector<double> sweepAngles(double start, double end, double step) {
   return angles;
 }
 
-void readMotion(Fields& motion, const Reader& reader, BoneMotion& result,
+void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, BoneMotion& result,
                 std::vector<double>& labels) {
   const std::string type = motion.choice("type", "none", {"none", "keyframes", "sweep"});
   if (type == "sweep") {
-    const btVector3 pivot = motion.vector3("pivot", btVector3(0, 0, 0)) * btScalar(reader.scale);
+    const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
     const btVector3 axis = motion.vector3("axis", btVector3(1, 0, 0));
     if (axis.length() <= 0) motion.fail("axis", "expected a non-zero rotation axis");
     const double start = motion.number("start_deg", 0, -3600, 3600);
@@ -209,7 +211,7 @@ BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion&
   bone.set("transform", transform.finish());
   input.mesh = transformed(mesh, rest);
   Fields motionFields = bone.object("motion");
-  readMotion(motionFields, reader, motion, labels);
+  readMotion(motionFields, reader, input.mesh, motion, labels);
   bone.set("motion", motionFields.finish());
   Fields spheres = bone.object("spheres");
   input.spheres.thinning = btScalar(spheres.number("thinning", 0, 0, 1));
@@ -260,8 +262,10 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
   } else {
     Fields generator = fibres.object("generator");
     int columns = 0;
-    input.fibres =
-        scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount, lattice, &columns);
+    if (!scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount,
+                                      reader.scale, *reader.result, input.fibres))
+      input.fibres = scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount,
+                                           lattice, &columns);
     input.fibreGridColumns = gridColumns > 0 ? gridColumns : columns;
     fibres.set("generator", generator.finish());
   }
@@ -295,6 +299,7 @@ SpringParameters readModel(Fields& model) {
     model.fail("damping", "expected \"auto\" (Zeleny's estimate) or a number >= 0 [N·s/m], got " +
                               scene::describe(*damping));
   }
+  springs.dampingScale = btScalar(model.number("damping_scale", springs.dampingScale, 0, kInf));
   springs.density = btScalar(model.number("density", springs.density, 0, kInf, true));
   return springs;
 }
@@ -317,7 +322,13 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
   parameters.epsilon =
       btScalar(simulation.number("epsilon", defaults.epsilon / scale, 0, kInf, true) * scale);
   parameters.budgetMs = btScalar(simulation.number("budget_ms", defaults.budgetMs, 0, kInf, true));
+  parameters.deviationEpsilon =
+      btScalar(simulation.number("deviation_epsilon", defaults.deviationEpsilon, 0, kInf, true));
   parameters.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
+  parameters.blendedPretransform =
+      simulation.boolean("blended_pretransform", defaults.blendedPretransform);
+  parameters.motionFraction =
+      btScalar(simulation.number("motion_fraction", defaults.motionFraction, 0, 1, true));
   const Json* seed = simulation.raw("seed");
   if (seed &&
       !(seed->is_number_unsigned() || (seed->is_number_integer() && seed->get<long long>() >= 0)))
@@ -454,6 +465,7 @@ LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::stri
     throw InputError(source, "", std::string("not valid JSON: ") + e.what());
   }
   scene::applyOverrides(raw, overrides);
+  scene::validateSceneJson(raw, source);
   LoadedScene result = readScene(raw, source, baseDir, defaultName);
   if (source.rfind("built-in", 0) == 0) result.source = "built-in";
   return result;

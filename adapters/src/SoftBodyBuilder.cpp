@@ -65,6 +65,10 @@ struct SoftBodyScene::Impl {
   size_t links = 0;
 
   ~Impl() {
+    // Removing a body ends its pairs, and each ending pair scans every SDF bucket once per
+    // cached triangle: empty the SDF down to one bucket first.
+    world->getWorldInfo().m_sparsesdf.Reset();
+    world->getWorldInfo().m_sparsesdf.Initialize(1, 1);
     for (Muscle& m : muscles) {
       world->removeSoftBody(m.body);
       delete m.body;
@@ -177,7 +181,7 @@ SoftBodyScene::SoftBodyScene(const PreparedScene& scene,
   btSoftBodyWorldInfo& info = m.world->getWorldInfo();
   info.m_gravity.setZero();
   info.air_density = 0;
-  info.m_sparsesdf.Initialize();
+  info.m_sparsesdf.Initialize(kSdfBuckets, kSdfMaxCells);
   info.m_sparsesdf.setDefaultVoxelsz(definition.sdfVoxelSize * definition.lengthScale);
 
   m.boneTransforms.assign(scene.bones.size(), btTransform::getIdentity());

@@ -79,6 +79,7 @@ void compare(CompareArgs& args) {
 
 void addCompareCommand(CLI::App& app) {
   auto args = std::make_shared<CompareArgs>();
+  args->options.methodBudgetSeconds = 40;  // keeps `compare thigh13` within minutes
   CLI::App* command = app.add_subcommand(
       "compare",
       "Run a scene through FibreMSS, its self-reference (dt/8, 8x iterations), the btSoftBody "
@@ -111,6 +112,12 @@ void addCompareCommand(CLI::App& app) {
                    "btSoftBody: position solver iterations per world step")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  command
+      ->add_option("--method-budget", args->options.methodBudgetSeconds,
+                   "Seconds of wall time per method; a method past it stops after its current "
+                   "step and is reported over the steps it did (0: no limit)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   command->callback([args] { compare(*args); });
 }
 

@@ -9,5 +9,6 @@ void addCheckCommand(CLI::App& app);    ///< `fibremss check`: prepare a scene, 
 void addRunCommand(CLI::App& app);      ///< `fibremss run`: simulate a scene, write frames
 void addCompareCommand(CLI::App& app);  ///< `fibremss compare`: all methods side by side
 void addMergeCommand(CLI::App& app);    ///< `fibremss merge`: merge summaries into one report
+void addFibresCommand(CLI::App& app);   ///< `fibremss fibres`: fibres from a muscle surface
 
 }  // namespace fibremss::cli

@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   fibremss::cli::addRunCommand(app);
   fibremss::cli::addCompareCommand(app);
   fibremss::cli::addMergeCommand(app);
+  fibremss::cli::addFibresCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -335,7 +335,7 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
     if (run.value("nan", false)) failed = "NaN";
     if (run.value("exploded", false)) failed = "exploded";
     if (failed != "no") failed += " at step " + std::to_string(run.value("failed_step", -1));
-    if (run.value("interrupted", false)) failed = "interrupted";
+    if (run.value("interrupted", false)) failed = "stopped (time budget)";
     out << "| " << text(run, "method") << " | " << text(run, "scene") << " | "
         << joined(run.value("scene_overrides", nlohmann::json::array()), " ") << " | "
         << run.value("particles", 0) << " | " << run.value("springs", 0) << " | "

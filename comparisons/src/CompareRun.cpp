@@ -321,16 +321,23 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   for (const MethodSpec& spec : specs) {
     if (options.cancel && options.cancel->load()) break;
     log("running " + spec.name);
-    MethodRunOptions methodOptions{options.progress, options.cancel};
+    // Stops after the current step on the user's cancel or when the time budget is spent.
+    std::atomic<bool> stop{false};
+    auto report = [&](const MethodProgress& p) {
+      if (options.progress) options.progress(p);
+      if ((options.cancel && options.cancel->load()) ||
+          (options.methodBudgetSeconds > 0 && p.seconds > options.methodBudgetSeconds)) {
+        stop.store(true);
+      }
+    };
+    MethodRunOptions methodOptions{report, &stop};
     FibreRunOptions fibreOptions;
     fibreOptions.method = spec.name;
-    fibreOptions.cancel = options.cancel;
+    fibreOptions.cancel = &stop;
     fibreOptions.frameEvery = 0;
-    if (options.progress) {
-      fibreOptions.progress = [&](const RunProgress& p) {
-        options.progress({spec.name, p.step, p.steps, p.iterations, p.seconds});
-      };
-    }
+    fibreOptions.progress = [&](const RunProgress& p) {
+      report({spec.name, p.step, p.steps, p.iterations, p.seconds});
+    };
     if (spec.family == "fibremss" && spec.overrides.empty()) {
       runs.push_back(runFibreMSS(scene, prepared, fibreOptions));
     } else if (spec.family == "fibremss") {

@@ -52,6 +52,8 @@ struct MuscleState {
   SphereTree tree;              ///< boundary particle spheres, world frame, refit each iteration
 
   std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
+  std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
+  bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
   std::vector<btVector3> surface;           ///< deformed surface vertices (output)
 };
 

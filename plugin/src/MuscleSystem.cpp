@@ -67,6 +67,16 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     if (s.isFixed(static_cast<uint32_t>(i)) && s.fixedBone[i] < 0)
       throw std::invalid_argument(where + "fixed particle " + std::to_string(i) + " has no bone");
   }
+  const bool blend = !s.blendWeight.empty();
+  if (blend && (s.blendWeight.size() != n || s.blendBoneA.size() != n || s.blendBoneB.size() != n))
+    throw std::invalid_argument(where + "blend arrays differ in size from the particles");
+  for (size_t i = 0; blend && i < n; ++i)
+    if (s.blendBoneA[i] >= static_cast<int32_t>(bones.size()) ||
+        s.blendBoneB[i] >= static_cast<int32_t>(bones.size()) || !(s.blendWeight[i] >= 0) ||
+        !(s.blendWeight[i] <= 1))
+      throw std::invalid_argument(where + "particle " + std::to_string(i) +
+                                  " has a blend bone beyond the bone handles or a weight outside "
+                                  "[0, 1]");
   for (const Spring& spring : s.springs)
     if (spring.a >= n || spring.b >= n)
       throw std::invalid_argument(where + "a spring refers to a particle beyond " +
@@ -81,6 +91,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->bones.assign(bones.begin(), bones.end());
   state->boneSlots.assign(bones.size(), -1);
   state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
+  state->boneDeltas.assign(bones.size(), btTransform::getIdentity());
   state->positions.resize(n);
   state->previous.resize(n);
   state->velocities.assign(n, btVector3(0, 0, 0));
@@ -126,7 +137,8 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->tree.build(s.boundaryParticles, state->positions, s.radii);
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
-    deformSurface(s, state->positions, state->boneTransforms, state->surface);
+    deformSurface(s, state->positions, state->boneTransforms, impl_->parameters.blendedPretransform,
+                  state->surface);
   }
 
   size_t boundaryTotal = s.boundaryParticles.size();

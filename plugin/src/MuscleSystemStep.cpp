@@ -1,11 +1,12 @@
 // One MuscleSystem step (method.md §5). Bones move from their last to their target transform
 // over the first motionFraction·iterations iterations (translation lerp, rotation slerp); in each
-// of those iterations every free particle is moved by its nearest bone's motion of that iteration
-// (the pre-transform, x and x(t−dt) alike, split like the bones so that muscles and bones stay in
+// of those iterations every free particle is moved by its bones' motion of that iteration (the
+// pre-transform: a blend of the two bones of a muscle spanning a joint, or the nearest bone's
+// as in the thesis; x and x(t−dt) alike, split like the bones so that muscles and bones stay in
 // step) and fixed particles are set to T·rest. Then per iteration: spring forces → dt (eq 5.1 or
 // fixed) → integration → tree refit → muscle–muscle and muscle–bone pairs → response. The thesis
 // mode (rebuildEveryStep) instead jumps the bones, restarts particles from rest moved by their
-// nearest bone, and rebuilds the trees. Output: deformed surfaces.
+// pre-transform, and rebuilds the trees. Output: deformed surfaces.
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 
 #include <chrono>
@@ -13,6 +14,7 @@
 
 #include "Integrators.h"
 #include "MuscleSystemImpl.h"
+#include "MuscleSystemPretransform.h"
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
@@ -44,31 +46,36 @@ void MuscleSystem::Impl::resolveBones(MuscleState& state) const {
   }
 }
 
-// Rest positions moved by the nearest bone (fixed ones by their bone); no velocity.
+// Rest positions moved by their pre-transform (fixed ones by their bone); no velocity.
 void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
   const MuscleSettings& settings = *state.settings;
-  for (size_t i = 0; i < settings.particleCount(); ++i) {
-    const int32_t bone = settings.isFixed(static_cast<uint32_t>(i)) ? settings.fixedBone[i]
-                                                                    : settings.nearestBone[i];
-    state.positions[i] = bone >= 0 ? state.boneTransforms[bone] * settings.restPositions[i]
-                                   : settings.restPositions[i];
+  for (uint32_t i = 0; i < settings.particleCount(); ++i) {
+    const btTransform* fixed = settings.isFixed(i)
+                                   ? boneTransformOf(state.boneTransforms, settings.fixedBone[i])
+                                   : nullptr;
+    state.positions[i] =
+        fixed ? *fixed * settings.restPositions[i]
+              : pretransformPoint(settings, state.boneTransforms, i, settings.restPositions[i],
+                                  parameters.blendedPretransform);
     state.previous[i] = state.positions[i];
     state.velocities[i].setZero();
   }
 }
 
-// Moves free particles by their nearest bone's motion in this iteration, x and x(t−dt) alike,
-// so the motion injects no velocity.
+// Moves free particles by their bones' motion in this iteration (blended, or the nearest
+// bone's), x and x(t−dt) alike, so the motion injects no velocity.
 void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities) const {
+  if (!state.bonesMoving) return;
   const MuscleSettings& settings = *state.settings;
+  const bool blended = parameters.blendedPretransform;
   for (uint32_t i : state.freeParticles) {
-    const int32_t b = settings.nearestBone[i];
-    if (b < 0 || state.boneSlots[b] < 0) continue;
-    const BoneState& bone = *bones.states[state.boneSlots[b]];
-    if (!bone.moving) continue;
-    state.positions[i] = bone.delta * state.positions[i];
-    state.previous[i] = bone.delta * state.previous[i];
-    if (rotateVelocities) state.velocities[i] = bone.delta.getBasis() * state.velocities[i];
+    state.positions[i] =
+        pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended);
+    state.previous[i] =
+        pretransformPoint(settings, state.boneDeltas, i, state.previous[i], blended);
+    if (rotateVelocities)
+      state.velocities[i] =
+          pretransformDirection(settings, state.boneDeltas, i, state.velocities[i], blended);
   }
 }
 
@@ -96,9 +103,15 @@ void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
   }
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
-    for (size_t b = 0; b < state.bones.size(); ++b)
-      if (state.boneSlots[b] >= 0)
-        state.boneTransforms[b] = bones.states[state.boneSlots[b]]->current;
+    state.bonesMoving = false;
+    for (size_t b = 0; b < state.bones.size(); ++b) {
+      state.boneDeltas[b].setIdentity();
+      if (state.boneSlots[b] < 0) continue;
+      const BoneState& bone = *bones.states[state.boneSlots[b]];
+      state.boneTransforms[b] = bone.current;
+      if (bone.moving) state.boneDeltas[b] = bone.delta;
+      state.bonesMoving = state.bonesMoving || bone.moving;
+    }
     pretransform(state, integratorFor(parameters.integrator).usesVelocities());
     followFixed(state);
   }
@@ -223,6 +236,8 @@ void MuscleSystem::Impl::step() {
       stop = stop || (arrived && stats.meanDisplacement < parameters.epsilon);
     else if (parameters.stopRule == StopRule::TimeBudget)
       stop = stop || millisecondsSince(stepStart) >= parameters.budgetMs;
+    else if (parameters.stopRule == StopRule::SpringDeviation)
+      stop = stop || (arrived && stats.springDeviationRatio < parameters.deviationEpsilon);
     if (stop) {
       // A spent budget ends the step where it is: the bones jump the rest of the way.
       if (!arrived) moveBones(1, true);
@@ -235,7 +250,8 @@ void MuscleSystem::Impl::step() {
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
     if (!state.surface.empty())
-      deformSurface(*state.settings, state.positions, state.boneTransforms, state.surface);
+      deformSurface(*state.settings, state.positions, state.boneTransforms,
+                    parameters.blendedPretransform, state.surface);
   }
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];

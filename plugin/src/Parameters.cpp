@@ -34,10 +34,11 @@ constexpr std::array<std::pair<Integrator, const char*>, 2> kIntegrators{{
     {Integrator::Verlet, "verlet"},
     {Integrator::SemiImplicitEuler, "semi-implicit-euler"},
 }};
-constexpr std::array<std::pair<StopRule, const char*>, 3> kStopRules{{
+constexpr std::array<std::pair<StopRule, const char*>, 4> kStopRules{{
     {StopRule::Iterations, "iterations"},
     {StopRule::Converged, "converged"},
     {StopRule::TimeBudget, "budget"},
+    {StopRule::SpringDeviation, "spring-deviation"},
 }};
 
 }  // namespace

@@ -195,10 +195,17 @@ MuscleSettings prepareMuscle(const MuscleInput& input, size_t index, uint32_t se
 
   const KdTree particles(muscle.restPositions);
   muscle.springs = detail::buildSprings(input, muscle.restPositions, particles);
+  attachToBones(input, bones, boneInputs, muscle, warnings);
+  if (detail::dropFixedSprings(muscle) > 0 && muscle.springs.empty())
+    warnings.push_back(source + ": every spring links two fixed particles, nothing moves");
   muscle.damping = parameters.springs.damping >= 0
                        ? parameters.springs.damping
-                       : detail::zelenyDamping(muscle.springs, muscle.particleMass);
-  attachToBones(input, bones, boneInputs, muscle, warnings);
+                       : parameters.springs.dampingScale *
+                             detail::zelenyDamping(muscle.springs, muscle.particleMass);
+  detail::blendAttachments(
+      muscle, bones.size(), [&](const btVector3& p, int32_t bone, btScalar limit) {
+        return bones[static_cast<size_t>(bone)].distance->closest(p, limit).distance;
+      });
   detail::bindSurface(muscle, particles, parameters.skinNeighbours);
   return muscle;
 }
@@ -208,6 +215,7 @@ MuscleSettings prepareMuscle(const MuscleInput& input, size_t index, uint32_t se
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
                            const std::vector<MuscleInput>& muscles, uint32_t seed) {
   const auto start = std::chrono::steady_clock::now();
+  requirePreparationMemory(bones, muscles);
   PreparedScene scene;
 
   std::vector<BoneShape> shapes(bones.size());

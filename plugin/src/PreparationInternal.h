@@ -2,6 +2,7 @@
 // The stages of preparation (method.md §2, §3, §6), one file each; prepareScene() in
 // Preparation.cpp runs them in order. Internal to the library.
 #include <cstdint>
+#include <functional>
 #include <random>
 #include <string>
 #include <vector>
@@ -32,6 +33,18 @@ std::vector<Spring> buildSprings(const MuscleInput& muscle, std::span<const btVe
 
 /// Zeleny's damping estimate c = √(4·k̄·2m) (000 eq 2.11), k̄ the mean spring stiffness.
 btScalar zelenyDamping(std::span<const Spring> springs, btScalar particleMass);
+
+/// Removes the springs whose two ends are fixed (PreparationBlend.cpp): they move nothing, and
+/// across two bones their length follows the joint. Returns how many were removed.
+size_t dropFixedSprings(MuscleSettings& muscle);
+
+/// Distance from a point to bone `bone`'s mesh, or infinity when farther than `limit` [m].
+using BoneDistance = std::function<btScalar(const btVector3&, int32_t bone, btScalar limit)>;
+
+/// The blended pre-transform (PreparationBlend.cpp): per particle, its nearest bone (A) and
+/// second-nearest bone (B) at rest and w = d_A² / (d_A² + d_B²), the share of B's motion.
+/// Needs nearestBone. With fewer than two bones: the nearest bone twice, w = 0.
+void blendAttachments(MuscleSettings& muscle, size_t boneCount, const BoneDistance& distance);
 
 /// Boundary particles, initial radii and skinning from the surface vertices (Radii.cpp):
 /// sets the kBoundary flags, boundaryParticles, radii (mean distance of the vertices that

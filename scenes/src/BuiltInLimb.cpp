@@ -89,7 +89,7 @@ Json hipScene(const std::string& kind) {
                                 bone("femur", tubeGenerator(femur.definition()), motion)});
   // Iliopsoas wraps over the front of the femoral head; gluteus medius over its top.
   const TubeDefinition iliopsoas =
-      limbMuscle(pelvis, {-5, 75, 50}, {{0, 40, 45}, {8, 0, 36}, {16, -30, 24}}, femur,
+      limbMuscle(pelvis, {-5, 75, 50}, {{0, 40, 47}, {8, 0, 40}, {16, -30, 26}}, femur,
                  {20, -50, -10}, 11, 10);
   const TubeDefinition gluteusMedius =
       limbMuscle(pelvis, {10, 110, -5}, {{28, 62, 0}, {45, 22, 0}}, femur, {50, -5, 0}, 14, 10);

@@ -9,10 +9,6 @@ namespace {
 
 constexpr int kSamplesPerSegment = 32;
 
-btVector3 lerp(const btVector3& a, const btVector3& b, double s) {
-  return a + (b - a) * btScalar(s);
-}
-
 btVector3 unitOr(const btVector3& v, const btVector3& fallback) {
   const btScalar length = v.length();
   return length > btScalar(1e-12) ? v / length : fallback;
@@ -27,12 +23,12 @@ btVector3 catmullRom(const btVector3& p0, const btVector3& p1, const btVector3& 
   };
   const double t0 = 0, t1 = knot(t0, p0, p1), t2 = knot(t1, p1, p2), t3 = knot(t2, p2, p3);
   const double t = t1 + s * (t2 - t1);
-  const btVector3 a1 = lerp(p0, p1, (t - t0) / (t1 - t0));
-  const btVector3 a2 = lerp(p1, p2, (t - t1) / (t2 - t1));
-  const btVector3 a3 = lerp(p2, p3, (t - t2) / (t3 - t2));
-  const btVector3 b1 = lerp(a1, a2, (t - t0) / (t2 - t0));
-  const btVector3 b2 = lerp(a2, a3, (t - t1) / (t3 - t1));
-  return lerp(b1, b2, (t - t1) / (t2 - t1));
+  const btVector3 a1 = lerp(p0, p1, btScalar((t - t0) / (t1 - t0)));
+  const btVector3 a2 = lerp(p1, p2, btScalar((t - t1) / (t2 - t1)));
+  const btVector3 a3 = lerp(p2, p3, btScalar((t - t2) / (t3 - t2)));
+  const btVector3 b1 = lerp(a1, a2, btScalar((t - t0) / (t2 - t0)));
+  const btVector3 b2 = lerp(a2, a3, btScalar((t - t1) / (t3 - t1)));
+  return lerp(b1, b2, btScalar((t - t1) / (t2 - t1)));
 }
 
 // Uniform Catmull-Rom for scalar profiles (radii).
@@ -146,9 +142,9 @@ Tube::Sample Tube::sample(double t) const {
   const Sample& a = samples_[lower];
   const Sample& b = samples_[upper];
   Sample result;
-  result.centre = lerp(a.centre, b.centre, s);
-  result.tangent = unitOr(lerp(a.tangent, b.tangent, s), a.tangent);
-  result.normal = unitOr(lerp(a.normal, b.normal, s), a.normal);
+  result.centre = lerp(a.centre, b.centre, btScalar(s));
+  result.tangent = unitOr(lerp(a.tangent, b.tangent, btScalar(s)), a.tangent);
+  result.normal = unitOr(lerp(a.normal, b.normal, btScalar(s)), a.normal);
   result.normal =
       unitOr(result.normal - result.tangent * result.normal.dot(result.tangent), a.normal);
   result.side = result.normal.cross(result.tangent).normalized();

@@ -35,6 +35,11 @@ TriangleMesh loadSurface(const std::string& path, double scale = 1.0, MeshReport
 /// or OBJ `l` elements. Throws InputError for unreadable input, empty or single-point fibres.
 FibreSet loadFibres(const std::string& path, double scale = 1.0);
 
+/// Writes fibre polylines as ASCII legacy VTK POLYDATA LINES (one polyline cell per fibre),
+/// coordinates divided by `scale` (metres to file units); loadFibres(path, scale) reads them
+/// back. Written atomically; throws std::runtime_error when the file cannot be written.
+void saveFibresVtk(const std::string& path, const FibreSet& fibres, double scale = 1.0);
+
 /// Checks a surface; throws InputError for fatal defects, returns the warnings.
 MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source);
 

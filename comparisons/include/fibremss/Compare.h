@@ -38,6 +38,8 @@ struct CompareOptions {
   std::function<void(const MethodProgress&)> progress;  ///< after every step (may be empty)
   std::function<void(const std::string&)> log;          ///< one line of news (may be empty)
   const std::atomic<bool>* cancel = nullptr;            ///< stop after the current step when true
+  double methodBudgetSeconds = 0;  ///< > 0: a method stops after the step that passes this wall
+                                   ///< time (its metrics cover the steps done, interrupted set)
 };
 
 /// Iterations counted for the pose duration when the stop rule makes them only a cap.

@@ -16,7 +16,7 @@ struct PartTiming {
   double muscleCd = 0;  ///< muscle–muscle collision detection
   double boneCd = 0;    ///< muscle–bone collision detection
   double response = 0;  ///< collision response
-  double output = 0;    ///< fibres, surfaces, measures (per iteration share)
+  double output = 0;    ///< the solver's fibres and surfaces (measuring for reports excluded)
 };
 
 /// One run's results. NaN marks a metric that does not apply or was not measured.

@@ -37,6 +37,12 @@ struct MuscleSettings {
   std::vector<uint8_t> flags;            ///< ParticleFlag bits
   std::vector<int32_t> fixedBone;        ///< bone index a fixed particle follows, else -1
   std::vector<int32_t> nearestBone;      ///< bone whose motion pre-transforms it (-1: none)
+  // Blended pre-transform (empty: nearestBone alone is used): a free particle moves by
+  // p + (1−w)·(T_A·p − p) + w·(T_B·p − p); A its nearest bone, B the second nearest, w from their
+  // rest distances, so the motion is continuous where the nearest bone changes.
+  std::vector<int32_t> blendBoneA;    ///< first bone of the blend (the nearest; -1: none)
+  std::vector<int32_t> blendBoneB;    ///< second bone (the second nearest; == A if only one)
+  std::vector<btScalar> blendWeight;  ///< w, the share of blendBoneB's motion (0..½)
 
   std::vector<uint32_t> boundaryParticles;  ///< indices of boundary particles, ascending
   std::vector<uint32_t> fixedParticles;     ///< indices of fixed particles, ascending

@@ -43,6 +43,19 @@ struct PreparedScene {
   PreparationReport report;
 };
 
+/// Rough upper estimate of the memory prepareScene() needs for these inputs [bytes]
+/// (particles = fibres × resolution, their springs, the meshes' trees and copies).
+size_t estimatePreparationBytes(const std::vector<BoneInput>& bones,
+                                const std::vector<MuscleInput>& muscles);
+
+/// The limit prepareScene() checks the estimate against [bytes]: the environment variable
+/// FIBREMSS_MEMORY_LIMIT_MB when set, else the machine's available memory (/proc/meminfo).
+size_t preparationMemoryLimit();
+
+/// Throws InputError with the estimate when estimatePreparationBytes() exceeds the limit.
+void requirePreparationMemory(const std::vector<BoneInput>& bones,
+                              const std::vector<MuscleInput>& muscles);
+
 /// Prepares all bodies together (radii shrink needs all of them). `seed` makes the fibre
 /// jitter and sphere thinning reproducible. Throws InputError for unusable input.
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,

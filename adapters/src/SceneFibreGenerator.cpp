@@ -1,0 +1,159 @@
+// Scene extensions for real anatomy: {"type": "surface"} fibre generators, static anchor
+// plates, femoral-head sweep pivots (see SceneAnatomy.h and scenes/README.md).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "SceneAnatomy.h"
+#include "fibremss/Error.h"
+#include "fibremss/FibreGeneration.h"
+#include "fibremss/Procedural.h"
+
+namespace fibremss::scene {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// A static plate just beyond the area's end along the muscle's main axis, as wide as the
+/// area, so that the area's vertices lie within its depth + gap of the plate.
+TriangleMesh anchorPlate(const TriangleMesh& surface, const std::vector<uint32_t>& area,
+                         btScalar thickness, btScalar gap, btScalar margin) {
+  btVector3 centroid(0, 0, 0), areaCentre(0, 0, 0);
+  for (const auto& v : surface.vertices) centroid += v;
+  centroid /= btScalar(surface.vertices.size());
+  for (uint32_t i : area) areaCentre += surface.vertices[i];
+  areaCentre /= btScalar(area.size());
+  btVector3 axis = areaCentre - centroid;
+  axis = axis.length2() > 0 ? axis.normalized() : btVector3(0, 0, 1);
+  btScalar far = -std::numeric_limits<btScalar>::infinity();
+  for (uint32_t i : area) far = std::max(far, surface.vertices[i].dot(axis));
+  // Plate frame: z along the axis.
+  btVector3 side = axis.cross(std::abs(axis.x()) < 0.9 ? btVector3(1, 0, 0) : btVector3(0, 1, 0));
+  side.normalize();
+  const btVector3 up = axis.cross(side);
+  btScalar halfSide = 0, halfUp = 0;
+  for (uint32_t i : area) {
+    const btVector3 d = surface.vertices[i] - areaCentre;
+    halfSide = std::max(halfSide, std::abs(d.dot(side)));
+    halfUp = std::max(halfUp, std::abs(d.dot(up)));
+  }
+  const btVector3 centre = areaCentre + axis * (far - areaCentre.dot(axis) + gap + thickness / 2);
+  TriangleMesh box =
+      makeBox(btVector3(0, 0, 0),
+              btVector3(2 * (halfSide + margin), 2 * (halfUp + margin), thickness), {1, 1, 1});
+  btMatrix3x3 basis(side.x(), up.x(), axis.x(), side.y(), up.y(), axis.y(), side.z(), up.z(),
+                    axis.z());
+  return transformed(box, btTransform(basis, centre));
+}
+
+struct AreaSpec {
+  AttachmentArea area;
+  bool anchor = false;
+  btScalar thickness = 0, gap = 0, margin = 0;
+};
+
+AreaSpec readArea(Fields& generator, const std::string& key, double scale,
+                  const LoadedScene& scene) {
+  Fields fields = generator.object(key);
+  AreaSpec spec;
+  const double mm = 0.001 / scale;  // one millimetre in scene units
+  const bool hasBone = fields.has("bone"), hasLandmarks = fields.has("landmarks");
+  if (hasBone && hasLandmarks)
+    fields.fail("bone", "give either \"bone\" or \"landmarks\", not both");
+  if (hasBone) {
+    const std::string name = fields.text("bone", "");
+    const BoneInput* bone = nullptr;
+    for (const auto& b : scene.bones)
+      if (b.name == name) bone = &b;
+    if (!bone) fields.fail("bone", "no bone named \"" + name + "\" (bones come before muscles)");
+    spec.area = AttachmentArea::fromBone(
+        bone->mesh, btScalar(fields.number("distance", 4 * mm, 0, kInf) * scale));
+  } else if (hasLandmarks) {
+    const Json& points = fields.array("landmarks");
+    if (points.empty()) fields.fail("landmarks", "expected at least one [x, y, z]");
+    std::vector<btVector3> landmarks;
+    for (size_t i = 0; i < points.size(); ++i)
+      landmarks.push_back(readVector3(points[i],
+                                      fields.pathOf("landmarks") + "[" + std::to_string(i) + "]",
+                                      fields.source()) *
+                          btScalar(scale));
+    fields.set("landmarks", points);
+    spec.area = AttachmentArea::fromLandmarks(
+        std::move(landmarks), btScalar(fields.number("radius", 10 * mm, 0, kInf, true) * scale));
+  } else {
+    spec.area.kind = AttachmentArea::Kind::FarEnd;
+    spec.area.endFraction = fields.number("end_fraction", 0.06, 0, 1, true);
+    spec.area.endDepth = btScalar(fields.number("end_depth", 0, 0, kInf) * scale);
+  }
+  spec.anchor = fields.boolean("anchor", false);
+  if (spec.anchor && hasBone)
+    fields.fail("anchor",
+                "an area on a bone is attached to that bone; anchor needs landmarks "
+                "or the far end");
+  if (spec.anchor) {
+    spec.thickness = btScalar(fields.number("anchor_thickness", 5 * mm, 0, kInf, true) * scale);
+    spec.gap = btScalar(fields.number("anchor_gap", 0.5 * mm, 0, kInf) * scale);
+    spec.margin = btScalar(fields.number("anchor_margin", 2 * mm, 0, kInf) * scale);
+  }
+  generator.set(key, fields.finish());
+  return spec;
+}
+
+}  // namespace
+
+bool generateSurfaceFibres(Fields& generator, const std::string& muscleName,
+                           const TriangleMesh& surface, int count, double scale, LoadedScene& scene,
+                           FibreSet& fibres) {
+  const Json* type = generator.raw("type");
+  if (!type || !type->is_string() || type->get<std::string>() != "surface") return false;
+  generator.set("type", "surface");
+  const AreaSpec origin = readArea(generator, "origin", scale, scene);
+  const AreaSpec insertion = readArea(generator, "insertion", scale, scene);
+  FibreGenerationOptions options;
+  options.count = count;
+  options.grid = generator.integer("grid", options.grid, 8, 400);
+  options.samples = generator.integer("samples", options.samples, 2, 100000);
+  FibreGenerationResult result;
+  try {
+    result = generateFibres(surface, origin.area, insertion.area, options,
+                            generator.source() + ": " + generator.path());
+  } catch (const InputError& e) {
+    generator.fail("type", e.problem());
+  }
+  for (auto& warning : result.warnings) scene.warnings.push_back(std::move(warning));
+  const FibreQuality& q = result.quality;
+  if (q.generated < 1) generator.fail("type", "no streamline reached the insertion area");
+  fibres = std::move(result.fibres);
+  const std::pair<const AreaSpec*, const std::vector<uint32_t>*> areas[2] = {
+      {&origin, &result.originArea}, {&insertion, &result.insertionArea}};
+  const char* names[2] = {"origin", "insertion"};
+  for (int a = 0; a < 2; ++a) {
+    const AreaSpec& spec = *areas[a].first;
+    if (!spec.anchor) continue;
+    BoneInput anchor;
+    anchor.name = muscleName + "-" + names[a] + "-anchor";
+    anchor.mesh = anchorPlate(surface, *areas[a].second, spec.thickness, spec.gap, spec.margin);
+    scene.bones.push_back(std::move(anchor));
+    scene.motions.push_back(BoneMotion{});
+  }
+  return true;
+}
+
+btVector3 readSweepPivot(Fields& motion, const TriangleMesh& bone, double scale) {
+  const Json* raw = motion.raw("pivot");
+  if (!raw || !raw->is_object())
+    return motion.vector3("pivot", btVector3(0, 0, 0)) * btScalar(scale);
+  Fields fit(*raw, motion.pathOf("pivot"), motion.source());
+  fit.choice("fit", "femoral_head", {"femoral_head"});
+  const btVector3 up = fit.vector3("up", btVector3(0, 0, 1));
+  const double depth = fit.number("depth", 0.03 / scale, 0, kInf, true);
+  if (up.length() <= 0) fit.fail("up", "expected a non-zero direction");
+  btVector3 centre;
+  btScalar radius;
+  if (!fitFemoralHead(bone, up, btScalar(depth * scale), centre, radius))
+    fit.fail("fit", "the sphere fit to the bone's head failed (too few vertices within depth)");
+  motion.set("pivot", fit.finish());
+  return centre;
+}
+
+}  // namespace fibremss::scene

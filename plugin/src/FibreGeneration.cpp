@@ -1,0 +1,752 @@
+// Fibres from a muscle surface: harmonic field on a voxel grid, gradient streamlines.
+#include "fibremss/FibreGeneration.h"
+
+#include <Eigen/Dense>
+#include <Eigen/IterativeLinearSolvers>
+#include <Eigen/Sparse>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <unordered_map>
+
+#include "fibremss/Error.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Main axis (PCA) and centroid of a point set.
+void principalAxis(const std::vector<btVector3>& points, btVector3& centroid, btVector3& axis) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : points) mean += Eigen::Vector3d(p.x(), p.y(), p.z());
+  mean /= double(std::max<size_t>(points.size(), 1));
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (const auto& p : points) {
+    const Eigen::Vector3d d = Eigen::Vector3d(p.x(), p.y(), p.z()) - mean;
+    covariance += d * d.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(covariance);
+  const Eigen::Vector3d a = solver.eigenvectors().col(2);
+  centroid = btVector3(btScalar(mean.x()), btScalar(mean.y()), btScalar(mean.z()));
+  axis = btVector3(btScalar(a.x()), btScalar(a.y()), btScalar(a.z()));
+}
+
+btVector3 centroidOf(const std::vector<btVector3>& vertices, const std::vector<uint32_t>& ids) {
+  btVector3 sum(0, 0, 0);
+  for (uint32_t i : ids) sum += vertices[i];
+  return ids.empty() ? sum : sum / btScalar(ids.size());
+}
+
+/// Surface vertices in an area given by a bone or landmarks (FarEnd is resolved by the caller).
+std::vector<uint32_t> areaVertices(const TriangleMesh& surface, const AttachmentArea& area,
+                                   const std::string& what, std::vector<std::string>& warnings) {
+  std::vector<uint32_t> ids;
+  const size_t n = surface.vertices.size();
+  if (area.kind == AttachmentArea::Kind::Bone) {
+    if (!area.bone || area.bone->empty()) return ids;
+    MeshDistance bone(*area.bone);
+    std::vector<btScalar> distance(n);
+    btScalar nearest = std::numeric_limits<btScalar>::infinity();
+    for (size_t i = 0; i < n; ++i) {
+      const auto c = bone.closest(surface.vertices[i]);
+      distance[i] = c.inside ? 0 : c.distance;
+      nearest = std::min(nearest, distance[i]);
+    }
+    btScalar limit = area.distance;
+    if (nearest >= limit) {
+      limit = nearest + area.distance;
+      warnings.push_back(what + ": no surface vertex within " +
+                         std::to_string(area.distance * 1000) + " mm of the bone (nearest " +
+                         std::to_string(nearest * 1000) + " mm); using vertices within " +
+                         std::to_string(limit * 1000) + " mm");
+    }
+    for (size_t i = 0; i < n; ++i)
+      if (distance[i] < limit) ids.push_back(uint32_t(i));
+  } else if (area.kind == AttachmentArea::Kind::Landmarks) {
+    btScalar radius = area.radius;
+    for (int attempt = 0; attempt < 2 && ids.empty(); ++attempt) {
+      for (size_t i = 0; i < n; ++i)
+        for (const auto& p : area.landmarks)
+          if (surface.vertices[i].distance(p) < radius) {
+            ids.push_back(uint32_t(i));
+            break;
+          }
+      if (ids.empty()) {
+        btScalar nearest = std::numeric_limits<btScalar>::infinity();
+        for (const auto& v : surface.vertices)
+          for (const auto& p : area.landmarks) nearest = std::min(nearest, v.distance(p));
+        radius = nearest + area.radius;
+        warnings.push_back(what + ": no surface vertex within the landmark radius; using " +
+                           std::to_string(radius * 1000) + " mm");
+      }
+    }
+  }
+  return ids;
+}
+
+/// Vertices at the end of the main axis farthest from `from` (or the low end when from is null).
+std::vector<uint32_t> farEnd(const TriangleMesh& surface, const btVector3* from, bool lowEnd,
+                             double fraction, btScalar depth) {
+  btVector3 centroid, axis;
+  principalAxis(surface.vertices, centroid, axis);
+  if (from) {
+    if ((*from - centroid).dot(axis) > 0) axis = -axis;
+  } else if (lowEnd) {
+    axis = -axis;
+  }
+  btScalar lo = std::numeric_limits<btScalar>::infinity(), hi = -lo;
+  for (const auto& v : surface.vertices) {
+    const btScalar s = (v - centroid).dot(axis);
+    lo = std::min(lo, s);
+    hi = std::max(hi, s);
+  }
+  const btScalar cut = depth > 0 ? hi - depth : hi - btScalar(fraction) * (hi - lo);
+  std::vector<uint32_t> ids;
+  for (size_t i = 0; i < surface.vertices.size(); ++i)
+    if ((surface.vertices[i] - centroid).dot(axis) >= cut) ids.push_back(uint32_t(i));
+  return ids;
+}
+
+/// Farthest-point order of a vertex subset, starting near the subset's centroid.
+std::vector<uint32_t> farthestPointOrder(const std::vector<btVector3>& vertices,
+                                         const std::vector<uint32_t>& ids, size_t count) {
+  std::vector<uint32_t> order;
+  if (ids.empty()) return order;
+  const btVector3 centre = centroidOf(vertices, ids);
+  size_t first = 0;
+  btScalar best = std::numeric_limits<btScalar>::infinity();
+  for (size_t k = 0; k < ids.size(); ++k)
+    if (vertices[ids[k]].distance2(centre) < best)
+      best = vertices[ids[k]].distance2(centre), first = k;
+  std::vector<btScalar> distance(ids.size(), std::numeric_limits<btScalar>::infinity());
+  size_t next = first;
+  count = std::min(count, ids.size());
+  while (order.size() < count) {
+    order.push_back(ids[next]);
+    const btVector3 p = vertices[ids[next]];
+    btScalar far = -1;
+    for (size_t k = 0; k < ids.size(); ++k) {
+      distance[k] = std::min(distance[k], vertices[ids[k]].distance2(p));
+      if (distance[k] > far) far = distance[k], next = k;
+    }
+    if (far <= 0) break;
+  }
+  return order;
+}
+
+/// A scalar field on a regular grid with trilinear interpolation.
+struct Grid {
+  int n[3] = {0, 0, 0};
+  btVector3 lower{0, 0, 0};
+  btScalar h = 1;
+  size_t index(int i, int j, int k) const { return (size_t(k) * n[1] + j) * n[0] + i; }
+  size_t size() const { return size_t(n[0]) * n[1] * n[2]; }
+  btVector3 centre(int i, int j, int k) const {
+    return lower + btVector3(btScalar(i), btScalar(j), btScalar(k)) * h;
+  }
+  /// Trilinear interpolation of `field` (3 components when `stride` is 3).
+  template <int C>
+  std::array<double, C> sample(const std::vector<double>& field, const btVector3& p) const {
+    const btVector3 g = (p - lower) / h;
+    int base[3];
+    double t[3];
+    for (int a = 0; a < 3; ++a) {
+      const double x = std::clamp(double(g[a]), 0.0, double(n[a] - 1) - 1e-9);
+      base[a] = std::min(int(std::floor(x)), n[a] - 2);
+      t[a] = x - base[a];
+    }
+    std::array<double, C> out{};
+    for (int c = 0; c < 8; ++c) {
+      const int di = c & 1, dj = (c >> 1) & 1, dk = (c >> 2) & 1;
+      const double w = (di ? t[0] : 1 - t[0]) * (dj ? t[1] : 1 - t[1]) * (dk ? t[2] : 1 - t[2]);
+      const size_t id = index(base[0] + di, base[1] + dj, base[2] + dk);
+      for (int q = 0; q < C; ++q) out[q] += w * field[id * C + q];
+    }
+    return out;
+  }
+};
+
+/// Arc-length resampling to `samples` points.
+std::vector<btVector3> resample(const std::vector<btVector3>& line, int samples) {
+  std::vector<double> s(line.size(), 0);
+  for (size_t i = 1; i < line.size(); ++i) s[i] = s[i - 1] + line[i].distance(line[i - 1]);
+  std::vector<btVector3> out;
+  size_t seg = 1;
+  for (int q = 0; q < samples; ++q) {
+    const double target = s.back() * q / (samples - 1);
+    while (seg + 1 < line.size() && s[seg] < target) ++seg;
+    const double span = s[seg] - s[seg - 1];
+    const double t = span > 0 ? std::clamp((target - s[seg - 1]) / span, 0.0, 1.0) : 0.0;
+    out.push_back(line[seg - 1].lerp(line[seg], btScalar(t)));
+  }
+  return out;
+}
+
+double segmentDistance2(const btVector3& p1, const btVector3& q1, const btVector3& p2,
+                        const btVector3& q2) {
+  // Closest points of two segments (Ericson, Real-Time Collision Detection 5.1.9).
+  const btVector3 d1 = q1 - p1, d2 = q2 - p2, r = p1 - p2;
+  const double a = d1.dot(d1), e = d2.dot(d2), f = d2.dot(r);
+  double s = 0, t = 0;
+  if (a <= 1e-20 && e <= 1e-20) return r.length2();
+  if (a <= 1e-20) {
+    t = std::clamp(f / e, 0.0, 1.0);
+  } else {
+    const double c = d1.dot(r);
+    if (e <= 1e-20) {
+      s = std::clamp(-c / a, 0.0, 1.0);
+    } else {
+      const double b = d1.dot(d2), denom = a * e - b * b;
+      s = denom > 1e-20 ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
+      t = (b * s + f) / e;
+      if (t < 0)
+        t = 0, s = std::clamp(-c / a, 0.0, 1.0);
+      else if (t > 1)
+        t = 1, s = std::clamp((b - c) / a, 0.0, 1.0);
+    }
+  }
+  const btVector3 c1 = p1 + d1 * btScalar(s), c2 = p2 + d2 * btScalar(t);
+  return (c1 - c2).length2();
+}
+
+}  // namespace
+
+FibreGenerationResult generateFibres(const TriangleMesh& surface, const AttachmentArea& origin,
+                                     const AttachmentArea& insertion,
+                                     const FibreGenerationOptions& options,
+                                     const std::string& source) {
+  const auto start = Clock::now();
+  FibreGenerationResult result;
+  FibreQuality& q = result.quality;
+  q.requested = options.count;
+  if (surface.empty()) throw InputError(source, "", "the muscle surface has no triangles");
+  if (options.count < 1 || options.samples < 2 || options.grid < 8)
+    throw InputError(source, "", "fibre generation needs count >= 1, samples >= 2, grid >= 8");
+  const auto& V = surface.vertices;
+
+  // Attachment areas.
+  std::vector<uint32_t> originIds =
+      areaVertices(surface, origin, source + ": origin", result.warnings);
+  std::vector<uint32_t> insertionIds =
+      areaVertices(surface, insertion, source + ": insertion", result.warnings);
+  const bool originFar = origin.kind == AttachmentArea::Kind::FarEnd;
+  const bool insertionFar = insertion.kind == AttachmentArea::Kind::FarEnd;
+  if (originFar && insertionFar) {
+    originIds = farEnd(surface, nullptr, true, origin.endFraction, origin.endDepth);
+    insertionIds = farEnd(surface, nullptr, false, insertion.endFraction, insertion.endDepth);
+  } else if (originFar) {
+    const btVector3 c = centroidOf(V, insertionIds);
+    originIds = farEnd(surface, &c, false, origin.endFraction, origin.endDepth);
+  } else if (insertionFar) {
+    const btVector3 c = centroidOf(V, originIds);
+    insertionIds = farEnd(surface, &c, false, insertion.endFraction, insertion.endDepth);
+  }
+  // A vertex in both areas belongs to neither (the field would be ill-posed there).
+  {
+    std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
+    for (uint32_t i : originIds) inOrigin[i] = 1;
+    for (uint32_t i : insertionIds) inInsertion[i] = 1;
+    size_t shared = 0;
+    std::vector<uint32_t> a, b;
+    for (uint32_t i : originIds)
+      if (!inInsertion[i])
+        a.push_back(i);
+      else
+        ++shared;
+    for (uint32_t i : insertionIds)
+      if (!inOrigin[i]) b.push_back(i);
+    if (shared)
+      result.warnings.push_back(source + ": " + std::to_string(shared) +
+                                " surface vertices are in both attachment areas; left out of both");
+    originIds.swap(a);
+    insertionIds.swap(b);
+  }
+  result.originArea = originIds;
+  result.insertionArea = insertionIds;
+  q.originVertices = originIds.size();
+  q.insertionVertices = insertionIds.size();
+  if (originIds.empty() || insertionIds.empty())
+    throw InputError(source, originIds.empty() ? "origin" : "insertion",
+                     "the attachment area holds no surface vertex");
+
+  // Voxel grid.
+  const MeshDistance distance(surface);
+  btVector3 lo, hi;
+  pointBounds(V, lo, hi);
+  const btVector3 extent = hi - lo;
+  const btScalar longest = std::max({extent.x(), extent.y(), extent.z()});
+  Grid grid;
+  grid.h = longest / btScalar(options.grid - 1);
+  for (int a = 0; a < 3; ++a) grid.n[a] = int(std::ceil(extent[a] / grid.h)) + 3;
+  grid.lower = lo - btVector3(grid.h, grid.h, grid.h);
+  for (int a = 0; a < 3; ++a) q.gridCells[a] = grid.n[a];
+  q.voxelSize = grid.h;
+  const btScalar h = grid.h;
+  const btScalar insideTolerance = options.insideTolerance > 0 ? options.insideTolerance : h / 4;
+
+  const size_t N = grid.size();
+  std::vector<btScalar> sd(N);
+  std::vector<int8_t> label(N, -1);  // -1 outside, 0 free, 1 origin (u=0), 2 insertion (u=1)
+  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
+  for (uint32_t i : originIds) inOrigin[i] = 1;
+  for (uint32_t i : insertionIds) inInsertion[i] = 1;
+  for (int k = 0; k < grid.n[2]; ++k)
+    for (int j = 0; j < grid.n[1]; ++j)
+      for (int i = 0; i < grid.n[0]; ++i) {
+        const size_t id = grid.index(i, j, k);
+        const btVector3 p = grid.centre(i, j, k);
+        const auto c = distance.closest(p);
+        sd[id] = c.inside ? -c.distance : c.distance;
+        if (!c.inside) continue;
+        label[id] = 0;
+        if (c.distance < h && c.triangle != UINT32_MAX) {
+          int o = 0, s = 0;
+          for (uint32_t v : surface.triangles[c.triangle]) o += inOrigin[v], s += inInsertion[v];
+          if (o > s)
+            label[id] = 1;
+          else if (s > o)
+            label[id] = 2;
+        }
+      }
+
+  // Keep the interior voxels connected to both areas (others would make the system singular).
+  const int offsets[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  auto neighbour = [&](size_t id, int d, size_t& out) {
+    const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
+              k = int(id / (size_t(grid.n[0]) * grid.n[1]));
+    const int a = i + offsets[d][0], b = j + offsets[d][1], c = k + offsets[d][2];
+    if (a < 0 || b < 0 || c < 0 || a >= grid.n[0] || b >= grid.n[1] || c >= grid.n[2]) return false;
+    out = grid.index(a, b, c);
+    return true;
+  };
+  {
+    std::vector<int> component(N, -1);
+    std::vector<size_t> stack;
+    int components = 0;
+    std::vector<std::array<bool, 2>> touches;
+    for (size_t id = 0; id < N; ++id) {
+      if (label[id] < 0 || component[id] >= 0) continue;
+      touches.push_back({false, false});
+      stack.push_back(id);
+      component[id] = components;
+      while (!stack.empty()) {
+        const size_t v = stack.back();
+        stack.pop_back();
+        if (label[v] == 1) touches.back()[0] = true;
+        if (label[v] == 2) touches.back()[1] = true;
+        for (int d = 0; d < 6; ++d) {
+          size_t w;
+          if (neighbour(v, d, w) && label[w] >= 0 && component[w] < 0) {
+            component[w] = components;
+            stack.push_back(w);
+          }
+        }
+      }
+      ++components;
+    }
+    for (size_t id = 0; id < N; ++id)
+      if (label[id] >= 0 && !(touches[component[id]][0] && touches[component[id]][1]))
+        label[id] = -1;
+  }
+  for (size_t id = 0; id < N; ++id) q.interiorVoxels += label[id] >= 0;
+  if (q.interiorVoxels == 0)
+    throw InputError(source, "", "no interior voxel connects the origin and insertion areas");
+
+  // Laplace: 7-point stencil, Neumann at the surface, Dirichlet 0 / 1 at the areas.
+  std::vector<int> unknown(N, -1);
+  int unknowns = 0;
+  for (size_t id = 0; id < N; ++id)
+    if (label[id] == 0) unknown[id] = unknowns++;
+  std::vector<double> u(N, 0);
+  for (size_t id = 0; id < N; ++id) u[id] = label[id] == 2 ? 1.0 : 0.0;
+  if (unknowns > 0) {
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(size_t(unknowns) * 7);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(unknowns);
+    for (size_t id = 0; id < N; ++id) {
+      if (unknown[id] < 0) continue;
+      const int row = unknown[id];
+      double degree = 0;
+      for (int d = 0; d < 6; ++d) {
+        size_t w;
+        if (!neighbour(id, d, w) || label[w] < 0) continue;
+        degree += 1;
+        if (unknown[w] >= 0)
+          triplets.emplace_back(row, unknown[w], -1.0);
+        else if (label[w] == 2)
+          rhs[row] += 1.0;
+      }
+      triplets.emplace_back(row, row, std::max(degree, 1.0));
+    }
+    Eigen::SparseMatrix<double> A(unknowns, unknowns);
+    A.setFromTriplets(triplets.begin(), triplets.end());
+    Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper,
+                             Eigen::IncompleteCholesky<double>>
+        solver;
+    solver.setTolerance(1e-8);
+    solver.setMaxIterations(5000);
+    solver.compute(A);
+    Eigen::VectorXd x = solver.solve(rhs);
+    if (solver.info() != Eigen::Success && solver.error() > 1e-4)
+      result.warnings.push_back(source + ": the Laplace solve did not converge (error " +
+                                std::to_string(solver.error()) + ")");
+    for (size_t id = 0; id < N; ++id)
+      if (unknown[id] >= 0) u[id] = std::clamp(x[unknown[id]], 0.0, 1.0);
+  }
+  // Extend the field a few voxels outwards (mean of known neighbours) for interpolation.
+  {
+    std::vector<char> known(N, 0);
+    for (size_t id = 0; id < N; ++id) known[id] = label[id] >= 0;
+    for (int pass = 0; pass < 3; ++pass) {
+      std::vector<std::pair<size_t, double>> updates;
+      for (size_t id = 0; id < N; ++id) {
+        if (known[id]) continue;
+        double sum = 0;
+        int count = 0;
+        for (int d = 0; d < 6; ++d) {
+          size_t w;
+          if (neighbour(id, d, w) && known[w]) sum += u[w], ++count;
+        }
+        if (count) updates.emplace_back(id, sum / count);
+      }
+      for (auto& [id, value] : updates) u[id] = value, known[id] = 1;
+    }
+  }
+  // Gradient by central differences (one-sided at the grid's edges).
+  std::vector<double> gradient(N * 3, 0);
+  for (int k = 0; k < grid.n[2]; ++k)
+    for (int j = 0; j < grid.n[1]; ++j)
+      for (int i = 0; i < grid.n[0]; ++i) {
+        const int c[3] = {i, j, k};
+        const size_t id = grid.index(i, j, k);
+        for (int a = 0; a < 3; ++a) {
+          int lo3[3] = {i, j, k}, hi3[3] = {i, j, k};
+          lo3[a] = std::max(c[a] - 1, 0);
+          hi3[a] = std::min(c[a] + 1, grid.n[a] - 1);
+          const double span = double(hi3[a] - lo3[a]) * h;
+          gradient[id * 3 + a] =
+              (u[grid.index(hi3[0], hi3[1], hi3[2])] - u[grid.index(lo3[0], lo3[1], lo3[2])]) /
+              span;
+        }
+      }
+
+  // Vertex normals (area weighted) for moving seeds inside.
+  std::vector<btVector3> normals(V.size(), btVector3(0, 0, 0));
+  for (const auto& t : surface.triangles) {
+    const btVector3 n = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
+    for (uint32_t v : t) normals[v] += n;
+  }
+  // Distance from a point to the nearest insertion / origin vertex (brute force over the area).
+  auto nearestIn = [&](const std::vector<uint32_t>& ids, const btVector3& p) {
+    btScalar best = std::numeric_limits<btScalar>::infinity();
+    for (uint32_t i : ids) best = std::min(best, V[i].distance2(p));
+    return std::sqrt(best);
+  };
+  const btScalar endTolerance = btScalar(2.5) * h;
+
+  auto fieldAt = [&](const btVector3& p) { return grid.sample<1>(u, p)[0]; };
+  auto directionAt = [&](const btVector3& p, btVector3& dir) {
+    const auto g = grid.sample<3>(gradient, p);
+    const btVector3 v{btScalar(g[0]), btScalar(g[1]), btScalar(g[2])};
+    if (v.length2() < btScalar(1e-12)) return false;
+    dir = v.normalized();
+    return true;
+  };
+  const btScalar step = h / 2;
+  const btScalar maxLength = btScalar(6) * (extent.length() + h);
+
+  /// Traces one streamline; 0 ok, 1 left the surface, 2 stopped early.
+  auto trace = [&](const btVector3& seed, const btVector3& normal, std::vector<btVector3>& line) {
+    line.clear();
+    btVector3 p = seed - normal * (h / 8);
+    if (distance.signedDistance(p) > 0) p = seed;
+    line.push_back(p);
+    // Leave the flat (Dirichlet) layer under the area inwards, so that the streamline starts
+    // where the field rises rather than sliding along the surface.
+    for (int k = 0; k < 8; ++k) {
+      btVector3 d;
+      if (directionAt(p, d) && fieldAt(p) > 1e-3) break;
+      const btVector3 next = p - normal * (h / 2);
+      if (distance.signedDistance(next) > -h / 8) break;
+      p = next;
+      line.push_back(p);
+    }
+    btScalar travelled = 0;
+    while (travelled < maxLength) {
+      if (fieldAt(p) >= 0.995) break;
+      btVector3 d1, d2;
+      if (!directionAt(p, d1)) return 2;
+      if (!directionAt(p + d1 * (step / 2), d2)) return 2;
+      const btVector3 next = p + d2 * step;
+      const btScalar s = distance.signedDistance(next);
+      if (s > insideTolerance) {
+        // Slide along the surface: pull back inside along the closest-point direction.
+        const auto c = distance.closest(next);
+        const btVector3 pulled = c.point + (c.point - next).normalized() * (h / 4);
+        if (distance.signedDistance(pulled) > 0 || nearestIn(insertionIds, next) < endTolerance) {
+          if (nearestIn(insertionIds, next) < endTolerance) break;
+          return 1;
+        }
+        p = pulled;
+      } else {
+        p = next;
+      }
+      travelled += step;
+      line.push_back(p);
+    }
+    if (nearestIn(insertionIds, line.back()) >= endTolerance) return 2;
+    // End on the surface: the closest surface point, a little inside.
+    const auto c = distance.closest(line.back());
+    if (c.triangle != UINT32_MAX && c.distance > h / 8) {
+      const btVector3 last = c.point + (line.back() - c.point).normalized() * (h / 8);
+      if (distance.signedDistance(last) <= 0) line.push_back(last);
+    }
+    return 0;
+  };
+
+  // Seed pool: the origin area's vertices and random points on its triangles (a tapered end
+  // has few vertices); seeds are taken in farthest-point order, the first `count` good
+  // streamlines kept.
+  std::vector<btVector3> pool, poolNormals;
+  for (uint32_t v : originIds) {
+    pool.push_back(V[v]);
+    poolNormals.push_back(normals[v].length2() > 0 ? normals[v].normalized() : btVector3(0, 0, 0));
+  }
+  {
+    std::vector<uint32_t> areaTriangles;
+    std::vector<double> cumulative;
+    double total = 0;
+    for (uint32_t t = 0; t < surface.triangles.size(); ++t) {
+      const auto& tri = surface.triangles[t];
+      if (!(inOrigin[tri[0]] && inOrigin[tri[1]] && inOrigin[tri[2]])) continue;
+      total += double((V[tri[1]] - V[tri[0]]).cross(V[tri[2]] - V[tri[0]]).length());
+      areaTriangles.push_back(t);
+      cumulative.push_back(total);
+    }
+    uint64_t state = 0x9e3779b97f4a7c15ull;
+    auto random = [&]() {  // splitmix64 -> [0, 1)
+      uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+      z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+      z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+      return double((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
+    };
+    const size_t extra = areaTriangles.empty() ? 0 : size_t(options.count) * 16;
+    for (size_t e = 0; e < extra; ++e) {
+      const size_t at =
+          size_t(std::lower_bound(cumulative.begin(), cumulative.end(), random() * total) -
+                 cumulative.begin());
+      const auto& tri = surface.triangles[areaTriangles[std::min(at, areaTriangles.size() - 1)]];
+      double a = random(), b = random();
+      if (a + b > 1) a = 1 - a, b = 1 - b;
+      pool.push_back(V[tri[0]] + (V[tri[1]] - V[tri[0]]) * btScalar(a) +
+                     (V[tri[2]] - V[tri[0]]) * btScalar(b));
+      poolNormals.push_back((V[tri[1]] - V[tri[0]]).cross(V[tri[2]] - V[tri[0]]).normalized());
+    }
+  }
+  std::vector<uint32_t> poolIds(pool.size());
+  std::iota(poolIds.begin(), poolIds.end(), 0u);
+  // Fibres closer than minSeparation to an accepted one (streamlines converging into a narrow
+  // tendon) are set aside and used only when the seeds run out: near-coincident particles make
+  // springs of almost no rest length.
+  std::vector<std::vector<btVector3>> lines, crowded;
+  const btScalar separation = options.minSeparation;
+  std::unordered_map<uint64_t, std::vector<btVector3>> acceptedPoints;
+  auto cellKey = [&](const btVector3& p, int di, int dj, int dk) {
+    const btVector3 g = (p - grid.lower) / std::max(separation, btScalar(1e-9));
+    return (uint64_t(uint32_t(int(std::floor(g.x())) + di + 1048576)) << 42) ^
+           (uint64_t(uint32_t(int(std::floor(g.y())) + dj + 1048576)) << 21) ^
+           uint64_t(uint32_t(int(std::floor(g.z())) + dk + 1048576));
+  };
+  auto tooClose = [&](const std::vector<btVector3>& fibre) {
+    if (separation <= 0) return false;
+    for (const auto& p : fibre)
+      for (int dk = -1; dk <= 1; ++dk)
+        for (int dj = -1; dj <= 1; ++dj)
+          for (int di = -1; di <= 1; ++di) {
+            const auto it = acceptedPoints.find(cellKey(p, di, dj, dk));
+            if (it == acceptedPoints.end()) continue;
+            for (const auto& o : it->second)
+              if (o.distance2(p) < separation * separation) return true;
+          }
+    return false;
+  };
+  auto accept = [&](const std::vector<btVector3>& fibre) {
+    if (separation <= 0) return;
+    for (const auto& p : fibre) acceptedPoints[cellKey(p, 0, 0, 0)].push_back(p);
+  };
+  const size_t wanted = size_t(options.count);
+  const size_t maxTraced = wanted * 8;  // bounds the time when many seeds fail or crowd
+  size_t candidates = std::min(pool.size(), wanted * 2);
+  std::vector<uint32_t> order;
+  size_t tried = 0;
+  std::vector<btVector3> line;
+  while (lines.size() < wanted) {
+    order = farthestPointOrder(pool, poolIds, candidates);
+    for (; tried < order.size() && lines.size() < wanted && size_t(q.traced) < maxTraced; ++tried) {
+      ++q.traced;
+      const int status = trace(pool[order[tried]], poolNormals[order[tried]], line);
+      if (status == 1) ++q.droppedOutside;
+      if (status == 2) ++q.droppedEarly;
+      if (status != 0) continue;
+      std::vector<btVector3> fibre = resample(line, options.samples);
+      if (tooClose(fibre)) {
+        crowded.push_back(std::move(fibre));
+        continue;
+      }
+      accept(fibre);
+      lines.push_back(std::move(fibre));
+    }
+    if (candidates >= pool.size() || tried < order.size() || size_t(q.traced) >= maxTraced) break;
+    candidates = std::min(pool.size(), candidates * 2);
+  }
+  q.crowded = int(crowded.size());
+  for (size_t i = 0; i < crowded.size() && lines.size() < wanted; ++i)
+    lines.push_back(std::move(crowded[i]));
+  if (lines.size() < wanted)
+    result.warnings.push_back(source + ": made " + std::to_string(lines.size()) + " of " +
+                              std::to_string(wanted) + " fibres (" +
+                              std::to_string(q.droppedOutside) + " left the surface, " +
+                              std::to_string(q.droppedEarly) + " stopped early)");
+  for (const auto& l : lines) result.fibres.addFibre(l);
+  q.generated = int(lines.size());
+
+  // Quality: lengths, points outside, right ends.
+  std::vector<btScalar> lengths;
+  int right = 0;
+  for (const auto& l : lines) {
+    btScalar length = 0;
+    for (size_t i = 1; i < l.size(); ++i) length += l[i].distance(l[i - 1]);
+    lengths.push_back(length);
+    for (const auto& p : l) q.pointsOutside += distance.signedDistance(p) > insideTolerance;
+    right += nearestIn(originIds, l.front()) < endTolerance &&
+             nearestIn(insertionIds, l.back()) < endTolerance;
+  }
+  if (!lengths.empty()) {
+    std::sort(lengths.begin(), lengths.end());
+    q.minLength = lengths.front();
+    q.maxLength = lengths.back();
+    q.medianLength = lengths[lengths.size() / 2];
+    q.rightEnds = double(right) / double(lines.size());
+  }
+  // Coverage: interior voxels within coverageDistance of a fibre point (points dense enough).
+  {
+    std::vector<char> covered(N, 0);
+    const btScalar r = options.coverageDistance;
+    const int reach = int(std::ceil(r / h));
+    for (const auto& l : lines) {
+      std::vector<btVector3> dense;
+      for (size_t i = 1; i < l.size(); ++i) {
+        const int parts = std::max(1, int(std::ceil(l[i].distance(l[i - 1]) / (r / 2))));
+        for (int s = 0; s < parts; ++s) dense.push_back(l[i - 1].lerp(l[i], btScalar(s) / parts));
+      }
+      dense.push_back(l.back());
+      for (const auto& p : dense) {
+        const btVector3 g = (p - grid.lower) / h;
+        const int ci = int(std::lround(g.x())), cj = int(std::lround(g.y())),
+                  ck = int(std::lround(g.z()));
+        for (int k = std::max(0, ck - reach); k <= std::min(grid.n[2] - 1, ck + reach); ++k)
+          for (int j = std::max(0, cj - reach); j <= std::min(grid.n[1] - 1, cj + reach); ++j)
+            for (int i = std::max(0, ci - reach); i <= std::min(grid.n[0] - 1, ci + reach); ++i)
+              if (grid.centre(i, j, k).distance2(p) <= r * r) covered[grid.index(i, j, k)] = 1;
+      }
+    }
+    size_t hit = 0;
+    for (size_t id = 0; id < N; ++id) hit += label[id] >= 0 && covered[id];
+    q.coverage = double(hit) / double(q.interiorVoxels);
+  }
+  // Crossings: fibre pairs with segments closer than the tolerance (hash grid of segments).
+  {
+    const btScalar tol = options.crossingTolerance;
+    const btScalar cell = std::max(tol * 4, h);
+    struct Seg {
+      uint32_t fibre, index;
+    };
+    std::unordered_map<uint64_t, std::vector<Seg>> buckets;
+    auto key = [&](int i, int j, int k) {
+      return (uint64_t(uint32_t(i + 1048576)) << 42) ^ (uint64_t(uint32_t(j + 1048576)) << 21) ^
+             uint64_t(uint32_t(k + 1048576));
+    };
+    auto cellOf = [&](const btVector3& p, int c[3]) {
+      for (int a = 0; a < 3; ++a) c[a] = int(std::floor((p[a] - grid.lower[a]) / cell));
+    };
+    for (uint32_t f = 0; f < lines.size(); ++f)
+      for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
+        int c[3];
+        cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
+        buckets[key(c[0], c[1], c[2])].push_back({f, s});
+      }
+    std::vector<char> pair(lines.size() * lines.size(), 0);
+    const btScalar segmentLength = lines.empty() ? 0 : q.maxLength / btScalar(options.samples - 1);
+    const int reach = 1 + int(std::ceil(segmentLength / cell));
+    for (uint32_t f = 0; f < lines.size(); ++f)
+      for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
+        int c[3];
+        cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
+        for (int dk = -reach; dk <= reach; ++dk)
+          for (int dj = -reach; dj <= reach; ++dj)
+            for (int di = -reach; di <= reach; ++di) {
+              auto it = buckets.find(key(c[0] + di, c[1] + dj, c[2] + dk));
+              if (it == buckets.end()) continue;
+              for (const Seg& other : it->second) {
+                if (other.fibre <= f || pair[f * lines.size() + other.fibre]) continue;
+                if (segmentDistance2(lines[f][s], lines[f][s + 1], lines[other.fibre][other.index],
+                                     lines[other.fibre][other.index + 1]) < double(tol) * tol) {
+                  pair[f * lines.size() + other.fibre] = 1;
+                  ++q.crossingPairs;
+                }
+              }
+            }
+      }
+  }
+  q.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return result;
+}
+
+bool fitSphere(const std::vector<btVector3>& points, btVector3& centre, btScalar& radius) {
+  if (points.size() < 4) return false;
+  // |p|^2 = 2 c.p + (r^2 - |c|^2): linear least squares in (c, d).
+  Eigen::MatrixXd A(points.size(), 4);
+  Eigen::VectorXd b(points.size());
+  const btVector3 shift = points.front();
+  for (size_t i = 0; i < points.size(); ++i) {
+    const btVector3 p = points[i] - shift;
+    A.row(Eigen::Index(i)) << 2.0 * p.x(), 2.0 * p.y(), 2.0 * p.z(), 1.0;
+    b[Eigen::Index(i)] = double(p.length2());
+  }
+  const Eigen::Vector4d x = A.colPivHouseholderQr().solve(b);
+  const double r2 = x[3] + x.head<3>().squaredNorm();
+  if (!(r2 > 0) || !std::isfinite(r2)) return false;
+  centre = shift + btVector3(btScalar(x[0]), btScalar(x[1]), btScalar(x[2]));
+  radius = btScalar(std::sqrt(r2));
+  return true;
+}
+
+bool fitFemoralHead(const TriangleMesh& femur, const btVector3& up, btScalar depth,
+                    btVector3& centre, btScalar& radius) {
+  if (femur.vertices.empty()) return false;
+  const btVector3 axis = up.normalized();
+  btVector3 top = femur.vertices.front();
+  for (const auto& v : femur.vertices)
+    if (v.dot(axis) > top.dot(axis)) top = v;
+  // First guess: vertices within `depth` of the topmost vertex (the head is the highest part).
+  std::vector<btVector3> points;
+  for (const auto& v : femur.vertices)
+    if (v.distance(top) < depth) points.push_back(v);
+  if (!fitSphere(points, centre, radius)) return false;
+  // Refine: vertices near the fitted sphere and not below its centre's neck side.
+  for (int pass = 0; pass < 5; ++pass) {
+    points.clear();
+    for (const auto& v : femur.vertices)
+      if (std::abs(v.distance(centre) - radius) < btScalar(0.1) * radius) points.push_back(v);
+    btVector3 c;
+    btScalar r;
+    if (!fitSphere(points, c, r)) break;
+    centre = c;
+    radius = r;
+  }
+  return true;
+}
+
+}  // namespace fibremss
