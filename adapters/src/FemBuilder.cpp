@@ -256,7 +256,7 @@ FemScene::FemScene(const PreparedScene& scene, std::span<const btTransform> bone
 
 FemScene::~FemScene() = default;
 
-void FemScene::stepPose(std::span<const btTransform> targets) {
+bool FemScene::stepPose(std::span<const btTransform> targets, const std::function<bool()>& stop) {
   Impl& m = *impl_;
   if (targets.size() != m.bones.size()) {
     throw std::invalid_argument("FemScene::stepPose: bone transforms do not match the bones");
@@ -265,6 +265,7 @@ void FemScene::stepPose(std::span<const btTransform> targets) {
   const btScalar dt = m.definition.poseDuration / static_cast<btScalar>(substeps);
   const std::vector<btTransform> from = m.boneTransforms;
   for (int k = 1; k <= substeps; ++k) {
+    if (stop && stop()) return false;
     const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
     for (size_t b = 0; b < m.bones.size(); ++b) {
       m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
@@ -276,6 +277,7 @@ void FemScene::stepPose(std::span<const btTransform> targets) {
   }
   for (Impl::Muscle& muscle : m.muscles) m.readPositions(muscle);
   m.world->getWorldInfo().m_sparsesdf.GarbageCollect();
+  return true;
 }
 
 size_t FemScene::muscleCount() const {

@@ -187,7 +187,7 @@ Methods:
   soft–soft collision by clusters (CL_SS); run in centimetres because Bullet extrudes mesh
   triangles by a fixed 0.06 units. The simulated time of a pose is FibreMSS's iterations × dt.
 - **fem**: each muscle's surface voxelized and split into positively oriented tetrahedra,
-  `btDeformableNeoHookeanForce` (E = 30 kPa, ν = 0.45, nearly incompressible) in a
+  `btDeformableNeoHookeanForce` (E matched to the spring network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a
   `btDeformableMultiBodyDynamicsWorld`, nodes near fixed particles pinned and moved with their
   bones, node contact with the bones' meshes (SDF_RD), surface vertices embedded in the
   tetrahedra. It is the accuracy reference, not a speed competitor.

@@ -48,7 +48,7 @@ std::vector<btTransform> posesAt(const LoadedScene& scene, int pose) {
 
 /// What the pose loop needs from a simulated method.
 struct Simulated {
-  std::function<void(std::span<const btTransform>)> step;        ///< one pose
+  std::function<bool(std::span<const btTransform>)> step;        ///< one pose; false: stopped
   std::function<void(size_t, std::vector<btVector3>&)> surface;  ///< muscle's surface
   std::function<bool()> exploded;                                ///< after a step
   std::function<double()> springDeviation;                       ///< at the end
@@ -75,7 +75,10 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
     }
     const std::vector<btTransform> transforms = posesAt(scene, s);
     const auto stepStart = Clock::now();
-    sim.step(transforms);
+    if (!sim.step(transforms)) {
+      metrics.interrupted = true;
+      break;
+    }
     msPerStep.push_back(secondsSince(stepStart) * 1000);
     metrics.steps = s + 1;
     metrics.iterations += sim.iterationsPerStep;
@@ -187,7 +190,10 @@ RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
     }
   }
   Simulated simulated;
-  simulated.step = [&](std::span<const btTransform> t) { sim.stepPose(t); };
+  simulated.step = [&](std::span<const btTransform> t) {
+    sim.stepPose(t);
+    return true;
+  };
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
   simulated.exploded = [&] {
     for (size_t m = 0; m < springs.size(); ++m) {
@@ -236,7 +242,12 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
     }
   }
   Simulated simulated;
-  simulated.step = [&](std::span<const btTransform> t) { sim.stepPose(t); };
+  // The budget is checked between substeps too: one FEM pose can outlast a whole budget.
+  const auto outOfTime = [&] {
+    return (options.cancel && options.cancel->load()) ||
+           (options.budgetSeconds > 0 && secondsSince(start) > options.budgetSeconds);
+  };
+  simulated.step = [&](std::span<const btTransform> t) { return sim.stepPose(t, outOfTime); };
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
   simulated.exploded = [&] {
     for (size_t m = 0; m < edges.size(); ++m) {
@@ -330,7 +341,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
         stop.store(true);
       }
     };
-    MethodRunOptions methodOptions{report, &stop};
+    MethodRunOptions methodOptions{report, &stop, options.methodBudgetSeconds};
     FibreRunOptions fibreOptions;
     fibreOptions.method = spec.name;
     fibreOptions.cancel = &stop;

@@ -7,6 +7,7 @@
 #include <BulletSoftBody/btSoftBody.h>
 #include <LinearMath/btTransform.h>
 
+#include <functional>
 #include <memory>
 #include <span>
 #include <vector>
@@ -59,7 +60,9 @@ class FemScene {
   FemScene& operator=(const FemScene&) = delete;
 
   /// One pose: bones move to `targets` over the substeps, pinned nodes follow them.
-  void stepPose(std::span<const btTransform> targets);
+  /// Returns false when `stop` (checked between substeps; may be empty) ended the pose early:
+  /// one substep of Bullet's deformable contact can take seconds on large bones.
+  bool stepPose(std::span<const btTransform> targets, const std::function<bool()>& stop = {});
 
   size_t muscleCount() const;
   size_t nodeCount() const;                     ///< nodes of all muscles

@@ -54,6 +54,7 @@ double poseDuration(const SimulationParameters& simulation);
 struct MethodRunOptions {
   std::function<void(const MethodProgress&)> progress;  ///< after every step (may be empty)
   const std::atomic<bool>* cancel = nullptr;            ///< stop after the current step
+  double budgetSeconds = 0;  ///< > 0: wall time after which the FEM stops inside its pose
 };
 
 /// The btSoftBody baseline on every pose of the scene.
