@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The two set-up commands of README.md, for a fresh Debian 12 machine (as root, or with sudo):
 #   ./setup.sh run    install what is missing, build, run the main comparison job
-#   ./setup.sh test   install what is missing, build (float and double Bullet), run ctest
+#   ./setup.sh test   install what is missing, build (float, double, sanitizers), run ctest
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -45,6 +45,11 @@ case "${1:-}" in
     # The same suite against Bullet's double-precision variant.
     build build-double -DFIBREMSS_WERROR=ON -DFIBREMSS_DOUBLE=ON
     ctest --test-dir build-double -j"$jobs" --output-on-failure --timeout 900
+    # And under AddressSanitizer + UndefinedBehaviorSanitizer. The install test is left out
+    # there: its consumer is not instrumented but would link the instrumented library.
+    build build-asan -DFIBREMSS_WERROR=ON -DFIBREMSS_SANITIZE=address,undefined \
+      -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g"
+    ctest --test-dir build-asan -j"$jobs" --output-on-failure --timeout 900 -E '^Install\.'
     ;;
   *)
     echo "usage: $0 run|test" >&2
