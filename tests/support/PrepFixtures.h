@@ -2,10 +2,10 @@
 // Small closed meshes with known geometry for the geometry, preparation and output tests.
 #include <algorithm>
 #include <cmath>
-#include <map>
-#include <utility>
+#include <limits>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/Procedural.h"
 
 namespace fibremss::testing {
 
@@ -20,42 +20,10 @@ inline TriangleMesh boxMesh(const btVector3& lower, const btVector3& upper) {
   return mesh;
 }
 
-/// Icosphere of `radius` around `centre` with `subdivisions` levels (20·4^s triangles).
+/// Icosphere of `radius` around `centre` with `subdivisions` levels (20·4^s triangles): the
+/// procedural scenes' ellipsoid with equal radii.
 inline TriangleMesh sphereMesh(const btVector3& centre, btScalar radius, int subdivisions) {
-  const btScalar t = (1 + std::sqrt(btScalar(5))) / 2;
-  std::vector<btVector3> unit = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
-                                 {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
-                                 {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
-  for (auto& v : unit) v.normalize();
-  std::vector<std::array<uint32_t, 3>> faces = {
-      {0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-      {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-      {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-  for (int level = 0; level < subdivisions; ++level) {
-    std::map<std::pair<uint32_t, uint32_t>, uint32_t> middles;
-    auto middle = [&](uint32_t a, uint32_t b) {
-      const auto key = std::minmax(a, b);
-      const auto found = middles.find(key);
-      if (found != middles.end()) return found->second;
-      unit.push_back((unit[a] + unit[b]).normalized());
-      const auto index = static_cast<uint32_t>(unit.size() - 1);
-      middles.emplace(key, index);
-      return index;
-    };
-    std::vector<std::array<uint32_t, 3>> finer;
-    for (const auto& f : faces) {
-      const uint32_t ab = middle(f[0], f[1]), bc = middle(f[1], f[2]), ca = middle(f[2], f[0]);
-      finer.push_back({f[0], ab, ca});
-      finer.push_back({f[1], bc, ab});
-      finer.push_back({f[2], ca, bc});
-      finer.push_back({ab, bc, ca});
-    }
-    faces = std::move(finer);
-  }
-  TriangleMesh mesh;
-  for (const auto& v : unit) mesh.vertices.push_back(centre + v * radius);
-  mesh.triangles = std::move(faces);
-  return mesh;
+  return makeEllipsoid(centre, btVector3(radius, radius, radius), subdivisions);
 }
 
 /// Closed cylinder along x from x0 to x1, `segments` around, `rings` along, capped with fans.
