@@ -13,19 +13,13 @@
 
 #include "../plugin/src/CollisionTrees.h"
 #include "fibremss/MuscleSystem.h"
+#include "support/SolverFixtures.h"
 
 namespace fibremss {
 namespace {
 
-/// A bone with the given spheres (bone frame).
-std::shared_ptr<BoneSettings> makeBone(std::vector<btVector3> centres = {},
-                                       std::vector<btScalar> radii = {}) {
-  auto bone = std::make_shared<BoneSettings>();
-  bone->name = "bone";
-  bone->sphereCentres = std::move(centres);
-  bone->sphereRadii = std::move(radii);
-  return bone;
-}
+using testing::fix;
+using testing::makeBone;
 
 /// Free boundary particles (spheres) at `points` with `radii`, no springs.
 std::shared_ptr<MuscleSettings> makeSpheres(const std::vector<btVector3>& points,
@@ -41,12 +35,6 @@ std::shared_ptr<MuscleSettings> makeSpheres(const std::vector<btVector3>& points
   for (uint32_t i = 0; i < points.size(); ++i) muscle->boundaryParticles.push_back(i);
   muscle->particleMass = mass;
   return muscle;
-}
-
-void fix(MuscleSettings& muscle, uint32_t particle, int32_t bone) {
-  muscle.flags[particle] |= kFixed;
-  muscle.fixedBone[particle] = bone;
-  muscle.fixedParticles.push_back(particle);
 }
 
 /// One iteration per step: every test below looks at a single response.

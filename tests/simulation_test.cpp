@@ -18,6 +18,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "support/SolverFixtures.h"
 
 namespace {
 
@@ -51,17 +52,10 @@ void operator delete(void* p, size_t) noexcept {
 namespace fibremss {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using testing::fix;
+using testing::makeBone;
 
-/// A bone without spheres (attachments only) or with the given spheres.
-std::shared_ptr<BoneSettings> makeBone(std::vector<btVector3> centres = {},
-                                       std::vector<btScalar> radii = {}) {
-  auto bone = std::make_shared<BoneSettings>();
-  bone->name = "bone";
-  bone->sphereCentres = std::move(centres);
-  bone->sphereRadii = std::move(radii);
-  return bone;
-}
+constexpr double kPi = std::numbers::pi;
 
 /// Particles at `points` (no springs yet), all boundary spheres of `radius` (0: none collide).
 std::shared_ptr<MuscleSettings> makeMuscle(const std::vector<btVector3>& points, btScalar mass,
@@ -78,12 +72,6 @@ std::shared_ptr<MuscleSettings> makeMuscle(const std::vector<btVector3>& points,
   muscle->particleMass = mass;
   muscle->damping = damping;
   return muscle;
-}
-
-void fix(MuscleSettings& muscle, uint32_t particle, int32_t bone) {
-  muscle.flags[particle] |= kFixed;
-  muscle.fixedBone[particle] = bone;
-  muscle.fixedParticles.push_back(particle);
 }
 
 void addSpring(MuscleSettings& muscle, uint32_t a, uint32_t b, btScalar stiffness,

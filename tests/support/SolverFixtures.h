@@ -1,0 +1,28 @@
+#pragma once
+// Hand-made bones and attachments for the solver tests (collision_test, simulation_test).
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include "fibremss/MuscleSettings.h"
+
+namespace fibremss::testing {
+
+/// A bone without spheres (attachments only) or with the given spheres (bone frame).
+inline std::shared_ptr<BoneSettings> makeBone(std::vector<btVector3> centres = {},
+                                              std::vector<btScalar> radii = {}) {
+  auto bone = std::make_shared<BoneSettings>();
+  bone->name = "bone";
+  bone->sphereCentres = std::move(centres);
+  bone->sphereRadii = std::move(radii);
+  return bone;
+}
+
+/// Fixes `particle` of `muscle` to bone index `bone`.
+inline void fix(MuscleSettings& muscle, uint32_t particle, int32_t bone) {
+  muscle.flags[particle] |= kFixed;
+  muscle.fixedBone[particle] = bone;
+  muscle.fixedParticles.push_back(particle);
+}
+
+}  // namespace fibremss::testing
