@@ -341,6 +341,32 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
   simulation.set("seed", parameters.seed);
   parameters.initialNoise =
       btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, kInf) * scale);
+  parameters.threads = simulation.integer("threads", defaults.threads, 0, 1024);
+  parameters.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
+  parameters.solverTolerance =
+      btScalar(simulation.number("solver_tolerance", defaults.solverTolerance, 0, 1, true));
+  parameters.solverIterations =
+      simulation.integer("solver_iterations", defaults.solverIterations, 1, 100000);
+  parameters.constraintIterations =
+      simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
+  fromString(
+      simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
+      parameters.onFailure);
+  parameters.maxRetries = simulation.integer("max_retries", defaults.maxRetries, 0, 30);
+}
+
+void readCollision(Fields& collision, double scale, SimulationParameters& parameters) {
+  const SimulationParameters defaults;
+  parameters.muscleMuscle = collision.boolean("muscle_muscle", defaults.muscleMuscle);
+  parameters.muscleBone = collision.boolean("muscle_bone", defaults.muscleBone);
+  fromString(collision.choice("bone_collision", toString(defaults.boneCollision),
+                              namesOf<BoneCollision>()),
+             parameters.boneCollision);
+  parameters.distanceFieldCell = btScalar(
+      collision.number("distance_field_cell", defaults.distanceFieldCell / scale, 0, kInf, true) *
+      scale);
+  parameters.penetrationRecovery =
+      collision.boolean("penetration_recovery", defaults.penetrationRecovery);
 }
 
 LoadedScene readScene(const Json& raw, const std::string& source, const fs::path& baseDir,
@@ -403,8 +429,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   Fields simulation = root.object("simulation");
   readSimulation(simulation, reader.scale, result.simulation);
   Fields collision = root.object("collision");
-  result.simulation.muscleMuscle = collision.boolean("muscle_muscle", true);
-  result.simulation.muscleBone = collision.boolean("muscle_bone", true);
+  readCollision(collision, reader.scale, result.simulation);
   Fields outputs = root.object("outputs");
   result.outputs.frameEvery = outputs.integer("frame_every", 1, 0, 1000000000);
   result.outputs.writeSurfaces = outputs.boolean("surfaces", true);

@@ -1,6 +1,8 @@
 #include "Integrators.h"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace fibremss {
 namespace {
@@ -27,6 +29,7 @@ class VerletIntegrator final : public TimeIntegrator {
     return result;
   }
   bool usesVelocities() const override { return false; }
+  Integrator kind() const override { return Integrator::Verlet; }
 };
 
 /// Semi-implicit (symplectic) Euler: v += dt/m·(F − c·v); x += dt·v.
@@ -48,6 +51,7 @@ class SemiImplicitEulerIntegrator final : public TimeIntegrator {
     return result;
   }
   bool usesVelocities() const override { return true; }
+  Integrator kind() const override { return Integrator::SemiImplicitEuler; }
 };
 
 }  // namespace
@@ -59,9 +63,11 @@ const TimeIntegrator& integratorFor(Integrator kind) {
     case Integrator::SemiImplicitEuler:
       return semiImplicitEuler;
     case Integrator::Verlet:
+      return verlet;
+    default:
       break;
   }
-  return verlet;
+  throw std::invalid_argument(std::string("integrator not available yet: ") + toString(kind));
 }
 
 }  // namespace fibremss

@@ -26,12 +26,27 @@ class TimeIntegrator {
   /// `previous` to `positions`.
   virtual IntegrationResult advance(MuscleState& muscle, btScalar dt,
                                     btScalar previousDt) const = 0;
+  /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs; called when
+  /// the muscle is added and when the integrator changes, never inside the iterations.
+  virtual void prepare(MuscleState& muscle) const {
+    muscle.workspace.reset();
+    muscle.preparedFor = kind();
+    muscle.prepared = true;
+  }
+  /// The kind this integrator implements.
+  virtual Integrator kind() const = 0;
   /// Whether the integrator keeps explicit velocities (they are rotated by the pre-transform
   /// and zeroed on contact).
   virtual bool usesVelocities() const = 0;
 };
 
-/// The integrator for a kind (one shared stateless instance per kind).
+/// The integrator for a kind (one shared stateless instance per kind; thread-safe: all
+/// per-muscle data lives in MuscleState).
 const TimeIntegrator& integratorFor(Integrator kind);
+
+/// Prepares `muscle` for `integrator` unless it already is.
+inline void ensurePrepared(const TimeIntegrator& integrator, MuscleState& muscle) {
+  if (!muscle.prepared || muscle.preparedFor != integrator.kind()) integrator.prepare(muscle);
+}
 
 }  // namespace fibremss

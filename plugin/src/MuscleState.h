@@ -28,6 +28,12 @@ struct BoneState {
   BoneSphereTree tree;  ///< bone spheres, static topology, bounds placed in world space
 };
 
+/// Scratch an integrator keeps per muscle (Jacobian structure, CG vectors, stage buffers);
+/// made by TimeIntegrator::prepare, never state a rollback must restore.
+struct IntegratorWorkspace {
+  virtual ~IntegratorWorkspace() = default;
+};
+
 /// A muscle: settings plus the state a step changes.
 struct MuscleState {
   std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
@@ -55,6 +61,11 @@ struct MuscleState {
   std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
   bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
   std::vector<btVector3> surface;           ///< deformed surface vertices (output)
+
+  std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
+  Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
+  bool prepared = false;                           ///< workspace made for `preparedFor`
+  bool frozen = false;  ///< stopped by the numerical guard: skipped by every part of a step
 };
 
 }  // namespace fibremss

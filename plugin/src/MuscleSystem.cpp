@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "Integrators.h"
 #include "MuscleSystemImpl.h"
 #include "Skin.h"
 #include "SpringForces.h"
@@ -135,6 +136,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     }
   }
   state->tree.build(s.boundaryParticles, state->positions, s.radii);
+  ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
     deformSurface(s, state->positions, state->boneTransforms, impl_->parameters.blendedPretransform,

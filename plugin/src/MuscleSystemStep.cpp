@@ -184,6 +184,7 @@ void MuscleSystem::Impl::step() {
   }
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
+    ensurePrepared(integrator, state);
     resolveBones(state);
     if (rebuild) {
       placeAtBones(state);

@@ -30,15 +30,32 @@ constexpr std::array<std::pair<SpringLayout, const char*>, 4> kLayouts{{
     {SpringLayout::Lattice6, "lattice6"},
     {SpringLayout::Lattice26, "lattice26"},
 }};
-constexpr std::array<std::pair<Integrator, const char*>, 2> kIntegrators{{
+constexpr std::array<std::pair<Integrator, const char*>, 10> kIntegrators{{
     {Integrator::Verlet, "verlet"},
     {Integrator::SemiImplicitEuler, "semi-implicit-euler"},
+    {Integrator::ExplicitEuler, "explicit-euler"},
+    {Integrator::Rk2, "rk2"},
+    {Integrator::Rk4, "rk4"},
+    {Integrator::ImplicitEuler, "implicit-euler"},
+    {Integrator::ImplicitMidpoint, "implicit-midpoint"},
+    {Integrator::Bdf2, "bdf2"},
+    {Integrator::Pbd, "pbd"},
+    {Integrator::Xpbd, "xpbd"},
 }};
 constexpr std::array<std::pair<StopRule, const char*>, 4> kStopRules{{
     {StopRule::Iterations, "iterations"},
     {StopRule::Converged, "converged"},
     {StopRule::TimeBudget, "budget"},
     {StopRule::SpringDeviation, "spring-deviation"},
+}};
+constexpr std::array<std::pair<BoneCollision, const char*>, 2> kBoneCollisions{{
+    {BoneCollision::Spheres, "spheres"},
+    {BoneCollision::DistanceField, "distance-field"},
+}};
+constexpr std::array<std::pair<FailurePolicy, const char*>, 3> kFailurePolicies{{
+    {FailurePolicy::Retry, "retry"},
+    {FailurePolicy::StopBody, "stop-body"},
+    {FailurePolicy::Report, "report"},
 }};
 
 }  // namespace
@@ -51,6 +68,18 @@ const char* toString(Integrator integrator) {
 }
 const char* toString(StopRule rule) {
   return nameOf(kStopRules, rule);
+}
+const char* toString(BoneCollision mode) {
+  return nameOf(kBoneCollisions, mode);
+}
+const char* toString(FailurePolicy policy) {
+  return nameOf(kFailurePolicies, policy);
+}
+bool fromString(const std::string& name, BoneCollision& mode) {
+  return valueOf(kBoneCollisions, name, mode);
+}
+bool fromString(const std::string& name, FailurePolicy& policy) {
+  return valueOf(kFailurePolicies, name, policy);
 }
 bool fromString(const std::string& name, SpringLayout& layout) {
   return valueOf(kLayouts, name, layout);

@@ -46,8 +46,32 @@ struct MuscleParameters {
   SpringParameters springs;             ///< spring layout and material
 };
 
-/// Integrator by name; the integrator issue adds more.
-enum class Integrator : uint8_t { Verlet, SemiImplicitEuler };
+/// Time integrator by name (seed 002 §4.8.3 compares them).
+enum class Integrator : uint8_t {
+  Verlet,             ///< damped position Verlet, time-corrected for a varying dt (default)
+  SemiImplicitEuler,  ///< symplectic Euler: v += dt·a(x, v); x += dt·v
+  ExplicitEuler,      ///< x += dt·v; v += dt·a(x, v)
+  Rk2,                ///< midpoint Runge–Kutta, spring forces evaluated twice per iteration
+  Rk4,                ///< classic Runge–Kutta, spring forces evaluated four times
+  ImplicitEuler,      ///< backward Euler, one Newton step, CG on the spring Jacobian
+  ImplicitMidpoint,   ///< implicit midpoint rule, one Newton step, CG
+  Bdf2,               ///< second-order backward differentiation, one Newton step, CG
+  Pbd,                ///< position-based dynamics: distance constraints per spring
+  Xpbd,               ///< extended PBD: compliant distance constraints (compliance from κ)
+};
+
+/// How muscles find bones (method.md §6; seed 002 Table 4.31).
+enum class BoneCollision : uint8_t {
+  Spheres,        ///< bone spheres in a static btDbvt per bone (the thesis)
+  DistanceField,  ///< signed distance grid of the bone mesh in the bone frame
+};
+
+/// What the numerical guard does when a step produces NaN/inf or explodes.
+enum class FailurePolicy : uint8_t {
+  Retry,     ///< roll back, retry with a smaller dt up to maxRetries times, then stop the body
+  StopBody,  ///< roll back and freeze the failing muscle (it stays at its last good state)
+  Report,    ///< only report it in StepStats (the state is left as the step made it)
+};
 
 /// When the iterations of one step stop (method.md §4).
 enum class StopRule : uint8_t {
@@ -78,14 +102,34 @@ struct SimulationParameters {
   bool muscleBone = true;         ///< collide muscles with bones
   uint32_t seed = 1;              ///< seed for every random choice (jitter, thinning, noise)
   btScalar initialNoise = 0;      ///< random displacement of free particles at start [m]
+
+  int threads = 0;  ///< worker threads of the solver (0: the machine's hardware threads)
+
+  BoneCollision boneCollision = BoneCollision::Spheres;  ///< muscle–bone detection
+  btScalar distanceFieldCell = 0.001;                    ///< cell size of bone distance fields [m]
+  /// Seed 001 eq 1: a particle whose bone-distance direction flips (d·d′ < −0.75) between
+  /// iterations has passed through the bone; push it back out on its previous side.
+  bool penetrationRecovery = true;
+
+  bool diagonalJacobian = false;    ///< implicit integrators: diagonal-only Jacobian (seed 002)
+  btScalar solverTolerance = 1e-6;  ///< implicit integrators: CG relative residual
+  int solverIterations = 50;        ///< implicit integrators: CG iteration cap
+  int constraintIterations = 4;     ///< PBD/XPBD: Gauss–Seidel passes per iteration
+
+  FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
+  int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap
 };
 
 const char* toString(SpringLayout layout);
 const char* toString(Integrator integrator);
 const char* toString(StopRule rule);
+const char* toString(BoneCollision mode);
+const char* toString(FailurePolicy policy);
 /// Parse by name (as in toString); return false for an unknown name.
 bool fromString(const std::string& name, SpringLayout& layout);
 bool fromString(const std::string& name, Integrator& integrator);
 bool fromString(const std::string& name, StopRule& rule);
+bool fromString(const std::string& name, BoneCollision& mode);
+bool fromString(const std::string& name, FailurePolicy& policy);
 
 }  // namespace fibremss
