@@ -20,22 +20,7 @@ namespace {
 
 using testing::fix;
 using testing::makeBone;
-
-/// Free boundary particles (spheres) at `points` with `radii`, no springs.
-std::shared_ptr<MuscleSettings> makeSpheres(const std::vector<btVector3>& points,
-                                            const std::vector<btScalar>& radii,
-                                            btScalar mass = 1e-5) {
-  auto muscle = std::make_shared<MuscleSettings>();
-  muscle->name = "spheres";
-  muscle->restPositions = points;
-  muscle->radii = radii;
-  muscle->flags.assign(points.size(), kBoundary);
-  muscle->fixedBone.assign(points.size(), -1);
-  muscle->nearestBone.assign(points.size(), -1);
-  for (uint32_t i = 0; i < points.size(); ++i) muscle->boundaryParticles.push_back(i);
-  muscle->particleMass = mass;
-  return muscle;
-}
+using testing::makeSpheres;
 
 /// One iteration per step: every test below looks at a single response.
 SimulationParameters oneIteration() {
@@ -311,7 +296,9 @@ TEST(BroadPhase, BoneTreeFindsExactlyTheBruteForcePairsWhileBothMove) {
 
 /// A particle pulled by a stiff spring from +30 mm towards an anchor at −30 mm, through a bone
 /// sphere of radius 10 mm at the origin; returns the particle's x after every iteration.
-std::vector<double> pulledThroughBone(const SimulationParameters& parameters, int iterations) {
+std::vector<double> pulledThroughBone(SimulationParameters parameters, int iterations) {
+  // The spring starts 600× its rest length on purpose: the guard reports it, never freezes it.
+  parameters.onFailure = FailurePolicy::Report;
   auto muscle = std::make_shared<MuscleSettings>();
   muscle->name = "pulled";
   muscle->restPositions = {{-0.03, 0, 0}, {0.03, 0, 0}};

@@ -262,8 +262,8 @@ TEST(CompareCommand, RejectsAnUnknownMethodWithExitCode2) {
   EXPECT_FALSE(fs::exists(out / "summary.json"));
 }
 
-/// A hand-made summary: thigh13 at resolution 20 with known part timings, and a sweep run.
-nlohmann::json madeSummary(double stepDeg, double msPerIteration) {
+/// A hand-made summary: thigh13 at `resolution` with known part timings, and a sweep run.
+nlohmann::json madeSummary(double stepDeg, double msPerIteration, int resolution = 20) {
   RunMetrics run;
   run.scene = "thigh13";
   run.method = "fibremss";
@@ -273,8 +273,8 @@ nlohmann::json madeSummary(double stepDeg, double msPerIteration) {
   run.maxPenetrationMm = stepDeg / 2;
   run.rmsToFemMm = 3;
   nlohmann::json object = toJson(run);
-  object["scene_overrides"] = {"resolution=20"};
-  object["resolution"] = 20;
+  object["scene_overrides"] = {"resolution=" + std::to_string(resolution)};
+  object["resolution"] = resolution;
   object["step_deg"] = stepDeg;
   return {{"scene", "thigh13"},
           {"machine", machineJson()},
@@ -301,8 +301,28 @@ TEST(MergeAndReport, MergedReportHasTable1RatiosAndTheSweepPlot) {
   // MSS 10 ms per iteration → 5 s per 500; thesis 18.66 s → ratio 3.73.
   const std::string report = readFile(out / "report.md");
   EXPECT_NE(report.find("Seed 004 Table 1"), std::string::npos);
-  EXPECT_NE(report.find("| 20 | MSS | 5 | 18.66 | 3.73 |"), std::string::npos) << report;
-  EXPECT_NE(report.find("| 20 | total | 10 | 56.84 | 5.68 |"), std::string::npos) << report;
+  EXPECT_NE(report.find("| MSS | 5 / 18.66 (3.73×) |"), std::string::npos) << report;
+  EXPECT_NE(report.find("| total | 10 / 56.84 (5.68×) |"), std::string::npos) << report;
+}
+
+TEST(MergeAndReport, FourResolutionsGiveTable1ColumnsInOrder) {
+  const fs::path out = scratch("merged_resolutions");
+  std::vector<nlohmann::json> cells;
+  std::vector<std::string> sources;
+  for (int resolution : {80, 40, 20, 60}) {  // cells finish in any order
+    cells.push_back(madeSummary(2, 10, resolution));
+    sources.push_back("r" + std::to_string(resolution));
+  }
+  writeComparison(mergeSummaries(cells, sources), out.string());
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("| part | resolution 20 | resolution 40 | resolution 60 | resolution 80 |"),
+            std::string::npos)
+      << report;
+  // bone CD 4 ms per iteration → 2 s per 500; thesis 30.03 / 37.43 / 56.03 / 67.10.
+  EXPECT_NE(report.find("| bone CD | 2 / 30.03 (15×) | 2 / 37.43 (18.7×) | 2 / 56.03 (28×) | "
+                        "2 / 67.10 (33.5×) |"),
+            std::string::npos)
+      << report;
 }
 
 TEST(MergeAndReport, RejectsSomethingThatIsNotASummary) {

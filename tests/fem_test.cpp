@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "fibremss/Error.h"
@@ -188,6 +189,48 @@ TEST(FemScene, FollowsATranslatedBone) {
   ASSERT_TRUE(finite(surface));
   EXPECT_LT(rmsDistanceMm(surface, restSurfaceAt(scene, moved)), 10.0);
   EXPECT_LT(std::abs(volumeChangePercent(scene.muscles[0]->restSurface, surface)), 10.0);
+}
+
+TEST(FemScene, BoneContactKeepsFreeNodesOutsideAMovingBone) {
+  // A plate bone under the rod rises 6 mm, 4 mm into it: without contact the nodes it
+  // passes stay inside; with contact every node ends outside the moved plate.
+  PreparedScene scene = rodScene();
+  auto plate = std::make_shared<BoneSettings>();
+  plate->name = "plate";
+  plate->mesh = boxMesh(btVector3(0.015f, -0.04f, -0.03f), btVector3(0.07f, -0.012f, 0.03f));
+  scene.bones.push_back(plate);
+  const btTransform rest = btTransform::getIdentity();
+  const btTransform raised(btQuaternion::getIdentity(), btVector3(0, 0.006f, 0));
+  const std::array<btTransform, 2> start{rest, rest}, pressed{rest, raised};
+  const MeshDistance plateSurface(plate->mesh);
+  auto deepest = [&](bool contact) {
+    FemScene fem(scene, start, {.mesher = {.targetCells = 60}, .boneContact = contact});
+    for (int pose = 0; pose < 4; ++pose) fem.stepPose(pressed);
+    btScalar depth = -1;
+    for (const btVector3& node : fem.nodePositions(0)) {
+      depth = std::max(depth, -plateSurface.signedDistance(raised.invXform(node)));
+    }
+    return depth;
+  };
+  EXPECT_GT(deepest(false), 0.002f);
+  EXPECT_LT(deepest(true), 1e-5f);
+}
+
+TEST(SoftBodyScene, ClustersHoldOnlyFreeNodesAndHaveFiniteInertia) {
+  // Bullet weighs a pinned node as 1e18 in its cluster; in float its inverse inertia is NaN.
+  const PreparedScene scene = rodScene();
+  const btTransform rest = btTransform::getIdentity();
+  SoftBodyScene soft(scene, {&rest, 1}, {.clustersPerMuscle = 8});
+  btSoftBody& body = soft.body(0);
+  ASSERT_GT(body.m_clusters.size(), 0);
+  for (int c = 0; c < body.m_clusters.size(); ++c) {
+    const btSoftBody::Cluster& cluster = *body.m_clusters[c];
+    EXPECT_GE(cluster.m_nodes.size(), 4);
+    for (int n = 0; n < cluster.m_nodes.size(); ++n) EXPECT_GT(cluster.m_nodes[n]->m_im, 0);
+    for (int r = 0; r < 3; ++r) {
+      EXPECT_TRUE(std::isfinite(cluster.m_invwi[r].length())) << "cluster " << c;
+    }
+  }
 }
 
 TEST(SoftBodyScene, StaysAtRestWithoutMotion) {

@@ -353,17 +353,124 @@ TEST(Springs, DelaunayRejectsCoplanarParticles) {
 }
 
 TEST(Springs, CoincidentParticlesAreAnError) {
+  // Lattice layouts keep every sampled particle (their springs follow the grid's indices), so
+  // a fibre repeated next to itself makes a zero-length spring.
   MuscleInput input = gridMuscle("twin", 0, 0.1f, 0, 0.01f, 1, 2, 6);
-  input.fibres.addFibre(input.fibres.fibre(0));  // fibre 2 starts where fibre 0 starts
-  input.fibreGridColumns = 0;
-  input.parameters.springs.neighbours = 4;
+  FibreSet fibres;
+  fibres.addFibre(input.fibres.fibre(0));
+  fibres.addFibre(input.fibres.fibre(0));  // fibre 1 starts where fibre 0 starts
+  fibres.addFibre(input.fibres.fibre(1));
+  input.fibres = fibres;
+  input.fibreGridColumns = 3;
+  input.parameters.springs.layout = SpringLayout::Lattice6;
   try {
     prepareOne(input);
     FAIL() << "expected InputError";
   } catch (const InputError& error) {
     EXPECT_NE(std::string(error.what()).find("twin"), std::string::npos);
-    EXPECT_NE(error.where().find("particles 0 and 12"), std::string::npos) << error.what();
+    EXPECT_NE(error.where().find("particles 0 and 6"), std::string::npos) << error.what();
   }
+}
+
+/// A muscle's particles and fibres given directly (no sampling).
+MuscleSettings particlesOnFibres(const std::vector<std::vector<btVector3>>& fibres) {
+  MuscleSettings muscle;
+  for (const auto& fibre : fibres) {
+    for (const btVector3& p : fibre) {
+      muscle.fibreParticles.push_back(static_cast<uint32_t>(muscle.restPositions.size()));
+      muscle.restPositions.push_back(p);
+    }
+    muscle.fibreOffsets.push_back(static_cast<uint32_t>(muscle.fibreParticles.size()));
+  }
+  return muscle;
+}
+
+TEST(MergeParticles, ParticlesOfOtherFibresCloserThanTheDistanceMerge) {
+  MuscleSettings muscle = particlesOnFibres(
+      {{{0, 0, 0}, {1, 0, 0}, {2, 0, 0}},             // A: kept
+       {{0, 0.1f, 0}, {1, 1, 0}, {2, 0.05f, 0}},      // B: its ends merge into A's (0.1, 0.05)
+       {{0, 0, 0.3f}, {1, 0, 1}, {2, 0, 1}},          // C: 0.3 from A's start, kept
+       {{5, 0, 0}, {5.01f, 0, 0}, {6, 0, 0}},         // D: 0.01 apart on one fibre, kept
+       {{9, 0, 0}},                                   // E: one particle
+       {{9, 0.05f, 0}, {9, -0.05f, 0}, {9, 2, 0}}});  // F: both first particles merge into E's
+  // Steps after the second particle: A 1, B 1.38, C 1, D 0.99, F 2.05 (E has none).
+  EXPECT_NEAR(detail::medianSampleSpacing(muscle), 1.0, 1e-6);
+  ASSERT_EQ(detail::mergeCloseParticles(muscle, 0.25f), 4u);
+  ASSERT_EQ(muscle.particleCount(), 16u - 4u);
+  const std::vector<uint32_t> offsets = {0, 3, 6, 9, 12, 13, 15};
+  EXPECT_EQ(muscle.fibreOffsets, offsets);
+  // Kept particles keep their order: A 0-2, B's middle 3, C 4-6, D 7-9, E 10, F's last 11.
+  const std::vector<uint32_t> particles = {0, 1, 2, 0, 3, 2, 4, 5, 6, 7, 8, 9, 10, 10, 11};
+  EXPECT_EQ(muscle.fibreParticles, particles);
+  EXPECT_EQ(muscle.restPositions[3], btVector3(1, 1, 0));
+  EXPECT_EQ(muscle.restPositions[10], btVector3(9, 0, 0));
+  // Particles of different fibres are now at least the distance apart.
+  for (size_t f = 0; f + 1 < muscle.fibreCount(); ++f)
+    for (size_t g = f + 1; g < muscle.fibreCount(); ++g)
+      for (uint32_t i = muscle.fibreOffsets[f]; i < muscle.fibreOffsets[f + 1]; ++i)
+        for (uint32_t j = muscle.fibreOffsets[g]; j < muscle.fibreOffsets[g + 1]; ++j) {
+          const uint32_t a = muscle.fibreParticles[i], b = muscle.fibreParticles[j];
+          if (a != b) {
+            EXPECT_GE(muscle.restPositions[a].distance(muscle.restPositions[b]), 0.25f);
+          }
+        }
+  EXPECT_EQ(detail::mergeCloseParticles(muscle, 0.25f), 0u);  // nothing left to merge
+}
+
+TEST(MergeParticles, ConvergingFibresMergeAndNoSpringIsShorterThanTheDistance) {
+  // 16 fibres from a 2 cm square converge to one point 10 cm away (a tendon).
+  MuscleInput input;
+  input.name = "fan";
+  input.surface = boxMesh({-0.011f, -0.011f, -0.001f}, {0.011f, 0.011f, 0.101f});
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) {
+      const std::vector<btVector3> line = {{-0.009f + 0.006f * c, -0.009f + 0.006f * r, 0},
+                                           {0, 0, 0.1f}};
+      input.fibres.addFibre(line);
+    }
+  input.parameters.resolution = 21;
+  EXPECT_EQ(prepareOne(input).report.muscles[0].mergedParticles, 0u);  // only when asked
+  input.mergeConverging = true;
+  const PreparedScene scene = prepareOne(input);
+  ASSERT_EQ(scene.report.muscles.size(), 1u);
+  const MusclePreparationReport& report = scene.report.muscles[0];
+  const MuscleSettings& muscle = *scene.muscles[0];
+  EXPECT_EQ(report.sampledParticles, 16u * 21u);
+  EXPECT_GT(report.mergedParticles, 0u);
+  EXPECT_EQ(muscle.particleCount(), report.sampledParticles - report.mergedParticles);
+  // The step is about 5 mm (10 cm / 20); a quarter of it is the merge distance.
+  EXPECT_NEAR(report.mergeDistance, 0.25 * 0.1 / 20, 0.25 * 0.1 / 20 * 0.05);
+  expectWellFormedSprings(muscle, input.parameters.springs.kappa);
+  btScalar shortest = 1;
+  for (const Spring& spring : muscle.springs) shortest = std::min(shortest, spring.restLength);
+  EXPECT_EQ(report.shortestSpring, shortest);
+  // Along one fibre the jittered second particle may be closer; across fibres nothing is.
+  for (const Spring& spring : muscle.springs) {
+    if (spring.restLength < report.mergeDistance) {
+      EXPECT_TRUE(testing::shareAFibre(muscle, spring.a, spring.b))
+          << spring.a << "-" << spring.b << " " << spring.restLength;
+    }
+  }
+  bool reported = false;
+  for (const auto& repair : scene.report.repairs)
+    reported |= repair.find("fan") != std::string::npos &&
+                repair.find(std::to_string(report.mergedParticles) + " of 336 particles merged") !=
+                    std::string::npos;
+  EXPECT_TRUE(reported);
+}
+
+TEST(PushOut, PointsDeeperThanTheMinimumLeaveAlongTheNormal) {
+  const MeshDistance box(boxMesh({0, 0, 0}, {1, 1, 1}));
+  std::vector<btVector3> points = {{0.5f, 0.5f, 0.9f},    // 0.1 below the top face: moves up
+                                   {0.5f, 0.5f, 0.96f},   // 0.04 deep: shallower than 0.05
+                                   {0.5f, 0.5f, 1.5f},    // outside
+                                   {0.08f, 0.5f, 0.3f}};  // 0.08 from the face x = 0: moves
+  const size_t moved = detail::pushOutOf(points, box, 0.05f, 0.01f);
+  EXPECT_EQ(moved, 2u);
+  EXPECT_LT(points[0].distance(btVector3(0.5f, 0.5f, 1.01f)), 1e-5f);
+  EXPECT_EQ(points[1], btVector3(0.5f, 0.5f, 0.96f));
+  EXPECT_EQ(points[2], btVector3(0.5f, 0.5f, 1.5f));
+  EXPECT_LT(points[3].distance(btVector3(-0.01f, 0.5f, 0.3f)), 1e-5f);
 }
 
 TEST(Preparation, MassAndDamping) {
@@ -448,17 +555,38 @@ TEST(Preparation, WarnsAboutFibreEndsLeftLoose) {
   EXPECT_GT(total, 0u);  // (ΔL − δ) > 4 mm for 84 % of fibres: some are loose
 }
 
-TEST(Preparation, WarnsAboutFreeParticlesInsideABone) {
+TEST(Preparation, FreeParticlesInsideABoneArePushedOutAndFixed) {
   const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 20);
   const BoneInput bone = sphereBone("cyst", {0.05f, 0, 0}, 0.009f);
-  const PreparedScene scene = prepareScene({bone}, {input}, 1);
-  const MuscleSettings& muscle = *scene.muscles[0];
   const MeshDistance distance(bone.mesh);
-  size_t inside = 0;
-  for (uint32_t i = 0; i < muscle.particleCount(); ++i)
-    inside += !muscle.isFixed(i) && distance.signedDistance(muscle.restPositions[i]) < 0;
-  ASSERT_GT(inside, 0u);
-  EXPECT_EQ(warnedCount(scene, "particles lie inside bone 'cyst'"), inside);
+  // Without the bone the particles are the sampled ones (straight fibres: nothing merges).
+  const PreparedScene alone = prepareOne(input);
+  ASSERT_EQ(alone.report.muscles[0].mergedParticles, 0u);
+  size_t deep = 0;
+  for (const btVector3& p : alone.muscles[0]->restPositions)
+    deep += distance.signedDistance(p) < -input.parameters.attachmentDistance;
+  ASSERT_GT(deep, 0u);
+
+  const PreparedScene scene = prepareScene({bone}, {input}, 1);
+  const MusclePreparationReport& report = scene.report.muscles[0];
+  const btScalar margin = detail::medianSampleSpacing(*alone.muscles[0]) / 4;
+  ASSERT_EQ(report.pushedOutOfBones.size(), 1u);
+  EXPECT_EQ(report.pushedOutOfBones[0], deep);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  size_t freeInside = 0, justOutside = 0;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
+    const btScalar d = distance.signedDistance(muscle.restPositions[i]);
+    freeInside += !muscle.isFixed(i) && d < 0;
+    justOutside += d > 0 && d <= margin + 1e-6f && muscle.isFixed(i);
+  }
+  EXPECT_EQ(freeInside, 0u);
+  EXPECT_GE(justOutside, deep);  // moved to a quarter spacing outside
+  EXPECT_EQ(warnedCount(scene, "particles lie inside bone 'cyst'"), 0u);
+  bool reported = false;
+  for (const auto& repair : scene.report.repairs)
+    reported |= repair.find(std::to_string(deep) + " free particles inside bone 'cyst'") !=
+                std::string::npos;
+  EXPECT_TRUE(reported);
 }
 
 TEST(Preparation, BoundaryParticlesAndRadiiFromSurfaceVertices) {
@@ -576,13 +704,36 @@ TEST(Preparation, RestPoseHasNoOverlapBetweenBodies) {
   for (const auto& muscle : scene.muscles) fixed += muscle->fixedParticles.size();
   EXPECT_GT(fixed, 0u);  // the exemption was exercised
   bool reported = false;
-  for (const auto& warning : scene.report.warnings)
-    reported |= warning.find("muscle spheres shrunk") != std::string::npos;
+  for (const auto& repair : scene.report.repairs)
+    reported |= repair.find("muscle spheres shrunk") != std::string::npos;
   EXPECT_TRUE(reported);
   for (double coverage : scene.report.surfaceCoverage) {
     EXPECT_GT(coverage, 0);
     EXPECT_LE(coverage, 1);
   }
+}
+
+TEST(Preparation, OverlappingMusclesAreSeparatedAndSurfacesLeaveBones) {
+  // Two 2 cm box muscles overlapping by 4 mm in y; a bone plate cutting 1 mm into the first.
+  const MuscleInput first = gridMuscle("first", 0, 0.1f, 0, 0.01f, 3, 3, 20);
+  const MuscleInput second = gridMuscle("second", 0, 0.1f, 0.016f, 0.01f, 3, 3, 20);
+  const BoneInput plate = boxBone("plate", {-0.01f, -0.03f, -0.015f}, {0.11f, 0.03f, -0.009f});
+  const PreparedScene scene = prepareScene({plate}, {first, second}, 1);
+  const MeshDistance firstSurface(first.surface), plateDistance(plate.mesh);
+  const MusclePreparationReport& report = scene.report.muscles[1];
+  ASSERT_EQ(report.pushedOutOfMuscles.size(), 2u);
+  EXPECT_GT(report.pushedOutOfMuscles[0], 0u);
+  EXPECT_EQ(report.pushedOutOfMuscles[1], 0u);  // not out of itself
+  EXPECT_TRUE(scene.report.muscles[0].pushedOutOfMuscles == std::vector<size_t>(2, 0));
+  for (const btVector3& p : scene.muscles[1]->restPositions)
+    EXPECT_GE(firstSurface.signedDistance(p), 0) << p.y();
+  // The first muscle's surface vertices on its bottom face inside the plate move out of it.
+  size_t insideBefore = 0;
+  for (const btVector3& v : first.surface.vertices) insideBefore += plateDistance.inside(v);
+  EXPECT_EQ(scene.report.muscles[0].surfaceVerticesPushedOut[0], insideBefore);
+  for (const btVector3& v : scene.muscles[0]->restSurface.vertices)
+    EXPECT_FALSE(plateDistance.inside(v));
+  expectNoInterBodyOverlap(scene);
 }
 
 TEST(BoneSpheres, CentresLieInsideTheBone) {

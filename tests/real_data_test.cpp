@@ -6,12 +6,14 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "fibremss/FibreGeneration.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "support/PrepFixtures.h"
 #include "support/Process.h"
 
 namespace fibremss {
@@ -55,8 +57,19 @@ TEST(RealData, FibresOfARealMuscleMeetTheQualityBounds) {
   // Coverage bound: 64 fibres in this ~160 mm long muscle leave it at least 40 % within 5 mm
   // (measured 50 %: it is wide and flat, 64 fibres 5 mm thick cannot fill it).
   EXPECT_GE(q.coverage, 0.4);
-  EXPECT_GT(q.minLength, 0.05);
+  EXPECT_EQ(q.pointsOutside, 0);
+  // Length spread: no fibre is shorter than the straight line between the two areas (less a
+  // voxel at each end for where a streamline starts and stops).
+  btScalar gap = std::numeric_limits<btScalar>::infinity();
+  for (uint32_t o : result.originArea)
+    for (uint32_t i : result.insertionArea)
+      gap = std::min(gap, muscle.vertices[o].distance(muscle.vertices[i]));
+  EXPECT_GT(q.minLength, gap - 2 * q.voxelSize);
+  EXPECT_LE(q.minLength, q.medianLength);
   EXPECT_LE(q.medianLength, q.maxLength);
+  // Crossings: streamlines of a gradient field do not cross; pairs closer than the tolerance
+  // are fibres converging into the tendon. Bound: at most 5 % of the 2016 pairs.
+  EXPECT_LE(q.crossingPairs, 64 * 63 / 2 / 20);
 }
 
 LoadedScene loadRealScene(const std::string& name) {
@@ -70,7 +83,7 @@ TEST(RealData, HipScenePreparesWithAnchorsAndAFittedPivot) {
   // The femur plus one static anchor plate per muscle origin.
   ASSERT_EQ(scene.bones.size(), 5u);
   EXPECT_EQ(scene.bones[0].name, "femur");
-  ASSERT_EQ(scene.poseCount, 5);
+  ASSERT_EQ(scene.poseCount, 19);  // 0 -> 90 deg in 5 deg steps
   for (const auto& muscle : scene.muscles) EXPECT_EQ(muscle.fibres.fibreCount(), 64u);
   // The sweep pivot is the femoral head's fitted centre: it stays put in every pose.
   btVector3 head;
@@ -99,8 +112,28 @@ TEST(RealData, HipScenePreparesWithAnchorsAndAFittedPivot) {
     EXPECT_GT(onFemur, 0u) << muscle.name;
     for (const auto& p : muscle.restPositions) ASSERT_TRUE(std::isfinite(p.length2()));
   }
+  // Converging fibres: particles of other fibres closer than a quarter spacing were merged, so
+  // the shortest spring is no shorter than that unless it lies along one fibre.
+  ASSERT_EQ(prepared.report.muscles.size(), 4u);
+  for (size_t m = 0; m < 4; ++m) {
+    const MusclePreparationReport& report = prepared.report.muscles[m];
+    const MuscleSettings& muscle = *prepared.muscles[m];
+    EXPECT_EQ(report.sampledParticles, 64u * 30u);
+    EXPECT_EQ(muscle.particleCount(), report.sampledParticles - report.mergedParticles);
+    EXPECT_GT(report.mergeDistance, 0);
+    for (const Spring& spring : muscle.springs) {
+      if (spring.restLength < report.mergeDistance) {
+        EXPECT_TRUE(testing::shareAFibre(muscle, spring.a, spring.b)) << muscle.name;
+      }
+    }
+  }
+  // Every surface vertex starts outside the femur (those inside were moved out).
+  const MeshDistance femur(scene.bones[0].mesh);
+  for (const auto& muscle : prepared.muscles)
+    for (const btVector3& v : muscle->restSurface.vertices) ASSERT_FALSE(femur.inside(v));
   for (const auto& warning : prepared.report.warnings)
     std::cout << "[prepared] " << warning << "\n";
+  for (const auto& repair : prepared.report.repairs) std::cout << "[repaired] " << repair << "\n";
 }
 
 TEST(RealData, BlockScenePrepares) {

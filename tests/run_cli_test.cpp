@@ -169,6 +169,58 @@ TEST(RunCli, AnUnstableRunFailsWithExitCode3AndSaysWhere) {
   }
 }
 
+TEST(RunCli, TheSummaryRecordsWhatTheNumericalGuardDid) {
+  // The default policy retries with smaller steps, then freezes the muscle that still bursts.
+  TemporaryDirectory out("fibremss_run_cli_guard");
+  const auto result = runProcess(cli() + " run fusiform" + kUnstable +
+                                 " --set max_retries=1 --steps 5 --out " + out.path().string());
+  EXPECT_EQ(result.exitCode, 3) << result.output;
+  EXPECT_NE(result.output.find("frozen at step"), std::string::npos) << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  const nlohmann::json& guard = summary.at("guard");
+  EXPECT_EQ(guard.at("policy"), "retry");
+  EXPECT_GE(guard.at("rolled_back_steps").get<int>(), 1);
+  EXPECT_EQ(guard.at("retries").get<int>(), 1);  // all spent
+  ASSERT_EQ(guard.at("frozen").size(), 1u);      // fusiform has one muscle
+  EXPECT_EQ(guard.at("frozen")[0].at("step"), summary.at("failed_step"));
+
+  // Only reporting: the run stops at the same kind of failure without any rollback.
+  const auto reported =
+      runProcess(cli() + " run fusiform" + kUnstable + " --set on_failure=report --steps 5 --json");
+  EXPECT_EQ(reported.exitCode, 3) << reported.output;
+  const nlohmann::json report = nlohmann::json::parse(reported.output);
+  EXPECT_EQ(report.at("guard").at("rolled_back_steps"), 0);
+  EXPECT_TRUE(report.at("guard").at("frozen").empty());
+  EXPECT_GE(report.at("failed_step").get<int>(), 0);
+}
+
+TEST(RunCli, ALoopedRunSamplesMemoryDriftAndTiming) {
+  TemporaryDirectory out("fibremss_run_cli_soak");
+  const auto result = runProcess(cli() +
+                                 " run fusiform --loop --steps 12 --sample-every 100 --frame-every "
+                                 "0 --out " +
+                                 out.path().string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  EXPECT_EQ(summary.at("steps"), 12);
+  EXPECT_EQ(summary.at("loop_motion"), true);
+  const nlohmann::json& soak = summary.at("soak");
+  const long iterations = summary.at("iterations");
+  ASSERT_GE(soak.at("samples").get<long>(), 1);
+  EXPECT_LE(soak.at("samples").get<long>(), iterations / 100);
+  EXPECT_EQ(soak.at("all_finite"), true);
+  EXPECT_GT(soak.at("resident_mb_max").get<double>(), 0);
+  EXPECT_LE(soak.at("ms_per_iteration_min").get<double>(),
+            soak.at("ms_per_iteration_max").get<double>());
+  // Fixed particles are put on T·rest every iteration: only rounding separates them.
+  EXPECT_LT(soak.at("fixed_drift_mm_max").get<double>(), 1e-3);
+  std::istringstream csv(readFile(out.path() / "soak.csv"));
+  std::string line;
+  size_t lines = 0;
+  while (std::getline(csv, line)) ++lines;
+  EXPECT_EQ(lines, soak.at("samples").get<size_t>() + 1);  // a header and one line per sample
+}
+
 TEST(RunCli, AnOutputDirectoryThatCannotBeMadeIsAnError) {
   TemporaryDirectory out("fibremss_run_cli_blocked");
   const fs::path blocker = out.path() / "file";

@@ -398,6 +398,7 @@ SweepResult sweep(const std::string& scene, const std::vector<std::string>& over
   const PreparedScene prepared = prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
   SimulationParameters parameters = loaded.simulation;
   parameters.blendedPretransform = blended;
+  parameters.onFailure = FailurePolicy::Report;  // the raw solver: no guard retries
   MuscleSystem system(parameters);
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
@@ -478,8 +479,9 @@ TEST(TwoBoneMuscles, WalkingKeepsEverySpringBelowThreeTimesItsRestLength) {
   EXPECT_LT(blended.maxSpringRatio, 3.0);
   EXPECT_LT(blended.maxSpringRatio, nearest.maxSpringRatio);
   // The surface tears less: where the nearest bone changes, the thesis' surface opens gaps
-  // (measured: edges up to 21 mm longer than at rest, against 9 mm with the blend).
-  EXPECT_LT(blended.maxEdgeGrowth, 0.5 * nearest.maxEdgeGrowth);
+  // (measured since preparation moves rest surface vertices out of bones: edges up to 15 mm
+  // longer than at rest, against 10 mm with the blend; before that 21 mm against 9 mm).
+  EXPECT_LT(blended.maxEdgeGrowth, 0.75 * nearest.maxEdgeGrowth);
   EXPECT_LT(blended.maxEdgeRatio, nearest.maxEdgeRatio);
 }
 
@@ -655,6 +657,7 @@ TEST(Explosion, FlagsNanAndExplodedSprings) {
   addSpring(*muscle, 0, 1, 1000, 0.01);
   SimulationParameters parameters = fixedStep(1e-3);
   parameters.iterations = 100;
+  parameters.onFailure = FailurePolicy::Report;  // the raw solver: no guard retries
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());
   system.addMuscle(muscle, std::span(&bone, 1));

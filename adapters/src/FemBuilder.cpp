@@ -1,41 +1,67 @@
 #include "fibremss/FemBuilder.h"
 
-#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletSoftBody/btDeformableBodySolver.h>
 #include <BulletSoftBody/btDeformableMultiBodyConstraintSolver.h>
 #include <BulletSoftBody/btDeformableMultiBodyDynamicsWorld.h>
 #include <BulletSoftBody/btDeformableNeoHookeanForce.h>
 #include <BulletSoftBody/btSoftBodyHelpers.h>
-#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 
 #include <algorithm>
 #include <limits>
+#include <span>
 #include <stdexcept>
 #include <utility>
 
 #include "SoftBodyBones.h"
+#include "fibremss/Geometry.h"
 
 namespace fibremss {
+namespace {
+
+/// Unit normal of a mesh triangle (its corners counter-clockwise seen from outside).
+btVector3 faceNormal(const TriangleMesh& mesh, uint32_t triangle) {
+  const auto& t = mesh.triangles[triangle];
+  btVector3 normal =
+      (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+  return normal.safeNormalize();
+}
+
+}  // namespace
 
 struct FemScene::Impl {
   FemDefinition definition;
-  std::unique_ptr<btSoftBodyRigidBodyCollisionConfiguration> configuration;
-  std::unique_ptr<btCollisionDispatcher> dispatcher;
-  std::unique_ptr<btDbvtBroadphase> broadphase;
-  std::unique_ptr<btDeformableBodySolver> deformableSolver;
-  std::unique_ptr<btDeformableMultiBodyConstraintSolver> solver;
+  SoftWorldParts parts;
+  std::unique_ptr<btDeformableBodySolver> deformableSolver =
+      std::make_unique<btDeformableBodySolver>();
+  std::unique_ptr<btDeformableMultiBodyConstraintSolver> solver =
+      std::make_unique<btDeformableMultiBodyConstraintSolver>();
   std::unique_ptr<btDeformableMultiBodyDynamicsWorld> world;
-  std::vector<KinematicBone> bones;
   std::vector<btTransform> boneTransforms;
 
+  /// A bone for the node contact: its exact surface and bounds in its rest frame [m].
+  struct Bone {
+    MeshDistance surface;    ///< closest points, inside test
+    btVector3 lower, upper;  ///< rest bounds grown by the contact reach
+    /// p (rest frame) lies within the grown bounds.
+    bool near(const btVector3& p) const {
+      return p.x() >= lower.x() && p.y() >= lower.y() && p.z() >= lower.z() && p.x() <= upper.x() &&
+             p.y() <= upper.y() && p.z() <= upper.z();
+    }
+  };
+  std::vector<Bone> bones;
+  btScalar contactMargin = 0;  ///< nodes are kept this far outside the bones [m]
+  btScalar contactReach = 0;   ///< how far from a bone's surface nodes are looked at [m]
+
   struct Muscle {
-    TetMesh mesh;                      ///< rest tetrahedra
-    TetEmbedding surface;              ///< the muscle's surface vertices in them
-    std::vector<uint32_t> pinned;      ///< pinned node indices
-    std::vector<int32_t> pinnedBone;   ///< their bones
-    std::vector<btVector3> positions;  ///< node positions after the last step
-    btSoftBody* body = nullptr;        ///< owned; removed from the world first
-    double networkStiffness = 0;       ///< Σ κ·L0 of its springs [N·m]
+    TetMesh mesh;                        ///< rest tetrahedra
+    TetEmbedding surface;                ///< the muscle's surface vertices in them
+    std::vector<uint8_t> startedInside;  ///< node × bone: inside that bone at the start (such
+                                         ///< nodes keep their contact-free overlap with it)
+    std::vector<uint32_t> pinned;        ///< pinned node indices
+    std::vector<int32_t> pinnedBone;     ///< their bones
+    std::vector<btVector3> positions;    ///< node positions after the last step
+    btSoftBody* body = nullptr;          ///< owned; removed from the world first
+    double networkStiffness = 0;         ///< Σ κ·L0 of its springs [N·m]
   };
   std::vector<Muscle> muscles;
   /// One elasticity for all muscles: Bullet merges forces of one type into the first added.
@@ -61,16 +87,73 @@ struct FemScene::Impl {
   }
 
   ~Impl() {
-    // Removing a body ends its pairs, and each ending pair scans every SDF bucket once per
-    // cached triangle: empty the SDF down to one bucket first.
-    world->getWorldInfo().m_sparsesdf.Reset();
-    world->getWorldInfo().m_sparsesdf.Initialize(1, 1);
     for (Muscle& m : muscles) {
       world->removeSoftBodyForce(m.body);
       world->removeSoftBody(m.body);
       delete m.body;
     }
-    for (KinematicBone& b : bones) world->removeRigidBody(b.body.get());
+  }
+
+  void addBone(const BoneSettings& settings) {
+    btVector3 lower(BT_LARGE_FLOAT, BT_LARGE_FLOAT, BT_LARGE_FLOAT);
+    btVector3 upper = -lower;
+    for (const btVector3& v : settings.mesh.vertices) {
+      lower.setMin(v);
+      upper.setMax(v);
+    }
+    const btVector3 reach(contactReach, contactReach, contactReach);
+    bones.push_back({MeshDistance(settings.mesh), lower - reach, upper + reach});
+  }
+
+  /// Marks the nodes that start inside a bone (the scene's rest geometry overlaps there):
+  /// pushing them out by up to a voxel at once inverts their tetrahedra.
+  void markStartedInside() {
+    const btScalar scale = definition.lengthScale;
+    for (Muscle& muscle : muscles) {
+      const size_t nodes = static_cast<size_t>(muscle.body->m_nodes.size());
+      muscle.startedInside.assign(nodes * bones.size(), 0);
+      for (size_t n = 0; n < nodes; ++n) {
+        for (size_t b = 0; b < bones.size(); ++b) {
+          const btVector3 p =
+              boneTransforms[b].invXform(muscle.body->m_nodes[static_cast<int>(n)].m_x / scale);
+          muscle.startedInside[n * bones.size() + b] =
+              bones[b].near(p) && bones[b].surface.signedDistance(p) < 0;
+        }
+      }
+    }
+  }
+
+  /// Keeps every free node at least contactMargin outside every bone it did not start in: a
+  /// node within contactReach of a bone's surface and closer than the margin (or inside) is
+  /// moved to the
+  /// margin along the surface normal and its velocity into the bone (relative to the bone's
+  /// motion over the substep `dt`, from `previous` transforms) is removed.
+  void projectNodes(std::span<const btTransform> previous, btScalar dt) {
+    const btScalar scale = definition.lengthScale;
+    for (Muscle& muscle : muscles) {
+      for (int n = 0; n < muscle.body->m_nodes.size(); ++n) {
+        btSoftBody::Node& node = muscle.body->m_nodes[n];
+        if (node.m_im == 0) continue;  // pinned
+        for (size_t b = 0; b < bones.size(); ++b) {
+          if (muscle.startedInside[static_cast<size_t>(n) * bones.size() + b]) continue;
+          const Bone& bone = bones[b];
+          const btVector3 p = boneTransforms[b].invXform(node.m_x / scale);
+          if (!bone.near(p)) continue;
+          const MeshDistance::Closest c = bone.surface.closest(p, contactReach);
+          if (c.triangle == UINT32_MAX || (!c.inside && c.distance >= contactMargin)) continue;
+          const btVector3 outward = c.distance > btScalar(1e-9)
+                                        ? (c.inside ? c.point - p : p - c.point) / c.distance
+                                        : faceNormal(bone.surface.mesh(), c.triangle);
+          const btVector3 target = c.point + outward * contactMargin;
+          node.m_x = boneTransforms[b] * target * scale;
+          const btVector3 normal = boneTransforms[b].getBasis() * outward;
+          const btVector3 boneVelocity =
+              (boneTransforms[b] * target - previous[b] * target) * (scale / dt);
+          const btScalar into = (node.m_v - boneVelocity).dot(normal);
+          if (into < 0) node.m_v -= normal * into;
+        }
+      }
+    }
   }
 
   void addMuscle(const MuscleSettings& s) {
@@ -162,12 +245,9 @@ struct FemScene::Impl {
     body.m_tetraScratchesTn.resize(body.m_tetras.size(), identity);
     btSoftBodyHelpers::generateBoundaryFaces(&body);
     body.getCollisionShape()->setMargin(mesh.cellSize * btScalar(0.25) * scale);
-    body.m_cfg.collisions = 0;
-    if (definition.boneContact) body.m_cfg.collisions |= btSoftBody::fCollision::SDF_RD;
+    body.m_cfg.collisions = 0;  // bone contact is projectNodes
     if (definition.muscleContact) body.m_cfg.collisions |= btSoftBody::fCollision::VF_DD;
-    body.m_cfg.kKHR = 1;  // contact hardness with kinematic bodies
-    body.m_cfg.kCHR = 1;  // contact hardness with rigid bodies
-    body.m_cfg.kDF = 0;   // frictionless, as FibreMSS's response
+    body.m_cfg.kDF = 0;  // frictionless, as FibreMSS's response
     body.m_sleepingThreshold = 0;
     // Bullet collides deformable faces pairwise unless told not to: minutes per pose on thigh13.
     body.m_softSoftCollision = definition.muscleContact;
@@ -225,58 +305,52 @@ FemScene::FemScene(const PreparedScene& scene, std::span<const btTransform> bone
   }
   Impl& m = *impl_;
   m.definition = definition;
-  m.configuration = std::make_unique<btSoftBodyRigidBodyCollisionConfiguration>();
-  m.dispatcher = std::make_unique<btCollisionDispatcher>(m.configuration.get());
-  m.broadphase = std::make_unique<btDbvtBroadphase>();
-  m.deformableSolver = std::make_unique<btDeformableBodySolver>();
-  m.solver = std::make_unique<btDeformableMultiBodyConstraintSolver>();
   m.solver->setDeformableSolver(m.deformableSolver.get());
   m.world = std::make_unique<btDeformableMultiBodyDynamicsWorld>(
-      m.dispatcher.get(), m.broadphase.get(), m.solver.get(), m.configuration.get(),
-      m.deformableSolver.get());
+      m.parts.dispatcher.get(), m.parts.broadphase.get(), m.solver.get(),
+      m.parts.configuration.get(), m.deformableSolver.get());
   m.world->setGravity(btVector3(0, 0, 0));
-  btSoftBodyWorldInfo& info = m.world->getWorldInfo();
-  info.m_gravity.setZero();
-  info.m_sparsesdf.Initialize(kSdfBuckets, kSdfMaxCells);
-  info.m_sparsesdf.setDefaultVoxelsz(definition.sdfVoxelSize * definition.lengthScale);
+  m.world->getWorldInfo().m_gravity.setZero();
 
   m.boneTransforms.assign(scene.bones.size(), btTransform::getIdentity());
   if (!boneTransforms.empty())
     m.boneTransforms.assign(boneTransforms.begin(), boneTransforms.end());
-  m.bones.reserve(scene.bones.size());
-  for (size_t b = 0; b < scene.bones.size(); ++b) {
-    m.bones.emplace_back(*scene.bones[b],
-                         scaledTransform(m.boneTransforms[b], definition.lengthScale),
-                         definition.lengthScale);
-    if (definition.boneContact) m.world->addRigidBody(m.bones.back().body.get());
-  }
   for (const auto& muscle : scene.muscles) m.addMuscle(*muscle);
   m.addElasticity();
+  // Contact reach from the finest muscle grid: one voxel (a node moves less in a substep).
+  btScalar cell = BT_LARGE_FLOAT;
+  for (const Impl::Muscle& muscle : m.muscles) cell = std::min(cell, muscle.mesh.cellSize);
+  m.contactMargin = std::max(definition.contactMargin, btScalar(0));
+  m.contactReach = std::max(cell, 2 * m.contactMargin);
+  if (definition.boneContact) {
+    for (const auto& bone : scene.bones) m.addBone(*bone);
+  }
+  m.markStartedInside();
 }
 
 FemScene::~FemScene() = default;
 
 bool FemScene::stepPose(std::span<const btTransform> targets, const std::function<bool()>& stop) {
   Impl& m = *impl_;
-  if (targets.size() != m.bones.size()) {
+  if (targets.size() != m.boneTransforms.size()) {
     throw std::invalid_argument("FemScene::stepPose: bone transforms do not match the bones");
   }
   const int substeps = m.definition.substepsPerPose;
   const btScalar dt = m.definition.poseDuration / static_cast<btScalar>(substeps);
   const std::vector<btTransform> from = m.boneTransforms;
+  std::vector<btTransform> previous = from;
   for (int k = 1; k <= substeps; ++k) {
     if (stop && stop()) return false;
     const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
-    for (size_t b = 0; b < m.bones.size(); ++b) {
+    for (size_t b = 0; b < from.size(); ++b) {
+      previous[b] = m.boneTransforms[b];
       m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
-      m.bones[b].body->setWorldTransform(
-          scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
     }
     for (const Impl::Muscle& muscle : m.muscles) m.movePins(muscle);
     m.world->stepSimulation(dt, 0);
+    m.projectNodes(previous, dt);
   }
   for (Impl::Muscle& muscle : m.muscles) m.readPositions(muscle);
-  m.world->getWorldInfo().m_sparsesdf.GarbageCollect();
   return true;
 }
 

@@ -262,8 +262,10 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
   } else {
     Fields generator = fibres.object("generator");
     int columns = 0;
-    if (!scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount,
-                                      reader.scale, *reader.result, input.fibres))
+    input.mergeConverging =
+        scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount, reader.scale,
+                                     *reader.result, input.fibres);
+    if (!input.mergeConverging)
       input.fibres = scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount,
                                            lattice, &columns);
     input.fibreGridColumns = gridColumns > 0 ? gridColumns : columns;
@@ -486,7 +488,7 @@ LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::stri
   Json raw;
   try {
     raw = Json::parse(text);
-  } catch (const Json::parse_error& e) {
+  } catch (const Json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
     throw InputError(source, "", std::string("not valid JSON: ") + e.what());
   }
   scene::applyOverrides(raw, overrides);

@@ -1,8 +1,6 @@
 #include "fibremss/SoftBodyBuilder.h"
 
-#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
-#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
 
 #include <algorithm>
@@ -10,8 +8,37 @@
 #include <stdexcept>
 
 #include "SoftBodyBones.h"
+#include "fibremss/BoneBody.h"
 
 namespace fibremss {
+namespace {
+
+/// Drops the pinned nodes from every cluster (and the clusters left with fewer than four
+/// nodes, which have no inertia), then recomputes the clusters. Bullet weighs a mass-0 node as
+/// BT_LARGE_FLOAT (1e18) in its cluster; in float the cluster's inertia then overflows and its
+/// inverse is NaN, which CL_SS spreads to every node it touches (NaN in thigh13's first pose).
+/// Pinned nodes are moved with their bones by us, so cluster impulses must not touch them.
+void clustersOfFreeNodes(btSoftBody& body) {
+  for (int c = body.m_clusters.size() - 1; c >= 0; --c) {
+    btSoftBody::Cluster& cluster = *body.m_clusters[c];
+    btAlignedObjectArray<btSoftBody::Node*> free;
+    for (int j = 0; j < cluster.m_nodes.size(); ++j) {
+      if (cluster.m_nodes[j]->m_im > 0) free.push_back(cluster.m_nodes[j]);
+    }
+    if (free.size() < 4) {
+      body.releaseCluster(c);
+      continue;
+    }
+    cluster.m_nodes = free;
+    cluster.m_containsAnchor = false;
+    if (cluster.m_leaf) body.m_cdbvt.remove(cluster.m_leaf);  // initializeClusters forgets it
+    cluster.m_leaf = nullptr;
+  }
+  body.initializeClusters();
+  body.updateClusters();
+}
+
+}  // namespace
 
 void skinSurface(const MuscleSettings& muscle, std::span<const btVector3> positions,
                  std::span<const btTransform> boneTransforms, std::vector<btVector3>& out) {
@@ -47,14 +74,19 @@ std::vector<btVector3> posedParticles(const MuscleSettings& muscle,
 
 struct SoftBodyScene::Impl {
   SoftBodyDefinition definition;
-  std::unique_ptr<btSoftBodyRigidBodyCollisionConfiguration> configuration;
-  std::unique_ptr<btCollisionDispatcher> dispatcher;
-  std::unique_ptr<btDbvtBroadphase> broadphase;
-  std::unique_ptr<btSequentialImpulseConstraintSolver> solver;
-  std::unique_ptr<btSoftRigidDynamicsWorld> world;
+  SoftWorldParts parts;
+  std::unique_ptr<btSequentialImpulseConstraintSolver> solver =
+      std::make_unique<btSequentialImpulseConstraintSolver>();
+  std::unique_ptr<btSoftRigidDynamicsWorld> world = std::make_unique<btSoftRigidDynamicsWorld>(
+      parts.dispatcher.get(), parts.broadphase.get(), solver.get(), parts.configuration.get());
 
-  std::vector<KinematicBone> bones;
-  std::vector<btTransform> boneTransforms;
+  /// Kinematic bones in Bullet units, their bounds padded by kBonePadding so that muscle–bone
+  /// pairs never end: when one ends, btSoftBodyTriangleCallback::clearCache scans every
+  /// sparse-SDF cell once per cached triangle (minutes per pose on thigh13). Triangles are
+  /// still culled by the muscle's own bounds.
+  std::vector<std::unique_ptr<BoneBody>> bones;
+  std::vector<btTransform> boneTransforms;     ///< current bone poses [m]
+  static constexpr btScalar kBonePadding = 2;  ///< [m] beyond any muscle's reach
 
   struct Muscle {
     std::shared_ptr<const MuscleSettings> settings;
@@ -73,13 +105,16 @@ struct SoftBodyScene::Impl {
       world->removeSoftBody(m.body);
       delete m.body;
     }
-    for (KinematicBone& b : bones) world->removeRigidBody(b.body.get());
+    for (auto& bone : bones) world->removeRigidBody(bone->body());
   }
 
-  void addBone(const BoneSettings& settings, const btTransform& transform) {
-    bones.emplace_back(settings, scaledTransform(transform, definition.lengthScale),
-                       definition.lengthScale);
-    if (definition.boneCollision) world->addRigidBody(bones.back().body.get());
+  void addBone(std::shared_ptr<const BoneSettings> settings, const btTransform& transform) {
+    const btScalar scale = definition.lengthScale;
+    bones.push_back(std::make_unique<BoneBody>(std::move(settings),
+                                               scaledTransform(transform, scale),
+                                               BoneBodyOptions{scale, kBonePadding * scale}));
+    bones.back()->body()->getCollisionShape()->setMargin(0);
+    if (definition.boneCollision) world->addRigidBody(bones.back()->body());
   }
 
   void addMuscle(std::shared_ptr<const MuscleSettings> settings) {
@@ -135,6 +170,7 @@ struct SoftBodyScene::Impl {
       body.m_cfg.collisions |= btSoftBody::fCollision::CL_SS;
       body.generateClusters(
           std::min<int>(definition.clustersPerMuscle, static_cast<int>(s.particleCount())));
+      clustersOfFreeNodes(body);
     }
     // Collision margin: the mean radius of the colliding particles (FibreMSS's spheres).
     double radius = 0;
@@ -171,23 +207,18 @@ SoftBodyScene::SoftBodyScene(const PreparedScene& scene,
   }
   Impl& m = *impl_;
   m.definition = definition;
-  m.configuration = std::make_unique<btSoftBodyRigidBodyCollisionConfiguration>();
-  m.dispatcher = std::make_unique<btCollisionDispatcher>(m.configuration.get());
-  m.broadphase = std::make_unique<btDbvtBroadphase>();
-  m.solver = std::make_unique<btSequentialImpulseConstraintSolver>();
-  m.world = std::make_unique<btSoftRigidDynamicsWorld>(m.dispatcher.get(), m.broadphase.get(),
-                                                       m.solver.get(), m.configuration.get());
   m.world->setGravity(btVector3(0, 0, 0));
   btSoftBodyWorldInfo& info = m.world->getWorldInfo();
   info.m_gravity.setZero();
   info.air_density = 0;
   info.m_sparsesdf.Initialize(kSdfBuckets, kSdfMaxCells);
   info.m_sparsesdf.setDefaultVoxelsz(definition.sdfVoxelSize * definition.lengthScale);
+  info.m_sparsesdf.Reset();  // the voxel size takes effect only here
 
   m.boneTransforms.assign(scene.bones.size(), btTransform::getIdentity());
   if (!boneTransforms.empty())
     m.boneTransforms.assign(boneTransforms.begin(), boneTransforms.end());
-  for (size_t b = 0; b < scene.bones.size(); ++b) m.addBone(*scene.bones[b], m.boneTransforms[b]);
+  for (size_t b = 0; b < scene.bones.size(); ++b) m.addBone(scene.bones[b], m.boneTransforms[b]);
   for (const auto& muscle : scene.muscles) m.addMuscle(muscle);
 }
 
@@ -205,8 +236,7 @@ void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
     const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
     for (size_t b = 0; b < m.bones.size(); ++b) {
       m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
-      m.bones[b].body->setWorldTransform(
-          scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
+      m.bones[b]->setTransform(scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
     }
     for (const Impl::Muscle& muscle : m.muscles) m.movePins(muscle);
     m.world->stepSimulation(dt, 0);

@@ -81,6 +81,33 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared)
   collection.write((fs::path(directory) / "rest.pvd").string());
 }
 
+/// What preparation found and repaired, per muscle, by name (the JSON "preparation" object).
+nlohmann::ordered_json preparationReport(const PreparationReport& report,
+                                         const LoadedScene& scene) {
+  auto byName = [](const std::vector<size_t>& counts, auto name) {
+    nlohmann::ordered_json object = nlohmann::ordered_json::object();
+    for (size_t i = 0; i < counts.size(); ++i)
+      if (counts[i] > 0) object[name(i)] = counts[i];
+    return object;
+  };
+  auto boneName = [&](size_t b) { return scene.bones[b].name; };
+  auto muscleName = [&](size_t m) { return scene.muscles[m].name; };
+  nlohmann::ordered_json muscles = nlohmann::ordered_json::array();
+  for (size_t m = 0; m < report.muscles.size(); ++m) {
+    const MusclePreparationReport& r = report.muscles[m];
+    muscles.push_back(
+        {{"name", scene.muscles[m].name},
+         {"sampled_particles", r.sampledParticles},
+         {"merged_particles", r.mergedParticles},
+         {"merge_distance_mm", r.mergeDistance * 1000},
+         {"shortest_spring_mm", r.shortestSpring * 1000},
+         {"pushed_out_of_muscles", byName(r.pushedOutOfMuscles, muscleName)},
+         {"pushed_out_of_bones", byName(r.pushedOutOfBones, boneName)},
+         {"surface_vertices_pushed_out", byName(r.surfaceVerticesPushedOut, boneName)}});
+  }
+  return {{"repairs", report.repairs}, {"muscles", muscles}};
+}
+
 void runCheck(const CheckArgs& args) {
   using Clock = std::chrono::steady_clock;
   const auto loadStart = Clock::now();
@@ -91,6 +118,7 @@ void runCheck(const CheckArgs& args) {
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (const auto& warning : prepared.report.warnings)
     std::cerr << "fibremss: warning: " << warning << "\n";
+  const nlohmann::ordered_json preparation = preparationReport(prepared.report, scene);
 
   nlohmann::ordered_json muscles = nlohmann::ordered_json::array();
   nlohmann::ordered_json bones = nlohmann::ordered_json::array();
@@ -132,7 +160,8 @@ void runCheck(const CheckArgs& args) {
                                   {"preparation_seconds", prepared.report.seconds},
                                   {"muscles", muscles},
                                   {"bones", bones},
-                                  {"warnings", prepared.report.warnings}};
+                                  {"warnings", prepared.report.warnings},
+                                  {"preparation", preparation}};
     for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
     std::cout << result.dump(2) << "\n";
     return;
@@ -160,6 +189,9 @@ void runCheck(const CheckArgs& args) {
             << " fixed, " << springs << " springs, " << spheres << " bone spheres\n";
   std::cout << std::setprecision(3) << "load " << loadSeconds << " s, preparation "
             << prepared.report.seconds << " s\n";
+  std::cout << "preparation report:"
+            << (prepared.report.repairs.empty() ? " nothing repaired\n" : "\n");
+  for (const auto& repair : prepared.report.repairs) std::cout << "  repaired: " << repair << "\n";
   if (!args.out.empty()) std::cout << "rest state written to " << args.out << "/rest.pvd\n";
 }
 

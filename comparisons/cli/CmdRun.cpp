@@ -11,6 +11,7 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "Commands.h"
 #include "SceneArgs.h"
@@ -22,11 +23,13 @@ namespace fibremss::cli {
 namespace {
 
 struct RunArgs {
-  SceneArgs scene;      ///< SCENE and --set overrides
-  std::string out;      ///< --out DIR ("" writes nothing)
-  int steps = -1;       ///< --steps N (< 0: one per pose)
-  int frameEvery = -1;  ///< --frame-every K (< 0: the scene's outputs.frame_every)
-  bool json = false;    ///< --json: the summary as JSON on stdout
+  SceneArgs scene;       ///< SCENE and --set overrides
+  std::string out;       ///< --out DIR ("" writes nothing)
+  int steps = -1;        ///< --steps N (< 0: one per pose)
+  int frameEvery = -1;   ///< --frame-every K (< 0: the scene's outputs.frame_every)
+  bool json = false;     ///< --json: the summary as JSON on stdout
+  bool loop = false;     ///< --loop: sweep the motion forth and back past its last pose
+  long sampleEvery = 0;  ///< --sample-every K: soak sample every K iterations (0: none)
 };
 
 /// Exit codes beyond 0 (done), 1 (error) and 2 (bad input).
@@ -61,7 +64,57 @@ class InterruptGuard {
   struct sigaction previous_ {};
 };
 
-void printSummary(const RunMetrics& m, const FibreRunDetails& details, const RunArgs& args) {
+/// What the numerical guard did, for summary.json.
+nlohmann::json guardJson(const FibreRunDetails& details, FailurePolicy policy) {
+  nlohmann::json frozen = nlohmann::json::array();
+  for (const FrozenMuscle& muscle : details.frozen)
+    frozen.push_back({{"muscle", muscle.name},
+                      {"step", muscle.step},
+                      {"cause", muscle.nan ? "nan" : "exploded"}});
+  return {{"policy", toString(policy)},
+          {"rolled_back_steps", details.rolledBackSteps},
+          {"retries", details.retries},
+          {"frozen", frozen}};
+}
+
+/// Soak samples as CSV, one line per sample.
+std::string soakCsv(const std::vector<SoakSample>& samples) {
+  std::string csv = "step,iterations,seconds,ms_per_iteration,resident_mb,fixed_drift_mm,finite\n";
+  char line[256];
+  for (const SoakSample& s : samples) {
+    std::snprintf(line, sizeof line, "%d,%ld,%.3f,%.5g,%.1f,%.3g,%d\n", s.step, s.iterations,
+                  s.seconds, s.msPerIteration, s.residentMb, s.fixedDriftMm, s.finite ? 1 : 0);
+    csv += line;
+  }
+  return csv;
+}
+
+/// The soak figures over all samples: memory first/last/largest, fixed-particle drift, NaN, and
+/// the spread of the time per iteration between samples.
+nlohmann::json soakJson(const std::vector<SoakSample>& samples) {
+  std::vector<double> ms;
+  double driftMax = 0, residentMax = 0;
+  bool finite = true;
+  for (const SoakSample& s : samples) {
+    ms.push_back(s.msPerIteration);
+    driftMax = std::max(driftMax, s.fixedDriftMm);
+    residentMax = std::max(residentMax, s.residentMb);
+    finite = finite && s.finite;
+  }
+  std::sort(ms.begin(), ms.end());
+  return {{"samples", samples.size()},
+          {"resident_mb_first", samples.front().residentMb},
+          {"resident_mb_last", samples.back().residentMb},
+          {"resident_mb_max", residentMax},
+          {"fixed_drift_mm_max", driftMax},
+          {"all_finite", finite},
+          {"ms_per_iteration_min", ms.front()},
+          {"ms_per_iteration_median", ms[ms.size() / 2]},
+          {"ms_per_iteration_max", ms.back()}};
+}
+
+void printSummary(const RunMetrics& m, const FibreRunDetails& details, const RunArgs& args,
+                  const nlohmann::json& summary) {
   std::printf("%s: %s, %s: %d steps, %ld iterations, %.3g ms per iteration (median)\n",
               m.scene.c_str(), m.method.c_str(), m.integrator.c_str(), m.steps, m.iterations,
               m.msPerIteration);
@@ -79,6 +132,25 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
   if (m.failedStep >= 0)
     std::printf("  FAILED at step %d:%s%s\n", m.failedStep, m.nan ? " NaN/inf" : "",
                 m.exploded ? " exploded (a spring beyond 3x its rest length)" : "");
+  if (details.rolledBackSteps > 0)
+    std::printf("  numerical guard: %d step(s) rolled back, %d retries with a smaller dt\n",
+                details.rolledBackSteps, details.retries);
+  for (const FrozenMuscle& muscle : details.frozen)
+    std::printf("  muscle '%s' frozen at step %d (%s)\n", muscle.name.c_str(), muscle.step,
+                muscle.nan ? "NaN/inf" : "exploded");
+  if (summary.contains("soak")) {
+    const nlohmann::json& soak = summary.at("soak");
+    std::printf(
+        "  soak: %zu samples; resident %.1f -> %.1f MB (max %.1f); fixed drift max %.3g mm; %s; "
+        "ms per iteration %.3g / %.3g / %.3g (min / median / max)\n",
+        soak.at("samples").get<size_t>(), soak.at("resident_mb_first").get<double>(),
+        soak.at("resident_mb_last").get<double>(), soak.at("resident_mb_max").get<double>(),
+        soak.at("fixed_drift_mm_max").get<double>(),
+        soak.at("all_finite").get<bool>() ? "no NaN" : "NaN/inf seen",
+        soak.at("ms_per_iteration_min").get<double>(),
+        soak.at("ms_per_iteration_median").get<double>(),
+        soak.at("ms_per_iteration_max").get<double>());
+  }
   if (m.interrupted) std::printf("  interrupted after %d steps\n", m.steps);
   if (!args.out.empty() && details.frames > 0)
     std::printf("  wrote %s/summary.json and %d frame(s) (%s/run.pvd)\n", args.out.c_str(),
@@ -95,7 +167,9 @@ void run(const RunArgs& args) {
   if (!args.out.empty()) {
     std::filesystem::create_directories(args.out);
     writeFileAtomically(args.out + "/scene.json", scene.json);
-    std::filesystem::remove(args.out + "/summary.json");  // a previous run's would mislead
+    // A previous run's would mislead.
+    std::filesystem::remove(args.out + "/summary.json");
+    std::filesystem::remove(args.out + "/soak.csv");
   }
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
@@ -109,6 +183,8 @@ void run(const RunArgs& args) {
   options.steps = args.steps;
   options.keepPoseSurfaces = false;
   options.cancel = &interruptRequested;
+  options.loopMotion = args.loop;
+  options.sampleEvery = args.sampleEvery;
   const int steps = args.steps >= 0 ? args.steps : std::max(scene.poseCount, 1);
   ProgressBar bar(scene.name, steps);
   options.progress = [&bar](const RunProgress& p) { bar.update(p.step, p.iterations, p.seconds); };
@@ -130,12 +206,17 @@ void run(const RunArgs& args) {
   summary["frames"] = details.frames;
   if (std::isfinite(details.measureMsPerStep))
     summary["measure_ms_per_step"] = details.measureMsPerStep;
+  summary["guard"] = guardJson(details, scene.simulation.onFailure);
+  summary["loop_motion"] = args.loop;
+  if (!details.samples.empty()) summary["soak"] = soakJson(details.samples);
+  if (!args.out.empty() && !details.samples.empty())
+    writeFileAtomically(args.out + "/soak.csv", soakCsv(details.samples));
   if (!args.out.empty()) writeFileAtomically(args.out + "/summary.json", summary.dump(2) + "\n");
 
   if (args.json)
     std::cout << summary.dump(2) << "\n";
   else
-    printSummary(metrics, details, args);
+    printSummary(metrics, details, args, summary);
   std::fflush(stdout);
   if (metrics.interrupted) throw CLI::RuntimeError(kExitInterrupted);
   if (metrics.failedStep >= 0) throw CLI::RuntimeError(kExitSimulationFailed);
@@ -149,9 +230,11 @@ void addRunCommand(CLI::App& app) {
       "run", "Simulate a scene with FibreMSS: progress, a summary, frames and summary.json");
   command->footer(
       "One step per pose of the scene's motion. With --out DIR: DIR/frames/*.vtp and DIR/run.pvd "
-      "(open in ParaView), DIR/scene.json (the complete scene) and DIR/summary.json. Exit code 3 "
-      "when the simulation failed (NaN or explosion), 130 when interrupted: Ctrl-C stops after "
-      "the current step and every file written stays valid.");
+      "(open in ParaView), DIR/scene.json (the complete scene) and DIR/summary.json (with what "
+      "the numerical guard did: rolled-back steps, retries, frozen muscles). Exit code 3 when "
+      "the simulation failed (a muscle frozen, or NaN/explosion with on_failure=report), 130 "
+      "when interrupted: Ctrl-C stops after the current step and every file written stays "
+      "valid. Soak run: --loop --steps N --sample-every 1000.");
   addSceneArgs(*command, args->scene);
   command->add_option("--out", args->out,
                       "Directory for frames/*.vtp, run.pvd, scene.json and summary.json");
@@ -165,6 +248,14 @@ void addRunCommand(CLI::App& app) {
                    "outputs.frame_every)")
       ->check(CLI::NonNegativeNumber);
   command->add_flag("--json", args->json, "Print the summary as JSON instead of text");
+  command->add_flag("--loop", args->loop,
+                    "Past the last pose, sweep the motion back to the first and forth again (with "
+                    "--steps: a soak run)");
+  command
+      ->add_option("--sample-every", args->sampleEvery,
+                   "Every K iterations record resident memory, fixed-particle drift from T*rest, "
+                   "NaN and the time per iteration (summary.json 'soak', DIR/soak.csv)")
+      ->check(CLI::NonNegativeNumber);
   command->callback([args] { run(*args); });
 }
 

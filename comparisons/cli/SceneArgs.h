@@ -1,5 +1,6 @@
 #pragma once
-// The arguments every scene-taking subcommand shares: SCENE and repeated --set key=value.
+// The arguments every scene-taking subcommand shares: SCENE, repeated --set key=value and
+// --threads N (short for --set threads=N).
 #include <CLI/CLI.hpp>
 #include <string>
 #include <vector>
@@ -19,6 +20,11 @@ inline void addSceneArgs(CLI::App& command, SceneArgs& args) {
       .add_option("--set", args.overrides,
                   "Override a scene parameter, e.g. --set resolution=40 (repeatable)")
       ->allow_extra_args(false);
+  command.add_option_function<int>(
+      "--threads",
+      [&args](int threads) { args.overrides.push_back("threads=" + std::to_string(threads)); },
+      "Solver threads, the caller included (0: the machine's hardware threads); "
+      "short for --set threads=N");
 }
 
 }  // namespace fibremss::cli

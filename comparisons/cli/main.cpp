@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   fibremss::cli::addCompareCommand(app);
   fibremss::cli::addMergeCommand(app);
   fibremss::cli::addFibresCommand(app);
+  fibremss::cli::addStabilityCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -12,8 +12,10 @@
 #include <set>
 #include <sstream>
 
+#include "ReportScaling.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
+#include "fibremss/Stability.h"
 
 namespace fibremss {
 namespace {
@@ -170,9 +172,10 @@ same code (`Measures.h`):
   step (spring models only).
 - **rms_to_fem_mm / rms_to_self_reference_mm**: root mean square distance of corresponding
   surface vertices to the FEM / self-reference run at the same pose, over all poses both
-  reached. **nan / exploded**: a non-finite position, or a spring (FEM: tetrahedron edge)
-  beyond 3× its rest length. **peak_memory_mb**: peak resident set of the process after the
-  run (getrusage; it includes every run before it in the same process).
+  reached (a failed pose counts in neither, nor in the penetration). **nan / exploded**: a
+  non-finite position, or a spring (FEM: tetrahedron edge) beyond 3× its rest length.
+  **peak_memory_mb**: peak resident set of the process after the run (getrusage; it includes
+  every run before it in the same process).
 
 Methods:
 
@@ -189,45 +192,55 @@ Methods:
 - **fem**: each muscle's surface voxelized and split into positively oriented tetrahedra,
   `btDeformableNeoHookeanForce` (E matched to the spring network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a
   `btDeformableMultiBodyDynamicsWorld`, nodes near fixed particles pinned and moved with their
-  bones, node contact with the bones' meshes (SDF_RD), surface vertices embedded in the
-  tetrahedra. It is the accuracy reference, not a speed competitor.
+  bones, node contact with the bones' exact meshes (own projection after every substep),
+  surface vertices embedded in the tetrahedra. It is the accuracy reference, not a speed competitor.
 )";
 }
 
+/// Seed 004 Table 1 beside ours: parts as rows, resolutions as columns (ascending; the first
+/// default FibreMSS run on thigh13 of each resolution in the thesis' table).
 std::string table1(const nlohmann::json& runs) {
-  std::ostringstream out;
-  std::vector<const nlohmann::json*> rows;
+  std::map<int, const nlohmann::json*> columns;  // resolution → run
   for (const auto& run : runs) {
     double thesis[4];
     const int resolution = static_cast<int>(number(run, "resolution"));
     if (text(run, "method") == "fibremss" && text(run, "scene").rfind("thigh13", 0) == 0 &&
         thesisTable1(resolution, thesis)) {
-      rows.push_back(&run);
+      columns.emplace(resolution, &run);
     }
   }
-  if (rows.empty()) return "";
+  if (columns.empty()) return "";
+  std::ostringstream out;
   out << "\n## Seed 004 Table 1: seconds for 500 iterations (thigh13, FibreMSS default)\n\n"
-      << "The thesis measured a Core2Duo 1.86 GHz; ours is this machine. Ratio = thesis / "
-         "ours (how many times faster).\n\n"
-      << "| resolution | part | FibreMSS [s] | thesis [s] | ratio |\n|---|---|---|---|---|\n";
+      << "Each cell: ours / the thesis' (ratio = thesis / ours, how many times faster). The "
+         "thesis measured a Core2Duo 1.86 GHz; ours is this machine.\n\n| part |";
+  for (const auto& [resolution, run] : columns) out << " resolution " << resolution << " |";
+  out << "\n|---|";
+  for (size_t c = 0; c < columns.size(); ++c) out << "---|";
+  out << "\n";
   const char* parts[4] = {"MSS", "muscle CD", "bone CD", "total"};
-  for (const nlohmann::json* run : rows) {
-    double thesis[4];
-    const int resolution = static_cast<int>(number(*run, "resolution"));
-    thesisTable1(resolution, thesis);
-    const auto& timing = run->value("timing", nlohmann::json::object());
-    const double ours[4] = {number(timing, "mss") * 0.5, number(timing, "muscle_cd") * 0.5,
-                            number(timing, "bone_cd") * 0.5,
-                            number(*run, "ms_per_iteration") * 0.5};
-    for (int p = 0; p < 4; ++p) {
-      char line[200];
-      std::snprintf(line, sizeof line, "| %d | %s | %.3g | %.2f | %.3g |\n", resolution, parts[p],
-                    ours[p], thesis[p], ours[p] > 0 ? thesis[p] / ours[p] : NAN);
-      out << line;
+  for (int p = 0; p < 4; ++p) {
+    out << "| " << parts[p] << " |";
+    for (const auto& [resolution, run] : columns) {
+      double thesis[4];
+      thesisTable1(resolution, thesis);
+      const auto& timing = run->value("timing", nlohmann::json::object());
+      const double perIteration[4] = {number(timing, "mss"), number(timing, "muscle_cd"),
+                                      number(timing, "bone_cd"), number(*run, "ms_per_iteration")};
+      const double ours = perIteration[p] * 0.5;  // ms per iteration × 500 / 1000
+      char entry[80];
+      std::snprintf(entry, sizeof entry, " %.3g / %.2f (%.3g×) |", ours, thesis[p],
+                    ours > 0 ? thesis[p] / ours : NAN);
+      out << entry;
     }
+    out << "\n";
   }
-  out << "\nFibreMSS parts are medians per iteration × 500; total is the median ms per "
-         "iteration × 500 (it includes the response and the output).\n";
+  out << "| particles |";
+  for (const auto& [resolution, run] : columns) out << " " << run->value("particles", 0) << " |";
+  out << "\n\nFibreMSS parts are medians per iteration × 500; total is the median ms per "
+         "iteration × 500 (it includes the response and the output). Run one `fibremss compare "
+         "thigh13 --set resolution=R` per resolution and `fibremss merge` them for all four "
+         "columns (comparisons/README.md).\n";
   return out.str();
 }
 
@@ -352,7 +365,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
       out << "\n![" << plot << "](" << plot << ")\n";
     }
   }
-  out << table1(runs) << "\n" << describeMethods();
+  out << table1(runs) << integratorsReport(runs) << scalingReport(runs) << "\n"
+      << describeMethods();
   return out.str();
 }
 

@@ -46,14 +46,38 @@ std::vector<btTransform> posesAt(const LoadedScene& scene, int pose) {
   return transforms;
 }
 
+/// Point pairs (a, b, rest length) of one muscle, checked against 3× their rest length.
+using PairList = std::vector<std::tuple<uint32_t, uint32_t, btScalar>>;
+
 /// What the pose loop needs from a simulated method.
 struct Simulated {
   std::function<bool(std::span<const btTransform>)> step;        ///< one pose; false: stopped
   std::function<void(size_t, std::vector<btVector3>&)> surface;  ///< muscle's surface
-  std::function<bool()> exploded;                                ///< after a step
-  std::function<double()> springDeviation;                       ///< at the end
-  long iterationsPerStep = 1;                                    ///< for ms/iteration
+  std::function<std::span<const btVector3>(size_t)> points;      ///< muscle's simulated points
+  std::vector<PairList> pairs;              ///< per muscle, indices into points(muscle)
+  std::function<double()> springDeviation;  ///< at the end
+  long iterationsPerStep = 1;               ///< for ms/iteration
 };
+
+/// A run of `method` on the scene, named and not yet measured.
+RunMetrics namedRun(const LoadedScene& scene, const char* method, const char* integrator) {
+  RunMetrics metrics;
+  metrics.scene = scene.name;
+  metrics.method = method;
+  metrics.integrator = integrator;
+  return metrics;
+}
+
+/// True when some pair is longer than 3× its rest length (FibreMSS's criterion).
+bool beyondThreeTimes(const Simulated& sim) {
+  for (size_t m = 0; m < sim.pairs.size(); ++m) {
+    const std::span<const btVector3> positions = sim.points(m);
+    for (const auto& [a, b, rest] : sim.pairs[m]) {
+      if ((positions[a] - positions[b]).length() > 3 * rest) return true;
+    }
+  }
+  return false;
+}
 
 /// Runs every pose and measures it the way runFibreMSS does: surface penetration into the
 /// bones' true meshes over all steps, volume change and spring deviation at the last step.
@@ -89,10 +113,12 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
       poseSurface.insert(poseSurface.end(), muscleSurface.begin(), muscleSurface.end());
     }
     metrics.nan = !allFinite(poseSurface);
-    metrics.exploded = !metrics.nan && sim.exploded();
-    if (!metrics.nan)
+    metrics.exploded = !metrics.nan && beyondThreeTimes(sim);
+    // A failed pose's surface says nothing about the method: it enters no penetration or RMS.
+    if (!metrics.nan && !metrics.exploded) {
       penetration = combine(penetration, measurePenetration(poseSurface, bones, transforms));
-    metrics.poseSurfaces.push_back(poseSurface);
+      metrics.poseSurfaces.push_back(poseSurface);
+    }
     if (options.progress) {
       options.progress({metrics.method, s + 1, steps, metrics.iterations, secondsSince(start)});
     }
@@ -121,15 +147,6 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   }
   metrics.peakMemoryMb = peakMemoryMb();
   metrics.wallSeconds = secondsSince(start);
-}
-
-/// True when some pair (a, b) is longer than 3× its rest length (FibreMSS's criterion).
-template <class Pairs>
-bool beyondThreeTimes(const Pairs& pairs, std::span<const btVector3> positions) {
-  for (const auto& [a, b, rest] : pairs) {
-    if ((positions[a] - positions[b]).length() > 3 * rest) return true;
-  }
-  return false;
 }
 
 std::vector<std::string> split(const std::string& text, char separator) {
@@ -170,37 +187,28 @@ double poseDuration(const SimulationParameters& simulation) {
 RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
                        const SoftBodyDefinition& definition, const MethodRunOptions& options) {
   const auto start = Clock::now();
-  RunMetrics metrics;
-  metrics.scene = scene.name;
-  metrics.method = "btsoftbody";
-  metrics.integrator = "btSoftBody position solver";
+  RunMetrics metrics = namedRun(scene, "btsoftbody", "btSoftBody position solver");
   SoftBodyScene sim(prepared, posesAt(scene, 0), definition);
   metrics.particles = sim.nodeCount();
   metrics.springs = sim.linkCount();
   for (const auto& muscle : prepared.muscles)
     metrics.boundaryParticles += muscle->boundaryParticles.size();
 
-  std::vector<std::vector<std::tuple<uint32_t, uint32_t, btScalar>>> springs;
+  Simulated simulated;
   double restLengths = 0;
   for (const auto& muscle : prepared.muscles) {
-    springs.emplace_back();
+    simulated.pairs.emplace_back();
     for (const Spring& s : muscle->springs) {
-      springs.back().emplace_back(s.a, s.b, s.restLength);
+      simulated.pairs.back().emplace_back(s.a, s.b, s.restLength);
       restLengths += s.restLength;
     }
   }
-  Simulated simulated;
   simulated.step = [&](std::span<const btTransform> t) {
     sim.stepPose(t);
     return true;
   };
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
-  simulated.exploded = [&] {
-    for (size_t m = 0; m < springs.size(); ++m) {
-      if (beyondThreeTimes(springs[m], sim.positions(m))) return true;
-    }
-    return false;
-  };
+  simulated.points = [&](size_t m) { return sim.positions(m); };
   simulated.springDeviation = [&] {
     double deviation = 0;
     for (size_t m = 0; m < prepared.muscles.size(); ++m) {
@@ -221,27 +229,25 @@ RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
 RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                   const FemDefinition& definition, const MethodRunOptions& options) {
   const auto start = Clock::now();
-  RunMetrics metrics;
-  metrics.scene = scene.name;
-  metrics.method = "fem";
-  metrics.integrator = "Neo-Hookean FEM, btDeformableBodySolver (implicit)";
+  RunMetrics metrics =
+      namedRun(scene, "fem", "Neo-Hookean FEM, btDeformableBodySolver (implicit damping)");
   FemScene sim(prepared, posesAt(scene, 0), definition);
   metrics.particles = sim.nodeCount();
   metrics.springs = sim.tetrahedronCount();
 
   // Tetrahedron edges with their rest lengths, for the explosion criterion.
-  std::vector<std::vector<std::tuple<uint32_t, uint32_t, btScalar>>> edges(sim.muscleCount());
+  Simulated simulated;
+  simulated.pairs.resize(sim.muscleCount());
   for (size_t m = 0; m < sim.muscleCount(); ++m) {
     const TetMesh& mesh = sim.tetMesh(m);
     for (const auto& t : mesh.tetrahedra) {
       for (int a = 0; a < 4; ++a) {
         for (int b = a + 1; b < 4; ++b) {
-          edges[m].emplace_back(t[a], t[b], mesh.nodes[t[a]].distance(mesh.nodes[t[b]]));
+          simulated.pairs[m].emplace_back(t[a], t[b], mesh.nodes[t[a]].distance(mesh.nodes[t[b]]));
         }
       }
     }
   }
-  Simulated simulated;
   // The budget is checked between substeps too: one FEM pose can outlast a whole budget.
   const auto outOfTime = [&] {
     return (options.cancel && options.cancel->load()) ||
@@ -249,12 +255,7 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
   };
   simulated.step = [&](std::span<const btTransform> t) { return sim.stepPose(t, outOfTime); };
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
-  simulated.exploded = [&] {
-    for (size_t m = 0; m < edges.size(); ++m) {
-      if (beyondThreeTimes(edges[m], sim.nodePositions(m))) return true;
-    }
-    return false;
-  };
+  simulated.points = [&](size_t m) { return sim.nodePositions(m); };
   simulated.springDeviation = [] { return RunMetrics::kNone; };  // not a spring model
   simulated.iterationsPerStep = definition.substepsPerPose;
   runPoses(scene, prepared, simulated, options, start, metrics);

@@ -37,12 +37,13 @@ double medianOrZero(std::vector<double> values) {
   return values.empty() ? 0.0 : median(std::move(values));
 }
 
-/// Peak resident set of this process from /proc (NaN where unavailable).
-double peakMemoryMb() {
+/// A memory figure of this process from /proc/self/status ("VmHWM:" peak resident set,
+/// "VmRSS:" resident set now) [MB] (NaN where unavailable).
+double statusMemoryMb(const char* field) {
   std::ifstream status("/proc/self/status");
   std::string key;
   while (status >> key) {
-    if (key == "VmHWM:") {
+    if (key == field) {
       double kilobytes = 0;
       status >> kilobytes;
       return kilobytes / 1024.0;
@@ -64,6 +65,31 @@ bool allFinite(std::span<const btVector3> points) {
   return std::all_of(points.begin(), points.end(), [](const btVector3& p) {
     return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
   });
+}
+
+/// The pose of step s: the scene's poses in order, then the last one held, or when looping
+/// swept back to the first and forth again (0, 1, …, P−1, P−2, …, 1, 0, 1, …).
+int poseOfStep(int s, int poseCount, bool loop) {
+  const int last = std::max(poseCount, 1) - 1;
+  if (!loop || last == 0) return std::min(s, last);
+  const int phase = s % (2 * last);
+  return phase <= last ? phase : 2 * last - phase;
+}
+
+/// Largest distance of a fixed particle from where its bone puts it (T·rest) [mm].
+double fixedDriftMm(const MuscleSystem& system, std::span<const MuscleHandle> muscles,
+                    std::span<const BoneHandle> bones) {
+  double drift = 0;
+  for (MuscleHandle handle : muscles) {
+    const MuscleSettings& muscle = system.settings(handle);
+    std::span<const btVector3> x = system.positions(handle);
+    for (uint32_t p : muscle.fixedParticles) {
+      const btVector3 target =
+          system.boneTransform(bones[muscle.fixedBone[p]]) * muscle.restPositions[p];
+      drift = std::max(drift, 1000.0 * double(x[p].distance(target)));
+    }
+  }
+  return drift;
 }
 
 bool inside(const btVector3& p, const btVector3& lower, const btVector3& upper) {
@@ -251,12 +277,16 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       measureMsPerStep;
   Penetration penetration, spherePenetration;
   std::vector<btVector3> poseSurface;
+  FibreRunDetails guard;  // what the numerical guard did, and the soak samples
+  std::vector<bool> reportedFrozen(muscles.size(), false);
+  double sampleSolverMs = 0;
+  long sampleIterations = 0;
   for (int s = 0; s < steps; ++s) {
     if (options.cancel && options.cancel->load()) {
       metrics.interrupted = true;
       break;
     }
-    const int pose = std::min(s, std::max(scene.poseCount, 1) - 1);
+    const int pose = poseOfStep(s, scene.poseCount, options.loopMotion);
     const auto stepStart = Clock::now();
     for (size_t b = 0; b < bones.size(); ++b) {
       boneTransforms[b] = scene.bonePose(b, pose);
@@ -297,8 +327,35 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     output.push_back(stats.timing.output / iterations);
     measureMsPerStep.push_back(measureMs);
 
-    metrics.nan = stats.nan || !finite;
-    metrics.exploded = stats.exploded;
+    // The guard's verdict: a frozen muscle or a failure left in place (Report) ends the run.
+    guard.rolledBackSteps += stats.rolledBack ? 1 : 0;
+    guard.retries += stats.retries;
+    for (size_t m = 0; stats.newlyFrozen > 0 && m < muscles.size(); ++m)
+      if (system.frozen(muscles[m]) && !reportedFrozen[m]) {
+        reportedFrozen[m] = true;
+        const bool blamed = muscles[m].index == stats.failedMuscle.index &&
+                            muscles[m].generation == stats.failedMuscle.generation;
+        guard.frozen.push_back({system.settings(muscles[m]).name, s, blamed && stats.failedNan});
+      }
+    const bool failed = stats.failed || stats.newlyFrozen > 0;
+    metrics.nan = !finite || (failed && stats.failedNan);
+    metrics.exploded = failed && !metrics.nan;
+
+    sampleSolverMs += stepMs;
+    sampleIterations += stats.iterations;
+    if (options.sampleEvery > 0 && sampleIterations >= options.sampleEvery) {
+      SoakSample sample;
+      sample.step = s + 1;
+      sample.iterations = metrics.iterations;
+      sample.seconds = millisecondsSince(runStart) / 1000.0;
+      sample.msPerIteration = sampleSolverMs / static_cast<double>(sampleIterations);
+      sample.residentMb = statusMemoryMb("VmRSS:");
+      sample.fixedDriftMm = fixedDriftMm(system, muscles, bones);
+      sample.finite = finite;
+      guard.samples.push_back(sample);
+      sampleSolverMs = 0;
+      sampleIterations = 0;
+    }
     if (options.keepPoseSurfaces) metrics.poseSurfaces.push_back(poseSurface);
     if (options.progress) {
       RunProgress progress;
@@ -338,11 +395,12 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   metrics.timing = {medianOrZero(mss), medianOrZero(muscleCd), medianOrZero(boneCd),
                     medianOrZero(response), medianOrZero(output)};
   if (details) {
+    *details = std::move(guard);
     details->spherePenetration = spherePenetration;
     details->frames = frames ? frames->frames() : 0;
     details->measureMsPerStep = median(measureMsPerStep);
   }
-  metrics.peakMemoryMb = peakMemoryMb();
+  metrics.peakMemoryMb = statusMemoryMb("VmHWM:");
   metrics.wallSeconds = millisecondsSince(runStart) / 1000.0;
   return metrics;
 }

@@ -1,7 +1,105 @@
 #include "CollisionPairs.h"
 
+#include <LinearMath/btAabbUtil2.h>
+
+#include <algorithm>
+#include <cmath>
+
 namespace fibremss {
 namespace {
+
+/// Steps of the walk back out of a bone along a remembered side before it gives up.
+constexpr int kMaxBackOutSteps = 64;
+
+void addPush(MuscleState& muscle, uint32_t i, const btVector3& push) {
+  muscle.pushes[i] += push;
+  ++muscle.pushCounts[i];
+}
+
+/// Walks from `local` (bone frame) along the remembered unit `side` until the field clears
+/// `radius` with its direction on that side; returns the point reached.
+btVector3 backOut(const BoneDistanceField& field, btVector3 local, const btVector3& side,
+                  btScalar radius) {
+  for (int k = 0; k < kMaxBackOutSteps; ++k) {
+    const BoneDistanceField::Sample s = field.sample(local);
+    if (s.distance >= radius && s.gradient.dot(side) > 0) break;
+    local += side * std::max(std::abs(radius - s.distance), field.cell());
+  }
+  return local;
+}
+
+/// Push (bone frame) of penetration recovery for particle i at `local` with field sample `s`:
+/// non-zero only when its side flipped; updates the particle's side memory.
+btVector3 recoveryPush(MuscleState& muscle, uint32_t i, int32_t bone,
+                       const BoneDistanceField& field, const btVector3& local,
+                       const BoneDistanceField::Sample& s, btScalar radius) {
+  int32_t& owner = muscle.sideBones[i];
+  btVector3& side = muscle.boneSides[i];
+  uint32_t& stamp = muscle.sideStamps[i];
+  // Remembered only while the particle stays near the bone from one iteration to the next:
+  // away from it (unseen, stale), a particle may go round the bone legitimately.
+  const btScalar band = 2 * radius + 2 * field.cell();
+  if (owner >= 0 && stamp + 1 < muscle.contactRound) owner = -1;
+  if (owner == bone) {
+    if (s.distance > band) {
+      owner = -1;
+      return btVector3(0, 0, 0);
+    }
+    stamp = muscle.contactRound;
+    if (s.gradient.dot(side) < kFlippedSide) return backOut(field, local, side, radius) - local;
+    if (!s.gradient.isZero()) side = s.gradient;
+  } else if (owner < 0 && s.distance <= band && !s.gradient.isZero()) {
+    owner = bone;
+    side = s.gradient;
+    stamp = muscle.contactRound;
+  }
+  return btVector3(0, 0, 0);
+}
+
+/// collideMuscleBone against the bone's distance field.
+void collideWithField(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
+                      ContactLog& log) {
+  const btDbvtNode* root = muscle.tree.root();
+  if (!root) return;
+  const MuscleSettings& settings = *muscle.settings;
+  const BoneDistanceField& field = *bone.field;
+  btVector3 lower, upper;
+  btTransformAabb(field.lower(), field.upper(), 0, bone.current, lower, upper);
+  const btDbvtVolume box = btDbvtVolume::FromMM(lower, upper);
+  const btTransform toBone = bone.current.inverse();
+  const btMatrix3x3& toWorld = bone.current.getBasis();
+  const bool recovery = !muscle.sideBones.empty();
+  stack.clear();
+  stack.push_back({root, -1});
+  while (!stack.empty()) {
+    const btDbvtNode* node = stack.back().muscle;
+    stack.pop_back();
+    if (!Intersect(node->volume, box)) continue;
+    if (node->isinternal()) {
+      // φ is 1-Lipschitz: a node whose box (spheres included) lies well clear of the bone
+      // holds no contact and no particle within its recovery band (twice its radius).
+      const btVector3 centre = node->volume.Center();
+      const btScalar halfDiagonal = node->volume.Extents().length();
+      if (field.sample(toBone * centre).distance > 3 * halfDiagonal + 2 * field.cell()) continue;
+      stack.push_back({node->childs[0], -1});
+      stack.push_back({node->childs[1], -1});
+      continue;
+    }
+    const uint32_t i = static_cast<uint32_t>(node->dataAsInt);
+    if (settings.isFixed(i)) continue;
+    ++log.candidates;
+    const btScalar radius = settings.radii[i];
+    const btVector3 local = toBone * muscle.positions[i];
+    const BoneDistanceField::Sample s = field.sample(local);
+    btVector3 push =
+        recovery ? recoveryPush(muscle, i, static_cast<int32_t>(bone.slot), field, local, s, radius)
+                 : btVector3(0, 0, 0);
+    if (push.isZero() && s.distance < radius) push = s.gradient * (radius - s.distance);
+    if (push.isZero()) continue;
+    addPush(muscle, i, toWorld * push);
+    log.add(muscle.positions[i], muscle.positions[i] - toWorld * (s.gradient * s.distance));
+  }
+}
 
 class MuscleMusclePairs final : public btDbvt::ICollide {
  public:
@@ -23,14 +121,8 @@ class MuscleMusclePairs final : public btDbvt::ICollide {
       return;
     const btScalar shareA = fixedA ? 0 : (fixedB ? 1 : btScalar(0.5));
     const btScalar shareB = 1 - shareA;
-    if (shareA > 0) {
-      a_.pushes[i] += direction * (depth * shareA);
-      ++a_.pushCounts[i];
-    }
-    if (shareB > 0) {
-      b_.pushes[j] -= direction * (depth * shareB);
-      ++b_.pushCounts[j];
-    }
+    if (shareA > 0) addPush(a_, i, direction * (depth * shareA));
+    if (shareB > 0) addPush(b_, j, direction * (-depth * shareB));
     log_.add(a_.positions[i], b_.positions[j]);
   }
 
@@ -61,6 +153,10 @@ void collideMuscles(MuscleState& a, MuscleState& b, ContactLog& log) {
 
 void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
                        ContactLog& log) {
+  if (bone.field) {
+    collideWithField(muscle, bone, stack, log);
+    return;
+  }
   const MuscleSettings& settings = *muscle.settings;
   const std::vector<btScalar>& boneRadii = bone.settings->sphereRadii;
   collideWithBone(stack, muscle.tree.root(), bone.tree,
@@ -74,13 +170,17 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneSta
                     if (!sphereOverlap(muscle.positions[i], settings.radii[i], centre,
                                        boneRadii[sphere], direction, depth))
                       return;
-                    muscle.pushes[i] += direction * depth;
-                    ++muscle.pushCounts[i];
+                    addPush(muscle, i, direction * depth);
                     log.add(muscle.positions[i], centre);
                   });
 }
 
+void forgetBoneSides(MuscleState& muscle) {
+  std::fill(muscle.sideBones.begin(), muscle.sideBones.end(), -1);
+}
+
 void applyPushes(MuscleState& muscle, bool zeroVelocities) {
+  ++muscle.contactRound;
   for (uint32_t i : muscle.settings->boundaryParticles) {
     if (muscle.pushCounts[i] == 0) continue;
     muscle.positions[i] += muscle.pushes[i];

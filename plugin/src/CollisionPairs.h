@@ -28,6 +28,13 @@ struct ContactLog {
   }
 };
 
+/// Bone distance fields reach this many cells beyond the bone's bounds; beyond, the field's
+/// value is an upper bound (BoneDistanceField::sample), so contacts need particle radii below.
+constexpr btScalar kDistanceFieldMargin = 16;
+/// Seed 001 eq 1: a bone direction that turned by more than arccos(−0.75) ≈ 139° since the
+/// last iteration means the particle passed through the bone.
+constexpr btScalar kFlippedSide = btScalar(-0.75);
+
 /// Overlap of spheres (a, ra) and (b, rb): false when apart; else the unit direction from b to
 /// a (+x when the centres coincide) and the overlap depth ra + rb − |a − b| > 0.
 inline bool sphereOverlap(const btVector3& a, btScalar ra, const btVector3& b, btScalar rb,
@@ -50,10 +57,17 @@ void rebuildTree(MuscleState& muscle);
 /// Muscle–muscle pairs of two different muscles: half the overlap each, the whole one to the
 /// free particle when the other is fixed, nothing when both are fixed.
 void collideMuscles(MuscleState& a, MuscleState& b, ContactLog& log);
-/// Muscle–bone pairs: the whole overlap to the free particle; the bone's tree must have been
-/// placed at its current transform.
+/// Muscle–bone contacts, the whole overlap to the free particle: against the bone's spheres
+/// (its tree placed at its current transform), or, when the bone has a distance field, every
+/// boundary particle in the field's box is pushed out along the field's gradient to clear its
+/// radius. With the muscle's side memory (penetration recovery), a particle whose direction out
+/// of the bone flipped since the last iteration is pushed back out on its remembered side.
 void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
                        ContactLog& log);
+
+/// Forgets the bone sides penetration recovery remembers (after a rollback: the remembered
+/// sides belong to positions that no longer exist).
+void forgetBoneSides(MuscleState& muscle);
 
 /// Moves every pushed particle by its accumulated push and zeroes its velocity
 /// (previous = position); clears the pushes.

@@ -1,12 +1,14 @@
 #pragma once
-// Time integrators (method.md §4), internal. One step of an integrator moves the free particles of
-// one muscle by dt from the spring forces already in state.forces (computed at state.positions
-// before dt was chosen); fixed particles are skipped. Every integrator leaves x(t) in `previous`,
-// so eq 5.1 and the collision response (which zeroes velocity by previous = positions) work for
-// all of them. The integrator issue adds more kinds here: multi-stage ones (RK2/4) and implicit
-// ones evaluate forces at other positions with springForces(settings, positions, forces, ...)
-// (SpringForces.h) into buffers added to MuscleState and allocated when the muscle is added.
+// Time integrators (method.md §4; docs/integrators.md), internal. One step of an integrator moves
+// the free particles of one muscle by dt from the spring forces already in state.forces (computed
+// at state.positions before dt was chosen); fixed particles are skipped. Every integrator leaves
+// x(t) in `previous`, so eq 5.1 and the collision response (which zeroes velocity by previous =
+// positions) work for all of them. Multi-stage (RK) and implicit ones evaluate forces at other
+// positions with springForces(settings, positions, forces, ...) (SpringForces.h) into buffers of
+// their IntegratorWorkspace, made by prepare(); advance() never allocates.
 #include <LinearMath/btScalar.h>
+
+#include <memory>
 
 #include "MuscleState.h"
 #include "fibremss/Parameters.h"
@@ -15,29 +17,32 @@ namespace fibremss {
 
 /// What one integration pass measured.
 struct IntegrationResult {
-  double displacement = 0;  ///< Σ |x_new − x| over free particles [m]
-  bool finite = true;       ///< no NaN or inf appeared
+  double displacement = 0;    ///< Σ |x_new − x| over free particles [m]
+  bool finite = true;         ///< no NaN or inf appeared
+  int solverIterations = 0;   ///< implicit integrators: conjugate-gradient iterations run
+  double solverResidual = 0;  ///< implicit integrators: final CG residual |r| / |b|
 };
 
 class TimeIntegrator {
  public:
   virtual ~TimeIntegrator() = default;
   /// Advances the free particles of `muscle` by dt; `previousDt` is the step that led from
-  /// `previous` to `positions`.
+  /// `previous` to `positions`. Solver settings come from muscle.parameters.
   virtual IntegrationResult advance(MuscleState& muscle, btScalar dt,
                                     btScalar previousDt) const = 0;
-  /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs; called when
-  /// the muscle is added and when the integrator changes, never inside the iterations.
-  virtual void prepare(MuscleState& muscle) const {
-    muscle.workspace.reset();
-    muscle.preparedFor = kind();
-    muscle.prepared = true;
-  }
+  /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs and sets the
+  /// muscle's stability bound for it; called when the muscle is added and when the integrator
+  /// changes, never inside the iterations.
+  void prepare(MuscleState& muscle) const;
   /// The kind this integrator implements.
   virtual Integrator kind() const = 0;
   /// Whether the integrator keeps explicit velocities (they are rotated by the pre-transform
   /// and zeroed on contact).
   virtual bool usesVelocities() const = 0;
+
+ protected:
+  /// The workspace advance() needs for `muscle`, or null when it needs none.
+  virtual std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const;
 };
 
 /// The integrator for a kind (one shared stateless instance per kind; thread-safe: all
@@ -48,5 +53,8 @@ const TimeIntegrator& integratorFor(Integrator kind);
 inline void ensurePrepared(const TimeIntegrator& integrator, MuscleState& muscle) {
   if (!muscle.prepared || muscle.preparedFor != integrator.kind()) integrator.prepare(muscle);
 }
+
+/// The solver settings of a muscle: its system's parameters, or the defaults when it has none.
+const SimulationParameters& solverParameters(const MuscleState& muscle);
 
 }  // namespace fibremss

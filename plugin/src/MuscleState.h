@@ -7,6 +7,7 @@
 #include <memory>
 #include <vector>
 
+#include "BoneDistanceField.h"
 #include "CollisionTrees.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
@@ -26,6 +27,11 @@ struct BoneState {
   btTransform delta = btTransform::getIdentity();    ///< current · previous-iteration⁻¹
   bool moving = false;  ///< delta differs from the identity in this iteration
   BoneSphereTree tree;  ///< bone spheres, static topology, bounds placed in world space
+  uint32_t slot = 0;    ///< the bone's slot in its system (names it in per-particle memory)
+  /// Signed distance field of the mesh, bone frame (BoneCollision::DistanceField), or null.
+  std::unique_ptr<const BoneDistanceField> field;
+  btTransform goodLast = btTransform::getIdentity();     ///< `last` at the step's start (guard)
+  btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
 };
 
 /// Scratch an integrator keeps per muscle (Jacobian structure, CG vectors, stage buffers);
@@ -52,6 +58,13 @@ struct MuscleState {
   std::vector<btScalar> stepRadius;      ///< r of eq 5.1: own radius, or the mean for inner ones
   std::vector<uint32_t> freeParticles;   ///< indices of particles that are not fixed
 
+  /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
+  /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).
+  std::vector<int32_t> sideBones;
+  std::vector<btVector3> boneSides;  ///< see sideBones
+  std::vector<uint32_t> sideStamps;  ///< contactRound when the side was last seen (else stale)
+  uint32_t contactRound = 0;         ///< responses applied so far (applyPushes)
+
   btScalar stableTimeStep = 0;  ///< largest dt for which damped Verlet stays stable [s]
   btScalar meanRadius = 0;      ///< mean boundary radius [m]
   double restLengthSum = 0;     ///< Σ L0 over the springs [m]
@@ -62,10 +75,16 @@ struct MuscleState {
   bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
   std::vector<btVector3> surface;           ///< deformed surface vertices (output)
 
+  /// The system's parameters (integrators read their solver settings; null: the defaults).
+  const SimulationParameters* parameters = nullptr;
   std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
   Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
   bool prepared = false;                           ///< workspace made for `preparedFor`
   bool frozen = false;  ///< stopped by the numerical guard: skipped by every part of a step
+  // The last good state (MuscleSystemGuard.cpp): saved at the start of a step, same sizes.
+  std::vector<btVector3> goodPositions;   ///< positions at the start of the step [m]
+  std::vector<btVector3> goodPrevious;    ///< previous at the start of the step [m]
+  std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
 };
 
 }  // namespace fibremss

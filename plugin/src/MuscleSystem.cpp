@@ -17,6 +17,7 @@ namespace fibremss {
 MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
     : impl_(std::make_unique<Impl>()) {
   impl_->parameters = parameters;
+  impl_->prepareWorkers();
 }
 
 MuscleSystem::~MuscleSystem() = default;
@@ -32,8 +33,14 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   if (body) state->last = state->target = state->current = body->getWorldTransform();
   state->tree.build(settings->sphereCentres, settings->sphereRadii);
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
+  if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
+    state->field = std::make_unique<const BoneDistanceField>(
+        MeshDistance(settings->mesh), impl_->parameters.distanceFieldCell,
+        kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
   state->settings = std::move(settings);
-  return impl_->bones.add<BoneHandle>(std::move(state));
+  const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
+  impl_->bones.states[handle.index]->slot = handle.index;
+  return handle;
 }
 
 void MuscleSystem::removeBone(BoneHandle bone) {
@@ -96,11 +103,21 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->positions.resize(n);
   state->previous.resize(n);
   state->velocities.assign(n, btVector3(0, 0, 0));
+  state->goodPositions.resize(n);
+  state->goodPrevious.resize(n);
+  state->goodVelocities.resize(n);
   state->forces.assign(n, btVector3(0, 0, 0));
   state->springVectors.resize(std::min(s.springs.size(), kSpringBlock));
   state->springFactors.resize(std::min(s.springs.size(), kSpringBlock));
   state->pushes.assign(n, btVector3(0, 0, 0));
   state->pushCounts.assign(n, 0);
+  // Recovery follows the bones' distance fields: without them it has nothing to remember.
+  if (impl_->parameters.penetrationRecovery &&
+      impl_->parameters.boneCollision == BoneCollision::DistanceField) {
+    state->sideBones.assign(n, -1);
+    state->boneSides.assign(n, btVector3(0, 0, 0));
+    state->sideStamps.assign(n, 0);
+  }
   for (uint32_t i = 0; i < n; ++i)
     if (!s.isFixed(i)) state->freeParticles.push_back(i);
 
@@ -136,6 +153,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     }
   }
   state->tree.build(s.boundaryParticles, state->positions, s.radii);
+  state->parameters = &impl_->parameters;
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
@@ -147,8 +165,9 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   for (uint32_t slot : impl_->muscles.order)
     boundaryTotal += impl_->muscles.states[slot]->settings->boundaryParticles.size();
   impl_->contacts.ends.resize(std::max(impl_->contacts.ends.size(), 4 * boundaryTotal));
-  impl_->stack.reserve(4096);
-  return impl_->muscles.add<MuscleHandle>(std::move(state));
+  const MuscleHandle handle = impl_->muscles.add<MuscleHandle>(std::move(state));
+  impl_->prepareWorkers();  // threads and their scratch start here, not in step()
+  return handle;
 }
 
 void MuscleSystem::removeMuscle(MuscleHandle muscle) {
@@ -159,8 +178,16 @@ bool MuscleSystem::contains(MuscleHandle muscle) const {
   return impl_->muscles.find(muscle) != nullptr;
 }
 
+bool MuscleSystem::frozen(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).frozen;
+}
+
+void MuscleSystem::unfreeze(MuscleHandle muscle) {
+  impl_->muscle(muscle).frozen = false;
+}
+
 void MuscleSystem::step() {
-  impl_->step();
+  impl_->guardedStep();
 }
 
 const StepStats& MuscleSystem::lastStep() const {

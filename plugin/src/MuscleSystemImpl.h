@@ -7,6 +7,8 @@
 
 #include "CollisionPairs.h"
 #include "MuscleState.h"
+#include "SpringForces.h"
+#include "TaskPool.h"
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss {
@@ -45,16 +47,45 @@ struct Slots {
   }
 };
 
+/// Scratch of one thread of the step: what a task may write that is not its muscle's.
+struct ThreadScratch {
+  MuscleBoneStack stack;  ///< traversal stack of muscle–bone queries
+  ContactLog contacts;    ///< contacts this thread found in the running phase
+};
+
+/// What the per-muscle tasks of one iteration measured, reduced in insertion order afterwards
+/// so that the sums do not depend on which thread ran which muscle.
+struct MuscleIterationResult {
+  SpringForceResult forces;   ///< deviation and overstretched springs
+  btScalar safeTimeStep = 0;  ///< eq 5.1 bound of this muscle (adaptive dt only)
+  double displacement = 0;    ///< Σ |Δx| of the integration
+  bool finite = true;         ///< the integration stayed finite
+};
+
+/// Two muscles whose bounds meet, and the round their pairs run in: no muscle appears twice in
+/// a round, so a round's pairs run in parallel and every push sum has a fixed order.
+struct MusclePairTask {
+  uint32_t a = 0;      ///< slot of the first muscle (earlier in insertion order)
+  uint32_t b = 0;      ///< slot of the second muscle
+  uint32_t round = 0;  ///< greedy colour in insertion order of the pairs
+};
+
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
 struct MuscleSystem::Impl {
-  SimulationParameters parameters;  ///< how to step
-  StepStats stats;                  ///< what the last step did
-  Slots<MuscleState> muscles;       ///< muscle states by slot
-  Slots<BoneState> bones;           ///< bone states by slot
-  MuscleBoneStack stack;            ///< traversal stack of muscle–bone queries
-  ContactLog contacts;              ///< contacts of the last iteration, for drawing
-  uint32_t musclesAdded = 0;        ///< counts additions, seeds each muscle's noise
-  btScalar previousDt = 0;          ///< dt of the last iteration (0: none yet)
+  SimulationParameters parameters;             ///< how to step
+  StepStats stats;                             ///< what the last step did
+  Slots<MuscleState> muscles;                  ///< muscle states by slot
+  Slots<BoneState> bones;                      ///< bone states by slot
+  ContactLog contacts;                         ///< contacts of the last iteration, for drawing
+  std::unique_ptr<TaskPool> pool;              ///< worker threads (SimulationParameters::threads)
+  std::vector<ThreadScratch> scratch;          ///< per thread of the pool
+  std::vector<uint32_t> active;                ///< unfrozen muscle slots, largest first
+  std::vector<MuscleIterationResult> results;  ///< per muscle slot, this iteration
+  std::vector<MusclePairTask> pairTasks;       ///< muscle pairs of this iteration, by round
+  std::vector<uint32_t> lastRound;             ///< scratch of the colouring, per slot
+  uint32_t musclesAdded = 0;                   ///< counts additions, seeds each muscle's noise
+  btScalar previousDt = 0;                     ///< dt of the last iteration (0: none yet)
+  uint64_t stepCount = 0;                      ///< steps taken (the guard numbers them)
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
@@ -67,14 +98,30 @@ struct MuscleSystem::Impl {
     return *state;
   }
 
+  /// Starts the pool for parameters.threads and sizes the per-thread and per-muscle scratch;
+  /// allocates only when the thread count or the bodies changed (never in the iterations).
+  void prepareWorkers();
+  /// Runs task(state, thread) for every active muscle on the pool.
+  template <typename Task>
+  void forEachMuscle(Task&& task) {
+    pool->run(active.size(), [&](size_t k, unsigned thread) {
+      task(*muscles.states[active[k]], active[k], thread);
+    });
+  }
+  /// Moves the contacts each thread logged into `contacts` (counts always; ends while room).
+  void gatherContacts();
+
   void resolveBones(MuscleState& state) const;
   void placeAtBones(MuscleState& state) const;
   void pretransform(MuscleState& state, bool rotateVelocities) const;
   void followFixed(MuscleState& state) const;
   void moveBones(btScalar share, bool arrive);
+  void followBones(MuscleState& state) const;
   btScalar timeStep() const;
+  void collideMusclePairs();
   void collide();
   void step();
+  void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
 };
 
 }  // namespace fibremss

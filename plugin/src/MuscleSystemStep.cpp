@@ -9,6 +9,7 @@
 // pre-transform, and rebuilds the trees. Output: deformed surfaces.
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -90,7 +91,37 @@ void MuscleSystem::Impl::followFixed(MuscleState& state) const {
   }
 }
 
-// Bones to `share` of the way from last to target (exactly the target when arriving).
+void MuscleSystem::Impl::prepareWorkers() {
+  const unsigned threads = TaskPool::resolve(parameters.threads);
+  if (!pool || pool->threads() != threads) pool = std::make_unique<TaskPool>(threads);
+  scratch.resize(threads);
+  // Each thread logs an even share of the drawing capacity; a full log still counts.
+  const size_t share = (contacts.ends.size() / threads + 1) & ~size_t{1};
+  for (ThreadScratch& thread : scratch) {
+    if (thread.contacts.ends.size() < share) thread.contacts.ends.resize(share);
+    thread.stack.reserve(4096);
+  }
+  const size_t slots = muscles.states.size();
+  active.reserve(slots);
+  results.resize(slots);
+  lastRound.resize(slots);
+  pairTasks.reserve(slots * (slots - std::min<size_t>(slots, 1)) / 2);
+}
+
+void MuscleSystem::Impl::gatherContacts() {
+  for (ThreadScratch& thread : scratch) {
+    ContactLog& log = thread.contacts;
+    const size_t moved = std::min(log.stored, contacts.ends.size() / 2 - contacts.stored);
+    std::copy_n(log.ends.begin(), 2 * moved, contacts.ends.begin() + 2 * contacts.stored);
+    contacts.stored += moved;
+    contacts.found += log.found;
+    contacts.candidates += log.candidates;
+    log.clear();
+  }
+}
+
+// Bones to `share` of the way from last to target (exactly the target when arriving); the
+// muscles follow in followBones.
 void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
@@ -101,58 +132,92 @@ void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
     if (bone.moving)
       bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
   }
-  for (uint32_t slot : muscles.order) {
-    MuscleState& state = *muscles.states[slot];
-    state.bonesMoving = false;
-    for (size_t b = 0; b < state.bones.size(); ++b) {
-      state.boneDeltas[b].setIdentity();
-      if (state.boneSlots[b] < 0) continue;
-      const BoneState& bone = *bones.states[state.boneSlots[b]];
-      state.boneTransforms[b] = bone.current;
-      if (bone.moving) state.boneDeltas[b] = bone.delta;
-      state.bonesMoving = state.bonesMoving || bone.moving;
-    }
-    pretransform(state, integratorFor(parameters.integrator).usesVelocities());
-    followFixed(state);
+}
+
+// One muscle after its bones moved: their transforms and deltas, the pre-transform, the fixed
+// particles.
+void MuscleSystem::Impl::followBones(MuscleState& state) const {
+  state.bonesMoving = false;
+  for (size_t b = 0; b < state.bones.size(); ++b) {
+    state.boneDeltas[b].setIdentity();
+    if (state.boneSlots[b] < 0) continue;
+    const BoneState& bone = *bones.states[state.boneSlots[b]];
+    state.boneTransforms[b] = bone.current;
+    if (bone.moving) state.boneDeltas[b] = bone.delta;
+    state.bonesMoving = state.bonesMoving || bone.moving;
   }
+  pretransform(state, integratorFor(parameters.integrator).usesVelocities());
+  followFixed(state);
 }
 
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
 btScalar MuscleSystem::Impl::timeStep() const {
   if (!parameters.adaptiveTimeStep) return parameters.timeStep;
   btScalar dt = parameters.timeStep;
-  for (uint32_t slot : muscles.order)
-    dt = std::min(dt, adaptiveTimeStep(*muscles.states[slot], previousDt));
+  for (uint32_t slot : active) dt = std::min(dt, results[slot].safeTimeStep);
   return std::max(dt, parameters.minTimeStep);
+}
+
+// Pairs of muscles whose bounds meet, in rounds where no muscle appears twice: a pair goes to
+// the round after the last one of either muscle, so every muscle meets its partners in
+// insertion order whatever the thread count (the pushes are summed in one fixed order).
+void MuscleSystem::Impl::collideMusclePairs() {
+  pairTasks.clear();
+  std::fill(lastRound.begin(), lastRound.end(), 0);
+  for (size_t i = 0; i < muscles.order.size(); ++i) {
+    const uint32_t a = muscles.order[i];
+    const MuscleState& first = *muscles.states[a];
+    if (first.frozen || !first.tree.root()) continue;
+    for (size_t j = i + 1; j < muscles.order.size(); ++j) {
+      const uint32_t b = muscles.order[j];
+      const MuscleState& second = *muscles.states[b];
+      if (second.frozen || !second.tree.root() ||
+          !Intersect(first.tree.root()->volume, second.tree.root()->volume))
+        continue;
+      const uint32_t round = std::max(lastRound[a], lastRound[b]) + 1;
+      lastRound[a] = lastRound[b] = round;
+      pairTasks.push_back({a, b, round});
+    }
+  }
+  // Stable by construction within a round: a pair's round exceeds every earlier pair's of its
+  // muscles, so sorting by round alone cannot reorder a muscle's pairs.
+  std::sort(pairTasks.begin(), pairTasks.end(),
+            [](const MusclePairTask& x, const MusclePairTask& y) { return x.round < y.round; });
+  for (size_t begin = 0; begin < pairTasks.size();) {
+    size_t end = begin;
+    while (end < pairTasks.size() && pairTasks[end].round == pairTasks[begin].round) ++end;
+    pool->run(end - begin, [&](size_t k, unsigned thread) {
+      const MusclePairTask& pair = pairTasks[begin + k];
+      collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].contacts);
+    });
+    begin = end;
+  }
 }
 
 void MuscleSystem::Impl::collide() {
   Clock::time_point start = Clock::now();
   contacts.clear();
   const bool any = parameters.muscleMuscle || parameters.muscleBone;
-  if (any)
-    for (uint32_t slot : muscles.order) {
-      MuscleState& state = *muscles.states[slot];
-      refitTree(state);
-    }
-  if (parameters.muscleMuscle)
-    for (size_t a = 0; a < muscles.order.size(); ++a)
-      for (size_t b = a + 1; b < muscles.order.size(); ++b)
-        collideMuscles(*muscles.states[muscles.order[a]], *muscles.states[muscles.order[b]],
-                       contacts);
+  if (any) forEachMuscle([](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+  if (parameters.muscleMuscle) collideMusclePairs();
   stats.timing.muscleCd += millisecondsSince(start);
 
   start = Clock::now();
   if (parameters.muscleBone)
-    for (uint32_t muscleSlot : muscles.order)
+    forEachMuscle([&](MuscleState& state, uint32_t, unsigned thread) {
       for (uint32_t boneSlot : bones.order)
-        collideMuscleBone(*muscles.states[muscleSlot], *bones.states[boneSlot], stack, contacts);
+        collideMuscleBone(state, *bones.states[boneSlot], scratch[thread].stack,
+                          scratch[thread].contacts);
+    });
+  gatherContacts();
   stats.timing.boneCd += millisecondsSince(start);
 
   start = Clock::now();
   const bool zeroVelocities = integratorFor(parameters.integrator).usesVelocities();
   if (any)
-    for (uint32_t slot : muscles.order) applyPushes(*muscles.states[slot], zeroVelocities);
+    forEachMuscle([zeroVelocities](MuscleState& state, uint32_t, unsigned) {
+      applyPushes(state, zeroVelocities);
+    });
   stats.contacts = contacts.found;
   stats.candidates = contacts.candidates;
   stats.timing.response += millisecondsSince(start);
@@ -163,6 +228,17 @@ void MuscleSystem::Impl::step() {
   stats = StepStats{};
   const TimeIntegrator& integrator = integratorFor(parameters.integrator);
   const int cap = std::max(1, parameters.iterations);
+  prepareWorkers();
+  // Largest muscles first: handed out in this order, the threads finish close together.
+  active.clear();
+  for (uint32_t slot : muscles.order)
+    if (!muscles.states[slot]->frozen) active.push_back(slot);
+  const auto cost = [this](uint32_t slot) {
+    const MuscleSettings& settings = *muscles.states[slot]->settings;
+    return settings.springs.size() + settings.particleCount();
+  };
+  std::sort(active.begin(), active.end(),
+            [&](uint32_t x, uint32_t y) { return cost(x) != cost(y) ? cost(x) > cost(y) : x < y; });
 
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
@@ -182,30 +258,41 @@ void MuscleSystem::Impl::step() {
     motionIterations =
         std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
   }
-  for (uint32_t slot : muscles.order) {
+  for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, state);
     resolveBones(state);
-    if (rebuild) {
+  }
+  if (rebuild)
+    forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
       placeAtBones(state);
       rebuildTree(state);
-    }
-  }
+    });
 
+  const bool adaptive = parameters.adaptiveTimeStep;
   int iteration = 0;
   while (true) {
     ++iteration;
     Clock::time_point start = Clock::now();
-    if (iteration <= motionIterations)
+    const bool bonesMove = iteration <= motionIterations;
+    if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
+    forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+      if (bonesMove) followBones(state);
+      MuscleIterationResult& result = results[slot];
+      result.forces = springForces(state);
+      if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+    });
 
+    // Reduced in insertion order: the same sums for every thread count.
     double deviation = 0;
     double restSum = 0;
     // Judged on the last iteration: tearing while bones move heals.
     stats.exploded = false;
     stats.overstretchedSprings = 0;
     for (uint32_t slot : muscles.order) {
-      const SpringForceResult forces = springForces(*muscles.states[slot]);
+      if (muscles.states[slot]->frozen) continue;
+      const SpringForceResult& forces = results[slot].forces;
       deviation += forces.deviation;
       stats.exploded = stats.exploded || forces.exploded;
       stats.overstretchedSprings += forces.overstretched;
@@ -214,15 +301,20 @@ void MuscleSystem::Impl::step() {
     stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
 
     const btScalar dt = timeStep();
+    const btScalar lastDt = previousDt > 0 ? previousDt : dt;
+    forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+      const IntegrationResult integration = integrator.advance(state, dt, lastDt);
+      results[slot].displacement = integration.displacement;
+      results[slot].finite = integration.finite;
+    });
     double displacement = 0;
     size_t freeCount = 0;
     for (uint32_t slot : muscles.order) {
-      MuscleState& state = *muscles.states[slot];
-      const IntegrationResult result =
-          integrator.advance(state, dt, previousDt > 0 ? previousDt : dt);
-      displacement += result.displacement;
+      const MuscleState& state = *muscles.states[slot];
+      if (state.frozen) continue;
+      displacement += results[slot].displacement;
       freeCount += state.freeParticles.size();
-      if (!result.finite) stats.nan = true;
+      if (!results[slot].finite) stats.nan = true;
     }
     stats.lastTimeStep = previousDt = dt;
     stats.meanDisplacement =
@@ -241,19 +333,21 @@ void MuscleSystem::Impl::step() {
       stop = stop || (arrived && stats.springDeviationRatio < parameters.deviationEpsilon);
     if (stop) {
       // A spent budget ends the step where it is: the bones jump the rest of the way.
-      if (!arrived) moveBones(1, true);
+      if (!arrived) {
+        moveBones(1, true);
+        forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { followBones(state); });
+      }
       break;
     }
   }
   stats.iterations = iteration;
 
   const Clock::time_point outputStart = Clock::now();
-  for (uint32_t slot : muscles.order) {
-    MuscleState& state = *muscles.states[slot];
+  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
     if (!state.surface.empty())
       deformSurface(*state.settings, state.positions, state.boneTransforms,
                     parameters.blendedPretransform, state.surface);
-  }
+  });
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.last = bone.current = bone.target;

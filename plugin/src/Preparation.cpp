@@ -8,6 +8,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <exception>
 #include <thread>
 
@@ -20,6 +21,12 @@ namespace {
 using detail::KdTree;
 
 enum RandomStream : uint32_t { kFibreJitter = 1, kSphereThinning = 2 };
+
+/// Particles of different fibres closer than this share of the median sample spacing merge when
+/// the input asks for it (lattice layouts excepted: their springs follow the grid's indices).
+constexpr btScalar kMergeFraction = btScalar(0.25);
+/// Surface vertices inside a bone at rest move this share of the spacing beyond its surface.
+constexpr btScalar kSurfaceMarginFraction = btScalar(0.01);
 
 /// Runs task(i) for i in [0, count) on up to hardware_concurrency threads; rethrows the
 /// exception of the lowest failing i.
@@ -107,6 +114,39 @@ void checkFibres(const std::string& source, const FibreSet& fibres) {
                        "coordinates must be finite numbers");
 }
 
+/// One sentence per repair preparation made to a muscle (empty counts are left out).
+void describeRepairs(const MuscleInput& muscle, const MusclePreparationReport& report,
+                     const std::vector<BoneInput>& bones, const std::vector<MuscleInput>& muscles,
+                     std::vector<std::string>& repairs) {
+  const std::string source = detail::muscleSource(muscle);
+  auto mm = [](btScalar metres) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.3g mm", double(metres) * 1000);
+    return std::string(text);
+  };
+  if (report.mergedParticles > 0)
+    repairs.push_back(source + ": " + std::to_string(report.mergedParticles) + " of " +
+                      std::to_string(report.sampledParticles) +
+                      " particles merged into a particle of another fibre closer than " +
+                      mm(report.mergeDistance) + " (converging fibres); shortest spring " +
+                      mm(report.shortestSpring));
+  for (size_t other = 0; other < report.pushedOutOfMuscles.size(); ++other)
+    if (report.pushedOutOfMuscles[other] > 0)
+      repairs.push_back(source + ": " + std::to_string(report.pushedOutOfMuscles[other]) +
+                        " particles inside muscle '" + muscles[other].name +
+                        "' at rest moved out along its normal (the surfaces overlap)");
+  for (size_t b = 0; b < bones.size(); ++b) {
+    if (report.pushedOutOfBones[b] > 0)
+      repairs.push_back(source + ": " + std::to_string(report.pushedOutOfBones[b]) +
+                        " free particles inside bone '" + bones[b].name +
+                        "' at rest moved out along its normal (now fixed to it)");
+    if (report.surfaceVerticesPushedOut[b] > 0)
+      repairs.push_back(source + ": " + std::to_string(report.surfaceVerticesPushedOut[b]) +
+                        " surface vertices inside bone '" + bones[b].name +
+                        "' at rest moved out along its normal");
+  }
+}
+
 std::string join(const std::vector<std::string>& parts) {
   std::string joined;
   for (const auto& part : parts) joined += (joined.empty() ? "" : "; ") + part;
@@ -163,10 +203,8 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
                        "attachment distance)");
 }
 
-MuscleSettings prepareMuscle(const MuscleInput& input, size_t index, uint32_t seed,
-                             const std::vector<BoneShape>& bones,
-                             const std::vector<BoneInput>& boneInputs,
-                             std::vector<std::string>& warnings) {
+/// The first stage of a muscle: checks its input, samples its fibres.
+MuscleSettings sampleMuscle(const MuscleInput& input, size_t index, uint32_t seed) {
   const std::string source = detail::muscleSource(input);
   checkMesh(source, "surface", input.surface);
   checkFibres(source, input.fibres);
@@ -177,12 +215,50 @@ MuscleSettings prepareMuscle(const MuscleInput& input, size_t index, uint32_t se
     throw InputError(source, "springs.density", "must be positive");
   if (parameters.skinNeighbours < 1)
     throw InputError(source, "skin_neighbours", "must be at least 1");
-
   MuscleSettings muscle;
   muscle.name = input.name;
   muscle.restSurface = input.surface;
   std::mt19937 random = detail::bodyRandom(seed, kFibreJitter, index);
   detail::sampleFibres(input, random, muscle);
+  return muscle;
+}
+
+/// The second stage: rest-pose overlaps moved out (free particles deep in a bone, particles
+/// inside an earlier muscle, surface vertices inside a bone), then near-coincident particles
+/// merged. `surfaces` holds every muscle's surface distance tree.
+void separateMuscle(const MuscleInput& input, size_t index, const std::vector<BoneShape>& bones,
+                    const std::vector<std::unique_ptr<MeshDistance>>& surfaces,
+                    MuscleSettings& muscle, MusclePreparationReport& report) {
+  report.sampledParticles = muscle.particleCount();
+  const btScalar spacing = detail::medianSampleSpacing(muscle);
+  const btScalar margin = kMergeFraction * spacing;
+  report.pushedOutOfMuscles.assign(surfaces.size(), 0);
+  for (size_t other = 0; other < index; ++other)
+    report.pushedOutOfMuscles[other] =
+        detail::pushOutOf(muscle.restPositions, *surfaces[other], 0, margin);
+  report.pushedOutOfBones.assign(bones.size(), 0);
+  report.surfaceVerticesPushedOut.assign(bones.size(), 0);
+  for (size_t b = 0; b < bones.size(); ++b) {
+    // Particles within the attachment distance are fixed to the bone: they may stay inside.
+    report.pushedOutOfBones[b] = detail::pushOutOf(muscle.restPositions, *bones[b].distance,
+                                                   input.parameters.attachmentDistance, margin);
+    report.surfaceVerticesPushedOut[b] = detail::pushOutOf(
+        muscle.restSurface.vertices, *bones[b].distance, 0, kSurfaceMarginFraction * spacing);
+  }
+  const SpringLayout layout = input.parameters.springs.layout;
+  if (input.mergeConverging && layout != SpringLayout::Lattice6 &&
+      layout != SpringLayout::Lattice26) {
+    report.mergeDistance = margin;
+    report.mergedParticles = detail::mergeCloseParticles(muscle, report.mergeDistance);
+  }
+}
+
+/// The last stage: springs, attachments, damping, blend weights, skinning.
+void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
+                  const std::vector<BoneInput>& boneInputs, std::vector<std::string>& warnings,
+                  MuscleSettings& muscle, MusclePreparationReport& report) {
+  const std::string source = detail::muscleSource(input);
+  const MuscleParameters& parameters = input.parameters;
   const size_t n = muscle.particleCount();
   muscle.flags.assign(n, 0);
 
@@ -207,7 +283,9 @@ MuscleSettings prepareMuscle(const MuscleInput& input, size_t index, uint32_t se
         return bones[static_cast<size_t>(bone)].distance->closest(p, limit).distance;
       });
   detail::bindSurface(muscle, particles, parameters.skinNeighbours);
-  return muscle;
+  report.shortestSpring = muscle.springs.empty() ? 0 : muscle.springs.front().restLength;
+  for (const Spring& spring : muscle.springs)
+    report.shortestSpring = std::min(report.shortestSpring, spring.restLength);
 }
 
 }  // namespace
@@ -234,8 +312,18 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
 
   std::vector<MuscleSettings> muscleSettings(muscles.size());
   std::vector<std::vector<std::string>> muscleWarnings(muscles.size());
+  std::vector<MusclePreparationReport>& muscleReports = scene.report.muscles;
+  muscleReports.resize(muscles.size());
+  std::vector<std::unique_ptr<MeshDistance>> surfaces(muscles.size());
   parallelFor(muscles.size(), [&](size_t m) {
-    muscleSettings[m] = prepareMuscle(muscles[m], m, seed, shapes, bones, muscleWarnings[m]);
+    muscleSettings[m] = sampleMuscle(muscles[m], m, seed);
+    surfaces[m] = std::make_unique<MeshDistance>(muscles[m].surface);
+  });
+  parallelFor(muscles.size(), [&](size_t m) {
+    separateMuscle(muscles[m], m, shapes, surfaces, muscleSettings[m], muscleReports[m]);
+  });
+  parallelFor(muscles.size(), [&](size_t m) {
+    finishMuscle(muscles[m], shapes, bones, muscleWarnings[m], muscleSettings[m], muscleReports[m]);
   });
 
   std::vector<std::string>& warnings = scene.report.warnings;
@@ -255,17 +343,20 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
     if (!notes.empty()) warnings.push_back("bone '" + bones[b].name + "': " + join(notes));
   }
   for (const auto& list : muscleWarnings) warnings.insert(warnings.end(), list.begin(), list.end());
+  for (size_t m = 0; m < muscles.size(); ++m)
+    describeRepairs(muscles[m], muscleReports[m], bones, muscles, scene.report.repairs);
 
   const detail::ShrinkReport shrink = detail::shrinkRadii(muscleSettings, boneSettings);
   size_t sphereCount = 0;
   for (const auto& muscle : muscleSettings) sphereCount += muscle.boundaryParticles.size();
   if (shrink.muscleSpheresShrunk > 0 || shrink.boneSpheresShrunk > 0)
-    warnings.push_back("radii: " + std::to_string(shrink.muscleSpheresShrunk) + " of " +
-                       std::to_string(sphereCount) +
-                       " muscle spheres shrunk so that no two bodies overlap at rest (" +
-                       std::to_string(shrink.muscleSpheresZeroed) + " to radius 0); " +
-                       std::to_string(shrink.boneSpheresShrunk) +
-                       " bone spheres shrunk around muscle particles inside them");
+    scene.report.repairs.push_back(
+        "radii: " + std::to_string(shrink.muscleSpheresShrunk) + " of " +
+        std::to_string(sphereCount) +
+        " muscle spheres shrunk so that no two bodies overlap at rest (" +
+        std::to_string(shrink.muscleSpheresZeroed) + " to radius 0); " +
+        std::to_string(shrink.boneSpheresShrunk) +
+        " bone spheres shrunk around muscle particles inside them");
 
   scene.report.surfaceCoverage.assign(muscles.size(), 0);
   parallelFor(muscles.size(), [&](size_t m) {

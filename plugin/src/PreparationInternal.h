@@ -22,8 +22,25 @@ std::string muscleSource(const MuscleInput& muscle);
 std::mt19937 bodyRandom(uint32_t seed, uint32_t kind, size_t bodyIndex);
 
 /// Fibre sampling (FibreSampling.cpp): fills restPositions, fibreParticles and fibreOffsets of
-/// `out`. Particle i of fibre f gets index f·resolution + i.
+/// `out`. Particle i of fibre f gets index f·resolution + i (until mergeCloseParticles).
 void sampleFibres(const MuscleInput& muscle, std::mt19937& random, MuscleSettings& out);
+
+/// Median over the fibres of the regular step between particles (PreparationMerge.cpp) [m];
+/// 0 when no fibre has three particles.
+btScalar medianSampleSpacing(const MuscleSettings& muscle);
+
+/// Merges every particle closer than `distance` to an earlier kept particle of another fibre
+/// into it (PreparationMerge.cpp): kept particles of different fibres are at least `distance`
+/// apart. Compacts
+/// restPositions and renumbers fibreParticles/fibreOffsets (a fibre keeps one of two
+/// consecutive merged particles); call before any other per-particle array exists. Returns
+/// how many particles were removed.
+size_t mergeCloseParticles(MuscleSettings& muscle, btScalar distance);
+
+/// Moves every point deeper than `minDepth` inside `body` out along its normal to `margin`
+/// beyond its surface (PreparationOverlap.cpp, seed 001 §4.1). Returns how many moved.
+size_t pushOutOf(std::span<btVector3> points, const MeshDistance& body, btScalar minDepth,
+                 btScalar margin);
 
 /// Springs of the muscle's layout (Springs.cpp), sorted by (a, b), a < b, no duplicates;
 /// rest length = distance, k = κ / L0. Throws InputError for unusable layouts or coincident

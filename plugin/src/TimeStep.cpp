@@ -2,13 +2,50 @@
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <limits>
+#include <vector>
 
 namespace fibremss {
 namespace {
 constexpr btScalar kInfinity = std::numeric_limits<btScalar>::infinity();
 /// Margin below the stability limit (rounding, non-linear springs).
 constexpr btScalar kStabilitySafety = btScalar(0.9);
+
+/// Whether an explicit Runge–Kutta method of `order` stages and order (stability polynomial: the
+/// Taylor series of exp to that order) is stable at dt for every mode s² + γs + ω² = 0 with ω²
+/// sampled over [0, lambda].
+bool rungeKuttaStable(int order, double lambda, double gamma, double dt) {
+  constexpr int kSamples = 64;
+  for (int j = 0; j <= kSamples; ++j) {
+    const double omega2 = lambda * j / kSamples;
+    const std::complex<double> root = std::sqrt(std::complex<double>(gamma * gamma / 4 - omega2));
+    for (const std::complex<double> s : {-gamma / 2 + root, -gamma / 2 - root}) {
+      const std::complex<double> z = s * dt;
+      std::complex<double> term = 1, sum = 1;
+      for (int k = 1; k <= order; ++k) sum += term *= z / static_cast<double>(k);
+      if (std::abs(sum) > 1 + 1e-12) return false;
+    }
+  }
+  return true;
+}
+
+/// The largest stable dt of rungeKuttaStable (safety factor applied), searched from the Verlet
+/// limit: doubled while stable, then bisected. Undamped springs give 0 for Euler and RK2, whose
+/// regions miss the imaginary axis.
+btScalar rungeKuttaLimit(int order, double lambda, double gamma, double start) {
+  double stable = 0;
+  double unstable = start;
+  while (rungeKuttaStable(order, lambda, gamma, unstable) && unstable < 64 * start) {
+    stable = unstable;
+    unstable *= 2;
+  }
+  for (int k = 0; k < 40; ++k) {
+    const double middle = (stable + unstable) / 2;
+    (rungeKuttaStable(order, lambda, gamma, middle) ? stable : unstable) = middle;
+  }
+  return static_cast<btScalar>(kStabilitySafety * stable);
+}
 }  // namespace
 
 btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, btScalar mass,
@@ -37,7 +74,7 @@ btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt) {
   return dt;
 }
 
-btScalar stableTimeStep(const MuscleSettings& settings) {
+btScalar stableTimeStep(const MuscleSettings& settings, Integrator kind) {
   // Rows of free particles only: fixed ones are never integrated.
   std::vector<btScalar> stiffness(settings.particleCount(), 0);
   for (const Spring& spring : settings.springs) {
@@ -47,11 +84,23 @@ btScalar stableTimeStep(const MuscleSettings& settings) {
   const btScalar stiffest =
       stiffness.empty() ? 0 : *std::max_element(stiffness.begin(), stiffness.end());
   if (stiffest <= 0 || settings.particleMass <= 0) return kInfinity;
-  const btScalar lambda = 2 * stiffest / settings.particleMass;  // ω²max bound
-  const btScalar dampingRate = settings.damping / settings.particleMass;
-  const btScalar limit =
+  const double lambda = 2.0 * stiffest / settings.particleMass;  // ω²max bound
+  const double dampingRate = settings.damping / settings.particleMass;
+  const double verletLimit =
       (-dampingRate + std::sqrt(dampingRate * dampingRate + 4 * lambda)) / lambda;
-  return kStabilitySafety * limit;
+  switch (kind) {
+    case Integrator::Verlet:
+    case Integrator::SemiImplicitEuler:
+      return static_cast<btScalar>(kStabilitySafety * verletLimit);
+    case Integrator::ExplicitEuler:
+      return rungeKuttaLimit(1, lambda, dampingRate, verletLimit);
+    case Integrator::Rk2:
+      return rungeKuttaLimit(2, lambda, dampingRate, verletLimit);
+    case Integrator::Rk4:
+      return rungeKuttaLimit(4, lambda, dampingRate, verletLimit);
+    default:
+      return kInfinity;
+  }
 }
 
 }  // namespace fibremss

@@ -20,9 +20,13 @@ btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, bt
 /// by the muscle's stability bound.
 btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt);
 
-/// The largest dt for which damped Verlet (and semi-implicit Euler) is stable for every particle
-/// of the settings, from a Gershgorin bound 2·Σk/m on the stiffness: λ·dt² + 2(c/m)·dt < 4,
-/// times a safety factor. Eq 5.1 alone does not bound the oscillation of stiff springs.
-btScalar stableTimeStep(const MuscleSettings& settings);
+/// The largest dt for which `kind` is stable for every particle of the settings, times a safety
+/// factor. The spring stiffness is bounded by Gershgorin (eigenvalues ω² of K/m in [0, 2·Σk/m]);
+/// each mode s² + (c/m)·s + ω² = 0 must map inside the integrator's stability region. Damped
+/// Verlet and semi-implicit Euler: λ·dt² + 2(c/m)·dt < 4. Explicit Euler, RK2, RK4: |R(dt·s)| ≤ 1
+/// with R their stability polynomial, found by bisection over sampled ω². Implicit and
+/// position-based integrators: infinity (eq 5.1 alone bounds their dt). Eq 5.1 alone does not
+/// bound the oscillation of stiff springs.
+btScalar stableTimeStep(const MuscleSettings& settings, Integrator kind = Integrator::Verlet);
 
 }  // namespace fibremss

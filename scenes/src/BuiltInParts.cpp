@@ -148,6 +148,7 @@ std::vector<BuiltInScene> builtInScenes() {
       {"hip-adduction",
        "pelvis, femur and 4 hip muscles; hip adduction 0 -> 60 deg in 2 deg steps"},
       {"hip-rotation", "pelvis, femur and 4 hip muscles; internal rotation 0 -> 60 deg"},
+      {"tension-spike", "a short muscle whose attachments jump 40 mm apart in one pose, then hold"},
       {"pinch", "a muscle between two bones that pass each other like shear blades"},
       {"sphere-denoise", "a sphere of 3840 particles perturbed by noise, no bones (integrators)"},
       {"sphere-planes", "a soft noisy sphere trapped between two immobile planes"},
@@ -169,6 +170,8 @@ std::string builtInSceneDefinition(const std::string& name) {
     scene = hipScene("adduction");
   else if (name == "hip-rotation")
     scene = hipScene("rotation");
+  else if (name == "tension-spike")
+    scene = tensionSpikeScene();
   else if (name == "pinch")
     scene = pinchScene();
   else if (name == "sphere-denoise")

@@ -1,4 +1,4 @@
-// The small built-in scenes: fusiform, pinch, sphere-denoise, sphere-planes.
+// The small built-in scenes: fusiform, tension-spike, pinch, sphere-denoise, sphere-planes.
 #include "BuiltInParts.h"
 
 namespace fibremss::builtin {
@@ -18,6 +18,28 @@ Json fusiformScene() {
       muscleTube({{0, 146.5, 0}, {0, 75, 0}, {0, 0, 0}, {0, -75, 0}, {0, -146.5, 0}},
                  {{6, 6}, {14, 14}, {20, 20}, {14, 14}, {6, 6}});
   scene["muscles"] = Json::array({tubeMuscle("fusiform", muscle)});
+  return scene;
+}
+
+Json tensionSpikeScene() {
+  // A stability hard case (issue 5): a short spindle between two bars that jump 20 mm apart
+  // each in one pose (the muscle from 103 to 143 mm, a sudden 1.4x stretch), then hold for six
+  // poses so that a stable integrator's kinetic energy decays and an unstable one's grows.
+  Json scene = header("tension-spike", "a short muscle whose attachments jump apart, then hold");
+  const TubeDefinition upper = boneTube({{-30, 65, 0}, {30, 65, 0}}, {15, 15});
+  const TubeDefinition lower = boneTube({{-30, -65, 0}, {30, -65, 0}}, {15, 15});
+  std::vector<btTransform> up{btTransform::getIdentity()}, down{btTransform::getIdentity()};
+  for (int i = 0; i < 7; ++i) {
+    up.emplace_back(btQuaternion::getIdentity(), btVector3(0, 20, 0));
+    down.emplace_back(btQuaternion::getIdentity(), btVector3(0, -20, 0));
+  }
+  scene["bones"] = Json::array({bone("upper", tubeGenerator(upper), keyframes(up)),
+                                bone("lower", tubeGenerator(lower), keyframes(down))});
+  // Ends 1.5 mm inside the bars (their facing sides at y = ±50).
+  const TubeDefinition muscle =
+      muscleTube({{0, 51.5, 0}, {0, 25, 0}, {0, 0, 0}, {0, -25, 0}, {0, -51.5, 0}},
+                 {{4, 4}, {8, 8}, {10, 10}, {8, 8}, {4, 4}});
+  scene["muscles"] = Json::array({tubeMuscle("spiked", muscle)});
   return scene;
 }
 

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
 #include "fibremss/Procedural.h"
 
 namespace fibremss::testing {
@@ -70,6 +71,16 @@ inline btVector3 bruteClosestOnTriangle(const btVector3& p, const btVector3& a, 
   for (const btVector3& candidate : {onSegment(b, c), onSegment(c, a)})
     if ((candidate - p).length2() < (best - p).length2()) best = candidate;
   return best;
+}
+
+/// Whether particles a and b lie on one fibre of the muscle.
+inline bool shareAFibre(const MuscleSettings& muscle, uint32_t a, uint32_t b) {
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+    const auto begin = muscle.fibreParticles.begin() + muscle.fibreOffsets[f];
+    const auto end = muscle.fibreParticles.begin() + muscle.fibreOffsets[f + 1];
+    if (std::find(begin, end, a) != end && std::find(begin, end, b) != end) return true;
+  }
+  return false;
 }
 
 /// Distance from p to a mesh by testing every triangle.

@@ -18,6 +18,22 @@ inline std::shared_ptr<BoneSettings> makeBone(std::vector<btVector3> centres = {
   return bone;
 }
 
+/// Free boundary particles (spheres) at `points` with `radii`, no springs.
+inline std::shared_ptr<MuscleSettings> makeSpheres(const std::vector<btVector3>& points,
+                                                   const std::vector<btScalar>& radii,
+                                                   btScalar mass = 1e-5) {
+  auto muscle = std::make_shared<MuscleSettings>();
+  muscle->name = "spheres";
+  muscle->restPositions = points;
+  muscle->radii = radii;
+  muscle->flags.assign(points.size(), kBoundary);
+  muscle->fixedBone.assign(points.size(), -1);
+  muscle->nearestBone.assign(points.size(), -1);
+  for (uint32_t i = 0; i < points.size(); ++i) muscle->boundaryParticles.push_back(i);
+  muscle->particleMass = mass;
+  return muscle;
+}
+
 /// Fixes `particle` of `muscle` to bone index `bone`.
 inline void fix(MuscleSettings& muscle, uint32_t particle, int32_t bone) {
   muscle.flags[particle] |= kFixed;

@@ -2,8 +2,8 @@
 // The finite-element reference built from a prepared scene: each muscle's surface
 // tetrahedralized (TetMesher.h), a btSoftBody of those tetrahedra with Bullet's Neo-Hookean
 // force in a btDeformableMultiBodyDynamicsWorld, nodes near the attachments pinned and moved
-// with their bones, contact with the bones' true triangle meshes. It is the accuracy
-// reference, not a speed competitor.
+// with their bones, contact with the bones' true triangle meshes (own node projection between
+// Bullet's substeps). It is the accuracy reference, not a speed competitor.
 #include <BulletSoftBody/btSoftBody.h>
 #include <LinearMath/btTransform.h>
 
@@ -34,22 +34,30 @@ struct FemDefinition {
   btScalar density = 1060;        ///< muscle density [kg/m³]; node mass = ρ·(adjacent volume)/4
   btScalar poseDuration = 0.07f;  ///< simulated time of one pose [s]
   int substepsPerPose = 50;       ///< world steps per pose (dt = poseDuration / substeps: 1.4 ms
-                                  ///< per 70 ms pose; Bullet's default deformable solve blows up
-                                  ///< at 5 ms for these stiffnesses)
-  TetMesherDefinition mesher;     ///< voxel size of the tetrahedral meshes
-  bool boneContact = true;        ///< SDF_RD contact of nodes with the bones' triangle meshes
-  bool muscleContact = false;     ///< VF_DD contact between muscles (boundary faces)
+                                  ///< per 70 ms pose; at 2.8 ms fusiform's reference exploded)
+  /// Voxels per muscle (6 tetrahedra each): 120 keeps the 13 poses of thigh13 within the
+  /// compare budget: Bullet recomputes every tetrahedron's rotation each substep (300 voxels,
+  /// 24 000 tetrahedra on thigh13, took ~16 s of CPU per pose).
+  TetMesherDefinition mesher{.targetCells = 120};
+  /// Node contact with the bones' true triangle meshes: after every substep a node inside a
+  /// bone (found within one voxel edge of its surface) or closer than contactMargin is put
+  /// back at the margin and loses its velocity into the bone (frictionless). Nodes that start
+  /// inside a bone (overlapping rest geometry) keep that overlap. Bullet's own SDF_RD
+  /// node–face contact took minutes per pose against thigh13's bone meshes.
+  bool boneContact = true;
+  btScalar contactMargin = 0;       ///< [m] kept between nodes and bones (0: on the surface)
+  bool muscleContact = false;       ///< VF_DD contact between muscles (boundary faces)
   btScalar attachmentDistance = 0;  ///< nodes this close to a fixed particle are pinned to its
                                     ///< bone [m]; 0: one voxel edge
-  btScalar sdfVoxelSize = 0.003f;   ///< btSparseSdf voxel edge [m]
-  /// Bullet units per metre inside the reference's world (see SoftBodyDefinition: Bullet
-  /// extrudes mesh triangles by 0.06 units for soft contact). Lengths are scaled by it, the
-  /// Lamé parameters divided by it, masses and time kept, so the motion in metres is the same.
+  /// Bullet units per metre inside the reference's world (centimetres, as the btSoftBody
+  /// baseline). Lengths are scaled by it, the Lamé parameters divided by it, masses and time
+  /// kept, so the motion in metres is the same.
   btScalar lengthScale = 100;
 };
 
-/// The reference world: one deformable btSoftBody per muscle, a kinematic btRigidBody with a
-/// btBvhTriangleMeshShape per bone, in a btDeformableMultiBodyDynamicsWorld without gravity.
+/// The reference world: one deformable btSoftBody per muscle in a
+/// btDeformableMultiBodyDynamicsWorld without gravity; the bones are their exact meshes
+/// (MeshDistance) moved by their transforms, outside Bullet's world.
 class FemScene {
  public:
   /// Bodies start at the poses `boneTransforms` (one per bone; rest pose when empty).

@@ -28,7 +28,8 @@ namespace fibremss {
 struct SoftBodyDefinition {
   int substepsPerPose = 20;       ///< world steps per pose; bones and pins interpolated
   btScalar poseDuration = 0.07f;  ///< simulated time of one pose [s]
-  int positionIterations = 4;     ///< m_cfg.piterations (links, per world step)
+  int positionIterations = 16;    ///< m_cfg.piterations (links, per world step); with 4, links
+                                  ///< of thigh13 stretched past 3× under its motion alone
   int clusterIterations = 2;      ///< m_cfg.citerations (cluster contacts, per world step)
   int clustersPerMuscle = 24;     ///< k-means clusters for soft–soft (CL_SS) collision
   bool softSoftCollision = true;  ///< CL_SS between muscles (no self-collision)

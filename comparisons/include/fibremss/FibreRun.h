@@ -5,6 +5,7 @@
 #include <atomic>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "fibremss/Measures.h"
 #include "fibremss/MuscleSystem.h"
@@ -34,6 +35,27 @@ struct FibreRunOptions {
   std::function<void(const RunProgress&)> progress;  ///< called after every step (may be empty)
   const std::atomic<bool>* cancel = nullptr;  ///< when it becomes true the run stops after the
                                               ///< current step, metrics.interrupted set
+  bool loopMotion = false;  ///< steps past the last pose sweep the motion back and forth (a soak
+                            ///< run) instead of holding the last pose
+  long sampleEvery = 0;     ///< iterations between soak samples (FibreRunDetails::samples; 0: none)
+};
+
+/// A muscle the numerical guard froze during a run.
+struct FrozenMuscle {
+  std::string name;  ///< the muscle's name
+  int step = 0;      ///< the step that froze it
+  bool nan = false;  ///< it had NaN/inf (else: burst springs)
+};
+
+/// The state of a long run every FibreRunOptions::sampleEvery iterations.
+struct SoakSample {
+  int step = 0;               ///< steps done
+  long iterations = 0;        ///< solver iterations done
+  double seconds = 0;         ///< wall time since the run started
+  double msPerIteration = 0;  ///< solver wall time per iteration since the previous sample
+  double residentMb = 0;      ///< resident set of the process now (VmRSS)
+  double fixedDriftMm = 0;    ///< largest distance of a fixed particle from T·rest now
+  bool finite = true;         ///< every particle is finite
 };
 
 /// What a FibreMSS run measures beyond RunMetrics.
@@ -45,14 +67,19 @@ struct FibreRunDetails {
   /// Median wall time of measuring one step [ms]; not part of RunMetrics::timing, which is the
   /// method's own cost (an application embedding FibreMSS does not measure).
   double measureMsPerStep = RunMetrics::kNone;
+  int rolledBackSteps = 0;           ///< steps the numerical guard rolled back
+  int retries = 0;                   ///< attempts it repeated with a smaller dt, all steps
+  std::vector<FrozenMuscle> frozen;  ///< muscles it froze, in order
+  std::vector<SoakSample> samples;   ///< every options.sampleEvery iterations
 };
 
-/// Runs the scene. Step s sets every bone to the scene's pose min(s, poseCount−1), steps the
-/// solver and measures: penetration of the muscle surfaces' vertices into the bones' true meshes
-/// (max over steps; mean over all penetrating vertices of all steps), and at the last step run
-/// the volume change (all muscles together) and the spring-deviation ratio. Stops at the first
-/// step with a NaN or an explosion (failedStep). Throws std::runtime_error if frames cannot be
-/// written.
+/// Runs the scene. Step s sets every bone to the scene's pose min(s, poseCount−1) (looping: s
+/// swept forth and back over the poses), steps the solver and measures: penetration of the muscle
+/// surfaces' vertices into the bones' true meshes (max over steps; mean over all penetrating
+/// vertices of all steps), and at the last step run the volume change (all muscles together) and
+/// the spring-deviation ratio. Stops at the first step the numerical guard could not save: a
+/// muscle frozen, or NaN/an explosion left in place (failedStep). Throws std::runtime_error if
+/// frames cannot be written.
 /// `details`, when given, receives what RunMetrics has no place for.
 RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
                        const FibreRunOptions& options = {}, FibreRunDetails* details = nullptr);

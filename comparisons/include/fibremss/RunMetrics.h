@@ -48,7 +48,8 @@ struct RunMetrics {
   double peakMemoryMb = kNone;          ///< peak resident set of the process
   double wallSeconds = 0;               ///< whole run
 
-  /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods).
+  /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
+  /// a NaN or exploded pose is left out.
   std::vector<std::vector<btVector3>> poseSurfaces;
 };
 

@@ -14,12 +14,20 @@
 
 namespace fibremss {
 
+/// How a BoneBody's shape is built; the defaults keep the mesh as given.
+struct BoneBodyOptions {
+  btScalar scale = 1;    ///< every vertex is multiplied by it (a world in other length units)
+  btScalar padding = 0;  ///< the shape's broadphase bounds reach this far beyond the mesh
+                         ///< (scaled units), so that pairs with it never end
+};
+
 class BoneBody {
  public:
   /// Builds the shape from `settings->mesh` (throws InputError when it has no triangles) and a
-  /// kinematic body placed at `transform` (rest → current).
+  /// kinematic body placed at `transform` (rest → current, in scaled units).
   explicit BoneBody(std::shared_ptr<const BoneSettings> settings,
-                    const btTransform& transform = btTransform::getIdentity());
+                    const btTransform& transform = btTransform::getIdentity(),
+                    const BoneBodyOptions& options = {});
   ~BoneBody();
   BoneBody(const BoneBody&) = delete;
   BoneBody& operator=(const BoneBody&) = delete;

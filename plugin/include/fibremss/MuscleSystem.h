@@ -54,6 +54,16 @@ struct StepStats {
   bool nan = false;                   ///< a NaN or inf appeared
   bool exploded = false;              ///< a spring beyond 3× its rest length in the last iteration
   size_t overstretchedSprings = 0;    ///< springs beyond 3× their rest length, last iteration
+
+  // The numerical guard (SimulationParameters::onFailure): what it found and did in this step.
+  uint64_t step = 0;          ///< index of this step in the system (0: the first)
+  bool failed = false;        ///< the state is left failed (Report: a muscle has NaN/inf or burst)
+  bool rolledBack = false;    ///< an attempt failed and the state went back to the step's start
+  int retries = 0;            ///< attempts repeated with a smaller dt (Retry)
+  MuscleHandle failedMuscle;  ///< the first muscle that failed in this step (invalid: none)
+  bool failedNan = false;     ///< that muscle had NaN/inf (else: exploded springs)
+  size_t newlyFrozen = 0;     ///< muscles this step froze at their last good state
+  size_t frozenMuscles = 0;   ///< muscles frozen in the system after this step
 };
 
 /// What debugDraw draws (bit flags).
@@ -88,10 +98,16 @@ class MuscleSystem {
                          std::span<const BoneHandle> bones);
   void removeMuscle(MuscleHandle muscle);
   bool contains(MuscleHandle muscle) const;
+  /// Whether the numerical guard stopped this muscle (it keeps its last good state).
+  bool frozen(MuscleHandle muscle) const;
+  /// Lets a frozen muscle move again from the state it was frozen in.
+  void unfreeze(MuscleHandle muscle);
 
   /// One simulation step: bones move from their last to their target transforms split over
   /// the iterations; pre-transform; iterations of forces, integration, collision detection and
-  /// response until the stop rule says; then output (fibres, surfaces).
+  /// response until the stop rule says; then output (fibres, surfaces). A step that produces
+  /// NaN/inf or explodes is handled as parameters().onFailure says (StepStats reports it); it
+  /// never throws for numerical reasons.
   void step();
 
   const StepStats& lastStep() const;
@@ -110,6 +126,7 @@ class MuscleSystem {
   void debugDraw(btIDebugDraw* drawer, int flags = kDrawParticles | kDrawBoneSpheres) const;
 
  private:
+  friend struct MuscleSystemAccess;  ///< the kernel benchmarks reach the state (internal)
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

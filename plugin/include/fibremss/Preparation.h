@@ -20,20 +20,40 @@ struct BoneInput {
 
 /// A muscle as given: its surface and fibres in the rest pose.
 struct MuscleInput {
-  std::string name;             ///< unique name
-  TriangleMesh surface;         ///< closed surface [m]
-  FibreSet fibres;              ///< polylines from attachment to attachment [m]
-  MuscleParameters parameters;  ///< resolution, attachment distance, springs
-  int fibreGridColumns = 0;     ///< > 0: fibres form a row-major grid with this many columns
-                                ///< (needed by the lattice layouts)
+  std::string name;              ///< unique name
+  TriangleMesh surface;          ///< closed surface [m]
+  FibreSet fibres;               ///< polylines from attachment to attachment [m]
+  MuscleParameters parameters;   ///< resolution, attachment distance, springs
+  int fibreGridColumns = 0;      ///< > 0: fibres form a row-major grid with this many columns
+                                 ///< (needed by the lattice layouts)
+  bool mergeConverging = false;  ///< merge near-coincident particles of different fibres
+                                 ///< (fibres generated from a surface converge into tendons)
+};
+
+/// What preparation found and changed in one muscle; printed by `fibremss check`.
+struct MusclePreparationReport {
+  size_t sampledParticles = 0;  ///< fibres × resolution, before merging
+  size_t mergedParticles = 0;   ///< particles merged into a near-coincident one of another fibre
+  btScalar mergeDistance = 0;   ///< particles of different fibres closer than this merge [m]
+  btScalar shortestSpring = 0;  ///< shortest spring rest length after preparation [m]
+  /// Per earlier muscle: particles that lay inside its surface at rest, moved out along its
+  /// normal (the earlier muscle keeps the overlap; seed 001 §4.1).
+  std::vector<size_t> pushedOutOfMuscles;
+  /// Per bone: free particles (deeper than the attachment distance) inside it at rest, moved
+  /// out along its normal (they end within the attachment distance, so they are fixed to it).
+  std::vector<size_t> pushedOutOfBones;
+  /// Per bone: surface vertices inside it at rest, moved out along its normal.
+  std::vector<size_t> surfaceVerticesPushedOut;
 };
 
 /// What preparation measured and decided; printed by `fibremss check`.
 struct PreparationReport {
   double seconds = 0;                 ///< wall time of the whole preparation
-  std::vector<std::string> warnings;  ///< things a user should know (radii shrunk, ...)
+  std::vector<std::string> warnings;  ///< things a user should know (loose fibre ends, ...)
+  std::vector<std::string> repairs;   ///< what preparation changed, one sentence each
   /// Per muscle: fraction of surface vertices inside some particle sphere (0..1).
   std::vector<double> surfaceCoverage;
+  std::vector<MusclePreparationReport> muscles;  ///< per muscle, same order as the inputs
 };
 
 /// Everything a simulation needs, immutable once made.

@@ -1,0 +1,94 @@
+#include "BenchScene.h"
+
+#include <string>
+
+#include "Integrators.h"
+#include "TimeStep.h"
+#include "fibremss/Preparation.h"
+
+namespace fibremss::bench {
+
+const char* partName(Part part) {
+  switch (part) {
+    case Part::SpringForces:
+      return "spring-forces";
+    case Part::Integration:
+      return "integration";
+    case Part::TreeRefit:
+      return "tree-refit";
+    case Part::MuscleMusclePairs:
+      return "muscle-muscle-pairs";
+    case Part::MuscleBonePairs:
+      return "muscle-bone-pairs";
+    case Part::Response:
+      return "response";
+  }
+  return "?";
+}
+
+BenchScene::BenchScene(int resolution, int threads)
+    : scene_(loadScene("thigh13", {"resolution=" + std::to_string(resolution),
+                                   "threads=" + std::to_string(threads)})) {
+  const PreparedScene prepared = prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed);
+  system_ = std::make_unique<MuscleSystem>(scene_.simulation);
+  for (const auto& bone : prepared.bones) bones_.push_back(system_->addBone(bone));
+  for (const auto& muscle : prepared.muscles) {
+    system_->addMuscle(muscle, bones_);
+    particles_ += muscle->particleCount();
+  }
+  impl_ = &MuscleSystemAccess::impl(*system_);
+  stepPose();
+  dt_ = impl_->parameters.timeStep;
+}
+
+void BenchScene::stepPose() {
+  pose_ = scene_.poseCount > 1 ? 1 - pose_ : 0;
+  for (size_t b = 0; b < bones_.size(); ++b)
+    system_->setBoneTransform(bones_[b], scene_.bonePose(b, pose_));
+  system_->step();
+}
+
+void BenchScene::run(Part part) {
+  MuscleSystemAccess::Impl& impl = *impl_;
+  const SimulationParameters& parameters = impl.parameters;
+  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
+  switch (part) {
+    case Part::SpringForces:
+      dt_ = parameters.timeStep;
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        springForces(state);
+        if (parameters.adaptiveTimeStep)
+          dt_ = std::min(dt_, adaptiveTimeStep(state, impl.previousDt));
+      }
+      dt_ = std::max(dt_, parameters.minTimeStep);
+      break;
+    case Part::Integration:
+      for (uint32_t slot : impl.muscles.order)
+        integrator.advance(*impl.muscles.states[slot], dt_, impl.previousDt);
+      impl.previousDt = dt_;
+      break;
+    case Part::TreeRefit:
+      for (uint32_t slot : impl.muscles.order) refitTree(*impl.muscles.states[slot]);
+      break;
+    case Part::MuscleMusclePairs:
+      impl.contacts.clear();
+      for (size_t a = 0; a < impl.muscles.order.size(); ++a)
+        for (size_t b = a + 1; b < impl.muscles.order.size(); ++b)
+          collideMuscles(*impl.muscles.states[impl.muscles.order[a]],
+                         *impl.muscles.states[impl.muscles.order[b]], impl.contacts);
+      break;
+    case Part::MuscleBonePairs:
+      for (uint32_t muscle : impl.muscles.order)
+        for (uint32_t bone : impl.bones.order)
+          collideMuscleBone(*impl.muscles.states[muscle], *impl.bones.states[bone],
+                            impl.scratch[0].stack, impl.contacts);
+      break;
+    case Part::Response:
+      for (uint32_t slot : impl.muscles.order)
+        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities());
+      break;
+  }
+}
+
+}  // namespace fibremss::bench

@@ -1,0 +1,52 @@
+#pragma once
+// The scene the kernel benchmarks run on: thigh13 prepared at one resolution, added to a
+// MuscleSystem and stepped into contact, with the step's parts callable one at a time on one
+// thread (the kernels), in the order an iteration runs them.
+#include <memory>
+
+#include "MuscleSystemAccess.h"
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss::bench {
+
+/// The parts of one iteration, in order (method.md §5).
+enum class Part {
+  SpringForces,       ///< spring forces and the adaptive dt bound of every muscle
+  Integration,        ///< the integrator's advance of every muscle
+  TreeRefit,          ///< refit of every muscle tree
+  MuscleMusclePairs,  ///< narrow phase of every pair of muscles
+  MuscleBonePairs,    ///< narrow phase of every muscle against every bone
+  Response,           ///< pushes applied to every muscle
+};
+constexpr Part kParts[] = {Part::SpringForces,      Part::Integration,     Part::TreeRefit,
+                           Part::MuscleMusclePairs, Part::MuscleBonePairs, Part::Response};
+
+/// Name of a part as benchmarks and the callgrind reference print it.
+const char* partName(Part part);
+
+/// thigh13 at `resolution` with `threads` solver threads, stepped to its second pose so that
+/// the muscles touch each other and the bones.
+class BenchScene {
+ public:
+  BenchScene(int resolution, int threads);
+
+  MuscleSystem& system() { return *system_; }
+  /// Particles of all muscles.
+  size_t particles() const { return particles_; }
+  /// One step towards the other of the first two poses (bones move in every step).
+  void stepPose();
+  /// One part of an iteration over every muscle, on the calling thread.
+  void run(Part part);
+
+ private:
+  LoadedScene scene_;                         ///< the loaded scene
+  std::unique_ptr<MuscleSystem> system_;      ///< the prepared system
+  std::vector<BoneHandle> bones_;             ///< bone handles, scene order
+  MuscleSystemAccess::Impl* impl_ = nullptr;  ///< the system's private state
+  size_t particles_ = 0;                      ///< particles of all muscles
+  int pose_ = 0;                              ///< pose of the last stepPose()
+  btScalar dt_ = 0;                           ///< dt of the last SpringForces part
+};
+
+}  // namespace fibremss::bench

@@ -1,0 +1,99 @@
+// `fibremss stability [CASE...]`: the hard-case stability matrix (issue 5): each integrator's
+// stable step measured, then every case × integrator × multiple of it, each run judged and
+// time-boxed; writes stability.json and stability.md.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "Commands.h"
+#include "fibremss/Error.h"
+#include "fibremss/Output.h"
+#include "fibremss/Stability.h"
+
+namespace fibremss::cli {
+namespace {
+
+struct StabilityArgs {
+  std::vector<std::string> cases;      ///< CASE... (empty: the hard cases)
+  std::vector<std::string> overrides;  ///< --set, every case
+  std::string out = "stability";       ///< --out DIR
+  std::string calibration;             ///< --calibrate CASE ("": the options' default)
+  StabilityOptions options;            ///< integrators, factors, boxes
+};
+
+void stability(StabilityArgs& args) {
+  std::vector<StabilityCase> cases;
+  for (const std::string& text : args.cases) cases.push_back(parseStabilityCase(text));
+  if (cases.empty()) cases = defaultHardCases();
+  if (!args.calibration.empty()) args.options.calibration = parseStabilityCase(args.calibration);
+  args.options.overrides.insert(args.options.overrides.end(), args.overrides.begin(),
+                                args.overrides.end());
+  for (const std::string& name : args.options.integrators) {
+    Integrator kind{};
+    if (!fromString(name, kind))
+      throw InputError("--integrators", name,
+                       "unknown integrator; one of verlet, "
+                       "semi-implicit-euler, explicit-euler, rk2, rk4, "
+                       "implicit-euler, implicit-midpoint, bdf2, pbd, xpbd");
+  }
+  args.options.log = [](const std::string& line) { std::fprintf(stderr, "%s\n", line.c_str()); };
+  const StabilityMatrix matrix = runStabilityMatrix(cases, args.options);
+
+  std::filesystem::create_directories(args.out);
+  writeFileAtomically(args.out + "/stability.json",
+                      stabilityJson(matrix, args.options).dump(1) + "\n");
+  const std::string markdown = stabilityMarkdown(matrix, args.options);
+  writeFileAtomically(args.out + "/stability.md", markdown);
+  std::printf("%s\nwrote %s/stability.json %s/stability.md\n", markdown.c_str(), args.out.c_str(),
+              args.out.c_str());
+}
+
+}  // namespace
+
+void addStabilityCommand(CLI::App& app) {
+  auto args = std::make_shared<StabilityArgs>();
+  CLI::App* command = app.add_subcommand(
+      "stability",
+      "Hard-case stability matrix: every integrator's stable step measured, then each case at "
+      "multiples of it; writes stability.json and stability.md to --out");
+  command->footer(
+      "CASE: a built-in scene or .json file, optionally with overrides and a stiffness factor: "
+      "hip-extension:step_deg=4, hip-extension:step_deg=10*kappa=100. Without CASE: "
+      "hip-extension at step_deg 2, 4, 5, 10, pinch, hip-extension with kappa x100, "
+      "tension-spike. Failing runs are reported (nan/exploded/energy/timeout with the step), "
+      "never fatal.");
+  command->add_option("case", args->cases, "Cases (default: the hard cases)");
+  command
+      ->add_option("--set", args->overrides,
+                   "Override for every case, after the default resolution=12 (repeatable)")
+      ->allow_extra_args(false);
+  command
+      ->add_option("--integrators", args->options.integrators,
+                   "Comma-separated integrators (default: all ten)")
+      ->delimiter(',');
+  command
+      ->add_option("--dt-factors", args->options.dtFactors,
+                   "Comma-separated multiples of each integrator's stable step")
+      ->delimiter(',')
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command->add_option("--calibrate", args->calibration,
+                      "Case on which each integrator's stable step is measured (default: "
+                      "hip-extension)");
+  command->add_option("--out", args->out, "Output directory")->capture_default_str();
+  command
+      ->add_option("--cell-seconds", args->options.cellSeconds,
+                   "Wall-time box of one run; a run past it stops after its step (timeout)")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command
+      ->add_option("--calibration-steps", args->options.calibrationSteps,
+                   "Steps of each stable-step probe")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  command->callback([args] { stability(*args); });
+}
+
+}  // namespace fibremss::cli

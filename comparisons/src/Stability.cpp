@@ -1,0 +1,371 @@
+#include "fibremss/Stability.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <exception>
+#include <limits>
+#include <memory>
+
+#include "fibremss/Error.h"
+#include "fibremss/FibreRun.h"
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// A case loaded and prepared once, run by many cells (preparation does not depend on the
+/// integrator or the time step). Calibration probes hold the first pose and add noise.
+struct PreparedCase {
+  LoadedScene scene;       ///< simulation settings are changed per cell
+  PreparedScene prepared;  ///< particles, springs, bones
+  double freeMass = 0;     ///< mass of the free particles of all muscles [kg]
+};
+
+PreparedCase prepareCase(const StabilityCase& stabilityCase, const StabilityOptions& options,
+                         bool calibration = false) {
+  std::vector<std::string> overrides = options.overrides;
+  overrides.insert(overrides.end(), stabilityCase.overrides.begin(), stabilityCase.overrides.end());
+  PreparedCase result;
+  result.scene = loadScene(stabilityCase.scene, overrides);
+  if (calibration) {
+    result.scene.poseCount = 1;  // every step holds the first pose
+    result.scene.simulation.initialNoise = static_cast<btScalar>(options.calibrationNoise);
+  }
+  for (MuscleInput& muscle : result.scene.muscles)
+    muscle.parameters.springs.kappa *= static_cast<btScalar>(stabilityCase.kappaFactor);
+  result.prepared =
+      prepareScene(result.scene.bones, result.scene.muscles, result.scene.simulation.seed);
+  for (const auto& muscle : result.prepared.muscles)
+    result.freeMass += static_cast<double>(muscle->particleMass) *
+                       static_cast<double>(muscle->particleCount() - muscle->fixedParticles.size());
+  return result;
+}
+
+/// One run of a prepared case; `steps` < 0 runs every pose. Never throws.
+StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
+                          const std::string& integrator, double dt, int steps,
+                          const StabilityOptions& options) {
+  StabilityCell cell;
+  cell.caseLabel = caseLabel;
+  cell.integrator = integrator;
+  cell.dt = dt;
+  Integrator kind{};
+  if (!fromString(integrator, kind)) {
+    cell.outcome = CellOutcome::Error;
+    cell.message = "unknown integrator " + integrator;
+    return cell;
+  }
+  if (!integratorAvailable(kind)) {
+    cell.outcome = CellOutcome::Unavailable;
+    cell.message = "the solver does not implement " + integrator + " yet";
+    return cell;
+  }
+  SimulationParameters& simulation = prepared.scene.simulation;
+  simulation.integrator = kind;
+  simulation.adaptiveTimeStep = false;
+  simulation.timeStep = static_cast<btScalar>(dt);
+  // Failures must be seen, not healed by a rollback.
+  simulation.onFailure = FailurePolicy::Report;
+
+  std::atomic<bool> stop{false};
+  bool timedOut = false;
+  FibreRunOptions run;
+  run.steps = steps;
+  run.frameEvery = 0;
+  run.keepPoseSurfaces = false;
+  run.cancel = &stop;
+  run.progress = [&](const RunProgress& progress) {
+    const StepStats& last = *progress.lastStep;
+    const double speed =
+        last.lastTimeStep > 0 ? static_cast<double>(last.meanDisplacement / last.lastTimeStep) : 0;
+    cell.kineticEnergy.push_back(0.5 * prepared.freeMass * speed * speed);
+    if (progress.seconds > options.cellSeconds) {
+      timedOut = true;
+      stop.store(true);
+    }
+    if (options.cancel && options.cancel->load()) stop.store(true);
+  };
+  try {
+    const RunMetrics metrics = runFibreMSS(prepared.scene, prepared.prepared, run);
+    cell.steps = metrics.steps;
+    cell.iterations = metrics.iterations;
+    cell.msPerIteration = metrics.msPerIteration;
+    cell.wallSeconds = metrics.wallSeconds;
+    cell.failedStep = metrics.failedStep;
+    if (metrics.nan) {
+      cell.outcome = CellOutcome::Nan;
+    } else if (metrics.exploded) {
+      cell.outcome = CellOutcome::Exploded;
+    } else if (metrics.interrupted) {
+      cell.outcome = CellOutcome::Timeout;
+      cell.failedStep = metrics.steps;
+      cell.message = timedOut ? "stopped after " + std::to_string(metrics.steps) + " steps (" +
+                                    std::to_string(options.cellSeconds) + " s box)"
+                              : "interrupted";
+    } else {
+      const EnergyCheck energy = checkEnergy(
+          cell.kineticEnergy, options.energyGrowth,
+          0.5 * prepared.freeMass * options.energyFloorSpeed * options.energyFloorSpeed);
+      cell.energyRatio = energy.ratio;
+      if (!energy.bounded) {
+        cell.outcome = CellOutcome::Energy;
+        cell.failedStep = energy.growthStep;
+      }
+    }
+  } catch (const std::exception& e) {
+    cell.outcome = CellOutcome::Error;
+    cell.message = e.what();
+  }
+  return cell;
+}
+
+void log(const StabilityOptions& options, const std::string& line) {
+  if (options.log) options.log(line);
+}
+
+/// "1.5e-05".
+std::string seconds(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", value);
+  return text;
+}
+
+/// The bisection of findStableStep on an already prepared calibration case.
+StableStep calibrate(PreparedCase& prepared, const std::string& integrator,
+                     const StabilityOptions& options) {
+  StableStep result;
+  result.integrator = integrator;
+  Integrator kind{};
+  if (!fromString(integrator, kind))
+    throw InputError("--integrators", integrator, "unknown integrator");
+  result.available = integratorAvailable(kind);
+  if (!result.available) return result;
+  auto stable = [&](double dt) {
+    ++result.probes;
+    const StabilityCell cell = runPrepared(prepared, options.calibration.label, integrator, dt,
+                                           options.calibrationSteps, options);
+    // Energy is no criterion here: relaxing noise from rest, it grows from zero at any dt.
+    return cell.outcome == CellOutcome::Ok || cell.outcome == CellOutcome::Energy;
+  };
+  double low = options.calibrationLow, high = options.calibrationHigh;
+  if (stable(high)) {
+    result.dt = high;
+    result.capped = true;
+    return result;
+  }
+  if (!stable(low)) {
+    result.dt = low;
+    result.found = false;
+    return result;
+  }
+  while (high / low > options.calibrationRatio) {
+    const double middle = std::sqrt(low * high);
+    (stable(middle) ? low : high) = middle;
+  }
+  result.dt = low;
+  return result;
+}
+
+}  // namespace
+
+const char* toString(CellOutcome outcome) {
+  static const char* const names[] = {"ok",      "nan",         "exploded", "energy",
+                                      "timeout", "unavailable", "error"};
+  return names[static_cast<size_t>(outcome)];
+}
+
+std::vector<std::string> allIntegratorNames() {
+  std::vector<std::string> names;
+  for (int i = 0; i <= static_cast<int>(Integrator::Xpbd); ++i)
+    names.emplace_back(toString(static_cast<Integrator>(i)));
+  return names;
+}
+
+bool integratorAvailable(Integrator integrator) {
+  SimulationParameters parameters;
+  parameters.integrator = integrator;
+  MuscleSystem system(parameters);
+  try {
+    system.step();  // an empty system: only the integrator lookup can fail
+  } catch (const std::invalid_argument&) {
+    return false;
+  }
+  return true;
+}
+
+std::vector<StabilityCase> defaultHardCases() {
+  std::vector<StabilityCase> cases;
+  for (int step : {2, 4, 5, 10}) {
+    const std::string stepDeg = "step_deg=" + std::to_string(step);
+    cases.push_back({"hip-extension " + stepDeg, "hip-extension", {stepDeg}, 1});
+  }
+  cases.push_back({"pinch", "pinch", {}, 1});
+  cases.push_back({"hip-extension kappa x100", "hip-extension", {"step_deg=10"}, 100});
+  cases.push_back({"tension-spike", "tension-spike", {}, 1});
+  return cases;
+}
+
+StabilityCase parseStabilityCase(const std::string& text) {
+  StabilityCase result;
+  result.label = text;
+  std::string rest = text;
+  if (const size_t star = rest.find("*kappa="); star != std::string::npos) {
+    const std::string factor = rest.substr(star + 7);
+    size_t used = 0;
+    try {
+      result.kappaFactor = std::stod(factor, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != factor.size() || !(result.kappaFactor > 0))
+      throw InputError("stability case", text, "'*kappa=' needs a positive number");
+    rest = rest.substr(0, star);
+  }
+  const size_t colon = rest.find(':');
+  result.scene = rest.substr(0, colon);
+  if (result.scene.empty()) throw InputError("stability case", text, "no scene name");
+  if (colon == std::string::npos) return result;
+  size_t start = colon + 1;
+  while (true) {
+    const size_t plus = rest.find('+', start);
+    const std::string part = rest.substr(start, plus - start);
+    if (part.find('=') == std::string::npos || part.front() == '=')
+      throw InputError("stability case", text,
+                       "override '" + part + "' is not <key>=<value> (parts joined by '+')");
+    result.overrides.push_back(part);
+    if (plus == std::string::npos) break;
+    start = plus + 1;
+  }
+  return result;
+}
+
+EnergyCheck checkEnergy(std::span<const double> series, double growthFactor, double floor) {
+  EnergyCheck result;
+  if (series.size() < 2) return result;
+  for (size_t i = 0; i < series.size(); ++i)
+    if (!std::isfinite(series[i])) {
+      result.bounded = false;
+      result.growthStep = static_cast<int>(i);
+      result.ratio = std::numeric_limits<double>::infinity();
+      return result;
+    }
+  const size_t lastStart = series.size() - (series.size() + 3) / 4;
+  const double earlier = *std::max_element(series.begin(), series.begin() + lastStart);
+  const double last = *std::max_element(series.begin() + lastStart, series.end());
+  result.ratio =
+      earlier > 0 ? last / earlier : (last > 0 ? std::numeric_limits<double>::infinity() : 0);
+  const double limit = growthFactor * earlier + floor;
+  for (size_t i = lastStart; i < series.size(); ++i)
+    if (series[i] > limit) {
+      result.bounded = false;
+      result.growthStep = static_cast<int>(i);
+      break;
+    }
+  return result;
+}
+
+StabilityCell runStabilityCell(const StabilityCase& stabilityCase, const std::string& integrator,
+                               double dt, const StabilityOptions& options) {
+  try {
+    PreparedCase prepared = prepareCase(stabilityCase, options);
+    return runPrepared(prepared, stabilityCase.label, integrator, dt, -1, options);
+  } catch (const std::exception& e) {
+    StabilityCell cell;
+    cell.caseLabel = stabilityCase.label;
+    cell.integrator = integrator;
+    cell.dt = dt;
+    cell.outcome = CellOutcome::Error;
+    cell.message = e.what();
+    return cell;
+  }
+}
+
+StableStep findStableStep(const std::string& integrator, const StabilityOptions& options) {
+  PreparedCase prepared = prepareCase(options.calibration, options, true);
+  return calibrate(prepared, integrator, options);
+}
+
+StabilityCell runCalibrationProbe(const std::string& integrator, double dt,
+                                  const StabilityOptions& options) {
+  PreparedCase prepared = prepareCase(options.calibration, options, true);
+  return runPrepared(prepared, options.calibration.label, integrator, dt, options.calibrationSteps,
+                     options);
+}
+
+StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
+                                   const StabilityOptions& options) {
+  const auto start = Clock::now();
+  StabilityMatrix matrix;
+  matrix.cases = cases;
+  matrix.dtFactors = options.dtFactors;
+  matrix.overrides = options.overrides;
+  const std::vector<std::string> integrators =
+      options.integrators.empty() ? allIntegratorNames() : options.integrators;
+
+  {
+    log(options, "calibrating on " + options.calibration.label);
+    PreparedCase calibration = prepareCase(options.calibration, options, true);
+    for (const std::string& integrator : integrators) {
+      const StableStep step = calibrate(calibration, integrator, options);
+      matrix.stableSteps.push_back(step);
+      if (!step.available)
+        log(options, "  " + integrator + ": unavailable");
+      else
+        log(options, "  " + integrator + ": stable step " + (step.capped ? ">= " : "") +
+                         seconds(step.dt) + " s" + (step.found ? "" : " (none found; lowest)") +
+                         " after " + std::to_string(step.probes) + " probes");
+    }
+  }
+
+  const size_t total = cases.size() * integrators.size() * options.dtFactors.size();
+  size_t done = 0;
+  for (const StabilityCase& stabilityCase : cases) {
+    if (options.cancel && options.cancel->load()) break;
+    log(options, "case " + stabilityCase.label + ": preparing");
+    std::unique_ptr<PreparedCase> prepared;
+    std::string failure;
+    try {
+      prepared = std::make_unique<PreparedCase>(prepareCase(stabilityCase, options));
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+    for (size_t i = 0; i < integrators.size(); ++i) {
+      for (double factor : options.dtFactors) {
+        if (options.cancel && options.cancel->load()) break;
+        const double dt = factor * matrix.stableSteps[i].dt;
+        StabilityCell cell;
+        if (prepared) {
+          cell = runPrepared(*prepared, stabilityCase.label, integrators[i], dt, -1, options);
+        } else {
+          cell.caseLabel = stabilityCase.label;
+          cell.integrator = integrators[i];
+          cell.dt = dt;
+          cell.outcome = CellOutcome::Error;
+          cell.message = failure;
+        }
+        cell.dtFactor = factor;
+        ++done;
+        std::string line = "[" + std::to_string(done) + "/" + std::to_string(total) + "] " +
+                           stabilityCase.label + " " + integrators[i] + " x" + seconds(factor) +
+                           " (dt " + seconds(dt) + " s): " + toString(cell.outcome);
+        if (cell.failedStep >= 0) line += " at step " + std::to_string(cell.failedStep);
+        if (cell.outcome != CellOutcome::Unavailable)
+          line +=
+              ", " + std::to_string(cell.steps) + " steps in " + seconds(cell.wallSeconds) + " s";
+        if (cell.outcome == CellOutcome::Error) line += ": " + cell.message;
+        log(options, line);
+        matrix.cells.push_back(std::move(cell));
+      }
+    }
+  }
+  matrix.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return matrix;
+}
+
+}  // namespace fibremss

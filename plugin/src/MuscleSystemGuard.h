@@ -1,0 +1,29 @@
+#pragma once
+// The numerical guard of a MuscleSystem step (internal; SimulationParameters::onFailure): the
+// last good state of a muscle (saved at the start of every step, restored after a failed one)
+// and the per-muscle check that attributes a failed step to the muscles that failed.
+#include <cstddef>
+
+#include "MuscleState.h"
+
+namespace fibremss {
+
+/// What a muscle's state looks like; checked only after a step that reported a failure.
+struct MuscleHealth {
+  bool nan = false;            ///< a position, previous position or velocity is NaN or inf
+  size_t explodedSprings = 0;  ///< springs counted as exploded (see checkMuscle)
+  bool failed() const { return nan || explodedSprings > 0; }
+};
+
+/// NaN/inf scan of the particles and the spring lengths of `muscle`. A spring counts as exploded
+/// when it is longer than 3× its rest length and longer than its rest length by more than the
+/// muscle's mean rest length: the 3× rule alone trips on springs of a few µm (converging fibre
+/// ends, jittered neighbours) whose stretch is harmless.
+MuscleHealth checkMuscle(const MuscleState& muscle);
+
+/// Copies positions, previous and velocities of `muscle` into its good-state buffers.
+void saveGoodState(MuscleState& muscle);
+/// Restores positions, previous and velocities saved by saveGoodState.
+void restoreGoodState(MuscleState& muscle);
+
+}  // namespace fibremss

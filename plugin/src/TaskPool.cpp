@@ -1,0 +1,94 @@
+#include "TaskPool.h"
+
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+namespace fibremss {
+namespace {
+
+/// Busy-wait rounds before sleeping: a few tens of microseconds, longer than the serial gaps
+/// between the phases of an iteration, shorter than the gaps between steps.
+constexpr int kSpinRounds = 4000;
+
+void relax() {
+#if defined(__SSE2__)
+  _mm_pause();
+#else
+  std::this_thread::yield();
+#endif
+}
+
+/// Waits until `value` differs from `old`: spins first, then sleeps (futex on Linux).
+template <typename T>
+T awaitChange(const std::atomic<T>& value, T old) {
+  for (int round = 0; round < kSpinRounds; ++round) {
+    const T now = value.load(std::memory_order_acquire);
+    if (now != old) return now;
+    relax();
+  }
+  value.wait(old, std::memory_order_acquire);
+  return value.load(std::memory_order_acquire);
+}
+
+}  // namespace
+
+unsigned TaskPool::resolve(int threads) {
+  if (threads > 0) return static_cast<unsigned>(threads);
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+TaskPool::TaskPool(unsigned threads) {
+  const unsigned total = threads == 0 ? resolve(0) : threads;
+  workers_.reserve(total - 1);
+  for (unsigned t = 1; t < total; ++t) workers_.emplace_back([this, t] { loop(t); });
+}
+
+TaskPool::~TaskPool() {
+  stopping_.store(true);
+  generation_.fetch_add(2);
+  generation_.notify_all();
+  for (std::thread& worker : workers_) worker.join();
+}
+
+void TaskPool::runErased(size_t count, Call call, void* context) {
+  if (workers_.empty() || count <= 1) {
+    for (size_t index = 0; index < count; ++index) call(context, index, 0);
+    return;
+  }
+  // Close the last job, let any late worker leave it, then publish this one. Sequentially
+  // consistent: a worker either sees the closed generation or is seen inside.
+  const uint64_t closed = generation_.fetch_add(1) + 1;
+  while (inside_.load() != 0) relax();
+  count_ = count;
+  call_ = call;
+  context_ = context;
+  next_.store(0);
+  done_.store(0);
+  generation_.store(closed + 1);
+  generation_.notify_all();
+  work(0);
+  for (size_t finished = done_.load(); finished != count; finished = done_.load())
+    awaitChange(done_, finished);
+}
+
+void TaskPool::work(unsigned thread) {
+  for (size_t index = next_.fetch_add(1); index < count_; index = next_.fetch_add(1)) {
+    call_(context_, index, thread);
+    if (done_.fetch_add(1) + 1 == count_) done_.notify_one();
+  }
+}
+
+void TaskPool::loop(unsigned thread) {
+  uint64_t seen = 0;
+  while (true) {
+    seen = awaitChange(generation_, seen);
+    if (stopping_.load()) return;
+    if (seen % 2 == 1) continue;  // being set up: wait for it to open
+    inside_.fetch_add(1);
+    if (generation_.load() == seen) work(thread);  // else it closed before we got in
+    inside_.fetch_sub(1);
+  }
+}
+
+}  // namespace fibremss

@@ -1,0 +1,280 @@
+// The numerical guard (SimulationParameters::onFailure): a step that produces NaN/inf or bursts
+// springs is rolled back to the exact last good state, retried with a smaller dt, or the failing
+// muscle is frozen while the others (and a host's Bullet world) keep going; Report leaves it.
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletCollision/CollisionShapes/btSphereShape.h>
+#include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "../plugin/src/TimeStep.h"
+#include "fibremss/BoneBody.h"
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/MuscleWorld.h"
+#include "support/GridMuscle.h"
+
+namespace fibremss {
+namespace {
+
+using testing::cubeBone;
+using testing::gridMuscle;
+
+/// κ of the stiff muscle relative to the soft one: its stable dt is about eight times smaller.
+constexpr btScalar kStiff = 100;
+/// A fixed dt this many times the stiff muscle's stable bound bursts it, even halved (the
+/// bound is conservative: up to √3 below the true limit), and keeps the soft one stable.
+constexpr btScalar kBursting = 6;
+
+const std::shared_ptr<const BoneSettings>& leftBone() {
+  static const auto bone = cubeBone("left", btVector3(-0.02f, 0, 0));
+  return bone;
+}
+const std::shared_ptr<const BoneSettings>& rightBone() {
+  static const auto bone = cubeBone("right", btVector3(0.02f, 0, 0));
+  return bone;
+}
+const std::shared_ptr<const MuscleSettings>& softMuscle() {
+  static const auto muscle = gridMuscle("soft", 0, 1);
+  return muscle;
+}
+const std::shared_ptr<const MuscleSettings>& stiffMuscle() {
+  static const auto muscle = gridMuscle("stiff", btScalar(0.03), kStiff);
+  return muscle;
+}
+
+/// Fixed dt (no adaptive bound) `ofStiffLimit` times the stiff muscle's stable dt, 10
+/// iterations, light noise so that an unstable step has something to amplify.
+SimulationParameters fixedStep(btScalar ofStiffLimit, FailurePolicy policy) {
+  SimulationParameters parameters;
+  parameters.adaptiveTimeStep = false;
+  parameters.timeStep = ofStiffLimit * stableTimeStep(*stiffMuscle());
+  parameters.iterations = 10;
+  parameters.initialNoise = btScalar(1e-4);
+  parameters.onFailure = policy;
+  return parameters;
+}
+
+/// A system with two bones (the right one moves a little each step) and the given muscles.
+struct Rig {
+  MuscleSystem system;
+  std::vector<BoneHandle> bones;
+  std::vector<MuscleHandle> muscles;
+  int steps = 0;
+
+  Rig(const SimulationParameters& parameters,
+      const std::vector<std::shared_ptr<const MuscleSettings>>& settings)
+      : system(parameters) {
+    bones = {system.addBone(leftBone()), system.addBone(rightBone())};
+    for (const auto& muscle : settings) muscles.push_back(system.addMuscle(muscle, bones));
+  }
+  void step() {
+    ++steps;
+    btTransform moved = btTransform::getIdentity();
+    moved.setOrigin(btVector3(btScalar(0.0005) * steps, 0, 0));
+    system.setBoneTransform(bones[1], moved);
+    system.step();
+  }
+  std::vector<btVector3> positions(size_t m) const {
+    const auto x = system.positions(muscles[m]);
+    return {x.begin(), x.end()};
+  }
+};
+
+bool sameHandle(MuscleHandle a, MuscleHandle b) {
+  return a.index == b.index && a.generation == b.generation;
+}
+
+bool allFinite(const std::vector<btVector3>& points) {
+  for (const btVector3& p : points)
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) return false;
+  return true;
+}
+
+/// Bit-for-bit equality of two particle arrays.
+::testing::AssertionResult identical(const std::vector<btVector3>& a,
+                                     const std::vector<btVector3>& b) {
+  if (a.size() != b.size()) return ::testing::AssertionFailure() << "sizes differ";
+  for (size_t i = 0; i < a.size(); ++i)
+    if (a[i].x() != b[i].x() || a[i].y() != b[i].y() || a[i].z() != b[i].z())
+      return ::testing::AssertionFailure() << "particle " << i << " differs";
+  return ::testing::AssertionSuccess();
+}
+
+TEST(Guard, TheChosenTimeStepsAreStableForTheSoftAndUnstableForTheStiffMuscle) {
+  // The premise of the other tests, checked with the guard only reporting.
+  Rig soft(fixedStep(kBursting, FailurePolicy::Report), {softMuscle()});
+  Rig stiff(fixedStep(kBursting / 2, FailurePolicy::Report), {stiffMuscle()});
+  Rig quarter(fixedStep(btScalar(0.75), FailurePolicy::Report), {stiffMuscle()});
+  for (int s = 0; s < 3; ++s) {
+    soft.step();
+    EXPECT_FALSE(soft.system.lastStep().failed);
+    quarter.step();
+    EXPECT_FALSE(quarter.system.lastStep().failed);
+  }
+  stiff.step();
+  EXPECT_TRUE(stiff.system.lastStep().failed);
+  EXPECT_TRUE(stiff.system.lastStep().nan || stiff.system.lastStep().exploded);
+}
+
+TEST(Guard, ReportLeavesTheFailedStateAndNamesTheMuscle) {
+  Rig rig(fixedStep(kBursting, FailurePolicy::Report), {softMuscle(), stiffMuscle()});
+  const std::vector<btVector3> before = rig.positions(1);
+  rig.step();
+  const StepStats& stats = rig.system.lastStep();
+  EXPECT_TRUE(stats.failed);
+  EXPECT_FALSE(stats.rolledBack);
+  EXPECT_EQ(stats.retries, 0);
+  EXPECT_EQ(stats.newlyFrozen, 0u);
+  EXPECT_EQ(stats.step, 0u);
+  EXPECT_TRUE(sameHandle(stats.failedMuscle, rig.muscles[1]));
+  EXPECT_FALSE(rig.system.frozen(rig.muscles[1]));
+  EXPECT_FALSE(identical(rig.positions(1), before));  // the burst state is left in place
+  double longest = 0;
+  const auto x = rig.system.positions(rig.muscles[1]);
+  for (const Spring& spring : stiffMuscle()->springs)
+    longest = std::max(longest, double(x[spring.a].distance(x[spring.b]) / spring.restLength));
+  EXPECT_TRUE(!allFinite(rig.positions(1)) || longest > 3);
+}
+
+TEST(Guard, StopBodyRestoresTheExactLastGoodStateAndFreezesOnlyTheFailingMuscle) {
+  // Two good steps at a small dt, then a dt at which the stiff muscle bursts.
+  Rig rig(fixedStep(btScalar(0.5), FailurePolicy::StopBody), {softMuscle(), stiffMuscle()});
+  rig.step();
+  rig.step();
+  ASSERT_FALSE(rig.system.lastStep().rolledBack);
+  const std::vector<btVector3> stiffGood = rig.positions(1);
+  const std::vector<btVector3> softGood = rig.positions(0);
+  rig.system.parameters().timeStep *= 2 * kBursting;
+  rig.step();
+  const StepStats& stats = rig.system.lastStep();
+  EXPECT_TRUE(stats.rolledBack);
+  EXPECT_FALSE(stats.failed);
+  EXPECT_EQ(stats.step, 2u);
+  EXPECT_EQ(stats.retries, 0);
+  EXPECT_EQ(stats.newlyFrozen, 1u);
+  EXPECT_EQ(stats.frozenMuscles, 1u);
+  EXPECT_TRUE(sameHandle(stats.failedMuscle, rig.muscles[1]));
+  EXPECT_TRUE(rig.system.frozen(rig.muscles[1]));
+  EXPECT_FALSE(rig.system.frozen(rig.muscles[0]));
+  EXPECT_TRUE(identical(rig.positions(1), stiffGood));
+  EXPECT_FALSE(identical(rig.positions(0), softGood));  // the soft one finished the step
+  EXPECT_TRUE(allFinite(rig.positions(0)));
+
+  // Later steps: the frozen muscle stays put, the other follows its bone.
+  for (int s = 0; s < 3; ++s) {
+    const std::vector<btVector3> soft = rig.positions(0);
+    rig.step();
+    EXPECT_FALSE(rig.system.lastStep().rolledBack);
+    EXPECT_EQ(rig.system.lastStep().newlyFrozen, 0u);
+    EXPECT_EQ(rig.system.lastStep().frozenMuscles, 1u);
+    EXPECT_TRUE(identical(rig.positions(1), stiffGood));
+    EXPECT_FALSE(identical(rig.positions(0), soft));
+  }
+  rig.system.unfreeze(rig.muscles[1]);
+  EXPECT_FALSE(rig.system.frozen(rig.muscles[1]));
+}
+
+TEST(Guard, TheOtherMuscleMovesExactlyAsIfTheFrozenOneWereNotThere) {
+  Rig both(fixedStep(kBursting, FailurePolicy::StopBody), {softMuscle(), stiffMuscle()});
+  Rig alone(fixedStep(kBursting, FailurePolicy::StopBody), {softMuscle()});
+  for (int s = 0; s < 3; ++s) {
+    both.step();
+    alone.step();
+    EXPECT_TRUE(identical(both.positions(0), alone.positions(0))) << "step " << s;
+  }
+  EXPECT_TRUE(both.system.frozen(both.muscles[1]));
+}
+
+TEST(Guard, RetrySucceedsWithASmallerTimeStepWhereTheFullOneBursts) {
+  Rig retried(fixedStep(3, FailurePolicy::Retry), {stiffMuscle()});
+  retried.step();
+  const StepStats& stats = retried.system.lastStep();
+  EXPECT_TRUE(stats.rolledBack);
+  EXPECT_FALSE(stats.failed);
+  ASSERT_GE(stats.retries, 1);
+  ASSERT_LE(stats.retries, retried.system.parameters().maxRetries);
+  EXPECT_EQ(stats.frozenMuscles, 0u);
+  EXPECT_TRUE(sameHandle(stats.failedMuscle, retried.muscles[0]));
+  EXPECT_TRUE(allFinite(retried.positions(0)));
+  EXPECT_EQ(retried.system.parameters().timeStep, fixedStep(3, FailurePolicy::Retry).timeStep)
+      << "the requested parameters are back after the step";
+
+  // The same step run directly with the retry's dt and iterations gives the very same state:
+  // the rollback left nothing of the failed attempts behind.
+  const int factor = 1 << stats.retries;
+  SimulationParameters smaller = fixedStep(3, FailurePolicy::Report);
+  smaller.timeStep /= static_cast<btScalar>(factor);
+  smaller.iterations *= factor;
+  Rig direct(smaller, {stiffMuscle()});
+  direct.step();
+  EXPECT_FALSE(direct.system.lastStep().failed);
+  EXPECT_TRUE(identical(retried.positions(0), direct.positions(0)));
+  EXPECT_EQ(stats.iterations, 10 * (2 * factor - 1)) << "every attempt's iterations counted";
+}
+
+TEST(Guard, RetryFreezesTheMuscleOnceItsRetriesAreSpent) {
+  SimulationParameters parameters = fixedStep(kBursting, FailurePolicy::Retry);
+  parameters.maxRetries = 1;  // dt/2 is still unstable
+  Rig rig(parameters, {softMuscle(), stiffMuscle()});
+  const std::vector<btVector3> start = rig.positions(1);
+  rig.step();
+  const StepStats& stats = rig.system.lastStep();
+  EXPECT_TRUE(stats.rolledBack);
+  EXPECT_EQ(stats.retries, 1);
+  EXPECT_EQ(stats.newlyFrozen, 1u);
+  EXPECT_TRUE(rig.system.frozen(rig.muscles[1]));
+  EXPECT_FALSE(rig.system.frozen(rig.muscles[0]));
+  EXPECT_TRUE(identical(rig.positions(1), start));
+  EXPECT_TRUE(allFinite(rig.positions(0)));
+}
+
+TEST(Guard, TheHostsBulletWorldKeepsRunningBesideABurstingMuscle) {
+  btSoftBodyRigidBodyCollisionConfiguration configuration;
+  btCollisionDispatcher dispatcher(&configuration);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  SimulationParameters parameters = fixedStep(kBursting, FailurePolicy::Retry);
+  parameters.maxRetries = 1;
+  MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
+  world.setGravity(btVector3(0, btScalar(-9.81), 0));
+  BoneBody left(leftBone()), right(rightBone());
+  const std::vector<BoneHandle> bones = {world.addBone(left.body(), left.settings()),
+                                         world.addBone(right.body(), right.settings())};
+  const MuscleHandle soft = world.addMuscle(softMuscle(), bones);
+  const MuscleHandle stiff = world.addMuscle(stiffMuscle(), bones);
+
+  // A falling ball well away from the muscles.
+  btSphereShape shape(btScalar(0.05));
+  btVector3 inertia(0, 0, 0);
+  shape.calculateLocalInertia(1, inertia);
+  btTransform start = btTransform::getIdentity();
+  start.setOrigin(btVector3(1, 1, 0));
+  btDefaultMotionState motion(start);
+  btRigidBody ball(btRigidBody::btRigidBodyConstructionInfo(1, &motion, &shape, inertia));
+  world.addRigidBody(&ball);
+
+  const int steps = 30;
+  for (int s = 0; s < steps; ++s) ASSERT_NO_THROW(world.stepSimulation(btScalar(1.0 / 60), 0));
+  EXPECT_EQ(world.muscleSteps(), steps);
+  EXPECT_TRUE(world.muscleSystem().frozen(stiff));
+  EXPECT_FALSE(world.muscleSystem().frozen(soft));
+  EXPECT_EQ(world.muscleSystem().lastStep().frozenMuscles, 1u);
+  EXPECT_TRUE(allFinite(
+      {world.muscleSystem().positions(soft).begin(), world.muscleSystem().positions(soft).end()}));
+  // Half a second of free fall: ½·g·t² = 1.23 m; Bullet's symplectic Euler falls a little more.
+  const btScalar fallen = 1 - ball.getWorldTransform().getOrigin().y();
+  const btScalar seconds = btScalar(steps) / 60;
+  EXPECT_NEAR(fallen, 0.5 * 9.81 * seconds * seconds, 0.05);
+  EXPECT_GT(ball.getLinearVelocity().y(), btScalar(-9.81 * seconds) - btScalar(0.01));
+  world.removeRigidBody(&ball);
+  world.removeMuscle(soft);
+  world.removeMuscle(stiff);
+  for (BoneHandle bone : bones) world.removeBone(bone);
+}
+
+}  // namespace
+}  // namespace fibremss

@@ -1,0 +1,384 @@
+// Time integrators (docs/integrators.md): order of accuracy on a damped spring against the
+// analytic solution, PBD/XPBD statics, implicit stability far beyond the explicit limit on a
+// stiff chain, and every integrator inside a MuscleSystem with collision (finite, no allocation
+// in step()).
+#include "../plugin/src/Integrators.h"
+
+#include <LinearMath/btAlignedAllocator.h>
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <memory>
+#include <random>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "../plugin/src/SpringForces.h"
+#include "../plugin/src/TimeStep.h"
+#include "fibremss/MuscleSystem.h"
+#include "support/AllocationCounter.h"
+#include "support/SolverFixtures.h"
+
+namespace fibremss {
+namespace {
+
+constexpr Integrator kIntegrators[] = {Integrator::Verlet,
+                                       Integrator::SemiImplicitEuler,
+                                       Integrator::ExplicitEuler,
+                                       Integrator::Rk2,
+                                       Integrator::Rk4,
+                                       Integrator::ImplicitEuler,
+                                       Integrator::ImplicitMidpoint,
+                                       Integrator::Bdf2,
+                                       Integrator::Pbd,
+                                       Integrator::Xpbd};
+
+constexpr bool kFloat = sizeof(btScalar) == sizeof(float);
+
+/// Particles at `points`, none colliding, with springs added by link() in (a, b) order.
+std::shared_ptr<MuscleSettings> particles(const std::vector<btVector3>& points, btScalar mass,
+                                          btScalar damping) {
+  auto settings = std::make_shared<MuscleSettings>();
+  settings->name = "particles";
+  settings->restPositions = points;
+  settings->radii.assign(points.size(), 0);
+  settings->flags.assign(points.size(), 0);
+  settings->fixedBone.assign(points.size(), -1);
+  settings->nearestBone.assign(points.size(), -1);
+  settings->particleMass = mass;
+  settings->damping = damping;
+  return settings;
+}
+
+/// Spring a–b (a < b) of stiffness k and rest length L0.
+void link(MuscleSettings& settings, uint32_t a, uint32_t b, btScalar k, btScalar restLength) {
+  settings.springs.push_back({a, b, restLength, k});
+}
+
+/// One muscle's state stepped by an integrator alone (no system): forces, then advance.
+class Bench {
+ public:
+  Bench(std::shared_ptr<const MuscleSettings> settings, Integrator kind)
+      : integrator_(integratorFor(kind)) {
+    const size_t n = settings->particleCount();
+    state.settings = settings;
+    state.positions = settings->restPositions;
+    state.previous = settings->restPositions;
+    state.velocities.assign(n, btVector3(0, 0, 0));
+    state.forces.assign(n, btVector3(0, 0, 0));
+    state.springVectors.resize(std::min(settings->springs.size(), kSpringBlock));
+    state.springFactors.resize(std::min(settings->springs.size(), kSpringBlock));
+    for (uint32_t i = 0; i < n; ++i)
+      if (!settings->isFixed(i)) state.freeParticles.push_back(i);
+    parameters.solverTolerance = 1e-12;
+    parameters.solverIterations = 200;
+    state.parameters = &parameters;
+    integrator_.prepare(state);
+  }
+  Bench(const Bench&) = delete;
+  Bench& operator=(const Bench&) = delete;
+
+  /// Places particle i at x, at rest.
+  void place(uint32_t i, const btVector3& x) { state.positions[i] = state.previous[i] = x; }
+  /// One iteration of fixed dt; returns the integrator's result.
+  IntegrationResult step(btScalar dt) {
+    springForces(state);
+    return integrator_.advance(state, dt, dt);
+  }
+  /// Kinetic plus spring energy; the velocity is v or (x − x_prev)/dt.
+  double energy(btScalar dt) const {
+    const MuscleSettings& settings = *state.settings;
+    double total = 0;
+    for (uint32_t i : state.freeParticles) {
+      const btVector3 v = integrator_.usesVelocities()
+                              ? state.velocities[i]
+                              : (state.positions[i] - state.previous[i]) / dt;
+      total += 0.5 * settings.particleMass * v.length2();
+    }
+    for (const Spring& s : settings.springs) {
+      const double stretch = (state.positions[s.b] - state.positions[s.a]).length() - s.restLength;
+      total += 0.5 * s.stiffness * stretch * stretch;
+    }
+    return total;
+  }
+
+  MuscleState state;                ///< the muscle stepped
+  SimulationParameters parameters;  ///< solver settings (tight CG tolerance)
+
+ private:
+  const TimeIntegrator& integrator_;
+};
+
+// --- order of accuracy: one free particle on a damped spring to a fixed one ---------------------
+
+constexpr double kMass = 1, kStiffness = 1;  // ω0 = 1
+constexpr double kRest = 0.1, kAmplitude = 0.05, kEndTime = 4;
+
+/// Analytic elongation at t of m·ü + c·u̇ + k·u = 0 from u(0) = A, u̇(0) = 0.
+double analyticElongation(double t, double damping) {
+  const double decay = damping / (2 * kMass);
+  const double omega = std::sqrt(kStiffness / kMass - decay * decay);
+  return kAmplitude * std::exp(-decay * t) *
+         (std::cos(omega * t) + decay / omega * std::sin(omega * t));
+}
+
+/// |x(T) − x_exact(T)| of the free particle after `steps` steps of T/steps.
+double springError(Integrator kind, int steps, double damping) {
+  auto settings =
+      particles({{0, 0, 0}, {kRest + kAmplitude, 0, 0}}, kMass, static_cast<btScalar>(damping));
+  testing::fix(*settings, 0, 0);
+  link(*settings, 0, 1, kStiffness, kRest);
+  Bench bench(settings, kind);
+  const auto dt = static_cast<btScalar>(kEndTime / steps);
+  // Two-step Verlet starts from the exact x(−dt) (x(−dt) = x(0) would be an O(dt) start).
+  bench.state.previous[1].setX(static_cast<btScalar>(kRest + analyticElongation(-dt, damping)));
+  for (int s = 0; s < steps; ++s) bench.step(dt);
+  return std::abs(bench.state.positions[1].x() - (kRest + analyticElongation(kEndTime, damping)));
+}
+
+struct OrderCase {
+  Integrator kind;  ///< integrator
+  double order;     ///< its classical order
+  int steps;        ///< coarsest step count of the refinement
+  double damping;   ///< c [N·s/m] (0.2: ζ = 0.1)
+};
+
+class OrderOfAccuracy : public ::testing::TestWithParam<OrderCase> {};
+
+TEST_P(OrderOfAccuracy, HalvingDtDividesTheErrorByTwoToTheOrder) {
+  const OrderCase& c = GetParam();
+  const double coarse = springError(c.kind, c.steps, c.damping);
+  const double middle = springError(c.kind, 2 * c.steps, c.damping);
+  const double fine = springError(c.kind, 4 * c.steps, c.damping);
+  // Below this the float build measures round-off, not truncation.
+  const double floor = 200 * std::numeric_limits<btScalar>::epsilon() * (kRest + kAmplitude);
+  if (fine < floor)
+    GTEST_SKIP() << toString(c.kind) << ": error " << fine << " at the finest dt is round-off "
+                 << "of this btScalar (below " << floor << "); the double build checks the order";
+  const double measured = std::log2(middle / fine);
+  RecordProperty("measured_order", std::to_string(measured));
+  EXPECT_NEAR(measured, c.order, 0.3)
+      << toString(c.kind) << " errors " << coarse << ", " << middle << ", " << fine
+      << " (coarse pair order " << std::log2(coarse / middle) << ")";
+}
+
+INSTANTIATE_TEST_SUITE_P(DampedSpring, OrderOfAccuracy,
+                         // Verlet damps with the backward velocity (x − x_prev)/dt, an O(dt) error:
+                         // second order undamped, first order damped (as the thesis' scheme is).
+                         ::testing::Values(OrderCase{Integrator::ExplicitEuler, 1, 80, 0.2},
+                                           OrderCase{Integrator::SemiImplicitEuler, 1, 80, 0.2},
+                                           OrderCase{Integrator::ImplicitEuler, 1, 80, 0.2},
+                                           OrderCase{Integrator::Verlet, 2, 10, 0},
+                                           OrderCase{Integrator::Verlet, 1, 80, 0.2},
+                                           OrderCase{Integrator::Rk2, 2, 40, 0.2},
+                                           OrderCase{Integrator::ImplicitMidpoint, 2, 40, 0.2},
+                                           OrderCase{Integrator::Bdf2, 2, 40, 0.2},
+                                           OrderCase{Integrator::Rk4, 4, kFloat ? 4 : 10, 0.2}),
+                         [](const auto& param) {
+                           std::string name = toString(param.param.kind);
+                           std::erase(name, '-');
+                           return name + (param.param.damping > 0 ? "Damped" : "Undamped");
+                         });
+
+// --- position-based: rest length and static elongation -----------------------------------------
+
+TEST(PositionBased, PbdConvergesToTheRestLengths) {
+  // A tetrahedron, one corner fixed, the other three displaced: every edge returns to L0.
+  const btScalar edge = 0.01;
+  auto settings = particles({{0, 0, 0},
+                             {edge, 0, 0},
+                             {edge / 2, edge * btScalar(0.866), 0},
+                             {edge / 2, 0.29f * edge, 0.82f * edge}},
+                            1e-3, 2e-2);
+  testing::fix(*settings, 0, 0);
+  for (uint32_t a = 0; a < 4; ++a)
+    for (uint32_t b = a + 1; b < 4; ++b)
+      link(*settings, a, b, 100,
+           (settings->restPositions[b] - settings->restPositions[a]).length());
+  Bench bench(settings, Integrator::Pbd);
+  std::mt19937 random(5);
+  std::uniform_real_distribution<btScalar> noise(-0.2f * edge, 0.2f * edge);
+  for (uint32_t i = 1; i < 4; ++i)
+    bench.place(
+        i, settings->restPositions[i] + btVector3(noise(random), noise(random), noise(random)));
+  for (int s = 0; s < 300; ++s) ASSERT_TRUE(bench.step(1e-3).finite);
+  for (const Spring& s : settings->springs)
+    EXPECT_NEAR((bench.state.positions[s.b] - bench.state.positions[s.a]).length(), s.restLength,
+                1e-4 * s.restLength);
+}
+
+TEST(PositionBased, XpbdGivesTheStaticElongationUnderLoad) {
+  // Fixed A at 0, free P, fixed B at D: spring 1 (k1, L1) loaded by spring 2 (k2, L2). At rest
+  // k1·(x − L1) = k2·(D − x − L2), so x = (k1·L1 + k2·(D − L2)) / (k1 + k2).
+  const double k1 = 10, k2 = 30, l1 = 0.01, l2 = 0.01, d = 0.03;
+  auto settings = particles({{0, 0, 0}, {0.015f, 0, 0}, {btScalar(d), 0, 0}}, 1e-3, 2e-2);
+  testing::fix(*settings, 0, 0);
+  testing::fix(*settings, 2, 0);
+  link(*settings, 0, 1, btScalar(k1), btScalar(l1));
+  link(*settings, 1, 2, btScalar(k2), btScalar(l2));
+  const double expected = (k1 * l1 + k2 * (d - l2)) / (k1 + k2);
+  for (Integrator kind : {Integrator::Xpbd, Integrator::Pbd}) {
+    Bench bench(settings, kind);
+    for (int s = 0; s < 3000; ++s) ASSERT_TRUE(bench.step(1e-3).finite);
+    const double x = bench.state.positions[1].x();
+    if (kind == Integrator::Xpbd)
+      EXPECT_NEAR(x - l1, expected - l1, 1e-3 * (expected - l1)) << "elongation of spring 1";
+    else  // rigid constraints cannot both hold: PBD ends elsewhere, at neither elongation.
+      EXPECT_GT(std::abs(x - expected), 0.1 * (expected - l1));
+  }
+}
+
+// --- stability: a stiff chain at 50× the explicit limit -----------------------------------------
+
+/// A chain of `free` particles h = 1 cm apart hanging from a fixed one, springs to the next and
+/// the one after, stiff (k = 1000 N/m at 1 g), lightly damped; zigzag (every other particle
+/// off the axis by h/2: non-linear springs) or straight (motion along the axis: linear springs).
+std::shared_ptr<MuscleSettings> stiffChain(int free, bool zigzag) {
+  const btScalar h = 0.01;
+  std::vector<btVector3> points;
+  for (int i = 0; i <= free; ++i) points.emplace_back(h * i, zigzag ? (i % 2) * h / 2 : 0, 0);
+  auto settings = particles(points, 1e-3, 1e-3);
+  testing::fix(*settings, 0, 0);
+  for (uint32_t a = 0; a < points.size(); ++a)
+    for (uint32_t b = a + 1; b < std::min<size_t>(a + 3, points.size()); ++b)
+      link(*settings, a, b, 1000, (points[b] - points[a]).length());
+  return settings;
+}
+
+/// Energy of `kind` over 200 steps of `multiple` × the Verlet limit from the chain displaced at
+/// random by up to 1 mm (along the axis only when straight): {start, largest, end}, or NaN.
+std::array<double, 3> chainEnergies(Integrator kind, bool zigzag, btScalar multiple) {
+  auto chain = stiffChain(8, zigzag);
+  const btScalar dt = multiple * stableTimeStep(*chain, Integrator::Verlet);
+  Bench bench(chain, kind);
+  std::mt19937 random(11);
+  std::uniform_real_distribution<btScalar> noise(-1e-3f, 1e-3f);
+  for (uint32_t i : bench.state.freeParticles) {
+    const btVector3 offset(noise(random), noise(random), noise(random));
+    bench.place(i, bench.state.positions[i] + (zigzag ? offset : btVector3(offset.x(), 0, 0)));
+  }
+  std::array<double, 3> energies;
+  energies.fill(bench.energy(dt));
+  for (int s = 0; s < 200; ++s) {
+    if (!bench.step(dt).finite) return {energies[0], NAN, NAN};
+    energies[1] = std::max(energies[1], energies[2] = bench.energy(dt));
+  }
+  return energies;
+}
+
+TEST(Stability, ImplicitIntegratorsHoldAtFiftyTimesTheExplicitLimit) {
+  // Straight chain: linear springs, where A-stability promises it for all three. Zigzag: the
+  // one Newton step meets non-linear springs; backward Euler and BDF2 still hold (they damp the
+  // stiff modes), the midpoint rule (no numerical damping) only at a smaller multiple.
+  struct Case {
+    Integrator kind;
+    bool zigzag;
+    btScalar multiple;
+  };
+  for (const Case& c :
+       {Case{Integrator::ImplicitEuler, false, 50}, Case{Integrator::Bdf2, false, 50},
+        Case{Integrator::ImplicitMidpoint, false, 50}, Case{Integrator::ImplicitEuler, true, 50},
+        Case{Integrator::Bdf2, true, 50}, Case{Integrator::ImplicitMidpoint, true, 10}}) {
+    const auto [start, largest, end] = chainEnergies(c.kind, c.zigzag, c.multiple);
+    const std::string label = std::string(toString(c.kind)) + (c.zigzag ? " zigzag" : " straight");
+    ASSERT_TRUE(std::isfinite(largest)) << label;
+    EXPECT_LE(largest, 1.05 * start) << label << ": energy grew";
+    EXPECT_LT(end, start) << label << ": the damping took nothing out";
+  }
+  for (Integrator kind : {Integrator::ExplicitEuler, Integrator::Verlet})
+    for (bool zigzag : {false, true}) {
+      const auto [start, largest, end] = chainEnergies(kind, zigzag, 50);
+      EXPECT_FALSE(largest < 1e3 * start) << toString(kind) << " should blow up";
+    }
+}
+
+TEST(Stability, ExplicitBoundsFollowTheStabilityRegions) {
+  // Undamped: Euler and RK2 miss the imaginary axis (no stable dt beyond the round-off margin
+  // of the test), RK4 reaches 2√2/ω, beyond Verlet's 2/ω; implicit and position-based ones have
+  // no bound.
+  auto chain = stiffChain(4, true);
+  chain->damping = 0;
+  const btScalar verlet = stableTimeStep(*chain, Integrator::Verlet);
+  EXPECT_LT(stableTimeStep(*chain, Integrator::ExplicitEuler), 0.01 * verlet);
+  EXPECT_LT(stableTimeStep(*chain, Integrator::Rk2), 0.01 * verlet);
+  EXPECT_NEAR(stableTimeStep(*chain, Integrator::Rk4) / verlet, std::sqrt(2.0), 1e-3);
+  for (Integrator kind : {Integrator::ImplicitEuler, Integrator::ImplicitMidpoint, Integrator::Bdf2,
+                          Integrator::Pbd, Integrator::Xpbd})
+    EXPECT_TRUE(std::isinf(stableTimeStep(*chain, kind))) << toString(kind);
+}
+
+// --- every integrator in a MuscleSystem with collision ------------------------------------------
+
+/// A 3 × 3 × 5 block of particles 5 mm apart, springs between all pairs closer than 1.8 spacings
+/// (k = κ/L0, κ = 1 N), the z = 0 layer fixed to bone 0, every particle a 2.5 mm sphere.
+std::shared_ptr<MuscleSettings> block() {
+  const btScalar spacing = 0.005;
+  std::vector<btVector3> points;
+  for (int z = 0; z < 5; ++z)
+    for (int y = 0; y < 3; ++y)
+      for (int x = 0; x < 3; ++x) points.emplace_back(x * spacing, y * spacing, z * spacing);
+  auto settings = particles(points, 3e-5, 0);
+  double stiffnessSum = 0;
+  for (uint32_t a = 0; a < points.size(); ++a) {
+    settings->flags[a] = kBoundary;
+    settings->radii[a] = spacing / 2;
+    settings->boundaryParticles.push_back(a);
+    settings->nearestBone[a] = 0;
+    if (points[a].z() == 0) testing::fix(*settings, a, 0);
+    for (uint32_t b = a + 1; b < points.size(); ++b) {
+      const btScalar rest = (points[b] - points[a]).length();
+      if (rest > 1.8f * spacing) continue;
+      link(*settings, a, b, 1 / rest, rest);
+      stiffnessSum += 1 / rest;
+    }
+  }
+  // Half the critical damping of the mean spring (as the scenes' dampingScale does).
+  settings->damping = static_cast<btScalar>(
+      0.5 * std::sqrt(8 * stiffnessSum / settings->springs.size() * settings->particleMass));
+  return settings;
+}
+
+class EveryIntegrator : public ::testing::TestWithParam<Integrator> {};
+
+TEST_P(EveryIntegrator, StepsWithCollisionFiniteAndWithoutAllocating) {
+  SimulationParameters parameters;
+  parameters.integrator = GetParam();
+  parameters.iterations = 10;
+  MuscleSystem system(parameters);
+  // A bone sphere inside one side of the block, so its particles are pushed out.
+  const BoneHandle bone = system.addBone(testing::makeBone({{0.005, -0.002, 0.012}}, {0.005}));
+  const MuscleHandle muscle = system.addMuscle(block(), std::span(&bone, 1));
+  system.step();
+  size_t contacts = system.lastStep().contacts;
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
+  testing::allocationCount = 0;
+  testing::countingArmed = true;
+  for (int s = 1; s <= 4; ++s) {
+    system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.03f * s)));
+    system.step();
+    contacts += system.lastStep().contacts;
+    if (system.lastStep().nan) break;
+  }
+  testing::countingArmed = false;
+  btAlignedAllocSetCustom(nullptr, nullptr);
+  EXPECT_EQ(testing::allocationCount.load(), 0) << "allocations in step()";
+  EXPECT_FALSE(system.lastStep().nan);
+  EXPECT_FALSE(system.lastStep().exploded);
+  EXPECT_GT(contacts, 0u) << "collision never ran";
+  for (const btVector3& x : system.positions(muscle))
+    ASSERT_TRUE(std::isfinite(x.x()) && std::isfinite(x.y()) && std::isfinite(x.z()));
+}
+
+INSTANTIATE_TEST_SUITE_P(All, EveryIntegrator, ::testing::ValuesIn(kIntegrators),
+                         [](const auto& param) {
+                           std::string name = toString(param.param);
+                           std::erase(name, '-');
+                           return name;
+                         });
+
+}  // namespace
+}  // namespace fibremss

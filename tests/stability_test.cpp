@@ -1,0 +1,201 @@
+// The hard-case stability matrix (issue 5): the energy criterion on constructed series, case
+// parsing, and the matrix at a small resolution over every integrator the solver has.
+#include "fibremss/Stability.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "fibremss/Error.h"
+#include "fibremss/Scene.h"
+#include "support/Process.h"
+
+namespace {
+
+using fibremss::CellOutcome;
+using fibremss::checkEnergy;
+using fibremss::StabilityOptions;
+
+/// Small and fast: the tension spike (one muscle, 8 poses) at 8 particles per fibre and 20
+/// iterations per step, also the calibration scene.
+StabilityOptions smallOptions() {
+  StabilityOptions options;
+  options.overrides = {"resolution=8", "iterations=20"};
+  options.calibration = fibremss::parseStabilityCase("tension-spike");
+  options.calibrationSteps = 2;
+  options.calibrationRatio = 2;
+  options.dtFactors = {1, 100};
+  return options;
+}
+
+bool isFailure(CellOutcome outcome) {
+  return outcome == CellOutcome::Nan || outcome == CellOutcome::Exploded ||
+         outcome == CellOutcome::Energy;
+}
+
+TEST(EnergyCheck, DecayIsBounded) {
+  const std::vector<double> series{10, 8, 5, 3, 1, 0.5, 0.2, 0.1};
+  const auto check = checkEnergy(series, 10, 0);
+  EXPECT_TRUE(check.bounded);
+  EXPECT_EQ(check.growthStep, -1);
+  // Last quarter of 2: max(0.2, 0.1) / max(10, 8, 5, 3, 1, 0.5).
+  EXPECT_DOUBLE_EQ(check.ratio, 0.2 / 10);
+}
+
+TEST(EnergyCheck, RampThatSettlesIsBounded) {
+  // A driven ramp peaking mid-run passes although it ends far above the first quarter.
+  const std::vector<double> series{0, 1e-6, 1e-5, 1e-4, 1e-3, 8e-4, 7e-4, 7e-4};
+  EXPECT_TRUE(checkEnergy(series, 10, 0).bounded);
+  EXPECT_DOUBLE_EQ(checkEnergy(series, 10, 0).ratio, 0.7);
+}
+
+TEST(EnergyCheck, GeometricGrowthFailsAtTheFirstValueAboveTheLimit) {
+  std::vector<double> series;
+  for (int i = 0; i < 8; ++i) series.push_back(std::pow(4.0, i));
+  // Before the last quarter the max is 4^5 = 1024, the limit 10240; the last quarter is 4096,
+  // 16384: 16384 (index 7) fails.
+  const auto check = checkEnergy(series, 10, 0);
+  EXPECT_FALSE(check.bounded);
+  EXPECT_EQ(check.growthStep, 7);
+  EXPECT_DOUBLE_EQ(check.ratio, 16384.0 / 1024.0);
+  // A growth factor of the ratio accepts it (the limit is not exceeded, only reached).
+  EXPECT_TRUE(checkEnergy(series, 16, 0).bounded);
+}
+
+TEST(EnergyCheck, QuartersRoundUp) {
+  // 5 values: a last quarter of ceil(5/4) = 2, so index 3 belongs to it.
+  const std::vector<double> series{1, 1, 1, 50, 1};
+  const auto check = checkEnergy(series, 10, 0);
+  EXPECT_FALSE(check.bounded);
+  EXPECT_EQ(check.growthStep, 3);
+}
+
+TEST(EnergyCheck, FloorAcceptsGrowthFromRest) {
+  const std::vector<double> series{0, 0, 0, 0, 0, 0, 1e-12, 2e-12};
+  EXPECT_FALSE(checkEnergy(series, 10, 0).bounded);
+  EXPECT_TRUE(std::isinf(checkEnergy(series, 10, 0).ratio));
+  EXPECT_TRUE(checkEnergy(series, 10, 1e-11).bounded);
+}
+
+TEST(EnergyCheck, NonFiniteValueFailsAtItsIndex) {
+  const std::vector<double> series{1, 1, std::numeric_limits<double>::quiet_NaN(), 1};
+  const auto check = checkEnergy(series, 10, 0);
+  EXPECT_FALSE(check.bounded);
+  EXPECT_EQ(check.growthStep, 2);
+  EXPECT_TRUE(checkEnergy(std::vector<double>{5}, 10, 0).bounded);
+}
+
+TEST(StabilityCase, ParsesOverridesAndStiffnessFactor) {
+  const auto c = fibremss::parseStabilityCase("hip-extension:step_deg=4+resolution=5*kappa=100");
+  EXPECT_EQ(c.scene, "hip-extension");
+  EXPECT_EQ(c.overrides, (std::vector<std::string>{"step_deg=4", "resolution=5"}));
+  EXPECT_DOUBLE_EQ(c.kappaFactor, 100);
+  EXPECT_EQ(fibremss::parseStabilityCase("pinch").overrides.size(), 0u);
+  EXPECT_THROW(fibremss::parseStabilityCase("pinch:step_deg"), fibremss::InputError);
+  EXPECT_THROW(fibremss::parseStabilityCase("pinch*kappa=-1"), fibremss::InputError);
+  EXPECT_THROW(fibremss::parseStabilityCase(":a=1"), fibremss::InputError);
+}
+
+TEST(StabilityCase, DefaultHardCasesCoverTheIssue) {
+  const auto cases = fibremss::defaultHardCases();
+  ASSERT_EQ(cases.size(), 7u);
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.label);
+    // Every case loads (the scenes exist and the overrides are known keys).
+    EXPECT_NO_THROW(fibremss::loadScene(c.scene, c.overrides));
+  }
+  EXPECT_DOUBLE_EQ(cases[5].kappaFactor, 100);
+}
+
+// Every integrator: unavailable ones are flagged as such; for the others the probe at the
+// measured stable step passes, and the probe at the largest dt tried, which the bisection found
+// failing unless capped, is flagged with the step it failed at, the run stopping there.
+TEST(StabilityMatrix, StableStepPassesAndTheFailingProbeIsFlagged) {
+  const StabilityOptions options = smallOptions();
+  for (const std::string& name : fibremss::allIntegratorNames()) {
+    SCOPED_TRACE(name);
+    fibremss::Integrator kind{};
+    ASSERT_TRUE(fibremss::fromString(name, kind));
+    const auto step = fibremss::findStableStep(name, options);
+    ASSERT_EQ(step.available, fibremss::integratorAvailable(kind));
+    if (!step.available) {
+      const auto cell = fibremss::runStabilityCell(options.calibration, name, 1e-4, options);
+      EXPECT_EQ(cell.outcome, CellOutcome::Unavailable);
+      continue;
+    }
+    ASSERT_TRUE(step.found) << "unstable even at " << options.calibrationLow << " s";
+    const auto stable = fibremss::runCalibrationProbe(name, step.dt, options);
+    EXPECT_TRUE(stable.outcome == CellOutcome::Ok || stable.outcome == CellOutcome::Energy)
+        << toString(stable.outcome) << " " << stable.message;
+    EXPECT_EQ(stable.steps, options.calibrationSteps);
+    for (double e : stable.kineticEnergy) EXPECT_TRUE(std::isfinite(e));
+    if (step.capped) continue;
+    const auto failing = fibremss::runCalibrationProbe(name, options.calibrationHigh, options);
+    ASSERT_TRUE(failing.outcome == CellOutcome::Nan || failing.outcome == CellOutcome::Exploded)
+        << toString(failing.outcome) << " " << failing.message;
+    EXPECT_GE(failing.failedStep, 0);
+    EXPECT_EQ(failing.steps, failing.failedStep + 1);  // stopped at the failure
+  }
+}
+
+// The matrix on two hard cases over every integrator: it runs to the end, every cell is there,
+// every failure carries its step, nothing non-finite hides in an "ok", and both files say so.
+TEST(StabilityMatrix, HardCasesAtSmallResolution) {
+  StabilityOptions options = smallOptions();
+  const std::vector<fibremss::StabilityCase> cases{fibremss::parseStabilityCase("pinch"),
+                                                   fibremss::parseStabilityCase("tension-spike")};
+  const auto matrix = fibremss::runStabilityMatrix(cases, options);
+  const auto names = fibremss::allIntegratorNames();
+  ASSERT_EQ(matrix.stableSteps.size(), names.size());
+  ASSERT_EQ(matrix.cells.size(), cases.size() * names.size() * options.dtFactors.size());
+  size_t unavailable = 0;
+  for (const auto& cell : matrix.cells) {
+    SCOPED_TRACE(cell.caseLabel + " " + cell.integrator);
+    fibremss::Integrator kind{};
+    ASSERT_TRUE(fibremss::fromString(cell.integrator, kind));
+    EXPECT_EQ(cell.outcome == CellOutcome::Unavailable, !fibremss::integratorAvailable(kind));
+    unavailable += cell.outcome == CellOutcome::Unavailable;
+    EXPECT_NE(cell.outcome, CellOutcome::Error) << cell.message;
+    if (isFailure(cell.outcome)) {
+      EXPECT_GE(cell.failedStep, 0);
+      EXPECT_LT(cell.failedStep, std::max(cell.steps, 1));
+    }
+    if (cell.outcome == CellOutcome::Ok) {
+      EXPECT_EQ(cell.failedStep, -1);
+      for (double e : cell.kineticEnergy) EXPECT_TRUE(std::isfinite(e));
+    }
+  }
+  const auto json = fibremss::stabilityJson(matrix, options);
+  EXPECT_EQ(json["cells"].size(), matrix.cells.size());
+  const std::string markdown = fibremss::stabilityMarkdown(matrix, options);
+  EXPECT_NE(markdown.find("| pinch |"), std::string::npos);
+  EXPECT_NE(markdown.find("| tension-spike |"), std::string::npos);
+  EXPECT_EQ(markdown.find("unavailable |") != std::string::npos, unavailable > 0);
+}
+
+TEST(StabilityCli, WritesBothFilesAndRejectsUnknownIntegrators) {
+  fibremss::testing::TemporaryDirectory dir("stability_cli");
+  const std::string out = (dir.path() / "matrix").string();
+  const auto result = fibremss::testing::runProcess(
+      std::string(FIBREMSS_CLI) +
+      " stability tension-spike --set resolution=8 --integrators verlet --dt-factors 1,100 "
+      "--calibrate tension-spike --calibration-steps 2 --out " +
+      out + " 2>/dev/null");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  std::ifstream in(out + "/stability.json");
+  const auto json = nlohmann::json::parse(in);
+  ASSERT_EQ(json["cells"].size(), 2u);
+  EXPECT_EQ(json["cells"][0]["integrator"], "verlet");
+  EXPECT_TRUE(std::filesystem::exists(out + "/stability.md"));
+  EXPECT_EQ(fibremss::testing::runProcess(std::string(FIBREMSS_CLI) +
+                                          " stability --integrators no-such 2>/dev/null")
+                .exitCode,
+            2);
+}
+
+}  // namespace
