@@ -71,20 +71,35 @@ std::string quoted(const std::string& s) {
   return out + "\"";
 }
 
-void runGnuplot(const std::string& script, const std::string& scriptPath) {
+/// Runs a plot script (kept beside the plots, writing their final names) so that an interrupted
+/// or failed gnuplot leaves no half plot: gnuplot writes `<plot>.partial` files, renamed to
+/// the final names only once it succeeded.
+void runGnuplot(const std::string& script, const std::string& scriptPath,
+                const std::vector<std::string>& plots) {
   writeFileAtomically(scriptPath, script);
-  const std::string command = "gnuplot " + quoted(scriptPath) + " 2>&1";
+  std::string partialScript = script;
+  for (const std::string& plot : plots) {
+    const std::string from = quoted(plot), to = quoted(plot + ".partial");
+    for (size_t at = 0; (at = partialScript.find(from, at)) != std::string::npos; at += to.size())
+      partialScript.replace(at, from.size(), to);
+  }
+  const std::string partialPath = scriptPath + ".partial";
+  writeFileAtomically(partialPath, partialScript);
+  const std::string command = "gnuplot " + quoted(partialPath) + " 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
   if (!pipe) throw std::runtime_error("cannot run gnuplot (is gnuplot installed?)");
   std::string output;
   char buffer[256];
   while (std::fgets(buffer, sizeof buffer, pipe)) output += buffer;
   const int status = pclose(pipe);
+  std::filesystem::remove(partialPath);
   if (status != 0) {
+    for (const std::string& plot : plots) std::filesystem::remove(plot + ".partial");
     throw std::runtime_error("gnuplot failed on " + scriptPath + " (exit " +
                              std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) +
                              "): " + output);
   }
+  for (const std::string& plot : plots) std::filesystem::rename(plot + ".partial", plot);
 }
 
 /// Sets both terminals in turn: the same plot as PNG and SVG.
@@ -379,16 +394,15 @@ std::vector<std::string> writeComparison(const nlohmann::json& summary, const st
 
   std::vector<std::string> plots;
   const nlohmann::json& runs = summary["runs"];
-  runGnuplot(speedVsErrorScript(runs, (dir / "speed_vs_error").string()),
-             (dir / "speed_vs_error.gp").string());
-  plots.push_back("speed_vs_error.png");
-  plots.push_back("speed_vs_error.svg");
-  if (anySweep(runs)) {
-    runGnuplot(penetrationScript(runs, (dir / "penetration_vs_step").string()),
-               (dir / "penetration_vs_step.gp").string());
-    plots.push_back("penetration_vs_step.png");
-    plots.push_back("penetration_vs_step.svg");
-  }
+  const auto plot = [&](const std::string& name, const std::string& script) {
+    const std::string stem = (dir / name).string();
+    runGnuplot(script, stem + ".gp", {stem + ".png", stem + ".svg"});
+    plots.push_back(name + ".png");
+    plots.push_back(name + ".svg");
+  };
+  plot("speed_vs_error", speedVsErrorScript(runs, (dir / "speed_vs_error").string()));
+  if (anySweep(runs))
+    plot("penetration_vs_step", penetrationScript(runs, (dir / "penetration_vs_step").string()));
   writeFileAtomically((dir / "report.md").string(), reportMarkdown(summary, plots));
   written.push_back("report.md");
   written.insert(written.end(), plots.begin(), plots.end());

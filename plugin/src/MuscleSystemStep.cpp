@@ -254,10 +254,12 @@ void MuscleSystem::Impl::step() {
       bone.moving = false;
       bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
     }
-  } else {
+  } else if (std::any_of(bones.order.begin(), bones.order.end(), [&](uint32_t slot) {
+               return !(bones.states[slot]->last == bones.states[slot]->target);
+             })) {
     motionIterations =
         std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
-  }
+  }  // else no bone moves in this step: the stop rules need not wait for an arrival
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, state);
