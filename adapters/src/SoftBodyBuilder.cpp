@@ -7,6 +7,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "../../plugin/src/MuscleSystemPretransform.h"
 #include "SoftBodyBones.h"
 #include "fibremss/BoneBody.h"
 
@@ -86,6 +87,7 @@ struct SoftBodyScene::Impl {
   /// still culled by the muscle's own bounds.
   std::vector<std::unique_ptr<BoneBody>> bones;
   std::vector<btTransform> boneTransforms;     ///< current bone poses [m]
+  std::vector<btTransform> deltas;             ///< bone motion of one substep (scratch)
   static constexpr btScalar kBonePadding = 2;  ///< [m] beyond any muscle's reach
 
   struct Muscle {
@@ -160,7 +162,7 @@ struct SoftBodyScene::Impl {
 
     body.m_cfg.piterations = definition.positionIterations;
     body.m_cfg.citerations = definition.clusterIterations;
-    body.m_cfg.kDP = static_cast<btScalar>(std::clamp(s.damping * dt / mass, 0.0, 1.0));
+    body.m_cfg.kDP = std::clamp(definition.velocityDamping, btScalar(0), btScalar(1));
     body.m_cfg.kCHR = 1;  // rigid contact hardness
     body.m_cfg.kKHR = 1;  // kinematic contact hardness
     body.m_cfg.kSHR = 1;  // soft contact hardness
@@ -180,6 +182,21 @@ struct SoftBodyScene::Impl {
         static_cast<btScalar>(std::max(radius, 1e-4) * definition.lengthScale));
     world->addSoftBody(muscle.body);
     muscles.push_back(std::move(muscle));
+  }
+
+  /// Free nodes (x and the previous x alike) moved by their bones' motion since `previous`.
+  void moveFreeNodes(const Muscle& muscle, std::span<const btTransform> previous) {
+    const MuscleSettings& s = *muscle.settings;
+    deltas.resize(boneTransforms.size());
+    for (size_t b = 0; b < boneTransforms.size(); ++b)
+      deltas[b] = boneTransforms[b] * previous[b].inverse();
+    const btScalar scale = definition.lengthScale;
+    for (uint32_t i = 0; i < s.particleCount(); ++i) {
+      if (s.isFixed(i)) continue;
+      btSoftBody::Node& node = muscle.body->m_nodes[static_cast<int>(i)];
+      node.m_x = pretransformPoint(s, deltas, i, node.m_x / scale, true) * scale;
+      node.m_q = pretransformPoint(s, deltas, i, node.m_q / scale, true) * scale;
+    }
   }
 
   void movePins(const Muscle& muscle) const {
@@ -232,13 +249,18 @@ void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
   const int substeps = m.definition.substepsPerPose;
   const btScalar dt = m.definition.poseDuration / static_cast<btScalar>(substeps);
   const std::vector<btTransform> from = m.boneTransforms;
+  std::vector<btTransform> previous = from;
   for (int k = 1; k <= substeps; ++k) {
     const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
     for (size_t b = 0; b < m.bones.size(); ++b) {
       m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
       m.bones[b]->setTransform(scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
     }
-    for (const Impl::Muscle& muscle : m.muscles) m.movePins(muscle);
+    for (const Impl::Muscle& muscle : m.muscles) {
+      if (m.definition.freeNodesFollowBones) m.moveFreeNodes(muscle, previous);
+      m.movePins(muscle);
+    }
+    previous = m.boneTransforms;
     m.world->stepSimulation(dt, 0);
   }
   for (Impl::Muscle& muscle : m.muscles) {

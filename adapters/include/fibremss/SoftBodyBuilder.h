@@ -23,18 +23,23 @@ namespace fibremss {
 /// mass m/2). btSoftBody's position solver applies m_kLST = s of the error per iteration, so
 /// after n = positionIterations iterations (1−s)ⁿ of it is left: s = 1 − (1 − f)^(1/n).
 /// Links are grouped into `stiffnessLevels` materials (s rounded to the level's centre).
-/// Damping: btSoftBody's kDP removes that fraction of node velocity per step; c·dt/m (clamped
-/// to [0, 1]) is the velocity a FibreMSS damper of coefficient c removes in one step.
+/// Damping: btSoftBody's kDP removes that fraction of node velocity per step. FibreMSS's c·dt/m
+/// came to 6–26 on thigh13 before clamping to 1: it zeroed every node's velocity each step.
+/// Free nodes follow their bones each substep by FibreMSS's blended pre-transform; without it
+/// the links alone dragged them through the bones' motion (thigh13 resolution 20, pose 0→1:
+/// 16 links beyond 3×, one at 18×).
 struct SoftBodyDefinition {
-  int substepsPerPose = 20;       ///< world steps per pose; bones and pins interpolated
-  btScalar poseDuration = 0.07f;  ///< simulated time of one pose [s]
-  int positionIterations = 16;    ///< m_cfg.piterations (links, per world step); with 4, links
-                                  ///< of thigh13 stretched past 3× under its motion alone
-  int clusterIterations = 2;      ///< m_cfg.citerations (cluster contacts, per world step)
-  int clustersPerMuscle = 24;     ///< k-means clusters for soft–soft (CL_SS) collision
-  bool softSoftCollision = true;  ///< CL_SS between muscles (no self-collision)
-  bool boneCollision = true;      ///< SDF_RS against the bones' triangle meshes
-  int stiffnessLevels = 16;       ///< distinct link materials per muscle
+  int substepsPerPose = 20;          ///< world steps per pose; bones and pins interpolated
+  btScalar poseDuration = 0.07f;     ///< simulated time of one pose [s]
+  int positionIterations = 16;       ///< m_cfg.piterations (links, per world step); with 4, links
+                                     ///< of thigh13 stretched past 3× under its motion alone
+  int clusterIterations = 2;         ///< m_cfg.citerations (cluster contacts, per world step)
+  btScalar velocityDamping = 0.1f;   ///< m_cfg.kDP: share of node velocity removed per step
+  bool freeNodesFollowBones = true;  ///< move free nodes by their bones' motion each substep
+  int clustersPerMuscle = 24;        ///< k-means clusters for soft–soft (CL_SS) collision
+  bool softSoftCollision = true;     ///< CL_SS between muscles (no self-collision)
+  bool boneCollision = true;         ///< SDF_RS against the bones' triangle meshes
+  int stiffnessLevels = 16;          ///< distinct link materials per muscle
   btScalar sdfVoxelSize =
       0.003f;  ///< btSparseSdf voxel edge [m] (Bullet's 0.25 is for metres-sized toys)
   /// Bullet units per metre inside the baseline's world. Bullet extrudes every bone triangle
