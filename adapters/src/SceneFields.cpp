@@ -100,7 +100,12 @@ int Fields::integer(const std::string& key, int fallback, int lowest, int highes
     if (!integral)
       fail(key, "expected an integer in [" + std::to_string(lowest) + ", " +
                     std::to_string(highest) + "], got " + describe(*value));
-    result = value->is_number_float() ? (long long)value->get<double>() : value->get<long long>();
+    // Range-check an integral float before converting it: 1e300 has no long long.
+    const double number = value->is_number_float() ? value->get<double>() : 0;
+    if (value->is_number_float() && (number < lowest || number > highest))
+      fail(key, "expected an integer in [" + std::to_string(lowest) + ", " +
+                    std::to_string(highest) + "], got " + describe(*value));
+    result = value->is_number_float() ? static_cast<long long>(number) : value->get<long long>();
   }
   if (result < lowest || result > highest)
     fail(key, "expected an integer in [" + std::to_string(lowest) + ", " + std::to_string(highest) +
