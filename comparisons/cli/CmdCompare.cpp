@@ -8,6 +8,7 @@
 #include <string>
 
 #include "Commands.h"
+#include "Interrupt.h"
 #include "SceneArgs.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Progress.h"
@@ -60,6 +61,8 @@ void compare(CompareArgs& args) {
     }
     bar->update(p.step, p.iterations, p.seconds);
   };
+  InterruptGuard interrupt;
+  args.options.cancel = &interruptRequested;
   const Comparison comparison = runComparison(args.scene.scene, args.scene.overrides, args.options);
   if (bar) bar->finish();
 
@@ -77,6 +80,7 @@ void compare(CompareArgs& args) {
   std::printf("wrote");
   for (const std::string& file : files) std::printf(" %s/%s", out.c_str(), file.c_str());
   std::printf("\n");
+  if (interruptRequested.load()) throw CLI::RuntimeError(kExitInterrupted);
 }
 
 }  // namespace

@@ -1,8 +1,5 @@
 // `fibremss run SCENE`: prepare a scene, simulate every pose of its motion with FibreMSS,
 // report progress, write frames and summary.json. Ctrl-C stops after the current step.
-#include <signal.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -14,6 +11,7 @@
 #include <vector>
 
 #include "Commands.h"
+#include "Interrupt.h"
 #include "SceneArgs.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Output.h"
@@ -34,35 +32,6 @@ struct RunArgs {
 
 /// Exit codes beyond 0 (done), 1 (error) and 2 (bad input).
 constexpr int kExitSimulationFailed = 3;
-constexpr int kExitInterrupted = 130;
-
-std::atomic<bool> interruptRequested{false};
-
-void onInterrupt(int) {
-  interruptRequested.store(true);
-  // write() is async-signal-safe; SA_RESETHAND made a second Ctrl-C end the process at once.
-  const char message[] = "\nfibremss: interrupted, stopping after the current step\n";
-  [[maybe_unused]] ssize_t written = write(STDERR_FILENO, message, sizeof message - 1);
-}
-
-/// Stops the run on SIGINT for as long as it lives, then restores the previous handler.
-class InterruptGuard {
- public:
-  InterruptGuard() {
-    interruptRequested.store(false);
-    struct sigaction action {};
-    action.sa_handler = onInterrupt;
-    sigemptyset(&action.sa_mask);
-    action.sa_flags = SA_RESETHAND;
-    sigaction(SIGINT, &action, &previous_);
-  }
-  ~InterruptGuard() { sigaction(SIGINT, &previous_, nullptr); }
-  InterruptGuard(const InterruptGuard&) = delete;
-  InterruptGuard& operator=(const InterruptGuard&) = delete;
-
- private:
-  struct sigaction previous_ {};
-};
 
 /// What the numerical guard did, for summary.json.
 nlohmann::json guardJson(const FibreRunDetails& details, FailurePolicy policy) {
