@@ -18,36 +18,8 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "support/AllocationCounter.h"
 #include "support/SolverFixtures.h"
-
-namespace {
-
-// Counts every allocation of the process (operator new and Bullet's allocator) while armed.
-std::atomic<bool> countAllocations{false};
-std::atomic<long> allocations{0};
-
-void* countingMalloc(size_t size) {
-  if (countAllocations) ++allocations;
-  return std::malloc(size);
-}
-
-}  // namespace
-
-void* operator new(size_t size) {
-  if (countAllocations) ++allocations;
-  if (void* p = std::malloc(size ? size : 1)) return p;
-  throw std::bad_alloc();
-}
-// Out of line, so that the compiler does not pair the replaced new with free().
-[[gnu::noinline]] void release(void* p) noexcept {
-  std::free(p);
-}
-void operator delete(void* p) noexcept {
-  release(p);
-}
-void operator delete(void* p, size_t) noexcept {
-  release(p);
-}
 
 namespace fibremss {
 namespace {
@@ -567,7 +539,7 @@ TEST(Determinism, SameInputGivesBitwiseIdenticalPositions) {
 }
 
 TEST(Allocation, StepAllocatesNothing) {
-  btAlignedAllocSetCustom(countingMalloc, std::free);
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   {
     SimulationParameters parameters;
     parameters.iterations = 20;
@@ -580,15 +552,16 @@ TEST(Allocation, StepAllocatesNothing) {
       a->damping = b->damping = zelenyDamping(*a);
       system.addMuscle(a, std::span(&bone, 1));
       system.addMuscle(b, std::span(&bone, 1));
-      allocations = 0;
-      countAllocations = true;
+      testing::allocationCount = 0;
+      testing::countingArmed = true;
       for (int s = 0; s < 10; ++s) {
         system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
         system.step();
       }
-      countAllocations = false;
+      testing::countingArmed = false;
       EXPECT_GT(system.lastStep().contacts, 0u);  // collision ran
-      EXPECT_EQ(allocations.load(), 0) << (rebuild ? "rebuild" : "animation") << " mode";
+      EXPECT_EQ(testing::allocationCount.load(), 0)
+          << (rebuild ? "rebuild" : "animation") << " mode";
     }
   }
   btAlignedAllocSetCustom(nullptr, nullptr);
