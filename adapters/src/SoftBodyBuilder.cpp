@@ -184,12 +184,10 @@ struct SoftBodyScene::Impl {
     muscles.push_back(std::move(muscle));
   }
 
-  /// Free nodes (x and the previous x alike) moved by their bones' motion since `previous`.
-  void moveFreeNodes(const Muscle& muscle, std::span<const btTransform> previous) {
+  /// Free nodes (x and the previous x alike) moved by the bones' motion of this substep,
+  /// `deltas` (filled once per substep for every muscle).
+  void moveFreeNodes(const Muscle& muscle) const {
     const MuscleSettings& s = *muscle.settings;
-    deltas.resize(boneTransforms.size());
-    for (size_t b = 0; b < boneTransforms.size(); ++b)
-      deltas[b] = boneTransforms[b] * previous[b].inverse();
     const btScalar scale = definition.lengthScale;
     for (uint32_t i = 0; i < s.particleCount(); ++i) {
       if (s.isFixed(i)) continue;
@@ -249,18 +247,19 @@ void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
   const int substeps = m.definition.substepsPerPose;
   const btScalar dt = m.definition.poseDuration / static_cast<btScalar>(substeps);
   const std::vector<btTransform> from = m.boneTransforms;
-  std::vector<btTransform> previous = from;
+  m.deltas.resize(m.bones.size());
   for (int k = 1; k <= substeps; ++k) {
     const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
     for (size_t b = 0; b < m.bones.size(); ++b) {
+      const btTransform before = m.boneTransforms[b];
       m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
+      m.deltas[b] = m.boneTransforms[b] * before.inverse();
       m.bones[b]->setTransform(scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
     }
     for (const Impl::Muscle& muscle : m.muscles) {
-      if (m.definition.freeNodesFollowBones) m.moveFreeNodes(muscle, previous);
+      if (m.definition.freeNodesFollowBones) m.moveFreeNodes(muscle);
       m.movePins(muscle);
     }
-    previous = m.boneTransforms;
     m.world->stepSimulation(dt, 0);
   }
   for (Impl::Muscle& muscle : m.muscles) {
