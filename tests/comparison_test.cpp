@@ -162,7 +162,9 @@ TEST(RmsBetweenRuns, CombinesPosesAsTheRootMeanSquare) {
   runs[1].poseSurfaces = a.poseSurfaces;
   fillRms(runs);
   EXPECT_NEAR(runs[0].rmsToFemMm, 1.0, 1e-4);
+  EXPECT_EQ(runs[0].rmsToFemPoses, 1) << "the FEM's second pose has no partner";
   EXPECT_EQ(runs[1].rmsToFemMm, 0.0);
+  EXPECT_EQ(runs[1].rmsToFemPoses, 2);
   EXPECT_TRUE(std::isnan(runs[0].rmsToSelfReferenceMm));
 }
 
@@ -180,6 +182,8 @@ TEST_P(EveryMethod, GivesFiniteMetrics) {
   for (const RunMetrics& run : comparison.runs) {
     SCOPED_TRACE(run.method);
     EXPECT_EQ(run.steps, std::max(scene.poseCount, 1));
+    EXPECT_EQ(run.poses, run.steps);
+    EXPECT_EQ(run.rmsToFemPoses, run.steps) << "RMS to FEM over every pose";
     EXPECT_FALSE(run.nan);
     EXPECT_FALSE(run.exploded);
     EXPECT_EQ(run.failedStep, -1);
@@ -251,6 +255,22 @@ TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   EXPECT_NE(report.find("How each method was measured"), std::string::npos);
 }
 
+TEST(CompareCommand, HipSweepWritesThePenetrationAgainstStepPlot) {
+  // hip-extension is a sweep: its step_deg (here overridden to 20) reaches summary.json and a
+  // second plot, penetration against step_deg, is written beside speed against error.
+  const fs::path out = scratch("hip_sweep");
+  const std::string command = std::string(FIBREMSS_CLI) +
+                              " compare hip-extension --set step_deg=20 --methods fibremss --out " +
+                              out.string() + " > " + (out.string() + ".log") + " 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << readFile(out.string() + ".log");
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
+  EXPECT_EQ(summary["runs"][0]["step_deg"], 20.0);
+  std::string problem;
+  ASSERT_TRUE(fs::exists(out / "penetration_vs_step.svg"));
+  EXPECT_TRUE(wellFormedXml(readFile(out / "penetration_vs_step.svg"), problem)) << problem;
+  EXPECT_NE(readFile(out / "report.md").find("penetration_vs_step.png"), std::string::npos);
+}
+
 TEST(CompareCommand, RejectsAnUnknownMethodWithExitCode2) {
   const fs::path out = scratch("bad_method");
   const std::string command = std::string(FIBREMSS_CLI) +
@@ -303,6 +323,43 @@ TEST(MergeAndReport, MergedReportHasTable1RatiosAndTheSweepPlot) {
   EXPECT_NE(report.find("Seed 004 Table 1"), std::string::npos);
   EXPECT_NE(report.find("| MSS | 5 / 18.66 (3.73×) |"), std::string::npos) << report;
   EXPECT_NE(report.find("| total | 10 / 56.84 (5.68×) |"), std::string::npos) << report;
+}
+
+TEST(MergeAndReport, SaysWhenRmsToFemCoversFewerPosesThanTheRun) {
+  // The FEM exploded at step 1 of 13: FibreMSS's RMS to it covers pose 0 only.
+  nlohmann::json summary = madeSummary(2, 20);
+  summary["runs"][0]["poses"] = 13;
+  summary["runs"][0]["steps"] = 13;
+  summary["runs"][0]["rms_to_fem_poses"] = 1;
+  RunMetrics fem;
+  fem.scene = "thigh13";
+  fem.method = "fem";
+  fem.msPerStep = 5000;
+  fem.rmsToFemMm = 0;
+  fem.exploded = true;
+  fem.failedStep = 1;
+  fem.steps = 2;
+  fem.poses = 13;
+  fem.rmsToFemPoses = 1;
+  summary["runs"].push_back(toJson(fem));
+  const fs::path out = scratch("partial_fem");
+  writeComparison(summary, out.string());
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("RMS to FEM covers fewer poses than the runs"), std::string::npos)
+      << report;
+  EXPECT_NE(report.find("fibremss (1/13 poses)"), std::string::npos) << report;
+  EXPECT_NE(report.find("exploded at step 1"), std::string::npos) << report;
+  EXPECT_NE(report.find("| 3 (1/13 poses) |"), std::string::npos) << "table cell: " << report;
+  const std::string script = readFile(out / "speed_vs_error.gp");
+  EXPECT_NE(script.find("(1/13 poses)"), std::string::npos) << "point label: " << script;
+  std::string problem;
+  EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
+
+  // Every pose covered: no note.
+  summary["runs"][0]["rms_to_fem_poses"] = 13;
+  summary["runs"][1]["rms_to_fem_poses"] = 13;
+  writeComparison(summary, out.string());
+  EXPECT_EQ(readFile(out / "report.md").find("covers fewer poses"), std::string::npos);
 }
 
 TEST(MergeAndReport, FourResolutionsGiveTable1ColumnsInOrder) {

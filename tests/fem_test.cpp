@@ -9,6 +9,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/FemBuilder.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Scene.h"
 #include "fibremss/SoftBodyBuilder.h"
 #include "fibremss/TetMesher.h"
 #include "support/PrepFixtures.h"
@@ -214,6 +215,45 @@ TEST(FemScene, BoneContactKeepsFreeNodesOutsideAMovingBone) {
   };
   EXPECT_GT(deepest(false), 0.002f);
   EXPECT_LT(deepest(true), 1e-5f);
+}
+
+TEST(FemScene, SurvivesHipFlexionPosesWithoutInvertedTetrahedra) {
+  // The first two 5° steps of hip-flexion: with 50 substeps, no mass scaling and free nodes
+  // left to the pinned ones, tetrahedra of muscle 3 inverted within the first moving pose
+  // (Bullet's elastic forces are explicit; FemDefinition::stableOmegaDt). After every pose
+  // each node must be finite, each tetrahedron positively oriented, each edge within 3× rest.
+  const LoadedScene loaded = loadScene("hip-flexion", {});
+  const PreparedScene scene = prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
+  const auto posesAt = [&](int pose) {
+    std::vector<btTransform> transforms;
+    for (size_t b = 0; b < loaded.bones.size(); ++b) transforms.push_back(loaded.bonePose(b, pose));
+    return transforms;
+  };
+  FemScene fem(scene, posesAt(0), {.mesher = {.targetCells = 60}});
+  EXPECT_GT(fem.addedMassShare(), 0) << "hip-flexion's stiff muscles need mass scaling";
+  for (int pose = 1; pose <= 2; ++pose) {
+    fem.stepPose(posesAt(pose));
+    for (size_t m = 0; m < fem.muscleCount(); ++m) {
+      const TetMesh& mesh = fem.tetMesh(m);
+      const std::span<const btVector3> x = fem.nodePositions(m);
+      ASSERT_TRUE(std::all_of(x.begin(), x.end(),
+                              [](const btVector3& p) {
+                                return std::isfinite(p.x()) && std::isfinite(p.y()) &&
+                                       std::isfinite(p.z());
+                              }))
+          << "pose " << pose << " muscle " << m;
+      for (const auto& t : mesh.tetrahedra) {
+        ASSERT_GT(tetrahedronVolume(x[t[0]], x[t[1]], x[t[2]], x[t[3]]), 0)
+            << "pose " << pose << " muscle " << m;
+        for (int a = 0; a < 4; ++a) {
+          for (int b = a + 1; b < 4; ++b) {
+            ASSERT_LT(x[t[a]].distance(x[t[b]]), 3 * mesh.nodes[t[a]].distance(mesh.nodes[t[b]]))
+                << "pose " << pose << " muscle " << m;
+          }
+        }
+      }
+    }
+  }
 }
 
 TEST(SoftBodyScene, ClustersHoldOnlyFreeNodesAndHaveFiniteInertia) {

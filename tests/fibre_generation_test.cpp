@@ -5,11 +5,14 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <iostream>
 
 #include "fibremss/Error.h"
 #include "fibremss/FibreGeneration.h"
 #include "fibremss/MeshIO.h"
+#include "fibremss/Preparation.h"
 #include "fibremss/Procedural.h"
+#include "fibremss/Scene.h"
 #include "support/Process.h"
 
 namespace fibremss {
@@ -98,6 +101,31 @@ TEST(FibreGeneration, SpindleBetweenTwoBones) {
   EXPECT_GE(result.quality.rightEnds, 0.9);
 }
 
+// Seeds on the origin area follow the field out of a small tip, where the streamlines of
+// neighbouring seeds stay close; seeds spread over the widest cross-section and traced both
+// ways place the fibres evenly through the belly. A cone-like muscle: a 5 mm landmark at one
+// tip of the spindle, the whole far half as the insertion.
+TEST(FibreGeneration, SeedsOnTheWidestSectionCoverMoreThanSeedsOnTheOrigin) {
+  const TriangleMesh surface = spindle();
+  const btVector3 tip = kCentre - btVector3(0, 0, kRadii.z());
+  const AttachmentArea origin = AttachmentArea::fromLandmarks({tip}, btScalar(0.005));
+  AttachmentArea insertion;
+  insertion.endFraction = 0.3;
+  FibreGenerationOptions options;
+  options.count = 16;
+  options.sectionSeeds = false;
+  const FibreGenerationResult onOrigin = generateFibres(surface, origin, insertion, options);
+  options.sectionSeeds = true;
+  const FibreGenerationResult onSection = generateFibres(surface, origin, insertion, options);
+  ASSERT_EQ(onOrigin.fibres.fibreCount(), 16u);
+  ASSERT_EQ(onSection.fibres.fibreCount(), 16u);
+  EXPECT_EQ(pointsOutside(onSection.fibres, surface, onSection.quality.voxelSize / 4), 0u);
+  EXPECT_GE(onSection.quality.rightEnds, 0.9);
+  EXPECT_GT(onSection.quality.coverage, onOrigin.quality.coverage);
+  std::cout << "[coverage] origin seeds " << onOrigin.quality.coverage * 100 << " %, section seeds "
+            << onSection.quality.coverage * 100 << " %\n";
+}
+
 TEST(FibreGeneration, RejectsEmptySurfaceAndBadOptions) {
   EXPECT_THROW(generateFibres(TriangleMesh{}, AttachmentArea{}, AttachmentArea{}, {}), InputError);
   FibreGenerationOptions options;
@@ -114,6 +142,89 @@ TEST(FibreGeneration, FarLandmarksWidenTheAreaWithAWarning) {
   EXPECT_EQ(result.fibres.fibreCount(), 8u);
   ASSERT_FALSE(result.warnings.empty());
   EXPECT_NE(result.warnings.front().find("landmark"), std::string::npos);
+}
+
+// The scene format's two ways to attach an origin without a bone (issue 8: the shared data
+// has no pelvis): landmark points in the scene, anchored to a static plate that preparation
+// fixes the origin's particles to. A spindle (mm) from a landmark at its top to a plate below.
+TEST(FibreGeneration, SceneWithALandmarkOriginOnAnAnchor) {
+  testing::TemporaryDirectory directory("fibremss_landmark_scene");
+  const std::string path = (directory.path() / "landmarks.json").string();
+  std::ofstream(path) << R"({"units": "mm",
+    "bones": [{"name": "plate",
+               "mesh": {"generator": {"type": "box", "centre": [0, 0, -106], "size": [60, 60, 10]}}}],
+    "muscles": [{"name": "spindle",
+      "surface": {"generator": {"type": "ellipsoid", "radii": [20, 20, 100]}},
+      "fibres": {"generator": {"type": "surface",
+                 "origin": {"landmarks": [[0, 0, 100]], "radius": 15, "anchor": true},
+                 "insertion": {"bone": "plate", "distance": 5}}},
+      "fibre_count": 16, "resolution": 40, "attachment_distance": 12}]})";
+  const LoadedScene scene = loadScene(path);
+  ASSERT_EQ(scene.bones.size(), 2u);
+  EXPECT_EQ(scene.bones[1].name, "spindle-origin-anchor");
+  ASSERT_EQ(scene.muscles.size(), 1u);
+  const FibreSet& fibres = scene.muscles[0].fibres;
+  ASSERT_EQ(fibres.fibreCount(), 16u);
+  for (size_t f = 0; f < fibres.fibreCount(); ++f) {
+    // From within the landmark's 15 mm to within the plate's 5 mm, each plus the generator's
+    // end tolerance (2.5 voxels of 200 / 47 mm).
+    EXPECT_LT(fibres.fibre(f).front().distance(btVector3(0, 0, 0.1f)), 0.015f + 0.011f) << f;
+    EXPECT_LT(fibres.fibre(f).back().z(), -0.1f + 0.005f + 0.011f) << f;
+  }
+  // Attachment distance 12 mm: a fibre's last particle lies up to one spacing (5 mm) before
+  // its end, which lies up to the area's depth from the plate.
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, 1);
+  const MuscleSettings& muscle = *prepared.muscles[0];
+  size_t onPlate = 0, onAnchor = 0;
+  for (uint32_t i : muscle.fixedParticles) (muscle.fixedBone[i] == 0 ? onPlate : onAnchor) += 1;
+  EXPECT_GT(onPlate, 0u);
+  EXPECT_GT(onAnchor, 0u);
+}
+
+// Explicit attachment areas: surface vertex indices, in the API and in a scene.
+TEST(FibreGeneration, VertexIndexAreas) {
+  const TriangleMesh surface = spindle();
+  std::vector<uint32_t> bottom;
+  for (uint32_t v = 0; v < surface.vertices.size(); ++v)
+    if (surface.vertices[v].z() < kCentre.z() - 0.09f) bottom.push_back(v);
+  ASSERT_GT(bottom.size(), 3u);
+  FibreGenerationOptions options;
+  options.count = 16;
+  const FibreGenerationResult result =
+      generateFibres(surface, AttachmentArea::fromVertices(bottom), AttachmentArea{}, options);
+  ASSERT_EQ(result.fibres.fibreCount(), 16u);
+  EXPECT_EQ(result.originArea, bottom);
+  EXPECT_GE(result.quality.rightEnds, 0.9);
+  for (size_t f = 0; f < result.fibres.fibreCount(); ++f)
+    EXPECT_LT(result.fibres.fibre(f).front().z(), kCentre.z() - 0.09f + 0.011f) << f;
+  EXPECT_THROW(generateFibres(surface, AttachmentArea::fromVertices({uint32_t(1) << 30}),
+                              AttachmentArea{}, options),
+               InputError);
+
+  testing::TemporaryDirectory directory("fibremss_vertex_scene");
+  auto write = [&](const std::string& origin) {
+    const std::string path = (directory.path() / "vertices.json").string();
+    std::ofstream(path) << R"({"muscles": [{"name": "spindle",
+      "surface": {"generator": {"type": "ellipsoid", "radii": [0.02, 0.02, 0.1]}},
+      "fibres": {"generator": {"type": "surface", "origin": )"
+                        << origin << R"(}}, "fibre_count": 8}]})";
+    return path;
+  };
+  // The scene's own ellipsoid (its vertex numbering), its bottom 10 mm as the origin.
+  const TriangleMesh sceneSurface = loadScene(write("{}")).muscles[0].surface;
+  std::string indices = "{\"anchor\": true, \"vertices\": [";
+  for (uint32_t v = 0; v < sceneSurface.vertices.size(); ++v)
+    if (sceneSurface.vertices[v].z() < -0.09f)
+      indices += (indices.back() == '[' ? "" : ",") + std::to_string(v);
+  const LoadedScene scene = loadScene(write(indices + "]}"));
+  ASSERT_EQ(scene.bones.size(), 1u);  // the anchor
+  EXPECT_EQ(scene.muscles[0].fibres.fibreCount(), 8u);
+  try {
+    loadScene(write("{\"vertices\": [-1]}"));
+    ADD_FAILURE() << "a negative vertex index loaded";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("vertices"), std::string::npos) << e.what();
+  }
 }
 
 TEST(SphereFit, RecoversASphereAndAFemoralHead) {

@@ -11,6 +11,9 @@
 #include <memory>
 #include <vector>
 
+#include "../plugin/src/MuscleSystemAccess.h"
+#include "../plugin/src/MuscleSystemGuard.h"
+#include "../plugin/src/MuscleSystemPretransform.h"
 #include "../plugin/src/TimeStep.h"
 #include "fibremss/BoneBody.h"
 #include "fibremss/MuscleSystem.h"
@@ -71,11 +74,15 @@ struct Rig {
     bones = {system.addBone(leftBone()), system.addBone(rightBone())};
     for (const auto& muscle : settings) muscles.push_back(system.addMuscle(muscle, bones));
   }
+  /// The right bone's transform after `step` steps: 0.5 mm further along x each step.
+  static btTransform rightAt(int step) {
+    btTransform moved = btTransform::getIdentity();
+    moved.setOrigin(btVector3(btScalar(0.0005) * static_cast<btScalar>(step), 0, 0));
+    return moved;
+  }
   void step() {
     ++steps;
-    btTransform moved = btTransform::getIdentity();
-    moved.setOrigin(btVector3(btScalar(0.0005) * steps, 0, 0));
-    system.setBoneTransform(bones[1], moved);
+    system.setBoneTransform(bones[1], rightAt(steps));
     system.step();
   }
   std::vector<btVector3> positions(size_t m) const {
@@ -83,6 +90,19 @@ struct Rig {
     return {x.begin(), x.end()};
   }
 };
+
+/// Where a frozen grid muscle at `x` goes in the Rig's step `step`: it rides with its bones (the
+/// grid has no blend: each free particle with its nearest bone's motion over the step, fixed ones
+/// at T·rest); no bone touches it there, so no push changes that.
+std::vector<btVector3> carried(const MuscleSettings& muscle, std::vector<btVector3> x, int step) {
+  const btTransform transforms[2] = {btTransform::getIdentity(), Rig::rightAt(step)};
+  const btTransform deltas[2] = {btTransform::getIdentity(),
+                                 Rig::rightAt(step) * Rig::rightAt(step - 1).inverse()};
+  for (uint32_t i = 0; i < x.size(); ++i)
+    x[i] = muscle.isFixed(i) ? transforms[muscle.fixedBone[i]] * muscle.restPositions[i]
+                             : pretransformPoint(muscle, deltas, i, x[i], true);
+  return x;
+}
 
 bool sameHandle(MuscleHandle a, MuscleHandle b) {
   return a.index == b.index && a.generation == b.generation;
@@ -160,18 +180,21 @@ TEST(Guard, StopBodyRestoresTheExactLastGoodStateAndFreezesOnlyTheFailingMuscle)
   EXPECT_TRUE(sameHandle(stats.failedMuscle, rig.muscles[1]));
   EXPECT_TRUE(rig.system.frozen(rig.muscles[1]));
   EXPECT_FALSE(rig.system.frozen(rig.muscles[0]));
-  EXPECT_TRUE(identical(rig.positions(1), stiffGood));
-  EXPECT_FALSE(identical(rig.positions(0), softGood));  // the soft one finished the step
+  // The last good state, carried rigidly with the bones over the step.
+  EXPECT_TRUE(identical(rig.positions(1), carried(*stiffMuscle(), stiffGood, rig.steps)));
+  EXPECT_FALSE(identical(rig.positions(1), stiffGood));  // the right bone moved it
+  EXPECT_FALSE(identical(rig.positions(0), softGood));   // the soft one finished the step
   EXPECT_TRUE(allFinite(rig.positions(0)));
 
-  // Later steps: the frozen muscle stays put, the other follows its bone.
+  // Later steps: the frozen muscle only rides with its bones, the other one deforms.
   for (int s = 0; s < 3; ++s) {
     const std::vector<btVector3> soft = rig.positions(0);
+    const std::vector<btVector3> stiff = rig.positions(1);
     rig.step();
     EXPECT_FALSE(rig.system.lastStep().rolledBack);
     EXPECT_EQ(rig.system.lastStep().newlyFrozen, 0u);
     EXPECT_EQ(rig.system.lastStep().frozenMuscles, 1u);
-    EXPECT_TRUE(identical(rig.positions(1), stiffGood));
+    EXPECT_TRUE(identical(rig.positions(1), carried(*stiffMuscle(), stiff, rig.steps)));
     EXPECT_FALSE(identical(rig.positions(0), soft));
   }
   rig.system.unfreeze(rig.muscles[1]);
@@ -228,8 +251,67 @@ TEST(Guard, RetryFreezesTheMuscleOnceItsRetriesAreSpent) {
   EXPECT_EQ(stats.newlyFrozen, 1u);
   EXPECT_TRUE(rig.system.frozen(rig.muscles[1]));
   EXPECT_FALSE(rig.system.frozen(rig.muscles[0]));
-  EXPECT_TRUE(identical(rig.positions(1), start));
+  EXPECT_TRUE(identical(rig.positions(1), carried(*stiffMuscle(), start, rig.steps)));
   EXPECT_TRUE(allFinite(rig.positions(0)));
+}
+
+/// Deepest overlap of the free boundary particles of `muscle` at `x` with the spheres of `plate`
+/// placed at `transform` (0 when none overlaps).
+btScalar deepestOverlap(const MuscleSettings& muscle, const std::vector<btVector3>& x,
+                        const BoneSettings& plate, const btTransform& transform) {
+  btScalar deepest = 0;
+  for (uint32_t i : muscle.boundaryParticles) {
+    if (muscle.isFixed(i)) continue;
+    for (size_t s = 0; s < plate.sphereCentres.size(); ++s)
+      deepest = std::max(deepest, muscle.radii[i] + plate.sphereRadii[s] -
+                                      x[i].distance(transform * plate.sphereCentres[s]));
+  }
+  return deepest;
+}
+
+TEST(Guard, AFrozenMuscleIsPushedOutOfABoneThatMovesIntoIt) {
+  // The stiff muscle (top layer of particles at y = 34 mm, radius 1.5 mm) is frozen; then a
+  // plate of bone spheres (radius 3 mm, 2 mm apart; not one of its bones, so it does not carry
+  // the muscle) comes down to y = 33 mm in one step, 2.5 mm into that layer.
+  Rig rig(fixedStep(btScalar(0.5), FailurePolicy::StopBody), {stiffMuscle()});
+  rig.step();
+  rig.system.parameters().timeStep *= 2 * kBursting;
+  rig.step();
+  ASSERT_TRUE(rig.system.frozen(rig.muscles[0]));
+  auto plate = std::make_shared<BoneSettings>();
+  plate->name = "plate";
+  for (int i = -7; i <= 7; ++i)
+    for (int k = -4; k <= 4; ++k) {
+      plate->sphereCentres.emplace_back(btScalar(0.002) * btScalar(i), btScalar(0.053),
+                                        btScalar(0.002) * btScalar(k));
+      plate->sphereRadii.push_back(btScalar(0.003));
+    }
+  const BoneHandle bone = rig.system.addBone(plate);
+  btTransform down = btTransform::getIdentity();
+  down.setOrigin(btVector3(0, btScalar(-0.017), 0));
+  rig.system.setBoneTransform(bone, down);
+  const std::vector<btVector3> before = rig.positions(0);
+  rig.step();
+  EXPECT_EQ(rig.system.lastStep().frozenMuscles, 1u);
+  // Carried with its own bones only, it would be 2.5 mm inside the plate; it is pushed out.
+  EXPECT_GT(
+      deepestOverlap(*stiffMuscle(), carried(*stiffMuscle(), before, rig.steps), *plate, down),
+      btScalar(0.002));
+  EXPECT_LE(deepestOverlap(*stiffMuscle(), rig.positions(0), *plate, down), btScalar(1e-5));
+  EXPECT_TRUE(allFinite(rig.positions(0)));
+}
+
+TEST(Guard, AMuscleSpreadFarBeyondItsSizeIsDivergingNotTorn) {
+  // The guard keeps a trapped muscle's burst springs only while it is not spread: a torn muscle
+  // stays between its bones, a diverging one grows without bound.
+  Rig rig(fixedStep(btScalar(0.5), FailurePolicy::Retry), {softMuscle()});
+  MuscleState& state = *MuscleSystemAccess::impl(rig.system).muscles.states[rig.muscles[0].index];
+  EXPECT_FALSE(checkMuscle(state).spread);
+  EXPECT_FALSE(checkMuscle(state).failed());
+  for (btVector3& x : state.positions) x *= btScalar(2 * kTornSpread);
+  const MuscleHealth grown = checkMuscle(state);
+  EXPECT_TRUE(grown.spread);
+  EXPECT_TRUE(grown.failed());  // its springs are beyond 3× as well
 }
 
 TEST(Guard, TheHostsBulletWorldKeepsRunningBesideABurstingMuscle) {

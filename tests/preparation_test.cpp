@@ -201,9 +201,16 @@ TEST(Springs, LatticeCountsMatchTheGrid) {
       (size_t(3 * rows - 2) * (3 * columns - 2) * (3 * samples - 2) - cells) / 2;
   EXPECT_EQ(all.muscles[0]->springs.size(), expected26);
   expectWellFormedSprings(*all.muscles[0], input.parameters.springs.kappa);
-  // Lattice6 neighbours are one step apart in exactly one grid direction.
-  for (const Spring& s : six.muscles[0]->springs) {
-    const uint32_t fa = s.a / samples, fb = s.b / samples, ka = s.a % samples, kb = s.b % samples;
+  // Lattice6 neighbours are one step apart in exactly one grid direction (grid index: fibre ·
+  // samples + place along it; preparation renumbers the particles).
+  const MuscleSettings& lattice = *six.muscles[0];
+  std::vector<uint32_t> grid(lattice.particleCount());
+  for (uint32_t f = 0; f < lattice.fibreCount(); ++f)
+    for (uint32_t k = lattice.fibreOffsets[f]; k < lattice.fibreOffsets[f + 1]; ++k)
+      grid[lattice.fibreParticles[k]] = f * samples + (k - lattice.fibreOffsets[f]);
+  for (const Spring& s : lattice.springs) {
+    const uint32_t fa = grid[s.a] / samples, fb = grid[s.b] / samples, ka = grid[s.a] % samples,
+                   kb = grid[s.b] % samples;
     const int dr = std::abs(int(fa / columns) - int(fb / columns));
     const int dc = std::abs(int(fa % columns) - int(fb % columns));
     const int dk = std::abs(int(ka) - int(kb));
@@ -711,6 +718,77 @@ TEST(Preparation, RestPoseHasNoOverlapBetweenBodies) {
     EXPECT_GT(coverage, 0);
     EXPECT_LE(coverage, 1);
   }
+}
+
+/// Median over the fibres of (distance from the second to the last particle) / steps: the
+/// regular sample spacing after the jittered second particle.
+btScalar sampleSpacing(const MuscleSettings& muscle) {
+  std::vector<btScalar> spacing;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+    const uint32_t first = muscle.fibreOffsets[f], last = muscle.fibreOffsets[f + 1] - 1;
+    spacing.push_back(muscle.restPositions[muscle.fibreParticles[last]].distance(
+                          muscle.restPositions[muscle.fibreParticles[first + 1]]) /
+                      btScalar(last - first - 1));
+  }
+  std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
+  return spacing[spacing.size() / 2];
+}
+
+TEST(Preparation, SpheresNearAnotherMuscleAreCappedAtTheSpacing) {
+  // Two tubes (radius 20 mm, fibres within 15 mm of the axis, 3 mm sample spacing): boundary
+  // spheres reach ~5 mm to the surface, more than the spacing. The same pair prepared 1 m
+  // apart gives the radii before any shrinking (same particles: the jitter depends on the
+  // seed and the muscle's index only).
+  std::vector<MuscleInput> muscles = {tubeMuscle("a", 0, 0.12f, 0.02f, 41),
+                                      tubeMuscle("b", 0, 0.12f, 0.02f, 41)};
+  auto shiftSecond = [&](btScalar y) {
+    std::vector<MuscleInput> shifted = muscles;
+    for (auto& v : shifted[1].surface.vertices) v += btVector3(0, y, 0);
+    for (auto& p : shifted[1].fibres.points) p += btVector3(0, y, 0);
+    return shifted;
+  };
+  const PreparedScene apart = prepareScene({}, shiftSecond(1), 3);
+  const PreparedScene close = prepareScene({}, shiftSecond(0.041f), 3);
+  expectNoInterBodyOverlap(close);
+  const MuscleSettings &a = *close.muscles[0], &b = *close.muscles[1];
+  const MuscleSettings &a0 = *apart.muscles[0], &b0 = *apart.muscles[1];
+  ASSERT_EQ(a.boundaryParticles, a0.boundaryParticles);
+  // b's unshrunk radii, matched by position (its particles may be numbered differently 1 m away).
+  std::vector<btScalar> bRadius(b.particleCount(), 0);
+  for (uint32_t j : b.boundaryParticles) {
+    const btVector3 there = b.restPositions[j] + btVector3(0, 1 - 0.041f, 0);
+    uint32_t match = 0;
+    for (uint32_t k = 1; k < b0.particleCount(); ++k)
+      if (b0.restPositions[k].distance2(there) < b0.restPositions[match].distance2(there))
+        match = k;
+    ASSERT_LT(b0.restPositions[match].distance(there), 1e-5);
+    bRadius[j] = b0.radii[match];
+  }
+  const btScalar spacing = sampleSpacing(a);
+  ASSERT_GT(spacing, 0.0025f);
+  ASSERT_LT(spacing, 0.0035f);
+  size_t capped = 0, keptLarge = 0;
+  for (uint32_t i : a.boundaryParticles) {
+    // The smallest gap between i's sphere and one of b's, both at their unshrunk radii.
+    btScalar gap = std::numeric_limits<btScalar>::infinity();
+    for (uint32_t j : b.boundaryParticles)
+      gap = std::min(gap,
+                     a.restPositions[i].distance(b.restPositions[j]) - a0.radii[i] - b0.radii[j]);
+    if (gap < spacing * 0.99f && a0.radii[i] > spacing) {
+      EXPECT_LE(a.radii[i], spacing * 1.0001f) << i;
+      ++capped;
+    } else if (gap > spacing * 1.01f) {
+      EXPECT_EQ(a.radii[i], a0.radii[i]) << i;  // away from b: untouched
+      keptLarge += a.radii[i] > spacing;
+    }
+  }
+  EXPECT_GT(capped, 0u);
+  EXPECT_GT(keptLarge, 0u);
+  bool reported = false;
+  for (const auto& repair : close.report.repairs)
+    reported |= repair.find("capped at the sample spacing") != std::string::npos &&
+                repair.find(" 0 capped") == std::string::npos;
+  EXPECT_TRUE(reported);
 }
 
 TEST(Preparation, OverlappingMusclesAreSeparatedAndSurfacesLeaveBones) {

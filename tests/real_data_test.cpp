@@ -29,47 +29,67 @@ const std::string kSource = FIBREMSS_SOURCE_DIR;
                << " (FIBREMSS_SHARED_DATA_DIR/muscle-deformation-pbd); the real-data tests need " \
                   "../shared/data next to the repository"
 
-TEST(RealData, FibresOfARealMuscleMeetTheQualityBounds) {
+// The quality bounds (issue 8) on the four real muscles, with the real-hip scene's areas:
+// insertion within 3 mm of the femur, origin the far end 3 mm deep.
+// - inside: no point outside the surface (checked here, a quarter voxel's tolerance);
+// - right ends: >= 90 % start at the origin and end at the femur (checked here, within the
+//   generator's end tolerance of 2.5 voxels);
+// - coverage: >= 60 % of the interior within 5 mm of a fibre. Seeds spread over the widest
+//   cross-section (the default) give 75-99 % here; seeds on the origin area (the 3 mm tip)
+//   bunch the fibres and gave 43 % for muscle 0, which this bound rejects;
+// - crossings: streamlines of a gradient field do not cross; pairs closer than 0.5 mm are
+//   fibres converging into a tendon: at most 5 % of the 2016 pairs (origin seeding: 215 and
+//   107 pairs for muscles 2 and 3);
+// - length spread: no fibre shorter than the straight line between the two areas.
+TEST(RealData, FibresOfTheRealMusclesMeetTheQualityBounds) {
   REQUIRE_SHARED_DATA();
-  const TriangleMesh muscle = loadSurface(kData + "/muscle0_s1.vtk", 0.001);
   const TriangleMesh femur = loadSurface(kData + "/bone1_s1.vtk", 0.001);
+  const MeshDistance bone(femur);
   const btScalar areaDistance = 0.003;
-  FibreGenerationOptions options;  // 64 fibres, 48 voxels along the longest side
-  const FibreGenerationResult result = generateFibres(
-      muscle, AttachmentArea{}, AttachmentArea::fromBone(femur, areaDistance), options);
-  const FibreQuality& q = result.quality;
-  ASSERT_EQ(result.fibres.fibreCount(), 64u);
-  // All inside: every point within a quarter voxel of the surface's inside, checked here.
-  const MeshDistance surface(muscle), bone(femur);
-  size_t outside = 0;
-  for (const auto& p : result.fibres.points) outside += surface.signedDistance(p) > q.voxelSize / 4;
-  EXPECT_EQ(outside, 0u);
-  // >= 90 % end at the femur (within the area distance plus a voxel) and start at the far end
-  // (farther from the femur than that).
-  int right = 0;
-  for (size_t f = 0; f < result.fibres.fibreCount(); ++f) {
-    const auto fibre = result.fibres.fibre(f);
-    right += bone.closest(fibre.back()).distance < areaDistance + q.voxelSize &&
-             bone.closest(fibre.front()).distance > areaDistance + q.voxelSize;
+  for (int m = 0; m < 4; ++m) {
+    const std::string name = "muscle" + std::to_string(m) + "_s1.vtk";
+    SCOPED_TRACE(name);
+    const TriangleMesh muscle = loadSurface(kData + "/" + name, 0.001);
+    AttachmentArea origin;  // the far end
+    origin.endDepth = btScalar(0.003);
+    FibreGenerationOptions options;  // 64 fibres, 48 voxels along the longest side
+    const FibreGenerationResult result =
+        generateFibres(muscle, origin, AttachmentArea::fromBone(femur, areaDistance), options);
+    const FibreQuality& q = result.quality;
+    ASSERT_EQ(result.fibres.fibreCount(), 64u);
+    const MeshDistance surface(muscle);
+    size_t outside = 0;
+    for (const auto& p : result.fibres.points)
+      outside += surface.signedDistance(p) > q.voxelSize / 4;
+    EXPECT_EQ(outside, 0u);
+    EXPECT_EQ(q.pointsOutside, 0);
+    std::vector<char> inOrigin(muscle.vertices.size(), 0);
+    for (uint32_t o : result.originArea) inOrigin[o] = 1;
+    int right = 0;
+    for (size_t f = 0; f < result.fibres.fibreCount(); ++f) {
+      const auto fibre = result.fibres.fibre(f);
+      btScalar toOrigin = std::numeric_limits<btScalar>::infinity();
+      for (uint32_t o : result.originArea)
+        toOrigin = std::min(toOrigin, muscle.vertices[o].distance(fibre.front()));
+      // Within the generator's end tolerance (2.5 voxels) of each area.
+      right += bone.closest(fibre.back()).distance < areaDistance + 2.5f * q.voxelSize &&
+               toOrigin < 2.5f * q.voxelSize;
+    }
+    EXPECT_GE(right, int(0.9 * 64));
+    EXPECT_GE(q.rightEnds, 0.9);
+    EXPECT_GE(q.coverage, 0.6);
+    EXPECT_LE(q.crossingPairs, 64 * 63 / 2 / 20);
+    btScalar gap = std::numeric_limits<btScalar>::infinity();
+    for (uint32_t o : result.originArea)
+      for (uint32_t i : result.insertionArea)
+        gap = std::min(gap, muscle.vertices[o].distance(muscle.vertices[i]));
+    EXPECT_GT(q.minLength, gap - 2 * q.voxelSize);
+    EXPECT_LE(q.minLength, q.medianLength);
+    EXPECT_LE(q.medianLength, q.maxLength);
+    std::cout << "[quality] " << name << ": coverage " << q.coverage * 100 << " %, crossings "
+              << q.crossingPairs << ", right ends " << q.rightEnds * 100 << " % (" << right
+              << " checked here)\n";
   }
-  EXPECT_GE(right, int(0.9 * 64));
-  EXPECT_GE(q.rightEnds, 0.9);
-  // Coverage bound: 64 fibres in this ~160 mm long muscle leave it at least 40 % within 5 mm
-  // (measured 50 %: it is wide and flat, 64 fibres 5 mm thick cannot fill it).
-  EXPECT_GE(q.coverage, 0.4);
-  EXPECT_EQ(q.pointsOutside, 0);
-  // Length spread: no fibre is shorter than the straight line between the two areas (less a
-  // voxel at each end for where a streamline starts and stops).
-  btScalar gap = std::numeric_limits<btScalar>::infinity();
-  for (uint32_t o : result.originArea)
-    for (uint32_t i : result.insertionArea)
-      gap = std::min(gap, muscle.vertices[o].distance(muscle.vertices[i]));
-  EXPECT_GT(q.minLength, gap - 2 * q.voxelSize);
-  EXPECT_LE(q.minLength, q.medianLength);
-  EXPECT_LE(q.medianLength, q.maxLength);
-  // Crossings: streamlines of a gradient field do not cross; pairs closer than the tolerance
-  // are fibres converging into the tendon. Bound: at most 5 % of the 2016 pairs.
-  EXPECT_LE(q.crossingPairs, 64 * 63 / 2 / 20);
 }
 
 LoadedScene loadRealScene(const std::string& name) {
@@ -190,16 +210,44 @@ void shortRun(const std::string& name, double penetrationBoundMm) {
   EXPECT_LT(penetration, penetrationBoundMm);
 }
 
-// Bounds: the muscles' own collision radius scale (a few mm); measured 1.4 mm (hip, 5 poses,
-// 70 iterations) and 3.5 mm (block, its boxes get one bone sphere each).
+// Bound: the integrator issue's (5) 1 mm for the muscle surfaces' penetration into the true
+// bone meshes. Measured over the whole runs with the scenes' 70 iterations: 0.072 mm (hip,
+// 19 poses), 0.105 mm (block, 5 poses).
 TEST(RealData, HipShortRunHasNoNaN) {
   REQUIRE_SHARED_DATA();
-  shortRun("real-hip", 5.0);
+  shortRun("real-hip", 1.0);
 }
 
 TEST(RealData, BlockShortRunHasNoNaN) {
   REQUIRE_SHARED_DATA();
-  shortRun("real-block", 10.0);
+  shortRun("real-block", 1.0);
+}
+
+// `fibremss check` and `fibremss compare` on the block scene (run: BlockShortRunHasNoNaN).
+TEST(RealData, BlockSceneChecksAndCompares) {
+  REQUIRE_SHARED_DATA();
+  const std::string scene = kSource + "/scenes/json/real-block.json --set data_dir=" + kData;
+  const auto check = testing::runProcess(std::string(FIBREMSS_CLI) + " check " + scene + " 2>&1");
+  ASSERT_EQ(check.exitCode, 0) << check.output;
+  EXPECT_NE(check.output.find("1 muscles"), std::string::npos) << check.output;
+  EXPECT_NE(check.output.find("preparation report"), std::string::npos) << check.output;
+  testing::TemporaryDirectory directory("fibremss_real_compare");
+  const auto compare = testing::runProcess(
+      std::string(FIBREMSS_CLI) + " compare " + scene +
+      " --set iterations=20 --methods fibremss,btsoftbody --softbody-substeps 4 --out " +
+      directory.path().string() + " 2>&1");
+  ASSERT_EQ(compare.exitCode, 0) << compare.output;
+  std::ifstream in(directory.path() / "summary.json");
+  ASSERT_TRUE(in) << compare.output;
+  const auto runs = nlohmann::json::parse(in).at("runs");
+  ASSERT_EQ(runs.size(), 2u);
+  for (const auto& run : runs) {
+    SCOPED_TRACE(run.at("method").get<std::string>());
+    EXPECT_EQ(run.at("steps").get<int>(), 5);
+    EXPECT_FALSE(run.at("nan").get<bool>());
+  }
+  EXPECT_FALSE(runs[0].at("exploded").get<bool>());  // FibreMSS
+  EXPECT_TRUE(fs::exists(directory.path() / "report.md"));
 }
 
 TEST(RealData, FibresCommandOnARealMuscle) {

@@ -4,11 +4,14 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <string>
 #include <vector>
 
 #include "fibremss/Error.h"
@@ -172,10 +175,63 @@ TEST(StabilityMatrix, HardCasesAtSmallResolution) {
   }
   const auto json = fibremss::stabilityJson(matrix, options);
   EXPECT_EQ(json["cells"].size(), matrix.cells.size());
+  EXPECT_EQ(json["interrupted"], false);
   const std::string markdown = fibremss::stabilityMarkdown(matrix, options);
   EXPECT_NE(markdown.find("| pinch |"), std::string::npos);
   EXPECT_NE(markdown.find("| tension-spike |"), std::string::npos);
   EXPECT_EQ(markdown.find("unavailable |") != std::string::npos, unavailable > 0);
+}
+
+// Ctrl-C (options.cancel) set when the first case starts: the calibration is complete, no cell
+// runs, both files say interrupted; set before anything runs, the calibration stops too; a run
+// cancelled stops after its first step and says interrupted, not timeout.
+TEST(StabilityMatrix, InterruptStopsAfterTheRunningStep) {
+  StabilityOptions options = smallOptions();
+  options.integrators = {"verlet", "rk4"};
+  std::atomic<bool> cancel{false};
+  options.cancel = &cancel;
+  options.log = [&](const std::string& line) {
+    if (line.starts_with("case ")) cancel.store(true);
+  };
+  const auto matrix =
+      fibremss::runStabilityMatrix({fibremss::parseStabilityCase("tension-spike")}, options);
+  EXPECT_TRUE(matrix.interrupted);
+  EXPECT_EQ(matrix.stableSteps.size(), 2u);
+  EXPECT_TRUE(matrix.cells.empty());
+  EXPECT_EQ(fibremss::stabilityJson(matrix, options)["interrupted"], true);
+  EXPECT_NE(fibremss::stabilityMarkdown(matrix, options).find("**Interrupted**"),
+            std::string::npos);
+
+  const auto early =
+      fibremss::runStabilityMatrix({fibremss::parseStabilityCase("tension-spike")}, options);
+  EXPECT_TRUE(early.interrupted);
+  EXPECT_TRUE(early.stableSteps.empty());
+  EXPECT_TRUE(early.cells.empty());
+
+  const auto cell =
+      fibremss::runStabilityCell(options.calibration, "verlet", matrix.stableSteps[0].dt, options);
+  EXPECT_EQ(cell.outcome, CellOutcome::Interrupted) << cell.message;
+  EXPECT_EQ(cell.steps, 1);
+  EXPECT_EQ(cell.failedStep, -1);
+}
+
+// SIGINT to the CLI once it has started calibrating: exit code 130, both files written and
+// marked interrupted. The shell waits for the log line, not for a time.
+TEST(StabilityCli, CtrlCWritesInterruptedFilesAndExits130) {
+  fibremss::testing::TemporaryDirectory dir("stability_interrupt");
+  const std::string out = (dir.path() / "matrix").string();
+  const std::string log = (dir.path() / "log").string();
+  const auto result = fibremss::testing::runProcess(
+      "sh -c '" + std::string(FIBREMSS_CLI) + " stability --set resolution=8 --out " + out + " 2>" +
+      log + " & p=$!; until grep -q calibrating " + log +
+      " 2>/dev/null || ! kill -0 $p 2>/dev/null; do sleep 0.05; done; kill -INT $p; wait $p'");
+  ASSERT_EQ(result.exitCode, 130) << result.output;
+  std::ifstream in(out + "/stability.json");
+  const auto json = nlohmann::json::parse(in);
+  EXPECT_EQ(json["interrupted"], true);
+  std::ifstream markdown(out + "/stability.md");
+  const std::string text((std::istreambuf_iterator<char>(markdown)), {});
+  EXPECT_NE(text.find("**Interrupted**"), std::string::npos);
 }
 
 TEST(StabilityCli, WritesBothFilesAndRejectsUnknownIntegrators) {

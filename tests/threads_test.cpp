@@ -1,6 +1,7 @@
 // The solver's threads (plugin/src/TaskPool.h, MuscleSystemStep.cpp): every task runs once on
 // a valid thread, and a step gives bit-identical particles for any thread count, because each
-// muscle's work is independent and every sum runs in a fixed order; frozen muscles stay put.
+// muscle's work is independent and every sum runs in a fixed order; frozen muscles only ride
+// with their bones.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -12,6 +13,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "support/ThighSteps.h"
 
 using namespace fibremss;
 
@@ -39,50 +41,24 @@ TEST(TaskPool, ZeroMeansTheHardwareThreads) {
 
 namespace {
 
-/// thigh13 at a low resolution (13 muscles, many muscle pairs), prepared once.
-const PreparedScene& thigh(LoadedScene& scene) {
-  static LoadedScene loaded = loadScene("thigh13", {"resolution=8"});
-  static const PreparedScene prepared =
-      prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
-  scene = loaded;
-  return prepared;
-}
-
-struct Outcome {
-  std::vector<std::vector<btVector3>> positions;  ///< per muscle after the steps
-  std::vector<std::vector<btVector3>> surfaces;   ///< per muscle after the steps
-  size_t contacts = 0;                            ///< contacts of the last iteration
-};
+using Outcome = fibremss::testing::StepOutcome;
 
 /// Two steps through the first poses with `threads` threads; `freeze` (if ≥ 0) freezes that
-/// muscle before stepping.
-Outcome simulate(int threads, int freeze = -1) {
+/// muscle before stepping; `alone`: that muscle is the only one added.
+Outcome simulate(int threads, int freeze = -1, bool alone = false) {
   LoadedScene scene;
-  const PreparedScene& prepared = thigh(scene);
-  SimulationParameters parameters = scene.simulation;
-  parameters.threads = threads;
-  parameters.iterations = 20;
-  MuscleSystem system(parameters);
-  std::vector<BoneHandle> bones;
-  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
-  std::vector<MuscleHandle> muscles;
-  for (const auto& muscle : prepared.muscles) muscles.push_back(system.addMuscle(muscle, bones));
-  if (freeze >= 0)
-    MuscleSystemAccess::impl(system).muscles.states[muscles[freeze].index]->frozen = true;
-  for (int pose = 1; pose <= 2; ++pose) {
-    for (size_t b = 0; b < bones.size(); ++b)
-      system.setBoneTransform(bones[b], scene.bonePose(b, pose % scene.poseCount));
-    system.step();
-  }
-  Outcome run;
-  for (MuscleHandle muscle : muscles) {
-    auto x = system.positions(muscle);
-    auto surface = system.surface(muscle);
-    run.positions.emplace_back(x.begin(), x.end());
-    run.surfaces.emplace_back(surface.begin(), surface.end());
-  }
-  run.contacts = system.lastStep().contacts;
-  return run;
+  const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+  std::vector<std::shared_ptr<const MuscleSettings>> muscles;
+  for (size_t m = 0; m < prepared.muscles.size(); ++m)
+    if (!alone || static_cast<int>(m) == freeze) muscles.push_back(prepared.muscles[m]);
+  return fibremss::testing::stepThroughPoses(
+      scene, prepared, muscles, threads,
+      [&](MuscleSystem& system, const std::vector<MuscleHandle>& handles) {
+        if (freeze >= 0)
+          MuscleSystemAccess::impl(system)
+              .muscles.states[handles[alone ? 0 : freeze].index]
+              ->frozen = true;
+      });
 }
 
 bool sameBits(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
@@ -108,16 +84,12 @@ TEST(Threads, AnyThreadCountGivesTheSameBits) {
 }
 
 TEST(Threads, AFrozenMuscleIsSkippedByEveryPart) {
-  LoadedScene scene;
-  const PreparedScene& prepared = thigh(scene);
   const Outcome moving = simulate(2);
   const Outcome frozen = simulate(2, 0);
-  // Where it was added: placed at its bones, never stepped.
-  MuscleSystem reference(scene.simulation);
-  std::vector<BoneHandle> bones;
-  for (const auto& bone : prepared.bones) bones.push_back(reference.addBone(bone));
-  const MuscleHandle first = reference.addMuscle(prepared.muscles[0], bones);
-  auto start = reference.positions(first);
-  EXPECT_TRUE(sameBits(frozen.positions[0], {start.begin(), start.end()}));
+  // It only rides with its bones (MuscleSystemGuard.cpp): exactly as it does alone, on one thread;
+  // no part of the step, the pairs with the other muscles included, touched it.
+  const Outcome alone = simulate(1, 0, true);
+  EXPECT_TRUE(sameBits(frozen.positions[0], alone.positions[0]));
+  EXPECT_TRUE(sameBits(frozen.surfaces[0], alone.surfaces[0]));
   EXPECT_FALSE(sameBits(moving.positions[0], frozen.positions[0]));
 }

@@ -36,7 +36,8 @@ struct FemScene::Impl {
   std::unique_ptr<btDeformableMultiBodyConstraintSolver> solver =
       std::make_unique<btDeformableMultiBodyConstraintSolver>();
   std::unique_ptr<btDeformableMultiBodyDynamicsWorld> world;
-  std::vector<btTransform> boneTransforms;
+  std::vector<btTransform> boneTransforms;  ///< current bone poses [m]
+  std::vector<btTransform> deltas;          ///< bone motion of one substep (scratch)
 
   /// A bone for the node contact: its exact surface and bounds in its rest frame [m].
   struct Bone {
@@ -53,20 +54,23 @@ struct FemScene::Impl {
   btScalar contactReach = 0;   ///< how far from a bone's surface nodes are looked at [m]
 
   struct Muscle {
-    TetMesh mesh;                        ///< rest tetrahedra
-    TetEmbedding surface;                ///< the muscle's surface vertices in them
-    std::vector<uint8_t> startedInside;  ///< node × bone: inside that bone at the start (such
-                                         ///< nodes keep their contact-free overlap with it)
-    std::vector<uint32_t> pinned;        ///< pinned node indices
-    std::vector<int32_t> pinnedBone;     ///< their bones
-    std::vector<btVector3> positions;    ///< node positions after the last step
-    btSoftBody* body = nullptr;          ///< owned; removed from the world first
-    double networkStiffness = 0;         ///< Σ κ·L0 of its springs [N·m]
+    std::shared_ptr<const MuscleSettings> settings;  ///< its particles' bones and blends
+    TetMesh mesh;                                    ///< rest tetrahedra
+    std::vector<uint32_t> nearestParticle;  ///< per node: the particle whose bones it follows
+    TetEmbedding surface;                   ///< the muscle's surface vertices in them
+    std::vector<uint8_t> startedInside;     ///< node × bone: inside that bone at the start (such
+                                            ///< nodes keep their contact-free overlap with it)
+    std::vector<uint32_t> pinned;           ///< pinned node indices
+    std::vector<int32_t> pinnedBone;        ///< their bones
+    std::vector<btVector3> positions;       ///< node positions after the last step
+    btSoftBody* body = nullptr;             ///< owned; removed from the world first
+    double networkStiffness = 0;            ///< Σ κ·L0 of its springs [N·m]
   };
   std::vector<Muscle> muscles;
   /// One elasticity for all muscles: Bullet merges forces of one type into the first added.
   std::unique_ptr<btDeformableNeoHookeanForce> force;
-  double youngsModulus = 0;  ///< E used [Pa]
+  double youngsModulus = 0;   ///< E used [Pa]
+  double addedMassShare = 0;  ///< mass added by scaleMasses / free nodes' mass before it
 
   /// E from the definition or matched to all muscles' springs together, then the force.
   void addElasticity() {
@@ -84,6 +88,45 @@ struct FemScene::Impl {
         static_cast<btScalar>(e / (2 * (1 + nu))),
         static_cast<btScalar>(e * nu / ((1 + nu) * (1 - 2 * nu))), definition.damping);
     for (Muscle& muscle : muscles) world->addForce(muscle.body, force.get());
+  }
+
+  /// Selective mass scaling (FemDefinition::stableOmegaDt): a free node oscillates at
+  /// ω² ≈ K/m with K = (λ+2μ)·Σ V·|∇N|² over its tetrahedra (N its barycentric coordinate);
+  /// nodes with ω·dt beyond the limit get the mass that brings them to it.
+  void scaleMasses(btScalar dt) {
+    if (!(definition.stableOmegaDt > 0)) return;
+    const double nu = definition.poissonRatio;
+    const double modulus = youngsModulus * (1 - nu) / ((1 + nu) * (1 - 2 * nu));  // λ + 2μ
+    const double limit = static_cast<double>(definition.stableOmegaDt) / dt;
+    double total = 0, added = 0;
+    for (Muscle& muscle : muscles) {
+      const TetMesh& mesh = muscle.mesh;
+      std::vector<double> stiffness(mesh.nodes.size(), 0);
+      for (const auto& t : mesh.tetrahedra) {
+        const btVector3* x[4] = {&mesh.nodes[t[0]], &mesh.nodes[t[1]], &mesh.nodes[t[2]],
+                                 &mesh.nodes[t[3]]};
+        const double volume = tetrahedronVolume(*x[0], *x[1], *x[2], *x[3]);
+        for (int i = 0; i < 4; ++i) {
+          // |∇N_i| = area of the opposite face / (3V)
+          const btVector3& a = *x[(i + 1) % 4];
+          const double area = 0.5 * (*x[(i + 2) % 4] - a).cross(*x[(i + 3) % 4] - a).length();
+          const double gradient = area / (3 * volume);
+          stiffness[t[i]] += modulus * volume * gradient * gradient;
+        }
+      }
+      for (int n = 0; n < muscle.body->m_nodes.size(); ++n) {
+        const btScalar inverse = muscle.body->m_nodes[n].m_im;
+        if (inverse == 0) continue;  // pinned
+        const double mass = 1 / static_cast<double>(inverse);
+        const double needed = stiffness[static_cast<size_t>(n)] / (limit * limit);
+        total += mass;
+        if (needed > mass) {
+          muscle.body->setMass(n, static_cast<btScalar>(needed));
+          added += needed - mass;
+        }
+      }
+    }
+    addedMassShare = total > 0 ? added / total : 0;
   }
 
   ~Impl() {
@@ -156,8 +199,10 @@ struct FemScene::Impl {
     }
   }
 
-  void addMuscle(const MuscleSettings& s) {
+  void addMuscle(std::shared_ptr<const MuscleSettings> settings) {
+    const MuscleSettings& s = *settings;
     Muscle muscle;
+    muscle.settings = std::move(settings);
     muscle.mesh = tetrahedralize(s.restSurface, definition.mesher);
     muscle.surface = embed(muscle.mesh, s.restSurface.vertices);
     const TetMesh& mesh = muscle.mesh;
@@ -169,6 +214,7 @@ struct FemScene::Impl {
         definition.attachmentDistance > 0 ? definition.attachmentDistance : mesh.cellSize;
     std::vector<int32_t> poseBone(nodes, -1);
     std::vector<int32_t> pinBone(nodes, -1);
+    muscle.nearestParticle.assign(nodes, 0);
     for (size_t n = 0; n < nodes; ++n) {
       btScalar nearest = std::numeric_limits<btScalar>::infinity();
       btScalar nearestFixed = std::numeric_limits<btScalar>::infinity();
@@ -176,6 +222,7 @@ struct FemScene::Impl {
         const btScalar d = mesh.nodes[n].distance2(s.restPositions[p]);
         if (d < nearest) {
           nearest = d;
+          muscle.nearestParticle[n] = static_cast<uint32_t>(p);
           poseBone[n] = s.fixedBone[p] >= 0 ? s.fixedBone[p] : s.nearestBone[p];
         }
         if (s.isFixed(static_cast<uint32_t>(p)) && d < nearestFixed) {
@@ -277,6 +324,18 @@ struct FemScene::Impl {
     }
   }
 
+  /// Free nodes moved by the bones' motion of this substep (`deltas`), each blended as its
+  /// nearest particle.
+  void moveFreeNodes(const Muscle& muscle) const {
+    for (int n = 0; n < muscle.body->m_nodes.size(); ++n) {
+      btSoftBody::Node& node = muscle.body->m_nodes[n];
+      if (node.m_im > 0) {
+        moveNodeWithBones(*muscle.settings, deltas, muscle.nearestParticle[static_cast<size_t>(n)],
+                          definition.lengthScale, node);
+      }
+    }
+  }
+
   void movePins(const Muscle& muscle) {
     for (size_t k = 0; k < muscle.pinned.size(); ++k) {
       const uint32_t n = muscle.pinned[k];
@@ -315,8 +374,9 @@ FemScene::FemScene(const PreparedScene& scene, std::span<const btTransform> bone
   m.boneTransforms.assign(scene.bones.size(), btTransform::getIdentity());
   if (!boneTransforms.empty())
     m.boneTransforms.assign(boneTransforms.begin(), boneTransforms.end());
-  for (const auto& muscle : scene.muscles) m.addMuscle(*muscle);
+  for (const auto& muscle : scene.muscles) m.addMuscle(muscle);
   m.addElasticity();
+  m.scaleMasses(definition.poseDuration / static_cast<btScalar>(definition.substepsPerPose));
   // Contact reach from the finest muscle grid: one voxel (a node moves less in a substep).
   btScalar cell = BT_LARGE_FLOAT;
   for (const Impl::Muscle& muscle : m.muscles) cell = std::min(cell, muscle.mesh.cellSize);
@@ -341,12 +401,13 @@ bool FemScene::stepPose(std::span<const btTransform> targets, const std::functio
   std::vector<btTransform> previous = from;
   for (int k = 1; k <= substeps; ++k) {
     if (stop && stop()) return false;
-    const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
-    for (size_t b = 0; b < from.size(); ++b) {
-      previous[b] = m.boneTransforms[b];
-      m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
+    previous = m.boneTransforms;
+    advanceBones(from, targets, static_cast<btScalar>(k) / static_cast<btScalar>(substeps),
+                 m.boneTransforms, m.deltas);
+    for (const Impl::Muscle& muscle : m.muscles) {
+      if (m.definition.freeNodesFollowBones) m.moveFreeNodes(muscle);
+      m.movePins(muscle);
     }
-    for (const Impl::Muscle& muscle : m.muscles) m.movePins(muscle);
     m.world->stepSimulation(dt, 0);
     m.projectNodes(previous, dt);
   }
@@ -403,6 +464,10 @@ const FemDefinition& FemScene::definition() const {
 
 double FemScene::youngsModulus() const {
   return impl_->youngsModulus;
+}
+
+double FemScene::addedMassShare() const {
+  return impl_->addedMassShare;
 }
 
 }  // namespace fibremss

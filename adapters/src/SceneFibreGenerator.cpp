@@ -57,9 +57,11 @@ AreaSpec readArea(Fields& generator, const std::string& key, double scale,
   Fields fields = generator.object(key);
   AreaSpec spec;
   const double mm = 0.001 / scale;  // one millimetre in scene units
-  const bool hasBone = fields.has("bone"), hasLandmarks = fields.has("landmarks");
-  if (hasBone && hasLandmarks)
-    fields.fail("bone", "give either \"bone\" or \"landmarks\", not both");
+  const bool hasBone = fields.has("bone"), hasLandmarks = fields.has("landmarks"),
+             hasVertices = fields.has("vertices");
+  if (int(hasBone) + int(hasLandmarks) + int(hasVertices) > 1)
+    fields.fail(hasBone ? "bone" : "landmarks",
+                "give one of \"bone\", \"landmarks\" and \"vertices\"");
   if (hasBone) {
     const std::string name = fields.text("bone", "");
     const BoneInput* bone = nullptr;
@@ -80,6 +82,18 @@ AreaSpec readArea(Fields& generator, const std::string& key, double scale,
     fields.set("landmarks", points);
     spec.area = AttachmentArea::fromLandmarks(
         std::move(landmarks), btScalar(fields.number("radius", 10 * mm, 0, kInf, true) * scale));
+  } else if (hasVertices) {
+    const Json& indices = fields.array("vertices");
+    if (indices.empty()) fields.fail("vertices", "expected at least one surface vertex index");
+    std::vector<uint32_t> vertices;
+    for (const Json& index : indices) {
+      if (!index.is_number_unsigned() || index.get<uint64_t>() > UINT32_MAX)
+        fields.fail("vertices",
+                    "expected surface vertex indices (integers >= 0), got " + describe(index));
+      vertices.push_back(index.get<uint32_t>());
+    }
+    fields.set("vertices", indices);
+    spec.area = AttachmentArea::fromVertices(std::move(vertices));
   } else {
     spec.area.kind = AttachmentArea::Kind::FarEnd;
     spec.area.endFraction = fields.number("end_fraction", 0.06, 0, 1, true);
@@ -88,8 +102,8 @@ AreaSpec readArea(Fields& generator, const std::string& key, double scale,
   spec.anchor = fields.boolean("anchor", false);
   if (spec.anchor && hasBone)
     fields.fail("anchor",
-                "an area on a bone is attached to that bone; anchor needs landmarks "
-                "or the far end");
+                "an area on a bone is attached to that bone; anchor needs landmarks, "
+                "vertices or the far end");
   if (spec.anchor) {
     spec.thickness = btScalar(fields.number("anchor_thickness", 5 * mm, 0, kInf, true) * scale);
     spec.gap = btScalar(fields.number("anchor_gap", 0.5 * mm, 0, kInf) * scale);

@@ -7,7 +7,6 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "../../plugin/src/MuscleSystemPretransform.h"
 #include "SoftBodyBones.h"
 #include "fibremss/BoneBody.h"
 
@@ -184,16 +183,14 @@ struct SoftBodyScene::Impl {
     muscles.push_back(std::move(muscle));
   }
 
-  /// Free nodes (x and the previous x alike) moved by the bones' motion of this substep,
-  /// `deltas` (filled once per substep for every muscle).
+  /// Free nodes moved by the bones' motion of this substep, `deltas` (filled once per
+  /// substep for every muscle).
   void moveFreeNodes(const Muscle& muscle) const {
     const MuscleSettings& s = *muscle.settings;
     const btScalar scale = definition.lengthScale;
     for (uint32_t i = 0; i < s.particleCount(); ++i) {
-      if (s.isFixed(i)) continue;
-      btSoftBody::Node& node = muscle.body->m_nodes[static_cast<int>(i)];
-      node.m_x = pretransformPoint(s, deltas, i, node.m_x / scale, true) * scale;
-      node.m_q = pretransformPoint(s, deltas, i, node.m_q / scale, true) * scale;
+      if (!s.isFixed(i))
+        moveNodeWithBones(s, deltas, i, scale, muscle.body->m_nodes[static_cast<int>(i)]);
     }
   }
 
@@ -247,13 +244,10 @@ void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
   const int substeps = m.definition.substepsPerPose;
   const btScalar dt = m.definition.poseDuration / static_cast<btScalar>(substeps);
   const std::vector<btTransform> from = m.boneTransforms;
-  m.deltas.resize(m.bones.size());
   for (int k = 1; k <= substeps; ++k) {
-    const btScalar t = static_cast<btScalar>(k) / static_cast<btScalar>(substeps);
+    advanceBones(from, targets, static_cast<btScalar>(k) / static_cast<btScalar>(substeps),
+                 m.boneTransforms, m.deltas);
     for (size_t b = 0; b < m.bones.size(); ++b) {
-      const btTransform before = m.boneTransforms[b];
-      m.boneTransforms[b] = interpolateTransform(from[b], targets[b], t);
-      m.deltas[b] = m.boneTransforms[b] * before.inverse();
       m.bones[b]->setTransform(scaledTransform(m.boneTransforms[b], m.definition.lengthScale));
     }
     for (const Impl::Muscle& muscle : m.muscles) {

@@ -116,6 +116,11 @@ void addCompareCommand(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   command
+      ->add_option("--fem-omega-dt", args->options.fem.stableOmegaDt,
+                   "FEM: mass scaling limit of a node's omega*dt (0: no mass scaling)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  command
       ->add_option("--softbody-substeps", args->options.softBody.substepsPerPose,
                    "btSoftBody: world steps per pose")
       ->capture_default_str()

@@ -22,6 +22,8 @@ struct FibresArgs {
   double radius = 10;     // mm: landmark radius
   double coverage = 5;    // mm
   double crossing = 0.5;  // mm
+  double endDepth = 0;    // mm: a far end's depth (0: 6 % of the length)
+  std::string seeds = "section";
 };
 
 /// "x,y,z;x,y,z[@r]" (file units) -> landmarks; false when `text` is not of that form.
@@ -53,7 +55,11 @@ bool parseLandmarks(const std::string& text, double scale, double defaultRadiusM
 
 AttachmentArea readArea(const std::string& text, const FibresArgs& args, TriangleMesh& bone,
                         const std::string& option) {
-  if (text.empty()) return AttachmentArea{};
+  if (text.empty()) {
+    AttachmentArea farEnd;
+    farEnd.endDepth = btScalar(args.endDepth * 0.001);
+    return farEnd;
+  }
   std::vector<btVector3> points;
   btScalar radius;
   if (!std::filesystem::exists(text) &&
@@ -80,6 +86,7 @@ void run(const FibresArgs& args) {
   options.grid = args.grid;
   options.coverageDistance = btScalar(args.coverage * 0.001);
   options.crossingTolerance = btScalar(args.crossing * 0.001);
+  options.sectionSeeds = args.seeds == "section";
   const FibreGenerationResult result =
       generateFibres(surface, origin, insertion, options, args.muscle);
   for (const auto& warning : result.warnings) std::cout << "warning: " << warning << "\n";
@@ -146,6 +153,17 @@ void addFibresCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--crossing", args->crossing, "crossing tolerance for the figures [mm]")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  command
+      ->add_option("--end-depth", args->endDepth,
+                   "a missing attachment: the far end this deep [mm] (0: 6 % of the length)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  command
+      ->add_option("--seeds", args->seeds,
+                   "section: seeds over the widest cross-section, traced both ways; origin: "
+                   "seeds over the origin area")
+      ->check(CLI::IsMember({"section", "origin"}))
       ->capture_default_str();
   command->add_option("--out", args->out, "output legacy VTK LINES file")->required();
   command->callback([args] { run(*args); });

@@ -1,5 +1,7 @@
 // `fibremss run SCENE`: prepare a scene, simulate every pose of its motion with FibreMSS,
 // report progress, write frames and summary.json. Ctrl-C stops after the current step.
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -44,6 +46,13 @@ nlohmann::json guardJson(const FibreRunDetails& details, FailurePolicy policy) {
           {"rolled_back_steps", details.rolledBackSteps},
           {"retries", details.retries},
           {"frozen", frozen}};
+}
+
+/// Muscles trapped between bones (StepStats::trappedMuscles), for summary.json.
+nlohmann::json trappedJson(const FibreRunDetails& details) {
+  return {{"steps", details.trappedSteps},
+          {"first_step", details.firstTrappedStep},
+          {"particles_max", details.trappedParticlesMax}};
 }
 
 /// Soak samples as CSV, one line per sample.
@@ -107,6 +116,11 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
   for (const FrozenMuscle& muscle : details.frozen)
     std::printf("  muscle '%s' frozen at step %d (%s)\n", muscle.name.c_str(), muscle.step,
                 muscle.nan ? "NaN/inf" : "exploded");
+  if (details.trappedSteps > 0)
+    std::printf(
+        "  trapped between bones after %d step(s) (first: step %d), up to %zu particle(s) "
+        "caught\n",
+        details.trappedSteps, details.firstTrappedStep, details.trappedParticlesMax);
   if (summary.contains("soak")) {
     const nlohmann::json& soak = summary.at("soak");
     std::printf(
@@ -156,7 +170,15 @@ void run(const RunArgs& args) {
   options.sampleEvery = args.sampleEvery;
   const int steps = args.steps >= 0 ? args.steps : std::max(scene.poseCount, 1);
   ProgressBar bar(scene.name, steps);
-  options.progress = [&bar](const RunProgress& p) { bar.update(p.step, p.iterations, p.seconds); };
+  options.progress = [&bar, interactive = isatty(fileno(stderr)) != 0](const RunProgress& p) {
+    const StepStats& stats = *p.lastStep;
+    // On its own line, ahead of the bar (which a terminal redraws in place).
+    if (stats.trappedMuscles > 0)
+      std::fprintf(
+          stderr, "%sstep %d: %zu muscle(s) trapped between bones, %zu particle(s) caught\n",
+          interactive ? "\r\x1b[K" : "", p.step - 1, stats.trappedMuscles, stats.trappedParticles);
+    bar.update(p.step, p.iterations, p.seconds);
+  };
 
   RunMetrics metrics;
   FibreRunDetails details;
@@ -176,6 +198,7 @@ void run(const RunArgs& args) {
   if (std::isfinite(details.measureMsPerStep))
     summary["measure_ms_per_step"] = details.measureMsPerStep;
   summary["guard"] = guardJson(details, scene.simulation.onFailure);
+  summary["trapped"] = trappedJson(details);
   summary["loop_motion"] = args.loop;
   if (!details.samples.empty()) summary["soak"] = soakJson(details.samples);
   if (!args.out.empty() && !details.samples.empty())

@@ -1,6 +1,7 @@
 // `fibremss stability [CASE...]`: the hard-case stability matrix (issue 5): each integrator's
 // stable step measured, then every case × integrator × multiple of it, each run judged and
-// time-boxed; writes stability.json and stability.md.
+// time-boxed; writes stability.json and stability.md. Ctrl-C stops after the running step and
+// writes both files marked interrupted (exit 130).
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -8,6 +9,7 @@
 #include <vector>
 
 #include "Commands.h"
+#include "Interrupt.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
 #include "fibremss/Stability.h"
@@ -39,6 +41,8 @@ void stability(StabilityArgs& args) {
                        "implicit-euler, implicit-midpoint, bdf2, pbd, xpbd");
   }
   args.options.log = [](const std::string& line) { std::fprintf(stderr, "%s\n", line.c_str()); };
+  InterruptGuard interrupt;
+  args.options.cancel = &interruptRequested;
   const StabilityMatrix matrix = runStabilityMatrix(cases, args.options);
 
   std::filesystem::create_directories(args.out);
@@ -48,6 +52,7 @@ void stability(StabilityArgs& args) {
   writeFileAtomically(args.out + "/stability.md", markdown);
   std::printf("%s\nwrote %s/stability.json %s/stability.md\n", markdown.c_str(), args.out.c_str(),
               args.out.c_str());
+  if (matrix.interrupted) throw CLI::RuntimeError(kExitInterrupted);
 }
 
 }  // namespace
@@ -63,7 +68,8 @@ void addStabilityCommand(CLI::App& app) {
       "hip-extension:step_deg=4, hip-extension:step_deg=10*kappa=100. Without CASE: "
       "hip-extension at step_deg 2, 4, 5, 10, pinch, hip-extension with kappa x100, "
       "tension-spike. Failing runs are reported (nan/exploded/energy/timeout with the step), "
-      "never fatal.");
+      "never fatal. Ctrl-C stops after the current step and writes both files marked "
+      "interrupted (exit code 130).");
   command->add_option("case", args->cases, "Cases (default: the hard cases)");
   command
       ->add_option("--set", args->overrides,

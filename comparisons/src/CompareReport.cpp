@@ -61,6 +61,43 @@ std::string runLabel(const nlohmann::json& run) {
   return label;
 }
 
+/// " (k/N poses)" when the run's RMS to FEM covers k of its N poses, k < N (the FEM or the
+/// run failed or stopped early); "" otherwise or for summaries without the counts.
+std::string femCoverage(const nlohmann::json& run) {
+  const double covered = number(run, "rms_to_fem_poses"), poses = number(run, "poses");
+  if (!std::isfinite(number(run, "rms_to_fem_mm")) || !(covered >= 0) || !(covered < poses)) {
+    return "";
+  }
+  return " (" + cell(covered) + "/" + cell(poses) + " poses)";
+}
+
+/// A paragraph for report.md when some RMS to FEM covers fewer poses than its run: which runs,
+/// and why the FEM reference stopped. Empty when every RMS covers all poses.
+std::string femCoverageNote(const nlohmann::json& runs) {
+  std::string list;
+  for (const auto& run : runs) {
+    const std::string coverage = femCoverage(run);
+    if (!coverage.empty()) list += (list.empty() ? "" : ", ") + text(run, "method") + coverage;
+  }
+  if (list.empty()) return "";
+  std::string why;
+  for (const auto& run : runs) {
+    if (text(run, "method") != "fem") continue;
+    if (run.value("interrupted", false)) {
+      why = " The FEM reference was stopped (time budget) after " + cell(number(run, "steps")) +
+            " poses.";
+    } else if (run.value("nan", false) || run.value("exploded", false)) {
+      why = std::string(" The FEM reference ") +
+            (run.value("nan", false) ? "hit NaN" : "exploded") + " at step " +
+            cell(number(run, "failed_step")) + "; later poses have no reference.";
+    }
+  }
+  return "\n**RMS to FEM covers fewer poses than the runs** (poses 0 to k−1 of N only): " + list +
+         "." + why +
+         " Read those RMS values (and their points in the plot) as that many poses' "
+         "error, not the whole motion's.\n";
+}
+
 /// gnuplot string literal.
 std::string quoted(const std::string& s) {
   std::string out = "\"";
@@ -113,16 +150,24 @@ std::string bothTerminals(const std::string& stem, const std::string& body) {
 std::string speedVsErrorScript(const nlohmann::json& runs, const std::string& stem) {
   std::ostringstream data, body;
   int points = 0;
+  bool partial = false;
   for (const auto& run : runs) {
     const double ms = number(run, "ms_per_step"), rms = number(run, "rms_to_fem_mm");
     if (!(ms > 0) || !(rms > 0)) continue;  // log axes; the FEM run itself has 0
-    data << ms << " " << rms << " " << quoted(runLabel(run)) << "\n";
+    const std::string coverage = femCoverage(run);
+    data << ms << " " << rms << " " << quoted(runLabel(run) + coverage) << "\n";
     ++points;
+    partial = partial || !coverage.empty();
   }
   body << "set title 'Speed against error (one point per run; the FEM reference is the zero)'\n"
        << "set xlabel 'ms per step (median wall time, log)'\n"
        << "set ylabel 'RMS surface distance to FEM [mm] (log)'\n"
        << "set logscale xy\nset grid\nset key off\n";
+  if (partial) {
+    body << "set label 2 '(k/N poses): RMS to FEM over the first k of N poses only (the FEM or "
+            "the run failed or stopped)' at graph 0.01, graph 0.03 left font ',9' tc rgb "
+            "'#b00000'\n";
+  }
   if (points == 0) {
     body << "set xrange [0.1:1000]\nset yrange [0.01:100]\n"
          << "set label 1 'no run has both a time and an RMS to a FEM run' at graph 0.5,0.5 "
@@ -206,9 +251,12 @@ Methods:
   triangles by a fixed 0.06 units. The simulated time of a pose is FibreMSS's iterations × dt.
 - **fem**: each muscle's surface voxelized and split into positively oriented tetrahedra,
   `btDeformableNeoHookeanForce` (E matched to the spring network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a
-  `btDeformableMultiBodyDynamicsWorld`, nodes near fixed particles pinned and moved with their
-  bones, node contact with the bones' exact meshes (own projection after every substep),
-  surface vertices embedded in the tetrahedra. It is the accuracy reference, not a speed competitor.
+  `btDeformableMultiBodyDynamicsWorld` (elastic forces explicit, damping implicit; 200
+  substeps per pose, nodes too stiff for the substep get extra mass — the run's `integrator`
+  says how much), nodes near fixed particles pinned and moved with their bones, free nodes
+  moved with their bones by FibreMSS's blended pre-transform each substep, node contact with
+  the bones' exact meshes (own projection after every substep), surface vertices embedded in
+  the tetrahedra. It is the accuracy reference, not a speed competitor.
 )";
 }
 
@@ -370,14 +418,17 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
         << run.value("steps", 0) << " | " << field(run, "ms_per_step") << " | "
         << field(run, "ms_per_iteration") << " | " << field(run, "max_penetration_mm") << " | "
         << field(run, "mean_penetration_mm") << " | " << field(run, "volume_change_pct") << " | "
-        << field(run, "rms_to_fem_mm") << " | " << field(run, "rms_to_self_reference_mm") << " | "
-        << field(run, "spring_deviation_ratio") << " | " << failed << " | "
-        << field(run, "peak_memory_mb") << " | " << field(run, "wall_seconds") << " |\n";
+        << field(run, "rms_to_fem_mm") << femCoverage(run) << " | "
+        << field(run, "rms_to_self_reference_mm") << " | " << field(run, "spring_deviation_ratio")
+        << " | " << failed << " | " << field(run, "peak_memory_mb") << " | "
+        << field(run, "wall_seconds") << " |\n";
   }
   out << "\n— : does not apply or was not measured (e.g. no FEM run to compare with).\n";
+  const std::string coverageNote = femCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {
       out << "\n![" << plot << "](" << plot << ")\n";
+      if (plot.rfind("speed_vs_error", 0) == 0) out << coverageNote;
     }
   }
   out << table1(runs) << integratorsReport(runs) << scalingReport(runs) << "\n"

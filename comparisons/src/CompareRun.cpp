@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <map>
 
@@ -80,7 +81,8 @@ bool beyondThreeTimes(const Simulated& sim) {
 }
 
 /// Runs every pose and measures it the way runFibreMSS does: surface penetration into the
-/// bones' true meshes over all steps, volume change and spring deviation at the last step.
+/// bones' true meshes over all steps, volume change at the last intact step and spring
+/// deviation at the last step.
 void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Simulated& sim,
               const MethodRunOptions& options, Clock::time_point start, RunMetrics& metrics) {
   std::vector<MeshDistance> boneDistances;
@@ -132,15 +134,21 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   if (metrics.steps > 0 && !metrics.nan) {
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
-    // Volume change of all muscles together (rest-volume weighted), as runFibreMSS.
+    // Volume change of all muscles together (rest-volume weighted), as runFibreMSS, at the
+    // last pose that did not fail (an exploded pose's volume says nothing).
     double restVolume = 0, change = 0;
-    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    size_t offset = 0;
+    const std::span<const btVector3> last =
+        metrics.poseSurfaces.empty() ? std::span<const btVector3>() : metrics.poseSurfaces.back();
+    for (size_t m = 0; m < prepared.muscles.size() && !last.empty(); ++m) {
       const TriangleMesh& rest = prepared.muscles[m]->restSurface;
-      if (rest.empty()) continue;
-      const double volume = meshVolume(rest);
-      sim.surface(m, muscleSurface);
-      change += volume * volumeChangePercent(rest, muscleSurface);
-      restVolume += volume;
+      const size_t count = rest.vertices.size();
+      if (!rest.empty() && offset + count <= last.size()) {
+        const double volume = meshVolume(rest);
+        change += volume * volumeChangePercent(rest, last.subspan(offset, count));
+        restVolume += volume;
+      }
+      offset += count;
     }
     if (restVolume != 0) metrics.volumeChangePct = change / restVolume;
     metrics.springDeviationRatio = sim.springDeviation();
@@ -229,9 +237,13 @@ RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
 RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                   const FemDefinition& definition, const MethodRunOptions& options) {
   const auto start = Clock::now();
-  RunMetrics metrics =
-      namedRun(scene, "fem", "Neo-Hookean FEM, btDeformableBodySolver (implicit damping)");
   FemScene sim(prepared, posesAt(scene, 0), definition);
+  char integrator[160];
+  std::snprintf(integrator, sizeof integrator,
+                "Neo-Hookean FEM, btDeformableBodySolver (explicit elasticity, implicit damping, "
+                "%d substeps per pose, mass scaling +%.0f %%)",
+                definition.substepsPerPose, 100 * sim.addedMassShare());
+  RunMetrics metrics = namedRun(scene, "fem", integrator);
   metrics.particles = sim.nodeCount();
   metrics.springs = sim.tetrahedronCount();
 
@@ -262,8 +274,12 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
   return metrics;
 }
 
+int sharedPoses(const RunMetrics& a, const RunMetrics& b) {
+  return static_cast<int>(std::min(a.poseSurfaces.size(), b.poseSurfaces.size()));
+}
+
 double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b) {
-  const size_t poses = std::min(a.poseSurfaces.size(), b.poseSurfaces.size());
+  const size_t poses = static_cast<size_t>(sharedPoses(a, b));
   if (poses == 0) return RunMetrics::kNone;
   double sum = 0;
   for (size_t p = 0; p < poses; ++p) {
@@ -282,8 +298,15 @@ void fillRms(std::vector<RunMetrics>& runs) {
     if (run.method == "self-reference") self = &run;
   }
   for (RunMetrics& run : runs) {
-    if (fem) run.rmsToFemMm = rmsBetweenRuns(run, *fem);
-    if (self) run.rmsToSelfReferenceMm = rmsBetweenRuns(run, *self);
+    if (fem) {
+      run.rmsToFemMm = rmsBetweenRuns(run, *fem);
+      run.rmsToFemPoses = std::isnan(run.rmsToFemMm) ? 0 : sharedPoses(run, *fem);
+    }
+    if (self) {
+      run.rmsToSelfReferenceMm = rmsBetweenRuns(run, *self);
+      run.rmsToSelfReferencePoses =
+          std::isnan(run.rmsToSelfReferenceMm) ? 0 : sharedPoses(run, *self);
+    }
   }
 }
 
@@ -375,6 +398,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       definition.poseDuration = static_cast<btScalar>(duration);
       runs.push_back(runFem(scene, prepared, definition, methodOptions));
     }
+    runs.back().poses = std::max(scene.poseCount, 1);
   }
   fillRms(runs);
   return comparison;

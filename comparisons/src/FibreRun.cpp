@@ -330,6 +330,10 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     // The guard's verdict: a frozen muscle or a failure left in place (Report) ends the run.
     guard.rolledBackSteps += stats.rolledBack ? 1 : 0;
     guard.retries += stats.retries;
+    if (stats.trappedMuscles > 0) {
+      if (guard.trappedSteps++ == 0) guard.firstTrappedStep = s;
+      guard.trappedParticlesMax = std::max(guard.trappedParticlesMax, stats.trappedParticles);
+    }
     for (size_t m = 0; stats.newlyFrozen > 0 && m < muscles.size(); ++m)
       if (system.frozen(muscles[m]) && !reportedFrozen[m]) {
         reportedFrozen[m] = true;

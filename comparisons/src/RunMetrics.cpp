@@ -27,6 +27,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"boundary_particles", m.boundaryParticles},
       {"bone_spheres", m.boneSpheres},
       {"steps", m.steps},
+      {"poses", m.poses},
       {"iterations", m.iterations},
       {"ms_per_step", number(m.msPerStep)},
       {"ms_per_iteration", number(m.msPerIteration)},
@@ -42,6 +43,8 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"spring_deviation_ratio", number(m.springDeviationRatio)},
       {"rms_to_fem_mm", number(m.rmsToFemMm)},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
+      {"rms_to_fem_poses", m.rmsToFemPoses},
+      {"rms_to_self_reference_poses", m.rmsToSelfReferencePoses},
       {"nan", m.nan},
       {"exploded", m.exploded},
       {"failed_step", m.failedStep},
@@ -61,6 +64,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.boundaryParticles = o.value("boundary_particles", m.boundaryParticles);
   m.boneSpheres = o.value("bone_spheres", m.boneSpheres);
   m.steps = o.value("steps", m.steps);
+  m.poses = o.value("poses", m.poses);
   m.iterations = o.value("iterations", m.iterations);
   m.msPerStep = numberOr(o, "ms_per_step", m.msPerStep);
   m.msPerIteration = numberOr(o, "ms_per_iteration", m.msPerIteration);
@@ -77,6 +81,8 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.springDeviationRatio = numberOr(o, "spring_deviation_ratio", m.springDeviationRatio);
   m.rmsToFemMm = numberOr(o, "rms_to_fem_mm", m.rmsToFemMm);
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
+  m.rmsToFemPoses = o.value("rms_to_fem_poses", m.rmsToFemPoses);
+  m.rmsToSelfReferencePoses = o.value("rms_to_self_reference_poses", m.rmsToSelfReferencePoses);
   m.nan = o.value("nan", m.nan);
   m.exploded = o.value("exploded", m.exploded);
   m.failedStep = o.value("failed_step", m.failedStep);

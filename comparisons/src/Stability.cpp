@@ -47,6 +47,11 @@ PreparedCase prepareCase(const StabilityCase& stabilityCase, const StabilityOpti
   return result;
 }
 
+/// Whether the user asked the matrix to stop.
+bool cancelled(const StabilityOptions& options) {
+  return options.cancel && options.cancel->load();
+}
+
 /// One run of a prepared case; `steps` < 0 runs every pose. Never throws.
 StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
                           const std::string& integrator, double dt, int steps,
@@ -85,11 +90,12 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
     const double speed =
         last.lastTimeStep > 0 ? static_cast<double>(last.meanDisplacement / last.lastTimeStep) : 0;
     cell.kineticEnergy.push_back(0.5 * prepared.freeMass * speed * speed);
-    if (progress.seconds > options.cellSeconds) {
+    if (cancelled(options)) {
+      stop.store(true);
+    } else if (progress.seconds > options.cellSeconds) {
       timedOut = true;
       stop.store(true);
     }
-    if (options.cancel && options.cancel->load()) stop.store(true);
   };
   try {
     const RunMetrics metrics = runFibreMSS(prepared.scene, prepared.prepared, run);
@@ -102,12 +108,14 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
       cell.outcome = CellOutcome::Nan;
     } else if (metrics.exploded) {
       cell.outcome = CellOutcome::Exploded;
-    } else if (metrics.interrupted) {
+    } else if (metrics.interrupted && timedOut) {
       cell.outcome = CellOutcome::Timeout;
       cell.failedStep = metrics.steps;
-      cell.message = timedOut ? "stopped after " + std::to_string(metrics.steps) + " steps (" +
-                                    std::to_string(options.cellSeconds) + " s box)"
-                              : "interrupted";
+      cell.message = "stopped after " + std::to_string(metrics.steps) + " steps (" +
+                     std::to_string(options.cellSeconds) + " s box)";
+    } else if (metrics.interrupted) {
+      cell.outcome = CellOutcome::Interrupted;
+      cell.message = "interrupted after " + std::to_string(metrics.steps) + " steps";
     } else {
       const EnergyCheck energy = checkEnergy(
           cell.kineticEnergy, options.energyGrowth,
@@ -164,7 +172,7 @@ StableStep calibrate(PreparedCase& prepared, const std::string& integrator,
     result.found = false;
     return result;
   }
-  while (high / low > options.calibrationRatio) {
+  while (high / low > options.calibrationRatio && !cancelled(options)) {
     const double middle = std::sqrt(low * high);
     (stable(middle) ? low : high) = middle;
   }
@@ -176,7 +184,7 @@ StableStep calibrate(PreparedCase& prepared, const std::string& integrator,
 
 const char* toString(CellOutcome outcome) {
   static const char* const names[] = {"ok",      "nan",         "exploded", "energy",
-                                      "timeout", "unavailable", "error"};
+                                      "timeout", "unavailable", "error",    "interrupted"};
   return names[static_cast<size_t>(outcome)];
 }
 
@@ -313,6 +321,7 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
     PreparedCase calibration = prepareCase(options.calibration, options, true);
     for (const std::string& integrator : integrators) {
       const StableStep step = calibrate(calibration, integrator, options);
+      if (cancelled(options)) break;  // its bisection was cut short
       matrix.stableSteps.push_back(step);
       if (!step.available)
         log(options, "  " + integrator + ": unavailable");
@@ -326,7 +335,7 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
   const size_t total = cases.size() * integrators.size() * options.dtFactors.size();
   size_t done = 0;
   for (const StabilityCase& stabilityCase : cases) {
-    if (options.cancel && options.cancel->load()) break;
+    if (cancelled(options) || matrix.stableSteps.size() < integrators.size()) break;
     log(options, "case " + stabilityCase.label + ": preparing");
     std::unique_ptr<PreparedCase> prepared;
     std::string failure;
@@ -337,7 +346,7 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
     }
     for (size_t i = 0; i < integrators.size(); ++i) {
       for (double factor : options.dtFactors) {
-        if (options.cancel && options.cancel->load()) break;
+        if (cancelled(options)) break;
         const double dt = factor * matrix.stableSteps[i].dt;
         StabilityCell cell;
         if (prepared) {
@@ -365,6 +374,10 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
     }
   }
   matrix.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  matrix.interrupted = cancelled(options);
+  if (matrix.interrupted)
+    log(options, "interrupted: " + std::to_string(matrix.cells.size()) + " of " +
+                     std::to_string(total) + " cells run");
   return matrix;
 }
 

@@ -91,7 +91,8 @@ nlohmann::json stabilityJson(const StabilityMatrix& matrix, const StabilityOptio
           {"cases", cases},
           {"stable_steps", steps},
           {"cells", cells},
-          {"seconds", matrix.seconds}};
+          {"seconds", matrix.seconds},
+          {"interrupted", matrix.interrupted}};
 }
 
 std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOptions& options) {
@@ -103,6 +104,9 @@ std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOpti
       << ", a fixed time step (`--set time_step=fixed --set dt=...`) of each integrator's stable "
          "step × the factor, the numerical guard set to report only (`--set on_failure=report`); "
       << number(matrix.seconds) << " s in all.\n\n";
+  if (matrix.interrupted)
+    out << "**Interrupted** (Ctrl-C): " << matrix.cells.size() << " cells run, the last one "
+        << "stopped where it was (`interrupted`); cells not run show `—`.\n\n";
 
   out << "## Stable steps\n\n"
       << "Measured, not derived: the largest fixed dt at which `" << options.calibration.label
@@ -126,7 +130,8 @@ std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOpti
          "`ok`: stable; `nan@S`, `exploded@S`, `energy@S`: failed at step S (the pose index from "
          "0); `timeout@S`: not finished within "
       << number(options.cellSeconds)
-      << " s (S steps done); `unavailable`: the integrator is not implemented.\n\n| case |";
+      << " s (S steps done); `unavailable`: the integrator is not implemented; `interrupted`: "
+         "stopped by the user, no verdict.\n\n| case |";
   for (const StableStep& step : matrix.stableSteps)
     for (double factor : matrix.dtFactors)
       out << " " << step.integrator << " ×" << number(factor) << " |";

@@ -11,9 +11,45 @@ namespace {
 /// Steps of the walk back out of a bone along a remembered side before it gives up.
 constexpr int kMaxBackOutSteps = 64;
 
+/// Two bones' pushes on one particle oppose when their directions are more than 120° apart.
+constexpr btScalar kOpposed = btScalar(-0.5);
+/// A caught particle has a way out sideways when the bones' pushes across the gap add up to at
+/// least this share of their lengths (an edge or a rounded end of a bone next to it).
+constexpr btScalar kWayOut = btScalar(0.05);
+
 void addPush(MuscleState& muscle, uint32_t i, const btVector3& push) {
   muscle.pushes[i] += push;
   ++muscle.pushCounts[i];
+}
+
+/// addPush of bone `slot`, also summed per bone for the pinch test of applyPushes.
+void addBonePush(MuscleState& muscle, uint32_t i, uint32_t slot, const btVector3& push) {
+  addPush(muscle, i, push);
+  int32_t& first = muscle.pinchBones[i];
+  if (first < 0) first = static_cast<int32_t>(slot);
+  (first == static_cast<int32_t>(slot) ? muscle.firstBonePushes[i] : muscle.otherBonePushes[i]) +=
+      push;
+}
+
+/// The response of a particle that bone pushes `a` (first bone) and `b` (the others) press
+/// from opposite sides, both overlapping it (no room for its diameter): replaces `push` and
+/// returns true; false, `push` unchanged, when they do not oppose. Along the gap's normal it
+/// moves half the pushes' sum, which leaves equal overlaps on both sides (the whole sum would
+/// swap them, back and forth every iteration); across, it moves out of the gap by their mean
+/// depth along what the bones push across (towards a bone's edge or rounded end); muscle pushes
+/// count only across the gap, where they cannot drive it into a bone.
+bool pinchPush(const btVector3& a, const btVector3& b, btVector3& push) {
+  const btScalar la = a.length(), lb = b.length();
+  if (la <= 0 || lb <= 0 || a.dot(b) > kOpposed * la * lb) return false;
+  const btVector3 normal = (a / la - b / lb).normalized();
+  const btVector3 bones = a + b;
+  const btScalar along = bones.dot(normal);
+  const btVector3 across = bones - normal * along;
+  const btVector3 muscles = push - bones;
+  push = normal * (along / 2) + (muscles - normal * muscles.dot(normal));
+  const btScalar acrossLength = across.length();
+  if (acrossLength > kWayOut * (la + lb)) push += across * ((la + lb) / (2 * acrossLength));
+  return true;
 }
 
 /// Walks from `local` (bone frame) along the remembered unit `side` until the field clears
@@ -96,7 +132,7 @@ void collideWithField(MuscleState& muscle, const BoneState& bone, MuscleBoneStac
                  : btVector3(0, 0, 0);
     if (push.isZero() && s.distance < radius) push = s.gradient * (radius - s.distance);
     if (push.isZero()) continue;
-    addPush(muscle, i, toWorld * push);
+    addBonePush(muscle, i, bone.slot, toWorld * push);
     log.add(muscle.positions[i], muscle.positions[i] - toWorld * (s.gradient * s.distance));
   }
 }
@@ -170,7 +206,7 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneSta
                     if (!sphereOverlap(muscle.positions[i], settings.radii[i], centre,
                                        boneRadii[sphere], direction, depth))
                       return;
-                    addPush(muscle, i, direction * depth);
+                    addBonePush(muscle, i, bone.slot, direction * depth);
                     log.add(muscle.positions[i], centre);
                   });
 }
@@ -181,14 +217,23 @@ void forgetBoneSides(MuscleState& muscle) {
 
 void applyPushes(MuscleState& muscle, bool zeroVelocities) {
   ++muscle.contactRound;
+  size_t pinched = 0;
   for (uint32_t i : muscle.settings->boundaryParticles) {
     if (muscle.pushCounts[i] == 0) continue;
-    muscle.positions[i] += muscle.pushes[i];
+    btVector3 push = muscle.pushes[i];
+    if (muscle.pinchBones[i] >= 0) {
+      if (pinchPush(muscle.firstBonePushes[i], muscle.otherBonePushes[i], push)) ++pinched;
+      muscle.pinchBones[i] = -1;
+      muscle.firstBonePushes[i].setZero();
+      muscle.otherBonePushes[i].setZero();
+    }
+    muscle.positions[i] += push;
     muscle.previous[i] = muscle.positions[i];
     if (zeroVelocities) muscle.velocities[i].setZero();
     muscle.pushes[i].setZero();
     muscle.pushCounts[i] = 0;
   }
+  muscle.pinched = pinched;
 }
 
 }  // namespace fibremss

@@ -70,7 +70,9 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneSta
 void forgetBoneSides(MuscleState& muscle);
 
 /// Moves every pushed particle by its accumulated push and zeroes its velocity
-/// (previous = position); clears the pushes.
+/// (previous = position); clears the pushes. A particle two bones press from opposite sides
+/// (pinched: no room between them) is moved to equal overlaps and out sideways where the bones
+/// leave a way out; muscle.pinched counts such particles.
 void applyPushes(MuscleState& muscle, bool zeroVelocities);
 
 }  // namespace fibremss

@@ -57,7 +57,37 @@ void SphereTree::orderInnerNodes() {
 
 void collideTrees(SphereTree& stackOwner, const btDbvtNode* a, const btDbvtNode* b,
                   btDbvt::ICollide& policy) {
-  stackOwner.tree().collideTTpersistentStack(a, b, policy);
+  // btDbvt::collideTTpersistentStack's traversal and pair order, but child pairs are tested
+  // before they are pushed (most fail, and then cost no stack traffic). The stack grows like
+  // Bullet grows it (never in practice: it holds a few entries per level of both trees).
+  if (!a || !b || !Intersect(a->volume, b->volume)) return;
+  btAlignedObjectArray<btDbvt::sStkNN>& stack = stackOwner.tree().m_stkStack;
+  if (stack.size() < btDbvt::DOUBLE_STACKSIZE) stack.resize(btDbvt::DOUBLE_STACKSIZE);
+  int depth = 0;
+  const auto visit = [&](const btDbvtNode* x, const btDbvtNode* y) {
+    if (Intersect(x->volume, y->volume)) stack[depth++] = btDbvt::sStkNN(x, y);
+  };
+  visit(a, b);
+  while (depth > 0) {
+    const btDbvt::sStkNN pair = stack[--depth];
+    if (depth + 4 > stack.size()) stack.resize(stack.size() * 2);
+    if (pair.a->isinternal()) {
+      if (pair.b->isinternal()) {
+        visit(pair.a->childs[0], pair.b->childs[0]);
+        visit(pair.a->childs[1], pair.b->childs[0]);
+        visit(pair.a->childs[0], pair.b->childs[1]);
+        visit(pair.a->childs[1], pair.b->childs[1]);
+      } else {
+        visit(pair.a->childs[0], pair.b);
+        visit(pair.a->childs[1], pair.b);
+      }
+    } else if (pair.b->isinternal()) {
+      visit(pair.a, pair.b->childs[0]);
+      visit(pair.a, pair.b->childs[1]);
+    } else {
+      policy.Process(pair.a, pair.b);
+    }
+  }
 }
 
 void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const btScalar> radii) {

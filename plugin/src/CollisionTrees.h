@@ -93,31 +93,34 @@ struct MuscleBoneNodes {
 using MuscleBoneStack = std::vector<MuscleBoneNodes>;
 
 /// Calls onPair(muscleLeaf, sphere) for every muscle leaf whose bounds overlap the bounds of a
-/// bone sphere (both in world space), descending both trees like btDbvt::collideTT.
+/// bone sphere (both in world space), descending both trees like btDbvt::collideTT. Child pairs
+/// are tested before they are pushed: most fail, and a failed test then costs no stack traffic.
 template <typename OnPair>
 void collideWithBone(MuscleBoneStack& stack, const btDbvtNode* muscleRoot,
                      const BoneSphereTree& bone, OnPair&& onPair) {
-  if (!muscleRoot || bone.empty()) return;
+  if (!muscleRoot || bone.empty() || !Intersect(muscleRoot->volume, bone.bounds(0))) return;
   stack.clear();
   stack.push_back({muscleRoot, 0});
+  const auto visit = [&](const btDbvtNode* muscle, int32_t boneNode) {
+    if (Intersect(muscle->volume, bone.bounds(boneNode))) stack.push_back({muscle, boneNode});
+  };
   while (!stack.empty()) {
     const MuscleBoneNodes pair = stack.back();
     stack.pop_back();
-    if (!Intersect(pair.muscle->volume, bone.bounds(pair.bone))) continue;
     const BoneSphereTree::Node& b = bone.node(pair.bone);
     if (pair.muscle->isinternal()) {
       if (b.sphere < 0) {
-        stack.push_back({pair.muscle->childs[0], b.children[0]});
-        stack.push_back({pair.muscle->childs[1], b.children[0]});
-        stack.push_back({pair.muscle->childs[0], b.children[1]});
-        stack.push_back({pair.muscle->childs[1], b.children[1]});
+        visit(pair.muscle->childs[0], b.children[0]);
+        visit(pair.muscle->childs[1], b.children[0]);
+        visit(pair.muscle->childs[0], b.children[1]);
+        visit(pair.muscle->childs[1], b.children[1]);
       } else {
-        stack.push_back({pair.muscle->childs[0], pair.bone});
-        stack.push_back({pair.muscle->childs[1], pair.bone});
+        visit(pair.muscle->childs[0], pair.bone);
+        visit(pair.muscle->childs[1], pair.bone);
       }
     } else if (b.sphere < 0) {
-      stack.push_back({pair.muscle, b.children[0]});
-      stack.push_back({pair.muscle, b.children[1]});
+      visit(pair.muscle, b.children[0]);
+      visit(pair.muscle, b.children[1]);
     } else {
       onPair(pair.muscle, b.sphere);
     }

@@ -39,7 +39,8 @@ btVector3 centroidOf(const std::vector<btVector3>& vertices, const std::vector<u
   return ids.empty() ? sum : sum / btScalar(ids.size());
 }
 
-/// Surface vertices in an area given by a bone or landmarks (FarEnd is resolved by the caller).
+/// Surface vertices in an area given by a bone, landmarks or indices (FarEnd is resolved by the
+/// caller).
 std::vector<uint32_t> areaVertices(const TriangleMesh& surface, const AttachmentArea& area,
                                    const std::string& what, std::vector<std::string>& warnings) {
   std::vector<uint32_t> ids;
@@ -64,6 +65,15 @@ std::vector<uint32_t> areaVertices(const TriangleMesh& surface, const Attachment
     }
     for (size_t i = 0; i < n; ++i)
       if (distance[i] < limit) ids.push_back(uint32_t(i));
+  } else if (area.kind == AttachmentArea::Kind::Vertices) {
+    for (uint32_t i : area.vertices)
+      if (i >= n)
+        throw InputError(what, "vertices",
+                         "vertex " + std::to_string(i) + " is out of range (the surface has " +
+                             std::to_string(n) + " vertices)");
+    ids = area.vertices;
+    std::sort(ids.begin(), ids.end());
+    ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
   } else if (area.kind == AttachmentArea::Kind::Landmarks) {
     btScalar radius = area.radius;
     for (int attempt = 0; attempt < 2 && ids.empty(); ++attempt) {
@@ -457,9 +467,58 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
   const btScalar step = h / 2;
   const btScalar maxLength = btScalar(6) * (extent.length() + h);
 
-  /// Traces one streamline; 0 ok, 1 left the surface, 2 stopped early.
-  auto trace = [&](const btVector3& seed, const btVector3& normal, std::vector<btVector3>& line) {
+  /// Follows the gradient (sign +1, towards the insertion) or against it (-1, towards the
+  /// origin) from line.back() until the field reaches that end's area; the end is moved onto
+  /// the surface, a little inside. 0 ok, 1 left the surface, 2 stopped early.
+  auto traceTo = [&](double sign, std::vector<btVector3>& line) {
+    const std::vector<uint32_t>& target = sign > 0 ? insertionIds : originIds;
+    btVector3 p = line.back();
+    btScalar travelled = 0;
+    while (travelled < maxLength) {
+      const double value = fieldAt(p);
+      if (sign > 0 ? value >= 0.995 : value <= 0.005) break;
+      btVector3 d1, d2;
+      if (!directionAt(p, d1)) return 2;
+      d1 *= btScalar(sign);
+      if (!directionAt(p + d1 * (step / 2), d2)) return 2;
+      const btVector3 next = p + d2 * (step * btScalar(sign));
+      const btScalar s = distance.signedDistance(next);
+      if (s > insideTolerance) {
+        // Slide along the surface: pull back inside along the closest-point direction.
+        const auto c = distance.closest(next);
+        const btVector3 pulled = c.point + (c.point - next).normalized() * (h / 4);
+        if (distance.signedDistance(pulled) > 0 || nearestIn(target, next) < endTolerance) {
+          if (nearestIn(target, next) < endTolerance) break;
+          return 1;
+        }
+        p = pulled;
+      } else {
+        p = next;
+      }
+      travelled += step;
+      line.push_back(p);
+    }
+    if (nearestIn(target, line.back()) >= endTolerance) return 2;
+    // End on the surface: the closest surface point, a little inside.
+    const auto c = distance.closest(line.back());
+    if (c.triangle != UINT32_MAX && c.distance > h / 8) {
+      const btVector3 last = c.point + (line.back() - c.point).normalized() * (h / 8);
+      if (distance.signedDistance(last) <= 0) line.push_back(last);
+    }
+    return 0;
+  };
+  /// Traces one streamline from a seed on the origin area (normal: the surface's outward
+  /// normal there) or, for a seed inside (`inside`), both ways.
+  std::vector<btVector3> back;
+  auto trace = [&](const btVector3& seed, const btVector3& normal, bool inside,
+                   std::vector<btVector3>& line) {
     line.clear();
+    if (inside) {
+      back.assign(1, seed);
+      if (const int status = traceTo(-1, back)) return status;
+      line.assign(back.rbegin(), back.rend());
+      return traceTo(1, line);
+    }
     btVector3 p = seed - normal * (h / 8);
     if (distance.signedDistance(p) > 0) p = seed;
     line.push_back(p);
@@ -473,48 +532,51 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
       p = next;
       line.push_back(p);
     }
-    btScalar travelled = 0;
-    while (travelled < maxLength) {
-      if (fieldAt(p) >= 0.995) break;
-      btVector3 d1, d2;
-      if (!directionAt(p, d1)) return 2;
-      if (!directionAt(p + d1 * (step / 2), d2)) return 2;
-      const btVector3 next = p + d2 * step;
-      const btScalar s = distance.signedDistance(next);
-      if (s > insideTolerance) {
-        // Slide along the surface: pull back inside along the closest-point direction.
-        const auto c = distance.closest(next);
-        const btVector3 pulled = c.point + (c.point - next).normalized() * (h / 4);
-        if (distance.signedDistance(pulled) > 0 || nearestIn(insertionIds, next) < endTolerance) {
-          if (nearestIn(insertionIds, next) < endTolerance) break;
-          return 1;
-        }
-        p = pulled;
-      } else {
-        p = next;
-      }
-      travelled += step;
-      line.push_back(p);
-    }
-    if (nearestIn(insertionIds, line.back()) >= endTolerance) return 2;
-    // End on the surface: the closest surface point, a little inside.
-    const auto c = distance.closest(line.back());
-    if (c.triangle != UINT32_MAX && c.distance > h / 8) {
-      const btVector3 last = c.point + (line.back() - c.point).normalized() * (h / 8);
-      if (distance.signedDistance(last) <= 0) line.push_back(last);
-    }
-    return 0;
+    return traceTo(1, line);
   };
 
-  // Seed pool: the origin area's vertices and random points on its triangles (a tapered end
-  // has few vertices); seeds are taken in farthest-point order, the first `count` good
-  // streamlines kept.
+  // Seed pool: points on the widest cross-section (sectionSeeds), else the origin area's
+  // vertices and random points on its triangles (a tapered end has few vertices); seeds are
+  // taken in farthest-point order, the first `count` good streamlines kept.
   std::vector<btVector3> pool, poolNormals;
-  for (uint32_t v : originIds) {
-    pool.push_back(V[v]);
-    poolNormals.push_back(normals[v].length2() > 0 ? normals[v].normalized() : btVector3(0, 0, 0));
+  if (options.sectionSeeds) {
+    // Where the field crosses a level between two interior voxels, linearly interpolated: a
+    // cross-section of the muscle. The widest of the levels 0.05, 0.1, ... 0.95 (most crossed
+    // voxel edges) holds the seeds, which farthest-point order then covers evenly.
+    auto crossings = [&](double level, std::vector<btVector3>* points) {
+      size_t count = 0;
+      for (size_t id = 0; id < N; ++id)
+        for (int d = 0; d < 6; d += 2) {
+          size_t w;
+          if (label[id] < 0 || !neighbour(id, d, w) || label[w] < 0) continue;
+          const double a = u[id] - level, b = u[w] - level;
+          if ((a < 0) == (b < 0)) continue;
+          ++count;
+          if (!points) continue;
+          const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
+                    k = int(id / (size_t(grid.n[0]) * grid.n[1]));
+          const btVector3 edge =
+              btVector3(btScalar(offsets[d][0]), btScalar(offsets[d][1]), btScalar(offsets[d][2])) *
+              h;
+          points->push_back(grid.centre(i, j, k) + edge * btScalar(a / (a - b)));
+        }
+      return count;
+    };
+    std::vector<std::pair<size_t, double>> levels;
+    for (int l = 1; l < 20; ++l) levels.emplace_back(crossings(l * 0.05, nullptr), l * 0.05);
+    std::sort(levels.rbegin(), levels.rend());
+    // A narrow muscle's widest section may hold too few seeds: the next widest ones add theirs.
+    for (size_t l = 0; l < levels.size() && pool.size() < size_t(options.count) * 2; ++l)
+      crossings(levels[l].second, &pool);
+    poolNormals.assign(pool.size(), btVector3(0, 0, 0));
   }
-  {
+  const bool sectionSeeds = !pool.empty();
+  if (!sectionSeeds) {
+    for (uint32_t v : originIds) {
+      pool.push_back(V[v]);
+      poolNormals.push_back(normals[v].length2() > 0 ? normals[v].normalized()
+                                                     : btVector3(0, 0, 0));
+    }
     std::vector<uint32_t> areaTriangles;
     std::vector<double> cumulative;
     double total = 0;
@@ -586,7 +648,7 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
     order = farthestPointOrder(pool, poolIds, candidates);
     for (; tried < order.size() && lines.size() < wanted && size_t(q.traced) < maxTraced; ++tried) {
       ++q.traced;
-      const int status = trace(pool[order[tried]], poolNormals[order[tried]], line);
+      const int status = trace(pool[order[tried]], poolNormals[order[tried]], sectionSeeds, line);
       if (status == 1) ++q.droppedOutside;
       if (status == 2) ++q.droppedEarly;
       if (status != 0) continue;

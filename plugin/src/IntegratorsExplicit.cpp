@@ -18,16 +18,20 @@ btVector3 acceleration(const btVector3& force, const btVector3& velocity, btScal
   return (force - velocity * damping) * inverseMass;
 }
 
-/// Verlet with velocity damping (method.md §4), time-corrected for a changing dt:
-/// x(t+dt) = x(t) + v·dt + dt²/m·(F − c·v) with v = (x(t) − x(t−dt′))/dt′ (dt′ the previous
-/// step). With a fixed dt this is the thesis' x(t+dt) = 2x(t) − x(t−dt) + dt²/m·(F − c·v);
-/// without the correction, a shrinking adaptive dt would raise the velocity and pump energy in.
+/// Verlet with centred velocity damping (method.md §4), time-corrected for a changing dt:
+/// x⁺ − x = v⁻·dt + dt²/m·(F − c·v) with v⁻ = (x − x⁻)/dt′ (dt′ the previous step) and the
+/// damped velocity centred at t, v = ((x⁺ − x)/dt + v⁻)/2. Solved for x⁺ with γ = c·dt/(2m):
+/// x⁺ = x + ((x − x⁻)·(dt/dt′)·(1 − γ) + dt²/m·F)/(1 + γ). With a fixed dt this is
+/// x⁺ = x + (x − x⁻)·(1 − γ)/(1 + γ) + dt²/m·F/(1 + γ), second order also when damped (the
+/// backward velocity alone made it first order); without the dt/dt′ correction a shrinking
+/// adaptive dt would raise the velocity and pump energy in.
 class VerletIntegrator final : public TimeIntegrator {
  public:
   IntegrationResult advance(MuscleState& muscle, btScalar dt, btScalar previousDt) const override {
     const MuscleSettings& settings = *muscle.settings;
-    const btScalar forceScale = dt * dt / settings.particleMass;
-    const btScalar keep = (1 - settings.damping * dt / settings.particleMass) * dt / previousDt;
+    const btScalar gamma = settings.damping * dt / (2 * settings.particleMass);
+    const btScalar forceScale = dt * dt / (settings.particleMass * (1 + gamma));
+    const btScalar keep = (1 - gamma) / (1 + gamma) * dt / previousDt;
     IntegrationResult result;
     for (uint32_t i : muscle.freeParticles) {
       const btVector3 x = muscle.positions[i];

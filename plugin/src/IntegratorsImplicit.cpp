@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
+#include "MuscleSystemPretransform.h"
+#include "TimeStep.h"
 
 namespace fibremss {
 namespace {
@@ -35,10 +37,23 @@ struct ImplicitWorkspace final : IntegratorWorkspace {
   Vector preconditioned;                      ///< z = D⁻¹·r
   Vector product;                             ///< A·p (and A·w when forming b)
   Vector inverseDiagonal;                     ///< D⁻¹, the Jacobi preconditioner
-  Vector known;                               ///< a vector A is applied to when forming b (v or w)
+  Vector known;                               ///< e of G(v′) (see ImplicitIntegrator)
+  Vector guess;                               ///< CG's start: v (midpoint) or v̂
+  double explicitLimit = 0;                   ///< Verlet's stable dt of the muscle [s]
   std::vector<btVector3> previousVelocities;  ///< BDF2: v(t−dt′) of the free particles
+  std::vector<btVector3> writtenVelocities;   ///< the v′ advance() last wrote (BDF2)
   bool history = false;                       ///< BDF2: previousVelocities hold a step
 };
+
+/// The coefficients of G(v′) = d·v′ − e − φ·F(p + σ·v′) (see ImplicitIntegrator).
+struct Newton {
+  double diagonal;  ///< d
+  double phi;       ///< φ, the factor on the forces
+  double sigma;     ///< σ, the factor on v′ in the evaluation point
+};
+
+/// Midpoint: θ = 1/2 + min(1/2, dt / (kThetaScale · Verlet's stable dt)) — 0.55 at 50× it.
+constexpr double kThetaScale = 1000;
 
 /// Index in the values of the entry (row, column) of the compressed column-major matrix.
 int32_t valueIndex(const Matrix& matrix, uint32_t row, uint32_t column) {
@@ -85,13 +100,23 @@ void conjugateGradient(ImplicitWorkspace& w, double tolerance, int cap, Integrat
 }
 
 /// One Newton step of an implicit method, written for all three as: with x̂ = a₁·x − a₂·x(t−dt′),
-/// v̂ = a₁·v − a₂·v(t−dt′) and F(x′) ≈ F(x) − K·(x′ − x),
+/// v̂ = a₁·v − a₂·v(t−dt′),
 ///   x′ = x̂ + β·v″,  m·v′ = m·v̂ + β·(F(x″) − c·v″)
 /// where backward Euler and BDF2 take x″ = x′, v″ = v′ (BDF2: β = dt·(1+ω)/(1+2ω),
 /// a₁ = (1+ω)²/(1+2ω), a₂ = ω²/(1+2ω), ω = dt/dt′; backward Euler and BDF2's first step: a₁ = 1,
-/// a₂ = 0, β = dt) and the midpoint rule x″ = (x + x′)/2, v″ = (v + v′)/2 with a₁ = 1, a₂ = 0,
-/// β = dt. The Jacobian drops the compressive part of the geometric stiffness (l < L0), which
-/// keeps A symmetric positive definite for CG.
+/// a₂ = 0, β = dt) and the midpoint rule, as the one-leg θ-method, v″ = (1−θ)·v + θ·v′,
+/// x′ = x + dt·v″, x″ = x + θ·(x′ − x), a₁ = 1, a₂ = 0, β = dt. θ = 1/2 is the midpoint rule,
+/// which has no numerical damping: far beyond the explicit limit the linearization error of
+/// rotating springs feeds its stiff modes (a zigzag chain at 50× the limit blew up, also with up
+/// to 8 safeguarded Newton steps, which tripled the cost). θ = 1/2 + min(1/2,
+/// dt/(kThetaScale·h_e)), h_e Verlet's stable dt, damps them (θ = 0.55 at 50×) and keeps
+/// second order (θ − 1/2 = O(dt)).
+/// Each is G(v′) = d·v′ − e − φ·F(p + σ·v′) = 0 (midpoint: d = m + c·θ·dt,
+/// e = (m − c·(1−θ)·dt)·v, φ = dt, p = x + θ(1−θ)·dt·v, σ = θ²·dt; the others: d = m + c·β,
+/// e = m·v̂, φ = β, p = x̂, σ = β), and the Newton step from v′₀ with p + σ·v′₀ = x, with
+/// F(y) ≈ F(x) − K·(y − x), is (d·I + φσ·K)·v′ = e + φ·F(x) + φσ·K·v′₀. The Jacobian drops the
+/// compressive part of the geometric stiffness (l < L0), which keeps A symmetric positive
+/// definite for CG.
 class ImplicitIntegrator final : public TimeIntegrator {
  public:
   explicit ImplicitIntegrator(Integrator kind) : kind_(kind) {}
@@ -109,40 +134,29 @@ class ImplicitIntegrator final : public TimeIntegrator {
     const double a1 = bdf2 ? (1 + ratio) * (1 + ratio) / (1 + 2 * ratio) : 1;
     const double a2 = bdf2 ? ratio * ratio / (1 + 2 * ratio) : 0;
     const double beta = bdf2 ? h * (1 + ratio) / (1 + 2 * ratio) : h;
-    // Midpoint: (m + c·h/2)·v′ + (h²/4)·K·v′ = (m − c·h/2)·v + h·F − (h²/4)·K·v.
-    const double diagonal = midpoint ? m + c * h / 2 : m + c * beta;
-    const double stiffnessScale = midpoint ? h * h / 4 : beta * beta;
-    fill(w, settings, muscle.positions, diagonal, stiffnessScale, parameters.diagonalJacobian);
-
-    // The vector A is applied to in b: v (midpoint) or w = x̂ − x = a₂·(x − x(t−dt′)) (BDF2).
+    const double theta = midpoint ? 0.5 + std::min(0.5, h / (kThetaScale * w.explicitLimit)) : 1;
+    const Newton newton{midpoint ? m + c * theta * h : m + c * beta, midpoint ? h : beta,
+                        midpoint ? theta * theta * h : beta};
     const std::vector<uint32_t>& free = muscle.freeParticles;
+    if (kind_ == Integrator::Bdf2) followVelocityHistory(w, muscle, parameters);
     for (size_t k = 0; k < free.size(); ++k) {
       const uint32_t i = free[k];
-      const btVector3 known = midpoint ? muscle.velocities[i]
-                                       : (muscle.positions[i] - muscle.previous[i]) * btScalar(a2);
-      for (int j = 0; j < 3; ++j) w.known[3 * k + j] = known[j];
-    }
-    if (midpoint || bdf2) w.product.noalias() = w.matrix * w.known;
-    for (size_t k = 0; k < free.size(); ++k) {
-      const uint32_t i = free[k];
+      const btVector3 x = muscle.positions[i];
+      const btVector3 v = muscle.velocities[i];
+      const btVector3 offset = midpoint ? v * btScalar(theta * (1 - theta) * h)
+                                        : (x - muscle.previous[i]) * btScalar(a2);
       for (int j = 0; j < 3; ++j) {
         const size_t r = 3 * k + j;
-        const double v = muscle.velocities[i][j];
-        const double force = muscle.forces[i][j];
-        if (midpoint) {
-          w.rhs[r] = 2 * m * v + h * force - w.product[r];
-          w.solution[r] = v;
-        } else {
-          const double guess = a1 * v - a2 * w.previousVelocities[k][j];
-          const double correction = bdf2 ? (w.product[r] - diagonal * w.known[r]) / beta : 0;
-          w.rhs[r] = m * guess + beta * force - correction;
-          w.solution[r] = guess;
-        }
+        w.known[r] = midpoint ? (m - c * (1 - theta) * h) * v[j]
+                              : m * (a1 * v[j] - a2 * w.previousVelocities[k][j]);
+        // v′₀ with p + σ·v′₀ = x: the step linearizes at the iteration's positions; CG
+        // starts from v (midpoint) or v̂.
+        w.solution[r] = -offset[j] / newton.sigma;
+        w.guess[r] = midpoint ? v[j] : w.known[r] / m;
       }
     }
     IntegrationResult result;
-    conjugateGradient(w, parameters.solverTolerance, std::max(1, parameters.solverIterations),
-                      result);
+    newtonStep(w, muscle, newton, parameters, result);
 
     for (size_t k = 0; k < free.size(); ++k) {
       const uint32_t i = free[k];
@@ -151,9 +165,10 @@ class ImplicitIntegrator final : public TimeIntegrator {
                            static_cast<btScalar>(w.solution[3 * k + 2]));
       const btVector3 x = muscle.positions[i];
       const btVector3 target =
-          midpoint ? x + (muscle.velocities[i] + next) * (dt / 2)
+          midpoint ? x + (muscle.velocities[i] * btScalar(1 - theta) + next * btScalar(theta)) * dt
                    : x + (x - muscle.previous[i]) * btScalar(a2) + next * btScalar(beta);
       w.previousVelocities[k] = muscle.velocities[i];
+      w.writtenVelocities[k] = next;
       muscle.velocities[i] = next;
       muscle.previous[i] = x;
       muscle.positions[i] = target;
@@ -207,13 +222,56 @@ class ImplicitIntegrator final : public TimeIntegrator {
       blockColumns(rb, ra, w->springBlocks[s].data() + 3);
     }
     for (Vector* v : {&w->rhs, &w->solution, &w->residual, &w->direction, &w->preconditioned,
-                      &w->product, &w->inverseDiagonal, &w->known})
+                      &w->product, &w->inverseDiagonal, &w->known, &w->guess})
       v->setZero(size);
+    w->explicitLimit = stableTimeStep(settings, Integrator::Verlet);
     w->previousVelocities.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
+    w->writtenVelocities.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
     return w;
   }
 
  private:
+  /// The Newton step from v′₀ in w.solution, linearized at the muscle's positions (= p + σ·v′₀)
+  /// with their forces: refills A, forms b = e + φ·F + (A − d·I)·v′₀, solves A·v′ = b into
+  /// w.solution from w.guess.
+  static void newtonStep(ImplicitWorkspace& w, const MuscleState& muscle, const Newton& newton,
+                         const SimulationParameters& parameters, IntegrationResult& result) {
+    fill(w, *muscle.settings, muscle.positions, newton.diagonal, newton.phi * newton.sigma,
+         parameters.diagonalJacobian);
+    w.product.noalias() = w.matrix * w.solution;
+    const std::vector<uint32_t>& free = muscle.freeParticles;
+    for (size_t k = 0; k < free.size(); ++k)
+      for (int j = 0; j < 3; ++j) {
+        const size_t r = 3 * k + j;
+        w.rhs[r] = w.known[r] + newton.phi * muscle.forces[free[k]][j] + w.product[r] -
+                   newton.diagonal * w.solution[r];
+      }
+    w.solution = w.guess;
+    conjugateGradient(w, parameters.solverTolerance, std::max(1, parameters.solverIterations),
+                      result);
+  }
+
+  /// BDF2's v(t−dt′) follows what happened to the velocity advance() last wrote: unchanged, it
+  /// stays; turned by the bones' pre-transform (the same turn of the written velocity gives the
+  /// present one bit for bit), it turns alike; anything else (a contact zeroed it, a rollback
+  /// or preparation restored another) drops the history: v(t−dt′) = v, so v̂ = v.
+  static void followVelocityHistory(ImplicitWorkspace& w, const MuscleState& muscle,
+                                    const SimulationParameters& parameters) {
+    const MuscleSettings& settings = *muscle.settings;
+    for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
+      const uint32_t i = muscle.freeParticles[k];
+      const btVector3& v = muscle.velocities[i];
+      if (v == w.writtenVelocities[k]) continue;
+      if (pretransformDirection(settings, muscle.boneDeltas, i, w.writtenVelocities[k],
+                                parameters.blendedPretransform) == v)
+        w.previousVelocities[k] =
+            pretransformDirection(settings, muscle.boneDeltas, i, w.previousVelocities[k],
+                                  parameters.blendedPretransform);
+      else
+        w.previousVelocities[k] = v;
+    }
+  }
+
   /// Refills A = diagonal·I + stiffnessScale·K at `positions` (only K's diagonal entries when
   /// `diagonalOnly`, seed 002's approximation) and the preconditioner D⁻¹.
   static void fill(ImplicitWorkspace& w, const MuscleSettings& settings,

@@ -65,6 +65,15 @@ struct MuscleState {
   std::vector<uint32_t> sideStamps;  ///< contactRound when the side was last seen (else stale)
   uint32_t contactRound = 0;         ///< responses applied so far (applyPushes)
 
+  /// Pinch (CollisionPairs.cpp): this iteration's bone pushes of each particle split into the
+  /// first bone's and the others', to tell a particle two bones push opposite ways. Slot of the
+  /// first bone that pushed the particle in this iteration (-1: none).
+  std::vector<int32_t> pinchBones;
+  std::vector<btVector3> firstBonePushes;  ///< Σ pushes of that bone this iteration [m]
+  std::vector<btVector3> otherBonePushes;  ///< Σ pushes of every other bone this iteration [m]
+  size_t pinched = 0;      ///< particles caught between two bones in the last response
+  size_t tornSprings = 0;  ///< most springs found burst while it was trapped (the guard's)
+
   btScalar stableTimeStep = 0;  ///< largest dt for which damped Verlet stays stable [s]
   btScalar meanRadius = 0;      ///< mean boundary radius [m]
   double restLengthSum = 0;     ///< Σ L0 over the springs [m]

@@ -111,6 +111,9 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->springFactors.resize(std::min(s.springs.size(), kSpringBlock));
   state->pushes.assign(n, btVector3(0, 0, 0));
   state->pushCounts.assign(n, 0);
+  state->pinchBones.assign(n, -1);
+  state->firstBonePushes.assign(n, btVector3(0, 0, 0));
+  state->otherBonePushes.assign(n, btVector3(0, 0, 0));
   // Recovery follows the bones' distance fields: without them it has nothing to remember.
   if (impl_->parameters.penetrationRecovery &&
       impl_->parameters.boneCollision == BoneCollision::DistanceField) {

@@ -4,7 +4,12 @@
 // and unless the policy is Report it is rolled back and repeated: with half the dt cap and twice
 // the iterations (Retry, up to maxRetries times), or with the failing muscles frozen at their last
 // good state (StopBody, and Retry once its retries are spent). The other muscles always finish the
-// step; nothing throws, so a host's Bullet world keeps running.
+// step; nothing throws, so a host's Bullet world keeps running. A muscle whose springs burst
+// while two bones still press some of its particles from opposite sides (trapped: pinched in the
+// last iteration, CollisionPairs.cpp), not NaN nor spread far beyond its size, was torn by the
+// bones, not by the numerics: its state is kept, and later steps fail it only for more burst
+// springs than the trap left. A frozen muscle rides with its bones (their motion over the step)
+// and is pushed out of them, so it never ends inside one.
 #include "MuscleSystemGuard.h"
 
 #include <algorithm>
@@ -12,6 +17,7 @@
 #include <climits>
 #include <cmath>
 
+#include "Integrators.h"
 #include "MuscleSystemImpl.h"
 #include "Skin.h"
 
@@ -22,6 +28,8 @@ using Clock = std::chrono::steady_clock;
 
 /// Retries stop after this many halvings of the dt cap (1024× smaller), whatever maxRetries says.
 constexpr int kMaxHalvings = 10;
+/// Collision rounds that push a frozen muscle, carried with its bones, out of them.
+constexpr int kFrozenRounds = 8;
 
 bool finite(const btVector3& v) {
   return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
@@ -29,6 +37,17 @@ bool finite(const btVector3& v) {
 
 bool allFinite(const std::vector<btVector3>& points) {
   return std::all_of(points.begin(), points.end(), finite);
+}
+
+/// Diagonal of the bounding box of `points`.
+double extent(const std::vector<btVector3>& points) {
+  if (points.empty()) return 0;
+  btVector3 lower = points.front(), upper = points.front();
+  for (const btVector3& p : points) {
+    lower.setMin(p);
+    upper.setMax(p);
+  }
+  return double(lower.distance(upper));
 }
 
 /// `requested` with the dt cap (and the lower clamp) divided by 2^halvings and the iterations
@@ -59,6 +78,8 @@ MuscleHealth checkMuscle(const MuscleState& muscle) {
   health.nan =
       !allFinite(muscle.positions) || !allFinite(muscle.previous) || !allFinite(muscle.velocities);
   const MuscleSettings& settings = *muscle.settings;
+  // Written so that a NaN extent counts as spread too.
+  health.spread = !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
   if (settings.springs.empty()) return health;
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
   for (const Spring& spring : settings.springs) {
@@ -88,14 +109,14 @@ void MuscleSystem::Impl::guardedStep() {
   const uint64_t number = stepCount++;
   const FailurePolicy policy = parameters.onFailure;
   const bool rollback = policy != FailurePolicy::Report;
-  if (rollback) {
-    for (uint32_t slot : muscles.order)
-      if (!muscles.states[slot]->frozen) saveGoodState(*muscles.states[slot]);
-    for (uint32_t slot : bones.order) {
-      BoneState& bone = *bones.states[slot];
-      bone.goodLast = bone.last;
-      bone.goodCurrent = bone.current;
-    }
+  // Frozen muscles too: carried with their bones every step, a rollback restores them as well.
+  if (rollback)
+    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot]);
+  // Always: the bones' motion over the step carries the frozen muscles.
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.goodLast = bone.last;
+    bone.goodCurrent = bone.current;
   }
   const btScalar goodPreviousDt = previousDt;
   const SimulationParameters requested = parameters;
@@ -120,6 +141,15 @@ void MuscleSystem::Impl::guardedStep() {
       if (state.frozen) continue;
       const MuscleHealth health = checkMuscle(state);
       if (!health.failed()) continue;
+      if (!health.nan && !health.spread) {
+        // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
+        if (state.pinched > 0) {
+          state.tornSprings = std::max(state.tornSprings, health.explodedSprings);
+          continue;
+        }
+        // What a trap tore stays torn once the bones let go: only more burst springs fail.
+        if (health.explodedSprings <= state.tornSprings) continue;
+      }
       if (blamed++ == 0) {
         failedMuscle = {slot, muscles.generations[slot]};
         failedNan = health.nan;
@@ -146,20 +176,51 @@ void MuscleSystem::Impl::guardedStep() {
     }
     previousDt = goodPreviousDt;
     rolledBack = true;
-    // A frozen muscle shows its last good state, surface included.
-    for (uint32_t slot : muscles.order) {
-      MuscleState& state = *muscles.states[slot];
-      if (!state.frozen || state.surface.empty()) continue;
-      resolveBones(state);
-      deformSurface(*state.settings, state.positions, state.boneTransforms,
-                    parameters.blendedPretransform, state.surface);
-    }
     parameters = retry ? smallerSteps(requested, ++retries) : requested;
   }
   parameters = requested;
 
-  size_t frozen = 0;
-  for (uint32_t slot : muscles.order) frozen += muscles.states[slot]->frozen ? 1 : 0;
+  // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
+  // started) and is pushed out of them.
+  const bool velocities = integratorFor(parameters.integrator).usesVelocities();
+  const auto carryFrozen = [&](MuscleState& state) {
+    resolveBones(state);
+    state.bonesMoving = false;
+    for (size_t b = 0; b < state.bones.size(); ++b) {
+      state.boneDeltas[b].setIdentity();
+      if (state.boneSlots[b] < 0) continue;
+      const BoneState& bone = *bones.states[state.boneSlots[b]];
+      if (bone.current == bone.goodLast) continue;
+      state.boneDeltas[b] = bone.current * bone.goodLast.inverse();
+      state.bonesMoving = true;
+    }
+    pretransform(state, velocities);
+    followFixed(state);
+    // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
+    ThreadScratch& thread = scratch.front();
+    state.pinched = 0;
+    if (parameters.muscleBone && state.bonesMoving)
+      for (int round = 0; round < kFrozenRounds; ++round) {
+        refitTree(state);
+        for (uint32_t slot : bones.order)
+          collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
+        applyPushes(state, velocities);
+      }
+    thread.contacts.clear();
+    if (!state.surface.empty())
+      deformSurface(*state.settings, state.positions, state.boneTransforms,
+                    parameters.blendedPretransform, state.surface);
+  };
+  size_t frozen = 0, trappedParticles = 0, trappedMuscles = 0;
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    if (state.frozen) {
+      ++frozen;
+      carryFrozen(state);
+    }
+    trappedParticles += state.pinched;
+    trappedMuscles += state.pinched > 0 ? 1 : 0;
+  }
   stats.timing = spent;
   stats.timing.total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
   stats.iterations = iterations;
@@ -171,6 +232,8 @@ void MuscleSystem::Impl::guardedStep() {
   stats.failedNan = failedNan;
   stats.newlyFrozen = newlyFrozen;
   stats.frozenMuscles = frozen;
+  stats.trappedParticles = trappedParticles;
+  stats.trappedMuscles = trappedMuscles;
 }
 
 }  // namespace fibremss

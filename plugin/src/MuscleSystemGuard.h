@@ -12,13 +12,20 @@ namespace fibremss {
 struct MuscleHealth {
   bool nan = false;            ///< a position, previous position or velocity is NaN or inf
   size_t explodedSprings = 0;  ///< springs counted as exploded (see checkMuscle)
+  /// The particles' bounding box is more than kTornSpread times as large (diagonal) as at rest:
+  /// diverging, not merely torn.
+  bool spread = false;
   bool failed() const { return nan || explodedSprings > 0; }
 };
 
-/// NaN/inf scan of the particles and the spring lengths of `muscle`. A spring counts as exploded
-/// when it is longer than 3× its rest length and longer than its rest length by more than the
-/// muscle's mean rest length: the 3× rule alone trips on springs of a few µm (converging fibre
-/// ends, jittered neighbours) whose stretch is harmless.
+/// Times its rest extent (bounding-box diagonal) a muscle may grow before it counts as diverging:
+/// a torn muscle stays between its bones, a diverging one grows without bound.
+constexpr double kTornSpread = 2;
+
+/// NaN/inf scan of the particles, their extent and the spring lengths of `muscle`. A spring
+/// counts as exploded when it is longer than 3× its rest length and longer than its rest length
+/// by more than the muscle's mean rest length: the 3× rule alone trips on springs of a few µm
+/// (converging fibre ends, jittered neighbours) whose stretch is harmless.
 MuscleHealth checkMuscle(const MuscleState& muscle);
 
 /// Copies positions, previous and velocities of `muscle` into its good-state buffers.

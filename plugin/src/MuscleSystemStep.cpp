@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <utility>
 
 #include "Integrators.h"
 #include "MuscleSystemImpl.h"
@@ -69,6 +70,17 @@ void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities)
   if (!state.bonesMoving) return;
   const MuscleSettings& settings = *state.settings;
   const bool blended = parameters.blendedPretransform;
+#if FIBREMSS_SSE_PRETRANSFORM
+  // The common case (Verlet, blended, a few bones) with the transforms packed once.
+  const size_t count = state.boneDeltas.size();
+  if (blended && !settings.blendWeight.empty() && !rotateVelocities && count <= kPackedBones) {
+    PackedTransform packed[kPackedBones];
+    for (size_t b = 0; b < count; ++b) packed[b] = packTransform(state.boneDeltas[b]);
+    for (uint32_t i : state.freeParticles)
+      pretransformPacked(settings, packed, count, i, state.positions[i], state.previous[i]);
+    return;
+  }
+#endif
   for (uint32_t i : state.freeParticles) {
     state.positions[i] =
         pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended);
@@ -105,7 +117,14 @@ void MuscleSystem::Impl::prepareWorkers() {
   active.reserve(slots);
   results.resize(slots);
   lastRound.resize(slots);
-  pairTasks.reserve(slots * (slots - std::min<size_t>(slots, 1)) / 2);
+  const size_t pairs = slots * (slots - std::min<size_t>(slots, 1)) / 2;
+  pairTasks.reserve(pairs);
+  lastPair.resize(slots);
+  if (pairCapacity < pairs) {
+    pairDone = std::make_unique<std::atomic<uint64_t>[]>(pairs);
+    pairCapacity = pairs;
+    pairStamp = 0;
+  }
 }
 
 void MuscleSystem::Impl::gatherContacts() {
@@ -158,9 +177,12 @@ btScalar MuscleSystem::Impl::timeStep() const {
   return std::max(dt, parameters.minTimeStep);
 }
 
-// Pairs of muscles whose bounds meet, in rounds where no muscle appears twice: a pair goes to
-// the round after the last one of either muscle, so every muscle meets its partners in
-// insertion order whatever the thread count (the pushes are summed in one fixed order).
+// Pairs of muscles whose bounds meet, listed by round (a pair goes to the round after the last
+// one of either muscle), each waiting only for the previous pair of each of its muscles: every
+// muscle meets its partners in insertion order whatever the thread count (the pushes are summed
+// in one fixed order), and no barrier holds a thread between rounds. The pool hands the pairs
+// out in listed order, so a pair's predecessors are already running or done: waiting for them
+// cannot deadlock.
 void MuscleSystem::Impl::collideMusclePairs() {
   pairTasks.clear();
   std::fill(lastRound.begin(), lastRound.end(), 0);
@@ -183,15 +205,21 @@ void MuscleSystem::Impl::collideMusclePairs() {
   // muscles, so sorting by round alone cannot reorder a muscle's pairs.
   std::sort(pairTasks.begin(), pairTasks.end(),
             [](const MusclePairTask& x, const MusclePairTask& y) { return x.round < y.round; });
-  for (size_t begin = 0; begin < pairTasks.size();) {
-    size_t end = begin;
-    while (end < pairTasks.size() && pairTasks[end].round == pairTasks[begin].round) ++end;
-    pool->run(end - begin, [&](size_t k, unsigned thread) {
-      const MusclePairTask& pair = pairTasks[begin + k];
-      collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].contacts);
-    });
-    begin = end;
+  std::fill(lastPair.begin(), lastPair.end(), kNoPair);
+  for (uint32_t k = 0; k < pairTasks.size(); ++k) {
+    MusclePairTask& pair = pairTasks[k];
+    pair.after[0] = std::exchange(lastPair[pair.a], k);
+    pair.after[1] = std::exchange(lastPair[pair.b], k);
   }
+  const uint64_t stamp = ++pairStamp;
+  pool->run(pairTasks.size(), [&](size_t k, unsigned thread) {
+    const MusclePairTask& pair = pairTasks[k];
+    for (uint32_t before : pair.after)
+      if (before != kNoPair) TaskPool::awaitValue(pairDone[before], stamp);
+    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].contacts);
+    pairDone[k].store(stamp, std::memory_order_release);
+    pairDone[k].notify_all();
+  });
 }
 
 void MuscleSystem::Impl::collide() {

@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "PreparationInternal.h"
+#include "PreparationReorder.h"
 #include "fibremss/Error.h"
 
 namespace fibremss {
@@ -283,6 +284,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
         return bones[static_cast<size_t>(bone)].distance->closest(p, limit).distance;
       });
   detail::bindSurface(muscle, particles, parameters.skinNeighbours);
+  detail::reorderParticles(muscle, detail::mortonOrder(muscle.restPositions));
   report.shortestSpring = muscle.springs.empty() ? 0 : muscle.springs.front().restLength;
   for (const Spring& spring : muscle.springs)
     report.shortestSpring = std::min(report.shortestSpring, spring.restLength);
@@ -354,7 +356,9 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
         "radii: " + std::to_string(shrink.muscleSpheresShrunk) + " of " +
         std::to_string(sphereCount) +
         " muscle spheres shrunk so that no two bodies overlap at rest (" +
-        std::to_string(shrink.muscleSpheresZeroed) + " to radius 0); " +
+        std::to_string(shrink.muscleSpheresZeroed) + " to radius 0, " +
+        std::to_string(shrink.muscleSpheresCapped) +
+        " capped at the sample spacing near another muscle); " +
         std::to_string(shrink.boneSpheresShrunk) +
         " bone spheres shrunk around muscle particles inside them");
 

@@ -72,12 +72,14 @@ void bindSurface(MuscleSettings& muscle, const KdTree& particles, int skinNeighb
 struct ShrinkReport {
   size_t muscleSpheresShrunk = 0;  ///< muscle spheres made smaller
   size_t muscleSpheresZeroed = 0;  ///< of these, shrunk to radius 0
+  size_t muscleSpheresCapped = 0;  ///< of these, capped at the spacing near another muscle
   size_t boneSpheresShrunk = 0;    ///< bone spheres that held a muscle particle's centre
 };
 
 /// Shrinks sphere radii until no sphere of one body overlaps a sphere of another body at rest
 /// (fixed particles are not tested against their own bone). Bone spheres shrink only when a
-/// muscle particle's centre lies inside them.
+/// muscle particle's centre lies inside them. Muscle spheres within their muscle's sample
+/// spacing of another muscle's sphere are first capped at that spacing.
 ShrinkReport shrinkRadii(std::vector<MuscleSettings>& muscles, std::vector<BoneSettings>& bones);
 
 /// Fraction of surface vertices inside some sphere of the muscle.

@@ -7,7 +7,8 @@
 
 namespace fibremss {
 
-/// Springs per block of the force pass (its scratch: MuscleState::springVectors/springFactors).
+/// Springs per block of the old two-pass force loop; only sizes the scratch that
+/// MuscleState::springVectors/springFactors still hold until their callers drop them.
 constexpr size_t kSpringBlock = 256;
 
 /// What one spring-force pass measured.
@@ -18,13 +19,20 @@ struct SpringForceResult {
 };
 
 /// F = k·(l − L0)·(x_b − x_a)/l on a, the opposite on b, at `positions` into `forces`
-/// (overwritten). Per block of kSpringBlock springs: their vectors (gather into vectorScratch),
-/// their force factors (factorScratch; SSE: lengths, square roots, divisions four at a time),
-/// then the scatter to the particles. Scratch spans hold min(springs, kSpringBlock) entries.
-/// Integrators that need forces at other positions (RK, implicit) call this with their buffers.
+/// (overwritten), in one pass over the springs (SSE: four springs at a time, exact square
+/// roots and divisions; the force on a summed in a register along the run of springs that share
+/// a). Integrators that need forces at other positions (RK, implicit) call this with their
+/// buffers.
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
-                               std::span<btVector3> forces, std::span<btVector3> vectorScratch,
-                               std::span<btScalar> factorScratch);
+                               std::span<btVector3> forces);
+
+/// The same; the scratch spans are no longer used (kept until the integrators' calls drop them).
+inline SpringForceResult springForces(const MuscleSettings& settings,
+                                      std::span<const btVector3> positions,
+                                      std::span<btVector3> forces, std::span<btVector3>,
+                                      std::span<btScalar>) {
+  return springForces(settings, positions, forces);
+}
 
 /// The muscle's spring forces at its positions, into muscle.forces.
 SpringForceResult springForces(MuscleState& muscle);

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 namespace fibremss {
@@ -34,13 +35,17 @@ class TaskPool {
   template <typename Task>
   void run(size_t count, Task&& task) {
     auto call = [](void* context, size_t index, unsigned thread) {
-      (*static_cast<Task*>(context))(index, thread);
+      (*static_cast<std::remove_reference_t<Task>*>(context))(index, thread);
     };
-    runErased(count, call, &task);
+    runErased(count, call, const_cast<void*>(static_cast<const void*>(&task)));
   }
 
   /// The thread count a `threads` setting means (0: hardware threads, at least 1).
   static unsigned resolve(int threads);
+
+  /// Waits until `value` reaches `target` (spins, then sleeps): for a task that must follow an
+  /// earlier-listed task of the same run, which sets the value and notifies when done.
+  static void awaitValue(const std::atomic<uint64_t>& value, uint64_t target);
 
  private:
   using Call = void (*)(void* context, size_t index, unsigned thread);

@@ -49,11 +49,14 @@ btScalar rungeKuttaLimit(int order, double lambda, double gamma, double start) {
 }  // namespace
 
 btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, btScalar mass,
-                             btScalar damping) {
+                             btScalar damping, bool centredDamping) {
   // a·dt² + b·dt − m·r ≤ 0 holds at dt = 0; its first positive root, in the form that stays
-  // accurate for a → 0 and a < 0 (damping outweighs the force): 2mr / (b + √(b² + 4a·mr)).
-  const btScalar a = force - damping * speed;
-  const btScalar b = mass * speed;
+  // accurate for a → 0 and a, b < 0 (damping outweighs the force): 2mr / (b + √(b² + 4a·mr)).
+  // Centred damping (Verlet): (1 + γ)·|Δx| ≤ (1 − γ)·v·dt + |F|·dt²/m with γ = c·dt/(2m), so
+  // half the damping enters a, and the (1 + γ) on the left adds −c·r/2 to b.
+  const btScalar dampingForce = centredDamping ? damping * speed / 2 : damping * speed;
+  const btScalar a = force - dampingForce;
+  const btScalar b = mass * speed - (centredDamping ? damping * radius / 2 : 0);
   const btScalar mr = mass * radius;
   const btScalar discriminant = b * b + 4 * a * mr;
   if (discriminant < 0) return kInfinity;  // a < 0 and the bound holds for every dt
@@ -64,12 +67,13 @@ btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, bt
 btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt) {
   const MuscleSettings& settings = *muscle.settings;
   const btScalar inversePreviousDt = previousDt > 0 ? 1 / previousDt : 0;
+  const bool centred = muscle.preparedFor == Integrator::Verlet;
   btScalar dt = muscle.stableTimeStep;
   for (uint32_t i : muscle.freeParticles) {
     const btScalar force = muscle.forces[i].length();
     const btScalar speed = (muscle.positions[i] - muscle.previous[i]).length() * inversePreviousDt;
     dt = std::min(dt, largestSafeTimeStep(force, speed, muscle.stepRadius[i], settings.particleMass,
-                                          settings.damping));
+                                          settings.damping, centred));
   }
   return dt;
 }
@@ -89,7 +93,8 @@ btScalar stableTimeStep(const MuscleSettings& settings, Integrator kind) {
   const double verletLimit =
       (-dampingRate + std::sqrt(dampingRate * dampingRate + 4 * lambda)) / lambda;
   switch (kind) {
-    case Integrator::Verlet:
+    case Integrator::Verlet:  // (1 + γ)z² − (2 − λdt²)z + (1 − γ): |roots| < 1 iff λdt² < 4
+      return static_cast<btScalar>(kStabilitySafety * 2 / std::sqrt(lambda));
     case Integrator::SemiImplicitEuler:
       return static_cast<btScalar>(kStabilitySafety * verletLimit);
     case Integrator::ExplicitEuler:

@@ -33,20 +33,32 @@ struct FemDefinition {
                                   ///< terms of the strain rate (0.1 s would be treacle)
   btScalar density = 1060;        ///< muscle density [kg/m³]; node mass = ρ·(adjacent volume)/4
   btScalar poseDuration = 0.07f;  ///< simulated time of one pose [s]
-  int substepsPerPose = 50;       ///< world steps per pose (dt = poseDuration / substeps: 1.4 ms
-                                  ///< per 70 ms pose; at 2.8 ms fusiform's reference exploded)
-  /// Voxels per muscle (6 tetrahedra each): 120 keeps the 13 poses of thigh13 within the
-  /// compare budget: Bullet recomputes every tetrahedron's rotation each substep (300 voxels,
-  /// 24 000 tetrahedra on thigh13, took ~16 s of CPU per pose).
-  TetMesherDefinition mesher{.targetCells = 120};
+  /// Bullet's deformable world applies the elastic forces explicitly (only the damping is
+  /// implicit), so a substep must keep ω·dt below ~2 for every node (ω² = the node's stiffness
+  /// K ≈ (λ+2μ)·Σ V·|∇N|² over its tetrahedra, divided by its mass). On thigh13 (E ≈ 216 kPa,
+  /// ν = 0.45) the stiffest nodes need dt ≈ 0.1 ms: at 120 voxels 50 substeps (1.4 ms) exploded
+  /// in the first moving pose, 200 in pose 11. Selective mass scaling: a free node whose ω·dt
+  /// passes stableOmegaDt gets the mass that brings it back (0: none); the poses are
+  /// quasi-static, where mass changes only the transient. thigh13 survives all 13 poses with
+  /// 80 voxels and 150 substeps (+133 % mass, FemScene::addedMassShare; ~35 s CPU) or 120 and
+  /// 200 (+76 %, ~68 s CPU, past the compare budget).
+  btScalar stableOmegaDt = 2;
+  int substepsPerPose = 150;  ///< world steps per pose (dt = poseDuration / substeps: 0.47 ms
+                              ///< per 70 ms pose)
+  /// Voxels per muscle (6 tetrahedra each), chosen with substepsPerPose for the compare budget.
+  TetMesherDefinition mesher{.targetCells = 80};
   /// Node contact with the bones' true triangle meshes: after every substep a node inside a
   /// bone (found within one voxel edge of its surface) or closer than contactMargin is put
   /// back at the margin and loses its velocity into the bone (frictionless). Nodes that start
   /// inside a bone (overlapping rest geometry) keep that overlap. Bullet's own SDF_RD
   /// node–face contact took minutes per pose against thigh13's bone meshes.
   bool boneContact = true;
-  btScalar contactMargin = 0;       ///< [m] kept between nodes and bones (0: on the surface)
-  bool muscleContact = false;       ///< VF_DD contact between muscles (boundary faces)
+  btScalar contactMargin = 0;  ///< [m] kept between nodes and bones (0: on the surface)
+  bool muscleContact = false;  ///< VF_DD contact between muscles (boundary faces)
+  /// Free nodes follow their bones each substep by FibreMSS's blended pre-transform (of their
+  /// nearest particle), as in the btSoftBody baseline; without it the pinned nodes alone drag
+  /// them and thigh13's first moving pose inverts tetrahedra within 7 substeps.
+  bool freeNodesFollowBones = true;
   btScalar attachmentDistance = 0;  ///< nodes this close to a fixed particle are pinned to its
                                     ///< bone [m]; 0: one voxel edge
   /// Bullet units per metre inside the reference's world (centimetres, as the btSoftBody
@@ -84,7 +96,8 @@ class FemScene {
   btSoftBody& body(size_t muscle);
   btDeformableMultiBodyDynamicsWorld& world();
   const FemDefinition& definition() const;
-  double youngsModulus() const;  ///< E used for all muscles [Pa]
+  double youngsModulus() const;   ///< E used for all muscles [Pa]
+  double addedMassShare() const;  ///< mass added by scaling / free nodes' mass (0.1: +10 %)
 
  private:
   struct Impl;

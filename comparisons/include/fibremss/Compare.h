@@ -64,6 +64,9 @@ RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
 RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                   const FemDefinition& definition, const MethodRunOptions& options = {});
 
+/// Poses both runs reached without failing (the first ones: a run stops at its first failure).
+int sharedPoses(const RunMetrics& a, const RunMetrics& b);
+
 /// Root-mean-square surface distance between two runs over the poses both reached (NaN when
 /// they share none or their surfaces differ in size).
 double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b);

@@ -70,7 +70,11 @@ struct FibreRunDetails {
   int rolledBackSteps = 0;           ///< steps the numerical guard rolled back
   int retries = 0;                   ///< attempts it repeated with a smaller dt, all steps
   std::vector<FrozenMuscle> frozen;  ///< muscles it froze, in order
-  std::vector<SoakSample> samples;   ///< every options.sampleEvery iterations
+  /// Steps after which a muscle was trapped between bones (StepStats::trappedMuscles > 0).
+  int trappedSteps = 0;
+  int firstTrappedStep = -1;        ///< the first of them (-1: none)
+  size_t trappedParticlesMax = 0;   ///< most particles still caught between bones after a step
+  std::vector<SoakSample> samples;  ///< every options.sampleEvery iterations
 };
 
 /// Runs the scene. Step s sets every bone to the scene's pose min(s, poseCount−1) (looping: s

@@ -31,6 +31,7 @@ struct RunMetrics {
   size_t boundaryParticles = 0;      ///< colliding particles
   size_t boneSpheres = 0;            ///< bone spheres (FibreMSS)
   int steps = 0;                     ///< simulation steps (poses) run
+  int poses = 0;                     ///< poses of the scene's motion (steps planned)
   long iterations = 0;               ///< solver iterations in total
   double msPerStep = kNone;          ///< median wall time of one step
   double msPerIteration = kNone;     ///< median wall time of one iteration
@@ -41,6 +42,8 @@ struct RunMetrics {
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
   double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
   double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
+  int rmsToFemPoses = 0;                ///< poses rmsToFemMm covers (both runs reached them intact)
+  int rmsToSelfReferencePoses = 0;      ///< poses rmsToSelfReferenceMm covers
   bool nan = false;                     ///< a NaN or inf appeared
   bool exploded = false;                ///< stability criteria violated
   int failedStep = -1;                  ///< step where it failed, -1 if none

@@ -38,6 +38,7 @@ enum class CellOutcome : uint8_t {
   Timeout,      ///< the run did not finish within its wall-time box
   Unavailable,  ///< the integrator is not implemented (yet)
   Error,        ///< anything else threw (message kept)
+  Interrupted,  ///< stopped by the user (StabilityOptions::cancel): no verdict
 };
 const char* toString(CellOutcome outcome);
 
@@ -127,9 +128,13 @@ struct StabilityMatrix {
   std::vector<StabilityCell> cells;     ///< case-major, then integrator, then factor
   std::vector<std::string> overrides;   ///< StabilityOptions::overrides
   double seconds = 0;                   ///< wall time of everything
+  bool interrupted = false;  ///< stopped by options.cancel: later cells (and steps) not run
 };
 
-/// Calibrates every integrator, then runs every case × integrator × factor.
+/// Calibrates every integrator, then runs every case × integrator × factor. When
+/// options.cancel turns true it stops after the running step: that cell is `interrupted`, no
+/// later probe or cell runs (integrators not calibrated yet get no stable step) and the matrix
+/// says `interrupted`.
 StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
                                    const StabilityOptions& options);
 

@@ -2,6 +2,7 @@
 // Fibres from a closed muscle surface and its attachment areas (issue 8): a harmonic field
 // inside the muscle (Laplace on a voxel grid, 0 at the origin area, 1 at the insertion area),
 // streamlines of its gradient traced from seeds spread over the origin area, resampled.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -9,15 +10,17 @@
 
 namespace fibremss {
 
-/// Where a muscle attaches: surface vertices near a bone, near landmark points, or (when
-/// neither is given) the muscle's extreme end along its main axis away from the other area.
+/// Where a muscle attaches: surface vertices near a bone, near landmark points, given by index,
+/// or (when none is given) the muscle's extreme end along its main axis away from the other
+/// area.
 struct AttachmentArea {
-  enum class Kind { Bone, Landmarks, FarEnd };
+  enum class Kind { Bone, Landmarks, Vertices, FarEnd };
   Kind kind = Kind::FarEnd;
   const TriangleMesh* bone = nullptr;   ///< Kind::Bone: the bone mesh (same frame, metres)
   btScalar distance = btScalar(0.004);  ///< Kind::Bone: vertices within this of the bone [m]
   std::vector<btVector3> landmarks;     ///< Kind::Landmarks: points [m]
   btScalar radius = btScalar(0.01);     ///< Kind::Landmarks: vertices within this of a point [m]
+  std::vector<uint32_t> vertices;       ///< Kind::Vertices: surface vertex indices
   double endFraction = 0.06;  ///< Kind::FarEnd: the end's depth as a fraction of the length
   btScalar endDepth = 0;      ///< Kind::FarEnd: the end's depth [m] (> 0: used instead of
                               ///< endFraction)
@@ -27,6 +30,12 @@ struct AttachmentArea {
     area.kind = Kind::Bone;
     area.bone = &mesh;
     area.distance = distance;
+    return area;
+  }
+  static AttachmentArea fromVertices(std::vector<uint32_t> indices) {
+    AttachmentArea area;
+    area.kind = Kind::Vertices;
+    area.vertices = std::move(indices);
     return area;
   }
   static AttachmentArea fromLandmarks(std::vector<btVector3> points, btScalar radius) {
@@ -46,8 +55,11 @@ struct FibreGenerationOptions {
   btScalar crossingTolerance = btScalar(5e-4);  ///< quality: segments closer than this cross [m]
   btScalar minSeparation = btScalar(1e-3);      ///< fibres closer than this to an earlier one are
                                                 ///< used only when seeds run out [m] (0: off)
-  btScalar insideTolerance = btScalar(0);       ///< a point farther outside than this is "outside";
-                                                ///< 0: a quarter voxel
+  /// Seeds spread over the muscle's widest cross-section (a level set of the field), each
+  /// traced back to the origin and on to the insertion; false: over the origin area.
+  bool sectionSeeds = true;
+  btScalar insideTolerance = btScalar(0);  ///< a point farther outside than this is "outside";
+                                           ///< 0: a quarter voxel
 };
 
 /// Quality figures of a generated fibre set.

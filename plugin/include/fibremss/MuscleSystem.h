@@ -64,6 +64,13 @@ struct StepStats {
   bool failedNan = false;     ///< that muscle had NaN/inf (else: exploded springs)
   size_t newlyFrozen = 0;     ///< muscles this step froze at their last good state
   size_t frozenMuscles = 0;   ///< muscles frozen in the system after this step
+
+  // Bones closing on a muscle (pinch): particles two bones press from opposite sides.
+  size_t trappedParticles = 0;  ///< such particles still caught in the last iteration
+  /// Muscles with trapped particles; springs such a muscle burst do not fail the step (unless it
+  /// has NaN or grew beyond twice its rest size): the bones tore it and no smaller dt opens the
+  /// gap, so the guard keeps that state.
+  size_t trappedMuscles = 0;
 };
 
 /// What debugDraw draws (bit flags).
