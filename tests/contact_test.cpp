@@ -195,27 +195,31 @@ TEST(Pinch, TheMuscleTheBladesShearIsReportedTrappedStaysFiniteAndEndsOutsideThe
   EXPECT_LE(run.lastSurfaceMm, 1.0);
 }
 
-/// Two plates of bone spheres (radius 2 mm, 1 mm apart: a face flat to 0.07 mm) above and below
-/// a 3 × 3 layer of free particles of radius 1 mm at y = 0.3 mm, closing in four steps to `gap`
-/// between their faces. Returns the system's last stats; `heights` gets the particles' y.
-StepStats closeVice(btScalar gap, std::vector<btScalar>& heights) {
+/// Two plates of bone spheres (radius 2 mm, 2 mm apart: a face flat to 0.27 mm; the lower one
+/// from x = −10 to 10 mm, the upper one to x = `topEnd` mm) above and below a 3 × 3 layer of free
+/// particles of radius 1 mm at x ∈ {−1, 1, 3} mm, z ∈ {−2, 0, 2} mm, y = 0.3 mm (each between two
+/// spheres of a plate along x), closing in four steps to `gap`
+/// between their faces. Returns the system's last stats; `positions` gets the particles.
+StepStats closeVice(btScalar gap, std::vector<btVector3>& positions, int topEnd = 10) {
   // The faces start 4 mm from the particles' plane (the bones' rest frame) and move in.
-  const btScalar sphere = 0.002, spacing = 0.001, start = 0.004;
-  std::vector<btVector3> centres;
-  for (int i = -10; i <= 10; ++i)
-    for (int k = -10; k <= 10; ++k)
-      centres.emplace_back(spacing * btScalar(i), start + sphere, spacing * btScalar(k));
-  std::vector<btVector3> lower = centres;
-  for (btVector3& c : lower) c.setY(-start - sphere);
-  const std::vector<btScalar> radii(centres.size(), sphere);
+  const btScalar sphere = 0.002, spacing = 0.002, start = 0.004;
+  std::vector<btVector3> centres, lower;
+  for (int i = -5; i <= 5; ++i)
+    for (int k = -5; k <= 5; ++k) {
+      if (spacing * btScalar(i) <= btScalar(0.001) * btScalar(topEnd))
+        centres.emplace_back(spacing * btScalar(i), start + sphere, spacing * btScalar(k));
+      lower.emplace_back(spacing * btScalar(i), -start - sphere, spacing * btScalar(k));
+    }
   std::vector<btVector3> particles;
   for (int i = -1; i <= 1; ++i)
     for (int k = -1; k <= 1; ++k)
-      particles.emplace_back(btScalar(0.002) * btScalar(i), btScalar(0.0003),
-                             btScalar(0.002) * btScalar(k));
+      particles.emplace_back(spacing * btScalar(i) + btScalar(0.001), btScalar(0.0003),
+                             spacing * btScalar(k));
   MuscleSystem system;  // the default configuration
-  const BoneHandle top = system.addBone(testing::makeBone(centres, radii));
-  const BoneHandle bottom = system.addBone(testing::makeBone(lower, radii));
+  const BoneHandle top =
+      system.addBone(testing::makeBone(centres, std::vector<btScalar>(centres.size(), sphere)));
+  const BoneHandle bottom =
+      system.addBone(testing::makeBone(lower, std::vector<btScalar>(lower.size(), sphere)));
   const MuscleHandle muscle =
       system.addMuscle(makeSpheres(particles, std::vector<btScalar>(particles.size(), 0.001)), {});
   for (int step = 1; step <= 6; ++step) {
@@ -224,35 +228,50 @@ StepStats closeVice(btScalar gap, std::vector<btScalar>& heights) {
     system.setBoneTransform(bottom, btTransform(btQuaternion::getIdentity(), {0, closed, 0}));
     system.step();
   }
-  heights.clear();
-  for (const btVector3& x : system.positions(muscle)) {
-    EXPECT_TRUE(std::isfinite(x.length2()));
-    heights.push_back(x.y());
-  }
+  positions.assign(system.positions(muscle).begin(), system.positions(muscle).end());
+  for (const btVector3& x : positions) EXPECT_TRUE(std::isfinite(x.length2()));
   return system.lastStep();
 }
 
 TEST(Pinch, AClosedViceReportsItsParticlesTrappedAndHoldsThemMidway) {
   // Closed to 1 mm, half a particle's diameter: no particle fits, none has a way out.
-  std::vector<btScalar> heights;
-  const StepStats stats = closeVice(0.001, heights);
+  std::vector<btVector3> positions;
+  const StepStats stats = closeVice(0.001, positions);
   EXPECT_FALSE(stats.nan);
   EXPECT_EQ(stats.frozenMuscles, 0u);
   EXPECT_EQ(stats.trappedMuscles, 1u);
-  EXPECT_EQ(stats.trappedParticles, heights.size());
+  EXPECT_EQ(stats.trappedParticles, positions.size());
   // Moved to equal overlaps with both plates. The whole sum of the two pushes would swap the
   // overlaps every iteration: the particles would jump between y = ±0.3 mm.
-  for (const btScalar y : heights) EXPECT_NEAR(y, 0, 1e-5);
+  for (const btVector3& x : positions) EXPECT_NEAR(x.y(), 0, 1e-5);
 }
 
 TEST(Pinch, AViceThatLeavesRoomPressesButTrapsNothing) {
-  // Closed to 2.2 mm, more than a diameter: the top plate reaches the particles (0.3 mm above
-  // the middle) and pushes them down, but there is room, so none is caught.
-  std::vector<btScalar> heights;
-  const StepStats stats = closeVice(0.0022, heights);
+  // Closed to 1.9 mm below the spheres' centres, 2.4 mm between two spheres where the particles
+  // sit: more than a diameter. The top plate reaches the particles (0.3 mm above the middle) and
+  // pushes them down, but there is room, so none is caught.
+  std::vector<btVector3> positions;
+  const StepStats stats = closeVice(0.0019, positions);
   EXPECT_EQ(stats.trappedMuscles, 0u);
   EXPECT_EQ(stats.trappedParticles, 0u);
-  for (const btScalar y : heights) EXPECT_LT(y, 0.00025f);
+  for (const btVector3& x : positions) EXPECT_LT(x.y(), 0.00025f);
+}
+
+TEST(Pinch, ParticlesAtTheEdgeOfAPlateAreSqueezedOutSideways) {
+  // The upper plate ends at x = 0 (its last spheres centred there). The particles at x = 1 mm are
+  // caught under its rounded edge, which pushes them towards +x, out of the vice; those at
+  // x = −1 mm lie between two of its spheres, pushed straight down, with no way out; those at
+  // x = 3 mm are beyond its reach.
+  std::vector<btVector3> positions;
+  const StepStats stats = closeVice(0.001, positions, 0);
+  EXPECT_EQ(stats.trappedMuscles, 1u);
+  EXPECT_EQ(stats.trappedParticles, 3u);
+  for (size_t p = 3; p < 6; ++p) {
+    // Clear of the upper plate: beyond its last spheres' reach (sphere + particle radius).
+    const btVector3 lastSphere(0, btScalar(0.0025), positions[p].z());
+    EXPECT_GE(positions[p].distance(lastSphere), btScalar(0.003 - 1e-6)) << p;
+    EXPECT_GT(positions[p].x(), btScalar(0.0015)) << p;
+  }
 }
 
 }  // namespace

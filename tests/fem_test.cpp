@@ -88,31 +88,30 @@ TEST(TetEmbedding, ReproducesPointsAndFollowsAffineMaps) {
   EXPECT_LT(rmsDistanceMm(out, expected), 1e-3);
 }
 
-/// A box muscle 60 × 20 × 20 mm along +x from a bone box on its −x side: 7 × 3 × 3 particles
-/// 10 mm apart, springs to all neighbours within 1.8 cells, the x = 0 layer fixed to the bone,
-/// each surface vertex skinned by its three nearest particles.
-PreparedScene rodScene() {
-  auto bone = std::make_shared<BoneSettings>();
-  bone->name = "bone";
-  bone->mesh = boxMesh(btVector3(-0.05f, -0.02f, -0.02f), btVector3(-0.001f, 0.02f, 0.02f));
+/// A box muscle 60 × 20 × 20 mm along +x from x = 0, shifted by `offset`: 7 × 3 × 3 particles
+/// 10 mm (x) and 8 mm (y, z) apart, springs to all neighbours within 1.8 cells, the x = 0 layer
+/// fixed to bone 0, each surface vertex skinned by its three nearest particles. Particle p is
+/// grid point (p · stride) mod 63 (stride coprime to 63): the same muscle in another node order.
+std::shared_ptr<MuscleSettings> rodMuscle(const btVector3& offset = btVector3(0, 0, 0),
+                                          uint32_t stride = 1) {
   auto muscle = std::make_shared<MuscleSettings>();
   MuscleSettings& m = *muscle;
   m.name = "rod";
-  m.restSurface = boxMesh(btVector3(0, -0.01f, -0.01f), btVector3(0.06f, 0.01f, 0.01f));
-  for (int i = 0; i < 7; ++i) {
-    for (int j = -1; j <= 1; ++j) {
-      for (int k = -1; k <= 1; ++k) {
-        m.restPositions.emplace_back(0.01f * i, 0.008f * j, 0.008f * k);
-        const bool fixed = i == 0;
-        const auto index = static_cast<uint32_t>(m.restPositions.size() - 1);
-        m.flags.push_back(fixed ? kFixed | kBoundary : kBoundary);
-        m.fixedBone.push_back(fixed ? 0 : -1);
-        m.nearestBone.push_back(0);
-        m.radii.push_back(0.004f);
-        m.boundaryParticles.push_back(index);
-        if (fixed) m.fixedParticles.push_back(index);
-      }
-    }
+  m.restSurface =
+      boxMesh(btVector3(0, -0.01f, -0.01f) + offset, btVector3(0.06f, 0.01f, 0.01f) + offset);
+  constexpr uint32_t kCount = 7 * 3 * 3;
+  for (uint32_t index = 0; index < kCount; ++index) {
+    const uint32_t grid = index * stride % kCount;
+    const int i = static_cast<int>(grid / 9), j = static_cast<int>(grid / 3 % 3) - 1,
+              k = static_cast<int>(grid % 3) - 1;
+    m.restPositions.push_back(btVector3(0.01f * i, 0.008f * j, 0.008f * k) + offset);
+    const bool fixed = i == 0;
+    m.flags.push_back(fixed ? kFixed | kBoundary : kBoundary);
+    m.fixedBone.push_back(fixed ? 0 : -1);
+    m.nearestBone.push_back(0);
+    m.radii.push_back(0.004f);
+    m.boundaryParticles.push_back(index);
+    if (fixed) m.fixedParticles.push_back(index);
   }
   m.particleMass = 1060 * 0.06f * 0.02f * 0.02f / static_cast<btScalar>(m.particleCount());
   m.damping = 0.05f;
@@ -134,9 +133,37 @@ PreparedScene rodScene() {
       m.skinWeights.push_back(btScalar(1) / 3);
     }
   }
+  return muscle;
+}
+
+/// The bone box on the −x side of the rods, wide enough for `rods` rods side by side.
+std::shared_ptr<BoneSettings> rodBone(int rods = 1) {
+  auto bone = std::make_shared<BoneSettings>();
+  bone->name = "bone";
+  bone->mesh = boxMesh(btVector3(-0.05f, -0.02f, -0.02f),
+                       btVector3(-0.001f, 0.02f + 0.03f * static_cast<btScalar>(rods - 1), 0.02f));
+  return bone;
+}
+
+/// One rod (rodMuscle) fixed to its bone.
+PreparedScene rodScene() {
   PreparedScene scene;
-  scene.bones.push_back(bone);
-  scene.muscles.push_back(muscle);
+  scene.bones.push_back(rodBone());
+  scene.muscles.push_back(rodMuscle());
+  return scene;
+}
+
+/// Three rods side by side along +y whose outer particle layers are `gap` apart (less than
+/// their spheres' 8 mm: they touch at rest, as the muscles of thigh13 do), each in another
+/// node order (strides 1, 62 = reversed, 29).
+PreparedScene touchingRodsScene(btScalar gap) {
+  PreparedScene scene;
+  scene.bones.push_back(rodBone(3));
+  const uint32_t strides[] = {1, 62, 29};
+  for (int r = 0; r < 3; ++r) {
+    scene.muscles.push_back(
+        rodMuscle(btVector3(0, (0.016f + gap) * static_cast<btScalar>(r), 0), strides[r]));
+  }
   return scene;
 }
 
@@ -301,6 +328,54 @@ TEST(SoftBodyScene, PinnedNodesMoveWithTheirBoneAndTheRestFollows) {
   const btVector3 tip = positions[m.particleCount() - 5];  // centre of the x = 60 mm layer
   EXPECT_GT(tip.y(), 0.002f);
   EXPECT_LT(springDeviationRatio(m.springs, positions), 0.1);
+}
+
+TEST(SoftBodyScene, MusclesTouchingAtRestStayAtRest) {
+  // Muscles closer at rest than their spheres' radii (thigh13: 0.6 mm apart, 2–4 mm radii):
+  // cluster contacts must not push them apart before anything moves (thigh13 exploded at
+  // pose 0, a link at 4.2×). Nothing moves, so every link keeps its rest length.
+  const PreparedScene scene = touchingRodsScene(0.002f);
+  const btTransform rest = btTransform::getIdentity();
+  SoftBodyScene soft(scene, {&rest, 1}, {.clustersPerMuscle = 4});
+  for (size_t m = 0; m < scene.muscles.size(); ++m) ASSERT_GT(soft.body(m).m_clusters.size(), 1);
+  for (int pose = 0; pose < 3; ++pose) soft.stepPose({&rest, 1});
+  for (size_t m = 0; m < scene.muscles.size(); ++m) {
+    const auto positions = soft.positions(m);
+    ASSERT_TRUE(finite(positions)) << "muscle " << m;
+    double worst = 0;  // largest relative change of a link's length
+    for (const Spring& spring : scene.muscles[m]->springs) {
+      const double length = positions[spring.a].distance(positions[spring.b]);
+      worst = std::max(worst, std::abs(length / spring.restLength - 1));
+    }
+    EXPECT_LT(worst, 0.01) << "muscle " << m;
+  }
+}
+
+TEST(SoftBodyScene, ClustersDoNotDependOnTheNodeOrder) {
+  // The rods of touchingRodsScene are one muscle numbered three ways: each must get the same
+  // clusters (as sets of rest positions relative to the rod).
+  const PreparedScene scene = touchingRodsScene(0.002f);
+  const btTransform rest = btTransform::getIdentity();
+  SoftBodyScene soft(scene, {&rest, 1}, {.clustersPerMuscle = 4});
+  // Node positions relative to the rod, in 0.1 mm (exact for the rods' 8 and 10 mm grid).
+  std::vector<std::vector<std::vector<std::array<long, 3>>>> clusters(scene.muscles.size());
+  for (size_t m = 0; m < scene.muscles.size(); ++m) {
+    const btSoftBody& body = soft.body(m);
+    const btVector3 origin = scene.muscles[m]->restSurface.vertices.front();
+    for (int c = 0; c < body.m_clusters.size(); ++c) {
+      auto& nodes = clusters[m].emplace_back();
+      const auto& members = body.m_clusters[c]->m_nodes;
+      for (int n = 0; n < members.size(); ++n) {
+        const btVector3 x = (members[n]->m_x / soft.definition().lengthScale - origin) * 1e4f;
+        nodes.push_back({std::lround(x.x()), std::lround(x.y()), std::lround(x.z())});
+      }
+      std::sort(nodes.begin(), nodes.end());
+    }
+    std::sort(clusters[m].begin(), clusters[m].end());
+  }
+  ASSERT_GT(clusters[0].size(), 1u);
+  EXPECT_EQ(clusters[1], clusters[0]);
+  EXPECT_EQ(clusters[2], clusters[0]);
 }
 
 }  // namespace

@@ -369,6 +369,7 @@ void readCollision(Fields& collision, double scale, SimulationParameters& parame
       scale);
   parameters.penetrationRecovery =
       collision.boolean("penetration_recovery", defaults.penetrationRecovery);
+  parameters.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
 }
 
 LoadedScene readScene(const Json& raw, const std::string& source, const fs::path& baseDir,

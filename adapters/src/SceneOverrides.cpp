@@ -54,6 +54,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"bone_collision", {Target::Section, "collision"}},
       {"distance_field_cell", {Target::Section, "collision"}},
       {"penetration_recovery", {Target::Section, "collision"}},
+      {"sliding_contacts", {Target::Section, "collision"}},
       {"muscle_bone", {Target::Section, "collision"}},
       {"frame_every", {Target::Section, "outputs"}},
       {"surfaces", {Target::Section, "outputs"}},

@@ -17,6 +17,13 @@ constexpr btScalar kOpposed = btScalar(-0.5);
 /// least this share of their lengths (an edge or a rounded end of a bone next to it).
 constexpr btScalar kWayOut = btScalar(0.05);
 
+/// `velocity` without its part into the unit push direction `normal`: no rebound, and what
+/// moves along the contact keeps moving (frictionless sliding).
+btVector3 withoutApproach(const btVector3& velocity, const btVector3& normal) {
+  const btScalar into = velocity.dot(normal);
+  return into < 0 ? velocity - normal * into : velocity;
+}
+
 void addPush(MuscleState& muscle, uint32_t i, const btVector3& push) {
   muscle.pushes[i] += push;
   ++muscle.pushCounts[i];
@@ -215,8 +222,9 @@ void forgetBoneSides(MuscleState& muscle) {
   std::fill(muscle.sideBones.begin(), muscle.sideBones.end(), -1);
 }
 
-void applyPushes(MuscleState& muscle, bool zeroVelocities) {
+void applyPushes(MuscleState& muscle, bool hasVelocities) {
   ++muscle.contactRound;
+  const bool sliding = !muscle.parameters || muscle.parameters->slidingContacts;
   size_t pinched = 0;
   for (uint32_t i : muscle.settings->boundaryParticles) {
     if (muscle.pushCounts[i] == 0) continue;
@@ -227,9 +235,18 @@ void applyPushes(MuscleState& muscle, bool zeroVelocities) {
       muscle.firstBonePushes[i].setZero();
       muscle.otherBonePushes[i].setZero();
     }
-    muscle.positions[i] += push;
-    muscle.previous[i] = muscle.positions[i];
-    if (zeroVelocities) muscle.velocities[i].setZero();
+    const btScalar depth = push.length();
+    if (sliding && depth > 0) {
+      const btVector3 normal = push / depth;
+      const btVector3 moved = withoutApproach(muscle.positions[i] - muscle.previous[i], normal);
+      muscle.positions[i] += push;
+      muscle.previous[i] = muscle.positions[i] - moved;
+      if (hasVelocities) muscle.velocities[i] = withoutApproach(muscle.velocities[i], normal);
+    } else {
+      muscle.positions[i] += push;
+      muscle.previous[i] = muscle.positions[i];
+      if (hasVelocities) muscle.velocities[i].setZero();
+    }
     muscle.pushes[i].setZero();
     muscle.pushCounts[i] = 0;
   }

@@ -69,10 +69,11 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneSta
 /// sides belong to positions that no longer exist).
 void forgetBoneSides(MuscleState& muscle);
 
-/// Moves every pushed particle by its accumulated push and zeroes its velocity
-/// (previous = position); clears the pushes. A particle two bones press from opposite sides
-/// (pinched: no room between them) is moved to equal overlaps and out sideways where the bones
-/// leave a way out; muscle.pinched counts such particles.
-void applyPushes(MuscleState& muscle, bool zeroVelocities);
+/// Moves every pushed particle by its accumulated push and removes its velocity into the push
+/// (SimulationParameters::slidingContacts; else all of it: previous = position, velocities
+/// zeroed when the integrator `hasVelocities`); clears the pushes. A particle two bones press from
+/// opposite sides (pinched: no room between them) is moved to equal overlaps and out sideways where
+/// the bones leave a way out; muscle.pinched counts such particles.
+void applyPushes(MuscleState& muscle, bool hasVelocities);
 
 }  // namespace fibremss

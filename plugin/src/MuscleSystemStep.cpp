@@ -241,10 +241,10 @@ void MuscleSystem::Impl::collide() {
   stats.timing.boneCd += millisecondsSince(start);
 
   start = Clock::now();
-  const bool zeroVelocities = integratorFor(parameters.integrator).usesVelocities();
+  const bool hasVelocities = integratorFor(parameters.integrator).usesVelocities();
   if (any)
-    forEachMuscle([zeroVelocities](MuscleState& state, uint32_t, unsigned) {
-      applyPushes(state, zeroVelocities);
+    forEachMuscle([hasVelocities](MuscleState& state, uint32_t, unsigned) {
+      applyPushes(state, hasVelocities);
     });
   stats.contacts = contacts.found;
   stats.candidates = contacts.candidates;

@@ -110,11 +110,15 @@ struct SimulationParameters {
   /// Seed 001 eq 1: a particle whose bone-distance direction flips (d·d′ < −0.75) between
   /// iterations has passed through the bone; push it back out on its previous side.
   bool penetrationRecovery = true;
+  /// Response keeps a pushed particle's velocity along the contact (frictionless sliding) and
+  /// removes only the part into the push; false: the thesis' x(t−dt) = x(t), which makes
+  /// contacts stick (muscles sliding past each other tear, scenes/json/REAL-ANATOMY.md).
+  bool slidingContacts = true;
 
   bool diagonalJacobian = false;    ///< implicit integrators: diagonal-only Jacobian (seed 002)
   btScalar solverTolerance = 1e-6;  ///< implicit integrators: CG relative residual
   int solverIterations = 50;        ///< implicit integrators: CG iteration cap
-  int constraintIterations = 4;     ///< PBD/XPBD: Gauss–Seidel passes per iteration
+  int constraintIterations = 4;     ///< PBD/XPBD: constraint passes per iteration (averaged Jacobi)
 
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap
