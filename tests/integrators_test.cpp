@@ -70,8 +70,6 @@ class Bench {
     state.previous = settings->restPositions;
     state.velocities.assign(n, btVector3(0, 0, 0));
     state.forces.assign(n, btVector3(0, 0, 0));
-    state.springVectors.resize(std::min(settings->springs.size(), kSpringBlock));
-    state.springFactors.resize(std::min(settings->springs.size(), kSpringBlock));
     for (uint32_t i = 0; i < n; ++i)
       if (!settings->isFixed(i)) state.freeParticles.push_back(i);
     parameters.solverTolerance = 1e-12;

@@ -2,9 +2,9 @@
 // Time integrators (method.md §4; docs/integrators.md), internal. One step of an integrator moves
 // the free particles of one muscle by dt from the spring forces already in state.forces (computed
 // at state.positions before dt was chosen); fixed particles are skipped. Every integrator leaves
-// x(t) in `previous`, so eq 5.1 and the collision response (which zeroes velocity by previous =
-// positions) work for all of them. Multi-stage (RK) and implicit ones evaluate forces at other
-// positions with springForces(settings, positions, forces, ...) (SpringForces.h) into buffers of
+// x(t) in `previous`, so eq 5.1 and the collision response (which removes velocity by moving
+// `previous`) work for all of them. Multi-stage (RK) and implicit ones evaluate forces at other
+// positions with springForces(settings, positions, forces) (SpringForces.h) into buffers of
 // their IntegratorWorkspace, made by prepare(); advance() never allocates.
 #include <LinearMath/btScalar.h>
 

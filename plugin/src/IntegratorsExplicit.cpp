@@ -117,8 +117,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
       stage.velocities[i] = v + a * firstOffset;
     }
     for (size_t s = 1; s < weights_.size(); ++s) {
-      springForces(settings, stage.positions, stage.forces, muscle.springVectors,
-                   muscle.springFactors);
+      springForces(settings, stage.positions, stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();
       const btScalar offset = last ? 0 : offsets_[s] * dt;

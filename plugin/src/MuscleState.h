@@ -47,16 +47,14 @@ struct MuscleState {
   std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
 
   // Particles, structure-of-arrays, size particleCount().
-  std::vector<btVector3> positions;      ///< x(t) [m]
-  std::vector<btVector3> previous;       ///< x(t−dt) [m]
-  std::vector<btVector3> velocities;     ///< for velocity-based integrators [m/s]
-  std::vector<btVector3> forces;         ///< spring forces of this iteration [N]
-  std::vector<btVector3> springVectors;  ///< x_b − x_a of a block of springs (scratch) [m]
-  std::vector<btScalar> springFactors;   ///< k·(l − L0)/l of a block of springs (scratch)
-  std::vector<btVector3> pushes;         ///< collision pushes accumulated this iteration [m]
-  std::vector<uint32_t> pushCounts;      ///< pairs that pushed each particle this iteration
-  std::vector<btScalar> stepRadius;      ///< r of eq 5.1: own radius, or the mean for inner ones
-  std::vector<uint32_t> freeParticles;   ///< indices of particles that are not fixed
+  std::vector<btVector3> positions;     ///< x(t) [m]
+  std::vector<btVector3> previous;      ///< x(t−dt) [m]
+  std::vector<btVector3> velocities;    ///< for velocity-based integrators [m/s]
+  std::vector<btVector3> forces;        ///< spring forces of this iteration [N]
+  std::vector<btVector3> pushes;        ///< collision pushes accumulated this iteration [m]
+  std::vector<uint32_t> pushCounts;     ///< pairs that pushed each particle this iteration
+  std::vector<btScalar> stepRadius;     ///< r of eq 5.1: own radius, or the mean for inner ones
+  std::vector<uint32_t> freeParticles;  ///< indices of particles that are not fixed
 
   /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
   /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).

@@ -107,8 +107,6 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->goodPrevious.resize(n);
   state->goodVelocities.resize(n);
   state->forces.assign(n, btVector3(0, 0, 0));
-  state->springVectors.resize(std::min(s.springs.size(), kSpringBlock));
-  state->springFactors.resize(std::min(s.springs.size(), kSpringBlock));
   state->pushes.assign(n, btVector3(0, 0, 0));
   state->pushCounts.assign(n, 0);
   state->pinchBones.assign(n, -1);

@@ -7,10 +7,6 @@
 
 namespace fibremss {
 
-/// Springs per block of the old two-pass force loop; only sizes the scratch that
-/// MuscleState::springVectors/springFactors still hold until their callers drop them.
-constexpr size_t kSpringBlock = 256;
-
 /// What one spring-force pass measured.
 struct SpringForceResult {
   double deviation = 0;      ///< Σ |l − L0| [m]
@@ -25,14 +21,6 @@ struct SpringForceResult {
 /// buffers.
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces);
-
-/// The same; the scratch spans are no longer used (kept until the integrators' calls drop them).
-inline SpringForceResult springForces(const MuscleSettings& settings,
-                                      std::span<const btVector3> positions,
-                                      std::span<btVector3> forces, std::span<btVector3>,
-                                      std::span<btScalar>) {
-  return springForces(settings, positions, forces);
-}
 
 /// The muscle's spring forces at its positions, into muscle.forces.
 SpringForceResult springForces(MuscleState& muscle);
