@@ -149,16 +149,22 @@ std::string bothTerminals(const std::string& stem, const std::string& body) {
 
 std::string speedVsErrorScript(const nlohmann::json& runs, const std::string& stem) {
   std::ostringstream data, body;
-  int points = 0;
+  std::vector<std::pair<double, std::string>> rows;  // ms per step → the data line
   bool partial = false;
   for (const auto& run : runs) {
     const double ms = number(run, "ms_per_step"), rms = number(run, "rms_to_fem_mm");
     if (!(ms > 0) || !(rms > 0)) continue;  // log axes; the FEM run itself has 0
     const std::string coverage = femCoverage(run);
-    data << ms << " " << rms << " " << quoted(runLabel(run) + coverage) << "\n";
-    ++points;
+    std::ostringstream line;
+    line << ms << " " << rms << " " << quoted(runLabel(run) + coverage) << "\n";
+    rows.emplace_back(ms, line.str());
     partial = partial || !coverage.empty();
   }
+  // Sorted by speed, so that labels alternating above and below keep neighbours apart.
+  std::stable_sort(rows.begin(), rows.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& row : rows) data << row.second;
+  const size_t points = rows.size();
   body << "set title 'Speed against error (one point per run; the FEM reference is the zero)'\n"
        << "set xlabel 'ms per step (median wall time, log)'\n"
        << "set ylabel 'RMS surface distance to FEM [mm] (log)'\n"
@@ -175,7 +181,10 @@ std::string speedVsErrorScript(const nlohmann::json& runs, const std::string& st
   } else {
     body << "set offsets graph 0.15, graph 0.15, graph 0.15, graph 0.15\n"
          << "plot $runs using 1:2 with points pt 7 ps 1.5 lc rgb '#1f77b4', "
-            "$runs using 1:2:3 with labels offset char 0,1.2 font ',9'\n";
+            "$runs using 1:2:(int($0) % 2 ? '' : stringcolumn(3)) with labels offset char 0,1.2 "
+            "font ',9', "
+            "$runs using 1:2:(int($0) % 2 ? stringcolumn(3) : '') with labels offset char 0,-1.2 "
+            "font ',9'\n";
   }
   return "$runs << EOD\n" + data.str() + "EOD\n" + bothTerminals(stem, body.str());
 }
