@@ -31,6 +31,15 @@ void* operator new(size_t size) {
   if (!block) throw std::bad_alloc();
   return block;
 }
+// The nothrow form too (std::stable_sort's temporary buffer uses it): its memory comes back
+// through the replaced delete, so a sanitizer's own nothrow new would mismatch with free().
+void* operator new(size_t size, const std::nothrow_t&) noexcept {
+  fibremss::testing::allocationCount += fibremss::testing::countingArmed ? 1 : 0;
+  return std::malloc(size == 0 ? 1 : size);
+}
+void operator delete(void* block, const std::nothrow_t&) noexcept {
+  fibremss::testing::releaseBlock(block);
+}
 void operator delete(void* block) noexcept {
   fibremss::testing::releaseBlock(block);
 }
