@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "Integrators.h"
+
 namespace fibremss {
 namespace {
 
@@ -224,7 +226,7 @@ void forgetBoneSides(MuscleState& muscle) {
 
 void applyPushes(MuscleState& muscle, bool hasVelocities) {
   ++muscle.contactRound;
-  const bool sliding = !muscle.parameters || muscle.parameters->slidingContacts;
+  const bool sliding = solverParameters(muscle).slidingContacts;
   size_t pinched = 0;
   for (uint32_t i : muscle.settings->boundaryParticles) {
     if (muscle.pushCounts[i] == 0) continue;
