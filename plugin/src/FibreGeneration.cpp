@@ -487,10 +487,8 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
         // Slide along the surface: pull back inside along the closest-point direction.
         const auto c = distance.closest(next);
         const btVector3 pulled = c.point + (c.point - next).normalized() * (h / 4);
-        if (distance.signedDistance(pulled) > 0 || nearestIn(target, next) < endTolerance) {
-          if (nearestIn(target, next) < endTolerance) break;
-          return 1;
-        }
+        if (nearestIn(target, next) < endTolerance) break;
+        if (distance.signedDistance(pulled) > 0) return 1;
         p = pulled;
       } else {
         p = next;
