@@ -185,17 +185,7 @@ void MuscleSystem::Impl::guardedStep() {
   const bool velocities = integratorFor(parameters.integrator).usesVelocities();
   const auto carryFrozen = [&](MuscleState& state) {
     resolveBones(state);
-    state.bonesMoving = false;
-    for (size_t b = 0; b < state.bones.size(); ++b) {
-      state.boneDeltas[b].setIdentity();
-      if (state.boneSlots[b] < 0) continue;
-      const BoneState& bone = *bones.states[state.boneSlots[b]];
-      if (bone.current == bone.goodLast) continue;
-      state.boneDeltas[b] = bone.current * bone.goodLast.inverse();
-      state.bonesMoving = true;
-    }
-    pretransform(state, velocities);
-    followFixed(state);
+    followBones(state, BoneMotion::SinceStepStart);
     // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
     ThreadScratch& thread = scratch.front();
     state.pinched = 0;

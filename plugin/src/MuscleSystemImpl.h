@@ -127,7 +127,11 @@ struct MuscleSystem::Impl {
   void pretransform(MuscleState& state, bool rotateVelocities) const;
   void followFixed(MuscleState& state) const;
   void moveBones(btScalar share, bool arrive);
-  void followBones(MuscleState& state) const;
+  /// The bone motion a muscle follows: this iteration's, or all of it since the step began (what
+  /// carries a frozen muscle, which skipped the iterations).
+  enum class BoneMotion { Iteration, SinceStepStart };
+  /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
+  void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
   btScalar timeStep() const;
   void collideMusclePairs();
   void collide();

@@ -153,17 +153,17 @@ void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
   }
 }
 
-// One muscle after its bones moved: their transforms and deltas, the pre-transform, the fixed
-// particles.
-void MuscleSystem::Impl::followBones(MuscleState& state) const {
+void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) const {
+  const bool sinceStart = motion == BoneMotion::SinceStepStart;
   state.bonesMoving = false;
   for (size_t b = 0; b < state.bones.size(); ++b) {
     state.boneDeltas[b].setIdentity();
     if (state.boneSlots[b] < 0) continue;
     const BoneState& bone = *bones.states[state.boneSlots[b]];
     state.boneTransforms[b] = bone.current;
-    if (bone.moving) state.boneDeltas[b] = bone.delta;
-    state.bonesMoving = state.bonesMoving || bone.moving;
+    if (sinceStart ? bone.current == bone.goodLast : !bone.moving) continue;
+    state.boneDeltas[b] = sinceStart ? bone.current * bone.goodLast.inverse() : bone.delta;
+    state.bonesMoving = true;
   }
   pretransform(state, integratorFor(parameters.integrator).usesVelocities());
   followFixed(state);
