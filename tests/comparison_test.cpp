@@ -271,6 +271,47 @@ TEST(CompareCommand, HipSweepWritesThePenetrationAgainstStepPlot) {
   EXPECT_NE(readFile(out / "report.md").find("penetration_vs_step.png"), std::string::npos);
 }
 
+TEST(CompareCommand, StatesTheRatioToBtSoftBodyWithTheThreadCounts) {
+  // FibreMSS on the one thread --threads asks for, btSoftBody on Bullet's one: report.md and
+  // summary.json state the ratio of the two runs' ms per step with both thread counts.
+  const fs::path out = scratch("softbody_ratio");
+  const std::string command = std::string(FIBREMSS_CLI) +
+                              " compare fusiform --set resolution=8 --threads 1 --methods "
+                              "fibremss,btsoftbody --out " +
+                              out.string() + " > " + (out.string() + ".log") + " 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << readFile(out.string() + ".log");
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
+  ASSERT_EQ(summary["runs"].size(), 2u);
+  const nlohmann::json &fibre = summary["runs"][0], &softBody = summary["runs"][1];
+  EXPECT_EQ(fibre["threads"], 1);
+  EXPECT_EQ(softBody["threads"], 1);
+  ASSERT_EQ(summary["btsoftbody_ratio"].size(), 1u);
+  const nlohmann::json& ratio = summary["btsoftbody_ratio"][0];
+  const double expected =
+      softBody["ms_per_step"].get<double>() / fibre["ms_per_step"].get<double>();
+  EXPECT_NEAR(ratio["ratio"].get<double>(), expected, 1e-9 * expected);
+  EXPECT_EQ(ratio["fibremss_threads"], 1);
+  EXPECT_EQ(ratio["btsoftbody_threads"], 1);
+  EXPECT_EQ(ratio["poses"], fibre["steps"]);
+  EXPECT_EQ(ratio["of"], fibre["poses"]);
+  // A time step: FibreMSS's iteration; btSoftBody's world substep, several per pose.
+  EXPECT_EQ(fibre["ms_per_time_step"], fibre["ms_per_iteration"]);
+  EXPECT_LT(softBody["ms_per_time_step"].get<double>(), softBody["ms_per_step"].get<double>());
+  EXPECT_GT(softBody["ms_per_time_step"].get<double>(), softBody["ms_per_iteration"].get<double>());
+  const double perTimeStep =
+      softBody["ms_per_time_step"].get<double>() / fibre["ms_per_time_step"].get<double>();
+  EXPECT_NEAR(ratio["time_step_ratio"].get<double>(), perTimeStep, 1e-9 * perTimeStep);
+  char line[240];
+  std::snprintf(line, sizeof line,
+                "FibreMSS (1 thread) vs btSoftBody (Bullet, 1 thread): %.1f× per simulated step "
+                "(one pose), %.1f× per time step (a FibreMSS iteration against a Bullet substep) "
+                "(fusiform, resolution 8, %d/%d poses)",
+                expected, perTimeStep, fibre["steps"].get<int>(), fibre["poses"].get<int>());
+  EXPECT_EQ(ratio["statement"], line);
+  EXPECT_NE(readFile(out / "report.md").find(std::string("- ") + line + "\n"), std::string::npos)
+      << readFile(out / "report.md");
+}
+
 TEST(CompareCommand, RejectsAnUnknownMethodWithExitCode2) {
   const fs::path out = scratch("bad_method");
   const std::string command = std::string(FIBREMSS_CLI) +
@@ -288,7 +329,7 @@ nlohmann::json madeSummary(double stepDeg, double msPerIteration, int resolution
   run.scene = "thigh13";
   run.method = "fibremss";
   run.msPerStep = 70 * msPerIteration;
-  run.msPerIteration = msPerIteration;
+  run.msPerIteration = run.msPerTimeStep = msPerIteration;
   run.timing = {10, 2, 4, 1, 0.5};
   run.maxPenetrationMm = stepDeg / 2;
   run.rmsToFemMm = 3;
@@ -379,6 +420,55 @@ TEST(MergeAndReport, FourResolutionsGiveTable1ColumnsInOrder) {
   EXPECT_NE(report.find("| bone CD | 2 / 30.03 (15×) | 2 / 37.43 (18.7×) | 2 / 56.03 (28×) | "
                         "2 / 67.10 (33.5×) |"),
             std::string::npos)
+      << report;
+}
+
+TEST(MergeAndReport, SaysWhichPosesTheBtSoftBodyRatioCovers) {
+  // btSoftBody exploded at step 3 of 13 at resolution 40: its median covers 4 poses, and the
+  // ratio says so in its own section and in the scaling table, with FibreMSS's threads.
+  nlohmann::json two = madeSummary(2, 1.5, 40), one = madeSummary(2, 2.5, 40);
+  two["runs"][0]["threads"] = 2;  // 105 ms per step
+  one["runs"][0]["method"] = "fibremss:threads=1";
+  one["runs"][0]["threads"] = 1;  // 175 ms per step
+  RunMetrics softBody;
+  softBody.scene = "thigh13";
+  softBody.method = "btsoftbody";
+  softBody.msPerStep = 2100;
+  softBody.msPerTimeStep = 210;  // 10 world substeps per pose
+  softBody.threads = 1;
+  softBody.steps = 4;
+  softBody.poses = 13;
+  softBody.exploded = true;
+  softBody.failedStep = 3;
+  nlohmann::json softBodyRun = toJson(softBody);
+  softBodyRun["resolution"] = 40;
+  for (nlohmann::json* run : {&two["runs"][0], &one["runs"][0]}) {
+    (*run)["steps"] = 13;
+    (*run)["poses"] = 13;
+  }
+  two["runs"].push_back(softBodyRun);
+  const nlohmann::json merged = mergeSummaries({two, one}, {"two", "one"});
+  ASSERT_EQ(merged["btsoftbody_ratio"].size(), 2u);
+  EXPECT_NEAR(merged["btsoftbody_ratio"][0]["ratio"].get<double>(), 20.0, 1e-9);
+  EXPECT_EQ(merged["btsoftbody_ratio"][0]["poses"], 4);
+  EXPECT_EQ(merged["btsoftbody_ratio"][0]["of"], 13);
+  const fs::path out = scratch("softbody_partial");
+  writeComparison(merged, out.string());
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("- FibreMSS (2 threads) vs btSoftBody (Bullet, 1 thread): 20.0× per "
+                        "simulated step (one pose), 140.0× per time step (a FibreMSS iteration "
+                        "against a Bullet substep) (thigh13, resolution 40, 4/13 poses: "
+                        "btsoftbody exploded (a link past 3×) at step 3; the ratio covers those "
+                        "poses only)"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("- FibreMSS (1 thread) vs btSoftBody (Bullet, 1 thread): 12.0×"),
+            std::string::npos)
+      << report;
+  // The scaling table: rows by threads, each with its own ratio and the poses it covers.
+  EXPECT_NE(report.find("| 2.1e+03 | 175 | 12.0× (4/13 poses) | 84× |"), std::string::npos)
+      << report;
+  EXPECT_NE(report.find("| 2.1e+03 | 105 | 20.0× (4/13 poses) | 140× |"), std::string::npos)
       << report;
 }
 

@@ -90,22 +90,20 @@ void freeNodeClusters(btSoftBody& body, int count) {
   body.updateClusters();
 }
 
-/// Spring indices ordered by the places of their ends in the fibre lists (fibre by fibre, along
-/// each), not by particle numbers. Bullet solves links Gauss–Seidel in this order: in
-/// preparation's Morton numbering a 0.13 mm link of thigh13's muscle 1 passed 3× at pose 6 (16
-/// or 24 iterations), in fibre order none passed 1.96× over the 13 poses.
-std::vector<uint32_t> linksInFibreOrder(const MuscleSettings& muscle) {
-  // Particles on no fibre sort last.
-  std::vector<uint32_t> place(muscle.particleCount(), UINT32_MAX);
-  for (uint32_t k = 0; k < muscle.fibreParticles.size(); ++k) place[muscle.fibreParticles[k]] = k;
-  const auto key = [&](uint32_t i) {
-    const uint32_t a = place[muscle.springs[i].a], b = place[muscle.springs[i].b];
-    return std::pair(std::min(a, b), std::max(a, b));
-  };
+/// Spring indices from the softest to the stiffest (FibreMSS's k = κ/L0; ties by index).
+/// Bullet solves links Gauss–Seidel in this order, and those solved last end each sweep
+/// satisfied. At the baseline's substep every link of thigh13 saturates (2k·dt²/m = 200 to
+/// 10 000, so m_kLST = 1 for all): Bullet weighs a 0.08 mm link like a 3 mm one that FibreMSS
+/// makes 40× softer, and unless it comes last the short link takes the stretch. In fibre
+/// order a 0.078 mm link of muscle 1 at resolution 40 grew by 0.04× per substep and passed 3×
+/// at pose 3, with every collision off too and with 32 iterations or 40 substeps alike; solved
+/// stiffest last, no link passed 1.5× over the 13 poses.
+std::vector<uint32_t> linksSoftestFirst(const MuscleSettings& muscle) {
   std::vector<uint32_t> order(muscle.springs.size());
   std::iota(order.begin(), order.end(), 0u);
-  std::stable_sort(order.begin(), order.end(),
-                   [&](uint32_t x, uint32_t y) { return key(x) < key(y); });
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
+    return muscle.springs[x].stiffness < muscle.springs[y].stiffness;
+  });
   return order;
 }
 
@@ -146,6 +144,15 @@ std::vector<double> restGaps(const PreparedScene& scene,
   return gaps;
 }
 
+/// The most particles on one fibre of the scene (its resolution).
+uint32_t particlesPerFibre(const PreparedScene& scene) {
+  uint32_t most = 0;
+  for (const auto& muscle : scene.muscles)
+    for (size_t f = 0; f < muscle->fibreCount(); ++f)
+      most = std::max(most, muscle->fibreOffsets[f + 1] - muscle->fibreOffsets[f]);
+  return most;
+}
+
 }  // namespace
 
 void skinSurface(const MuscleSettings& muscle, std::span<const btVector3> positions,
@@ -166,6 +173,14 @@ void skinSurface(const MuscleSettings& muscle, std::span<const btVector3> positi
     }
     out[v] = sum;
   }
+}
+
+int substepsFor(const PreparedScene& scene) {
+  return std::max(1, static_cast<int>((particlesPerFibre(scene) + 3) / 4));
+}
+
+int iterationsFor(const PreparedScene& scene) {
+  return std::max(1, static_cast<int>((2 * particlesPerFibre(scene) + 4) / 5));
 }
 
 std::vector<btVector3> posedParticles(const MuscleSettings& muscle,
@@ -262,7 +277,7 @@ struct SoftBodyScene::Impl {
       materials[level] = body.appendMaterial();
       materials[level]->m_kLST = static_cast<btScalar>(levelSum[level] / levelCount[level]);
     }
-    for (uint32_t i : linksInFibreOrder(s)) {
+    for (uint32_t i : linksSoftestFirst(s)) {
       body.appendLink(static_cast<int>(s.springs[i].a), static_cast<int>(s.springs[i].b),
                       materials[linkLevel[i]]);
     }
@@ -319,13 +334,16 @@ SoftBodyScene::SoftBodyScene(const PreparedScene& scene,
   if (!boneTransforms.empty() && boneTransforms.size() != scene.bones.size()) {
     throw std::invalid_argument("SoftBodyScene: bone transforms do not match the bones");
   }
-  if (definition.substepsPerPose < 1 || definition.poseDuration <= 0 ||
-      definition.lengthScale <= 0) {
+  if (definition.substepsPerPose < 0 || definition.positionIterations < 0 ||
+      definition.poseDuration <= 0 || definition.lengthScale <= 0) {
     throw std::invalid_argument(
-        "SoftBodyScene: substepsPerPose, poseDuration and lengthScale must be > 0");
+        "SoftBodyScene: substepsPerPose and positionIterations must be >= 0, poseDuration and "
+        "lengthScale > 0");
   }
   Impl& m = *impl_;
   m.definition = definition;
+  if (m.definition.substepsPerPose == 0) m.definition.substepsPerPose = substepsFor(scene);
+  if (m.definition.positionIterations == 0) m.definition.positionIterations = iterationsFor(scene);
   m.world->setGravity(btVector3(0, 0, 0));
   btSoftBodyWorldInfo& info = m.world->getWorldInfo();
   info.m_gravity.setZero();

@@ -122,14 +122,15 @@ void addCompareCommand(CLI::App& app) {
       ->check(CLI::NonNegativeNumber);
   command
       ->add_option("--softbody-substeps", args->options.softBody.substepsPerPose,
-                   "btSoftBody: world steps per pose")
+                   "btSoftBody: world steps per pose (0: the most particles on one fibre / 4)")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::NonNegativeNumber);
   command
       ->add_option("--softbody-iterations", args->options.softBody.positionIterations,
-                   "btSoftBody: position solver iterations per world step")
+                   "btSoftBody: position solver iterations per world step (0: the most "
+                   "particles on one fibre x 2/5)")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::NonNegativeNumber);
   command
       ->add_option("--method-budget", args->options.methodBudgetSeconds,
                    "Seconds of wall time per method; a method past it stops after its current "

@@ -232,7 +232,9 @@ same code (`Measures.h`):
 
 - **ms_per_step**: median wall time of one step (bones moved, solver run, surfaces made);
   **ms_per_iteration**: ms_per_step divided by the iterations of a step (FibreMSS: solver
-  iterations; btSoftBody: world substeps × position iterations; FEM: world substeps).
+  iterations; btSoftBody: world substeps × position iterations; FEM: world substeps);
+  **ms_per_time_step**: one step of simulated time dt (FibreMSS: an iteration; btSoftBody and
+  FEM: a world substep).
 - **max/mean_penetration_mm**: depth of the muscle surface vertices inside the bones' true
   triangle meshes (signed distance in each bone's rest frame), max over all steps; mean over
   the penetrating vertices of all steps.
@@ -254,10 +256,14 @@ Methods:
   simulated time per step.
 - **btsoftbody**: `btSoftBody` in a `btSoftRigidDynamicsWorld`: the same particles as nodes
   (same masses), the springs as links (stiffness mapped to `m_kLST` per link from k = κ/L0,
-  the substep and the iteration count), fixed particles pinned (mass 0) and moved with their
-  bones every substep, bones as kinematic bodies with `btBvhTriangleMeshShape` (SDF_RS),
-  soft–soft collision by clusters (CL_SS); run in centimetres because Bullet extrudes mesh
-  triangles by a fixed 0.06 units. The simulated time of a pose is FibreMSS's iterations × dt.
+  the substep and the iteration count; solved softest first), fixed particles pinned (mass 0)
+  and moved with their bones every substep, bones as kinematic bodies with
+  `btBvhTriangleMeshShape` (SDF_RS), soft–soft collision by clusters (CL_SS); run in
+  centimetres because Bullet extrudes mesh triangles by a fixed 0.06 units. Substeps and link
+  iterations grow with the particles per fibre, n: ⌈n/4⌉ × ⌈2n/5⌉ per pose (the run's
+  integrator says which), the cheapest counts that kept thigh13's links within [1/3, 3]× at
+  resolutions 20 and 40 (comparisons/README.md). One thread (Debian's Bullet has no task
+  scheduler). The simulated time of a pose is FibreMSS's iterations × dt.
 - **fem**: each muscle's surface voxelized and split into positively oriented tetrahedra,
   `btDeformableNeoHookeanForce` (E matched to the spring network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a
   `btDeformableMultiBodyDynamicsWorld` (elastic forces explicit, damping implicit; 200
@@ -316,6 +322,13 @@ std::string table1(const nlohmann::json& runs) {
   return out.str();
 }
 
+/// summary.json's "btsoftbody_ratio": every softBodyRatios entry.
+nlohmann::json softBodyRatioJson(const nlohmann::json& runs) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const SoftBodyRatio& ratio : softBodyRatios(runs)) list.push_back(ratio.toJson());
+  return list;
+}
+
 }  // namespace
 
 nlohmann::json machineJson() {
@@ -344,9 +357,11 @@ nlohmann::json summaryJson(const Comparison& comparison, const std::string& comm
                                                            : nlohmann::json(nullptr);
     runs.push_back(std::move(object));
   }
+  nlohmann::json ratios = softBodyRatioJson(runs);
   return {{"scene", comparison.scene},
           {"machine", machineJson()},
           {"command", command},
+          {"btsoftbody_ratio", std::move(ratios)},
           {"runs", std::move(runs)}};
 }
 
@@ -370,7 +385,11 @@ nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
   }
   std::string scene;
   for (const std::string& s : scenes) scene += (scene.empty() ? "" : ", ") + s;
-  return {{"scene", scene}, {"machine", machine}, {"command", commands}, {"runs", runs}};
+  return {{"scene", scene},
+          {"machine", machine},
+          {"command", commands},
+          {"btsoftbody_ratio", softBodyRatioJson(runs)},
+          {"runs", runs}};
 }
 
 nlohmann::json readSummary(const std::string& path) {
@@ -432,7 +451,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
         << " | " << failed << " | " << field(run, "peak_memory_mb") << " | "
         << field(run, "wall_seconds") << " |\n";
   }
-  out << "\n— : does not apply or was not measured (e.g. no FEM run to compare with).\n";
+  out << "\n— : does not apply or was not measured (e.g. no FEM run to compare with).\n"
+      << softBodyRatioReport(runs);
   const std::string coverageNote = femCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <thread>
 
 #include "fibremss/Compare.h"
 #include "fibremss/Error.h"
@@ -58,6 +59,7 @@ struct Simulated {
   std::vector<PairList> pairs;              ///< per muscle, indices into points(muscle)
   std::function<double()> springDeviation;  ///< at the end
   long iterationsPerStep = 1;               ///< for ms/iteration
+  long timeStepsPerStep = 1;                ///< world substeps per pose, for ms/time step
 };
 
 /// A run of `method` on the scene, named and not yet measured.
@@ -131,6 +133,7 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   }
   metrics.msPerStep = median(msPerStep);
   metrics.msPerIteration = metrics.msPerStep / static_cast<double>(sim.iterationsPerStep);
+  metrics.msPerTimeStep = metrics.msPerStep / static_cast<double>(sim.timeStepsPerStep);
   if (metrics.steps > 0 && !metrics.nan) {
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
@@ -155,6 +158,14 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   }
   metrics.peakMemoryMb = peakMemoryMb();
   metrics.wallSeconds = secondsSince(start);
+}
+
+/// Threads FibreMSS's solver runs with for `simulation` (its 0: the machine's hardware
+/// threads, as TaskPool resolves it).
+int solverThreads(const SimulationParameters& simulation) {
+  return simulation.threads > 0
+             ? simulation.threads
+             : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
 std::vector<std::string> split(const std::string& text, char separator) {
@@ -195,8 +206,16 @@ double poseDuration(const SimulationParameters& simulation) {
 RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
                        const SoftBodyDefinition& definition, const MethodRunOptions& options) {
   const auto start = Clock::now();
-  RunMetrics metrics = namedRun(scene, "btsoftbody", "btSoftBody position solver");
   SoftBodyScene sim(prepared, posesAt(scene, 0), definition);
+  const SoftBodyDefinition& used = sim.definition();
+  char integrator[200];
+  std::snprintf(integrator, sizeof integrator,
+                "btSoftBody position solver (%d substeps × %d link iterations per pose, links "
+                "softest first, %d clusters per muscle × %d iterations)",
+                used.substepsPerPose, used.positionIterations, used.clustersPerMuscle,
+                used.clusterIterations);
+  RunMetrics metrics = namedRun(scene, "btsoftbody", integrator);
+  metrics.threads = 1;  // Debian's Bullet steps soft bodies on the calling thread only
   metrics.particles = sim.nodeCount();
   metrics.springs = sim.linkCount();
   for (const auto& muscle : prepared.muscles)
@@ -228,8 +247,8 @@ RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
     }
     return restLengths > 0 ? deviation / restLengths : RunMetrics::kNone;
   };
-  simulated.iterationsPerStep =
-      static_cast<long>(definition.substepsPerPose) * definition.positionIterations;
+  simulated.iterationsPerStep = static_cast<long>(used.substepsPerPose) * used.positionIterations;
+  simulated.timeStepsPerStep = used.substepsPerPose;
   runPoses(scene, prepared, simulated, options, start, metrics);
   return metrics;
 }
@@ -244,6 +263,7 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                 "%d substeps per pose, mass scaling +%.0f %%)",
                 definition.substepsPerPose, 100 * sim.addedMassShare());
   RunMetrics metrics = namedRun(scene, "fem", integrator);
+  metrics.threads = 1;
   metrics.particles = sim.nodeCount();
   metrics.springs = sim.tetrahedronCount();
 
@@ -269,7 +289,7 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
   simulated.points = [&](size_t m) { return sim.nodePositions(m); };
   simulated.springDeviation = [] { return RunMetrics::kNone; };  // not a spring model
-  simulated.iterationsPerStep = definition.substepsPerPose;
+  simulated.iterationsPerStep = simulated.timeStepsPerStep = definition.substepsPerPose;
   runPoses(scene, prepared, simulated, options, start, metrics);
   return metrics;
 }
@@ -375,6 +395,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     };
     if (spec.family == "fibremss" && spec.overrides.empty()) {
       runs.push_back(runFibreMSS(scene, prepared, fibreOptions));
+      runs.back().threads = solverThreads(scene.simulation);
     } else if (spec.family == "fibremss") {
       std::vector<std::string> all = overrides;
       all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
@@ -382,6 +403,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       const PreparedScene variantPrepared =
           prepareScene(variant.bones, variant.muscles, variant.simulation.seed);
       runs.push_back(runFibreMSS(variant, variantPrepared, fibreOptions));
+      runs.back().threads = solverThreads(variant.simulation);
     } else if (spec.family == "self-reference") {
       LoadedScene reference = scene;
       const int f = std::max(1, options.selfReferenceFactor);
@@ -389,6 +411,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       reference.simulation.minTimeStep /= static_cast<btScalar>(f);
       reference.simulation.iterations *= f;
       runs.push_back(runFibreMSS(reference, prepared, fibreOptions));
+      runs.back().threads = solverThreads(reference.simulation);
     } else if (spec.family == "btsoftbody") {
       SoftBodyDefinition definition = options.softBody;
       definition.poseDuration = static_cast<btScalar>(duration);

@@ -395,7 +395,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     if (restLengthSum != 0) metrics.springDeviationRatio = deviation / restLengthSum;
   }
   metrics.msPerStep = median(msPerStep);
-  metrics.msPerIteration = median(msPerIteration);
+  metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
   metrics.timing = {medianOrZero(mss), medianOrZero(muscleCd), medianOrZero(boneCd),
                     medianOrZero(response), medianOrZero(output)};
   if (details) {

@@ -29,8 +29,10 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"steps", m.steps},
       {"poses", m.poses},
       {"iterations", m.iterations},
+      {"threads", m.threads},
       {"ms_per_step", number(m.msPerStep)},
       {"ms_per_iteration", number(m.msPerIteration)},
+      {"ms_per_time_step", number(m.msPerTimeStep)},
       {"timing",
        {{"mss", m.timing.mss},
         {"muscle_cd", m.timing.muscleCd},
@@ -66,8 +68,10 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.steps = o.value("steps", m.steps);
   m.poses = o.value("poses", m.poses);
   m.iterations = o.value("iterations", m.iterations);
+  m.threads = o.value("threads", m.threads);
   m.msPerStep = numberOr(o, "ms_per_step", m.msPerStep);
   m.msPerIteration = numberOr(o, "ms_per_iteration", m.msPerIteration);
+  m.msPerTimeStep = numberOr(o, "ms_per_time_step", m.msPerTimeStep);
   if (auto t = o.find("timing"); t != o.end() && t->is_object()) {
     m.timing.mss = numberOr(*t, "mss", 0);
     m.timing.muscleCd = numberOr(*t, "muscle_cd", 0);

@@ -23,6 +23,9 @@ namespace fibremss {
 /// mass m/2). btSoftBody's position solver applies m_kLST = s of the error per iteration, so
 /// after n = positionIterations iterations (1−s)ⁿ of it is left: s = 1 − (1 − f)^(1/n).
 /// Links are grouped into `stiffnessLevels` materials (s rounded to the level's centre).
+/// At thigh13's substeps every link saturates (f = 200–10 000: m_kLST = 1 for all), so Bullet
+/// weighs a 0.08 mm link like a 3 mm one; links are solved from the softest to the stiffest
+/// spring so that the stiffest end each Gauss–Seidel sweep satisfied (SoftBodyBuilder.cpp).
 /// Damping: btSoftBody's kDP removes that fraction of node velocity per step. FibreMSS's c·dt/m
 /// came to 6–26 on thigh13 before clamping to 1: it zeroed every node's velocity each step.
 /// Free nodes follow their bones each substep by FibreMSS's blended pre-transform; without it
@@ -31,10 +34,11 @@ namespace fibremss {
 /// Collision margin of a muscle: the mean radius of its spheres, at most half its rest gap to
 /// the nearest other muscle, so that muscles touching at rest are not pushed apart.
 struct SoftBodyDefinition {
-  int substepsPerPose = 20;          ///< world steps per pose; bones and pins interpolated
+  int substepsPerPose = 0;           ///< world steps per pose (bones and pins interpolated);
+                                     ///< 0: substepsFor(scene)
   btScalar poseDuration = 0.07f;     ///< simulated time of one pose [s]
-  int positionIterations = 16;       ///< m_cfg.piterations (links, per world step); with 4, links
-                                     ///< of thigh13 stretched past 3× under its motion alone
+  int positionIterations = 0;        ///< m_cfg.piterations (links, per world step);
+                                     ///< 0: iterationsFor(scene)
   int clusterIterations = 2;         ///< m_cfg.citerations (cluster contacts, per world step)
   btScalar velocityDamping = 0.1f;   ///< m_cfg.kDP: share of node velocity removed per step
   bool freeNodesFollowBones = true;  ///< move free nodes by their bones' motion each substep
@@ -51,6 +55,22 @@ struct SoftBodyDefinition {
   /// (100) it is ±0.6 mm. Inputs and outputs stay in metres.
   btScalar lengthScale = 100;
 };
+
+/// The baseline's default world steps per pose: the most particles on one fibre of the scene
+/// (its resolution) / 4, rounded up, so that a substep moves the bones by the same share of
+/// the particle spacing at every resolution.
+/// Chosen as the cheapest measured counts with which thigh13 (13 poses, collisions on) runs
+/// every pose with each link within [1/3, 3]× its rest length and its surface at most 1 mm
+/// inside a bone, at resolutions 20 and 40: 5 substeps × 8 iterations at 20 (links within
+/// 0.50–1.53×, 0.66 mm; 3 substeps or fewer fold a link below 0.11×, 4 iterations leave
+/// 1.49 mm), 10 × 16 at 40 (0.60–1.55×; 5 substeps fold a link to 0.03–0.09×, 8 iterations
+/// to 0.04×; 20 × 8, also within, costs more). comparisons/README.md has the grid.
+int substepsFor(const PreparedScene& scene);
+
+/// The baseline's default link iterations per substep: the most particles on one fibre × 2/5,
+/// rounded up. A Gauss–Seidel sweep carries a pinned end's correction about one link along a
+/// fibre, so the sweeps a substep needs grow with the particles on it (see substepsFor).
+int iterationsFor(const PreparedScene& scene);
 
 /// Deformed surface vertices of a muscle from its particle positions (method.md §7): every
 /// skin particle j carries the vertex's rest offset rotated with the particle's nearest bone,
@@ -74,7 +94,7 @@ class SoftBodyScene {
   SoftBodyScene& operator=(const SoftBodyScene&) = delete;
 
   /// One pose: bones move from their current transforms to `targets` over the substeps,
-  /// pinned nodes follow them, the world steps `substepsPerPose` times.
+  /// pinned nodes follow them, the world steps definition().substepsPerPose times.
   void stepPose(std::span<const btTransform> targets);
 
   size_t muscleCount() const;
@@ -87,6 +107,7 @@ class SoftBodyScene {
   std::span<const btTransform> boneTransforms() const;
   btSoftBody& body(size_t muscle);    ///< in Bullet units (definition().lengthScale per metre)
   btSoftRigidDynamicsWorld& world();  ///< in Bullet units
+  /// As given, with substepsPerPose and positionIterations 0 resolved for the scene.
   const SoftBodyDefinition& definition() const;
 
  private:

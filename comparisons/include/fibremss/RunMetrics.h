@@ -23,22 +23,26 @@ struct PartTiming {
 struct RunMetrics {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
 
-  std::string scene;                 ///< scene name
-  std::string method;                ///< "fibremss", "btsoftbody", "fem", "fibremss:<variant>", ...
-  std::string integrator;            ///< integrator name where it applies
-  size_t particles = 0;              ///< particles / nodes
-  size_t springs = 0;                ///< springs / links / tetrahedra
-  size_t boundaryParticles = 0;      ///< colliding particles
-  size_t boneSpheres = 0;            ///< bone spheres (FibreMSS)
-  int steps = 0;                     ///< simulation steps (poses) run
-  int poses = 0;                     ///< poses of the scene's motion (steps planned)
-  long iterations = 0;               ///< solver iterations in total
-  double msPerStep = kNone;          ///< median wall time of one step
-  double msPerIteration = kNone;     ///< median wall time of one iteration
-  PartTiming timing;                 ///< per-part breakdown (FibreMSS)
-  double maxPenetrationMm = kNone;   ///< surface vertices into bones' true meshes
-  double meanPenetrationMm = kNone;  ///< mean over penetrating vertices
-  double volumeChangePct = kNone;    ///< final muscle volume against rest
+  std::string scene;              ///< scene name
+  std::string method;             ///< "fibremss", "btsoftbody", "fem", "fibremss:<variant>", ...
+  std::string integrator;         ///< integrator name where it applies
+  size_t particles = 0;           ///< particles / nodes
+  size_t springs = 0;             ///< springs / links / tetrahedra
+  size_t boundaryParticles = 0;   ///< colliding particles
+  size_t boneSpheres = 0;         ///< bone spheres (FibreMSS)
+  int steps = 0;                  ///< simulation steps (poses) run
+  int poses = 0;                  ///< poses of the scene's motion (steps planned)
+  long iterations = 0;            ///< solver iterations in total
+  int threads = 0;                ///< threads the method computed with (0: not recorded)
+  double msPerStep = kNone;       ///< median wall time of one step
+  double msPerIteration = kNone;  ///< median wall time of one iteration
+  /// Median wall time of one time step: a FibreMSS iteration (one integration step of dt), a
+  /// Bullet world substep (btSoftBody, FEM).
+  double msPerTimeStep = kNone;
+  PartTiming timing;                    ///< per-part breakdown (FibreMSS)
+  double maxPenetrationMm = kNone;      ///< surface vertices into bones' true meshes
+  double meanPenetrationMm = kNone;     ///< mean over penetrating vertices
+  double volumeChangePct = kNone;       ///< final muscle volume against rest
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
   double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
   double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
