@@ -14,9 +14,9 @@ namespace fibremss::bench {
 enum class Part {
   SpringForces,       ///< spring forces and the adaptive dt bound of every muscle
   Integration,        ///< the integrator's advance of every muscle
-  TreeRefit,          ///< refit of every muscle tree
-  MuscleMusclePairs,  ///< narrow phase of every pair of muscles
-  MuscleBonePairs,    ///< narrow phase of every muscle against every bone
+  TreeRefit,          ///< refitTree of every muscle (a refit only past the skin)
+  MuscleMusclePairs,  ///< every pair of muscles (their candidate lists while they hold)
+  MuscleBonePairs,    ///< every muscle against every bone (lists while they hold)
   Response,           ///< pushes applied to every muscle
 };
 constexpr Part kParts[] = {Part::SpringForces,      Part::Integration,     Part::TreeRefit,

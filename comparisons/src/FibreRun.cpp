@@ -280,6 +280,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   FibreRunDetails guard;  // what the numerical guard did, and the soak samples
   std::vector<bool> reportedFrozen(muscles.size(), false);
   double sampleSolverMs = 0;
+  size_t candidateOverflows = 0;  // StepStats::candidateOverflows over the run
   long sampleIterations = 0;
   for (int s = 0; s < steps; ++s) {
     if (options.cancel && options.cancel->load()) {
@@ -327,6 +328,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     output.push_back(stats.timing.output / iterations);
     measureMsPerStep.push_back(measureMs);
 
+    candidateOverflows += stats.candidateOverflows;
     // The guard's verdict: a frozen muscle or a failure left in place (Report) ends the run.
     guard.rolledBackSteps += stats.rolledBack ? 1 : 0;
     guard.retries += stats.retries;
@@ -377,6 +379,11 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     if (frames && (s % frameEvery == 0 || s == steps - 1))
       frames->write(s, system, muscles, prepared, boneTransforms);
   }
+  if (candidateOverflows > 0)
+    std::fprintf(stderr,
+                 "note: collision candidate lists overflowed %zu time(s): those pairs were "
+                 "traversed directly (same contacts, slower)\n",
+                 candidateOverflows);
 
   if (metrics.steps > 0 && !metrics.nan) {
     metrics.maxPenetrationMm = penetration.maxMm;

@@ -146,54 +146,184 @@ void collideWithField(MuscleState& muscle, const BoneState& bone, MuscleBoneStac
   }
 }
 
+/// Whether spheres around snapshots `a` and `b` whose radii and reaches add up to `reach` may
+/// overlap before either leaves its reach: the fat spheres overlap (a relative 1e-4 more
+/// covers the rounding; AABBs alone would list about twice as many pairs).
+bool mayMeet(const btVector3& a, const btVector3& b, btScalar reach) {
+  reach *= btScalar(1.0001);
+  return (a - b).length2() < reach * reach;
+}
+
+/// Exact test of particle i of `a` against particle j of `b` (not both fixed), pushes and log.
+void testMusclePair(MuscleState& a, MuscleState& b, uint32_t i, uint32_t j, ContactLog& log) {
+  ++log.candidates;
+  const MuscleSettings& sa = *a.settings;
+  const MuscleSettings& sb = *b.settings;
+  const bool fixedA = sa.isFixed(i);
+  const bool fixedB = sb.isFixed(j);
+  btVector3 direction;
+  btScalar depth;
+  if (!sphereOverlap(a.positions[i], sa.radii[i], b.positions[j], sb.radii[j], direction, depth))
+    return;
+  const btScalar shareA = fixedA ? 0 : (fixedB ? 1 : btScalar(0.5));
+  const btScalar shareB = 1 - shareA;
+  if (shareA > 0) addPush(a, i, direction * (depth * shareA));
+  if (shareB > 0) addPush(b, j, direction * (-depth * shareB));
+  log.add(a.positions[i], b.positions[j]);
+}
+
+/// Exact test of free particle i of the muscle against the bone's sphere, push and log.
+void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere,
+                  ContactLog& log) {
+  ++log.candidates;
+  const btVector3& centre = bone.tree.centre(static_cast<int32_t>(sphere));
+  btVector3 direction;
+  btScalar depth;
+  if (!sphereOverlap(muscle.positions[i], muscle.settings->radii[i], centre,
+                     bone.settings->sphereRadii[sphere], direction, depth))
+    return;
+  addBonePush(muscle, i, bone.slot, direction * depth);
+  log.add(muscle.positions[i], centre);
+}
+
+/// Leaf pairs of two muscle trees (not both particles fixed): listed when `list` is given,
+/// tested when `log` is.
 class MuscleMusclePairs final : public btDbvt::ICollide {
  public:
-  MuscleMusclePairs(MuscleState& a, MuscleState& b, ContactLog& log) : a_(a), b_(b), log_(log) {}
+  MuscleMusclePairs(MuscleState& a, MuscleState& b, CandidateList* list, ContactLog* log)
+      : a_(a), b_(b), list_(list), log_(log) {}
   using btDbvt::ICollide::Process;
   void Process(const btDbvtNode* leafA, const btDbvtNode* leafB) override {
-    ++log_.candidates;
     const uint32_t i = static_cast<uint32_t>(leafA->dataAsInt);
     const uint32_t j = static_cast<uint32_t>(leafB->dataAsInt);
-    const MuscleSettings& sa = *a_.settings;
-    const MuscleSettings& sb = *b_.settings;
-    const bool fixedA = sa.isFixed(i);
-    const bool fixedB = sb.isFixed(j);
-    if (fixedA && fixedB) return;
-    btVector3 direction;
-    btScalar depth;
-    if (!sphereOverlap(a_.positions[i], sa.radii[i], b_.positions[j], sb.radii[j], direction,
-                       depth))
-      return;
-    const btScalar shareA = fixedA ? 0 : (fixedB ? 1 : btScalar(0.5));
-    const btScalar shareB = 1 - shareA;
-    if (shareA > 0) addPush(a_, i, direction * (depth * shareA));
-    if (shareB > 0) addPush(b_, j, direction * (-depth * shareB));
-    log_.add(a_.positions[i], b_.positions[j]);
+    if (a_.settings->isFixed(i) && b_.settings->isFixed(j)) return;
+    const btScalar reach = a_.settings->radii[i] + b_.settings->radii[j];
+    if (list_ &&
+        mayMeet(a_.treeSnapshot[i], b_.treeSnapshot[j], reach + a_.treeReach + b_.treeReach))
+      list_->add(i, j);
+    if (log_) testMusclePair(a_, b_, i, j, *log_);
   }
 
  private:
   MuscleState& a_;
   MuscleState& b_;
-  ContactLog& log_;
+  CandidateList* list_;
+  ContactLog* log_;
 };
+
+/// Traverses two muscle trees with `pairs` (nothing when their roots are apart).
+void traverseMuscles(MuscleState& a, MuscleState& b, MuscleMusclePairs& pairs) {
+  if (!a.tree.root() || !b.tree.root()) return;
+  if (!Intersect(a.tree.root()->volume, b.tree.root()->volume)) return;
+  collideTrees(a.tree, a.tree.root(), b.tree.root(), pairs);
+}
+
+/// Calls onPair(particle, sphere) for every free boundary particle whose leaf bounds overlap a
+/// bone sphere's.
+template <typename OnPair>
+void forBonePairs(MuscleBoneStack& stack, const MuscleState& muscle, const BoneState& bone,
+                  OnPair&& onPair) {
+  const MuscleSettings& settings = *muscle.settings;
+  collideWithBone(stack, muscle.tree.root(), bone.tree,
+                  [&](const btDbvtNode* leaf, int32_t sphere) {
+                    const uint32_t i = static_cast<uint32_t>(leaf->dataAsInt);
+                    if (!settings.isFixed(i)) onPair(i, static_cast<uint32_t>(sphere));
+                  });
+}
+
+/// mayMeet for particle i of the muscle and a sphere of the bone (placed: it holds still).
+bool mayMeetBone(const MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere) {
+  return mayMeet(muscle.treeSnapshot[i], bone.tree.centre(static_cast<int32_t>(sphere)),
+                 muscle.settings->radii[i] + bone.settings->sphereRadii[sphere] + muscle.treeReach);
+}
+
+/// A list with room for `pairs` pairs found when the bodies are added and the slack for
+/// `particles` boundary particles (kListSlack).
+CandidateList sizedList(size_t pairs, size_t particles) {
+  CandidateList list;
+  list.pairs.resize(kListSlack * pairs + particles / 2);
+  return list;
+}
 
 }  // namespace
 
-void refitTree(MuscleState& muscle) {
+void buildTree(MuscleState& muscle) {
   const MuscleSettings& settings = *muscle.settings;
-  muscle.tree.refit(settings.boundaryParticles, muscle.positions, settings.radii);
+  muscle.treeSkin = kTreeSkin * muscle.meanRadius;
+  muscle.treeReach = muscle.treeSkin / 2;
+  muscle.treeSnapshot = muscle.positions;
+  muscle.tree.build(settings.boundaryParticles, muscle.positions, settings.radii, muscle.treeReach);
+}
+
+bool refitTree(MuscleState& muscle) {
+  const MuscleSettings& settings = *muscle.settings;
+  const std::vector<uint32_t>& boundary = settings.boundaryParticles;
+  const btScalar half = muscle.treeSkin / 2;
+  btScalar margin = half;
+  if (muscle.treeReach > 0) {
+    // One pass that stops at the first particle out of its skin.
+    const btScalar reach2 = muscle.treeReach * muscle.treeReach;
+    size_t k = 0;
+    while (k < boundary.size() &&
+           (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2() <= reach2)
+      ++k;
+    if (k == boundary.size()) return muscle.refitStreak = false;
+    // Out in two iterations running, or the first one out already past the whole skin:
+    // moving faster than a skin pays for (bones moving), so tight bounds, refit every
+    // iteration, until it slows down.
+    const btScalar moved2 =
+        (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2();
+    if (muscle.refitStreak || moved2 > 4 * half * half) margin = 0;
+  } else if (muscle.treeMotion > half * half) {
+    margin = 0;  // still moving more than the skin holds in one iteration
+  }
+  muscle.treeReach = margin;
+  muscle.treeMotion =
+      muscle.tree.refit(boundary, muscle.positions, settings.radii, margin, muscle.treeSnapshot);
+  return muscle.refitStreak = true;
 }
 
 void rebuildTree(MuscleState& muscle) {
   const MuscleSettings& settings = *muscle.settings;
-  muscle.tree.rebuild(settings.boundaryParticles, muscle.positions, settings.radii);
+  const std::vector<uint32_t>& boundary = settings.boundaryParticles;
+  for (uint32_t i : boundary) muscle.treeSnapshot[i] = muscle.positions[i];
+  muscle.treeReach = muscle.treeSkin / 2;
+  muscle.refitStreak = false;
+  muscle.tree.rebuild(boundary, muscle.positions, settings.radii, muscle.treeReach);
+}
+
+CandidateList muscleList(MuscleState& a, MuscleState& b) {
+  CandidateList counter;
+  MuscleMusclePairs pairs(a, b, &counter, nullptr);
+  traverseMuscles(a, b, pairs);
+  return sizedList(counter.count, std::min(a.settings->boundaryParticles.size(),
+                                           b.settings->boundaryParticles.size()));
+}
+
+CandidateList boneList(const MuscleState& muscle, const BoneState& bone) {
+  if (bone.field) return {};
+  size_t count = 0;
+  MuscleBoneStack stack;
+  forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
+    count += mayMeetBone(muscle, bone, i, sphere) ? 1 : 0;
+  });
+  return sizedList(count, muscle.settings->boundaryParticles.size());
 }
 
 void collideMuscles(MuscleState& a, MuscleState& b, ContactLog& log) {
-  if (!a.tree.root() || !b.tree.root()) return;
-  if (!Intersect(a.tree.root()->volume, b.tree.root()->volume)) return;
-  MuscleMusclePairs pairs(a, b, log);
-  collideTrees(a.tree, a.tree.root(), b.tree.root(), pairs);
+  CandidateList* list = b.slot < a.muscleLists.size() ? &a.muscleLists[b.slot] : nullptr;
+  const uint64_t keyA = a.tree.epoch(), keyB = b.tree.epoch();
+  if (list && list->holds(keyA, keyB)) {
+    for (size_t k = 0; k < list->count; ++k)
+      testMusclePair(a, b, list->pairs[k].first, list->pairs[k].second, log);
+    return;
+  }
+  // A tight tree (moving faster than its skin) is refit next iteration: nothing to list for.
+  if (a.treeReach == 0 || b.treeReach == 0) list = nullptr;
+  if (list) list->start(keyA, keyB);
+  MuscleMusclePairs pairs(a, b, list, &log);
+  traverseMuscles(a, b, pairs);
+  if (list && !list->finish()) ++a.candidateOverflows;
 }
 
 void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
@@ -202,22 +332,21 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneSta
     collideWithField(muscle, bone, stack, log);
     return;
   }
-  const MuscleSettings& settings = *muscle.settings;
-  const std::vector<btScalar>& boneRadii = bone.settings->sphereRadii;
-  collideWithBone(stack, muscle.tree.root(), bone.tree,
-                  [&](const btDbvtNode* leaf, int32_t sphere) {
-                    ++log.candidates;
-                    const uint32_t i = static_cast<uint32_t>(leaf->dataAsInt);
-                    if (settings.isFixed(i)) return;
-                    const btVector3& centre = bone.tree.centre(sphere);
-                    btVector3 direction;
-                    btScalar depth;
-                    if (!sphereOverlap(muscle.positions[i], settings.radii[i], centre,
-                                       boneRadii[sphere], direction, depth))
-                      return;
-                    addBonePush(muscle, i, bone.slot, direction * depth);
-                    log.add(muscle.positions[i], centre);
-                  });
+  CandidateList* list =
+      bone.slot < muscle.boneLists.size() ? &muscle.boneLists[bone.slot] : nullptr;
+  const uint64_t muscleKey = muscle.tree.epoch(), boneKey = bone.tree.placement();
+  if (list && list->holds(muscleKey, boneKey)) {
+    for (size_t k = 0; k < list->count; ++k)
+      testBonePair(muscle, bone, list->pairs[k].first, list->pairs[k].second, log);
+    return;
+  }
+  if (muscle.treeReach == 0) list = nullptr;
+  if (list) list->start(muscleKey, boneKey);
+  forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
+    if (list && mayMeetBone(muscle, bone, i, sphere)) list->add(i, sphere);
+    testBonePair(muscle, bone, i, sphere, log);
+  });
+  if (list && !list->finish()) ++muscle.candidateOverflows;
 }
 
 void forgetBoneSides(MuscleState& muscle) {

@@ -5,12 +5,14 @@
 namespace fibremss {
 
 void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                       std::span<const btScalar> radii) {
+                       std::span<const btScalar> radii, btScalar margin) {
+  ++epoch_;
   tree_.clear();
   leaves_.clear();
   leaves_.reserve(indices.size());
   for (uint32_t index : indices) {
-    btDbvtNode* leaf = tree_.insert(btDbvtVolume::FromCR(centres[index], radii[index]), nullptr);
+    btDbvtNode* leaf =
+        tree_.insert(btDbvtVolume::FromCR(centres[index], radii[index] + margin), nullptr);
     leaf->dataAsInt = static_cast<int>(index);
     leaves_.push_back(leaf);
   }
@@ -23,18 +25,32 @@ void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVect
   tree_.m_stkStack.resize(btDbvt::DOUBLE_STACKSIZE);
 }
 
-void SphereTree::refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                       std::span<const btScalar> radii) {
-  for (size_t k = 0; k < leaves_.size(); ++k)
-    leaves_[k]->volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]]);
+btScalar SphereTree::refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+                           std::span<const btScalar> radii, btScalar margin,
+                           std::span<btVector3> snapshot) {
+  ++epoch_;
+  btScalar moved2 = 0;
+  if (snapshot.empty()) {
+    for (size_t k = 0; k < leaves_.size(); ++k)
+      leaves_[k]->volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]] + margin);
+  } else {
+    for (size_t k = 0; k < leaves_.size(); ++k) {
+      const uint32_t i = indices[k];
+      leaves_[k]->volume = btDbvtVolume::FromCR(centres[i], radii[i] + margin);
+      moved2 = std::max(moved2, (centres[i] - snapshot[i]).length2());
+      snapshot[i] = centres[i];
+    }
+  }
   for (btDbvtNode* node : inner_)
     Merge(node->childs[0]->volume, node->childs[1]->volume, node->volume);
+  return moved2;
 }
 
 void SphereTree::rebuild(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                         std::span<const btScalar> radii) {
+                         std::span<const btScalar> radii, btScalar margin) {
+  ++epoch_;
   for (size_t k = 0; k < leaves_.size(); ++k) {
-    btDbvtVolume volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]]);
+    btDbvtVolume volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]] + margin);
     tree_.update(leaves_[k], volume);  // remove and insert: reuses the freed node
   }
   orderInnerNodes();
@@ -124,6 +140,7 @@ void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const b
 
 void BoneSphereTree::place(const btTransform& boneToWorld, std::span<const btVector3> centres,
                            std::span<const btScalar> radii) {
+  ++placement_;
   for (size_t k = 0; k < centres.size(); ++k) centres_[k] = boneToWorld * centres[k];
   for (size_t n = nodes_.size(); n-- > 0;) {
     const Node& node = nodes_[n];

@@ -12,10 +12,11 @@
 namespace fibremss {
 
 /// One btDbvt over spheres; leaf k holds the sphere `indices[k]` given to build(). Refit keeps the
-/// topology (method.md §6: refit every iteration, rebuild only when asked): a leaf's bounds
-/// are its sphere's, an inner node's the union of its children's, recomputed bottom-up in O(n).
-/// Re-inserting moved leaves (btDbvt::update with a velocity margin) was measured 2–3× slower at
-/// thigh13: while bones move, most spheres leave their fattened bounds every iteration.
+/// topology (method.md §6: rebuild only when asked): a leaf's bounds are its sphere's grown by
+/// `margin` (the Verlet skin of refitTree: a tree refit only when a sphere left its fat bounds),
+/// an inner node's the union of its children's, recomputed bottom-up in O(n). Re-inserting moved
+/// leaves one by one (btDbvt::update with a velocity margin) was measured 2–3× slower at thigh13:
+/// while bones move, most spheres leave their fattened bounds every iteration.
 class SphereTree {
  public:
   SphereTree() = default;
@@ -24,17 +25,22 @@ class SphereTree {
 
   /// Inserts one leaf per listed sphere and optimises the tree top-down. Allocates.
   void build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-             std::span<const btScalar> radii);
-  /// Tight bounds for the spheres' current centres, same topology. No allocation.
-  void refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-             std::span<const btScalar> radii);
+             std::span<const btScalar> radii, btScalar margin = 0);
+  /// Bounds for the spheres' current centres grown by `margin`, same topology. With a
+  /// `snapshot` (indexed like `centres`), also returns the largest squared distance of a centre
+  /// from its snapshot and replaces the snapshot by the centres (in the same pass). No allocation.
+  btScalar refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+                 std::span<const btScalar> radii, btScalar margin = 0,
+                 std::span<btVector3> snapshot = {});
   /// Re-inserts every leaf at its sphere (the thesis' rebuild each step): a new topology fitted
   /// to the current shape. No allocation.
   void rebuild(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-               std::span<const btScalar> radii);
+               std::span<const btScalar> radii, btScalar margin = 0);
 
   const btDbvtNode* root() const { return tree_.m_root; }
   size_t leafCount() const { return leaves_.size(); }
+  /// Counts build, refit and rebuild calls: lists of leaf pairs hold while it is unchanged.
+  uint64_t epoch() const { return epoch_; }
   /// The Bullet tree (its persistent traversal stack is reused by collideTrees()).
   btDbvt& tree() { return tree_; }
 
@@ -42,6 +48,7 @@ class SphereTree {
   /// Lists the inner nodes children-first into inner_.
   void orderInnerNodes();
 
+  uint64_t epoch_ = 0;                ///< see epoch()
   btDbvt tree_;                       ///< the Bullet tree
   std::vector<btDbvtNode*> leaves_;   ///< leaf of the k-th sphere, owned by tree_
   std::vector<btDbvtNode*> inner_;    ///< inner nodes, every child before its parent
@@ -77,11 +84,57 @@ class BoneSphereTree {
   const btDbvtVolume& bounds(int32_t n) const { return bounds_[n]; }
   /// Sphere centres in world coordinates as of the last place().
   const btVector3& centre(int32_t sphere) const { return centres_[sphere]; }
+  /// Counts place() calls: lists of leaf pairs with this bone hold while it is unchanged.
+  uint64_t placement() const { return placement_; }
 
  private:
+  uint64_t placement_ = 0;            ///< see placement()
   std::vector<Node> nodes_;           ///< node 0 is the root
   std::vector<btDbvtVolume> bounds_;  ///< world bounds per node
   std::vector<btVector3> centres_;    ///< world sphere centres
+};
+
+/// A leaf pair of two bodies: the sphere index in the first body and in the second.
+struct CandidatePair {
+  uint32_t first;   ///< sphere (particle) index in the first body
+  uint32_t second;  ///< sphere index in the second body (a particle or a bone sphere)
+};
+
+/// The leaf pairs of two bodies whose spheres grown by their reach overlapped when it was
+/// listed, reused while both keys it was listed for (SphereTree::epoch, BoneSphereTree::placement)
+/// hold: with fat leaves (refitTree's skin) it holds every pair of spheres that can overlap
+/// until then. Capacity is
+/// fixed when the bodies are added (no allocation in a step); a listing that does not fit is
+/// dropped, and the pair is traversed directly until the keys change.
+struct CandidateList {
+  std::vector<CandidatePair> pairs;  ///< capacity entries, allocated when the bodies are added
+  size_t count = 0;                  ///< entries listed
+  uint64_t firstKey = 0;             ///< first body's key when listed
+  uint64_t secondKey = 0;            ///< second body's key when listed
+  bool valid = false;                ///< pairs[0, count) are every candidate for the keys
+
+  /// Listed (and complete) for these keys.
+  bool holds(uint64_t first, uint64_t second) const {
+    return valid && firstKey == first && secondKey == second;
+  }
+  /// Starts a listing for the keys (invalid until finish()).
+  void start(uint64_t first, uint64_t second) {
+    valid = false;
+    count = 0;
+    firstKey = first;
+    secondKey = second;
+  }
+  /// Appends a pair while room is left; counts it anyway (count > capacity: overflowed).
+  void add(uint32_t first, uint32_t second) {
+    if (count < pairs.size()) pairs[count] = {first, second};
+    ++count;
+  }
+  /// Ends a listing: valid when everything fitted; returns false when it overflowed.
+  bool finish() {
+    valid = count <= pairs.size();
+    if (!valid) count = 0;
+    return valid;
+  }
 };
 
 /// A muscle tree node paired with a bone tree node, on the traversal stack.

@@ -75,7 +75,20 @@ struct MuscleState {
   btScalar stableTimeStep = 0;  ///< largest dt for which damped Verlet stays stable [s]
   btScalar meanRadius = 0;      ///< mean boundary radius [m]
   double restLengthSum = 0;     ///< Σ L0 over the springs [m]
-  SphereTree tree;              ///< boundary particle spheres, world frame, refit each iteration
+  SphereTree tree;              ///< boundary particle spheres, world frame (refitTree)
+  uint32_t slot = 0;            ///< the muscle's slot in its system (names it in pair lists)
+  /// Verlet skin of the tree (refitTree): leaves are the spheres around treeSnapshot grown by
+  /// treeReach, treeSkin/2 or 0 while the muscle moves faster than that every iteration [m].
+  btScalar treeSkin = 0;
+  btScalar treeReach = 0;    ///< what the tree's leaves are grown by; refit past it [m]
+  bool refitStreak = false;  ///< the last refitTree call refitted
+  btScalar treeMotion = 0;   ///< largest squared move of a particle between the last refits [m²]
+  /// Positions of the boundary particles at the last refit (by particle; inner ones unused) [m].
+  std::vector<btVector3> treeSnapshot;
+  /// Leaf pairs with each later-added muscle, by its slot (collideMuscles; empty when unlisted).
+  std::vector<CandidateList> muscleLists;
+  std::vector<CandidateList> boneLists;  ///< leaf pairs with each bone, by bone slot
+  size_t candidateOverflows = 0;  ///< listings that overflowed since the step last summed them
 
   std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
   std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)

@@ -39,7 +39,14 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
         kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
   state->settings = std::move(settings);
   const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
+  const BoneState& bone = *impl_->bones.states[handle.index];
   impl_->bones.states[handle.index]->slot = handle.index;
+  // Every muscle's candidate list for this slot starts over (a reused slot's is another bone's).
+  for (uint32_t slot : impl_->muscles.order) {
+    MuscleState& muscle = *impl_->muscles.states[slot];
+    muscle.boneLists.resize(impl_->bones.states.size());
+    muscle.boneLists[handle.index] = boneList(muscle, bone);
+  }
   return handle;
 }
 
@@ -153,7 +160,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       state->previous[i] = state->positions[i];
     }
   }
-  state->tree.build(s.boundaryParticles, state->positions, s.radii);
+  buildTree(*state);
   state->parameters = &impl_->parameters;
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
@@ -166,7 +173,21 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   for (uint32_t slot : impl_->muscles.order)
     boundaryTotal += impl_->muscles.states[slot]->settings->boundaryParticles.size();
   impl_->contacts.ends.resize(std::max(impl_->contacts.ends.size(), 4 * boundaryTotal));
+  MuscleState& added = *state;
   const MuscleHandle handle = impl_->muscles.add<MuscleHandle>(std::move(state));
+  added.slot = handle.index;
+  // Candidate lists, sized from the pairs at the placed positions: with every bone, and every
+  // earlier muscle with this one (a reused slot's lists were another muscle's).
+  added.boneLists.resize(impl_->bones.states.size());
+  for (uint32_t slot : impl_->bones.order)
+    added.boneLists[slot] = boneList(added, *impl_->bones.states[slot]);
+  added.muscleLists.resize(impl_->muscles.states.size());
+  for (uint32_t slot : impl_->muscles.order) {
+    MuscleState& earlier = *impl_->muscles.states[slot];
+    if (&earlier == &added) continue;
+    earlier.muscleLists.resize(impl_->muscles.states.size());
+    earlier.muscleLists[added.slot] = muscleList(earlier, added);
+  }
   impl_->prepareWorkers();  // threads and their scratch start here, not in step()
   return handle;
 }

@@ -4,9 +4,9 @@
 // pre-transform: a blend of the two bones of a muscle spanning a joint, or the nearest bone's
 // as in the thesis; x and x(t−dt) alike, split like the bones so that muscles and bones stay in
 // step) and fixed particles are set to T·rest. Then per iteration: spring forces → dt (eq 5.1 or
-// fixed) → integration → tree refit → muscle–muscle and muscle–bone pairs → response. The thesis
-// mode (rebuildEveryStep) instead jumps the bones, restarts particles from rest moved by their
-// pre-transform, and rebuilds the trees. Output: deformed surfaces.
+// fixed) → integration → tree refit (only past the skin) → muscle–muscle and muscle–bone pairs →
+// response. The thesis mode (rebuildEveryStep) instead jumps the bones, restarts particles from
+// rest moved by their pre-transform, and rebuilds the trees. Output: deformed surfaces.
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 
 #include <algorithm>
@@ -248,6 +248,8 @@ void MuscleSystem::Impl::collide() {
     });
   stats.contacts = contacts.found;
   stats.candidates = contacts.candidates;
+  for (uint32_t slot : muscles.order)
+    stats.candidateOverflows += std::exchange(muscles.states[slot]->candidateOverflows, 0);
   stats.timing.response += millisecondsSince(start);
 }
 

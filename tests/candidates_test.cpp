@@ -1,0 +1,193 @@
+// The Verlet skin of the collision (CollisionPairs.h: refitTree, collideMuscles,
+// collideMuscleBone): fat leaves refit only when a particle leaves its skin, and candidate lists
+// reused while both trees and the bone hold must give exactly the contacts of tight trees
+// refit and traversed every iteration — whatever moved the particles, and when a list overflows.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+#include "../plugin/src/CollisionPairs.h"
+#include "../plugin/src/MuscleSystemAccess.h"
+#include "fibremss/MuscleSystem.h"
+#include "support/GridMuscle.h"
+#include "support/ThighSteps.h"
+
+namespace fibremss {
+namespace {
+
+/// Makes every muscle of the system use tight trees (skin 0): refit whenever a particle moved,
+/// traversed every iteration, nothing listed — the collision without the skin.
+void withoutSkin(MuscleSystem& system) {
+  MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
+  for (uint32_t slot : impl.muscles.order) {
+    impl.muscles.states[slot]->treeSkin = 0;
+    impl.muscles.states[slot]->treeReach = 0;
+  }
+}
+
+/// Leaves every candidate list room for one pair (each listing overflows and falls back).
+void withTinyLists(MuscleSystem& system) {
+  MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
+  for (uint32_t slot : impl.muscles.order) {
+    MuscleState& state = *impl.muscles.states[slot];
+    for (auto* lists : {&state.muscleLists, &state.boneLists})
+      for (CandidateList& list : *lists) {
+        list.pairs = std::vector<CandidatePair>(1);
+        list.valid = false;
+      }
+  }
+}
+
+/// Tree refits (epochs) summed over the muscles.
+uint64_t refits(MuscleSystem& system) {
+  MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
+  uint64_t sum = 0;
+  for (uint32_t slot : impl.muscles.order) sum += impl.muscles.states[slot]->tree.epoch();
+  return sum;
+}
+
+/// thigh13 (resolution 8) in one-iteration steps: 20 moving the bones from pose 0 to pose 1
+/// (interpolated), then 30 with the bones still, while the muscles settle.
+class ThighRun {
+ public:
+  explicit ThighRun(int threads) {
+    const PreparedScene& prepared = testing::preparedThigh(scene_);
+    SimulationParameters parameters = scene_.simulation;
+    parameters.threads = threads;
+    parameters.iterations = 1;
+    parameters.stopRule = StopRule::Iterations;
+    system_ = std::make_unique<MuscleSystem>(parameters);
+    for (const auto& bone : prepared.bones) bones_.push_back(system_->addBone(bone));
+    for (const auto& muscle : prepared.muscles)
+      muscles_.push_back(system_->addMuscle(muscle, bones_));
+  }
+  MuscleSystem& system() { return *system_; }
+  static constexpr int kSteps = 50;  ///< one-iteration steps of a run
+  /// Step k (0 ≤ k < kSteps).
+  void step(int k) {
+    const btScalar share = std::min(btScalar(1), btScalar(k + 1) / 20);
+    for (size_t b = 0; b < bones_.size(); ++b) {
+      const btTransform from = scene_.bonePose(b, 0), to = scene_.bonePose(b, 1);
+      system_->setBoneTransform(bones_[b],
+                                btTransform(from.getRotation().slerp(to.getRotation(), share),
+                                            from.getOrigin().lerp(to.getOrigin(), share)));
+    }
+    system_->step();
+  }
+  /// Whether both runs' particles are bitwise equal.
+  bool samePositions(ThighRun& other) {
+    for (size_t m = 0; m < muscles_.size(); ++m) {
+      const auto x = system_->positions(muscles_[m]);
+      const auto y = other.system_->positions(other.muscles_[m]);
+      if (x.size() != y.size() || std::memcmp(x.data(), y.data(), x.size_bytes()) != 0)
+        return false;
+    }
+    return true;
+  }
+
+ private:
+  LoadedScene scene_;
+  std::unique_ptr<MuscleSystem> system_;
+  std::vector<BoneHandle> bones_;
+  std::vector<MuscleHandle> muscles_;
+};
+
+// Same tree topology (a refit keeps it) and the lists in traversal order: the pushes are summed
+// in the same order, so the skin changes no bit — while bones move and while muscles settle.
+TEST(CandidateLists, GiveTheContactsOfTightTreesBitForBit) {
+  ThighRun skinned(1), tight(1);
+  withoutSkin(tight.system());
+  size_t contacts = 0, fewerTested = 0;
+  for (int k = 0; k < ThighRun::kSteps; ++k) {
+    skinned.step(k);
+    tight.step(k);
+    const StepStats& a = skinned.system().lastStep();
+    const StepStats& b = tight.system().lastStep();
+    ASSERT_EQ(a.contacts, b.contacts) << "iteration " << k;
+    ASSERT_TRUE(skinned.samePositions(tight)) << "iteration " << k;
+    EXPECT_EQ(a.candidateOverflows, 0u) << "iteration " << k;
+    contacts += a.contacts;
+    fewerTested += a.candidates < b.candidates ? 1 : 0;
+  }
+  EXPECT_GT(contacts, 0u);
+  // The skin did its work: fewer refits, and lists shorter than the tight traversals' pairs.
+  EXPECT_LT(refits(skinned.system()), refits(tight.system()) / 2);
+  EXPECT_GT(fewerTested, 0u);
+}
+
+// A listing that overflows falls back to traversing the trees: counted, the same contacts.
+TEST(CandidateLists, AnOverflowFallsBackToTheTreesWithTheSameContacts) {
+  ThighRun tiny(2), tight(2);
+  withTinyLists(tiny.system());
+  withoutSkin(tight.system());
+  size_t overflows = 0;
+  for (int k = 0; k < ThighRun::kSteps; ++k) {
+    tiny.step(k);
+    tight.step(k);
+    ASSERT_EQ(tiny.system().lastStep().contacts, tight.system().lastStep().contacts) << k;
+    ASSERT_TRUE(tiny.samePositions(tight)) << "iteration " << k;
+    overflows += tiny.system().lastStep().candidateOverflows;
+  }
+  EXPECT_GT(overflows, 0u);
+}
+
+/// Two grid muscles 1 cm apart along y (not touching), stepped until their trees settle.
+struct TwoGrids {
+  TwoGrids() : system(parameters()) {
+    const BoneHandle bones[] = {system.addBone(testing::cubeBone("left", btVector3(-0.02f, 0, 0))),
+                                system.addBone(testing::cubeBone("right", btVector3(0.02f, 0, 0)))};
+    first = system.addMuscle(testing::gridMuscle("first", 0), bones);
+    second = system.addMuscle(testing::gridMuscle("second", btScalar(0.01)), bones);
+    for (int k = 0; k < 5; ++k) system.step();
+  }
+  static SimulationParameters parameters() {
+    SimulationParameters p;
+    p.iterations = 1;
+    p.stopRule = StopRule::Iterations;
+    p.threads = 1;
+    return p;
+  }
+  MuscleState& state(MuscleHandle muscle) {
+    return *MuscleSystemAccess::impl(system).muscles.states[muscle.index];
+  }
+  MuscleSystem system;
+  MuscleHandle first, second;
+};
+
+// However far a particle is moved by hand (a user, a rollback, the guard), the tree holds it:
+// within the skin no refit and the list finds the new contact; past it the tree refits.
+TEST(CandidateLists, AParticleMovedByHandIsCaughtWithinAndPastTheSkin) {
+  for (btScalar share : {btScalar(0.3), btScalar(0.45), btScalar(0.55), btScalar(3)}) {
+    TwoGrids grids;
+    MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(grids.system);
+    MuscleState& a = grids.state(grids.first);
+    MuscleState& b = grids.state(grids.second);
+    // Particle 10 of each grid: boundary and free, on the sides that face each other.
+    const uint32_t i = 10;
+    ASSERT_TRUE(a.settings->isBoundary(i) && !a.settings->isFixed(i));
+    ASSERT_GT(b.treeReach, 0);
+    // b's particle put just out of reach of a's, its tree refit there; then moved by hand
+    // share·skin straight into a's sphere.
+    const btScalar reach = a.settings->radii[i] + b.settings->radii[i];
+    const btScalar move = share * b.treeSkin;
+    const btVector3 up(0, 1, 0);
+    b.positions[i] = b.previous[i] = a.positions[i] + up * (reach + move * btScalar(0.8));
+    b.treeSnapshot[i] = b.positions[i];
+    b.tree.refit(b.settings->boundaryParticles, b.treeSnapshot, b.settings->radii, b.treeReach);
+    impl.collide();
+    ASSERT_EQ(grids.system.lastStep().contacts, 0u) << share;
+    const uint64_t epoch = b.tree.epoch();
+    b.positions[i] = b.previous[i] = b.positions[i] - up * move;
+    const btVector3 before = a.positions[i];
+    impl.collide();
+    EXPECT_EQ(b.tree.epoch() != epoch, share > btScalar(0.5)) << share;
+    EXPECT_EQ(grids.system.lastStep().contacts, 1u) << share;
+    EXPECT_LT(a.positions[i].y(), before.y()) << share;  // pushed away from b's particle
+  }
+}
+
+}  // namespace
+}  // namespace fibremss
