@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -96,6 +97,8 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   EXPECT_EQ(summary.at("method"), "fibremss");
   EXPECT_FALSE(summary.at("integrator").get<std::string>().empty());
   EXPECT_EQ(summary.at("steps"), 2);
+  // simulation.threads 0: the machine's hardware threads, recorded as resolved.
+  EXPECT_EQ(summary.at("threads"), std::max(1u, std::thread::hardware_concurrency()));
   for (const char* key :
        {"particles", "springs", "boundary_particles", "bone_spheres", "iterations"})
     EXPECT_GT(summary.at(key).get<double>(), 0) << key;

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <functional>
 #include <map>
-#include <thread>
 
 #include "fibremss/Compare.h"
 #include "fibremss/Error.h"
@@ -158,14 +157,6 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   }
   metrics.peakMemoryMb = peakMemoryMb();
   metrics.wallSeconds = secondsSince(start);
-}
-
-/// Threads FibreMSS's solver runs with for `simulation` (its 0: the machine's hardware
-/// threads, as TaskPool resolves it).
-int solverThreads(const SimulationParameters& simulation) {
-  return simulation.threads > 0
-             ? simulation.threads
-             : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
 std::vector<std::string> split(const std::string& text, char separator) {
@@ -395,7 +386,6 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     };
     if (spec.family == "fibremss" && spec.overrides.empty()) {
       runs.push_back(runFibreMSS(scene, prepared, fibreOptions));
-      runs.back().threads = solverThreads(scene.simulation);
     } else if (spec.family == "fibremss") {
       std::vector<std::string> all = overrides;
       all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
@@ -403,7 +393,6 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       const PreparedScene variantPrepared =
           prepareScene(variant.bones, variant.muscles, variant.simulation.seed);
       runs.push_back(runFibreMSS(variant, variantPrepared, fibreOptions));
-      runs.back().threads = solverThreads(variant.simulation);
     } else if (spec.family == "self-reference") {
       LoadedScene reference = scene;
       const int f = std::max(1, options.selfReferenceFactor);
@@ -411,7 +400,6 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       reference.simulation.minTimeStep /= static_cast<btScalar>(f);
       reference.simulation.iterations *= f;
       runs.push_back(runFibreMSS(reference, prepared, fibreOptions));
-      runs.back().threads = solverThreads(reference.simulation);
     } else if (spec.family == "btsoftbody") {
       SoftBodyDefinition definition = options.softBody;
       definition.poseDuration = static_cast<btScalar>(duration);

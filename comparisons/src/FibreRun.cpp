@@ -243,6 +243,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   metrics.integrator = toString(scene.simulation.integrator);
 
   MuscleSystem system(scene.simulation);
+  metrics.threads = static_cast<int>(system.threads());
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) {
     bones.push_back(system.addBone(bone));

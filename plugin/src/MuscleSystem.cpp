@@ -222,6 +222,10 @@ const SimulationParameters& MuscleSystem::parameters() const {
   return impl_->parameters;
 }
 
+unsigned MuscleSystem::threads() const {
+  return TaskPool::resolve(impl_->parameters.threads);
+}
+
 std::span<const btVector3> MuscleSystem::positions(MuscleHandle muscle) const {
   return impl_->muscle(muscle).positions;
 }

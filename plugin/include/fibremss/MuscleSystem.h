@@ -123,6 +123,8 @@ class MuscleSystem {
   const StepStats& lastStep() const;
   SimulationParameters& parameters();
   const SimulationParameters& parameters() const;
+  /// Threads a step computes with: parameters().threads, or the machine's hardware threads for 0.
+  unsigned threads() const;
 
   std::span<const btVector3> positions(MuscleHandle muscle) const;  ///< current particles
   const MuscleSettings& settings(MuscleHandle muscle) const;
