@@ -145,5 +145,15 @@ TEST(SpringDeviation, WeightsBySumOfRestLengths) {
   EXPECT_THROW(springDeviationRatio(outside, positions), std::invalid_argument);
 }
 
+TEST(SpringExploded, PastThreeTimesAndPastTheMeanRestLength) {
+  const double meanRest = 2e-3;
+  EXPECT_TRUE(springExploded(3.1 * 1e-3, 1e-3, meanRest));   // 2.1 mm longer than at rest
+  EXPECT_FALSE(springExploded(2.9 * 3e-3, 3e-3, meanRest));  // stretched, but below 3x
+  // A 0.08 mm spring at 4x is 0.24 mm long: harmless next to a 2 mm mean rest length.
+  EXPECT_FALSE(springExploded(4 * 0.08e-3, 0.08e-3, meanRest));
+  EXPECT_TRUE(springExploded(std::nan(""), 1e-3, meanRest));
+  EXPECT_FALSE(springExploded(0, 1e-3, meanRest));  // compressed to nothing is not an explosion
+}
+
 }  // namespace
 }  // namespace fibremss

@@ -244,7 +244,8 @@ same code (`Measures.h`):
 - **rms_to_fem_mm / rms_to_self_reference_mm**: root mean square distance of corresponding
   surface vertices to the FEM / self-reference run at the same pose, over all poses both
   reached (a failed pose counts in neither, nor in the penetration). **nan / exploded**: a
-  non-finite position, or a spring (FEM: tetrahedron edge) beyond 3× its rest length.
+  non-finite position, or a spring (FEM: tetrahedron edge) beyond 3× its rest length and longer
+  than it by more than its muscle's mean rest length (FibreMSS's guard rule, `springExploded`).
   **peak_memory_mb**: peak resident set of the process after the run (getrusage; it includes
   every run before it in the same process).
 

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <functional>
 #include <map>
+#include <tuple>
 
 #include "fibremss/Compare.h"
 #include "fibremss/Error.h"
@@ -70,13 +71,17 @@ RunMetrics namedRun(const LoadedScene& scene, const char* method, const char* in
   return metrics;
 }
 
-/// True when some pair is longer than 3× its rest length (FibreMSS's criterion).
-bool beyondThreeTimes(const Simulated& sim) {
+/// True when some pair counts as exploded by FibreMSS's guard rule (springExploded: past 3× its
+/// rest length and longer than it by more than its muscle's mean rest length).
+bool exploded(const Simulated& sim) {
   for (size_t m = 0; m < sim.pairs.size(); ++m) {
+    if (sim.pairs[m].empty()) continue;
+    double restSum = 0;
+    for (const auto& pair : sim.pairs[m]) restSum += std::get<2>(pair);
+    const double meanRest = restSum / static_cast<double>(sim.pairs[m].size());
     const std::span<const btVector3> positions = sim.points(m);
-    for (const auto& [a, b, rest] : sim.pairs[m]) {
-      if ((positions[a] - positions[b]).length() > 3 * rest) return true;
-    }
+    for (const auto& [a, b, rest] : sim.pairs[m])
+      if (springExploded((positions[a] - positions[b]).length(), rest, meanRest)) return true;
   }
   return false;
 }
@@ -116,7 +121,7 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
       poseSurface.insert(poseSurface.end(), muscleSurface.begin(), muscleSurface.end());
     }
     metrics.nan = !allFinite(poseSurface);
-    metrics.exploded = !metrics.nan && beyondThreeTimes(sim);
+    metrics.exploded = !metrics.nan && exploded(sim);
     // A failed pose's surface says nothing about the method: it enters no penetration or RMS.
     if (!metrics.nan && !metrics.exploded) {
       penetration = combine(penetration, measurePenetration(poseSurface, bones, transforms));

@@ -20,6 +20,7 @@
 #include "Integrators.h"
 #include "MuscleSystemImpl.h"
 #include "Skin.h"
+#include "fibremss/Measures.h"
 
 namespace fibremss {
 namespace {
@@ -83,10 +84,8 @@ MuscleHealth checkMuscle(const MuscleState& muscle) {
   if (settings.springs.empty()) return health;
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
   for (const Spring& spring : settings.springs) {
-    const double stretch =
-        double(muscle.positions[spring.a].distance(muscle.positions[spring.b])) - spring.restLength;
-    // Written so that a NaN length counts as exploded too.
-    if (!(stretch <= 2.0 * spring.restLength || stretch <= floor)) ++health.explodedSprings;
+    const double length = muscle.positions[spring.a].distance(muscle.positions[spring.b]);
+    if (springExploded(length, spring.restLength, floor)) ++health.explodedSprings;
   }
   return health;
 }

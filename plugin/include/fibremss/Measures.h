@@ -34,6 +34,15 @@ double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> 
 /// Spring-deviation ratio Σ|l − L0| / Σ L0 over `springs` at `positions`.
 double springDeviationRatio(std::span<const Spring> springs, std::span<const btVector3> positions);
 
+/// Whether a spring (or a mesh edge) of rest length `rest` counts as exploded at `length`:
+/// longer than 3× its rest length and longer than it by more than `meanRest`, its body's mean
+/// rest length. The 3× rule alone trips on springs of a few µm (converging fibre ends, jittered
+/// neighbours) whose stretch is harmless. A NaN length counts as exploded.
+inline bool springExploded(double length, double rest, double meanRest) {
+  const double stretch = length - rest;
+  return !(stretch <= 2.0 * rest || stretch <= meanRest);
+}
+
 /// Root-mean-square distance between corresponding points, in millimetres.
 double rmsDistanceMm(std::span<const btVector3> a, std::span<const btVector3> b);
 
