@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
@@ -17,11 +18,13 @@
 #include <string>
 #include <vector>
 
+#include "../plugin/src/MuscleSystemAccess.h"
 #include "../plugin/src/SpringForces.h"
 #include "../plugin/src/TimeStep.h"
 #include "fibremss/MuscleSystem.h"
 #include "support/AllocationCounter.h"
 #include "support/SolverFixtures.h"
+#include "support/ThighSteps.h"
 
 namespace fibremss {
 namespace {
@@ -360,6 +363,120 @@ TEST(AdaptiveStep, CentredBoundIsTightForVerletsStep) {
     else
       EXPECT_GT(step, radius);
   }
+}
+
+/// Eq 5.1's minimum the plain way: largestSafeTimeStep particle by particle, in order.
+btScalar referenceTimeStep(const MuscleState& muscle, btScalar previousDt) {
+  const MuscleSettings& settings = *muscle.settings;
+  const btScalar inversePreviousDt = previousDt > 0 ? 1 / previousDt : 0;
+  btScalar dt = muscle.stableTimeStep;
+  for (uint32_t i : muscle.freeParticles)
+    dt = std::min(dt, largestSafeTimeStep(
+                          muscle.forces[i].length(),
+                          (muscle.positions[i] - muscle.previous[i]).length() * inversePreviousDt,
+                          muscle.stepRadius[i], settings.particleMass, settings.damping,
+                          muscle.preparedFor == Integrator::Verlet));
+  return dt;
+}
+
+/// The bits of a value, so that ±0 and NaN compare exactly.
+auto bits(btScalar value) {
+  return std::bit_cast<std::conditional_t<kFloat, uint32_t, uint64_t>>(value);
+}
+
+/// adaptiveTimeStep bit for bit against the reference on `muscle`: the minimum over its free
+/// particles, and each particle's own bound (the particle 4 to 7 times over, so that every lane
+/// of a vector path and the scalar tail compute it). Returns how many bounds were finite.
+size_t expectReferenceTimeSteps(MuscleState& muscle, btScalar previousDt) {
+  EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)),
+            bits(referenceTimeStep(muscle, previousDt)));
+  const std::vector<uint32_t> free = muscle.freeParticles;
+  const btScalar stable = muscle.stableTimeStep;
+  muscle.stableTimeStep = std::numeric_limits<btScalar>::infinity();
+  size_t finite = 0;
+  for (size_t k = 0; k < free.size(); ++k) {
+    muscle.freeParticles.assign(4 + k % 4, free[k]);
+    const btScalar own = referenceTimeStep(muscle, previousDt);
+    EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)), bits(own)) << "particle " << free[k];
+    finite += std::isfinite(own);
+  }
+  muscle.freeParticles = free;
+  muscle.stableTimeStep = stable;
+  return finite;
+}
+
+TEST(AdaptiveStep, EveryParticlesBoundIsTheReferencesBitForBit) {
+  // Forces, displacements, radii, masses and damping over orders of magnitude (a < 0, b < 0 and a
+  // negative discriminant all occur), zeros, a NaN force; Verlet (centred) and not; no previous
+  // dt; 0 to 9 free particles for the minimum.
+  std::mt19937 random(51);
+  const auto magnitude = [&](double low, double high) {
+    return btScalar(std::pow(10.0, std::uniform_real_distribution<double>(low, high)(random)));
+  };
+  const auto vector = [&](double low, double high) {  // draws in sequence: any compiler, one run
+    std::normal_distribution<double> normal;
+    btVector3 v;
+    for (int axis = 0; axis < 3; ++axis) v[axis] = btScalar(normal(random));
+    return v * magnitude(low, high);
+  };
+  constexpr uint32_t kParticles = 64;
+  size_t finite = 0, bounds = 0;
+  for (int round = 0; round < 40; ++round) {
+    MuscleState muscle;
+    const btScalar mass = magnitude(-6, -2);
+    const btScalar damping = round % 5 == 0 ? 0 : magnitude(-5, 0);
+    muscle.settings =
+        particles(std::vector<btVector3>(kParticles, btVector3(0, 0, 0)), mass, damping);
+    muscle.preparedFor = round % 2 ? Integrator::Verlet : Integrator::SemiImplicitEuler;
+    muscle.stableTimeStep =
+        round % 3 ? std::numeric_limits<btScalar>::infinity() : magnitude(-5, -3);
+    for (uint32_t i = 0; i < kParticles; ++i) {
+      muscle.positions.push_back(vector(-3, 0));
+      muscle.previous.push_back(muscle.positions.back() -
+                                (i % 7 ? vector(-9, -3) : btVector3(0, 0, 0)));
+      muscle.forces.push_back(i % 11 ? vector(-8, 1) : btVector3(0, 0, 0));
+      muscle.stepRadius.push_back(i % 13 ? magnitude(-4, -2) : 0);
+      muscle.freeParticles.push_back(i);
+    }
+    if (round == 7) muscle.forces[5].setX(std::numeric_limits<btScalar>::quiet_NaN());
+    const btScalar previousDt = round % 4 ? magnitude(-5, -2) : 0;
+    finite += expectReferenceTimeSteps(muscle, previousDt);
+    bounds += kParticles;
+    for (size_t count = 0; count < 10; ++count) {
+      muscle.freeParticles.resize(count);
+      EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)),
+                bits(referenceTimeStep(muscle, previousDt)));
+    }
+  }
+  EXPECT_GT(finite, bounds / 4);   // roots taken
+  EXPECT_LT(finite, bounds - 40);  // and bounds that hold for every dt
+}
+
+TEST(AdaptiveStep, ThighStatesGiveTheReferencesBoundsBitForBit) {
+  // The states thigh13 leaves after two poses (every muscle, spring forces and displacements of
+  // a real run), at the system's last dt.
+  LoadedScene scene;
+  const PreparedScene& prepared = testing::preparedThigh(scene);
+  SimulationParameters parameters = scene.simulation;
+  parameters.threads = 1;
+  parameters.iterations = 20;
+  MuscleSystem system(parameters);
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  for (const auto& muscle : prepared.muscles) system.addMuscle(muscle, bones);
+  for (int pose = 1; pose <= 2; ++pose) {
+    for (size_t b = 0; b < bones.size(); ++b)
+      system.setBoneTransform(bones[b], scene.bonePose(b, pose % scene.poseCount));
+    system.step();
+  }
+  auto& impl = MuscleSystemAccess::impl(system);
+  ASSERT_GT(impl.previousDt, 0);
+  size_t finite = 0, bounds = 0;
+  for (auto& muscle : impl.muscles.states) {
+    finite += expectReferenceTimeSteps(*muscle, impl.previousDt);
+    bounds += muscle->freeParticles.size();
+  }
+  EXPECT_GT(finite, bounds / 2);
 }
 
 // --- BDF2's remembered velocity: pre-transform and contacts ----------------------------------

@@ -6,6 +6,13 @@
 #include <limits>
 #include <vector>
 
+#if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
+#include <immintrin.h>
+#define FIBREMSS_SSE_TIMESTEP 1
+#else
+#define FIBREMSS_SSE_TIMESTEP 0
+#endif
+
 namespace fibremss {
 namespace {
 constexpr btScalar kInfinity = std::numeric_limits<btScalar>::infinity();
@@ -46,6 +53,64 @@ btScalar rungeKuttaLimit(int order, double lambda, double gamma, double start) {
   }
   return static_cast<btScalar>(kStabilitySafety * stable);
 }
+
+#if FIBREMSS_SSE_TIMESTEP
+/// |v|² of four vectors, one per lane, in btVector3::length2's order: (x² + y²) + z².
+__m128 squaredLengths(__m128 v0, __m128 v1, __m128 v2, __m128 v3) {
+  _MM_TRANSPOSE4_PS(v0, v1, v2, v3);
+  return _mm_add_ps(_mm_add_ps(_mm_mul_ps(v0, v0), _mm_mul_ps(v1, v1)), _mm_mul_ps(v2, v2));
+}
+
+/// adaptiveTimeStep over the free particles [0, count), count a multiple of 4, four at a time,
+/// from `dt`: largestSafeTimeStep's operations in its order with exact square roots and
+/// divisions, so each lane holds its value bit for bit (and a minimum does not depend on order).
+btScalar adaptiveTimeStepSse(const MuscleState& muscle, size_t count, btScalar inversePreviousDt,
+                             bool centred, btScalar dt) {
+  const uint32_t* indices = muscle.freeParticles.data();
+  const btVector3* f = muscle.forces.data();
+  const btVector3* x = muscle.positions.data();
+  const btVector3* previous = muscle.previous.data();
+  const btScalar* radii = muscle.stepRadius.data();
+  const __m128 mass = _mm_set1_ps(muscle.settings->particleMass);
+  const __m128 damping = _mm_set1_ps(muscle.settings->damping);
+  const __m128 half = _mm_set1_ps(btScalar(0.5));  // x·0.5 rounds as x/2
+  const __m128 two = _mm_set1_ps(2), four = _mm_set1_ps(4);
+  const __m128 inverseDt = _mm_set1_ps(inversePreviousDt);
+  const __m128 zero = _mm_setzero_ps(), infinity = _mm_set1_ps(kInfinity);
+  const auto load = [](const btVector3& v) { return _mm_load_ps(v.m_floats); };
+  const auto step = [&](const btVector3& v, const btVector3& w) {
+    return _mm_sub_ps(load(v), load(w));
+  };
+  __m128 minimum = _mm_set1_ps(dt);
+  for (size_t k = 0; k < count; k += 4) {
+    const uint32_t i0 = indices[k], i1 = indices[k + 1], i2 = indices[k + 2], i3 = indices[k + 3];
+    const __m128 force =
+        _mm_sqrt_ps(squaredLengths(load(f[i0]), load(f[i1]), load(f[i2]), load(f[i3])));
+    const __m128 speed = _mm_mul_ps(
+        _mm_sqrt_ps(squaredLengths(step(x[i0], previous[i0]), step(x[i1], previous[i1]),
+                                   step(x[i2], previous[i2]), step(x[i3], previous[i3]))),
+        inverseDt);
+    const __m128 radius = _mm_setr_ps(radii[i0], radii[i1], radii[i2], radii[i3]);
+    __m128 dampingForce = _mm_mul_ps(damping, speed);
+    if (centred) dampingForce = _mm_mul_ps(dampingForce, half);
+    const __m128 a = _mm_sub_ps(force, dampingForce);
+    const __m128 b = _mm_sub_ps(_mm_mul_ps(mass, speed),
+                                centred ? _mm_mul_ps(_mm_mul_ps(damping, radius), half) : zero);
+    const __m128 mr = _mm_mul_ps(mass, radius);
+    const __m128 discriminant = _mm_add_ps(_mm_mul_ps(b, b), _mm_mul_ps(_mm_mul_ps(four, a), mr));
+    // A negative discriminant's root is NaN, so its denominator fails > 0 too: infinity.
+    const __m128 denominator = _mm_add_ps(b, _mm_sqrt_ps(discriminant));
+    const __m128 positive = _mm_cmpgt_ps(denominator, zero);
+    const __m128 root =
+        _mm_or_ps(_mm_and_ps(positive, _mm_div_ps(_mm_mul_ps(two, mr), denominator)),
+                  _mm_andnot_ps(positive, infinity));
+    minimum = _mm_min_ps(root, minimum);  // root < minimum ? root : minimum, as std::min
+  }
+  alignas(16) btScalar lanes[4];
+  _mm_store_ps(lanes, minimum);
+  return std::min(std::min(lanes[0], lanes[1]), std::min(lanes[2], lanes[3]));
+}
+#endif
 }  // namespace
 
 btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, btScalar mass,
@@ -69,7 +134,13 @@ btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt) {
   const btScalar inversePreviousDt = previousDt > 0 ? 1 / previousDt : 0;
   const bool centred = muscle.preparedFor == Integrator::Verlet;
   btScalar dt = muscle.stableTimeStep;
-  for (uint32_t i : muscle.freeParticles) {
+  size_t k = 0;
+#if FIBREMSS_SSE_TIMESTEP
+  k = muscle.freeParticles.size() & ~size_t{3};
+  dt = adaptiveTimeStepSse(muscle, k, inversePreviousDt, centred, dt);
+#endif
+  for (; k < muscle.freeParticles.size(); ++k) {
+    const uint32_t i = muscle.freeParticles[k];
     const btScalar force = muscle.forces[i].length();
     const btScalar speed = (muscle.positions[i] - muscle.previous[i]).length() * inversePreviousDt;
     dt = std::min(dt, largestSafeTimeStep(force, speed, muscle.stepRadius[i], settings.particleMass,

@@ -20,6 +20,7 @@ btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, bt
 /// radius (boundary) or the muscle's mean radius (inner particles, which never collide but
 /// should not outrun their neighbours either), speed = |x − x_prev| / previousDt, with centred
 /// damping when the muscle is prepared for Verlet; also capped by the muscle's stability bound.
+/// Float builds with SSE2 take four particles at a time, each bound bit for bit the scalar one.
 btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt);
 
 /// The largest dt for which `kind` is stable for every particle of the settings, times a safety
