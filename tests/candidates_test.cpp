@@ -189,5 +189,49 @@ TEST(CandidateLists, AParticleMovedByHandIsCaughtWithinAndPastTheSkin) {
   }
 }
 
+/// The pushes of both muscles (and their counts) as bytes, then cleared as a response would.
+std::vector<unsigned char> takePushes(MuscleState& a, MuscleState& b) {
+  std::vector<unsigned char> bytes;
+  for (MuscleState* muscle : {&a, &b}) {
+    const auto* p = reinterpret_cast<const unsigned char*>(muscle->pushes.data());
+    bytes.insert(bytes.end(), p, p + muscle->pushes.size() * sizeof(btVector3));
+    for (uint32_t count : muscle->pushCounts) bytes.push_back(static_cast<unsigned char>(count));
+    for (btVector3& push : muscle->pushes) push.setZero();
+    std::fill(muscle->pushCounts.begin(), muscle->pushCounts.end(), 0u);
+  }
+  return bytes;
+}
+
+// A pair's contacts are recorded, then pushed into each muscle; contacts beyond the records'
+// room are found again by traversing the trees: the same pushes, bit for bit, and counted.
+TEST(CandidateLists, ContactsBeyondTheirRecordsAreFoundAgainInOrder) {
+  ThighRun run(1);
+  for (int k = 0; k < 10; ++k) run.step(k);
+  MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(run.system());
+  SphereTree stack;
+  ContactLog log;
+  size_t pairsInContact = 0;
+  const std::vector<uint32_t>& order = impl.muscles.order;
+  for (size_t x = 0; x < order.size(); ++x)
+    for (size_t y = x + 1; y < order.size(); ++y) {
+      MuscleState& a = *impl.muscles.states[order[x]];
+      MuscleState& b = *impl.muscles.states[order[y]];
+      std::vector<MuscleContact> room(a.muscleLists[b.slot].pairs.size() + 1);
+      MuscleContacts full{room.data(), room.size()}, none{room.data(), 0};
+      collideMuscles(a, b, stack, log, full);
+      ASSERT_LE(full.count, full.capacity);
+      for (bool onFirst : {true, false}) pushMuscleContacts(a, b, onFirst, stack, full);
+      const std::vector<unsigned char> recorded = takePushes(a, b);
+      collideMuscles(a, b, stack, log, none);
+      ASSERT_EQ(none.count, full.count);
+      const size_t overflows = a.candidateOverflows;
+      for (bool onFirst : {true, false}) pushMuscleContacts(a, b, onFirst, stack, none);
+      EXPECT_EQ(a.candidateOverflows, overflows + (none.count > 0 ? 1 : 0));
+      EXPECT_TRUE(takePushes(a, b) == recorded) << x << " with " << y;
+      pairsInContact += full.count > 0 ? 1 : 0;
+    }
+  EXPECT_GT(pairsInContact, 0u);
+}
+
 }  // namespace
 }  // namespace fibremss

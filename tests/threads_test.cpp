@@ -69,7 +69,7 @@ bool sameBits(const std::vector<btVector3>& a, const std::vector<btVector3>& b) 
 
 TEST(Threads, AnyThreadCountGivesTheSameBits) {
   const Outcome one = simulate(1);
-  EXPECT_GT(one.contacts, 0u);  // the muscles touch: the pair rounds ran
+  EXPECT_GT(one.contacts, 0u);  // the muscles touch: the muscle pairs ran
   for (int threads : {2, 3}) {
     const Outcome many = simulate(threads);
     ASSERT_EQ(many.positions.size(), one.positions.size());
@@ -80,6 +80,31 @@ TEST(Threads, AnyThreadCountGivesTheSameBits) {
           << "muscle " << m << ", " << threads << " threads";
     }
     EXPECT_EQ(many.contacts, one.contacts);
+  }
+}
+
+// Pairs whose contacts overflow their records (room for one) are traversed again by both muscles'
+// tasks at once, each with its thread's stack: still the same bits as the recorded pushes.
+TEST(Threads, ContactsBeyondTheirRecordsGiveTheSameBits) {
+  LoadedScene scene;
+  const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+  const auto cramped = [&](int threads) {
+    return fibremss::testing::stepThroughPoses(
+        scene, prepared, prepared.muscles, threads,
+        [](MuscleSystem& system, const std::vector<MuscleHandle>&) {
+          MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
+          for (uint32_t slot : impl.muscles.order)
+            for (CandidateList& list : impl.muscles.states[slot]->muscleLists)
+              list.pairs = std::vector<CandidatePair>(1);
+        });
+  };
+  const Outcome roomy = simulate(1);
+  for (int threads : {1, 3}) {
+    const Outcome many = cramped(threads);
+    for (size_t m = 0; m < roomy.positions.size(); ++m)
+      EXPECT_TRUE(sameBits(roomy.positions[m], many.positions[m]))
+          << "muscle " << m << ", " << threads << " threads";
+    EXPECT_EQ(many.contacts, roomy.contacts);
   }
 }
 

@@ -12,6 +12,8 @@ const char* partName(Part part) {
   switch (part) {
     case Part::SpringForces:
       return "spring-forces";
+    case Part::AdaptiveTimeStep:
+      return "adaptive-dt";
     case Part::Integration:
       return "integration";
     case Part::TreeRefit:
@@ -54,13 +56,13 @@ void BenchScene::run(Part part) {
   const TimeIntegrator& integrator = integratorFor(parameters.integrator);
   switch (part) {
     case Part::SpringForces:
+      for (uint32_t slot : impl.muscles.order) springForces(*impl.muscles.states[slot]);
+      break;
+    case Part::AdaptiveTimeStep:
       dt_ = parameters.timeStep;
-      for (uint32_t slot : impl.muscles.order) {
-        MuscleState& state = *impl.muscles.states[slot];
-        springForces(state);
+      for (uint32_t slot : impl.muscles.order)
         if (parameters.adaptiveTimeStep)
-          dt_ = std::min(dt_, adaptiveTimeStep(state, impl.previousDt));
-      }
+          dt_ = std::min(dt_, adaptiveTimeStep(*impl.muscles.states[slot], impl.previousDt));
       dt_ = std::max(dt_, parameters.minTimeStep);
       break;
     case Part::Integration:
@@ -72,11 +74,8 @@ void BenchScene::run(Part part) {
       for (uint32_t slot : impl.muscles.order) refitTree(*impl.muscles.states[slot]);
       break;
     case Part::MuscleMusclePairs:
-      impl.contacts.clear();
-      for (size_t a = 0; a < impl.muscles.order.size(); ++a)
-        for (size_t b = a + 1; b < impl.muscles.order.size(); ++b)
-          collideMuscles(*impl.muscles.states[impl.muscles.order[a]],
-                         *impl.muscles.states[impl.muscles.order[b]], impl.contacts);
+      impl.collideMusclePairs();
+      for (ThreadScratch& thread : impl.scratch) thread.contacts.clear();
       break;
     case Part::MuscleBonePairs:
       for (uint32_t muscle : impl.muscles.order)

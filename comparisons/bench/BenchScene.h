@@ -12,15 +12,17 @@ namespace fibremss::bench {
 
 /// The parts of one iteration, in order (method.md §5).
 enum class Part {
-  SpringForces,       ///< spring forces and the adaptive dt bound of every muscle
+  SpringForces,       ///< spring forces of every muscle
+  AdaptiveTimeStep,   ///< the adaptive dt bound of every muscle (eq 5.1), and the dt
   Integration,        ///< the integrator's advance of every muscle
   TreeRefit,          ///< refitTree of every muscle (a refit only past the skin)
-  MuscleMusclePairs,  ///< every pair of muscles (their candidate lists while they hold)
+  MuscleMusclePairs,  ///< collideMusclePairs: pairs whose bounds meet, then each muscle's pushes
   MuscleBonePairs,    ///< every muscle against every bone (lists while they hold)
   Response,           ///< pushes applied to every muscle
 };
-constexpr Part kParts[] = {Part::SpringForces,      Part::Integration,     Part::TreeRefit,
-                           Part::MuscleMusclePairs, Part::MuscleBonePairs, Part::Response};
+constexpr Part kParts[] = {Part::SpringForces, Part::AdaptiveTimeStep,  Part::Integration,
+                           Part::TreeRefit,    Part::MuscleMusclePairs, Part::MuscleBonePairs,
+                           Part::Response};
 
 /// Name of a part as benchmarks and the callgrind reference print it.
 const char* partName(Part part);
@@ -46,7 +48,7 @@ class BenchScene {
   MuscleSystemAccess::Impl* impl_ = nullptr;  ///< the system's private state
   size_t particles_ = 0;                      ///< particles of all muscles
   int pose_ = 0;                              ///< pose of the last stepPose()
-  btScalar dt_ = 0;                           ///< dt of the last SpringForces part
+  btScalar dt_ = 0;                           ///< dt of the last AdaptiveTimeStep part
 };
 
 }  // namespace fibremss::bench

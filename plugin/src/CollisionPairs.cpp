@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include "Integrators.h"
 
@@ -154,22 +155,21 @@ bool mayMeet(const btVector3& a, const btVector3& b, btScalar reach) {
   return (a - b).length2() < reach * reach;
 }
 
-/// Exact test of particle i of `a` against particle j of `b` (not both fixed), pushes and log.
-void testMusclePair(MuscleState& a, MuscleState& b, uint32_t i, uint32_t j, ContactLog& log) {
-  ++log.candidates;
+/// Exact test of particle i of `a` against particle j of `b` (not both fixed): false when apart,
+/// else their contact.
+bool musclePairContact(const MuscleState& a, const MuscleState& b, uint32_t i, uint32_t j,
+                       MuscleContact& contact) {
   const MuscleSettings& sa = *a.settings;
   const MuscleSettings& sb = *b.settings;
-  const bool fixedA = sa.isFixed(i);
-  const bool fixedB = sb.isFixed(j);
   btVector3 direction;
   btScalar depth;
   if (!sphereOverlap(a.positions[i], sa.radii[i], b.positions[j], sb.radii[j], direction, depth))
-    return;
-  const btScalar shareA = fixedA ? 0 : (fixedB ? 1 : btScalar(0.5));
-  const btScalar shareB = 1 - shareA;
-  if (shareA > 0) addPush(a, i, direction * (depth * shareA));
-  if (shareB > 0) addPush(b, j, direction * (-depth * shareB));
-  log.add(a.positions[i], b.positions[j]);
+    return false;
+  const bool fixedA = sa.isFixed(i);
+  const bool fixedB = sb.isFixed(j);
+  const btScalar share = fixedA || fixedB ? 1 : btScalar(0.5);
+  contact = {fixedA ? kUnpushed : i, fixedB ? kUnpushed : j, direction * (depth * share)};
+  return true;
 }
 
 /// Exact test of free particle i of the muscle against the bone's sphere, push and log.
@@ -186,12 +186,13 @@ void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32
   log.add(muscle.positions[i], centre);
 }
 
-/// Leaf pairs of two muscle trees (not both particles fixed): listed when `list` is given,
-/// tested when `log` is.
+/// Leaf pairs of two muscle trees (not both particles fixed): listed when `list` is given, and
+/// passed to onPair(i, j).
+template <typename OnPair>
 class MuscleMusclePairs final : public btDbvt::ICollide {
  public:
-  MuscleMusclePairs(MuscleState& a, MuscleState& b, CandidateList* list, ContactLog* log)
-      : a_(a), b_(b), list_(list), log_(log) {}
+  MuscleMusclePairs(const MuscleState& a, const MuscleState& b, CandidateList* list, OnPair& onPair)
+      : a_(a), b_(b), list_(list), onPair_(onPair) {}
   using btDbvt::ICollide::Process;
   void Process(const btDbvtNode* leafA, const btDbvtNode* leafB) override {
     const uint32_t i = static_cast<uint32_t>(leafA->dataAsInt);
@@ -201,21 +202,25 @@ class MuscleMusclePairs final : public btDbvt::ICollide {
     if (list_ &&
         mayMeet(a_.treeSnapshot[i], b_.treeSnapshot[j], reach + a_.treeReach + b_.treeReach))
       list_->add(i, j);
-    if (log_) testMusclePair(a_, b_, i, j, *log_);
+    onPair_(i, j);
   }
 
  private:
-  MuscleState& a_;
-  MuscleState& b_;
+  const MuscleState& a_;
+  const MuscleState& b_;
   CandidateList* list_;
-  ContactLog* log_;
+  OnPair& onPair_;
 };
 
-/// Traverses two muscle trees with `pairs` (nothing when their roots are apart).
-void traverseMuscles(MuscleState& a, MuscleState& b, MuscleMusclePairs& pairs) {
+/// Calls onPair(i, j) for the leaf pairs of two muscle trees (nothing when their roots are
+/// apart), listing them into `list` if given; `stack` owns the traversal stack.
+template <typename OnPair>
+void traverseMuscles(const MuscleState& a, const MuscleState& b, SphereTree& stack,
+                     CandidateList* list, OnPair&& onPair) {
   if (!a.tree.root() || !b.tree.root()) return;
   if (!Intersect(a.tree.root()->volume, b.tree.root()->volume)) return;
-  collideTrees(a.tree, a.tree.root(), b.tree.root(), pairs);
+  MuscleMusclePairs<std::remove_reference_t<OnPair>> pairs(a, b, list, onPair);
+  collideTrees(stack, a.tree.root(), b.tree.root(), pairs);
 }
 
 /// Calls onPair(particle, sphere) for every free boundary particle whose leaf bounds overlap a
@@ -294,8 +299,7 @@ void rebuildTree(MuscleState& muscle) {
 
 CandidateList muscleList(MuscleState& a, MuscleState& b) {
   CandidateList counter;
-  MuscleMusclePairs pairs(a, b, &counter, nullptr);
-  traverseMuscles(a, b, pairs);
+  traverseMuscles(a, b, a.tree, &counter, [](uint32_t, uint32_t) {});
   return sizedList(counter.count, std::min(a.settings->boundaryParticles.size(),
                                            b.settings->boundaryParticles.size()));
 }
@@ -310,20 +314,49 @@ CandidateList boneList(const MuscleState& muscle, const BoneState& bone) {
   return sizedList(count, muscle.settings->boundaryParticles.size());
 }
 
-void collideMuscles(MuscleState& a, MuscleState& b, ContactLog& log) {
+void collideMuscles(MuscleState& a, const MuscleState& b, SphereTree& stack, ContactLog& log,
+                    MuscleContacts& out) {
+  out.count = 0;
+  out.listOverflowed = false;
+  const auto test = [&](uint32_t i, uint32_t j) {
+    ++log.candidates;
+    MuscleContact contact;
+    if (!musclePairContact(a, b, i, j, contact)) return;
+    log.add(a.positions[i], b.positions[j]);
+    if (out.count < out.capacity) out.records[out.count] = contact;
+    ++out.count;
+  };
   CandidateList* list = b.slot < a.muscleLists.size() ? &a.muscleLists[b.slot] : nullptr;
   const uint64_t keyA = a.tree.epoch(), keyB = b.tree.epoch();
   if (list && list->holds(keyA, keyB)) {
-    for (size_t k = 0; k < list->count; ++k)
-      testMusclePair(a, b, list->pairs[k].first, list->pairs[k].second, log);
+    for (size_t k = 0; k < list->count; ++k) test(list->pairs[k].first, list->pairs[k].second);
     return;
   }
   // A tight tree (moving faster than its skin) is refit next iteration: nothing to list for.
   if (a.treeReach == 0 || b.treeReach == 0) list = nullptr;
   if (list) list->start(keyA, keyB);
-  MuscleMusclePairs pairs(a, b, list, &log);
-  traverseMuscles(a, b, pairs);
-  if (list && !list->finish()) ++a.candidateOverflows;
+  traverseMuscles(a, b, stack, list, test);
+  out.listOverflowed = list && !list->finish();
+}
+
+void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, SphereTree& stack,
+                        const MuscleContacts& contacts) {
+  MuscleState& muscle = onFirst ? a : b;
+  const auto push = [&](const MuscleContact& contact) {
+    const uint32_t i = onFirst ? contact.i : contact.j;
+    if (i != kUnpushed) addPush(muscle, i, onFirst ? contact.push : -contact.push);
+  };
+  const bool overflowed = contacts.count > contacts.capacity;
+  if (onFirst && (overflowed || contacts.listOverflowed)) ++a.candidateOverflows;
+  if (!overflowed) {
+    for (size_t k = 0; k < contacts.count; ++k) push(contacts.records[k]);
+    return;
+  }
+  // Only a traversal overflows (a list that held fits its records): the same one again.
+  traverseMuscles(a, b, stack, nullptr, [&](uint32_t i, uint32_t j) {
+    MuscleContact contact;
+    if (musclePairContact(a, b, i, j, contact)) push(contact);
+  });
 }
 
 void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,

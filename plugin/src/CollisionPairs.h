@@ -79,12 +79,40 @@ CandidateList muscleList(MuscleState& a, MuscleState& b);
 /// muscleList; empty (never listed) for a bone with a distance field. Allocates.
 CandidateList boneList(const MuscleState& muscle, const BoneState& bone);
 
-/// Muscle–muscle pairs of two different muscles (`b` added after `a`): half the overlap each,
-/// the whole one to the free particle when the other is fixed, nothing when both are fixed.
-/// Tests the pairs a.muscleLists[b.slot] holds for both trees' epochs, else traverses the trees
-/// and lists them (a listing that overflows counts in a.candidateOverflows). log.candidates
-/// counts the pairs tested exactly in this call (listed or traversed; both-fixed pairs skipped).
-void collideMuscles(MuscleState& a, MuscleState& b, ContactLog& log);
+/// MuscleContact::i or j of a fixed particle: the contact does not move it.
+constexpr uint32_t kUnpushed = UINT32_MAX;
+
+/// A contact of particle i of a muscle `a` with particle j of a later-added `b`: i is pushed by
+/// `push`, j by −push (half the overlap each, the whole one to the free particle when the other
+/// is fixed; both fixed are never tested).
+struct MuscleContact {
+  uint32_t i;      ///< particle of `a`, or kUnpushed
+  uint32_t j;      ///< particle of `b`, or kUnpushed
+  btVector3 push;  ///< push on i; j's is −push [m]
+};
+
+/// The contacts of one muscle pair in one iteration, in the order they were found, in room the
+/// caller gives (the pair's candidate list capacity: a listed pair always fits).
+struct MuscleContacts {
+  MuscleContact* records = nullptr;  ///< capacity entries
+  size_t capacity = 0;               ///< room in records
+  size_t count = 0;                  ///< contacts found (> capacity: records incomplete)
+  bool listOverflowed = false;       ///< the pair's listing overflowed its capacity
+};
+
+/// Muscle–muscle contacts of two different muscles (`b` added after `a`) recorded into `out`,
+/// pushing neither: tests the pairs a.muscleLists[b.slot] holds for both trees' epochs, else
+/// traverses the trees (`stack` owns the traversal stack) and lists them. Writes only the pair's
+/// list, `out` and `log` (log.candidates counts the pairs tested exactly: listed or traversed;
+/// both-fixed pairs skipped), so pairs sharing a muscle may run concurrently.
+void collideMuscles(MuscleState& a, const MuscleState& b, SphereTree& stack, ContactLog& log,
+                    MuscleContacts& out);
+/// Adds the pushes collideMuscles recorded for `a` and `b` to a (`onFirst`) or b, in record
+/// order; when they overflowed, traverses the trees again (`stack` owns the traversal stack) for
+/// the same contacts in the same order (counted like a listing overflow in a.candidateOverflows).
+/// Writes only that muscle's pushes (and a.candidateOverflows when `onFirst`).
+void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, SphereTree& stack,
+                        const MuscleContacts& contacts);
 /// Muscle–bone contacts, the whole overlap to the free particle: against the bone's spheres
 /// (its tree placed at its current transform), or, when the bone has a distance field, every
 /// boundary particle in the field's box is pushed out along the field's gradient to clear its

@@ -88,7 +88,7 @@ struct MuscleState {
   /// Leaf pairs with each later-added muscle, by its slot (collideMuscles; empty when unlisted).
   std::vector<CandidateList> muscleLists;
   std::vector<CandidateList> boneLists;  ///< leaf pairs with each bone, by bone slot
-  size_t candidateOverflows = 0;  ///< listings that overflowed since the step last summed them
+  size_t candidateOverflows = 0;  ///< listings or pair contact records that overflowed, unsummed
 
   std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
   std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)

@@ -2,7 +2,6 @@
 // MuscleSystem's private state (internal): body slots, scratch buffers, stats, and the step
 // pipeline of method.md §5 (MuscleSystemStep.cpp).
 #include <algorithm>
-#include <atomic>
 #include <memory>
 #include <vector>
 
@@ -52,6 +51,8 @@ struct Slots {
 struct ThreadScratch {
   MuscleBoneStack stack;  ///< traversal stack of muscle–bone queries
   ContactLog contacts;    ///< contacts this thread found in the running phase
+  /// No spheres: owns the traversal stack of muscle–muscle pairs (not movable, hence held).
+  std::unique_ptr<SphereTree> pairStack;
 };
 
 /// What the per-muscle tasks of one iteration measured, reduced in insertion order afterwards
@@ -63,17 +64,11 @@ struct MuscleIterationResult {
   bool finite = true;         ///< the integration stayed finite
 };
 
-/// Sentinel of MusclePairTask::after: no earlier pair of that muscle.
-constexpr uint32_t kNoPair = UINT32_MAX;
-
-/// Two muscles whose bounds meet, the round their pair is listed in (no muscle appears twice in
-/// a round) and the earlier pairs of each muscle it must wait for: every muscle meets its
-/// partners in one fixed order, so every push sum has a fixed order.
+/// Two muscles whose bounds meet in this iteration and the contacts their pair task recorded.
 struct MusclePairTask {
-  uint32_t a = 0;      ///< slot of the first muscle (earlier in insertion order)
-  uint32_t b = 0;      ///< slot of the second muscle
-  uint32_t round = 0;  ///< greedy colour in insertion order of the pairs
-  uint32_t after[2] = {kNoPair, kNoPair};  ///< listed index of a's and b's previous pair
+  uint32_t a = 0;           ///< slot of the first muscle (earlier in insertion order)
+  uint32_t b = 0;           ///< slot of the second muscle
+  MuscleContacts contacts;  ///< in pairContacts, sized by the pair's candidate list
 };
 
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
@@ -87,16 +82,13 @@ struct MuscleSystem::Impl {
   std::vector<ThreadScratch> scratch;          ///< per thread of the pool
   std::vector<uint32_t> active;                ///< unfrozen muscle slots, largest first
   std::vector<MuscleIterationResult> results;  ///< per muscle slot, this iteration
-  std::vector<MusclePairTask> pairTasks;       ///< muscle pairs of this iteration, by round
-  std::vector<uint32_t> lastRound;             ///< scratch of the colouring, per slot
-  std::vector<uint32_t> lastPair;              ///< scratch: listed index of a slot's last pair
-  /// Per listed pair: pairStamp once it is done (stamps only grow, so nothing is cleared).
-  std::unique_ptr<std::atomic<uint64_t>[]> pairDone;
-  size_t pairCapacity = 0;    ///< entries of pairDone
-  uint64_t pairStamp = 0;     ///< counts collideMusclePairs calls
-  uint32_t musclesAdded = 0;  ///< counts additions, seeds each muscle's noise
-  btScalar previousDt = 0;    ///< dt of the last iteration (0: none yet)
-  uint64_t stepCount = 0;     ///< steps taken (the guard numbers them)
+  std::vector<MusclePairTask> pairTasks;       ///< muscle pairs of this iteration, in pair order
+  /// Per slot: its pairTasks in insertion order of the partners (the order its pushes sum in).
+  std::vector<std::vector<uint32_t>> musclePairs;
+  std::vector<MuscleContact> pairContacts;  ///< room for every muscle pair's contacts
+  uint32_t musclesAdded = 0;                ///< counts additions, seeds each muscle's noise
+  btScalar previousDt = 0;                  ///< dt of the last iteration (0: none yet)
+  uint64_t stepCount = 0;                   ///< steps taken (the guard numbers them)
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);

@@ -112,19 +112,21 @@ void MuscleSystem::Impl::prepareWorkers() {
   for (ThreadScratch& thread : scratch) {
     if (thread.contacts.ends.size() < share) thread.contacts.ends.resize(share);
     thread.stack.reserve(4096);
+    if (thread.pairStack) continue;
+    thread.pairStack = std::make_unique<SphereTree>();
+    thread.pairStack->tree().m_stkStack.resize(btDbvt::DOUBLE_STACKSIZE);  // as build() warms it
   }
   const size_t slots = muscles.states.size();
   active.reserve(slots);
   results.resize(slots);
-  lastRound.resize(slots);
-  const size_t pairs = slots * (slots - std::min<size_t>(slots, 1)) / 2;
-  pairTasks.reserve(pairs);
-  lastPair.resize(slots);
-  if (pairCapacity < pairs) {
-    pairDone = std::make_unique<std::atomic<uint64_t>[]>(pairs);
-    pairCapacity = pairs;
-    pairStamp = 0;
-  }
+  pairTasks.reserve(slots * (slots - std::min<size_t>(slots, 1)) / 2);
+  musclePairs.resize(slots);
+  for (std::vector<uint32_t>& pairs : musclePairs) pairs.reserve(slots);
+  // Room for the contacts of every pair at once: its candidate list's capacity.
+  size_t room = 0;
+  for (uint32_t a : muscles.order)
+    for (const CandidateList& list : muscles.states[a]->muscleLists) room += list.pairs.size();
+  if (pairContacts.size() < room) pairContacts.resize(room);
 }
 
 void MuscleSystem::Impl::gatherContacts() {
@@ -177,15 +179,14 @@ btScalar MuscleSystem::Impl::timeStep() const {
   return std::max(dt, parameters.minTimeStep);
 }
 
-// Pairs of muscles whose bounds meet, listed by round (a pair goes to the round after the last
-// one of either muscle), each waiting only for the previous pair of each of its muscles: every
-// muscle meets its partners in insertion order whatever the thread count (the pushes are summed
-// in one fixed order), and no barrier holds a thread between rounds. The pool hands the pairs
-// out in listed order, so a pair's predecessors are already running or done: waiting for them
-// cannot deadlock.
+// Pairs of muscles whose bounds meet, in two phases without waiting: every pair records its
+// contacts (any thread, any order; muscles are only read), then every muscle adds its pairs'
+// pushes in insertion order of its partners, each pair's in the order found. The sums have one
+// fixed order whatever the thread count.
 void MuscleSystem::Impl::collideMusclePairs() {
   pairTasks.clear();
-  std::fill(lastRound.begin(), lastRound.end(), 0);
+  for (std::vector<uint32_t>& pairs : musclePairs) pairs.clear();
+  size_t room = 0;
   for (size_t i = 0; i < muscles.order.size(); ++i) {
     const uint32_t a = muscles.order[i];
     const MuscleState& first = *muscles.states[a];
@@ -196,29 +197,24 @@ void MuscleSystem::Impl::collideMusclePairs() {
       if (second.frozen || !second.tree.root() ||
           !Intersect(first.tree.root()->volume, second.tree.root()->volume))
         continue;
-      const uint32_t round = std::max(lastRound[a], lastRound[b]) + 1;
-      lastRound[a] = lastRound[b] = round;
-      pairTasks.push_back({a, b, round});
+      const size_t capacity = b < first.muscleLists.size() ? first.muscleLists[b].pairs.size() : 0;
+      musclePairs[a].push_back(static_cast<uint32_t>(pairTasks.size()));
+      musclePairs[b].push_back(static_cast<uint32_t>(pairTasks.size()));
+      pairTasks.push_back({a, b, {pairContacts.data() + room, capacity}});
+      room += capacity;
     }
   }
-  // Stable by construction within a round: a pair's round exceeds every earlier pair's of its
-  // muscles, so sorting by round alone cannot reorder a muscle's pairs.
-  std::sort(pairTasks.begin(), pairTasks.end(),
-            [](const MusclePairTask& x, const MusclePairTask& y) { return x.round < y.round; });
-  std::fill(lastPair.begin(), lastPair.end(), kNoPair);
-  for (uint32_t k = 0; k < pairTasks.size(); ++k) {
-    MusclePairTask& pair = pairTasks[k];
-    pair.after[0] = std::exchange(lastPair[pair.a], k);
-    pair.after[1] = std::exchange(lastPair[pair.b], k);
-  }
-  const uint64_t stamp = ++pairStamp;
   pool->run(pairTasks.size(), [&](size_t k, unsigned thread) {
-    const MusclePairTask& pair = pairTasks[k];
-    for (uint32_t before : pair.after)
-      if (before != kNoPair) TaskPool::awaitValue(pairDone[before], stamp);
-    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].contacts);
-    pairDone[k].store(stamp, std::memory_order_release);
-    pairDone[k].notify_all();
+    MusclePairTask& pair = pairTasks[k];
+    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], *scratch[thread].pairStack,
+                   scratch[thread].contacts, pair.contacts);
+  });
+  forEachMuscle([&](MuscleState&, uint32_t slot, unsigned thread) {
+    for (uint32_t k : musclePairs[slot]) {
+      const MusclePairTask& pair = pairTasks[k];
+      pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot,
+                         *scratch[thread].pairStack, pair.contacts);
+    }
   });
 }
 

@@ -38,11 +38,6 @@ unsigned TaskPool::resolve(int threads) {
   return std::max(1u, std::thread::hardware_concurrency());
 }
 
-void TaskPool::awaitValue(const std::atomic<uint64_t>& value, uint64_t target) {
-  for (uint64_t now = value.load(std::memory_order_acquire); now != target;)
-    now = awaitChange(value, now);
-}
-
 TaskPool::TaskPool(unsigned threads) {
   const unsigned total = threads == 0 ? resolve(0) : threads;
   workers_.reserve(total - 1);

@@ -43,10 +43,6 @@ class TaskPool {
   /// The thread count a `threads` setting means (0: hardware threads, at least 1).
   static unsigned resolve(int threads);
 
-  /// Waits until `value` reaches `target` (spins, then sleeps): for a task that must follow an
-  /// earlier-listed task of the same run, which sets the value and notifies when done.
-  static void awaitValue(const std::atomic<uint64_t>& value, uint64_t target);
-
  private:
   using Call = void (*)(void* context, size_t index, unsigned thread);
 

@@ -49,8 +49,8 @@ struct StepStats {
   btScalar meanDisplacement = 0;  ///< mean free-particle displacement in the last iteration [m]
   size_t contacts = 0;            ///< sphere pairs found overlapping in the last iteration
   size_t candidates = 0;          ///< sphere pairs tested exactly in the last iteration
-  /// Candidate-list listings in this step that overflowed their capacity (each pair fell back to
-  /// a direct tree traversal: slower, the same contacts).
+  /// Candidate lists or contact records that overflowed their capacity in this step (each pair fell
+  /// back to a direct tree traversal: slower, the same contacts).
   size_t candidateOverflows = 0;
   btScalar springDeviationRatio = 0;  ///< Σ|l−L0| / ΣL0 over all muscles, last iteration
   StepTiming timing;                  ///< per-part wall time
