@@ -208,7 +208,7 @@ TEST(CandidateLists, ContactsBeyondTheirRecordsAreFoundAgainInOrder) {
   ThighRun run(1);
   for (int k = 0; k < 10; ++k) run.step(k);
   MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(run.system());
-  SphereTree stack;
+  TreeTraversalStack stack;
   ContactLog log;
   size_t pairsInContact = 0;
   const std::vector<uint32_t>& order = impl.muscles.order;

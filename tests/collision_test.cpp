@@ -238,6 +238,7 @@ TEST(BroadPhase, MuscleTreesFindExactlyTheBruteForcePairsWhileMoving) {
   SphereTree treeA, treeB;
   treeA.build(a.indices, a.centres, a.radii);
   treeB.build(b.indices, b.centres, b.radii);
+  TreeTraversalStack stack;
   size_t totalPairs = 0, totalCandidates = 0;
   for (int iteration = 0; iteration < 80; ++iteration) {
     if (iteration > 0) {
@@ -245,7 +246,7 @@ TEST(BroadPhase, MuscleTreesFindExactlyTheBruteForcePairsWhileMoving) {
       moveAndRefit(b, treeB, random, box, iteration);
     }
     PairRecorder recorder(a.centres, a.radii, b.centres, b.radii);
-    collideTrees(treeA, treeA.root(), treeB.root(), recorder);
+    collideTrees(stack, treeA.root(), treeB.root(), recorder);
     ASSERT_EQ(recorder.pairs, bruteForce(a.centres, a.radii, b.centres, b.radii))
         << "iteration " << iteration;
     totalPairs += recorder.pairs.size();

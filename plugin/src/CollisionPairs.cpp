@@ -215,7 +215,7 @@ class MuscleMusclePairs final : public btDbvt::ICollide {
 /// Calls onPair(i, j) for the leaf pairs of two muscle trees (nothing when their roots are
 /// apart), listing them into `list` if given; `stack` owns the traversal stack.
 template <typename OnPair>
-void traverseMuscles(const MuscleState& a, const MuscleState& b, SphereTree& stack,
+void traverseMuscles(const MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
                      CandidateList* list, OnPair&& onPair) {
   if (!a.tree.root() || !b.tree.root()) return;
   if (!Intersect(a.tree.root()->volume, b.tree.root()->volume)) return;
@@ -297,9 +297,10 @@ void rebuildTree(MuscleState& muscle) {
   muscle.tree.rebuild(boundary, muscle.positions, settings.radii, muscle.treeReach);
 }
 
-CandidateList muscleList(MuscleState& a, MuscleState& b) {
+CandidateList muscleList(const MuscleState& a, const MuscleState& b) {
   CandidateList counter;
-  traverseMuscles(a, b, a.tree, &counter, [](uint32_t, uint32_t) {});
+  TreeTraversalStack stack;
+  traverseMuscles(a, b, stack, &counter, [](uint32_t, uint32_t) {});
   return sizedList(counter.count, std::min(a.settings->boundaryParticles.size(),
                                            b.settings->boundaryParticles.size()));
 }
@@ -314,8 +315,8 @@ CandidateList boneList(const MuscleState& muscle, const BoneState& bone) {
   return sizedList(count, muscle.settings->boundaryParticles.size());
 }
 
-void collideMuscles(MuscleState& a, const MuscleState& b, SphereTree& stack, ContactLog& log,
-                    MuscleContacts& out) {
+void collideMuscles(MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
+                    ContactLog& log, MuscleContacts& out) {
   out.count = 0;
   out.listOverflowed = false;
   const auto test = [&](uint32_t i, uint32_t j) {
@@ -339,7 +340,7 @@ void collideMuscles(MuscleState& a, const MuscleState& b, SphereTree& stack, Con
   out.listOverflowed = list && !list->finish();
 }
 
-void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, SphereTree& stack,
+void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraversalStack& stack,
                         const MuscleContacts& contacts) {
   MuscleState& muscle = onFirst ? a : b;
   const auto push = [&](const MuscleContact& contact) {

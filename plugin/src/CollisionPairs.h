@@ -74,7 +74,7 @@ bool refitTree(MuscleState& muscle);
 void rebuildTree(MuscleState& muscle);
 /// A list for the leaf pairs of `a` and a later-added `b` (MuscleState::muscleLists), sized from
 /// their pairs at the current positions (kListSlack). Allocates.
-CandidateList muscleList(MuscleState& a, MuscleState& b);
+CandidateList muscleList(const MuscleState& a, const MuscleState& b);
 /// A list for the leaf pairs of a muscle and a sphere bone (MuscleState::boneLists), sized like
 /// muscleList; empty (never listed) for a bone with a distance field. Allocates.
 CandidateList boneList(const MuscleState& muscle, const BoneState& bone);
@@ -105,13 +105,13 @@ struct MuscleContacts {
 /// traverses the trees (`stack` owns the traversal stack) and lists them. Writes only the pair's
 /// list, `out` and `log` (log.candidates counts the pairs tested exactly: listed or traversed;
 /// both-fixed pairs skipped), so pairs sharing a muscle may run concurrently.
-void collideMuscles(MuscleState& a, const MuscleState& b, SphereTree& stack, ContactLog& log,
-                    MuscleContacts& out);
+void collideMuscles(MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
+                    ContactLog& log, MuscleContacts& out);
 /// Adds the pushes collideMuscles recorded for `a` and `b` to a (`onFirst`) or b, in record
 /// order; when they overflowed, traverses the trees again (`stack` owns the traversal stack) for
 /// the same contacts in the same order (counted like a listing overflow in a.candidateOverflows).
 /// Writes only that muscle's pushes (and a.candidateOverflows when `onFirst`).
-void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, SphereTree& stack,
+void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraversalStack& stack,
                         const MuscleContacts& contacts);
 /// Muscle–bone contacts, the whole overlap to the free particle: against the bone's spheres
 /// (its tree placed at its current transform), or, when the bone has a distance field, every

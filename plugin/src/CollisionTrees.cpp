@@ -21,8 +21,6 @@ void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVect
   inner_.reserve(leaves_.size());
   pending_.reserve(leaves_.size());
   orderInnerNodes();
-  // Warm the persistent traversal stack so that the first collideTrees() does not allocate.
-  tree_.m_stkStack.resize(btDbvt::DOUBLE_STACKSIZE);
 }
 
 btScalar SphereTree::refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
@@ -71,13 +69,12 @@ void SphereTree::orderInnerNodes() {
   std::reverse(inner_.begin(), inner_.end());
 }
 
-void collideTrees(SphereTree& stackOwner, const btDbvtNode* a, const btDbvtNode* b,
+void collideTrees(TreeTraversalStack& stack, const btDbvtNode* a, const btDbvtNode* b,
                   btDbvt::ICollide& policy) {
   // btDbvt::collideTTpersistentStack's traversal and pair order, but child pairs are tested
   // before they are pushed (most fail, and then cost no stack traffic). The stack grows like
   // Bullet grows it (never in practice: it holds a few entries per level of both trees).
   if (!a || !b || !Intersect(a->volume, b->volume)) return;
-  btAlignedObjectArray<btDbvt::sStkNN>& stack = stackOwner.tree().m_stkStack;
   if (stack.size() < btDbvt::DOUBLE_STACKSIZE) stack.resize(btDbvt::DOUBLE_STACKSIZE);
   int depth = 0;
   const auto visit = [&](const btDbvtNode* x, const btDbvtNode* y) {

@@ -41,8 +41,6 @@ class SphereTree {
   size_t leafCount() const { return leaves_.size(); }
   /// Counts build, refit and rebuild calls: lists of leaf pairs hold while it is unchanged.
   uint64_t epoch() const { return epoch_; }
-  /// The Bullet tree (its persistent traversal stack is reused by collideTrees()).
-  btDbvt& tree() { return tree_; }
 
  private:
   /// Lists the inner nodes children-first into inner_.
@@ -55,9 +53,13 @@ class SphereTree {
   std::vector<btDbvtNode*> pending_;  ///< scratch of orderInnerNodes, sized at build
 };
 
-/// Reports every leaf pair of two trees in the same frame whose bounds overlap
-/// (btDbvt::collideTTpersistentStack: collideTT reusing `stackOwner`'s stack, so no allocation).
-void collideTrees(SphereTree& stackOwner, const btDbvtNode* a, const btDbvtNode* b,
+/// A traversal stack for collideTrees (Bullet's node-pair entries), reused: sized once, it grows
+/// only if a traversal needs more (never in practice).
+using TreeTraversalStack = btAlignedObjectArray<btDbvt::sStkNN>;
+
+/// Reports every leaf pair of two trees in the same frame whose bounds overlap, like
+/// btDbvt::collideTTpersistentStack on a stack of the caller's (one per thread: no allocation).
+void collideTrees(TreeTraversalStack& stack, const btDbvtNode* a, const btDbvtNode* b,
                   btDbvt::ICollide& policy);
 
 /// A bone's spheres in a static tree: built once by btDbvt in the bone frame, its topology never

@@ -49,10 +49,9 @@ struct Slots {
 
 /// Scratch of one thread of the step: what a task may write that is not its muscle's.
 struct ThreadScratch {
-  MuscleBoneStack stack;  ///< traversal stack of muscle–bone queries
-  ContactLog contacts;    ///< contacts this thread found in the running phase
-  /// No spheres: owns the traversal stack of muscle–muscle pairs (not movable, hence held).
-  std::unique_ptr<SphereTree> pairStack;
+  MuscleBoneStack stack;         ///< traversal stack of muscle–bone queries
+  ContactLog contacts;           ///< contacts this thread found in the running phase
+  TreeTraversalStack pairStack;  ///< traversal stack of muscle–muscle pairs
 };
 
 /// What the per-muscle tasks of one iteration measured, reduced in insertion order afterwards

@@ -112,9 +112,8 @@ void MuscleSystem::Impl::prepareWorkers() {
   for (ThreadScratch& thread : scratch) {
     if (thread.contacts.ends.size() < share) thread.contacts.ends.resize(share);
     thread.stack.reserve(4096);
-    if (thread.pairStack) continue;
-    thread.pairStack = std::make_unique<SphereTree>();
-    thread.pairStack->tree().m_stkStack.resize(btDbvt::DOUBLE_STACKSIZE);  // as build() warms it
+    if (thread.pairStack.size() < btDbvt::DOUBLE_STACKSIZE)
+      thread.pairStack.resize(btDbvt::DOUBLE_STACKSIZE);
   }
   const size_t slots = muscles.states.size();
   active.reserve(slots);
@@ -206,14 +205,14 @@ void MuscleSystem::Impl::collideMusclePairs() {
   }
   pool->run(pairTasks.size(), [&](size_t k, unsigned thread) {
     MusclePairTask& pair = pairTasks[k];
-    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], *scratch[thread].pairStack,
+    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].pairStack,
                    scratch[thread].contacts, pair.contacts);
   });
   forEachMuscle([&](MuscleState&, uint32_t slot, unsigned thread) {
     for (uint32_t k : musclePairs[slot]) {
       const MusclePairTask& pair = pairTasks[k];
       pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot,
-                         *scratch[thread].pairStack, pair.contacts);
+                         scratch[thread].pairStack, pair.contacts);
     }
   });
 }
