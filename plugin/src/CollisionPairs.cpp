@@ -242,6 +242,23 @@ bool mayMeetBone(const MuscleState& muscle, const BoneState& bone, uint32_t i, u
                  muscle.settings->radii[i] + bone.settings->sphereRadii[sphere] + muscle.treeReach);
 }
 
+/// The candidate-list protocol of one pair of bodies: test(i, j) over the pairs `list` holds for
+/// the two keys; else traverse(listing) finds and tests them, listing into `list` unless a tree
+/// is tight (moving faster than its skin: refit next iteration, nothing to list for). Returns
+/// whether that listing overflowed.
+template <typename Test, typename Traverse>
+bool testCandidates(CandidateList* list, uint64_t firstKey, uint64_t secondKey, bool tight,
+                    Test&& test, Traverse&& traverse) {
+  if (list && list->holds(firstKey, secondKey)) {
+    for (size_t k = 0; k < list->count; ++k) test(list->pairs[k].first, list->pairs[k].second);
+    return false;
+  }
+  if (tight) list = nullptr;
+  if (list) list->start(firstKey, secondKey);
+  traverse(list);
+  return list && !list->finish();
+}
+
 /// A list with room for `pairs` pairs found when the bodies are added and the slack for
 /// `particles` boundary particles (kListSlack).
 CandidateList sizedList(size_t pairs, size_t particles) {
@@ -266,18 +283,18 @@ bool refitTree(MuscleState& muscle) {
   const btScalar half = muscle.treeSkin / 2;
   btScalar margin = half;
   if (muscle.treeReach > 0) {
-    // One pass that stops at the first particle out of its skin.
+    // One pass that stops at the first particle out of its skin (moved2: its squared move).
     const btScalar reach2 = muscle.treeReach * muscle.treeReach;
+    btScalar moved2 = 0;
     size_t k = 0;
-    while (k < boundary.size() &&
-           (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2() <= reach2)
-      ++k;
+    for (; k < boundary.size(); ++k) {
+      moved2 = (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2();
+      if (!(moved2 <= reach2)) break;
+    }
     if (k == boundary.size()) return muscle.refitStreak = false;
     // Out in two iterations running, or the first one out already past the whole skin:
     // moving faster than a skin pays for (bones moving), so tight bounds, refit every
     // iteration, until it slows down.
-    const btScalar moved2 =
-        (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2();
     if (muscle.refitStreak || moved2 > 4 * half * half) margin = 0;
   } else if (muscle.treeMotion > half * half) {
     margin = 0;  // still moving more than the skin holds in one iteration
@@ -328,16 +345,9 @@ void collideMuscles(MuscleState& a, const MuscleState& b, TreeTraversalStack& st
     ++out.count;
   };
   CandidateList* list = b.slot < a.muscleLists.size() ? &a.muscleLists[b.slot] : nullptr;
-  const uint64_t keyA = a.tree.epoch(), keyB = b.tree.epoch();
-  if (list && list->holds(keyA, keyB)) {
-    for (size_t k = 0; k < list->count; ++k) test(list->pairs[k].first, list->pairs[k].second);
-    return;
-  }
-  // A tight tree (moving faster than its skin) is refit next iteration: nothing to list for.
-  if (a.treeReach == 0 || b.treeReach == 0) list = nullptr;
-  if (list) list->start(keyA, keyB);
-  traverseMuscles(a, b, stack, list, test);
-  out.listOverflowed = list && !list->finish();
+  out.listOverflowed = testCandidates(
+      list, a.tree.epoch(), b.tree.epoch(), a.treeReach == 0 || b.treeReach == 0, test,
+      [&](CandidateList* listing) { traverseMuscles(a, b, stack, listing, test); });
 }
 
 void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraversalStack& stack,
@@ -368,19 +378,18 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneSta
   }
   CandidateList* list =
       bone.slot < muscle.boneLists.size() ? &muscle.boneLists[bone.slot] : nullptr;
-  const uint64_t muscleKey = muscle.tree.epoch(), boneKey = bone.tree.placement();
-  if (list && list->holds(muscleKey, boneKey)) {
-    for (size_t k = 0; k < list->count; ++k)
-      testBonePair(muscle, bone, list->pairs[k].first, list->pairs[k].second, log);
-    return;
-  }
-  if (muscle.treeReach == 0) list = nullptr;
-  if (list) list->start(muscleKey, boneKey);
-  forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
-    if (list && mayMeetBone(muscle, bone, i, sphere)) list->add(i, sphere);
+  const auto test = [&](uint32_t i, uint32_t sphere) {
     testBonePair(muscle, bone, i, sphere, log);
-  });
-  if (list && !list->finish()) ++muscle.candidateOverflows;
+  };
+  const auto traverse = [&](CandidateList* listing) {
+    forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
+      if (listing && mayMeetBone(muscle, bone, i, sphere)) listing->add(i, sphere);
+      test(i, sphere);
+    });
+  };
+  if (testCandidates(list, muscle.tree.epoch(), bone.tree.placement(), muscle.treeReach == 0, test,
+                     traverse))
+    ++muscle.candidateOverflows;
 }
 
 void forgetBoneSides(MuscleState& muscle) {
