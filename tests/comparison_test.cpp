@@ -12,6 +12,7 @@
 #include "fibremss/Compare.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Error.h"
+#include "support/Process.h"
 
 namespace fibremss {
 namespace {
@@ -30,6 +31,11 @@ fs::path scratch(const std::string& name) {
   const fs::path dir = fs::current_path() / ("comparison_test_" + name);
   fs::remove_all(dir);
   return dir;
+}
+
+/// Runs the fibremss tool with `arguments`: its exit code and all it printed (stderr too).
+testing::ProcessResult runCli(const std::string& arguments) {
+  return testing::runProcess(std::string(FIBREMSS_CLI) + " " + arguments + " 2>&1");
 }
 
 /// XML well-formedness: one root, every tag closed in order, quoted attributes, valid
@@ -216,11 +222,9 @@ INSTANTIATE_TEST_SUITE_P(BuiltInScenes, EveryMethod, ::testing::Values("fusiform
 
 TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   const fs::path out = scratch("cli");
-  const std::string command = std::string(FIBREMSS_CLI) +
-                              " compare fusiform --set resolution=12 --methods fibremss,fem "
-                              "--out " +
-                              out.string() + " > " + (out.string() + ".log") + " 2>&1";
-  ASSERT_EQ(std::system(command.c_str()), 0) << readFile(out.string() + ".log");
+  const testing::ProcessResult result =
+      runCli("compare fusiform --set resolution=12 --methods fibremss,fem --out " + out.string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
   for (const char* file :
        {"summary.json", "report.md", "speed_vs_error.png", "speed_vs_error.svg"}) {
     ASSERT_TRUE(fs::exists(out / file)) << file;
@@ -259,10 +263,9 @@ TEST(CompareCommand, HipSweepWritesThePenetrationAgainstStepPlot) {
   // hip-extension is a sweep: its step_deg (here overridden to 20) reaches summary.json and a
   // second plot, penetration against step_deg, is written beside speed against error.
   const fs::path out = scratch("hip_sweep");
-  const std::string command = std::string(FIBREMSS_CLI) +
-                              " compare hip-extension --set step_deg=20 --methods fibremss --out " +
-                              out.string() + " > " + (out.string() + ".log") + " 2>&1";
-  ASSERT_EQ(std::system(command.c_str()), 0) << readFile(out.string() + ".log");
+  const testing::ProcessResult result =
+      runCli("compare hip-extension --set step_deg=20 --methods fibremss --out " + out.string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
   EXPECT_EQ(summary["runs"][0]["step_deg"], 20.0);
   std::string problem;
@@ -275,11 +278,10 @@ TEST(CompareCommand, StatesTheRatioToBtSoftBodyWithTheThreadCounts) {
   // FibreMSS on the one thread --threads asks for, btSoftBody on Bullet's one: report.md and
   // summary.json state the ratio of the two runs' ms per step with both thread counts.
   const fs::path out = scratch("softbody_ratio");
-  const std::string command = std::string(FIBREMSS_CLI) +
-                              " compare fusiform --set resolution=8 --threads 1 --methods "
-                              "fibremss,btsoftbody --out " +
-                              out.string() + " > " + (out.string() + ".log") + " 2>&1";
-  ASSERT_EQ(std::system(command.c_str()), 0) << readFile(out.string() + ".log");
+  const testing::ProcessResult result = runCli(
+      "compare fusiform --set resolution=8 --threads 1 --methods fibremss,btsoftbody --out " +
+      out.string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
   ASSERT_EQ(summary["runs"].size(), 2u);
   const nlohmann::json &fibre = summary["runs"][0], &softBody = summary["runs"][1];
