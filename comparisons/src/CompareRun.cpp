@@ -71,17 +71,24 @@ RunMetrics namedRun(const LoadedScene& scene, const char* method, const char* in
   return metrics;
 }
 
-/// True when some pair counts as exploded by FibreMSS's guard rule (springExploded: past 3× its
-/// rest length and longer than it by more than its muscle's mean rest length).
-bool exploded(const Simulated& sim) {
-  for (size_t m = 0; m < sim.pairs.size(); ++m) {
-    if (sim.pairs[m].empty()) continue;
+/// Mean rest length of each muscle's pairs (0 for a muscle without pairs).
+std::vector<double> meanRestLengths(const Simulated& sim) {
+  std::vector<double> means;
+  for (const PairList& pairs : sim.pairs) {
     double restSum = 0;
-    for (const auto& pair : sim.pairs[m]) restSum += std::get<2>(pair);
-    const double meanRest = restSum / static_cast<double>(sim.pairs[m].size());
+    for (const auto& pair : pairs) restSum += std::get<2>(pair);
+    means.push_back(pairs.empty() ? 0 : restSum / static_cast<double>(pairs.size()));
+  }
+  return means;
+}
+
+/// True when some pair counts as exploded by FibreMSS's guard rule (springExploded: past 3× its
+/// rest length and longer than it by more than its muscle's mean rest length, `meanRest`).
+bool exploded(const Simulated& sim, std::span<const double> meanRest) {
+  for (size_t m = 0; m < sim.pairs.size(); ++m) {
     const std::span<const btVector3> positions = sim.points(m);
     for (const auto& [a, b, rest] : sim.pairs[m])
-      if (springExploded((positions[a] - positions[b]).length(), rest, meanRest)) return true;
+      if (springExploded((positions[a] - positions[b]).length(), rest, meanRest[m])) return true;
   }
   return false;
 }
@@ -97,6 +104,7 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   for (const MeshDistance& d : boneDistances) bones.push_back(&d);
 
   const int steps = std::max(scene.poseCount, 1);
+  const std::vector<double> meanRest = meanRestLengths(sim);
   std::vector<double> msPerStep;
   Penetration penetration;
   std::vector<btVector3> poseSurface, muscleSurface;
@@ -121,7 +129,7 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
       poseSurface.insert(poseSurface.end(), muscleSurface.begin(), muscleSurface.end());
     }
     metrics.nan = !allFinite(poseSurface);
-    metrics.exploded = !metrics.nan && exploded(sim);
+    metrics.exploded = !metrics.nan && exploded(sim, meanRest);
     // A failed pose's surface says nothing about the method: it enters no penetration or RMS.
     if (!metrics.nan && !metrics.exploded) {
       penetration = combine(penetration, measurePenetration(poseSurface, bones, transforms));

@@ -97,7 +97,8 @@ std::optional<SoftBodyRatio> againstSoftBody(const nlohmann::json& runs,
     r.threads = threadsOf(run);
     if (const double threads = number(softBody, "threads"); threads > 0)
       r.softBodyThreads = static_cast<int>(threads);
-    r.ratio = number(softBody, "ms_per_step") / number(run, "ms_per_step");
+    r.softBodyMsPerStep = number(softBody, "ms_per_step");
+    r.ratio = r.softBodyMsPerStep / number(run, "ms_per_step");
     r.timeStepRatio = number(softBody, "ms_per_time_step") / number(run, "ms_per_time_step");
     r.of = std::max(run.value("poses", 0), softBody.value("poses", 0));
     r.poses = std::min({run.value("steps", 0), softBody.value("steps", 0), r.of});
@@ -205,10 +206,8 @@ std::string scalingReport(const nlohmann::json& runs) {
     const double particles = number(run, "particles");
     const nlohmann::json* single =
         find(row, [](const nlohmann::json& r) { return plainFibre(r) && threadsOf(r) == 1; });
-    const nlohmann::json* softBody =
-        find(row, [](const nlohmann::json& r) { return text(r, "method") == "btsoftbody"; });
-    const double softBodyStep = softBody ? number(*softBody, "ms_per_step") : NAN;
     const std::optional<SoftBodyRatio> ratio = againstSoftBody(runs, run);
+    const double softBodyStep = ratio ? ratio->softBodyMsPerStep : NAN;
     std::string ratioCell = ratio ? cell(ratio->ratio, "%.1f×") : "—";
     if (ratio && ratio->poses < ratio->of)
       ratioCell +=

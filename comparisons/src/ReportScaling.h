@@ -21,12 +21,13 @@ std::string scalingReport(const nlohmann::json& runs);
 /// with the threads each used and the poses both simulated (a median covers only the poses its
 /// run reached).
 struct SoftBodyRatio {
-  std::string scene;        ///< scene name
-  int resolution = 0;       ///< particles per fibre
-  std::string method;       ///< the FibreMSS run's method name
-  int threads = 0;          ///< FibreMSS's solver threads (0: the machine's, not recorded)
-  int softBodyThreads = 1;  ///< btSoftBody's (Debian's Bullet has no task scheduler)
-  double ratio = NAN;       ///< btSoftBody ms per step ÷ FibreMSS ms per step
+  std::string scene;               ///< scene name
+  int resolution = 0;              ///< particles per fibre
+  std::string method;              ///< the FibreMSS run's method name
+  int threads = 0;                 ///< FibreMSS's solver threads (0: the machine's, not recorded)
+  int softBodyThreads = 1;         ///< btSoftBody's (Debian's Bullet has no task scheduler)
+  double ratio = NAN;              ///< btSoftBody ms per step ÷ FibreMSS ms per step
+  double softBodyMsPerStep = NAN;  ///< btSoftBody's median ms per step (one pose)
   /// btSoftBody ms per world substep ÷ FibreMSS ms per iteration (each one time step dt).
   double timeStepRatio = NAN;
   int poses = 0;                  ///< poses both runs simulated
