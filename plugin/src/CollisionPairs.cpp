@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <type_traits>
+#include <utility>
 
 #include "Integrators.h"
 
@@ -281,6 +282,7 @@ bool refitTree(MuscleState& muscle) {
   const MuscleSettings& settings = *muscle.settings;
   const std::vector<uint32_t>& boundary = settings.boundaryParticles;
   const btScalar half = muscle.treeSkin / 2;
+  const bool followed = std::exchange(muscle.treeFollowed, false);
   btScalar margin = half;
   if (muscle.treeReach > 0) {
     // One pass that stops at the first particle out of its skin (moved2: its squared move).
@@ -296,12 +298,22 @@ bool refitTree(MuscleState& muscle) {
     // moving faster than a skin pays for (bones moving), so tight bounds, refit every
     // iteration, until it slows down.
     if (muscle.refitStreak || moved2 > 4 * half * half) margin = 0;
+  } else if (followed && muscle.treeMotion > half * half) {
+    // Tight and carried on by its bones (faster than the skin when it went tight): bounds at the
+    // particles, but no snapshot or move measured, which would only say "moving fast" again
+    // until the bones arrive (that iteration takes the snapshot).
+    muscle.tree.refit(boundary, muscle.positions, settings.radii);
+    ++muscle.snapshotSkips;
+    return muscle.refitStreak = true;
   } else if (muscle.treeMotion > half * half) {
     margin = 0;  // still moving more than the skin holds in one iteration
   }
   muscle.treeReach = margin;
-  muscle.treeMotion =
+  const btScalar motion =
       muscle.tree.refit(boundary, muscle.positions, settings.radii, margin, muscle.treeSnapshot);
+  // Per iteration: the bones move at a steady pace, so a move over skipped snapshots divides.
+  const auto span = static_cast<btScalar>(1 + std::exchange(muscle.snapshotSkips, 0));
+  muscle.treeMotion = motion / (span * span);
   return muscle.refitStreak = true;
 }
 
@@ -311,6 +323,7 @@ void rebuildTree(MuscleState& muscle) {
   for (uint32_t i : boundary) muscle.treeSnapshot[i] = muscle.positions[i];
   muscle.treeReach = muscle.treeSkin / 2;
   muscle.refitStreak = false;
+  muscle.snapshotSkips = 0;
   muscle.tree.rebuild(boundary, muscle.positions, settings.radii, muscle.treeReach);
 }
 

@@ -68,7 +68,9 @@ void buildTree(MuscleState& muscle);
 /// bones, rollback, the guard, a user); returns whether it refitted. Until then every sphere
 /// lies inside its leaf's bounds. The new leaves are grown by skin/2, or not at all (refit every
 /// iteration) while the muscle moves faster than the skin would hold: refit in two iterations
-/// running, or more than the skin in one (bones moving).
+/// running, or more than the skin in one (bones moving). While tight and carried by its bones
+/// (followBones), it refits without updating the snapshot (a pass less) until the iteration in
+/// which they arrive.
 bool refitTree(MuscleState& muscle);
 /// Re-inserts every leaf (the thesis' rebuild each step), with the skin; a new snapshot and epoch.
 void rebuildTree(MuscleState& muscle);

@@ -82,7 +82,11 @@ struct MuscleState {
   btScalar treeSkin = 0;
   btScalar treeReach = 0;    ///< what the tree's leaves are grown by; refit past it [m]
   bool refitStreak = false;  ///< the last refitTree call refitted
-  btScalar treeMotion = 0;   ///< largest squared move of a particle between the last refits [m²]
+  btScalar treeMotion = 0;   ///< largest squared move of a particle per iteration, last refit [m²]
+  /// followBones moved the particles, and their bones have yet to arrive (refitTree may skip the
+  /// snapshot of a tight tree).
+  bool treeFollowed = false;
+  uint32_t snapshotSkips = 0;  ///< tight refits without the snapshot since it was taken
   /// Positions of the boundary particles at the last refit (by particle; inner ones unused) [m].
   std::vector<btVector3> treeSnapshot;
   /// Leaf pairs with each later-added muscle, by its slot (collideMuscles; empty when unlisted).

@@ -157,15 +157,18 @@ void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
 void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) const {
   const bool sinceStart = motion == BoneMotion::SinceStepStart;
   state.bonesMoving = false;
+  bool arrived = true;
   for (size_t b = 0; b < state.bones.size(); ++b) {
     state.boneDeltas[b].setIdentity();
     if (state.boneSlots[b] < 0) continue;
     const BoneState& bone = *bones.states[state.boneSlots[b]];
     state.boneTransforms[b] = bone.current;
+    arrived = arrived && bone.current == bone.target;
     if (sinceStart ? bone.current == bone.goodLast : !bone.moving) continue;
     state.boneDeltas[b] = sinceStart ? bone.current * bone.goodLast.inverse() : bone.delta;
     state.bonesMoving = true;
   }
+  state.treeFollowed = state.bonesMoving && !arrived;
   pretransform(state, integratorFor(parameters.integrator).usesVelocities());
   followFixed(state);
 }
