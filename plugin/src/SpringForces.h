@@ -14,13 +14,36 @@ struct SpringForceResult {
   size_t overstretched = 0;  ///< springs beyond 3× their rest length, or not finite
 };
 
+/// The instruction set a spring-force pass runs on.
+enum class SpringKernel {
+  scalar,  ///< one spring at a time (every build; the only one in the double build)
+  sse2,    ///< four springs at a time (float build on x86-64)
+  avx2,    ///< eight springs at a time with FMA (float build, CPU with AVX2 and FMA)
+};
+
+/// Whether `kernel` runs in this build on this CPU.
+bool springKernelAvailable(SpringKernel kernel);
+
+/// The fastest available kernel, or the available one the environment variable
+/// FIBREMSS_SPRING_KERNEL names ("scalar", "sse2", "avx2"), chosen once per process:
+/// springForces runs it.
+SpringKernel fastestSpringKernel();
+
+/// The kernel's name: "scalar", "sse2" or "avx2".
+const char* springKernelName(SpringKernel kernel);
+
 /// F = k·(l − L0)·(x_b − x_a)/l on a, the opposite on b, at `positions` into `forces`
-/// (overwritten), in one pass over the springs (SSE: four springs at a time, exact square
-/// roots and divisions; the force on a summed in a register along the run of springs that share
-/// a). Integrators that need forces at other positions (RK, implicit) call this with their
-/// buffers.
+/// (overwritten), in one pass over the springs on fastestSpringKernel() (exact square roots and
+/// divisions; SSE2 sums the force on a in a register along the run of springs that share a, AVX2
+/// adds each group of eight springs' forces to f[a] in memory; the kernels differ in rounding
+/// only: FMA, order of the sums). Integrators that need forces at other positions (RK, implicit)
+/// call this with their buffers.
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces);
+
+/// springForces on the given kernel, which must be available (tests compare the kernels).
+SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                               std::span<btVector3> forces, SpringKernel kernel);
 
 /// The muscle's spring forces at its positions, into muscle.forces.
 SpringForceResult springForces(MuscleState& muscle);
