@@ -3,6 +3,33 @@
 #include <algorithm>
 
 namespace fibremss {
+namespace {
+
+/// btDbvtVolume::FromCR(centre, radius), written in place: the same values.
+void setSphereBounds(btDbvtVolume& bounds, const btVector3& centre, btScalar radius) {
+#if FIBREMSS_SSE_BOUNDS
+  const __m128 c = _mm_load_ps(centre.m_floats), r = _mm_setr_ps(radius, radius, radius, 0);
+  _mm_store_ps(bounds.tMins().m_floats, _mm_sub_ps(c, r));
+  _mm_store_ps(bounds.tMaxs().m_floats, _mm_add_ps(c, r));
+#else
+  bounds = btDbvtVolume::FromCR(centre, radius);
+#endif
+}
+
+/// Bullet's Merge(a, b, r) without its branch per coordinate (unpredictable in a refit): the
+/// lane-wise minimum and maximum, the same values.
+void mergeBounds(const btDbvtVolume& a, const btDbvtVolume& b, btDbvtVolume& r) {
+#if FIBREMSS_SSE_BOUNDS
+  _mm_store_ps(r.tMins().m_floats,
+               _mm_min_ps(_mm_load_ps(a.Mins().m_floats), _mm_load_ps(b.Mins().m_floats)));
+  _mm_store_ps(r.tMaxs().m_floats,
+               _mm_max_ps(_mm_load_ps(a.Maxs().m_floats), _mm_load_ps(b.Maxs().m_floats)));
+#else
+  Merge(a, b, r);
+#endif
+}
+
+}  // namespace
 
 void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
                        std::span<const btScalar> radii, btScalar margin) {
@@ -30,17 +57,17 @@ btScalar SphereTree::refit(std::span<const uint32_t> indices, std::span<const bt
   btScalar moved2 = 0;
   if (snapshot.empty()) {
     for (size_t k = 0; k < leaves_.size(); ++k)
-      leaves_[k]->volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]] + margin);
+      setSphereBounds(leaves_[k]->volume, centres[indices[k]], radii[indices[k]] + margin);
   } else {
     for (size_t k = 0; k < leaves_.size(); ++k) {
       const uint32_t i = indices[k];
-      leaves_[k]->volume = btDbvtVolume::FromCR(centres[i], radii[i] + margin);
+      setSphereBounds(leaves_[k]->volume, centres[i], radii[i] + margin);
       moved2 = std::max(moved2, (centres[i] - snapshot[i]).length2());
       snapshot[i] = centres[i];
     }
   }
   for (btDbvtNode* node : inner_)
-    Merge(node->childs[0]->volume, node->childs[1]->volume, node->volume);
+    mergeBounds(node->childs[0]->volume, node->childs[1]->volume, node->volume);
   return moved2;
 }
 
@@ -74,11 +101,13 @@ void collideTrees(TreeTraversalStack& stack, const btDbvtNode* a, const btDbvtNo
   // btDbvt::collideTTpersistentStack's traversal and pair order, but child pairs are tested
   // before they are pushed (most fail, and then cost no stack traffic). The stack grows like
   // Bullet grows it (never in practice: it holds a few entries per level of both trees).
-  if (!a || !b || !Intersect(a->volume, b->volume)) return;
+  if (!a || !b || !boundsOverlap(a->volume, b->volume)) return;
   if (stack.size() < btDbvt::DOUBLE_STACKSIZE) stack.resize(btDbvt::DOUBLE_STACKSIZE);
   int depth = 0;
+  // Written always, kept when they overlap: no branch on the test.
   const auto visit = [&](const btDbvtNode* x, const btDbvtNode* y) {
-    if (Intersect(x->volume, y->volume)) stack[depth++] = btDbvt::sStkNN(x, y);
+    stack[depth] = btDbvt::sStkNN(x, y);
+    depth += boundsOverlap(x->volume, y->volume);
   };
   visit(a, b);
   while (depth > 0) {
@@ -142,9 +171,9 @@ void BoneSphereTree::place(const btTransform& boneToWorld, std::span<const btVec
   for (size_t n = nodes_.size(); n-- > 0;) {
     const Node& node = nodes_[n];
     if (node.sphere >= 0)
-      bounds_[n] = btDbvtVolume::FromCR(centres_[node.sphere], radii[node.sphere]);
+      setSphereBounds(bounds_[n], centres_[node.sphere], radii[node.sphere]);
     else
-      Merge(bounds_[node.children[0]], bounds_[node.children[1]], bounds_[n]);
+      mergeBounds(bounds_[node.children[0]], bounds_[node.children[1]], bounds_[n]);
   }
 }
 

@@ -9,7 +9,29 @@
 #include <span>
 #include <vector>
 
+#if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
+#include <immintrin.h>
+#define FIBREMSS_SSE_BOUNDS 1
+#else
+#define FIBREMSS_SSE_BOUNDS 0
+#endif
+
 namespace fibremss {
+
+/// Whether bounds a and b overlap (touching counts; NaN never does), as Bullet's Intersect but
+/// without branches: Debian's Bullet is built without BT_USE_SSE, so Intersect is a chain of six
+/// compare-and-branch, and a traversal's overlap tests go either way about as often.
+inline bool boundsOverlap(const btDbvtVolume& a, const btDbvtVolume& b) {
+#if FIBREMSS_SSE_BOUNDS
+  const __m128 below = _mm_cmple_ps(_mm_load_ps(a.Mins().m_floats), _mm_load_ps(b.Maxs().m_floats));
+  const __m128 above = _mm_cmple_ps(_mm_load_ps(b.Mins().m_floats), _mm_load_ps(a.Maxs().m_floats));
+  return (_mm_movemask_ps(_mm_and_ps(below, above)) & 7) == 7;  // x, y, z; w is not bounds
+#else
+  const btVector3 &ai = a.Mins(), &ax = a.Maxs(), &bi = b.Mins(), &bx = b.Maxs();
+  return (ai.x() <= bx.x()) & (bi.x() <= ax.x()) & (ai.y() <= bx.y()) & (bi.y() <= ax.y()) &
+         (ai.z() <= bx.z()) & (bi.z() <= ax.z());
+#endif
+}
 
 /// One btDbvt over spheres; leaf k holds the sphere `indices[k]` given to build(). Refit keeps the
 /// topology (method.md §6: rebuild only when asked): a leaf's bounds are its sphere's grown by
@@ -153,15 +175,18 @@ using MuscleBoneStack = std::vector<MuscleBoneNodes>;
 template <typename OnPair>
 void collideWithBone(MuscleBoneStack& stack, const btDbvtNode* muscleRoot,
                      const BoneSphereTree& bone, OnPair&& onPair) {
-  if (!muscleRoot || bone.empty() || !Intersect(muscleRoot->volume, bone.bounds(0))) return;
-  stack.clear();
-  stack.push_back({muscleRoot, 0});
+  if (!muscleRoot || bone.empty() || !boundsOverlap(muscleRoot->volume, bone.bounds(0))) return;
+  size_t depth = 0;
+  // Written always, kept when they overlap: no branch on the test.
   const auto visit = [&](const btDbvtNode* muscle, int32_t boneNode) {
-    if (Intersect(muscle->volume, bone.bounds(boneNode))) stack.push_back({muscle, boneNode});
+    stack[depth] = {muscle, boneNode};
+    depth += boundsOverlap(muscle->volume, bone.bounds(boneNode));
   };
-  while (!stack.empty()) {
-    const MuscleBoneNodes pair = stack.back();
-    stack.pop_back();
+  if (stack.size() < 64) stack.resize(64);
+  stack[depth++] = {muscleRoot, 0};
+  while (depth > 0) {
+    const MuscleBoneNodes pair = stack[--depth];
+    if (depth + 4 > stack.size()) stack.resize(2 * stack.size());  // never in practice
     const BoneSphereTree::Node& b = bone.node(pair.bone);
     if (pair.muscle->isinternal()) {
       if (b.sphere < 0) {
