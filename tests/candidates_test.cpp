@@ -262,7 +262,7 @@ TEST(CandidateLists, AParticleMovedByHandIsCaughtWithinAndPastTheSkin) {
     const btVector3 up(0, 1, 0);
     b.positions[i] = b.previous[i] = a.positions[i] + up * (reach + move * btScalar(0.8));
     b.treeSnapshot[i] = b.positions[i];
-    b.tree.refit(b.settings->boundaryParticles, b.treeSnapshot, b.settings->radii, b.treeReach);
+    b.tree.refit(b.treeSnapshot, b.settings->radii, b.treeReach);
     impl.collide();
     ASSERT_EQ(grids.system.lastStep().contacts, 0u) << share;
     const uint64_t epoch = b.tree.epoch();

@@ -157,27 +157,24 @@ TEST(Switches, NoSelfCollisionAndCollisionTogglesAreRespected) {
 
 using PairSet = std::set<std::pair<int, int>>;
 
+struct RandomSpheres {
+  std::vector<btVector3> centres, velocities;
+  std::vector<btScalar> radii;
+  std::vector<uint32_t> indices;
+};
+
 /// Collects the leaf pairs whose spheres overlap exactly; counts the candidates.
-class PairRecorder final : public btDbvt::ICollide {
- public:
-  PairRecorder(const std::vector<btVector3>& a, const std::vector<btScalar>& ra,
-               const std::vector<btVector3>& b, const std::vector<btScalar>& rb)
-      : a_(a), ra_(ra), b_(b), rb_(rb) {}
-  using btDbvt::ICollide::Process;
-  void Process(const btDbvtNode* leafA, const btDbvtNode* leafB) override {
+struct PairRecorder {
+  PairRecorder(const RandomSpheres& first, const RandomSpheres& second) : a(first), b(second) {}
+  void operator()(int32_t i, int32_t j) {
     ++candidates;
-    const int i = leafA->dataAsInt, j = leafB->dataAsInt;
-    const btScalar reach = ra_[i] + rb_[j];
-    if ((a_[i] - b_[j]).length2() < reach * reach) pairs.insert({i, j});
+    const btScalar reach = a.radii[i] + b.radii[j];
+    if ((a.centres[i] - b.centres[j]).length2() < reach * reach) pairs.insert({i, j});
   }
+  const RandomSpheres& a;
+  const RandomSpheres& b;
   PairSet pairs;
   size_t candidates = 0;
-
- private:
-  const std::vector<btVector3>& a_;
-  const std::vector<btScalar>& ra_;
-  const std::vector<btVector3>& b_;
-  const std::vector<btScalar>& rb_;
 };
 
 PairSet bruteForce(const std::vector<btVector3>& a, const std::vector<btScalar>& ra,
@@ -192,12 +189,6 @@ PairSet bruteForce(const std::vector<btVector3>& a, const std::vector<btScalar>&
     }
   return pairs;
 }
-
-struct RandomSpheres {
-  std::vector<btVector3> centres, velocities;
-  std::vector<btScalar> radii;
-  std::vector<uint32_t> indices;
-};
 
 RandomSpheres randomSpheres(std::mt19937& random, size_t n, btScalar box) {
   std::uniform_real_distribution<btScalar> position(-box, box), radius(0.001, 0.004),
@@ -226,9 +217,9 @@ void moveAndRefit(RandomSpheres& spheres, SphereTree& tree, std::mt19937& random
       if (std::abs(c[axis]) > box) spheres.velocities[i][axis] *= -1;
   }
   if (iteration % 10 == 0)
-    tree.rebuild(spheres.indices, spheres.centres, spheres.radii);
+    tree.rebuild(spheres.centres, spheres.radii);
   else
-    tree.refit(spheres.indices, spheres.centres, spheres.radii);
+    tree.refit(spheres.centres, spheres.radii);
 }
 
 TEST(BroadPhase, MuscleTreesFindExactlyTheBruteForcePairsWhileMoving) {
@@ -245,8 +236,8 @@ TEST(BroadPhase, MuscleTreesFindExactlyTheBruteForcePairsWhileMoving) {
       moveAndRefit(a, treeA, random, box, iteration);
       moveAndRefit(b, treeB, random, box, iteration);
     }
-    PairRecorder recorder(a.centres, a.radii, b.centres, b.radii);
-    collideTrees(stack, treeA.root(), treeB.root(), recorder);
+    PairRecorder recorder(a, b);
+    collideTrees(stack, treeA, treeB, recorder);
     ASSERT_EQ(recorder.pairs, bruteForce(a.centres, a.radii, b.centres, b.radii))
         << "iteration " << iteration;
     totalPairs += recorder.pairs.size();
@@ -266,7 +257,7 @@ TEST(BroadPhase, BoneTreeFindsExactlyTheBruteForcePairsWhileBothMove) {
   BoneSphereTree boneTree;
   muscleTree.build(muscle.indices, muscle.centres, muscle.radii);
   boneTree.build(bone.centres, bone.radii);
-  MuscleBoneStack stack;
+  TreeTraversalStack stack;
   std::uniform_real_distribution<btScalar> unit(-1, 1);
   size_t totalPairs = 0, totalCandidates = 0;
   for (int iteration = 0; iteration < 80; ++iteration) {
@@ -277,9 +268,8 @@ TEST(BroadPhase, BoneTreeFindsExactlyTheBruteForcePairsWhileBothMove) {
         btVector3(unit(random), unit(random), unit(random)) * 0.005);
     boneTree.place(boneToWorld, bone.centres, bone.radii);
     PairSet pairs;
-    collideWithBone(stack, muscleTree.root(), boneTree, [&](const btDbvtNode* leaf, int32_t s) {
+    collideTrees(stack, muscleTree, boneTree, [&](int32_t i, int32_t s) {
       ++totalCandidates;
-      const int i = leaf->dataAsInt;
       EXPECT_LT((boneTree.centre(s) - boneToWorld * bone.centres[s]).length(), 1e-6);
       const btScalar reach = muscle.radii[i] + bone.radii[s];
       if ((muscle.centres[i] - boneTree.centre(s)).length2() < reach * reach) pairs.insert({i, s});

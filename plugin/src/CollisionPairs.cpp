@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <type_traits>
 #include <utility>
 
 #include "Integrators.h"
@@ -104,10 +103,10 @@ btVector3 recoveryPush(MuscleState& muscle, uint32_t i, int32_t bone,
 }
 
 /// collideMuscleBone against the bone's distance field.
-void collideWithField(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
+void collideWithField(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
                       ContactLog& log) {
-  const btDbvtNode* root = muscle.tree.root();
-  if (!root) return;
+  const SphereTree& tree = muscle.tree;
+  if (tree.empty()) return;
   const MuscleSettings& settings = *muscle.settings;
   const BoneDistanceField& field = *bone.field;
   btVector3 lower, upper;
@@ -117,22 +116,24 @@ void collideWithField(MuscleState& muscle, const BoneState& bone, MuscleBoneStac
   const btMatrix3x3& toWorld = bone.current.getBasis();
   const bool recovery = !muscle.sideBones.empty();
   stack.clear();
-  stack.push_back({root, -1});
+  stack.push_back({0, -1});
   while (!stack.empty()) {
-    const btDbvtNode* node = stack.back().muscle;
+    const int32_t n = stack.back().first;
     stack.pop_back();
-    if (!Intersect(node->volume, box)) continue;
-    if (node->isinternal()) {
+    const btDbvtVolume& bounds = tree.bounds(n);
+    if (!boundsOverlap(bounds, box)) continue;
+    const SphereTree::Node& node = tree.node(n);
+    if (node.sphere < 0) {
       // φ is 1-Lipschitz: a node whose box (spheres included) lies well clear of the bone
       // holds no contact and no particle within its recovery band (twice its radius).
-      const btVector3 centre = node->volume.Center();
-      const btScalar halfDiagonal = node->volume.Extents().length();
+      const btVector3 centre = bounds.Center();
+      const btScalar halfDiagonal = bounds.Extents().length();
       if (field.sample(toBone * centre).distance > 3 * halfDiagonal + 2 * field.cell()) continue;
-      stack.push_back({node->childs[0], -1});
-      stack.push_back({node->childs[1], -1});
+      stack.push_back({node.children[0], -1});
+      stack.push_back({node.children[1], -1});
       continue;
     }
-    const uint32_t i = static_cast<uint32_t>(node->dataAsInt);
+    const auto i = static_cast<uint32_t>(node.sphere);
     if (settings.isFixed(i)) continue;
     ++log.candidates;
     const btScalar radius = settings.radii[i];
@@ -187,54 +188,34 @@ void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32
   log.add(muscle.positions[i], centre);
 }
 
-/// Leaf pairs of two muscle trees (not both particles fixed): listed when `list` is given, and
-/// passed to onPair(i, j).
-template <typename OnPair>
-class MuscleMusclePairs final : public btDbvt::ICollide {
- public:
-  MuscleMusclePairs(const MuscleState& a, const MuscleState& b, CandidateList* list, OnPair& onPair)
-      : a_(a), b_(b), list_(list), onPair_(onPair) {}
-  using btDbvt::ICollide::Process;
-  void Process(const btDbvtNode* leafA, const btDbvtNode* leafB) override {
-    const uint32_t i = static_cast<uint32_t>(leafA->dataAsInt);
-    const uint32_t j = static_cast<uint32_t>(leafB->dataAsInt);
-    if (a_.settings->isFixed(i) && b_.settings->isFixed(j)) return;
-    const btScalar reach = a_.settings->radii[i] + b_.settings->radii[j];
-    if (list_ &&
-        mayMeet(a_.treeSnapshot[i], b_.treeSnapshot[j], reach + a_.treeReach + b_.treeReach))
-      list_->add(i, j);
-    onPair_(i, j);
-  }
-
- private:
-  const MuscleState& a_;
-  const MuscleState& b_;
-  CandidateList* list_;
-  OnPair& onPair_;
-};
-
-/// Calls onPair(i, j) for the leaf pairs of two muscle trees (nothing when their roots are
-/// apart), listing them into `list` if given; `stack` owns the traversal stack.
+/// Calls onPair(i, j) for the leaf pairs of two muscle trees (not both particles fixed; nothing
+/// when their roots are apart), listing them into `list` if given; `stack` owns the traversal
+/// stack.
 template <typename OnPair>
 void traverseMuscles(const MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
                      CandidateList* list, OnPair&& onPair) {
-  if (!a.tree.root() || !b.tree.root()) return;
-  if (!Intersect(a.tree.root()->volume, b.tree.root()->volume)) return;
-  MuscleMusclePairs<std::remove_reference_t<OnPair>> pairs(a, b, list, onPair);
-  collideTrees(stack, a.tree.root(), b.tree.root(), pairs);
+  const MuscleSettings& sa = *a.settings;
+  const MuscleSettings& sb = *b.settings;
+  collideTrees(stack, a.tree, b.tree, [&](int32_t sphereA, int32_t sphereB) {
+    const auto i = static_cast<uint32_t>(sphereA), j = static_cast<uint32_t>(sphereB);
+    if (sa.isFixed(i) && sb.isFixed(j)) return;
+    const btScalar reach = sa.radii[i] + sb.radii[j];
+    if (list && mayMeet(a.treeSnapshot[i], b.treeSnapshot[j], reach + a.treeReach + b.treeReach))
+      list->add(i, j);
+    onPair(i, j);
+  });
 }
 
 /// Calls onPair(particle, sphere) for every free boundary particle whose leaf bounds overlap a
 /// bone sphere's.
 template <typename OnPair>
-void forBonePairs(MuscleBoneStack& stack, const MuscleState& muscle, const BoneState& bone,
+void forBonePairs(TreeTraversalStack& stack, const MuscleState& muscle, const BoneState& bone,
                   OnPair&& onPair) {
   const MuscleSettings& settings = *muscle.settings;
-  collideWithBone(stack, muscle.tree.root(), bone.tree,
-                  [&](const btDbvtNode* leaf, int32_t sphere) {
-                    const uint32_t i = static_cast<uint32_t>(leaf->dataAsInt);
-                    if (!settings.isFixed(i)) onPair(i, static_cast<uint32_t>(sphere));
-                  });
+  collideTrees(stack, muscle.tree, bone.tree, [&](int32_t particle, int32_t sphere) {
+    const auto i = static_cast<uint32_t>(particle);
+    if (!settings.isFixed(i)) onPair(i, static_cast<uint32_t>(sphere));
+  });
 }
 
 /// mayMeet for particle i of the muscle and a sphere of the bone (placed: it holds still).
@@ -302,7 +283,7 @@ bool refitTree(MuscleState& muscle) {
     // Tight and carried on by its bones (faster than the skin when it went tight): bounds at the
     // particles, but no snapshot or move measured, which would only say "moving fast" again
     // until the bones arrive (that iteration takes the snapshot).
-    muscle.tree.refit(boundary, muscle.positions, settings.radii);
+    muscle.tree.refit(muscle.positions, settings.radii);
     ++muscle.snapshotSkips;
     return muscle.refitStreak = true;
   } else if (muscle.treeMotion > half * half) {
@@ -310,7 +291,7 @@ bool refitTree(MuscleState& muscle) {
   }
   muscle.treeReach = margin;
   const btScalar motion =
-      muscle.tree.refit(boundary, muscle.positions, settings.radii, margin, muscle.treeSnapshot);
+      muscle.tree.refit(muscle.positions, settings.radii, margin, muscle.treeSnapshot);
   // Per iteration: the bones move at a steady pace, so a move over skipped snapshots divides.
   const auto span = static_cast<btScalar>(1 + std::exchange(muscle.snapshotSkips, 0));
   muscle.treeMotion = motion / (span * span);
@@ -324,7 +305,7 @@ void rebuildTree(MuscleState& muscle) {
   muscle.treeReach = muscle.treeSkin / 2;
   muscle.refitStreak = false;
   muscle.snapshotSkips = 0;
-  muscle.tree.rebuild(boundary, muscle.positions, settings.radii, muscle.treeReach);
+  muscle.tree.rebuild(muscle.positions, settings.radii, muscle.treeReach);
 }
 
 CandidateList muscleList(const MuscleState& a, const MuscleState& b) {
@@ -338,7 +319,7 @@ CandidateList muscleList(const MuscleState& a, const MuscleState& b) {
 CandidateList boneList(const MuscleState& muscle, const BoneState& bone) {
   if (bone.field) return {};
   size_t count = 0;
-  MuscleBoneStack stack;
+  TreeTraversalStack stack;
   forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
     count += mayMeetBone(muscle, bone, i, sphere) ? 1 : 0;
   });
@@ -383,7 +364,7 @@ void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraver
   });
 }
 
-void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
+void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
                        ContactLog& log) {
   if (bone.field) {
     collideWithField(muscle, bone, stack, log);

@@ -122,7 +122,7 @@ void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraver
 /// of the bone flipped since the last iteration is pushed back out on its remembered side.
 /// Against spheres, the pairs muscle.boneLists[bone.slot] holds for the muscle's tree epoch and
 /// the bone's placement are tested, else listed like collideMuscles; the field is traversed.
-void collideMuscleBone(MuscleState& muscle, const BoneState& bone, MuscleBoneStack& stack,
+void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
                        ContactLog& log);
 
 /// Forgets the bone sides penetration recovery remembers (after a rollback: the remembered

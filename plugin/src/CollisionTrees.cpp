@@ -31,135 +31,101 @@ void mergeBounds(const btDbvtVolume& a, const btDbvtVolume& b, btDbvtVolume& r) 
 
 }  // namespace
 
-void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                       std::span<const btScalar> radii, btScalar margin) {
-  ++epoch_;
-  tree_.clear();
-  leaves_.clear();
-  leaves_.reserve(indices.size());
-  for (uint32_t index : indices) {
-    btDbvtNode* leaf =
-        tree_.insert(btDbvtVolume::FromCR(centres[index], radii[index] + margin), nullptr);
-    leaf->dataAsInt = static_cast<int>(index);
-    leaves_.push_back(leaf);
-  }
-  // Top-down optimisation gives a balanced tree to start from; it keeps the leaf nodes.
-  if (!leaves_.empty()) tree_.optimizeTopDown();
-  inner_.reserve(leaves_.size());
-  pending_.reserve(leaves_.size());
-  orderInnerNodes();
-}
-
-btScalar SphereTree::refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                           std::span<const btScalar> radii, btScalar margin,
-                           std::span<btVector3> snapshot) {
-  ++epoch_;
-  btScalar moved2 = 0;
-  if (snapshot.empty()) {
-    for (size_t k = 0; k < leaves_.size(); ++k)
-      setSphereBounds(leaves_[k]->volume, centres[indices[k]], radii[indices[k]] + margin);
-  } else {
-    for (size_t k = 0; k < leaves_.size(); ++k) {
-      const uint32_t i = indices[k];
-      setSphereBounds(leaves_[k]->volume, centres[i], radii[i] + margin);
-      moved2 = std::max(moved2, (centres[i] - snapshot[i]).length2());
-      snapshot[i] = centres[i];
-    }
-  }
-  for (btDbvtNode* node : inner_)
-    mergeBounds(node->childs[0]->volume, node->childs[1]->volume, node->volume);
-  return moved2;
-}
-
-void SphereTree::rebuild(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                         std::span<const btScalar> radii, btScalar margin) {
-  ++epoch_;
-  for (size_t k = 0; k < leaves_.size(); ++k) {
-    btDbvtVolume volume = btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]] + margin);
-    tree_.update(leaves_[k], volume);  // remove and insert: reuses the freed node
-  }
-  orderInnerNodes();
-}
-
-void SphereTree::orderInnerNodes() {
-  // Depth first from the root lists parents before children; reversed, children come first.
-  inner_.clear();
-  pending_.clear();
-  if (tree_.m_root && tree_.m_root->isinternal()) pending_.push_back(tree_.m_root);
-  while (!pending_.empty()) {
-    btDbvtNode* node = pending_.back();
-    pending_.pop_back();
-    inner_.push_back(node);
-    for (btDbvtNode* child : node->childs)
-      if (child->isinternal()) pending_.push_back(child);
-  }
-  std::reverse(inner_.begin(), inner_.end());
-}
-
-void collideTrees(TreeTraversalStack& stack, const btDbvtNode* a, const btDbvtNode* b,
-                  btDbvt::ICollide& policy) {
-  // btDbvt::collideTTpersistentStack's traversal and pair order, but child pairs are tested
-  // before they are pushed (most fail, and then cost no stack traffic). The stack grows like
-  // Bullet grows it (never in practice: it holds a few entries per level of both trees).
-  if (!a || !b || !boundsOverlap(a->volume, b->volume)) return;
-  if (stack.size() < btDbvt::DOUBLE_STACKSIZE) stack.resize(btDbvt::DOUBLE_STACKSIZE);
-  int depth = 0;
-  // Written always, kept when they overlap: no branch on the test.
-  const auto visit = [&](const btDbvtNode* x, const btDbvtNode* y) {
-    stack[depth] = btDbvt::sStkNN(x, y);
-    depth += boundsOverlap(x->volume, y->volume);
+void FlatSphereTree::flatten(btDbvt& tree, size_t leafCount, std::vector<btDbvtNode*>& sources) {
+  const size_t count = leafCount ? 2 * leafCount - 1 : 0;
+  nodes_.assign(count, Node{});
+  bounds_.resize(count);
+  sources.resize(count);
+  firstLeaf_ = leafCount ? static_cast<int32_t>(leafCount - 1) : 0;
+  if (!tree.m_root) return;
+  // Depth first; an inner node numbers its children when it is reached, so they follow it.
+  int32_t nextInner = 0;
+  const auto number = [&](const btDbvtNode* node) {
+    return node->isleaf() ? firstLeaf_ + node->dataAsInt : nextInner++;
   };
-  visit(a, b);
-  while (depth > 0) {
-    const btDbvt::sStkNN pair = stack[--depth];
-    if (depth + 4 > stack.size()) stack.resize(stack.size() * 2);
-    if (pair.a->isinternal()) {
-      if (pair.b->isinternal()) {
-        visit(pair.a->childs[0], pair.b->childs[0]);
-        visit(pair.a->childs[1], pair.b->childs[0]);
-        visit(pair.a->childs[0], pair.b->childs[1]);
-        visit(pair.a->childs[1], pair.b->childs[1]);
-      } else {
-        visit(pair.a->childs[0], pair.b);
-        visit(pair.a->childs[1], pair.b);
-      }
-    } else if (pair.b->isinternal()) {
-      visit(pair.a, pair.b->childs[0]);
-      visit(pair.a, pair.b->childs[1]);
-    } else {
-      policy.Process(pair.a, pair.b);
-    }
-  }
-}
-
-void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const btScalar> radii) {
-  nodes_.clear();
-  bounds_.clear();
-  centres_.clear();
-  if (centres.empty()) return;
-  btDbvt tree;
-  for (size_t k = 0; k < centres.size(); ++k)
-    tree.insert(btDbvtVolume::FromCR(centres[k], radii[k]), nullptr)->dataAsInt =
-        static_cast<int>(k);
-  tree.optimizeTopDown();
-  // Flatten depth first; a parent's index is below its children's.
-  std::vector<std::pair<const btDbvtNode*, int32_t>> pending{{tree.m_root, 0}};
-  nodes_.emplace_back();
-  while (!pending.empty()) {
-    const auto [node, index] = pending.back();
-    pending.pop_back();
+  pending_.clear();
+  pending_.emplace_back(tree.m_root, number(tree.m_root));
+  while (!pending_.empty()) {
+    const auto [node, index] = pending_.back();
+    pending_.pop_back();
+    sources[index] = node;
+    bounds_[index] = node->volume;
     if (node->isleaf()) {
       nodes_[index].sphere = node->dataAsInt;
       continue;
     }
     for (int c = 0; c < 2; ++c) {
-      const auto child = static_cast<int32_t>(nodes_.size());
+      const int32_t child = number(node->childs[c]);
       nodes_[index].children[c] = child;
-      nodes_.emplace_back();
-      pending.emplace_back(node->childs[c], child);
+      pending_.emplace_back(node->childs[c], child);
     }
   }
-  bounds_.resize(nodes_.size());
+}
+
+void FlatSphereTree::mergeInner() {
+  for (int32_t n = firstLeaf_; n-- > 0;)
+    mergeBounds(bounds_[nodes_[n].children[0]], bounds_[nodes_[n].children[1]], bounds_[n]);
+}
+
+void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
+                       std::span<const btScalar> radii, btScalar margin) {
+  ++epoch_;
+  tree_.clear();
+  spheres_.assign(indices.begin(), indices.end());
+  for (size_t k = 0; k < indices.size(); ++k)
+    tree_.insert(btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]] + margin), nullptr)
+        ->dataAsInt = static_cast<int>(k);
+  // Top-down optimisation gives a balanced tree to start from; it keeps the leaf nodes.
+  if (!spheres_.empty()) tree_.optimizeTopDown();
+  copyTree();
+}
+
+btScalar SphereTree::refit(std::span<const btVector3> centres, std::span<const btScalar> radii,
+                           btScalar margin, std::span<btVector3> snapshot) {
+  ++epoch_;
+  btScalar moved2 = 0;
+  btDbvtVolume* leaves = bounds_.data() + firstLeaf_;
+  if (snapshot.empty()) {
+    for (size_t k = 0; k < spheres_.size(); ++k)
+      setSphereBounds(leaves[k], centres[spheres_[k]], radii[spheres_[k]] + margin);
+  } else {
+    for (size_t k = 0; k < spheres_.size(); ++k) {
+      const uint32_t i = spheres_[k];
+      setSphereBounds(leaves[k], centres[i], radii[i] + margin);
+      moved2 = std::max(moved2, (centres[i] - snapshot[i]).length2());
+      snapshot[i] = centres[i];
+    }
+  }
+  mergeInner();
+  return moved2;
+}
+
+void SphereTree::rebuild(std::span<const btVector3> centres, std::span<const btScalar> radii,
+                         btScalar margin) {
+  ++epoch_;
+  // The btDbvt's bounds as the last refit left them guide the re-insertions.
+  for (size_t n = 0; n < nodes_.size(); ++n) dbvtNodes_[n]->volume = bounds_[n];
+  for (size_t k = 0; k < spheres_.size(); ++k) {
+    btDbvtVolume volume = btDbvtVolume::FromCR(centres[spheres_[k]], radii[spheres_[k]] + margin);
+    tree_.update(dbvtNodes_[leaf(k)], volume);  // remove and insert: reuses the freed node
+  }
+  copyTree();
+}
+
+void SphereTree::copyTree() {
+  flatten(tree_, spheres_.size(), dbvtNodes_);
+  for (size_t k = 0; k < spheres_.size(); ++k)
+    nodes_[leaf(k)].sphere = static_cast<int32_t>(spheres_[k]);
+}
+
+void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const btScalar> radii) {
+  btDbvt tree;
+  for (size_t k = 0; k < centres.size(); ++k)
+    tree.insert(btDbvtVolume::FromCR(centres[k], radii[k]), nullptr)->dataAsInt =
+        static_cast<int>(k);
+  if (!centres.empty()) tree.optimizeTopDown();
+  std::vector<btDbvtNode*> sources;
+  flatten(tree, centres.size(), sources);
   centres_.resize(centres.size());
   place(btTransform::getIdentity(), centres, radii);
 }
@@ -167,14 +133,11 @@ void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const b
 void BoneSphereTree::place(const btTransform& boneToWorld, std::span<const btVector3> centres,
                            std::span<const btScalar> radii) {
   ++placement_;
-  for (size_t k = 0; k < centres.size(); ++k) centres_[k] = boneToWorld * centres[k];
-  for (size_t n = nodes_.size(); n-- > 0;) {
-    const Node& node = nodes_[n];
-    if (node.sphere >= 0)
-      setSphereBounds(bounds_[n], centres_[node.sphere], radii[node.sphere]);
-    else
-      mergeBounds(bounds_[node.children[0]], bounds_[node.children[1]], bounds_[n]);
+  for (size_t k = 0; k < centres.size(); ++k) {
+    centres_[k] = boneToWorld * centres[k];
+    setSphereBounds(bounds_[leaf(k)], centres_[k], radii[k]);
   }
+  mergeInner();
 }
 
 }  // namespace fibremss

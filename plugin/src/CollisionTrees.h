@@ -1,12 +1,14 @@
 #pragma once
-// Sphere trees for the broad phase (method.md §6) on Bullet's btDbvt: one tree per body, leaves
-// are sphere bounds whose dataAsInt is the sphere's index (a particle or a bone sphere), never a
-// pointer. Internal to the plugin; exposed to tests through this header.
+// Sphere trees for the broad phase (method.md §6): one tree per body, its topology built by
+// Bullet's btDbvt and copied into flat arrays (node indices, bounds side by side) that the refits
+// and traversals of every iteration sweep. Internal to the plugin; exposed to tests through this
+// header.
 #include <BulletCollision/BroadphaseCollision/btDbvt.h>
 #include <LinearMath/btTransform.h>
 
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
@@ -33,89 +35,103 @@ inline bool boundsOverlap(const btDbvtVolume& a, const btDbvtVolume& b) {
 #endif
 }
 
-/// One btDbvt over spheres; leaf k holds the sphere `indices[k]` given to build(). Refit keeps the
-/// topology (method.md §6: rebuild only when asked): a leaf's bounds are its sphere's grown by
-/// `margin` (the Verlet skin of refitTree: a tree refit only when a sphere left its fat bounds),
-/// an inner node's the union of its children's, recomputed bottom-up in O(n). Re-inserting moved
-/// leaves one by one (btDbvt::update with a velocity margin) was measured 2–3× slower at thigh13:
-/// while bones move, most spheres leave their fattened bounds every iteration.
-class SphereTree {
+/// The topology and bounds of a btDbvt over spheres in flat arrays: the inner nodes first, each
+/// before its children (node 0 is the root), then the leaves in the order of their spheres'
+/// slots. A refit is two sweeps over contiguous memory (leaves, then inner nodes backwards);
+/// btDbvt's own nodes, one allocation each, were measured to make refit and traversal
+/// memory-bound.
+class FlatSphereTree {
+ public:
+  /// One node.
+  struct Node {
+    int32_t children[2] = {-1, -1};  ///< child nodes, or -1 for a leaf
+    int32_t sphere = -1;             ///< the leaf's sphere index (a particle or a bone sphere)
+  };
+
+  bool empty() const { return nodes_.empty(); }
+  const Node& node(int32_t n) const { return nodes_[n]; }
+  const btDbvtVolume& bounds(int32_t n) const { return bounds_[n]; }
+  /// The node of the sphere in slot k (build order).
+  int32_t leaf(size_t k) const { return firstLeaf_ + static_cast<int32_t>(k); }
+  size_t leafCount() const { return nodes_.size() - static_cast<size_t>(firstLeaf_); }
+
+ protected:
+  /// Copies `tree` (its leaves' dataAsInt: slots 0 … leafCount−1) with its bounds; leaf k's
+  /// sphere is k until the caller renames it; sources[n] is the btDbvt node of node n. Allocates
+  /// only when the tree grew.
+  void flatten(btDbvt& tree, size_t leafCount, std::vector<btDbvtNode*>& sources);
+  /// Every inner node's bounds the union of its children's, bottom-up.
+  void mergeInner();
+
+  std::vector<Node> nodes_;           ///< inner nodes, then leaves
+  std::vector<btDbvtVolume> bounds_;  ///< bounds per node
+  int32_t firstLeaf_ = 0;             ///< index of the first leaf (the number of inner nodes)
+
+ private:
+  std::vector<std::pair<btDbvtNode*, int32_t>> pending_;  ///< scratch of flatten
+};
+
+/// A tree over a muscle's boundary spheres; leaf k holds the sphere `indices[k]` given to build().
+/// Refit keeps the topology (method.md §6: rebuild only when asked): a leaf's bounds are its
+/// sphere's grown by `margin` (the Verlet skin of refitTree: a tree refit only when a sphere left
+/// its fat bounds), an inner node's the union of its children's, recomputed bottom-up in O(n).
+/// Re-inserting moved leaves one by one (btDbvt::update with a velocity margin) was measured
+/// 2–3× slower at thigh13: while bones move, most spheres leave their fattened bounds every
+/// iteration.
+class SphereTree : public FlatSphereTree {
  public:
   SphereTree() = default;
   SphereTree(const SphereTree&) = delete;
   SphereTree& operator=(const SphereTree&) = delete;
 
-  /// Inserts one leaf per listed sphere and optimises the tree top-down. Allocates.
+  /// Inserts one leaf per listed sphere into a btDbvt, optimises it top-down and copies it.
+  /// Allocates.
   void build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
              std::span<const btScalar> radii, btScalar margin = 0);
   /// Bounds for the spheres' current centres grown by `margin`, same topology. With a
   /// `snapshot` (indexed like `centres`), also returns the largest squared distance of a centre
   /// from its snapshot and replaces the snapshot by the centres (in the same pass). No allocation.
-  btScalar refit(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                 std::span<const btScalar> radii, btScalar margin = 0,
-                 std::span<btVector3> snapshot = {});
-  /// Re-inserts every leaf at its sphere (the thesis' rebuild each step): a new topology fitted
-  /// to the current shape. No allocation.
-  void rebuild(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-               std::span<const btScalar> radii, btScalar margin = 0);
+  btScalar refit(std::span<const btVector3> centres, std::span<const btScalar> radii,
+                 btScalar margin = 0, std::span<btVector3> snapshot = {});
+  /// Re-inserts every leaf at its sphere into the btDbvt (the thesis' rebuild each step) and
+  /// copies it again: a new topology fitted to the current shape. No allocation.
+  void rebuild(std::span<const btVector3> centres, std::span<const btScalar> radii,
+               btScalar margin = 0);
 
-  const btDbvtNode* root() const { return tree_.m_root; }
-  size_t leafCount() const { return leaves_.size(); }
   /// Counts build, refit and rebuild calls: lists of leaf pairs hold while it is unchanged.
   uint64_t epoch() const { return epoch_; }
 
  private:
-  /// Lists the inner nodes children-first into inner_.
-  void orderInnerNodes();
+  /// Copies the btDbvt and names every leaf by its sphere.
+  void copyTree();
 
-  uint64_t epoch_ = 0;                ///< see epoch()
-  btDbvt tree_;                       ///< the Bullet tree
-  std::vector<btDbvtNode*> leaves_;   ///< leaf of the k-th sphere, owned by tree_
-  std::vector<btDbvtNode*> inner_;    ///< inner nodes, every child before its parent
-  std::vector<btDbvtNode*> pending_;  ///< scratch of orderInnerNodes, sized at build
+  uint64_t epoch_ = 0;                  ///< see epoch()
+  btDbvt tree_;                         ///< Bullet's tree: the topology, rebuilt on request
+  std::vector<uint32_t> spheres_;       ///< sphere of slot k (the indices given to build)
+  std::vector<btDbvtNode*> dbvtNodes_;  ///< tree_'s node of each node, owned by tree_
 };
-
-/// A traversal stack for collideTrees (Bullet's node-pair entries), reused: sized once, it grows
-/// only if a traversal needs more (never in practice).
-using TreeTraversalStack = btAlignedObjectArray<btDbvt::sStkNN>;
-
-/// Reports every leaf pair of two trees in the same frame whose bounds overlap, like
-/// btDbvt::collideTTpersistentStack on a stack of the caller's (one per thread: no allocation).
-void collideTrees(TreeTraversalStack& stack, const btDbvtNode* a, const btDbvtNode* b,
-                  btDbvt::ICollide& policy);
 
 /// A bone's spheres in a static tree: built once by btDbvt in the bone frame, its topology never
 /// changes; place() re-expresses every node's bounds in world coordinates for the bone's current
 /// transform (leaves: the transformed spheres, tight; inner nodes: merged children), O(nodes)
 /// per moving bone and no allocation. Queries then run in world space against the muscle trees,
 /// with boxes tighter than a muscle box rotated into the bone frame would be.
-class BoneSphereTree {
+class BoneSphereTree : public FlatSphereTree {
  public:
-  /// One node; children come after their parent, so a reverse sweep refits bottom-up.
-  struct Node {
-    int32_t children[2] = {-1, -1};  ///< child nodes, or -1 for a leaf
-    int32_t sphere = -1;             ///< the leaf's sphere index
-  };
-
   /// Builds the tree over the spheres (bone frame) and places it at the identity. Allocates.
   void build(std::span<const btVector3> centres, std::span<const btScalar> radii);
   /// World bounds and sphere centres for the bone at `boneToWorld`.
   void place(const btTransform& boneToWorld, std::span<const btVector3> centres,
              std::span<const btScalar> radii);
 
-  bool empty() const { return nodes_.empty(); }
-  const Node& node(int32_t n) const { return nodes_[n]; }
-  const btDbvtVolume& bounds(int32_t n) const { return bounds_[n]; }
   /// Sphere centres in world coordinates as of the last place().
   const btVector3& centre(int32_t sphere) const { return centres_[sphere]; }
   /// Counts place() calls: lists of leaf pairs with this bone hold while it is unchanged.
   uint64_t placement() const { return placement_; }
 
  private:
-  uint64_t placement_ = 0;            ///< see placement()
-  std::vector<Node> nodes_;           ///< node 0 is the root
-  std::vector<btDbvtVolume> bounds_;  ///< world bounds per node
-  std::vector<btVector3> centres_;    ///< world sphere centres
+  uint64_t placement_ = 0;          ///< see placement()
+  std::vector<btVector3> centres_;  ///< world sphere centres
 };
 
 /// A leaf pair of two bodies: the sphere index in the first body and in the second.
@@ -161,48 +177,48 @@ struct CandidateList {
   }
 };
 
-/// A muscle tree node paired with a bone tree node, on the traversal stack.
-struct MuscleBoneNodes {
-  const btDbvtNode* muscle;  ///< node of the muscle's btDbvt
-  int32_t bone;              ///< node of the bone tree
+/// Two nodes, one of each tree, on a traversal stack.
+struct NodePair {
+  int32_t first;   ///< node of the first tree
+  int32_t second;  ///< node of the second tree
 };
-/// A reusable traversal stack for collideWithBone.
-using MuscleBoneStack = std::vector<MuscleBoneNodes>;
+/// A traversal stack, reused (one per thread: no allocation once it is deep enough).
+using TreeTraversalStack = std::vector<NodePair>;
 
-/// Calls onPair(muscleLeaf, sphere) for every muscle leaf whose bounds overlap the bounds of a
-/// bone sphere (both in world space), descending both trees like btDbvt::collideTT. Child pairs
-/// are tested before they are pushed: most fail, and a failed test then costs no stack traffic.
+/// Calls onPair(sphereA, sphereB) for every leaf pair of two trees in the same frame whose
+/// bounds overlap, in btDbvt::collideTT's order. Child pairs are written to the stack and kept
+/// when they overlap: most fail, and a failed test then costs no branch and no stack traffic.
 template <typename OnPair>
-void collideWithBone(MuscleBoneStack& stack, const btDbvtNode* muscleRoot,
-                     const BoneSphereTree& bone, OnPair&& onPair) {
-  if (!muscleRoot || bone.empty() || !boundsOverlap(muscleRoot->volume, bone.bounds(0))) return;
-  size_t depth = 0;
-  // Written always, kept when they overlap: no branch on the test.
-  const auto visit = [&](const btDbvtNode* muscle, int32_t boneNode) {
-    stack[depth] = {muscle, boneNode};
-    depth += boundsOverlap(muscle->volume, bone.bounds(boneNode));
-  };
+void collideTrees(TreeTraversalStack& stack, const FlatSphereTree& a, const FlatSphereTree& b,
+                  OnPair&& onPair) {
+  if (a.empty() || b.empty() || !boundsOverlap(a.bounds(0), b.bounds(0))) return;
   if (stack.size() < 64) stack.resize(64);
-  stack[depth++] = {muscleRoot, 0};
+  size_t depth = 0;
+  const auto visit = [&](int32_t x, int32_t y) {
+    stack[depth] = {x, y};
+    depth += boundsOverlap(a.bounds(x), b.bounds(y));
+  };
+  stack[depth++] = {0, 0};
   while (depth > 0) {
-    const MuscleBoneNodes pair = stack[--depth];
+    const NodePair pair = stack[--depth];
     if (depth + 4 > stack.size()) stack.resize(2 * stack.size());  // never in practice
-    const BoneSphereTree::Node& b = bone.node(pair.bone);
-    if (pair.muscle->isinternal()) {
-      if (b.sphere < 0) {
-        visit(pair.muscle->childs[0], b.children[0]);
-        visit(pair.muscle->childs[1], b.children[0]);
-        visit(pair.muscle->childs[0], b.children[1]);
-        visit(pair.muscle->childs[1], b.children[1]);
+    const FlatSphereTree::Node& x = a.node(pair.first);
+    const FlatSphereTree::Node& y = b.node(pair.second);
+    if (x.sphere < 0) {
+      if (y.sphere < 0) {
+        visit(x.children[0], y.children[0]);
+        visit(x.children[1], y.children[0]);
+        visit(x.children[0], y.children[1]);
+        visit(x.children[1], y.children[1]);
       } else {
-        visit(pair.muscle->childs[0], pair.bone);
-        visit(pair.muscle->childs[1], pair.bone);
+        visit(x.children[0], pair.second);
+        visit(x.children[1], pair.second);
       }
-    } else if (b.sphere < 0) {
-      visit(pair.muscle, b.children[0]);
-      visit(pair.muscle, b.children[1]);
+    } else if (y.sphere < 0) {
+      visit(pair.first, y.children[0]);
+      visit(pair.first, y.children[1]);
     } else {
-      onPair(pair.muscle, b.sphere);
+      onPair(x.sphere, y.sphere);
     }
   }
 }

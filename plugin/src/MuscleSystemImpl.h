@@ -49,9 +49,8 @@ struct Slots {
 
 /// Scratch of one thread of the step: what a task may write that is not its muscle's.
 struct ThreadScratch {
-  MuscleBoneStack stack;         ///< traversal stack of muscle–bone queries
-  ContactLog contacts;           ///< contacts this thread found in the running phase
-  TreeTraversalStack pairStack;  ///< traversal stack of muscle–muscle pairs
+  TreeTraversalStack stack;  ///< traversal stack of the tree queries
+  ContactLog contacts;       ///< contacts this thread found in the running phase
 };
 
 /// What the per-muscle tasks of one iteration measured, reduced in insertion order afterwards

@@ -112,8 +112,6 @@ void MuscleSystem::Impl::prepareWorkers() {
   for (ThreadScratch& thread : scratch) {
     if (thread.contacts.ends.size() < share) thread.contacts.ends.resize(share);
     thread.stack.reserve(4096);
-    if (thread.pairStack.size() < btDbvt::DOUBLE_STACKSIZE)
-      thread.pairStack.resize(btDbvt::DOUBLE_STACKSIZE);
   }
   const size_t slots = muscles.states.size();
   active.reserve(slots);
@@ -192,12 +190,12 @@ void MuscleSystem::Impl::collideMusclePairs() {
   for (size_t i = 0; i < muscles.order.size(); ++i) {
     const uint32_t a = muscles.order[i];
     const MuscleState& first = *muscles.states[a];
-    if (first.frozen || !first.tree.root()) continue;
+    if (first.frozen || first.tree.empty()) continue;
     for (size_t j = i + 1; j < muscles.order.size(); ++j) {
       const uint32_t b = muscles.order[j];
       const MuscleState& second = *muscles.states[b];
-      if (second.frozen || !second.tree.root() ||
-          !Intersect(first.tree.root()->volume, second.tree.root()->volume))
+      if (second.frozen || second.tree.empty() ||
+          !boundsOverlap(first.tree.bounds(0), second.tree.bounds(0)))
         continue;
       const size_t capacity = b < first.muscleLists.size() ? first.muscleLists[b].pairs.size() : 0;
       musclePairs[a].push_back(static_cast<uint32_t>(pairTasks.size()));
@@ -208,14 +206,14 @@ void MuscleSystem::Impl::collideMusclePairs() {
   }
   pool->run(pairTasks.size(), [&](size_t k, unsigned thread) {
     MusclePairTask& pair = pairTasks[k];
-    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].pairStack,
+    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
                    scratch[thread].contacts, pair.contacts);
   });
   forEachMuscle([&](MuscleState&, uint32_t slot, unsigned thread) {
     for (uint32_t k : musclePairs[slot]) {
       const MusclePairTask& pair = pairTasks[k];
       pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot,
-                         scratch[thread].pairStack, pair.contacts);
+                         scratch[thread].stack, pair.contacts);
     }
   });
 }
