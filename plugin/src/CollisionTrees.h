@@ -37,9 +37,9 @@ inline bool boundsOverlap(const btDbvtVolume& a, const btDbvtVolume& b) {
 
 /// The topology and bounds of a btDbvt over spheres in flat arrays: the inner nodes first, each
 /// before its children (node 0 is the root), then the leaves in the order of their spheres'
-/// slots. A refit is two sweeps over contiguous memory (leaves, then inner nodes backwards);
-/// btDbvt's own nodes, one allocation each, were measured to make refit and traversal
-/// memory-bound.
+/// slots. A refit is two sweeps over contiguous memory (leaves, then inner nodes backwards).
+/// Refit and traversal on btDbvt's own nodes (one allocation each) took about 1.6× as long
+/// (muscle CD at thigh13, resolution 40, one thread).
 class FlatSphereTree {
  public:
   /// One node.
