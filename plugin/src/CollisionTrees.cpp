@@ -44,6 +44,7 @@ void FlatSphereTree::flatten(btDbvt& tree, size_t leafCount, std::vector<btDbvtN
     return node->isleaf() ? firstLeaf_ + node->dataAsInt : nextInner++;
   };
   pending_.clear();
+  pending_.reserve(leafCount + 1);  // the deepest a rebuilt tree can get: no allocation then
   pending_.emplace_back(tree.m_root, number(tree.m_root));
   while (!pending_.empty()) {
     const auto [node, index] = pending_.back();
