@@ -7,10 +7,12 @@
 #include <LinearMath/btAlignedAllocator.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <random>
@@ -346,6 +348,62 @@ TEST(Stability, ExplicitBoundsFollowTheStabilityRegions) {
     EXPECT_TRUE(std::isinf(stableTimeStep(*chain, kind))) << toString(kind);
 }
 
+// --- Verlet's step particle by particle -----------------------------------------------------
+
+TEST(VerletStep, EveryParticleTakesTheFormulasStepBitForBit) {
+  // x⁺ = x + ((x − x⁻)·keep + F·scale) with btVector3's operators, particle by particle in the
+  // order of the free list (the plain loop), against advance (its vector path and scalar tail):
+  // positions and previous (x with its w lane) bit for bit and the displacement sum, for 0 to 17
+  // free particles in shuffled order out of 24; fixed ones untouched.
+  std::mt19937 random(23);
+  std::normal_distribution<double> normal;
+  const auto vector = [&](double scale) {
+    btVector3 v;
+    for (int axis = 0; axis < 4; ++axis) v.m_floats[axis] = btScalar(scale * normal(random));
+    return v;
+  };
+  const auto same = [](const btVector3& a, const btVector3& b) {
+    return std::memcmp(a.m_floats, b.m_floats, sizeof(a.m_floats)) == 0;
+  };
+  constexpr uint32_t kParticles = 24;
+  std::vector<uint32_t> order(kParticles);
+  for (uint32_t i = 0; i < kParticles; ++i) order[i] = i;
+  for (size_t count = 0; count < 18; ++count) {
+    const btScalar mass = btScalar(1e-3), damping = count % 3 ? btScalar(2e-3) : 0;
+    const btScalar dt = btScalar(1e-3), previousDt = count % 2 ? btScalar(1.3e-3) : dt;
+    MuscleState muscle;
+    muscle.settings =
+        particles(std::vector<btVector3>(kParticles, btVector3(0, 0, 0)), mass, damping);
+    for (uint32_t i = 0; i < kParticles; ++i) {
+      muscle.positions.push_back(vector(0.1));
+      muscle.previous.push_back(muscle.positions.back() + vector(1e-4));
+      muscle.forces.push_back(vector(1e-2));
+    }
+    std::shuffle(order.begin(), order.end(), random);
+    muscle.freeParticles.assign(order.begin(), order.begin() + static_cast<ptrdiff_t>(count));
+    const btScalar gamma = damping * dt / (2 * mass);
+    const btScalar forceScale = dt * dt / (mass * (1 + gamma));
+    const btScalar keep = (1 - gamma) / (1 + gamma) * dt / previousDt;
+    std::vector<btVector3> positions = muscle.positions, previous = muscle.previous;
+    double displacement = 0;
+    for (uint32_t i : muscle.freeParticles) {
+      const btVector3 step = (positions[i] - previous[i]) * keep + muscle.forces[i] * forceScale;
+      previous[i] = positions[i];
+      positions[i] = positions[i] + step;
+      displacement += step.length();
+    }
+    const IntegrationResult result =
+        integratorFor(Integrator::Verlet).advance(muscle, dt, previousDt);
+    EXPECT_TRUE(result.finite);
+    // The vector path sums in four partial sums: equal up to the rounding of the sums.
+    EXPECT_NEAR(result.displacement, displacement, 1e-14 * displacement) << count << " free";
+    for (uint32_t i = 0; i < kParticles; ++i) {
+      EXPECT_TRUE(same(muscle.positions[i], positions[i])) << "particle " << i << " of " << count;
+      EXPECT_TRUE(same(muscle.previous[i], previous[i])) << "particle " << i << " of " << count;
+    }
+  }
+}
+
 // --- eq 5.1 for Verlet's centred damping ---------------------------------------------------
 
 TEST(AdaptiveStep, CentredBoundIsTightForVerletsStep) {
@@ -384,9 +442,18 @@ auto bits(btScalar value) {
   return std::bit_cast<std::conditional_t<kFloat, uint32_t, uint64_t>>(value);
 }
 
-/// adaptiveTimeStep bit for bit against the reference on `muscle`: the minimum over its free
-/// particles, and each particle's own bound (the particle 4 to 7 times over, so that every lane
-/// of a vector path and the scalar tail compute it). Returns how many bounds were finite.
+/// The kernels adaptiveTimeStep can run on in this build on this CPU.
+std::vector<SpringKernel> availableKernels() {
+  std::vector<SpringKernel> kernels;
+  for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2})
+    if (springKernelAvailable(kernel)) kernels.push_back(kernel);
+  return kernels;
+}
+
+/// adaptiveTimeStep bit for bit against the reference on `muscle`, on every available kernel:
+/// the minimum over its free particles, and each particle's own bound (the particle 8 to 15
+/// times over, so that every lane of the AVX2 and SSE2 paths and the scalar tail compute it).
+/// Returns how many bounds were finite.
 size_t expectReferenceTimeSteps(MuscleState& muscle, btScalar previousDt) {
   EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)),
             bits(referenceTimeStep(muscle, previousDt)));
@@ -395,9 +462,11 @@ size_t expectReferenceTimeSteps(MuscleState& muscle, btScalar previousDt) {
   muscle.stableTimeStep = std::numeric_limits<btScalar>::infinity();
   size_t finite = 0;
   for (size_t k = 0; k < free.size(); ++k) {
-    muscle.freeParticles.assign(4 + k % 4, free[k]);
+    muscle.freeParticles.assign(8 + k % 8, free[k]);
     const btScalar own = referenceTimeStep(muscle, previousDt);
-    EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)), bits(own)) << "particle " << free[k];
+    for (SpringKernel kernel : availableKernels())
+      EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt, kernel)), bits(own))
+          << "particle " << free[k] << " kernel " << springKernelName(kernel);
     finite += std::isfinite(own);
   }
   muscle.freeParticles = free;
@@ -408,7 +477,7 @@ size_t expectReferenceTimeSteps(MuscleState& muscle, btScalar previousDt) {
 TEST(AdaptiveStep, EveryParticlesBoundIsTheReferencesBitForBit) {
   // Forces, displacements, radii, masses and damping over orders of magnitude (a < 0, b < 0 and a
   // negative discriminant all occur), zeros, a NaN force; Verlet (centred) and not; no previous
-  // dt; 0 to 9 free particles for the minimum.
+  // dt; 0 to 17 free particles for the minimum.
   std::mt19937 random(51);
   const auto magnitude = [&](double low, double high) {
     return btScalar(std::pow(10.0, std::uniform_real_distribution<double>(low, high)(random)));
@@ -442,10 +511,12 @@ TEST(AdaptiveStep, EveryParticlesBoundIsTheReferencesBitForBit) {
     const btScalar previousDt = round % 4 ? magnitude(-5, -2) : 0;
     finite += expectReferenceTimeSteps(muscle, previousDt);
     bounds += kParticles;
-    for (size_t count = 0; count < 10; ++count) {
+    for (size_t count = 0; count < 18; ++count) {
       muscle.freeParticles.resize(count);
-      EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)),
-                bits(referenceTimeStep(muscle, previousDt)));
+      for (SpringKernel kernel : availableKernels())
+        EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt, kernel)),
+                  bits(referenceTimeStep(muscle, previousDt)))
+            << count << " particles, kernel " << springKernelName(kernel);
     }
   }
   EXPECT_GT(finite, bounds / 4);   // roots taken

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
+#include "ParticleSimd.h"
 #include "SpringForces.h"
 
 namespace fibremss {
@@ -16,6 +17,48 @@ namespace {
 btVector3 acceleration(const btVector3& force, const btVector3& velocity, btScalar damping,
                        btScalar inverseMass) {
   return (force - velocity * damping) * inverseMass;
+}
+
+/// Verlet's step of the free particles but the last (count mod 4) on the SSE2 path (none in
+/// builds without it), one particle per register with the scalar loop's operations in its
+/// order (no FMA), so positions and previous get the same bits (w lanes: x's kept in previous,
+/// 0 in positions as btVector3's operators leave it). Adds Σ|step| to `displacement`: lengths
+/// four at a time into four double partial sums (one long chain of additions would bound the
+/// loop), so it differs from the particle-order sum in the last bits only, the same for any
+/// thread count. Returns how many particles it moved.
+size_t advanceVerletVector(MuscleState& muscle, btScalar keep, btScalar forceScale,
+                           double& displacement) {
+#if FIBREMSS_SSE_PARTICLES
+  const size_t count = muscle.freeParticles.size() & ~size_t{3};
+  const uint32_t* indices = muscle.freeParticles.data();
+  btVector3* x = muscle.positions.data();
+  btVector3* previous = muscle.previous.data();
+  const btVector3* f = muscle.forces.data();
+  const __m128 keepAll = _mm_set1_ps(keep), scaleAll = _mm_set1_ps(forceScale);
+  const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+  __m128d low = _mm_setzero_pd(), high = _mm_setzero_pd();  // four partial sums of lengths
+  for (size_t k = 0; k < count; k += 4) {
+    __m128 steps[4];
+    for (size_t j = 0; j < 4; ++j) {
+      const uint32_t i = indices[k + j];
+      const __m128 position = loadVector(x[i]);
+      steps[j] = _mm_add_ps(_mm_mul_ps(_mm_sub_ps(position, loadVector(previous[i])), keepAll),
+                            _mm_mul_ps(loadVector(f[i]), scaleAll));
+      _mm_store_ps(previous[i].m_floats, position);
+      _mm_store_ps(x[i].m_floats, _mm_and_ps(_mm_add_ps(position, steps[j]), xyz));
+    }
+    const __m128 lengths = _mm_sqrt_ps(squaredLengths(steps[0], steps[1], steps[2], steps[3]));
+    low = _mm_add_pd(low, _mm_cvtps_pd(lengths));
+    high = _mm_add_pd(high, _mm_cvtps_pd(_mm_movehl_ps(lengths, lengths)));
+  }
+  alignas(16) double sums[4];
+  _mm_store_pd(sums, low);
+  _mm_store_pd(sums + 2, high);
+  displacement += (sums[0] + sums[1]) + (sums[2] + sums[3]);
+  return count;
+#else
+  return 0;
+#endif
 }
 
 /// Verlet with centred velocity damping (method.md §4), time-corrected for a changing dt:
@@ -33,7 +76,9 @@ class VerletIntegrator final : public TimeIntegrator {
     const btScalar forceScale = dt * dt / (settings.particleMass * (1 + gamma));
     const btScalar keep = (1 - gamma) / (1 + gamma) * dt / previousDt;
     IntegrationResult result;
-    for (uint32_t i : muscle.freeParticles) {
+    for (size_t k = advanceVerletVector(muscle, keep, forceScale, result.displacement);
+         k < muscle.freeParticles.size(); ++k) {
+      const uint32_t i = muscle.freeParticles[k];
       const btVector3 x = muscle.positions[i];
       const btVector3 step = (x - muscle.previous[i]) * keep + muscle.forces[i] * forceScale;
       muscle.previous[i] = x;

@@ -5,14 +5,10 @@
 
 #include <span>
 
-#if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
-#include <immintrin.h>
-#define FIBREMSS_SSE_PRETRANSFORM 1
-#else
-#define FIBREMSS_SSE_PRETRANSFORM 0
-#endif
-
+#include "ParticleSimd.h"
 #include "fibremss/MuscleSettings.h"
+
+#define FIBREMSS_SSE_PRETRANSFORM FIBREMSS_SSE_PARTICLES
 
 namespace fibremss {
 
@@ -125,6 +121,53 @@ inline void pretransformPacked(const MuscleSettings& settings, const PackedTrans
     if (useB)
       moved = _mm_add_ps(moved, _mm_mul_ps(_mm_sub_ps(transformPacked(packed[b], p), p), shareB));
     _mm_store_ps(point->m_floats, _mm_or_ps(_mm_and_ps(xyz, moved), _mm_andnot_ps(xyz, p)));
+  }
+}
+#endif
+
+#if FIBREMSS_AVX2_PARTICLES
+/// A PackedTransform in both halves of AVX registers, for two points at once.
+struct PackedTransformPair {
+  __m256 columns[3];  ///< basis columns, twice
+  __m256 origin;      ///< translation, twice
+};
+
+/// t·p of the two points in p's halves, with transformPacked's rounding (AVX without FMA).
+FIBREMSS_AVX2_PASS inline __m256 transformPair(const PackedTransformPair& t, __m256 p) {
+  const __m256 x = _mm256_permute_ps(p, 0x00), y = _mm256_permute_ps(p, 0x55),
+               z = _mm256_permute_ps(p, 0xaa);
+  return _mm256_add_ps(
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(t.columns[0], x), _mm256_mul_ps(t.columns[1], y)),
+                    _mm256_mul_ps(t.columns[2], z)),
+      t.origin);
+}
+
+/// pretransformPacked for each of `particles` with its x and y in the two halves of one
+/// register: half the operations, each lane the same as pretransformPacked's, so the same bits.
+FIBREMSS_AVX2_PASS inline void pretransformPackedAvx2(const MuscleSettings& settings,
+                                                      const PackedTransform* packed, size_t count,
+                                                      std::span<const uint32_t> particles,
+                                                      btVector3* x, btVector3* y) {
+  PackedTransformPair pairs[kPackedBones];
+  for (size_t b = 0; b < count; ++b) {
+    for (int c = 0; c < 3; ++c) pairs[b].columns[c] = _mm256_broadcast_ps(&packed[b].columns[c]);
+    pairs[b].origin = _mm256_broadcast_ps(&packed[b].origin);
+  }
+  const __m256 xyz = _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
+  for (uint32_t i : particles) {
+    const btScalar w = settings.blendWeight[i];
+    const int32_t a = settings.blendBoneA[i], b = settings.blendBoneB[i];
+    const __m256 p = loadPair(x[i], y[i]);
+    __m256 moved = p;
+    if (a >= 0 && static_cast<size_t>(a) < count && w < 1)
+      moved = _mm256_add_ps(moved, _mm256_mul_ps(_mm256_sub_ps(transformPair(pairs[a], p), p),
+                                                 _mm256_set1_ps(1 - w)));
+    if (b >= 0 && static_cast<size_t>(b) < count && w > 0)
+      moved = _mm256_add_ps(
+          moved, _mm256_mul_ps(_mm256_sub_ps(transformPair(pairs[b], p), p), _mm256_set1_ps(w)));
+    moved = _mm256_blendv_ps(p, moved, xyz);  // w lanes kept
+    _mm_store_ps(x[i].m_floats, _mm256_castps256_ps128(moved));
+    _mm_store_ps(y[i].m_floats, _mm256_extractf128_ps(moved, 1));
   }
 }
 #endif

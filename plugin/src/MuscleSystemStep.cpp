@@ -76,6 +76,11 @@ void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities)
   if (blended && !settings.blendWeight.empty() && !rotateVelocities && count <= kPackedBones) {
     PackedTransform packed[kPackedBones];
     for (size_t b = 0; b < count; ++b) packed[b] = packTransform(state.boneDeltas[b]);
+#if FIBREMSS_AVX2_PARTICLES
+    if (fastestSpringKernel() == SpringKernel::avx2)
+      return pretransformPackedAvx2(settings, packed, count, state.freeParticles,
+                                    state.positions.data(), state.previous.data());
+#endif
     for (uint32_t i : state.freeParticles)
       pretransformPacked(settings, packed, count, i, state.positions[i], state.previous[i]);
     return;

@@ -6,12 +6,7 @@
 #include <limits>
 #include <vector>
 
-#if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
-#include <immintrin.h>
-#define FIBREMSS_SSE_TIMESTEP 1
-#else
-#define FIBREMSS_SSE_TIMESTEP 0
-#endif
+#include "ParticleSimd.h"
 
 namespace fibremss {
 namespace {
@@ -54,18 +49,13 @@ btScalar rungeKuttaLimit(int order, double lambda, double gamma, double start) {
   return static_cast<btScalar>(kStabilitySafety * stable);
 }
 
-#if FIBREMSS_SSE_TIMESTEP
-/// |v|² of four vectors, one per lane, in btVector3::length2's order: (x² + y²) + z².
-__m128 squaredLengths(__m128 v0, __m128 v1, __m128 v2, __m128 v3) {
-  _MM_TRANSPOSE4_PS(v0, v1, v2, v3);
-  return _mm_add_ps(_mm_add_ps(_mm_mul_ps(v0, v0), _mm_mul_ps(v1, v1)), _mm_mul_ps(v2, v2));
-}
-
-/// adaptiveTimeStep over the free particles [0, count), count a multiple of 4, four at a time,
-/// from `dt`: largestSafeTimeStep's operations in its order with exact square roots and
-/// divisions, so each lane holds its value bit for bit (and a minimum does not depend on order).
-btScalar adaptiveTimeStepSse(const MuscleState& muscle, size_t count, btScalar inversePreviousDt,
-                             bool centred, btScalar dt) {
+#if FIBREMSS_SSE_PARTICLES
+/// adaptiveTimeStep over the free particles [begin, count), count − begin a multiple of 4, four
+/// at a time, from `dt`: largestSafeTimeStep's operations in its order with exact square roots
+/// and divisions, so each lane holds its value bit for bit (and a minimum does not depend on
+/// order).
+btScalar adaptiveTimeStepSse(const MuscleState& muscle, size_t begin, size_t count,
+                             btScalar inversePreviousDt, bool centred, btScalar dt) {
   const uint32_t* indices = muscle.freeParticles.data();
   const btVector3* f = muscle.forces.data();
   const btVector3* x = muscle.positions.data();
@@ -77,15 +67,14 @@ btScalar adaptiveTimeStepSse(const MuscleState& muscle, size_t count, btScalar i
   const __m128 two = _mm_set1_ps(2), four = _mm_set1_ps(4);
   const __m128 inverseDt = _mm_set1_ps(inversePreviousDt);
   const __m128 zero = _mm_setzero_ps(), infinity = _mm_set1_ps(kInfinity);
-  const auto load = [](const btVector3& v) { return _mm_load_ps(v.m_floats); };
   const auto step = [&](const btVector3& v, const btVector3& w) {
-    return _mm_sub_ps(load(v), load(w));
+    return _mm_sub_ps(loadVector(v), loadVector(w));
   };
   __m128 minimum = _mm_set1_ps(dt);
-  for (size_t k = 0; k < count; k += 4) {
+  for (size_t k = begin; k < count; k += 4) {
     const uint32_t i0 = indices[k], i1 = indices[k + 1], i2 = indices[k + 2], i3 = indices[k + 3];
-    const __m128 force =
-        _mm_sqrt_ps(squaredLengths(load(f[i0]), load(f[i1]), load(f[i2]), load(f[i3])));
+    const __m128 force = _mm_sqrt_ps(
+        squaredLengths(loadVector(f[i0]), loadVector(f[i1]), loadVector(f[i2]), loadVector(f[i3])));
     const __m128 speed = _mm_mul_ps(
         _mm_sqrt_ps(squaredLengths(step(x[i0], previous[i0]), step(x[i1], previous[i1]),
                                    step(x[i2], previous[i2]), step(x[i3], previous[i3]))),
@@ -111,6 +100,64 @@ btScalar adaptiveTimeStepSse(const MuscleState& muscle, size_t count, btScalar i
   return std::min(std::min(lanes[0], lanes[1]), std::min(lanes[2], lanes[3]));
 }
 #endif
+
+#if FIBREMSS_AVX2_PARTICLES
+/// x − previous of particles i and j, as loadPair.
+FIBREMSS_AVX2_PASS __m256 stepPair(const btVector3* x, const btVector3* previous, uint32_t i,
+                                   uint32_t j) {
+  return _mm256_sub_ps(loadPair(x[i], x[j]), loadPair(previous[i], previous[j]));
+}
+
+/// adaptiveTimeStepSse eight particles at a time over [0, count), count a multiple of 8: the
+/// same operations per lane (AVX2 without FMA), so the same bits.
+FIBREMSS_AVX2_PASS btScalar adaptiveTimeStepAvx2(const MuscleState& muscle, size_t count,
+                                                 btScalar inversePreviousDt, bool centred,
+                                                 btScalar dt) {
+  const uint32_t* indices = muscle.freeParticles.data();
+  const btVector3* f = muscle.forces.data();
+  const btVector3* x = muscle.positions.data();
+  const btVector3* previous = muscle.previous.data();
+  const btScalar* radii = muscle.stepRadius.data();
+  const __m256 mass = _mm256_set1_ps(muscle.settings->particleMass);
+  const __m256 damping = _mm256_set1_ps(muscle.settings->damping);
+  const __m256 half = _mm256_set1_ps(btScalar(0.5));  // x·0.5 rounds as x/2
+  const __m256 two = _mm256_set1_ps(2), four = _mm256_set1_ps(4);
+  const __m256 inverseDt = _mm256_set1_ps(inversePreviousDt);
+  const __m256 zero = _mm256_setzero_ps(), infinity = _mm256_set1_ps(kInfinity);
+  __m256 minimum = _mm256_set1_ps(dt);
+  for (size_t k = 0; k < count; k += 8) {
+    const uint32_t* i = indices + k;
+    const __m256 force =
+        _mm256_sqrt_ps(squaredLengths8(loadPair(f[i[0]], f[i[4]]), loadPair(f[i[1]], f[i[5]]),
+                                       loadPair(f[i[2]], f[i[6]]), loadPair(f[i[3]], f[i[7]])));
+    const __m256 speed =
+        _mm256_mul_ps(_mm256_sqrt_ps(squaredLengths8(
+                          stepPair(x, previous, i[0], i[4]), stepPair(x, previous, i[1], i[5]),
+                          stepPair(x, previous, i[2], i[6]), stepPair(x, previous, i[3], i[7]))),
+                      inverseDt);
+    const __m256 radius = _mm256_i32gather_ps(
+        radii, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(i)), sizeof(btScalar));
+    __m256 dampingForce = _mm256_mul_ps(damping, speed);
+    if (centred) dampingForce = _mm256_mul_ps(dampingForce, half);
+    const __m256 a = _mm256_sub_ps(force, dampingForce);
+    const __m256 b =
+        _mm256_sub_ps(_mm256_mul_ps(mass, speed),
+                      centred ? _mm256_mul_ps(_mm256_mul_ps(damping, radius), half) : zero);
+    const __m256 mr = _mm256_mul_ps(mass, radius);
+    const __m256 discriminant =
+        _mm256_add_ps(_mm256_mul_ps(b, b), _mm256_mul_ps(_mm256_mul_ps(four, a), mr));
+    // A negative discriminant's root is NaN, so its denominator fails > 0 too: infinity.
+    const __m256 denominator = _mm256_add_ps(b, _mm256_sqrt_ps(discriminant));
+    const __m256 positive = _mm256_cmp_ps(denominator, zero, _CMP_GT_OQ);
+    const __m256 root =
+        _mm256_blendv_ps(infinity, _mm256_div_ps(_mm256_mul_ps(two, mr), denominator), positive);
+    minimum = _mm256_min_ps(root, minimum);  // root < minimum ? root : minimum, as std::min
+  }
+  alignas(32) btScalar lanes[8];
+  _mm256_store_ps(lanes, minimum);
+  return *std::min_element(lanes, lanes + 8);
+}
+#endif
 }  // namespace
 
 btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, btScalar mass,
@@ -130,14 +177,28 @@ btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, bt
 }
 
 btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt) {
+  return adaptiveTimeStep(muscle, previousDt, fastestSpringKernel());
+}
+
+btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt,
+                          [[maybe_unused]] SpringKernel kernel) {
   const MuscleSettings& settings = *muscle.settings;
   const btScalar inversePreviousDt = previousDt > 0 ? 1 / previousDt : 0;
   const bool centred = muscle.preparedFor == Integrator::Verlet;
   btScalar dt = muscle.stableTimeStep;
   size_t k = 0;
-#if FIBREMSS_SSE_TIMESTEP
-  k = muscle.freeParticles.size() & ~size_t{3};
-  dt = adaptiveTimeStepSse(muscle, k, inversePreviousDt, centred, dt);
+#if FIBREMSS_AVX2_PARTICLES
+  if (kernel == SpringKernel::avx2) {
+    k = muscle.freeParticles.size() & ~size_t{7};
+    dt = adaptiveTimeStepAvx2(muscle, k, inversePreviousDt, centred, dt);
+  }
+#endif
+#if FIBREMSS_SSE_PARTICLES
+  if (kernel != SpringKernel::scalar) {
+    const size_t begin = k;
+    k = muscle.freeParticles.size() & ~size_t{3};
+    dt = adaptiveTimeStepSse(muscle, begin, k, inversePreviousDt, centred, dt);
+  }
 #endif
   for (; k < muscle.freeParticles.size(); ++k) {
     const uint32_t i = muscle.freeParticles[k];
