@@ -1,7 +1,8 @@
 // Particle order (plugin/src/PreparationReorder.*): preparation leaves the particles along the
 // Morton curve, and a muscle whose particles are renumbered is the same muscle: every index in
-// it follows the permutation, and it steps to the same positions up to the permutation (to
-// float rounding: the spring and push sums run in another order).
+// it follows the permutation (the spring blocks are laid out again), and it steps to the same
+// positions up to the permutation (to float rounding: the spring and push sums run in another
+// order).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -107,6 +108,14 @@ TEST(Reorder, EveryIndexFollowsThePermutation) {
     }
     EXPECT_TRUE(std::is_sorted(actual.begin(), actual.end()));
     EXPECT_EQ(actual, expected);
+    // The AVX2 kernel's blocks follow the renumbered springs.
+    MuscleSettings laidOut = muscle;
+    layoutSprings(laidOut);
+    EXPECT_EQ(muscle.springBlocks.springCount, muscle.springs.size());
+    EXPECT_EQ(muscle.springBlocks.a, laidOut.springBlocks.a);
+    EXPECT_EQ(muscle.springBlocks.b, laidOut.springBlocks.b);
+    EXPECT_EQ(muscle.springBlocks.restLength, laidOut.springBlocks.restLength);
+    EXPECT_EQ(muscle.springBlocks.stiffness, laidOut.springBlocks.stiffness);
     // Index lists: the renumbered particles, ascending where they were sorted.
     auto renumbered = [&rank](const std::vector<uint32_t>& indices, bool sorted) {
       std::vector<uint32_t> result;

@@ -65,6 +65,16 @@ btTransform MuscleSystem::boneTransform(BoneHandle bone) const {
 MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> settings,
                                      std::span<const BoneHandle> bones) {
   if (!settings) throw std::invalid_argument("MuscleSystem::addMuscle: null settings");
+  // The AVX2 spring kernel reads springBlocks, which only checks the count of springs: settings
+  // made or changed by hand (blocks not those of their springs) run on a laid-out copy.
+  if (fastestSpringKernel() == SpringKernel::avx2) {
+    SpringBlocks blocks = springBlocksFor(*settings);
+    if (!(blocks == settings->springBlocks)) {
+      auto laidOut = std::make_shared<MuscleSettings>(*settings);
+      laidOut->springBlocks = std::move(blocks);
+      settings = std::move(laidOut);
+    }
+  }
   const MuscleSettings& s = *settings;
   const std::string where = "MuscleSystem::addMuscle: muscle '" + s.name + "': ";
   const size_t n = s.particleCount();

@@ -3,6 +3,8 @@
 #include <cstddef>
 #include <cstdlib>
 #include <cstring>
+#include <stdexcept>
+#include <type_traits>
 
 #include "SpringForces.h"
 
@@ -173,46 +175,55 @@ FIBREMSS_AVX2 void transpose(__m256& r0, __m256& r1, __m256& r2, __m256& r3) {
   r3 = _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3));
 }
 
-/// Lane `lane` of an integer mask, in all four lanes.
-template <int lane>
-FIBREMSS_AVX2 __m128 laneMask(__m128i mask) {
-  return _mm_castsi128_ps(_mm_shuffle_epi32(mask, lane * 0x55));
+/// The vector `offset` bytes into `base`.
+template <typename Vector>
+Vector& at(Vector* base, uint32_t offset) {
+  using Byte = std::conditional_t<std::is_const_v<Vector>, const char, char>;
+  return *reinterpret_cast<Vector*>(reinterpret_cast<Byte*>(base) + offset);
 }
 
-/// Springs [0, count), count a multiple of 8, eight at a time (spring r + 4h in lane r of half h
-/// of every row). The force on a is added in memory once per group, not carried in a register:
-/// springs are sorted by a with a < b, so f[a] has all its b contributions once its run starts
-/// and the group's scatter to f[b] comes first. A group that shares one a (39 % of thigh13's at
-/// resolution 40; 56 % have two) loads x[a] once and adds its sum to f[a]; in another, every spring
-/// stores f[a] (loaded before those stores) plus its run's forces so far in the group, so the last
-/// spring of each run leaves the total, with no branch on where runs end. Returns Σ|l − L0| in
-/// float lanes.
-FIBREMSS_AVX2 __m256 addSpringsAvx2(const Spring* springs, size_t count, const btVector3* x,
-                                    btVector3* f, size_t& overstretched) {
+/// Overstretched springs among the lanes of a group whose mask bit is set in `beyond`: padding
+/// lanes (b = a; a spring has a ≠ b) are not springs; they are beyond only with a non-finite
+/// x[a].
+[[gnu::cold, gnu::noinline]] size_t overstretchedSprings(int beyond, const uint32_t* a,
+                                                         const uint32_t* b) {
+  size_t count = 0;
+  for (size_t k = 0; k < 8; ++k) count += (beyond >> k & 1) && b[k] != a[k / 4];
+  return count;
+}
+
+// A group of eight lanes is two blocks, one per 128-bit half.
+static_assert(SpringBlocks::kLanes == 4);
+
+/// SpringBlocks' arrays, read through plain pointers (the force stores cannot change them).
+struct BlockArrays {
+  const uint32_t* a;           ///< SpringBlocks::a
+  const uint32_t* b;           ///< SpringBlocks::b
+  const btScalar* restLength;  ///< SpringBlocks::restLength
+  const btScalar* stiffness;   ///< SpringBlocks::stiffness
+};
+
+/// Lanes of the blocks [first, first + count), count a multiple of 8, eight at a time: blocks 2g
+/// and 2g + 1 in the low and high halves (lane r of block h in lane r of half h of every row). A
+/// block shares one a, so its x[a] is one load and the force on a one sum of four rows, added to
+/// f[a] after the group's scatter to f[b]: no transposes of spring records, no branch on where
+/// runs end. Returns Σ|l − L0| in float lanes.
+FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_t count,
+                                         const btVector3* x, btVector3* f, size_t& overstretched) {
   const __m256 absolute = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
   const __m256 zero = _mm256_setzero_ps();
-  const __m256i previousLane = _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6);
   __m256 deviation = zero;
-  for (size_t s = 0; s < count; s += 8) {
-    const Spring* group = springs + s;
-    uint32_t a[8], b[8];
-    for (int k = 0; k < 8; ++k) a[k] = group[k].a, b[k] = group[k].b;
-    const bool sharedA = a[0] == a[7];
-    __m256 xa[4];
-    if (sharedA) {
-      xa[0] = xa[1] = xa[2] = xa[3] =
-          _mm256_broadcast_ps(reinterpret_cast<const __m128*>(&x[a[0]]));
-    } else {
-      for (int r = 0; r < 4; ++r) xa[r] = loadPair(&x[a[r]], &x[a[r + 4]]);
-    }
-    __m256 dx = _mm256_sub_ps(loadPair(&x[b[0]], &x[b[4]]), xa[0]);
-    __m256 dy = _mm256_sub_ps(loadPair(&x[b[1]], &x[b[5]]), xa[1]);
-    __m256 dz = _mm256_sub_ps(loadPair(&x[b[2]], &x[b[6]]), xa[2]);
-    __m256 dw = _mm256_sub_ps(loadPair(&x[b[3]], &x[b[7]]), xa[3]);
+  for (size_t s = first; s < first + count; s += 8) {
+    const uint32_t* b = blocks.b + s;
+    const uint32_t a0 = blocks.a[s / 4], a1 = blocks.a[s / 4 + 1];
+    const __m256 xa = loadPair(&at(x, a0), &at(x, a1));
+    __m256 dx = _mm256_sub_ps(loadPair(&at(x, b[0]), &at(x, b[4])), xa);
+    __m256 dy = _mm256_sub_ps(loadPair(&at(x, b[1]), &at(x, b[5])), xa);
+    __m256 dz = _mm256_sub_ps(loadPair(&at(x, b[2]), &at(x, b[6])), xa);
+    __m256 dw = _mm256_sub_ps(loadPair(&at(x, b[3]), &at(x, b[7])), xa);
     transpose(dx, dy, dz, dw);
-    __m256 aIndices = loadPair(&group[0], &group[4]), bIndices = loadPair(&group[1], &group[5]);
-    __m256 restLength = loadPair(&group[2], &group[6]), stiffness = loadPair(&group[3], &group[7]);
-    transpose(aIndices, bIndices, restLength, stiffness);
+    const __m256 restLength = _mm256_loadu_ps(blocks.restLength + s);
+    const __m256 stiffness = _mm256_loadu_ps(blocks.stiffness + s);
 
     const __m256 length =
         _mm256_sqrt_ps(_mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx))));
@@ -221,10 +232,12 @@ FIBREMSS_AVX2 __m256 addSpringsAvx2(const Spring* springs, size_t count, const b
     // Not (stretch ≤ 2·L0): beyond 3× the rest length, or NaN.
     const int beyond = _mm256_movemask_ps(
         _mm256_cmp_ps(stretch, _mm256_add_ps(restLength, restLength), _CMP_NLE_UQ));
-    if (beyond) overstretched += static_cast<size_t>(__builtin_popcount(beyond));
-    // k·(l − L0)/l, 0 for coincident ends (0/0 masked).
-    const __m256 factor = _mm256_and_ps(_mm256_div_ps(_mm256_mul_ps(stiffness, stretch), length),
-                                        _mm256_cmp_ps(length, zero, _CMP_GT_OQ));
+    if (beyond) overstretched += overstretchedSprings(beyond, blocks.a + s / 4, b);
+    // −k·(l − L0)/l, 0 for coincident ends (0/0 masked) and padding lanes: the force on b, so
+    // that its scatter is an add with the load folded in (x − y is x + (−y), bit for bit).
+    const __m256 factor =
+        _mm256_and_ps(_mm256_div_ps(_mm256_fnmadd_ps(stiffness, stretch, zero), length),
+                      _mm256_cmp_ps(length, zero, _CMP_GT_OQ));
     __m256 f0 = _mm256_mul_ps(dx, factor), f1 = _mm256_mul_ps(dy, factor),
            f2 = _mm256_mul_ps(dz, factor), f3 = zero;
     transpose(f0, f1, f2, f3);
@@ -232,49 +245,26 @@ FIBREMSS_AVX2 __m256 addSpringsAvx2(const Spring* springs, size_t count, const b
                              _mm256_castps256_ps128(f2),   _mm256_castps256_ps128(f3),
                              _mm256_extractf128_ps(f0, 1), _mm256_extractf128_ps(f1, 1),
                              _mm256_extractf128_ps(f2, 1), _mm256_extractf128_ps(f3, 1)};
-    for (int k = 0; k < 8; ++k) store(f[b[k]], _mm_sub_ps(load(f[b[k]]), force[k]));
-    if (sharedA) {
-      const __m256 rows = _mm256_add_ps(_mm256_add_ps(f0, f1), _mm256_add_ps(f2, f3));
-      const __m128 sum = _mm_add_ps(_mm256_castps256_ps128(rows), _mm256_extractf128_ps(rows, 1));
-      store(f[a[0]], _mm_add_ps(load(f[a[0]]), sum));
-      continue;
-    }
-
-    // same[k]: spring k continues the run of spring k − 1 (k > 0).
-    const __m256i aLanes = _mm256_castps_si256(aIndices);
-    const __m256i same =
-        _mm256_cmpeq_epi32(aLanes, _mm256_permutevar8x32_epi32(aLanes, previousLane));
-    const __m128i sameLow = _mm256_castsi256_si128(same);
-    const __m128i sameHigh = _mm256_extracti128_si256(same, 1);
-    __m128 base[8];
-    for (int k = 0; k < 8; ++k) base[k] = load(f[a[k]]);
-    __m128 sum[8];
-    sum[0] = _mm_add_ps(base[0], force[0]);
-    sum[1] = _mm_add_ps(_mm_blendv_ps(base[1], sum[0], laneMask<1>(sameLow)), force[1]);
-    sum[2] = _mm_add_ps(_mm_blendv_ps(base[2], sum[1], laneMask<2>(sameLow)), force[2]);
-    sum[3] = _mm_add_ps(_mm_blendv_ps(base[3], sum[2], laneMask<3>(sameLow)), force[3]);
-    sum[4] = _mm_add_ps(_mm_blendv_ps(base[4], sum[3], laneMask<0>(sameHigh)), force[4]);
-    sum[5] = _mm_add_ps(_mm_blendv_ps(base[5], sum[4], laneMask<1>(sameHigh)), force[5]);
-    sum[6] = _mm_add_ps(_mm_blendv_ps(base[6], sum[5], laneMask<2>(sameHigh)), force[6]);
-    sum[7] = _mm_add_ps(_mm_blendv_ps(base[7], sum[6], laneMask<3>(sameHigh)), force[7]);
-    for (int k = 0; k < 8; ++k) store(f[a[k]], sum[k]);
+    for (int k = 0; k < 8; ++k) store(at(f, b[k]), _mm_add_ps(force[k], load(at(f, b[k]))));
+    const __m256 rows = _mm256_add_ps(_mm256_add_ps(f0, f1), _mm256_add_ps(f2, f3));
+    store(at(f, a0), _mm_sub_ps(load(at(f, a0)), _mm256_castps256_ps128(rows)));
+    store(at(f, a1), _mm_sub_ps(load(at(f, a1)), _mm256_extractf128_ps(rows, 1)));
   }
   return deviation;
 }
 
-/// AVX2 groups of eight springs from the start: returns how many springs it took; every f[a] is
-/// complete, so `tail` is an empty run.
-FIBREMSS_AVX2 size_t avx2Springs(const Spring* springs, size_t count, const btVector3* x,
-                                 btVector3* f, RunSum& tail, SpringForceResult& result) {
-  const size_t groups = count & ~size_t{7};
-  for (size_t s = 0; s < groups; s += kDeviationBlock) {
-    const size_t n = std::min(kDeviationBlock, groups - s);
-    const __m256 lanes = addSpringsAvx2(springs + s, n, x, f, result.overstretched);
+/// Every spring block on AVX2 (settings.springBlocks, laid out for these springs).
+FIBREMSS_AVX2 void avx2Springs(const SpringBlocks& blocks, const btVector3* x, btVector3* f,
+                               SpringForceResult& result) {
+  const BlockArrays arrays{blocks.a.data(), blocks.b.data(), blocks.restLength.data(),
+                           blocks.stiffness.data()};
+  const size_t lanes = blocks.b.size();
+  for (size_t s = 0; s < lanes; s += kDeviationBlock) {
+    const __m256 sums = addSpringBlocksAvx2(arrays, s, std::min(kDeviationBlock, lanes - s), x, f,
+                                            result.overstretched);
     result.deviation +=
-        laneSum(_mm256_castps256_ps128(lanes)) + laneSum(_mm256_extractf128_ps(lanes, 1));
+        laneSum(_mm256_castps256_ps128(sums)) + laneSum(_mm256_extractf128_ps(sums, 1));
   }
-  tail = {springs[0].a, btVector3(0, 0, 0)};
-  return groups;
 }
 #endif
 
@@ -288,8 +278,7 @@ bool springKernelAvailable(SpringKernel kernel) {
       return FIBREMSS_SSE_SPRINGS;
     case SpringKernel::avx2:
 #if FIBREMSS_AVX2_SPRINGS
-      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
-             __builtin_cpu_supports("popcnt");
+      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
 #else
       return false;
 #endif
@@ -324,6 +313,64 @@ const char* springKernelName(SpringKernel kernel) {
   return "unknown";
 }
 
+namespace {
+
+/// A block to lay out: the particle a and its springs [first, end), at most kLanes of them.
+struct BlockSprings {
+  uint32_t a;    ///< the block's particle
+  size_t first;  ///< its first spring
+  size_t end;    ///< one past its last spring
+};
+
+/// Appends `block` to `blocks`, padded to kLanes lanes.
+void addBlock(SpringBlocks& blocks, const BlockSprings& block, const Spring* springs) {
+  constexpr uint32_t kBytes = sizeof(btVector3);
+  blocks.a.push_back(block.a * kBytes);
+  for (size_t s = block.first; s < block.first + SpringBlocks::kLanes; ++s) {
+    const bool spring = s < block.end;
+    blocks.b.push_back((spring ? springs[s].b : block.a) * kBytes);
+    blocks.restLength.push_back(spring ? springs[s].restLength : 0);
+    blocks.stiffness.push_back(spring ? springs[s].stiffness : 0);
+  }
+}
+
+}  // namespace
+
+SpringBlocks springBlocksFor(const MuscleSettings& settings) {
+  if (settings.particleCount() > UINT32_MAX / sizeof(btVector3))
+    throw std::length_error("layoutSprings: particle offsets do not fit 32 bits");
+  // Runs alternate between the low and high halves of the kernel's groups: the halves add to
+  // different f[a], so the read-modify-writes of one f[a] wait on one another but not on the
+  // other half's (thigh13 spring-forces/40, one thread: about 0.82 of the previous AVX2 kernel's
+  // time, about 0.89 with the runs one after the other).
+  const std::vector<Spring>& springs = settings.springs;
+  std::vector<BlockSprings> halves[2];
+  for (size_t s = 0, run = 0; s < springs.size(); ++run) {
+    size_t end = s;
+    while (end < springs.size() && springs[end].a == springs[s].a) ++end;
+    for (; s < end; s = std::min(end, s + SpringBlocks::kLanes))
+      halves[run % 2].push_back({springs[s].a, s, std::min(end, s + SpringBlocks::kLanes)});
+  }
+  const size_t groups = std::max(halves[0].size(), halves[1].size());
+  SpringBlocks blocks;
+  blocks.springCount = springs.size();
+  blocks.a.reserve(2 * groups);
+  blocks.b.reserve(2 * groups * SpringBlocks::kLanes);
+  blocks.restLength.reserve(2 * groups * SpringBlocks::kLanes);
+  blocks.stiffness.reserve(2 * groups * SpringBlocks::kLanes);
+  for (size_t g = 0; g < groups; ++g)
+    for (const std::vector<BlockSprings>& half : halves) {
+      // A half that ran out gets blocks of padding only (of its last particle).
+      const uint32_t last = half.empty() ? halves[0].front().a : half.back().a;
+      addBlock(blocks, g < half.size() ? half[g] : BlockSprings{last, 0, 0}, springs.data());
+    }
+  return blocks;
+}
+
+void layoutSprings(MuscleSettings& settings) {
+  settings.springBlocks = springBlocksFor(settings);
+}
+
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces, [[maybe_unused]] SpringKernel kernel) {
   const Spring* springs = settings.springs.data();
@@ -334,13 +381,20 @@ SpringForceResult springForces(const MuscleSettings& settings, std::span<const b
 
   SpringForceResult result;
   if (count == 0) return result;
+#if FIBREMSS_AVX2_SPRINGS
+  if (kernel == SpringKernel::avx2) {
+    if (settings.springBlocks.springCount == count) {
+      avx2Springs(settings.springBlocks, x, f, result);
+      result.exploded = result.overstretched > 0;
+      return result;
+    }
+    kernel = SpringKernel::sse2;  // not laid out: the springs as they are
+  }
+#endif
   RunSum tail{springs[0].a, btVector3(0, 0, 0)};
   size_t s = 0;
 #if FIBREMSS_SSE_SPRINGS
   if (kernel == SpringKernel::sse2) s = sse2Springs(springs, count, x, f, tail, result);
-#endif
-#if FIBREMSS_AVX2_SPRINGS
-  if (kernel == SpringKernel::avx2) s = avx2Springs(springs, count, x, f, tail, result);
 #endif
   for (; s < count; ++s) addSpring(springs[s], x, f, tail, result.deviation, result.overstretched);
   f[tail.particle] += tail.sum;

@@ -5,12 +5,14 @@
 #include <stdexcept>
 #include <utility>
 
+#include "SpringForces.h"
+
 namespace fibremss::detail {
 namespace {
 
 // A new field of MuscleSettings may hold particle indices or per-particle values: remap it in
 // reorderParticles, then update this size (libstdc++, x86-64).
-static_assert(sizeof(MuscleSettings) == 448 + 2 * sizeof(btScalar),
+static_assert(sizeof(MuscleSettings) == 552 + 2 * sizeof(btScalar),
               "MuscleSettings changed: remap its new fields in reorderParticles");
 
 /// Spreads the low 10 bits of v to every third bit (bit i to bit 3i).
@@ -96,6 +98,7 @@ void reorderParticles(MuscleSettings& muscle, std::span<const uint32_t> order) {
   }
   std::sort(muscle.springs.begin(), muscle.springs.end(),
             [](const Spring& x, const Spring& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; });
+  layoutSprings(muscle);
 }
 
 }  // namespace fibremss::detail

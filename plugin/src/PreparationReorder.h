@@ -18,8 +18,9 @@ std::vector<uint32_t> mortonOrder(std::span<const btVector3> points);
 
 /// Renumbers the particles so that new particle k is old particle order[k] (order must be a
 /// permutation of the particles) and remaps every particle index in the muscle: springs (a < b,
-/// sorted by (a, b) again), boundary and fixed particles (ascending again), fibres and skin
-/// bindings. Nothing else changes: the muscle is the same up to the permutation.
+/// sorted by (a, b) again, laid out again by layoutSprings), boundary and fixed particles
+/// (ascending again), fibres and skin bindings. Nothing else changes: the muscle is the same up
+/// to the permutation.
 void reorderParticles(MuscleSettings& muscle, std::span<const uint32_t> order);
 
 }  // namespace fibremss::detail

@@ -32,12 +32,20 @@ SpringKernel fastestSpringKernel();
 /// The kernel's name: "scalar", "sse2" or "avx2".
 const char* springKernelName(SpringKernel kernel);
 
+/// settings.springs laid out for the AVX2 kernel (SpringBlocks). Throws std::length_error when
+/// particle byte offsets do not fit 32 bits.
+SpringBlocks springBlocksFor(const MuscleSettings& settings);
+/// settings.springBlocks = springBlocksFor(settings). Preparation does it (reorderParticles);
+/// MuscleSystem::addMuscle lays out a copy of settings made or changed by hand; the kernel itself
+/// only checks the count of springs (else it runs as SSE2).
+void layoutSprings(MuscleSettings& settings);
+
 /// F = k·(l − L0)·(x_b − x_a)/l on a, the opposite on b, at `positions` into `forces`
 /// (overwritten), in one pass over the springs on fastestSpringKernel() (exact square roots and
 /// divisions; SSE2 sums the force on a in a register along the run of springs that share a, AVX2
-/// adds each group of eight springs' forces to f[a] in memory; the kernels differ in rounding
-/// only: FMA, order of the sums). Integrators that need forces at other positions (RK, implicit)
-/// call this with their buffers.
+/// reads settings.springBlocks, two blocks of one a each per group of eight lanes; the kernels
+/// differ in rounding only: FMA, order of the sums). Integrators that need forces at other
+/// positions (RK, implicit) call this with their buffers.
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces);
 

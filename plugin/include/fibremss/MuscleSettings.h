@@ -5,6 +5,7 @@
 #include <LinearMath/btScalar.h>
 #include <LinearMath/btVector3.h>
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -19,6 +20,23 @@ struct Spring {
   uint32_t b;           ///< second particle index
   btScalar restLength;  ///< L0 [m]
   btScalar stiffness;   ///< k = κ / L0 [N/m]
+};
+
+/// The springs as the AVX2 spring-force kernel reads them (layoutSprings in SpringForces.h):
+/// each run of springs that share a split into blocks of kLanes lanes with one a,
+/// structure-of-arrays, so that x[a] is one load and the force on a one sum per block. Runs
+/// alternate between even and odd blocks (an even number of blocks, padded with empty ones).
+/// Particles are byte offsets i·sizeof(btVector3) into the particle arrays (an address is one
+/// add). Padding lanes have b = a, L0 = 0, k = 0 (zero force, zero deviation).
+struct SpringBlocks {
+  static constexpr size_t kLanes = 4;  ///< springs per block
+  std::vector<uint32_t> a;             ///< the particle a of each block (byte offset)
+  std::vector<uint32_t> b;             ///< kLanes per block: b, or a in a padding lane (offsets)
+  std::vector<btScalar> restLength;    ///< kLanes per block: L0, or 0 in a padding lane
+  std::vector<btScalar> stiffness;     ///< kLanes per block: k, or 0 in a padding lane
+  size_t springCount = 0;              ///< springs laid out (the kernel's check against `springs`)
+
+  bool operator==(const SpringBlocks&) const = default;
 };
 
 /// Bit flags per particle.
@@ -51,6 +69,7 @@ struct MuscleSettings {
   btScalar damping = 0;       ///< spring damping coefficient c [N·s/m]
 
   std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
+  SpringBlocks springBlocks;    ///< `springs` laid out for the AVX2 kernel (empty: not laid out)
 
   // Fibres: fibre f is particles fibreParticles[fibreOffsets[f] .. fibreOffsets[f+1]).
   std::vector<uint32_t> fibreParticles;   ///< particle indices in fibre order
