@@ -256,7 +256,8 @@ void buildTree(MuscleState& muscle) {
   muscle.treeSkin = kTreeSkin * muscle.meanRadius;
   muscle.treeReach = muscle.treeSkin / 2;
   muscle.treeSnapshot = muscle.positions;
-  muscle.tree.build(settings.boundaryParticles, muscle.positions, settings.radii, muscle.treeReach);
+  muscle.tree.build(settings.boundaryParticles, muscle.positions, settings.radii, muscle.treeReach,
+                    solverParameters(muscle).rebuildEveryStep);
 }
 
 bool refitTree(MuscleState& muscle) {

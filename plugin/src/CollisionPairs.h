@@ -61,7 +61,7 @@ constexpr btScalar kTreeSkin = btScalar(0.25);
 /// thigh13 (R=20, 40), hip-extension and pinch overflows with this room.
 constexpr size_t kListSlack = 4;
 /// Builds a muscle's tree with its skin (MuscleState::treeSkin = kTreeSkin · meanRadius) and takes
-/// the snapshot. Allocates.
+/// the snapshot; rebuildable in the thesis' rebuild-every-step mode. Allocates.
 void buildTree(MuscleState& muscle);
 /// Refits a muscle's tree (same topology, a new snapshot and epoch) when some boundary particle
 /// moved farther than the tree's reach from its snapshot — whatever moved it (integration,

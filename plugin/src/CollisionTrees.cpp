@@ -69,16 +69,25 @@ void FlatSphereTree::mergeInner() {
 }
 
 void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-                       std::span<const btScalar> radii, btScalar margin) {
+                       std::span<const btScalar> radii, btScalar margin, bool rebuildable) {
   ++epoch_;
-  tree_.clear();
   spheres_.assign(indices.begin(), indices.end());
-  for (size_t k = 0; k < indices.size(); ++k)
-    tree_.insert(btDbvtVolume::FromCR(centres[indices[k]], radii[indices[k]] + margin), nullptr)
+  buildTopology(centres, radii, margin);
+  copyTree();
+  if (!rebuildable) {
+    tree_.clear();
+    std::vector<btDbvtNode*>().swap(dbvtNodes_);
+  }
+}
+
+void SphereTree::buildTopology(std::span<const btVector3> centres, std::span<const btScalar> radii,
+                               btScalar margin) {
+  tree_.clear();
+  for (size_t k = 0; k < spheres_.size(); ++k)
+    tree_.insert(btDbvtVolume::FromCR(centres[spheres_[k]], radii[spheres_[k]] + margin), nullptr)
         ->dataAsInt = static_cast<int>(k);
   // Top-down optimisation gives a balanced tree to start from; it keeps the leaf nodes.
   if (!spheres_.empty()) tree_.optimizeTopDown();
-  copyTree();
 }
 
 btScalar SphereTree::refit(std::span<const btVector3> centres, std::span<const btScalar> radii,
@@ -104,11 +113,15 @@ btScalar SphereTree::refit(std::span<const btVector3> centres, std::span<const b
 void SphereTree::rebuild(std::span<const btVector3> centres, std::span<const btScalar> radii,
                          btScalar margin) {
   ++epoch_;
-  // The btDbvt's bounds as the last refit left them guide the re-insertions.
-  for (size_t n = 0; n < nodes_.size(); ++n) dbvtNodes_[n]->volume = bounds_[n];
-  for (size_t k = 0; k < spheres_.size(); ++k) {
-    btDbvtVolume volume = btDbvtVolume::FromCR(centres[spheres_[k]], radii[spheres_[k]] + margin);
-    tree_.update(dbvtNodes_[leaf(k)], volume);  // remove and insert: reuses the freed node
+  if (!tree_.m_root) {
+    buildTopology(centres, radii, margin);  // built not rebuildable
+  } else {
+    // The btDbvt's bounds as the last refit left them guide the re-insertions.
+    for (size_t n = 0; n < nodes_.size(); ++n) dbvtNodes_[n]->volume = bounds_[n];
+    for (size_t k = 0; k < spheres_.size(); ++k) {
+      btDbvtVolume volume = btDbvtVolume::FromCR(centres[spheres_[k]], radii[spheres_[k]] + margin);
+      tree_.update(dbvtNodes_[leaf(k)], volume);  // remove and insert: reuses the freed node
+    }
   }
   copyTree();
 }

@@ -84,17 +84,19 @@ class SphereTree : public FlatSphereTree {
   SphereTree(const SphereTree&) = delete;
   SphereTree& operator=(const SphereTree&) = delete;
 
-  /// Inserts one leaf per listed sphere into a btDbvt, optimises it top-down and copies it.
+  /// Inserts one leaf per listed sphere into a btDbvt, optimises it top-down and copies it; keeps
+  /// the btDbvt for rebuild() when `rebuildable` (else frees it: ~75 B per particle at thigh13).
   /// Allocates.
   void build(std::span<const uint32_t> indices, std::span<const btVector3> centres,
-             std::span<const btScalar> radii, btScalar margin = 0);
+             std::span<const btScalar> radii, btScalar margin = 0, bool rebuildable = true);
   /// Bounds for the spheres' current centres grown by `margin`, same topology. With a
   /// `snapshot` (indexed like `centres`), also returns the largest squared distance of a centre
   /// from its snapshot and replaces the snapshot by the centres (in the same pass). No allocation.
   btScalar refit(std::span<const btVector3> centres, std::span<const btScalar> radii,
                  btScalar margin = 0, std::span<btVector3> snapshot = {});
   /// Re-inserts every leaf at its sphere into the btDbvt (the thesis' rebuild each step) and
-  /// copies it again: a new topology fitted to the current shape. No allocation.
+  /// copies it again: a new topology fitted to the current shape. No allocation, unless built
+  /// not rebuildable: then the btDbvt is built again from the spheres (allocates, once).
   void rebuild(std::span<const btVector3> centres, std::span<const btScalar> radii,
                btScalar margin = 0);
 
@@ -102,6 +104,9 @@ class SphereTree : public FlatSphereTree {
   uint64_t epoch() const { return epoch_; }
 
  private:
+  /// A btDbvt over the spheres at their current centres, optimised top-down.
+  void buildTopology(std::span<const btVector3> centres, std::span<const btScalar> radii,
+                     btScalar margin);
   /// Copies the btDbvt and names every leaf by its sphere.
   void copyTree();
 

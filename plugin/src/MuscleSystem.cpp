@@ -170,8 +170,8 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       state->previous[i] = state->positions[i];
     }
   }
-  buildTree(*state);
   state->parameters = &impl_->parameters;
+  buildTree(*state);
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
