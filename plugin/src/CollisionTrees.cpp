@@ -31,6 +31,14 @@ void mergeBounds(const btDbvtVolume& a, const btDbvtVolume& b, btDbvtVolume& r) 
 
 }  // namespace
 
+template <typename BoundsOf>
+void FlatSphereTree::buildDbvt(btDbvt& tree, size_t count, BoundsOf&& boundsOf) {
+  tree.clear();
+  for (size_t k = 0; k < count; ++k)
+    tree.insert(boundsOf(k), nullptr)->dataAsInt = static_cast<int>(k);
+  if (count > 0) tree.optimizeTopDown();
+}
+
 void FlatSphereTree::flatten(btDbvt& tree, size_t leafCount, std::vector<btDbvtNode*>& sources) {
   const size_t count = leafCount ? 2 * leafCount - 1 : 0;
   nodes_.assign(count, Node{});
@@ -82,12 +90,9 @@ void SphereTree::build(std::span<const uint32_t> indices, std::span<const btVect
 
 void SphereTree::buildTopology(std::span<const btVector3> centres, std::span<const btScalar> radii,
                                btScalar margin) {
-  tree_.clear();
-  for (size_t k = 0; k < spheres_.size(); ++k)
-    tree_.insert(btDbvtVolume::FromCR(centres[spheres_[k]], radii[spheres_[k]] + margin), nullptr)
-        ->dataAsInt = static_cast<int>(k);
-  // Top-down optimisation gives a balanced tree to start from; it keeps the leaf nodes.
-  if (!spheres_.empty()) tree_.optimizeTopDown();
+  buildDbvt(tree_, spheres_.size(), [&](size_t k) {
+    return btDbvtVolume::FromCR(centres[spheres_[k]], radii[spheres_[k]] + margin);
+  });
 }
 
 btScalar SphereTree::refit(std::span<const btVector3> centres, std::span<const btScalar> radii,
@@ -134,10 +139,8 @@ void SphereTree::copyTree() {
 
 void BoneSphereTree::build(std::span<const btVector3> centres, std::span<const btScalar> radii) {
   btDbvt tree;
-  for (size_t k = 0; k < centres.size(); ++k)
-    tree.insert(btDbvtVolume::FromCR(centres[k], radii[k]), nullptr)->dataAsInt =
-        static_cast<int>(k);
-  if (!centres.empty()) tree.optimizeTopDown();
+  buildDbvt(tree, centres.size(),
+            [&](size_t k) { return btDbvtVolume::FromCR(centres[k], radii[k]); });
   std::vector<btDbvtNode*> sources;
   flatten(tree, centres.size(), sources);
   centres_.resize(centres.size());

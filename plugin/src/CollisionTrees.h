@@ -53,9 +53,12 @@ class FlatSphereTree {
   const btDbvtVolume& bounds(int32_t n) const { return bounds_[n]; }
   /// The node of the sphere in slot k (build order).
   int32_t leaf(size_t k) const { return firstLeaf_ + static_cast<int32_t>(k); }
-  size_t leafCount() const { return nodes_.size() - static_cast<size_t>(firstLeaf_); }
 
  protected:
+  /// Fills `tree` with one leaf per slot k < count (bounds boundsOf(k), dataAsInt k), optimised
+  /// top-down: a balanced tree to start from (it keeps the leaf nodes).
+  template <typename BoundsOf>
+  static void buildDbvt(btDbvt& tree, size_t count, BoundsOf&& boundsOf);
   /// Copies `tree` (its leaves' dataAsInt: slots 0 … leafCount−1) with its bounds; leaf k's
   /// sphere is k until the caller renames it; sources[n] is the btDbvt node of node n. Allocates
   /// only when the tree grew.

@@ -6,21 +6,15 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "ParticleSimd.h"
 #include "SpringForces.h"
 
-#if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
-#include <immintrin.h>
-#define FIBREMSS_SSE_SPRINGS 1
-#else
-#define FIBREMSS_SSE_SPRINGS 0
-#endif
+#define FIBREMSS_SSE_SPRINGS FIBREMSS_SSE_PARTICLES
 // The AVX2 kernel is compiled for its own target and chosen at run time: the library still runs
-// on plain x86-64.
-#if FIBREMSS_SSE_SPRINGS && defined(__x86_64__) && defined(__GNUC__)
-#define FIBREMSS_AVX2_SPRINGS 1
+// on plain x86-64. With FMA, unlike the per-particle passes: the kernels differ in rounding anyway.
+#define FIBREMSS_AVX2_SPRINGS FIBREMSS_AVX2_PARTICLES
+#if FIBREMSS_AVX2_SPRINGS
 #define FIBREMSS_AVX2 __attribute__((target("avx2,fma")))
-#else
-#define FIBREMSS_AVX2_SPRINGS 0
 #endif
 
 namespace fibremss {
@@ -65,9 +59,6 @@ struct SseRunSum {
   __m128 sum;         ///< force summed over the run so far
 };
 
-__m128 load(const btVector3& v) {
-  return _mm_load_ps(v.m_floats);
-}
 void store(btVector3& v, __m128 value) {
   _mm_store_ps(v.m_floats, value);
 }
@@ -84,8 +75,10 @@ __m128 addSpringsSse(const Spring* springs, size_t count, const btVector3* x, bt
     const Spring* group = springs + s;
     const uint32_t a0 = group[0].a, a1 = group[1].a, a2 = group[2].a, a3 = group[3].a;
     const uint32_t b0 = group[0].b, b1 = group[1].b, b2 = group[2].b, b3 = group[3].b;
-    __m128 dx = _mm_sub_ps(load(x[b0]), load(x[a0])), dy = _mm_sub_ps(load(x[b1]), load(x[a1])),
-           dz = _mm_sub_ps(load(x[b2]), load(x[a2])), dw = _mm_sub_ps(load(x[b3]), load(x[a3]));
+    __m128 dx = _mm_sub_ps(loadVector(x[b0]), loadVector(x[a0])),
+           dy = _mm_sub_ps(loadVector(x[b1]), loadVector(x[a1])),
+           dz = _mm_sub_ps(loadVector(x[b2]), loadVector(x[a2])),
+           dw = _mm_sub_ps(loadVector(x[b3]), loadVector(x[a3]));
     _MM_TRANSPOSE4_PS(dx, dy, dz, dw);
     // Rest lengths and stiffnesses are the upper halves of the 16-byte springs.
     const float* raw = reinterpret_cast<const float*>(group);
@@ -110,10 +103,10 @@ __m128 addSpringsSse(const Spring* springs, size_t count, const btVector3* x, bt
            f3 = zero;
     _MM_TRANSPOSE4_PS(f0, f1, f2, f3);
 
-    store(f[b0], _mm_sub_ps(load(f[b0]), f0));
-    store(f[b1], _mm_sub_ps(load(f[b1]), f1));
-    store(f[b2], _mm_sub_ps(load(f[b2]), f2));
-    store(f[b3], _mm_sub_ps(load(f[b3]), f3));
+    store(f[b0], _mm_sub_ps(loadVector(f[b0]), f0));
+    store(f[b1], _mm_sub_ps(loadVector(f[b1]), f1));
+    store(f[b2], _mm_sub_ps(loadVector(f[b2]), f2));
+    store(f[b3], _mm_sub_ps(loadVector(f[b3]), f3));
     if (a0 == run.particle && a3 == a0) {  // the common case: the whole group continues the run
       run.sum = _mm_add_ps(run.sum, _mm_add_ps(_mm_add_ps(f0, f1), _mm_add_ps(f2, f3)));
       continue;
@@ -122,7 +115,7 @@ __m128 addSpringsSse(const Spring* springs, size_t count, const btVector3* x, bt
     const __m128 forces[4] = {f0, f1, f2, f3};
     for (int k = 0; k < 4; ++k) {
       if (ends[k] != run.particle) {
-        store(f[run.particle], _mm_add_ps(load(f[run.particle]), run.sum));
+        store(f[run.particle], _mm_add_ps(loadVector(f[run.particle]), run.sum));
         run = {ends[k], forces[k]};
       } else {
         run.sum = _mm_add_ps(run.sum, forces[k]);
@@ -157,12 +150,6 @@ size_t sse2Springs(const Spring* springs, size_t count, const btVector3* x, btVe
 #endif
 
 #if FIBREMSS_AVX2_SPRINGS
-/// Two 16-byte values as the low and high halves of one register.
-FIBREMSS_AVX2 __m256 loadPair(const void* low, const void* high) {
-  return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(static_cast<const float*>(low))),
-                              _mm_loadu_ps(static_cast<const float*>(high)), 1);
-}
-
 /// Transposes the 4×4 blocks in each 128-bit half of four rows.
 FIBREMSS_AVX2 void transpose(__m256& r0, __m256& r1, __m256& r2, __m256& r3) {
   const __m256d t0 = _mm256_castps_pd(_mm256_unpacklo_ps(r0, r1));
@@ -216,11 +203,11 @@ FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_
   for (size_t s = first; s < first + count; s += 8) {
     const uint32_t* b = blocks.b + s;
     const uint32_t a0 = blocks.a[s / 4], a1 = blocks.a[s / 4 + 1];
-    const __m256 xa = loadPair(&at(x, a0), &at(x, a1));
-    __m256 dx = _mm256_sub_ps(loadPair(&at(x, b[0]), &at(x, b[4])), xa);
-    __m256 dy = _mm256_sub_ps(loadPair(&at(x, b[1]), &at(x, b[5])), xa);
-    __m256 dz = _mm256_sub_ps(loadPair(&at(x, b[2]), &at(x, b[6])), xa);
-    __m256 dw = _mm256_sub_ps(loadPair(&at(x, b[3]), &at(x, b[7])), xa);
+    const __m256 xa = loadPair(at(x, a0), at(x, a1));
+    __m256 dx = _mm256_sub_ps(loadPair(at(x, b[0]), at(x, b[4])), xa);
+    __m256 dy = _mm256_sub_ps(loadPair(at(x, b[1]), at(x, b[5])), xa);
+    __m256 dz = _mm256_sub_ps(loadPair(at(x, b[2]), at(x, b[6])), xa);
+    __m256 dw = _mm256_sub_ps(loadPair(at(x, b[3]), at(x, b[7])), xa);
     transpose(dx, dy, dz, dw);
     const __m256 restLength = _mm256_loadu_ps(blocks.restLength + s);
     const __m256 stiffness = _mm256_loadu_ps(blocks.stiffness + s);
@@ -245,10 +232,10 @@ FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_
                              _mm256_castps256_ps128(f2),   _mm256_castps256_ps128(f3),
                              _mm256_extractf128_ps(f0, 1), _mm256_extractf128_ps(f1, 1),
                              _mm256_extractf128_ps(f2, 1), _mm256_extractf128_ps(f3, 1)};
-    for (int k = 0; k < 8; ++k) store(at(f, b[k]), _mm_add_ps(force[k], load(at(f, b[k]))));
+    for (int k = 0; k < 8; ++k) store(at(f, b[k]), _mm_add_ps(force[k], loadVector(at(f, b[k]))));
     const __m256 rows = _mm256_add_ps(_mm256_add_ps(f0, f1), _mm256_add_ps(f2, f3));
-    store(at(f, a0), _mm_sub_ps(load(at(f, a0)), _mm256_castps256_ps128(rows)));
-    store(at(f, a1), _mm_sub_ps(load(at(f, a1)), _mm256_extractf128_ps(rows, 1)));
+    store(at(f, a0), _mm_sub_ps(loadVector(at(f, a0)), _mm256_castps256_ps128(rows)));
+    store(at(f, a1), _mm_sub_ps(loadVector(at(f, a1)), _mm256_extractf128_ps(rows, 1)));
   }
   return deviation;
 }
