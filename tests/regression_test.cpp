@@ -93,16 +93,31 @@ TEST(FuzzRegression, MeshCheck) {
   });
 }
 
+/// scratch/scene.json holding `json`, with scratch/meshes linked to the scene test meshes so
+/// that relative mesh references resolve as they did for the fuzzer.
+fs::path writeScene(const fs::path& scratch, const std::string& json) {
+  const fs::path meshes = scratch / "meshes";
+  if (!fs::exists(meshes))
+    fs::create_directory_symlink(fs::path(FIBREMSS_SOURCE_DIR) / "tests/data/scenes/meshes",
+                                 meshes);
+  write(scratch / "scene.json", json);
+  return scratch / "scene.json";
+}
+
 TEST(FuzzRegression, SceneJson) {
   replay("fuzz_scene_json", [](const fs::path& scratch, const std::string& bytes) {
-    // Relative mesh references resolve as they did for the fuzzer.
-    const fs::path meshes = scratch / "meshes";
-    if (!fs::exists(meshes))
-      fs::create_directory_symlink(fs::path(FIBREMSS_SOURCE_DIR) / "tests/data/scenes/meshes",
-                                   meshes);
-    const fs::path file = scratch / "scene.json";
-    write(file, bytes);
-    loadScene(file.string());
+    loadScene(writeScene(scratch, bytes).string());
+  });
+}
+
+TEST(FuzzRegression, SceneStructured) {
+  replay("fuzz_scene_structured", [](const fs::path& scratch, const std::string& bytes) {
+    const std::string json = fuzz::sceneJsonFromBytes(bytes);
+    try {
+      loadScene(writeScene(scratch, json).string());
+    } catch (const InputError&) {
+    }
+    loadScene("fusiform", {"model=" + json, "muscles.0=" + json});
   });
 }
 

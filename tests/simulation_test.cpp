@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
@@ -703,7 +704,7 @@ TEST(Handles, RemovedHandlesGoStale) {
   EXPECT_TRUE(system.contains(second));
   EXPECT_EQ(second.index, first.index);
   EXPECT_NE(second.generation, first.generation);
-  EXPECT_THROW(system.positions(first), std::out_of_range);
+  EXPECT_THROW(system.positions(first), InputError);
   EXPECT_EQ(system.muscles().size(), 1u);
   system.step();
 }

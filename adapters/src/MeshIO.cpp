@@ -133,6 +133,7 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
   meshio::requireScale(path, scale);
   TriangleMesh mesh;
   std::vector<std::string> readerWarnings;
+  meshio::requireNonEmptyFile(path);  // before isLegacyVtk opens it: a FIFO would block
   if (isLegacyVtk(path, lowerExtension(path))) {
     const std::string bytes = meshio::readWholeFile(path);
     meshio::VtkPolyData data = meshio::readLegacyVtk(path, bytes, scale);
@@ -146,7 +147,6 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
     for (const std::string& warning : data.warnings)
       readerWarnings.push_back(path + ": " + warning);
   } else {
-    meshio::requireNonEmptyFile(path);  // the same messages as for VTK files
     mesh = meshio::readAssimpSurface(path, scale);
   }
   MeshReport checked = checkSurface(mesh, path);

@@ -4,16 +4,80 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <algorithm>
 #include <assimp/Importer.hpp>
 #include <cmath>
 #include <exception>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 
 #include "MeshIOInternal.h"
 #include "fibremss/Error.h"
 
 namespace fibremss::meshio {
+namespace {
+
+/// Least bytes one value of a PLY property type takes (binary; ASCII takes at least 2: a digit
+/// and a separator).
+uint64_t plyTypeBytes(const std::string& type) {
+  if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
+  if (type == "int" || type == "uint" || type == "float" || type == "int32" || type == "uint32" ||
+      type == "float32")
+    return 4;
+  if (type == "double" || type == "float64") return 8;
+  return 1;
+}
+
+/// A PLY header's element counts against the bytes after it: assimp reserves memory for the
+/// counts as declared (2 000 000 000 vertices in a 340-byte file would commit gigabytes).
+void checkPlyCounts(const std::string& path) {
+  constexpr size_t kHeaderLimit = 64 * 1024;
+  std::ifstream file(path, std::ios::binary);
+  std::string head(kHeaderLimit, '\0');
+  file.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<size_t>(file.gcount()));
+  const size_t end = head.find("end_header");
+  if (head.rfind("ply", 0) != 0 || end == std::string::npos) return;  // assimp judges the rest
+  const uint64_t size = std::filesystem::file_size(path);
+  const uint64_t left = size - std::min<uint64_t>(head.find('\n', end) + 1, size);
+  std::istringstream lines(head.substr(0, end));
+  std::string line, name;
+  bool ascii = false;
+  uint64_t count = 0, bytesPerElement = 0;
+  long double needed = 0;
+  auto closeElement = [&] {
+    needed += static_cast<long double>(count) * std::max<uint64_t>(bytesPerElement, 1);
+    if (needed > static_cast<long double>(left))
+      throw InputError(path, "header, element " + meshio::quoted(name),
+                       "declares " + std::to_string(count) + " elements, which need at least " +
+                           std::to_string(static_cast<uint64_t>(needed)) +
+                           " bytes with the elements before them, but only " +
+                           std::to_string(left) + " bytes follow the header");
+  };
+  while (std::getline(lines, line)) {
+    std::istringstream words(line);
+    std::string word, type;
+    words >> word;
+    if (word == "format") {
+      words >> type;
+      ascii = type == "ascii";
+    } else if (word == "element") {
+      if (!name.empty()) closeElement();
+      if (!(words >> name >> count)) return;
+      bytesPerElement = 0;
+    } else if (word == "property" && !name.empty() && (words >> type)) {
+      if (type == "list") words >> type;  // a list holds at least its count
+      bytesPerElement += ascii ? 2 : plyTypeBytes(type);
+    }
+  }
+  if (!name.empty()) closeElement();
+}
+
+}  // namespace
 
 TriangleMesh readAssimpSurface(const std::string& path, double scale) {
+  checkPlyCounts(path);
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
                               aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS |

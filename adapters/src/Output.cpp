@@ -1,14 +1,21 @@
 // Output writers: atomic file writes, VTK XML PolyData (.vtp, ASCII) and .pvd collections.
 #include "fibremss/Output.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <charconv>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <regex>
 #include <stdexcept>
 #include <system_error>
+
+#include "fibremss/Error.h"
 
 namespace fibremss {
 namespace {
@@ -146,6 +153,47 @@ void writeFileAtomically(const std::string& path, std::string_view content) {
     throw std::runtime_error(path +
                              ": cannot rename the temporary file into place: " + error.message());
   }
+}
+
+void requireWritableDirectory(const std::string& path) {
+  std::error_code error;
+  fs::path existing = fs::absolute(path, error);
+  while (!fs::exists(existing, error) && existing.has_relative_path())
+    existing = existing.parent_path();
+  if (!fs::is_directory(existing, error))
+    throw InputError(path, "", existing.string() + " is not a directory; expected a directory");
+  if (::access(existing.c_str(), W_OK | X_OK) != 0)
+    throw InputError(path, "",
+                     "cannot write output: " + existing.string() + ": " + std::strerror(errno));
+}
+
+OutputDirectory::OutputDirectory(const std::string& path) {
+  requireWritableDirectory(path);
+  std::error_code error;
+  fs::create_directories(path, error);
+  if (error) throw InputError(path, "", "cannot create the directory: " + error.message());
+  const std::string lockPath = (fs::path(path) / ".fibremss.lock").string();
+  lock_ = ::open(lockPath.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_ < 0)
+    throw InputError(lockPath, "", std::string("cannot open: ") + std::strerror(errno));
+  if (::flock(lock_, LOCK_EX | LOCK_NB) != 0) {
+    ::close(lock_);
+    throw InputError(path, "",
+                     "another fibremss process is writing into this directory; wait for it or "
+                     "choose another --out");
+  }
+  // Only a writer holding the lock makes temporaries here: any left are a killed writer's.
+  static const std::regex kTemporary(R"(.*\.tmp\.[0-9]+\.[0-9]+)");
+  for (auto it = fs::recursive_directory_iterator(path, error);
+       !error && it != fs::recursive_directory_iterator(); it.increment(error))
+    if (it->is_regular_file(error) &&
+        std::regex_match(it->path().filename().string(), kTemporary) &&
+        fs::remove(it->path(), error))
+      ++removed_;
+}
+
+OutputDirectory::~OutputDirectory() {
+  ::close(lock_);  // releases the flock
 }
 
 void writeVtp(const std::string& path, const PolyData& data) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <set>
 #include <sstream>
 
 #include "fibremss/Error.h"
@@ -34,10 +35,84 @@ std::string joinPath(const std::string& path, const std::string& key) {
   return path.empty() ? key : path + "." + key;
 }
 
+namespace {
+
+/// Appends `value` as compact JSON until `out` passes `limit` characters: every level adds a
+/// character, so neither the depth nor the size of the value matters.
+void describeInto(const Json& value, std::string& out, size_t limit) {
+  if (out.size() > limit) return;
+  if (!value.is_structured()) {
+    out += value.dump().substr(0, limit + 1 - out.size());
+    return;
+  }
+  out += value.is_object() ? '{' : '[';
+  bool first = true;
+  for (auto it = value.begin(); it != value.end() && out.size() <= limit; ++it, first = false) {
+    if (!first) out += ',';
+    if (value.is_object()) out += Json(it.key()).dump() + ':';
+    describeInto(it.value(), out, limit);
+  }
+  out += value.is_object() ? '}' : ']';
+}
+
+/// Where the parser is: one frame per open object or array.
+struct ParseFrame {
+  bool array = false;          ///< an array (else an object)
+  size_t index = 0;            ///< array: the element being read
+  std::string key;             ///< object: the key being read
+  std::set<std::string> keys;  ///< object: the keys seen
+};
+
+std::string pathOf(const std::vector<ParseFrame>& frames) {
+  std::string path;
+  for (const ParseFrame& frame : frames)
+    path = frame.array ? path + "[" + std::to_string(frame.index) + "]" : joinPath(path, frame.key);
+  return path;
+}
+
+}  // namespace
+
 std::string describe(const Json& value) {
-  std::string text = value.dump();
-  if (text.size() > 60) text = text.substr(0, 57) + "...";
+  constexpr size_t kLimit = 60;
+  std::string text;
+  describeInto(value, text, kLimit);
+  if (text.size() > kLimit) text = text.substr(0, kLimit - 3) + "...";
   return text;
+}
+
+Json parseJson(const std::string& text, const std::string& source) {
+  std::vector<ParseFrame> frames;
+  auto enter = [&](bool array) {
+    if (frames.size() >= kMaxJsonDepth)
+      throw InputError(source, pathOf(frames),
+                       "nested deeper than " + std::to_string(kMaxJsonDepth) +
+                           " levels; a scene needs a handful");
+    frames.push_back(ParseFrame{array, 0, {}, {}});
+  };
+  auto leave = [&] {
+    frames.pop_back();
+    if (!frames.empty() && frames.back().array) ++frames.back().index;
+  };
+  const Json::parser_callback_t check = [&](int, Json::parse_event_t event, Json& parsed) {
+    using Event = Json::parse_event_t;
+    if (event == Event::object_start || event == Event::array_start)
+      enter(event == Event::array_start);
+    if (event == Event::object_end || event == Event::array_end) leave();
+    if (event == Event::value && !frames.empty() && frames.back().array) ++frames.back().index;
+    if (event == Event::key) {
+      ParseFrame& frame = frames.back();
+      frame.key = parsed.get<std::string>();
+      if (!frame.keys.insert(frame.key).second)
+        throw InputError(source, pathOf(frames),
+                         "duplicate key: the object has this key twice (JSON keeps only one)");
+    }
+    return true;
+  };
+  try {
+    return Json::parse(text, check);
+  } catch (const Json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
+    throw InputError(source, "", std::string("not valid JSON: ") + e.what());
+  }
 }
 
 btVector3 readVector3(const Json& value, const std::string& path, const std::string& source) {
@@ -86,6 +161,13 @@ double Fields::number(const std::string& key, double fallback, double lowest, do
   if (!std::isfinite(result) || tooLow || result > highest)
     fail(key,
          "expected " + range(lowest, highest, lowestExcluded) + ", got " + formatNumber(result));
+  // The solver stores btScalar: 1e-46 would become 0 and 1e39 inf in float.
+  constexpr double kLargest = std::numeric_limits<btScalar>::max();
+  constexpr double kSmallest = std::numeric_limits<btScalar>::min();
+  if (result != 0 && (std::abs(result) > kLargest || std::abs(result) < kSmallest))
+    fail(key, "expected a magnitude between " + formatNumber(kSmallest) + " and " +
+                  formatNumber(kLargest) + " (btScalar, " + std::to_string(sizeof(btScalar) * 8) +
+                  "-bit), got " + formatNumber(result));
   set(key, result);
   return result;
 }

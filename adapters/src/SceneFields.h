@@ -55,8 +55,16 @@ class Fields {
   Json complete_ = Json::object();
 };
 
-/// A JSON value as a user reads it in an error message (short).
+/// A JSON value as a user reads it in an error message (at most 60 characters, however large
+/// or deep the value).
 std::string describe(const Json& value);
+
+/// Objects and arrays nested deeper than this are refused (a scene needs about eight).
+constexpr size_t kMaxJsonDepth = 100;
+
+/// Parses scene JSON from `source`; InputError for invalid JSON, nesting beyond kMaxJsonDepth and
+/// duplicate keys, naming where.
+Json parseJson(const std::string& text, const std::string& source);
 
 /// Reads [x, y, z] at `path` (error naming the path otherwise).
 btVector3 readVector3(const Json& value, const std::string& path, const std::string& source);

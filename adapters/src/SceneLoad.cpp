@@ -342,7 +342,8 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
   parameters.seed = seed ? uint32_t(seed->get<unsigned long long>()) : defaults.seed;
   simulation.set("seed", parameters.seed);
   parameters.initialNoise =
-      btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, kInf) * scale);
+      btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, 1 / scale) *
+               scale);  // at most 1 m: more throws particles beyond any muscle
   parameters.threads = simulation.integer("threads", defaults.threads, 0, 1024);
   parameters.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
   parameters.solverTolerance =
@@ -431,6 +432,11 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
 
   Fields simulation = root.object("simulation");
   readSimulation(simulation, reader.scale, result.simulation);
+  if (result.simulation.stopRule == StopRule::TimeBudget)
+    result.warnings.push_back(
+        "simulation.stop = budget: each step iterates until its wall-clock budget is spent, so "
+        "the results depend on the machine's load and the thread count and are not "
+        "bit-identical between runs (the one exception; see docs/reliability.md)");
   Fields collision = root.object("collision");
   readCollision(collision, reader.scale, result.simulation);
   Fields outputs = root.object("outputs");
@@ -486,12 +492,7 @@ LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::stri
     baseDir = fs::absolute(path).parent_path();
     defaultName = path.stem().string();
   }
-  Json raw;
-  try {
-    raw = Json::parse(text);
-  } catch (const Json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
-    throw InputError(source, "", std::string("not valid JSON: ") + e.what());
-  }
+  Json raw = scene::parseJson(text, source);
   scene::applyOverrides(raw, overrides);
   scene::validateSceneJson(raw, source);
   LoadedScene result = readScene(raw, source, baseDir, defaultName);

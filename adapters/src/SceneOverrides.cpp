@@ -95,12 +95,13 @@ void setPath(Json& scene, const std::string& key, const Json& value) {
       // An index, or the name of an element ("muscles.rectus_femoris.resolution").
       Json* element = nullptr;
       if (std::all_of(part.begin(), part.end(), ::isdigit)) {
-        const size_t index = std::stoul(part);
-        if (index >= node->size())
+        // More digits than any array has elements: no stoul overflow.
+        const bool tooLong = part.size() > std::to_string(node->size()).size();
+        if (tooLong || std::stoul(part) >= node->size())
           throw InputError(
               "--set", key,
               walked + " has " + std::to_string(node->size()) + " elements; no [" + part + "]");
-        element = &(*node)[index];
+        element = &(*node)[std::stoul(part)];
       } else {
         for (auto& candidate : *node)
           if (candidate.is_object() && candidate.value("name", "") == part) element = &candidate;
@@ -141,8 +142,8 @@ void applyOverrides(Json& scene, const std::vector<std::string>& overrides) {
       throw InputError("--set", override, "expected key=value, e.g. --set resolution=40");
     const std::string key = override.substr(0, equals);
     const std::string text = override.substr(equals + 1);
-    Json value = Json::parse(text, nullptr, false);
-    if (value.is_discarded()) value = text;
+    // JSON when it is JSON (nesting and duplicate keys checked as in a scene file), else text.
+    Json value = Json::accept(text) ? parseJson(text, "--set " + key) : Json(text);
 
     if (key.find('.') != std::string::npos) {
       setPath(scene, key, value);

@@ -308,6 +308,10 @@ class PolyDataReader {
       }
     }
     if (!havePoints_) in_.fail("expected a POINTS section, found the end of the file");
+    if (skippedCells_ > kListedSkips)
+      data_.warnings.push_back("... and " + std::to_string(skippedCells_ - kListedSkips) +
+                               " more cells with fewer than 3 points skipped (" +
+                               std::to_string(skippedCells_) + " in all)");
     return std::move(data_);
   }
 
@@ -463,6 +467,7 @@ class PolyDataReader {
       return;
     }
     if (cell_.size() < 3) {
+      if (++skippedCells_ > kListedSkips) return;  // counted, summed up at the end
       data_.warnings.push_back(kind + " cell " + std::to_string(cell) + " (" + location + ") has " +
                                std::to_string(cell_.size()) +
                                " points, expected at least 3; skipped");
@@ -511,6 +516,9 @@ class PolyDataReader {
   VtkPolyData data_;
   bool havePoints_ = false;
   std::vector<uint32_t> cell_;  ///< point indices of the cell being read
+  /// Skipped cells named one by one before a count (2 000 000 empty cells: 11 lines, not 2 M).
+  static constexpr size_t kListedSkips = 10;
+  size_t skippedCells_ = 0;  ///< cells with fewer than 3 points
 };
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <iostream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "Commands.h"
 #include "SceneArgs.h"
@@ -22,11 +23,13 @@ struct CheckArgs {
   std::string out;
 };
 
-/// A file-name-safe version of a body name.
-std::string fileStem(const std::string& name) {
+/// A file-name-safe version of a body name, distinct from every stem in `used` ("a b" and
+/// "a_b" both give a_b: the second becomes a_b-1, with the body's index).
+std::string fileStem(const std::string& name, size_t index, std::set<std::string>& used) {
   std::string stem = name;
   for (char& c : stem)
     if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
+  while (!used.insert(stem).second) stem += "-" + std::to_string(index);
   return stem;
 }
 
@@ -46,8 +49,10 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared)
     writeVtp((fs::path(directory) / file).string(), data);
     collection.add(0.0, file, part++);
   };
-  for (const auto& muscle : prepared.muscles) {
-    const std::string stem = "muscle-" + fileStem(muscle->name);
+  std::set<std::string> muscleStems, boneStems;
+  for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    const MuscleSettings* muscle = prepared.muscles[m].get();
+    const std::string stem = "muscle-" + fileStem(muscle->name, m, muscleStems);
     add(stem + "-surface.vtp", meshData(muscle->restSurface));
 
     PolyData fibres;
@@ -68,8 +73,9 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared)
     particles.pointScalars = {{"radius", radius}, {"fixed", fixed}, {"boundary", boundary}};
     add(stem + "-particles.vtp", particles);
   }
-  for (const auto& bone : prepared.bones) {
-    const std::string stem = "bone-" + fileStem(bone->name);
+  for (size_t b = 0; b < prepared.bones.size(); ++b) {
+    const BoneSettings* bone = prepared.bones[b].get();
+    const std::string stem = "bone-" + fileStem(bone->name, b, boneStems);
     add(stem + "-mesh.vtp", meshData(bone->mesh));
     PolyData spheres;
     spheres.points = bone->sphereCentres;
@@ -115,6 +121,7 @@ void runCheck(const CheckArgs& args) {
   const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
   for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
 
+  if (!args.out.empty()) requireWritableDirectory(args.out);  // fail before preparing
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (const auto& warning : prepared.report.warnings)
     std::cerr << "fibremss: warning: " << warning << "\n";
@@ -146,7 +153,10 @@ void runCheck(const CheckArgs& args) {
     spheres += bone->sphereCentres.size();
   }
 
-  if (!args.out.empty()) writeRestState(args.out, prepared);
+  if (!args.out.empty()) {
+    const OutputDirectory locked(args.out);
+    writeRestState(args.out, prepared);
+  }
 
   if (args.json) {
     nlohmann::ordered_json result{{"scene", scene.name},

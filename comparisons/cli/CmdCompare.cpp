@@ -10,6 +10,7 @@
 #include "Commands.h"
 #include "Interrupt.h"
 #include "SceneArgs.h"
+#include "Validators.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Progress.h"
 #include "fibremss/Stability.h"
@@ -105,38 +106,38 @@ void addCompareCommand(CLI::App& app) {
       ->add_option("--fem-cells", args->options.fem.mesher.targetCells,
                    "FEM: voxels per muscle (each 6 tetrahedra)")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positiveInteger());
   command
       ->add_option("--fem-substeps", args->options.fem.substepsPerPose, "FEM: world steps per pose")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positiveInteger());
   command
       ->add_option("--fem-damping", args->options.fem.damping,
                    "FEM: Neo-Hookean damping [s] (0: none; the solve is implicit in it)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumber());
   command
       ->add_option("--fem-omega-dt", args->options.fem.stableOmegaDt,
                    "FEM: mass scaling limit of a node's omega*dt (0: no mass scaling)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumber());
   command
       ->add_option("--softbody-substeps", args->options.softBody.substepsPerPose,
                    "btSoftBody: world steps per pose (0: the most particles on one fibre / 4)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeInteger());
   command
       ->add_option("--softbody-iterations", args->options.softBody.positionIterations,
                    "btSoftBody: position solver iterations per world step (0: the most "
                    "particles on one fibre x 2/5)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeInteger());
   command
       ->add_option("--method-budget", args->options.methodBudgetSeconds,
                    "Seconds of wall time per method; a method past it stops after its current "
                    "step and is reported over the steps it did (0: no limit)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeNumber());
   command->callback([args] { compare(*args); });
 }
 

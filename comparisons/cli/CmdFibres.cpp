@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "Commands.h"
+#include "Validators.h"
 #include "fibremss/Error.h"
 #include "fibremss/FibreGeneration.h"
 #include "fibremss/MeshIO.h"
@@ -140,24 +141,24 @@ void addFibresCommand(CLI::App& app) {
       ->check(CLI::Range(8, 400))
       ->capture_default_str();
   command->add_option("--scale", args->scale, "metres per file unit (0.001: files in mm)")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->capture_default_str();
   command->add_option("--distance", args->distance, "bone attachment area: within this [mm]")
-      ->check(CLI::NonNegativeNumber)
+      ->check(nonNegativeNumber())
       ->capture_default_str();
   command->add_option("--radius", args->radius, "landmark radius when not given with @ [mm]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->capture_default_str();
   command->add_option("--coverage", args->coverage, "coverage distance for the figures [mm]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->capture_default_str();
   command->add_option("--crossing", args->crossing, "crossing tolerance for the figures [mm]")
-      ->check(CLI::PositiveNumber)
+      ->check(positiveNumber())
       ->capture_default_str();
   command
       ->add_option("--end-depth", args->endDepth,
                    "a missing attachment: the far end this deep [mm] (0: 6 % of the length)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(nonNegativeNumber())
       ->capture_default_str();
   command
       ->add_option("--seeds", args->seeds,

@@ -9,12 +9,14 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "Commands.h"
 #include "Interrupt.h"
 #include "SceneArgs.h"
+#include "Validators.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
@@ -146,19 +148,24 @@ void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   for (const std::string& warning : scene.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
-  // The output directory first: a run that cannot write should fail before preparing.
-  if (!args.out.empty()) {
-    std::filesystem::create_directories(args.out);
-    writeFileAtomically(args.out + "/scene.json", scene.json);
-    // A previous run's would mislead.
-    std::filesystem::remove(args.out + "/summary.json");
-    std::filesystem::remove(args.out + "/soak.csv");
-  }
+  // A run that cannot write fails before preparing, and writes nothing before it prepared.
+  if (!args.out.empty()) requireWritableDirectory(args.out);
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (const std::string& warning : prepared.report.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
+  std::optional<OutputDirectory> outDir;  // locked against a second run into it
+  if (!args.out.empty()) {
+    outDir.emplace(args.out);
+    if (outDir->removedTemporaries() > 0)
+      std::fprintf(stderr, "removed %zu temporary file(s) an interrupted run left in %s\n",
+                   outDir->removedTemporaries(), args.out.c_str());
+    writeFileAtomically(args.out + "/scene.json", scene.json);
+    // A previous run's would mislead.
+    std::filesystem::remove(args.out + "/summary.json");
+    std::filesystem::remove(args.out + "/soak.csv");
+  }
 
   FibreRunOptions options;
   options.outDir = args.out;
@@ -233,12 +240,12 @@ void addRunCommand(CLI::App& app) {
   command
       ->add_option("--steps", args->steps,
                    "Steps to run (default: one per pose; later steps hold the last pose)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeInteger());
   command
       ->add_option("--frame-every", args->frameEvery,
                    "Write a frame every K-th step (0: no frames; default: the scene's "
                    "outputs.frame_every)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeInteger());
   command->add_flag("--json", args->json, "Print the summary as JSON instead of text");
   command->add_flag("--loop", args->loop,
                     "Past the last pose, sweep the motion back to the first and forth again (with "
@@ -247,7 +254,7 @@ void addRunCommand(CLI::App& app) {
       ->add_option("--sample-every", args->sampleEvery,
                    "Every K iterations record resident memory, fixed-particle drift from T*rest, "
                    "NaN and the time per iteration (summary.json 'soak', DIR/soak.csv)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeInteger());
   command->callback([args] { run(*args); });
 }
 

@@ -10,6 +10,7 @@
 
 #include "Commands.h"
 #include "Interrupt.h"
+#include "Validators.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
 #include "fibremss/Stability.h"
@@ -84,7 +85,7 @@ void addStabilityCommand(CLI::App& app) {
                    "Comma-separated multiples of each integrator's stable step")
       ->delimiter(',')
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positiveNumber());
   command->add_option("--calibrate", args->calibration,
                       "Case on which each integrator's stable step is measured (default: "
                       "hip-extension)");
@@ -93,12 +94,12 @@ void addStabilityCommand(CLI::App& app) {
       ->add_option("--cell-seconds", args->options.cellSeconds,
                    "Wall-time box of one run; a run past it stops after its step (timeout)")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positiveNumber());
   command
       ->add_option("--calibration-steps", args->options.calibrationSteps,
                    "Steps of each stable-step probe")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positiveInteger());
   command->callback([args] { stability(*args); });
 }
 

@@ -1,13 +1,33 @@
-// The fibremss command-line tool.
+// The fibremss command-line tool. Exit codes (docs/bad-inputs.md): 0 done, 2 bad input or usage,
+// 3 a run that failed numerically, 130 interrupted; 1 only for an internal error.
 #include <exception>
 #include <iostream>
 
 #include "Commands.h"
 #include "fibremss/Error.h"
 
+namespace {
+
+/// Exit code of bad input and of every usage error (CLI11's own codes are 100 and up).
+constexpr int kExitBadInput = 2;
+
+/// --help and --version print and exit 0; the commands' own exit codes (3, 130) pass through
+/// as CLI::RuntimeError; every other parse error is a usage error.
+int exitFor(const CLI::App& app, const CLI::ParseError& e) {
+  if (e.get_exit_code() == 0 || dynamic_cast<const CLI::RuntimeError*>(&e)) return app.exit(e);
+  std::cerr << "fibremss: error: " << e.what() << "\n"
+            << "Run with --help for more information.\n";
+  return kExitBadInput;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   CLI::App app{"FibreMSS: fibre-sampled mass-spring muscles with sphere collision for Bullet"};
   app.require_subcommand(1);
+  app.footer(
+      "Exit codes (every subcommand): 0 done, 2 bad input or usage, 3 a run that failed "
+      "numerically, 130 interrupted (docs/bad-inputs.md).");
   fibremss::cli::addScenesCommand(app);
   fibremss::cli::addCheckCommand(app);
   fibremss::cli::addRunCommand(app);
@@ -18,10 +38,10 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return exitFor(app, e);
   } catch (const fibremss::InputError& e) {
     std::cerr << "fibremss: error: " << e.what() << "\n";
-    return 2;
+    return kExitBadInput;
   } catch (const std::exception& e) {
     std::cerr << "fibremss: error: " << e.what() << "\n";
     return 1;

@@ -3,6 +3,7 @@
 #include <sys/utsname.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -366,8 +367,47 @@ nlohmann::json summaryJson(const Comparison& comparison, const std::string& comm
           {"runs", std::move(runs)}};
 }
 
+namespace {
+
+/// Whether `value` has the JSON type of `expected`, a field of toJson(RunMetrics{}): numbers
+/// (null: NaN) for numbers and nulls, the same type otherwise, arrays of numbers or nulls.
+bool sameKind(const nlohmann::json& value, const nlohmann::json& expected) {
+  auto numeric = [](const nlohmann::json& v) { return v.is_number() || v.is_null(); };
+  if (numeric(expected)) return numeric(value);
+  if (expected.is_array())
+    return value.is_array() && std::all_of(value.begin(), value.end(), numeric);
+  return value.type() == expected.type();
+}
+
+/// Throws InputError naming `path.key` for a field of a run whose type toJson would not write.
+void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
+                    const std::string& source, const std::string& path) {
+  if (!run.is_object()) throw InputError(source, path, "expected a run object {...}");
+  for (auto it = expected.begin(); it != expected.end(); ++it) {
+    const auto found = run.find(it.key());
+    if (found == run.end()) continue;  // missing keys keep their defaults
+    if (it->is_object())
+      checkRunFields(*found, *it, source, path + "." + it.key());
+    else if (!sameKind(*found, *it))
+      throw InputError(source, path + "." + it.key(),
+                       std::string("expected a ") + it->type_name() +
+                           " as `fibremss compare` "
+                           "writes it, got " +
+                           found->dump().substr(0, 60));
+  }
+  const auto overrides = run.find("scene_overrides");
+  if (overrides != run.end() &&
+      !(overrides->is_array() &&
+        std::all_of(overrides->begin(), overrides->end(),
+                    [](const nlohmann::json& o) { return o.is_string(); })))
+    throw InputError(source, path + ".scene_overrides", "expected an array of strings");
+}
+
+}  // namespace
+
 nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
                               const std::vector<std::string>& sources) {
+  const nlohmann::json expected = toJson(RunMetrics{});
   nlohmann::json runs = nlohmann::json::array(), commands = nlohmann::json::array();
   std::set<std::string> scenes;
   nlohmann::json machine;
@@ -377,13 +417,27 @@ nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
       throw InputError(i < sources.size() ? sources[i] : "summary", "runs",
                        "a summary.json written by `fibremss compare` (an object with \"runs\")");
     }
-    for (const auto& run : summary["runs"]) runs.push_back(run);
+    const std::string source = i < sources.size() ? sources[i] : "summary";
+    for (size_t r = 0; r < summary["runs"].size(); ++r) {
+      checkRunFields(summary["runs"][r], expected, source, "runs[" + std::to_string(r) + "]");
+      runs.push_back(summary["runs"][r]);
+    }
     if (summary.contains("scene") && summary["scene"].is_string()) {
       scenes.insert(summary["scene"].get<std::string>());
     }
     if (summary.contains("command")) commands.push_back(summary["command"]);
     if (machine.is_null() && summary.contains("machine")) machine = summary["machine"];
+    const nlohmann::json fields = machine.is_null() ? nlohmann::json::object() : machine;
+    if (!fields.is_object() || !fields.value("cpu", nlohmann::json("")).is_string() ||
+        !fields.value("os", nlohmann::json("")).is_string() ||
+        !fields.value("cores", nlohmann::json(0)).is_number())
+      throw InputError(source, "machine",
+                       "expected {\"cpu\": text, \"cores\": number, \"os\": text}");
   }
+  if (runs.empty())
+    throw InputError(sources.empty() ? "merge" : sources.front(), "runs",
+                     "no runs in any of the summaries; expected summary.json files written by "
+                     "`fibremss compare`");
   std::string scene;
   for (const std::string& s : scenes) scene += (scene.empty() ? "" : ", ") + s;
   return {{"scene", scene},

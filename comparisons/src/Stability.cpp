@@ -27,12 +27,18 @@ struct PreparedCase {
   double freeMass = 0;     ///< mass of the free particles of all muscles [kg]
 };
 
-PreparedCase prepareCase(const StabilityCase& stabilityCase, const StabilityOptions& options,
-                         bool calibration = false) {
+/// The options' overrides, then the case's own.
+std::vector<std::string> caseOverrides(const StabilityCase& stabilityCase,
+                                       const StabilityOptions& options) {
   std::vector<std::string> overrides = options.overrides;
   overrides.insert(overrides.end(), stabilityCase.overrides.begin(), stabilityCase.overrides.end());
+  return overrides;
+}
+
+PreparedCase prepareCase(const StabilityCase& stabilityCase, const StabilityOptions& options,
+                         bool calibration = false) {
   PreparedCase result;
-  result.scene = loadScene(stabilityCase.scene, overrides);
+  result.scene = loadScene(stabilityCase.scene, caseOverrides(stabilityCase, options));
   if (calibration) {
     result.scene.poseCount = 1;  // every step holds the first pose
     result.scene.simulation.initialNoise = static_cast<btScalar>(options.calibrationNoise);
@@ -308,6 +314,11 @@ StabilityCell runCalibrationProbe(const std::string& integrator, double dt,
 
 StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
                                    const StabilityOptions& options) {
+  // Every scene loads (files, fields, overrides) before any work: bad input is an InputError,
+  // not a matrix of error cells after minutes of calibration.
+  loadScene(options.calibration.scene, caseOverrides(options.calibration, options));
+  for (const StabilityCase& stabilityCase : cases)
+    loadScene(stabilityCase.scene, caseOverrides(stabilityCase, options));
   const auto start = Clock::now();
   StabilityMatrix matrix;
   matrix.cases = cases;

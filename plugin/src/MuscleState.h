@@ -26,6 +26,9 @@ struct BoneState {
   btTransform current = btTransform::getIdentity();  ///< in the running iteration
   btTransform delta = btTransform::getIdentity();    ///< current · previous-iteration⁻¹
   bool moving = false;  ///< delta differs from the identity in this iteration
+  /// The target of this step was not finite (a host's body gone NaN, a NaN setBoneTransform):
+  /// the bone holds its transform for the step, which reports NaN.
+  bool heldNonFinite = false;
   BoneSphereTree tree;  ///< bone spheres, static topology, bounds placed in world space
   uint32_t slot = 0;    ///< the bone's slot in its system (names it in per-particle memory)
   /// Signed distance field of the mesh, bone frame (BoneCollision::DistanceField), or null.

@@ -7,15 +7,18 @@
 #include <string>
 
 #include "Integrators.h"
+#include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "fibremss/Error.h"
 
 namespace fibremss {
 
 MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
     : impl_(std::make_unique<Impl>()) {
+  checkStepParameters(parameters, "MuscleSystem");
   impl_->parameters = parameters;
   impl_->prepareWorkers();
 }
@@ -28,6 +31,11 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   if (settings->sphereCentres.size() != settings->sphereRadii.size())
     throw std::invalid_argument("MuscleSystem::addBone: bone '" + settings->name +
                                 "' has different numbers of sphere centres and radii");
+  const std::string call = "MuscleSystem::addBone: bone '" + settings->name + "'";
+  checkPoints(settings->sphereCentres, call, "sphere centre");
+  checkRadii(settings->sphereRadii, call);
+  if (body && !finiteTransform(body->getWorldTransform()))
+    throw InputError(call, "body", "expected a finite world transform within 1e6 m");
   auto state = std::make_unique<BoneState>();
   state->body = body;
   if (body) state->last = state->target = state->current = body->getWorldTransform();
@@ -51,6 +59,15 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
 }
 
 void MuscleSystem::removeBone(BoneHandle bone) {
+  const BoneState& removed = impl_->bone(bone);  // InputError for a stale or unknown handle
+  for (uint32_t slot : impl_->muscles.order) {
+    const MuscleState& muscle = *impl_->muscles.states[slot];
+    for (const BoneHandle& attached : muscle.bones)
+      if (attached.index == bone.index && attached.generation == bone.generation)
+        throw InputError(
+            "MuscleSystem::removeBone", "bone '" + removed.settings->name + "'",
+            "muscle '" + muscle.settings->name + "' is attached to it; remove the muscle first");
+  }
   impl_->bones.remove(bone);
 }
 
@@ -111,6 +128,20 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
                        s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount;
   for (uint32_t p : s.boundaryParticles)
     if (p >= n) throw std::invalid_argument(where + "boundary particle beyond the particles");
+  const std::string call = "MuscleSystem::addMuscle: muscle '" + s.name + "'";
+  checkPoints(s.restPositions, call, "rest position");
+  checkRadii(s.radii, call);
+  for (size_t b = 0; b < bones.size(); ++b) {
+    const BoneState* bone = impl_->bones.find(bones[b]);
+    if (!bone)
+      throw InputError(call, "bones[" + std::to_string(b) + "]",
+                       "expected a handle of a bone in this system; the handle is unknown or "
+                       "its bone was removed");
+    if (!finiteTransform(bone->current) || !finiteTransform(bone->target))
+      throw InputError(call, "bones[" + std::to_string(b) + "]",
+                       "bone '" + bone->settings->name +
+                           "' has a non-finite transform; the muscle cannot be placed on it");
+  }
 
   auto state = std::make_unique<MuscleState>();
   state->bones.assign(bones.begin(), bones.end());
@@ -171,6 +202,8 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     }
   }
   state->parameters = &impl_->parameters;
+  // Before the tree: btDbvt's build breaks on non-finite or huge bounds.
+  checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
   buildTree(*state);
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
@@ -203,6 +236,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
 }
 
 void MuscleSystem::removeMuscle(MuscleHandle muscle) {
+  impl_->muscle(muscle);  // InputError for a stale or unknown handle
   impl_->muscles.remove(muscle);
 }
 
@@ -219,6 +253,7 @@ void MuscleSystem::unfreeze(MuscleHandle muscle) {
 }
 
 void MuscleSystem::step() {
+  checkStepParameters(impl_->parameters, "MuscleSystem::step");
   impl_->guardedStep();
 }
 

@@ -200,6 +200,8 @@ void MuscleSystem::Impl::guardedStep() {
       deformSurface(*state.settings, state.positions, state.boneTransforms,
                     parameters.blendedPretransform, state.surface);
   };
+  size_t heldBones = 0;
+  for (uint32_t slot : bones.order) heldBones += bones.states[slot]->heldNonFinite ? 1 : 0;
   size_t frozen = 0, trappedParticles = 0, trappedMuscles = 0;
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
@@ -214,11 +216,14 @@ void MuscleSystem::Impl::guardedStep() {
   stats.timing.total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
   stats.iterations = iterations;
   stats.step = number;
-  stats.failed = failed;
+  // A bone given a NaN/inf transform held its own: reported as NaN, the muscles stay finite.
+  stats.heldBones = heldBones;
+  stats.nan = stats.nan || heldBones > 0;
+  stats.failedNan = failedNan || heldBones > 0;
+  stats.failed = failed || heldBones > 0;
   stats.rolledBack = rolledBack;
   stats.retries = retries;
   stats.failedMuscle = failedMuscle;
-  stats.failedNan = failedNan;
   stats.newlyFrozen = newlyFrozen;
   stats.frozenMuscles = frozen;
   stats.trappedParticles = trappedParticles;

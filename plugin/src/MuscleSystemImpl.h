@@ -3,12 +3,14 @@
 // pipeline of method.md §5 (MuscleSystemStep.cpp).
 #include <algorithm>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "CollisionPairs.h"
 #include "MuscleState.h"
 #include "SpringForces.h"
 #include "TaskPool.h"
+#include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss {
@@ -69,6 +71,17 @@ struct MusclePairTask {
   MuscleContacts contacts;  ///< in pairContacts, sized by the pair's candidate list
 };
 
+/// What a handle that finds no body is (Slots::find compares the slot's generation).
+constexpr const char* kStaleHandle =
+    "unknown handle, or its body was removed (the slot's generation differs)";
+
+/// "muscle handle {slot 3, generation 1}" for messages.
+template <typename Handle>
+std::string handleText(const char* kind, const Handle& handle) {
+  return std::string(kind) + " handle {slot " + std::to_string(handle.index) + ", generation " +
+         std::to_string(handle.generation) + "}";
+}
+
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
 struct MuscleSystem::Impl {
   SimulationParameters parameters;             ///< how to step
@@ -90,12 +103,12 @@ struct MuscleSystem::Impl {
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
-    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed muscle handle");
+    if (!state) throw InputError("MuscleSystem", handleText("muscle", handle), kStaleHandle);
     return *state;
   }
   BoneState& bone(BoneHandle handle) const {
     BoneState* state = bones.find(handle);
-    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed bone handle");
+    if (!state) throw InputError("MuscleSystem", handleText("bone", handle), kStaleHandle);
     return *state;
   }
 

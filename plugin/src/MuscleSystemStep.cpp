@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "Integrators.h"
+#include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
 #include "MuscleSystemPretransform.h"
 #include "Skin.h"
@@ -274,6 +275,9 @@ void MuscleSystem::Impl::step() {
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     if (bone.body) bone.target = bone.body->getWorldTransform();
+    // NaN here would spread into every muscle on the bone and break its sphere tree.
+    bone.heldNonFinite = !finiteTransform(bone.target);
+    if (bone.heldNonFinite) bone.target = bone.current;
   }
   // The thesis rebuilt everything each step: bones jump, particles restart from rest.
   const bool rebuild = parameters.rebuildEveryStep;

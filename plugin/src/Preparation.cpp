@@ -90,12 +90,16 @@ NearestBone nearestBone(const btVector3& p, const std::vector<BoneShape>& bones,
 }
 
 /// Indices in range and finite coordinates: what every later stage relies on.
+/// What checkMesh and checkFibres expect of a point.
+const char* const kWithinWorld =
+    "coordinates must be finite numbers within 1e6 m (1000 km) of the origin; are the units "
+    "right?";
+
 void checkMesh(const std::string& source, const std::string& field, const TriangleMesh& mesh) {
   if (mesh.empty()) throw InputError(source, field, "the mesh has no triangles");
   for (size_t v = 0; v < mesh.vertices.size(); ++v)
-    if (!std::isfinite(mesh.vertices[v].length2()))
-      throw InputError(source, field + " vertex " + std::to_string(v),
-                       "coordinates must be finite numbers");
+    if (!withinWorld(mesh.vertices[v]))
+      throw InputError(source, field + " vertex " + std::to_string(v), kWithinWorld);
   for (size_t t = 0; t < mesh.triangles.size(); ++t)
     for (uint32_t index : mesh.triangles[t])
       if (index >= mesh.vertices.size())
@@ -110,9 +114,8 @@ void checkFibres(const std::string& source, const FibreSet& fibres) {
       !std::is_sorted(fibres.offsets.begin(), fibres.offsets.end()))
     throw InputError(source, "fibres", "fibre offsets do not match the fibre points");
   for (size_t i = 0; i < fibres.points.size(); ++i)
-    if (!std::isfinite(fibres.points[i].length2()))
-      throw InputError(source, "fibre point " + std::to_string(i),
-                       "coordinates must be finite numbers");
+    if (!withinWorld(fibres.points[i]))
+      throw InputError(source, "fibre point " + std::to_string(i), kWithinWorld);
 }
 
 /// One sentence per repair preparation made to a muscle (empty counts are left out).

@@ -1,5 +1,6 @@
 // Memory estimate of a preparation, checked before anything is allocated: a scene that asks
 // for 10^8 particles is refused with the estimate in the message instead of exhausting memory.
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -72,9 +73,17 @@ size_t estimatePreparationBytes(const std::vector<BoneInput>& bones,
 
 size_t preparationMemoryLimit() {
   if (const char* limit = std::getenv("FIBREMSS_MEMORY_LIMIT_MB")) {
-    char* end = nullptr;
-    const unsigned long long megabytes = std::strtoull(limit, &end, 10);
-    if (end != limit && *end == '\0' && megabytes > 0) return times(megabytes, 1024 * 1024);
+    // Digits only: strtoull would take "-5" as 2^64 - 5 (no limit at all).
+    const std::string text = limit;
+    const bool digits =
+        !text.empty() && text.size() <= 12 &&
+        std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; });
+    const unsigned long long megabytes = digits ? std::stoull(text) : 0;
+    if (megabytes == 0)
+      throw InputError("FIBREMSS_MEMORY_LIMIT_MB", "",
+                       "expected a whole number of megabytes >= 1 (at most 12 digits), got \"" +
+                           text + "\"; unset it to use the available memory");
+    return times(megabytes, 1024 * 1024);
   }
   const size_t available = availableMemory();
   return available > 0 ? available : SIZE_MAX;

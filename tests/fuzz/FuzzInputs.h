@@ -9,6 +9,7 @@
 #include <fstream>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "fibremss/Geometry.h"
 
@@ -37,6 +38,174 @@ inline TriangleMesh meshFromBytes(std::string_view bytes) {
   return mesh;
 }
 
+/// Scene JSON text from bytes, aware of its structure: every byte is a step of a writer that
+/// opens objects and arrays (so a run of bytes nests thousands deep), closes them, and writes
+/// scene field names as keys (sometimes twice in one object), the scene's words as strings
+/// ("mm", "sweep", "budget", "meshes/cube.obj", ...), booleans, nulls and numbers from small
+/// integers to 1e±400, denormals, -0 and the int64 limits. The top level is an object and every
+/// container is closed at the end, so the text is JSON unless a number overflows.
+inline std::string sceneJsonFromBytes(std::string_view bytes) {
+  static constexpr const char* kKeys[] = {"name",
+                                          "units",
+                                          "bones",
+                                          "muscles",
+                                          "model",
+                                          "simulation",
+                                          "collision",
+                                          "outputs",
+                                          "mesh",
+                                          "surface",
+                                          "fibres",
+                                          "file",
+                                          "generator",
+                                          "type",
+                                          "transform",
+                                          "translation",
+                                          "rotation",
+                                          "quaternion",
+                                          "axis",
+                                          "angle_deg",
+                                          "motion",
+                                          "keyframes",
+                                          "label",
+                                          "pivot",
+                                          "start_deg",
+                                          "end_deg",
+                                          "step_deg",
+                                          "spheres",
+                                          "thinning",
+                                          "max_radius",
+                                          "resolution",
+                                          "fibre_count",
+                                          "attachment_distance",
+                                          "skin_neighbours",
+                                          "fibre_grid_columns",
+                                          "layout",
+                                          "neighbours",
+                                          "kappa",
+                                          "damping",
+                                          "damping_scale",
+                                          "density",
+                                          "integrator",
+                                          "time_step",
+                                          "dt",
+                                          "min_dt",
+                                          "stop",
+                                          "iterations",
+                                          "epsilon",
+                                          "budget_ms",
+                                          "seed",
+                                          "initial_noise",
+                                          "threads",
+                                          "on_failure",
+                                          "max_retries",
+                                          "frame_every",
+                                          "size",
+                                          "radius",
+                                          "radii",
+                                          "divisions",
+                                          "sections",
+                                          "slices",
+                                          "caps",
+                                          "pattern",
+                                          "points",
+                                          "centre",
+                                          "data_dir",
+                                          "description"};
+  static constexpr const char* kWords[] = {"m",
+                                           "mm",
+                                           "box",
+                                           "tube",
+                                           "ellipsoid",
+                                           "chords",
+                                           "sweep",
+                                           "keyframes",
+                                           "none",
+                                           "auto",
+                                           "budget",
+                                           "converged",
+                                           "verlet",
+                                           "xpbd",
+                                           "fixed",
+                                           "adaptive",
+                                           "retry",
+                                           "report",
+                                           "stop-body",
+                                           "lattice6",
+                                           "delaunay",
+                                           "meshes/cube.obj",
+                                           "meshes/muscle.obj",
+                                           "meshes/fibres.obj",
+                                           "${data_dir}/x.obj",
+                                           "",
+                                           "round",
+                                           "grid"};
+  static constexpr const char* kNumbers[] = {"0",
+                                             "1",
+                                             "2",
+                                             "-1",
+                                             "3",
+                                             "10",
+                                             "40",
+                                             "0.5",
+                                             "1e-3",
+                                             "-0",
+                                             "1e-46",
+                                             "1e39",
+                                             "1e-40",
+                                             "1e308",
+                                             "1e-320",
+                                             "9223372036854775807",
+                                             "-9223372036854775808",
+                                             "18446744073709551616",
+                                             "4294967296",
+                                             "1e16",
+                                             "1e12",
+                                             "0.001",
+                                             "100000",
+                                             "2147483648"};
+  size_t at = 0;
+  auto next = [&]() -> uint8_t { return at < bytes.size() ? uint8_t(bytes[at++]) : 0; };
+  auto pick = [&](const auto& table) { return table[next() % std::size(table)]; };
+  std::string json = "{";
+  std::vector<char> open = {'}'};  // closers of the open containers
+  std::vector<bool> first = {true};
+  auto startValue = [&] {
+    if (!first.back()) json += ',';
+    first.back() = false;
+    if (open.back() == '}') json += std::string("\"") + pick(kKeys) + "\":";
+  };
+  while (at < bytes.size()) {
+    const uint8_t op = next() % 16;
+    if (op == 5) {
+      if (open.size() > 1) {
+        json += open.back();
+        open.pop_back();
+        first.pop_back();
+      }
+      continue;
+    }
+    startValue();
+    if (op <= 4) {
+      json += op <= 2 ? '{' : '[';
+      open.push_back(op <= 2 ? '}' : ']');
+      first.push_back(true);
+    } else if (op <= 8) {
+      // Mantissa -128..127, exponent -512..508: past float, past double, denormal.
+      json += op == 8 ? std::to_string(int8_t(next())) + "e" + std::to_string(next() * 4 - 512)
+                      : std::string(pick(kNumbers));
+    } else if (op <= 11) {
+      json += std::string("\"") + pick(kWords) + "\"";
+    } else if (op <= 13) {
+      json += next() & 1 ? "true" : "false";
+    } else {
+      json += "null";
+    }
+  }
+  for (auto closer = open.rbegin(); closer != open.rend(); ++closer) json += *closer;
+  return json;
+}
+
 /// A scratch directory for this process with `name` inside it, holding `bytes`; the scene
 /// targets link "meshes" to the scene test meshes so that relative file references resolve.
 inline std::filesystem::path writeScratchFile(const std::string& name, std::string_view bytes) {
@@ -46,6 +215,16 @@ inline std::filesystem::path writeScratchFile(const std::string& name, std::stri
   const auto path = directory / name;
   std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes.data(), bytes.size());
   return path;
+}
+
+/// scene.json in the scratch directory holding `json`, next to a "meshes" link to the scene test
+/// meshes (FIBREMSS_SCENE_MESHES) so that relative file references resolve.
+inline std::filesystem::path writeScratchScene(std::string_view json, const char* meshDirectory) {
+  const std::filesystem::path scene = writeScratchFile("scene.json", json);
+  const auto meshes = scene.parent_path() / "meshes";
+  if (!std::filesystem::exists(meshes))
+    std::filesystem::create_directory_symlink(meshDirectory, meshes);
+  return scene;
 }
 
 }  // namespace fibremss::fuzz

@@ -11,10 +11,7 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace fibremss;
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
-  const std::filesystem::path scene = fuzz::writeScratchFile("scene.json", bytes);
-  const auto meshes = scene.parent_path() / "meshes";
-  if (!std::filesystem::exists(meshes))
-    std::filesystem::create_directory_symlink(FIBREMSS_SCENE_MESHES, meshes);
+  const std::filesystem::path scene = fuzz::writeScratchScene(bytes, FIBREMSS_SCENE_MESHES);
   try {
     loadScene(scene.string());
   } catch (const InputError&) {

@@ -16,6 +16,29 @@ namespace fibremss {
 /// (with the path) when it cannot. Creates missing parent directories.
 void writeFileAtomically(const std::string& path, std::string_view content);
 
+/// Throws InputError when directory `path` could not be created or written: it exists and is
+/// no directory or not writable, or its nearest existing ancestor is not writable. Checked
+/// without writing anything (so a run can fail before its preparation and write nothing).
+void requireWritableDirectory(const std::string& path);
+
+/// An output directory one process writes at a time: created, locked (DIR/.fibremss.lock held
+/// with flock while this lives; a second writer gets InputError naming the directory), and
+/// cleared of the temporary files (NAME.tmp.PID.N) that a killed writer left in it or its
+/// subfolders.
+class OutputDirectory {
+ public:
+  explicit OutputDirectory(const std::string& path);
+  ~OutputDirectory();
+  OutputDirectory(const OutputDirectory&) = delete;
+  OutputDirectory& operator=(const OutputDirectory&) = delete;
+  /// Temporary files of earlier writers removed when it was opened.
+  size_t removedTemporaries() const { return removed_; }
+
+ private:
+  int lock_ = -1;  ///< the lock file's descriptor
+  size_t removed_ = 0;
+};
+
 /// Points with optional vertices, polylines and triangles, and per-point data arrays.
 struct PolyData {
   std::vector<btVector3> points;                   ///< point coordinates

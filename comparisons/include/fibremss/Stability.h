@@ -131,7 +131,8 @@ struct StabilityMatrix {
   bool interrupted = false;  ///< stopped by options.cancel: later cells (and steps) not run
 };
 
-/// Calibrates every integrator, then runs every case × integrator × factor. When
+/// Loads every case's scene first (InputError before any work), then calibrates every
+/// integrator and runs every case × integrator × factor. When
 /// options.cancel turns true it stops after the running step: that cell is `interrupted`, no
 /// later probe or cell runs (integrators not calibrated yet get no stable step) and the matrix
 /// says `interrupted`.

@@ -12,6 +12,17 @@
 
 namespace fibremss {
 
+/// Largest |coordinate| a point of a body may have [m] (1000 km; a scene in the wrong units
+/// lands beyond it): btDbvt's tree build multiplies extents, which overflow float far beyond
+/// any body and then write out of bounds.
+constexpr btScalar kMaxCoordinate = btScalar(1e6);
+
+/// Whether every coordinate of `p` is finite and within ±kMaxCoordinate (NaN is not).
+inline bool withinWorld(const btVector3& p) {
+  return btFabs(p.x()) <= kMaxCoordinate && btFabs(p.y()) <= kMaxCoordinate &&
+         btFabs(p.z()) <= kMaxCoordinate;
+}
+
 /// A triangle surface; triangles are counter-clockwise seen from outside (outward normals).
 struct TriangleMesh {
   std::vector<btVector3> vertices;                 ///< vertex positions

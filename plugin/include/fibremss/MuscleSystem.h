@@ -67,6 +67,9 @@ struct StepStats {
   bool failedNan = false;     ///< that muscle had NaN/inf (else: exploded springs)
   size_t newlyFrozen = 0;     ///< muscles this step froze at their last good state
   size_t frozenMuscles = 0;   ///< muscles frozen in the system after this step
+  /// Bones whose target transform was NaN/inf (setBoneTransform, or a host's body): each held
+  /// its last transform for this step, and the step reports nan, failed and failedNan.
+  size_t heldBones = 0;
 
   // Bones closing on a muscle (pinch): particles two bones press from opposite sides.
   size_t trappedParticles = 0;  ///< such particles still caught in the last iteration
@@ -87,6 +90,7 @@ enum DebugDrawFlag : int {
 
 class MuscleSystem {
  public:
+  /// InputError for parameters no step can run with (dt not finite > 0, no iterations, ...).
   explicit MuscleSystem(const SimulationParameters& parameters = {});
   ~MuscleSystem();
   MuscleSystem(const MuscleSystem&) = delete;
@@ -94,19 +98,24 @@ class MuscleSystem {
 
   /// Adds a bone. With `body`, its world transform is read at every step (a kinematic
   /// btRigidBody or any collision object whose transform maps rest to current coordinates);
-  /// without, setBoneTransform moves it.
+  /// without, setBoneTransform moves it. InputError for spheres or a body transform that are
+  /// not finite or lie beyond kMaxCoordinate.
   BoneHandle addBone(std::shared_ptr<const BoneSettings> settings,
                      const btCollisionObject* body = nullptr);
+  /// InputError for a stale or unknown handle, and while a muscle is attached to the bone.
   void removeBone(BoneHandle bone);
-  /// Target transform (rest → current) reached at the end of the next step.
+  /// Target transform (rest → current) reached at the end of the next step. A non-finite one is
+  /// not followed: the bone holds its transform and the step reports it (StepStats::heldBones).
   void setBoneTransform(BoneHandle bone, const btTransform& transform);
   btTransform boneTransform(BoneHandle bone) const;
 
   /// Adds a muscle; `bones[i]` is the handle of the settings' bone index i (fixedBone,
   /// nearestBone). Its particles start at their rest positions moved by their nearest bone.
+  /// InputError for a stale or unknown bone handle, a bone whose transform is not finite, and
+  /// particles (as placed, with initialNoise) or radii not finite or beyond kMaxCoordinate.
   MuscleHandle addMuscle(std::shared_ptr<const MuscleSettings> settings,
                          std::span<const BoneHandle> bones);
-  void removeMuscle(MuscleHandle muscle);
+  void removeMuscle(MuscleHandle muscle);  ///< InputError for a stale or unknown handle
   bool contains(MuscleHandle muscle) const;
   /// Whether the numerical guard stopped this muscle (it keeps its last good state).
   bool frozen(MuscleHandle muscle) const;
@@ -117,7 +126,8 @@ class MuscleSystem {
   /// the iterations; pre-transform; iterations of forces, integration, collision detection and
   /// response until the stop rule says; then output (fibres, surfaces). A step that produces
   /// NaN/inf or explodes is handled as parameters().onFailure says (StepStats reports it); it
-  /// never throws for numerical reasons.
+  /// never throws for numerical reasons, only InputError for parameters() that were changed to
+  /// values no step can run with (a dt of 0 or below, ...).
   void step();
 
   const StepStats& lastStep() const;

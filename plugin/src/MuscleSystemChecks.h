@@ -1,0 +1,26 @@
+#pragma once
+// Checks of what an embedder hands the MuscleSystem API (internal): each throws InputError
+// naming the call, the body and what was expected, before anything is built from it.
+#include <span>
+#include <string>
+
+#include "fibremss/Geometry.h"
+#include "fibremss/Parameters.h"
+
+namespace fibremss {
+
+/// Time step parameters a step can run with: dt finite > 0 (and the adaptive lower clamp
+/// too), at least one iteration, initial noise finite in [0, kMaxCoordinate].
+void checkStepParameters(const SimulationParameters& parameters, const std::string& call);
+
+/// Every point finite and within ±kMaxCoordinate (`what`: "particle", "sphere centre", ...).
+void checkPoints(std::span<const btVector3> points, const std::string& call,
+                 const std::string& what);
+
+/// Every radius finite in [0, kMaxCoordinate].
+void checkRadii(std::span<const btScalar> radii, const std::string& call);
+
+/// Whether the transform's rotation and translation are finite.
+bool finiteTransform(const btTransform& transform);
+
+}  // namespace fibremss
