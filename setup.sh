@@ -7,7 +7,11 @@ cd "$(dirname "$0")"
 
 packages=(cmake make g++ pkg-config ccache valgrind libbullet-dev libeigen3-dev libassimp-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev libtbb-dev libgtest-dev
-  libgmock-dev libbenchmark-dev gnuplot-nox clang-format)
+  libgmock-dev libbenchmark-dev gnuplot-nox clang-format
+  # `fibremss view`: window, OpenGL (Mesa's drivers, llvmpipe where there is no GPU), panel, PNG
+  libglfw3-dev libgl-dev libgl1-mesa-dri libimgui-dev libstb-dev)
+# Only the tests need them: a virtual X server for the viewer's screenshots.
+test_packages=(xvfb xauth)
 
 install_missing() {
   local missing=()
@@ -39,6 +43,7 @@ case "${1:-}" in
     echo "setup: report in results/thigh13/report.md (plot: results/thigh13/speed_vs_error.png)"
     ;;
   test)
+    packages+=("${test_packages[@]}")
     install_missing
     build build -DFIBREMSS_WERROR=ON
     ctest --test-dir build -j"$jobs" --output-on-failure --timeout 900

@@ -1,0 +1,40 @@
+#pragma once
+// The viewer's btIDebugDraw: collects what a world's debugDrawWorld draws (lines; spheres as
+// points, e.g. particles and bone spheres) for the renderer; its debug mode gates what Bullet
+// itself draws.
+#include <LinearMath/btIDebugDraw.h>
+
+#include <vector>
+
+namespace fibremss::viewer {
+
+class DebugDrawer : public btIDebugDraw {
+ public:
+  /// Forgets what was drawn.
+  void clear();
+
+  void drawLine(const btVector3& from, const btVector3& to, const btVector3& colour) override;
+  using btIDebugDraw::drawSphere;
+  /// A sphere becomes one point (its centre, its colour); radii are not drawn.
+  void drawSphere(const btVector3& centre, btScalar radius, const btVector3& colour) override;
+  void drawContactPoint(const btVector3& point, const btVector3& normal, btScalar distance,
+                        int lifeTime, const btVector3& colour) override;
+  void reportErrorWarning(const char* warning) override;
+  void draw3dText(const btVector3& location, const char* text) override {}
+  void setDebugMode(int mode) override { mode_ = mode; }
+  int getDebugMode() const override { return mode_; }
+
+  const std::vector<float>& lineVertices() const { return lineVertices_; }  ///< xyz, 2 per line
+  const std::vector<float>& lineColours() const { return lineColours_; }    ///< rgb per vertex
+  const std::vector<float>& points() const { return points_; }              ///< xyz per point
+  const std::vector<float>& pointColours() const { return pointColours_; }  ///< rgb per point
+
+ private:
+  int mode_ = DBG_NoDebug;           ///< btIDebugDraw::DebugDrawModes bits
+  std::vector<float> lineVertices_;  ///< [m]
+  std::vector<float> lineColours_;   ///< 0..1
+  std::vector<float> points_;        ///< [m]
+  std::vector<float> pointColours_;  ///< 0..1
+};
+
+}  // namespace fibremss::viewer
