@@ -12,22 +12,22 @@ void append(std::vector<float>& to, const btVector3& v) {
 }  // namespace
 
 void DebugDrawer::clear() {
-  lineVertices_.clear();
-  lineColours_.clear();
-  points_.clear();
-  pointColours_.clear();
+  geometry_.lineVertices.clear();
+  geometry_.lineColours.clear();
+  geometry_.points.clear();
+  geometry_.pointColours.clear();
 }
 
 void DebugDrawer::drawLine(const btVector3& from, const btVector3& to, const btVector3& colour) {
-  append(lineVertices_, from);
-  append(lineVertices_, to);
-  append(lineColours_, colour);
-  append(lineColours_, colour);
+  append(geometry_.lineVertices, from);
+  append(geometry_.lineVertices, to);
+  append(geometry_.lineColours, colour);
+  append(geometry_.lineColours, colour);
 }
 
 void DebugDrawer::drawSphere(const btVector3& centre, btScalar radius, const btVector3& colour) {
-  append(points_, centre);
-  append(pointColours_, colour);
+  append(geometry_.points, centre);
+  append(geometry_.pointColours, colour);
 }
 
 void DebugDrawer::drawContactPoint(const btVector3& point, const btVector3& normal,

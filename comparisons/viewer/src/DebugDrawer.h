@@ -8,6 +8,14 @@
 
 namespace fibremss::viewer {
 
+/// Lines and points as drawn, ready for OpenGL's vertex arrays.
+struct DebugGeometry {
+  std::vector<float> lineVertices;  ///< xyz, two vertices per line [m]
+  std::vector<float> lineColours;   ///< rgb per line vertex, 0..1
+  std::vector<float> points;        ///< xyz per point [m]
+  std::vector<float> pointColours;  ///< rgb per point, 0..1
+};
+
 class DebugDrawer : public btIDebugDraw {
  public:
   /// Forgets what was drawn.
@@ -24,17 +32,11 @@ class DebugDrawer : public btIDebugDraw {
   void setDebugMode(int mode) override { mode_ = mode; }
   int getDebugMode() const override { return mode_; }
 
-  const std::vector<float>& lineVertices() const { return lineVertices_; }  ///< xyz, 2 per line
-  const std::vector<float>& lineColours() const { return lineColours_; }    ///< rgb per vertex
-  const std::vector<float>& points() const { return points_; }              ///< xyz per point
-  const std::vector<float>& pointColours() const { return pointColours_; }  ///< rgb per point
+  const DebugGeometry& geometry() const { return geometry_; }  ///< what was drawn
 
  private:
-  int mode_ = DBG_NoDebug;           ///< btIDebugDraw::DebugDrawModes bits
-  std::vector<float> lineVertices_;  ///< [m]
-  std::vector<float> lineColours_;   ///< 0..1
-  std::vector<float> points_;        ///< [m]
-  std::vector<float> pointColours_;  ///< 0..1
+  int mode_ = DBG_NoDebug;  ///< btIDebugDraw::DebugDrawModes bits
+  DebugGeometry geometry_;  ///< what was drawn since clear()
 };
 
 }  // namespace fibremss::viewer

@@ -36,7 +36,7 @@ void setLights() {
 
 }  // namespace
 
-void Renderer::draw(const ViewFrame& frame, const DebugDrawer& debug, const Camera& camera,
+void Renderer::draw(const ViewFrame& frame, const DebugGeometry& debug, const Camera& camera,
                     const Viewport& viewport, const RenderSettings& settings) {
   glClearColor(settings.background[0], settings.background[1], settings.background[2], 1);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
@@ -118,19 +118,19 @@ void Renderer::drawMesh(const ViewMesh& mesh, bool perVertexColour) {
   glPopMatrix();
 }
 
-void Renderer::drawDebug(const DebugDrawer& debug, float pointSize) {
+void Renderer::drawDebug(const DebugGeometry& debug, float pointSize) {
   glEnableClientState(GL_VERTEX_ARRAY);
   glEnableClientState(GL_COLOR_ARRAY);
-  if (!debug.lineVertices().empty()) {
-    glVertexPointer(3, GL_FLOAT, 0, debug.lineVertices().data());
-    glColorPointer(3, GL_FLOAT, 0, debug.lineColours().data());
-    glDrawArrays(GL_LINES, 0, static_cast<GLsizei>(debug.lineVertices().size() / 3));
+  if (!debug.lineVertices.empty()) {
+    glVertexPointer(3, GL_FLOAT, 0, debug.lineVertices.data());
+    glColorPointer(3, GL_FLOAT, 0, debug.lineColours.data());
+    glDrawArrays(GL_LINES, 0, static_cast<GLsizei>(debug.lineVertices.size() / 3));
   }
-  if (!debug.points().empty()) {
+  if (!debug.points.empty()) {
     glPointSize(pointSize);
-    glVertexPointer(3, GL_FLOAT, 0, debug.points().data());
-    glColorPointer(3, GL_FLOAT, 0, debug.pointColours().data());
-    glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(debug.points().size() / 3));
+    glVertexPointer(3, GL_FLOAT, 0, debug.points.data());
+    glColorPointer(3, GL_FLOAT, 0, debug.pointColours.data());
+    glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(debug.points.size() / 3));
   }
   glDisableClientState(GL_COLOR_ARRAY);
   glDisableClientState(GL_VERTEX_ARRAY);

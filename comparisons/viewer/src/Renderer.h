@@ -36,14 +36,14 @@ struct RenderSettings {
 class Renderer {
  public:
   /// Clears the whole window and draws into `viewport`.
-  void draw(const ViewFrame& frame, const DebugDrawer& debug, const Camera& camera,
+  void draw(const ViewFrame& frame, const DebugGeometry& debug, const Camera& camera,
             const Viewport& viewport, const RenderSettings& settings);
 
  private:
   /// Fills xyz_ and normals_ (area-weighted vertex normals) from `mesh`.
   void prepareGeometry(const ViewMesh& mesh);
   void drawMesh(const ViewMesh& mesh, bool perVertexColour);
-  void drawDebug(const DebugDrawer& debug, float pointSize);
+  void drawDebug(const DebugGeometry& debug, float pointSize);
 
   std::vector<float> xyz_;      ///< vertex positions (scratch)
   std::vector<float> normals_;  ///< vertex normals (scratch)

@@ -16,7 +16,7 @@
 
 #include "Colours.h"
 #include "DebugDrawer.h"
-#include "LiveScene.h"
+#include "LivePlayer.h"
 #include "Renderer.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
@@ -71,16 +71,14 @@ class Window {
 struct Session {
   Camera camera;
   RenderSettings render;
-  DebugDrawer drawer;
   Renderer renderer;
+  Snapshot shown;         ///< what the window shows
   Vec3 lower{}, upper{};  ///< the scene's bounds at the start [m]
-  bool playing = false;   ///< step every frame
-  bool stepOnce = false;  ///< step once in the next frame
   bool showUi = true;
-  bool autoRange = true;         ///< colour range from the current frame
-  Range extremes;                ///< the coloured array's smallest and largest value now
-  int muscleFlags = 0;           ///< DebugDrawFlag bits
-  bool bulletWireframe = false;  ///< Bullet's own wireframes of the bones' collision shapes
+  bool autoRange = true;  ///< colour range from the current frame
+  Range extremes;         ///< the coloured array's smallest and largest value now
+  DebugRequest debug;     ///< what the world's btIDebugDraw draws
+  bool loop = false;      ///< the motion sweeps back and forth
   bool quit = false;
   std::vector<float> stepMs;  ///< wall time of the recent steps [ms]
 };
@@ -117,12 +115,12 @@ void moveCamera(Camera& camera, int height) {
 }
 
 /// Space plays or pauses, S or → steps, R resets, F frames the scene, H hides the panel, Q quits.
-void handleKeys(Session& session, LiveScene& scene) {
+void handleKeys(Session& session, LivePlayer& player) {
   if (ImGui::GetIO().WantCaptureKeyboard) return;
-  if (ImGui::IsKeyPressed(GLFW_KEY_SPACE, false)) session.playing = !session.playing;
+  if (ImGui::IsKeyPressed(GLFW_KEY_SPACE, false)) player.setPlaying(!player.playing());
   if (ImGui::IsKeyPressed(GLFW_KEY_S) || ImGui::IsKeyPressed(GLFW_KEY_RIGHT))
-    session.stepOnce = true;
-  if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) scene.reset();
+    player.requestSteps(1);
+  if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) player.requestReset();
   if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) session.camera.frame(session.lower, session.upper);
   if (ImGui::IsKeyPressed(GLFW_KEY_H, false)) session.showUi = !session.showUi;
   if (ImGui::IsKeyPressed(GLFW_KEY_Q, false) || ImGui::IsKeyPressed(GLFW_KEY_ESCAPE, false))
@@ -160,23 +158,23 @@ std::string poseLabel(const LoadedScene& scene, int pose) {
   return text;
 }
 
-void playbackControls(Session& session, LiveScene& scene) {
-  const LoadedScene& loaded = scene.scene();
-  ImGui::Text("%s: step %d, pose %d of %d (%s)", loaded.name.c_str(), scene.steps(),
-              scene.shownPose(), std::max(loaded.poseCount, 1),
-              poseLabel(loaded, scene.shownPose()).c_str());
-  if (ImGui::Button(session.playing ? "Pause (space)" : "Play (space)"))
-    session.playing = !session.playing;
+void playbackControls(Session& session, LivePlayer& player) {
+  const LoadedScene& loaded = player.scene();
+  const Snapshot& shown = session.shown;
+  ImGui::Text("%s: step %d, pose %d of %d (%s)", loaded.name.c_str(), shown.steps, shown.shownPose,
+              std::max(loaded.poseCount, 1), poseLabel(loaded, shown.shownPose).c_str());
+  const bool playing = player.playing();
+  if (ImGui::Button(playing ? "Pause (space)" : "Play (space)")) player.setPlaying(!playing);
   ImGui::SameLine();
-  if (ImGui::Button("Step (S)")) session.stepOnce = true;
+  if (ImGui::Button("Step (S)")) player.requestSteps(1);
   ImGui::SameLine();
-  if (ImGui::Button("Reset (R)")) scene.reset();
+  if (ImGui::Button("Reset (R)")) player.requestReset();
   ImGui::SameLine();
-  ImGui::Checkbox("loop", &scene.loop);
-  int pose = scene.pose();
+  if (ImGui::Checkbox("loop", &session.loop)) player.setLoop(session.loop);
+  int pose = shown.nextPose;
   const std::string format = "%d (" + poseLabel(loaded, pose) + ")";
   if (ImGui::SliderInt("next pose", &pose, 0, std::max(loaded.poseCount, 1) - 1, format.c_str()))
-    scene.setPose(pose);
+    player.requestPose(pose);
 }
 
 void appearanceControls(Session& session) {
@@ -205,13 +203,14 @@ void appearanceControls(Session& session) {
                              {"contacts", kDrawContacts}};
   for (const Flag& flag : kFlags) {
     if (flag.bit != kDrawSprings) ImGui::SameLine();  // two rows
-    ImGui::CheckboxFlags(flag.label, &session.muscleFlags, flag.bit);
+    ImGui::CheckboxFlags(flag.label, &session.debug.muscleFlags, flag.bit);
   }
-  ImGui::Checkbox("Bullet wireframe", &session.bulletWireframe);
+  ImGui::CheckboxFlags("Bullet wireframe", &session.debug.bulletMode,
+                       btIDebugDraw::DBG_DrawWireframe);
 }
 
-void timingTable(const Session& session, const LiveScene& scene) {
-  const StepStats& stats = scene.lastStep();
+void timingTable(const Session& session) {
+  const StepStats& stats = session.shown.stats;
   ImGui::Text("last step: %d iterations, %zu contacts, %zu candidates", stats.iterations,
               stats.contacts, stats.candidates);
   const StepTiming& t = stats.timing;
@@ -232,25 +231,27 @@ int panelWidth(const Session& session, int windowWidth) {
   return session.showUi ? std::min(400, windowWidth / 2) : 0;
 }
 
-void drawPanel(Session& session, LiveScene& scene, int width, int height) {
+void drawPanel(Session& session, LivePlayer& player, int width, int height) {
   ImGui::SetNextWindowPos(ImVec2(0, 0));
   ImGui::SetNextWindowSize(ImVec2(float(width), float(height)));
   ImGui::Begin("FibreMSS", nullptr,
                ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
-  playbackControls(session, scene);
+  playbackControls(session, player);
   ImGui::Separator();
   appearanceControls(session);
   ImGui::Separator();
-  timingTable(session, scene);
+  timingTable(session);
   ImGui::Separator();
   ImGui::TextDisabled("drag: orbit | right/middle drag: pan | wheel: zoom");
   ImGui::TextDisabled("F: frame the scene | H: hide this panel | Q: quit");
   ImGui::End();
 }
 
-void step(Session& session, LiveScene& scene) {
-  scene.step();
-  session.stepMs.push_back(float(scene.lastStep().timing.total));
+/// Shows the player's newest snapshot, if there is one; keeps the recent step times.
+void fetch(Session& session, LivePlayer& player) {
+  const int stepsBefore = session.shown.steps;
+  if (!player.fetch(session.shown) || session.shown.steps <= stepsBefore) return;
+  session.stepMs.push_back(float(session.shown.stats.timing.total));
   if (session.stepMs.size() > 200) session.stepMs.erase(session.stepMs.begin());
 }
 
@@ -271,7 +272,7 @@ void writeScreenshot(const std::string& path, int width, int height) {
 }
 
 /// One frame: input, steps, panel, drawing; returns the window's and the scene's size.
-void renderFrame(Window& window, Session& session, LiveScene& scene, ViewerResult& size) {
+void renderFrame(Window& window, Session& session, LivePlayer& player, ViewerResult& size) {
   ImGui_ImplOpenGL2_NewFrame();
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
@@ -279,21 +280,14 @@ void renderFrame(Window& window, Session& session, LiveScene& scene, ViewerResul
   size.viewX = panelWidth(session, size.width);
   size.viewWidth = size.width - size.viewX;
   moveCamera(session.camera, std::max(size.height, 1));
-  handleKeys(session, scene);
-  if (session.playing || session.stepOnce) step(session, scene);
-  session.stepOnce = false;
-  const Range range = arrayRange(scene.frame(), session.render.colourBy, session.extremes);
+  handleKeys(session, player);
+  fetch(session, player);
+  const Range range = arrayRange(session.shown.frame, session.render.colourBy, session.extremes);
   if (session.autoRange) session.render.range = range;
-  if (session.showUi) drawPanel(session, scene, size.viewX, size.height);
+  if (session.showUi) drawPanel(session, player, size.viewX, size.height);
+  player.setDebug(session.debug);
   ImGui::Render();
-
-  session.drawer.clear();
-  session.drawer.setDebugMode(session.bulletWireframe ? btIDebugDraw::DBG_DrawWireframe
-                                                      : btIDebugDraw::DBG_NoDebug);
-  scene.world().setDebugDrawer(&session.drawer);
-  scene.world().setMuscleDebugFlags(session.muscleFlags);
-  scene.world().debugDrawWorld();
-  session.renderer.draw(scene.frame(), session.drawer, session.camera,
+  session.renderer.draw(session.shown.frame, session.shown.debug, session.camera,
                         {size.viewX, 0, size.viewWidth, size.height}, session.render);
   ImGui_ImplOpenGL2_RenderDrawData(ImGui::GetDrawData());
 }
@@ -311,27 +305,30 @@ ViewerResult runViewer(const ViewerOptions& options) {
     throw InputError(
         "--colour-by", "",
         "expected fibre_stretch, displacement or muscle_id, got '" + options.colourBy + "'");
-  LiveScene scene(options.scene, options.overrides);
-  scene.loop = options.loop;
-  const bool screenshot = !options.screenshot.empty();
-  Window window(options.width, options.height, !screenshot, "FibreMSS - " + scene.scene().name);
-
+  auto scene = std::make_unique<LiveScene>(options.scene, options.overrides);
+  scene->loop = options.loop;
   Session session;
+  frameBounds(scene->frame(), session.lower, session.upper);
+  session.camera.frame(session.lower, session.upper);
+  session.camera.setView(options.azimuthDeg, options.elevationDeg, options.zoom);
   session.render.colourBy = options.colourBy;
   session.render.bones = options.bones;
   session.render.surfaceOpacity = options.surfaceOpacity;
-  session.muscleFlags = options.muscleDebugFlags;
+  session.debug.muscleFlags = options.muscleDebugFlags;
   session.showUi = !options.hideUi;
-  frameBounds(scene.frame(), session.lower, session.upper);
-  session.camera.frame(session.lower, session.upper);
-  session.camera.setView(options.azimuthDeg, options.elevationDeg, options.zoom);
-  for (int s = 0; s < options.steps; ++s) step(session, scene);
+  session.loop = options.loop;
+  const bool screenshot = !options.screenshot.empty();
+  Window window(options.width, options.height, !screenshot, "FibreMSS - " + scene->scene().name);
+  LivePlayer player(std::move(scene), session.debug);
+  player.requestSteps(options.steps);
+  // A screenshot shows the scene after its steps (the window's own steps come later).
+  if (screenshot) player.waitForSteps(options.steps);
 
   ViewerResult result;
   // A screenshot takes a few frames: Dear ImGui sizes its windows in the first ones.
   for (int frame = 0; !glfwWindowShouldClose(window.get()) && !session.quit; ++frame) {
     glfwPollEvents();
-    renderFrame(window, session, scene, result);
+    renderFrame(window, session, player, result);
     if (screenshot && frame == 2) {
       writeScreenshot(options.screenshot, result.width, result.height);
       break;
@@ -339,7 +336,7 @@ ViewerResult runViewer(const ViewerOptions& options) {
     glfwSwapBuffers(window.get());
   }
   result.camera = session.camera;
-  result.steps = scene.steps();
+  result.steps = session.shown.steps;
   return result;
 }
 
