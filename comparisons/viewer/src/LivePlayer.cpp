@@ -1,6 +1,25 @@
 #include "LivePlayer.h"
 
+#include <imgui.h>
+
+#include <algorithm>
+#include <cfloat>
+#include <cstdio>
+#include <string>
+#include <utility>
+
 namespace fibremss::viewer {
+namespace {
+
+/// The pose's label (e.g. the joint angle) as text.
+std::string poseLabel(const LoadedScene& scene, int pose) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.4g",
+                pose < int(scene.poseLabels.size()) ? scene.poseLabels[pose] : double(pose));
+  return text;
+}
+
+}  // namespace
 
 LivePlayer::LivePlayer(std::unique_ptr<LiveScene> scene, const DebugRequest& debug)
     : scene_(std::move(scene)), loop_(scene_->loop), debug_(debug), worker_([this] { work(); }) {}
@@ -14,17 +33,78 @@ LivePlayer::~LivePlayer() {
   worker_.join();
 }
 
-void LivePlayer::setPlaying(bool playing) {
+bool LivePlayer::fetch(Snapshot& into) {
   {
     std::lock_guard lock(mutex_);
-    playing_ = playing;
+    if (newest_.snapshot.version <= into.version) return false;
+    shown_ = newest_;
   }
-  wake_.notify_one();
+  if (shown_.snapshot.steps > into.steps) {
+    stepMs_.push_back(float(shown_.stats.timing.total));
+    if (stepMs_.size() > 200) stepMs_.erase(stepMs_.begin());
+  }
+  into = shown_.snapshot;
+  return true;
 }
 
-bool LivePlayer::playing() const {
-  std::lock_guard lock(mutex_);
-  return playing_;
+void LivePlayer::controls(const Snapshot& shown) {
+  const LoadedScene& scene = scene_->scene();
+  ImGui::Text("%s: step %d, pose %d of %d (%s)", scene.name.c_str(), shown.steps, shown_.shownPose,
+              std::max(scene.poseCount, 1), poseLabel(scene, shown_.shownPose).c_str());
+  bool playing = false;
+  {
+    std::lock_guard lock(mutex_);
+    playing = playing_;
+  }
+  if (ImGui::Button(playing ? "Pause (space)" : "Play (space)")) togglePlaying();
+  ImGui::SameLine();
+  if (ImGui::Button("Step (S)")) step();
+  ImGui::SameLine();
+  if (ImGui::Button("Reset (R)")) reset();
+  ImGui::SameLine();
+  bool loop = false;
+  {
+    std::lock_guard lock(mutex_);
+    loop = loop_;
+  }
+  if (ImGui::Checkbox("loop", &loop)) {
+    std::lock_guard lock(mutex_);
+    loop_ = loop;
+  }
+  int pose = shown_.nextPose;
+  const std::string format = "%d (" + poseLabel(scene, pose) + ")";
+  if (ImGui::SliderInt("next pose", &pose, 0, std::max(scene.poseCount, 1) - 1, format.c_str())) {
+    {
+      std::lock_guard lock(mutex_);
+      pose_ = pose;
+    }
+    wake_.notify_one();
+  }
+}
+
+void LivePlayer::timings(const Snapshot& shown) {
+  const StepStats& stats = shown_.stats;
+  ImGui::Text("last step: %d iterations, %zu contacts, %zu candidates", stats.iterations,
+              stats.contacts, stats.candidates);
+  const StepTiming& t = stats.timing;
+  ImGui::Text("ms: mss %.3g | muscle CD %.3g | bone CD %.3g", t.mss, t.muscleCd, t.boneCd);
+  ImGui::Text("    response %.3g | output %.3g", t.response, t.output);
+  ImGui::Text("ms: step total %.3g (%.3g per iteration)", t.total,
+              t.total / std::max(stats.iterations, 1));
+  if (!stepMs_.empty())
+    ImGui::PlotLines("step ms", stepMs_.data(), int(stepMs_.size()), 0, nullptr, 0, FLT_MAX,
+                     ImVec2(0, 40));
+  if (stats.failed || stats.frozenMuscles > 0)
+    ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "numerical guard: %zu muscle(s) frozen%s",
+                       stats.frozenMuscles, stats.failed ? ", step failed" : "");
+}
+
+void LivePlayer::togglePlaying() {
+  {
+    std::lock_guard lock(mutex_);
+    playing_ = !playing_;
+  }
+  wake_.notify_one();
 }
 
 void LivePlayer::requestSteps(int steps) {
@@ -35,27 +115,11 @@ void LivePlayer::requestSteps(int steps) {
   wake_.notify_one();
 }
 
-void LivePlayer::requestReset() {
+void LivePlayer::reset() {
   {
     std::lock_guard lock(mutex_);
     reset_ = true;
     stepsRequested_ = 0;
-  }
-  wake_.notify_one();
-}
-
-void LivePlayer::requestPose(int pose) {
-  {
-    std::lock_guard lock(mutex_);
-    pose_ = pose;
-  }
-  wake_.notify_one();
-}
-
-void LivePlayer::setLoop(bool loop) {
-  {
-    std::lock_guard lock(mutex_);
-    loop_ = loop;
   }
   wake_.notify_one();
 }
@@ -70,16 +134,16 @@ void LivePlayer::setDebug(const DebugRequest& debug) {
   wake_.notify_one();
 }
 
-bool LivePlayer::fetch(Snapshot& into) {
-  std::lock_guard lock(mutex_);
-  if (snapshot_.version <= into.version) return false;
-  into = snapshot_;
-  return true;
-}
-
-void LivePlayer::waitForSteps(int steps) {
+void LivePlayer::advance(int steps) {
+  int target = 0;
+  {
+    std::lock_guard lock(mutex_);
+    target = newest_.snapshot.steps + stepsRequested_ + steps;
+  }
+  requestSteps(steps);
   std::unique_lock lock(mutex_);
-  published_.wait(lock, [&] { return snapshot_.steps >= steps; });
+  published_.wait(
+      lock, [&] { return newest_.snapshot.version >= 0 && newest_.snapshot.steps >= target; });
 }
 
 bool LivePlayer::hasWork() const {
@@ -113,17 +177,17 @@ void LivePlayer::publish(const DebugRequest& debug) {
   scene_->world().setDebugDrawer(&drawer_);
   scene_->world().setMuscleDebugFlags(debug.muscleFlags);
   scene_->world().debugDrawWorld();
-  Snapshot next;
-  next.frame = scene_->frame();
-  next.debug = drawer_.geometry();
+  Published next;
+  next.snapshot.frame = scene_->frame();
+  next.snapshot.debug = drawer_.geometry();
+  next.snapshot.steps = scene_->steps();
   next.stats = scene_->lastStep();
-  next.steps = scene_->steps();
   next.shownPose = scene_->shownPose();
   next.nextPose = scene_->pose();
   {
     std::lock_guard lock(mutex_);
-    next.version = snapshot_.version + 1;
-    snapshot_ = std::move(next);
+    next.snapshot.version = newest_.snapshot.version + 1;
+    newest_ = std::move(next);
   }
   published_.notify_all();
 }

@@ -18,6 +18,7 @@
 #include "DebugDrawer.h"
 #include "LivePlayer.h"
 #include "Renderer.h"
+#include "Source.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
 
@@ -26,7 +27,8 @@ namespace {
 
 std::string glfwMessage;  ///< GLFW's last error, for the exception when no window opens
 
-/// GLFW, a window with an OpenGL 2.1 context, and Dear ImGui on it; torn down in reverse.
+/// GLFW, a window with an OpenGL 2.1 context, and Dear ImGui on it; torn down
+/// in reverse.
 class Window {
  public:
   Window(int width, int height, bool visible, const std::string& title) {
@@ -73,14 +75,12 @@ struct Session {
   RenderSettings render;
   Renderer renderer;
   Snapshot shown;         ///< what the window shows
-  Vec3 lower{}, upper{};  ///< the scene's bounds at the start [m]
+  Vec3 lower{}, upper{};  ///< the scene's bounds in its first snapshot
   bool showUi = true;
   bool autoRange = true;  ///< colour range from the current frame
   Range extremes;         ///< the coloured array's smallest and largest value now
   DebugRequest debug;     ///< what the world's btIDebugDraw draws
-  bool loop = false;      ///< the motion sweeps back and forth
   bool quit = false;
-  std::vector<float> stepMs;  ///< wall time of the recent steps [ms]
 };
 
 /// The box around every bone and muscle vertex of the frame [m].
@@ -101,7 +101,8 @@ void frameBounds(const ViewFrame& frame, Vec3& lower, Vec3& upper) {
   if (lower[0] > upper[0]) lower = upper = Vec3{0, 0, 0};
 }
 
-/// Left drag orbits, right or middle drag (or shift + left) pans, the wheel zooms.
+/// Left drag orbits, right or middle drag (or shift + left) pans, the wheel
+/// zooms.
 void moveCamera(Camera& camera, int height) {
   const ImGuiIO& io = ImGui::GetIO();
   if (io.WantCaptureMouse) return;
@@ -114,13 +115,13 @@ void moveCamera(Camera& camera, int height) {
   if (io.MouseWheel != 0) camera.zoom(std::pow(1.15f, io.MouseWheel));
 }
 
-/// Space plays or pauses, S or → steps, R resets, F frames the scene, H hides the panel, Q quits.
-void handleKeys(Session& session, LivePlayer& player) {
+/// Space plays or pauses, S or → steps, R resets, F frames the scene, H hides
+/// the panel, Q quits.
+void handleKeys(Session& session, Source& source) {
   if (ImGui::GetIO().WantCaptureKeyboard) return;
-  if (ImGui::IsKeyPressed(GLFW_KEY_SPACE, false)) player.setPlaying(!player.playing());
-  if (ImGui::IsKeyPressed(GLFW_KEY_S) || ImGui::IsKeyPressed(GLFW_KEY_RIGHT))
-    player.requestSteps(1);
-  if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) player.requestReset();
+  if (ImGui::IsKeyPressed(GLFW_KEY_SPACE, false)) source.togglePlaying();
+  if (ImGui::IsKeyPressed(GLFW_KEY_S) || ImGui::IsKeyPressed(GLFW_KEY_RIGHT)) source.step();
+  if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) source.reset();
   if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) session.camera.frame(session.lower, session.upper);
   if (ImGui::IsKeyPressed(GLFW_KEY_H, false)) session.showUi = !session.showUi;
   if (ImGui::IsKeyPressed(GLFW_KEY_Q, false) || ImGui::IsKeyPressed(GLFW_KEY_ESCAPE, false))
@@ -148,33 +149,6 @@ void drawLegend(const std::string& array, const Range& range) {
   ImGui::Text("%.4g", range.low);
   ImGui::SameLine(width - 50);
   ImGui::Text("%.4g", range.high);
-}
-
-/// The pose's label (e.g. the joint angle) as text.
-std::string poseLabel(const LoadedScene& scene, int pose) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.4g",
-                pose < int(scene.poseLabels.size()) ? scene.poseLabels[pose] : double(pose));
-  return text;
-}
-
-void playbackControls(Session& session, LivePlayer& player) {
-  const LoadedScene& loaded = player.scene();
-  const Snapshot& shown = session.shown;
-  ImGui::Text("%s: step %d, pose %d of %d (%s)", loaded.name.c_str(), shown.steps, shown.shownPose,
-              std::max(loaded.poseCount, 1), poseLabel(loaded, shown.shownPose).c_str());
-  const bool playing = player.playing();
-  if (ImGui::Button(playing ? "Pause (space)" : "Play (space)")) player.setPlaying(!playing);
-  ImGui::SameLine();
-  if (ImGui::Button("Step (S)")) player.requestSteps(1);
-  ImGui::SameLine();
-  if (ImGui::Button("Reset (R)")) player.requestReset();
-  ImGui::SameLine();
-  if (ImGui::Checkbox("loop", &session.loop)) player.setLoop(session.loop);
-  int pose = shown.nextPose;
-  const std::string format = "%d (" + poseLabel(loaded, pose) + ")";
-  if (ImGui::SliderInt("next pose", &pose, 0, std::max(loaded.poseCount, 1) - 1, format.c_str()))
-    player.requestPose(pose);
 }
 
 void appearanceControls(Session& session) {
@@ -209,53 +183,29 @@ void appearanceControls(Session& session) {
                        btIDebugDraw::DBG_DrawWireframe);
 }
 
-void timingTable(const Session& session) {
-  const StepStats& stats = session.shown.stats;
-  ImGui::Text("last step: %d iterations, %zu contacts, %zu candidates", stats.iterations,
-              stats.contacts, stats.candidates);
-  const StepTiming& t = stats.timing;
-  ImGui::Text("ms: mss %.3g | muscle CD %.3g | bone CD %.3g", t.mss, t.muscleCd, t.boneCd);
-  ImGui::Text("    response %.3g | output %.3g", t.response, t.output);
-  ImGui::Text("ms: step total %.3g (%.3g per iteration)", t.total,
-              t.total / std::max(stats.iterations, 1));
-  if (!session.stepMs.empty())
-    ImGui::PlotLines("step ms", session.stepMs.data(), int(session.stepMs.size()), 0, nullptr, 0,
-                     FLT_MAX, ImVec2(0, 40));
-  if (stats.failed || stats.frozenMuscles > 0)
-    ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "numerical guard: %zu muscle(s) frozen%s",
-                       stats.frozenMuscles, stats.failed ? ", step failed" : "");
-}
-
 /// The panel's width beside the scene [px] (0 when hidden).
 int panelWidth(const Session& session, int windowWidth) {
   return session.showUi ? std::min(400, windowWidth / 2) : 0;
 }
 
-void drawPanel(Session& session, LivePlayer& player, int width, int height) {
+void drawPanel(Session& session, Source& source, int width, int height) {
   ImGui::SetNextWindowPos(ImVec2(0, 0));
   ImGui::SetNextWindowSize(ImVec2(float(width), float(height)));
   ImGui::Begin("FibreMSS", nullptr,
                ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
-  playbackControls(session, player);
+  source.controls(session.shown);
   ImGui::Separator();
   appearanceControls(session);
   ImGui::Separator();
-  timingTable(session);
+  source.timings(session.shown);
   ImGui::Separator();
   ImGui::TextDisabled("drag: orbit | right/middle drag: pan | wheel: zoom");
   ImGui::TextDisabled("F: frame the scene | H: hide this panel | Q: quit");
   ImGui::End();
 }
 
-/// Shows the player's newest snapshot, if there is one; keeps the recent step times.
-void fetch(Session& session, LivePlayer& player) {
-  const int stepsBefore = session.shown.steps;
-  if (!player.fetch(session.shown) || session.shown.steps <= stepsBefore) return;
-  session.stepMs.push_back(float(session.shown.stats.timing.total));
-  if (session.stepMs.size() > 200) session.stepMs.erase(session.stepMs.begin());
-}
-
-/// Reads the back buffer (width × height) and writes it as a PNG, whole or not at all.
+/// Reads the back buffer (width × height) and writes it as a PNG, whole or not
+/// at all.
 void writeScreenshot(const std::string& path, int width, int height) {
   std::vector<unsigned char> pixels(size_t(3) * width * height);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
@@ -271,8 +221,9 @@ void writeScreenshot(const std::string& path, int width, int height) {
   writeFileAtomically(path, png);
 }
 
-/// One frame: input, steps, panel, drawing; returns the window's and the scene's size.
-void renderFrame(Window& window, Session& session, LivePlayer& player, ViewerResult& size) {
+/// One frame: input, steps, panel, drawing; returns the window's and the
+/// scene's size.
+void renderFrame(Window& window, Session& session, Source& source, ViewerResult& size) {
   ImGui_ImplOpenGL2_NewFrame();
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
@@ -280,12 +231,12 @@ void renderFrame(Window& window, Session& session, LivePlayer& player, ViewerRes
   size.viewX = panelWidth(session, size.width);
   size.viewWidth = size.width - size.viewX;
   moveCamera(session.camera, std::max(size.height, 1));
-  handleKeys(session, player);
-  fetch(session, player);
+  handleKeys(session, source);
+  source.fetch(session.shown);
   const Range range = arrayRange(session.shown.frame, session.render.colourBy, session.extremes);
   if (session.autoRange) session.render.range = range;
-  if (session.showUi) drawPanel(session, player, size.viewX, size.height);
-  player.setDebug(session.debug);
+  if (session.showUi) drawPanel(session, source, size.viewX, size.height);
+  source.setDebug(session.debug);
   ImGui::Render();
   session.renderer.draw(session.shown.frame, session.shown.debug, session.camera,
                         {size.viewX, 0, size.viewWidth, size.height}, session.render);
@@ -307,28 +258,30 @@ ViewerResult runViewer(const ViewerOptions& options) {
         "expected fibre_stretch, displacement or muscle_id, got '" + options.colourBy + "'");
   auto scene = std::make_unique<LiveScene>(options.scene, options.overrides);
   scene->loop = options.loop;
+  const std::string title = "FibreMSS - " + scene->scene().name;
   Session session;
-  frameBounds(scene->frame(), session.lower, session.upper);
+  session.debug.muscleFlags = options.muscleDebugFlags;
+  std::unique_ptr<Source> source = std::make_unique<LivePlayer>(std::move(scene), session.debug);
+  const bool screenshot = !options.screenshot.empty();
+  source->advance(screenshot ? options.steps : 0);  // a screenshot shows the scene after them
+  source->fetch(session.shown);
+  for (int s = 0; !screenshot && s < options.steps; ++s) source->step();
+
+  frameBounds(session.shown.frame, session.lower, session.upper);
   session.camera.frame(session.lower, session.upper);
   session.camera.setView(options.azimuthDeg, options.elevationDeg, options.zoom);
   session.render.colourBy = options.colourBy;
   session.render.bones = options.bones;
   session.render.surfaceOpacity = options.surfaceOpacity;
-  session.debug.muscleFlags = options.muscleDebugFlags;
   session.showUi = !options.hideUi;
-  session.loop = options.loop;
-  const bool screenshot = !options.screenshot.empty();
-  Window window(options.width, options.height, !screenshot, "FibreMSS - " + scene->scene().name);
-  LivePlayer player(std::move(scene), session.debug);
-  player.requestSteps(options.steps);
-  // A screenshot shows the scene after its steps (the window's own steps come later).
-  if (screenshot) player.waitForSteps(options.steps);
+  Window window(options.width, options.height, !screenshot, title);
 
   ViewerResult result;
-  // A screenshot takes a few frames: Dear ImGui sizes its windows in the first ones.
+  // A screenshot takes a few frames: Dear ImGui sizes its windows in the first
+  // ones.
   for (int frame = 0; !glfwWindowShouldClose(window.get()) && !session.quit; ++frame) {
     glfwPollEvents();
-    renderFrame(window, session, player, result);
+    renderFrame(window, session, *source, result);
     if (screenshot && frame == 2) {
       writeScreenshot(options.screenshot, result.width, result.height);
       break;
