@@ -201,10 +201,9 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       state->previous[i] = state->positions[i];
     }
   }
-  state->parameters = &impl_->parameters;
   // Before the tree: btDbvt's build breaks on non-finite or huge bounds.
   checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
-  buildTree(*state);
+  buildTree(*state, impl_->parameters.rebuildEveryStep);
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
