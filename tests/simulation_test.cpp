@@ -713,10 +713,11 @@ TEST(Handles, BadSettingsAreRejected) {
   MuscleSystem system;
   auto muscle = makeMuscle({{0, 0, 0}, {0.01, 0, 0}}, 1e-5, 0);
   fix(*muscle, 0, 0);
-  EXPECT_THROW(system.addMuscle(muscle, {}),
-               std::invalid_argument);  // bone 0 not given
+  EXPECT_THROW(system.addMuscle(muscle, {}), InputError);  // bone 0 not given
   auto massless = makeMuscle({{0, 0, 0}}, 0, 0);
-  EXPECT_THROW(system.addMuscle(massless, {}), std::invalid_argument);
+  EXPECT_THROW(system.addMuscle(massless, {}), InputError);
+  EXPECT_THROW(system.addMuscle(nullptr, {}), InputError);
+  EXPECT_THROW(system.addBone(nullptr), InputError);
 }
 
 }  // namespace

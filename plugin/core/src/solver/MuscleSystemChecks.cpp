@@ -22,7 +22,7 @@ std::string format(btScalar value) {
 
 }  // namespace
 
-void checkStepParameters(const SimulationParameters& parameters, const std::string& call) {
+void checkStepParameters(const SimulationParameters& parameters, const char* call) {
   if (!(parameters.timeStep > 0) || !std::isfinite(parameters.timeStep))
     throw InputError(call, "SimulationParameters::timeStep",
                      "expected a finite dt > 0 [s], got " + format(parameters.timeStep));

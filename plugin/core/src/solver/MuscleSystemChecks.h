@@ -10,8 +10,9 @@
 namespace fibremss {
 
 /// Time step parameters a step can run with: dt finite > 0 (and the adaptive lower clamp
-/// too), at least one iteration, initial noise finite in [0, kMaxCoordinate].
-void checkStepParameters(const SimulationParameters& parameters, const std::string& call);
+/// too), at least one iteration, initial noise finite in [0, kMaxCoordinate]. Allocates only
+/// to throw (step() calls it).
+void checkStepParameters(const SimulationParameters& parameters, const char* call);
 
 /// Every point finite and within ±kMaxCoordinate (`what`: "particle", "sphere centre", ...).
 void checkPoints(std::span<const btVector3> points, const std::string& call,
