@@ -7,7 +7,11 @@ cd "$(dirname "$0")"
 
 packages=(cmake make g++ pkg-config ccache valgrind libbullet-dev libeigen3-dev libassimp-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev libtbb-dev libgtest-dev
-  libgmock-dev libbenchmark-dev gnuplot-nox clang-format)
+  libgmock-dev libbenchmark-dev gnuplot-nox clang-format zlib1g-dev)
+
+# Only for `test`: the real clients the frames are read back with (VTK 9 and ParaView 5.11 in
+# Debian's /usr/bin/python3; python3-paraview brings its own VTK and replaces python3-vtk9).
+test_packages=(python3-paraview)
 
 install_missing() {
   local missing=()
@@ -39,6 +43,7 @@ case "${1:-}" in
     echo "setup: report in results/thigh13/report.md (plot: results/thigh13/speed_vs_error.png)"
     ;;
   test)
+    packages+=("${test_packages[@]}")
     install_missing
     build build -DFIBREMSS_WERROR=ON
     ctest --test-dir build -j"$jobs" --output-on-failure --timeout 900
