@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/Error.h"
+
 namespace fibremss {
 namespace {
 
@@ -37,10 +39,11 @@ Penetration measurePenetration(std::span<const btVector3> points,
                                std::span<float> depthsMm) {
   if (bones.size() != boneTransforms.size() ||
       (!depthsMm.empty() && depthsMm.size() != points.size())) {
-    throw std::invalid_argument("measurePenetration: " + std::to_string(bones.size()) + " bones, " +
-                                std::to_string(boneTransforms.size()) + " transforms, " +
-                                std::to_string(points.size()) + " points, " +
-                                std::to_string(depthsMm.size()) + " depths");
+    throw InputError("measurePenetration", "",
+                     std::to_string(bones.size()) + " bones, " +
+                         std::to_string(boneTransforms.size()) + " transforms, " +
+                         std::to_string(points.size()) + " points, " +
+                         std::to_string(depthsMm.size()) + " depths");
   }
   std::vector<Bounds> bounds(bones.size());
   std::vector<btTransform> toRest(bones.size());
@@ -93,9 +96,10 @@ double enclosedVolume(std::span<const std::array<uint32_t, 3>> triangles,
 
 double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> deformedVertices) {
   if (deformedVertices.size() != rest.vertices.size()) {
-    throw std::invalid_argument("volumeChangePercent: " + std::to_string(deformedVertices.size()) +
-                                " deformed vertices for a surface of " +
-                                std::to_string(rest.vertices.size()));
+    throw InputError("volumeChangePercent", "",
+                     std::to_string(deformedVertices.size()) +
+                         " deformed vertices for a surface of " +
+                         std::to_string(rest.vertices.size()));
   }
   const double restVolume = meshVolume(rest);
   if (restVolume == 0) return std::numeric_limits<double>::quiet_NaN();
@@ -108,9 +112,9 @@ double springDeviationRatio(std::span<const Spring> springs, std::span<const btV
   double rest = 0;
   for (const Spring& s : springs) {
     if (s.a >= positions.size() || s.b >= positions.size()) {
-      throw std::invalid_argument("springDeviationRatio: spring (" + std::to_string(s.a) + ", " +
-                                  std::to_string(s.b) + ") outside " +
-                                  std::to_string(positions.size()) + " positions");
+      throw InputError("springDeviationRatio", "",
+                       "spring (" + std::to_string(s.a) + ", " + std::to_string(s.b) +
+                           ") outside " + std::to_string(positions.size()) + " positions");
     }
     const double length = (positions[s.a] - positions[s.b]).length();
     deviation += std::abs(length - s.restLength);
@@ -121,8 +125,8 @@ double springDeviationRatio(std::span<const Spring> springs, std::span<const btV
 
 double rmsDistanceMm(std::span<const btVector3> a, std::span<const btVector3> b) {
   if (a.size() != b.size()) {
-    throw std::invalid_argument("rmsDistanceMm: " + std::to_string(a.size()) + " against " +
-                                std::to_string(b.size()) + " points");
+    throw InputError("rmsDistanceMm", "",
+                     std::to_string(a.size()) + " against " + std::to_string(b.size()) + " points");
   }
   if (a.empty()) return std::numeric_limits<double>::quiet_NaN();
   double sum = 0;
