@@ -158,6 +158,8 @@ void run(const RunArgs& args) {
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (const std::string& warning : prepared.report.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  for (const std::string& warning : attachmentWarnings(scene, prepared))
+    std::fprintf(stderr, "warning: %s\n", warning.c_str());
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
 
   FibreRunOptions options;
