@@ -8,9 +8,9 @@
 #include <random>
 #include <set>
 
-#include "../plugin/src/PreparationInternal.h"
 #include "fibremss/Error.h"
 #include "fibremss/Measures.h"
+#include "prepare/PreparationInternal.h"
 #include "support/PrepFixtures.h"
 
 namespace fibremss {

@@ -61,5 +61,7 @@ Json tensionSpikeScene();
 Json pinchScene();
 Json sphereDenoiseScene();
 Json spherePlanesScene();
+Json cylinderStretchScene();
+Json cylinderTwistScene();
 
 }  // namespace fibremss::builtin
