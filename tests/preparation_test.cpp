@@ -9,6 +9,7 @@
 #include <set>
 
 #include "fibremss/Error.h"
+#include "fibremss/Measures.h"
 #include "prepare/PreparationInternal.h"
 #include "support/PrepFixtures.h"
 
@@ -75,6 +76,19 @@ BoneInput sphereBone(const std::string& name, const btVector3& centre, btScalar 
   bone.name = name;
   bone.mesh = sphereMesh(centre, radius, 3);
   return bone;
+}
+
+/// Boxes at both ends of a gridMuscle from x = 0 to 0.1 m: "left" and "right".
+std::vector<BoneInput> endBones() {
+  return {boxBone("left", {-0.03f, -0.02f, -0.02f}, {0, 0.02f, 0.02f}),
+          boxBone("right", {0.1f, -0.02f, -0.02f}, {0.13f, 0.02f, 0.02f})};
+}
+
+/// endBones() and `more`.
+std::vector<BoneInput> endBonesAnd(std::vector<BoneInput> more) {
+  std::vector<BoneInput> bones = endBones();
+  bones.insert(bones.end(), more.begin(), more.end());
+  return bones;
 }
 
 void expectWellFormedSprings(const MuscleSettings& muscle, btScalar kappa) {
@@ -502,10 +516,7 @@ TEST(Preparation, FixedParticlesAreThoseWithinTheAttachmentDistance) {
   // Fibres run from one bone to the other; a third bone sits beside the muscle.
   MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 25);
   input.parameters.attachmentDistance = 0.006f;
-  const std::vector<BoneInput> bones = {
-      boxBone("left", {-0.03f, -0.02f, -0.02f}, {0, 0.02f, 0.02f}),
-      boxBone("right", {0.1f, -0.02f, -0.02f}, {0.13f, 0.02f, 0.02f}),
-      sphereBone("side", {0.05f, 0.03f, 0}, 0.02f)};
+  const std::vector<BoneInput> bones = endBonesAnd({sphereBone("side", {0.05f, 0.03f, 0}, 0.02f)});
   const PreparedScene scene = prepareScene(bones, {input}, 3);
   const MuscleSettings& muscle = *scene.muscles[0];
   size_t fixed = 0, checked = 0;
@@ -546,9 +557,7 @@ TEST(Preparation, WarnsAboutFibreEndsLeftLoose) {
   // At resolution 5 the last particle lies ΔL − δ before the end, often beyond the
   // attachment distance of the end bone.
   const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 5);
-  const std::vector<BoneInput> bones = {
-      boxBone("left", {-0.03f, -0.02f, -0.02f}, {0, 0.02f, 0.02f}),
-      boxBone("right", {0.1f, -0.02f, -0.02f}, {0.13f, 0.02f, 0.02f})};
+  const std::vector<BoneInput> bones = endBones();
   size_t total = 0;
   for (uint32_t seed = 1; seed <= 4; ++seed) {
     const PreparedScene scene = prepareScene(bones, {input}, seed);
@@ -898,6 +907,109 @@ TEST(BoneSpheres, ThinningAndMaxRadius) {
   for (btScalar r : capped->sphereRadii) EXPECT_LE(r, typical);
   bone.spheres.thinning = 1;
   EXPECT_THROW(prepareScene({bone}, {}, 1), InputError);
+}
+
+/// Brute force of the declared-attachment rule: the bone that fixes particle p (-1: free), the
+/// nearest area bone within the attachment distance among the areas whose vertices are no more
+/// than that distance farther from p than the nearest surface vertex.
+int32_t expectedDeclaredBone(const MuscleInput& input, const std::vector<BoneInput>& bones,
+                             const btVector3& p) {
+  const btScalar attachment = input.parameters.attachmentDistance;
+  auto nearestOf = [&](const std::vector<uint32_t>& ids) {
+    btScalar best = 1e9f;
+    for (uint32_t v : ids) best = std::min(best, p.distance(input.surface.vertices[v]));
+    return best;
+  };
+  std::vector<uint32_t> all(input.surface.vertices.size());
+  for (uint32_t v = 0; v < all.size(); ++v) all[v] = v;
+  const btScalar toSurface = nearestOf(all);
+  int32_t bone = -1;
+  btScalar best = attachment;
+  for (const DeclaredAttachment& area : input.attachments) {
+    if (nearestOf(area.surfaceVertices) - toSurface > attachment) continue;
+    for (uint32_t b : area.bones) {
+      const btScalar d = bruteDistance(bones[b].mesh, p);
+      if (d < best) best = d, bone = int32_t(b);
+    }
+  }
+  return bone;
+}
+
+/// The bone each particle of the prepared muscle is fixed to agrees with the brute force (ties
+/// within 1 µm of the attachment distance skipped); returns the particles checked.
+size_t expectDeclaredBones(const MuscleInput& input, const std::vector<BoneInput>& bones,
+                           const MuscleSettings& muscle) {
+  size_t checked = 0;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
+    const btVector3& p = muscle.restPositions[i];
+    bool tie = false;
+    for (const BoneInput& bone : bones)
+      tie |= std::abs(bruteDistance(bone.mesh, p) - input.parameters.attachmentDistance) < 1e-6f;
+    if (tie) continue;
+    ++checked;
+    EXPECT_EQ(muscle.fixedBone[i], expectedDeclaredBone(input, bones, p)) << "particle " << i;
+    EXPECT_EQ(muscle.isFixed(i), muscle.fixedBone[i] >= 0) << "particle " << i;
+  }
+  return checked;
+}
+
+TEST(Attachments, DeclaredAreasFixOnlyTheirParticles) {
+  // Fibres run from the left bone to the right one; a sphere touches the muscle's top next to
+  // its right end. The nearest-bone rule fixes particles to the sphere; declared areas (the
+  // box surface's left corners on the left bone, its right corners on the right bone) do not.
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 25);
+  input.parameters.attachmentDistance = 0.006f;
+  const std::vector<BoneInput> bones = endBonesAnd({sphereBone("side", {0.08f, 0.03f, 0}, 0.02f)});
+  const std::vector<size_t> nearestRule =
+      fixedParticlesPerBone(*prepareScene(bones, {input}, 3).muscles[0], bones.size());
+  ASSERT_GT(nearestRule[2], 0u);
+
+  input.attachments = {{"origin", {0, 2, 4, 6}, {0}}, {"insertion", {1, 3, 5, 7}, {1}}};
+  const PreparedScene scene = prepareScene(bones, {input}, 3);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  EXPECT_GT(expectDeclaredBones(input, bones, muscle), muscle.particleCount() * 9 / 10);
+  const std::vector<size_t> declared = fixedParticlesPerBone(muscle, bones.size());
+  EXPECT_EQ(declared[0], nearestRule[0]);  // the ends are fixed as before
+  EXPECT_EQ(declared[2], 0u);              // the sphere fixes nothing: its particles are free
+  size_t nearSide = 0;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i)
+    nearSide += bruteDistance(bones[2].mesh, muscle.restPositions[i]) < 0.006f;
+  EXPECT_GT(nearSide, 0u);
+  EXPECT_EQ(muscle.fixedParticles.size(), declared[0] + declared[1]);
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {  // every fibre from left to right
+    EXPECT_EQ(muscle.fixedBone[muscle.fibreParticles[muscle.fibreOffsets[f]]], 0);
+    EXPECT_EQ(muscle.fixedBone[muscle.fibreParticles[muscle.fibreOffsets[f + 1] - 1]], 1);
+  }
+}
+
+TEST(Attachments, AnAreaOnSeveralBonesFixesEachParticleToTheNearest) {
+  // The origin is shared by the left bone and a sphere over the muscle's left end; the same
+  // sphere's bone near the right end is not part of the insertion's area.
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 25);
+  input.parameters.attachmentDistance = 0.006f;
+  const std::vector<BoneInput> bones =
+      endBonesAnd({sphereBone("left-cap", {0.015f, 0.03f, 0}, 0.02f),
+                   sphereBone("right-cap", {0.08f, 0.03f, 0}, 0.02f)});
+  input.attachments = {{"origin", {0, 2, 4, 6}, {0, 2, 3}}, {"insertion", {1, 3, 5, 7}, {1}}};
+  const PreparedScene scene = prepareScene(bones, {input}, 3);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  EXPECT_GT(expectDeclaredBones(input, bones, muscle), muscle.particleCount() * 9 / 10);
+  const std::vector<size_t> perBone = fixedParticlesPerBone(muscle, bones.size());
+  EXPECT_GT(perBone[0], 0u);
+  EXPECT_GT(perBone[2], 0u);  // the shared area's second bone
+  EXPECT_EQ(perBone[3], 0u);  // named by the origin, but nowhere near the origin's area
+}
+
+TEST(Attachments, DeclaredAreasMustNameVerticesAndBonesThatExist) {
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 10);
+  const std::vector<BoneInput> bones = {
+      boxBone("left", {-0.03f, -0.02f, -0.02f}, {0, 0.02f, 0.02f})};
+  input.attachments = {{"origin", {0, 2}, {}}, {"insertion", {1}, {0}}};
+  EXPECT_THROW(prepareScene(bones, {input}, 1), InputError);
+  input.attachments = {{"origin", {0, 2}, {1}}, {"insertion", {1}, {0}}};
+  EXPECT_THROW(prepareScene(bones, {input}, 1), InputError);
+  input.attachments = {{"origin", {0, 99}, {0}}, {"insertion", {1}, {0}}};
+  EXPECT_THROW(prepareScene(bones, {input}, 1), InputError);
 }
 
 }  // namespace

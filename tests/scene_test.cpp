@@ -401,3 +401,91 @@ TEST(Scene, RepositorySceneFilesLoadAndRoundTrip) {
   }
   EXPECT_GE(files, 1u);
 }
+
+namespace {
+
+/// sweepScene's bones and a tube muscle from inside the fixed box to the moving box's face,
+/// with muscle-level fields `declarations` (and fibres `fibres`).
+std::string declaredScene(const std::string& declarations,
+                          const std::string& fibres = R"({"generator": {"type": "tube"}})") {
+  std::string scene = sweepScene(R"({"type": "sweep", "end_deg": 30})");
+  scene.pop_back();  // reopen the top-level object
+  return scene + R"(, "muscles": [{"name": "m",
+      "surface": {"generator": {"type": "tube", "points": [[0, 5, 7], [0, -30, 8], [0, -60, 7]],
+                                "radii": [3, 3, 3]}},
+      "fibres": )" +
+         fibres + ", " + declarations + ", \"fibre_count\": 16, \"resolution\": 12}]}";
+}
+
+}  // namespace
+
+TEST(Attachments, DeclaredOriginAndInsertionInASceneFile) {
+  const LoadedScene scene = loadScene(writeScene(
+      "declared.json",
+      declaredScene(R"("origin": {"landmarks": [[0, 5, 7]], "radius": 5, "bones": ["fixed"]},
+                       "insertion": {"bone": "moving", "distance": 2})")));
+  ASSERT_EQ(scene.muscles.size(), 1u);
+  const auto& attachments = scene.muscles[0].attachments;
+  ASSERT_EQ(attachments.size(), 2u);
+  EXPECT_EQ(attachments[0].name, "origin");
+  EXPECT_EQ(attachments[0].bones, std::vector<uint32_t>{0});
+  EXPECT_EQ(attachments[1].bones, std::vector<uint32_t>{1});
+  const fibremss::TriangleMesh& surface = scene.muscles[0].surface;
+  ASSERT_FALSE(attachments[0].surfaceVertices.empty());
+  for (uint32_t v : attachments[0].surfaceVertices)
+    EXPECT_LT(surface.vertices[v].distance(btVector3(0, 0.005f, 0.007f)), 0.005f);
+  const fibremss::MeshDistance femur(scene.bones[1].mesh);
+  ASSERT_FALSE(attachments[1].surfaceVertices.empty());
+  for (uint32_t v : attachments[1].surfaceVertices)
+    EXPECT_LT(femur.closest(surface.vertices[v]).distance, 0.002f);
+  // The complete scene keeps them; loading it again gives the same areas.
+  const LoadedScene again = loadScene(writeScene("declared-again.json", scene.json));
+  ASSERT_EQ(again.muscles[0].attachments.size(), 2u);
+  EXPECT_EQ(again.muscles[0].attachments[1].surfaceVertices, attachments[1].surfaceVertices);
+  // Without declarations the nearest-bone rule stays: no attachments.
+  EXPECT_TRUE(loadScene(writeScene("undeclared.json", declaredScene(R"("name": "m")")))
+                  .muscles[0]
+                  .attachments.empty());
+}
+
+TEST(Attachments, BadDeclarationsNameTheField) {
+  auto whereOf = [](const std::string& declarations,
+                    const std::string& fibres = R"({"generator": {"type": "tube"}})") {
+    const std::string path = writeScene("bad-declared.json", declaredScene(declarations, fibres));
+    return errorOf([&] { loadScene(path); });
+  };
+  const std::string insertion = R"("insertion": {"bone": "moving"})";
+  EXPECT_EQ(whereOf(insertion).where(), "muscles[0].origin");
+  EXPECT_EQ(whereOf(R"("origin": {"landmarks": [[0, 5, 7]]}, )" + insertion).where(),
+            "muscles[0].origin");
+  EXPECT_EQ(whereOf(R"("origin": {"bones": ["nope"]}, )" + insertion).where(),
+            "muscles[0].origin.bones");
+  EXPECT_EQ(whereOf(R"("origin": {"bone": "fixed", "bones": ["fixed"]}, )" + insertion).where(),
+            "muscles[0].origin.bones");
+  // The surface fibre generator takes the muscle's areas; its own would contradict them.
+  EXPECT_EQ(whereOf(R"("origin": {"bone": "fixed"}, )" + insertion,
+                    R"({"generator": {"type": "surface", "insertion": {"bone": "moving"}}})")
+                .where(),
+            "muscles[0].fibres.generator.insertion");
+}
+
+TEST(Attachments, CheckWarnsWhenNothingIsFixedToABoneThatMovesAway) {
+  // The insertion names the fixed bone: nothing is fixed to the moving one the fibres end at.
+  const LoadedScene scene = loadScene(writeScene(
+      "declared-wrong.json",
+      declaredScene(R"("origin": {"landmarks": [[0, 5, 7]], "radius": 5, "bones": ["fixed"]},
+                       "insertion": {"landmarks": [[0, -60, 7]], "radius": 5, "bones": ["fixed"]})")));
+  const fibremss::PreparedScene prepared =
+      fibremss::prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const std::vector<std::string> warnings = fibremss::attachmentWarnings(scene, prepared);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("bone 'moving'"), std::string::npos) << warnings[0];
+  // Declared right, nothing to warn about.
+  const LoadedScene right = loadScene(writeScene(
+      "declared-right.json",
+      declaredScene(R"("origin": {"landmarks": [[0, 5, 7]], "radius": 5, "bones": ["fixed"]},
+                       "insertion": {"bone": "moving", "distance": 2})")));
+  EXPECT_TRUE(fibremss::attachmentWarnings(
+                  right, fibremss::prepareScene(right.bones, right.muscles, right.simulation.seed))
+                  .empty());
+}

@@ -10,6 +10,7 @@
 
 #include "Commands.h"
 #include "SceneArgs.h"
+#include "fibremss/Measures.h"
 #include "fibremss/Output.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
@@ -91,6 +92,24 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared,
   collection.write((fs::path(directory) / "rest.pvd").string());
 }
 
+/// Particles of the muscle fixed to each bone, by bone name (bones fixing none left out).
+nlohmann::ordered_json fixedByBone(const MuscleSettings& muscle, const PreparedScene& prepared) {
+  const std::vector<size_t> counts = fixedParticlesPerBone(muscle, prepared.bones.size());
+  nlohmann::ordered_json object = nlohmann::ordered_json::object();
+  for (size_t b = 0; b < counts.size(); ++b)
+    if (counts[b] > 0) object[prepared.bones[b]->name] = counts[b];
+  return object;
+}
+
+/// "412 to 'pelvis', 40 to 'femur'" (or "none").
+std::string describeFixed(const nlohmann::ordered_json& byBone) {
+  std::string text;
+  for (auto it = byBone.begin(); it != byBone.end(); ++it)
+    text += (text.empty() ? "" : ", ") + std::to_string(it.value().get<size_t>()) + " to '" +
+            it.key() + "'";
+  return text.empty() ? "none" : text;
+}
+
 /// What preparation found and repaired, per muscle, by name (the JSON "preparation" object).
 nlohmann::ordered_json preparationReport(const PreparationReport& report,
                                          const LoadedScene& scene) {
@@ -130,6 +149,11 @@ void runCheck(const CheckArgs& args) {
   for (const auto& warning : prepared.report.warnings)
     std::cerr << "fibremss: warning: " << warning << "\n";
   const nlohmann::ordered_json preparation = preparationReport(prepared.report, scene);
+  std::vector<std::string> warnings = prepared.report.warnings;
+  for (auto& warning : attachmentWarnings(scene, prepared)) {
+    std::cerr << "fibremss: warning: " << warning << "\n";
+    warnings.push_back(std::move(warning));
+  }
 
   nlohmann::ordered_json muscles = nlohmann::ordered_json::array();
   nlohmann::ordered_json bones = nlohmann::ordered_json::array();
@@ -140,6 +164,7 @@ void runCheck(const CheckArgs& args) {
                                  {"particles", muscle.particleCount()},
                                  {"boundary_particles", muscle.boundaryParticles.size()},
                                  {"fixed_particles", muscle.fixedParticles.size()},
+                                 {"fixed_to_bones", fixedByBone(muscle, prepared)},
                                  {"springs", muscle.springs.size()},
                                  {"fibres", muscle.fibreCount()}};
     if (m < prepared.report.surfaceCoverage.size())
@@ -174,7 +199,7 @@ void runCheck(const CheckArgs& args) {
                                   {"preparation_seconds", prepared.report.seconds},
                                   {"muscles", muscles},
                                   {"bones", bones},
-                                  {"warnings", prepared.report.warnings},
+                                  {"warnings", warnings},
                                   {"preparation", preparation}};
     for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
     std::cout << result.dump(2) << "\n";
@@ -196,6 +221,9 @@ void runCheck(const CheckArgs& args) {
                 << 100 * m["surface_coverage"].get<double>() << "%" << std::defaultfloat;
     std::cout << "\n";
   }
+  for (const auto& m : muscles)
+    std::cout << "fixed particles of " << m["name"].get<std::string>() << ": "
+              << describeFixed(m["fixed_to_bones"]) << "\n";
   for (const auto& b : bones)
     std::cout << std::left << std::setw(24) << ("bone " + b["name"].get<std::string>())
               << std::right << std::setw(10) << b["spheres"].get<size_t>() << " spheres\n";

@@ -156,6 +156,8 @@ void run(const RunArgs& args) {
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (const std::string& warning : prepared.report.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  for (const std::string& warning : attachmentWarnings(scene, prepared))
+    std::fprintf(stderr, "warning: %s\n", warning.c_str());
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
   std::optional<OutputDirectory> outDir;  // locked against a second run into it
   if (!args.out.empty()) {

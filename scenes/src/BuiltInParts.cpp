@@ -148,6 +148,9 @@ std::vector<BuiltInScene> builtInScenes() {
       {"hip-adduction",
        "pelvis, femur and 4 hip muscles; hip adduction 0 -> 60 deg in 2 deg steps"},
       {"hip-rotation", "pelvis, femur and 4 hip muscles; internal rotation 0 -> 60 deg"},
+      {"hip-pelvis",
+       "pelvis with a brim, femur with head and lesser trochanter, iliacus, psoas, gluteal; "
+       "declared attachments; flexion 0 -> 90 deg"},
       {"tension-spike", "a short muscle whose attachments jump 40 mm apart in one pose, then hold"},
       {"pinch", "a muscle between two bones that pass each other like shear blades"},
       {"sphere-denoise", "a sphere of 3840 particles perturbed by noise, no bones (integrators)"},
@@ -174,6 +177,8 @@ std::string builtInSceneDefinition(const std::string& name) {
     scene = hipScene("adduction");
   else if (name == "hip-rotation")
     scene = hipScene("rotation");
+  else if (name == "hip-pelvis")
+    scene = hipPelvisScene();
   else if (name == "tension-spike")
     scene = tensionSpikeScene();
   else if (name == "pinch")

@@ -56,6 +56,7 @@ inline btVector3 hipCentre() {
 Json fusiformScene();
 Json thigh13Scene();
 Json hipScene(const std::string& kind);  ///< "flexion", "extension", "adduction", "rotation"
+Json hipPelvisScene();
 Json tensionSpikeScene();
 Json pinchScene();
 Json sphereDenoiseScene();

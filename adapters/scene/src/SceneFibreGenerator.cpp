@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <optional>
 
 #include "SceneAnatomy.h"
 #include "fibremss/Error.h"
@@ -46,30 +48,68 @@ TriangleMesh anchorPlate(const TriangleMesh& surface, const std::vector<uint32_t
   return transformed(box, btTransform(basis, centre));
 }
 
-struct AreaSpec {
-  AttachmentArea area;
-  bool anchor = false;
-  btScalar thickness = 0, gap = 0, margin = 0;
-};
+/// Index of the bone named `name` in `scene` (bones come before muscles).
+uint32_t boneIndex(Fields& fields, const std::string& key, const std::string& name,
+                   const LoadedScene& scene) {
+  for (size_t b = 0; b < scene.bones.size(); ++b)
+    if (scene.bones[b].name == name) return uint32_t(b);
+  fields.fail(key, "no bone named \"" + name + "\" (bones come before muscles)");
+}
 
-AreaSpec readArea(Fields& generator, const std::string& key, double scale,
-                  const LoadedScene& scene) {
-  Fields fields = generator.object(key);
+/// The bones an area names: "bone": NAME or "bones": [NAME, ...].
+std::vector<uint32_t> readAreaBones(Fields& fields, const LoadedScene& scene) {
+  std::vector<uint32_t> bones;
+  if (fields.has("bone"))
+    bones.push_back(boneIndex(fields, "bone", fields.text("bone", ""), scene));
+  if (!fields.has("bones")) return bones;
+  if (!bones.empty()) fields.fail("bones", "give \"bone\" or \"bones\", not both");
+  const Json& names = fields.array("bones");
+  if (names.empty()) fields.fail("bones", "expected at least one bone name");
+  for (const Json& name : names) {
+    if (!name.is_string()) fields.fail("bones", "expected bone names, got " + describe(name));
+    bones.push_back(boneIndex(fields, "bones", name.get<std::string>(), scene));
+  }
+  fields.set("bones", names);
+  return bones;
+}
+
+/// The bones' meshes as one mesh (one bone: its mesh).
+std::shared_ptr<const TriangleMesh> joinedMeshes(const std::vector<uint32_t>& bones,
+                                                 const LoadedScene& scene) {
+  auto joined = std::make_shared<TriangleMesh>();
+  for (uint32_t b : bones) {
+    const TriangleMesh& mesh = scene.bones[b].mesh;
+    const auto offset = uint32_t(joined->vertices.size());
+    joined->vertices.insert(joined->vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
+    for (const auto& t : mesh.triangles)
+      joined->triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  }
+  return joined;
+}
+
+}  // namespace
+
+AreaSpec readArea(Fields& owner, const std::string& key, double scale, const LoadedScene& scene,
+                  bool declared) {
+  Fields fields = owner.object(key);
   AreaSpec spec;
   const double mm = 0.001 / scale;  // one millimetre in scene units
-  const bool hasBone = fields.has("bone"), hasLandmarks = fields.has("landmarks"),
-             hasVertices = fields.has("vertices");
+  const bool hasLandmarks = fields.has("landmarks"), hasVertices = fields.has("vertices");
+  const bool hasEnd = fields.has("end_fraction") || fields.has("end_depth");
+  const bool hasBone =
+      fields.has("bone") || (fields.has("bones") && !hasLandmarks && !hasVertices && !hasEnd);
   if (int(hasBone) + int(hasLandmarks) + int(hasVertices) > 1)
     fields.fail(hasBone ? "bone" : "landmarks",
                 "give one of \"bone\", \"landmarks\" and \"vertices\"");
+  spec.bones = readAreaBones(fields, scene);
+  if (!declared && !hasBone && !spec.bones.empty())
+    fields.fail("bones",
+                "only a muscle-level origin or insertion fixes particles to bones; a fibre "
+                "generator's area takes bones only as {\"bones\": [...], \"distance\": d}");
   if (hasBone) {
-    const std::string name = fields.text("bone", "");
-    const BoneInput* bone = nullptr;
-    for (const auto& b : scene.bones)
-      if (b.name == name) bone = &b;
-    if (!bone) fields.fail("bone", "no bone named \"" + name + "\" (bones come before muscles)");
+    spec.boneMesh = joinedMeshes(spec.bones, scene);
     spec.area = AttachmentArea::fromBone(
-        bone->mesh, btScalar(fields.number("distance", 4 * mm, 0, kInf) * scale));
+        *spec.boneMesh, btScalar(fields.number("distance", 4 * mm, 0, kInf) * scale));
   } else if (hasLandmarks) {
     const Json& points = fields.array("landmarks");
     if (points.empty()) fields.fail("landmarks", "expected at least one [x, y, z]");
@@ -100,7 +140,7 @@ AreaSpec readArea(Fields& generator, const std::string& key, double scale,
     spec.area.endDepth = btScalar(fields.number("end_depth", 0, 0, kInf) * scale);
   }
   spec.anchor = fields.boolean("anchor", false);
-  if (spec.anchor && hasBone)
+  if (spec.anchor && !spec.bones.empty())
     fields.fail("anchor",
                 "an area on a bone is attached to that bone; anchor needs landmarks, "
                 "vertices or the far end");
@@ -109,20 +149,72 @@ AreaSpec readArea(Fields& generator, const std::string& key, double scale,
     spec.gap = btScalar(fields.number("anchor_gap", 0.5 * mm, 0, kInf) * scale);
     spec.margin = btScalar(fields.number("anchor_margin", 2 * mm, 0, kInf) * scale);
   }
-  generator.set(key, fields.finish());
+  owner.set(key, fields.finish());
   return spec;
+}
+
+namespace {
+
+uint32_t addAnchor(const AreaSpec& spec, const std::string& name, const TriangleMesh& surface,
+                   const std::vector<uint32_t>& area, LoadedScene& scene) {
+  BoneInput anchor;
+  anchor.name = name;
+  anchor.mesh = anchorPlate(surface, area, spec.thickness, spec.gap, spec.margin);
+  scene.bones.push_back(std::move(anchor));
+  scene.motions.push_back(BoneMotion{});
+  return uint32_t(scene.bones.size() - 1);
 }
 
 }  // namespace
 
+std::optional<DeclaredAreas> readDeclaredAttachments(Fields& muscle, const std::string& muscleName,
+                                                     const TriangleMesh& surface, double scale,
+                                                     LoadedScene& scene,
+                                                     std::vector<DeclaredAttachment>& attachments) {
+  const bool hasOrigin = muscle.has("origin"), hasInsertion = muscle.has("insertion");
+  if (!hasOrigin && !hasInsertion) return std::nullopt;
+  if (hasOrigin != hasInsertion)
+    muscle.fail(hasOrigin ? "insertion" : "origin",
+                "declare both origin and insertion (a muscle fixed at one end only would hang)");
+  DeclaredAreas areas{readArea(muscle, "origin", scale, scene, true),
+                      readArea(muscle, "insertion", scale, scene, true)};
+  std::vector<uint32_t> vertices[2];
+  resolveAttachmentAreas(surface, areas.origin.area, areas.insertion.area,
+                         muscle.source() + ": " + muscle.path(), vertices[0], vertices[1],
+                         scene.warnings);
+  const char* names[2] = {"origin", "insertion"};
+  AreaSpec* specs[2] = {&areas.origin, &areas.insertion};
+  for (int a = 0; a < 2; ++a) {
+    if (vertices[a].empty()) muscle.fail(names[a], "the area holds no surface vertex");
+    std::vector<uint32_t> bones = specs[a]->bones;
+    if (specs[a]->anchor)
+      bones = {addAnchor(*specs[a], muscleName + "-" + names[a] + "-anchor", surface, vertices[a],
+                         scene)};
+    if (bones.empty())
+      muscle.fail(names[a],
+                  "name the bones its particles are fixed to: \"bones\": [NAME, ...] (or "
+                  "\"anchor\": true for a static plate)");
+    attachments.push_back({names[a], std::move(vertices[a]), std::move(bones)});
+    specs[a]->anchor = false;  // the plate exists; the fibre generator must not add another
+  }
+  return areas;
+}
+
 bool generateSurfaceFibres(Fields& generator, const std::string& muscleName,
                            const TriangleMesh& surface, int count, double scale, LoadedScene& scene,
-                           FibreSet& fibres) {
+                           FibreSet& fibres, const DeclaredAreas* declared) {
   const Json* type = generator.raw("type");
   if (!type || !type->is_string() || type->get<std::string>() != "surface") return false;
   generator.set("type", "surface");
-  const AreaSpec origin = readArea(generator, "origin", scale, scene);
-  const AreaSpec insertion = readArea(generator, "insertion", scale, scene);
+  auto area = [&](const char* key, const AreaSpec* muscleLevel) {
+    if (!muscleLevel) return readArea(generator, key, scale, scene, false);
+    if (generator.has(key))
+      generator.fail(key, std::string("the muscle declares its ") + key +
+                              "; the generator uses it (remove this one)");
+    return *muscleLevel;
+  };
+  const AreaSpec origin = area("origin", declared ? &declared->origin : nullptr);
+  const AreaSpec insertion = area("insertion", declared ? &declared->insertion : nullptr);
   FibreGenerationOptions options;
   options.count = count;
   options.grid = generator.integer("grid", options.grid, 8, 400);
@@ -141,15 +233,10 @@ bool generateSurfaceFibres(Fields& generator, const std::string& muscleName,
   const std::pair<const AreaSpec*, const std::vector<uint32_t>*> areas[2] = {
       {&origin, &result.originArea}, {&insertion, &result.insertionArea}};
   const char* names[2] = {"origin", "insertion"};
-  for (int a = 0; a < 2; ++a) {
-    const AreaSpec& spec = *areas[a].first;
-    if (!spec.anchor) continue;
-    BoneInput anchor;
-    anchor.name = muscleName + "-" + names[a] + "-anchor";
-    anchor.mesh = anchorPlate(surface, *areas[a].second, spec.thickness, spec.gap, spec.margin);
-    scene.bones.push_back(std::move(anchor));
-    scene.motions.push_back(BoneMotion{});
-  }
+  for (int a = 0; a < 2; ++a)
+    if (areas[a].first->anchor)
+      addAnchor(*areas[a].first, muscleName + "-" + names[a] + "-anchor", surface, *areas[a].second,
+                scene);
   return true;
 }
 

@@ -231,6 +231,8 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
   input.parameters.attachmentDistance =
       btScalar(muscle.number("attachment_distance", 0.004 / reader.scale, 0, kInf) * reader.scale);
   input.parameters.skinNeighbours = muscle.integer("skin_neighbours", 3, 1, 64);
+  const std::optional<scene::DeclaredAreas> declared = scene::readDeclaredAttachments(
+      muscle, input.name, input.surface, reader.scale, *reader.result, input.attachments);
   input.parameters.springs = springs;
   const int gridColumns = muscle.integer("fibre_grid_columns", 0, 0, 1000000);
   const bool lattice =
@@ -264,7 +266,7 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
     int columns = 0;
     input.mergeConverging =
         scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount, reader.scale,
-                                     *reader.result, input.fibres);
+                                     *reader.result, input.fibres, declared ? &*declared : nullptr);
     if (!input.mergeConverging)
       input.fibres = scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount,
                                            lattice, &columns);

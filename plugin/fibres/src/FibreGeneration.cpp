@@ -223,6 +223,45 @@ double segmentDistance2(const btVector3& p1, const btVector3& q1, const btVector
 
 }  // namespace
 
+void resolveAttachmentAreas(const TriangleMesh& surface, const AttachmentArea& origin,
+                            const AttachmentArea& insertion, const std::string& source,
+                            std::vector<uint32_t>& originIds, std::vector<uint32_t>& insertionIds,
+                            std::vector<std::string>& warnings) {
+  const auto& V = surface.vertices;
+  originIds = areaVertices(surface, origin, source + ": origin", warnings);
+  insertionIds = areaVertices(surface, insertion, source + ": insertion", warnings);
+  const bool originFar = origin.kind == AttachmentArea::Kind::FarEnd;
+  const bool insertionFar = insertion.kind == AttachmentArea::Kind::FarEnd;
+  if (originFar && insertionFar) {
+    originIds = farEnd(surface, nullptr, true, origin.endFraction, origin.endDepth);
+    insertionIds = farEnd(surface, nullptr, false, insertion.endFraction, insertion.endDepth);
+  } else if (originFar) {
+    const btVector3 c = centroidOf(V, insertionIds);
+    originIds = farEnd(surface, &c, false, origin.endFraction, origin.endDepth);
+  } else if (insertionFar) {
+    const btVector3 c = centroidOf(V, originIds);
+    insertionIds = farEnd(surface, &c, false, insertion.endFraction, insertion.endDepth);
+  }
+  // A vertex in both areas belongs to neither (the field would be ill-posed there).
+  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
+  for (uint32_t i : originIds) inOrigin[i] = 1;
+  for (uint32_t i : insertionIds) inInsertion[i] = 1;
+  size_t shared = 0;
+  std::vector<uint32_t> a, b;
+  for (uint32_t i : originIds)
+    if (!inInsertion[i])
+      a.push_back(i);
+    else
+      ++shared;
+  for (uint32_t i : insertionIds)
+    if (!inOrigin[i]) b.push_back(i);
+  if (shared)
+    warnings.push_back(source + ": " + std::to_string(shared) +
+                       " surface vertices are in both attachment areas; left out of both");
+  originIds.swap(a);
+  insertionIds.swap(b);
+}
+
 FibreGenerationResult generateFibres(const TriangleMesh& surface, const AttachmentArea& origin,
                                      const AttachmentArea& insertion,
                                      const FibreGenerationOptions& options,
@@ -237,44 +276,10 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
   const auto& V = surface.vertices;
 
   // Attachment areas.
-  std::vector<uint32_t> originIds =
-      areaVertices(surface, origin, source + ": origin", result.warnings);
-  std::vector<uint32_t> insertionIds =
-      areaVertices(surface, insertion, source + ": insertion", result.warnings);
-  const bool originFar = origin.kind == AttachmentArea::Kind::FarEnd;
-  const bool insertionFar = insertion.kind == AttachmentArea::Kind::FarEnd;
-  if (originFar && insertionFar) {
-    originIds = farEnd(surface, nullptr, true, origin.endFraction, origin.endDepth);
-    insertionIds = farEnd(surface, nullptr, false, insertion.endFraction, insertion.endDepth);
-  } else if (originFar) {
-    const btVector3 c = centroidOf(V, insertionIds);
-    originIds = farEnd(surface, &c, false, origin.endFraction, origin.endDepth);
-  } else if (insertionFar) {
-    const btVector3 c = centroidOf(V, originIds);
-    insertionIds = farEnd(surface, &c, false, insertion.endFraction, insertion.endDepth);
-  }
-  // A vertex in both areas belongs to neither (the field would be ill-posed there).
-  {
-    std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
-    for (uint32_t i : originIds) inOrigin[i] = 1;
-    for (uint32_t i : insertionIds) inInsertion[i] = 1;
-    size_t shared = 0;
-    std::vector<uint32_t> a, b;
-    for (uint32_t i : originIds)
-      if (!inInsertion[i])
-        a.push_back(i);
-      else
-        ++shared;
-    for (uint32_t i : insertionIds)
-      if (!inOrigin[i]) b.push_back(i);
-    if (shared)
-      result.warnings.push_back(source + ": " + std::to_string(shared) +
-                                " surface vertices are in both attachment areas; left out of both");
-    originIds.swap(a);
-    insertionIds.swap(b);
-  }
-  result.originArea = originIds;
-  result.insertionArea = insertionIds;
+  resolveAttachmentAreas(surface, origin, insertion, source, result.originArea,
+                         result.insertionArea, result.warnings);
+  const std::vector<uint32_t>& originIds = result.originArea;
+  const std::vector<uint32_t>& insertionIds = result.insertionArea;
   q.originVertices = originIds.size();
   q.insertionVertices = insertionIds.size();
   if (originIds.empty() || insertionIds.empty())

@@ -58,6 +58,12 @@ struct LoadedScene {
   btTransform bonePose(size_t bone, int pose) const;
 };
 
+/// Warnings about a prepared scene's attachments: a muscle whose fibres end next to a bone that
+/// moves relative to a bone the muscle is fixed to, with no particle fixed to the moving bone
+/// (it will not follow it; `fibremss check` and `run` print them).
+std::vector<std::string> attachmentWarnings(const LoadedScene& scene,
+                                            const PreparedScene& prepared);
+
 /// Built-in scene names with a one-line description each.
 struct BuiltInScene {
   std::string name;

@@ -5,6 +5,7 @@
 #include <LinearMath/btVector3.h>
 
 #include <span>
+#include <vector>
 
 #include "fibremss/Geometry.h"
 #include "fibremss/MuscleSettings.h"
@@ -40,6 +41,15 @@ double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> 
 
 /// Spring-deviation ratio Σ|l − L0| / Σ L0 over `springs` at `positions`.
 double springDeviationRatio(std::span<const Spring> springs, std::span<const btVector3> positions);
+
+/// The largest ratio l / L0 of any spring at `positions` (0 without springs).
+double worstSpringRatio(std::span<const Spring> springs, std::span<const btVector3> positions);
+
+/// Mean length of the muscle's fibres (polylines through their particles) at `positions` [m].
+double meanFibreLength(const MuscleSettings& muscle, std::span<const btVector3> positions);
+
+/// Particles of the muscle fixed to each bone (index = bone index; `boneCount` entries).
+std::vector<size_t> fixedParticlesPerBone(const MuscleSettings& muscle, size_t boneCount);
 
 /// Whether a spring (or a mesh edge) of rest length `rest` counts as exploded at `length`:
 /// longer than 3× its rest length and longer than it by more than `meanRest`, its body's mean

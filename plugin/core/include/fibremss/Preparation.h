@@ -18,6 +18,17 @@ struct BoneInput {
   BoneSphereParameters spheres;  ///< sphere generation settings
 };
 
+/// An attachment area a muscle declares (its origin or insertion): particles of the area are
+/// fixed, each to the nearest of the area's bones. A particle belongs to the area when it lies
+/// within the muscle's attachment distance of one of those bones and no more than that distance
+/// farther from the area's surface vertices than from the surface (the area is where it meets
+/// the surface).
+struct DeclaredAttachment {
+  std::string name;                       ///< "origin" or "insertion", for messages
+  std::vector<uint32_t> surfaceVertices;  ///< the area: indices into the muscle's surface
+  std::vector<uint32_t> bones;            ///< indices of the bones its particles are fixed to
+};
+
 /// A muscle as given: its surface and fibres in the rest pose.
 struct MuscleInput {
   std::string name;              ///< unique name
@@ -28,6 +39,10 @@ struct MuscleInput {
                                  ///< (needed by the lattice layouts)
   bool mergeConverging = false;  ///< merge near-coincident particles of different fibres
                                  ///< (fibres generated from a surface converge into tendons)
+  /// Declared attachments (origin, insertion): only their particles are fixed, every other
+  /// particle is free and meets bones through collision. Empty: every particle within the
+  /// attachment distance of a bone is fixed to the nearest bone.
+  std::vector<DeclaredAttachment> attachments;
 };
 
 /// What preparation found and changed in one muscle; printed by `fibremss check`.

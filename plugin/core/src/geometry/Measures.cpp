@@ -123,6 +123,36 @@ double springDeviationRatio(std::span<const Spring> springs, std::span<const btV
   return rest > 0 ? deviation / rest : std::numeric_limits<double>::quiet_NaN();
 }
 
+double worstSpringRatio(std::span<const Spring> springs, std::span<const btVector3> positions) {
+  double worst = 0;
+  for (const Spring& s : springs) {
+    const double length = (positions[s.a] - positions[s.b]).length();
+    // Written so that a NaN length makes the ratio NaN.
+    const double ratio = s.restLength > 0 ? length / s.restLength : 0;
+    if (!(ratio <= worst)) worst = ratio;
+  }
+  return worst;
+}
+
+double meanFibreLength(const MuscleSettings& muscle, std::span<const btVector3> positions) {
+  if (muscle.fibreCount() == 0) return 0;
+  double total = 0;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f)
+    for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k)
+      total +=
+          positions[muscle.fibreParticles[k]].distance(positions[muscle.fibreParticles[k - 1]]);
+  return total / static_cast<double>(muscle.fibreCount());
+}
+
+std::vector<size_t> fixedParticlesPerBone(const MuscleSettings& muscle, size_t boneCount) {
+  std::vector<size_t> counts(boneCount, 0);
+  for (uint32_t p : muscle.fixedParticles) {
+    const int32_t bone = muscle.fixedBone[p];
+    if (bone >= 0 && static_cast<size_t>(bone) < boneCount) ++counts[static_cast<size_t>(bone)];
+  }
+  return counts;
+}
+
 double rmsDistanceMm(std::span<const btVector3> a, std::span<const btVector3> b) {
   if (a.size() != b.size()) {
     throw InputError("rmsDistanceMm", "",

@@ -10,6 +10,8 @@
 #include <cmath>
 #include <cstdio>
 #include <exception>
+#include <limits>
+#include <optional>
 #include <thread>
 
 #include "PreparationInternal.h"
@@ -118,6 +120,16 @@ void checkFibres(const std::string& source, const FibreSet& fibres) {
       throw InputError(source, "fibre point " + std::to_string(i), kWithinWorld);
 }
 
+/// Whether bone b may fix particles of the muscle: any bone, or with declared attachments only
+/// the bones they name.
+bool mayFix(const MuscleInput& input, size_t b) {
+  if (input.attachments.empty()) return true;
+  return std::any_of(
+      input.attachments.begin(), input.attachments.end(), [b](const DeclaredAttachment& area) {
+        return std::find(area.bones.begin(), area.bones.end(), b) != area.bones.end();
+      });
+}
+
 /// One sentence per repair preparation made to a muscle (empty counts are left out).
 void describeRepairs(const MuscleInput& muscle, const MusclePreparationReport& report,
                      const std::vector<BoneInput>& bones, const std::vector<MuscleInput>& muscles,
@@ -143,7 +155,10 @@ void describeRepairs(const MuscleInput& muscle, const MusclePreparationReport& r
     if (report.pushedOutOfBones[b] > 0)
       repairs.push_back(source + ": " + std::to_string(report.pushedOutOfBones[b]) +
                         " free particles inside bone '" + bones[b].name +
-                        "' at rest moved out along its normal (now fixed to it)");
+                        "' at rest moved out along its normal" +
+                        (muscle.attachments.empty() ? " (now fixed to it)"
+                         : mayFix(muscle, b)        ? " (fixed to it when in an attachment area)"
+                                                    : " (free: they meet it through collision)"));
     if (report.surfaceVerticesPushedOut[b] > 0)
       repairs.push_back(source + ": " + std::to_string(report.surfaceVerticesPushedOut[b]) +
                         " surface vertices inside bone '" + bones[b].name +
@@ -157,6 +172,78 @@ std::string join(const std::vector<std::string>& parts) {
   return joined;
 }
 
+/// A muscle's declared attachment areas (MuscleInput::attachments): which bone, if any, fixes a
+/// particle.
+class DeclaredAreas {
+ public:
+  DeclaredAreas(const MuscleInput& input, const MuscleSettings& muscle,
+                const std::vector<BoneShape>& bones)
+      : input_(input), bones_(bones), surface_(muscle.restSurface.vertices) {
+    for (const DeclaredAttachment& area : input.attachments) {
+      std::vector<btVector3> points;
+      for (uint32_t v : area.surfaceVertices) points.push_back(muscle.restSurface.vertices[v]);
+      areaPoints_.push_back(std::move(points));
+    }
+    for (const auto& points : areaPoints_) areas_.push_back(std::make_unique<KdTree>(points));
+    fixedCount_.assign(areas_.size(), 0);
+  }
+
+  /// The bone that fixes particle position `p` (-1: free): the nearest bone of the areas it
+  /// belongs to.
+  int32_t boneFor(const btVector3& p) {
+    const btScalar attachment = input_.parameters.attachmentDistance;
+    const btScalar toSurface = nearestDistance(surface_, p);
+    int32_t best = -1, bestArea = -1;
+    btScalar bestDistance = attachment;
+    for (size_t a = 0; a < areas_.size(); ++a) {
+      if (nearestDistance(*areas_[a], p) - toSurface > attachment) continue;
+      for (uint32_t b : input_.attachments[a].bones) {
+        const btScalar d = bones_[b].distance->closest(p, bestDistance).distance;
+        if (d < bestDistance) {
+          bestDistance = d;
+          best = static_cast<int32_t>(b);
+          bestArea = static_cast<int32_t>(a);
+        }
+      }
+    }
+    if (bestArea >= 0) ++fixedCount_[size_t(bestArea)];
+    return best;
+  }
+
+  /// A warning per area that fixed no particle.
+  void warnEmpty(const std::vector<BoneInput>& boneInputs,
+                 std::vector<std::string>& warnings) const {
+    for (size_t a = 0; a < areas_.size(); ++a) {
+      if (fixedCount_[a] > 0) continue;
+      const DeclaredAttachment& area = input_.attachments[a];
+      std::string names;
+      for (uint32_t b : area.bones)
+        names += (names.empty() ? "'" : ", '") + boneInputs[b].name + "'";
+      warnings.push_back(detail::muscleSource(input_) + ": the " + area.name +
+                         " fixes no particle: none lies within the attachment distance of " +
+                         names +
+                         " where the area meets the surface (raise attachment_distance "
+                         "or move the area)");
+    }
+  }
+
+ private:
+  static btScalar nearestDistance(const KdTree& tree, const btVector3& p) {
+    uint32_t index = 0;
+    btScalar distance2 = 0;
+    if (tree.nearest(p, 1, &index, &distance2) == 0)
+      return std::numeric_limits<btScalar>::infinity();
+    return std::sqrt(distance2);
+  }
+
+  const MuscleInput& input_;
+  const std::vector<BoneShape>& bones_;
+  KdTree surface_;
+  std::vector<std::vector<btVector3>> areaPoints_;  ///< per area, its vertices (trees' storage)
+  std::vector<std::unique_ptr<KdTree>> areas_;
+  std::vector<size_t> fixedCount_;  ///< per area, particles it fixed
+};
+
 /// Fixed particles, nearest bones and the warnings about attachments.
 void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones,
                    const std::vector<BoneInput>& boneInputs, MuscleSettings& muscle,
@@ -167,6 +254,8 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
   muscle.nearestBone.assign(n, -1);
   muscle.fixedParticles.clear();
   if (bones.empty()) return;
+  std::optional<DeclaredAreas> declared;
+  if (!input.attachments.empty()) declared.emplace(input, muscle, bones);
   std::vector<std::pair<btScalar, uint32_t>> order;
   std::vector<size_t> insideCount(bones.size(), 0);
   for (uint32_t i = 0; i < n; ++i) {
@@ -174,8 +263,11 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
     const NearestBone nearest = nearestBone(p, bones, order);
     muscle.nearestBone[i] = nearest.bone;
     if (nearest.bone < 0) continue;
-    if (nearest.distance < attachment) {
-      muscle.fixedBone[i] = nearest.bone;
+    const int32_t fixedTo = declared                        ? declared->boneFor(p)
+                            : nearest.distance < attachment ? nearest.bone
+                                                            : -1;
+    if (fixedTo >= 0) {
+      muscle.fixedBone[i] = fixedTo;
       muscle.flags[i] |= kFixed;
       muscle.fixedParticles.push_back(i);
     }
@@ -187,13 +279,16 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
       warnings.push_back(detail::muscleSource(input) + ": " + std::to_string(insideCount[b]) +
                          " free (not fixed) particles lie inside bone '" + boneInputs[b].name +
                          "' at rest; collisions will push them out");
+  if (declared) declared->warnEmpty(boneInputs, warnings);
   if (muscle.fixedParticles.empty())
     warnings.push_back(detail::muscleSource(input) +
-                       ": no particle is within the attachment distance of a bone, so the "
-                       "muscle is attached to nothing");
+                       (declared ? ": no particle lies in a declared attachment area, so the "
+                                   "muscle is attached to nothing"
+                                 : ": no particle is within the attachment distance of a bone, "
+                                   "so the muscle is attached to nothing"));
   // Fibre ends touching a bone whose last particle (ΔL − δ short of the end) stays free.
   size_t looseEnds = 0;
-  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+  for (size_t f = 0; !declared && f < muscle.fibreCount(); ++f) {
     const auto fibre = input.fibres.fibre(f);
     const uint32_t last = muscle.fibreParticles[muscle.fibreOffsets[f + 1] - 1];
     if (!muscle.isFixed(last) && nearestBone(fibre.back(), bones, order).distance < attachment)
@@ -207,11 +302,34 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
                        "attachment distance)");
 }
 
+/// Declared areas must name surface vertices and bones that exist.
+void checkAttachments(const MuscleInput& input, size_t boneCount) {
+  const std::string source = detail::muscleSource(input);
+  for (const DeclaredAttachment& area : input.attachments) {
+    if (area.surfaceVertices.empty())
+      throw InputError(source, area.name, "the attachment area holds no surface vertex");
+    if (area.bones.empty())
+      throw InputError(source, area.name, "names no bone to fix its particles to");
+    for (uint32_t v : area.surfaceVertices)
+      if (v >= input.surface.vertices.size())
+        throw InputError(source, area.name,
+                         "surface vertex " + std::to_string(v) + " is out of range (" +
+                             std::to_string(input.surface.vertices.size()) + " vertices)");
+    for (uint32_t b : area.bones)
+      if (b >= boneCount)
+        throw InputError(source, area.name,
+                         "bone " + std::to_string(b) + " is out of range (" +
+                             std::to_string(boneCount) + " bones)");
+  }
+}
+
 /// The first stage of a muscle: checks its input, samples its fibres.
-MuscleSettings sampleMuscle(const MuscleInput& input, size_t index, uint32_t seed) {
+MuscleSettings sampleMuscle(const MuscleInput& input, size_t index, size_t boneCount,
+                            uint32_t seed) {
   const std::string source = detail::muscleSource(input);
   checkMesh(source, "surface", input.surface);
   checkFibres(source, input.fibres);
+  checkAttachments(input, boneCount);
   const MuscleParameters& parameters = input.parameters;
   if (!(parameters.attachmentDistance >= 0))
     throw InputError(source, "attachment_distance", "must not be negative");
@@ -243,9 +361,10 @@ void separateMuscle(const MuscleInput& input, size_t index, const std::vector<Bo
   report.pushedOutOfBones.assign(bones.size(), 0);
   report.surfaceVerticesPushedOut.assign(bones.size(), 0);
   for (size_t b = 0; b < bones.size(); ++b) {
-    // Particles within the attachment distance are fixed to the bone: they may stay inside.
-    report.pushedOutOfBones[b] = detail::pushOutOf(muscle.restPositions, *bones[b].distance,
-                                                   input.parameters.attachmentDistance, margin);
+    // Particles within the attachment distance may be fixed to the bone: they may stay inside.
+    const btScalar depth = mayFix(input, b) ? input.parameters.attachmentDistance : btScalar(0);
+    report.pushedOutOfBones[b] =
+        detail::pushOutOf(muscle.restPositions, *bones[b].distance, depth, margin);
     report.surfaceVerticesPushedOut[b] = detail::pushOutOf(
         muscle.restSurface.vertices, *bones[b].distance, 0, kSurfaceMarginFraction * spacing);
   }
@@ -321,7 +440,7 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   muscleReports.resize(muscles.size());
   std::vector<std::unique_ptr<MeshDistance>> surfaces(muscles.size());
   parallelFor(muscles.size(), [&](size_t m) {
-    muscleSettings[m] = sampleMuscle(muscles[m], m, seed);
+    muscleSettings[m] = sampleMuscle(muscles[m], m, bones.size(), seed);
     surfaces[m] = std::make_unique<MeshDistance>(muscles[m].surface);
   });
   parallelFor(muscles.size(), [&](size_t m) {

@@ -91,6 +91,14 @@ struct FibreGenerationResult {
   std::vector<uint32_t> insertionArea;  ///< surface vertices of the insertion area
 };
 
+/// The surface vertices of both areas as generateFibres() uses them (a far end resolved against
+/// the other area; a vertex in both areas left out of both, with a warning). Throws InputError
+/// (source `source`) for vertex indices out of range.
+void resolveAttachmentAreas(const TriangleMesh& surface, const AttachmentArea& origin,
+                            const AttachmentArea& insertion, const std::string& source,
+                            std::vector<uint32_t>& originIds, std::vector<uint32_t>& insertionIds,
+                            std::vector<std::string>& warnings);
+
 /// Generates fibres inside `surface` (closed, outward, metres). Throws InputError (source
 /// `source`) when the surface or the areas make it impossible (e.g. both areas empty).
 FibreGenerationResult generateFibres(const TriangleMesh& surface, const AttachmentArea& origin,
