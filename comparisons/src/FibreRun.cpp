@@ -275,8 +275,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs);
 
   std::vector<btTransform> boneTransforms(bones.size(), btTransform::getIdentity());
-  std::vector<double> msPerStep, msPerIteration, mss, muscleCd, boneCd, response, output,
-      measureMsPerStep;
+  std::vector<double> msPerStep, msPerIteration, mss, volumeTerm, muscleCd, boneCd, response,
+      output, measureMsPerStep;
   Penetration penetration, spherePenetration;
   std::vector<btVector3> poseSurface;
   FibreRunDetails guard;  // what the numerical guard did, and the soak samples
@@ -312,6 +312,15 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       poseSurface.insert(poseSurface.end(), surface.begin(), surface.end());
     }
     if (finite) {
+      for (size_t m = 0; m < muscles.size(); ++m) {
+        if (muscleRestVolumes[m] == 0) continue;
+        const double change =
+            volumeChangePercent(prepared.muscles[m]->restSurface, system.surface(muscles[m]));
+        if (!(std::abs(change) <= std::abs(metrics.worstMuscleVolumeChangePct))) {
+          metrics.worstMuscleVolumeChangePct = change;
+          metrics.worstVolumeMuscle = prepared.muscles[m]->name;
+        }
+      }
       penetration = combine(penetration, boneMeshes.points(poseSurface, boneTransforms));
       for (MuscleHandle muscle : muscles)
         spherePenetration = combine(
@@ -324,6 +333,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     msPerStep.push_back(stepMs);
     msPerIteration.push_back(stepMs / iterations);
     mss.push_back(stats.timing.mss / iterations);
+    volumeTerm.push_back(stats.timing.volume / iterations);
     muscleCd.push_back(stats.timing.muscleCd / iterations);
     boneCd.push_back(stats.timing.boneCd / iterations);
     response.push_back(stats.timing.response / iterations);
@@ -408,8 +418,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   }
   metrics.msPerStep = median(msPerStep);
   metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
-  metrics.timing = {medianOrZero(mss), medianOrZero(muscleCd), medianOrZero(boneCd),
-                    medianOrZero(response), medianOrZero(output)};
+  metrics.timing = {medianOrZero(mss),    medianOrZero(volumeTerm), medianOrZero(muscleCd),
+                    medianOrZero(boneCd), medianOrZero(response),   medianOrZero(output)};
   if (details) {
     *details = std::move(guard);
     details->spherePenetration = spherePenetration;

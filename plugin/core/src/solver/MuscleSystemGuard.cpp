@@ -66,6 +66,7 @@ SimulationParameters smallerSteps(const SimulationParameters& requested, int hal
 
 void add(StepTiming& sum, const StepTiming& part) {
   sum.mss += part.mss;
+  sum.volume += part.volume;
   sum.muscleCd += part.muscleCd;
   sum.boneCd += part.boneCd;
   sum.response += part.response;
