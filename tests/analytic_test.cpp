@@ -3,6 +3,7 @@
 // gives, and a short FibreMSS run measures every figure.
 #include "fibremss/Analytic.h"
 
+#include <LinearMath/btAlignedAllocator.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -10,6 +11,8 @@
 
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
+#include "fibremss/MuscleSystem.h"
+#include "support/AllocationCounter.h"
 
 namespace fibremss {
 namespace {
@@ -127,6 +130,55 @@ TEST(AnalyticRun, ShortFibreMSSRunsMeasureEveryFigureAndRoundTripThroughJson) {
     EXPECT_DOUBLE_EQ(back.midRadiusRatio, m.midRadiusRatio);
     EXPECT_DOUBLE_EQ(back.exactVolumeChangePct, m.exactVolumeChangePct);
   }
+}
+
+/// A short run of a cylinder scene with the given volume stiffness.
+RunMetrics cylinderRun(const char* name, double volumeStiffness) {
+  const LoadedScene scene =
+      loadScene(name, {"resolution=12", "fibre_count=24", "simulation.iterations=600",
+                       "volume_stiffness=" + std::to_string(volumeStiffness)});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  FibreRunOptions options;
+  options.keepPoseSurfaces = false;
+  return runFibreMSS(scene, prepared, options);
+}
+
+TEST(VolumeTerm, KeepsTheCylindersVolumeWhereTheSpringsAloneLoseOrGainIt) {
+  for (const char* name : {"cylinder-stretch", "cylinder-twist"}) {
+    const RunMetrics springs = cylinderRun(name, 0), kept = cylinderRun(name, 10);
+    ASSERT_FALSE(kept.nan || kept.exploded) << name;
+    EXPECT_GT(std::abs(springs.analytic.volumeChangePct), 2) << name;
+    EXPECT_LT(std::abs(kept.analytic.volumeChangePct),
+              std::abs(springs.analytic.volumeChangePct) / 2)
+        << name;
+    EXPECT_GT(kept.timing.volume, 0) << name;  // its cost is measured
+    EXPECT_EQ(springs.timing.volume, 0) << name;
+  }
+}
+
+TEST(VolumeTerm, StepAllocatesNothing) {
+  const LoadedScene scene =
+      loadScene("cylinder-twist", {"resolution=10", "fibre_count=16", "volume_stiffness=10",
+                                   "stop=iterations", "simulation.iterations=20"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
+  {
+    MuscleSystem system(scene.simulation);
+    std::vector<BoneHandle> bones;
+    for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+    system.addMuscle(prepared.muscles[0], bones);
+    testing::allocationCount = 0;
+    testing::countingArmed = true;
+    for (int pose = 0; pose < scene.poseCount; ++pose) {
+      for (size_t b = 0; b < bones.size(); ++b)
+        system.setBoneTransform(bones[b], scene.bonePose(b, pose));
+      system.step();
+    }
+    testing::countingArmed = false;
+    EXPECT_GT(system.lastStep().timing.volume, 0);
+    EXPECT_EQ(testing::allocationCount.load(), 0);
+  }
+  btAlignedAllocSetCustom(nullptr, nullptr);
 }
 
 }  // namespace

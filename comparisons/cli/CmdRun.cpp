@@ -102,11 +102,16 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
   std::printf("  particles %zu (boundary %zu), springs %zu, bone spheres %zu\n", m.particles,
               m.boundaryParticles, m.springs, m.boneSpheres);
   std::printf(
-      "  ms per iteration: mss %.3g, muscle CD %.3g, bone CD %.3g, response %.3g, output %.3g\n",
-      m.timing.mss, m.timing.muscleCd, m.timing.boneCd, m.timing.response, m.timing.output);
+      "  ms per iteration: mss %.3g (volume term %.3g), muscle CD %.3g, bone CD %.3g, response "
+      "%.3g, output %.3g\n",
+      m.timing.mss, m.timing.volume, m.timing.muscleCd, m.timing.boneCd, m.timing.response,
+      m.timing.output);
   std::printf(
       "  penetration max %.3g mm, mean %.3g mm; volume change %.3g %%; spring deviation %.3g\n",
       m.maxPenetrationMm, m.meanPenetrationMm, m.volumeChangePct, m.springDeviationRatio);
+  if (!m.worstVolumeMuscle.empty())
+    std::printf("  worst muscle volume change at any pose: %+.3g %% (%s)\n",
+                m.worstMuscleVolumeChangePct, m.worstVolumeMuscle.c_str());
   if (!m.analytic.type.empty()) std::printf("  %s\n", analyticLine(m.analytic).c_str());
   std::printf("  particle spheres in bones: max %.3g mm, mean %.3g mm (%zu of %zu sphere tests)\n",
               details.spherePenetration.maxMm, details.spherePenetration.meanMm,

@@ -194,8 +194,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale);
 
   std::vector<btTransform> boneTransforms(bones.size(), btTransform::getIdentity());
-  std::vector<double> msPerStep, msPerIteration, mss, muscleCd, boneCd, response, output,
-      measureMsPerStep;
+  std::vector<double> msPerStep, msPerIteration, mss, volumeTerm, muscleCd, boneCd, response,
+      output, measureMsPerStep;
   Penetration penetration, spherePenetration;
   std::vector<btVector3> poseSurface;
   std::vector<std::vector<float>> surfaceDepthsMm(muscles.size());  // per muscle, this step
@@ -236,6 +236,13 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     if (finite)
       for (size_t m = 0; m < muscles.size(); ++m) {
         std::span<const btVector3> surface = system.surface(muscles[m]);
+        if (muscleRestVolumes[m] != 0) {
+          const double change = volumeChangePercent(prepared.muscles[m]->restSurface, surface);
+          if (!(std::abs(change) <= std::abs(metrics.worstMuscleVolumeChangePct))) {
+            metrics.worstMuscleVolumeChangePct = change;
+            metrics.worstVolumeMuscle = prepared.muscles[m]->name;
+          }
+        }
         surfaceDepthsMm[m].resize(surface.size());
         penetration =
             combine(penetration, boneMeshes.points(surface, boneTransforms, surfaceDepthsMm[m]));
@@ -249,6 +256,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     msPerStep.push_back(stepMs);
     msPerIteration.push_back(stepMs / iterations);
     mss.push_back(stats.timing.mss / iterations);
+    volumeTerm.push_back(stats.timing.volume / iterations);
     muscleCd.push_back(stats.timing.muscleCd / iterations);
     boneCd.push_back(stats.timing.boneCd / iterations);
     response.push_back(stats.timing.response / iterations);
@@ -334,8 +342,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   }
   metrics.msPerStep = median(msPerStep);
   metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
-  metrics.timing = {medianOrZero(mss), medianOrZero(muscleCd), medianOrZero(boneCd),
-                    medianOrZero(response), medianOrZero(output)};
+  metrics.timing = {medianOrZero(mss),    medianOrZero(volumeTerm), medianOrZero(muscleCd),
+                    medianOrZero(boneCd), medianOrZero(response),   medianOrZero(output)};
   if (details) {
     *details = std::move(guard);
     details->spherePenetration = spherePenetration;

@@ -65,6 +65,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"ms_per_time_step", number(m.msPerTimeStep)},
       {"timing",
        {{"mss", m.timing.mss},
+        {"volume", m.timing.volume},
         {"muscle_cd", m.timing.muscleCd},
         {"bone_cd", m.timing.boneCd},
         {"response", m.timing.response},
@@ -72,6 +73,8 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"max_penetration_mm", number(m.maxPenetrationMm)},
       {"mean_penetration_mm", number(m.meanPenetrationMm)},
       {"volume_change_pct", number(m.volumeChangePct)},
+      {"worst_muscle_volume_change_pct", number(m.worstMuscleVolumeChangePct)},
+      {"worst_volume_muscle", m.worstVolumeMuscle},
       {"spring_deviation_ratio", number(m.springDeviationRatio)},
       {"rms_to_fem_mm", number(m.rmsToFemMm)},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
@@ -109,6 +112,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.msPerTimeStep = numberOr(o, "ms_per_time_step", m.msPerTimeStep);
   if (auto t = o.find("timing"); t != o.end() && t->is_object()) {
     m.timing.mss = numberOr(*t, "mss", 0);
+    m.timing.volume = numberOr(*t, "volume", 0);
     m.timing.muscleCd = numberOr(*t, "muscle_cd", 0);
     m.timing.boneCd = numberOr(*t, "bone_cd", 0);
     m.timing.response = numberOr(*t, "response", 0);
@@ -117,6 +121,9 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.maxPenetrationMm = numberOr(o, "max_penetration_mm", m.maxPenetrationMm);
   m.meanPenetrationMm = numberOr(o, "mean_penetration_mm", m.meanPenetrationMm);
   m.volumeChangePct = numberOr(o, "volume_change_pct", m.volumeChangePct);
+  m.worstMuscleVolumeChangePct =
+      numberOr(o, "worst_muscle_volume_change_pct", m.worstMuscleVolumeChangePct);
+  m.worstVolumeMuscle = o.value("worst_volume_muscle", m.worstVolumeMuscle);
   m.springDeviationRatio = numberOr(o, "spring_deviation_ratio", m.springDeviationRatio);
   m.rmsToFemMm = numberOr(o, "rms_to_fem_mm", m.rmsToFemMm);
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);

@@ -305,6 +305,8 @@ SpringParameters readModel(Fields& model) {
   }
   springs.dampingScale = btScalar(model.number("damping_scale", springs.dampingScale, 0, kInf));
   springs.density = btScalar(model.number("density", springs.density, 0, kInf, true));
+  springs.volumeStiffness =
+      btScalar(model.number("volume_stiffness", springs.volumeStiffness, 0, 1e6));
   return springs;
 }
 

@@ -28,6 +28,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"kappa", {Target::Section, "model"}},
       {"damping", {Target::Section, "model"}},
       {"density", {Target::Section, "model"}},
+      {"volume_stiffness", {Target::Section, "model"}},
       {"damping_scale", {Target::Section, "model"}},
       {"integrator", {Target::Section, "simulation"}},
       {"time_step", {Target::Section, "simulation"}},

@@ -12,7 +12,8 @@ namespace fibremss {
 
 /// Median milliseconds per iteration spent in each part of a FibreMSS step (seed 004 Table 1).
 struct PartTiming {
-  double mss = 0;       ///< spring forces + integration
+  double mss = 0;       ///< spring forces + volume term + integration
+  double volume = 0;    ///< the volume term (part of mss)
   double muscleCd = 0;  ///< muscle–muscle collision detection
   double boneCd = 0;    ///< muscle–bone collision detection
   double response = 0;  ///< collision response
@@ -54,10 +55,13 @@ struct RunMetrics {
   /// Median wall time of one time step: a FibreMSS iteration (one integration step of dt), a
   /// Bullet world substep (btSoftBody, FEM).
   double msPerTimeStep = kNone;
-  PartTiming timing;                    ///< per-part breakdown (FibreMSS)
-  double maxPenetrationMm = kNone;      ///< surface vertices into bones' true meshes
-  double meanPenetrationMm = kNone;     ///< mean over penetrating vertices
-  double volumeChangePct = kNone;       ///< final muscle volume against rest
+  PartTiming timing;                 ///< per-part breakdown (FibreMSS)
+  double maxPenetrationMm = kNone;   ///< surface vertices into bones' true meshes
+  double meanPenetrationMm = kNone;  ///< mean over penetrating vertices
+  double volumeChangePct = kNone;    ///< final muscle volume against rest
+  /// The largest |volume change| of one muscle at any pose [%] (FibreMSS), and that muscle.
+  double worstMuscleVolumeChangePct = kNone;
+  std::string worstVolumeMuscle;        ///< the muscle of worstMuscleVolumeChangePct
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
   double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
   double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations

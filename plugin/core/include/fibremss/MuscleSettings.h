@@ -65,8 +65,10 @@ struct MuscleSettings {
   std::vector<uint32_t> boundaryParticles;  ///< indices of boundary particles, ascending
   std::vector<uint32_t> fixedParticles;     ///< indices of fixed particles, ascending
 
-  btScalar particleMass = 0;  ///< the same for every particle [kg]
-  btScalar damping = 0;       ///< spring damping coefficient c [N·s/m]
+  btScalar particleMass = 0;   ///< the same for every particle [kg]
+  btScalar damping = 0;        ///< spring damping coefficient c [N·s/m]
+  btScalar volumeModulus = 0;  ///< K of the volume term (VolumeForces.h) [Pa]; 0: none
+  double restVolume = 0;       ///< volume enclosed by restSurface [m³]
 
   std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
   SpringBlocks springBlocks;    ///< `springs` laid out for the AVX2 kernel (empty: not laid out)

@@ -34,7 +34,8 @@ struct BoneHandle {
 
 /// Milliseconds spent in each part of the last step, summed over its iterations.
 struct StepTiming {
-  double mss = 0;       ///< spring forces + dt + integration
+  double mss = 0;       ///< spring forces + volume term + dt + integration
+  double volume = 0;    ///< the volume term, part of mss (its share of the force tasks' time)
   double muscleCd = 0;  ///< muscle–muscle collision detection
   double boneCd = 0;    ///< muscle–bone collision detection
   double response = 0;  ///< collision response

@@ -30,6 +30,9 @@ struct SpringParameters {
   /// holds: 0.5 keeps that margin.
   btScalar dampingScale = 0.5;
   btScalar density = 1060;  ///< muscle density [kg/m³]; mass = density·volume / particles
+  /// Volume preservation: the muscle's bulk modulus against its enclosed volume's change, as a
+  /// multiple of the spring network's Young's modulus Σk·L0² / 3V (0: no volume term).
+  btScalar volumeStiffness = 0;
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).

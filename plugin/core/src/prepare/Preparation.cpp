@@ -407,6 +407,13 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
       });
   detail::bindSurface(muscle, particles, parameters.skinNeighbours);
   detail::reorderParticles(muscle, detail::mortonOrder(muscle.restPositions));
+  muscle.restVolume = meshVolume(muscle.restSurface);
+  double network = 0;  // Σ k·L0²
+  for (const Spring& spring : muscle.springs)
+    network += double(spring.stiffness) * spring.restLength * spring.restLength;
+  if (muscle.restVolume != 0)
+    muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * network /
+                                                 (3 * std::abs(muscle.restVolume)));
   report.shortestSpring = muscle.springs.empty() ? 0 : muscle.springs.front().restLength;
   for (const Spring& spring : muscle.springs)
     report.shortestSpring = std::min(report.shortestSpring, spring.restLength);

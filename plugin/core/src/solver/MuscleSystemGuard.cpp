@@ -67,6 +67,7 @@ StepSize smallerSteps(const SimulationParameters& requested, int halvings) {
 
 void add(StepTiming& sum, const StepTiming& part) {
   sum.mss += part.mss;
+  sum.volume += part.volume;
   sum.muscleCd += part.muscleCd;
   sum.boneCd += part.boneCd;
   sum.response += part.response;

@@ -62,6 +62,8 @@ struct MuscleIterationResult {
   btScalar safeTimeStep = 0;  ///< eq 5.1 bound of this muscle (adaptive dt only)
   double displacement = 0;    ///< Σ |Δx| of the integration
   bool finite = true;         ///< the integration stayed finite
+  double forcesMs = 0;        ///< thread time of the springs and the volume term
+  double volumeMs = 0;        ///< thread time of the volume term
 };
 
 /// Two muscles whose bounds meet in this iteration and the contacts their pair task recorded.
@@ -144,6 +146,8 @@ struct MuscleSystem::Impl {
   /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
   void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
   btScalar timeStep(const StepSize& size) const;
+  void addVolumeTerm(MuscleState& state, bool newOffsets) const;
+  double volumeShare() const;
   void collideMusclePairs();
   void collide();
   void step(const StepSize& size);

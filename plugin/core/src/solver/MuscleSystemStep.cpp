@@ -20,6 +20,7 @@
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "VolumeForces.h"
 #include "integrators/Integrators.h"
 
 namespace fibremss {
@@ -177,6 +178,24 @@ void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) cons
   followFixed(state);
 }
 
+// The volume term's forces (with new skin offsets when the bones moved) into state.forces.
+void MuscleSystem::Impl::addVolumeTerm(MuscleState& state, bool newOffsets) const {
+  if (state.volumeOffsets.empty()) return;
+  if (newOffsets) updateVolumeOffsets(state, parameters.blendedPretransform);
+  state.volume = addVolumeForces(state, state.positions, state.forces);
+}
+
+// The volume term's share of the force phase's thread time in this iteration (its wall time is
+// not measured apart: it runs in the same task as the springs).
+double MuscleSystem::Impl::volumeShare() const {
+  double volume = 0, forces = 0;
+  for (uint32_t slot : active) {
+    volume += results[slot].volumeMs;
+    forces += results[slot].forcesMs;
+  }
+  return forces > 0 ? volume / forces : 0;
+}
+
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
 btScalar MuscleSystem::Impl::timeStep(const StepSize& size) const {
   if (!parameters.adaptiveTimeStep) return size.timeStep;
@@ -315,10 +334,16 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     const bool bonesMove = iteration <= motionIterations;
     if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
+    const bool newOffsets = bonesMove || iteration == 1;
     forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
       if (bonesMove) followBones(state);
       MuscleIterationResult& result = results[slot];
+      const Clock::time_point forcesStart = Clock::now();
       result.forces = springForces(state);
+      const Clock::time_point volumeStart = Clock::now();
+      addVolumeTerm(state, newOffsets);
+      result.forcesMs = millisecondsSince(forcesStart);
+      result.volumeMs = millisecondsSince(volumeStart);
       if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
     });
 
@@ -337,6 +362,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       restSum += muscles.states[slot]->restLengthSum;
     }
     stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
+    stats.timing.volume += volumeShare() * millisecondsSince(start);
 
     const btScalar dt = timeStep(size);
     const btScalar lastDt = previousDt > 0 ? previousDt : dt;
