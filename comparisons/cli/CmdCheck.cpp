@@ -115,7 +115,8 @@ void runCheck(const CheckArgs& args) {
   const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
   for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
 
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   for (const auto& warning : prepared.report.warnings)
     std::cerr << "fibremss: warning: " << warning << "\n";
   const nlohmann::ordered_json preparation = preparationReport(prepared.report, scene);

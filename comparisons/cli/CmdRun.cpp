@@ -157,7 +157,8 @@ void run(const RunArgs& args) {
     std::filesystem::remove(args.out + "/soak.csv");
   }
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   for (const std::string& warning : prepared.report.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
