@@ -83,6 +83,20 @@ TEST(Threads, AnyThreadCountGivesTheSameBits) {
   }
 }
 
+TEST(Threads, PreparationGivesTheSameBitsForAnyThreadCount) {
+  const LoadedScene scene = loadScene("hip-flexion");  // four muscles: tasks to share
+  const PreparedScene one = prepareScene(scene.bones, scene.muscles, scene.simulation.seed, 1);
+  const PreparedScene two = prepareScene(scene.bones, scene.muscles, scene.simulation.seed, 2);
+  ASSERT_EQ(one.muscles.size(), two.muscles.size());
+  for (size_t m = 0; m < one.muscles.size(); ++m) {
+    const MuscleSettings &a = *one.muscles[m], &b = *two.muscles[m];
+    EXPECT_TRUE(sameBits(a.restPositions, b.restPositions)) << "muscle " << m;
+    ASSERT_EQ(a.radii.size(), b.radii.size());
+    EXPECT_EQ(std::memcmp(a.radii.data(), b.radii.data(), a.radii.size() * sizeof(btScalar)), 0);
+    EXPECT_EQ(a.springs.size(), b.springs.size()) << "muscle " << m;
+  }
+}
+
 // Pairs whose contacts overflow their records (room for one) are traversed again by both muscles'
 // tasks at once, each with its thread's stack: still the same bits as the recorded pushes.
 TEST(Threads, ContactsBeyondTheirRecordsGiveTheSameBits) {

@@ -145,7 +145,8 @@ void runCheck(const CheckArgs& args) {
   for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
 
   if (!args.out.empty()) requireWritableDirectory(args.out);  // fail before preparing
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   for (const auto& warning : prepared.report.warnings)
     std::cerr << "fibremss: warning: " << warning << "\n";
   const nlohmann::ordered_json preparation = preparationReport(prepared.report, scene);

@@ -158,7 +158,8 @@ void run(const RunArgs& args) {
   // A run that cannot write fails before preparing, and writes nothing before it prepared.
   if (!args.out.empty()) requireWritableDirectory(args.out);
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   for (const std::string& warning : prepared.report.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
   for (const std::string& warning : attachmentWarnings(scene, prepared))

@@ -395,7 +395,8 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   };
   const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
   log("preparing " + scene.name);
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   const double duration = poseDuration(scene.simulation);
 
   Comparison comparison;
@@ -430,8 +431,8 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       std::vector<std::string> all = overrides;
       all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
       const LoadedScene variant = loadScene(sceneNameOrPath, all);
-      const PreparedScene variantPrepared =
-          prepareScene(variant.bones, variant.muscles, variant.simulation.seed);
+      const PreparedScene variantPrepared = prepareScene(
+          variant.bones, variant.muscles, variant.simulation.seed, variant.simulation.threads);
       runs.push_back(runFibreMSS(variant, variantPrepared, fibreOptions));
     } else if (spec.family == "self-reference") {
       LoadedScene reference = scene;

@@ -45,8 +45,8 @@ PreparedCase prepareCase(const StabilityCase& stabilityCase, const StabilityOpti
   }
   for (MuscleInput& muscle : result.scene.muscles)
     muscle.parameters.springs.kappa *= static_cast<btScalar>(stabilityCase.kappaFactor);
-  result.prepared =
-      prepareScene(result.scene.bones, result.scene.muscles, result.scene.simulation.seed);
+  result.prepared = prepareScene(result.scene.bones, result.scene.muscles,
+                                 result.scene.simulation.seed, result.scene.simulation.threads);
   for (const auto& muscle : result.prepared.muscles)
     result.freeMass += static_cast<double>(muscle->particleMass) *
                        static_cast<double>(muscle->particleCount() - muscle->fixedParticles.size());

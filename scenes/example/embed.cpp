@@ -45,8 +45,8 @@ int main(int argc, char** argv) try {
   // 1. A muscle with its bones: the built-in "fusiform" scene, prepared (particles, springs,
   //    radii, bone spheres). A real application would load its own scene file the same way.
   const fibremss::LoadedScene scene = fibremss::loadScene("fusiform", {"resolution=12"});
-  const fibremss::PreparedScene prepared =
-      fibremss::prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const fibremss::PreparedScene prepared = fibremss::prepareScene(
+      scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
 
   // 2. An ordinary Bullet soft-rigid world, as MuscleWorld: it steps the muscles too.
   btSoftBodyRigidBodyCollisionConfiguration configuration;

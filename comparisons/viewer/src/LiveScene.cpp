@@ -58,7 +58,8 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
   for (const std::string& warning : scene_.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
   std::fprintf(stderr, "preparing %s ...\n", scene_.name.c_str());
-  prepared_ = prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed);
+  prepared_ =
+      prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed, scene_.simulation.threads);
   for (const std::string& warning : prepared_.report.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
 

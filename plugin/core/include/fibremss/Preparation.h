@@ -92,8 +92,10 @@ void requirePreparationMemory(const std::vector<BoneInput>& bones,
                               const std::vector<MuscleInput>& muscles);
 
 /// Prepares all bodies together (radii shrink needs all of them). `seed` makes the fibre
-/// jitter and sphere thinning reproducible. Throws InputError for unusable input.
+/// jitter and sphere thinning reproducible. `threads` counts the caller, as
+/// SimulationParameters::threads (0: the machine's hardware threads); the result is the same
+/// for any count. Throws InputError for unusable input.
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
-                           const std::vector<MuscleInput>& muscles, uint32_t seed);
+                           const std::vector<MuscleInput>& muscles, uint32_t seed, int threads = 0);
 
 }  // namespace fibremss

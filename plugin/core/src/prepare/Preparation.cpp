@@ -17,6 +17,7 @@
 #include "PreparationInternal.h"
 #include "PreparationReorder.h"
 #include "fibremss/Error.h"
+#include "solver/TaskPool.h"
 
 namespace fibremss {
 namespace {
@@ -31,10 +32,10 @@ constexpr btScalar kMergeFraction = btScalar(0.25);
 /// Surface vertices inside a bone at rest move this share of the spacing beyond its surface.
 constexpr btScalar kSurfaceMarginFraction = btScalar(0.01);
 
-/// Runs task(i) for i in [0, count) on up to hardware_concurrency threads; rethrows the
-/// exception of the lowest failing i.
+/// Runs task(i) for i in [0, count) on up to `threads` threads (TaskPool::resolve: 0 is the
+/// hardware threads); rethrows the exception of the lowest failing i.
 template <typename Task>
-void parallelFor(size_t count, Task task) {
+void parallelFor(size_t count, int threads, Task task) {
   std::vector<std::exception_ptr> errors(count);
   std::atomic<size_t> next{0};
   auto worker = [&] {
@@ -44,9 +45,9 @@ void parallelFor(size_t count, Task task) {
         errors[i] = std::current_exception();
       }
   };
-  const size_t threads = std::min<size_t>(count, std::max(1u, std::thread::hardware_concurrency()));
+  const size_t used = std::min<size_t>(count, TaskPool::resolve(threads));
   std::vector<std::thread> pool;
-  for (size_t t = 1; t < threads; ++t) pool.emplace_back(worker);
+  for (size_t t = 1; t < used; ++t) pool.emplace_back(worker);
   worker();
   for (auto& thread : pool) thread.join();
   for (const auto& error : errors)
@@ -422,7 +423,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
 }  // namespace
 
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
-                           const std::vector<MuscleInput>& muscles, uint32_t seed) {
+                           const std::vector<MuscleInput>& muscles, uint32_t seed, int threads) {
   const auto start = std::chrono::steady_clock::now();
   requirePreparationMemory(bones, muscles);
   PreparedScene scene;
@@ -430,7 +431,7 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   std::vector<BoneShape> shapes(bones.size());
   std::vector<BoneSettings> boneSettings(bones.size());
   std::vector<detail::BoneSphereReport> sphereReports(bones.size());
-  parallelFor(bones.size(), [&](size_t b) {
+  parallelFor(bones.size(), threads, [&](size_t b) {
     checkMesh("bone '" + bones[b].name + "'", "mesh", bones[b].mesh);
     shapes[b].distance = std::make_unique<MeshDistance>(bones[b].mesh);
     pointBounds(bones[b].mesh.vertices, shapes[b].lower, shapes[b].upper);
@@ -446,14 +447,14 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   std::vector<MusclePreparationReport>& muscleReports = scene.report.muscles;
   muscleReports.resize(muscles.size());
   std::vector<std::unique_ptr<MeshDistance>> surfaces(muscles.size());
-  parallelFor(muscles.size(), [&](size_t m) {
+  parallelFor(muscles.size(), threads, [&](size_t m) {
     muscleSettings[m] = sampleMuscle(muscles[m], m, bones.size(), seed);
     surfaces[m] = std::make_unique<MeshDistance>(muscles[m].surface);
   });
-  parallelFor(muscles.size(), [&](size_t m) {
+  parallelFor(muscles.size(), threads, [&](size_t m) {
     separateMuscle(muscles[m], m, shapes, surfaces, muscleSettings[m], muscleReports[m]);
   });
-  parallelFor(muscles.size(), [&](size_t m) {
+  parallelFor(muscles.size(), threads, [&](size_t m) {
     finishMuscle(muscles[m], shapes, bones, muscleWarnings[m], muscleSettings[m], muscleReports[m]);
   });
 
@@ -492,7 +493,7 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
         " bone spheres shrunk around muscle particles inside them");
 
   scene.report.surfaceCoverage.assign(muscles.size(), 0);
-  parallelFor(muscles.size(), [&](size_t m) {
+  parallelFor(muscles.size(), threads, [&](size_t m) {
     scene.report.surfaceCoverage[m] = detail::surfaceCoverage(muscleSettings[m]);
   });
   for (auto& bone : boneSettings)
