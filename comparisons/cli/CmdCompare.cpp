@@ -1,6 +1,8 @@
 // `fibremss compare SCENE`: the same scene through FibreMSS, its self-reference, the
-// btSoftBody baseline and the FEM reference, measured the same way; writes summary.json,
-// report.md and the speed-against-error plot.
+// btSoftBody baseline and Bullet's FEM, measured the same way against the CalculiX reference;
+// writes summary.json, report.md and the speed-against-error plot.
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <iterator>
@@ -9,6 +11,7 @@
 
 #include "Commands.h"
 #include "Interrupt.h"
+#include "ReferenceArgs.h"
 #include "SceneArgs.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Progress.h"
@@ -37,6 +40,40 @@ std::string commandLine() {
     line += (line.empty() ? "" : " ") + arg;
   }
   return line;
+}
+
+/// A table cell: 3 significant digits, "—" for a value that does not apply.
+std::string cell(double value) {
+  if (std::isnan(value)) return "\u2014";
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", value);
+  return text;
+}
+
+void printTable(const Comparison& comparison) {
+  std::printf("%-28s %10s %10s %10s %10s %10s\n", "method", "ms/step", "max pen mm", "volume %",
+              "RMS ref mm", "RMS self mm");
+  for (const RunMetrics& run : comparison.runs) {
+    // "—" is one column wide but three bytes: printf pads by bytes.
+    std::string line = run.method;
+    line.resize(std::max<size_t>(line.size(), 28), ' ');
+    for (double value : {run.msPerStep, run.maxPenetrationMm, run.volumeChangePct,
+                         run.rmsToReferenceMm, run.rmsToSelfReferenceMm}) {
+      const std::string text = cell(value);
+      const size_t width = std::isnan(value) ? 1 : text.size();
+      line.append(width < 10 ? 11 - width : 1, ' ');
+      line += text;
+    }
+    std::printf("%s%s\n", line.c_str(), run.failedStep >= 0 ? "  FAILED" : "");
+  }
+  if (!comparison.reference) {
+    std::printf("no reference (--no-reference): no RMS to it, no ranking\n");
+    return;
+  }
+  for (const std::string& line : gateLines(comparison.reference->gates))
+    std::printf("reference gate: %s\n", line.c_str());
+  if (!comparison.reference->gates.passed())
+    std::printf("the reference fails a gate: no ranking of the methods\n");
 }
 
 void compare(CompareArgs& args) {
@@ -70,13 +107,7 @@ void compare(CompareArgs& args) {
   const nlohmann::json summary = summaryJson(comparison, commandLine());
   const std::vector<std::string> files = writeComparison(summary, out);
 
-  std::printf("%-28s %10s %10s %10s %10s %10s\n", "method", "ms/step", "max pen mm", "volume %",
-              "RMS FEM mm", "RMS self mm");
-  for (const RunMetrics& run : comparison.runs) {
-    std::printf("%-28s %10.3g %10.3g %10.3g %10.3g %10.3g%s\n", run.method.c_str(), run.msPerStep,
-                run.maxPenetrationMm, run.volumeChangePct, run.rmsToFemMm, run.rmsToSelfReferenceMm,
-                run.failedStep >= 0 ? "  FAILED" : "");
-  }
+  printTable(comparison);
   std::printf("wrote");
   for (const std::string& file : files) std::printf(" %s/%s", out.c_str(), file.c_str());
   std::printf("\n");
@@ -91,7 +122,8 @@ void addCompareCommand(CLI::App& app) {
   CLI::App* command = app.add_subcommand(
       "compare",
       "Run a scene through FibreMSS, its self-reference (dt/8, 8x iterations), the btSoftBody "
-      "baseline and the Bullet FEM reference, measured the same way; write summary.json, "
+      "baseline and Bullet's FEM, measured the same way against the CalculiX static reference "
+      "(cached, with its gates); write summary.json, "
       "report.md and speed_vs_error.png/.svg (plus penetration_vs_step for sweeps) to --out.");
   addSceneArgs(*command, args->scene);
   command
@@ -101,6 +133,13 @@ void addCompareCommand(CLI::App& app) {
                    "(one variant per integrator); default all four")
       ->delimiter(',');
   command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
+  command->add_flag("!--no-fronts", args->options.fronts,
+                    "One run per method instead of sweeping each over its cost knob "
+                    "(fibremss iterations x0.5-x4 and resolution x0.5/x2, btsoftbody iterations "
+                    "and fem substeps x0.5-x2)");
+  command->add_flag("!--no-reference", args->options.withReference,
+                    "Skip the CalculiX reference (no RMS to it, no gates, no ranking)");
+  addReferenceArgs(*command, args->options.reference);
   command
       ->add_option("--fem-cells", args->options.fem.mesher.targetCells,
                    "FEM: voxels per muscle (each 6 tetrahedra)")

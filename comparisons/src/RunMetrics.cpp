@@ -18,6 +18,8 @@ double numberOr(const nlohmann::json& object, const char* key, double fallback) 
 }  // namespace
 
 nlohmann::json toJson(const RunMetrics& m) {
+  nlohmann::json perPose = nlohmann::json::array();
+  for (double rms : m.rmsToReferencePerPoseMm) perPose.push_back(number(rms));
   return {
       {"scene", m.scene},
       {"method", m.method},
@@ -43,9 +45,13 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"mean_penetration_mm", number(m.meanPenetrationMm)},
       {"volume_change_pct", number(m.volumeChangePct)},
       {"spring_deviation_ratio", number(m.springDeviationRatio)},
-      {"rms_to_fem_mm", number(m.rmsToFemMm)},
+      {"rms_to_reference_mm", number(m.rmsToReferenceMm)},
+      {"shape_rms_to_reference_mm", number(m.shapeRmsToReferenceMm)},
+      {"worst_muscle", m.worstMuscle},
+      {"worst_muscle_rms_mm", number(m.worstMuscleRmsMm)},
+      {"rms_to_reference_per_pose_mm", perPose},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
-      {"rms_to_fem_poses", m.rmsToFemPoses},
+      {"rms_to_reference_poses", m.rmsToReferencePoses},
       {"rms_to_self_reference_poses", m.rmsToSelfReferencePoses},
       {"nan", m.nan},
       {"exploded", m.exploded},
@@ -83,9 +89,14 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.meanPenetrationMm = numberOr(o, "mean_penetration_mm", m.meanPenetrationMm);
   m.volumeChangePct = numberOr(o, "volume_change_pct", m.volumeChangePct);
   m.springDeviationRatio = numberOr(o, "spring_deviation_ratio", m.springDeviationRatio);
-  m.rmsToFemMm = numberOr(o, "rms_to_fem_mm", m.rmsToFemMm);
+  m.rmsToReferenceMm = numberOr(o, "rms_to_reference_mm", m.rmsToReferenceMm);
+  m.shapeRmsToReferenceMm = numberOr(o, "shape_rms_to_reference_mm", m.shapeRmsToReferenceMm);
+  m.worstMuscle = o.value("worst_muscle", m.worstMuscle);
+  m.worstMuscleRmsMm = numberOr(o, "worst_muscle_rms_mm", m.worstMuscleRmsMm);
+  if (auto it = o.find("rms_to_reference_per_pose_mm"); it != o.end() && it->is_array())
+    for (const auto& v : *it) m.rmsToReferencePerPoseMm.push_back(v.is_number() ? v.get<double>() : kNone);
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
-  m.rmsToFemPoses = o.value("rms_to_fem_poses", m.rmsToFemPoses);
+  m.rmsToReferencePoses = o.value("rms_to_reference_poses", m.rmsToReferencePoses);
   m.rmsToSelfReferencePoses = o.value("rms_to_self_reference_poses", m.rmsToSelfReferencePoses);
   m.nan = o.value("nan", m.nan);
   m.exploded = o.value("exploded", m.exploded);

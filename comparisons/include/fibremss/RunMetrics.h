@@ -44,9 +44,15 @@ struct RunMetrics {
   double meanPenetrationMm = kNone;     ///< mean over penetrating vertices
   double volumeChangePct = kNone;       ///< final muscle volume against rest
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
-  double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
+  double rmsToReferenceMm = kNone;  ///< surface vertex RMS against the CalculiX reference [mm]
+  /// Symmetric nearest-surface RMS against the reference [mm]: every vertex's distance to the
+  /// other surface, both ways (sliding along the surface is not counted), over all poses.
+  double shapeRmsToReferenceMm = kNone;
+  std::string worstMuscle;              ///< the muscle with the largest vertex RMS to the reference
+  double worstMuscleRmsMm = kNone;      ///< its vertex RMS over all poses [mm]
+  std::vector<double> rmsToReferencePerPoseMm;  ///< vertex RMS per pose both reached [mm]
   double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
-  int rmsToFemPoses = 0;                ///< poses rmsToFemMm covers (both runs reached them intact)
+  int rmsToReferencePoses = 0;  ///< poses rmsToReferenceMm covers (both reached them intact)
   int rmsToSelfReferencePoses = 0;      ///< poses rmsToSelfReferenceMm covers
   bool nan = false;                     ///< a NaN or inf appeared
   bool exploded = false;                ///< stability criteria violated
