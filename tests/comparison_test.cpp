@@ -182,7 +182,7 @@ class EveryMethod : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(EveryMethod, GivesFiniteMetrics) {
   const LoadedScene scene = loadScene(GetParam());
-  CompareOptions options;  // all four methods
+  CompareOptions options;         // all four methods
   options.withReference = false;  // the reference has its own tests (calculix_test)
   options.fronts = false;         // one run per method
   const Comparison comparison = runComparison(GetParam(), {}, options);
@@ -221,8 +221,10 @@ INSTANTIATE_TEST_SUITE_P(BuiltInScenes, EveryMethod, ::testing::Values("fusiform
 
 TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   const fs::path out = scratch("cli");
-  const testing::ProcessResult result =
-      runCli("compare fusiform --set resolution=12 --methods fibremss,fem --no-fronts --no-reference --out " + out.string());
+  const testing::ProcessResult result = runCli(
+      "compare fusiform --set resolution=12 --methods fibremss,fem --no-fronts --no-reference "
+      "--out " +
+      out.string());
   ASSERT_EQ(result.exitCode, 0) << result.output;
   for (const char* file :
        {"summary.json", "report.md", "speed_vs_error.png", "speed_vs_error.svg"}) {
@@ -262,8 +264,10 @@ TEST(CompareCommand, HipSweepWritesThePenetrationAgainstStepPlot) {
   // hip-extension is a sweep: its step_deg (here overridden to 20) reaches summary.json and a
   // second plot, penetration against step_deg, is written beside speed against error.
   const fs::path out = scratch("hip_sweep");
-  const testing::ProcessResult result =
-      runCli("compare hip-extension --set step_deg=20 --methods fibremss --no-fronts --no-reference --out " + out.string());
+  const testing::ProcessResult result = runCli(
+      "compare hip-extension --set step_deg=20 --methods fibremss --no-fronts --no-reference "
+      "--out " +
+      out.string());
   ASSERT_EQ(result.exitCode, 0) << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
   EXPECT_EQ(summary["runs"][0]["step_deg"], 20.0);
@@ -278,7 +282,8 @@ TEST(CompareCommand, StatesTheRatioToBtSoftBodyWithTheThreadCounts) {
   // summary.json state the ratio of the two runs' ms per step with both thread counts.
   const fs::path out = scratch("softbody_ratio");
   const testing::ProcessResult result = runCli(
-      "compare fusiform --set resolution=8 --threads 1 --methods fibremss,btsoftbody --no-fronts --no-reference --out " +
+      "compare fusiform --set resolution=8 --threads 1 --methods fibremss,btsoftbody --no-fronts "
+      "--no-reference --out " +
       out.string());
   ASSERT_EQ(result.exitCode, 0) << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));

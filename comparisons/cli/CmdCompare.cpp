@@ -11,8 +11,10 @@
 
 #include "Commands.h"
 #include "Interrupt.h"
+#include "ProgressLog.h"
 #include "ReferenceArgs.h"
 #include "SceneArgs.h"
+#include "fibremss/Analytic.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Progress.h"
 #include "fibremss/Stability.h"
@@ -66,8 +68,10 @@ void printTable(const Comparison& comparison) {
     }
     std::printf("%s%s\n", line.c_str(), run.failedStep >= 0 ? "  FAILED" : "");
   }
-  if (!comparison.reference) {
-    std::printf("no reference (--no-reference): no RMS to it, no ranking\n");
+  if (!comparison.reference || comparison.reference->missing) {
+    std::printf("%s: no RMS to it, no gates, no ranking\n",
+                comparison.reference ? "no reference (not in the cache; --reference-cached-only)"
+                                     : "no reference (--no-reference)");
     return;
   }
   for (const std::string& line : gateLines(comparison.reference->gates))
@@ -83,31 +87,29 @@ void compare(CompareArgs& args) {
   });
   for (const std::string& method : args.options.methods) parseMethod(method);  // fail early
 
-  std::unique_ptr<ProgressBar> bar;
-  std::string current;
-  args.options.log = [&](const std::string& line) {
-    if (bar) bar->finish();
-    bar.reset();
-    std::fprintf(stderr, "%s\n", line.c_str());
-  };
+  ProgressLog progress;
+  args.options.log = [&](const std::string& line) { progress.line(line); };
   args.options.progress = [&](const MethodProgress& p) {
-    if (!bar || current != p.method) {
-      if (bar) bar->finish();
-      bar = std::make_unique<ProgressBar>(p.method, p.steps);
-      current = p.method;
-    }
-    bar->update(p.step, p.iterations, p.seconds);
+    progress.update(p.method, p.step, p.steps, p.iterations, p.seconds);
   };
   InterruptGuard interrupt;
   args.options.cancel = &interruptRequested;
   const Comparison comparison = runComparison(args.scene.scene, args.scene.overrides, args.options);
-  if (bar) bar->finish();
+  progress.finish();
 
   const std::string out = args.out.empty() ? "compare-" + comparison.scene : args.out;
   const nlohmann::json summary = summaryJson(comparison, commandLine());
   const std::vector<std::string> files = writeComparison(summary, out);
 
   printTable(comparison);
+  for (const RunMetrics& run : comparison.runs)
+    if (std::isfinite(run.worstPoseRmsToEquilibriumMm) && run.method != "equilibrium")
+      std::printf("%-28s RMS to equilibrium %.3g mm, worst pose %.3g mm, %.3g ms per pose\n",
+                  run.method.c_str(), run.rmsToEquilibriumMm, run.worstPoseRmsToEquilibriumMm,
+                  run.msPerStep);
+  for (const RunMetrics& run : comparison.runs)
+    if (!run.analytic.type.empty())
+      std::printf("%-28s %s\n", run.method.c_str(), analyticLine(run.analytic).c_str());
   std::printf("wrote");
   for (const std::string& file : files) std::printf(" %s/%s", out.c_str(), file.c_str());
   std::printf("\n");
@@ -127,10 +129,13 @@ void addCompareCommand(CLI::App& app) {
       "report.md and speed_vs_error.png/.svg (plus penetration_vs_step for sweeps) to --out.");
   addSceneArgs(*command, args->scene);
   command
-      ->add_option("--methods", args->methods,
-                   "Comma-separated methods: fibremss, self-reference, btsoftbody, fem, "
-                   "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
-                   "(one variant per integrator); default all four")
+      ->add_option(
+          "--methods", args->methods,
+          "Comma-separated methods: fibremss, self-reference, equilibrium (run to convergence), "
+          "btsoftbody, fem, "
+          "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
+          "(one variant per integrator), btsoftbody:iterations=N, fem:substeps=N (N or xF: F "
+          "times the default); default fibremss, self-reference, btsoftbody, fem")
       ->delimiter(',');
   command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
   command->add_flag("!--no-fronts", args->options.fronts,

@@ -32,6 +32,9 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
                   "bounds the tetrahedron volume by 1/8)")
       ->capture_default_str()
       ->check(CLI::Range(0, 3));
+  command.add_flag("--reference-cached-only", options.cachedOnly,
+                   "Use the reference (and each gate's solve) only if it is in the cache; what is "
+                   "not there is reported missing, not computed");
   command.add_flag("!--no-gates", options.gates,
                    "Skip the reference's gate solves (one level finer, attachment distance "
                    "x0.5 and x1.5); the comparison then reports no ranking");

@@ -14,6 +14,7 @@
 #include <tuple>
 
 #include "ReportScaling.h"
+#include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
 #include "fibremss/Stability.h"
@@ -160,7 +161,9 @@ std::pair<std::string, std::string> frontOf(const std::string& method) {
 
 std::string threadsText(const nlohmann::json& run) {
   const int threads = run.value("threads", 0);
-  return threads == 1 ? "1 thread" : threads > 1 ? std::to_string(threads) + " threads" : "threads not recorded";
+  return threads == 1  ? "1 thread"
+         : threads > 1 ? std::to_string(threads) + " threads"
+                       : "threads not recorded";
 }
 
 /// Lines of the plot: title → points (ms per pose, error, label), sorted by ms.
@@ -180,7 +183,8 @@ std::map<std::string, std::vector<std::tuple<double, double, std::string>>> fron
     std::set<std::string> joins = knob.empty() ? knobs[family] : std::set<std::string>{knob};
     if (joins.empty()) joins.insert("");
     for (const std::string& j : joins) {
-      const std::string title = family + (j.empty() ? "" : " (" + j + ")") + ", " + threadsText(run);
+      const std::string title =
+          family + (j.empty() ? "" : " (" + j + ")") + ", " + threadsText(run);
       lines[title].emplace_back(ms, error, label);
     }
   }
@@ -197,31 +201,36 @@ std::string speedVsErrorScript(const nlohmann::json& summary, const std::string&
   int index = 0;
   for (const auto& [title, points] : lines) {
     data << "$line" << index << " << EOD\n";
-    for (const auto& [ms, error, label] : points) data << ms << " " << error << " " << quoted(label) << "\n";
+    for (const auto& [ms, error, label] : points)
+      data << ms << " " << error << " " << quoted(label) << "\n";
     data << "EOD\n";
-    plot << (index ? ", " : "plot ") << "$line" << index << " using 1:2 with linespoints pt 7 ps 1.2 lw 2 title "
+    plot << (index ? ", " : "plot ") << "$line" << index
+         << " using 1:2 with linespoints pt 7 ps 1.2 lw 2 lc " << index + 1 << " title "
          << quoted(title) << ", $line" << index
          << " using 1:2:3 with labels offset char 0,1 font ',8' notitle";
     ++index;
   }
-  const nlohmann::json gates = summary.value("reference", nlohmann::json::object()).value("gates", nlohmann::json::object());
+  const nlohmann::json gates =
+      summary.value("reference", nlohmann::json::object()).value("gates", nlohmann::json::object());
   const double band = number(gates, "refinement_mm");
-  std::string title = reference ? "Speed against error: one line per method (its cost knob swept)"
-                                : "Speed against error to the self-reference (no CalculiX reference)";
+  std::string title = reference
+                          ? "Speed against error: one line per method (its cost knob swept)"
+                          : "Speed against error to the self-reference (no CalculiX reference)";
   body << "set title " << quoted(title) << "\n"
        << "set xlabel 'ms per pose (median wall time, log)'\n"
-       << "set ylabel " << quoted(reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
-                                           : "RMS surface distance to the self-reference [mm] (log)")
+       << "set ylabel "
+       << quoted(reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
+                           : "RMS surface distance to the self-reference [mm] (log)")
        << "\nset logscale xy\nset grid\nset key outside right top font ',9'\n";
-  if (reference && !gates.value("passed", false)) {
+  if (reference && summary.contains("reference") && !gates.value("passed", false)) {
     body << "set label 4 'the reference FAILS a gate: no ranking (report.md, Reference)' at graph "
             "0.5, graph 0.96 center font ',10' tc rgb '#b00000'\n";
   }
   if (reference && band > 0) {
     body << "set object 1 rect from graph 0, graph 0 to graph 1, first " << band
          << " fc rgb '#dddddd' fs solid 0.6 noborder behind\n"
-         << "set label 3 " << quoted("reference's mesh-refinement spread") << " at graph 0.02, first "
-         << band << " offset 0,0.6 font ',8' tc rgb '#606060'\n";
+         << "set label 3 " << quoted("reference's mesh-refinement spread")
+         << " at graph 0.02, first " << band << " offset 0,0.6 font ',8' tc rgb '#606060'\n";
   }
   if (index == 0) {
     body << "set xrange [0.1:1000]\nset yrange [0.01:100]\n"
@@ -317,6 +326,10 @@ Methods:
   **fibremss:k=v**: a variant with those scene overrides.
 - **self-reference**: FibreMSS with dt/8 (and min dt/8) and 8× the iterations, the same
   simulated time per step.
+- **equilibrium**: FibreMSS run at every pose until the mean displacement per iteration is
+  below 1e-4 mm (at most 20 000 iterations; the bones move over as many iterations as in the
+  scene): the model's own converged state, the floor of its error. `rms_to_equilibrium_mm` of
+  every run is measured against it.
 - **btsoftbody**: `btSoftBody` in a `btSoftRigidDynamicsWorld`: the same particles as nodes
   (same masses), the springs as links (stiffness mapped to `m_kLST` per link from k = κ/L0,
   the substep and the iteration count; solved softest first), fixed particles pinned (mass 0)
@@ -435,12 +448,24 @@ std::string referenceSection(const nlohmann::json& summary) {
     return out.str();
   }
   const nlohmann::json& reference = summary["reference"];
+  if (reference.value("missing", false)) {
+    out << "**No reference**: it was to be taken from the cache only (`--reference-cached-only`) "
+           "and the cache has none for this scene and these settings (key "
+        << reference.value("key", std::string())
+        << "). `fibremss reference` with this comparison's scene and `--set` options computes "
+           "it (with its gates) into the cache, where the next comparison finds it. No RMS to "
+           "it, no gates, no ranking.\n";
+    return out.str();
+  }
   out << reference.value("description", std::string()) << ".\n\n";
   int solved = 0, poses = 0;
   for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
     ++poses;
-    if (pose.value("solved", false)) ++solved;
-    else out << "- pose " << poses - 1 << " not solved: " << pose.value("failure", std::string()) << "\n";
+    if (pose.value("solved", false))
+      ++solved;
+    else
+      out << "- pose " << poses - 1 << " not solved: " << pose.value("failure", std::string())
+          << "\n";
   }
   out << "Poses solved: " << solved << "/" << poses << " ("
       << (reference.value("from_cache", false) ? "from the cache" : "solved by this run") << ", "
@@ -463,6 +488,45 @@ std::string referenceSection(const nlohmann::json& summary) {
     out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " mm at "
         << cell(number(*run, "ms_per_step")) << " ms per pose (" << threadsText(*run) << ")\n";
   return out.str();
+}
+
+/// The time-to-accuracy figure: every run measured against an "equilibrium" run, its worst pose's
+/// RMS to that equilibrium and ms per pose, and the fastest run whose every pose is within
+/// kEquilibriumAccuracyMm. Empty without an equilibrium run.
+std::string equilibriumReport(const nlohmann::json& runs) {
+  std::string rows, fastest;
+  double fastestMs = INFINITY;
+  for (const auto& run : runs) {
+    const double worst = number(run, "worst_pose_rms_to_equilibrium_mm");
+    const std::string method = text(run, "method");
+    if (!std::isfinite(worst) || method == "equilibrium") continue;
+    const double ms = number(run, "ms_per_step");
+    rows += "| " + method + " | " + cell(number(run, "threads")) + " | " +
+            field(run, "iterations") + " | " + cell(ms) + " | " +
+            field(run, "rms_to_equilibrium_mm") + " | " + cell(worst) + " |\n";
+    if (worst <= kEquilibriumAccuracyMm && ms < fastestMs) fastestMs = ms, fastest = method;
+  }
+  if (rows.empty()) return "";
+  std::string unconverged;
+  for (const auto& run : runs)
+    if (text(run, "method") == "equilibrium" && number(run, "unconverged_poses") > 0)
+      unconverged = " **" + cell(number(run, "unconverged_poses")) +
+                    " pose(s) of the equilibrium run reached its iteration cap unconverged**: "
+                    "distances to them are distances to an unconverged state.";
+  char bound[32];
+  std::snprintf(bound, sizeof bound, "%.2g mm", kEquilibriumAccuracyMm);
+  return "\n## Distance to equilibrium\n\nThe `equilibrium` run is FibreMSS at every pose until "
+         "the mean displacement per iteration falls below 1e-4 mm (from the previous pose's "
+         "equilibrium)." +
+         unconverged +
+         " Per run: the RMS of the surface vertices to it over all poses, and the worst pose's "
+         "RMS.\n\n| method | threads | iterations | ms/pose | RMS to equilibrium [mm] | worst "
+         "pose [mm] |\n|---|---|---|---|---|---|\n" +
+         rows + "\nTime to accuracy (every pose within " + bound + " RMS of its equilibrium): " +
+         (fastest.empty() ? std::string("no run reached it")
+                          : "**" + cell(fastestMs) + " ms per pose** (" + fastest + ")") +
+         ". Sweep the iterations (`--methods equilibrium,fibremss:iterations=20,"
+         "fibremss:iterations=40,...`) for the front.\n";
 }
 
 /// summary.json's "btsoftbody_ratio": every softBodyRatios entry.
@@ -536,10 +600,12 @@ nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
                            {"btsoftbody_ratio", softBodyRatioJson(runs)},
                            {"runs", runs}};
   // One reference's gates hold for its own runs only: kept when a single summary has one.
-  const auto withReference = std::count_if(summaries.begin(), summaries.end(),
-                                           [](const nlohmann::json& s) { return s.contains("reference"); });
+  const auto withReference =
+      std::count_if(summaries.begin(), summaries.end(),
+                    [](const nlohmann::json& s) { return s.contains("reference"); });
   for (const auto& summary : summaries)
-    if (withReference == 1 && summary.contains("reference")) merged["reference"] = summary["reference"];
+    if (withReference == 1 && summary.contains("reference"))
+      merged["reference"] = summary["reference"];
   return merged;
 }
 
@@ -612,7 +678,7 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
   out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
          "iterations: Newton iterations).\n"
-      << softBodyRatioReport(runs);
+      << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
   const std::string coverageNote = referenceCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {
@@ -620,7 +686,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
       if (plot.rfind("speed_vs_error", 0) == 0) out << coverageNote;
     }
   }
-  out << referenceSection(summary) << table1(runs) << integratorsReport(runs) << scalingReport(runs) << "\n"
+  out << referenceSection(summary) << table1(runs) << integratorsReport(runs) << scalingReport(runs)
+      << "\n"
       << describeMethods() << runSettings(runs);
   return out.str();
 }

@@ -9,6 +9,7 @@
 #include <map>
 #include <tuple>
 
+#include "fibremss/Analytic.h"
 #include "fibremss/Compare.h"
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
@@ -152,6 +153,12 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
     metrics.meanPenetrationMm = penetration.meanMm;
     if (!metrics.poseSurfaces.empty())
       metrics.volumeChangePct = volumeChangePct(prepared, metrics.poseSurfaces.back());
+    if (!prepared.muscles.empty() && !metrics.poseSurfaces.empty()) {
+      const std::span<const btVector3> last = metrics.poseSurfaces.back();
+      const TriangleMesh& rest = prepared.muscles[0]->restSurface;
+      metrics.analytic = measureAnalytic(scene.analytic, rest,
+                                         last.first(std::min(rest.vertices.size(), last.size())));
+    }
     metrics.springDeviationRatio = sim.springDeviation();
   }
   metrics.peakMemoryMb = peakMemoryMb();
@@ -304,24 +311,40 @@ int sharedPoses(const RunMetrics& a, const RunMetrics& b) {
   return static_cast<int>(std::min(a.poseSurfaces.size(), b.poseSurfaces.size()));
 }
 
-double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b) {
+double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose) {
   const size_t poses = static_cast<size_t>(sharedPoses(a, b));
+  if (worstPose) *worstPose = RunMetrics::kNone;
   if (poses == 0) return RunMetrics::kNone;
-  double sum = 0;
+  double sum = 0, worst = 0;
   for (size_t p = 0; p < poses; ++p) {
     if (a.poseSurfaces[p].size() != b.poseSurfaces[p].size()) return RunMetrics::kNone;
     const double rms = rmsDistanceMm(a.poseSurfaces[p], b.poseSurfaces[p]);
     sum += rms * rms;
+    worst = std::max(worst, rms);
   }
+  if (worstPose) *worstPose = worst;
   return std::sqrt(sum / static_cast<double>(poses));
+}
+
+SimulationParameters equilibriumSettings(const SimulationParameters& simulation) {
+  SimulationParameters converged = simulation;
+  const int motion = std::max(1, static_cast<int>(std::lround(simulation.motionFraction *
+                                                              std::max(1, simulation.iterations))));
+  converged.stopRule = StopRule::Converged;
+  converged.epsilon = static_cast<btScalar>(kEquilibriumEpsilon);
+  converged.iterations = kEquilibriumIterations;
+  converged.motionFraction = static_cast<btScalar>(double(motion) / kEquilibriumIterations);
+  return converged;
 }
 
 void fillRms(std::vector<RunMetrics>& runs) {
   const RunMetrics* reference = nullptr;
   const RunMetrics* self = nullptr;
+  const RunMetrics* equilibrium = nullptr;
   for (const RunMetrics& run : runs) {
     if (run.method == "calculix") reference = &run;
     if (run.method == "self-reference") self = &run;
+    if (run.method == "equilibrium") equilibrium = &run;
   }
   for (RunMetrics& run : runs) {
     if (reference) {
@@ -332,6 +355,11 @@ void fillRms(std::vector<RunMetrics>& runs) {
       run.rmsToSelfReferenceMm = rmsBetweenRuns(run, *self);
       run.rmsToSelfReferencePoses =
           std::isnan(run.rmsToSelfReferenceMm) ? 0 : sharedPoses(run, *self);
+    }
+    if (equilibrium) {
+      run.rmsToEquilibriumMm = rmsBetweenRuns(run, *equilibrium, &run.worstPoseRmsToEquilibriumMm);
+      run.rmsToEquilibriumPoses =
+          std::isnan(run.rmsToEquilibriumMm) ? 0 : sharedPoses(run, *equilibrium);
     }
   }
 }
@@ -380,7 +408,8 @@ void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& pre
     std::vector<double> muscleSquares(prepared.muscles.size(), 0);
     for (size_t p = 0; p < poses; ++p) {
       if (run.poseSurfaces[p].size() != reference.poseSurfaces[p].size()) return;
-      run.rmsToReferencePerPoseMm.push_back(rmsDistanceMm(run.poseSurfaces[p], reference.poseSurfaces[p]));
+      run.rmsToReferencePerPoseMm.push_back(
+          rmsDistanceMm(run.poseSurfaces[p], reference.poseSurfaces[p]));
       size_t offset = 0;
       for (size_t m = 0; m < prepared.muscles.size(); ++m) {
         const TriangleMesh& rest = prepared.muscles[m]->restSurface;
@@ -395,7 +424,8 @@ void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& pre
     run.shapeRmsToReferenceMm = std::sqrt(shapeSquares / static_cast<double>(shapePoints));
     for (size_t m = 0; m < prepared.muscles.size(); ++m) {
       const size_t count = prepared.muscles[m]->restSurface.vertices.size();
-      const double rms = count ? std::sqrt(muscleSquares[m] / static_cast<double>(count * poses)) : 0;
+      const double rms =
+          count ? std::sqrt(muscleSquares[m] / static_cast<double>(count * poses)) : 0;
       if (rms > worst) {
         worst = rms;
         run.worstMuscle = prepared.muscles[m]->name;
@@ -410,16 +440,17 @@ MethodSpec parseMethod(const std::string& name) {
   spec.name = name;
   const size_t colon = name.find(':');
   spec.family = name.substr(0, colon);
-  if (spec.family != "fibremss" && spec.family != "self-reference" && spec.family != "btsoftbody" &&
-      spec.family != "fem") {
+  if (spec.family != "fibremss" && spec.family != "self-reference" &&
+      spec.family != "equilibrium" && spec.family != "btsoftbody" && spec.family != "fem") {
     throw InputError("--methods", name,
-                     "unknown method; expected fibremss, self-reference, btsoftbody, fem, "
-                     "fibremss:<key>=<value>[+<key>=<value>...], btsoftbody:iterations|substeps=N "
-                     "or fem:substeps|cells=N (N or xF, F times the default)");
+                     "unknown method; expected fibremss, self-reference, equilibrium, btsoftbody, "
+                     "fem, fibremss:<key>=<value>[+<key>=<value>...], "
+                     "btsoftbody:iterations|substeps=N or fem:substeps|cells=N (N or xF, F times "
+                     "the default)");
   }
   if (colon == std::string::npos) return spec;
-  if (spec.family == "self-reference") {
-    throw InputError("--methods", name, "self-reference takes no variants");
+  if (spec.family == "self-reference" || spec.family == "equilibrium") {
+    throw InputError("--methods", name, spec.family + " takes no variants");
   }
   for (const std::string& part : split(name.substr(colon + 1), '+')) {
     const size_t equals = part.find('=');
@@ -455,11 +486,12 @@ std::vector<std::string> frontMethods(const std::vector<std::string>& methods) {
   std::vector<std::string> expanded;
   for (const std::string& method : methods) {
     if (method == "fibremss") {
-      expanded.insert(expanded.end(), {"fibremss:iterations=x0.5", "fibremss", "fibremss:iterations=x2",
-                                       "fibremss:iterations=x4", "fibremss:resolution=x0.5",
-                                       "fibremss:resolution=x2"});
+      expanded.insert(expanded.end(), {"fibremss:iterations=x0.5", "fibremss",
+                                       "fibremss:iterations=x2", "fibremss:iterations=x4",
+                                       "fibremss:resolution=x0.5", "fibremss:resolution=x2"});
     } else if (method == "btsoftbody") {
-      expanded.insert(expanded.end(), {"btsoftbody:iterations=x0.5", "btsoftbody", "btsoftbody:iterations=x2"});
+      expanded.insert(expanded.end(),
+                      {"btsoftbody:iterations=x0.5", "btsoftbody", "btsoftbody:iterations=x2"});
     } else if (method == "fem") {
       expanded.insert(expanded.end(), {"fem:substeps=x0.5", "fem", "fem:substeps=x2"});
     } else {
@@ -487,12 +519,11 @@ MethodSpec resolvedSpec(const MethodSpec& spec, const LoadedScene& scene,
       if (spec.family == "fibremss" && key == "resolution" && !scene.muscles.empty())
         base = scene.muscles.front().parameters.resolution;
       if (spec.family == "btsoftbody")
-        base = key == "iterations" ? (options.softBody.positionIterations > 0
-                                          ? options.softBody.positionIterations
-                                          : iterationsFor(prepared))
-                                   : (options.softBody.substepsPerPose > 0
-                                          ? options.softBody.substepsPerPose
-                                          : substepsFor(prepared));
+        base = key == "iterations"
+                   ? (options.softBody.positionIterations > 0 ? options.softBody.positionIterations
+                                                              : iterationsFor(prepared))
+                   : (options.softBody.substepsPerPose > 0 ? options.softBody.substepsPerPose
+                                                           : substepsFor(prepared));
       if (spec.family == "fem")
         base = key == "substeps" ? options.fem.substepsPerPose : options.fem.mesher.targetCells;
       if (base == 0) {
@@ -551,6 +582,21 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
     reference.simulation.minTimeStep /= static_cast<btScalar>(f);
     reference.simulation.iterations *= f;
     return runFibreMSS(reference, prepared, fibreOptions);
+  } else if (spec.family == "equilibrium") {
+    LoadedScene converged = scene;
+    converged.simulation = equilibriumSettings(scene.simulation);
+    FibreRunOptions equilibriumOptions = fibreOptions;
+    int unconverged = 0;
+    equilibriumOptions.progress = [&](const RunProgress& p) {
+      unconverged += p.lastStep->iterations >= kEquilibriumIterations ? 1 : 0;
+      fibreOptions.progress(p);
+    };
+    RunMetrics metrics = runFibreMSS(converged, prepared, equilibriumOptions);
+    metrics.unconvergedPoses = unconverged;
+    if (unconverged > 0 && options.log)
+      options.log("equilibrium: " + std::to_string(unconverged) +
+                  " pose(s) reached the iteration cap before converging");
+    return metrics;
   } else if (spec.family == "btsoftbody") {
     SoftBodyDefinition definition = options.softBody;
     definition.poseDuration = static_cast<btScalar>(duration);
@@ -595,7 +641,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       };
     }
     comparison.reference = computeReference(scene, prepared, referenceOptions);
-    runs.push_back(comparison.reference->metrics);
+    if (!comparison.reference->missing) runs.push_back(comparison.reference->metrics);
   }
   for (const MethodSpec& given : specs) {
     if (options.cancel && options.cancel->load()) break;
@@ -607,7 +653,8 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   }
   fillRms(runs);
   fillReferenceShapes(runs, prepared);
-  if (comparison.reference) comparison.reference->gates.spreadMm = methodSpreadMm(runs);
+  if (comparison.reference && !comparison.reference->missing)
+    comparison.reference->gates.spreadMm = methodSpreadMm(runs);
   return comparison;
 }
 

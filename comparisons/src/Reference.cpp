@@ -3,24 +3,36 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <cstdio>
+#include <map>
 #include <sstream>
 
+#include "fibremss/Analytic.h"
 #include "fibremss/Compare.h"
 #include "fibremss/Measures.h"
 
 namespace fibremss {
 namespace {
 
-/// One solve through the cache, with a line of news saying which.
-CalculixSolution solveVariant(const LoadedScene& scene, const PreparedScene& prepared,
-                              const CalculixDefinition& definition, const ReferenceOptions& options,
-                              const std::string& what, bool* fromCache = nullptr) {
+/// One solve through the cache, with a line of news saying which; false when options.cachedOnly
+/// and it is not in the cache.
+bool solveVariant(const LoadedScene& scene, const PreparedScene& prepared,
+                  const CalculixDefinition& definition, const ReferenceOptions& options,
+                  const std::string& what, CalculixSolution& solution, bool* fromCache = nullptr) {
   bool cached = false;
-  if (options.log) options.log("reference (" + what + "): " + referenceCacheKey(scene, prepared, definition));
-  CalculixSolution solution = cachedCalculixReference(scene, prepared, definition, options.cacheDir,
-                                                      options.progress, options.cancel, &cached);
+  const std::string key = referenceCacheKey(scene, prepared, definition);
+  if (options.cachedOnly) {
+    cached = loadSolution(options.cacheDir + "/" + key + "/surfaces.bin", solution);
+    if (!cached) {
+      if (options.log)
+        options.log("reference (" + what + "): " + key + " not in the cache, not computed");
+      return false;
+    }
+  } else {
+    if (options.log) options.log("reference (" + what + "): " + key);
+    solution = cachedCalculixReference(scene, prepared, definition, options.cacheDir,
+                                       options.progress, options.cancel, &cached);
+  }
   if (options.log) {
     std::ostringstream line;
     line << "reference (" << what << "): " << (cached ? "from the cache" : "solved") << ", "
@@ -29,7 +41,7 @@ CalculixSolution solveVariant(const LoadedScene& scene, const PreparedScene& pre
     options.log(line.str());
   }
   if (fromCache) *fromCache = cached;
-  return solution;
+  return true;
 }
 
 /// "pose k: reason" for every pose (and the return step) that did not solve.
@@ -47,14 +59,16 @@ std::string failures(const CalculixSolution& solution, const std::string& what) 
 std::vector<btVector3> restSurfaces(const PreparedScene& prepared) {
   std::vector<btVector3> rest;
   for (const auto& muscle : prepared.muscles)
-    rest.insert(rest.end(), muscle->restSurface.vertices.begin(), muscle->restSurface.vertices.end());
+    rest.insert(rest.end(), muscle->restSurface.vertices.begin(),
+                muscle->restSurface.vertices.end());
   return rest;
 }
 
 /// The reference as a run: its solved poses' surfaces, penetration into the bones' true
 /// meshes (it has no contact), volume change at the last solved pose.
 RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepared,
-                            const CalculixSolution& solution, const CalculixDefinition& definition) {
+                            const CalculixSolution& solution,
+                            const CalculixDefinition& definition) {
   RunMetrics metrics;
   metrics.scene = scene.name;
   metrics.method = "calculix";
@@ -77,15 +91,55 @@ RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepa
     std::vector<btTransform> transforms;
     for (size_t b = 0; b < bones.size(); ++b) transforms.push_back(scene.bonePose(b, p));
     metrics.poseSurfaces.push_back(solution.poseSurfaces[static_cast<size_t>(p)]);
-    penetration = combine(penetration, measurePenetration(metrics.poseSurfaces.back(), pointers, transforms));
+    penetration =
+        combine(penetration, measurePenetration(metrics.poseSurfaces.back(), pointers, transforms));
   }
   if (metrics.steps > 0) {
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
     metrics.volumeChangePct = volumeChangePct(prepared, metrics.poseSurfaces.back());
+    if (!prepared.muscles.empty()) {
+      const std::span<const btVector3> last = metrics.poseSurfaces.back();
+      const TriangleMesh& rest = prepared.muscles[0]->restSurface;
+      metrics.analytic = measureAnalytic(scene.analytic, rest,
+                                         last.first(std::min(rest.vertices.size(), last.size())));
+    }
   }
   if (metrics.steps < metrics.poses) metrics.failedStep = metrics.steps;
   return metrics;
+}
+
+/// The gate solves (one level finer, attachment distance x0.5 and x1.5) against `base`.
+void solveGates(const LoadedScene& scene, const PreparedScene& prepared,
+                const ReferenceOptions& options, const CalculixSolution& base,
+                ReferenceGates& gates) {
+  CalculixDefinition finer = options.definition, low = options.definition,
+                     high = options.definition;
+  // One level finer: C3D4 made quadratic on the same mesh, C3D10 on the next mesh level.
+  if (finer.element == CalculixElement::C3D4) {
+    finer.element = CalculixElement::C3D10;
+    gates.refinedBy = "C3D10 on the same tetrahedra";
+  } else {
+    finer.mesher.refinement += 1;
+    gates.refinedBy = "mesh level " + std::to_string(finer.mesher.refinement);
+  }
+  low.attachmentScale *= 0.5f;
+  high.attachmentScale *= 1.5f;
+  finer.returnToRest = low.returnToRest = high.returnToRest = false;
+  const std::pair<const CalculixDefinition*, const char*> variants[] = {
+      {&finer, "one level finer"},
+      {&low, "attachment distance x0.5"},
+      {&high, "attachment distance x1.5"}};
+  double* results[] = {&gates.refinementMm, &gates.attachmentLowMm, &gates.attachmentHighMm};
+  for (size_t v = 0; v < 3; ++v) {
+    CalculixSolution solution;
+    if (options.cancel && options.cancel->load()) return;
+    if (!solveVariant(scene, prepared, *variants[v].first, options, variants[v].second, solution))
+      continue;
+    *results[v] = rmsBetweenSolutions(base, solution);
+    const std::string more = failures(solution, variants[v].second);
+    if (!more.empty()) gates.failures += (gates.failures.empty() ? "" : "; ") + more;
+  }
 }
 
 }  // namespace
@@ -126,52 +180,38 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   Reference reference;
   reference.key = referenceCacheKey(scene, prepared, definition);
   reference.cacheEntry = resolved.cacheDir + "/" + reference.key;
-  reference.solution = solveVariant(scene, prepared, definition, resolved, "reference", &reference.fromCache);
+  if (!solveVariant(scene, prepared, definition, resolved, "reference", reference.solution,
+                    &reference.fromCache)) {
+    reference.missing = true;
+    return reference;
+  }
   const CalculixSolution& base = reference.solution;
   reference.gates.failures = failures(base, "reference");
   if (!base.returnSurface.empty())
     reference.gates.returnMm = rmsDistanceMm(base.returnSurface, restSurfaces(prepared));
-  if (options.gates && !(options.cancel && options.cancel->load())) {
-    CalculixDefinition finer = definition, low = definition, high = definition;
-    // One level finer: C3D4 made quadratic on the same mesh, C3D10 on the next mesh level.
-    if (finer.element == CalculixElement::C3D4) {
-      finer.element = CalculixElement::C3D10;
-      reference.gates.refinedBy = "C3D10 on the same tetrahedra";
-    } else {
-      finer.mesher.refinement += 1;
-      reference.gates.refinedBy = "mesh level " + std::to_string(finer.mesher.refinement);
-    }
-    low.attachmentScale *= 0.5f;
-    high.attachmentScale *= 1.5f;
-    finer.returnToRest = low.returnToRest = high.returnToRest = false;
-    const CalculixSolution refined = solveVariant(scene, prepared, finer, resolved, "one level finer");
-    reference.gates.refinementMm = rmsBetweenSolutions(base, refined);
-    const CalculixSolution lowSolution = solveVariant(scene, prepared, low, resolved, "attachment distance x0.5");
-    const CalculixSolution highSolution = solveVariant(scene, prepared, high, resolved, "attachment distance x1.5");
-    reference.gates.attachmentLowMm = rmsBetweenSolutions(base, lowSolution);
-    reference.gates.attachmentHighMm = rmsBetweenSolutions(base, highSolution);
-    for (const auto& [solution, what] :
-         {std::pair{&refined, "finer"}, {&lowSolution, "attachment x0.5"}, {&highSolution, "attachment x1.5"}}) {
-      const std::string more = failures(*solution, what);
-      if (!more.empty()) reference.gates.failures += (reference.gates.failures.empty() ? "" : "; ") + more;
-    }
-  }
+  if (options.gates && !(options.cancel && options.cancel->load()))
+    solveGates(scene, prepared, resolved, reference.solution, reference.gates);
   reference.metrics = referenceMetrics(scene, prepared, base, definition);
   std::ostringstream description;
-  description << "CalculiX (" << calculixVersion(definition.program) << ") static equilibrium per pose, "
+  description << "CalculiX (" << calculixVersion(definition.program)
+              << ") static equilibrium per pose, "
               << "Neo-Hookean (E " << definition.material.youngsModulus / 1000 << " kPa, nu "
-              << definition.material.poissonRatio << "), " << toString(definition.element) << ", tetgen -pYq"
-              << definition.mesher.radiusEdgeRatio << " mesh of the prepared rest surface (level "
-              << definition.mesher.refinement << "; " << base.nodes << " nodes, " << base.elements
-              << " tetrahedra), material within " << definition.attachmentScale
-              << "x the attachment distance of a bone moves with it (" << base.prescribedNodes
-              << " nodes); no contact";
+              << definition.material.poissonRatio << "), " << toString(definition.element)
+              << ", tetgen -pYq" << definition.mesher.radiusEdgeRatio
+              << " mesh of each muscle's surface (level " << definition.mesher.refinement << "; "
+              << base.nodes << " nodes, " << base.elements << " tetrahedra), material within "
+              << definition.attachmentScale << "x the attachment distance of a bone moves with it ("
+              << base.prescribedNodes << " nodes); no contact";
   reference.description = description.str();
   return reference;
 }
 
 nlohmann::json referenceJson(const Reference& reference) {
-  const auto number = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  if (reference.missing)
+    return {{"key", reference.key}, {"cache_entry", reference.cacheEntry}, {"missing", true}};
+  const auto number = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
   const CalculixSolution& s = reference.solution;
   nlohmann::json poses = nlohmann::json::array();
   for (size_t p = 0; p < s.poseSurfaces.size(); ++p)
@@ -213,11 +253,14 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
   std::vector<std::string> lines;
   lines.push_back("return to rest after the motion: " + mm(g.returnMm) + " RMS (bound " +
                   mm(kReturnGateMm) + "): " +
-                  (std::isnan(g.returnMm) ? "not computed" : g.returnPasses() ? "passes" : "FAILS"));
+                  (std::isnan(g.returnMm) ? "not computed"
+                   : g.returnPasses()     ? "passes"
+                                          : "FAILS"));
   std::string refinement = "one level finer (" + (g.refinedBy.empty() ? "\u2014" : g.refinedBy) +
                            "): moves it " + mm(g.refinementMm) + " RMS";
   if (std::isnan(g.spreadMm))
-    refinement += " (passes when below a third of the spread between the methods: needs a comparison)";
+    refinement +=
+        " (passes when below a third of the spread between the methods: needs a comparison)";
   else
     refinement += " against a third of the methods' spread " + mm(g.spreadMm / 3) + ": " +
                   (g.refinementPasses() ? "passes" : "FAILS");

@@ -17,6 +17,14 @@
 
 namespace fibremss {
 
+/// The "equilibrium" method: FibreMSS at every pose until the mean displacement per iteration is
+/// below this [m] (1e-4 mm), from the previous pose's equilibrium.
+inline constexpr double kEquilibriumEpsilon = 1e-7;
+/// Its iteration cap per pose (a pose that reaches it is counted in RunMetrics::unconvergedPoses).
+inline constexpr int kEquilibriumIterations = 20000;
+/// The time-to-accuracy figure's bound: a pose within this RMS of its equilibrium [mm].
+inline constexpr double kEquilibriumAccuracyMm = 0.5;
+
 /// Method names `compare` knows; "fibremss:<key>=<value>[+<key>=<value>...]" adds a FibreMSS
 /// variant with those scene overrides (e.g. "fibremss:integrator=semi-implicit-euler").
 inline constexpr const char* kDefaultMethods[] = {"fibremss", "self-reference", "btsoftbody",
@@ -36,7 +44,7 @@ struct CompareOptions {
   std::vector<std::string> methods{std::begin(kDefaultMethods), std::end(kDefaultMethods)};
   SoftBodyDefinition softBody;  ///< the baseline (poseDuration set from the scene, see below)
   FemDefinition fem;            ///< Bullet's FEM method (poseDuration set from the scene)
-  bool fronts = true;  ///< each method swept over its cost knob (frontMethods)
+  bool fronts = true;           ///< each method swept over its cost knob (frontMethods)
   bool withReference = true;    ///< compute (or find) the CalculiX reference and its gates
   ReferenceOptions reference;   ///< how (log, progress and cancel are set by runComparison)
   int selfReferenceFactor = 8;  ///< self-reference: dt / f and f × iterations
@@ -77,11 +85,17 @@ double volumeChangePct(const PreparedScene& prepared, std::span<const btVector3>
 int sharedPoses(const RunMetrics& a, const RunMetrics& b);
 
 /// Root-mean-square surface distance between two runs over the poses both reached (NaN when
-/// they share none or their surfaces differ in size).
-double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b);
+/// they share none or their surfaces differ in size); `worstPose`, when given, receives the
+/// largest per-pose RMS.
+double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose = nullptr);
 
-/// Fills rmsToReferenceMm / rmsToSelfReferenceMm of every run from the "calculix" and
-/// "self-reference" runs among them (the references themselves get 0 against themselves).
+/// The scene's settings for the "equilibrium" method: the converged stop rule at
+/// kEquilibriumEpsilon with kEquilibriumIterations as the cap, the bones moving over as many
+/// iterations as in the scene's own settings.
+SimulationParameters equilibriumSettings(const SimulationParameters& simulation);
+
+/// Fills rmsToReferenceMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the
+/// "calculix", "self-reference" and "equilibrium" runs among them (each gets 0 against itself).
 void fillRms(std::vector<RunMetrics>& runs);
 
 /// Against the "calculix" run among `runs`: each run's vertex RMS per pose, shape RMS
@@ -95,8 +109,8 @@ double shapeRmsMm(const TriangleMesh& a, const TriangleMesh& b);
 
 /// A method and its scene overrides, parsed from "name" or "fibremss:k=v+k=v".
 struct MethodSpec {
-  std::string name;                    ///< the full name as given
-  std::string family;                  ///< "fibremss", "self-reference", "btsoftbody", "fem"
+  std::string name;    ///< the full name as given
+  std::string family;  ///< "fibremss", "self-reference", "equilibrium", "btsoftbody", "fem"
   std::vector<std::string> overrides;  ///< FibreMSS: extra --set overrides; btsoftbody / fem:
                                        ///< their knobs ("iterations=N", "substeps=xF", ...)
 };

@@ -3,9 +3,8 @@
 // (return to rest, mesh refinement, attachment distance ±50 %) and its metrics as a run.
 #include <atomic>
 #include <functional>
-#include <string>
-
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "fibremss/ReferenceCache.h"
 #include "fibremss/RunMetrics.h"
@@ -17,9 +16,12 @@ struct ReferenceOptions {
   CalculixDefinition definition;  ///< material, element, mesher, attachment rule
   std::string cacheDir;           ///< "" : defaultReferenceCacheDir()
   bool gates = true;  ///< also solve one level finer and with the attachment distance ±50 %
-  std::function<void(const std::string&)> log;                ///< one line of news (may be empty)
-  std::function<void(const ReferenceProgress&)> progress;     ///< while ccx runs (may be empty)
-  const std::atomic<bool>* cancel = nullptr;                  ///< stop when true
+  /// Take the reference (and each gate's solve) only from the cache; what is not there is not
+  /// computed (Reference::missing, gates left out). For jobs that must stay short.
+  bool cachedOnly = false;
+  std::function<void(const std::string&)> log;             ///< one line of news (may be empty)
+  std::function<void(const ReferenceProgress&)> progress;  ///< while ccx runs (may be empty)
+  const std::atomic<bool>* cancel = nullptr;               ///< stop when true
 };
 
 /// The bound of the return-to-rest gate [mm]: the surface at rest after the motion, RMS to the
@@ -52,6 +54,7 @@ struct Reference {
   std::string key;            ///< cache key of the reference solve
   std::string cacheEntry;     ///< directory holding its .inp files and results
   bool fromCache = false;     ///< the reference solve came from the cache
+  bool missing = false;       ///< cachedOnly and not in the cache: no reference at all
   CalculixSolution solution;  ///< the reference solve
   ReferenceGates gates;
   RunMetrics metrics;  ///< as a run ("calculix"): surfaces of the solved poses, volume, penetration
@@ -71,6 +74,7 @@ double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b)
 /// or the one family's best when only one was compared. NaN when no run has an RMS.
 double methodSpreadMm(const std::vector<RunMetrics>& runs);
 
+/// {"key", "cache_entry", "missing": true} when it was not in the cache (cachedOnly), else
 /// {"key", "cache_entry", "from_cache", "description", "poses": [{"solved", "failure"}...],
 /// "gates": {...}, "nodes", "tetrahedra", "prescribed_nodes", "newton_iterations",
 /// "increments", "seconds"} (NaN written as null).

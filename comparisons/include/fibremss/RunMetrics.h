@@ -19,6 +19,21 @@ struct PartTiming {
   double output = 0;    ///< the solver's fibres and surfaces (measuring for reports excluded)
 };
 
+/// An analytic case measured at the last pose, beside its exact answer (NaN: does not apply).
+struct AnalyticMetrics {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  std::string type;                     ///< "cylinder-stretch", "cylinder-twist" ("": none)
+  double poissonRatio = kNone;          ///< effective ν = −ln(r/r0) / ln(stretch), mid-section
+  double exactPoissonRatio = kNone;     ///< the homogeneous Neo-Hookean answer's
+  double volumeChangePct = kNone;       ///< the muscle's volume against rest [%]
+  double exactVolumeChangePct = kNone;  ///< exact [%]
+  double midRadiusRatio = kNone;        ///< mid-section radius / rest radius
+  double exactMidRadiusRatio = kNone;   ///< exact
+  double midRotationDeg = kNone;        ///< twist: rotation of the mid-section about the axis [°]
+  double exactMidRotationDeg = kNone;   ///< exact (half the end's twist)
+  double rotationErrorDeg = kNone;  ///< twist: largest |rotation − exact| over 9 sections [°]
+};
+
 /// One run's results. NaN marks a metric that does not apply or was not measured.
 struct RunMetrics {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
@@ -44,22 +59,30 @@ struct RunMetrics {
   double meanPenetrationMm = kNone;     ///< mean over penetrating vertices
   double volumeChangePct = kNone;       ///< final muscle volume against rest
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
-  double rmsToReferenceMm = kNone;  ///< surface vertex RMS against the CalculiX reference [mm]
+  double rmsToReferenceMm = kNone;      ///< surface vertex RMS against the CalculiX reference [mm]
   /// Symmetric nearest-surface RMS against the reference [mm]: every vertex's distance to the
   /// other surface, both ways (sliding along the surface is not counted), over all poses.
   double shapeRmsToReferenceMm = kNone;
-  std::string worstMuscle;              ///< the muscle with the largest vertex RMS to the reference
-  double worstMuscleRmsMm = kNone;      ///< its vertex RMS over all poses [mm]
+  std::string worstMuscle;          ///< the muscle with the largest vertex RMS to the reference
+  double worstMuscleRmsMm = kNone;  ///< its vertex RMS over all poses [mm]
   std::vector<double> rmsToReferencePerPoseMm;  ///< vertex RMS per pose both reached [mm]
-  double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
+  double rmsToSelfReferenceMm = kNone;          ///< against FibreMSS at dt/8, 8× iterations
+  /// Against the "equilibrium" run (FibreMSS converged at every pose): RMS over the poses, and
+  /// the worst pose's RMS.
+  double rmsToEquilibriumMm = kNone;
+  double worstPoseRmsToEquilibriumMm = kNone;  ///< the largest per-pose RMS to equilibrium
+  int rmsToEquilibriumPoses = 0;               ///< poses rmsToEquilibriumMm covers
+  int unconvergedPoses = 0;     ///< "equilibrium" run: poses that hit the iteration cap unconverged
   int rmsToReferencePoses = 0;  ///< poses rmsToReferenceMm covers (both reached them intact)
-  int rmsToSelfReferencePoses = 0;      ///< poses rmsToSelfReferenceMm covers
-  bool nan = false;                     ///< a NaN or inf appeared
-  bool exploded = false;                ///< stability criteria violated
-  int failedStep = -1;                  ///< step where it failed, -1 if none
-  bool interrupted = false;             ///< stopped by the user (Ctrl-C)
-  double peakMemoryMb = kNone;          ///< peak resident set of the process
-  double wallSeconds = 0;               ///< whole run
+  int rmsToSelfReferencePoses = 0;  ///< poses rmsToSelfReferenceMm covers
+  bool nan = false;                 ///< a NaN or inf appeared
+  bool exploded = false;            ///< stability criteria violated
+  int failedStep = -1;              ///< step where it failed, -1 if none
+  bool interrupted = false;         ///< stopped by the user (Ctrl-C)
+  double peakMemoryMb = kNone;      ///< peak resident set of the process
+  double wallSeconds = 0;           ///< whole run
+
+  AnalyticMetrics analytic;  ///< the scene's exact case, if it is one
 
   /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
   /// a NaN or exploded pose is left out.

@@ -1,0 +1,78 @@
+#pragma once
+// A scene: bones with motions, muscles, model parameters, collision settings and outputs,
+// read from JSON (a file or a built-in scene) and resolved into the plugin's inputs.
+#include <LinearMath/btTransform.h>
+
+#include <string>
+#include <vector>
+
+#include "fibremss/Parameters.h"
+#include "fibremss/Preparation.h"
+
+namespace fibremss {
+
+/// Rigid motion of one bone over the scene's poses, relative to its rest pose.
+struct BoneMotion {
+  std::vector<btTransform> poses;  ///< one transform per pose (empty: the bone stays at rest)
+};
+
+/// What a run writes (paths relative to the run's --out directory).
+struct OutputSettings {
+  int frameEvery = 1;          ///< write a frame every k-th step (0: none)
+  bool writeSurfaces = true;   ///< deformed muscle surfaces in frames
+  bool writeParticles = true;  ///< particles with radii in frames
+  bool writeFibres = true;     ///< deformed fibres in frames
+};
+
+/// An exact case the scene reproduces (the analytic tier): a straight cylindrical muscle whose
+/// free length (between its attachments) is stretched or twisted by its bones. `run` and
+/// `compare` measure its first muscle at the last pose beside the exact answer.
+struct AnalyticCase {
+  std::string type = "none";     ///< "none", "cylinder-stretch" or "cylinder-twist"
+  btVector3 axisStart{0, 0, 0};  ///< rest axis where the free length starts (the fixed side) [m]
+  btVector3 axisEnd{0, 0, 0};    ///< rest axis where the free length ends [m]
+  double stretch = 1;            ///< free length at the last pose / at rest (symmetric about the
+                                 ///< middle, along the axis)
+  double twistDeg = 0;  ///< rotation of the axisEnd side about start → end at the last pose [°]
+  double poissonRatio = 0.49;  ///< ν of the continuum the exact stretch answer is for
+};
+
+/// A scene resolved into what preparation and simulation take; all SI.
+struct LoadedScene {
+  std::string name;                   ///< scene name (built-in name or file stem)
+  std::string source;                 ///< the file it came from, or "built-in"
+  std::string json;                   ///< the complete scene, every default filled in
+  std::string description;            ///< one line saying what the scene shows
+  double unitScale = 1;               ///< metres per scene unit (0.001 for "mm")
+  std::vector<BoneInput> bones;       ///< bones, meshes loaded or generated
+  std::vector<MuscleInput> muscles;   ///< muscles, surfaces and fibres loaded or generated
+  std::vector<BoneMotion> motions;    ///< one per bone
+  int poseCount = 1;                  ///< number of poses (simulation steps) in the motion
+  std::vector<double> poseLabels;     ///< per pose, e.g. the sweep angle in degrees
+  SimulationParameters simulation;    ///< solver settings
+  OutputSettings outputs;             ///< output settings
+  AnalyticCase analytic;              ///< the exact case it reproduces (type "none": none)
+  std::vector<std::string> warnings;  ///< things found while loading that a run can live with
+
+  /// Transform of bone b at pose p (identity where the bone has no motion).
+  btTransform bonePose(size_t bone, int pose) const;
+};
+
+/// Built-in scene names with a one-line description each.
+struct BuiltInScene {
+  std::string name;
+  std::string description;
+};
+std::vector<BuiltInScene> builtInScenes();
+
+/// The JSON text of a built-in scene, every default filled in (throws InputError for an
+/// unknown name). Loading it again gives the same scene.
+std::string exportBuiltInScene(const std::string& name);
+
+/// Loads a scene by built-in name or .json path and applies `key=value` overrides
+/// (e.g. "resolution=40", "simulation.iterations=100"). Throws InputError naming the file
+/// and field for unknown fields, wrong types and bad values.
+LoadedScene loadScene(const std::string& nameOrPath,
+                      const std::vector<std::string>& overrides = {});
+
+}  // namespace fibremss

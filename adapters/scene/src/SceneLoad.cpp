@@ -1,0 +1,521 @@
+// Scene JSON -> LoadedScene: validation with defaults, units, files and generators, motions.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <sstream>
+
+#include "SceneAnatomy.h"
+#include "SceneFields.h"
+#include "SceneShapes.h"
+#include "SceneValidation.h"
+#include "fibremss/BuiltInScenes.h"
+#include "fibremss/Error.h"
+#include "fibremss/MeshIO.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss {
+namespace {
+
+using scene::Fields;
+using scene::Json;
+namespace fs = std::filesystem;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kDegrees = M_PI / 180;
+
+/// Every name an enum's toString() knows, in enum order (follows additions to Parameters.h).
+template <typename Enum>
+std::vector<std::string> namesOf() {
+  std::vector<std::string> names;
+  for (int value = 0; value < 256; ++value) {
+    const std::string name = toString(static_cast<Enum>(value));
+    if (name == "unknown") break;
+    names.push_back(name);
+  }
+  return names;
+}
+
+/// JSON with two-space indents where arrays of numbers stay on one line ([x, y, z]).
+void writePretty(const Json& value, int indent, std::string& out) {
+  const std::string pad(size_t(indent + 2), ' ');
+  if (value.is_object() && !value.empty()) {
+    out += "{\n";
+    size_t i = 0;
+    for (auto it = value.begin(); it != value.end(); ++it, ++i) {
+      out += pad + Json(it.key()).dump() + ": ";
+      writePretty(it.value(), indent + 2, out);
+      out += i + 1 < value.size() ? ",\n" : "\n";
+    }
+    out += std::string(size_t(indent), ' ') + "}";
+  } else if (value.is_array() && !value.empty()) {
+    const bool flat = std::none_of(value.begin(), value.end(),
+                                   [](const Json& element) { return element.is_structured(); });
+    if (flat) {
+      out += "[";
+      for (size_t i = 0; i < value.size(); ++i) out += (i ? ", " : "") + value[i].dump();
+      out += "]";
+      return;
+    }
+    out += "[\n";
+    for (size_t i = 0; i < value.size(); ++i) {
+      out += pad;
+      writePretty(value[i], indent + 2, out);
+      out += i + 1 < value.size() ? ",\n" : "\n";
+    }
+    out += std::string(size_t(indent), ' ') + "]";
+  } else {
+    out += value.dump();
+  }
+}
+
+/// State shared while reading one scene.
+struct Reader {
+  std::string source;   ///< file path or "built-in scene NAME", for error messages
+  fs::path baseDir;     ///< relative file paths start here
+  std::string dataDir;  ///< substituted for ${data_dir}
+  double scale = 1;     ///< metres per scene unit
+  LoadedScene* result = nullptr;
+
+  /// Resolves a file path field: ${data_dir} substitution, then relative to the scene file.
+  std::string resolve(Fields& fields, const std::string& key, const std::string& path) const {
+    std::string resolved = path;
+    const std::string token = "${data_dir}";
+    for (size_t at; (at = resolved.find(token)) != std::string::npos;) {
+      if (dataDir.empty())
+        fields.fail(key, "uses ${data_dir} but data_dir is not set; pass --set data_dir=DIR");
+      resolved.replace(at, token.size(), dataDir);
+    }
+    fs::path file(resolved);
+    if (file.is_relative()) file = baseDir / file;
+    if (!fs::exists(file)) fields.fail(key, "no such file: " + file.string());
+    return file.lexically_normal().string();
+  }
+};
+
+btQuaternion readRotation(Fields& fields) {
+  if (fields.has("quaternion")) {
+    const Json* q = fields.raw("quaternion");
+    if (!q->is_array() || q->size() != 4 ||
+        !std::all_of(q->begin(), q->end(), [](const Json& v) { return v.is_number(); }))
+      fields.fail("quaternion", "expected [x, y, z, w], got " + scene::describe(*q));
+    btQuaternion rotation(btScalar((*q)[0].get<double>()), btScalar((*q)[1].get<double>()),
+                          btScalar((*q)[2].get<double>()), btScalar((*q)[3].get<double>()));
+    if (!(rotation.length() > btScalar(1e-6)))
+      fields.fail("quaternion", "expected a non-zero quaternion");
+    fields.set("quaternion", *q);
+    return rotation.normalized();
+  }
+  Fields rotation = fields.object("rotation");
+  const btVector3 axis = rotation.vector3("axis", btVector3(0, 0, 1));
+  const double angle = rotation.number("angle_deg", 0, -kInf, kInf);
+  fields.set("rotation", rotation.finish());
+  if (axis.length() <= 0) {
+    if (angle != 0)
+      throw InputError(fields.source(), fields.pathOf("rotation.axis"), "expected a non-zero axis");
+    return btQuaternion::getIdentity();
+  }
+  return btQuaternion(axis.normalized(), btScalar(angle * kDegrees));
+}
+
+/// {"translation": [..], "rotation": {"axis", "angle_deg"}} or {.., "quaternion": [x,y,z,w]}.
+btTransform readTransform(Fields& fields, double scale) {
+  const btVector3 translation = fields.vector3("translation", btVector3(0, 0, 0)) * btScalar(scale);
+  return btTransform(readRotation(fields), translation);
+}
+
+/// The angles of a sweep from start to end in steps (the last step may be shorter).
+std::vector<double> sweepAngles(double start, double end, double step) {
+  std::vector<double> angles;
+  const double span = std::abs(end - start);
+  const double direction = end >= start ? 1 : -1;
+  const int steps = int(std::ceil(span / step - 1e-9));
+  for (int k = 0; k < steps; ++k) angles.push_back(start + direction * step * k);
+  angles.push_back(end);
+  return angles;
+}
+
+void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, BoneMotion& result,
+                std::vector<double>& labels) {
+  const std::string type = motion.choice("type", "none", {"none", "keyframes", "sweep"});
+  if (type == "sweep") {
+    const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
+    const btVector3 axis = motion.vector3("axis", btVector3(1, 0, 0));
+    if (axis.length() <= 0) motion.fail("axis", "expected a non-zero rotation axis");
+    const double start = motion.number("start_deg", 0, -3600, 3600);
+    const double end = motion.number("end_deg", 90, -3600, 3600);
+    const double step = motion.number("step_deg", 10, 0, 3600, true);
+    if (std::abs(end - start) / step > 100000)
+      motion.fail("step_deg", "gives more than 100000 poses");
+    labels = sweepAngles(start, end, step);
+    for (double angle : labels) {
+      const btTransform rotation(btQuaternion(axis.normalized(), btScalar(angle * kDegrees)));
+      // About the pivot: translate it to the origin, rotate, translate back.
+      result.poses.push_back(btTransform(btQuaternion::getIdentity(), pivot) * rotation *
+                             btTransform(btQuaternion::getIdentity(), -pivot));
+    }
+  } else if (type == "keyframes") {
+    const Json& frames = motion.array("keyframes");
+    if (frames.empty()) motion.fail("keyframes", "expected at least one keyframe");
+    Json complete = Json::array();
+    for (size_t i = 0; i < frames.size(); ++i) {
+      Fields frame(frames[i], motion.pathOf("keyframes") + "[" + std::to_string(i) + "]",
+                   motion.source());
+      labels.push_back(frame.number("label", double(i), -kInf, kInf));
+      result.poses.push_back(readTransform(frame, reader.scale));
+      complete.push_back(frame.finish());
+    }
+    motion.set("keyframes", std::move(complete));
+  }
+}
+
+TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& reader,
+                         std::optional<scene::Shape>& shape) {
+  Fields source = owner.object(key);
+  const bool hasFile = source.has("file"), hasGenerator = source.has("generator");
+  if (hasFile == hasGenerator)
+    owner.fail(key, "expected exactly one of {\"file\": PATH} or {\"generator\": {...}}");
+  TriangleMesh mesh;
+  if (hasFile) {
+    const std::string path = reader.resolve(source, "file", source.text("file", ""));
+    MeshReport report;
+    mesh = loadSurface(path, reader.scale, &report);
+    for (const auto& warning : report.warnings) reader.result->warnings.push_back(warning);
+  } else {
+    Fields generator = source.object("generator");
+    shape = scene::generateShape(generator, reader.scale);
+    mesh = shape->mesh;
+    source.set("generator", generator.finish());
+  }
+  owner.set(key, source.finish());
+  return mesh;
+}
+
+/// Evenly spaced subset of `count` fibres.
+FibreSet selectFibres(const FibreSet& all, size_t count) {
+  FibreSet subset;
+  for (size_t i = 0; i < count; ++i) subset.addFibre(all.fibre(i * all.fibreCount() / count));
+  return subset;
+}
+
+BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion& motion,
+                   std::vector<double>& labels) {
+  BoneInput input;
+  input.name = bone.text("name", "bone" + std::to_string(index));
+  std::optional<scene::Shape> shape;
+  TriangleMesh mesh = readSurface(bone, "mesh", reader, shape);
+  Fields transform = bone.object("transform");
+  const btTransform rest = readTransform(transform, reader.scale);
+  bone.set("transform", transform.finish());
+  input.mesh = transformed(mesh, rest);
+  Fields motionFields = bone.object("motion");
+  readMotion(motionFields, reader, input.mesh, motion, labels);
+  bone.set("motion", motionFields.finish());
+  Fields spheres = bone.object("spheres");
+  input.spheres.thinning = btScalar(spheres.number("thinning", 0, 0, 1));
+  input.spheres.maxRadius = btScalar(spheres.number("max_radius", 0, 0, kInf) * reader.scale);
+  bone.set("spheres", spheres.finish());
+  return input;
+}
+
+MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
+                       const SpringParameters& springs) {
+  MuscleInput input;
+  input.name = muscle.text("name", "muscle" + std::to_string(index));
+  std::optional<scene::Shape> shape;
+  input.surface = readSurface(muscle, "surface", reader, shape);
+  const int fibreCount = muscle.integer("fibre_count", 64, 1, 1000000);
+  input.parameters.resolution = muscle.integer("resolution", 40, 2, 100000);
+  input.parameters.attachmentDistance =
+      btScalar(muscle.number("attachment_distance", 0.004 / reader.scale, 0, kInf) * reader.scale);
+  input.parameters.skinNeighbours = muscle.integer("skin_neighbours", 3, 1, 64);
+  input.parameters.springs = springs;
+  const int gridColumns = muscle.integer("fibre_grid_columns", 0, 0, 1000000);
+  const bool lattice =
+      springs.layout == SpringLayout::Lattice6 || springs.layout == SpringLayout::Lattice26;
+
+  Fields fibres = muscle.object("fibres");
+  const bool hasFile = fibres.has("file"), hasGenerator = fibres.has("generator");
+  if (hasFile == hasGenerator)
+    muscle.fail("fibres", "expected exactly one of {\"file\": PATH} or {\"generator\": {...}}");
+  if (hasFile) {
+    const std::string path = reader.resolve(fibres, "file", fibres.text("file", ""));
+    FibreSet all = loadFibres(path, reader.scale);
+    if (all.fibreCount() > size_t(fibreCount)) {
+      reader.result->warnings.push_back(path + ": using " + std::to_string(fibreCount) + " of " +
+                                        std::to_string(all.fibreCount()) +
+                                        " fibres, evenly spaced (fibre_count)");
+      input.fibres = selectFibres(all, size_t(fibreCount));
+    } else {
+      if (all.fibreCount() < size_t(fibreCount))
+        reader.result->warnings.push_back(path + ": has " + std::to_string(all.fibreCount()) +
+                                          " fibres, fewer than fibre_count " +
+                                          std::to_string(fibreCount) + "; using all");
+      input.fibres = std::move(all);
+    }
+    for (auto& warning : checkFibres(input.fibres, input.surface, path,
+                                     std::max<double>(input.parameters.attachmentDistance, 1e-3)))
+      reader.result->warnings.push_back(std::move(warning));
+    input.fibreGridColumns = gridColumns;
+  } else {
+    Fields generator = fibres.object("generator");
+    int columns = 0;
+    input.mergeConverging =
+        scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount, reader.scale,
+                                     *reader.result, input.fibres);
+    if (!input.mergeConverging)
+      input.fibres = scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount,
+                                           lattice, &columns);
+    input.fibreGridColumns = gridColumns > 0 ? gridColumns : columns;
+    fibres.set("generator", generator.finish());
+  }
+  muscle.set("fibres", fibres.finish());
+  if (lattice && input.fibreGridColumns <= 0)
+    muscle.fail("fibre_grid_columns",
+                "the lattice spring layouts need fibres on a grid: set fibre_grid_columns for "
+                "fibres from a file, or use a generator");
+  if (input.fibreGridColumns > 0 && input.fibres.fibreCount() % input.fibreGridColumns != 0)
+    muscle.fail("fibre_grid_columns", std::to_string(input.fibres.fibreCount()) +
+                                          " fibres do not form rows of " +
+                                          std::to_string(input.fibreGridColumns));
+  return input;
+}
+
+SpringParameters readModel(Fields& model) {
+  SpringParameters springs;
+  const std::string layout =
+      model.choice("layout", toString(springs.layout), namesOf<SpringLayout>());
+  fromString(layout, springs.layout);
+  springs.neighbours = model.integer("neighbours", springs.neighbours, 1, 1000);
+  springs.kappa = btScalar(model.number("kappa", springs.kappa, 0, kInf, true));
+  const Json* damping = model.raw("damping");
+  if (!damping || (damping->is_string() && damping->get<std::string>() == "auto")) {
+    model.set("damping", "auto");
+  } else if (damping->is_number() && damping->get<double>() >= 0 &&
+             std::isfinite(damping->get<double>())) {
+    springs.damping = btScalar(damping->get<double>());
+    model.set("damping", *damping);
+  } else {
+    model.fail("damping", "expected \"auto\" (Zeleny's estimate) or a number >= 0 [N·s/m], got " +
+                              scene::describe(*damping));
+  }
+  springs.dampingScale = btScalar(model.number("damping_scale", springs.dampingScale, 0, kInf));
+  springs.density = btScalar(model.number("density", springs.density, 0, kInf, true));
+  return springs;
+}
+
+void readSimulation(Fields& simulation, double scale, SimulationParameters& parameters) {
+  const SimulationParameters defaults;
+  fromString(simulation.choice("integrator", toString(defaults.integrator), namesOf<Integrator>()),
+             parameters.integrator);
+  parameters.adaptiveTimeStep =
+      simulation.choice("time_step", defaults.adaptiveTimeStep ? "adaptive" : "fixed",
+                        {"adaptive", "fixed"}) == "adaptive";
+  parameters.timeStep = btScalar(simulation.number("dt", defaults.timeStep, 0, kInf, true));
+  parameters.minTimeStep =
+      btScalar(simulation.number("min_dt", defaults.minTimeStep, 0, kInf, true));
+  if (parameters.minTimeStep > parameters.timeStep)
+    simulation.fail("min_dt", "must not exceed dt (" + std::to_string(parameters.timeStep) + " s)");
+  fromString(simulation.choice("stop", toString(defaults.stopRule), namesOf<StopRule>()),
+             parameters.stopRule);
+  parameters.iterations = simulation.integer("iterations", defaults.iterations, 1, 100000000);
+  parameters.epsilon =
+      btScalar(simulation.number("epsilon", defaults.epsilon / scale, 0, kInf, true) * scale);
+  parameters.budgetMs = btScalar(simulation.number("budget_ms", defaults.budgetMs, 0, kInf, true));
+  parameters.deviationEpsilon =
+      btScalar(simulation.number("deviation_epsilon", defaults.deviationEpsilon, 0, kInf, true));
+  parameters.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
+  parameters.blendedPretransform =
+      simulation.boolean("blended_pretransform", defaults.blendedPretransform);
+  parameters.motionFraction =
+      btScalar(simulation.number("motion_fraction", defaults.motionFraction, 0, 1, true));
+  const Json* seed = simulation.raw("seed");
+  if (seed &&
+      !(seed->is_number_unsigned() || (seed->is_number_integer() && seed->get<long long>() >= 0)))
+    simulation.fail("seed",
+                    "expected an integer in [0, 4294967295], got " + scene::describe(*seed));
+  if (seed && seed->get<unsigned long long>() > 0xffffffffull)
+    simulation.fail("seed",
+                    "expected an integer in [0, 4294967295], got " + scene::describe(*seed));
+  parameters.seed = seed ? uint32_t(seed->get<unsigned long long>()) : defaults.seed;
+  simulation.set("seed", parameters.seed);
+  parameters.initialNoise =
+      btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, kInf) * scale);
+  parameters.threads = simulation.integer("threads", defaults.threads, 0, 1024);
+  parameters.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
+  parameters.solverTolerance =
+      btScalar(simulation.number("solver_tolerance", defaults.solverTolerance, 0, 1, true));
+  parameters.solverIterations =
+      simulation.integer("solver_iterations", defaults.solverIterations, 1, 100000);
+  parameters.constraintIterations =
+      simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
+  fromString(
+      simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
+      parameters.onFailure);
+  parameters.maxRetries = simulation.integer("max_retries", defaults.maxRetries, 0, 30);
+}
+
+void readCollision(Fields& collision, double scale, SimulationParameters& parameters) {
+  const SimulationParameters defaults;
+  parameters.muscleMuscle = collision.boolean("muscle_muscle", defaults.muscleMuscle);
+  parameters.muscleBone = collision.boolean("muscle_bone", defaults.muscleBone);
+  fromString(collision.choice("bone_collision", toString(defaults.boneCollision),
+                              namesOf<BoneCollision>()),
+             parameters.boneCollision);
+  parameters.distanceFieldCell = btScalar(
+      collision.number("distance_field_cell", defaults.distanceFieldCell / scale, 0, kInf, true) *
+      scale);
+  parameters.penetrationRecovery =
+      collision.boolean("penetration_recovery", defaults.penetrationRecovery);
+  parameters.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
+}
+
+/// The top-level "analytic" object: which exact case the scene is, and its geometry.
+AnalyticCase readAnalytic(Fields& analytic, double scale) {
+  const AnalyticCase defaults;
+  AnalyticCase result;
+  result.type =
+      analytic.choice("type", defaults.type, {"none", "cylinder-stretch", "cylinder-twist"});
+  result.axisStart = analytic.vector3("axis_start", defaults.axisStart) * btScalar(scale);
+  result.axisEnd = analytic.vector3("axis_end", defaults.axisEnd) * btScalar(scale);
+  result.stretch = analytic.number("stretch", defaults.stretch, 0, kInf, true);
+  result.twistDeg = analytic.number("twist_deg", defaults.twistDeg, -3600, 3600);
+  result.poissonRatio = analytic.number("poisson_ratio", defaults.poissonRatio, 0, 0.4999);
+  if (result.type != "none" && result.axisStart.distance(result.axisEnd) <= 0)
+    analytic.fail("axis_end", "must differ from axis_start for an analytic case");
+  return result;
+}
+
+LoadedScene readScene(const Json& raw, const std::string& source, const fs::path& baseDir,
+                      const std::string& defaultName) {
+  LoadedScene result;
+  Reader reader;
+  reader.source = source;
+  reader.baseDir = baseDir;
+  reader.result = &result;
+  result.source = source;
+
+  Fields root(raw, "", source);
+  result.name = root.text("name", defaultName);
+  result.description = root.text("description", "");
+  const std::string units = root.choice("units", "m", {"m", "mm"});
+  reader.scale = result.unitScale = units == "mm" ? 1e-3 : 1.0;
+  reader.dataDir = root.text("data_dir", "");
+  if (!reader.dataDir.empty() && fs::path(reader.dataDir).is_relative())
+    reader.dataDir = (baseDir / reader.dataDir).lexically_normal().string();
+
+  // The model first: its spring layout decides the fibre patterns of generated muscles.
+  Fields model = root.object("model");
+  const SpringParameters springs = readModel(model);
+
+  const Json& bones = root.array("bones");
+  Json completeBones = Json::array();
+  std::set<std::string> names;
+  for (size_t i = 0; i < bones.size(); ++i) {
+    Fields bone(bones[i], "bones[" + std::to_string(i) + "]", source);
+    BoneMotion motion;
+    std::vector<double> labels;
+    result.bones.push_back(readBone(bone, i, reader, motion, labels));
+    if (!names.insert(result.bones.back().name).second)
+      bone.fail("name", "\"" + result.bones.back().name + "\" is used by another bone");
+    if (motion.poses.size() > 1) {
+      if (result.poseCount > 1 && int(motion.poses.size()) != result.poseCount)
+        bone.fail("motion", "has " + std::to_string(motion.poses.size()) +
+                                " poses but an earlier bone's motion has " +
+                                std::to_string(result.poseCount));
+      if (result.poseCount <= 1) result.poseLabels = labels;
+      result.poseCount = int(motion.poses.size());
+    }
+    result.motions.push_back(std::move(motion));
+    completeBones.push_back(bone.finish());
+  }
+  // Scenes without a multi-pose motion have one pose, labelled 0.
+  if (result.poseLabels.empty()) result.poseLabels = {0};
+
+  const Json& muscles = root.array("muscles");
+  Json completeMuscles = Json::array();
+  names.clear();
+  for (size_t i = 0; i < muscles.size(); ++i) {
+    Fields muscle(muscles[i], "muscles[" + std::to_string(i) + "]", source);
+    result.muscles.push_back(readMuscle(muscle, i, reader, springs));
+    if (!names.insert(result.muscles.back().name).second)
+      muscle.fail("name", "\"" + result.muscles.back().name + "\" is used by another muscle");
+    completeMuscles.push_back(muscle.finish());
+  }
+
+  Fields simulation = root.object("simulation");
+  readSimulation(simulation, reader.scale, result.simulation);
+  Fields collision = root.object("collision");
+  readCollision(collision, reader.scale, result.simulation);
+  Fields outputs = root.object("outputs");
+  result.outputs.frameEvery = outputs.integer("frame_every", 1, 0, 1000000000);
+  result.outputs.writeSurfaces = outputs.boolean("surfaces", true);
+  result.outputs.writeParticles = outputs.boolean("particles", true);
+  result.outputs.writeFibres = outputs.boolean("fibres", true);
+  Fields analytic = root.object("analytic");
+  result.analytic = readAnalytic(analytic, reader.scale);
+
+  root.set("bones", std::move(completeBones));
+  root.set("muscles", std::move(completeMuscles));
+  root.set("model", model.finish());
+  root.set("simulation", simulation.finish());
+  root.set("collision", collision.finish());
+  root.set("outputs", outputs.finish());
+  root.set("analytic", analytic.finish());
+  result.json.clear();
+  writePretty(root.finish(), 0, result.json);
+  return result;
+}
+
+}  // namespace
+
+btTransform LoadedScene::bonePose(size_t bone, int pose) const {
+  if (bone >= motions.size() || motions[bone].poses.empty()) return btTransform::getIdentity();
+  const auto& poses = motions[bone].poses;
+  return poses[size_t(std::clamp(pose, 0, int(poses.size()) - 1))];
+}
+
+std::string exportBuiltInScene(const std::string& name) {
+  if (builtInSceneDefinition(name).empty())
+    throw InputError(name, "", "not a built-in scene (see `fibremss scenes`)");
+  return loadScene(name).json;
+}
+
+LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::string>& overrides) {
+  std::string text = builtInSceneDefinition(nameOrPath);
+  std::string source = "built-in scene " + nameOrPath;
+  fs::path baseDir = fs::current_path();
+  std::string defaultName = nameOrPath;
+  if (text.empty()) {
+    const fs::path path(nameOrPath);
+    if (!fs::is_regular_file(path)) {
+      std::string list;
+      for (const auto& scene : builtInScenes()) list += (list.empty() ? "" : ", ") + scene.name;
+      throw InputError(nameOrPath, "",
+                       "neither a built-in scene (" + list + ") nor a readable scene file");
+    }
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream content;
+    content << in.rdbuf();
+    if (!in && !in.eof()) throw InputError(nameOrPath, "", "cannot read the file");
+    text = content.str();
+    source = nameOrPath;
+    baseDir = fs::absolute(path).parent_path();
+    defaultName = path.stem().string();
+  }
+  Json raw;
+  try {
+    raw = Json::parse(text);
+  } catch (const Json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
+    throw InputError(source, "", std::string("not valid JSON: ") + e.what());
+  }
+  scene::applyOverrides(raw, overrides);
+  scene::validateSceneJson(raw, source);
+  LoadedScene result = readScene(raw, source, baseDir, defaultName);
+  if (source.rfind("built-in", 0) == 0) result.source = "built-in";
+  return result;
+}
+
+}  // namespace fibremss

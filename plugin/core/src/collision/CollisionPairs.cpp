@@ -1,0 +1,425 @@
+#include "CollisionPairs.h"
+
+#include <LinearMath/btAabbUtil2.h>
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "integrators/Integrators.h"
+
+namespace fibremss {
+namespace {
+
+/// Steps of the walk back out of a bone along a remembered side before it gives up.
+constexpr int kMaxBackOutSteps = 64;
+
+/// Two bones' pushes on one particle oppose when their directions are more than 120° apart.
+constexpr btScalar kOpposed = btScalar(-0.5);
+/// A caught particle has a way out sideways when the bones' pushes across the gap add up to at
+/// least this share of their lengths (an edge or a rounded end of a bone next to it).
+constexpr btScalar kWayOut = btScalar(0.05);
+
+/// `velocity` without its part into the unit push direction `normal`: no rebound, and what
+/// moves along the contact keeps moving (frictionless sliding).
+btVector3 withoutApproach(const btVector3& velocity, const btVector3& normal) {
+  const btScalar into = velocity.dot(normal);
+  return into < 0 ? velocity - normal * into : velocity;
+}
+
+void addPush(MuscleState& muscle, uint32_t i, const btVector3& push) {
+  muscle.pushes[i] += push;
+  ++muscle.pushCounts[i];
+}
+
+/// addPush of bone `slot`, also summed per bone for the pinch test of applyPushes.
+void addBonePush(MuscleState& muscle, uint32_t i, uint32_t slot, const btVector3& push) {
+  addPush(muscle, i, push);
+  int32_t& first = muscle.pinchBones[i];
+  if (first < 0) first = static_cast<int32_t>(slot);
+  (first == static_cast<int32_t>(slot) ? muscle.firstBonePushes[i] : muscle.otherBonePushes[i]) +=
+      push;
+}
+
+/// The response of a particle that bone pushes `a` (first bone) and `b` (the others) press
+/// from opposite sides, both overlapping it (no room for its diameter): replaces `push` and
+/// returns true; false, `push` unchanged, when they do not oppose. Along the gap's normal it
+/// moves half the pushes' sum, which leaves equal overlaps on both sides (the whole sum would
+/// swap them, back and forth every iteration); across, it moves out of the gap by their mean
+/// depth along what the bones push across (towards a bone's edge or rounded end); muscle pushes
+/// count only across the gap, where they cannot drive it into a bone.
+bool pinchPush(const btVector3& a, const btVector3& b, btVector3& push) {
+  const btScalar la = a.length(), lb = b.length();
+  if (la <= 0 || lb <= 0 || a.dot(b) > kOpposed * la * lb) return false;
+  const btVector3 normal = (a / la - b / lb).normalized();
+  const btVector3 bones = a + b;
+  const btScalar along = bones.dot(normal);
+  const btVector3 across = bones - normal * along;
+  const btVector3 muscles = push - bones;
+  push = normal * (along / 2) + (muscles - normal * muscles.dot(normal));
+  const btScalar acrossLength = across.length();
+  if (acrossLength > kWayOut * (la + lb)) push += across * ((la + lb) / (2 * acrossLength));
+  return true;
+}
+
+/// Walks from `local` (bone frame) along the remembered unit `side` until the field clears
+/// `radius` with its direction on that side; returns the point reached.
+btVector3 backOut(const BoneDistanceField& field, btVector3 local, const btVector3& side,
+                  btScalar radius) {
+  for (int k = 0; k < kMaxBackOutSteps; ++k) {
+    const BoneDistanceField::Sample s = field.sample(local);
+    if (s.distance >= radius && s.gradient.dot(side) > 0) break;
+    local += side * std::max(std::abs(radius - s.distance), field.cell());
+  }
+  return local;
+}
+
+/// Push (bone frame) of penetration recovery for particle i at `local` with field sample `s`:
+/// non-zero only when its side flipped; updates the particle's side memory.
+btVector3 recoveryPush(MuscleState& muscle, uint32_t i, int32_t bone,
+                       const BoneDistanceField& field, const btVector3& local,
+                       const BoneDistanceField::Sample& s, btScalar radius) {
+  int32_t& owner = muscle.sideBones[i];
+  btVector3& side = muscle.boneSides[i];
+  uint32_t& stamp = muscle.sideStamps[i];
+  // Remembered only while the particle stays near the bone from one iteration to the next:
+  // away from it (unseen, stale), a particle may go round the bone legitimately.
+  const btScalar band = 2 * radius + 2 * field.cell();
+  if (owner >= 0 && stamp + 1 < muscle.contactRound) owner = -1;
+  if (owner == bone) {
+    if (s.distance > band) {
+      owner = -1;
+      return btVector3(0, 0, 0);
+    }
+    stamp = muscle.contactRound;
+    if (s.gradient.dot(side) < kFlippedSide) return backOut(field, local, side, radius) - local;
+    if (!s.gradient.isZero()) side = s.gradient;
+  } else if (owner < 0 && s.distance <= band && !s.gradient.isZero()) {
+    owner = bone;
+    side = s.gradient;
+    stamp = muscle.contactRound;
+  }
+  return btVector3(0, 0, 0);
+}
+
+/// collideMuscleBone against the bone's distance field.
+void collideWithField(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
+                      ContactLog& log) {
+  const SphereTree& tree = muscle.tree;
+  if (tree.empty()) return;
+  const MuscleSettings& settings = *muscle.settings;
+  const BoneDistanceField& field = *bone.field;
+  btVector3 lower, upper;
+  btTransformAabb(field.lower(), field.upper(), 0, bone.current, lower, upper);
+  const btDbvtVolume box = btDbvtVolume::FromMM(lower, upper);
+  const btTransform toBone = bone.current.inverse();
+  const btMatrix3x3& toWorld = bone.current.getBasis();
+  const bool recovery = !muscle.sideBones.empty();
+  stack.clear();
+  stack.push_back({0, -1});
+  while (!stack.empty()) {
+    const int32_t n = stack.back().first;
+    stack.pop_back();
+    const btDbvtVolume& bounds = tree.bounds(n);
+    if (!boundsOverlap(bounds, box)) continue;
+    const SphereTree::Node& node = tree.node(n);
+    if (node.sphere < 0) {
+      // φ is 1-Lipschitz: a node whose box (spheres included) lies well clear of the bone
+      // holds no contact and no particle within its recovery band (twice its radius).
+      const btVector3 centre = bounds.Center();
+      const btScalar halfDiagonal = bounds.Extents().length();
+      if (field.sample(toBone * centre).distance > 3 * halfDiagonal + 2 * field.cell()) continue;
+      stack.push_back({node.children[0], -1});
+      stack.push_back({node.children[1], -1});
+      continue;
+    }
+    const auto i = static_cast<uint32_t>(node.sphere);
+    if (settings.isFixed(i)) continue;
+    ++log.candidates;
+    const btScalar radius = settings.radii[i];
+    const btVector3 local = toBone * muscle.positions[i];
+    const BoneDistanceField::Sample s = field.sample(local);
+    btVector3 push =
+        recovery ? recoveryPush(muscle, i, static_cast<int32_t>(bone.slot), field, local, s, radius)
+                 : btVector3(0, 0, 0);
+    if (push.isZero() && s.distance < radius) push = s.gradient * (radius - s.distance);
+    if (push.isZero()) continue;
+    addBonePush(muscle, i, bone.slot, toWorld * push);
+    log.add(muscle.positions[i], muscle.positions[i] - toWorld * (s.gradient * s.distance));
+  }
+}
+
+/// Whether spheres around snapshots `a` and `b` whose radii and reaches add up to `reach` may
+/// overlap before either leaves its reach: the fat spheres overlap (a relative 1e-4 more
+/// covers the rounding; AABBs alone would list about twice as many pairs).
+bool mayMeet(const btVector3& a, const btVector3& b, btScalar reach) {
+  reach *= btScalar(1.0001);
+  return (a - b).length2() < reach * reach;
+}
+
+/// Exact test of particle i of `a` against particle j of `b` (not both fixed): false when apart,
+/// else their contact.
+bool musclePairContact(const MuscleState& a, const MuscleState& b, uint32_t i, uint32_t j,
+                       MuscleContact& contact) {
+  const MuscleSettings& sa = *a.settings;
+  const MuscleSettings& sb = *b.settings;
+  btVector3 direction;
+  btScalar depth;
+  if (!sphereOverlap(a.positions[i], sa.radii[i], b.positions[j], sb.radii[j], direction, depth))
+    return false;
+  const bool fixedA = sa.isFixed(i);
+  const bool fixedB = sb.isFixed(j);
+  const btScalar share = fixedA || fixedB ? 1 : btScalar(0.5);
+  contact = {fixedA ? kUnpushed : i, fixedB ? kUnpushed : j, direction * (depth * share)};
+  return true;
+}
+
+/// Exact test of free particle i of the muscle against the bone's sphere, push and log.
+void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere,
+                  ContactLog& log) {
+  ++log.candidates;
+  const btVector3& centre = bone.tree.centre(static_cast<int32_t>(sphere));
+  btVector3 direction;
+  btScalar depth;
+  if (!sphereOverlap(muscle.positions[i], muscle.settings->radii[i], centre,
+                     bone.settings->sphereRadii[sphere], direction, depth))
+    return;
+  addBonePush(muscle, i, bone.slot, direction * depth);
+  log.add(muscle.positions[i], centre);
+}
+
+/// Calls onPair(i, j) for the leaf pairs of two muscle trees (not both particles fixed; nothing
+/// when their roots are apart), listing them into `list` if given; `stack` owns the traversal
+/// stack.
+template <typename OnPair>
+void traverseMuscles(const MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
+                     CandidateList* list, OnPair&& onPair) {
+  const MuscleSettings& sa = *a.settings;
+  const MuscleSettings& sb = *b.settings;
+  collideTrees(stack, a.tree, b.tree, [&](int32_t sphereA, int32_t sphereB) {
+    const auto i = static_cast<uint32_t>(sphereA), j = static_cast<uint32_t>(sphereB);
+    if (sa.isFixed(i) && sb.isFixed(j)) return;
+    const btScalar reach = sa.radii[i] + sb.radii[j];
+    if (list && mayMeet(a.treeSnapshot[i], b.treeSnapshot[j], reach + a.treeReach + b.treeReach))
+      list->add(i, j);
+    onPair(i, j);
+  });
+}
+
+/// Calls onPair(particle, sphere) for every free boundary particle whose leaf bounds overlap a
+/// bone sphere's.
+template <typename OnPair>
+void forBonePairs(TreeTraversalStack& stack, const MuscleState& muscle, const BoneState& bone,
+                  OnPair&& onPair) {
+  const MuscleSettings& settings = *muscle.settings;
+  collideTrees(stack, muscle.tree, bone.tree, [&](int32_t particle, int32_t sphere) {
+    const auto i = static_cast<uint32_t>(particle);
+    if (!settings.isFixed(i)) onPair(i, static_cast<uint32_t>(sphere));
+  });
+}
+
+/// mayMeet for particle i of the muscle and a sphere of the bone (placed: it holds still).
+bool mayMeetBone(const MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere) {
+  return mayMeet(muscle.treeSnapshot[i], bone.tree.centre(static_cast<int32_t>(sphere)),
+                 muscle.settings->radii[i] + bone.settings->sphereRadii[sphere] + muscle.treeReach);
+}
+
+/// The candidate-list protocol of one pair of bodies: test(i, j) over the pairs `list` holds for
+/// the two keys; else traverse(listing) finds and tests them, listing into `list` unless a tree
+/// is tight (moving faster than its skin: refit next iteration, nothing to list for). Returns
+/// whether that listing overflowed.
+template <typename Test, typename Traverse>
+bool testCandidates(CandidateList* list, uint64_t firstKey, uint64_t secondKey, bool tight,
+                    Test&& test, Traverse&& traverse) {
+  if (list && list->holds(firstKey, secondKey)) {
+    for (size_t k = 0; k < list->count; ++k) test(list->pairs[k].first, list->pairs[k].second);
+    return false;
+  }
+  if (tight) list = nullptr;
+  if (list) list->start(firstKey, secondKey);
+  traverse(list);
+  return list && !list->finish();
+}
+
+/// A list with room for `pairs` pairs found when the bodies are added and the slack for
+/// `particles` boundary particles (kListSlack).
+CandidateList sizedList(size_t pairs, size_t particles) {
+  CandidateList list;
+  list.pairs.resize(kListSlack * pairs + particles / 2);
+  return list;
+}
+
+}  // namespace
+
+void buildTree(MuscleState& muscle) {
+  const MuscleSettings& settings = *muscle.settings;
+  muscle.treeSkin = kTreeSkin * muscle.meanRadius;
+  muscle.treeReach = muscle.treeSkin / 2;
+  muscle.treeSnapshot = muscle.positions;
+  muscle.tree.build(settings.boundaryParticles, muscle.positions, settings.radii, muscle.treeReach,
+                    solverParameters(muscle).rebuildEveryStep);
+}
+
+bool refitTree(MuscleState& muscle) {
+  const MuscleSettings& settings = *muscle.settings;
+  const std::vector<uint32_t>& boundary = settings.boundaryParticles;
+  const btScalar half = muscle.treeSkin / 2;
+  const bool followed = std::exchange(muscle.treeFollowed, false);
+  btScalar margin = half;
+  if (muscle.treeReach > 0) {
+    // One pass that stops at the first particle out of its skin (moved2: its squared move).
+    const btScalar reach2 = muscle.treeReach * muscle.treeReach;
+    btScalar moved2 = 0;
+    size_t k = 0;
+    for (; k < boundary.size(); ++k) {
+      moved2 = (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2();
+      if (!(moved2 <= reach2)) break;
+    }
+    if (k == boundary.size()) return muscle.refitStreak = false;
+    // Out in two iterations running, or the first one out already past the whole skin:
+    // moving faster than a skin pays for (bones moving), so tight bounds, refit every
+    // iteration, until it slows down.
+    if (muscle.refitStreak || moved2 > 4 * half * half) margin = 0;
+  } else if (followed && muscle.treeMotion > half * half) {
+    // Tight and carried on by its bones (faster than the skin when it went tight): bounds at the
+    // particles, but no snapshot or move measured, which would only say "moving fast" again
+    // until the bones arrive (that iteration takes the snapshot).
+    muscle.tree.refit(muscle.positions, settings.radii);
+    ++muscle.snapshotSkips;
+    return muscle.refitStreak = true;
+  } else if (muscle.treeMotion > half * half) {
+    margin = 0;  // still moving more than the skin holds in one iteration
+  }
+  muscle.treeReach = margin;
+  const btScalar motion =
+      muscle.tree.refit(muscle.positions, settings.radii, margin, muscle.treeSnapshot);
+  // Per iteration: the bones move at a steady pace, so a move over skipped snapshots divides.
+  const auto span = static_cast<btScalar>(1 + std::exchange(muscle.snapshotSkips, 0));
+  muscle.treeMotion = motion / (span * span);
+  return muscle.refitStreak = true;
+}
+
+void rebuildTree(MuscleState& muscle) {
+  const MuscleSettings& settings = *muscle.settings;
+  const std::vector<uint32_t>& boundary = settings.boundaryParticles;
+  for (uint32_t i : boundary) muscle.treeSnapshot[i] = muscle.positions[i];
+  muscle.treeReach = muscle.treeSkin / 2;
+  muscle.refitStreak = false;
+  muscle.snapshotSkips = 0;
+  muscle.tree.rebuild(muscle.positions, settings.radii, muscle.treeReach);
+}
+
+CandidateList muscleList(const MuscleState& a, const MuscleState& b) {
+  CandidateList counter;
+  TreeTraversalStack stack;
+  traverseMuscles(a, b, stack, &counter, [](uint32_t, uint32_t) {});
+  return sizedList(counter.count, std::min(a.settings->boundaryParticles.size(),
+                                           b.settings->boundaryParticles.size()));
+}
+
+CandidateList boneList(const MuscleState& muscle, const BoneState& bone) {
+  if (bone.field) return {};
+  size_t count = 0;
+  TreeTraversalStack stack;
+  forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
+    count += mayMeetBone(muscle, bone, i, sphere) ? 1 : 0;
+  });
+  return sizedList(count, muscle.settings->boundaryParticles.size());
+}
+
+void collideMuscles(MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
+                    ContactLog& log, MuscleContacts& out) {
+  out.count = 0;
+  out.listOverflowed = false;
+  const auto test = [&](uint32_t i, uint32_t j) {
+    ++log.candidates;
+    MuscleContact contact;
+    if (!musclePairContact(a, b, i, j, contact)) return;
+    log.add(a.positions[i], b.positions[j]);
+    if (out.count < out.capacity) out.records[out.count] = contact;
+    ++out.count;
+  };
+  CandidateList* list = b.slot < a.muscleLists.size() ? &a.muscleLists[b.slot] : nullptr;
+  out.listOverflowed = testCandidates(
+      list, a.tree.epoch(), b.tree.epoch(), a.treeReach == 0 || b.treeReach == 0, test,
+      [&](CandidateList* listing) { traverseMuscles(a, b, stack, listing, test); });
+}
+
+void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraversalStack& stack,
+                        const MuscleContacts& contacts) {
+  MuscleState& muscle = onFirst ? a : b;
+  const auto push = [&](const MuscleContact& contact) {
+    const uint32_t i = onFirst ? contact.i : contact.j;
+    if (i != kUnpushed) addPush(muscle, i, onFirst ? contact.push : -contact.push);
+  };
+  const bool overflowed = contacts.count > contacts.capacity;
+  if (onFirst && (overflowed || contacts.listOverflowed)) ++a.candidateOverflows;
+  if (!overflowed) {
+    for (size_t k = 0; k < contacts.count; ++k) push(contacts.records[k]);
+    return;
+  }
+  // Only a traversal overflows (a list that held fits its records): the same one again.
+  traverseMuscles(a, b, stack, nullptr, [&](uint32_t i, uint32_t j) {
+    MuscleContact contact;
+    if (musclePairContact(a, b, i, j, contact)) push(contact);
+  });
+}
+
+void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
+                       ContactLog& log) {
+  if (bone.field) {
+    collideWithField(muscle, bone, stack, log);
+    return;
+  }
+  CandidateList* list =
+      bone.slot < muscle.boneLists.size() ? &muscle.boneLists[bone.slot] : nullptr;
+  const auto test = [&](uint32_t i, uint32_t sphere) {
+    testBonePair(muscle, bone, i, sphere, log);
+  };
+  const auto traverse = [&](CandidateList* listing) {
+    forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
+      if (listing && mayMeetBone(muscle, bone, i, sphere)) listing->add(i, sphere);
+      test(i, sphere);
+    });
+  };
+  if (testCandidates(list, muscle.tree.epoch(), bone.tree.placement(), muscle.treeReach == 0, test,
+                     traverse))
+    ++muscle.candidateOverflows;
+}
+
+void forgetBoneSides(MuscleState& muscle) {
+  std::fill(muscle.sideBones.begin(), muscle.sideBones.end(), -1);
+}
+
+void applyPushes(MuscleState& muscle, bool hasVelocities) {
+  ++muscle.contactRound;
+  const bool sliding = solverParameters(muscle).slidingContacts;
+  size_t pinched = 0;
+  for (uint32_t i : muscle.settings->boundaryParticles) {
+    if (muscle.pushCounts[i] == 0) continue;
+    btVector3 push = muscle.pushes[i];
+    if (muscle.pinchBones[i] >= 0) {
+      if (pinchPush(muscle.firstBonePushes[i], muscle.otherBonePushes[i], push)) ++pinched;
+      muscle.pinchBones[i] = -1;
+      muscle.firstBonePushes[i].setZero();
+      muscle.otherBonePushes[i].setZero();
+    }
+    const btScalar depth = push.length();
+    if (sliding && depth > 0) {
+      const btVector3 normal = push / depth;
+      const btVector3 moved = withoutApproach(muscle.positions[i] - muscle.previous[i], normal);
+      muscle.positions[i] += push;
+      muscle.previous[i] = muscle.positions[i] - moved;
+      if (hasVelocities) muscle.velocities[i] = withoutApproach(muscle.velocities[i], normal);
+    } else {
+      muscle.positions[i] += push;
+      muscle.previous[i] = muscle.positions[i];
+      if (hasVelocities) muscle.velocities[i].setZero();
+    }
+    muscle.pushes[i].setZero();
+    muscle.pushCounts[i] = 0;
+  }
+  muscle.pinched = pinched;
+}
+
+}  // namespace fibremss

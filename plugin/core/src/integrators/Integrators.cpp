@@ -1,0 +1,34 @@
+#include "Integrators.h"
+
+#include <stdexcept>
+#include <string>
+
+#include "IntegratorsInternal.h"
+#include "solver/TimeStep.h"
+
+namespace fibremss {
+
+void TimeIntegrator::prepare(MuscleState& muscle) const {
+  muscle.workspace = makeWorkspace(muscle);
+  muscle.stableTimeStep = stableTimeStep(*muscle.settings, kind());
+  muscle.preparedFor = kind();
+  muscle.prepared = true;
+}
+
+std::unique_ptr<IntegratorWorkspace> TimeIntegrator::makeWorkspace(const MuscleState&) const {
+  return nullptr;
+}
+
+const TimeIntegrator& integratorFor(Integrator kind) {
+  if (const TimeIntegrator* integrator = explicitIntegratorFor(kind)) return *integrator;
+  if (const TimeIntegrator* integrator = implicitIntegratorFor(kind)) return *integrator;
+  if (const TimeIntegrator* integrator = positionBasedIntegratorFor(kind)) return *integrator;
+  throw std::invalid_argument(std::string("unknown integrator: ") + toString(kind));
+}
+
+const SimulationParameters& solverParameters(const MuscleState& muscle) {
+  static const SimulationParameters defaults;
+  return muscle.parameters ? *muscle.parameters : defaults;
+}
+
+}  // namespace fibremss

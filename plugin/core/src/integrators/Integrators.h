@@ -1,0 +1,60 @@
+#pragma once
+// Time integrators (method.md §4; docs/integrators.md), internal. One step of an integrator moves
+// the free particles of one muscle by dt from the spring forces already in state.forces (computed
+// at state.positions before dt was chosen); fixed particles are skipped. Every integrator leaves
+// x(t) in `previous`, so eq 5.1 and the collision response (which removes velocity by moving
+// `previous`) work for all of them. Multi-stage (RK) and implicit ones evaluate forces at other
+// positions with springForces(settings, positions, forces) (SpringForces.h) into buffers of
+// their IntegratorWorkspace, made by prepare(); advance() never allocates.
+#include <LinearMath/btScalar.h>
+
+#include <memory>
+
+#include "fibremss/Parameters.h"
+#include "solver/MuscleState.h"
+
+namespace fibremss {
+
+/// What one integration pass measured.
+struct IntegrationResult {
+  double displacement = 0;    ///< Σ |x_new − x| over free particles [m]
+  bool finite = true;         ///< no NaN or inf appeared
+  int solverIterations = 0;   ///< implicit integrators: conjugate-gradient iterations run
+  double solverResidual = 0;  ///< implicit integrators: final CG residual |r| / |b|
+};
+
+class TimeIntegrator {
+ public:
+  virtual ~TimeIntegrator() = default;
+  /// Advances the free particles of `muscle` by dt; `previousDt` is the step that led from
+  /// `previous` to `positions`. Solver settings come from muscle.parameters.
+  virtual IntegrationResult advance(MuscleState& muscle, btScalar dt,
+                                    btScalar previousDt) const = 0;
+  /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs and sets the
+  /// muscle's stability bound for it; called when the muscle is added and when the integrator
+  /// changes, never inside the iterations.
+  void prepare(MuscleState& muscle) const;
+  /// The kind this integrator implements.
+  virtual Integrator kind() const = 0;
+  /// Whether the integrator keeps explicit velocities (they are rotated by the pre-transform
+  /// and zeroed on contact).
+  virtual bool usesVelocities() const = 0;
+
+ protected:
+  /// The workspace advance() needs for `muscle`, or null when it needs none.
+  virtual std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const;
+};
+
+/// The integrator for a kind (one shared stateless instance per kind; thread-safe: all
+/// per-muscle data lives in MuscleState).
+const TimeIntegrator& integratorFor(Integrator kind);
+
+/// Prepares `muscle` for `integrator` unless it already is.
+inline void ensurePrepared(const TimeIntegrator& integrator, MuscleState& muscle) {
+  if (!muscle.prepared || muscle.preparedFor != integrator.kind()) integrator.prepare(muscle);
+}
+
+/// The solver settings of a muscle: its system's parameters, or the defaults when it has none.
+const SimulationParameters& solverParameters(const MuscleState& muscle);
+
+}  // namespace fibremss

@@ -1,0 +1,114 @@
+#pragma once
+// Per-body state of a MuscleSystem (internal): everything a step changes, structure-of-arrays,
+// allocated once when the body is added. The immutable settings are shared, never copied.
+#include <LinearMath/btTransform.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "collision/BoneDistanceField.h"
+#include "collision/CollisionTrees.h"
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/MuscleSystem.h"
+
+class btCollisionObject;
+
+namespace fibremss {
+
+/// A bone: settings, the transforms of one step and its sphere tree (static topology, bounds
+/// placed at the current transform).
+struct BoneState {
+  std::shared_ptr<const BoneSettings> settings;   ///< shared, immutable
+  const btCollisionObject* body = nullptr;        ///< transform source, or null (setBoneTransform)
+  btTransform last = btTransform::getIdentity();  ///< at the end of the previous step
+  btTransform target = btTransform::getIdentity();   ///< to reach at the end of this step
+  btTransform current = btTransform::getIdentity();  ///< in the running iteration
+  btTransform delta = btTransform::getIdentity();    ///< current · previous-iteration⁻¹
+  bool moving = false;  ///< delta differs from the identity in this iteration
+  BoneSphereTree tree;  ///< bone spheres, static topology, bounds placed in world space
+  uint32_t slot = 0;    ///< the bone's slot in its system (names it in per-particle memory)
+  /// Signed distance field of the mesh, bone frame (BoneCollision::DistanceField), or null.
+  std::unique_ptr<const BoneDistanceField> field;
+  btTransform goodLast = btTransform::getIdentity();     ///< `last` at the step's start (guard)
+  btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
+};
+
+/// Scratch an integrator keeps per muscle (Jacobian structure, CG vectors, stage buffers);
+/// made by TimeIntegrator::prepare, never state a rollback must restore.
+struct IntegratorWorkspace {
+  virtual ~IntegratorWorkspace() = default;
+};
+
+/// A muscle: settings plus the state a step changes.
+struct MuscleState {
+  std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
+  std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
+  std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
+
+  // Particles, structure-of-arrays, size particleCount().
+  std::vector<btVector3> positions;     ///< x(t) [m]
+  std::vector<btVector3> previous;      ///< x(t−dt) [m]
+  std::vector<btVector3> velocities;    ///< for velocity-based integrators [m/s]
+  std::vector<btVector3> forces;        ///< spring forces of this iteration [N]
+  std::vector<btVector3> pushes;        ///< collision pushes accumulated this iteration [m]
+  std::vector<uint32_t> pushCounts;     ///< pairs that pushed each particle this iteration
+  std::vector<btScalar> stepRadius;     ///< r of eq 5.1: own radius, or the mean for inner ones
+  std::vector<uint32_t> freeParticles;  ///< indices of particles that are not fixed
+
+  /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
+  /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).
+  std::vector<int32_t> sideBones;
+  std::vector<btVector3> boneSides;  ///< see sideBones
+  std::vector<uint32_t> sideStamps;  ///< contactRound when the side was last seen (else stale)
+  uint32_t contactRound = 0;         ///< responses applied so far (applyPushes)
+
+  /// Pinch (CollisionPairs.cpp): this iteration's bone pushes of each particle split into the
+  /// first bone's and the others', to tell a particle two bones push opposite ways. Slot of the
+  /// first bone that pushed the particle in this iteration (-1: none).
+  std::vector<int32_t> pinchBones;
+  std::vector<btVector3> firstBonePushes;  ///< Σ pushes of that bone this iteration [m]
+  std::vector<btVector3> otherBonePushes;  ///< Σ pushes of every other bone this iteration [m]
+  size_t pinched = 0;      ///< particles caught between two bones in the last response
+  size_t tornSprings = 0;  ///< most springs found burst while it was trapped (the guard's)
+
+  btScalar stableTimeStep = 0;  ///< largest dt for which damped Verlet stays stable [s]
+  btScalar meanRadius = 0;      ///< mean boundary radius [m]
+  double restLengthSum = 0;     ///< Σ L0 over the springs [m]
+  SphereTree tree;              ///< boundary particle spheres, world frame (refitTree)
+  uint32_t slot = 0;            ///< the muscle's slot in its system (names it in pair lists)
+  /// Verlet skin of the tree (refitTree): leaves are the spheres around treeSnapshot grown by
+  /// treeReach, treeSkin/2 or 0 while the muscle moves faster than that every iteration [m].
+  btScalar treeSkin = 0;
+  btScalar treeReach = 0;    ///< what the tree's leaves are grown by; refit past it [m]
+  bool refitStreak = false;  ///< the last refitTree call refitted
+  btScalar treeMotion = 0;   ///< largest squared move of a particle per iteration, last refit [m²]
+  /// followBones moved the particles, and their bones have yet to arrive (refitTree may skip the
+  /// snapshot of a tight tree).
+  bool treeFollowed = false;
+  uint32_t snapshotSkips = 0;  ///< tight refits without the snapshot since it was taken
+  /// Positions of the boundary particles at the last refit (by particle; inner ones unused) [m].
+  std::vector<btVector3> treeSnapshot;
+  /// Leaf pairs with each later-added muscle, by its slot (collideMuscles; empty when unlisted).
+  std::vector<CandidateList> muscleLists;
+  std::vector<CandidateList> boneLists;  ///< leaf pairs with each bone, by bone slot
+  size_t candidateOverflows = 0;  ///< listings or pair contact records that overflowed, unsummed
+
+  std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
+  std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
+  bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
+  std::vector<btVector3> surface;           ///< deformed surface vertices (output)
+
+  /// The system's parameters (integrators read their solver settings; null: the defaults).
+  const SimulationParameters* parameters = nullptr;
+  std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
+  Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
+  bool prepared = false;                           ///< workspace made for `preparedFor`
+  bool frozen = false;  ///< stopped by the numerical guard: skipped by every part of a step
+  // The last good state (MuscleSystemGuard.cpp): saved at the start of a step, same sizes.
+  std::vector<btVector3> goodPositions;   ///< positions at the start of the step [m]
+  std::vector<btVector3> goodPrevious;    ///< previous at the start of the step [m]
+  std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
+};
+
+}  // namespace fibremss

@@ -1,0 +1,265 @@
+#include "fibremss/MuscleSystem.h"
+
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
+
+#include <random>
+#include <stdexcept>
+#include <string>
+
+#include "MuscleSystemImpl.h"
+#include "Skin.h"
+#include "SpringForces.h"
+#include "TimeStep.h"
+#include "integrators/Integrators.h"
+
+namespace fibremss {
+
+MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->parameters = parameters;
+  impl_->prepareWorkers();
+}
+
+MuscleSystem::~MuscleSystem() = default;
+
+BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
+                                 const btCollisionObject* body) {
+  if (!settings) throw std::invalid_argument("MuscleSystem::addBone: null settings");
+  if (settings->sphereCentres.size() != settings->sphereRadii.size())
+    throw std::invalid_argument("MuscleSystem::addBone: bone '" + settings->name +
+                                "' has different numbers of sphere centres and radii");
+  auto state = std::make_unique<BoneState>();
+  state->body = body;
+  if (body) state->last = state->target = state->current = body->getWorldTransform();
+  state->tree.build(settings->sphereCentres, settings->sphereRadii);
+  state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
+  if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
+    state->field = std::make_unique<const BoneDistanceField>(
+        MeshDistance(settings->mesh), impl_->parameters.distanceFieldCell,
+        kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
+  state->settings = std::move(settings);
+  const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
+  const BoneState& bone = *impl_->bones.states[handle.index];
+  impl_->bones.states[handle.index]->slot = handle.index;
+  // Every muscle's candidate list for this slot starts over (a reused slot's is another bone's).
+  for (uint32_t slot : impl_->muscles.order) {
+    MuscleState& muscle = *impl_->muscles.states[slot];
+    muscle.boneLists.resize(impl_->bones.states.size());
+    muscle.boneLists[handle.index] = boneList(muscle, bone);
+  }
+  return handle;
+}
+
+void MuscleSystem::removeBone(BoneHandle bone) {
+  impl_->bones.remove(bone);
+}
+
+void MuscleSystem::setBoneTransform(BoneHandle bone, const btTransform& transform) {
+  impl_->bone(bone).target = transform;
+}
+
+btTransform MuscleSystem::boneTransform(BoneHandle bone) const {
+  return impl_->bone(bone).current;
+}
+
+MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> settings,
+                                     std::span<const BoneHandle> bones) {
+  if (!settings) throw std::invalid_argument("MuscleSystem::addMuscle: null settings");
+  // The AVX2 spring kernel reads springBlocks, which only checks the count of springs: settings
+  // made or changed by hand (blocks not those of their springs) run on a laid-out copy.
+  if (fastestSpringKernel() == SpringKernel::avx2) {
+    SpringBlocks blocks = springBlocksFor(*settings);
+    if (!(blocks == settings->springBlocks)) {
+      auto laidOut = std::make_shared<MuscleSettings>(*settings);
+      laidOut->springBlocks = std::move(blocks);
+      settings = std::move(laidOut);
+    }
+  }
+  const MuscleSettings& s = *settings;
+  const std::string where = "MuscleSystem::addMuscle: muscle '" + s.name + "': ";
+  const size_t n = s.particleCount();
+  if (s.radii.size() != n || s.flags.size() != n || s.fixedBone.size() != n ||
+      s.nearestBone.size() != n)
+    throw std::invalid_argument(where + "particle arrays differ in size");
+  if (!(s.particleMass > 0)) throw std::invalid_argument(where + "particle mass must be > 0");
+  for (size_t i = 0; i < n; ++i) {
+    const int32_t limit = static_cast<int32_t>(bones.size());
+    if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)
+      throw std::invalid_argument(where + "particle " + std::to_string(i) + " refers to bone " +
+                                  std::to_string(std::max(s.fixedBone[i], s.nearestBone[i])) +
+                                  " but only " + std::to_string(bones.size()) +
+                                  " bone handles were given");
+    if (s.isFixed(static_cast<uint32_t>(i)) && s.fixedBone[i] < 0)
+      throw std::invalid_argument(where + "fixed particle " + std::to_string(i) + " has no bone");
+  }
+  const bool blend = !s.blendWeight.empty();
+  if (blend && (s.blendWeight.size() != n || s.blendBoneA.size() != n || s.blendBoneB.size() != n))
+    throw std::invalid_argument(where + "blend arrays differ in size from the particles");
+  for (size_t i = 0; blend && i < n; ++i)
+    if (s.blendBoneA[i] >= static_cast<int32_t>(bones.size()) ||
+        s.blendBoneB[i] >= static_cast<int32_t>(bones.size()) || !(s.blendWeight[i] >= 0) ||
+        !(s.blendWeight[i] <= 1))
+      throw std::invalid_argument(where + "particle " + std::to_string(i) +
+                                  " has a blend bone beyond the bone handles or a weight outside "
+                                  "[0, 1]");
+  for (const Spring& spring : s.springs)
+    if (spring.a >= n || spring.b >= n)
+      throw std::invalid_argument(where + "a spring refers to a particle beyond " +
+                                  std::to_string(n));
+  const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
+  const bool skinned = !s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
+                       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount;
+  for (uint32_t p : s.boundaryParticles)
+    if (p >= n) throw std::invalid_argument(where + "boundary particle beyond the particles");
+
+  auto state = std::make_unique<MuscleState>();
+  state->bones.assign(bones.begin(), bones.end());
+  state->boneSlots.assign(bones.size(), -1);
+  state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
+  state->boneDeltas.assign(bones.size(), btTransform::getIdentity());
+  state->positions.resize(n);
+  state->previous.resize(n);
+  state->velocities.assign(n, btVector3(0, 0, 0));
+  state->goodPositions.resize(n);
+  state->goodPrevious.resize(n);
+  state->goodVelocities.resize(n);
+  state->forces.assign(n, btVector3(0, 0, 0));
+  state->pushes.assign(n, btVector3(0, 0, 0));
+  state->pushCounts.assign(n, 0);
+  state->pinchBones.assign(n, -1);
+  state->firstBonePushes.assign(n, btVector3(0, 0, 0));
+  state->otherBonePushes.assign(n, btVector3(0, 0, 0));
+  // Recovery follows the bones' distance fields: without them it has nothing to remember.
+  if (impl_->parameters.penetrationRecovery &&
+      impl_->parameters.boneCollision == BoneCollision::DistanceField) {
+    state->sideBones.assign(n, -1);
+    state->boneSides.assign(n, btVector3(0, 0, 0));
+    state->sideStamps.assign(n, 0);
+  }
+  for (uint32_t i = 0; i < n; ++i)
+    if (!s.isFixed(i)) state->freeParticles.push_back(i);
+
+  double radiusSum = 0;
+  for (uint32_t p : s.boundaryParticles) radiusSum += s.radii[p];
+  if (!s.boundaryParticles.empty()) radiusSum /= static_cast<double>(s.boundaryParticles.size());
+  if (!(radiusSum > 0)) {
+    // No collision spheres: half the mean spring length bounds the motion per iteration.
+    double lengthSum = 0;
+    for (const Spring& spring : s.springs) lengthSum += spring.restLength;
+    radiusSum = s.springs.empty() ? 1e-3 : 0.5 * lengthSum / static_cast<double>(s.springs.size());
+  }
+  state->meanRadius = static_cast<btScalar>(radiusSum);
+  state->stepRadius.resize(n);
+  for (uint32_t i = 0; i < n; ++i)
+    state->stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? s.radii[i] : state->meanRadius;
+  state->stableTimeStep = stableTimeStep(s);
+  for (const Spring& spring : s.springs) state->restLengthSum += spring.restLength;
+
+  state->settings = settings;
+  impl_->resolveBones(*state);
+  impl_->placeAtBones(*state);
+  ++impl_->musclesAdded;
+  if (impl_->parameters.initialNoise > 0) {
+    std::seed_seq seed{impl_->parameters.seed, impl_->musclesAdded};
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<btScalar> noise(-impl_->parameters.initialNoise,
+                                                   impl_->parameters.initialNoise);
+    for (uint32_t i : state->freeParticles) {
+      const btVector3 offset(noise(random), noise(random), noise(random));
+      state->positions[i] += offset;
+      state->previous[i] = state->positions[i];
+    }
+  }
+  state->parameters = &impl_->parameters;
+  buildTree(*state);
+  ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
+  if (skinned) {
+    state->surface.resize(s.restSurface.vertices.size());
+    deformSurface(s, state->positions, state->boneTransforms, impl_->parameters.blendedPretransform,
+                  state->surface);
+  }
+
+  size_t boundaryTotal = s.boundaryParticles.size();
+  for (uint32_t slot : impl_->muscles.order)
+    boundaryTotal += impl_->muscles.states[slot]->settings->boundaryParticles.size();
+  impl_->contacts.ends.resize(std::max(impl_->contacts.ends.size(), 4 * boundaryTotal));
+  MuscleState& added = *state;
+  const MuscleHandle handle = impl_->muscles.add<MuscleHandle>(std::move(state));
+  added.slot = handle.index;
+  // Candidate lists, sized from the pairs at the placed positions: with every bone, and every
+  // earlier muscle with this one (a reused slot's lists were another muscle's).
+  added.boneLists.resize(impl_->bones.states.size());
+  for (uint32_t slot : impl_->bones.order)
+    added.boneLists[slot] = boneList(added, *impl_->bones.states[slot]);
+  added.muscleLists.resize(impl_->muscles.states.size());
+  for (uint32_t slot : impl_->muscles.order) {
+    MuscleState& earlier = *impl_->muscles.states[slot];
+    if (&earlier == &added) continue;
+    earlier.muscleLists.resize(impl_->muscles.states.size());
+    earlier.muscleLists[added.slot] = muscleList(earlier, added);
+  }
+  impl_->prepareWorkers();  // threads and their scratch start here, not in step()
+  return handle;
+}
+
+void MuscleSystem::removeMuscle(MuscleHandle muscle) {
+  impl_->muscles.remove(muscle);
+}
+
+bool MuscleSystem::contains(MuscleHandle muscle) const {
+  return impl_->muscles.find(muscle) != nullptr;
+}
+
+bool MuscleSystem::frozen(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).frozen;
+}
+
+void MuscleSystem::unfreeze(MuscleHandle muscle) {
+  impl_->muscle(muscle).frozen = false;
+}
+
+void MuscleSystem::step() {
+  impl_->guardedStep();
+}
+
+const StepStats& MuscleSystem::lastStep() const {
+  return impl_->stats;
+}
+SimulationParameters& MuscleSystem::parameters() {
+  return impl_->parameters;
+}
+const SimulationParameters& MuscleSystem::parameters() const {
+  return impl_->parameters;
+}
+
+unsigned MuscleSystem::threads() const {
+  return TaskPool::resolve(impl_->parameters.threads);
+}
+
+std::span<const btVector3> MuscleSystem::positions(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).positions;
+}
+
+const MuscleSettings& MuscleSystem::settings(MuscleHandle muscle) const {
+  return *impl_->muscle(muscle).settings;
+}
+
+std::span<const btVector3> MuscleSystem::surface(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).surface;
+}
+
+std::vector<MuscleHandle> MuscleSystem::muscles() const {
+  std::vector<MuscleHandle> handles;
+  for (uint32_t slot : impl_->muscles.order)
+    handles.push_back({slot, impl_->muscles.generations[slot]});
+  return handles;
+}
+
+std::vector<BoneHandle> MuscleSystem::bones() const {
+  std::vector<BoneHandle> handles;
+  for (uint32_t slot : impl_->bones.order)
+    handles.push_back({slot, impl_->bones.generations[slot]});
+  return handles;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,228 @@
+// The numerical guard around one MuscleSystem step (SimulationParameters::onFailure). Every
+// step saves the state it changes (muscles' positions, previous, velocities; bones' transforms;
+// the last dt); a step whose stats report NaN/inf or an explosion is checked muscle by muscle,
+// and unless the policy is Report it is rolled back and repeated: with half the dt cap and twice
+// the iterations (Retry, up to maxRetries times), or with the failing muscles frozen at their last
+// good state (StopBody, and Retry once its retries are spent). The other muscles always finish the
+// step; nothing throws, so a host's Bullet world keeps running. A muscle whose springs burst
+// while two bones still press some of its particles from opposite sides (trapped: pinched in the
+// last iteration, CollisionPairs.cpp), not NaN nor spread far beyond its size, was torn by the
+// bones, not by the numerics: its state is kept, and later steps fail it only for more burst
+// springs than the trap left. A frozen muscle rides with its bones (their motion over the step)
+// and is pushed out of them, so it never ends inside one.
+#include "MuscleSystemGuard.h"
+
+#include <algorithm>
+#include <chrono>
+#include <climits>
+#include <cmath>
+
+#include "MuscleSystemImpl.h"
+#include "Skin.h"
+#include "fibremss/Measures.h"
+#include "integrators/Integrators.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Retries stop after this many halvings of the dt cap (1024× smaller), whatever maxRetries says.
+constexpr int kMaxHalvings = 10;
+/// Collision rounds that push a frozen muscle, carried with its bones, out of them.
+constexpr int kFrozenRounds = 8;
+
+bool finite(const btVector3& v) {
+  return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
+}
+
+bool allFinite(const std::vector<btVector3>& points) {
+  return std::all_of(points.begin(), points.end(), finite);
+}
+
+/// Diagonal of the bounding box of `points`.
+double extent(const std::vector<btVector3>& points) {
+  if (points.empty()) return 0;
+  btVector3 lower = points.front(), upper = points.front();
+  for (const btVector3& p : points) {
+    lower.setMin(p);
+    upper.setMax(p);
+  }
+  return double(lower.distance(upper));
+}
+
+/// `requested` with the dt cap (and the lower clamp) divided by 2^halvings and the iterations
+/// multiplied by it, so that the step still covers the same bone motion, in smaller iterations.
+SimulationParameters smallerSteps(const SimulationParameters& requested, int halvings) {
+  const int factor = 1 << halvings;
+  SimulationParameters smaller = requested;
+  smaller.timeStep = requested.timeStep / static_cast<btScalar>(factor);
+  smaller.minTimeStep = requested.minTimeStep / static_cast<btScalar>(factor);
+  smaller.iterations = std::max(requested.iterations, 1) > INT_MAX / factor
+                           ? INT_MAX
+                           : std::max(requested.iterations, 1) * factor;
+  return smaller;
+}
+
+void add(StepTiming& sum, const StepTiming& part) {
+  sum.mss += part.mss;
+  sum.muscleCd += part.muscleCd;
+  sum.boneCd += part.boneCd;
+  sum.response += part.response;
+  sum.output += part.output;
+}
+
+}  // namespace
+
+MuscleHealth checkMuscle(const MuscleState& muscle) {
+  MuscleHealth health;
+  health.nan =
+      !allFinite(muscle.positions) || !allFinite(muscle.previous) || !allFinite(muscle.velocities);
+  const MuscleSettings& settings = *muscle.settings;
+  // Written so that a NaN extent counts as spread too.
+  health.spread = !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
+  if (settings.springs.empty()) return health;
+  const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
+  for (const Spring& spring : settings.springs) {
+    const double length = muscle.positions[spring.a].distance(muscle.positions[spring.b]);
+    if (springExploded(length, spring.restLength, floor)) ++health.explodedSprings;
+  }
+  return health;
+}
+
+void saveGoodState(MuscleState& muscle) {
+  std::copy(muscle.positions.begin(), muscle.positions.end(), muscle.goodPositions.begin());
+  std::copy(muscle.previous.begin(), muscle.previous.end(), muscle.goodPrevious.begin());
+  std::copy(muscle.velocities.begin(), muscle.velocities.end(), muscle.goodVelocities.begin());
+}
+
+void restoreGoodState(MuscleState& muscle) {
+  std::copy(muscle.goodPositions.begin(), muscle.goodPositions.end(), muscle.positions.begin());
+  std::copy(muscle.goodPrevious.begin(), muscle.goodPrevious.end(), muscle.previous.begin());
+  std::copy(muscle.goodVelocities.begin(), muscle.goodVelocities.end(), muscle.velocities.begin());
+  forgetBoneSides(muscle);
+}
+
+void MuscleSystem::Impl::guardedStep() {
+  const Clock::time_point start = Clock::now();
+  const uint64_t number = stepCount++;
+  const FailurePolicy policy = parameters.onFailure;
+  const bool rollback = policy != FailurePolicy::Report;
+  // Frozen muscles too: carried with their bones every step, a rollback restores them as well.
+  if (rollback)
+    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot]);
+  // Always: the bones' motion over the step carries the frozen muscles.
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.goodLast = bone.last;
+    bone.goodCurrent = bone.current;
+  }
+  const btScalar goodPreviousDt = previousDt;
+  const SimulationParameters requested = parameters;
+
+  StepTiming spent;
+  int iterations = 0, retries = 0;
+  size_t newlyFrozen = 0;
+  MuscleHandle failedMuscle;
+  bool failedNan = false, rolledBack = false, failed = false;
+  while (true) {
+    step();
+    add(spent, stats.timing);
+    iterations += stats.iterations;
+    if (!stats.nan && !stats.exploded) break;
+
+    // Attribution: which muscles failed (frozen ones are out of the step and of the blame).
+    const bool retry =
+        policy == FailurePolicy::Retry && retries < std::min(requested.maxRetries, kMaxHalvings);
+    size_t blamed = 0;
+    for (uint32_t slot : muscles.order) {
+      MuscleState& state = *muscles.states[slot];
+      if (state.frozen) continue;
+      const MuscleHealth health = checkMuscle(state);
+      if (!health.failed()) continue;
+      if (!health.nan && !health.spread) {
+        // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
+        if (state.pinched > 0) {
+          state.tornSprings = std::max(state.tornSprings, health.explodedSprings);
+          continue;
+        }
+        // What a trap tore stays torn once the bones let go: only more burst springs fail.
+        if (health.explodedSprings <= state.tornSprings) continue;
+      }
+      if (blamed++ == 0) {
+        failedMuscle = {slot, muscles.generations[slot]};
+        failedNan = health.nan;
+      }
+      if (rollback && !retry) {
+        state.frozen = true;
+        ++newlyFrozen;
+      }
+    }
+    // Flagged, but no muscle fails the check (only tiny springs beyond 3×): the state is good.
+    if (blamed == 0) break;
+    if (!rollback) {
+      failed = true;
+      break;
+    }
+
+    // Back to the start of the step; every muscle, frozen ones included (theirs is unchanged).
+    for (uint32_t slot : muscles.order) restoreGoodState(*muscles.states[slot]);
+    for (uint32_t slot : bones.order) {
+      BoneState& bone = *bones.states[slot];
+      bone.last = bone.goodLast;
+      bone.current = bone.goodCurrent;
+      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+    }
+    previousDt = goodPreviousDt;
+    rolledBack = true;
+    parameters = retry ? smallerSteps(requested, ++retries) : requested;
+  }
+  parameters = requested;
+
+  // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
+  // started) and is pushed out of them.
+  const bool velocities = integratorFor(parameters.integrator).usesVelocities();
+  const auto carryFrozen = [&](MuscleState& state) {
+    resolveBones(state);
+    followBones(state, BoneMotion::SinceStepStart);
+    // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
+    ThreadScratch& thread = scratch.front();
+    state.pinched = 0;
+    if (parameters.muscleBone && state.bonesMoving)
+      for (int round = 0; round < kFrozenRounds; ++round) {
+        refitTree(state);
+        for (uint32_t slot : bones.order)
+          collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
+        applyPushes(state, velocities);
+      }
+    thread.contacts.clear();
+    if (!state.surface.empty())
+      deformSurface(*state.settings, state.positions, state.boneTransforms,
+                    parameters.blendedPretransform, state.surface);
+  };
+  size_t frozen = 0, trappedParticles = 0, trappedMuscles = 0;
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    if (state.frozen) {
+      ++frozen;
+      carryFrozen(state);
+    }
+    trappedParticles += state.pinched;
+    trappedMuscles += state.pinched > 0 ? 1 : 0;
+  }
+  stats.timing = spent;
+  stats.timing.total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+  stats.iterations = iterations;
+  stats.step = number;
+  stats.failed = failed;
+  stats.rolledBack = rolledBack;
+  stats.retries = retries;
+  stats.failedMuscle = failedMuscle;
+  stats.failedNan = failedNan;
+  stats.newlyFrozen = newlyFrozen;
+  stats.frozenMuscles = frozen;
+  stats.trappedParticles = trappedParticles;
+  stats.trappedMuscles = trappedMuscles;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,132 @@
+#pragma once
+// MuscleSystem's private state (internal): body slots, scratch buffers, stats, and the step
+// pipeline of method.md §5 (MuscleSystemStep.cpp).
+#include <algorithm>
+#include <memory>
+#include <vector>
+
+#include "MuscleState.h"
+#include "SpringForces.h"
+#include "TaskPool.h"
+#include "collision/CollisionPairs.h"
+#include "fibremss/MuscleSystem.h"
+
+namespace fibremss {
+
+/// Slots with generations (Box2D style ids): a removed slot is reused with a new generation.
+template <typename State>
+struct Slots {
+  std::vector<std::unique_ptr<State>> states;  ///< null: free slot
+  std::vector<uint32_t> generations;           ///< generation of each slot
+  std::vector<uint32_t> order;                 ///< occupied slots in insertion order
+
+  template <typename Handle>
+  Handle add(std::unique_ptr<State> state) {
+    uint32_t slot = 0;
+    while (slot < states.size() && states[slot]) ++slot;
+    if (slot == states.size()) {
+      states.emplace_back();
+      generations.push_back(0);
+    }
+    states[slot] = std::move(state);
+    order.push_back(slot);
+    return Handle{slot, generations[slot]};
+  }
+  template <typename Handle>
+  State* find(Handle handle) const {
+    if (handle.index >= states.size() || generations[handle.index] != handle.generation)
+      return nullptr;
+    return states[handle.index].get();
+  }
+  template <typename Handle>
+  void remove(Handle handle) {
+    if (!find(handle)) return;
+    states[handle.index].reset();
+    ++generations[handle.index];
+    order.erase(std::find(order.begin(), order.end(), handle.index));
+  }
+};
+
+/// Scratch of one thread of the step: what a task may write that is not its muscle's.
+struct ThreadScratch {
+  TreeTraversalStack stack;  ///< traversal stack of the tree queries
+  ContactLog contacts;       ///< contacts this thread found in the running phase
+};
+
+/// What the per-muscle tasks of one iteration measured, reduced in insertion order afterwards
+/// so that the sums do not depend on which thread ran which muscle.
+struct MuscleIterationResult {
+  SpringForceResult forces;   ///< deviation and overstretched springs
+  btScalar safeTimeStep = 0;  ///< eq 5.1 bound of this muscle (adaptive dt only)
+  double displacement = 0;    ///< Σ |Δx| of the integration
+  bool finite = true;         ///< the integration stayed finite
+};
+
+/// Two muscles whose bounds meet in this iteration and the contacts their pair task recorded.
+struct MusclePairTask {
+  uint32_t a = 0;           ///< slot of the first muscle (earlier in insertion order)
+  uint32_t b = 0;           ///< slot of the second muscle
+  MuscleContacts contacts;  ///< in pairContacts, sized by the pair's candidate list
+};
+
+/// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
+struct MuscleSystem::Impl {
+  SimulationParameters parameters;             ///< how to step
+  StepStats stats;                             ///< what the last step did
+  Slots<MuscleState> muscles;                  ///< muscle states by slot
+  Slots<BoneState> bones;                      ///< bone states by slot
+  ContactLog contacts;                         ///< contacts of the last iteration, for drawing
+  std::unique_ptr<TaskPool> pool;              ///< worker threads (SimulationParameters::threads)
+  std::vector<ThreadScratch> scratch;          ///< per thread of the pool
+  std::vector<uint32_t> active;                ///< unfrozen muscle slots, largest first
+  std::vector<MuscleIterationResult> results;  ///< per muscle slot, this iteration
+  std::vector<MusclePairTask> pairTasks;       ///< muscle pairs of this iteration, in pair order
+  /// Per slot: its pairTasks in insertion order of the partners (the order its pushes sum in).
+  std::vector<std::vector<uint32_t>> musclePairs;
+  std::vector<MuscleContact> pairContacts;  ///< room for every muscle pair's contacts
+  uint32_t musclesAdded = 0;                ///< counts additions, seeds each muscle's noise
+  btScalar previousDt = 0;                  ///< dt of the last iteration (0: none yet)
+  uint64_t stepCount = 0;                   ///< steps taken (the guard numbers them)
+
+  MuscleState& muscle(MuscleHandle handle) const {
+    MuscleState* state = muscles.find(handle);
+    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed muscle handle");
+    return *state;
+  }
+  BoneState& bone(BoneHandle handle) const {
+    BoneState* state = bones.find(handle);
+    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed bone handle");
+    return *state;
+  }
+
+  /// Starts the pool for parameters.threads and sizes the per-thread and per-muscle scratch;
+  /// allocates only when the thread count or the bodies changed (never in the iterations).
+  void prepareWorkers();
+  /// Runs task(state, thread) for every active muscle on the pool.
+  template <typename Task>
+  void forEachMuscle(Task&& task) {
+    pool->run(active.size(), [&](size_t k, unsigned thread) {
+      task(*muscles.states[active[k]], active[k], thread);
+    });
+  }
+  /// Moves the contacts each thread logged into `contacts` (counts always; ends while room).
+  void gatherContacts();
+
+  void resolveBones(MuscleState& state) const;
+  void placeAtBones(MuscleState& state) const;
+  void pretransform(MuscleState& state, bool rotateVelocities) const;
+  void followFixed(MuscleState& state) const;
+  void moveBones(btScalar share, bool arrive);
+  /// The bone motion a muscle follows: this iteration's, or all of it since the step began (what
+  /// carries a frozen muscle, which skipped the iterations).
+  enum class BoneMotion { Iteration, SinceStepStart };
+  /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
+  void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
+  btScalar timeStep() const;
+  void collideMusclePairs();
+  void collide();
+  void step();
+  void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
+};
+
+}  // namespace fibremss

@@ -1,0 +1,393 @@
+// One MuscleSystem step (method.md §5). Bones move from their last to their target transform
+// over the first motionFraction·iterations iterations (translation lerp, rotation slerp); in each
+// of those iterations every free particle is moved by its bones' motion of that iteration (the
+// pre-transform: a blend of the two bones of a muscle spanning a joint, or the nearest bone's
+// as in the thesis; x and x(t−dt) alike, split like the bones so that muscles and bones stay in
+// step) and fixed particles are set to T·rest. Then per iteration: spring forces → dt (eq 5.1 or
+// fixed) → integration → tree refit (only past the skin) → muscle–muscle and muscle–bone pairs →
+// response. The thesis mode (rebuildEveryStep) instead jumps the bones, restarts particles from
+// rest moved by their pre-transform, and rebuilds the trees. Output: deformed surfaces.
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <utility>
+
+#include "MuscleSystemImpl.h"
+#include "MuscleSystemPretransform.h"
+#include "Skin.h"
+#include "SpringForces.h"
+#include "TimeStep.h"
+#include "integrators/Integrators.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double millisecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+/// Rigid transform a share `s` of the way from `from` to `to`: linear translation, slerp rotation.
+btTransform interpolate(const btTransform& from, const btTransform& to, btScalar s) {
+  const btVector3 origin = from.getOrigin().lerp(to.getOrigin(), s);
+  const btQuaternion rotation = from.getRotation().slerp(to.getRotation(), s);
+  return btTransform(rotation, origin);
+}
+
+}  // namespace
+
+// Maps the muscle's bone indices to slots (-1 for removed bones) and copies their transforms.
+void MuscleSystem::Impl::resolveBones(MuscleState& state) const {
+  for (size_t b = 0; b < state.bones.size(); ++b) {
+    const BoneState* bone = bones.find(state.bones[b]);
+    state.boneSlots[b] = bone ? static_cast<int32_t>(state.bones[b].index) : -1;
+    state.boneTransforms[b] = bone ? bone->current : btTransform::getIdentity();
+  }
+}
+
+// Rest positions moved by their pre-transform (fixed ones by their bone); no velocity.
+void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
+  const MuscleSettings& settings = *state.settings;
+  for (uint32_t i = 0; i < settings.particleCount(); ++i) {
+    const btTransform* fixed = settings.isFixed(i)
+                                   ? boneTransformOf(state.boneTransforms, settings.fixedBone[i])
+                                   : nullptr;
+    state.positions[i] =
+        fixed ? *fixed * settings.restPositions[i]
+              : pretransformPoint(settings, state.boneTransforms, i, settings.restPositions[i],
+                                  parameters.blendedPretransform);
+    state.previous[i] = state.positions[i];
+    state.velocities[i].setZero();
+  }
+}
+
+// Moves free particles by their bones' motion in this iteration (blended, or the nearest
+// bone's), x and x(t−dt) alike, so the motion injects no velocity.
+void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities) const {
+  if (!state.bonesMoving) return;
+  const MuscleSettings& settings = *state.settings;
+  const bool blended = parameters.blendedPretransform;
+#if FIBREMSS_SSE_PRETRANSFORM
+  // The common case (Verlet, blended, a few bones) with the transforms packed once.
+  const size_t count = state.boneDeltas.size();
+  if (blended && !settings.blendWeight.empty() && !rotateVelocities && count <= kPackedBones) {
+    PackedTransform packed[kPackedBones];
+    for (size_t b = 0; b < count; ++b) packed[b] = packTransform(state.boneDeltas[b]);
+#if FIBREMSS_AVX2_PARTICLES
+    if (fastestSpringKernel() == SpringKernel::avx2)
+      return pretransformPackedAvx2(settings, packed, count, state.freeParticles,
+                                    state.positions.data(), state.previous.data());
+#endif
+    for (uint32_t i : state.freeParticles)
+      pretransformPacked(settings, packed, count, i, state.positions[i], state.previous[i]);
+    return;
+  }
+#endif
+  for (uint32_t i : state.freeParticles) {
+    state.positions[i] =
+        pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended);
+    state.previous[i] =
+        pretransformPoint(settings, state.boneDeltas, i, state.previous[i], blended);
+    if (rotateVelocities)
+      state.velocities[i] =
+          pretransformDirection(settings, state.boneDeltas, i, state.velocities[i], blended);
+  }
+}
+
+// Fixed particles sit exactly on their bone: x = T · rest.
+void MuscleSystem::Impl::followFixed(MuscleState& state) const {
+  const MuscleSettings& settings = *state.settings;
+  for (uint32_t i : settings.fixedParticles) {
+    const int32_t b = settings.fixedBone[i];
+    if (b < 0 || state.boneSlots[b] < 0) continue;
+    state.previous[i] = state.positions[i];
+    state.positions[i] = state.boneTransforms[b] * settings.restPositions[i];
+  }
+}
+
+void MuscleSystem::Impl::prepareWorkers() {
+  const unsigned threads = TaskPool::resolve(parameters.threads);
+  if (!pool || pool->threads() != threads) pool = std::make_unique<TaskPool>(threads);
+  scratch.resize(threads);
+  // Each thread logs an even share of the drawing capacity; a full log still counts.
+  const size_t share = (contacts.ends.size() / threads + 1) & ~size_t{1};
+  for (ThreadScratch& thread : scratch) {
+    if (thread.contacts.ends.size() < share) thread.contacts.ends.resize(share);
+    thread.stack.reserve(4096);
+  }
+  const size_t slots = muscles.states.size();
+  active.reserve(slots);
+  results.resize(slots);
+  pairTasks.reserve(slots * (slots - std::min<size_t>(slots, 1)) / 2);
+  musclePairs.resize(slots);
+  for (std::vector<uint32_t>& pairs : musclePairs) pairs.reserve(slots);
+  // Room for the contacts of every pair at once: its candidate list's capacity.
+  size_t room = 0;
+  for (uint32_t a : muscles.order)
+    for (const CandidateList& list : muscles.states[a]->muscleLists) room += list.pairs.size();
+  if (pairContacts.size() < room) pairContacts.resize(room);
+}
+
+void MuscleSystem::Impl::gatherContacts() {
+  for (ThreadScratch& thread : scratch) {
+    ContactLog& log = thread.contacts;
+    const size_t moved = std::min(log.stored, contacts.ends.size() / 2 - contacts.stored);
+    std::copy_n(log.ends.begin(), 2 * moved, contacts.ends.begin() + 2 * contacts.stored);
+    contacts.stored += moved;
+    contacts.found += log.found;
+    contacts.candidates += log.candidates;
+    log.clear();
+  }
+}
+
+// Bones to `share` of the way from last to target (exactly the target when arriving); the
+// muscles follow in followBones.
+void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    const btTransform before = bone.current;
+    bone.current = arrive ? bone.target : interpolate(bone.last, bone.target, share);
+    bone.delta = bone.current * before.inverse();
+    bone.moving = !(bone.current == before);
+    if (bone.moving)
+      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+  }
+}
+
+void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) const {
+  const bool sinceStart = motion == BoneMotion::SinceStepStart;
+  state.bonesMoving = false;
+  bool arrived = true;
+  for (size_t b = 0; b < state.bones.size(); ++b) {
+    state.boneDeltas[b].setIdentity();
+    if (state.boneSlots[b] < 0) continue;
+    const BoneState& bone = *bones.states[state.boneSlots[b]];
+    state.boneTransforms[b] = bone.current;
+    arrived = arrived && bone.current == bone.target;
+    if (sinceStart ? bone.current == bone.goodLast : !bone.moving) continue;
+    state.boneDeltas[b] = sinceStart ? bone.current * bone.goodLast.inverse() : bone.delta;
+    state.bonesMoving = true;
+  }
+  state.treeFollowed = state.bonesMoving && !arrived;
+  pretransform(state, integratorFor(parameters.integrator).usesVelocities());
+  followFixed(state);
+}
+
+// The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
+btScalar MuscleSystem::Impl::timeStep() const {
+  if (!parameters.adaptiveTimeStep) return parameters.timeStep;
+  btScalar dt = parameters.timeStep;
+  for (uint32_t slot : active) dt = std::min(dt, results[slot].safeTimeStep);
+  return std::max(dt, parameters.minTimeStep);
+}
+
+// Pairs of muscles whose bounds meet, in two phases without waiting: every pair records its
+// contacts (any thread, any order; muscles are only read), then every muscle adds its pairs'
+// pushes in insertion order of its partners, each pair's in the order found. The sums have one
+// fixed order whatever the thread count.
+void MuscleSystem::Impl::collideMusclePairs() {
+  pairTasks.clear();
+  for (std::vector<uint32_t>& pairs : musclePairs) pairs.clear();
+  size_t room = 0;
+  for (size_t i = 0; i < muscles.order.size(); ++i) {
+    const uint32_t a = muscles.order[i];
+    const MuscleState& first = *muscles.states[a];
+    if (first.frozen || first.tree.empty()) continue;
+    for (size_t j = i + 1; j < muscles.order.size(); ++j) {
+      const uint32_t b = muscles.order[j];
+      const MuscleState& second = *muscles.states[b];
+      if (second.frozen || second.tree.empty() ||
+          !boundsOverlap(first.tree.bounds(0), second.tree.bounds(0)))
+        continue;
+      const size_t capacity = b < first.muscleLists.size() ? first.muscleLists[b].pairs.size() : 0;
+      musclePairs[a].push_back(static_cast<uint32_t>(pairTasks.size()));
+      musclePairs[b].push_back(static_cast<uint32_t>(pairTasks.size()));
+      pairTasks.push_back({a, b, {pairContacts.data() + room, capacity}});
+      room += capacity;
+    }
+  }
+  pool->run(pairTasks.size(), [&](size_t k, unsigned thread) {
+    MusclePairTask& pair = pairTasks[k];
+    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
+                   scratch[thread].contacts, pair.contacts);
+  });
+  forEachMuscle([&](MuscleState&, uint32_t slot, unsigned thread) {
+    for (uint32_t k : musclePairs[slot]) {
+      const MusclePairTask& pair = pairTasks[k];
+      pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot,
+                         scratch[thread].stack, pair.contacts);
+    }
+  });
+}
+
+void MuscleSystem::Impl::collide() {
+  Clock::time_point start = Clock::now();
+  contacts.clear();
+  const bool any = parameters.muscleMuscle || parameters.muscleBone;
+  if (any) forEachMuscle([](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+  if (parameters.muscleMuscle) collideMusclePairs();
+  stats.timing.muscleCd += millisecondsSince(start);
+
+  start = Clock::now();
+  if (parameters.muscleBone)
+    forEachMuscle([&](MuscleState& state, uint32_t, unsigned thread) {
+      for (uint32_t boneSlot : bones.order)
+        collideMuscleBone(state, *bones.states[boneSlot], scratch[thread].stack,
+                          scratch[thread].contacts);
+    });
+  gatherContacts();
+  stats.timing.boneCd += millisecondsSince(start);
+
+  start = Clock::now();
+  const bool hasVelocities = integratorFor(parameters.integrator).usesVelocities();
+  if (any)
+    forEachMuscle([hasVelocities](MuscleState& state, uint32_t, unsigned) {
+      applyPushes(state, hasVelocities);
+    });
+  stats.contacts = contacts.found;
+  stats.candidates = contacts.candidates;
+  for (uint32_t slot : muscles.order)
+    stats.candidateOverflows += std::exchange(muscles.states[slot]->candidateOverflows, 0);
+  stats.timing.response += millisecondsSince(start);
+}
+
+void MuscleSystem::Impl::step() {
+  const Clock::time_point stepStart = Clock::now();
+  stats = StepStats{};
+  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
+  const int cap = std::max(1, parameters.iterations);
+  prepareWorkers();
+  // Largest muscles first: handed out in this order, the threads finish close together.
+  active.clear();
+  for (uint32_t slot : muscles.order)
+    if (!muscles.states[slot]->frozen) active.push_back(slot);
+  const auto cost = [this](uint32_t slot) {
+    const MuscleSettings& settings = *muscles.states[slot]->settings;
+    return settings.springs.size() + settings.particleCount();
+  };
+  std::sort(active.begin(), active.end(),
+            [&](uint32_t x, uint32_t y) { return cost(x) != cost(y) ? cost(x) > cost(y) : x < y; });
+
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    if (bone.body) bone.target = bone.body->getWorldTransform();
+  }
+  // The thesis rebuilt everything each step: bones jump, particles restart from rest.
+  const bool rebuild = parameters.rebuildEveryStep;
+  int motionIterations = 0;
+  if (rebuild) {
+    for (uint32_t slot : bones.order) {
+      BoneState& bone = *bones.states[slot];
+      bone.current = bone.last = bone.target;
+      bone.moving = false;
+      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+    }
+  } else if (std::any_of(bones.order.begin(), bones.order.end(), [&](uint32_t slot) {
+               return !(bones.states[slot]->last == bones.states[slot]->target);
+             })) {
+    motionIterations =
+        std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
+  }  // else no bone moves in this step: the stop rules need not wait for an arrival
+  for (uint32_t slot : active) {
+    MuscleState& state = *muscles.states[slot];
+    ensurePrepared(integrator, state);
+    resolveBones(state);
+  }
+  if (rebuild)
+    forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
+      placeAtBones(state);
+      rebuildTree(state);
+    });
+
+  const bool adaptive = parameters.adaptiveTimeStep;
+  int iteration = 0;
+  while (true) {
+    ++iteration;
+    Clock::time_point start = Clock::now();
+    const bool bonesMove = iteration <= motionIterations;
+    if (bonesMove)
+      moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
+    forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+      if (bonesMove) followBones(state);
+      MuscleIterationResult& result = results[slot];
+      result.forces = springForces(state);
+      if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+    });
+
+    // Reduced in insertion order: the same sums for every thread count.
+    double deviation = 0;
+    double restSum = 0;
+    // Judged on the last iteration: tearing while bones move heals.
+    stats.exploded = false;
+    stats.overstretchedSprings = 0;
+    for (uint32_t slot : muscles.order) {
+      if (muscles.states[slot]->frozen) continue;
+      const SpringForceResult& forces = results[slot].forces;
+      deviation += forces.deviation;
+      stats.exploded = stats.exploded || forces.exploded;
+      stats.overstretchedSprings += forces.overstretched;
+      restSum += muscles.states[slot]->restLengthSum;
+    }
+    stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
+
+    const btScalar dt = timeStep();
+    const btScalar lastDt = previousDt > 0 ? previousDt : dt;
+    forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+      const IntegrationResult integration = integrator.advance(state, dt, lastDt);
+      results[slot].displacement = integration.displacement;
+      results[slot].finite = integration.finite;
+    });
+    double displacement = 0;
+    size_t freeCount = 0;
+    for (uint32_t slot : muscles.order) {
+      const MuscleState& state = *muscles.states[slot];
+      if (state.frozen) continue;
+      displacement += results[slot].displacement;
+      freeCount += state.freeParticles.size();
+      if (!results[slot].finite) stats.nan = true;
+    }
+    stats.lastTimeStep = previousDt = dt;
+    stats.meanDisplacement =
+        freeCount ? static_cast<btScalar>(displacement / static_cast<double>(freeCount)) : 0;
+    stats.timing.mss += millisecondsSince(start);
+
+    collide();
+
+    const bool arrived = iteration >= motionIterations;
+    bool stop = iteration >= cap;
+    if (parameters.stopRule == StopRule::Converged)
+      stop = stop || (arrived && stats.meanDisplacement < parameters.epsilon);
+    else if (parameters.stopRule == StopRule::TimeBudget)
+      stop = stop || millisecondsSince(stepStart) >= parameters.budgetMs;
+    else if (parameters.stopRule == StopRule::SpringDeviation)
+      stop = stop || (arrived && stats.springDeviationRatio < parameters.deviationEpsilon);
+    if (stop) {
+      // A spent budget ends the step where it is: the bones jump the rest of the way.
+      if (!arrived) {
+        moveBones(1, true);
+        forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { followBones(state); });
+      }
+      break;
+    }
+  }
+  stats.iterations = iteration;
+
+  const Clock::time_point outputStart = Clock::now();
+  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
+    if (!state.surface.empty())
+      deformSurface(*state.settings, state.positions, state.boneTransforms,
+                    parameters.blendedPretransform, state.surface);
+  });
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.last = bone.current = bone.target;
+    bone.moving = false;
+  }
+  stats.timing.output = millisecondsSince(outputStart);
+  stats.timing.total = millisecondsSince(stepStart);
+}
+
+}  // namespace fibremss
