@@ -9,6 +9,7 @@
 #include "SpringForces.h"
 #include "TaskPool.h"
 #include "collision/CollisionPairs.h"
+#include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss {
@@ -69,6 +70,14 @@ struct MusclePairTask {
   MuscleContacts contacts;  ///< in pairContacts, sized by the pair's candidate list
 };
 
+/// The sizes of one step attempt: the parameters', or smaller while the guard retries a failed
+/// step (the parameters themselves are never changed by a step).
+struct StepSize {
+  btScalar timeStep = 0;     ///< largest dt (SimulationParameters::timeStep) [s]
+  btScalar minTimeStep = 0;  ///< smallest adaptive dt (SimulationParameters::minTimeStep) [s]
+  int iterations = 1;        ///< iteration cap (SimulationParameters::iterations, at least 1)
+};
+
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
 struct MuscleSystem::Impl {
   SimulationParameters parameters;             ///< how to step
@@ -90,12 +99,12 @@ struct MuscleSystem::Impl {
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
-    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed muscle handle");
+    if (!state) throw InputError("MuscleSystem", "muscle handle", "unknown or removed");
     return *state;
   }
   BoneState& bone(BoneHandle handle) const {
     BoneState* state = bones.find(handle);
-    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed bone handle");
+    if (!state) throw InputError("MuscleSystem", "bone handle", "unknown or removed");
     return *state;
   }
 
@@ -122,10 +131,10 @@ struct MuscleSystem::Impl {
   enum class BoneMotion { Iteration, SinceStepStart };
   /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
   void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
-  btScalar timeStep() const;
+  btScalar timeStep(const StepSize& size) const;
   void collideMusclePairs();
   void collide();
-  void step();
+  void step(const StepSize& size);
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
 };
 
