@@ -164,13 +164,13 @@ TEST(RmsBetweenRuns, CombinesPosesAsTheRootMeanSquare) {
   std::vector<RunMetrics> runs(2);
   runs[0].method = "fibremss";
   runs[0].poseSurfaces = b.poseSurfaces;
-  runs[1].method = "fem";
+  runs[1].method = "calculix";
   runs[1].poseSurfaces = a.poseSurfaces;
   fillRms(runs);
-  EXPECT_NEAR(runs[0].rmsToFemMm, 1.0, 1e-4);
-  EXPECT_EQ(runs[0].rmsToFemPoses, 1) << "the FEM's second pose has no partner";
-  EXPECT_EQ(runs[1].rmsToFemMm, 0.0);
-  EXPECT_EQ(runs[1].rmsToFemPoses, 2);
+  EXPECT_NEAR(runs[0].rmsToReferenceMm, 1.0, 1e-4);
+  EXPECT_EQ(runs[0].rmsToReferencePoses, 1) << "the reference's second pose has no partner";
+  EXPECT_EQ(runs[1].rmsToReferenceMm, 0.0);
+  EXPECT_EQ(runs[1].rmsToReferencePoses, 2);
   EXPECT_TRUE(std::isnan(runs[0].rmsToSelfReferenceMm));
 }
 
@@ -182,14 +182,15 @@ class EveryMethod : public ::testing::TestWithParam<const char*> {};
 
 TEST_P(EveryMethod, GivesFiniteMetrics) {
   const LoadedScene scene = loadScene(GetParam());
-  CompareOptions options;  // all four methods
+  CompareOptions options;         // all four methods
+  options.withReference = false;  // the reference has its own tests (calculix_test)
+  options.fronts = false;         // one run per method
   const Comparison comparison = runComparison(GetParam(), {}, options);
   ASSERT_EQ(comparison.runs.size(), 4u);
   for (const RunMetrics& run : comparison.runs) {
     SCOPED_TRACE(run.method);
     EXPECT_EQ(run.steps, std::max(scene.poseCount, 1));
     EXPECT_EQ(run.poses, run.steps);
-    EXPECT_EQ(run.rmsToFemPoses, run.steps) << "RMS to FEM over every pose";
     EXPECT_FALSE(run.nan);
     EXPECT_FALSE(run.exploded);
     EXPECT_EQ(run.failedStep, -1);
@@ -199,13 +200,11 @@ TEST_P(EveryMethod, GivesFiniteMetrics) {
     expectFinite(run.maxPenetrationMm, "max penetration");
     expectFinite(run.meanPenetrationMm, "mean penetration");
     expectFinite(run.volumeChangePct, "volume change");
-    expectFinite(run.rmsToFemMm, "RMS to FEM");
     expectFinite(run.rmsToSelfReferenceMm, "RMS to self-reference");
     expectFinite(run.peakMemoryMb, "peak memory");
     EXPECT_GE(run.maxPenetrationMm, run.meanPenetrationMm);
     if (run.method == "fem") {
       EXPECT_TRUE(std::isnan(run.springDeviationRatio)) << "FEM has no springs";
-      EXPECT_EQ(run.rmsToFemMm, 0);
     } else {
       expectFinite(run.springDeviationRatio, "spring deviation");
     }
@@ -222,8 +221,10 @@ INSTANTIATE_TEST_SUITE_P(BuiltInScenes, EveryMethod, ::testing::Values("fusiform
 
 TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   const fs::path out = scratch("cli");
-  const testing::ProcessResult result =
-      runCli("compare fusiform --set resolution=12 --methods fibremss,fem --out " + out.string());
+  const testing::ProcessResult result = runCli(
+      "compare fusiform --set resolution=12 --methods fibremss,fem --no-fronts --no-reference "
+      "--out " +
+      out.string());
   ASSERT_EQ(result.exitCode, 0) << result.output;
   for (const char* file :
        {"summary.json", "report.md", "speed_vs_error.png", "speed_vs_error.svg"}) {
@@ -246,7 +247,7 @@ TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
     EXPECT_TRUE(run["ms_per_step"].is_number());
   }
   EXPECT_EQ(summary["runs"][0]["method"], "fibremss");
-  EXPECT_TRUE(summary["runs"][0]["rms_to_fem_mm"].is_number());
+  EXPECT_TRUE(summary["runs"][0]["rms_to_reference_mm"].is_null()) << "no reference";
 
   std::string problem;
   EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
@@ -263,8 +264,10 @@ TEST(CompareCommand, HipSweepWritesThePenetrationAgainstStepPlot) {
   // hip-extension is a sweep: its step_deg (here overridden to 20) reaches summary.json and a
   // second plot, penetration against step_deg, is written beside speed against error.
   const fs::path out = scratch("hip_sweep");
-  const testing::ProcessResult result =
-      runCli("compare hip-extension --set step_deg=20 --methods fibremss --out " + out.string());
+  const testing::ProcessResult result = runCli(
+      "compare hip-extension --set step_deg=20 --methods fibremss --no-fronts --no-reference "
+      "--out " +
+      out.string());
   ASSERT_EQ(result.exitCode, 0) << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
   EXPECT_EQ(summary["runs"][0]["step_deg"], 20.0);
@@ -279,7 +282,8 @@ TEST(CompareCommand, StatesTheRatioToBtSoftBodyWithTheThreadCounts) {
   // summary.json state the ratio of the two runs' ms per step with both thread counts.
   const fs::path out = scratch("softbody_ratio");
   const testing::ProcessResult result = runCli(
-      "compare fusiform --set resolution=8 --threads 1 --methods fibremss,btsoftbody --out " +
+      "compare fusiform --set resolution=8 --threads 1 --methods fibremss,btsoftbody --no-fronts "
+      "--no-reference --out " +
       out.string());
   ASSERT_EQ(result.exitCode, 0) << result.output;
   const nlohmann::json summary = nlohmann::json::parse(readFile(out / "summary.json"));
@@ -334,7 +338,7 @@ nlohmann::json madeSummary(double stepDeg, double msPerIteration, int resolution
   run.msPerIteration = run.msPerTimeStep = msPerIteration;
   run.timing = {10, 2, 4, 1, 0.5};
   run.maxPenetrationMm = stepDeg / 2;
-  run.rmsToFemMm = 3;
+  run.rmsToReferenceMm = 3;
   nlohmann::json object = toJson(run);
   object["scene_overrides"] = {"resolution=" + std::to_string(resolution)};
   object["resolution"] = resolution;
@@ -363,35 +367,34 @@ TEST(MergeAndReport, MergedReportHasTable1RatiosAndTheSweepPlot) {
   }
   // MSS 10 ms per iteration → 5 s per 500; thesis 18.66 s → ratio 3.73.
   const std::string report = readFile(out / "report.md");
-  EXPECT_NE(report.find("Seed 004 Table 1"), std::string::npos);
+  EXPECT_NE(report.find("The thesis' timings (seed 004 Table 1)"), std::string::npos);
   EXPECT_NE(report.find("| MSS | 5 / 18.66 (3.73×) |"), std::string::npos) << report;
   EXPECT_NE(report.find("| total | 10 / 56.84 (5.68×) |"), std::string::npos) << report;
 }
 
-TEST(MergeAndReport, SaysWhenRmsToFemCoversFewerPosesThanTheRun) {
-  // The FEM exploded at step 1 of 13: FibreMSS's RMS to it covers pose 0 only.
+TEST(MergeAndReport, SaysWhenRmsToTheReferenceCoversFewerPosesThanTheRun) {
+  // ccx did not solve the reference's pose 1 of 13: FibreMSS's RMS to it covers pose 0 only.
   nlohmann::json summary = madeSummary(2, 20);
   summary["runs"][0]["poses"] = 13;
   summary["runs"][0]["steps"] = 13;
-  summary["runs"][0]["rms_to_fem_poses"] = 1;
-  RunMetrics fem;
-  fem.scene = "thigh13";
-  fem.method = "fem";
-  fem.msPerStep = 5000;
-  fem.rmsToFemMm = 0;
-  fem.exploded = true;
-  fem.failedStep = 1;
-  fem.steps = 2;
-  fem.poses = 13;
-  fem.rmsToFemPoses = 1;
-  summary["runs"].push_back(toJson(fem));
-  const fs::path out = scratch("partial_fem");
+  summary["runs"][0]["rms_to_reference_poses"] = 1;
+  RunMetrics reference;
+  reference.scene = "thigh13";
+  reference.method = "calculix";
+  reference.msPerStep = 5000;
+  reference.rmsToReferenceMm = 0;
+  reference.failedStep = 1;
+  reference.steps = 1;
+  reference.poses = 13;
+  reference.rmsToReferencePoses = 1;
+  summary["runs"].push_back(toJson(reference));
+  const fs::path out = scratch("partial_reference");
   writeComparison(summary, out.string());
   const std::string report = readFile(out / "report.md");
-  EXPECT_NE(report.find("RMS to FEM covers fewer poses than the runs"), std::string::npos)
+  EXPECT_NE(report.find("RMS to the reference covers fewer poses than the runs"), std::string::npos)
       << report;
   EXPECT_NE(report.find("fibremss (1/13 poses)"), std::string::npos) << report;
-  EXPECT_NE(report.find("exploded at step 1"), std::string::npos) << report;
+  EXPECT_NE(report.find("ccx did not solve the reference's pose 1"), std::string::npos) << report;
   EXPECT_NE(report.find("| 3 (1/13 poses) |"), std::string::npos) << "table cell: " << report;
   const std::string script = readFile(out / "speed_vs_error.gp");
   EXPECT_NE(script.find("(1/13 poses)"), std::string::npos) << "point label: " << script;
@@ -399,8 +402,8 @@ TEST(MergeAndReport, SaysWhenRmsToFemCoversFewerPosesThanTheRun) {
   EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
 
   // Every pose covered: no note.
-  summary["runs"][0]["rms_to_fem_poses"] = 13;
-  summary["runs"][1]["rms_to_fem_poses"] = 13;
+  summary["runs"][0]["rms_to_reference_poses"] = 13;
+  summary["runs"][1]["rms_to_reference_poses"] = 13;
   writeComparison(summary, out.string());
   EXPECT_EQ(readFile(out / "report.md").find("covers fewer poses"), std::string::npos);
 }

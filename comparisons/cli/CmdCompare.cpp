@@ -1,6 +1,7 @@
 // `fibremss compare SCENE`: the same scene through FibreMSS, its self-reference, the
-// btSoftBody baseline and the FEM reference, measured the same way; writes summary.json,
-// report.md and the speed-against-error plot.
+// btSoftBody baseline and Bullet's FEM, measured the same way against the CalculiX reference;
+// writes summary.json, report.md and the speed-against-error plot.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -10,6 +11,8 @@
 
 #include "Commands.h"
 #include "Interrupt.h"
+#include "ProgressLog.h"
+#include "ReferenceArgs.h"
 #include "SceneArgs.h"
 #include "Validators.h"
 #include "fibremss/Analytic.h"
@@ -42,6 +45,42 @@ std::string commandLine() {
   return line;
 }
 
+/// A table cell: 3 significant digits, "—" for a value that does not apply.
+std::string cell(double value) {
+  if (std::isnan(value)) return "\u2014";
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", value);
+  return text;
+}
+
+void printTable(const Comparison& comparison) {
+  std::printf("%-28s %10s %10s %10s %10s %10s\n", "method", "ms/step", "max pen mm", "volume %",
+              "RMS ref mm", "RMS self mm");
+  for (const RunMetrics& run : comparison.runs) {
+    // "—" is one column wide but three bytes: printf pads by bytes.
+    std::string line = run.method;
+    line.resize(std::max<size_t>(line.size(), 28), ' ');
+    for (double value : {run.msPerStep, run.maxPenetrationMm, run.volumeChangePct,
+                         run.rmsToReferenceMm, run.rmsToSelfReferenceMm}) {
+      const std::string text = cell(value);
+      const size_t width = std::isnan(value) ? 1 : text.size();
+      line.append(width < 10 ? 11 - width : 1, ' ');
+      line += text;
+    }
+    std::printf("%s%s\n", line.c_str(), run.failedStep >= 0 ? "  FAILED" : "");
+  }
+  if (!comparison.reference || comparison.reference->missing) {
+    std::printf("%s: no RMS to it, no gates, no ranking\n",
+                comparison.reference ? "no reference (not in the cache; --reference-cached-only)"
+                                     : "no reference (--no-reference)");
+    return;
+  }
+  for (const std::string& line : gateLines(comparison.reference->gates))
+    std::printf("reference gate: %s\n", line.c_str());
+  if (!comparison.reference->gates.passed())
+    std::printf("the reference fails a gate: no ranking of the methods\n");
+}
+
 void compare(CompareArgs& args) {
   if (!args.methods.empty()) args.options.methods = args.methods;
   args.options.methods = expandIntegratorMethods(args.options.methods, [](const std::string& line) {
@@ -49,37 +88,21 @@ void compare(CompareArgs& args) {
   });
   for (const std::string& method : args.options.methods) parseMethod(method);  // fail early
 
-  std::unique_ptr<ProgressBar> bar;
-  std::string current;
-  args.options.log = [&](const std::string& line) {
-    if (bar) bar->finish();
-    bar.reset();
-    std::fprintf(stderr, "%s\n", line.c_str());
-  };
+  ProgressLog progress;
+  args.options.log = [&](const std::string& line) { progress.line(line); };
   args.options.progress = [&](const MethodProgress& p) {
-    if (!bar || current != p.method) {
-      if (bar) bar->finish();
-      bar = std::make_unique<ProgressBar>(p.method, p.steps);
-      current = p.method;
-    }
-    bar->update(p.step, p.iterations, p.seconds);
+    progress.update(p.method, p.step, p.steps, p.iterations, p.seconds);
   };
   InterruptGuard interrupt;
   args.options.cancel = &interruptRequested;
   const Comparison comparison = runComparison(args.scene.scene, args.scene.overrides, args.options);
-  if (bar) bar->finish();
+  progress.finish();
 
   const std::string out = args.out.empty() ? "compare-" + comparison.scene : args.out;
   const nlohmann::json summary = summaryJson(comparison, commandLine());
   const std::vector<std::string> files = writeComparison(summary, out);
 
-  std::printf("%-28s %10s %10s %10s %10s %10s\n", "method", "ms/step", "max pen mm", "volume %",
-              "RMS FEM mm", "RMS self mm");
-  for (const RunMetrics& run : comparison.runs) {
-    std::printf("%-28s %10.3g %10.3g %10.3g %10.3g %10.3g%s\n", run.method.c_str(), run.msPerStep,
-                run.maxPenetrationMm, run.volumeChangePct, run.rmsToFemMm, run.rmsToSelfReferenceMm,
-                run.failedStep >= 0 ? "  FAILED" : "");
-  }
+  printTable(comparison);
   for (const RunMetrics& run : comparison.runs)
     if (std::isfinite(run.worstPoseRmsToEquilibriumMm) && run.method != "equilibrium")
       std::printf("%-28s RMS to equilibrium %.3g mm, worst pose %.3g mm, %.3g ms per pose\n",
@@ -102,7 +125,8 @@ void addCompareCommand(CLI::App& app) {
   CLI::App* command = app.add_subcommand(
       "compare",
       "Run a scene through FibreMSS, its self-reference (dt/8, 8x iterations), the btSoftBody "
-      "baseline and the Bullet FEM reference, measured the same way; write summary.json, "
+      "baseline and Bullet's FEM, measured the same way against the CalculiX static reference "
+      "(cached, with its gates); write summary.json, "
       "report.md and speed_vs_error.png/.svg (plus penetration_vs_step for sweeps) to --out.");
   addSceneArgs(*command, args->scene);
   command
@@ -111,9 +135,17 @@ void addCompareCommand(CLI::App& app) {
           "Comma-separated methods: fibremss, self-reference, equilibrium (run to convergence), "
           "btsoftbody, fem, "
           "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
-          "(one variant per integrator); default all four")
+          "(one variant per integrator), btsoftbody:iterations=N, fem:substeps=N (N or xF: F "
+          "times the default); default fibremss, self-reference, btsoftbody, fem")
       ->delimiter(',');
   command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
+  command->add_flag("!--no-fronts", args->options.fronts,
+                    "One run per method instead of sweeping each over its cost knob "
+                    "(fibremss iterations x0.5-x4 and resolution x0.5/x2, btsoftbody iterations "
+                    "and fem substeps x0.5-x2)");
+  command->add_flag("!--no-reference", args->options.withReference,
+                    "Skip the CalculiX reference (no RMS to it, no gates, no ranking)");
+  addReferenceArgs(*command, args->options.reference);
   command
       ->add_option("--fem-cells", args->options.fem.mesher.targetCells,
                    "FEM: voxels per muscle (each 6 tetrahedra)")

@@ -11,6 +11,7 @@ void addCompareCommand(CLI::App& app);    ///< `fibremss compare`: all methods s
 void addMergeCommand(CLI::App& app);      ///< `fibremss merge`: merge summaries into one report
 void addFibresCommand(CLI::App& app);     ///< `fibremss fibres`: fibres from a muscle surface
 void addStabilityCommand(CLI::App& app);  ///< `fibremss stability`: hard-case stability matrix
+void addReferenceCommand(CLI::App& app);  ///< `fibremss reference`: the CalculiX reference
 void addViewCommand(CLI::App& app);       ///< `fibremss view`: the interactive viewer
 
 }  // namespace fibremss::cli

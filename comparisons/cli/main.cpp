@@ -35,6 +35,7 @@ int main(int argc, char** argv) {
   fibremss::cli::addMergeCommand(app);
   fibremss::cli::addFibresCommand(app);
   fibremss::cli::addStabilityCommand(app);
+  fibremss::cli::addReferenceCommand(app);
   fibremss::cli::addViewCommand(app);
   try {
     app.parse(argc, argv);

@@ -12,6 +12,7 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 #include "ReportScaling.h"
 #include "fibremss/Analytic.h"
@@ -55,49 +56,37 @@ double number(const nlohmann::json& run, const char* key) {
   return it != run.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
-/// A label for plots: method, plus scene overrides when runs differ by them.
-std::string runLabel(const nlohmann::json& run) {
-  std::string label = text(run, "method");
-  const std::string overrides = joined(run.value("scene_overrides", nlohmann::json::array()), " ");
-  if (!overrides.empty()) label += " (" + overrides + ")";
-  return label;
-}
-
-/// " (k/N poses)" when the run's RMS to FEM covers k of its N poses, k < N (the FEM or the
-/// run failed or stopped early); "" otherwise or for summaries without the counts.
-std::string femCoverage(const nlohmann::json& run) {
-  const double covered = number(run, "rms_to_fem_poses"), poses = number(run, "poses");
-  if (!std::isfinite(number(run, "rms_to_fem_mm")) || !(covered >= 0) || !(covered < poses)) {
+/// " (k/N poses)" when the run's RMS to the reference covers k of its N poses, k < N (the
+/// reference or the run failed or stopped early); "" otherwise or for summaries without counts.
+std::string referenceCoverage(const nlohmann::json& run) {
+  const double covered = number(run, "rms_to_reference_poses"), poses = number(run, "poses");
+  if (!std::isfinite(number(run, "rms_to_reference_mm")) || !(covered >= 0) || !(covered < poses)) {
     return "";
   }
   return " (" + cell(covered) + "/" + cell(poses) + " poses)";
 }
 
-/// A paragraph for report.md when some RMS to FEM covers fewer poses than its run: which runs,
-/// and why the FEM reference stopped. Empty when every RMS covers all poses.
-std::string femCoverageNote(const nlohmann::json& runs) {
+/// A paragraph for report.md when some RMS to the reference covers fewer poses than its run:
+/// which runs, and where the reference stopped. Empty when every RMS covers all poses.
+std::string referenceCoverageNote(const nlohmann::json& runs) {
   std::string list;
   for (const auto& run : runs) {
-    const std::string coverage = femCoverage(run);
+    const std::string coverage = referenceCoverage(run);
     if (!coverage.empty()) list += (list.empty() ? "" : ", ") + text(run, "method") + coverage;
   }
   if (list.empty()) return "";
   std::string why;
   for (const auto& run : runs) {
-    if (text(run, "method") != "fem") continue;
-    if (run.value("interrupted", false)) {
-      why = " The FEM reference was stopped (time budget) after " + cell(number(run, "steps")) +
-            " poses.";
-    } else if (run.value("nan", false) || run.value("exploded", false)) {
-      why = std::string(" The FEM reference ") +
-            (run.value("nan", false) ? "hit NaN" : "exploded") + " at step " +
-            cell(number(run, "failed_step")) + "; later poses have no reference.";
+    if (text(run, "method") == "calculix" && run.value("failed_step", -1) >= 0) {
+      why = " ccx did not solve the reference's pose " + cell(number(run, "failed_step")) +
+            " (report.md, Reference); later poses have no reference.";
     }
   }
-  return "\n**RMS to FEM covers fewer poses than the runs** (poses 0 to k−1 of N only): " + list +
-         "." + why +
-         " Read those RMS values (and their points in the plot) as that many poses' "
-         "error, not the whole motion's.\n";
+  return "\n**RMS to the reference covers fewer poses than the runs** (poses 0 to k−1 of N "
+         "only): " +
+         list + "." + why +
+         " Read those RMS values (and their points in the plot) as that many poses' error, not "
+         "the whole motion's.\n";
 }
 
 /// gnuplot string literal.
@@ -149,46 +138,109 @@ std::string bothTerminals(const std::string& stem, const std::string& body) {
          quoted(stem + ".svg") + "\n" + body + "unset output\n";
 }
 
-std::string speedVsErrorScript(const nlohmann::json& runs, const std::string& stem) {
-  std::ostringstream data, body;
-  std::vector<std::pair<double, std::string>> rows;  // ms per step → the data line
-  bool partial = false;
+/// The error axis: RMS to the CalculiX reference where some run has one, else to the
+/// self-reference.
+const char* errorKey(const nlohmann::json& runs) {
+  for (const auto& run : runs)
+    if (number(run, "rms_to_reference_mm") > 0) return "rms_to_reference_mm";
+  return "rms_to_self_reference_mm";
+}
+
+/// The line of the speed–error plot a run belongs to: its method family and the knob its
+/// variant turns ("" for the family's default run, which joins every line of its family;
+/// a variant with other overrides is a line of its own).
+std::pair<std::string, std::string> frontOf(const std::string& method) {
+  const size_t colon = method.find(':');
+  const std::string family = method.substr(0, colon);
+  if (colon == std::string::npos) return {family, ""};
+  const std::string variant = method.substr(colon + 1);
+  if (variant.find('+') == std::string::npos)
+    for (const char* knob : {"iterations", "resolution", "substeps", "cells"})
+      if (variant.rfind(std::string(knob) + "=", 0) == 0) return {family, knob};
+  return {method, ""};
+}
+
+std::string threadsText(const nlohmann::json& run) {
+  const int threads = run.value("threads", 0);
+  return threads == 1  ? "1 thread"
+         : threads > 1 ? std::to_string(threads) + " threads"
+                       : "threads not recorded";
+}
+
+/// Lines of the plot: title → points (ms per pose, error, label), sorted by ms.
+std::map<std::string, std::vector<std::tuple<double, double, std::string>>> frontLines(
+    const nlohmann::json& runs, const char* key) {
+  std::map<std::string, std::set<std::string>> knobs;  // family → knobs swept
   for (const auto& run : runs) {
-    const double ms = number(run, "ms_per_step"), rms = number(run, "rms_to_fem_mm");
-    if (!(ms > 0) || !(rms > 0)) continue;  // log axes; the FEM run itself has 0
-    const std::string coverage = femCoverage(run);
-    std::ostringstream line;
-    line << ms << " " << rms << " " << quoted(runLabel(run) + coverage) << "\n";
-    rows.emplace_back(ms, line.str());
-    partial = partial || !coverage.empty();
+    const auto [family, knob] = frontOf(text(run, "method"));
+    if (!knob.empty()) knobs[family].insert(knob);
   }
-  // Sorted by speed, so that labels alternating above and below keep neighbours apart.
-  std::stable_sort(rows.begin(), rows.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
-  for (const auto& row : rows) data << row.second;
-  const size_t points = rows.size();
-  body << "set title 'Speed against error (one point per run; the FEM reference is the zero)'\n"
-       << "set xlabel 'ms per step (median wall time, log)'\n"
-       << "set ylabel 'RMS surface distance to FEM [mm] (log)'\n"
-       << "set logscale xy\nset grid\nset key off\n";
-  if (partial) {
-    body << "set label 2 '(k/N poses): RMS to FEM over the first k of N poses only (the FEM or "
-            "the run failed or stopped)' at graph 0.01, graph 0.03 left font ',9' tc rgb "
-            "'#b00000'\n";
+  std::map<std::string, std::vector<std::tuple<double, double, std::string>>> lines;
+  for (const auto& run : runs) {
+    const double ms = number(run, "ms_per_step"), error = number(run, key);
+    if (!(ms > 0) || !(error > 0) || text(run, "method") == "calculix") continue;
+    const auto [family, knob] = frontOf(text(run, "method"));
+    const std::string label = text(run, "method") + referenceCoverage(run);
+    std::set<std::string> joins = knob.empty() ? knobs[family] : std::set<std::string>{knob};
+    if (joins.empty()) joins.insert("");
+    for (const std::string& j : joins) {
+      const std::string title =
+          family + (j.empty() ? "" : " (" + j + ")") + ", " + threadsText(run);
+      lines[title].emplace_back(ms, error, label);
+    }
   }
-  if (points == 0) {
+  for (auto& [title, points] : lines) std::sort(points.begin(), points.end());
+  return lines;
+}
+
+std::string speedVsErrorScript(const nlohmann::json& summary, const std::string& stem) {
+  const nlohmann::json& runs = summary["runs"];
+  const char* key = errorKey(runs);
+  const bool reference = std::string(key) == "rms_to_reference_mm";
+  const auto lines = frontLines(runs, key);
+  std::ostringstream data, body, plot;
+  int index = 0;
+  for (const auto& [title, points] : lines) {
+    data << "$line" << index << " << EOD\n";
+    for (const auto& [ms, error, label] : points)
+      data << ms << " " << error << " " << quoted(label) << "\n";
+    data << "EOD\n";
+    plot << (index ? ", " : "plot ") << "$line" << index
+         << " using 1:2 with linespoints pt 7 ps 1.2 lw 2 lc " << index + 1 << " title "
+         << quoted(title) << ", $line" << index
+         << " using 1:2:3 with labels offset char 0,1 font ',8' notitle";
+    ++index;
+  }
+  const nlohmann::json gates =
+      summary.value("reference", nlohmann::json::object()).value("gates", nlohmann::json::object());
+  const double band = number(gates, "refinement_mm");
+  std::string title = reference
+                          ? "Speed against error: one line per method (its cost knob swept)"
+                          : "Speed against error to the self-reference (no CalculiX reference)";
+  body << "set title " << quoted(title) << "\n"
+       << "set xlabel 'ms per pose (median wall time, log)'\n"
+       << "set ylabel "
+       << quoted(reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
+                           : "RMS surface distance to the self-reference [mm] (log)")
+       << "\nset logscale xy\nset grid\nset key outside right top font ',9'\n";
+  if (reference && summary.contains("reference") && !gates.value("passed", false)) {
+    body << "set label 4 'the reference FAILS a gate: no ranking (report.md, Reference)' at graph "
+            "0.5, graph 0.96 center font ',10' tc rgb '#b00000'\n";
+  }
+  if (reference && band > 0) {
+    body << "set object 1 rect from graph 0, graph 0 to graph 1, first " << band
+         << " fc rgb '#dddddd' fs solid 0.6 noborder behind\n"
+         << "set label 3 " << quoted("reference's mesh-refinement spread")
+         << " at graph 0.02, first " << band << " offset 0,0.6 font ',8' tc rgb '#606060'\n";
+  }
+  if (index == 0) {
     body << "set xrange [0.1:1000]\nset yrange [0.01:100]\n"
-         << "set label 1 'no run has both a time and an RMS to a FEM run' at graph 0.5,0.5 "
+         << "set label 1 'no run has both a time and an error to a reference' at graph 0.5,0.5 "
             "center\nplot 1/0 notitle\nunset label 1\n";
   } else {
-    body << "set offsets graph 0.15, graph 0.15, graph 0.15, graph 0.15\n"
-         << "plot $runs using 1:2 with points pt 7 ps 1.5 lc rgb '#1f77b4', "
-            "$runs using 1:2:(int($0) % 2 ? '' : stringcolumn(3)) with labels offset char 0,1.2 "
-            "font ',9', "
-            "$runs using 1:2:(int($0) % 2 ? stringcolumn(3) : '') with labels offset char 0,-1.2 "
-            "font ',9'\n";
+    body << "set offsets graph 0.1, graph 0.1, graph 0.2, graph 0.2\n" << plot.str() << "\n";
   }
-  return "$runs << EOD\n" + data.str() + "EOD\n" + bothTerminals(stem, body.str());
+  return data.str() + bothTerminals(stem, body.str());
 }
 
 std::string penetrationScript(const nlohmann::json& runs, const std::string& stem) {
@@ -225,6 +277,21 @@ bool anySweep(const nlohmann::json& runs) {
   return false;
 }
 
+/// Each run's own settings (the integrator field: solver, substeps, iterations, added mass).
+std::string runSettings(const nlohmann::json& runs) {
+  std::ostringstream out;
+  out << "\nSettings of these runs (from the runs themselves):\n\n";
+  for (const auto& run : runs) {
+    out << "- " << text(run, "method") << ": " << text(run, "integrator");
+    const std::string method = text(run, "method");
+    const double steps = number(run, "steps");
+    if ((method.rfind("fibremss", 0) == 0 || method == "self-reference") && steps > 0)
+      out << ", " << cell(number(run, "iterations") / steps) << " iterations per pose";
+    out << "\n";
+  }
+  return out.str();
+}
+
 std::string describeMethods() {
   return R"(## How each method was measured
 
@@ -243,9 +310,12 @@ same code (`Measures.h`):
 - **volume_change_pct**: volume of the deformed surfaces against rest at the last step (all
   muscles together). **spring_deviation_ratio**: Σ|l − L0| / Σ L0 over the springs at the last
   step (spring models only).
-- **rms_to_fem_mm / rms_to_self_reference_mm**: root mean square distance of corresponding
-  surface vertices to the FEM / self-reference run at the same pose, over all poses both
-  reached (a failed pose counts in neither, nor in the penetration). **nan / exploded**: a
+- **rms_to_reference_mm / rms_to_self_reference_mm**: root mean square distance of corresponding
+  surface vertices to the CalculiX reference / the self-reference run at the same pose, over all
+  poses both reached (a failed pose counts in neither, nor in the penetration).
+  **shape_rms_to_reference_mm**: the same poses, each surface vertex's distance to the other
+  surface (nearest point, both ways, per muscle), so sliding along the surface is not counted.
+  **worst muscle**: the muscle with the largest vertex RMS to the reference. **nan / exploded**: a
   non-finite position, or a spring (FEM: tetrahedron edge) beyond 3× its rest length and longer
   than it by more than its muscle's mean rest length (FibreMSS's guard rule, `springExploded`).
   **peak_memory_mb**: peak resident set of the process after the run (getrusage; it includes
@@ -271,14 +341,17 @@ Methods:
   integrator says which), the cheapest counts that kept thigh13's links within [1/3, 3]× at
   resolutions 20 and 40 (comparisons/README.md). One thread (Debian's Bullet has no task
   scheduler). The simulated time of a pose is FibreMSS's iterations × dt.
-- **fem**: each muscle's surface voxelized and split into positively oriented tetrahedra,
-  `btDeformableNeoHookeanForce` (E matched to the spring network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a
-  `btDeformableMultiBodyDynamicsWorld` (elastic forces explicit, damping implicit; 200
-  substeps per pose, nodes too stiff for the substep get extra mass — the run's `integrator`
-  says how much), nodes near fixed particles pinned and moved with their bones, free nodes
-  moved with their bones by FibreMSS's blended pre-transform each substep, node contact with
-  the bones' exact meshes (own projection after every substep), surface vertices embedded in
-  the tetrahedra. It is the accuracy reference, not a speed competitor.
+- **fem**: Bullet's own continuum (a speed peer): each muscle's surface voxelized and split
+  into positively oriented tetrahedra, `btDeformableNeoHookeanForce` (E matched to the spring
+  network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a `btDeformableMultiBodyDynamicsWorld` (elastic forces
+  explicit, damping implicit; nodes too stiff for the substep get extra mass), nodes near fixed
+  particles pinned and moved with their bones, free nodes moved with their bones by FibreMSS's
+  blended pre-transform each substep, node contact with the bones' exact meshes (own
+  projection after every substep), surface vertices embedded in the tetrahedra. Its substeps
+  per pose and added mass are in the settings below.
+- **calculix** (the reference, not a method): each muscle's static equilibrium per pose by
+  CalculiX on a tetgen mesh of its prepared surface (report section "Reference").
+- **name:knob=N**: a point of that method's front (its cost knob set to N).
 )";
 }
 
@@ -296,9 +369,11 @@ std::string table1(const nlohmann::json& runs) {
   }
   if (columns.empty()) return "";
   std::ostringstream out;
-  out << "\n## Seed 004 Table 1: seconds for 500 iterations (thigh13, FibreMSS default)\n\n"
-      << "Each cell: ours / the thesis' (ratio = thesis / ours, how many times faster). The "
-         "thesis measured a Core2Duo 1.86 GHz; ours is this machine.\n\n| part |";
+  out << "\n## The thesis' timings (seed 004 Table 1)\n\n"
+      << "Seed 004 Table 1 is the FibreMSS thesis' table of seconds for 500 solver iterations "
+         "on thigh13 per part (spring forces and integration, muscle and bone collision "
+         "detection), measured on a Core2Duo 1.86 GHz. Each cell: ours on this machine / the "
+         "thesis' (ratio = thesis / ours, how many times faster).\n\n| part |";
   for (const auto& [resolution, run] : columns) out << " resolution " << resolution << " |";
   out << "\n|---|";
   for (size_t c = 0; c < columns.size(); ++c) out << "---|";
@@ -326,6 +401,93 @@ std::string table1(const nlohmann::json& runs) {
          "iteration × 500 (it includes the response and the output). Run one `fibremss compare "
          "thigh13 --set resolution=R` per resolution and `fibremss merge` them for all four "
          "columns (comparisons/README.md).\n";
+  return out.str();
+}
+
+ReferenceGates gatesFromJson(const nlohmann::json& gates) {
+  ReferenceGates g;
+  g.returnMm = number(gates, "return_mm");
+  g.refinementMm = number(gates, "refinement_mm");
+  g.refinedBy = gates.value("refined_by", std::string());
+  g.attachmentLowMm = number(gates, "attachment_low_mm");
+  g.attachmentHighMm = number(gates, "attachment_high_mm");
+  g.spreadMm = number(gates, "spread_mm");
+  g.failures = gates.value("failures", std::string());
+  return g;
+}
+
+/// Each method family's best run by `key` (ascending), for the ranking.
+std::vector<std::pair<double, const nlohmann::json*>> bestPerFamily(const nlohmann::json& runs,
+                                                                    const char* key) {
+  std::map<std::string, std::pair<double, const nlohmann::json*>> best;
+  for (const auto& run : runs) {
+    const double error = number(run, key);
+    const std::string method = text(run, "method");
+    const bool whole = !run.value("nan", false) && !run.value("exploded", false) &&
+                       !run.value("interrupted", false);
+    if (!std::isfinite(error) || method == "calculix" || !whole) continue;
+    const std::string family = method.substr(0, method.find(':'));
+    auto [it, added] = best.try_emplace(family, error, &run);
+    if (!added && error < it->second.first) it->second = {error, &run};
+  }
+  std::vector<std::pair<double, const nlohmann::json*>> ranked;
+  for (const auto& [family, entry] : best) ranked.push_back(entry);
+  std::sort(ranked.begin(), ranked.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  return ranked;
+}
+
+/// The "Reference" section: what the reference is, its poses, gates, and the ranking or why
+/// there is none.
+std::string referenceSection(const nlohmann::json& summary) {
+  std::ostringstream out;
+  out << "\n## Reference\n\n";
+  if (!summary.contains("reference")) {
+    out << "No CalculiX reference in this report (`--no-reference`, or merged from several "
+           "comparisons whose references differ): RMS columns are to the self-reference where "
+           "there is one, and no ranking is reported.\n";
+    return out.str();
+  }
+  const nlohmann::json& reference = summary["reference"];
+  if (reference.value("missing", false)) {
+    out << "**No reference**: it was to be taken from the cache only (`--reference-cached-only`) "
+           "and the cache has none for this scene and these settings (key "
+        << reference.value("key", std::string())
+        << "). `fibremss reference` with this comparison's scene and `--set` options computes "
+           "it (with its gates) into the cache, where the next comparison finds it. No RMS to "
+           "it, no gates, no ranking.\n";
+    return out.str();
+  }
+  out << reference.value("description", std::string()) << ".\n\n";
+  int solved = 0, poses = 0;
+  for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
+    ++poses;
+    if (pose.value("solved", false))
+      ++solved;
+    else
+      out << "- pose " << poses - 1 << " not solved: " << pose.value("failure", std::string())
+          << "\n";
+  }
+  out << "Poses solved: " << solved << "/" << poses << " ("
+      << (reference.value("from_cache", false) ? "from the cache" : "solved by this run") << ", "
+      << cell(reference.value("seconds", nlohmann::json())) << " s of tetgen and ccx; "
+      << reference.value("newton_iterations", 0) << " Newton iterations in "
+      << reference.value("increments", 0) << " increments; cache key "
+      << reference.value("key", std::string()) << ").\n\nGates:\n\n";
+  const ReferenceGates gates = gatesFromJson(reference.value("gates", nlohmann::json::object()));
+  for (const std::string& line : gateLines(gates)) out << "- " << line << "\n";
+  const char* key = "rms_to_reference_mm";
+  if (!gates.passed()) {
+    out << "\n**No ranking**: the reference does not pass its gates, so differences between the "
+           "methods are not shown to be larger than the reference's own uncertainty.\n";
+    return out.str();
+  }
+  out << "\n**Ranking** by each method's best RMS to the reference over the runs that finished "
+         "every pose (the plot shows what each point costs):\n\n";
+  int rank = 0;
+  for (const auto& [error, run] : bestPerFamily(summary["runs"], key))
+    out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " mm at "
+        << cell(number(*run, "ms_per_step")) << " ms per pose (" << threadsText(*run) << ")\n";
   return out.str();
 }
 
@@ -404,11 +566,13 @@ nlohmann::json summaryJson(const Comparison& comparison, const std::string& comm
     runs.push_back(std::move(object));
   }
   nlohmann::json ratios = softBodyRatioJson(runs);
-  return {{"scene", comparison.scene},
-          {"machine", machineJson()},
-          {"command", command},
-          {"btsoftbody_ratio", std::move(ratios)},
-          {"runs", std::move(runs)}};
+  nlohmann::json summary = {{"scene", comparison.scene},
+                            {"machine", machineJson()},
+                            {"command", command},
+                            {"btsoftbody_ratio", std::move(ratios)},
+                            {"runs", std::move(runs)}};
+  if (comparison.reference) summary["reference"] = referenceJson(*comparison.reference);
+  return summary;
 }
 
 namespace {
@@ -484,11 +648,19 @@ nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
                      "`fibremss compare`");
   std::string scene;
   for (const std::string& s : scenes) scene += (scene.empty() ? "" : ", ") + s;
-  return {{"scene", scene},
-          {"machine", machine},
-          {"command", commands},
-          {"btsoftbody_ratio", softBodyRatioJson(runs)},
-          {"runs", runs}};
+  nlohmann::json merged = {{"scene", scene},
+                           {"machine", machine},
+                           {"command", commands},
+                           {"btsoftbody_ratio", softBodyRatioJson(runs)},
+                           {"runs", runs}};
+  // One reference's gates hold for its own runs only: kept when a single summary has one.
+  const auto withReference =
+      std::count_if(summaries.begin(), summaries.end(),
+                    [](const nlohmann::json& s) { return s.contains("reference"); });
+  for (const auto& summary : summaries)
+    if (withReference == 1 && summary.contains("reference"))
+      merged["reference"] = summary["reference"];
+  return merged;
 }
 
 nlohmann::json readSummary(const std::string& path) {
@@ -529,38 +701,48 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
       out << "  - `" << (c.is_string() ? c.get<std::string>() : c.dump()) << "`\n";
   }
   out << "\n## Runs\n\n"
-      << "| method | scene | overrides | particles/nodes | springs/links/tets | steps | ms/step | "
-         "ms/iteration | max pen. [mm] | mean pen. [mm] | volume [%] | RMS to FEM [mm] | RMS to "
-         "self-ref. [mm] | spring dev. | failed | peak MB | wall [s] |\n"
-      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+      << "| method | threads | scene | overrides | particles/nodes | springs/links/tets | steps | "
+         "ms/step | ms/iteration | max pen. [mm] | mean pen. [mm] | volume [%] | RMS to ref. [mm] "
+         "| shape RMS to ref. [mm] | worst muscle [mm] | RMS to self-ref. [mm] | spring dev. | "
+         "failed | peak MB | wall [s] |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& run : runs) {
     std::string failed = "no";
     if (run.value("nan", false)) failed = "NaN";
     if (run.value("exploded", false)) failed = "exploded";
     if (failed != "no") failed += " at step " + std::to_string(run.value("failed_step", -1));
     if (run.value("interrupted", false)) failed = "stopped (time budget)";
-    out << "| " << text(run, "method") << " | " << text(run, "scene") << " | "
+    if (text(run, "method") == "calculix" && run.value("failed_step", -1) >= 0)
+      failed = "ccx did not solve pose " + std::to_string(run.value("failed_step", -1));
+    const std::string worst = text(run, "worst_muscle");
+    out << "| " << text(run, "method") << " | " << field(run, "threads") << " | "
+        << text(run, "scene") << " | "
         << joined(run.value("scene_overrides", nlohmann::json::array()), " ") << " | "
         << run.value("particles", 0) << " | " << run.value("springs", 0) << " | "
         << run.value("steps", 0) << " | " << field(run, "ms_per_step") << " | "
         << field(run, "ms_per_iteration") << " | " << field(run, "max_penetration_mm") << " | "
         << field(run, "mean_penetration_mm") << " | " << field(run, "volume_change_pct") << " | "
-        << field(run, "rms_to_fem_mm") << femCoverage(run) << " | "
+        << field(run, "rms_to_reference_mm") << referenceCoverage(run) << " | "
+        << field(run, "shape_rms_to_reference_mm") << " | "
+        << (worst.empty() ? "—" : worst + " " + field(run, "worst_muscle_rms_mm")) << " | "
         << field(run, "rms_to_self_reference_mm") << " | " << field(run, "spring_deviation_ratio")
         << " | " << failed << " | " << field(run, "peak_memory_mb") << " | "
         << field(run, "wall_seconds") << " |\n";
   }
-  out << "\n— : does not apply or was not measured (e.g. no FEM run to compare with).\n"
+  out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
+         "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
+         "iterations: Newton iterations).\n"
       << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
-  const std::string coverageNote = femCoverageNote(runs);
+  const std::string coverageNote = referenceCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {
       out << "\n![" << plot << "](" << plot << ")\n";
       if (plot.rfind("speed_vs_error", 0) == 0) out << coverageNote;
     }
   }
-  out << table1(runs) << integratorsReport(runs) << scalingReport(runs) << "\n"
-      << describeMethods();
+  out << referenceSection(summary) << table1(runs) << integratorsReport(runs) << scalingReport(runs)
+      << "\n"
+      << describeMethods() << runSettings(runs);
   return out.str();
 }
 
@@ -579,7 +761,7 @@ std::vector<std::string> writeComparison(const nlohmann::json& summary, const st
     plots.push_back(name + ".png");
     plots.push_back(name + ".svg");
   };
-  plot("speed_vs_error", speedVsErrorScript(runs, (dir / "speed_vs_error").string()));
+  plot("speed_vs_error", speedVsErrorScript(summary, (dir / "speed_vs_error").string()));
   if (anySweep(runs))
     plot("penetration_vs_step", penetrationScript(runs, (dir / "penetration_vs_step").string()));
   writeFileAtomically((dir / "report.md").string(), reportMarkdown(summary, plots));

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <map>
 #include <tuple>
@@ -150,24 +151,10 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   if (metrics.steps > 0 && !metrics.nan) {
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
-    // Volume change of all muscles together (rest-volume weighted), as runFibreMSS, at the
-    // last pose that did not fail (an exploded pose's volume says nothing).
-    double restVolume = 0, change = 0;
-    size_t offset = 0;
-    const std::span<const btVector3> last =
-        metrics.poseSurfaces.empty() ? std::span<const btVector3>() : metrics.poseSurfaces.back();
-    for (size_t m = 0; m < prepared.muscles.size() && !last.empty(); ++m) {
-      const TriangleMesh& rest = prepared.muscles[m]->restSurface;
-      const size_t count = rest.vertices.size();
-      if (!rest.empty() && offset + count <= last.size()) {
-        const double volume = meshVolume(rest);
-        change += volume * volumeChangePercent(rest, last.subspan(offset, count));
-        restVolume += volume;
-      }
-      offset += count;
-    }
-    if (restVolume != 0) metrics.volumeChangePct = change / restVolume;
-    if (!prepared.muscles.empty() && !last.empty()) {
+    if (!metrics.poseSurfaces.empty())
+      metrics.volumeChangePct = volumeChangePct(prepared, metrics.poseSurfaces.back());
+    if (!prepared.muscles.empty() && !metrics.poseSurfaces.empty()) {
+      const std::span<const btVector3> last = metrics.poseSurfaces.back();
       const TriangleMesh& rest = prepared.muscles[0]->restSurface;
       metrics.analytic = measureAnalytic(scene.analytic, rest,
                                          last.first(std::min(rest.vertices.size(), last.size())));
@@ -205,6 +192,22 @@ double sweepStep(const nlohmann::json& node) {
 }
 
 }  // namespace
+
+double volumeChangePct(const PreparedScene& prepared, std::span<const btVector3> surfaces) {
+  double restVolume = 0, change = 0;
+  size_t offset = 0;
+  for (const auto& muscle : prepared.muscles) {
+    const TriangleMesh& rest = muscle->restSurface;
+    const size_t count = rest.vertices.size();
+    if (!rest.empty() && offset + count <= surfaces.size()) {
+      const double volume = meshVolume(rest);
+      change += volume * volumeChangePercent(rest, surfaces.subspan(offset, count));
+      restVolume += volume;
+    }
+    offset += count;
+  }
+  return restVolume != 0 ? change / restVolume : RunMetrics::kNone;
+}
 
 double poseDuration(const SimulationParameters& simulation) {
   const int iterations = simulation.stopRule == StopRule::Iterations
@@ -335,18 +338,18 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation)
 }
 
 void fillRms(std::vector<RunMetrics>& runs) {
-  const RunMetrics* fem = nullptr;
+  const RunMetrics* reference = nullptr;
   const RunMetrics* self = nullptr;
   const RunMetrics* equilibrium = nullptr;
   for (const RunMetrics& run : runs) {
-    if (run.method == "fem") fem = &run;
+    if (run.method == "calculix") reference = &run;
     if (run.method == "self-reference") self = &run;
     if (run.method == "equilibrium") equilibrium = &run;
   }
   for (RunMetrics& run : runs) {
-    if (fem) {
-      run.rmsToFemMm = rmsBetweenRuns(run, *fem);
-      run.rmsToFemPoses = std::isnan(run.rmsToFemMm) ? 0 : sharedPoses(run, *fem);
+    if (reference) {
+      run.rmsToReferenceMm = rmsBetweenRuns(run, *reference);
+      run.rmsToReferencePoses = std::isnan(run.rmsToReferenceMm) ? 0 : sharedPoses(run, *reference);
     }
     if (self) {
       run.rmsToSelfReferenceMm = rmsBetweenRuns(run, *self);
@@ -361,6 +364,77 @@ void fillRms(std::vector<RunMetrics>& runs) {
   }
 }
 
+double shapeRmsMm(const TriangleMesh& a, const TriangleMesh& b) {
+  double sum = 0;
+  size_t count = 0;
+  for (const auto& [from, to] : {std::pair{&a, &b}, std::pair{&b, &a}}) {
+    const MeshDistance surface(*to);
+    for (const btVector3& p : from->vertices) {
+      const double d = 1000.0 * surface.closest(p).distance;
+      sum += d * d;
+      ++count;
+    }
+  }
+  return count ? std::sqrt(sum / static_cast<double>(count)) : RunMetrics::kNone;
+}
+
+namespace {
+
+/// Shape sum of squares and vertex sum of squares of one muscle at one pose.
+void addMusclePose(const TriangleMesh& rest, std::span<const btVector3> run,
+                   std::span<const btVector3> reference, double& shapeSquares, size_t& shapePoints,
+                   double& vertexSquares) {
+  TriangleMesh a{{run.begin(), run.end()}, rest.triangles};
+  TriangleMesh b{{reference.begin(), reference.end()}, rest.triangles};
+  const double shape = shapeRmsMm(a, b);
+  shapeSquares += shape * shape * static_cast<double>(2 * run.size());
+  shapePoints += 2 * run.size();
+  const double rms = rmsDistanceMm(run, reference);
+  vertexSquares += rms * rms * static_cast<double>(run.size());
+}
+
+}  // namespace
+
+void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& prepared) {
+  const auto found = std::find_if(runs.begin(), runs.end(),
+                                  [](const RunMetrics& r) { return r.method == "calculix"; });
+  if (found == runs.end()) return;
+  const RunMetrics reference = *found;
+  for (RunMetrics& run : runs) {
+    const size_t poses = static_cast<size_t>(sharedPoses(run, reference));
+    run.rmsToReferencePerPoseMm.clear();
+    double shapeSquares = 0, worst = -1;
+    size_t shapePoints = 0;
+    std::vector<double> muscleSquares(prepared.muscles.size(), 0);
+    for (size_t p = 0; p < poses; ++p) {
+      if (run.poseSurfaces[p].size() != reference.poseSurfaces[p].size()) return;
+      run.rmsToReferencePerPoseMm.push_back(
+          rmsDistanceMm(run.poseSurfaces[p], reference.poseSurfaces[p]));
+      size_t offset = 0;
+      for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+        const TriangleMesh& rest = prepared.muscles[m]->restSurface;
+        const size_t count = rest.vertices.size();
+        addMusclePose(rest, std::span(run.poseSurfaces[p]).subspan(offset, count),
+                      std::span(reference.poseSurfaces[p]).subspan(offset, count), shapeSquares,
+                      shapePoints, muscleSquares[m]);
+        offset += count;
+      }
+    }
+    if (poses == 0 || shapePoints == 0) continue;
+    run.shapeRmsToReferenceMm = std::sqrt(shapeSquares / static_cast<double>(shapePoints));
+    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+      const size_t count = prepared.muscles[m]->restSurface.vertices.size();
+      const double rms =
+          count ? std::sqrt(muscleSquares[m] / static_cast<double>(count * poses)) : 0;
+      if (rms > worst) {
+        worst = rms;
+        run.worstMuscle = prepared.muscles[m]->name;
+        run.worstMuscleRmsMm = rms;
+      }
+    }
+  }
+}
+
 MethodSpec parseMethod(const std::string& name) {
   MethodSpec spec;
   spec.name = name;
@@ -370,34 +444,192 @@ MethodSpec parseMethod(const std::string& name) {
       spec.family != "equilibrium" && spec.family != "btsoftbody" && spec.family != "fem") {
     throw InputError("--methods", name,
                      "unknown method; expected fibremss, self-reference, equilibrium, btsoftbody, "
-                     "fem or fibremss:<key>=<value>[+<key>=<value>...]");
+                     "fem, fibremss:<key>=<value>[+<key>=<value>...], "
+                     "btsoftbody:iterations|substeps=N or fem:substeps|cells=N (N or xF, F times "
+                     "the default)");
   }
   if (colon == std::string::npos) return spec;
-  if (spec.family != "fibremss") {
-    throw InputError("--methods", name, "only fibremss takes variants (fibremss:<key>=<value>)");
+  if (spec.family == "self-reference" || spec.family == "equilibrium") {
+    throw InputError("--methods", name, spec.family + " takes no variants");
   }
   for (const std::string& part : split(name.substr(colon + 1), '+')) {
-    if (part.find('=') == std::string::npos || part.front() == '=') {
+    const size_t equals = part.find('=');
+    if (equals == std::string::npos || equals == 0) {
       throw InputError("--methods", name,
                        "variant part '" + part + "' is not <key>=<value> (parts joined by '+')");
+    }
+    if (spec.family != "fibremss") {
+      const std::string key = part.substr(0, equals);
+      const bool known = spec.family == "btsoftbody" ? key == "iterations" || key == "substeps"
+                                                     : key == "substeps" || key == "cells";
+      if (!known || !(knobValue(part.substr(equals + 1), 1) > 0)) {
+        throw InputError("--methods", name,
+                         spec.family == "btsoftbody"
+                             ? "btsoftbody takes iterations=N or substeps=N (N > 0, or xF)"
+                             : "fem takes substeps=N or cells=N (N > 0, or xF)");
+      }
     }
     spec.overrides.push_back(part);
   }
   return spec;
 }
 
+int knobValue(const std::string& value, int defaultValue) {
+  char* end = nullptr;
+  const bool factor = !value.empty() && value[0] == 'x';
+  const double number = std::strtod(value.c_str() + (factor ? 1 : 0), &end);
+  if (end == value.c_str() + (factor ? 1 : 0) || *end != '\0' || !(number > 0)) return 0;
+  return std::max(1, static_cast<int>(std::lround(factor ? number * defaultValue : number)));
+}
+
+std::vector<std::string> frontMethods(const std::vector<std::string>& methods) {
+  std::vector<std::string> expanded;
+  for (const std::string& method : methods) {
+    if (method == "fibremss") {
+      expanded.insert(expanded.end(), {"fibremss:iterations=x0.5", "fibremss",
+                                       "fibremss:iterations=x2", "fibremss:iterations=x4",
+                                       "fibremss:resolution=x0.5", "fibremss:resolution=x2"});
+    } else if (method == "btsoftbody") {
+      expanded.insert(expanded.end(),
+                      {"btsoftbody:iterations=x0.5", "btsoftbody", "btsoftbody:iterations=x2"});
+    } else if (method == "fem") {
+      expanded.insert(expanded.end(), {"fem:substeps=x0.5", "fem", "fem:substeps=x2"});
+    } else {
+      expanded.push_back(method);
+    }
+  }
+  return expanded;
+}
+
+namespace {
+
+/// The spec with "xF" knob values made absolute from the scene's and the baselines' defaults;
+/// its name states the values used.
+MethodSpec resolvedSpec(const MethodSpec& spec, const LoadedScene& scene,
+                        const PreparedScene& prepared, const CompareOptions& options) {
+  MethodSpec resolved = spec;
+  if (spec.overrides.empty()) return resolved;
+  resolved.name = spec.family;
+  for (std::string& part : resolved.overrides) {
+    const size_t equals = part.find('=');
+    const std::string key = part.substr(0, equals), value = part.substr(equals + 1);
+    if (!value.empty() && value[0] == 'x') {
+      int base = 0;
+      if (spec.family == "fibremss" && key == "iterations") base = scene.simulation.iterations;
+      if (spec.family == "fibremss" && key == "resolution" && !scene.muscles.empty())
+        base = scene.muscles.front().parameters.resolution;
+      if (spec.family == "btsoftbody")
+        base = key == "iterations"
+                   ? (options.softBody.positionIterations > 0 ? options.softBody.positionIterations
+                                                              : iterationsFor(prepared))
+                   : (options.softBody.substepsPerPose > 0 ? options.softBody.substepsPerPose
+                                                           : substepsFor(prepared));
+      if (spec.family == "fem")
+        base = key == "substeps" ? options.fem.substepsPerPose : options.fem.mesher.targetCells;
+      if (base == 0) {
+        throw InputError("--methods", spec.name,
+                         "xF (a factor on the default) is for fibremss iterations/resolution, "
+                         "btsoftbody iterations/substeps and fem substeps/cells");
+      }
+      part = key + "=" + std::to_string(knobValue(value, base));
+    }
+    resolved.name += (resolved.name == spec.family ? ":" : "+") + part;
+  }
+  return resolved;
+}
+
+/// The integer value of a resolved "key=N" knob of a baseline spec, or `fallback`.
+int knob(const MethodSpec& spec, const std::string& key, int fallback) {
+  for (const std::string& part : spec.overrides)
+    if (part.rfind(key + "=", 0) == 0) return knobValue(part.substr(key.size() + 1), fallback);
+  return fallback;
+}
+
+/// One method's run, stopped by the user's cancel or the time budget after the current step.
+RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
+                     const std::vector<std::string>& overrides, const LoadedScene& scene,
+                     const PreparedScene& prepared, const CompareOptions& options) {
+  std::atomic<bool> stop{false};
+  auto report = [&](const MethodProgress& p) {
+    if (options.progress) options.progress(p);
+    if ((options.cancel && options.cancel->load()) ||
+        (options.methodBudgetSeconds > 0 && p.seconds > options.methodBudgetSeconds)) {
+      stop.store(true);
+    }
+  };
+  const MethodRunOptions methodOptions{report, &stop, options.methodBudgetSeconds};
+  FibreRunOptions fibreOptions;
+  fibreOptions.method = spec.name;
+  fibreOptions.cancel = &stop;
+  fibreOptions.frameEvery = 0;
+  fibreOptions.progress = [&](const RunProgress& p) {
+    report({spec.name, p.step, p.steps, p.iterations, p.seconds});
+  };
+  const double duration = poseDuration(scene.simulation);
+  if (spec.family == "fibremss" && spec.overrides.empty()) {
+    return runFibreMSS(scene, prepared, fibreOptions);
+  } else if (spec.family == "fibremss") {
+    std::vector<std::string> all = overrides;
+    all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
+    const LoadedScene variant = loadScene(sceneNameOrPath, all);
+    const PreparedScene variantPrepared =
+        prepareScene(variant.bones, variant.muscles, variant.simulation.seed);
+    return runFibreMSS(variant, variantPrepared, fibreOptions);
+  } else if (spec.family == "self-reference") {
+    LoadedScene reference = scene;
+    const int f = std::max(1, options.selfReferenceFactor);
+    reference.simulation.timeStep /= static_cast<btScalar>(f);
+    reference.simulation.minTimeStep /= static_cast<btScalar>(f);
+    reference.simulation.iterations *= f;
+    return runFibreMSS(reference, prepared, fibreOptions);
+  } else if (spec.family == "equilibrium") {
+    LoadedScene converged = scene;
+    converged.simulation = equilibriumSettings(scene.simulation);
+    FibreRunOptions equilibriumOptions = fibreOptions;
+    int unconverged = 0;
+    equilibriumOptions.progress = [&](const RunProgress& p) {
+      unconverged += p.lastStep->iterations >= kEquilibriumIterations ? 1 : 0;
+      fibreOptions.progress(p);
+    };
+    RunMetrics metrics = runFibreMSS(converged, prepared, equilibriumOptions);
+    metrics.unconvergedPoses = unconverged;
+    if (unconverged > 0 && options.log)
+      options.log("equilibrium: " + std::to_string(unconverged) +
+                  " pose(s) reached the iteration cap before converging");
+    return metrics;
+  } else if (spec.family == "btsoftbody") {
+    SoftBodyDefinition definition = options.softBody;
+    definition.poseDuration = static_cast<btScalar>(duration);
+    definition.positionIterations = knob(spec, "iterations", definition.positionIterations);
+    definition.substepsPerPose = knob(spec, "substeps", definition.substepsPerPose);
+    return runSoftBody(scene, prepared, definition, methodOptions);
+  }
+  FemDefinition definition = options.fem;
+  definition.poseDuration = static_cast<btScalar>(duration);
+  definition.substepsPerPose = knob(spec, "substeps", definition.substepsPerPose);
+  definition.mesher.targetCells = knob(spec, "cells", definition.mesher.targetCells);
+  return runFem(scene, prepared, definition, methodOptions);
+}
+
+}  // namespace
+
 Comparison runComparison(const std::string& sceneNameOrPath,
                          const std::vector<std::string>& overrides, const CompareOptions& options) {
   std::vector<MethodSpec> specs;
-  for (const std::string& method : options.methods) specs.push_back(parseMethod(method));
+  for (const std::string& method : options.fronts ? frontMethods(options.methods) : options.methods)
+    specs.push_back(parseMethod(method));
   auto log = [&](const std::string& line) {
     if (options.log) options.log(line);
   };
   const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
   log("preparing " + scene.name);
+<<<<<<< HEAD
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   const double duration = poseDuration(scene.simulation);
+=======
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+>>>>>>> reference
 
   Comparison comparison;
   comparison.scene = scene.name;
@@ -405,6 +637,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   if (!scene.muscles.empty()) comparison.resolution = scene.muscles.front().parameters.resolution;
   comparison.stepDeg = sweepStep(nlohmann::json::parse(scene.json, nullptr, false));
   std::vector<RunMetrics>& runs = comparison.runs;
+<<<<<<< HEAD
   for (const MethodSpec& spec : specs) {
     if (options.cancel && options.cancel->load()) break;
     log("running " + spec.name);
@@ -449,24 +682,32 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       equilibriumOptions.progress = [&](const RunProgress& p) {
         unconverged += p.lastStep->iterations >= kEquilibriumIterations ? 1 : 0;
         fibreOptions.progress(p);
+=======
+  if (options.withReference) {
+    ReferenceOptions referenceOptions = options.reference;
+    referenceOptions.log = options.log;
+    referenceOptions.cancel = options.cancel;
+    if (options.progress) {
+      referenceOptions.progress = [&](const ReferenceProgress& p) {
+        options.progress({"ccx " + p.muscle, p.step, p.steps, p.step, p.seconds});
+>>>>>>> reference
       };
-      runs.push_back(runFibreMSS(converged, prepared, equilibriumOptions));
-      runs.back().unconvergedPoses = unconverged;
-      if (unconverged > 0)
-        log("equilibrium: " + std::to_string(unconverged) +
-            " pose(s) reached the iteration cap before converging");
-    } else if (spec.family == "btsoftbody") {
-      SoftBodyDefinition definition = options.softBody;
-      definition.poseDuration = static_cast<btScalar>(duration);
-      runs.push_back(runSoftBody(scene, prepared, definition, methodOptions));
-    } else {
-      FemDefinition definition = options.fem;
-      definition.poseDuration = static_cast<btScalar>(duration);
-      runs.push_back(runFem(scene, prepared, definition, methodOptions));
     }
+    comparison.reference = computeReference(scene, prepared, referenceOptions);
+    if (!comparison.reference->missing) runs.push_back(comparison.reference->metrics);
+  }
+  for (const MethodSpec& given : specs) {
+    if (options.cancel && options.cancel->load()) break;
+    const MethodSpec spec = resolvedSpec(given, scene, prepared, options);
+    log("running " + spec.name);
+    runs.push_back(runMethod(spec, sceneNameOrPath, overrides, scene, prepared, options));
+    runs.back().method = spec.name;
     runs.back().poses = std::max(scene.poseCount, 1);
   }
   fillRms(runs);
+  fillReferenceShapes(runs, prepared);
+  if (comparison.reference && !comparison.reference->missing)
+    comparison.reference->gates.spreadMm = methodSpreadMm(runs);
   return comparison;
 }
 

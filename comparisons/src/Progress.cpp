@@ -48,7 +48,7 @@ std::string ProgressBar::format(const std::string& label, int done, int total, l
   char text[160];
   std::snprintf(text, sizeof text, " %d/%d steps", done, total);
   line += text;
-  if (seconds > 0) {
+  if (seconds > 0 && iterations > 0) {  // a job without iterations (ccx) shows none
     const double rate = static_cast<double>(iterations) / seconds;
     std::snprintf(text, sizeof text, rate >= 100 ? ", %.0f it/s" : ", %.3g it/s", rate);
     line += text;

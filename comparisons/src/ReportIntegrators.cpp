@@ -163,9 +163,9 @@ std::string denoiseTable(const std::vector<const nlohmann::json*>& runs) {
 
 std::string paretoTable(const std::vector<const nlohmann::json*>& runs) {
   // The error against the FEM reference where there is one, else against the self-reference.
-  const char* errorKey = "rms_to_fem_mm";
+  const char* errorKey = "rms_to_reference_mm";
   if (std::none_of(runs.begin(), runs.end(),
-                   [](const nlohmann::json* r) { return number(*r, "rms_to_fem_mm") > 0; }))
+                   [](const nlohmann::json* r) { return number(*r, "rms_to_reference_mm") > 0; }))
     errorKey = "rms_to_self_reference_mm";
   std::ostringstream out;
   out << "\n## Integrators: speed against error\n\n"

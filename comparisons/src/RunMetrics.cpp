@@ -48,6 +48,8 @@ AnalyticMetrics analyticFromJson(const nlohmann::json& o) {
 }  // namespace
 
 nlohmann::json toJson(const RunMetrics& m) {
+  nlohmann::json perPose = nlohmann::json::array();
+  for (double rms : m.rmsToReferencePerPoseMm) perPose.push_back(number(rms));
   return {
       {"scene", m.scene},
       {"method", m.method},
@@ -76,13 +78,17 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"worst_muscle_volume_change_pct", number(m.worstMuscleVolumeChangePct)},
       {"worst_volume_muscle", m.worstVolumeMuscle},
       {"spring_deviation_ratio", number(m.springDeviationRatio)},
-      {"rms_to_fem_mm", number(m.rmsToFemMm)},
+      {"rms_to_reference_mm", number(m.rmsToReferenceMm)},
+      {"shape_rms_to_reference_mm", number(m.shapeRmsToReferenceMm)},
+      {"worst_muscle", m.worstMuscle},
+      {"worst_muscle_rms_mm", number(m.worstMuscleRmsMm)},
+      {"rms_to_reference_per_pose_mm", perPose},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
       {"rms_to_equilibrium_mm", number(m.rmsToEquilibriumMm)},
       {"worst_pose_rms_to_equilibrium_mm", number(m.worstPoseRmsToEquilibriumMm)},
       {"rms_to_equilibrium_poses", m.rmsToEquilibriumPoses},
       {"unconverged_poses", m.unconvergedPoses},
-      {"rms_to_fem_poses", m.rmsToFemPoses},
+      {"rms_to_reference_poses", m.rmsToReferencePoses},
       {"rms_to_self_reference_poses", m.rmsToSelfReferencePoses},
       {"nan", m.nan},
       {"exploded", m.exploded},
@@ -125,14 +131,20 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
       numberOr(o, "worst_muscle_volume_change_pct", m.worstMuscleVolumeChangePct);
   m.worstVolumeMuscle = o.value("worst_volume_muscle", m.worstVolumeMuscle);
   m.springDeviationRatio = numberOr(o, "spring_deviation_ratio", m.springDeviationRatio);
-  m.rmsToFemMm = numberOr(o, "rms_to_fem_mm", m.rmsToFemMm);
+  m.rmsToReferenceMm = numberOr(o, "rms_to_reference_mm", m.rmsToReferenceMm);
+  m.shapeRmsToReferenceMm = numberOr(o, "shape_rms_to_reference_mm", m.shapeRmsToReferenceMm);
+  m.worstMuscle = o.value("worst_muscle", m.worstMuscle);
+  m.worstMuscleRmsMm = numberOr(o, "worst_muscle_rms_mm", m.worstMuscleRmsMm);
+  if (auto it = o.find("rms_to_reference_per_pose_mm"); it != o.end() && it->is_array())
+    for (const auto& v : *it)
+      m.rmsToReferencePerPoseMm.push_back(v.is_number() ? v.get<double>() : RunMetrics::kNone);
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
   m.rmsToEquilibriumMm = numberOr(o, "rms_to_equilibrium_mm", m.rmsToEquilibriumMm);
   m.worstPoseRmsToEquilibriumMm =
       numberOr(o, "worst_pose_rms_to_equilibrium_mm", m.worstPoseRmsToEquilibriumMm);
   m.rmsToEquilibriumPoses = o.value("rms_to_equilibrium_poses", m.rmsToEquilibriumPoses);
   m.unconvergedPoses = o.value("unconverged_poses", m.unconvergedPoses);
-  m.rmsToFemPoses = o.value("rms_to_fem_poses", m.rmsToFemPoses);
+  m.rmsToReferencePoses = o.value("rms_to_reference_poses", m.rmsToReferencePoses);
   m.rmsToSelfReferencePoses = o.value("rms_to_self_reference_poses", m.rmsToSelfReferencePoses);
   m.nan = o.value("nan", m.nan);
   m.exploded = o.value("exploded", m.exploded);

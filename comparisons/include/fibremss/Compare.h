@@ -5,10 +5,12 @@
 // self-reference runs, pose by pose.
 #include <atomic>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "fibremss/FemBuilder.h"
+#include "fibremss/Reference.h"
 #include "fibremss/RunMetrics.h"
 #include "fibremss/Scene.h"
 #include "fibremss/SoftBodyBuilder.h"
@@ -41,7 +43,10 @@ struct MethodProgress {
 struct CompareOptions {
   std::vector<std::string> methods{std::begin(kDefaultMethods), std::end(kDefaultMethods)};
   SoftBodyDefinition softBody;  ///< the baseline (poseDuration set from the scene, see below)
-  FemDefinition fem;            ///< the reference (poseDuration set from the scene)
+  FemDefinition fem;            ///< Bullet's FEM method (poseDuration set from the scene)
+  bool fronts = true;           ///< each method swept over its cost knob (frontMethods)
+  bool withReference = true;    ///< compute (or find) the CalculiX reference and its gates
+  ReferenceOptions reference;   ///< how (log, progress and cancel are set by runComparison)
   int selfReferenceFactor = 8;  ///< self-reference: dt / f and f × iterations
   std::function<void(const MethodProgress&)> progress;  ///< after every step (may be empty)
   std::function<void(const std::string&)> log;          ///< one line of news (may be empty)
@@ -72,6 +77,10 @@ RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
 RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                   const FemDefinition& definition, const MethodRunOptions& options = {});
 
+/// Volume change of all muscles together (rest-volume weighted) [%] for their surfaces
+/// concatenated in muscle order (NaN when no muscle has a rest surface).
+double volumeChangePct(const PreparedScene& prepared, std::span<const btVector3> surfaces);
+
 /// Poses both runs reached without failing (the first ones: a run stops at its first failure).
 int sharedPoses(const RunMetrics& a, const RunMetrics& b);
 
@@ -85,18 +94,37 @@ double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPos
 /// iterations as in the scene's own settings.
 SimulationParameters equilibriumSettings(const SimulationParameters& simulation);
 
-/// Fills rmsToFemMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the "fem",
-/// "self-reference" and "equilibrium" runs among them (the references get 0 against themselves).
+/// Fills rmsToReferenceMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the
+/// "calculix", "self-reference" and "equilibrium" runs among them (each gets 0 against itself).
 void fillRms(std::vector<RunMetrics>& runs);
+
+/// Against the "calculix" run among `runs`: each run's vertex RMS per pose, shape RMS
+/// (symmetric nearest-surface distance, per muscle surface) and worst muscle (largest vertex
+/// RMS over the shared poses). Runs without a shared pose keep NaN.
+void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& prepared);
+
+/// Symmetric nearest-surface RMS of two surfaces with the same triangles [mm]: the distance of
+/// each vertex of either to the other surface, over both vertex sets.
+double shapeRmsMm(const TriangleMesh& a, const TriangleMesh& b);
 
 /// A method and its scene overrides, parsed from "name" or "fibremss:k=v+k=v".
 struct MethodSpec {
   std::string name;    ///< the full name as given
   std::string family;  ///< "fibremss", "self-reference", "equilibrium", "btsoftbody", "fem"
-  std::vector<std::string> overrides;  ///< extra --set overrides of a FibreMSS variant
+  std::vector<std::string> overrides;  ///< FibreMSS: extra --set overrides; btsoftbody / fem:
+                                       ///< their knobs ("iterations=N", "substeps=xF", ...)
 };
 /// Throws InputError for an unknown method or a malformed variant.
 MethodSpec parseMethod(const std::string& name);
+
+/// A knob's value: "N" (an integer > 0) or "xF" (F times `defaultValue`, rounded, at least 1);
+/// 0 when it is neither.
+int knobValue(const std::string& value, int defaultValue);
+
+/// Each method with a cost knob swept over it, cheapest first: fibremss over its iterations per
+/// pose (×0.5, 1, 2, 4) and its resolution (×0.5, 2), btsoftbody over its link iterations
+/// (×0.5, 1, 2), fem over its substeps (×0.5, 1, 2); other methods as they are.
+std::vector<std::string> frontMethods(const std::vector<std::string>& methods);
 
 /// What one comparison ran: the scene as loaded and every method's metrics.
 struct Comparison {
@@ -104,7 +132,8 @@ struct Comparison {
   std::vector<std::string> overrides;  ///< the --set overrides it was loaded with
   int resolution = 0;                  ///< particles per fibre (first muscle), 0 if none
   double stepDeg = RunMetrics::kNone;  ///< sweep step of the motion (NaN if not a sweep)
-  std::vector<RunMetrics> runs;        ///< in the order of the methods
+  std::vector<RunMetrics> runs;        ///< the reference ("calculix") first, then the methods
+  std::optional<Reference> reference;  ///< the CalculiX reference, its gates against the runs
 };
 
 /// Loads and prepares the scene once (again for variants with overrides), runs every method

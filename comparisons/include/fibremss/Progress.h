@@ -20,9 +20,9 @@ class ProgressBar {
   ProgressBar(std::string label, int total, std::FILE* stream = stderr);
   ProgressBar(std::string label, int total, std::FILE* stream, bool interactive);
 
-  /// `done` of the total steps are finished, `iterations` solver iterations so far, `seconds`
-  /// since the job started. On a terminal the line is redrawn at most ten times a second
-  /// (always for the last step).
+  /// `done` of the total steps are finished, `iterations` solver iterations so far (0: no
+  /// rate shown), `seconds` since the job started. On a terminal the line is redrawn at most ten
+  /// times a second (always for the last step).
   void update(int done, long iterations, double seconds);
   /// Ends the redrawn line so that later output starts on a fresh one.
   void finish();

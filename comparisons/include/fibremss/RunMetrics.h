@@ -63,15 +63,21 @@ struct RunMetrics {
   double worstMuscleVolumeChangePct = kNone;
   std::string worstVolumeMuscle;        ///< the muscle of worstMuscleVolumeChangePct
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
-  double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
-  double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
+  double rmsToReferenceMm = kNone;      ///< surface vertex RMS against the CalculiX reference [mm]
+  /// Symmetric nearest-surface RMS against the reference [mm]: every vertex's distance to the
+  /// other surface, both ways (sliding along the surface is not counted), over all poses.
+  double shapeRmsToReferenceMm = kNone;
+  std::string worstMuscle;          ///< the muscle with the largest vertex RMS to the reference
+  double worstMuscleRmsMm = kNone;  ///< its vertex RMS over all poses [mm]
+  std::vector<double> rmsToReferencePerPoseMm;  ///< vertex RMS per pose both reached [mm]
+  double rmsToSelfReferenceMm = kNone;          ///< against FibreMSS at dt/8, 8× iterations
   /// Against the "equilibrium" run (FibreMSS converged at every pose): RMS over the poses, and
   /// the worst pose's RMS.
   double rmsToEquilibriumMm = kNone;
   double worstPoseRmsToEquilibriumMm = kNone;  ///< the largest per-pose RMS to equilibrium
   int rmsToEquilibriumPoses = 0;               ///< poses rmsToEquilibriumMm covers
-  int unconvergedPoses = 0;  ///< "equilibrium" run: poses that hit the iteration cap unconverged
-  int rmsToFemPoses = 0;     ///< poses rmsToFemMm covers (both runs reached them intact)
+  int unconvergedPoses = 0;     ///< "equilibrium" run: poses that hit the iteration cap unconverged
+  int rmsToReferencePoses = 0;  ///< poses rmsToReferenceMm covers (both reached them intact)
   int rmsToSelfReferencePoses = 0;  ///< poses rmsToSelfReferenceMm covers
   bool nan = false;                 ///< a NaN or inf appeared
   bool exploded = false;            ///< stability criteria violated

@@ -1,0 +1,77 @@
+#pragma once
+// The accuracy reference: each muscle's static equilibrium per pose, solved by CalculiX
+// (Debian calculix-ccx) as a Neo-Hookean body (*STATIC, NLGEOM) on a conforming tetrahedral
+// mesh of its surface (tetgen -pYq: the surface vertices are mesh nodes). Attachments follow
+// FibreMSS's rule: material within a muscle's attachment distance of a bone moves rigidly with
+// that bone (prescribed displacements per pose). The surface meshed is the loaded one:
+// preparation moves surface vertices that lie inside a bone out of it, which makes thigh13's
+// prepared surfaces self-intersect (24–481 facet pairs per muscle, tetgen -d); those vertices
+// are attached, so the reference reports them where that bone carries the prepared vertex. Not
+// modelled: contact (muscle–bone and muscle–muscle), gravity, activation; each muscle is solved on
+// its own.
+#include <atomic>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "fibremss/Calculix.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss {
+
+/// What the reference solves and how.
+struct CalculixDefinition {
+  /// Neo-Hookean, ν = 0.49 (muscle is nearly incompressible). With every load a prescribed
+  /// displacement (no gravity, no contact) the displacements do not depend on E; E is stated.
+  NeoHookeMaterial material;
+  /// Linear tetrahedra; the mesh-refinement gate solves the same mesh with quadratic C3D10
+  /// (which also measures C3D4's volumetric locking at ν = 0.49; comparisons/README.md).
+  CalculixElement element = CalculixElement::C3D4;
+  TetgenDefinition mesher;       ///< tetgen settings and the refinement level
+  btScalar attachmentScale = 1;  ///< × each muscle's attachment distance (the ±50 % gate)
+  bool returnToRest = true;      ///< a last step back to the rest pose (the return gate)
+  double initialIncrement = 1;   ///< first increment of a step (ccx cuts it back as needed)
+  std::string program = "ccx";   ///< the CalculiX executable (PATH is searched)
+};
+
+/// Where a reference solve is, after every step ccx finishes.
+struct ReferenceProgress {
+  std::string muscle;  ///< muscle being solved
+  int muscleIndex = 0;
+  int muscles = 0;
+  int step = 0;        ///< steps finished of this muscle's job
+  int steps = 0;       ///< steps in it (the poses, then the return to rest)
+  double seconds = 0;  ///< since the solve started
+};
+
+/// The reference's result: per pose, all muscles' surface vertices (prepared restSurface order,
+/// muscle after muscle), or why ccx did not give that pose.
+struct CalculixSolution {
+  std::vector<std::vector<btVector3>> poseSurfaces;  ///< per pose; empty where it failed
+  std::vector<std::string> poseFailures;             ///< per pose: "" or the reason
+  std::vector<btVector3> returnSurface;  ///< after the step back to rest (empty: none / failed)
+  std::string returnFailure;             ///< "" or why the return step failed
+  size_t nodes = 0;                      ///< mesh nodes of all muscles (midside included)
+  size_t elements = 0;                   ///< tetrahedra of all muscles
+  size_t prescribedNodes = 0;            ///< nodes moved with a bone
+  long newtonIterations = 0;             ///< summed over all increments (from ccx's .sta)
+  long increments = 0;                   ///< increments ccx took over all steps
+  double seconds = 0;                    ///< wall time of tetgen and ccx
+  std::vector<std::string> inputFiles;   ///< the .inp files, one per muscle
+  bool interrupted = false;              ///< cancelled before the end
+
+  /// Poses solved, counted from the first (a failed pose ends the run of solved ones).
+  int solvedPoses() const;
+};
+
+/// Meshes every muscle and solves its poses with ccx in `workDir` (created; the .inp, .dat,
+/// .sta and logs of each muscle are kept there). A pose ccx does not finish is reported in
+/// poseFailures (with ccx's last error line), never dropped. Throws InputError for a muscle
+/// that tetgen cannot mesh or that has no material near any bone.
+CalculixSolution solveCalculixReference(
+    const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
+    const std::string& workDir, const std::function<void(const ReferenceProgress&)>& progress = {},
+    const std::atomic<bool>* cancel = nullptr);
+
+}  // namespace fibremss

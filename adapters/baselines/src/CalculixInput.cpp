@@ -1,0 +1,85 @@
+// CalculiX input (.inp) for the static reference, and the quadratic tetrahedra it can use.
+#include <map>
+#include <ostream>
+#include <utility>
+
+#include "fibremss/Calculix.h"
+
+namespace fibremss {
+namespace {
+
+/// Numbers (1-based ids) 16 to a line, as Abaqus-style sets allow.
+void writeIds(std::ostream& out, const std::vector<uint32_t>& indices) {
+  for (size_t i = 0; i < indices.size(); ++i)
+    out << indices[i] + 1 << (i + 1 == indices.size() || i % 16 == 15 ? "\n" : ", ");
+}
+
+void writeMesh(std::ostream& out, const CalculixJob& job) {
+  out << "*NODE, NSET=NALL\n";
+  for (size_t n = 0; n < job.nodes.size(); ++n) {
+    const btVector3& x = job.nodes[n];
+    out << n + 1 << ", " << x.x() << ", " << x.y() << ", " << x.z() << "\n";
+  }
+  const size_t perElement = job.element == CalculixElement::C3D4 ? 4 : 10;
+  out << "*ELEMENT, TYPE=" << toString(job.element) << ", ELSET=EALL\n";
+  for (size_t e = 0; e * perElement < job.connectivity.size(); ++e) {
+    out << e + 1;
+    for (size_t i = 0; i < perElement; ++i) out << ", " << job.connectivity[e * perElement + i] + 1;
+    out << "\n";
+  }
+}
+
+void writeStep(std::ostream& out, const CalculixJob& job, size_t step) {
+  out << "*STEP, NLGEOM, INC=10000\n*STATIC\n"
+      << job.initialIncrement << ", 1., " << job.minimumIncrement << ", 1.\n*BOUNDARY\n";
+  const std::vector<btVector3>& u = job.steps[step];
+  for (size_t i = 0; i < job.prescribed.size(); ++i) {
+    const uint32_t id = job.prescribed[i] + 1;
+    for (int axis = 0; axis < 3; ++axis)
+      out << id << ", " << axis + 1 << ", " << axis + 1 << ", " << u[i][axis] << "\n";
+  }
+  out << "*NODE PRINT, NSET=NPRINT\nU\n*END STEP\n";
+}
+
+}  // namespace
+
+const char* toString(CalculixElement element) {
+  return element == CalculixElement::C3D4 ? "C3D4" : "C3D10";
+}
+
+void writeCalculixInput(std::ostream& out, const CalculixJob& job) {
+  const auto precision = out.precision(9);
+  out << "** " << job.title << "\n** written by FibreMSS; units: m, Pa\n";
+  writeMesh(out, job);
+  out << "*NSET, NSET=NMOVED\n";
+  writeIds(out, job.prescribed);
+  out << "*NSET, NSET=NPRINT\n";
+  writeIds(out, job.printed);
+  out << "*MATERIAL, NAME=MUSCLE\n*HYPERELASTIC, NEO HOOKE\n"
+      << job.material.c10() << ", " << job.material.d1() << "\n"
+      << "*SOLID SECTION, ELSET=EALL, MATERIAL=MUSCLE\n";
+  for (size_t step = 0; step < job.steps.size(); ++step) writeStep(out, job, step);
+  out.precision(precision);
+}
+
+std::vector<btVector3> quadraticTetrahedra(const TetMesh& mesh,
+                                           std::vector<uint32_t>& connectivity) {
+  std::vector<btVector3> nodes = mesh.nodes;
+  std::map<std::pair<uint32_t, uint32_t>, uint32_t> midside;
+  auto midpoint = [&](uint32_t a, uint32_t b) {
+    const auto key = std::minmax(a, b);
+    auto [it, added] = midside.try_emplace(key, static_cast<uint32_t>(nodes.size()));
+    if (added) nodes.push_back((mesh.nodes[a] + mesh.nodes[b]) * btScalar(0.5));
+    return it->second;
+  };
+  constexpr int kEdges[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+  connectivity.clear();
+  connectivity.reserve(mesh.tetrahedra.size() * 10);
+  for (const auto& t : mesh.tetrahedra) {
+    connectivity.insert(connectivity.end(), t.begin(), t.end());
+    for (const auto& edge : kEdges) connectivity.push_back(midpoint(t[edge[0]], t[edge[1]]));
+  }
+  return nodes;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,271 @@
+// The CalculiX static reference: per muscle a tetgen mesh, its attached nodes, one ccx job with
+// a step per pose (and one back to rest), the printed surface displacements read back.
+#include "fibremss/CalculixReference.h"
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "fibremss/Error.h"
+
+namespace fibremss {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// A muscle's ccx job and where its files are.
+struct MuscleJob {
+  CalculixJob job;
+  size_t surfaceVertices = 0;  ///< printed nodes: the surface vertices 0..n-1
+  size_t tetrahedra = 0;
+  std::string stem;  ///< file stem in the work directory
+  /// Surface vertices preparation moved (out of a bone): they move with the bone they are
+  /// attached to, so per step their position is that bone's transform of the prepared vertex.
+  std::vector<uint32_t> moved;
+  std::vector<std::vector<btVector3>> movedPositions;  ///< per step, per moved vertex [m]
+};
+
+/// Nodes within `distance` of a bone (or inside it), each with its nearest bone.
+void attach(const std::vector<btVector3>& nodes, const std::vector<MeshDistance>& bones,
+            btScalar distance, std::vector<uint32_t>& attached, std::vector<int>& boneOf) {
+  for (size_t n = 0; n < nodes.size(); ++n) {
+    int nearest = -1;
+    btScalar best = distance;
+    for (size_t b = 0; b < bones.size(); ++b) {
+      const btScalar d = bones[b].signedDistance(nodes[n]);
+      if (d < best) {
+        best = d;
+        nearest = static_cast<int>(b);
+      }
+    }
+    if (nearest >= 0) {
+      attached.push_back(static_cast<uint32_t>(n));
+      boneOf.push_back(nearest);
+    }
+  }
+}
+
+/// The job's elements (C3D4, or C3D10 with midside nodes) on the mesh.
+void setElements(CalculixJob& job, const TetMesh& mesh) {
+  if (job.element == CalculixElement::C3D10) {
+    job.nodes = quadraticTetrahedra(mesh, job.connectivity);
+    return;
+  }
+  job.nodes = mesh.nodes;
+  for (const auto& t : mesh.tetrahedra)
+    job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
+}
+
+/// Bone b's transform of pose p (the rest pose after the last one: the return step).
+btTransform stepTransform(const LoadedScene& scene, size_t bone, int step, int poses) {
+  return step < poses ? scene.bonePose(bone, step) : btTransform::getIdentity();
+}
+
+/// Meshes the muscle's surface as loaded (preparation's push out of the bones makes the
+/// prepared surface self-intersect where it overlapped a bone), attaches nodes within the
+/// attachment distance of a bone and prescribes their displacement per step.
+MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, size_t m,
+                    const std::vector<MeshDistance>& bones, const CalculixDefinition& definition,
+                    const std::string& workDir) {
+  const MuscleSettings& muscle = *prepared.muscles[m];
+  const TriangleMesh& loaded = scene.muscles[m].surface;
+  if (loaded.vertices.size() != muscle.restSurface.vertices.size()) {
+    throw InputError("muscles[" + std::to_string(m) + "]", muscle.name,
+                     "the prepared surface has other vertices than the loaded one");
+  }
+  MuscleJob result;
+  result.stem = "muscle" + std::to_string(m);
+  const TetMesh mesh = tetgenMesh(loaded, definition.mesher, workDir, result.stem);
+  result.surfaceVertices = loaded.vertices.size();
+  result.tetrahedra = mesh.tetrahedra.size();
+  CalculixJob& job = result.job;
+  job.title = "muscle " + muscle.name + " of scene " + scene.name;
+  job.element = definition.element;
+  job.material = definition.material;
+  job.initialIncrement = definition.initialIncrement;
+  setElements(job, mesh);
+  const btScalar distance =
+      scene.muscles[m].parameters.attachmentDistance * definition.attachmentScale;
+  std::vector<int> boneOf;
+  attach(job.nodes, bones, distance, job.prescribed, boneOf);
+  if (job.prescribed.empty()) {
+    throw InputError("muscles[" + std::to_string(m) + "]", muscle.name,
+                     "no material within the attachment distance (" +
+                         std::to_string(distance * 1000) +
+                         " mm) of a bone: the static reference needs the muscle held");
+  }
+  const int poses = std::max(scene.poseCount, 1);
+  const int steps = poses + (definition.returnToRest ? 1 : 0);
+  for (int p = 0; p < steps; ++p) {
+    std::vector<btVector3>& u = job.steps.emplace_back();
+    for (size_t i = 0; i < job.prescribed.size(); ++i) {
+      const btVector3& x = job.nodes[job.prescribed[i]];
+      u.push_back(stepTransform(scene, static_cast<size_t>(boneOf[i]), p, poses) * x - x);
+    }
+  }
+  // Prescribed nodes are ascending: the surface vertices among them come first.
+  result.movedPositions.resize(static_cast<size_t>(steps));
+  for (size_t i = 0; i < job.prescribed.size() && job.prescribed[i] < loaded.vertices.size(); ++i) {
+    const uint32_t v = job.prescribed[i];
+    if (muscle.restSurface.vertices[v] == loaded.vertices[v]) continue;
+    result.moved.push_back(v);
+    for (int p = 0; p < steps; ++p)
+      result.movedPositions[static_cast<size_t>(p)].push_back(
+          stepTransform(scene, static_cast<size_t>(boneOf[i]), p, poses) *
+          muscle.restSurface.vertices[v]);
+  }
+  for (uint32_t v = 0; v < result.surfaceVertices; ++v) job.printed.push_back(v);
+  return result;
+}
+
+/// ccx's .sta rows: step, increment, attempt, iterations, total time, step time, increment.
+struct StaSummary {
+  int stepsDone = 0;
+  long increments = 0;
+  long iterations = 0;
+};
+
+StaSummary readSta(const std::string& path) {
+  StaSummary summary;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream row(line);
+    int step = 0, increment = 0, attempt = 0, iterations = 0;
+    double total = 0, stepTime = 0;
+    if (!(row >> step >> increment >> attempt >> iterations >> total >> stepTime)) continue;
+    ++summary.increments;
+    summary.iterations += iterations;
+    if (std::abs(stepTime - 1) < 1e-6) summary.stepsDone = std::max(summary.stepsDone, step);
+  }
+  return summary;
+}
+
+/// The last line of ccx's log that says what went wrong ("*ERROR ..."), else its exit status.
+std::string ccxFailure(const std::string& logPath, int status) {
+  std::ifstream in(logPath);
+  std::string line, error;
+  while (std::getline(in, line))
+    if (line.find("ERROR") != std::string::npos) error = line.substr(line.find_first_not_of(' '));
+  return error.empty() ? "ccx stopped (exit " + std::to_string(status) + ")" : error;
+}
+
+/// Runs one muscle's job; per step the surface positions (empty where ccx gave none) and the
+/// reason of a failure.
+void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
+                 const std::string& workDir, const std::function<bool(int)>& poll,
+                 std::vector<std::vector<btVector3>>& stepSurfaces, std::string& failure,
+                 StaSummary& sta) {
+  const std::string base = workDir + "/" + muscle.stem;
+  {
+    std::ofstream out(base + ".inp");
+    writeCalculixInput(out, muscle.job);
+    if (!out) throw InputError(base + ".inp", "", "cannot write the CalculiX input");
+  }
+  std::filesystem::remove(base + ".sta");
+  std::filesystem::remove(base + ".dat");
+  const int status = runProgram({definition.program, "-i", muscle.stem}, workDir, base + ".log",
+                                [&] { return poll(readSta(base + ".sta").stepsDone); });
+  sta = readSta(base + ".sta");
+  std::ifstream dat(base + ".dat");
+  const std::vector<CalculixTable> tables = readCalculixDat(dat, base + ".dat");
+  const int steps = static_cast<int>(muscle.job.steps.size());
+  const auto ends = stepEndTables(tables, "displacements", "NPRINT", steps);
+  stepSurfaces.assign(static_cast<size_t>(steps), {});
+  for (size_t s = 0; s < ends.size(); ++s) {
+    const CalculixTable& table = *ends[s];
+    std::vector<btVector3>& surface = stepSurfaces[s];
+    surface.assign(muscle.job.nodes.begin(),
+                   muscle.job.nodes.begin() + static_cast<long>(muscle.surfaceVertices));
+    for (size_t row = 0; row < table.ids.size(); ++row) {
+      const size_t v = static_cast<size_t>(table.ids[row] - 1);
+      const double* u = &table.values[row * 3];
+      if (v < surface.size())
+        surface[v] += btVector3(btScalar(u[0]), btScalar(u[1]), btScalar(u[2]));
+    }
+    for (size_t i = 0; i < muscle.moved.size(); ++i)
+      surface[muscle.moved[i]] = muscle.movedPositions[s][i];
+  }
+  failure = static_cast<int>(ends.size()) == steps ? "" : ccxFailure(base + ".log", status);
+}
+
+}  // namespace
+
+int CalculixSolution::solvedPoses() const {
+  int solved = 0;
+  while (solved < static_cast<int>(poseSurfaces.size()) &&
+         !poseSurfaces[static_cast<size_t>(solved)].empty())
+    ++solved;
+  return solved;
+}
+
+CalculixSolution solveCalculixReference(
+    const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
+    const std::string& workDir, const std::function<void(const ReferenceProgress&)>& progress,
+    const std::atomic<bool>* cancel) {
+  const auto start = Clock::now();
+  std::filesystem::create_directories(workDir);
+  std::vector<MeshDistance> bones;
+  for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
+  const int poses = std::max(scene.poseCount, 1);
+  CalculixSolution solution;
+  solution.poseSurfaces.assign(static_cast<size_t>(poses), {});
+  solution.poseFailures.assign(static_cast<size_t>(poses), "");
+  const size_t muscles = prepared.muscles.size();
+  for (size_t m = 0; m < muscles && !solution.interrupted; ++m) {
+    const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir);
+    solution.nodes += muscle.job.nodes.size();
+    solution.elements += muscle.tetrahedra;
+    solution.prescribedNodes += muscle.job.prescribed.size();
+    solution.inputFiles.push_back(workDir + "/" + muscle.stem + ".inp");
+    const int steps = static_cast<int>(muscle.job.steps.size());
+    int reported = -1;
+    const auto poll = [&](int done) {
+      if (progress && done != reported) {
+        reported = done;
+        progress({prepared.muscles[m]->name, static_cast<int>(m), static_cast<int>(muscles), done,
+                  steps, secondsSince(start)});
+      }
+      if (cancel && cancel->load()) solution.interrupted = true;
+      return !solution.interrupted;
+    };
+    poll(0);
+    std::vector<std::vector<btVector3>> stepSurfaces;
+    std::string failure;
+    StaSummary sta;
+    solveMuscle(muscle, definition, workDir, poll, stepSurfaces, failure, sta);
+    poll(sta.stepsDone);
+    solution.increments += sta.increments;
+    solution.newtonIterations += sta.iterations;
+    if (solution.interrupted) failure = "interrupted";
+    const std::string blame = "muscle " + prepared.muscles[m]->name + ": " + failure;
+    for (int s = 0; s < steps; ++s) {
+      std::vector<btVector3>& surface = stepSurfaces[static_cast<size_t>(s)];
+      const bool pose = s < poses;
+      std::vector<btVector3>& into =
+          pose ? solution.poseSurfaces[static_cast<size_t>(s)] : solution.returnSurface;
+      std::string& why =
+          pose ? solution.poseFailures[static_cast<size_t>(s)] : solution.returnFailure;
+      const bool earlierFailed = !why.empty();
+      if (surface.empty() && !earlierFailed) why = blame;
+      if (m == 0 || !into.empty()) into.insert(into.end(), surface.begin(), surface.end());
+      if (!why.empty()) into.clear();
+    }
+  }
+  for (size_t p = 0; solution.interrupted && p <= solution.poseSurfaces.size(); ++p) {
+    const bool pose = p < solution.poseSurfaces.size();
+    std::string& why = pose ? solution.poseFailures[p] : solution.returnFailure;
+    if (why.empty()) why = "interrupted";
+    (pose ? solution.poseSurfaces[p] : solution.returnSurface).clear();
+  }
+  solution.seconds = secondsSince(start);
+  return solution;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,221 @@
+// The reference cache: key, binary store of a solution, and the cached solve.
+#include "fibremss/ReferenceCache.h"
+
+#include <array>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <type_traits>
+
+#include "fibremss/Error.h"
+
+namespace fibremss {
+namespace {
+
+constexpr char kMagic[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '1'};
+
+/// FNV-1a over everything fed to it.
+class Hasher {
+ public:
+  void bytes(const void* data, size_t size) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < size; ++i) hash_ = (hash_ ^ p[i]) * 0x100000001b3ull;
+  }
+  template <typename T>
+  void value(const T& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    bytes(&v, sizeof v);
+  }
+  void text(const std::string& s) {
+    value(s.size());
+    bytes(s.data(), s.size());
+  }
+  void points(const std::vector<btVector3>& points) {
+    value(points.size());
+    for (const btVector3& p : points) {
+      value(p.x());
+      value(p.y());
+      value(p.z());
+    }
+  }
+  void mesh(const TriangleMesh& mesh) {
+    points(mesh.vertices);
+    value(mesh.triangles.size());
+    if (!mesh.triangles.empty())
+      bytes(mesh.triangles.data(), mesh.triangles.size() * sizeof(mesh.triangles[0]));
+  }
+  std::string hex() const {
+    char out[17];
+    std::snprintf(out, sizeof out, "%016llx", static_cast<unsigned long long>(hash_));
+    return out;
+  }
+
+ private:
+  uint64_t hash_ = 0xcbf29ce484222325ull;
+};
+
+void writePoints(std::ofstream& out, const std::vector<btVector3>& points) {
+  const uint64_t count = points.size();
+  out.write(reinterpret_cast<const char*>(&count), sizeof count);
+  for (const btVector3& p : points) {
+    const double xyz[3] = {p.x(), p.y(), p.z()};
+    out.write(reinterpret_cast<const char*>(xyz), sizeof xyz);
+  }
+}
+
+void writeText(std::ofstream& out, const std::string& text) {
+  const uint64_t size = text.size();
+  out.write(reinterpret_cast<const char*>(&size), sizeof size);
+  out.write(text.data(), static_cast<std::streamsize>(size));
+}
+
+/// Reads from the stream or throws InputError naming the file.
+class Reader {
+ public:
+  Reader(std::ifstream& in, const std::string& path) : in_(in), path_(path) {}
+  template <typename T>
+  T value() {
+    T v{};
+    in_.read(reinterpret_cast<char*>(&v), sizeof v);
+    if (!in_) throw InputError(path_, "", "truncated reference cache file");
+    return v;
+  }
+  std::string text() {
+    const uint64_t size = value<uint64_t>();
+    if (size > (1u << 20)) throw InputError(path_, "", "not a reference cache file");
+    std::string s(size, '\0');
+    in_.read(s.data(), static_cast<std::streamsize>(size));
+    if (!in_) throw InputError(path_, "", "truncated reference cache file");
+    return s;
+  }
+  std::vector<btVector3> points() {
+    const uint64_t count = value<uint64_t>();
+    if (count > (1ull << 32)) throw InputError(path_, "", "not a reference cache file");
+    std::vector<btVector3> points(count);
+    for (btVector3& p : points) {
+      const auto xyz = value<std::array<double, 3>>();
+      p.setValue(btScalar(xyz[0]), btScalar(xyz[1]), btScalar(xyz[2]));
+    }
+    return points;
+  }
+
+ private:
+  std::ifstream& in_;
+  const std::string& path_;
+};
+
+}  // namespace
+
+std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& prepared,
+                              const CalculixDefinition& definition) {
+  Hasher h;
+  h.text("fibremss calculix reference 2");
+  h.text(calculixVersion(definition.program));
+  const int poses = std::max(scene.poseCount, 1);
+  h.value(poses);
+  for (size_t b = 0; b < prepared.bones.size(); ++b) {
+    h.mesh(prepared.bones[b]->mesh);
+    for (int p = 0; p < poses; ++p) {
+      const btTransform t = scene.bonePose(b, p);
+      h.points({t.getOrigin(), t.getBasis()[0], t.getBasis()[1], t.getBasis()[2]});
+    }
+  }
+  for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    h.mesh(scene.muscles[m].surface);
+    h.mesh(prepared.muscles[m]->restSurface);
+    h.value(scene.muscles[m].parameters.attachmentDistance);
+  }
+  h.value(definition.material.youngsModulus);
+  h.value(definition.material.poissonRatio);
+  h.value(definition.element);
+  h.value(definition.mesher.radiusEdgeRatio);
+  h.value(definition.mesher.refinement);
+  h.value(definition.attachmentScale);
+  h.value(definition.returnToRest);
+  h.value(definition.initialIncrement);
+  return h.hex();
+}
+
+std::string defaultReferenceCacheDir() {
+  if (const char* dir = std::getenv("FIBREMSS_CACHE"); dir && *dir)
+    return std::string(dir) + "/reference";
+  if (const char* dir = std::getenv("XDG_CACHE_HOME"); dir && *dir)
+    return std::string(dir) + "/fibremss/reference";
+  if (const char* home = std::getenv("HOME"); home && *home)
+    return std::string(home) + "/.cache/fibremss/reference";
+  return ".fibremss-cache/reference";
+}
+
+void saveSolution(const std::string& path, const CalculixSolution& solution) {
+  const std::string temporary = path + ".partial";
+  {
+    std::ofstream out(temporary, std::ios::binary);
+    out.write(kMagic, sizeof kMagic);
+    const uint64_t poses = solution.poseSurfaces.size();
+    out.write(reinterpret_cast<const char*>(&poses), sizeof poses);
+    for (size_t p = 0; p < poses; ++p) {
+      writeText(out, solution.poseFailures[p]);
+      writePoints(out, solution.poseSurfaces[p]);
+    }
+    writeText(out, solution.returnFailure);
+    writePoints(out, solution.returnSurface);
+    const uint64_t counts[5] = {solution.nodes, solution.elements, solution.prescribedNodes,
+                                static_cast<uint64_t>(solution.newtonIterations),
+                                static_cast<uint64_t>(solution.increments)};
+    out.write(reinterpret_cast<const char*>(counts), sizeof counts);
+    out.write(reinterpret_cast<const char*>(&solution.seconds), sizeof solution.seconds);
+    writeText(out, std::to_string(solution.inputFiles.size()));
+    for (const std::string& file : solution.inputFiles) writeText(out, file);
+    if (!out) throw std::runtime_error("cannot write " + temporary);
+  }
+  std::filesystem::rename(temporary, path);
+}
+
+bool loadSolution(const std::string& path, CalculixSolution& solution) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  Reader read(in, path);
+  char magic[sizeof kMagic];
+  in.read(magic, sizeof magic);
+  if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
+    throw InputError(path, "", "not a FibreMSS reference cache file");
+  solution = {};
+  const auto poses = read.value<uint64_t>();
+  if (poses > 1000000) throw InputError(path, "", "not a FibreMSS reference cache file");
+  for (uint64_t p = 0; p < poses; ++p) {
+    solution.poseFailures.push_back(read.text());
+    solution.poseSurfaces.push_back(read.points());
+  }
+  solution.returnFailure = read.text();
+  solution.returnSurface = read.points();
+  const auto counts = read.value<std::array<uint64_t, 5>>();
+  solution.nodes = counts[0];
+  solution.elements = counts[1];
+  solution.prescribedNodes = counts[2];
+  solution.newtonIterations = static_cast<long>(counts[3]);
+  solution.increments = static_cast<long>(counts[4]);
+  solution.seconds = read.value<double>();
+  const size_t files = std::stoul(read.text());
+  for (size_t f = 0; f < files; ++f) solution.inputFiles.push_back(read.text());
+  return true;
+}
+
+CalculixSolution cachedCalculixReference(
+    const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
+    const std::string& cacheDir, const std::function<void(const ReferenceProgress&)>& progress,
+    const std::atomic<bool>* cancel, bool* fromCache) {
+  const std::string entry = cacheDir + "/" + referenceCacheKey(scene, prepared, definition);
+  const std::string stored = entry + "/surfaces.bin";
+  CalculixSolution solution;
+  const bool found = loadSolution(stored, solution);
+  if (fromCache) *fromCache = found;
+  if (found) return solution;
+  solution = solveCalculixReference(scene, prepared, definition, entry, progress, cancel);
+  if (!solution.interrupted) saveSolution(stored, solution);
+  return solution;
+}
+
+}  // namespace fibremss

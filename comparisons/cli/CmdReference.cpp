@@ -1,0 +1,81 @@
+// `fibremss reference SCENE`: the CalculiX static reference of a scene (cached), its gates,
+// and the .inp files it was solved from.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+
+#include "Commands.h"
+#include "Interrupt.h"
+#include "ProgressLog.h"
+#include "ReferenceArgs.h"
+#include "SceneArgs.h"
+
+namespace fibremss::cli {
+namespace {
+
+struct ReferenceArgs {
+  SceneArgs scene;
+  std::string out;  ///< --out DIR (default: reference-<scene>)
+  ReferenceOptions options;
+};
+
+void writeOut(const Reference& reference, const std::string& out) {
+  std::filesystem::create_directories(out + "/inp");
+  for (const std::string& file : reference.solution.inputFiles) {
+    std::filesystem::copy_file(file,
+                               out + "/inp/" + std::filesystem::path(file).filename().string(),
+                               std::filesystem::copy_options::overwrite_existing);
+  }
+  const std::string path = out + "/reference.json";
+  std::ofstream json(path + ".partial");
+  json << referenceJson(reference).dump(2) << "\n";
+  if (!json) throw std::runtime_error("cannot write " + path);
+  json.close();
+  std::filesystem::rename(path + ".partial", path);
+}
+
+void reference(ReferenceArgs& args) {
+  const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
+  std::fprintf(stderr, "preparing %s\n", scene.name.c_str());
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ProgressLog progress;
+  args.options.log = [&](const std::string& line) { progress.line(line); };
+  args.options.progress = [&](const ReferenceProgress& p) {
+    progress.update("ccx " + p.muscle + " (" + std::to_string(p.muscleIndex + 1) + "/" +
+                        std::to_string(p.muscles) + ")",
+                    p.step, p.steps, 0, p.seconds);
+  };
+  InterruptGuard interrupt;
+  args.options.cancel = &interruptRequested;
+  const Reference result = computeReference(scene, prepared, args.options);
+  progress.finish();
+  const std::string out = args.out.empty() ? "reference-" + scene.name : args.out;
+  writeOut(result, out);
+  std::printf("%s\n", result.description.c_str());
+  std::printf("poses solved: %d/%d%s\n", result.solution.solvedPoses(),
+              static_cast<int>(result.solution.poseSurfaces.size()),
+              result.fromCache ? " (from the cache)" : "");
+  for (const std::string& line : gateLines(result.gates)) std::printf("gate: %s\n", line.c_str());
+  std::printf("wrote %s/reference.json and %zu .inp file(s) in %s/inp (cache entry %s)\n",
+              out.c_str(), result.solution.inputFiles.size(), out.c_str(),
+              result.cacheEntry.c_str());
+  if (interruptRequested.load()) throw CLI::RuntimeError(kExitInterrupted);
+}
+
+}  // namespace
+
+void addReferenceCommand(CLI::App& app) {
+  auto args = std::make_shared<ReferenceArgs>();
+  CLI::App* command = app.add_subcommand(
+      "reference",
+      "Solve a scene's static CalculiX reference (Neo-Hookean, tetgen mesh of each muscle "
+      "surface, attachments moving with their bones), or find it in the cache; print its "
+      "gates; write reference.json and the .inp files to --out.");
+  addSceneArgs(*command, args->scene);
+  command->add_option("--out", args->out, "Output directory (default: reference-<scene>)");
+  addReferenceArgs(*command, args->options);
+  command->callback([args] { reference(*args); });
+}
+
+}  // namespace fibremss::cli

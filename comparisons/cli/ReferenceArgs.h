@@ -1,0 +1,43 @@
+#pragma once
+// The CalculiX reference's options, shared by `reference` and `compare`.
+#include <CLI/CLI.hpp>
+#include <map>
+#include <string>
+
+#include "fibremss/Reference.h"
+
+namespace fibremss::cli {
+
+inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
+  command.add_option("--cache", options.cacheDir,
+                     "Reference cache directory (default $FIBREMSS_CACHE/reference, else "
+                     "~/.cache/fibremss/reference)");
+  command
+      .add_option("--ccx-element", options.definition.element,
+                  "Reference element: C3D4 (linear tetrahedra; the refinement gate solves C3D10) "
+                  "or C3D10 (quadratic; the gate solves the next mesh level)")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, CalculixElement>{{"C3D10", CalculixElement::C3D10},
+                                                 {"C3D4", CalculixElement::C3D4}},
+          CLI::ignore_case))
+      ->default_str("C3D4");
+  command
+      .add_option("--ccx-poisson", options.definition.material.poissonRatio,
+                  "Reference Poisson ratio (muscle is nearly incompressible)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.4999));
+  command
+      .add_option("--ccx-refine", options.definition.mesher.refinement,
+                  "Reference mesh level (each level splits the surface triangles in four and "
+                  "bounds the tetrahedron volume by 1/8)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 3));
+  command.add_flag("--reference-cached-only", options.cachedOnly,
+                   "Use the reference (and each gate's solve) only if it is in the cache; what is "
+                   "not there is reported missing, not computed");
+  command.add_flag("!--no-gates", options.gates,
+                   "Skip the reference's gate solves (one level finer, attachment distance "
+                   "x0.5 and x1.5); the comparison then reports no ranking");
+}
+
+}  // namespace fibremss::cli

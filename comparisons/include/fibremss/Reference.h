@@ -1,0 +1,87 @@
+#pragma once
+// The CalculiX reference as `reference` and `compare` use it: the cached solve, its gates
+// (return to rest, mesh refinement, attachment distance ±50 %) and its metrics as a run.
+#include <atomic>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "fibremss/ReferenceCache.h"
+#include "fibremss/RunMetrics.h"
+
+namespace fibremss {
+
+/// How the reference is computed.
+struct ReferenceOptions {
+  CalculixDefinition definition;  ///< material, element, mesher, attachment rule
+  std::string cacheDir;           ///< "" : defaultReferenceCacheDir()
+  bool gates = true;  ///< also solve one level finer and with the attachment distance ±50 %
+  /// Take the reference (and each gate's solve) only from the cache; what is not there is not
+  /// computed (Reference::missing, gates left out). For jobs that must stay short.
+  bool cachedOnly = false;
+  std::function<void(const std::string&)> log;             ///< one line of news (may be empty)
+  std::function<void(const ReferenceProgress&)> progress;  ///< while ccx runs (may be empty)
+  const std::atomic<bool>* cancel = nullptr;               ///< stop when true
+};
+
+/// The bound of the return-to-rest gate [mm]: the surface at rest after the motion, RMS to the
+/// prepared rest surface.
+inline constexpr double kReturnGateMm = 0.5;
+/// The mesh-refinement gate passes when one level finer moves the reference by less than this
+/// share of the spread between the methods compared.
+inline constexpr double kRefinementShareOfSpread = 1.0 / 3.0;
+
+/// The reference's gates. NaN where not computed.
+struct ReferenceGates {
+  double returnMm = RunMetrics::kNone;      ///< RMS at rest after the motion, to the rest surface
+  double refinementMm = RunMetrics::kNone;  ///< RMS one level finer against the reference
+  std::string refinedBy;  ///< what "one level finer" was (quadratic elements or the next level)
+  double attachmentLowMm = RunMetrics::kNone;   ///< RMS with the attachment distance × 0.5
+  double attachmentHighMm = RunMetrics::kNone;  ///< RMS with it × 1.5
+  std::string failures;  ///< poses ccx did not finish, of the reference or a gate's solve
+  /// The spread between the methods compared [mm] (NaN until a comparison sets it) and the
+  /// refinement gate's verdict against it.
+  double spreadMm = RunMetrics::kNone;
+
+  bool returnPasses() const { return returnMm <= kReturnGateMm; }
+  bool refinementPasses() const { return refinementMm < kRefinementShareOfSpread * spreadMm; }
+  /// Both gates passed and every pose solved: rankings may be reported.
+  bool passed() const { return returnPasses() && refinementPasses() && failures.empty(); }
+};
+
+/// A computed reference.
+struct Reference {
+  std::string key;            ///< cache key of the reference solve
+  std::string cacheEntry;     ///< directory holding its .inp files and results
+  bool fromCache = false;     ///< the reference solve came from the cache
+  bool missing = false;       ///< cachedOnly and not in the cache: no reference at all
+  CalculixSolution solution;  ///< the reference solve
+  ReferenceGates gates;
+  RunMetrics metrics;  ///< as a run ("calculix"): surfaces of the solved poses, volume, penetration
+  std::string description;  ///< one sentence: element, ν, mesh, attachments, ccx version
+};
+
+/// Solves (or finds in the cache) the reference and, with options.gates, its three gate
+/// variants; fills the metrics as runPoses does for the simulated methods.
+Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
+                           const ReferenceOptions& options);
+
+/// RMS over the poses both solved of two solutions' surfaces [mm] (NaN if none shared).
+double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b);
+
+/// The spread between methods: per method family (the name before ':' and the cost suffix
+/// '@'), its best RMS to the reference; the spread is the largest minus the smallest of those,
+/// or the one family's best when only one was compared. NaN when no run has an RMS.
+double methodSpreadMm(const std::vector<RunMetrics>& runs);
+
+/// {"key", "cache_entry", "missing": true} when it was not in the cache (cachedOnly), else
+/// {"key", "cache_entry", "from_cache", "description", "poses": [{"solved", "failure"}...],
+/// "gates": {...}, "nodes", "tetrahedra", "prescribed_nodes", "newton_iterations",
+/// "increments", "seconds"} (NaN written as null).
+nlohmann::json referenceJson(const Reference& reference);
+
+/// The gates as lines of text, one per gate: value, bound and verdict ("—" where a value is
+/// missing); the refinement gate says "needs a comparison" while spreadMm is NaN.
+std::vector<std::string> gateLines(const ReferenceGates& gates);
+
+}  // namespace fibremss

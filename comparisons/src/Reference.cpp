@@ -1,0 +1,274 @@
+// The CalculiX reference with its gates, and as a run among the methods.
+#include "fibremss/Reference.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <sstream>
+
+#include "fibremss/Analytic.h"
+#include "fibremss/Compare.h"
+#include "fibremss/Measures.h"
+
+namespace fibremss {
+namespace {
+
+/// One solve through the cache, with a line of news saying which; false when options.cachedOnly
+/// and it is not in the cache.
+bool solveVariant(const LoadedScene& scene, const PreparedScene& prepared,
+                  const CalculixDefinition& definition, const ReferenceOptions& options,
+                  const std::string& what, CalculixSolution& solution, bool* fromCache = nullptr) {
+  bool cached = false;
+  const std::string key = referenceCacheKey(scene, prepared, definition);
+  if (options.cachedOnly) {
+    cached = loadSolution(options.cacheDir + "/" + key + "/surfaces.bin", solution);
+    if (!cached) {
+      if (options.log)
+        options.log("reference (" + what + "): " + key + " not in the cache, not computed");
+      return false;
+    }
+  } else {
+    if (options.log) options.log("reference (" + what + "): " + key);
+    solution = cachedCalculixReference(scene, prepared, definition, options.cacheDir,
+                                       options.progress, options.cancel, &cached);
+  }
+  if (options.log) {
+    std::ostringstream line;
+    line << "reference (" << what << "): " << (cached ? "from the cache" : "solved") << ", "
+         << solution.solvedPoses() << "/" << solution.poseSurfaces.size() << " poses, "
+         << solution.nodes << " nodes, " << solution.elements << " tetrahedra";
+    options.log(line.str());
+  }
+  if (fromCache) *fromCache = cached;
+  return true;
+}
+
+/// "pose k: reason" for every pose (and the return step) that did not solve.
+std::string failures(const CalculixSolution& solution, const std::string& what) {
+  std::string text;
+  for (size_t p = 0; p < solution.poseFailures.size(); ++p)
+    if (!solution.poseFailures[p].empty())
+      text += (text.empty() ? "" : "; ") + what + " pose " + std::to_string(p) + ": " +
+              solution.poseFailures[p];
+  if (!solution.returnFailure.empty())
+    text += (text.empty() ? "" : "; ") + what + " return to rest: " + solution.returnFailure;
+  return text;
+}
+
+std::vector<btVector3> restSurfaces(const PreparedScene& prepared) {
+  std::vector<btVector3> rest;
+  for (const auto& muscle : prepared.muscles)
+    rest.insert(rest.end(), muscle->restSurface.vertices.begin(),
+                muscle->restSurface.vertices.end());
+  return rest;
+}
+
+/// The reference as a run: its solved poses' surfaces, penetration into the bones' true
+/// meshes (it has no contact), volume change at the last solved pose.
+RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepared,
+                            const CalculixSolution& solution,
+                            const CalculixDefinition& definition) {
+  RunMetrics metrics;
+  metrics.scene = scene.name;
+  metrics.method = "calculix";
+  metrics.integrator = std::string("static Neo-Hookean equilibrium, ccx *STATIC NLGEOM, ") +
+                       toString(definition.element);
+  metrics.threads = 1;
+  metrics.particles = solution.nodes;
+  metrics.springs = solution.elements;
+  metrics.poses = static_cast<int>(solution.poseSurfaces.size());
+  metrics.steps = solution.solvedPoses();
+  metrics.iterations = solution.newtonIterations;
+  metrics.wallSeconds = solution.seconds;
+  if (metrics.steps > 0) metrics.msPerStep = 1000 * solution.seconds / metrics.poses;
+  std::vector<MeshDistance> bones;
+  for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
+  std::vector<const MeshDistance*> pointers;
+  for (const MeshDistance& bone : bones) pointers.push_back(&bone);
+  Penetration penetration;
+  for (int p = 0; p < metrics.steps; ++p) {
+    std::vector<btTransform> transforms;
+    for (size_t b = 0; b < bones.size(); ++b) transforms.push_back(scene.bonePose(b, p));
+    metrics.poseSurfaces.push_back(solution.poseSurfaces[static_cast<size_t>(p)]);
+    penetration =
+        combine(penetration, measurePenetration(metrics.poseSurfaces.back(), pointers, transforms));
+  }
+  if (metrics.steps > 0) {
+    metrics.maxPenetrationMm = penetration.maxMm;
+    metrics.meanPenetrationMm = penetration.meanMm;
+    metrics.volumeChangePct = volumeChangePct(prepared, metrics.poseSurfaces.back());
+    if (!prepared.muscles.empty()) {
+      const std::span<const btVector3> last = metrics.poseSurfaces.back();
+      const TriangleMesh& rest = prepared.muscles[0]->restSurface;
+      metrics.analytic = measureAnalytic(scene.analytic, rest,
+                                         last.first(std::min(rest.vertices.size(), last.size())));
+    }
+  }
+  if (metrics.steps < metrics.poses) metrics.failedStep = metrics.steps;
+  return metrics;
+}
+
+/// The gate solves (one level finer, attachment distance x0.5 and x1.5) against `base`.
+void solveGates(const LoadedScene& scene, const PreparedScene& prepared,
+                const ReferenceOptions& options, const CalculixSolution& base,
+                ReferenceGates& gates) {
+  CalculixDefinition finer = options.definition, low = options.definition,
+                     high = options.definition;
+  // One level finer: C3D4 made quadratic on the same mesh, C3D10 on the next mesh level.
+  if (finer.element == CalculixElement::C3D4) {
+    finer.element = CalculixElement::C3D10;
+    gates.refinedBy = "C3D10 on the same tetrahedra";
+  } else {
+    finer.mesher.refinement += 1;
+    gates.refinedBy = "mesh level " + std::to_string(finer.mesher.refinement);
+  }
+  low.attachmentScale *= 0.5f;
+  high.attachmentScale *= 1.5f;
+  finer.returnToRest = low.returnToRest = high.returnToRest = false;
+  const std::pair<const CalculixDefinition*, const char*> variants[] = {
+      {&finer, "one level finer"},
+      {&low, "attachment distance x0.5"},
+      {&high, "attachment distance x1.5"}};
+  double* results[] = {&gates.refinementMm, &gates.attachmentLowMm, &gates.attachmentHighMm};
+  for (size_t v = 0; v < 3; ++v) {
+    CalculixSolution solution;
+    if (options.cancel && options.cancel->load()) return;
+    if (!solveVariant(scene, prepared, *variants[v].first, options, variants[v].second, solution))
+      continue;
+    *results[v] = rmsBetweenSolutions(base, solution);
+    const std::string more = failures(solution, variants[v].second);
+    if (!more.empty()) gates.failures += (gates.failures.empty() ? "" : "; ") + more;
+  }
+}
+
+}  // namespace
+
+double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b) {
+  const size_t poses = static_cast<size_t>(std::min(a.solvedPoses(), b.solvedPoses()));
+  if (poses == 0) return RunMetrics::kNone;
+  double sum = 0;
+  for (size_t p = 0; p < poses; ++p) {
+    const double rms = rmsDistanceMm(a.poseSurfaces[p], b.poseSurfaces[p]);
+    sum += rms * rms;
+  }
+  return std::sqrt(sum / static_cast<double>(poses));
+}
+
+double methodSpreadMm(const std::vector<RunMetrics>& runs) {
+  std::map<std::string, double> best;
+  for (const RunMetrics& run : runs) {
+    if (std::isnan(run.rmsToReferenceMm) || run.method == "calculix") continue;
+    const std::string family = run.method.substr(0, run.method.find_first_of(":@"));
+    auto [it, added] = best.try_emplace(family, run.rmsToReferenceMm);
+    if (!added) it->second = std::min(it->second, run.rmsToReferenceMm);
+  }
+  if (best.empty()) return RunMetrics::kNone;
+  double low = best.begin()->second, high = low;
+  for (const auto& [family, rms] : best) {
+    low = std::min(low, rms);
+    high = std::max(high, rms);
+  }
+  return best.size() == 1 ? high : high - low;
+}
+
+Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
+                           const ReferenceOptions& options) {
+  ReferenceOptions resolved = options;
+  if (resolved.cacheDir.empty()) resolved.cacheDir = defaultReferenceCacheDir();
+  const CalculixDefinition& definition = options.definition;
+  Reference reference;
+  reference.key = referenceCacheKey(scene, prepared, definition);
+  reference.cacheEntry = resolved.cacheDir + "/" + reference.key;
+  if (!solveVariant(scene, prepared, definition, resolved, "reference", reference.solution,
+                    &reference.fromCache)) {
+    reference.missing = true;
+    return reference;
+  }
+  const CalculixSolution& base = reference.solution;
+  reference.gates.failures = failures(base, "reference");
+  if (!base.returnSurface.empty())
+    reference.gates.returnMm = rmsDistanceMm(base.returnSurface, restSurfaces(prepared));
+  if (options.gates && !(options.cancel && options.cancel->load()))
+    solveGates(scene, prepared, resolved, reference.solution, reference.gates);
+  reference.metrics = referenceMetrics(scene, prepared, base, definition);
+  std::ostringstream description;
+  description << "CalculiX (" << calculixVersion(definition.program)
+              << ") static equilibrium per pose, "
+              << "Neo-Hookean (E " << definition.material.youngsModulus / 1000 << " kPa, nu "
+              << definition.material.poissonRatio << "), " << toString(definition.element)
+              << ", tetgen -pYq" << definition.mesher.radiusEdgeRatio
+              << " mesh of each muscle's surface (level " << definition.mesher.refinement << "; "
+              << base.nodes << " nodes, " << base.elements << " tetrahedra), material within "
+              << definition.attachmentScale << "x the attachment distance of a bone moves with it ("
+              << base.prescribedNodes << " nodes); no contact";
+  reference.description = description.str();
+  return reference;
+}
+
+nlohmann::json referenceJson(const Reference& reference) {
+  if (reference.missing)
+    return {{"key", reference.key}, {"cache_entry", reference.cacheEntry}, {"missing", true}};
+  const auto number = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
+  const CalculixSolution& s = reference.solution;
+  nlohmann::json poses = nlohmann::json::array();
+  for (size_t p = 0; p < s.poseSurfaces.size(); ++p)
+    poses.push_back({{"solved", !s.poseSurfaces[p].empty()}, {"failure", s.poseFailures[p]}});
+  const ReferenceGates& g = reference.gates;
+  return {{"key", reference.key},
+          {"cache_entry", reference.cacheEntry},
+          {"from_cache", reference.fromCache},
+          {"description", reference.description},
+          {"poses", poses},
+          {"return_failure", s.returnFailure},
+          {"gates",
+           {{"return_mm", number(g.returnMm)},
+            {"return_bound_mm", kReturnGateMm},
+            {"return_passes", g.returnPasses()},
+            {"refinement_mm", number(g.refinementMm)},
+            {"refined_by", g.refinedBy},
+            {"spread_mm", number(g.spreadMm)},
+            {"refinement_passes", g.refinementPasses()},
+            {"attachment_low_mm", number(g.attachmentLowMm)},
+            {"attachment_high_mm", number(g.attachmentHighMm)},
+            {"failures", g.failures},
+            {"passed", g.passed()}}},
+          {"nodes", s.nodes},
+          {"tetrahedra", s.elements},
+          {"prescribed_nodes", s.prescribedNodes},
+          {"newton_iterations", s.newtonIterations},
+          {"increments", s.increments},
+          {"seconds", s.seconds}};
+}
+
+std::vector<std::string> gateLines(const ReferenceGates& g) {
+  const auto mm = [](double v) {
+    if (std::isnan(v)) return std::string("—");
+    char text[32];
+    std::snprintf(text, sizeof text, "%.3g mm", v);
+    return std::string(text);
+  };
+  std::vector<std::string> lines;
+  lines.push_back("return to rest after the motion: " + mm(g.returnMm) + " RMS (bound " +
+                  mm(kReturnGateMm) + "): " +
+                  (std::isnan(g.returnMm) ? "not computed"
+                   : g.returnPasses()     ? "passes"
+                                          : "FAILS"));
+  std::string refinement = "one level finer (" + (g.refinedBy.empty() ? "\u2014" : g.refinedBy) +
+                           "): moves it " + mm(g.refinementMm) + " RMS";
+  if (std::isnan(g.spreadMm))
+    refinement +=
+        " (passes when below a third of the spread between the methods: needs a comparison)";
+  else
+    refinement += " against a third of the methods' spread " + mm(g.spreadMm / 3) + ": " +
+                  (g.refinementPasses() ? "passes" : "FAILS");
+  lines.push_back(refinement);
+  lines.push_back("attachment distance x0.5 / x1.5: moves it " + mm(g.attachmentLowMm) + " / " +
+                  mm(g.attachmentHighMm) + " RMS (stated, not a pass/fail gate)");
+  if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
+  return lines;
+}
+
+}  // namespace fibremss

@@ -1,0 +1,451 @@
+// The CalculiX reference's parts: tetgen meshes, the .inp writer, the .dat reader (on real ccx
+// runs of a bar under tension against its closed-form answer), the cache key and store, and
+// the gates.
+#include "fibremss/Calculix.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "fibremss/Error.h"
+#include "fibremss/Reference.h"
+#include "support/PrepFixtures.h"
+#include "support/Process.h"
+
+namespace fibremss {
+namespace {
+
+using testing::TemporaryDirectory;
+
+bool onPath(const char* program) {
+  return testing::runProcess(std::string("command -v ") + program + " >/dev/null").exitCode == 0;
+}
+
+#define REQUIRE_PROGRAM(program)                                                                \
+  if (!onPath(program))                                                                         \
+  GTEST_SKIP() << program << " is not installed (Debian: apt-get install "                      \
+               << (std::string(program) == "ccx" ? "calculix-ccx" : program) << "; ./setup.sh " \
+               << "installs it)"
+
+/// A 10 × 10 × 40 mm bar along z, its box surface split twice (vertices on every face).
+TriangleMesh barSurface() {
+  return subdivided(testing::boxMesh(btVector3(0, 0, 0), btVector3(0.01f, 0.01f, 0.04f)), 2);
+}
+
+TEST(Tetgen, KeepsTheSurfaceVerticesAsTheFirstNodesAndFillsTheVolume) {
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("tetgen_test");
+  const TriangleMesh surface = testing::sphereMesh(btVector3(0, 0, 0), 0.02f, 2);
+  const TetMesh mesh = tetgenMesh(surface, {}, dir.path().string(), "sphere");
+  ASSERT_GE(mesh.nodes.size(), surface.vertices.size());
+  for (size_t v = 0; v < surface.vertices.size(); ++v)
+    EXPECT_EQ(mesh.nodes[v], surface.vertices[v]);
+  for (const auto& t : mesh.tetrahedra)
+    ASSERT_GT(
+        tetrahedronVolume(mesh.nodes[t[0]], mesh.nodes[t[1]], mesh.nodes[t[2]], mesh.nodes[t[3]]),
+        0);
+  EXPECT_NEAR(totalVolume(mesh), meshVolume(surface), 1e-6 * meshVolume(surface));
+}
+
+TEST(Tetgen, RefinementSplitsTheSurfaceAndShrinksTheTetrahedra) {
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("tetgen_refine_test");
+  const TriangleMesh surface = testing::sphereMesh(btVector3(0, 0, 0), 0.02f, 2);
+  const TetMesh coarse = tetgenMesh(surface, {}, dir.path().string(), "coarse");
+  const TetMesh fine = tetgenMesh(surface, {.refinement = 1}, dir.path().string(), "fine");
+  EXPECT_GT(fine.tetrahedra.size(), 4 * coarse.tetrahedra.size());
+  const TriangleMesh split = subdivided(surface, 1);
+  EXPECT_EQ(split.triangles.size(), 4 * surface.triangles.size());
+  for (size_t v = 0; v < split.vertices.size(); ++v) EXPECT_EQ(fine.nodes[v], split.vertices[v]);
+  EXPECT_NEAR(totalVolume(fine), meshVolume(surface), 1e-6 * meshVolume(surface));
+}
+
+TEST(Tetgen, ReportsAnOpenSurfaceAsInputError) {
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("tetgen_bad_test");
+  TriangleMesh open = testing::boxMesh(btVector3(0, 0, 0), btVector3(1, 1, 1));
+  open.triangles.pop_back();
+  open.triangles.push_back({0, 0, 1});  // degenerate facet
+  EXPECT_THROW(tetgenMesh(open, {}, dir.path().string(), "open"), InputError);
+}
+
+TEST(CalculixInput, WritesEveryNodeElementSetAndStep) {
+  CalculixJob job;
+  job.title = "one tetrahedron";
+  job.nodes = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  job.connectivity = {0, 1, 2, 3};
+  job.material = {.youngsModulus = 1000, .poissonRatio = 0.25};
+  job.prescribed = {0, 1, 2};
+  job.steps = {{{0, 0, 0}, {0.1f, 0, 0}, {0, 0, 0}}, {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}}};
+  job.printed = {3};
+  std::ostringstream out;
+  writeCalculixInput(out, job);
+  const std::string text = out.str();
+  std::istringstream lines(text);
+  std::string line;
+  int steps = 0, boundaries = 0;
+  bool material = false;
+  std::string previous;
+  while (std::getline(lines, line)) {
+    steps += line.rfind("*STEP, NLGEOM", 0) == 0;
+    if (previous == "*HYPERELASTIC, NEO HOOKE") {
+      double c10 = 0, d1 = 0;
+      char comma = 0;
+      std::istringstream(line) >> c10 >> comma >> d1;
+      EXPECT_NEAR(c10, 1000 / (4 * 1.25), 1e-6);  // μ/2
+      EXPECT_NEAR(d1, 6 * 0.5 / 1000, 1e-9);      // 2/K
+      material = true;
+    }
+    boundaries += line == "2, 1, 1, 0.100000001" || line == "2, 1, 1, 0.1";
+    previous = line;
+  }
+  EXPECT_EQ(steps, 2);
+  EXPECT_TRUE(material);
+  EXPECT_EQ(boundaries, 1) << text;
+  EXPECT_NE(text.find("*ELEMENT, TYPE=C3D4, ELSET=EALL\n1, 1, 2, 3, 4\n"), std::string::npos);
+  EXPECT_NE(text.find("*NSET, NSET=NPRINT\n4\n"), std::string::npos);
+}
+
+TEST(CalculixInput, QuadraticTetrahedraShareTheirMidsideNodes) {
+  TetMesh mesh;
+  mesh.nodes = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}};
+  mesh.tetrahedra = {{0, 1, 2, 3}, {1, 2, 3, 4}};
+  std::vector<uint32_t> connectivity;
+  const std::vector<btVector3> nodes = quadraticTetrahedra(mesh, connectivity);
+  EXPECT_EQ(nodes.size(), 5u + 9u);  // 6 + 6 edges, 3 shared (the face 1-2-3)
+  ASSERT_EQ(connectivity.size(), 20u);
+  EXPECT_EQ(nodes[connectivity[4]], btVector3(0.5f, 0, 0));     // edge 1-2 of the first
+  EXPECT_EQ(nodes[connectivity[9]], btVector3(0, 0.5f, 0.5f));  // edge 3-4 of the first
+  EXPECT_EQ(connectivity[9], connectivity[10 + 5])
+      << "edge 2-3 of the first is edge 2-3 of the second";
+}
+
+TEST(CalculixDat, ReadsTablesRowsAndTotals) {
+  std::istringstream dat(
+      "\n displacements (vx,vy,vz) for set NPRINT and time  0.5000000E+00\n\n"
+      "         4  1.000000E-02 -2.000000E-03  0.000000E+00\n"
+      "         7 -1.5E-02  0.0E+00  3.0E-03\n\n"
+      " total force (fx,fy,fz) for set TOP and time  0.1000000E+01\n\n"
+      "        4.068957E-14 -2.617206E-14  2.763250E+02\n"
+      "\n displacements (vx,vy,vz) for set NPRINT and time  0.1000000E+01\n\n"
+      "         4  2.000000E-02  0.0E+00  0.0E+00\n");
+  const auto tables = readCalculixDat(dat, "test.dat");
+  ASSERT_EQ(tables.size(), 3u);
+  EXPECT_EQ(tables[0].quantity, "displacements");
+  EXPECT_EQ(tables[0].set, "NPRINT");
+  EXPECT_DOUBLE_EQ(tables[0].time, 0.5);
+  EXPECT_EQ(tables[0].ids, (std::vector<int>{4, 7}));
+  EXPECT_DOUBLE_EQ(tables[0].values[4], 0.0);
+  EXPECT_DOUBLE_EQ(tables[0].values[3], -0.015);
+  EXPECT_TRUE(tables[1].ids.empty());
+  EXPECT_DOUBLE_EQ(tables[1].values[2], 276.325);
+  const auto ends = stepEndTables(tables, "displacements", "NPRINT", 3);
+  ASSERT_EQ(ends.size(), 1u) << "step 1 ends at time 1; steps 2 and 3 were never printed";
+  EXPECT_EQ(ends[0], &tables[2]);
+}
+
+TEST(CalculixDat, NamesTheLineOfARowThatIsNotNumbers) {
+  std::istringstream dat(" displacements (vx,vy,vz) for set N and time 1.\n 4 1.0 x 2.0\n");
+  try {
+    readCalculixDat(dat, "bad.dat");
+    FAIL() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.where(), "line 2");
+  }
+}
+
+/// The Neo-Hookean bar's lateral stretch under an axial stretch λ with free sides (σ_lateral = 0
+/// for W = C10(Ī1−3) + (J−1)²/D1), by bisection.
+double lateralStretch(const NeoHookeMaterial& material, double lambda) {
+  auto lateralStress = [&](double mu) {
+    const double j = lambda * mu * mu;
+    const double deviatoric = 2 * material.c10() / j * std::pow(j, -2.0 / 3.0) *
+                              (mu * mu - (lambda * lambda + 2 * mu * mu) / 3);
+    return deviatoric + 2 / material.d1() * (j - 1);
+  };
+  double low = 0.5, high = 1.0;
+  for (int i = 0; i < 60; ++i)
+    ((lateralStress(0.5 * (low + high)) > 0) ? high : low) = 0.5 * (low + high);
+  return 0.5 * (low + high);
+}
+
+/// The bar stretched 10 % along z by its end faces, moved as the homogeneous closed-form
+/// answer; then back to rest. Its free surface nodes must follow that answer.
+void expectClosedFormBar(CalculixElement element) {
+  TemporaryDirectory dir(std::string("ccx_bar_test_") + toString(element));
+  const TriangleMesh surface = barSurface();
+  const TetMesh mesh = tetgenMesh(surface, {}, dir.path().string(), "bar");
+  CalculixJob job;
+  job.title = "bar under tension";
+  job.element = element;
+  job.material = {.youngsModulus = 100e3, .poissonRatio = 0.3};
+  if (element == CalculixElement::C3D10) {
+    job.nodes = quadraticTetrahedra(mesh, job.connectivity);
+  } else {
+    job.nodes = mesh.nodes;
+    for (const auto& t : mesh.tetrahedra)
+      job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
+  }
+  const double lambda = 1.1, mu = lateralStretch(job.material, lambda);
+  ASSERT_LT(mu, 0.98) << "ν = 0.3 narrows the bar";
+  const auto exact = [&](const btVector3& x) {
+    return btVector3(btScalar((x.x() - 0.005) * (mu - 1)), btScalar((x.y() - 0.005) * (mu - 1)),
+                     btScalar(x.z() * (lambda - 1)));
+  };
+  job.steps.resize(2);
+  for (uint32_t n = 0; n < job.nodes.size(); ++n) {
+    const btScalar z = job.nodes[n].z();
+    if (z < 1e-7f || z > 0.04f - 1e-7f) {
+      job.prescribed.push_back(n);
+      job.steps[0].push_back(exact(job.nodes[n]));
+      job.steps[1].push_back(btVector3(0, 0, 0));
+    } else if (n < surface.vertices.size()) {
+      job.printed.push_back(n);
+    }
+  }
+  ASSERT_GT(job.printed.size(), 20u);
+  {
+    std::ofstream out(dir.path() / "bar.inp");
+    writeCalculixInput(out, job);
+  }
+  const int status =
+      runProgram({"ccx", "-i", "bar"}, dir.path().string(), (dir.path() / "ccx.log").string());
+  ASSERT_EQ(status, 0);
+  std::ifstream dat(dir.path() / "bar.dat");
+  const auto tables = readCalculixDat(dat, "bar.dat");
+  const auto ends = stepEndTables(tables, "displacements", "NPRINT", 2);
+  ASSERT_EQ(ends.size(), 2u);
+  double worst = 0, back = 0;
+  for (size_t row = 0; row < ends[0]->ids.size(); ++row) {
+    const btVector3 expected = exact(job.nodes[static_cast<size_t>(ends[0]->ids[row] - 1)]);
+    const double* u = &ends[0]->values[row * 3];
+    worst =
+        std::max(worst, std::hypot(u[0] - expected.x(), u[1] - expected.y(), u[2] - expected.z()));
+    const double* r = &ends[1]->values[row * 3];
+    back = std::max(back, std::hypot(r[0], r[1], r[2]));
+  }
+  // The side moves by (1 − μ) × 5 mm ≈ 0.2 mm; the closed form within 1 µm.
+  EXPECT_LT(worst, 1e-6) << toString(element) << ": lateral stretch " << mu;
+  EXPECT_LT(back, 1e-7) << "back at rest";
+}
+
+TEST(CalculixRun, BarUnderTensionMatchesTheClosedFormNeoHookeanAnswerC3D4) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  expectClosedFormBar(CalculixElement::C3D4);
+}
+
+TEST(CalculixRun, BarUnderTensionMatchesTheClosedFormNeoHookeanAnswerC3D10) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  expectClosedFormBar(CalculixElement::C3D10);
+}
+
+TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
+  ReferenceGates gates;
+  EXPECT_FALSE(gates.passed()) << "nothing computed";
+  gates.returnMm = 0.4;
+  gates.refinementMm = 0.1;
+  gates.spreadMm = 0.6;
+  EXPECT_TRUE(gates.passed());
+  gates.spreadMm = 0.3;  // a third is 0.1: not below it
+  EXPECT_FALSE(gates.refinementPasses());
+  gates.spreadMm = 0.6;
+  gates.returnMm = 0.51;
+  EXPECT_FALSE(gates.returnPasses());
+  gates.returnMm = 0.4;
+  gates.failures = "reference pose 3: no convergence";
+  EXPECT_FALSE(gates.passed());
+}
+
+TEST(ReferenceGates, SpreadIsBetweenTheBestRunOfEachMethod) {
+  std::vector<RunMetrics> runs(5);
+  const char* names[] = {"calculix", "fibremss", "fibremss:iterations=280", "btsoftbody", "fem"};
+  const double rms[] = {0, 3.0, 1.5, 4.0, 2.0};
+  for (int i = 0; i < 5; ++i) {
+    runs[static_cast<size_t>(i)].method = names[i];
+    runs[static_cast<size_t>(i)].rmsToReferenceMm = rms[i];
+  }
+  EXPECT_DOUBLE_EQ(methodSpreadMm(runs), 4.0 - 1.5);
+  runs.resize(3);
+  EXPECT_DOUBLE_EQ(methodSpreadMm(runs), 1.5) << "one method: its best error";
+  runs.resize(1);
+  EXPECT_TRUE(std::isnan(methodSpreadMm(runs)));
+}
+
+TEST(ReferenceCache, StoresAndReadsBackASolution) {
+  TemporaryDirectory dir("reference_cache_test");
+  CalculixSolution solution;
+  solution.poseSurfaces = {{{1, 2, 3}, {4, 5, 6}}, {}};
+  solution.poseFailures = {"", "muscle m: *ERROR: too many cutbacks"};
+  solution.returnFailure = "muscle m: *ERROR: too many cutbacks";
+  solution.nodes = 11;
+  solution.elements = 7;
+  solution.newtonIterations = 42;
+  solution.inputFiles = {"/a/muscle0.inp"};
+  const std::string path = (dir.path() / "s.bin").string();
+  saveSolution(path, solution);
+  CalculixSolution back;
+  ASSERT_TRUE(loadSolution(path, back));
+  EXPECT_EQ(back.poseSurfaces, solution.poseSurfaces);
+  EXPECT_EQ(back.poseFailures, solution.poseFailures);
+  EXPECT_EQ(back.returnFailure, solution.returnFailure);
+  EXPECT_EQ(back.nodes, 11u);
+  EXPECT_EQ(back.newtonIterations, 42);
+  EXPECT_EQ(back.inputFiles, solution.inputFiles);
+  EXPECT_EQ(back.solvedPoses(), 1);
+  EXPECT_FALSE(loadSolution((dir.path() / "absent.bin").string(), back));
+  std::filesystem::resize_file(path, 30);
+  EXPECT_THROW(loadSolution(path, back), InputError);
+}
+
+TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
+  REQUIRE_PROGRAM("ccx");
+  const LoadedScene scene = loadScene("fusiform", {"resolution=6", "fibre_count=8"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const CalculixDefinition definition;
+  const std::string key = referenceCacheKey(scene, prepared, definition);
+  EXPECT_EQ(key.size(), 16u);
+  EXPECT_EQ(referenceCacheKey(scene, prepared, definition), key) << "stable";
+  const LoadedScene again =
+      loadScene("fusiform", {"resolution=6", "fibre_count=8", "iterations=500"});
+  EXPECT_EQ(referenceCacheKey(again, prepared, definition), key) << "solver settings do not matter";
+
+  std::set<std::string> keys{key};
+  int change = 0;
+  auto changed = [&](const LoadedScene& s, const PreparedScene& p, const CalculixDefinition& d) {
+    EXPECT_TRUE(keys.insert(referenceCacheKey(s, p, d)).second) << "change " << change;
+    ++change;
+  };
+  CalculixDefinition d = definition;
+  d.material.poissonRatio = 0.45;
+  changed(scene, prepared, d);
+  d = definition;
+  d.material.youngsModulus *= 2;
+  changed(scene, prepared, d);
+  d = definition;
+  d.element = CalculixElement::C3D10;
+  changed(scene, prepared, d);
+  d = definition;
+  d.mesher.refinement = 1;
+  changed(scene, prepared, d);
+  d = definition;
+  d.mesher.radiusEdgeRatio = 1.5;
+  changed(scene, prepared, d);
+  d = definition;
+  d.attachmentScale = 1.5;
+  changed(scene, prepared, d);
+  LoadedScene moved = scene;
+  moved.muscles[0].parameters.attachmentDistance *= 2;
+  changed(moved, prepared, definition);
+  PreparedScene reshaped = prepared;
+  auto muscle = std::make_shared<MuscleSettings>(*prepared.muscles[0]);
+  muscle->restSurface.vertices[0] += btVector3(1e-4f, 0, 0);
+  reshaped.muscles[0] = muscle;
+  changed(scene, reshaped, definition);
+  LoadedScene otherMotion = scene;
+  for (BoneMotion& motion : otherMotion.motions)
+    for (btTransform& pose : motion.poses) pose.getOrigin() += btVector3(0, 0, 1e-4f);
+  ASSERT_GT(otherMotion.poseCount, 1) << "fusiform moves a bone";
+  changed(otherMotion, prepared, definition);
+}
+
+}  // namespace
+}  // namespace fibremss
+
+namespace fibremss {
+namespace {
+
+/// fusiform with a coarse surface (8 slices × 12 sections): a reference of a few hundred
+/// tetrahedra, solved in seconds.
+std::string coarseFusiform(const std::filesystem::path& dir) {
+  nlohmann::json scene = nlohmann::json::parse(exportBuiltInScene("fusiform"));
+  nlohmann::json& generator = scene["muscles"][0]["surface"]["generator"];
+  generator["slices"] = 8;
+  generator["sections"] = 12;
+  const std::filesystem::path path = dir / "coarse-fusiform.json";
+  std::ofstream(path) << scene.dump(2);
+  return path.string();
+}
+
+std::string readText(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_command_test");
+  const std::string scene = coarseFusiform(dir.path());
+  const std::string cache = (dir.path() / "cache").string();
+  const std::string command = std::string(FIBREMSS_CLI) + " reference " + scene +
+                              " --set resolution=8 --cache " + cache + " --out " +
+                              (dir.path() / "out").string() + " 2>&1";
+  const auto first = testing::runProcess(command);
+  ASSERT_EQ(first.exitCode, 0) << first.output;
+  EXPECT_NE(first.output.find("poses solved: 3/3\n"), std::string::npos) << first.output;
+  EXPECT_NE(first.output.find("gate: return to rest"), std::string::npos) << first.output;
+  const nlohmann::json reference =
+      nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  EXPECT_FALSE(reference["from_cache"].get<bool>());
+  const nlohmann::json& gates = reference["gates"];
+  EXPECT_LT(gates["return_mm"].get<double>(), kReturnGateMm) << "no contact: back at rest";
+  EXPECT_GT(gates["refinement_mm"].get<double>(), 0) << "C3D10 differs from C3D4";
+  // The coarse mesh's nodes near the bars are the same within 2, 4 and 6 mm: 0 is possible.
+  EXPECT_GE(gates["attachment_low_mm"].get<double>(), 0);
+  EXPECT_GE(gates["attachment_high_mm"].get<double>(), 0);
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "out/inp/muscle0.inp"));
+  EXPECT_GT(reference["prescribed_nodes"].get<int>(), 0);
+
+  const auto second = testing::runProcess(command);
+  ASSERT_EQ(second.exitCode, 0) << second.output;
+  EXPECT_NE(second.output.find("(from the cache)"), std::string::npos) << second.output;
+  const nlohmann::json again = nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  EXPECT_EQ(again["gates"], gates) << "the cache gives the same reference";
+}
+
+TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("compare_reference_test");
+  const std::string scene = coarseFusiform(dir.path());
+  const auto result = testing::runProcess(
+      std::string(FIBREMSS_CLI) + " compare " + scene +
+      " --set resolution=8 --methods fibremss,btsoftbody --no-fronts --cache " +
+      (dir.path() / "cache").string() + " --out " + (dir.path() / "out").string() + " 2>&1");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("reference gate: return to rest"), std::string::npos)
+      << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readText(dir.path() / "out/summary.json"));
+  ASSERT_EQ(summary["runs"].size(), 3u);
+  EXPECT_EQ(summary["runs"][0]["method"], "calculix");
+  for (int r = 1; r < 3; ++r) {
+    const nlohmann::json& run = summary["runs"][r];
+    SCOPED_TRACE(run["method"].get<std::string>());
+    EXPECT_GT(run["rms_to_reference_mm"].get<double>(), 0);
+    EXPECT_GT(run["shape_rms_to_reference_mm"].get<double>(), 0);
+    EXPECT_LE(run["shape_rms_to_reference_mm"].get<double>(),
+              run["rms_to_reference_mm"].get<double>() + 1e-9)
+        << "the nearest surface point is never farther than the corresponding vertex";
+    EXPECT_EQ(run["worst_muscle"], "fusiform");
+    EXPECT_EQ(run["rms_to_reference_per_pose_mm"].size(), 3u);
+  }
+  const nlohmann::json& gates = summary["reference"]["gates"];
+  EXPECT_TRUE(gates["spread_mm"].is_number());
+  const std::string report = readText(dir.path() / "out/report.md");
+  EXPECT_NE(report.find("## Reference"), std::string::npos);
+  EXPECT_NE(report.find(gates["passed"].get<bool>() ? "**Ranking**" : "**No ranking**"),
+            std::string::npos)
+      << report;
+  EXPECT_EQ(report.find("nan |"), std::string::npos) << "tables print — for what does not apply";
+}
+
+}  // namespace
+}  // namespace fibremss
