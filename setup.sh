@@ -7,7 +7,7 @@ cd "$(dirname "$0")"
 
 packages=(cmake make g++ pkg-config ccache valgrind libbullet-dev libeigen3-dev libassimp-dev
   nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev libtbb-dev libgtest-dev
-  libgmock-dev libbenchmark-dev gnuplot-nox clang-format)
+  libgmock-dev libbenchmark-dev gnuplot-nox clang-format zlib1g-dev)
 
 install_missing() {
   local missing=()

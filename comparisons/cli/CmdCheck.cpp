@@ -114,6 +114,7 @@ void runCheck(const CheckArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
   for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
+  for (const auto& note : scene.notes) std::cerr << "fibremss: note: " << note << "\n";
 
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (const auto& warning : prepared.report.warnings)
@@ -161,6 +162,7 @@ void runCheck(const CheckArgs& args) {
                                   {"muscles", muscles},
                                   {"bones", bones},
                                   {"warnings", prepared.report.warnings},
+                                  {"notes", scene.notes},
                                   {"preparation", preparation}};
     for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
     std::cout << result.dump(2) << "\n";

@@ -146,6 +146,7 @@ void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   for (const std::string& warning : scene.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  for (const std::string& note : scene.notes) std::fprintf(stderr, "note: %s\n", note.c_str());
   // The output directory first: a run that cannot write should fail before preparing.
   if (!args.out.empty()) {
     std::filesystem::create_directories(args.out);

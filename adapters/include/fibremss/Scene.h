@@ -39,6 +39,8 @@ struct LoadedScene {
   SimulationParameters simulation;    ///< solver settings
   OutputSettings outputs;             ///< output settings
   std::vector<std::string> warnings;  ///< things found while loading that a run can live with
+  std::vector<std::string> notes;     ///< what loading changed that a user should know
+                                      ///< (large jumps split into sub-poses, ...)
 
   /// Transform of bone b at pose p (identity where the bone has no motion).
   btTransform bonePose(size_t bone, int pose) const;
