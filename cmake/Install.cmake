@@ -1,12 +1,14 @@
-# `cmake --install`: headers, the library, a CMake package (find_package(FibreMSS) gives
-# fibremss::fibremss) and a pkg-config file (pkg-config fibremss).
+# `cmake --install`: headers, the layer libraries, a CMake package (find_package(FibreMSS) gives
+# fibremss::core, fibremss::fibres, fibremss::io, fibremss::scene, fibremss::baselines) and a
+# pkg-config file for the core (pkg-config fibremss).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
-foreach(dir plugin adapters scenes)
+foreach(dir plugin/core plugin/fibres adapters/io adapters/scene adapters/baselines scenes)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${dir}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 endforeach()
-install(TARGETS fibremss EXPORT FibreMSSTargets
+install(TARGETS fibremss_core fibremss_fibres fibremss_io fibremss_scene fibremss_baselines
+  EXPORT FibreMSSTargets
   LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR}

@@ -9,9 +9,9 @@
 #include <memory>
 #include <vector>
 
-#include "../plugin/src/CollisionPairs.h"
-#include "../plugin/src/MuscleSystemAccess.h"
+#include "collision/CollisionPairs.h"
 #include "fibremss/MuscleSystem.h"
+#include "solver/MuscleSystemAccess.h"
 #include "support/GridMuscle.h"
 #include "support/ThighSteps.h"
 

@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-#include "../plugin/src/CollisionTrees.h"
+#include "collision/CollisionTrees.h"
 #include "fibremss/MuscleSystem.h"
 #include "support/SolverFixtures.h"
 

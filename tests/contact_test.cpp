@@ -10,7 +10,7 @@
 #include <random>
 #include <vector>
 
-#include "../plugin/src/BoneDistanceField.h"
+#include "collision/BoneDistanceField.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Measures.h"
 #include "fibremss/MuscleSystem.h"

@@ -11,13 +11,13 @@
 #include <memory>
 #include <vector>
 
-#include "../plugin/src/MuscleSystemAccess.h"
-#include "../plugin/src/MuscleSystemGuard.h"
-#include "../plugin/src/MuscleSystemPretransform.h"
-#include "../plugin/src/TimeStep.h"
 #include "fibremss/BoneBody.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/MuscleWorld.h"
+#include "solver/MuscleSystemAccess.h"
+#include "solver/MuscleSystemGuard.h"
+#include "solver/MuscleSystemPretransform.h"
+#include "solver/TimeStep.h"
 #include "support/GridMuscle.h"
 
 namespace fibremss {

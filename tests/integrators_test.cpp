@@ -2,7 +2,7 @@
 // analytic solution, PBD/XPBD statics, implicit stability far beyond the explicit limit on a
 // stiff chain, and every integrator inside a MuscleSystem with collision (finite, no allocation
 // in step()).
-#include "../plugin/src/Integrators.h"
+#include "integrators/Integrators.h"
 
 #include <LinearMath/btAlignedAllocator.h>
 #include <gtest/gtest.h>
@@ -20,10 +20,10 @@
 #include <string>
 #include <vector>
 
-#include "../plugin/src/MuscleSystemAccess.h"
-#include "../plugin/src/SpringForces.h"
-#include "../plugin/src/TimeStep.h"
 #include "fibremss/MuscleSystem.h"
+#include "solver/MuscleSystemAccess.h"
+#include "solver/SpringForces.h"
+#include "solver/TimeStep.h"
 #include "support/AllocationCounter.h"
 #include "support/SolverFixtures.h"
 #include "support/ThighSteps.h"

@@ -8,8 +8,8 @@
 #include <random>
 #include <set>
 
-#include "../plugin/src/PreparationInternal.h"
 #include "fibremss/Error.h"
+#include "prepare/PreparationInternal.h"
 #include "support/PrepFixtures.h"
 
 namespace fibremss {

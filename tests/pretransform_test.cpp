@@ -7,8 +7,8 @@
 #include <random>
 #include <vector>
 
-#include "../plugin/src/MuscleSystemPretransform.h"
-#include "../plugin/src/SpringForces.h"
+#include "solver/MuscleSystemPretransform.h"
+#include "solver/SpringForces.h"
 
 namespace fibremss {
 namespace {

@@ -1,7 +1,7 @@
-// Particle order (plugin/src/PreparationReorder.*): preparation leaves the particles along the
-// Morton curve, and a muscle whose particles are renumbered is the same muscle: every index in
-// it follows the permutation (the spring blocks are laid out again), and it steps to the same
-// positions up to the permutation (to float rounding: the spring and push sums run in another
+// Particle order (plugin/core/src/prepare/PreparationReorder.*): preparation leaves the particles
+// along the Morton curve, and a muscle whose particles are renumbered is the same muscle: every
+// index in it follows the permutation (the spring blocks are laid out again), and it steps to the
+// same positions up to the permutation (to float rounding: the spring and push sums run in another
 // order).
 #include <gtest/gtest.h>
 
@@ -11,11 +11,11 @@
 #include <tuple>
 #include <vector>
 
-#include "../plugin/src/PreparationReorder.h"
-#include "../plugin/src/SpringForces.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "prepare/PreparationReorder.h"
+#include "solver/SpringForces.h"
 #include "support/ThighSteps.h"
 
 namespace fibremss {

@@ -6,7 +6,6 @@
 #include <filesystem>
 #include <fstream>
 
-#include "../adapters/src/SceneMotion.h"
 #include "fibremss/Error.h"
 #include "fibremss/Scene.h"
 #include "support/Process.h"
@@ -15,8 +14,6 @@ namespace fs = std::filesystem;
 using fibremss::InputError;
 using fibremss::LoadedScene;
 using fibremss::loadScene;
-using fibremss::scene::MotionTable;
-using fibremss::scene::parseMotionTable;
 
 namespace {
 
@@ -30,16 +27,6 @@ std::string motText(const std::string& headerExtra, const std::string& names,
 
 const std::string kNames = "time\thip_flexion_r\thip_adduction_r";
 const std::string kRows = "  0.0\t  10.0\t -2.0\n  0.1\t 20.0\t -4.0\n  0.2\t 30.0\t -6.0\n";
-
-InputError errorOf(const std::string& text) {
-  try {
-    parseMotionTable("walk.mot", text);
-  } catch (const InputError& error) {
-    return error;
-  }
-  ADD_FAILURE() << "no InputError for:\n" << text;
-  return InputError("", "", "");
-}
 
 struct SceneFiles {
   fibremss::testing::TemporaryDirectory directory{"fibremss_scene_motion"};
@@ -64,30 +51,49 @@ double turnDegrees(const btTransform& transform) {
   return 2 * std::acos(std::min(1.0, std::abs(double(transform.getRotation().w())))) * 180 / M_PI;
 }
 
+/// A femur-like box driven by one coordinate ("hip_flexion_r" unless `column`) of `mot`.
+std::string motionScene(const SceneFiles& files, const std::string& mot,
+                        const std::string& column = "hip_flexion_r") {
+  const std::string path = files.write("walk.mot", mot);
+  return files.write("walk.json", boneScene(R"({"type": "opensim", "file": ")" + path +
+                                                R"(", "coordinates": [{"column": ")" + column +
+                                                R"(", "axis": [1, 0, 0]}]})",
+                                            R"({"max_step_deg": 0})"));
+}
+
+/// The InputError loading a scene on the .mot text `mot` gives (a failure when it loads).
+InputError errorOf(const std::string& mot) {
+  const SceneFiles files;
+  try {
+    loadScene(motionScene(files, mot));
+  } catch (const InputError& error) {
+    EXPECT_NE(error.source().find("walk.mot"), std::string::npos) << error.what();
+    return error;
+  }
+  ADD_FAILURE() << "no InputError for:\n" << mot;
+  return InputError("", "", "");
+}
+
 }  // namespace
 
 TEST(MotFile, HeaderColumnsAndRows) {
-  const MotionTable table =
-      parseMotionTable("walk.mot", motText("nRows=3\nnColumns=3\ninDegrees=yes", kNames, kRows));
-  EXPECT_TRUE(table.inDegrees);
-  ASSERT_EQ(table.columns.size(), 3u);
-  EXPECT_EQ(table.columns[1], "hip_flexion_r");
-  ASSERT_EQ(table.rows(), 3u);
-  EXPECT_DOUBLE_EQ(table.at(1, 0), 0.1);
-  EXPECT_DOUBLE_EQ(table.at(2, 2), -6.0);
-  EXPECT_EQ(table.column("hip_adduction_r"), 2u);
-  // Newer .sto files leave out the counts; CRLF line ends are read too.
-  const MotionTable radians = parseMotionTable(
-      "walk.sto", "version=1\r\ninDegrees=no\r\nendheader\r\ntime\tq\r\n0 0.5\r\n1 0.25\r\n");
-  EXPECT_FALSE(radians.inDegrees);
-  EXPECT_DOUBLE_EQ(radians.at(1, 1), 0.25);
+  const SceneFiles files;
+  const LoadedScene scene =
+      loadScene(motionScene(files, motText("nRows=3\nnColumns=3\ninDegrees=yes", kNames, kRows)));
+  ASSERT_EQ(scene.poseCount, 3);
+  EXPECT_DOUBLE_EQ(scene.poseLabels[1], 0.1);  // the rows' times
+  for (int p = 0; p < 3; ++p) EXPECT_NEAR(turnDegrees(scene.bonePose(0, p)), 10.0 * (p + 1), 1e-3);
+  // Newer .sto files leave out the counts; CRLF line ends are read too; radians.
+  const LoadedScene radians = loadScene(motionScene(
+      files, "version=1\r\ninDegrees=no\r\nendheader\r\ntime\tq\r\n0 0.5\r\n1 0.25\r\n", "q"));
+  ASSERT_EQ(radians.poseCount, 2);
+  EXPECT_NEAR(turnDegrees(radians.bonePose(0, 1)), 0.25 * 180 / M_PI, 1e-3);
 }
 
 TEST(MotFile, BadInputNamesTheFileTheLineAndWhatWasExpected) {
   const std::string header = "nRows=3\nnColumns=3\ninDegrees=yes";
   // No endheader.
   InputError e = errorOf("Coordinates\nnRows=3\ninDegrees=yes\n");
-  EXPECT_EQ(e.source(), "walk.mot");
   EXPECT_NE(e.problem().find("endheader"), std::string::npos) << e.what();
   // A count that is not a number, an unknown inDegrees, none at all.
   e = errorOf(motText("nRows=three\ninDegrees=yes", kNames, kRows));
@@ -112,15 +118,6 @@ TEST(MotFile, BadInputNamesTheFileTheLineAndWhatWasExpected) {
   e = errorOf(motText(header, kNames, "0 1 2\n0.2 1 2\n0.1 1 2\n"));
   EXPECT_EQ(e.where(), "line 10");
   EXPECT_NE(e.problem().find("time to increase"), std::string::npos) << e.what();
-  // A missing column names the columns there are.
-  const MotionTable table = parseMotionTable("walk.mot", motText(header, kNames, kRows));
-  try {
-    table.column("knee_angle_r");
-    ADD_FAILURE() << "no error for a missing column";
-  } catch (const InputError& error) {
-    EXPECT_NE(error.problem().find("knee_angle_r"), std::string::npos);
-    EXPECT_NE(error.problem().find("hip_flexion_r"), std::string::npos);
-  }
 }
 
 TEST(OpenSimMotion, DegreesAndRadiansGiveTheSamePosesAboutThePivot) {
@@ -231,39 +228,21 @@ TEST(SubPoses, JumpsFromRestAndBetweenPosesAreSplitAlongTheScrew) {
   EXPECT_EQ(loadScene(files.write("keys.json", boneScene(text)), {"max_step_deg=20"}).poseCount, 4);
 }
 
-TEST(SubPoses, ScrewInterpolationTurnsAndSlidesInProportion) {
-  using fibremss::scene::screwInterpolate;
-  const btTransform from(btQuaternion(btVector3(0, 1, 0), 0.3f), btVector3(1, 2, 3));
-  const btTransform to(btQuaternion(btVector3(1, 1, 0).normalized(), 1.1f), btVector3(-2, 0, 4));
-  EXPECT_LT(
-      (screwInterpolate(from, to, 0) * btVector3(1, 1, 1) - from * btVector3(1, 1, 1)).length(),
-      1e-5);
-  EXPECT_LT((screwInterpolate(from, to, 1) * btVector3(1, 1, 1) - to * btVector3(1, 1, 1)).length(),
-            1e-5);
-  // Two halves make the whole.
-  const btTransform half = screwInterpolate(from, to, 0.5);
-  const btTransform rest = screwInterpolate(half, to, 1);
-  EXPECT_LT((screwInterpolate(half, to, 0.5) * btVector3(0, 0, 1) -
-             screwInterpolate(from, to, 0.75) * btVector3(0, 0, 1))
-                .length(),
-            1e-5);
-  EXPECT_LT((rest * btVector3(2, 0, 0) - to * btVector3(2, 0, 0)).length(), 1e-5);
-}
-
-TEST(OpenSimMotion, SharedGaitFileLoadsWithAFemoralHeadPivot) {
+TEST(OpenSimMotion, SharedGaitFile) {
   const fs::path mot = kMotions / "subject01_walk1_ik_gait2392.mot";
   if (!fs::exists(mot)) GTEST_SKIP() << "shared data not found: " << mot;
-  const MotionTable table = fibremss::scene::readMotionTable(mot.string());
-  EXPECT_EQ(table.rows(), 211u);
-  EXPECT_EQ(table.columns.size(), 24u);
-  EXPECT_TRUE(table.inDegrees);
-  const size_t flexion = table.column("hip_flexion_r");
-  double lowest = 1e9, highest = -1e9;
-  for (size_t r = 0; r < table.rows(); ++r) {
-    lowest = std::min(lowest, table.at(r, flexion));
-    highest = std::max(highest, table.at(r, flexion));
-  }
-  // The README's range, computed from the file by another tool: -22.32 ... +21.91.
-  EXPECT_NEAR(lowest, -22.32, 0.01);
-  EXPECT_NEAR(highest, 21.91, 0.01);
+  const SceneFiles files;
+  const LoadedScene scene = loadScene(files.write(
+      "gait.json",
+      boneScene(R"({"type": "opensim", "file": ")" + mot.string() +
+                    R"(", "coordinates": [{"column": "hip_flexion_r", "axis": [-1, 0, 0]}]})",
+                R"({"max_step_deg": 0})")));
+  ASSERT_EQ(scene.poseCount, 211);
+  EXPECT_DOUBLE_EQ(scene.poseLabels.front(), 0.5);
+  EXPECT_DOUBLE_EQ(scene.poseLabels.back(), 4.0);
+  double largest = 0;
+  for (int p = 0; p < scene.poseCount; ++p)
+    largest = std::max(largest, turnDegrees(scene.bonePose(0, p)));
+  // The README's range, computed from the file by another tool: -22.32 ... +21.91 degrees.
+  EXPECT_NEAR(largest, 22.32, 0.01);
 }

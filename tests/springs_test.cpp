@@ -1,8 +1,8 @@
-// Spring-force kernels (plugin/src/MuscleSystemForces.cpp): every kernel this build and CPU can
-// run gives the forces, the deviation and the overstretched count of a plain double-precision
-// computation, spring by spring, on prepared thigh muscles and on a hand-made grid, with and
-// without the AVX2 kernel's spring blocks (layoutSprings), including coincident particles (zero
-// force), overstretched springs, a non-finite position and runs of every length.
+// Spring-force kernels (plugin/core/src/solver/MuscleSystemForces.cpp): every kernel this build and
+// CPU can run gives the forces, the deviation and the overstretched count of a plain
+// double-precision computation, spring by spring, on prepared thigh muscles and on a hand-made
+// grid, with and without the AVX2 kernel's spring blocks (layoutSprings), including coincident
+// particles (zero force), overstretched springs, a non-finite position and runs of every length.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -10,10 +10,10 @@
 #include <random>
 #include <vector>
 
-#include "../plugin/src/SpringForces.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "solver/SpringForces.h"
 #include "support/GridMuscle.h"
 #include "support/ThighSteps.h"
 

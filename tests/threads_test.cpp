@@ -1,6 +1,6 @@
-// The solver's threads (plugin/src/TaskPool.h, MuscleSystemStep.cpp): every task runs once on
-// a valid thread, and a step gives bit-identical particles for any thread count, because each
-// muscle's work is independent and every sum runs in a fixed order; frozen muscles only ride
+// The solver's threads (plugin/core/src/solver/TaskPool.h, MuscleSystemStep.cpp): every task runs
+// once on a valid thread, and a step gives bit-identical particles for any thread count, because
+// each muscle's work is independent and every sum runs in a fixed order; frozen muscles only ride
 // with their bones.
 #include <gtest/gtest.h>
 
@@ -9,10 +9,10 @@
 #include <memory>
 #include <vector>
 
-#include "../plugin/src/MuscleSystemAccess.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "solver/MuscleSystemAccess.h"
 #include "support/ThighSteps.h"
 
 using namespace fibremss;

@@ -2,9 +2,9 @@
 
 #include <string>
 
-#include "Integrators.h"
-#include "TimeStep.h"
 #include "fibremss/Preparation.h"
+#include "integrators/Integrators.h"
+#include "solver/TimeStep.h"
 
 namespace fibremss::bench {
 

@@ -4,9 +4,9 @@
 // thread (the kernels), in the order an iteration runs them.
 #include <memory>
 
-#include "MuscleSystemAccess.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Scene.h"
+#include "solver/MuscleSystemAccess.h"
 
 namespace fibremss::bench {
 

@@ -6,11 +6,11 @@
 #include <stdexcept>
 #include <string>
 
-#include "Integrators.h"
 #include "MuscleSystemImpl.h"
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "integrators/Integrators.h"
 
 namespace fibremss {
 

@@ -11,7 +11,7 @@
 #include <span>
 #include <vector>
 
-#include "../../plugin/src/MuscleSystemPretransform.h"
+#include "fibremss/Pretransform.h"
 
 namespace fibremss {
 

@@ -10,8 +10,8 @@
 
 #include <memory>
 
-#include "MuscleState.h"
 #include "fibremss/Parameters.h"
+#include "solver/MuscleState.h"
 
 namespace fibremss {
 

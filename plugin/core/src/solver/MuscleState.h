@@ -7,8 +7,8 @@
 #include <memory>
 #include <vector>
 
-#include "BoneDistanceField.h"
-#include "CollisionTrees.h"
+#include "collision/BoneDistanceField.h"
+#include "collision/CollisionTrees.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
 

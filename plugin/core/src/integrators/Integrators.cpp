@@ -4,7 +4,7 @@
 #include <string>
 
 #include "IntegratorsInternal.h"
-#include "TimeStep.h"
+#include "solver/TimeStep.h"
 
 namespace fibremss {
 

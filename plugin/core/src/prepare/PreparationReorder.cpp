@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "SpringForces.h"
+#include "solver/SpringForces.h"
 
 namespace fibremss::detail {
 namespace {

@@ -5,10 +5,10 @@
 #include <memory>
 #include <vector>
 
-#include "CollisionPairs.h"
 #include "MuscleState.h"
 #include "SpringForces.h"
 #include "TaskPool.h"
+#include "collision/CollisionPairs.h"
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss {

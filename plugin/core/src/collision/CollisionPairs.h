@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "MuscleState.h"
+#include "solver/MuscleState.h"
 
 namespace fibremss {
 

@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
-#include "ParticleSimd.h"
-#include "SpringForces.h"
+#include "solver/ParticleSimd.h"
+#include "solver/SpringForces.h"
 
 namespace fibremss {
 namespace {

@@ -14,12 +14,12 @@
 #include <cmath>
 #include <utility>
 
-#include "Integrators.h"
 #include "MuscleSystemImpl.h"
 #include "MuscleSystemPretransform.h"
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "integrators/Integrators.h"
 
 namespace fibremss {
 namespace {

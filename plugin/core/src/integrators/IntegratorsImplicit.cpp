@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
-#include "MuscleSystemPretransform.h"
-#include "TimeStep.h"
+#include "solver/MuscleSystemPretransform.h"
+#include "solver/TimeStep.h"
 
 namespace fibremss {
 namespace {

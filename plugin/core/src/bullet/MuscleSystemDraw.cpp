@@ -1,4 +1,4 @@
-#include "MuscleSystemImpl.h"
+#include "solver/MuscleSystemImpl.h"
 
 namespace fibremss {
 

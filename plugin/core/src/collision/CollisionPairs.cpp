@@ -6,7 +6,7 @@
 #include <cmath>
 #include <utility>
 
-#include "Integrators.h"
+#include "integrators/Integrators.h"
 
 namespace fibremss {
 namespace {

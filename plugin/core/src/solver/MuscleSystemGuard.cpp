@@ -17,10 +17,10 @@
 #include <climits>
 #include <cmath>
 
-#include "Integrators.h"
 #include "MuscleSystemImpl.h"
 #include "Skin.h"
 #include "fibremss/Measures.h"
+#include "integrators/Integrators.h"
 
 namespace fibremss {
 namespace {
