@@ -707,6 +707,13 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
       if (status == 2) ++q.droppedEarly;
       if (status != 0) continue;
       std::vector<btVector3> fibre = resample(line, options.samples);
+      // Resampling cuts the corners of a streamline that slid along a concave surface.
+      if (std::any_of(fibre.begin(), fibre.end(), [&](const btVector3& p) {
+            return distance.signedDistance(p) > insideTolerance;
+          })) {
+        ++q.droppedOutside;
+        continue;
+      }
       if (tooClose(fibre)) {
         crowded.push_back(std::move(fibre));
         continue;
