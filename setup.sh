@@ -5,13 +5,17 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
-packages=(cmake make g++ pkg-config ccache valgrind libbullet-dev libeigen3-dev libassimp-dev
-  nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev libtbb-dev libgtest-dev
-  libgmock-dev libbenchmark-dev gnuplot-nox clang-format zlib1g-dev)
+# What the main job needs (`run`), and what only the tests, benchmarks and style check need.
+run_packages=(cmake make g++ pkg-config ccache libbullet-dev libeigen3-dev libassimp-dev
+  nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev gnuplot-nox zlib1g-dev
+  # `fibremss view`: window, OpenGL (Mesa's drivers, llvmpipe where there is no GPU), panel, PNG
+  libglfw3-dev libgl-dev libgl1-mesa-dri libimgui-dev libstb-dev)
+# (xvfb, xauth: a virtual X server for the viewer's screenshot tests.)
+test_packages=(valgrind libgtest-dev libgmock-dev libbenchmark-dev clang-format xvfb xauth)
 
-install_missing() {
+install_missing() {  # install_missing PACKAGE...
   local missing=()
-  for p in "${packages[@]}"; do
+  for p in "$@"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
@@ -33,14 +37,16 @@ build() {  # build DIR [cmake options...]
 
 case "${1:-}" in
   run)
-    install_missing
-    build build
+    install_missing "${run_packages[@]}"
+    # Only the fibremss tool and its libraries: no tests, no benchmarks.
+    cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DFIBREMSS_BUILD_TESTS=OFF
+    cmake --build build -j"$jobs" --target fibremss_cli
     build/bin/fibremss compare thigh13 --set resolution=20 --out results/thigh13
     echo "setup: report in results/thigh13/report.md (plot: results/thigh13/speed_vs_error.png)"
     ;;
   test)
-    install_missing
-    build build -DFIBREMSS_WERROR=ON
+    install_missing "${run_packages[@]}" "${test_packages[@]}"
+    build build -DFIBREMSS_WERROR=ON -DFIBREMSS_BUILD_TESTS=ON
     ctest --test-dir build -j"$jobs" --output-on-failure --timeout 900
     # The same suite against Bullet's double-precision variant.
     build build-double -DFIBREMSS_WERROR=ON -DFIBREMSS_DOUBLE=ON

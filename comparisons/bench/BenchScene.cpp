@@ -67,7 +67,7 @@ void BenchScene::run(Part part) {
       break;
     case Part::Integration:
       for (uint32_t slot : impl.muscles.order)
-        integrator.advance(*impl.muscles.states[slot], dt_, impl.previousDt);
+        integrator.advance(*impl.muscles.states[slot], impl.parameters, dt_, impl.previousDt);
       impl.previousDt = dt_;
       break;
     case Part::TreeRefit:
@@ -85,7 +85,8 @@ void BenchScene::run(Part part) {
       break;
     case Part::Response:
       for (uint32_t slot : impl.muscles.order)
-        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities());
+        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities(),
+                    impl.parameters.slidingContacts);
       break;
   }
 }

@@ -1,6 +1,7 @@
 // `fibremss compare SCENE`: the same scene through FibreMSS, its self-reference, the
 // btSoftBody baseline and the FEM reference, measured the same way; writes summary.json,
 // report.md and the speed-against-error plot.
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <iterator>
@@ -10,6 +11,7 @@
 #include "Commands.h"
 #include "Interrupt.h"
 #include "SceneArgs.h"
+#include "fibremss/Analytic.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Progress.h"
 #include "fibremss/Stability.h"
@@ -77,6 +79,14 @@ void compare(CompareArgs& args) {
                 run.maxPenetrationMm, run.volumeChangePct, run.rmsToFemMm, run.rmsToSelfReferenceMm,
                 run.failedStep >= 0 ? "  FAILED" : "");
   }
+  for (const RunMetrics& run : comparison.runs)
+    if (std::isfinite(run.worstPoseRmsToEquilibriumMm) && run.method != "equilibrium")
+      std::printf("%-28s RMS to equilibrium %.3g mm, worst pose %.3g mm, %.3g ms per pose\n",
+                  run.method.c_str(), run.rmsToEquilibriumMm, run.worstPoseRmsToEquilibriumMm,
+                  run.msPerStep);
+  for (const RunMetrics& run : comparison.runs)
+    if (!run.analytic.type.empty())
+      std::printf("%-28s %s\n", run.method.c_str(), analyticLine(run.analytic).c_str());
   std::printf("wrote");
   for (const std::string& file : files) std::printf(" %s/%s", out.c_str(), file.c_str());
   std::printf("\n");
@@ -95,10 +105,12 @@ void addCompareCommand(CLI::App& app) {
       "report.md and speed_vs_error.png/.svg (plus penetration_vs_step for sweeps) to --out.");
   addSceneArgs(*command, args->scene);
   command
-      ->add_option("--methods", args->methods,
-                   "Comma-separated methods: fibremss, self-reference, btsoftbody, fem, "
-                   "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
-                   "(one variant per integrator); default all four")
+      ->add_option(
+          "--methods", args->methods,
+          "Comma-separated methods: fibremss, self-reference, equilibrium (run to convergence), "
+          "btsoftbody, fem, "
+          "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
+          "(one variant per integrator); default all four")
       ->delimiter(',');
   command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
   command

@@ -15,6 +15,7 @@
 #include "Commands.h"
 #include "Interrupt.h"
 #include "SceneArgs.h"
+#include "fibremss/Analytic.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
@@ -104,6 +105,7 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
   std::printf(
       "  penetration max %.3g mm, mean %.3g mm; volume change %.3g %%; spring deviation %.3g\n",
       m.maxPenetrationMm, m.meanPenetrationMm, m.volumeChangePct, m.springDeviationRatio);
+  if (!m.analytic.type.empty()) std::printf("  %s\n", analyticLine(m.analytic).c_str());
   std::printf("  particle spheres in bones: max %.3g mm, mean %.3g mm (%zu of %zu sphere tests)\n",
               details.spherePenetration.maxMm, details.spherePenetration.meanMm,
               details.spherePenetration.penetrating, details.spherePenetration.points);

@@ -11,5 +11,6 @@ void addCompareCommand(CLI::App& app);    ///< `fibremss compare`: all methods s
 void addMergeCommand(CLI::App& app);      ///< `fibremss merge`: merge summaries into one report
 void addFibresCommand(CLI::App& app);     ///< `fibremss fibres`: fibres from a muscle surface
 void addStabilityCommand(CLI::App& app);  ///< `fibremss stability`: hard-case stability matrix
+void addViewCommand(CLI::App& app);       ///< `fibremss view`: the interactive viewer
 
 }  // namespace fibremss::cli

@@ -15,6 +15,7 @@ int main(int argc, char** argv) {
   fibremss::cli::addMergeCommand(app);
   fibremss::cli::addFibresCommand(app);
   fibremss::cli::addStabilityCommand(app);
+  fibremss::cli::addViewCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "ReportScaling.h"
+#include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
 #include "fibremss/Output.h"
 #include "fibremss/Stability.h"
@@ -255,6 +256,10 @@ Methods:
   **fibremss:k=v**: a variant with those scene overrides.
 - **self-reference**: FibreMSS with dt/8 (and min dt/8) and 8× the iterations, the same
   simulated time per step.
+- **equilibrium**: FibreMSS run at every pose until the mean displacement per iteration is
+  below 1e-4 mm (at most 20 000 iterations; the bones move over as many iterations as in the
+  scene): the model's own converged state, the floor of its error. `rms_to_equilibrium_mm` of
+  every run is measured against it.
 - **btsoftbody**: `btSoftBody` in a `btSoftRigidDynamicsWorld`: the same particles as nodes
   (same masses), the springs as links (stiffness mapped to `m_kLST` per link from k = κ/L0,
   the substep and the iteration count; solved softest first), fixed particles pinned (mass 0)
@@ -321,6 +326,45 @@ std::string table1(const nlohmann::json& runs) {
          "thigh13 --set resolution=R` per resolution and `fibremss merge` them for all four "
          "columns (comparisons/README.md).\n";
   return out.str();
+}
+
+/// The time-to-accuracy figure: every run measured against an "equilibrium" run, its worst pose's
+/// RMS to that equilibrium and ms per pose, and the fastest run whose every pose is within
+/// kEquilibriumAccuracyMm. Empty without an equilibrium run.
+std::string equilibriumReport(const nlohmann::json& runs) {
+  std::string rows, fastest;
+  double fastestMs = INFINITY;
+  for (const auto& run : runs) {
+    const double worst = number(run, "worst_pose_rms_to_equilibrium_mm");
+    const std::string method = text(run, "method");
+    if (!std::isfinite(worst) || method == "equilibrium") continue;
+    const double ms = number(run, "ms_per_step");
+    rows += "| " + method + " | " + cell(number(run, "threads")) + " | " +
+            field(run, "iterations") + " | " + cell(ms) + " | " +
+            field(run, "rms_to_equilibrium_mm") + " | " + cell(worst) + " |\n";
+    if (worst <= kEquilibriumAccuracyMm && ms < fastestMs) fastestMs = ms, fastest = method;
+  }
+  if (rows.empty()) return "";
+  std::string unconverged;
+  for (const auto& run : runs)
+    if (text(run, "method") == "equilibrium" && number(run, "unconverged_poses") > 0)
+      unconverged = " **" + cell(number(run, "unconverged_poses")) +
+                    " pose(s) of the equilibrium run reached its iteration cap unconverged**: "
+                    "distances to them are distances to an unconverged state.";
+  char bound[32];
+  std::snprintf(bound, sizeof bound, "%.2g mm", kEquilibriumAccuracyMm);
+  return "\n## Distance to equilibrium\n\nThe `equilibrium` run is FibreMSS at every pose until "
+         "the mean displacement per iteration falls below 1e-4 mm (from the previous pose's "
+         "equilibrium)." +
+         unconverged +
+         " Per run: the RMS of the surface vertices to it over all poses, and the worst pose's "
+         "RMS.\n\n| method | threads | iterations | ms/pose | RMS to equilibrium [mm] | worst "
+         "pose [mm] |\n|---|---|---|---|---|---|\n" +
+         rows + "\nTime to accuracy (every pose within " + bound + " RMS of its equilibrium): " +
+         (fastest.empty() ? std::string("no run reached it")
+                          : "**" + cell(fastestMs) + " ms per pose** (" + fastest + ")") +
+         ". Sweep the iterations (`--methods equilibrium,fibremss:iterations=20,"
+         "fibremss:iterations=40,...`) for the front.\n";
 }
 
 /// summary.json's "btsoftbody_ratio": every softBodyRatios entry.
@@ -453,7 +497,7 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
         << field(run, "wall_seconds") << " |\n";
   }
   out << "\n— : does not apply or was not measured (e.g. no FEM run to compare with).\n"
-      << softBodyRatioReport(runs);
+      << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
   const std::string coverageNote = femCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {

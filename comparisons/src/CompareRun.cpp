@@ -8,6 +8,7 @@
 #include <map>
 #include <tuple>
 
+#include "fibremss/Analytic.h"
 #include "fibremss/Compare.h"
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
@@ -166,6 +167,11 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
       offset += count;
     }
     if (restVolume != 0) metrics.volumeChangePct = change / restVolume;
+    if (!prepared.muscles.empty() && !last.empty()) {
+      const TriangleMesh& rest = prepared.muscles[0]->restSurface;
+      metrics.analytic = measureAnalytic(scene.analytic, rest,
+                                         last.first(std::min(rest.vertices.size(), last.size())));
+    }
     metrics.springDeviationRatio = sim.springDeviation();
   }
   metrics.peakMemoryMb = peakMemoryMb();
@@ -302,24 +308,40 @@ int sharedPoses(const RunMetrics& a, const RunMetrics& b) {
   return static_cast<int>(std::min(a.poseSurfaces.size(), b.poseSurfaces.size()));
 }
 
-double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b) {
+double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose) {
   const size_t poses = static_cast<size_t>(sharedPoses(a, b));
+  if (worstPose) *worstPose = RunMetrics::kNone;
   if (poses == 0) return RunMetrics::kNone;
-  double sum = 0;
+  double sum = 0, worst = 0;
   for (size_t p = 0; p < poses; ++p) {
     if (a.poseSurfaces[p].size() != b.poseSurfaces[p].size()) return RunMetrics::kNone;
     const double rms = rmsDistanceMm(a.poseSurfaces[p], b.poseSurfaces[p]);
     sum += rms * rms;
+    worst = std::max(worst, rms);
   }
+  if (worstPose) *worstPose = worst;
   return std::sqrt(sum / static_cast<double>(poses));
+}
+
+SimulationParameters equilibriumSettings(const SimulationParameters& simulation) {
+  SimulationParameters converged = simulation;
+  const int motion = std::max(1, static_cast<int>(std::lround(simulation.motionFraction *
+                                                              std::max(1, simulation.iterations))));
+  converged.stopRule = StopRule::Converged;
+  converged.epsilon = static_cast<btScalar>(kEquilibriumEpsilon);
+  converged.iterations = kEquilibriumIterations;
+  converged.motionFraction = static_cast<btScalar>(double(motion) / kEquilibriumIterations);
+  return converged;
 }
 
 void fillRms(std::vector<RunMetrics>& runs) {
   const RunMetrics* fem = nullptr;
   const RunMetrics* self = nullptr;
+  const RunMetrics* equilibrium = nullptr;
   for (const RunMetrics& run : runs) {
     if (run.method == "fem") fem = &run;
     if (run.method == "self-reference") self = &run;
+    if (run.method == "equilibrium") equilibrium = &run;
   }
   for (RunMetrics& run : runs) {
     if (fem) {
@@ -331,6 +353,11 @@ void fillRms(std::vector<RunMetrics>& runs) {
       run.rmsToSelfReferencePoses =
           std::isnan(run.rmsToSelfReferenceMm) ? 0 : sharedPoses(run, *self);
     }
+    if (equilibrium) {
+      run.rmsToEquilibriumMm = rmsBetweenRuns(run, *equilibrium, &run.worstPoseRmsToEquilibriumMm);
+      run.rmsToEquilibriumPoses =
+          std::isnan(run.rmsToEquilibriumMm) ? 0 : sharedPoses(run, *equilibrium);
+    }
   }
 }
 
@@ -339,11 +366,11 @@ MethodSpec parseMethod(const std::string& name) {
   spec.name = name;
   const size_t colon = name.find(':');
   spec.family = name.substr(0, colon);
-  if (spec.family != "fibremss" && spec.family != "self-reference" && spec.family != "btsoftbody" &&
-      spec.family != "fem") {
+  if (spec.family != "fibremss" && spec.family != "self-reference" &&
+      spec.family != "equilibrium" && spec.family != "btsoftbody" && spec.family != "fem") {
     throw InputError("--methods", name,
-                     "unknown method; expected fibremss, self-reference, btsoftbody, fem or "
-                     "fibremss:<key>=<value>[+<key>=<value>...]");
+                     "unknown method; expected fibremss, self-reference, equilibrium, btsoftbody, "
+                     "fem or fibremss:<key>=<value>[+<key>=<value>...]");
   }
   if (colon == std::string::npos) return spec;
   if (spec.family != "fibremss") {
@@ -413,6 +440,20 @@ Comparison runComparison(const std::string& sceneNameOrPath,
       reference.simulation.minTimeStep /= static_cast<btScalar>(f);
       reference.simulation.iterations *= f;
       runs.push_back(runFibreMSS(reference, prepared, fibreOptions));
+    } else if (spec.family == "equilibrium") {
+      LoadedScene converged = scene;
+      converged.simulation = equilibriumSettings(scene.simulation);
+      FibreRunOptions equilibriumOptions = fibreOptions;
+      int unconverged = 0;
+      equilibriumOptions.progress = [&](const RunProgress& p) {
+        unconverged += p.lastStep->iterations >= kEquilibriumIterations ? 1 : 0;
+        fibreOptions.progress(p);
+      };
+      runs.push_back(runFibreMSS(converged, prepared, equilibriumOptions));
+      runs.back().unconvergedPoses = unconverged;
+      if (unconverged > 0)
+        log("equilibrium: " + std::to_string(unconverged) +
+            " pose(s) reached the iteration cap before converging");
     } else if (spec.family == "btsoftbody") {
       SoftBodyDefinition definition = options.softBody;
       definition.poseDuration = static_cast<btScalar>(duration);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/Analytic.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/Measures.h"
 #include "fibremss/Output.h"
@@ -400,6 +401,9 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
                      springDeviationRatio(muscle.springs, system.positions(muscles[m]));
     }
     if (restVolume != 0) metrics.volumeChangePct = volumeChange / restVolume;
+    if (!muscles.empty())
+      metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
+                                         system.surface(muscles[0]));
     if (restLengthSum != 0) metrics.springDeviationRatio = deviation / restLengthSum;
   }
   metrics.msPerStep = median(msPerStep);

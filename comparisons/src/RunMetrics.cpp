@@ -15,6 +15,36 @@ double numberOr(const nlohmann::json& object, const char* key, double fallback) 
   return it->get<double>();
 }
 
+nlohmann::json toJson(const AnalyticMetrics& a) {
+  if (a.type.empty()) return nullptr;
+  return {{"type", a.type},
+          {"poisson_ratio", number(a.poissonRatio)},
+          {"exact_poisson_ratio", number(a.exactPoissonRatio)},
+          {"volume_change_pct", number(a.volumeChangePct)},
+          {"exact_volume_change_pct", number(a.exactVolumeChangePct)},
+          {"mid_radius_ratio", number(a.midRadiusRatio)},
+          {"exact_mid_radius_ratio", number(a.exactMidRadiusRatio)},
+          {"mid_rotation_deg", number(a.midRotationDeg)},
+          {"exact_mid_rotation_deg", number(a.exactMidRotationDeg)},
+          {"rotation_error_deg", number(a.rotationErrorDeg)}};
+}
+
+AnalyticMetrics analyticFromJson(const nlohmann::json& o) {
+  AnalyticMetrics a;
+  if (!o.is_object()) return a;
+  a.type = o.value("type", a.type);
+  a.poissonRatio = numberOr(o, "poisson_ratio", a.poissonRatio);
+  a.exactPoissonRatio = numberOr(o, "exact_poisson_ratio", a.exactPoissonRatio);
+  a.volumeChangePct = numberOr(o, "volume_change_pct", a.volumeChangePct);
+  a.exactVolumeChangePct = numberOr(o, "exact_volume_change_pct", a.exactVolumeChangePct);
+  a.midRadiusRatio = numberOr(o, "mid_radius_ratio", a.midRadiusRatio);
+  a.exactMidRadiusRatio = numberOr(o, "exact_mid_radius_ratio", a.exactMidRadiusRatio);
+  a.midRotationDeg = numberOr(o, "mid_rotation_deg", a.midRotationDeg);
+  a.exactMidRotationDeg = numberOr(o, "exact_mid_rotation_deg", a.exactMidRotationDeg);
+  a.rotationErrorDeg = numberOr(o, "rotation_error_deg", a.rotationErrorDeg);
+  return a;
+}
+
 }  // namespace
 
 nlohmann::json toJson(const RunMetrics& m) {
@@ -45,6 +75,10 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"spring_deviation_ratio", number(m.springDeviationRatio)},
       {"rms_to_fem_mm", number(m.rmsToFemMm)},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
+      {"rms_to_equilibrium_mm", number(m.rmsToEquilibriumMm)},
+      {"worst_pose_rms_to_equilibrium_mm", number(m.worstPoseRmsToEquilibriumMm)},
+      {"rms_to_equilibrium_poses", m.rmsToEquilibriumPoses},
+      {"unconverged_poses", m.unconvergedPoses},
       {"rms_to_fem_poses", m.rmsToFemPoses},
       {"rms_to_self_reference_poses", m.rmsToSelfReferencePoses},
       {"nan", m.nan},
@@ -53,6 +87,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"interrupted", m.interrupted},
       {"peak_memory_mb", number(m.peakMemoryMb)},
       {"wall_seconds", m.wallSeconds},
+      {"analytic", toJson(m.analytic)},
   };
 }
 
@@ -85,6 +120,11 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.springDeviationRatio = numberOr(o, "spring_deviation_ratio", m.springDeviationRatio);
   m.rmsToFemMm = numberOr(o, "rms_to_fem_mm", m.rmsToFemMm);
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
+  m.rmsToEquilibriumMm = numberOr(o, "rms_to_equilibrium_mm", m.rmsToEquilibriumMm);
+  m.worstPoseRmsToEquilibriumMm =
+      numberOr(o, "worst_pose_rms_to_equilibrium_mm", m.worstPoseRmsToEquilibriumMm);
+  m.rmsToEquilibriumPoses = o.value("rms_to_equilibrium_poses", m.rmsToEquilibriumPoses);
+  m.unconvergedPoses = o.value("unconverged_poses", m.unconvergedPoses);
   m.rmsToFemPoses = o.value("rms_to_fem_poses", m.rmsToFemPoses);
   m.rmsToSelfReferencePoses = o.value("rms_to_self_reference_poses", m.rmsToSelfReferencePoses);
   m.nan = o.value("nan", m.nan);
@@ -93,6 +133,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.interrupted = o.value("interrupted", m.interrupted);
   m.peakMemoryMb = numberOr(o, "peak_memory_mb", m.peakMemoryMb);
   m.wallSeconds = numberOr(o, "wall_seconds", m.wallSeconds);
+  if (auto a = o.find("analytic"); a != o.end()) m.analytic = analyticFromJson(*a);
   return m;
 }
 

@@ -152,6 +152,10 @@ std::vector<BuiltInScene> builtInScenes() {
       {"pinch", "a muscle between two bones that pass each other like shear blades"},
       {"sphere-denoise", "a sphere of 3840 particles perturbed by noise, no bones (integrators)"},
       {"sphere-planes", "a soft noisy sphere trapped between two immobile planes"},
+      {"cylinder-stretch",
+       "a straight cylindrical muscle stretched 10 % by its attachments (exact answer known)"},
+      {"cylinder-twist",
+       "a straight cylindrical muscle, one end twisted 180 deg (exact answer known)"},
   };
 }
 
@@ -178,6 +182,10 @@ std::string builtInSceneDefinition(const std::string& name) {
     scene = sphereDenoiseScene();
   else if (name == "sphere-planes")
     scene = spherePlanesScene();
+  else if (name == "cylinder-stretch")
+    scene = cylinderStretchScene();
+  else if (name == "cylinder-twist")
+    scene = cylinderTwistScene();
   else
     return "";
   return scene.dump();

@@ -60,5 +60,7 @@ Json tensionSpikeScene();
 Json pinchScene();
 Json sphereDenoiseScene();
 Json spherePlanesScene();
+Json cylinderStretchScene();
+Json cylinderTwistScene();
 
 }  // namespace fibremss::builtin

@@ -381,6 +381,22 @@ void readCollision(Fields& collision, double scale, SimulationParameters& parame
   parameters.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
 }
 
+/// The top-level "analytic" object: which exact case the scene is, and its geometry.
+AnalyticCase readAnalytic(Fields& analytic, double scale) {
+  const AnalyticCase defaults;
+  AnalyticCase result;
+  result.type =
+      analytic.choice("type", defaults.type, {"none", "cylinder-stretch", "cylinder-twist"});
+  result.axisStart = analytic.vector3("axis_start", defaults.axisStart) * btScalar(scale);
+  result.axisEnd = analytic.vector3("axis_end", defaults.axisEnd) * btScalar(scale);
+  result.stretch = analytic.number("stretch", defaults.stretch, 0, kInf, true);
+  result.twistDeg = analytic.number("twist_deg", defaults.twistDeg, -3600, 3600);
+  result.poissonRatio = analytic.number("poisson_ratio", defaults.poissonRatio, 0, 0.4999);
+  if (result.type != "none" && result.axisStart.distance(result.axisEnd) <= 0)
+    analytic.fail("axis_end", "must differ from axis_start for an analytic case");
+  return result;
+}
+
 LoadedScene readScene(const Json& raw, const std::string& source, const fs::path& baseDir,
                       const std::string& defaultName) {
   LoadedScene result;
@@ -448,6 +464,8 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   result.outputs.writeSurfaces = outputs.boolean("surfaces", true);
   result.outputs.writeParticles = outputs.boolean("particles", true);
   result.outputs.writeFibres = outputs.boolean("fibres", true);
+  Fields analytic = root.object("analytic");
+  result.analytic = readAnalytic(analytic, reader.scale);
 
   root.set("bones", std::move(completeBones));
   root.set("muscles", std::move(completeMuscles));
@@ -455,6 +473,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   root.set("simulation", simulation.finish());
   root.set("collision", collision.finish());
   root.set("outputs", outputs.finish());
+  root.set("analytic", analytic.finish());
   result.json.clear();
   writePretty(root.finish(), 0, result.json);
   return result;

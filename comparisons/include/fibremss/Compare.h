@@ -15,6 +15,14 @@
 
 namespace fibremss {
 
+/// The "equilibrium" method: FibreMSS at every pose until the mean displacement per iteration is
+/// below this [m] (1e-4 mm), from the previous pose's equilibrium.
+inline constexpr double kEquilibriumEpsilon = 1e-7;
+/// Its iteration cap per pose (a pose that reaches it is counted in RunMetrics::unconvergedPoses).
+inline constexpr int kEquilibriumIterations = 20000;
+/// The time-to-accuracy figure's bound: a pose within this RMS of its equilibrium [mm].
+inline constexpr double kEquilibriumAccuracyMm = 0.5;
+
 /// Method names `compare` knows; "fibremss:<key>=<value>[+<key>=<value>...]" adds a FibreMSS
 /// variant with those scene overrides (e.g. "fibremss:integrator=semi-implicit-euler").
 inline constexpr const char* kDefaultMethods[] = {"fibremss", "self-reference", "btsoftbody",
@@ -68,17 +76,23 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
 int sharedPoses(const RunMetrics& a, const RunMetrics& b);
 
 /// Root-mean-square surface distance between two runs over the poses both reached (NaN when
-/// they share none or their surfaces differ in size).
-double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b);
+/// they share none or their surfaces differ in size); `worstPose`, when given, receives the
+/// largest per-pose RMS.
+double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose = nullptr);
 
-/// Fills rmsToFemMm / rmsToSelfReferenceMm of every run from the "fem" and "self-reference"
-/// runs among them (the references themselves get 0 against themselves).
+/// The scene's settings for the "equilibrium" method: the converged stop rule at
+/// kEquilibriumEpsilon with kEquilibriumIterations as the cap, the bones moving over as many
+/// iterations as in the scene's own settings.
+SimulationParameters equilibriumSettings(const SimulationParameters& simulation);
+
+/// Fills rmsToFemMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the "fem",
+/// "self-reference" and "equilibrium" runs among them (the references get 0 against themselves).
 void fillRms(std::vector<RunMetrics>& runs);
 
 /// A method and its scene overrides, parsed from "name" or "fibremss:k=v+k=v".
 struct MethodSpec {
-  std::string name;                    ///< the full name as given
-  std::string family;                  ///< "fibremss", "self-reference", "btsoftbody", "fem"
+  std::string name;    ///< the full name as given
+  std::string family;  ///< "fibremss", "self-reference", "equilibrium", "btsoftbody", "fem"
   std::vector<std::string> overrides;  ///< extra --set overrides of a FibreMSS variant
 };
 /// Throws InputError for an unknown method or a malformed variant.

@@ -19,6 +19,21 @@ struct PartTiming {
   double output = 0;    ///< the solver's fibres and surfaces (measuring for reports excluded)
 };
 
+/// An analytic case measured at the last pose, beside its exact answer (NaN: does not apply).
+struct AnalyticMetrics {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  std::string type;                     ///< "cylinder-stretch", "cylinder-twist" ("": none)
+  double poissonRatio = kNone;          ///< effective ν = −ln(r/r0) / ln(stretch), mid-section
+  double exactPoissonRatio = kNone;     ///< the homogeneous Neo-Hookean answer's
+  double volumeChangePct = kNone;       ///< the muscle's volume against rest [%]
+  double exactVolumeChangePct = kNone;  ///< exact [%]
+  double midRadiusRatio = kNone;        ///< mid-section radius / rest radius
+  double exactMidRadiusRatio = kNone;   ///< exact
+  double midRotationDeg = kNone;        ///< twist: rotation of the mid-section about the axis [°]
+  double exactMidRotationDeg = kNone;   ///< exact (half the end's twist)
+  double rotationErrorDeg = kNone;  ///< twist: largest |rotation − exact| over 9 sections [°]
+};
+
 /// One run's results. NaN marks a metric that does not apply or was not measured.
 struct RunMetrics {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
@@ -46,14 +61,22 @@ struct RunMetrics {
   double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
   double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
   double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
-  int rmsToFemPoses = 0;                ///< poses rmsToFemMm covers (both runs reached them intact)
-  int rmsToSelfReferencePoses = 0;      ///< poses rmsToSelfReferenceMm covers
-  bool nan = false;                     ///< a NaN or inf appeared
-  bool exploded = false;                ///< stability criteria violated
-  int failedStep = -1;                  ///< step where it failed, -1 if none
-  bool interrupted = false;             ///< stopped by the user (Ctrl-C)
-  double peakMemoryMb = kNone;          ///< peak resident set of the process
-  double wallSeconds = 0;               ///< whole run
+  /// Against the "equilibrium" run (FibreMSS converged at every pose): RMS over the poses, and
+  /// the worst pose's RMS.
+  double rmsToEquilibriumMm = kNone;
+  double worstPoseRmsToEquilibriumMm = kNone;  ///< the largest per-pose RMS to equilibrium
+  int rmsToEquilibriumPoses = 0;               ///< poses rmsToEquilibriumMm covers
+  int unconvergedPoses = 0;  ///< "equilibrium" run: poses that hit the iteration cap unconverged
+  int rmsToFemPoses = 0;     ///< poses rmsToFemMm covers (both runs reached them intact)
+  int rmsToSelfReferencePoses = 0;  ///< poses rmsToSelfReferenceMm covers
+  bool nan = false;                 ///< a NaN or inf appeared
+  bool exploded = false;            ///< stability criteria violated
+  int failedStep = -1;              ///< step where it failed, -1 if none
+  bool interrupted = false;         ///< stopped by the user (Ctrl-C)
+  double peakMemoryMb = kNone;      ///< peak resident set of the process
+  double wallSeconds = 0;           ///< whole run
+
+  AnalyticMetrics analytic;  ///< the scene's exact case, if it is one
 
   /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
   /// a NaN or exploded pose is left out.

@@ -24,6 +24,19 @@ struct OutputSettings {
   bool writeFibres = true;     ///< deformed fibres in frames
 };
 
+/// An exact case the scene reproduces (the analytic tier): a straight cylindrical muscle whose
+/// free length (between its attachments) is stretched or twisted by its bones. `run` and
+/// `compare` measure its first muscle at the last pose beside the exact answer.
+struct AnalyticCase {
+  std::string type = "none";     ///< "none", "cylinder-stretch" or "cylinder-twist"
+  btVector3 axisStart{0, 0, 0};  ///< rest axis where the free length starts (the fixed side) [m]
+  btVector3 axisEnd{0, 0, 0};    ///< rest axis where the free length ends [m]
+  double stretch = 1;            ///< free length at the last pose / at rest (symmetric about the
+                                 ///< middle, along the axis)
+  double twistDeg = 0;  ///< rotation of the axisEnd side about start → end at the last pose [°]
+  double poissonRatio = 0.49;  ///< ν of the continuum the exact stretch answer is for
+};
+
 /// A scene resolved into what preparation and simulation take; all SI.
 struct LoadedScene {
   std::string name;                   ///< scene name (built-in name or file stem)
@@ -38,6 +51,7 @@ struct LoadedScene {
   std::vector<double> poseLabels;     ///< per pose, e.g. the sweep angle in degrees
   SimulationParameters simulation;    ///< solver settings
   OutputSettings outputs;             ///< output settings
+  AnalyticCase analytic;              ///< the exact case it reproduces (type "none": none)
   std::vector<std::string> warnings;  ///< things found while loading that a run can live with
   std::vector<std::string> notes;     ///< what loading changed that a user should know
                                       ///< (large jumps split into sub-poses, ...)

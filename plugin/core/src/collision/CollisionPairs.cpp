@@ -6,8 +6,6 @@
 #include <cmath>
 #include <utility>
 
-#include "integrators/Integrators.h"
-
 namespace fibremss {
 namespace {
 
@@ -251,13 +249,13 @@ CandidateList sizedList(size_t pairs, size_t particles) {
 
 }  // namespace
 
-void buildTree(MuscleState& muscle) {
+void buildTree(MuscleState& muscle, bool rebuildEveryStep) {
   const MuscleSettings& settings = *muscle.settings;
   muscle.treeSkin = kTreeSkin * muscle.meanRadius;
   muscle.treeReach = muscle.treeSkin / 2;
   muscle.treeSnapshot = muscle.positions;
   muscle.tree.build(settings.boundaryParticles, muscle.positions, settings.radii, muscle.treeReach,
-                    solverParameters(muscle).rebuildEveryStep);
+                    rebuildEveryStep);
 }
 
 bool refitTree(MuscleState& muscle) {
@@ -391,9 +389,8 @@ void forgetBoneSides(MuscleState& muscle) {
   std::fill(muscle.sideBones.begin(), muscle.sideBones.end(), -1);
 }
 
-void applyPushes(MuscleState& muscle, bool hasVelocities) {
+void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {
   ++muscle.contactRound;
-  const bool sliding = solverParameters(muscle).slidingContacts;
   size_t pinched = 0;
   for (uint32_t i : muscle.settings->boundaryParticles) {
     if (muscle.pushCounts[i] == 0) continue;

@@ -61,8 +61,9 @@ constexpr btScalar kTreeSkin = btScalar(0.25);
 /// thigh13 (R=20, 40), hip-extension and pinch overflows with this room.
 constexpr size_t kListSlack = 4;
 /// Builds a muscle's tree with its skin (MuscleState::treeSkin = kTreeSkin · meanRadius) and takes
-/// the snapshot; rebuildable in the thesis' rebuild-every-step mode. Allocates.
-void buildTree(MuscleState& muscle);
+/// the snapshot; rebuildable when `rebuildEveryStep` (the thesis' mode,
+/// SimulationParameters::rebuildEveryStep). Allocates.
+void buildTree(MuscleState& muscle, bool rebuildEveryStep);
 /// Refits a muscle's tree (same topology, a new snapshot and epoch) when some boundary particle
 /// moved farther than the tree's reach from its snapshot — whatever moved it (integration,
 /// bones, rollback, the guard, a user); returns whether it refitted. Until then every sphere
@@ -130,10 +131,10 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversal
 void forgetBoneSides(MuscleState& muscle);
 
 /// Moves every pushed particle by its accumulated push and removes its velocity into the push
-/// (SimulationParameters::slidingContacts; else all of it: previous = position, velocities
-/// zeroed when the integrator `hasVelocities`); clears the pushes. A particle two bones press from
-/// opposite sides (pinched: no room between them) is moved to equal overlaps and out sideways where
-/// the bones leave a way out; muscle.pinched counts such particles.
-void applyPushes(MuscleState& muscle, bool hasVelocities);
+/// (when `sliding`, SimulationParameters::slidingContacts; else all of it: previous = position,
+/// velocities zeroed when the integrator `hasVelocities`); clears the pushes. A particle two bones
+/// press from opposite sides (pinched: no room between them) is moved to equal overlaps and out
+/// sideways where the bones leave a way out; muscle.pinched counts such particles.
+void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding);
 
 }  // namespace fibremss

@@ -26,9 +26,4 @@ const TimeIntegrator& integratorFor(Integrator kind) {
   throw std::invalid_argument(std::string("unknown integrator: ") + toString(kind));
 }
 
-const SimulationParameters& solverParameters(const MuscleState& muscle) {
-  static const SimulationParameters defaults;
-  return muscle.parameters ? *muscle.parameters : defaults;
-}
-
 }  // namespace fibremss

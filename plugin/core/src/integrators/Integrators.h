@@ -27,9 +27,10 @@ class TimeIntegrator {
  public:
   virtual ~TimeIntegrator() = default;
   /// Advances the free particles of `muscle` by dt; `previousDt` is the step that led from
-  /// `previous` to `positions`. Solver settings come from muscle.parameters.
-  virtual IntegrationResult advance(MuscleState& muscle, btScalar dt,
-                                    btScalar previousDt) const = 0;
+  /// `previous` to `positions`. `parameters`: the step's solver settings (implicit solves,
+  /// constraint passes).
+  virtual IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
+                                    btScalar dt, btScalar previousDt) const = 0;
   /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs and sets the
   /// muscle's stability bound for it; called when the muscle is added and when the integrator
   /// changes, never inside the iterations.
@@ -53,8 +54,5 @@ const TimeIntegrator& integratorFor(Integrator kind);
 inline void ensurePrepared(const TimeIntegrator& integrator, MuscleState& muscle) {
   if (!muscle.prepared || muscle.preparedFor != integrator.kind()) integrator.prepare(muscle);
 }
-
-/// The solver settings of a muscle: its system's parameters, or the defaults when it has none.
-const SimulationParameters& solverParameters(const MuscleState& muscle);
 
 }  // namespace fibremss

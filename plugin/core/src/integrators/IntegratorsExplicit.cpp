@@ -70,7 +70,8 @@ size_t advanceVerletVector(MuscleState& muscle, btScalar keep, btScalar forceSca
 /// adaptive dt would raise the velocity and pump energy in.
 class VerletIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, btScalar dt, btScalar previousDt) const override {
+  IntegrationResult advance(MuscleState& muscle, const SimulationParameters&, btScalar dt,
+                            btScalar previousDt) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar gamma = settings.damping * dt / (2 * settings.particleMass);
     const btScalar forceScale = dt * dt / (settings.particleMass * (1 + gamma));
@@ -95,7 +96,8 @@ class VerletIntegrator final : public TimeIntegrator {
 /// Semi-implicit (symplectic) Euler: v += dt/m·(F − c·v); x += dt·v.
 class SemiImplicitEulerIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, btScalar dt, btScalar) const override {
+  IntegrationResult advance(MuscleState& muscle, const SimulationParameters&, btScalar dt,
+                            btScalar) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     IntegrationResult result;
@@ -133,7 +135,8 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
                        std::span<const btScalar> weights)
       : kind_(kind), offsets_(offsets), weights_(weights) {}
 
-  IntegrationResult advance(MuscleState& muscle, btScalar dt, btScalar) const override {
+  IntegrationResult advance(MuscleState& muscle, const SimulationParameters&, btScalar dt,
+                            btScalar) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     const btScalar damping = settings.damping;

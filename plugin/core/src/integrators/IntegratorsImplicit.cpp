@@ -121,10 +121,10 @@ class ImplicitIntegrator final : public TimeIntegrator {
  public:
   explicit ImplicitIntegrator(Integrator kind) : kind_(kind) {}
 
-  IntegrationResult advance(MuscleState& muscle, btScalar dt, btScalar previousDt) const override {
+  IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
+                            btScalar dt, btScalar previousDt) const override {
     auto& w = static_cast<ImplicitWorkspace&>(*muscle.workspace);
     const MuscleSettings& settings = *muscle.settings;
-    const SimulationParameters& parameters = solverParameters(muscle);
     const double m = settings.particleMass;
     const double c = settings.damping;
     const double h = dt;

@@ -40,21 +40,29 @@ struct IntegratorWorkspace {
   virtual ~IntegratorWorkspace() = default;
 };
 
-/// A muscle: settings plus the state a step changes.
-struct MuscleState {
-  std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
-  std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
-  std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
+/// A muscle's particles as every iteration reads and writes them (the hot part), structure of
+/// arrays, size particleCount() unless said otherwise.
+struct ParticleState {
+  std::vector<btVector3> positions;         ///< x(t) [m]
+  std::vector<btVector3> previous;          ///< x(t−dt) [m]
+  std::vector<btVector3> velocities;        ///< for velocity-based integrators [m/s]
+  std::vector<btVector3> forces;            ///< spring forces of this iteration [N]
+  std::vector<btScalar> stepRadius;         ///< r of eq 5.1: own radius, or the mean for inner ones
+  std::vector<uint32_t> freeParticles;      ///< indices of particles that are not fixed
+  btScalar stableTimeStep = 0;              ///< largest dt for which damped Verlet stays stable [s]
+  btScalar meanRadius = 0;                  ///< mean boundary radius [m]
+  double restLengthSum = 0;                 ///< Σ L0 over the springs [m]
+  std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
+  std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
+  bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
+  std::vector<btVector3> surface;           ///< deformed surface vertices (output)
+};
 
-  // Particles, structure-of-arrays, size particleCount().
-  std::vector<btVector3> positions;     ///< x(t) [m]
-  std::vector<btVector3> previous;      ///< x(t−dt) [m]
-  std::vector<btVector3> velocities;    ///< for velocity-based integrators [m/s]
-  std::vector<btVector3> forces;        ///< spring forces of this iteration [N]
-  std::vector<btVector3> pushes;        ///< collision pushes accumulated this iteration [m]
-  std::vector<uint32_t> pushCounts;     ///< pairs that pushed each particle this iteration
-  std::vector<btScalar> stepRadius;     ///< r of eq 5.1: own radius, or the mean for inner ones
-  std::vector<uint32_t> freeParticles;  ///< indices of particles that are not fixed
+/// A muscle's contact scratch: the pushes of this iteration's collision pairs and what the
+/// response remembers between iterations.
+struct ContactState {
+  std::vector<btVector3> pushes;     ///< collision pushes accumulated this iteration [m]
+  std::vector<uint32_t> pushCounts;  ///< pairs that pushed each particle this iteration
 
   /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
   /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).
@@ -71,12 +79,11 @@ struct MuscleState {
   std::vector<btVector3> otherBonePushes;  ///< Σ pushes of every other bone this iteration [m]
   size_t pinched = 0;      ///< particles caught between two bones in the last response
   size_t tornSprings = 0;  ///< most springs found burst while it was trapped (the guard's)
+};
 
-  btScalar stableTimeStep = 0;  ///< largest dt for which damped Verlet stays stable [s]
-  btScalar meanRadius = 0;      ///< mean boundary radius [m]
-  double restLengthSum = 0;     ///< Σ L0 over the springs [m]
-  SphereTree tree;              ///< boundary particle spheres, world frame (refitTree)
-  uint32_t slot = 0;            ///< the muscle's slot in its system (names it in pair lists)
+/// A muscle's sphere tree and the candidate lists of its leaf pairs (CollisionPairs.h).
+struct TreeState {
+  SphereTree tree;  ///< boundary particle spheres, world frame (refitTree)
   /// Verlet skin of the tree (refitTree): leaves are the spheres around treeSnapshot grown by
   /// treeReach, treeSkin/2 or 0 while the muscle moves faster than that every iteration [m].
   btScalar treeSkin = 0;
@@ -93,22 +100,27 @@ struct MuscleState {
   std::vector<CandidateList> muscleLists;
   std::vector<CandidateList> boneLists;  ///< leaf pairs with each bone, by bone slot
   size_t candidateOverflows = 0;  ///< listings or pair contact records that overflowed, unsummed
+};
 
-  std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
-  std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
-  bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
-  std::vector<btVector3> surface;           ///< deformed surface vertices (output)
+/// The last good state (MuscleSystemGuard.cpp): saved at the start of a step, same sizes.
+struct GuardSnapshot {
+  std::vector<btVector3> goodPositions;   ///< positions at the start of the step [m]
+  std::vector<btVector3> goodPrevious;    ///< previous at the start of the step [m]
+  std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
+};
 
-  /// The system's parameters (integrators read their solver settings; null: the defaults).
-  const SimulationParameters* parameters = nullptr;
+/// A muscle: settings, its bones and slot, and the state a step changes in four parts (stages
+/// that need one part can take it alone). Solver settings are not here: the step passes them to
+/// the stages.
+struct MuscleState : ParticleState, ContactState, TreeState, GuardSnapshot {
+  std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
+  std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
+  std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
+  uint32_t slot = 0;               ///< the muscle's slot in its system (names it in pair lists)
   std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
   Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
   bool prepared = false;                           ///< workspace made for `preparedFor`
   bool frozen = false;  ///< stopped by the numerical guard: skipped by every part of a step
-  // The last good state (MuscleSystemGuard.cpp): saved at the start of a step, same sizes.
-  std::vector<btVector3> goodPositions;   ///< positions at the start of the step [m]
-  std::vector<btVector3> goodPrevious;    ///< previous at the start of the step [m]
-  std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
 };
 
 }  // namespace fibremss

@@ -170,8 +170,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       state->previous[i] = state->positions[i];
     }
   }
-  state->parameters = &impl_->parameters;
-  buildTree(*state);
+  buildTree(*state, impl_->parameters.rebuildEveryStep);
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());

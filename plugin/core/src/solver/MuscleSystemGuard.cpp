@@ -51,11 +51,12 @@ double extent(const std::vector<btVector3>& points) {
   return double(lower.distance(upper));
 }
 
-/// `requested` with the dt cap (and the lower clamp) divided by 2^halvings and the iterations
-/// multiplied by it, so that the step still covers the same bone motion, in smaller iterations.
-SimulationParameters smallerSteps(const SimulationParameters& requested, int halvings) {
+/// The step size of `requested` with the dt cap (and the lower clamp) divided by 2^halvings and
+/// the iterations multiplied by it, so that the step still covers the same bone motion, in
+/// smaller iterations.
+StepSize smallerSteps(const SimulationParameters& requested, int halvings) {
   const int factor = 1 << halvings;
-  SimulationParameters smaller = requested;
+  StepSize smaller;
   smaller.timeStep = requested.timeStep / static_cast<btScalar>(factor);
   smaller.minTimeStep = requested.minTimeStep / static_cast<btScalar>(factor);
   smaller.iterations = std::max(requested.iterations, 1) > INT_MAX / factor
@@ -118,7 +119,7 @@ void MuscleSystem::Impl::guardedStep() {
     bone.goodCurrent = bone.current;
   }
   const btScalar goodPreviousDt = previousDt;
-  const SimulationParameters requested = parameters;
+  StepSize size = smallerSteps(parameters, 0);
 
   StepTiming spent;
   int iterations = 0, retries = 0;
@@ -126,14 +127,14 @@ void MuscleSystem::Impl::guardedStep() {
   MuscleHandle failedMuscle;
   bool failedNan = false, rolledBack = false, failed = false;
   while (true) {
-    step();
+    step(size);
     add(spent, stats.timing);
     iterations += stats.iterations;
     if (!stats.nan && !stats.exploded) break;
 
     // Attribution: which muscles failed (frozen ones are out of the step and of the blame).
     const bool retry =
-        policy == FailurePolicy::Retry && retries < std::min(requested.maxRetries, kMaxHalvings);
+        policy == FailurePolicy::Retry && retries < std::min(parameters.maxRetries, kMaxHalvings);
     size_t blamed = 0;
     for (uint32_t slot : muscles.order) {
       MuscleState& state = *muscles.states[slot];
@@ -175,9 +176,8 @@ void MuscleSystem::Impl::guardedStep() {
     }
     previousDt = goodPreviousDt;
     rolledBack = true;
-    parameters = retry ? smallerSteps(requested, ++retries) : requested;
+    size = smallerSteps(parameters, retry ? ++retries : 0);
   }
-  parameters = requested;
 
   // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
   // started) and is pushed out of them.
@@ -193,7 +193,7 @@ void MuscleSystem::Impl::guardedStep() {
         refitTree(state);
         for (uint32_t slot : bones.order)
           collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
-        applyPushes(state, velocities);
+        applyPushes(state, velocities, parameters.slidingContacts);
       }
     thread.contacts.clear();
     if (!state.surface.empty())

@@ -69,6 +69,14 @@ struct MusclePairTask {
   MuscleContacts contacts;  ///< in pairContacts, sized by the pair's candidate list
 };
 
+/// The sizes of one step attempt: the parameters', or smaller while the guard retries a failed
+/// step (the parameters themselves are never changed by a step).
+struct StepSize {
+  btScalar timeStep = 0;     ///< largest dt (SimulationParameters::timeStep) [s]
+  btScalar minTimeStep = 0;  ///< smallest adaptive dt (SimulationParameters::minTimeStep) [s]
+  int iterations = 1;        ///< iteration cap (SimulationParameters::iterations, at least 1)
+};
+
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
 struct MuscleSystem::Impl {
   SimulationParameters parameters;             ///< how to step
@@ -122,10 +130,10 @@ struct MuscleSystem::Impl {
   enum class BoneMotion { Iteration, SinceStepStart };
   /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
   void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
-  btScalar timeStep() const;
+  btScalar timeStep(const StepSize& size) const;
   void collideMusclePairs();
   void collide();
-  void step();
+  void step(const StepSize& size);
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
 };
 

@@ -177,11 +177,11 @@ void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) cons
 }
 
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
-btScalar MuscleSystem::Impl::timeStep() const {
-  if (!parameters.adaptiveTimeStep) return parameters.timeStep;
-  btScalar dt = parameters.timeStep;
+btScalar MuscleSystem::Impl::timeStep(const StepSize& size) const {
+  if (!parameters.adaptiveTimeStep) return size.timeStep;
+  btScalar dt = size.timeStep;
   for (uint32_t slot : active) dt = std::min(dt, results[slot].safeTimeStep);
-  return std::max(dt, parameters.minTimeStep);
+  return std::max(dt, size.minTimeStep);
 }
 
 // Pairs of muscles whose bounds meet, in two phases without waiting: every pair records its
@@ -243,9 +243,10 @@ void MuscleSystem::Impl::collide() {
 
   start = Clock::now();
   const bool hasVelocities = integratorFor(parameters.integrator).usesVelocities();
+  const bool sliding = parameters.slidingContacts;
   if (any)
-    forEachMuscle([hasVelocities](MuscleState& state, uint32_t, unsigned) {
-      applyPushes(state, hasVelocities);
+    forEachMuscle([hasVelocities, sliding](MuscleState& state, uint32_t, unsigned) {
+      applyPushes(state, hasVelocities, sliding);
     });
   stats.contacts = contacts.found;
   stats.candidates = contacts.candidates;
@@ -254,11 +255,11 @@ void MuscleSystem::Impl::collide() {
   stats.timing.response += millisecondsSince(start);
 }
 
-void MuscleSystem::Impl::step() {
+void MuscleSystem::Impl::step(const StepSize& size) {
   const Clock::time_point stepStart = Clock::now();
   stats = StepStats{};
   const TimeIntegrator& integrator = integratorFor(parameters.integrator);
-  const int cap = std::max(1, parameters.iterations);
+  const int cap = size.iterations;
   prepareWorkers();
   // Largest muscles first: handed out in this order, the threads finish close together.
   active.clear();
@@ -333,10 +334,10 @@ void MuscleSystem::Impl::step() {
     }
     stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
 
-    const btScalar dt = timeStep();
+    const btScalar dt = timeStep(size);
     const btScalar lastDt = previousDt > 0 ? previousDt : dt;
     forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
-      const IntegrationResult integration = integrator.advance(state, dt, lastDt);
+      const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
       results[slot].displacement = integration.displacement;
       results[slot].finite = integration.finite;
     });

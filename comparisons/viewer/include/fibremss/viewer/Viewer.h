@@ -1,0 +1,51 @@
+#pragma once
+// `fibremss view`: an interactive window (GLFW, OpenGL, Dear ImGui) that steps a scene live:
+// bones, muscle surfaces coloured by an array, particles, fibres, springs, bone spheres and
+// contacts through the world's btIDebugDraw, play/pause/step/pose, the per-part timings, an
+// orbit/pan/zoom camera. With a screenshot path it renders once after some steps, writes a
+// PNG and returns (under Xvfb where there is no display).
+#include <string>
+#include <vector>
+
+#include "fibremss/viewer/Camera.h"
+
+namespace fibremss::viewer {
+
+/// What to show and how; the defaults open a window on the scene at rest.
+struct ViewerOptions {
+  std::string scene;                   ///< built-in scene name or .json path
+  std::vector<std::string> overrides;  ///< key=value scene overrides, in order
+  std::string screenshot;  ///< write this PNG after `steps` steps and return ("": interactive)
+  int steps = 0;           ///< steps taken before the first picture
+  int width = 1280;        ///< window width [px]
+  int height = 800;        ///< window height [px]
+  std::string colourBy = "fibre_stretch";  ///< muscle_id, fibre_stretch or displacement
+  int muscleDebugFlags = 0;                ///< DebugDrawFlag bits drawn through the world's drawer
+  bool bones = true;                       ///< draw the bone meshes
+  float surfaceOpacity = 1;                ///< muscle surfaces' opacity (0 hides them)
+  float azimuthDeg = 30;                   ///< camera angle about the up (y) axis [deg]
+  float elevationDeg = 15;                 ///< camera angle above the horizontal plane [deg]
+  float zoom = 1;                          ///< > 1 closer than the framed view
+  bool hideUi = false;                     ///< no panel (H toggles it in the window)
+  bool loop = false;                       ///< sweep the motion back and forth past its last pose
+};
+
+/// What a viewer session ended with, to check a screenshot against.
+struct ViewerResult {
+  Camera camera;      ///< the camera of the last picture
+  int width = 0;      ///< its size [px]
+  int height = 0;     ///< [px]
+  int viewX = 0;      ///< the scene is drawn right of this column (left of it: the panel) [px]
+  int viewWidth = 0;  ///< in this many columns, the full height [px]
+  int steps = 0;      ///< steps taken
+};
+
+/// Opens the window and runs until it is closed (or, with a screenshot path, until the PNG is
+/// written). Throws InputError for a bad scene, std::runtime_error when no window can be
+/// opened or the PNG not written.
+ViewerResult runViewer(const ViewerOptions& options);
+
+/// The arrays muscles can be coloured by.
+const std::vector<std::string>& colourArrays();
+
+}  // namespace fibremss::viewer

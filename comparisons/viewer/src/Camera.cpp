@@ -1,0 +1,131 @@
+#include "fibremss/viewer/Camera.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace fibremss::viewer {
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+
+float radians(float degrees) {
+  return degrees * kPi / 180;
+}
+Vec3 add(const Vec3& a, const Vec3& b) {
+  return {a[0] + b[0], a[1] + b[1], a[2] + b[2]};
+}
+Vec3 sub(const Vec3& a, const Vec3& b) {
+  return {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+}
+Vec3 scale(const Vec3& a, float s) {
+  return {a[0] * s, a[1] * s, a[2] * s};
+}
+float dot(const Vec3& a, const Vec3& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3 normalised(const Vec3& a) {
+  return scale(a, 1 / std::sqrt(dot(a, a)));
+}
+
+/// From the target towards the eye, unit length (y up).
+Vec3 backward(float azimuthDeg, float elevationDeg) {
+  const float az = radians(azimuthDeg), el = radians(elevationDeg);
+  return {std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az)};
+}
+
+/// The camera's right and up directions in world coordinates.
+void basis(float azimuthDeg, float elevationDeg, Vec3& right, Vec3& up) {
+  const Vec3 back = backward(azimuthDeg, elevationDeg);
+  right = normalised(cross({0, 1, 0}, back));
+  up = cross(back, right);
+}
+
+}  // namespace
+
+void Camera::frame(const Vec3& lower, const Vec3& upper) {
+  target_ = scale(add(lower, upper), 0.5f);
+  const Vec3 diagonal = sub(upper, lower);
+  extent_ = std::max(0.5f * std::sqrt(dot(diagonal, diagonal)), 1e-6f);
+  framedDistance_ = distance_ = extent_ / std::sin(radians(fovYDeg / 2));
+}
+
+void Camera::orbit(float azimuthDeg, float elevationDeg) {
+  azimuth_ = std::remainder(azimuth_ + azimuthDeg, 360.0f);
+  elevation_ = std::clamp(elevation_ + elevationDeg, -89.0f, 89.0f);
+}
+
+void Camera::pan(float right, float up) {
+  Vec3 r, u;
+  basis(azimuth_, elevation_, r, u);
+  const float height = 2 * distance_ * std::tan(radians(fovYDeg / 2));
+  target_ = add(target_, add(scale(r, right * height), scale(u, up * height)));
+}
+
+void Camera::zoom(float factor) {
+  distance_ = std::clamp(distance_ / factor, 1e-3f * extent_, 100 * framedDistance_);
+}
+
+void Camera::setView(float azimuthDeg, float elevationDeg, float zoomFactor) {
+  azimuth_ = 0;
+  elevation_ = 0;
+  orbit(azimuthDeg, elevationDeg);
+  distance_ = framedDistance_;
+  zoom(zoomFactor);
+}
+
+Vec3 Camera::eye() const {
+  return add(target_, scale(backward(azimuth_, elevation_), distance_));
+}
+
+Mat4 Camera::view() const {
+  const Vec3 back = backward(azimuth_, elevation_);
+  Vec3 r, u;
+  basis(azimuth_, elevation_, r, u);
+  const Vec3 e = eye();
+  return {r[0], u[0], back[0], 0, r[1],       u[1],       back[1],       0,
+          r[2], u[2], back[2], 0, -dot(r, e), -dot(u, e), -dot(back, e), 1};
+}
+
+Mat4 Camera::projection(float aspect) const {
+  const float near = std::max(distance_ - 2 * extent_, distance_ / 100);
+  const float far = distance_ + 2 * extent_;
+  const float f = 1 / std::tan(radians(fovYDeg / 2));
+  return {f / aspect,
+          0,
+          0,
+          0,
+          0,
+          f,
+          0,
+          0,
+          0,
+          0,
+          (far + near) / (near - far),
+          -1,
+          0,
+          0,
+          2 * far * near / (near - far),
+          0};
+}
+
+Pixel Camera::project(const Vec3& point, int width, int height) const {
+  const Mat4 v = view(), p = projection(float(width) / float(height));
+  auto apply = [](const Mat4& m, const std::array<float, 4>& x) {
+    std::array<float, 4> y{};
+    for (int row = 0; row < 4; ++row)
+      for (int col = 0; col < 4; ++col) y[row] += m[col * 4 + row] * x[col];
+    return y;
+  };
+  const std::array<float, 4> clip = apply(p, apply(v, {point[0], point[1], point[2], 1}));
+  Pixel pixel;
+  if (clip[3] <= 0) return pixel;
+  pixel.x = (clip[0] / clip[3] + 1) / 2 * float(width);
+  pixel.y = (1 - clip[1] / clip[3]) / 2 * float(height);
+  pixel.visible = pixel.x >= 0 && pixel.y >= 0 && pixel.x < float(width) && pixel.y < float(height);
+  return pixel;
+}
+
+}  // namespace fibremss::viewer

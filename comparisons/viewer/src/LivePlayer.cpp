@@ -1,0 +1,195 @@
+#include "LivePlayer.h"
+
+#include <imgui.h>
+
+#include <algorithm>
+#include <cfloat>
+#include <cstdio>
+#include <string>
+#include <utility>
+
+namespace fibremss::viewer {
+namespace {
+
+/// The pose's label (e.g. the joint angle) as text.
+std::string poseLabel(const LoadedScene& scene, int pose) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.4g",
+                pose < int(scene.poseLabels.size()) ? scene.poseLabels[pose] : double(pose));
+  return text;
+}
+
+}  // namespace
+
+LivePlayer::LivePlayer(std::unique_ptr<LiveScene> scene, const DebugRequest& debug)
+    : scene_(std::move(scene)), loop_(scene_->loop), debug_(debug), worker_([this] { work(); }) {}
+
+LivePlayer::~LivePlayer() {
+  {
+    std::lock_guard lock(mutex_);
+    quit_ = true;
+  }
+  wake_.notify_one();
+  worker_.join();
+}
+
+bool LivePlayer::fetch(Snapshot& into) {
+  {
+    std::lock_guard lock(mutex_);
+    if (newest_.snapshot.version <= into.version) return false;
+    shown_ = newest_;
+  }
+  if (shown_.snapshot.steps > into.steps) {
+    stepMs_.push_back(float(shown_.stats.timing.total));
+    if (stepMs_.size() > 200) stepMs_.erase(stepMs_.begin());
+  }
+  into = shown_.snapshot;
+  return true;
+}
+
+void LivePlayer::controls(const Snapshot& shown) {
+  const LoadedScene& scene = scene_->scene();
+  ImGui::Text("%s: step %d, pose %d of %d (%s)", scene.name.c_str(), shown.steps, shown_.shownPose,
+              std::max(scene.poseCount, 1), poseLabel(scene, shown_.shownPose).c_str());
+  bool playing = false;
+  {
+    std::lock_guard lock(mutex_);
+    playing = playing_;
+  }
+  if (ImGui::Button(playing ? "Pause (space)" : "Play (space)")) togglePlaying();
+  ImGui::SameLine();
+  if (ImGui::Button("Step (S)")) step();
+  ImGui::SameLine();
+  if (ImGui::Button("Reset (R)")) reset();
+  ImGui::SameLine();
+  bool loop = false;
+  {
+    std::lock_guard lock(mutex_);
+    loop = loop_;
+  }
+  if (ImGui::Checkbox("loop", &loop)) {
+    std::lock_guard lock(mutex_);
+    loop_ = loop;
+  }
+  int pose = shown_.nextPose;
+  const std::string format = "%d (" + poseLabel(scene, pose) + ")";
+  if (ImGui::SliderInt("next pose", &pose, 0, std::max(scene.poseCount, 1) - 1, format.c_str())) {
+    {
+      std::lock_guard lock(mutex_);
+      pose_ = pose;
+    }
+    wake_.notify_one();
+  }
+}
+
+void LivePlayer::timings(const Snapshot& shown) {
+  const StepStats& stats = shown_.stats;
+  ImGui::Text("last step: %d iterations, %zu contacts, %zu candidates", stats.iterations,
+              stats.contacts, stats.candidates);
+  const StepTiming& t = stats.timing;
+  ImGui::Text("ms: mss %.3g | muscle CD %.3g | bone CD %.3g", t.mss, t.muscleCd, t.boneCd);
+  ImGui::Text("    response %.3g | output %.3g", t.response, t.output);
+  ImGui::Text("ms: step total %.3g (%.3g per iteration)", t.total,
+              t.total / std::max(stats.iterations, 1));
+  if (!stepMs_.empty())
+    ImGui::PlotLines("step ms", stepMs_.data(), int(stepMs_.size()), 0, nullptr, 0, FLT_MAX,
+                     ImVec2(0, 40));
+  if (stats.failed || stats.frozenMuscles > 0)
+    ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "numerical guard: %zu muscle(s) frozen%s",
+                       stats.frozenMuscles, stats.failed ? ", step failed" : "");
+}
+
+void LivePlayer::togglePlaying() {
+  {
+    std::lock_guard lock(mutex_);
+    playing_ = !playing_;
+  }
+  wake_.notify_one();
+}
+
+void LivePlayer::requestSteps(int steps) {
+  {
+    std::lock_guard lock(mutex_);
+    stepsRequested_ += steps;
+  }
+  wake_.notify_one();
+}
+
+void LivePlayer::reset() {
+  {
+    std::lock_guard lock(mutex_);
+    reset_ = true;
+    stepsRequested_ = 0;
+  }
+  wake_.notify_one();
+}
+
+void LivePlayer::setDebug(const DebugRequest& debug) {
+  {
+    std::lock_guard lock(mutex_);
+    if (debug == debug_) return;
+    debug_ = debug;
+    redraw_ = true;
+  }
+  wake_.notify_one();
+}
+
+void LivePlayer::advance(int steps) {
+  int target = 0;
+  {
+    std::lock_guard lock(mutex_);
+    target = newest_.snapshot.steps + stepsRequested_ + steps;
+  }
+  requestSteps(steps);
+  std::unique_lock lock(mutex_);
+  published_.wait(
+      lock, [&] { return newest_.snapshot.version >= 0 && newest_.snapshot.steps >= target; });
+}
+
+bool LivePlayer::hasWork() const {
+  return quit_ || playing_ || stepsRequested_ > 0 || reset_ || pose_ >= 0 || redraw_;
+}
+
+void LivePlayer::work() {
+  std::unique_lock lock(mutex_);
+  while (true) {
+    wake_.wait(lock, [this] { return hasWork(); });
+    if (quit_) return;
+    const bool reset = std::exchange(reset_, false);
+    const int pose = std::exchange(pose_, -1);
+    const bool step = playing_ || stepsRequested_ > 0;
+    if (!playing_ && stepsRequested_ > 0) --stepsRequested_;
+    redraw_ = false;
+    scene_->loop = loop_;
+    const DebugRequest debug = debug_;
+    lock.unlock();  // the step runs while the window draws and takes requests
+    if (reset) scene_->reset();
+    if (pose >= 0) scene_->setPose(pose);
+    if (step) scene_->step();
+    publish(debug);
+    lock.lock();
+  }
+}
+
+void LivePlayer::publish(const DebugRequest& debug) {
+  drawer_.clear();
+  drawer_.setDebugMode(debug.bulletMode);
+  scene_->world().setDebugDrawer(&drawer_);
+  scene_->world().setMuscleDebugFlags(debug.muscleFlags);
+  scene_->world().debugDrawWorld();
+  Published next;
+  next.snapshot.frame = scene_->frame();
+  next.snapshot.debug = drawer_.geometry();
+  next.snapshot.steps = scene_->steps();
+  next.stats = scene_->lastStep();
+  next.shownPose = scene_->shownPose();
+  next.nextPose = scene_->pose();
+  {
+    std::lock_guard lock(mutex_);
+    next.snapshot.version = newest_.snapshot.version + 1;
+    newest_ = std::move(next);
+  }
+  published_.notify_all();
+}
+
+}  // namespace fibremss::viewer

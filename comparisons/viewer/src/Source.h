@@ -1,0 +1,51 @@
+#pragma once
+// Where the viewer's pictures come from: a scene stepped live (LivePlayer) or a
+// run's frames (FramePlayer). The window fetches the source's newest Snapshot
+// every frame, draws the source's controls and timings in its panel and passes
+// the playback keys on.
+#include "DebugDrawer.h"
+#include "ViewFrame.h"
+
+namespace fibremss::viewer {
+
+/// What the window shows at one moment.
+struct Snapshot {
+  ViewFrame frame;      ///< surfaces and bones
+  DebugGeometry debug;  ///< lines and points: what the world's debugDrawWorld
+                        ///< drew, or the particles and fibres of a frame
+  int steps = 0;        ///< steps taken (live) or the frame's index (frames)
+  long version = -1;    ///< increases with every new snapshot
+};
+
+/// What to draw besides the surfaces (through the world's btIDebugDraw when
+/// live).
+struct DebugRequest {
+  int muscleFlags = 0;  ///< DebugDrawFlag bits (MuscleWorld::setMuscleDebugFlags)
+  int bulletMode = 0;   ///< btIDebugDraw::DebugDrawModes bits for Bullet's own drawing
+  bool operator==(const DebugRequest&) const = default;
+};
+
+class Source {
+ public:
+  virtual ~Source() = default;
+
+  /// Copies the newest snapshot into `into` when it is newer; returns whether
+  /// it was.
+  virtual bool fetch(Snapshot& into) = 0;
+  /// Draws the panel's playback part: where it is, play/pause, step, reset,
+  /// scrub.
+  virtual void controls(const Snapshot& shown) = 0;
+  /// Draws the per-part timings.
+  virtual void timings(const Snapshot& shown) = 0;
+
+  virtual void togglePlaying() = 0;  ///< play or pause
+  virtual void step() = 0;           ///< one step (frame) forward
+  virtual void reset() = 0;          ///< back to the start
+  /// What to draw besides the surfaces (muscleFlags: particles, fibres, ...).
+  virtual void setDebug(const DebugRequest& debug) = 0;
+  /// Goes `steps` steps (frames) forward and returns once that is what fetch()
+  /// gives.
+  virtual void advance(int steps) = 0;
+};
+
+}  // namespace fibremss::viewer

@@ -1,0 +1,79 @@
+// The analytic built-in scenes (issue 17's analytic tier): a straight cylindrical muscle between
+// two plates, stretched or twisted by them, whose exact answers `run` and `compare` print.
+#include <cmath>
+
+#include "BuiltInParts.h"
+
+namespace fibremss::builtin {
+namespace {
+
+constexpr double kRadius = 10;     // cylinder radius [mm]
+constexpr double kFreeHalf = 50;   // half the free length between the attachments [mm]
+constexpr double kAttachment = 2;  // attachment distance [mm]
+constexpr double kPlateFace = kFreeHalf + kAttachment;  // plates' facing sides at y = ±52
+constexpr double kPlateThickness = 10;
+
+Json plate(double side) {
+  return Json{{"type", "box"},
+              {"centre", vec({0, btScalar(side * (kPlateFace + kPlateThickness / 2)), 0})},
+              {"size", vec({60, btScalar(kPlateThickness), 60})},
+              {"divisions", Json::array({12, 2, 12})}};
+}
+
+/// The cylinder scene without motions: plates at y = ±52 mm, a cylinder of radius 10 mm whose
+/// flat ends sit 1.5 mm inside them, attached within 2 mm (free length 100 mm, y in ±50).
+Json cylinderScene(const std::string& name, const std::string& description) {
+  Json scene = header(name, description);
+  const double end = kPlateFace + 1.5;
+  TubeDefinition tube = muscleTube({{0, btScalar(-end), 0}, {0, 0, 0}, {0, btScalar(end), 0}},
+                                   {{kRadius, kRadius}, {kRadius, kRadius}, {kRadius, kRadius}});
+  Json muscle = tubeMuscle("cylinder", tube);
+  muscle["attachment_distance"] = kAttachment;
+  scene["muscles"] = Json::array({muscle});
+  // Poses held to equilibrium: the exact answers are static.
+  scene["simulation"] = {
+      {"stop", "converged"}, {"epsilon", 1e-4}, {"iterations", 4000}, {"motion_fraction", 0.025}};
+  return scene;
+}
+
+Json analytic(const std::string& type, double stretch, double twistDeg) {
+  return Json{{"type", type},
+              {"axis_start", vec({0, btScalar(-kFreeHalf), 0})},
+              {"axis_end", vec({0, btScalar(kFreeHalf), 0})},
+              {"stretch", stretch},
+              {"twist_deg", twistDeg}};
+}
+
+}  // namespace
+
+Json cylinderStretchScene() {
+  // Both plates move apart along the axis, 2.5 mm each per pose: the free length 100 → 110 mm.
+  Json scene = cylinderScene("cylinder-stretch",
+                             "a straight cylindrical muscle stretched 10 % by its attachments");
+  std::vector<btTransform> up, down;
+  for (int i = 0; i < 3; ++i) {
+    const btScalar shift = btScalar(0.05 * kFreeHalf * i);
+    up.emplace_back(btQuaternion::getIdentity(), btVector3(0, shift, 0));
+    down.emplace_back(btQuaternion::getIdentity(), btVector3(0, -shift, 0));
+  }
+  scene["bones"] = Json::array({bone("plate-lower", plate(-1), keyframes(down)),
+                                bone("plate-upper", plate(1), keyframes(up))});
+  scene["analytic"] = analytic("cylinder-stretch", 1.1, 0);
+  return scene;
+}
+
+Json cylinderTwistScene() {
+  // The upper plate turns about the axis 45° per pose, the lower one holds: 180° in four poses.
+  Json scene =
+      cylinderScene("cylinder-twist", "a straight cylindrical muscle, one end twisted 180 deg");
+  std::vector<btTransform> turns;
+  for (int i = 0; i <= 4; ++i)
+    turns.emplace_back(btQuaternion(btVector3(0, 1, 0), btScalar(M_PI / 4 * i)),
+                       btVector3(0, 0, 0));
+  scene["bones"] = Json::array(
+      {bone("plate-lower", plate(-1)), bone("plate-upper", plate(1), keyframes(turns))});
+  scene["analytic"] = analytic("cylinder-twist", 1, 180);
+  return scene;
+}
+
+}  // namespace fibremss::builtin

@@ -1,0 +1,12 @@
+# Fails when the dynamic section of LIBRARY (fibremss::core) needs assimp or a JSON library.
+execute_process(COMMAND ${READELF} -d ${LIBRARY} OUTPUT_VARIABLE dynamic RESULT_VARIABLE result)
+if(NOT result EQUAL 0 OR NOT dynamic MATCHES "NEEDED")
+  message(FATAL_ERROR "readelf -d ${LIBRARY} failed or lists no NEEDED entry:\n${dynamic}")
+endif()
+string(REGEX MATCHALL "NEEDED[^\n]*" needed "${dynamic}")
+foreach(line ${needed})
+  if(line MATCHES "assimp|json")
+    message(FATAL_ERROR "${LIBRARY} needs ${line}")
+  endif()
+endforeach()
+message(STATUS "${LIBRARY}:\n${needed}")

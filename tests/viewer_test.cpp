@@ -1,0 +1,187 @@
+// `fibremss view`: the camera's projection, and screenshots rendered by the real viewer
+// (GLFW, OpenGL through Mesa, under Xvfb in CI) read back with stb: each muscle is drawn
+// where an independent simulation of the same steps puts it, the background elsewhere.
+#include "fibremss/viewer/Viewer.h"
+
+#include <gtest/gtest.h>
+#include <stb_image.h>
+
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Scene.h"
+#include "support/Process.h"
+
+namespace fibremss {
+namespace {
+
+using testing::runProcess;
+using testing::TemporaryDirectory;
+using viewer::Camera;
+using viewer::Vec3;
+
+/// An 8-bit RGB image read back from a PNG file by stb_image.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<unsigned char> rgb;
+
+  explicit Image(const std::string& path) {
+    int channels = 0;
+    unsigned char* data = stbi_load(path.c_str(), &width, &height, &channels, 3);
+    if (!data) return;
+    rgb.assign(data, data + size_t(3) * width * height);
+    stbi_image_free(data);
+  }
+  std::array<int, 3> at(int x, int y) const {
+    const size_t i = 3 * (size_t(y) * width + x);
+    return {rgb[i], rgb[i + 1], rgb[i + 2]};
+  }
+};
+
+/// The viewer's background (RenderSettings::background) in 8 bits.
+bool isBackground(const std::array<int, 3>& c) {
+  const std::array<int, 3> background{41, 43, 51};
+  for (int k = 0; k < 3; ++k)
+    if (std::abs(c[k] - background[k]) > 3) return false;
+  return true;
+}
+
+/// The first muscle's palette colour is red; lit, it stays clearly red (bones are ivory).
+bool isFirstMuscleColour(const std::array<int, 3>& c) {
+  return c[0] > c[1] + 40 && c[0] > c[2] + 40;
+}
+
+TEST(ViewerCamera, ProjectsTheFramedBoxIntoTheImageAndItsCentreToTheMiddle) {
+  Camera camera;
+  const Vec3 lower{-1, 0, 2}, upper{3, 1, 4};
+  camera.frame(lower, upper);
+  for (float azimuth : {0.0f, 70.0f, 200.0f}) {
+    camera.setView(azimuth, 25, 1);
+    const viewer::Pixel centre = camera.project({1, 0.5f, 3}, 640, 480);
+    ASSERT_TRUE(centre.visible);
+    EXPECT_NEAR(centre.x, 320, 1e-2);
+    EXPECT_NEAR(centre.y, 240, 1e-2);
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3 p{corner & 1 ? upper[0] : lower[0], corner & 2 ? upper[1] : lower[1],
+                   corner & 4 ? upper[2] : lower[2]};
+      EXPECT_TRUE(camera.project(p, 640, 480).visible) << "corner " << corner;
+    }
+  }
+  // Up in the world is up in the image; behind the eye is not visible.
+  camera.setView(0, 0, 1);
+  EXPECT_LT(camera.project({1, 1, 3}, 640, 480).y, 240);
+  const Vec3 eye = camera.eye();
+  EXPECT_FALSE(
+      camera.project({2 * eye[0] - 1, 2 * eye[1] - 0.5f, 2 * eye[2] - 3}, 640, 480).visible);
+}
+
+/// Each muscle's surface centroid after `steps` steps of `scene`, simulated here the way
+/// `fibremss run` steps (one pose per step), independently of the viewer.
+std::vector<Vec3> muscleCentroids(const std::string& name, int steps) {
+  const LoadedScene scene = loadScene(name);
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  MuscleSystem system(scene.simulation);
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  std::vector<MuscleHandle> muscles;
+  for (const auto& muscle : prepared.muscles) muscles.push_back(system.addMuscle(muscle, bones));
+  for (int s = 0; s < steps; ++s) {
+    for (size_t b = 0; b < bones.size(); ++b)
+      system.setBoneTransform(bones[b], scene.bonePose(b, std::min(s, scene.poseCount - 1)));
+    system.step();
+  }
+  std::vector<Vec3> centroids;
+  for (MuscleHandle muscle : muscles) {
+    btVector3 sum(0, 0, 0);
+    for (const btVector3& v : system.surface(muscle)) sum += v;
+    sum /= btScalar(system.surface(muscle).size());
+    centroids.push_back({float(sum.x()), float(sum.y()), float(sum.z())});
+  }
+  return centroids;
+}
+
+TEST(Viewer, ScreenshotDrawsTheMuscleWhereTheSimulationPutsItAndBackgroundElsewhere) {
+  TemporaryDirectory directory("fibremss_viewer_test");
+  viewer::ViewerOptions options;
+  options.scene = "fusiform";
+  options.steps = 3;
+  options.screenshot = (directory.path() / "fusiform.png").string();
+  options.width = 320;
+  options.height = 240;
+  options.colourBy = "muscle_id";
+  options.hideUi = true;
+  options.azimuthDeg = 20;
+  options.elevationDeg = 10;
+  const viewer::ViewerResult result = viewer::runViewer(options);
+  EXPECT_EQ(result.steps, 3);
+
+  const Image image(options.screenshot);
+  ASSERT_EQ(image.width, result.width);
+  ASSERT_EQ(image.height, result.height);
+  for (const auto& [x, y] : std::vector<std::pair<int, int>>{{1, 1},
+                                                             {image.width - 2, 1},
+                                                             {1, image.height - 2},
+                                                             {image.width - 2, image.height - 2}})
+    EXPECT_TRUE(isBackground(image.at(x, y))) << "corner " << x << "," << y;
+
+  const std::vector<Vec3> centroids = muscleCentroids("fusiform", 3);
+  ASSERT_EQ(centroids.size(), 1u);
+  ASSERT_EQ(result.viewX, 0);  // no panel
+  ASSERT_EQ(result.viewWidth, image.width);
+  const viewer::Pixel pixel = result.camera.project(centroids[0], image.width, image.height);
+  ASSERT_TRUE(pixel.visible);
+  // The muscle covers its projected centroid and a few pixels around it.
+  for (int dx : {-2, 0, 2})
+    for (int dy : {-2, 0, 2}) {
+      const std::array<int, 3> c = image.at(int(pixel.x) + dx, int(pixel.y) + dy);
+      EXPECT_TRUE(isFirstMuscleColour(c)) << "at " << pixel.x + dx << "," << pixel.y + dy << ": "
+                                          << c[0] << " " << c[1] << " " << c[2];
+    }
+  // And it is a shape, not a smear: a minority of the image.
+  size_t muscle = 0;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x) muscle += isFirstMuscleColour(image.at(x, y)) ? 1 : 0;
+  EXPECT_GT(muscle, 200u);
+  EXPECT_LT(muscle, size_t(image.width) * image.height / 2);
+}
+
+TEST(Viewer, CommandWritesAScreenshotColouredByFibreStretchWithThePanel) {
+  TemporaryDirectory directory("fibremss_view_cli_test");
+  const std::string png = (directory.path() / "view.png").string();
+  const auto run = runProcess(
+      std::string(FIBREMSS_CLI) + " view fusiform --frames 2 --size 400x300 " +
+      "--colour-by fibre_stretch --draw particles,fibres --opacity 0.6 " + "--screenshot " + png);
+  ASSERT_EQ(run.exitCode, 0) << run.output;
+  EXPECT_NE(run.output.find("wrote " + png + " (400x300, after 2 steps)"), std::string::npos)
+      << run.output;
+  const Image image(png);
+  ASSERT_EQ(image.width, 400);
+  ASSERT_EQ(image.height, 300);
+  std::set<std::array<int, 3>> colours;
+  size_t background = 0;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < image.width; ++x) {
+      colours.insert(image.at(x, y));
+      background += isBackground(image.at(x, y)) ? 1 : 0;
+    }
+  EXPECT_GT(colours.size(), 50u);  // shaded surfaces, the colour map, the panel's text
+  EXPECT_GT(background, size_t(image.width) * image.height / 10);
+}
+
+TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
+  const std::string cli = std::string(FIBREMSS_CLI) + " view ";
+  EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --colour-by pressure --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --draw sparks --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --size 12 --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --camera 1 --screenshot /tmp/x.png").exitCode, 2);
+}
+
+}  // namespace
+}  // namespace fibremss
