@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "collision/BoneDistanceField.h"
+#include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Measures.h"
 #include "fibremss/MuscleSystem.h"
@@ -71,7 +72,7 @@ TEST(DistanceField, GivesTheKnownDistancesNextToTheFacesOfABox) {
   // Beyond the grid the value grows with the distance to it.
   const btScalar far = half.y() + 6 * cell + 0.05f;
   EXPECT_NEAR(field.sample({0, far, 0}).distance, far - half.y(), 2e-4);
-  EXPECT_THROW(BoneDistanceField(mesh, 0, 0), std::invalid_argument);
+  EXPECT_THROW(BoneDistanceField(mesh, 0, 0), InputError);
 }
 
 // ---- Penetration recovery ------------------------------------------------------------------

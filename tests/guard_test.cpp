@@ -324,8 +324,8 @@ TEST(Guard, TheHostsBulletWorldKeepsRunningBesideABurstingMuscle) {
   MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
   world.setGravity(btVector3(0, btScalar(-9.81), 0));
   BoneBody left(leftBone()), right(rightBone());
-  const std::vector<BoneHandle> bones = {world.addBone(left.body(), left.settings()),
-                                         world.addBone(right.body(), right.settings())};
+  const std::vector<BoneHandle> bones = {world.addBone(left.settings(), left.body()),
+                                         world.addBone(right.settings(), right.body())};
   const MuscleHandle soft = world.addMuscle(softMuscle(), bones);
   const MuscleHandle stiff = world.addMuscle(stiffMuscle(), bones);
 

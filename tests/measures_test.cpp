@@ -6,6 +6,8 @@
 #include <cmath>
 #include <vector>
 
+#include "fibremss/Error.h"
+
 namespace fibremss {
 namespace {
 
@@ -39,7 +41,7 @@ TEST(RmsDistance, MixedDisplacementsGiveTheRootMeanSquare) {
 
 TEST(RmsDistance, RejectsDifferentCountsAndMarksEmptyAsNotMeasured) {
   std::vector<btVector3> two(2), three(3);
-  EXPECT_THROW(rmsDistanceMm(two, three), std::invalid_argument);
+  EXPECT_THROW(rmsDistanceMm(two, three), InputError);
   EXPECT_TRUE(std::isnan(rmsDistanceMm({}, {})));
 }
 
@@ -142,7 +144,7 @@ TEST(SpringDeviation, WeightsBySumOfRestLengths) {
   const std::vector<Spring> compressed = {{0, 1, 4, 1}};
   EXPECT_NEAR(springDeviationRatio(compressed, positions), 0.5, 1e-6);
   const std::vector<Spring> outside = {{0, 7, 1, 1}};
-  EXPECT_THROW(springDeviationRatio(outside, positions), std::invalid_argument);
+  EXPECT_THROW(springDeviationRatio(outside, positions), InputError);
 }
 
 TEST(SpringExploded, PastThreeTimesAndPastTheMeanRestLength) {

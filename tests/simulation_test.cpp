@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
@@ -703,7 +704,7 @@ TEST(Handles, RemovedHandlesGoStale) {
   EXPECT_TRUE(system.contains(second));
   EXPECT_EQ(second.index, first.index);
   EXPECT_NE(second.generation, first.generation);
-  EXPECT_THROW(system.positions(first), std::out_of_range);
+  EXPECT_THROW(system.positions(first), InputError);
   EXPECT_EQ(system.muscles().size(), 1u);
   system.step();
 }
@@ -712,10 +713,11 @@ TEST(Handles, BadSettingsAreRejected) {
   MuscleSystem system;
   auto muscle = makeMuscle({{0, 0, 0}, {0.01, 0, 0}}, 1e-5, 0);
   fix(*muscle, 0, 0);
-  EXPECT_THROW(system.addMuscle(muscle, {}),
-               std::invalid_argument);  // bone 0 not given
+  EXPECT_THROW(system.addMuscle(muscle, {}), InputError);  // bone 0 not given
   auto massless = makeMuscle({{0, 0, 0}}, 0, 0);
-  EXPECT_THROW(system.addMuscle(massless, {}), std::invalid_argument);
+  EXPECT_THROW(system.addMuscle(massless, {}), InputError);
+  EXPECT_THROW(system.addMuscle(nullptr, {}), InputError);
+  EXPECT_THROW(system.addBone(nullptr), InputError);
 }
 
 }  // namespace

@@ -174,6 +174,26 @@ TEST(Viewer, CommandWritesAScreenshotColouredByFibreStretchWithThePanel) {
   EXPECT_GT(background, size_t(image.width) * image.height / 10);
 }
 
+TEST(Viewer, ARunsDirectoryShowsTheSceneItRan) {
+  TemporaryDirectory directory("fibremss_view_run_test");
+  const std::string out = (directory.path() / "run").string();
+  const std::string png = (directory.path() / "run.png").string();
+  ASSERT_EQ(runProcess(std::string(FIBREMSS_CLI) + " run fusiform --steps 1 --frame-every 0 " +
+                       "--out " + out + " > /dev/null")
+                .exitCode,
+            0);
+  const auto view = runProcess(std::string(FIBREMSS_CLI) + " view " + out +
+                               " --frames 1 --size 200x150 --screenshot " + png);
+  ASSERT_EQ(view.exitCode, 0);
+  EXPECT_NE(view.output.find("wrote " + png + " (200x150, after 1 steps)"), std::string::npos)
+      << view.output;
+  // A directory that is not a run's is bad input.
+  EXPECT_EQ(runProcess(std::string(FIBREMSS_CLI) + " view " + directory.path().string() +
+                       " --screenshot " + png)
+                .exitCode,
+            2);
+}
+
 TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   const std::string cli = std::string(FIBREMSS_CLI) + " view ";
   EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);

@@ -64,8 +64,8 @@ struct WorldFixture {
     world.setGravity(btVector3(0, btScalar(-9.81), 0));
     world.getWorldInfo().m_gravity = world.getGravity();
     world.getWorldInfo().m_sparsesdf.Initialize();
-    bones.push_back(world.addBone(fixedBone.body(), fixedBone.settings()));
-    bones.push_back(world.addBone(movingBone.body(), movingBone.settings()));
+    bones.push_back(world.addBone(fixedBone.settings(), fixedBone.body()));
+    bones.push_back(world.addBone(movingBone.settings(), movingBone.body()));
   }
   ~WorldFixture() {
     for (MuscleHandle m : world.muscleSystem().muscles()) world.removeMuscle(m);
@@ -189,7 +189,7 @@ TEST(MuscleWorld, AddBonePutsItsBodyIntoTheWorldAndRemoveBoneTakesItOut) {
   WorldFixture f;
   const int objects = f.world.getNumCollisionObjects();
   BoneBody extra(cubeBone("extra", btVector3(0, 0.1f, 0)));
-  const BoneHandle added = f.world.addBone(extra.body(), extra.settings());
+  const BoneHandle added = f.world.addBone(extra.settings(), extra.body());
   EXPECT_EQ(f.world.getNumCollisionObjects(), objects + 1);
   EXPECT_TRUE(f.world.removeBone(added));
   EXPECT_EQ(f.world.getNumCollisionObjects(), objects);
@@ -197,11 +197,35 @@ TEST(MuscleWorld, AddBonePutsItsBodyIntoTheWorldAndRemoveBoneTakesItOut) {
 
   // A body the application already put into the world stays there.
   f.world.addRigidBody(extra.body());
-  const BoneHandle own = f.world.addBone(extra.body(), extra.settings());
+  const BoneHandle own = f.world.addBone(extra.settings(), extra.body());
   EXPECT_EQ(f.world.getNumCollisionObjects(), objects + 1);
   EXPECT_TRUE(f.world.removeBone(own));
   EXPECT_EQ(f.world.getNumCollisionObjects(), objects + 1);
   f.world.removeRigidBody(extra.body());
+}
+
+TEST(MuscleWorld, RemovingABonesBodyFromTheWorldRemovesTheBone) {
+  WorldFixture f;
+  const MuscleHandle muscle = f.world.addMuscle(gridMuscle(), f.bones);
+  f.step(1);
+  for (const bool rigid : {true, false}) {
+    auto extra = std::make_unique<BoneBody>(cubeBone("extra", btVector3(0, 0.1f, 0)));
+    const BoneHandle bone = f.world.addBone(extra->settings(), extra->body());
+    EXPECT_NO_THROW(f.world.muscleSystem().boneTransform(bone));
+    if (rigid)
+      f.world.removeRigidBody(extra->body());
+    else
+      f.world.removeCollisionObject(extra->body());
+    // The bone went with its body: deleting the body leaves the muscles nothing to read.
+    EXPECT_THROW(f.world.muscleSystem().boneTransform(bone), InputError);
+    EXPECT_FALSE(f.world.removeBone(bone));
+    extra.reset();
+    f.step(2);
+    EXPECT_FALSE(f.world.muscleSystem().lastStep().nan);
+  }
+  EXPECT_TRUE(f.world.containsMuscle(muscle));
+  // The fixture's own bones are still bones.
+  for (BoneHandle bone : f.bones) EXPECT_NO_THROW(f.world.muscleSystem().boneTransform(bone));
 }
 
 /// Counts what a Bullet renderer would be asked to draw.
@@ -226,12 +250,17 @@ TEST(MuscleWorld, DebugDrawGoesThroughTheWorldsDrawer) {
   f.step(1);
   CountingDrawer drawer;
   f.world.setDebugDrawer(&drawer);
+  f.world.setMuscleDebugFlags(kDrawParticles | kDrawSprings | kDrawBoneSpheres);
+  // The drawer's mode says nothing is to be drawn: nothing is.
+  f.world.debugDrawWorld();
+  EXPECT_EQ(drawer.lines, 0);
+  drawer.setDebugMode(btIDebugDraw::DBG_DrawWireframe);
   f.world.setMuscleDebugFlags(0);
   f.world.debugDrawWorld();
   const int withoutMuscles = drawer.lines;
   f.world.setMuscleDebugFlags(kDrawParticles | kDrawSprings | kDrawBoneSpheres);
   f.world.debugDrawWorld();
-  EXPECT_GT(drawer.lines - withoutMuscles, withoutMuscles);
+  EXPECT_GT(drawer.lines - 2 * withoutMuscles, 0);  // the muscles drew lines of their own
   f.world.setDebugDrawer(nullptr);
 }
 

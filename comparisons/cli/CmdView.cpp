@@ -1,7 +1,8 @@
-// `fibremss view SCENE`: the interactive viewer (comparisons/viewer), or with --screenshot a
-// PNG after some steps.
+// `fibremss view SCENE|RUN_DIR`: the interactive viewer (comparisons/viewer), or with
+// --screenshot a PNG after some steps.
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -48,9 +49,25 @@ struct ViewArgs {
   std::string size = "1280x800";  ///< --size WxH
 };
 
+/// SCENE, or for a run's directory the complete scene it ran (DIR/scene.json), stepped live:
+/// playing the frames themselves is not implemented yet.
+std::string sceneToView(const std::string& scene) {
+  if (!std::filesystem::is_directory(scene)) return scene;
+  const std::filesystem::path file = std::filesystem::path(scene) / "scene.json";
+  if (!std::filesystem::is_regular_file(file))
+    throw InputError(scene, "",
+                     "expected a built-in scene, a scene file or a run's directory (fibremss run "
+                     "--out DIR) with scene.json");
+  std::fprintf(stderr,
+               "note: playing a run's frames is not implemented yet; stepping its scene (%s) "
+               "live instead\n",
+               file.c_str());
+  return file.string();
+}
+
 void view(ViewArgs& args) {
   viewer::ViewerOptions& options = args.options;
-  options.scene = args.scene.scene;
+  options.scene = sceneToView(args.scene.scene);
   options.overrides = args.scene.overrides;
   options.muscleDebugFlags = drawFlags(args.draw);
   if (args.camera.size() < 2 || args.camera.size() > 3)
@@ -84,6 +101,9 @@ void addViewCommand(CLI::App& app) {
       "scene, H hides the panel, Q quits; drag to orbit, right or middle drag (or shift+drag) "
       "to pan, the wheel zooms. Without a display, --screenshot works under `xvfb-run -a`.");
   addSceneArgs(*command, args->scene);
+  command->get_option("scene")->description(
+      "Built-in scene name (see `fibremss scenes`), .json file, or a run's directory (its "
+      "scene.json is stepped live)");
   command->add_option("--screenshot", args->options.screenshot,
                       "Write this PNG after --frames steps and exit (no interaction)");
   command

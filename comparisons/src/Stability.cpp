@@ -201,7 +201,7 @@ bool integratorAvailable(Integrator integrator) {
   MuscleSystem system(parameters);
   try {
     system.step();  // an empty system: only the integrator lookup can fail
-  } catch (const std::invalid_argument&) {
+  } catch (const InputError&) {
     return false;
   }
   return true;

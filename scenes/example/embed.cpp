@@ -65,7 +65,7 @@ int main(int argc, char** argv) try {
   std::vector<fibremss::BoneHandle> bones;
   for (const auto& bone : prepared.bones) {
     boneBodies.push_back(std::make_unique<fibremss::BoneBody>(bone));
-    bones.push_back(world.addBone(boneBodies.back()->body(), bone));
+    bones.push_back(world.addBone(bone, boneBodies.back()->body()));
   }
   const fibremss::MuscleHandle muscle = world.addMuscle(prepared.muscles.front(), bones);
 

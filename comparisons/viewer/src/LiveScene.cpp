@@ -68,7 +68,7 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
   world_->setGravity(btVector3(0, 0, 0));
   for (size_t b = 0; b < prepared_.bones.size(); ++b) {
     boneBodies_.push_back(std::make_unique<BoneBody>(prepared_.bones[b], scene_.bonePose(b, 0)));
-    bones_.push_back(world_->addBone(boneBodies_.back()->body(), prepared_.bones[b]));
+    bones_.push_back(world_->addBone(prepared_.bones[b], boneBodies_.back()->body()));
     ViewMesh mesh;
     mesh.name = prepared_.bones[b]->name;
     mesh.vertices = prepared_.bones[b]->mesh.vertices;

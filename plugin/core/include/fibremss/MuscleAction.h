@@ -1,7 +1,13 @@
 #pragma once
 // FibreMSS muscles for applications that keep their own world class: a btActionInterface
 // that owns a MuscleSystem and steps it once per internal Bullet step
-// (world->addAction(&action)). Bones are added to the system with their collision objects.
+// (world->addAction(&action)). Bones are added to the system with their collision objects;
+// remove a bone from the system (muscleSystem().removeBone) before removing or deleting its
+// body, which this action cannot see.
+//
+// timeStep: as in MuscleWorld, the quasi-static pose mode. updateAction's timeStep (Bullet's
+// internal step) is not FibreMSS's dt: each call is one FibreMSS step that moves the muscles
+// to the bones' current poses in iterations of SimulationParameters::timeStep (simulated time).
 #include <BulletDynamics/Dynamics/btActionInterface.h>
 
 #include "fibremss/MuscleSystem.h"
@@ -12,7 +18,8 @@ class MuscleAction : public btActionInterface {
  public:
   explicit MuscleAction(const SimulationParameters& parameters = {}) : muscles_(parameters) {}
 
-  /// One FibreMSS step (Bullet calls it once per internal step, after rigid bodies moved).
+  /// One FibreMSS step (Bullet calls it once per internal step, after rigid bodies moved);
+  /// `timeStep` is not used (see the top of this header).
   void updateAction(btCollisionWorld* world, btScalar timeStep) override;
   /// Draws the muscles as debugFlags says (Bullet calls it from debugDrawWorld when the
   /// drawer's mode includes wireframe, AABBs or normals).

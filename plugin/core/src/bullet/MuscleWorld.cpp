@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "fibremss/Error.h"
+
 namespace fibremss {
 
 MuscleWorld::MuscleWorld(btDispatcher* dispatcher, btBroadphaseInterface* broadphase,
@@ -15,9 +17,9 @@ MuscleWorld::MuscleWorld(btDispatcher* dispatcher, btBroadphaseInterface* broadp
 
 MuscleWorld::~MuscleWorld() = default;
 
-BoneHandle MuscleWorld::addBone(btCollisionObject* body,
-                                std::shared_ptr<const BoneSettings> settings) {
-  if (!body) throw std::invalid_argument("MuscleWorld::addBone: a bone needs a collision object");
+BoneHandle MuscleWorld::addBone(std::shared_ptr<const BoneSettings> settings,
+                                btCollisionObject* body) {
+  if (!body) throw InputError("MuscleWorld::addBone", "", "a bone needs a collision object");
   const bool addHere = body->getBroadphaseHandle() == nullptr;
   BoneHandle handle = muscles_.addBone(std::move(settings), body);
   if (addHere) {
@@ -35,10 +37,29 @@ bool MuscleWorld::removeBone(BoneHandle bone) {
     return b.handle.index == bone.index && b.handle.generation == bone.generation;
   });
   if (it == bones_.end()) return false;
-  muscles_.removeBone(bone);
-  if (it->addedHere) removeCollisionObject(it->body);
+  const Bone removed = *it;
   bones_.erase(it);
+  muscles_.removeBone(bone);
+  if (removed.addedHere) removeCollisionObject(removed.body);
   return true;
+}
+
+void MuscleWorld::forgetBoneBody(const btCollisionObject* body) {
+  auto it =
+      std::find_if(bones_.begin(), bones_.end(), [&](const Bone& b) { return b.body == body; });
+  if (it == bones_.end()) return;
+  muscles_.removeBone(it->handle);
+  bones_.erase(it);
+}
+
+void MuscleWorld::removeCollisionObject(btCollisionObject* object) {
+  forgetBoneBody(object);
+  btSoftRigidDynamicsWorld::removeCollisionObject(object);
+}
+
+void MuscleWorld::removeRigidBody(btRigidBody* body) {
+  forgetBoneBody(body);
+  btSoftRigidDynamicsWorld::removeRigidBody(body);
 }
 
 MuscleHandle MuscleWorld::addMuscle(std::shared_ptr<const MuscleSettings> settings,
@@ -60,7 +81,10 @@ void MuscleWorld::internalSingleStepSimulation(btScalar timeStep) {
 
 void MuscleWorld::debugDrawWorld() {
   btSoftRigidDynamicsWorld::debugDrawWorld();
-  if (btIDebugDraw* drawer = getDebugDrawer(); drawer && muscleDebugFlags_ != 0)
+  constexpr int kDrawModes =
+      btIDebugDraw::DBG_DrawWireframe | btIDebugDraw::DBG_DrawAabb | btIDebugDraw::DBG_DrawNormals;
+  btIDebugDraw* drawer = getDebugDrawer();
+  if (drawer && (drawer->getDebugMode() & kDrawModes) && muscleDebugFlags_ != 0)
     muscles_.debugDraw(drawer, muscleDebugFlags_);
 }
 

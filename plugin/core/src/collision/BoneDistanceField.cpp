@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "fibremss/Error.h"
+
 namespace fibremss {
 namespace {
 
@@ -21,10 +23,10 @@ int blocksFor(btScalar extent, btScalar cell) {
 
 BoneDistanceField::BoneDistanceField(const MeshDistance& mesh, btScalar cell, btScalar margin) {
   if (!(cell > 0) || !(margin >= 0))
-    throw std::invalid_argument("BoneDistanceField: the cell (" + std::to_string(cell) +
-                                ") must be > 0 and the margin (" + std::to_string(margin) +
-                                ") >= 0");
-  if (mesh.mesh().empty()) throw std::invalid_argument("BoneDistanceField: empty bone mesh");
+    throw InputError("BoneDistanceField", "",
+                     "the cell (" + std::to_string(cell) + ") must be > 0 and the margin (" +
+                         std::to_string(margin) + ") >= 0");
+  if (mesh.mesh().empty()) throw InputError("BoneDistanceField", "", "empty bone mesh");
   btVector3 lower, upper;
   pointBounds(mesh.mesh().vertices, lower, upper);
   lower -= btVector3(margin, margin, margin);

@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/Error.h"
+
 namespace fibremss {
 namespace {
 
@@ -35,9 +37,9 @@ Penetration measurePenetration(std::span<const btVector3> points,
                                std::span<const MeshDistance* const> bones,
                                std::span<const btTransform> boneTransforms) {
   if (bones.size() != boneTransforms.size()) {
-    throw std::invalid_argument("measurePenetration: " + std::to_string(bones.size()) +
-                                " bones but " + std::to_string(boneTransforms.size()) +
-                                " transforms");
+    throw InputError("measurePenetration", "",
+                     std::to_string(bones.size()) + " bones but " +
+                         std::to_string(boneTransforms.size()) + " transforms");
   }
   std::vector<Bounds> bounds(bones.size());
   std::vector<btTransform> toRest(bones.size());
@@ -80,9 +82,10 @@ Penetration combine(const Penetration& a, const Penetration& b) {
 
 double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> deformedVertices) {
   if (deformedVertices.size() != rest.vertices.size()) {
-    throw std::invalid_argument("volumeChangePercent: " + std::to_string(deformedVertices.size()) +
-                                " deformed vertices for a surface of " +
-                                std::to_string(rest.vertices.size()));
+    throw InputError("volumeChangePercent", "",
+                     std::to_string(deformedVertices.size()) +
+                         " deformed vertices for a surface of " +
+                         std::to_string(rest.vertices.size()));
   }
   const double restVolume = meshVolume(rest);
   if (restVolume == 0) return std::numeric_limits<double>::quiet_NaN();
@@ -100,9 +103,9 @@ double springDeviationRatio(std::span<const Spring> springs, std::span<const btV
   double rest = 0;
   for (const Spring& s : springs) {
     if (s.a >= positions.size() || s.b >= positions.size()) {
-      throw std::invalid_argument("springDeviationRatio: spring (" + std::to_string(s.a) + ", " +
-                                  std::to_string(s.b) + ") outside " +
-                                  std::to_string(positions.size()) + " positions");
+      throw InputError("springDeviationRatio", "",
+                       "spring (" + std::to_string(s.a) + ", " + std::to_string(s.b) +
+                           ") outside " + std::to_string(positions.size()) + " positions");
     }
     const double length = (positions[s.a] - positions[s.b]).length();
     deviation += std::abs(length - s.restLength);
@@ -113,8 +116,8 @@ double springDeviationRatio(std::span<const Spring> springs, std::span<const btV
 
 double rmsDistanceMm(std::span<const btVector3> a, std::span<const btVector3> b) {
   if (a.size() != b.size()) {
-    throw std::invalid_argument("rmsDistanceMm: " + std::to_string(a.size()) + " against " +
-                                std::to_string(b.size()) + " points");
+    throw InputError("rmsDistanceMm", "",
+                     std::to_string(a.size()) + " against " + std::to_string(b.size()) + " points");
   }
   if (a.empty()) return std::numeric_limits<double>::quiet_NaN();
   double sum = 0;

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "IntegratorsInternal.h"
+#include "fibremss/Error.h"
 #include "solver/TimeStep.h"
 
 namespace fibremss {
@@ -23,7 +24,7 @@ const TimeIntegrator& integratorFor(Integrator kind) {
   if (const TimeIntegrator* integrator = explicitIntegratorFor(kind)) return *integrator;
   if (const TimeIntegrator* integrator = implicitIntegratorFor(kind)) return *integrator;
   if (const TimeIntegrator* integrator = positionBasedIntegratorFor(kind)) return *integrator;
-  throw std::invalid_argument(std::string("unknown integrator: ") + toString(kind));
+  throw InputError("SimulationParameters::integrator", toString(kind), "unknown integrator");
 }
 
 }  // namespace fibremss

@@ -10,6 +10,7 @@
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "fibremss/Error.h"
 #include "integrators/Integrators.h"
 
 namespace fibremss {
@@ -24,10 +25,10 @@ MuscleSystem::~MuscleSystem() = default;
 
 BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
                                  const btCollisionObject* body) {
-  if (!settings) throw std::invalid_argument("MuscleSystem::addBone: null settings");
+  if (!settings) throw InputError("MuscleSystem::addBone", "", "null settings");
   if (settings->sphereCentres.size() != settings->sphereRadii.size())
-    throw std::invalid_argument("MuscleSystem::addBone: bone '" + settings->name +
-                                "' has different numbers of sphere centres and radii");
+    throw InputError("MuscleSystem::addBone", "bone '" + settings->name + "'",
+                     "different numbers of sphere centres and radii");
   auto state = std::make_unique<BoneState>();
   state->body = body;
   if (body) state->last = state->target = state->current = body->getWorldTransform();
@@ -64,7 +65,7 @@ btTransform MuscleSystem::boneTransform(BoneHandle bone) const {
 
 MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> settings,
                                      std::span<const BoneHandle> bones) {
-  if (!settings) throw std::invalid_argument("MuscleSystem::addMuscle: null settings");
+  if (!settings) throw InputError("MuscleSystem::addMuscle", "", "null settings");
   // The AVX2 spring kernel reads springBlocks, which only checks the count of springs: settings
   // made or changed by hand (blocks not those of their springs) run on a laid-out copy.
   if (fastestSpringKernel() == SpringKernel::avx2) {
@@ -76,41 +77,43 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     }
   }
   const MuscleSettings& s = *settings;
-  const std::string where = "MuscleSystem::addMuscle: muscle '" + s.name + "': ";
+  const char* source = "MuscleSystem::addMuscle";
+  const std::string where = "muscle '" + s.name + "'";
   const size_t n = s.particleCount();
   if (s.radii.size() != n || s.flags.size() != n || s.fixedBone.size() != n ||
       s.nearestBone.size() != n)
-    throw std::invalid_argument(where + "particle arrays differ in size");
-  if (!(s.particleMass > 0)) throw std::invalid_argument(where + "particle mass must be > 0");
+    throw InputError(source, where, "particle arrays differ in size");
+  if (!(s.particleMass > 0)) throw InputError(source, where, "particle mass must be > 0");
   for (size_t i = 0; i < n; ++i) {
     const int32_t limit = static_cast<int32_t>(bones.size());
     if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)
-      throw std::invalid_argument(where + "particle " + std::to_string(i) + " refers to bone " +
-                                  std::to_string(std::max(s.fixedBone[i], s.nearestBone[i])) +
-                                  " but only " + std::to_string(bones.size()) +
-                                  " bone handles were given");
+      throw InputError(source, where,
+                       "particle " + std::to_string(i) + " refers to bone " +
+                           std::to_string(std::max(s.fixedBone[i], s.nearestBone[i])) +
+                           " but only " + std::to_string(bones.size()) +
+                           " bone handles were given");
     if (s.isFixed(static_cast<uint32_t>(i)) && s.fixedBone[i] < 0)
-      throw std::invalid_argument(where + "fixed particle " + std::to_string(i) + " has no bone");
+      throw InputError(source, where, "fixed particle " + std::to_string(i) + " has no bone");
   }
   const bool blend = !s.blendWeight.empty();
   if (blend && (s.blendWeight.size() != n || s.blendBoneA.size() != n || s.blendBoneB.size() != n))
-    throw std::invalid_argument(where + "blend arrays differ in size from the particles");
+    throw InputError(source, where, "blend arrays differ in size from the particles");
   for (size_t i = 0; blend && i < n; ++i)
     if (s.blendBoneA[i] >= static_cast<int32_t>(bones.size()) ||
         s.blendBoneB[i] >= static_cast<int32_t>(bones.size()) || !(s.blendWeight[i] >= 0) ||
         !(s.blendWeight[i] <= 1))
-      throw std::invalid_argument(where + "particle " + std::to_string(i) +
-                                  " has a blend bone beyond the bone handles or a weight outside "
-                                  "[0, 1]");
+      throw InputError(source, where,
+                       "particle " + std::to_string(i) +
+                           " has a blend bone beyond the bone handles or a weight outside "
+                           "[0, 1]");
   for (const Spring& spring : s.springs)
     if (spring.a >= n || spring.b >= n)
-      throw std::invalid_argument(where + "a spring refers to a particle beyond " +
-                                  std::to_string(n));
+      throw InputError(source, where, "a spring refers to a particle beyond " + std::to_string(n));
   const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
   const bool skinned = !s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
                        s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount;
   for (uint32_t p : s.boundaryParticles)
-    if (p >= n) throw std::invalid_argument(where + "boundary particle beyond the particles");
+    if (p >= n) throw InputError(source, where, "boundary particle beyond the particles");
 
   auto state = std::make_unique<MuscleState>();
   state->bones.assign(bones.begin(), bones.end());

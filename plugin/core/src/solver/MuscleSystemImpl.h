@@ -9,6 +9,7 @@
 #include "SpringForces.h"
 #include "TaskPool.h"
 #include "collision/CollisionPairs.h"
+#include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss {
@@ -98,12 +99,12 @@ struct MuscleSystem::Impl {
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
-    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed muscle handle");
+    if (!state) throw InputError("MuscleSystem", "muscle handle", "unknown or removed");
     return *state;
   }
   BoneState& bone(BoneHandle handle) const {
     BoneState* state = bones.find(handle);
-    if (!state) throw std::out_of_range("MuscleSystem: unknown or removed bone handle");
+    if (!state) throw InputError("MuscleSystem", "bone handle", "unknown or removed");
     return *state;
   }
 
