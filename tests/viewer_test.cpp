@@ -174,6 +174,23 @@ TEST(Viewer, CommandWritesAScreenshotColouredByFibreStretchWithThePanel) {
   EXPECT_GT(background, size_t(image.width) * image.height / 10);
 }
 
+TEST(Viewer, DrawsParticlesAndFibresThroughTheWorldsDebugDrawer) {
+  TemporaryDirectory directory("fibremss_view_debug_test");
+  auto changedPixels = [&](const std::string& draw) {
+    const std::string png = (directory.path() / (draw + ".png")).string();
+    const auto run = runProcess(std::string(FIBREMSS_CLI) + " view fusiform --opacity 0 " +
+                                "--hide-ui --size 300x200 --draw " + draw + " --screenshot " + png);
+    EXPECT_EQ(run.exitCode, 0);
+    const Image image(png);
+    size_t count = 0;
+    for (int y = 0; y < image.height; ++y)
+      for (int x = 0; x < image.width; ++x) count += isBackground(image.at(x, y)) ? 0 : 1;
+    return count;
+  };
+  // Surfaces hidden: the bones alone, then the bones with the particles and fibres in between.
+  EXPECT_GT(changedPixels("particles,fibres"), changedPixels("none") + 100);
+}
+
 TEST(Viewer, ARunsDirectoryShowsTheSceneItRan) {
   TemporaryDirectory directory("fibremss_view_run_test");
   const std::string out = (directory.path() / "run").string();

@@ -173,7 +173,10 @@ void LivePlayer::work() {
 
 void LivePlayer::publish(const DebugRequest& debug) {
   drawer_.clear();
-  drawer_.setDebugMode(debug.bulletMode);
+  // MuscleWorld draws the muscles when the mode asks for wireframes, AABBs or normals; normals
+  // alone make Bullet draw nothing of its own (no soft bodies here).
+  drawer_.setDebugMode(debug.bulletMode |
+                       (debug.muscleFlags != 0 ? btIDebugDraw::DBG_DrawNormals : 0));
   scene_->world().setDebugDrawer(&drawer_);
   scene_->world().setMuscleDebugFlags(debug.muscleFlags);
   scene_->world().debugDrawWorld();
