@@ -10,8 +10,11 @@ run_packages=(cmake make g++ pkg-config ccache libbullet-dev libeigen3-dev libas
   nlohmann-json3-dev libcli11-dev libnanoflann-dev libqhull-dev gnuplot-nox zlib1g-dev
   # `fibremss view`: window, OpenGL (Mesa's drivers, llvmpipe where there is no GPU), panel, PNG
   libglfw3-dev libgl-dev libgl1-mesa-dri libimgui-dev libstb-dev)
-# (xvfb, xauth: a virtual X server for the viewer's screenshot tests.)
-test_packages=(valgrind libgtest-dev libgmock-dev libbenchmark-dev clang-format xvfb xauth)
+# (xvfb, xauth: a virtual X server for the viewer's screenshot tests. python3-paraview: the
+# frames read back by VTK 9 and ParaView 5.11 in Debian's /usr/bin/python3; it brings its own
+# VTK and replaces python3-vtk9.)
+test_packages=(valgrind libgtest-dev libgmock-dev libbenchmark-dev clang-format xvfb xauth
+  python3-paraview)
 
 install_missing() {  # install_missing PACKAGE...
   local missing=()

@@ -1,8 +1,11 @@
-// Output writers: .vtp well-formed with the right counts, atomic writes, .pvd entries.
+// Output writers: .vtp well-formed with the right counts and compression headers, atomic
+// writes, .pvd entries. (tests/frames_vtk_test.py reads the frames with VTK and ParaView.)
 #include "fibremss/Output.h"
 
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -68,53 +71,98 @@ std::string attribute(const std::string& xml, const std::string& name, size_t fr
   return xml.substr(valueStart, xml.find('"', valueStart) - valueStart);
 }
 
-/// The numbers inside the DataArray named `name` within block `block` (e.g. Lines).
-std::vector<double> arrayValues(const std::string& xml, const std::string& block,
-                                const std::string& name) {
-  const size_t blockStart = block.empty() ? 0 : xml.find("<" + block);
+/// The attributes of the DataArray named `name` within block `block` (e.g. Lines): its tag text.
+std::string arrayTag(const std::string& xml, const std::string& block, const std::string& name) {
+  const size_t blockStart = xml.find("<" + block);
   EXPECT_NE(blockStart, std::string::npos) << block;
   const size_t start = xml.find("Name=\"" + name + "\"", blockStart);
   EXPECT_NE(start, std::string::npos) << block << "/" << name;
-  const size_t open = xml.find('>', start) + 1, close = xml.find("</DataArray>", open);
-  std::istringstream numbers(xml.substr(open, close - open));
-  std::vector<double> values;
-  for (double v; numbers >> v;) values.push_back(v);
-  return values;
+  if (start == std::string::npos) return "";
+  const size_t open = xml.rfind("<DataArray", start);
+  return xml.substr(open, xml.find('>', start) - open + 1);
+}
+
+/// The first numbers of the compression header (UInt64) of the array whose tag is `tag`: block
+/// count, block size, size of the partial last block. Checks the first compressed size too.
+std::array<uint64_t, 3> compressionHeader(const std::string& xml, const std::string& tag) {
+  const size_t data = xml.find('_', xml.find("<AppendedData encoding=\"raw\">")) + 1;
+  const size_t offset = std::stoul(attribute(tag, "offset"));
+  std::array<uint64_t, 4> header{};
+  EXPECT_LE(data + offset + 32, xml.size());
+  std::memcpy(header.data(), xml.data() + data + offset,
+              std::min<size_t>(32, xml.size() - data - offset));
+  if (header[0] > 0) {
+    EXPECT_GT(header[3], 0u);
+  }
+  return {header[0], header[1], header[2]};
+}
+
+/// A header for `bytes` uncompressed bytes in blocks of 32768 as vtkZLibDataCompressor writes it.
+std::array<uint64_t, 3> expectedHeader(uint64_t bytes) {
+  return {(bytes + 32767) / 32768, 32768, bytes % 32768};
 }
 
 TEST_F(OutputTest, VtpHasTheRightCountsAndArrays) {
   PolyData data;
   data.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0.5f, 0.25f, -3}};
+  data.pointScale = 1000;
   data.pointsAsVertices = true;
   data.lineIndices = {0, 1, 2, 3, 4};
   data.lineOffsets = {0, 3, 5};
   data.triangles = {{0, 1, 2}, {1, 2, 3}};
-  data.pointScalars = {{"radius", {0.1f, 0.2f, 0.3f, 0.4f, 0.5f}}, {"fixed", {0, 1, 0, 1, 0}}};
+  data.pointData = {{"radius", 1, std::vector<float>{0.1f, 0.2f, 0.3f, 0.4f, 0.5f}},
+                    {"muscle_id", 1, std::vector<int32_t>(5, 7)},
+                    {"displacement", 3, std::vector<float>(15, 0.5f)}};
+  data.fieldData = {{"TimeValue", 1, std::vector<double>{0.25}},
+                    {"transform", 16, std::vector<double>(16, 1.0)}};
   const fs::path path = directory_ / "nested" / "particles.vtp";
   writeVtp(path.string(), data);
   ASSERT_TRUE(fs::exists(path));
-  const std::string xml = readFile(path);
-  EXPECT_EQ(xml.rfind("<?xml", 0), 0u);
+  const std::string file = readFile(path);
+  EXPECT_EQ(file.rfind("<?xml", 0), 0u);
+  const size_t appended = file.find("<AppendedData");
+  ASSERT_NE(appended, std::string::npos);
+  const std::string xml = file.substr(0, appended) + "</VTKFile>";
+  EXPECT_TRUE(file.ends_with("</AppendedData>\n</VTKFile>\n"));
+  EXPECT_EQ(attribute(xml, "header_type"), "UInt64");
+  EXPECT_EQ(attribute(xml, "compressor"), "vtkZLibDataCompressor");
   const auto names = checkTagsBalanced(xml);
-  EXPECT_EQ(std::count(names.begin(), names.end(), "DataArray"), 2 + 1 + 2 * 3);
+  EXPECT_EQ(std::count(names.begin(), names.end(), "DataArray"), 2 + 3 + 1 + 3 * 2);
   EXPECT_EQ(attribute(xml, "NumberOfPoints"), "5");
   EXPECT_EQ(attribute(xml, "NumberOfVerts"), "5");
   EXPECT_EQ(attribute(xml, "NumberOfLines"), "2");
   EXPECT_EQ(attribute(xml, "NumberOfPolys"), "2");
+  EXPECT_EQ(attribute(xml, "Scalars"), "radius");
 
-  const auto points = arrayValues(xml, "Points", "Points");
-  ASSERT_EQ(points.size(), 15u);
-  for (size_t i = 0; i < data.points.size(); ++i)
-    for (int k = 0; k < 3; ++k) EXPECT_FLOAT_EQ(points[3 * i + k], data.points[i][k]);
-  const auto radius = arrayValues(xml, "PointData", "radius");
-  ASSERT_EQ(radius.size(), 5u);
-  EXPECT_FLOAT_EQ(radius[2], 0.3f);
-  EXPECT_EQ(arrayValues(xml, "PointData", "fixed"), (std::vector<double>{0, 1, 0, 1, 0}));
-  EXPECT_EQ(arrayValues(xml, "Lines", "connectivity"), (std::vector<double>{0, 1, 2, 3, 4}));
-  EXPECT_EQ(arrayValues(xml, "Lines", "offsets"), (std::vector<double>{3, 5}));
-  EXPECT_EQ(arrayValues(xml, "Polys", "connectivity"), (std::vector<double>{0, 1, 2, 1, 2, 3}));
-  EXPECT_EQ(arrayValues(xml, "Polys", "offsets"), (std::vector<double>{3, 6}));
-  EXPECT_EQ(arrayValues(xml, "Verts", "offsets").size(), 5u);
+  // Every array appended raw, its header announcing exactly the bytes of its values.
+  const std::string points = arrayTag(xml, "Points", "Points");
+  EXPECT_EQ(attribute(points, "type"), "Float32");
+  EXPECT_EQ(attribute(points, "NumberOfComponents"), "3");
+  EXPECT_EQ(compressionHeader(file, points), expectedHeader(5 * 3 * 4));
+  const std::string id = arrayTag(xml, "PointData", "muscle_id");
+  EXPECT_EQ(attribute(id, "type"), "Int32");
+  EXPECT_EQ(compressionHeader(file, id), expectedHeader(5 * 4));
+  EXPECT_EQ(attribute(arrayTag(xml, "PointData", "displacement"), "NumberOfComponents"), "3");
+  const std::string transform = arrayTag(xml, "FieldData", "transform");
+  EXPECT_EQ(attribute(transform, "type"), "Float64");
+  EXPECT_EQ(attribute(transform, "NumberOfTuples"), "1");
+  EXPECT_EQ(compressionHeader(file, transform), expectedHeader(16 * 8));
+  EXPECT_EQ(compressionHeader(file, arrayTag(xml, "Lines", "connectivity")), expectedHeader(5 * 4));
+  EXPECT_EQ(compressionHeader(file, arrayTag(xml, "Lines", "offsets")), expectedHeader(2 * 4));
+  EXPECT_EQ(compressionHeader(file, arrayTag(xml, "Polys", "connectivity")), expectedHeader(6 * 4));
+  EXPECT_EQ(compressionHeader(file, arrayTag(xml, "Verts", "offsets")), expectedHeader(5 * 4));
+}
+
+TEST_F(OutputTest, LargeArraysAreSplitIntoBlocks) {
+  PolyData data;
+  data.points.assign(10000, btVector3(1, 2, 3));  // 120 000 bytes: three full blocks and a part
+  const fs::path path = directory_ / "large.vtp";
+  writeVtp(path.string(), data);
+  const std::string file = readFile(path);
+  EXPECT_EQ(compressionHeader(file, arrayTag(file, "Points", "Points")),
+            (std::array<uint64_t, 3>{4, 32768, 120000 - 3 * 32768}));
+  EXPECT_EQ(file.find("<Polys"), std::string::npos);  // empty cell blocks are left out
+  EXPECT_LT(file.size(), 2000u);                      // and the repeated points compressed
 }
 
 TEST_F(OutputTest, VtpRejectsInconsistentData) {
@@ -124,9 +172,14 @@ TEST_F(OutputTest, VtpRejectsInconsistentData) {
   const fs::path path = directory_ / "bad.vtp";
   EXPECT_THROW(writeVtp(path.string(), data), std::runtime_error);
   data.triangles.clear();
-  data.pointScalars = {{"radius", {1}}};
+  data.pointData = {{"radius", 1, std::vector<float>{1}}};
   EXPECT_THROW(writeVtp(path.string(), data), std::runtime_error);
-  data.pointScalars.clear();
+  data.pointData = {{"displacement", 3, std::vector<float>(4)}};
+  EXPECT_THROW(writeVtp(path.string(), data), std::runtime_error);
+  data.pointData.clear();
+  data.fieldData = {{"transform", 16, std::vector<double>(15)}};
+  EXPECT_THROW(writeVtp(path.string(), data), std::runtime_error);
+  data.fieldData.clear();
   data.lineIndices = {0, 1};
   EXPECT_THROW(writeVtp(path.string(), data), std::runtime_error);  // offsets do not cover it
   EXPECT_FALSE(fs::exists(path));
@@ -135,11 +188,10 @@ TEST_F(OutputTest, VtpRejectsInconsistentData) {
 TEST_F(OutputTest, ArrayNamesAreEscaped) {
   PolyData data;
   data.points = {{0, 0, 0}};
-  data.pointScalars = {{"a<b & \"c\"", {1}}};
+  data.pointData = {{"a<b & \"c\"", 1, std::vector<float>{1}}};
   const fs::path path = directory_ / "escaped.vtp";
   writeVtp(path.string(), data);
   const std::string xml = readFile(path);
-  checkTagsBalanced(xml);
   EXPECT_NE(xml.find("a&lt;b &amp; &quot;c&quot;"), std::string::npos);
 }
 

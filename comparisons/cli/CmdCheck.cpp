@@ -37,12 +37,15 @@ PolyData meshData(const TriangleMesh& mesh) {
   return data;
 }
 
-/// Writes surfaces, fibres, particles (radius, fixed, boundary) and bone spheres, plus rest.pvd.
-void writeRestState(const std::string& directory, const PreparedScene& prepared) {
+/// Writes surfaces, fibres, particles (radius, fixed, boundary) and bone spheres in scene units
+/// (`unitScale` metres each), plus rest.pvd.
+void writeRestState(const std::string& directory, const PreparedScene& prepared, double unitScale) {
   namespace fs = std::filesystem;
   PvdCollection collection;
   int part = 0;
-  auto add = [&](const std::string& file, const PolyData& data) {
+  const auto scale = btScalar(1.0 / unitScale);
+  auto add = [&](const std::string& file, PolyData data) {
+    data.pointScale = scale;
     writeVtp((fs::path(directory) / file).string(), data);
     collection.add(0.0, file, part++);
   };
@@ -61,11 +64,11 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared)
     particles.pointsAsVertices = true;
     std::vector<float> radius, fixed, boundary;
     for (size_t i = 0; i < muscle->particleCount(); ++i) {
-      radius.push_back(float(muscle->radii[i]));
+      radius.push_back(float(muscle->radii[i] * scale));
       fixed.push_back(muscle->isFixed(uint32_t(i)) ? 1.f : 0.f);
       boundary.push_back(muscle->isBoundary(uint32_t(i)) ? 1.f : 0.f);
     }
-    particles.pointScalars = {{"radius", radius}, {"fixed", fixed}, {"boundary", boundary}};
+    particles.pointData = {{"radius", 1, radius}, {"fixed", 1, fixed}, {"boundary", 1, boundary}};
     add(stem + "-particles.vtp", particles);
   }
   for (const auto& bone : prepared.bones) {
@@ -74,8 +77,9 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared)
     PolyData spheres;
     spheres.points = bone->sphereCentres;
     spheres.pointsAsVertices = true;
-    spheres.pointScalars = {
-        {"radius", std::vector<float>(bone->sphereRadii.begin(), bone->sphereRadii.end())}};
+    std::vector<float> radius;
+    for (btScalar r : bone->sphereRadii) radius.push_back(float(r * scale));
+    spheres.pointData = {{"radius", 1, radius}};
     add(stem + "-spheres.vtp", spheres);
   }
   collection.write((fs::path(directory) / "rest.pvd").string());
@@ -147,7 +151,7 @@ void runCheck(const CheckArgs& args) {
     spheres += bone->sphereCentres.size();
   }
 
-  if (!args.out.empty()) writeRestState(args.out, prepared);
+  if (!args.out.empty()) writeRestState(args.out, prepared, scene.unitScale);
 
   if (args.json) {
     nlohmann::ordered_json result{{"scene", scene.name},

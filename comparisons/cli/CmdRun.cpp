@@ -225,7 +225,8 @@ void addRunCommand(CLI::App& app) {
       "run", "Simulate a scene with FibreMSS: progress, a summary, frames and summary.json");
   command->footer(
       "One step per pose of the scene's motion. With --out DIR: DIR/frames/*.vtp and DIR/run.pvd "
-      "(open in ParaView), DIR/scene.json (the complete scene) and DIR/summary.json (with what "
+      "(open in ParaView; binary, in the scene's units, at simulated seconds, arrays in "
+      "docs/outputs.md), DIR/scene.json (the complete scene) and DIR/summary.json (with what "
       "the numerical guard did: rolled-back steps, retries, frozen muscles). Exit code 3 when "
       "the simulation failed (a muscle frozen, or NaN/explosion with on_failure=report), 130 "
       "when interrupted: Ctrl-C stops after the current step and every file written stays "

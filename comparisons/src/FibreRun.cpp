@@ -1,7 +1,6 @@
 #include "fibremss/FibreRun.h"
 
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -11,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "FrameWriter.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/Measures.h"
@@ -54,14 +54,6 @@ double statusMemoryMb(const char* field) {
   return RunMetrics::kNone;
 }
 
-/// A name usable in a file name: letters, digits, '-' and '_' kept, anything else '_'.
-std::string fileSafe(const std::string& name) {
-  std::string safe = name.empty() ? "unnamed" : name;
-  for (char& c : safe)
-    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
-  return safe;
-}
-
 bool allFinite(std::span<const btVector3> points) {
   return std::all_of(points.begin(), points.end(), [](const btVector3& p) {
     return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
@@ -75,6 +67,11 @@ int poseOfStep(int s, int poseCount, bool loop) {
   if (!loop || last == 0) return std::min(s, last);
   const int phase = s % (2 * last);
   return phase <= last ? phase : 2 * last - phase;
+}
+
+/// The label of a pose (the pose's number where the scene gives none).
+double poseLabel(const LoadedScene& scene, int pose) {
+  return size_t(pose) < scene.poseLabels.size() ? scene.poseLabels[size_t(pose)] : pose;
 }
 
 /// Largest distance of a fixed particle from where its bone puts it (T·rest) [mm].
@@ -113,10 +110,11 @@ class BoneMeshes {
     inverses_.resize(distances_.size());
   }
 
-  /// Points (surface vertices) inside the bones placed at `transforms`.
-  Penetration points(std::span<const btVector3> points,
-                     std::span<const btTransform> transforms) const {
-    return measurePenetration(points, pointers_, transforms);
+  /// Points (surface vertices) inside the bones placed at `transforms`; `depthsMm` (one per
+  /// point) receives each one's depth [mm].
+  Penetration points(std::span<const btVector3> points, std::span<const btTransform> transforms,
+                     std::span<float> depthsMm) const {
+    return measurePenetration(points, pointers_, transforms, depthsMm);
   }
 
   /// Free boundary particles' spheres in the bones: max(0, r − signed distance of the centre)
@@ -152,85 +150,6 @@ class BoneMeshes {
   std::vector<const MeshDistance*> pointers_;  ///< the same, as Measures.h takes them
   std::vector<btVector3> lower_, upper_;       ///< rest-frame bounds per bone
   std::vector<btTransform> inverses_;          ///< current → rest, per bone (scratch)
-};
-
-/// Writes the frames of a run: per muscle its deformed surface and its particles (with radius,
-/// flags and fibres), per bone its mesh where it is, and run.pvd listing them all.
-class FrameWriter {
- public:
-  FrameWriter(const std::string& outDir, const OutputSettings& settings)
-      : outDir_(outDir), settings_(settings) {}
-
-  void write(int step, const MuscleSystem& system, std::span<const MuscleHandle> muscles,
-             const PreparedScene& prepared, std::span<const btTransform> boneTransforms) {
-    char number[16];
-    std::snprintf(number, sizeof number, "%05d", step);
-    int part = 0;
-    for (size_t m = 0; m < muscles.size(); ++m) {
-      const MuscleSettings& muscle = system.settings(muscles[m]);
-      const std::string stem = "frames/muscle" + std::to_string(m) + "_" + fileSafe(muscle.name);
-      if (settings_.writeSurfaces && !muscle.restSurface.empty()) {
-        PolyData surface;
-        std::span<const btVector3> vertices = system.surface(muscles[m]);
-        surface.points.assign(vertices.begin(), vertices.end());
-        surface.triangles = muscle.restSurface.triangles;
-        add(step, stem + "_surface_" + number + ".vtp", surface, part);
-      }
-      ++part;
-      if (settings_.writeParticles || settings_.writeFibres) {
-        add(step, stem + "_particles_" + number + ".vtp", particles(system, muscles[m], muscle),
-            part);
-      }
-      ++part;
-    }
-    for (size_t b = 0; b < prepared.bones.size(); ++b) {
-      const BoneSettings& bone = *prepared.bones[b];
-      PolyData mesh;
-      mesh.points = transformed(bone.mesh, boneTransforms[b]).vertices;
-      mesh.triangles = bone.mesh.triangles;
-      add(step,
-          "frames/bone" + std::to_string(b) + "_" + fileSafe(bone.name) + "_" + number + ".vtp",
-          mesh, part++);
-    }
-    pvd_.write(outDir_ + "/run.pvd");
-    ++frames_;
-  }
-
-  int frames() const { return frames_; }
-
- private:
-  PolyData particles(const MuscleSystem& system, MuscleHandle handle,
-                     const MuscleSettings& muscle) const {
-    PolyData data;
-    std::span<const btVector3> positions = system.positions(handle);
-    data.points.assign(positions.begin(), positions.end());
-    data.pointsAsVertices = settings_.writeParticles;
-    if (settings_.writeFibres) {
-      data.lineIndices = muscle.fibreParticles;
-      data.lineOffsets = muscle.fibreOffsets;
-    }
-    std::vector<float> radius(muscle.particleCount()), fixed(muscle.particleCount()),
-        boundary(muscle.particleCount());
-    for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
-      radius[i] = static_cast<float>(muscle.radii[i]);
-      fixed[i] = muscle.isFixed(i) ? 1.0f : 0.0f;
-      boundary[i] = muscle.isBoundary(i) ? 1.0f : 0.0f;
-    }
-    data.pointScalars = {{"radius", std::move(radius)},
-                         {"fixed", std::move(fixed)},
-                         {"boundary", std::move(boundary)}};
-    return data;
-  }
-
-  void add(int step, const std::string& file, const PolyData& data, int part) {
-    writeVtp(outDir_ + "/" + file, data);
-    pvd_.add(step, file, part);
-  }
-
-  std::string outDir_;
-  const OutputSettings& settings_;
-  PvdCollection pvd_;
-  int frames_ = 0;
 };
 
 }  // namespace
@@ -272,13 +191,15 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   const int frameEvery = options.frameEvery >= 0 ? options.frameEvery : scene.outputs.frameEvery;
   std::unique_ptr<FrameWriter> frames;
   if (!options.outDir.empty() && frameEvery > 0)
-    frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs);
+    frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale);
 
   std::vector<btTransform> boneTransforms(bones.size(), btTransform::getIdentity());
   std::vector<double> msPerStep, msPerIteration, mss, muscleCd, boneCd, response, output,
       measureMsPerStep;
   Penetration penetration, spherePenetration;
   std::vector<btVector3> poseSurface;
+  std::vector<std::vector<float>> surfaceDepthsMm(muscles.size());  // per muscle, this step
+  double simulatedTime = 0;                                         // [s]
   FibreRunDetails guard;  // what the numerical guard did, and the soak samples
   std::vector<bool> reportedFrozen(muscles.size(), false);
   double sampleSolverMs = 0;
@@ -298,6 +219,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     system.step();
     const double stepMs = millisecondsSince(stepStart);
     const StepStats& stats = system.lastStep();
+    simulatedTime += stats.simulatedTime;
     metrics.steps = s + 1;
     metrics.iterations += stats.iterations;
 
@@ -311,13 +233,16 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       finite = finite && allFinite(surface) && allFinite(system.positions(muscle));
       poseSurface.insert(poseSurface.end(), surface.begin(), surface.end());
     }
-    if (finite) {
-      penetration = combine(penetration, boneMeshes.points(poseSurface, boneTransforms));
-      for (MuscleHandle muscle : muscles)
+    if (finite)
+      for (size_t m = 0; m < muscles.size(); ++m) {
+        std::span<const btVector3> surface = system.surface(muscles[m]);
+        surfaceDepthsMm[m].resize(surface.size());
+        penetration =
+            combine(penetration, boneMeshes.points(surface, boneTransforms, surfaceDepthsMm[m]));
         spherePenetration = combine(
-            spherePenetration,
-            boneMeshes.spheres(system.settings(muscle), system.positions(muscle), boneTransforms));
-    }
+            spherePenetration, boneMeshes.spheres(system.settings(muscles[m]),
+                                                  system.positions(muscles[m]), boneTransforms));
+      }
     const double measureMs = millisecondsSince(measureStart);
 
     const double iterations = std::max(stats.iterations, 1);
@@ -379,7 +304,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       break;
     }
     if (frames && (s % frameEvery == 0 || s == steps - 1))
-      frames->write(s, system, muscles, prepared, boneTransforms);
+      frames->write({s, pose, poseLabel(scene, pose), simulatedTime}, system, muscles, prepared,
+                    boneTransforms, surfaceDepthsMm);
   }
   if (candidateOverflows > 0)
     std::fprintf(stderr,

@@ -1,12 +1,19 @@
-// Output writers: atomic file writes, VTK XML PolyData (.vtp, ASCII) and .pvd collections.
+// Output writers: atomic file writes, VTK XML PolyData (.vtp, appended raw data in
+// vtkZLibDataCompressor blocks) and .pvd collections.
 #include "fibremss/Output.h"
 
 #include <unistd.h>
+#include <zlib.h>
 
+#include <algorithm>
 #include <atomic>
+#include <bit>
 #include <charconv>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <span>
 #include <stdexcept>
 #include <system_error>
 
@@ -14,6 +21,12 @@ namespace fibremss {
 namespace {
 
 namespace fs = std::filesystem;
+
+static_assert(std::endian::native == std::endian::little,
+              "the .vtp writer copies numbers as they are in memory and declares LittleEndian");
+
+/// Uncompressed bytes per block, VTK's default (vtkXMLWriter::BlockSize).
+constexpr size_t kBlockSize = 32768;
 
 /// A name unique per process and call, so concurrent writers never share a temporary file.
 fs::path temporaryPathFor(const fs::path& target) {
@@ -46,59 +59,87 @@ std::string escapeXml(std::string_view text) {
   return escaped;
 }
 
-/// Appends numbers separated by spaces, shortest round-trip form, a line break every few.
-class NumberWriter {
+template <typename T>
+void appendRaw(std::string& out, T value) {
+  char bytes[sizeof(T)];
+  std::memcpy(bytes, &value, sizeof(T));
+  out.append(bytes, sizeof(T));
+}
+
+/// `bytes` as vtkZLibDataCompressor writes them: a header of UInt64 numbers (block count,
+/// uncompressed block size, uncompressed size of a partial last block or 0, then each block's
+/// compressed size) followed by the zlib streams of the blocks.
+void appendCompressed(std::string& out, std::span<const char> bytes) {
+  const size_t blocks = (bytes.size() + kBlockSize - 1) / kBlockSize;
+  const size_t headerAt = out.size();
+  appendRaw<uint64_t>(out, blocks);
+  appendRaw<uint64_t>(out, kBlockSize);
+  appendRaw<uint64_t>(out, bytes.size() % kBlockSize);
+  out.append(8 * blocks, '\0');  // the compressed sizes, filled in below
+  std::string block(compressBound(kBlockSize), '\0');
+  for (size_t b = 0; b < blocks; ++b) {
+    const size_t begin = b * kBlockSize, size = std::min(kBlockSize, bytes.size() - begin);
+    uLongf compressed = static_cast<uLongf>(block.size());
+    if (compress2(reinterpret_cast<Bytef*>(block.data()), &compressed,
+                  reinterpret_cast<const Bytef*>(bytes.data() + begin), static_cast<uLong>(size),
+                  Z_DEFAULT_COMPRESSION) != Z_OK)
+      throw std::runtime_error("zlib could not compress a block");
+    const uint64_t compressedSize = compressed;
+    std::memcpy(out.data() + headerAt + 8 * (3 + b), &compressedSize, 8);
+    out.append(block.data(), compressed);
+  }
+}
+
+template <typename T>
+constexpr const char* vtkType() {
+  if constexpr (std::is_same_v<T, float>) return "Float32";
+  if constexpr (std::is_same_v<T, double>) return "Float64";
+  if constexpr (std::is_same_v<T, int32_t>) return "Int32";
+}
+
+/// The XML of a .vtp and its appended data, built array by array.
+class VtpBuilder {
  public:
-  explicit NumberWriter(std::string& out) : out_(out) {}
+  /// A DataArray element pointing into the appended data, and its values compressed there.
+  /// `tuples` > 0 writes NumberOfTuples (field data needs it).
   template <typename T>
-  void operator()(T value) {
-    char buffer[32];
-    const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
-    out_.append(buffer, result.ptr);
-    out_ += ++count_ % 12 == 0 ? '\n' : ' ';
+  void array(std::string_view name, int components, std::span<const T> values, size_t tuples = 0) {
+    xml += "        <DataArray type=\"";
+    xml += vtkType<T>();
+    xml += "\" Name=\"" + escapeXml(name) + '"';
+    if (components > 1) xml += " NumberOfComponents=\"" + std::to_string(components) + '"';
+    if (tuples > 0) xml += " NumberOfTuples=\"" + std::to_string(tuples) + '"';
+    xml += " format=\"appended\" offset=\"" + std::to_string(appended.size()) + "\"/>\n";
+    appendCompressed(appended, std::span<const char>(reinterpret_cast<const char*>(values.data()),
+                                                     values.size_bytes()));
   }
 
- private:
-  std::string& out_;
-  size_t count_ = 0;
+  void array(const DataArray& data, size_t tuples = 0) {
+    std::visit(
+        [&](const auto& values) { array(data.name, data.components, std::span(values), tuples); },
+        data.values);
+  }
+
+  /// A cell block (Verts, Lines, Polys) with its connectivity and end offsets; nothing when empty.
+  void cells(std::string_view tag, std::span<const int32_t> connectivity,
+             std::span<const int32_t> offsets) {
+    if (offsets.empty()) return;
+    xml += "      <" + std::string(tag) + ">\n";
+    array<int32_t>("connectivity", 1, connectivity);
+    array<int32_t>("offsets", 1, offsets);
+    xml += "      </" + std::string(tag) + ">\n";
+  }
+
+  std::string xml;       ///< the document up to the appended data
+  std::string appended;  ///< the appended data's bytes
 };
-
-void openArray(std::string& out, std::string_view type, std::string_view name, int components) {
-  out += "        <DataArray type=\"";
-  out += type;
-  out += '"';
-  if (!name.empty()) out += " Name=\"" + escapeXml(name) + '"';
-  if (components > 1) out += " NumberOfComponents=\"" + std::to_string(components) + '"';
-  out += " format=\"ascii\">\n";
-}
-
-void closeArray(std::string& out) {
-  out += "\n        </DataArray>\n";
-}
-
-/// Writes one cell block (Verts, Lines, Polys): connectivity and end offsets.
-template <typename EmitConnectivity, typename EmitOffsets>
-void writeCells(std::string& out, std::string_view tag, EmitConnectivity connectivity,
-                EmitOffsets offsets) {
-  out += "      <";
-  out += tag;
-  out += ">\n";
-  openArray(out, "Int64", "connectivity", 1);
-  connectivity(NumberWriter(out));
-  closeArray(out);
-  openArray(out, "Int64", "offsets", 1);
-  offsets(NumberWriter(out));
-  closeArray(out);
-  out += "      </";
-  out += tag;
-  out += ">\n";
-}
 
 void checkPolyData(const std::string& path, const PolyData& data) {
   const size_t n = data.points.size();
   auto fail = [&](const std::string& what) {
     throw std::runtime_error(path + ": cannot write PolyData: " + what);
   };
+  if (n >= size_t(std::numeric_limits<int32_t>::max())) fail("too many points for Int32 cells");
   if (data.lineOffsets.empty() || data.lineOffsets.front() != 0 ||
       data.lineOffsets.back() != data.lineIndices.size())
     fail("line offsets must start at 0 and end at the number of line indices");
@@ -109,13 +150,41 @@ void checkPolyData(const std::string& path, const PolyData& data) {
   for (const auto& triangle : data.triangles)
     for (uint32_t index : triangle)
       if (index >= n) fail("triangle index " + std::to_string(index) + " >= point count");
-  for (const auto& [name, values] : data.pointScalars)
-    if (values.size() != n)
-      fail("array '" + name + "' has " + std::to_string(values.size()) + " values for " +
-           std::to_string(n) + " points");
+  for (const DataArray& array : data.pointData)
+    if (array.components < 1 || array.size() != n * size_t(array.components))
+      fail("array '" + array.name + "' has " + std::to_string(array.size()) + " values for " +
+           std::to_string(n) + " points of " + std::to_string(array.components) + " component(s)");
+  for (const DataArray& array : data.fieldData)
+    if (array.components < 1 || array.size() == 0 || array.size() % size_t(array.components) != 0)
+      fail("field array '" + array.name + "' has " + std::to_string(array.size()) +
+           " values, not a whole number of tuples of " + std::to_string(array.components));
+}
+
+std::vector<int32_t> sequence(size_t count, int32_t first, int32_t step) {
+  std::vector<int32_t> values(count);
+  for (size_t i = 0; i < count; ++i) values[i] = first + step * int32_t(i);
+  return values;
+}
+
+void writeCells(VtpBuilder& out, const PolyData& data) {
+  const size_t pointCount = data.points.size();
+  if (data.pointsAsVertices)
+    out.cells("Verts", sequence(pointCount, 0, 1), sequence(pointCount, 1, 1));
+  const std::vector<int32_t> lineIndices(data.lineIndices.begin(), data.lineIndices.end());
+  const std::vector<int32_t> lineEnds(data.lineOffsets.begin() + 1, data.lineOffsets.end());
+  out.cells("Lines", lineIndices, lineEnds);
+  std::vector<int32_t> triangles;
+  triangles.reserve(3 * data.triangles.size());
+  for (const auto& triangle : data.triangles)
+    for (uint32_t index : triangle) triangles.push_back(int32_t(index));
+  out.cells("Polys", triangles, sequence(data.triangles.size(), 3, 3));
 }
 
 }  // namespace
+
+size_t DataArray::size() const {
+  return std::visit([](const auto& v) { return v.size(); }, values);
+}
 
 void writeFileAtomically(const std::string& path, std::string_view content) {
   const fs::path target(path);
@@ -151,67 +220,39 @@ void writeFileAtomically(const std::string& path, std::string_view content) {
 void writeVtp(const std::string& path, const PolyData& data) {
   checkPolyData(path, data);
   const size_t pointCount = data.points.size();
-  const size_t vertCount = data.pointsAsVertices ? pointCount : 0;
-  const size_t lineCount = data.lineOffsets.size() - 1;
-  std::string out;
-  out.reserve(64 * pointCount + 32 * (data.lineIndices.size() + 3 * data.triangles.size()) + 1024);
-  out += "<?xml version=\"1.0\"?>\n";
-  out +=
+  VtpBuilder out;
+  out.xml =
+      "<?xml version=\"1.0\"?>\n"
       "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" "
-      "header_type=\"UInt64\">\n  <PolyData>\n";
-  out += "    <Piece NumberOfPoints=\"" + std::to_string(pointCount) + "\" NumberOfVerts=\"" +
-         std::to_string(vertCount) + "\" NumberOfLines=\"" + std::to_string(lineCount) +
-         "\" NumberOfStrips=\"0\" NumberOfPolys=\"" + std::to_string(data.triangles.size()) +
-         "\">\n";
-  out += "      <PointData";
-  if (!data.pointScalars.empty())
-    out += " Scalars=\"" + escapeXml(data.pointScalars.front().first) + '"';
-  out += ">\n";
-  for (const auto& [name, values] : data.pointScalars) {
-    openArray(out, "Float32", name, 1);
-    NumberWriter write(out);
-    for (float value : values) write(value);
-    closeArray(out);
+      "header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\">\n  <PolyData>\n";
+  if (!data.fieldData.empty()) {
+    out.xml += "    <FieldData>\n";
+    for (const DataArray& array : data.fieldData)
+      out.array(array, array.size() / size_t(array.components));
+    out.xml += "    </FieldData>\n";
   }
-  out += "      </PointData>\n      <Points>\n";
-  openArray(out, sizeof(btScalar) == 8 ? "Float64" : "Float32", "Points", 3);
-  {
-    NumberWriter write(out);
-    for (const btVector3& p : data.points) {
-      write(p.x());
-      write(p.y());
-      write(p.z());
-    }
-  }
-  closeArray(out);
-  out += "      </Points>\n";
-  writeCells(
-      out, "Verts",
-      [&](NumberWriter write) {
-        for (size_t i = 0; i < vertCount; ++i) write(i);
-      },
-      [&](NumberWriter write) {
-        for (size_t i = 0; i < vertCount; ++i) write(i + 1);
-      });
-  writeCells(
-      out, "Lines",
-      [&](NumberWriter write) {
-        for (uint32_t index : data.lineIndices) write(index);
-      },
-      [&](NumberWriter write) {
-        for (size_t i = 1; i < data.lineOffsets.size(); ++i) write(data.lineOffsets[i]);
-      });
-  writeCells(
-      out, "Polys",
-      [&](NumberWriter write) {
-        for (const auto& triangle : data.triangles)
-          for (uint32_t index : triangle) write(index);
-      },
-      [&](NumberWriter write) {
-        for (size_t i = 0; i < data.triangles.size(); ++i) write(3 * (i + 1));
-      });
-  out += "    </Piece>\n  </PolyData>\n</VTKFile>\n";
-  writeFileAtomically(path, out);
+  out.xml += "    <Piece NumberOfPoints=\"" + std::to_string(pointCount) + "\" NumberOfVerts=\"" +
+             std::to_string(data.pointsAsVertices ? pointCount : 0) + "\" NumberOfLines=\"" +
+             std::to_string(data.lineOffsets.size() - 1) +
+             "\" NumberOfStrips=\"0\" NumberOfPolys=\"" + std::to_string(data.triangles.size()) +
+             "\">\n";
+  out.xml += "      <PointData";
+  const auto scalars = std::find_if(data.pointData.begin(), data.pointData.end(),
+                                    [](const DataArray& a) { return a.components == 1; });
+  if (scalars != data.pointData.end()) out.xml += " Scalars=\"" + escapeXml(scalars->name) + '"';
+  out.xml += ">\n";
+  for (const DataArray& array : data.pointData) out.array(array);
+  out.xml += "      </PointData>\n      <Points>\n";
+  std::vector<float> points(3 * pointCount);
+  for (size_t i = 0; i < pointCount; ++i)
+    for (int k = 0; k < 3; ++k) points[3 * i + k] = float(data.points[i][k] * data.pointScale);
+  out.array<float>("Points", 3, points);
+  out.xml += "      </Points>\n";
+  writeCells(out, data);
+  out.xml += "    </Piece>\n  </PolyData>\n  <AppendedData encoding=\"raw\">\n   _";
+  out.xml += out.appended;
+  out.xml += "\n  </AppendedData>\n</VTKFile>\n";
+  writeFileAtomically(path, out.xml);
 }
 
 void PvdCollection::add(double time, const std::string& file, int part) {

@@ -1,6 +1,6 @@
 #pragma once
 // Output files: written whole or not at all (a temporary name, then rename), in formats
-// ParaView opens (VTK XML PolyData and a .pvd collection).
+// ParaView opens (VTK XML PolyData, binary and zlib-compressed, and a .pvd collection).
 #include <LinearMath/btVector3.h>
 
 #include <array>
@@ -8,6 +8,7 @@
 #include <string>
 #include <string_view>
 #include <utility>
+#include <variant>
 #include <vector>
 
 namespace fibremss {
@@ -16,17 +17,31 @@ namespace fibremss {
 /// (with the path) when it cannot. Creates missing parent directories.
 void writeFileAtomically(const std::string& path, std::string_view content);
 
-/// Points with optional vertices, polylines and triangles, and per-point data arrays.
+/// A named data array: `components` numbers per tuple, tuple after tuple.
+struct DataArray {
+  std::string name;    ///< array name as ParaView lists it
+  int components = 1;  ///< numbers per tuple (3 for a vector)
+  /// The values, written as Float32, Float64 or Int32.
+  std::variant<std::vector<float>, std::vector<double>, std::vector<int32_t>> values;
+
+  size_t size() const;  ///< number of values (tuples × components)
+};
+
+/// Points with optional vertices, polylines and triangles, per-point arrays and field data.
 struct PolyData {
-  std::vector<btVector3> points;                   ///< point coordinates
+  std::vector<btVector3> points;                   ///< point coordinates [any length unit]
+  btScalar pointScale = 1;                         ///< file units per point unit (1000: m → mm)
   bool pointsAsVertices = false;                   ///< emit every point as a vertex cell
   std::vector<uint32_t> lineIndices;               ///< polylines: point indices, CSR
   std::vector<uint32_t> lineOffsets{0};            ///< polyline i: [offsets[i], offsets[i+1])
   std::vector<std::array<uint32_t, 3>> triangles;  ///< triangle cells
-  std::vector<std::pair<std::string, std::vector<float>>> pointScalars;  ///< named arrays
+  std::vector<DataArray> pointData;                ///< one tuple per point each
+  std::vector<DataArray> fieldData;                ///< whole-dataset arrays (e.g. TimeValue)
 };
 
-/// Writes a .vtp (VTK XML PolyData, ASCII) file atomically.
+/// Writes a .vtp (VTK XML PolyData) file atomically: points as Float32, cells as Int32, every
+/// array appended raw and compressed in vtkZLibDataCompressor's blocks (UInt64 headers), as VTK
+/// 9 and ParaView 5.11 read it. Throws std::runtime_error for inconsistent data.
 void writeVtp(const std::string& path, const PolyData& data);
 
 /// A ParaView .pvd collection of time steps and parts.

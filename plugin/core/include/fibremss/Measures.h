@@ -21,12 +21,19 @@ struct Penetration {
 
 /// Penetration of world-space points into each bone (bone b's rest-frame mesh `bones[b]`
 /// placed at `boneTransforms[b]`); a point's depth is max(0, −signed distance), deepest bone.
+/// `depthsMm`, when not empty (one per point), receives every point's depth [mm] (0 outside).
 Penetration measurePenetration(std::span<const btVector3> points,
                                std::span<const MeshDistance* const> bones,
-                               std::span<const btTransform> boneTransforms);
+                               std::span<const btTransform> boneTransforms,
+                               std::span<float> depthsMm = {});
 
 /// Merges two penetration results (max of max, mean weighted by penetrating counts).
 Penetration combine(const Penetration& a, const Penetration& b);
+
+/// Signed volume enclosed by `triangles` over `vertices`, summed in double (positive when the
+/// normals point outward) [length unit³].
+double enclosedVolume(std::span<const std::array<uint32_t, 3>> triangles,
+                      std::span<const btVector3> vertices);
 
 /// Volume change of a deformed surface against its rest volume, in percent.
 double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> deformedVertices);

@@ -46,6 +46,7 @@ struct StepTiming {
 struct StepStats {
   int iterations = 0;             ///< iterations run
   btScalar lastTimeStep = 0;      ///< dt of the last iteration [s]
+  double simulatedTime = 0;       ///< time the step advanced: Σ dt over its iterations [s]
   btScalar meanDisplacement = 0;  ///< mean free-particle displacement in the last iteration [m]
   size_t contacts = 0;            ///< sphere pairs found overlapping in the last iteration
   size_t candidates = 0;          ///< sphere pairs tested exactly in the last iteration

@@ -35,11 +35,15 @@ double tripleProduct(const btVector3& a, const btVector3& b, const btVector3& c)
 
 Penetration measurePenetration(std::span<const btVector3> points,
                                std::span<const MeshDistance* const> bones,
-                               std::span<const btTransform> boneTransforms) {
-  if (bones.size() != boneTransforms.size()) {
+                               std::span<const btTransform> boneTransforms,
+                               std::span<float> depthsMm) {
+  if (bones.size() != boneTransforms.size() ||
+      (!depthsMm.empty() && depthsMm.size() != points.size())) {
     throw InputError("measurePenetration", "",
-                     std::to_string(bones.size()) + " bones but " +
-                         std::to_string(boneTransforms.size()) + " transforms");
+                     std::to_string(bones.size()) + " bones, " +
+                         std::to_string(boneTransforms.size()) + " transforms, " +
+                         std::to_string(points.size()) + " points, " +
+                         std::to_string(depthsMm.size()) + " depths");
   }
   std::vector<Bounds> bounds(bones.size());
   std::vector<btTransform> toRest(bones.size());
@@ -50,13 +54,14 @@ Penetration measurePenetration(std::span<const btVector3> points,
   Penetration result;
   result.points = points.size();
   double depthSum = 0;
-  for (const btVector3& p : points) {
+  for (size_t i = 0; i < points.size(); ++i) {
     double deepest = 0;
     for (size_t b = 0; b < bones.size(); ++b) {
-      const btVector3 local = toRest[b] * p;
+      const btVector3 local = toRest[b] * points[i];
       if (!bounds[b].contains(local)) continue;
       deepest = std::max(deepest, -static_cast<double>(bones[b]->signedDistance(local)));
     }
+    if (!depthsMm.empty()) depthsMm[i] = static_cast<float>(deepest * kMetresToMm);
     if (deepest > 0) {
       ++result.penetrating;
       depthSum += deepest * kMetresToMm;
@@ -80,6 +85,15 @@ Penetration combine(const Penetration& a, const Penetration& b) {
   return sum;
 }
 
+double enclosedVolume(std::span<const std::array<uint32_t, 3>> triangles,
+                      std::span<const btVector3> vertices) {
+  // Same formula as meshVolume, summed in double: many small tetra volumes lose digits.
+  double volume = 0;
+  for (const auto& t : triangles)
+    volume += tripleProduct(vertices[t[0]], vertices[t[1]], vertices[t[2]]) / 6.0;
+  return volume;
+}
+
 double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> deformedVertices) {
   if (deformedVertices.size() != rest.vertices.size()) {
     throw InputError("volumeChangePercent", "",
@@ -89,12 +103,7 @@ double volumeChangePercent(const TriangleMesh& rest, std::span<const btVector3> 
   }
   const double restVolume = meshVolume(rest);
   if (restVolume == 0) return std::numeric_limits<double>::quiet_NaN();
-  // Same formula as meshVolume, summed in double: many small tetra volumes lose digits.
-  double volume = 0;
-  for (const auto& t : rest.triangles) {
-    volume +=
-        tripleProduct(deformedVertices[t[0]], deformedVertices[t[1]], deformedVertices[t[2]]) / 6.0;
-  }
+  const double volume = enclosedVolume(rest.triangles, deformedVertices);
   return (volume - restVolume) / std::abs(restVolume) * 100.0;
 }
 

@@ -351,6 +351,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       if (!results[slot].finite) stats.nan = true;
     }
     stats.lastTimeStep = previousDt = dt;
+    stats.simulatedTime += dt;
     stats.meanDisplacement =
         freeCount ? static_cast<btScalar>(displacement / static_cast<double>(freeCount)) : 0;
     stats.timing.mss += millisecondsSince(start);

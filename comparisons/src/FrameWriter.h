@@ -1,0 +1,67 @@
+#pragma once
+// Internal to FibreRun: the frames of a run (muscle surfaces and particles with the arrays to
+// colour by, bones written only when they moved, run.pvd) and the per-particle fields they
+// carry.
+#include <span>
+#include <string>
+#include <vector>
+
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Output.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/Scene.h"
+
+namespace fibremss {
+
+/// Per particle: current / rest length of the fibre segments it belongs to (their lengths
+/// summed, so a particle between two segments averages them; 1 off every fibre).
+void particleFibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                          std::vector<float>& stretch);
+
+/// Per particle: Σ(l − L0) / Σ L0 over its springs, the engineering strain of its neighbourhood
+/// (> 0 stretched, < 0 compressed; 0 without springs).
+void particleSpringStrain(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                          std::vector<float>& strain);
+
+/// What a frame shows: which step and pose, and when.
+struct FrameInfo {
+  int step = 0;          ///< solver step the frame follows (0: the first)
+  int pose = 0;          ///< pose of the motion at that step
+  double poseLabel = 0;  ///< the pose's label (LoadedScene::poseLabels, e.g. a joint angle)
+  double time = 0;       ///< simulated time at the end of the step [s]
+};
+
+/// Writes the frames of a run in the scene's units: per muscle its deformed surface and its
+/// particles (fibres as lines), per bone its mesh where it is, again only once it moved, and
+/// run.pvd listing them all at their simulated times.
+class FrameWriter {
+ public:
+  FrameWriter(const std::string& outDir, const OutputSettings& settings, double unitScale);
+
+  /// One frame. `surfaceDepthsMm[m]`: depth of muscle m's surface vertices in the bones [mm].
+  void write(const FrameInfo& info, const MuscleSystem& system,
+             std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
+             std::span<const btTransform> boneTransforms,
+             std::span<const std::vector<float>> surfaceDepthsMm);
+
+  int frames() const { return frames_; }
+
+ private:
+  void writeMuscle(const FrameInfo& info, size_t m, const MuscleSystem& system, MuscleHandle handle,
+                   std::span<const float> depthsMm, int& part);
+  void writeBones(const FrameInfo& info, const PreparedScene& prepared,
+                  std::span<const btTransform> boneTransforms, int& part);
+  std::vector<DataArray> frameFields(const FrameInfo& info) const;
+  void add(double time, const std::string& file, const PolyData& data, int part);
+
+  std::string outDir_;
+  const OutputSettings& settings_;
+  btScalar sceneUnitsPerMetre_;
+  PvdCollection pvd_;
+  std::vector<std::string> boneFiles_;      ///< per bone, the file of its latest placement
+  std::vector<btTransform> boneWrittenAt_;  ///< per bone, the transform that file shows
+  std::vector<float> stretch_, strain_;     ///< per particle (scratch)
+  int frames_ = 0;
+};
+
+}  // namespace fibremss
