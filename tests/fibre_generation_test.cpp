@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 
@@ -293,6 +294,122 @@ TEST(FibresCommand, WritesTheRequestedCountReadableByTheLoader) {
                                        " --origin nonsense --out " + out + " 2>&1");
   EXPECT_EQ(bad.exitCode, 2);
   EXPECT_NE(bad.output.find("--origin"), std::string::npos) << bad.output;
+}
+
+/// Writes `surface` (metres) as an OBJ in millimetres.
+std::string writeObj(const std::filesystem::path& path, const TriangleMesh& surface) {
+  std::ofstream out(path);
+  for (const auto& v : surface.vertices)
+    out << "v " << v.x() * 1000 << ' ' << v.y() * 1000 << ' ' << v.z() * 1000 << '\n';
+  for (const auto& t : surface.triangles)
+    out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+  return path.string();
+}
+
+TEST(FibresCommand, AnUnreachableCountFailsWithExit2AndWritesNoFile) {
+  testing::TemporaryDirectory directory("fibremss_fibres_fail");
+  const std::string obj = writeObj(directory.path() / "spindle.obj", spindle());
+  const std::string out = (directory.path() / "fibres.vtk").string();
+  // A grid of 16 voxels holds far fewer seeds than 2000 fibres; the cap keeps it at 16.
+  auto run = [&](const std::string& options) {
+    return testing::runProcess(std::string(FIBREMSS_CLI) + " fibres " + obj + " " + options +
+                               " --out " + out + " 2>&1");
+  };
+  const auto tooMany = run("--count 2000 --grid 16 --max-grid 16 --samples 8");
+  EXPECT_EQ(tooMany.exitCode, 2) << tooMany.output;
+  EXPECT_NE(tooMany.output.find("fewer than the 1800 (90 %) required"), std::string::npos)
+      << tooMany.output;
+  EXPECT_NE(tooMany.output.find("ask for fewer fibres"), std::string::npos) << tooMany.output;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  // Accepting a smaller share makes the same request succeed (the file then exists).
+  const auto accepted = run("--count 2000 --grid 16 --max-grid 16 --samples 8 --min-share 0");
+  EXPECT_EQ(accepted.exitCode, 0) << accepted.output;
+  EXPECT_TRUE(std::filesystem::exists(out));
+  std::filesystem::remove(out);
+  // Two separate bodies: no grid connects an area on one to an area on the other.
+  TriangleMesh apart = makeEllipsoid(btVector3(0, 0, 0), btVector3(0.01f, 0.01f, 0.02f), 3);
+  const TriangleMesh other =
+      makeEllipsoid(btVector3(0, 0, 0.1f), btVector3(0.01f, 0.01f, 0.02f), 3);
+  const uint32_t base = uint32_t(apart.vertices.size());
+  apart.vertices.insert(apart.vertices.end(), other.vertices.begin(), other.vertices.end());
+  for (const auto& t : other.triangles)
+    apart.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  const std::string twoBodies = writeObj(directory.path() / "apart.obj", apart);
+  const auto disconnected = testing::runProcess(
+      std::string(FIBREMSS_CLI) + " fibres " + twoBodies +
+      " --origin 0,0,-20@5 --insertion 0,0,120@5 --grid 16 --max-grid 36 --out " + out + " 2>&1");
+  EXPECT_EQ(disconnected.exitCode, 2) << disconnected.output;
+  EXPECT_NE(disconnected.output.find("no interior voxel connects"), std::string::npos)
+      << disconnected.output;
+  EXPECT_NE(disconnected.output.find("grid 16, 24, 36"), std::string::npos) << disconnected.output;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+TEST(FibresCommand, LongLandmarkListsInlineOrFromAFile) {
+  testing::TemporaryDirectory directory("fibremss_fibres_landmarks");
+  const std::string obj = writeObj(directory.path() / "spindle.obj", spindle());
+  const std::string out = (directory.path() / "fibres.vtk").string();
+  // 40 landmarks around the lower tip (mm): more than 255 characters inline.
+  const btVector3 tip = (kCentre - btVector3(0, 0, kRadii.z())) * 1000;
+  std::string inline_list, json = "{\"landmarks\": [";
+  for (int i = 0; i < 40; ++i) {
+    const double a = 2 * M_PI * i / 40;
+    const btVector3 p = tip + btVector3(btScalar(3 * std::cos(a)), btScalar(3 * std::sin(a)), 2);
+    const std::string x = std::to_string(p.x()), y = std::to_string(p.y()),
+                      z = std::to_string(p.z());
+    inline_list += (i ? ";" : "") + x + "," + y + "," + z;
+    json += std::string(i ? ", " : "") + "[" + x + ", " + y + ", " + z + "]";
+  }
+  json += "], \"radius\": 10}";
+  ASSERT_GT(inline_list.size(), 255u);
+  const std::string file = (directory.path() / "origin.json").string();
+  std::ofstream(file) << json;
+  for (const std::string& origin : {"'" + inline_list + "@10'", "@" + file}) {
+    const auto result = testing::runProcess(std::string(FIBREMSS_CLI) + " fibres " + obj +
+                                            " --origin " + origin + " --count 16 --out " + out);
+    ASSERT_EQ(result.exitCode, 0) << result.output;
+    EXPECT_NE(result.output.find("fibres:        16 of 16"), std::string::npos) << result.output;
+    EXPECT_EQ(loadFibres(out, 0.001).fibreCount(), 16u);
+    std::filesystem::remove(out);
+  }
+  // A broken landmark file names the file and the element.
+  std::ofstream(file) << "{\"landmarks\": [[1, 2]]}";
+  const auto bad = testing::runProcess(std::string(FIBREMSS_CLI) + " fibres " + obj +
+                                       " --origin @" + file + " --out " + out + " 2>&1");
+  EXPECT_EQ(bad.exitCode, 2);
+  EXPECT_NE(bad.output.find("landmarks[0]"), std::string::npos) << bad.output;
+  EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+// A muscle passing over a bone on its way to its insertion on the same bone (a psoas over the
+// femoral head to the lesser trochanter): the bone area keeps its patch at the muscle's end,
+// so the fibres end there and not at the first contact.
+TEST(FibreGeneration, BoneAreasKeepThePatchAtTheMusclesEnd) {
+  const TriangleMesh surface = spindle();  // z from 0.2 to 0.4 m, 20 mm radius
+  TriangleMesh bone = makeBox(kCentre + btVector3(0.026f, 0, 0), btVector3(0.01f, 0.03f, 0.03f),
+                              {2, 2, 2});  // touches the belly's side
+  const TriangleMesh end = makeBox(kCentre + btVector3(0, 0, kRadii.z() + 0.006f),
+                                   btVector3(0.06f, 0.06f, 0.01f), {2, 2, 2});  // beyond +z
+  const uint32_t base = uint32_t(bone.vertices.size());
+  bone.vertices.insert(bone.vertices.end(), end.vertices.begin(), end.vertices.end());
+  for (const auto& t : end.triangles)
+    bone.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  FibreGenerationOptions options;
+  options.count = 24;
+  options.samples = 20;
+  const FibreGenerationResult result =
+      generateFibres(surface, AttachmentArea{}, AttachmentArea::fromBone(bone, 0.01f), options);
+  ASSERT_EQ(result.fibres.fibreCount(), 24u);
+  bool warned = false;
+  for (const auto& w : result.warnings)
+    warned |= w.find("passes over the bone") != std::string::npos;
+  EXPECT_TRUE(warned);
+  // Every insertion vertex lies at the +z end; every fibre ends there (beyond 85 % of the length).
+  for (uint32_t v : result.insertionArea) EXPECT_GT(surface.vertices[v].z(), kCentre.z() + 0.07f);
+  for (size_t f = 0; f < result.fibres.fibreCount(); ++f)
+    EXPECT_GT(result.fibres.fibre(f).back().z(), kCentre.z() + 0.07f) << "fibre " << f;
+  EXPECT_GE(result.quality.rightEnds, 0.9);
+  EXPECT_LT(result.quality.worstEndGap, result.quality.voxelSize * 2);
 }
 
 }  // namespace

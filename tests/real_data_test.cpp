@@ -38,8 +38,10 @@ const std::string kSource = FIBREMSS_SOURCE_DIR;
 //   cross-section (the default) give 75-99 % here; seeds on the origin area (the 3 mm tip)
 //   bunch the fibres and gave 43 % for muscle 0, which this bound rejects;
 // - crossings: streamlines of a gradient field do not cross; pairs closer than 0.5 mm are
-//   fibres converging into a tendon: at most 5 % of the 2016 pairs (origin seeding: 215 and
-//   107 pairs for muscles 2 and 3);
+//   fibres converging into a tendon: at most 6 % of the 2016 pairs (origin seeding: 215 and
+//   107 pairs for muscles 2 and 3; since issue 16 a bone area keeps only its patch at the
+//   muscle's end, so all of muscle 2's fibres run on into its insertion and converge there:
+//   102 pairs, coverage 99 %, where they stopped at a contact mid-muscle before: 64, 83 %);
 // - length spread: no fibre shorter than the straight line between the two areas.
 TEST(RealData, FibresOfTheRealMusclesMeetTheQualityBounds) {
   REQUIRE_SHARED_DATA();
@@ -78,7 +80,7 @@ TEST(RealData, FibresOfTheRealMusclesMeetTheQualityBounds) {
     EXPECT_GE(right, int(0.9 * 64));
     EXPECT_GE(q.rightEnds, 0.9);
     EXPECT_GE(q.coverage, 0.6);
-    EXPECT_LE(q.crossingPairs, 64 * 63 / 2 / 20);
+    EXPECT_LE(q.crossingPairs, 64 * 63 * 6 / 2 / 100);
     btScalar gap = std::numeric_limits<btScalar>::infinity();
     for (uint32_t o : result.originArea)
       for (uint32_t i : result.insertionArea)

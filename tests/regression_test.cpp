@@ -75,6 +75,18 @@ TEST(FuzzRegression, Vtk) {
   });
 }
 
+TEST(FuzzRegression, Vtp) {
+  replay("fuzz_vtp", [](const fs::path& scratch, const std::string& bytes) {
+    const fs::path file = scratch / "input.vtp";
+    write(file, bytes);
+    try {
+      loadSurface(file.string());
+    } catch (const InputError&) {
+    }
+    loadFibres(file.string());
+  });
+}
+
 TEST(FuzzRegression, ObjFibres) {
   replay("fuzz_obj_fibres", [](const fs::path& scratch, const std::string& bytes) {
     const fs::path file = scratch / "input.obj";

@@ -42,9 +42,9 @@ std::string sphereScene(const std::string& extra = "", const std::string& muscle
          extra + "}";
 }
 
-/// A pelvis-like box and a femur-like box swept about a pivot.
+/// A pelvis-like box and a femur-like box swept about a pivot (poses as given: no sub-poses).
 std::string sweepScene(const std::string& motion) {
-  return R"({"units": "mm", "bones": [
+  return R"({"units": "mm", "simulation": {"max_step_deg": 0}, "bones": [
     {"name": "fixed", "mesh": {"generator": {"type": "box", "size": [20, 20, 20]}}},
     {"name": "moving", "mesh": {"generator": {"type": "box", "centre": [0, -60, 0], "size": [10, 80, 10]}},
      "motion": )" +

@@ -143,6 +143,7 @@ void runCheck(const CheckArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
   for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
+  for (const auto& note : scene.notes) std::cerr << "fibremss: note: " << note << "\n";
 
   if (!args.out.empty()) requireWritableDirectory(args.out);  // fail before preparing
   const PreparedScene prepared =
@@ -201,6 +202,7 @@ void runCheck(const CheckArgs& args) {
                                   {"muscles", muscles},
                                   {"bones", bones},
                                   {"warnings", warnings},
+                                  {"notes", scene.notes},
                                   {"preparation", preparation}};
     for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
     std::cout << result.dump(2) << "\n";

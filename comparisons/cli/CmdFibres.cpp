@@ -2,8 +2,10 @@
 // fibres from a muscle surface (harmonic field + gradient streamlines), with quality figures.
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "Commands.h"
@@ -17,7 +19,8 @@ namespace {
 
 struct FibresArgs {
   std::string muscle, origin, insertion, out;
-  int count = 64, samples = 64, grid = 48;
+  int count = 64, samples = 64, grid = 48, maxGrid = 192;
+  double minShare = 0.9;  // fewer fibres than this share of --count: an error, no file
   double scale = 0.001;   // metres per file unit
   double distance = 4;    // mm: bone attachment area
   double radius = 10;     // mm: landmark radius
@@ -54,6 +57,47 @@ bool parseLandmarks(const std::string& text, double scale, double defaultRadiusM
   return !points.empty();
 }
 
+/// Landmarks from a JSON file: [[x, y, z], ...] or {"landmarks": [[x, y, z], ...], "radius": r}
+/// (file units).
+AttachmentArea landmarksFromFile(const std::string& path, const FibresArgs& args) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path, "", "cannot open the landmark file");
+  nlohmann::json json;
+  try {
+    json = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(path, "", std::string("not valid JSON: ") + e.what());
+  }
+  double radius = args.radius * 0.001 / args.scale;  // file units
+  const nlohmann::json* list = &json;
+  if (json.is_object()) {
+    for (const auto& [key, value] : json.items())
+      if (key != "landmarks" && key != "radius")
+        throw InputError(path, key, "unknown field; expected \"landmarks\" and \"radius\"");
+    if (!json.contains("landmarks")) throw InputError(path, "landmarks", "missing");
+    list = &json["landmarks"];
+    if (json.contains("radius")) {
+      if (!json["radius"].is_number() || !(json["radius"].get<double>() > 0))
+        throw InputError(path, "radius", "expected a number > 0 (file units)");
+      radius = json["radius"].get<double>();
+    }
+  }
+  if (!list->is_array() || list->empty())
+    throw InputError(path, "landmarks", "expected a non-empty array of [x, y, z] (file units)");
+  std::vector<btVector3> points;
+  for (size_t i = 0; i < list->size(); ++i) {
+    const nlohmann::json& p = (*list)[i];
+    if (!p.is_array() || p.size() != 3 || !p[0].is_number() || !p[1].is_number() ||
+        !p[2].is_number())
+      throw InputError(path, "landmarks[" + std::to_string(i) + "]",
+                       "expected [x, y, z] (file units), got " + p.dump());
+    points.push_back(btVector3(btScalar(p[0].get<double>() * args.scale),
+                               btScalar(p[1].get<double>() * args.scale),
+                               btScalar(p[2].get<double>() * args.scale)));
+  }
+  return AttachmentArea::fromLandmarks(std::move(points), btScalar(radius * args.scale));
+}
+
 AttachmentArea readArea(const std::string& text, const FibresArgs& args, TriangleMesh& bone,
                         const std::string& option) {
   if (text.empty()) {
@@ -61,15 +105,17 @@ AttachmentArea readArea(const std::string& text, const FibresArgs& args, Triangl
     farEnd.endDepth = btScalar(args.endDepth * 0.001);
     return farEnd;
   }
+  if (text.front() == '@') return landmarksFromFile(text.substr(1), args);
   std::vector<btVector3> points;
   btScalar radius;
-  if (!std::filesystem::exists(text) &&
-      parseLandmarks(text, args.scale, args.radius, points, radius))
+  std::error_code error;  // a long landmark list is no file name: no exception for it
+  const bool isFile = std::filesystem::is_regular_file(text, error);
+  if (!isFile && parseLandmarks(text, args.scale, args.radius, points, radius))
     return AttachmentArea::fromLandmarks(std::move(points), radius);
-  if (!std::filesystem::exists(text))
-    throw InputError(
-        option, text,
-        "expected a bone mesh file or landmarks \"x,y,z;x,y,z[@radius]\" (file units)");
+  if (!isFile)
+    throw InputError(option, text.size() > 60 ? text.substr(0, 60) + "..." : text,
+                     "expected a bone mesh file, landmarks \"x,y,z;x,y,z[@radius]\" (file units) "
+                     "or @FILE.json holding [[x, y, z], ...]");
   bone = loadSurface(text, args.scale);
   return AttachmentArea::fromBone(bone, btScalar(args.distance * 0.001));
 }
@@ -85,6 +131,8 @@ void run(const FibresArgs& args) {
   options.count = args.count;
   options.samples = args.samples;
   options.grid = args.grid;
+  options.maxGrid = std::max(args.maxGrid, args.grid);
+  options.minShare = args.minShare;
   options.coverageDistance = btScalar(args.coverage * 0.001);
   options.crossingTolerance = btScalar(args.crossing * 0.001);
   options.sectionSeeds = args.seeds == "section";
@@ -111,8 +159,9 @@ void run(const FibresArgs& args) {
             << "crossings:     " << q.crossingPairs << " fibre pairs closer than " << args.crossing
             << " mm\n"
             << "outside:       " << q.pointsOutside << " fibre points outside the surface\n"
-            << "right ends:    " << q.rightEnds * 100 << " % start at the origin and end at the "
-            << "insertion\n"
+            << "right ends:    " << q.rightEnds * 100 << " % start within 1.5 voxels of the "
+            << "origin and end within 1.5 voxels of the insertion (worst end "
+            << q.worstEndGap * 1000 << " mm from its area)\n"
             << "time:          " << q.seconds << " s\n"
             << "wrote:         " << args.out << "\n";
 }
@@ -126,11 +175,14 @@ void addFibresCommand(CLI::App& app) {
       "Generate fibres inside a muscle surface: a harmonic field from the origin area (0) to the "
       "insertion area (1), streamlines of its gradient. An attachment is a bone mesh (surface "
       "vertices within --distance of it) or landmarks \"x,y,z;x,y,z[@radius]\" in file units; "
-      "a missing one is the muscle's end farthest from the other along its main axis.");
+      "a missing one is the muscle's end farthest from the other along its main axis. Fewer fibres "
+      "than --min-share of --count: exit 2 and no file.");
   command->add_option("muscle", args->muscle, "closed muscle surface (obj, stl, vtk, ...)")
       ->required();
-  command->add_option("--origin", args->origin, "origin bone mesh or landmarks");
-  command->add_option("--insertion", args->insertion, "insertion bone mesh or landmarks");
+  command->add_option("--origin", args->origin,
+                      "origin bone mesh, landmarks, or @FILE.json with [[x, y, z], ...]");
+  command->add_option("--insertion", args->insertion,
+                      "insertion bone mesh, landmarks, or @FILE.json with [[x, y, z], ...]");
   command->add_option("--count", args->count, "fibres to generate")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
@@ -139,6 +191,17 @@ void addFibresCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--grid", args->grid, "voxels along the muscle's longest side")
       ->check(CLI::Range(8, 400))
+      ->capture_default_str();
+  command
+      ->add_option("--max-grid", args->maxGrid,
+                   "raise the grid 1.5x at a time up to this when the areas do not connect or "
+                   "too few fibres arrive")
+      ->check(CLI::Range(8, 400))
+      ->capture_default_str();
+  command
+      ->add_option("--min-share", args->minShare,
+                   "fail (exit 2, no file) when fewer than this share of --count can be made")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   command->add_option("--scale", args->scale, "metres per file unit (0.001: files in mm)")
       ->check(positiveNumber())

@@ -155,6 +155,7 @@ void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   for (const std::string& warning : scene.warnings)
     std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  for (const std::string& note : scene.notes) std::fprintf(stderr, "note: %s\n", note.c_str());
   // A run that cannot write fails before preparing, and writes nothing before it prepared.
   if (!args.out.empty()) requireWritableDirectory(args.out);
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());

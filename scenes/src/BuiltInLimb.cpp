@@ -101,6 +101,8 @@ Json hipScene(const std::string& kind) {
       Json::array({tubeMuscle("iliopsoas", iliopsoas), tubeMuscle("gluteus-medius", gluteusMedius),
                    tubeMuscle("gluteus-maximus", gluteusMaximus),
                    tubeMuscle("adductor-longus", adductorLongus)});
+  // Reference workloads: their poses stay as documented and measured (no sub-poses).
+  scene["simulation"] = {{"max_step_deg", 0}};
   return scene;
 }
 
@@ -188,6 +190,8 @@ Json thigh13Scene() {
                                     vias({{-130, -145, 38}, {-260, -145, 40}, {-385, -130, 40}}),
                                     tibia, {10, -470, -22}, 14, 10));
   scene["muscles"] = std::move(muscles);
+  // The thesis' workload: 13 poses as measured there (no sub-poses).
+  scene["simulation"] = {{"max_step_deg", 0}};
   return scene;
 }
 

@@ -82,6 +82,22 @@ std::string quoted(std::string_view text) {
   return result + "'";
 }
 
+void appendPolygon(std::vector<std::array<uint32_t, 3>>& triangles,
+                   const std::vector<uint32_t>& cell) {
+  for (size_t k = 1; k + 1 < cell.size(); ++k) triangles.push_back({cell[0], cell[k], cell[k + 1]});
+}
+
+void appendStrip(std::vector<std::array<uint32_t, 3>>& triangles,
+                 const std::vector<uint32_t>& cell) {
+  for (size_t k = 0; k + 2 < cell.size(); ++k) {
+    if (k % 2 == 0) {
+      triangles.push_back({cell[k], cell[k + 1], cell[k + 2]});
+    } else {
+      triangles.push_back({cell[k + 1], cell[k], cell[k + 2]});
+    }
+  }
+}
+
 FibreSet chainPolylines(const std::string& path, const std::vector<btVector3>& points,
                         const IndexPolylines& lines) {
   FibreSet fibres;
@@ -118,13 +134,25 @@ std::string lowerExtension(const std::string& path) {
   return extension;
 }
 
-/// Legacy VTK by extension, or by content for files named otherwise.
-bool isLegacyVtk(const std::string& path, const std::string& extension) {
-  if (extension == ".vtk") return true;
+enum class VtkKind { None, Legacy, Xml };
+
+/// Legacy VTK (.vtk) or VTK XML PolyData (.vtp) by extension, or by content for files named
+/// otherwise.
+VtkKind vtkKind(const std::string& path, const std::string& extension) {
+  if (extension == ".vtk") return VtkKind::Legacy;
+  if (extension == ".vtp") return VtkKind::Xml;
   std::ifstream file(path, std::ios::binary);
-  char head[32] = {};
+  char head[512] = {};
   file.read(head, sizeof head);
-  return meshio::looksLikeLegacyVtk(std::string_view(head, static_cast<size_t>(file.gcount())));
+  const std::string_view bytes(head, static_cast<size_t>(file.gcount()));
+  if (meshio::looksLikeLegacyVtk(bytes)) return VtkKind::Legacy;
+  return meshio::looksLikeVtkXml(bytes) ? VtkKind::Xml : VtkKind::None;
+}
+
+meshio::VtkPolyData readVtk(VtkKind kind, const std::string& path, const std::string& bytes,
+                            double scale) {
+  return kind == VtkKind::Legacy ? meshio::readLegacyVtk(path, bytes, scale)
+                                 : meshio::readVtkXmlPolyData(path, bytes, scale);
 }
 
 }  // namespace
@@ -133,14 +161,14 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
   meshio::requireScale(path, scale);
   TriangleMesh mesh;
   std::vector<std::string> readerWarnings;
-  meshio::requireNonEmptyFile(path);  // before isLegacyVtk opens it: a FIFO would block
-  if (isLegacyVtk(path, lowerExtension(path))) {
+  meshio::requireNonEmptyFile(path);  // before vtkKind opens it: a FIFO would block
+  if (const VtkKind kind = vtkKind(path, lowerExtension(path)); kind != VtkKind::None) {
     const std::string bytes = meshio::readWholeFile(path);
-    meshio::VtkPolyData data = meshio::readLegacyVtk(path, bytes, scale);
+    meshio::VtkPolyData data = readVtk(kind, path, bytes, scale);
     if (data.triangles.empty()) {
       throw InputError(path, "",
-                       "expected a surface (POLYGONS or TRIANGLE_STRIPS), found no triangles" +
-                           std::string(data.lines.size() > 0 ? " (only LINES: fibres?)" : ""));
+                       "expected a surface (polygons or triangle strips), found no triangles" +
+                           std::string(data.lines.size() > 0 ? " (only lines: fibres?)" : ""));
     }
     mesh.vertices = std::move(data.points);
     mesh.triangles = std::move(data.triangles);
@@ -175,20 +203,22 @@ FibreSet loadFibres(const std::string& path, double scale) {
   const std::string extension = lowerExtension(path);
   const std::string bytes = meshio::readWholeFile(path);
   FibreSet fibres;
-  if (extension == ".vtk" || meshio::looksLikeLegacyVtk(bytes)) {
-    const meshio::VtkPolyData data = meshio::readLegacyVtk(path, bytes, scale);
+  if (const VtkKind kind = vtkKind(path, extension); kind != VtkKind::None) {
+    const meshio::VtkPolyData data = readVtk(kind, path, bytes, scale);
     if (data.lines.size() == 0) {
-      throw InputError(path, "", "expected fibres as LINES cells, found none");
+      throw InputError(path, "", "expected fibres as lines cells (LINES, <Lines>), found none");
     }
     fibres = meshio::chainPolylines(path, data.points, data.lines);
   } else if (extension == ".obj") {
     const meshio::ObjPolylines data = meshio::readObjPolylines(path, bytes, scale);
     fibres = meshio::chainPolylines(path, data.points, data.lines);
   } else {
-    throw InputError(path, "",
-                     "expected fibres in legacy VTK (.vtk, LINES) or OBJ (.obj, `l` polylines), "
-                     "found the extension " +
-                         meshio::quoted(extension));
+    throw InputError(
+        path, "",
+        "expected fibres in legacy VTK (.vtk, LINES), VTK XML (.vtp, Lines) or OBJ (.obj, "
+        "`l` polylines), "
+        "found the extension " +
+            meshio::quoted(extension));
   }
   meshio::validateFibres(fibres, path);
   return fibres;

@@ -49,6 +49,22 @@ bool looksLikeLegacyVtk(std::string_view bytes);
 /// Legacy VTK POLYDATA, ASCII or BINARY (big-endian), classic or 5.1 OFFSETS layout.
 VtkPolyData readLegacyVtk(const std::string& path, std::string_view bytes, double scale);
 
+/// True when the bytes start like a VTK XML file ("<?xml" or "<VTKFile", naming VTKFile).
+bool looksLikeVtkXml(std::string_view bytes);
+
+/// VTK XML PolyData (.vtp): Points, Polys, Strips and Lines of every Piece; DataArrays in
+/// ascii, binary (base64, optionally vtkZLibDataCompressor blocks) or appended (raw or base64)
+/// format, UInt32 or UInt64 headers, either byte order.
+VtkPolyData readVtkXmlPolyData(const std::string& path, std::string_view bytes, double scale);
+
+/// Appends a polygon's fan triangles (`cell` has at least 3 points).
+void appendPolygon(std::vector<std::array<uint32_t, 3>>& triangles,
+                   const std::vector<uint32_t>& cell);
+
+/// Appends a triangle strip's triangles, every second one reversed to keep one orientation.
+void appendStrip(std::vector<std::array<uint32_t, 3>>& triangles,
+                 const std::vector<uint32_t>& cell);
+
 /// OBJ `v` and `l` statements (other statements are ignored, unknown ones are errors).
 ObjPolylines readObjPolylines(const std::string& path, std::string_view bytes, double scale);
 

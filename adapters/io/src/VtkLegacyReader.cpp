@@ -473,19 +473,10 @@ class PolyDataReader {
                                " points, expected at least 3; skipped");
       return;
     }
-    auto& triangles = data_.triangles;
     if (kind == "POLYGONS") {
-      for (size_t k = 1; k + 1 < cell_.size(); ++k)
-        triangles.push_back({cell_[0], cell_[k], cell_[k + 1]});
-      return;
-    }
-    // Triangle strips: every second triangle is reversed to keep one orientation.
-    for (size_t k = 0; k + 2 < cell_.size(); ++k) {
-      if (k % 2 == 0) {
-        triangles.push_back({cell_[k], cell_[k + 1], cell_[k + 2]});
-      } else {
-        triangles.push_back({cell_[k + 1], cell_[k], cell_[k + 2]});
-      }
+      appendPolygon(data_.triangles, cell_);
+    } else {
+      appendStrip(data_.triangles, cell_);
     }
   }
 

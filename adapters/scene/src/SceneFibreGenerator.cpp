@@ -218,6 +218,8 @@ bool generateSurfaceFibres(Fields& generator, const std::string& muscleName,
   FibreGenerationOptions options;
   options.count = count;
   options.grid = generator.integer("grid", options.grid, 8, 400);
+  options.maxGrid = generator.integer("max_grid", std::max(options.maxGrid, options.grid), 8, 400);
+  options.minShare = generator.number("min_share", options.minShare, 0, 1);
   options.samples = generator.integer("samples", options.samples, 2, 100000);
   FibreGenerationResult result;
   try {
@@ -227,8 +229,6 @@ bool generateSurfaceFibres(Fields& generator, const std::string& muscleName,
     generator.fail("type", e.problem());
   }
   for (auto& warning : result.warnings) scene.warnings.push_back(std::move(warning));
-  const FibreQuality& q = result.quality;
-  if (q.generated < 1) generator.fail("type", "no streamline reached the insertion area");
   fibres = std::move(result.fibres);
   const std::pair<const AreaSpec*, const std::vector<uint32_t>*> areas[2] = {
       {&origin, &result.originArea}, {&insertion, &result.insertionArea}};

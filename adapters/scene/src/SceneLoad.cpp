@@ -9,6 +9,7 @@
 
 #include "SceneAnatomy.h"
 #include "SceneFields.h"
+#include "SceneMotion.h"
 #include "SceneShapes.h"
 #include "SceneValidation.h"
 #include "fibremss/BuiltInScenes.h"
@@ -139,8 +140,13 @@ std::vector<double> sweepAngles(double start, double end, double step) {
 
 void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, BoneMotion& result,
                 std::vector<double>& labels) {
-  const std::string type = motion.choice("type", "none", {"none", "keyframes", "sweep"});
-  if (type == "sweep") {
+  const std::string type = motion.choice("type", "none", {"none", "keyframes", "sweep", "opensim"});
+  if (type == "opensim") {
+    if (!motion.has("file")) motion.fail("file", "missing: the OpenSim motion (.mot / .sto)");
+    const std::string file = reader.resolve(motion, "file", motion.text("file", ""));
+    const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
+    scene::readOpenSimMotion(motion, file, pivot, result.poses, labels);
+  } else if (type == "sweep") {
     const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
     const btVector3 axis = motion.vector3("axis", btVector3(1, 0, 0));
     if (axis.length() <= 0) motion.fail("axis", "expected a non-zero rotation axis");
@@ -261,6 +267,9 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
                                      std::max<double>(input.parameters.attachmentDistance, 1e-3)))
       reader.result->warnings.push_back(std::move(warning));
     input.fibreGridColumns = gridColumns;
+    // Measured fibres converge into tendons as generated ones do (issue 16: 632-1026 pairs
+    // closer than 0.5 mm in a real set): near-coincident particles merge whatever the source.
+    input.mergeConverging = true;
   } else {
     Fields generator = fibres.object("generator");
     int columns = 0;
@@ -457,6 +466,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
         "simulation.stop = budget: each step iterates until its wall-clock budget is spent, so "
         "the results depend on the machine's load and the thread count and are not "
         "bit-identical between runs (the one exception; see docs/reliability.md)");
+  scene::splitLargeJumps(result, simulation.number("max_step_deg", 5, 0, 180));
   Fields collision = root.object("collision");
   readCollision(collision, reader.scale, result.simulation);
   Fields outputs = root.object("outputs");

@@ -51,6 +51,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"constraint_iterations", {Target::Section, "simulation"}},
       {"on_failure", {Target::Section, "simulation"}},
       {"max_retries", {Target::Section, "simulation"}},
+      {"max_step_deg", {Target::Section, "simulation"}},
       {"muscle_muscle", {Target::Section, "collision"}},
       {"bone_collision", {Target::Section, "collision"}},
       {"distance_field_cell", {Target::Section, "collision"}},

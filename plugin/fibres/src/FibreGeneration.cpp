@@ -96,6 +96,59 @@ std::vector<uint32_t> areaVertices(const TriangleMesh& surface, const Attachment
   return ids;
 }
 
+/// A bone area may take in places where the muscle only passes over the bone (the psoas over
+/// the femoral head on its way to the lesser trochanter). Of its surface-connected patches, the
+/// one reaching nearest an end of the muscle's main axis is kept, with any other patch reaching
+/// within 15 % of the length of that end; the others are dropped with a warning.
+void keepEndPatches(const TriangleMesh& surface, std::vector<uint32_t>& ids,
+                    const std::string& what, std::vector<std::string>& warnings) {
+  const auto& V = surface.vertices;
+  std::vector<uint32_t> parent(V.size());
+  std::iota(parent.begin(), parent.end(), 0u);
+  auto root = [&](uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  std::vector<char> in(V.size(), 0);
+  for (uint32_t i : ids) in[i] = 1;
+  for (const auto& t : surface.triangles)
+    for (int e = 0; e < 3; ++e)
+      if (in[t[e]] && in[t[(e + 1) % 3]]) parent[root(t[e])] = root(t[(e + 1) % 3]);
+  btVector3 centroid, axis;
+  principalAxis(V, centroid, axis);
+  btScalar lo = std::numeric_limits<btScalar>::infinity(), hi = -lo;
+  for (const auto& v : V) {
+    lo = std::min(lo, (v - centroid).dot(axis));
+    hi = std::max(hi, (v - centroid).dot(axis));
+  }
+  // Per patch: how near it reaches to the low end and to the high end.
+  std::unordered_map<uint32_t, std::pair<btScalar, btScalar>> reach;
+  for (uint32_t i : ids) {
+    const btScalar s = (V[i] - centroid).dot(axis);
+    auto [it, fresh] = reach.try_emplace(root(i), s - lo, hi - s);
+    it->second = {std::min(it->second.first, s - lo), std::min(it->second.second, hi - s)};
+  }
+  if (reach.size() < 2) return;
+  bool lowEnd = true;
+  btScalar nearest = std::numeric_limits<btScalar>::infinity();
+  for (const auto& [patch, gaps] : reach)
+    for (int end = 0; end < 2; ++end)
+      if ((end ? gaps.second : gaps.first) < nearest)
+        nearest = end ? gaps.second : gaps.first, lowEnd = end == 0;
+  const btScalar limit = btScalar(0.15) * (hi - lo);
+  std::vector<uint32_t> kept;
+  for (uint32_t i : ids) {
+    const auto& gaps = reach[root(i)];
+    if ((lowEnd ? gaps.first : gaps.second) <= limit) kept.push_back(i);
+  }
+  if (kept.size() == ids.size()) return;
+  warnings.push_back(what + ": " + std::to_string(ids.size() - kept.size()) + " of " +
+                     std::to_string(ids.size()) +
+                     " vertices near the bone lie away from the muscle's ends (where it passes "
+                     "over the bone) and are left out of the area");
+  ids.swap(kept);
+}
+
 /// Vertices at the end of the main axis farthest from `from` (or the low end when from is null).
 std::vector<uint32_t> farEnd(const TriangleMesh& surface, const btVector3* from, bool lowEnd,
                              double fraction, btScalar depth) {
@@ -221,15 +274,19 @@ double segmentDistance2(const btVector3& p1, const btVector3& q1, const btVector
   return (c1 - c2).length2();
 }
 
-}  // namespace
-
-void resolveAttachmentAreas(const TriangleMesh& surface, const AttachmentArea& origin,
-                            const AttachmentArea& insertion, const std::string& source,
-                            std::vector<uint32_t>& originIds, std::vector<uint32_t>& insertionIds,
-                            std::vector<std::string>& warnings) {
+/// The surface vertices of both attachment areas (result.originArea, result.insertionArea).
+void resolveAreas(const TriangleMesh& surface, const AttachmentArea& origin,
+                  const AttachmentArea& insertion, const std::string& source,
+                  FibreGenerationResult& result) {
   const auto& V = surface.vertices;
-  originIds = areaVertices(surface, origin, source + ": origin", warnings);
-  insertionIds = areaVertices(surface, insertion, source + ": insertion", warnings);
+  std::vector<uint32_t> originIds =
+      areaVertices(surface, origin, source + ": origin", result.warnings);
+  std::vector<uint32_t> insertionIds =
+      areaVertices(surface, insertion, source + ": insertion", result.warnings);
+  if (origin.kind == AttachmentArea::Kind::Bone)
+    keepEndPatches(surface, originIds, source + ": origin", result.warnings);
+  if (insertion.kind == AttachmentArea::Kind::Bone)
+    keepEndPatches(surface, insertionIds, source + ": insertion", result.warnings);
   const bool originFar = origin.kind == AttachmentArea::Kind::FarEnd;
   const bool insertionFar = insertion.kind == AttachmentArea::Kind::FarEnd;
   if (originFar && insertionFar) {
@@ -243,48 +300,43 @@ void resolveAttachmentAreas(const TriangleMesh& surface, const AttachmentArea& o
     insertionIds = farEnd(surface, &c, false, insertion.endFraction, insertion.endDepth);
   }
   // A vertex in both areas belongs to neither (the field would be ill-posed there).
-  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
-  for (uint32_t i : originIds) inOrigin[i] = 1;
-  for (uint32_t i : insertionIds) inInsertion[i] = 1;
-  size_t shared = 0;
-  std::vector<uint32_t> a, b;
-  for (uint32_t i : originIds)
-    if (!inInsertion[i])
-      a.push_back(i);
-    else
-      ++shared;
-  for (uint32_t i : insertionIds)
-    if (!inOrigin[i]) b.push_back(i);
-  if (shared)
-    warnings.push_back(source + ": " + std::to_string(shared) +
-                       " surface vertices are in both attachment areas; left out of both");
-  originIds.swap(a);
-  insertionIds.swap(b);
-}
-
-FibreGenerationResult generateFibres(const TriangleMesh& surface, const AttachmentArea& origin,
-                                     const AttachmentArea& insertion,
-                                     const FibreGenerationOptions& options,
-                                     const std::string& source) {
-  const auto start = Clock::now();
-  FibreGenerationResult result;
-  FibreQuality& q = result.quality;
-  q.requested = options.count;
-  if (surface.empty()) throw InputError(source, "", "the muscle surface has no triangles");
-  if (options.count < 1 || options.samples < 2 || options.grid < 8)
-    throw InputError(source, "", "fibre generation needs count >= 1, samples >= 2, grid >= 8");
-  const auto& V = surface.vertices;
-
-  // Attachment areas.
-  resolveAttachmentAreas(surface, origin, insertion, source, result.originArea,
-                         result.insertionArea, result.warnings);
-  const std::vector<uint32_t>& originIds = result.originArea;
-  const std::vector<uint32_t>& insertionIds = result.insertionArea;
-  q.originVertices = originIds.size();
-  q.insertionVertices = insertionIds.size();
+  {
+    std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
+    for (uint32_t i : originIds) inOrigin[i] = 1;
+    for (uint32_t i : insertionIds) inInsertion[i] = 1;
+    size_t shared = 0;
+    std::vector<uint32_t> a, b;
+    for (uint32_t i : originIds)
+      if (!inInsertion[i])
+        a.push_back(i);
+      else
+        ++shared;
+    for (uint32_t i : insertionIds)
+      if (!inOrigin[i]) b.push_back(i);
+    if (shared)
+      result.warnings.push_back(source + ": " + std::to_string(shared) +
+                                " surface vertices are in both attachment areas; left out of both");
+    originIds.swap(a);
+    insertionIds.swap(b);
+  }
   if (originIds.empty() || insertionIds.empty())
     throw InputError(source, originIds.empty() ? "origin" : "insertion",
                      "the attachment area holds no surface vertex");
+  result.quality.originVertices = originIds.size();
+  result.quality.insertionVertices = insertionIds.size();
+  result.originArea = std::move(originIds);
+  result.insertionArea = std::move(insertionIds);
+}
+
+/// Voxelises the muscle at `gridSize` voxels along its longest side, solves the field and
+/// traces up to options.count fibres into `result`. False when no interior voxel connects the
+/// two areas at this grid.
+bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& options, int gridSize,
+                 const std::string& source, FibreGenerationResult& result) {
+  const auto& V = surface.vertices;
+  const std::vector<uint32_t>& originIds = result.originArea;
+  const std::vector<uint32_t>& insertionIds = result.insertionArea;
+  FibreQuality& q = result.quality;
 
   // Voxel grid.
   const MeshDistance distance(surface);
@@ -293,7 +345,7 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
   const btVector3 extent = hi - lo;
   const btScalar longest = std::max({extent.x(), extent.y(), extent.z()});
   Grid grid;
-  grid.h = longest / btScalar(options.grid - 1);
+  grid.h = longest / btScalar(gridSize - 1);
   for (int a = 0; a < 3; ++a) grid.n[a] = int(std::ceil(extent[a] / grid.h)) + 3;
   grid.lower = lo - btVector3(grid.h, grid.h, grid.h);
   for (int a = 0; a < 3; ++a) q.gridCells[a] = grid.n[a];
@@ -366,8 +418,7 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
         label[id] = -1;
   }
   for (size_t id = 0; id < N; ++id) q.interiorVoxels += label[id] >= 0;
-  if (q.interiorVoxels == 0)
-    throw InputError(source, "", "no interior voxel connects the origin and insertion areas");
+  if (q.interiorVoxels == 0) return false;
 
   // Laplace: 7-point stencil, Neumann at the surface, Dirichlet 0 / 1 at the areas.
   std::vector<int> unknown(N, -1);
@@ -656,6 +707,13 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
       if (status == 2) ++q.droppedEarly;
       if (status != 0) continue;
       std::vector<btVector3> fibre = resample(line, options.samples);
+      // Resampling cuts the corners of a streamline that slid along a concave surface.
+      if (std::any_of(fibre.begin(), fibre.end(), [&](const btVector3& p) {
+            return distance.signedDistance(p) > insideTolerance;
+          })) {
+        ++q.droppedOutside;
+        continue;
+      }
       if (tooClose(fibre)) {
         crowded.push_back(std::move(fibre));
         continue;
@@ -669,24 +727,33 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
   q.crowded = int(crowded.size());
   for (size_t i = 0; i < crowded.size() && lines.size() < wanted; ++i)
     lines.push_back(std::move(crowded[i]));
-  if (lines.size() < wanted)
-    result.warnings.push_back(source + ": made " + std::to_string(lines.size()) + " of " +
-                              std::to_string(wanted) + " fibres (" +
-                              std::to_string(q.droppedOutside) + " left the surface, " +
-                              std::to_string(q.droppedEarly) + " stopped early)");
   for (const auto& l : lines) result.fibres.addFibre(l);
   q.generated = int(lines.size());
 
-  // Quality: lengths, points outside, right ends.
+  // Quality: lengths, points outside, right ends (each end within 1.5 voxels, the field's
+  // resolution, of its area's triangles: those with a vertex in the area).
   std::vector<btScalar> lengths;
   int right = 0;
+  auto areaSurface = [&](const std::vector<uint32_t>& ids) {
+    std::vector<char> in(V.size(), 0);
+    for (uint32_t i : ids) in[i] = 1;
+    TriangleMesh area;
+    area.vertices = V;
+    for (const auto& t : surface.triangles)
+      if (in[t[0]] || in[t[1]] || in[t[2]]) area.triangles.push_back(t);
+    return MeshDistance(area);
+  };
+  const MeshDistance originSurface = areaSurface(originIds);
+  const MeshDistance insertionSurface = areaSurface(insertionIds);
   for (const auto& l : lines) {
     btScalar length = 0;
     for (size_t i = 1; i < l.size(); ++i) length += l[i].distance(l[i - 1]);
     lengths.push_back(length);
     for (const auto& p : l) q.pointsOutside += distance.signedDistance(p) > insideTolerance;
-    right += nearestIn(originIds, l.front()) < endTolerance &&
-             nearestIn(insertionIds, l.back()) < endTolerance;
+    const btScalar gap = std::max(originSurface.closest(l.front()).distance,
+                                  insertionSurface.closest(l.back()).distance);
+    q.worstEndGap = std::max(q.worstEndGap, gap);
+    right += gap <= btScalar(1.5) * h;
   }
   if (!lengths.empty()) {
     std::sort(lengths.begin(), lengths.end());
@@ -765,8 +832,86 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
             }
       }
   }
-  q.seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  return result;
+  return true;
+}
+
+}  // namespace
+
+void resolveAttachmentAreas(const TriangleMesh& surface, const AttachmentArea& origin,
+                            const AttachmentArea& insertion, const std::string& source,
+                            std::vector<uint32_t>& originIds, std::vector<uint32_t>& insertionIds,
+                            std::vector<std::string>& warnings) {
+  FibreGenerationResult areas;
+  resolveAreas(surface, origin, insertion, source, areas);
+  originIds = std::move(areas.originArea);
+  insertionIds = std::move(areas.insertionArea);
+  warnings.insert(warnings.end(), areas.warnings.begin(), areas.warnings.end());
+}
+
+FibreGenerationResult generateFibres(const TriangleMesh& surface, const AttachmentArea& origin,
+                                     const AttachmentArea& insertion,
+                                     const FibreGenerationOptions& options,
+                                     const std::string& source) {
+  const auto start = Clock::now();
+  if (surface.empty()) throw InputError(source, "", "the muscle surface has no triangles");
+  if (options.count < 1 || options.samples < 2 || options.grid < 8 || options.maxGrid < 8 ||
+      !(options.minShare >= 0 && options.minShare <= 1))
+    throw InputError(source, "",
+                     "fibre generation needs count >= 1, samples >= 2, grid >= 8, max grid >= 8 "
+                     "and a minimum share in [0, 1]");
+  FibreGenerationResult areas;
+  resolveAreas(surface, origin, insertion, source, areas);
+  areas.quality.requested = options.count;
+  const int needed = std::max(1, int(std::ceil(options.minShare * options.count - 1e-9)));
+  // Grids tried: the given one, then 1.5 times finer up to the cap, while the areas do not
+  // connect or too few streamlines arrive (and the finer grid brought more).
+  std::vector<int> tried;
+  FibreGenerationResult best;
+  bool connected = false;
+  for (int gridSize = options.grid;;) {
+    FibreGenerationResult attempt = areas;
+    tried.push_back(gridSize);
+    if (traceOnGrid(surface, options, gridSize, source, attempt)) {
+      const bool better = !connected || attempt.quality.generated > best.quality.generated;
+      connected = true;
+      if (better) best = std::move(attempt);
+      if (best.quality.generated >= needed || !better) break;
+    }
+    const int next = std::min(options.maxGrid, int(std::ceil(gridSize * 1.5)));
+    if (next <= gridSize) break;
+    gridSize = next;
+  }
+  std::string grids;
+  for (int g : tried) grids += (grids.empty() ? "" : ", ") + std::to_string(g);
+  if (!connected)
+    throw InputError(source, "",
+                     "no interior voxel connects the origin and insertion areas at grid " + grids +
+                         " (voxels along the longest side; the cap is " +
+                         std::to_string(options.maxGrid) +
+                         "): the muscle is thinner than a voxel somewhere between them, or the "
+                         "areas are not on its two ends; raise the grid cap or move the areas");
+  const FibreQuality& q = best.quality;
+  if (q.generated < needed)
+    throw InputError(source, "",
+                     "made " + std::to_string(q.generated) + " of " +
+                         std::to_string(options.count) + " fibres, fewer than the " +
+                         std::to_string(needed) + " (" +
+                         std::to_string(int(std::lround(options.minShare * 100))) +
+                         " %) required (grid " + grids + "; " + std::to_string(q.droppedOutside) +
+                         " streamlines left the surface, " + std::to_string(q.droppedEarly) +
+                         " stopped before the insertion area); change: widen the attachment "
+                         "areas or put them on the muscle's two ends, ask for fewer fibres (" +
+                         std::to_string(q.generated) + "), or accept a smaller minimum share");
+  if (tried.size() > 1)
+    best.warnings.push_back(source + ": grid raised from " + std::to_string(options.grid) +
+                            " (tried " + grids + ")");
+  if (q.generated < options.count)
+    best.warnings.push_back(source + ": made " + std::to_string(q.generated) + " of " +
+                            std::to_string(options.count) + " fibres (" +
+                            std::to_string(q.droppedOutside) + " left the surface, " +
+                            std::to_string(q.droppedEarly) + " stopped early)");
+  best.quality.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return best;
 }
 
 bool fitSphere(const std::vector<btVector3>& points, btVector3& centre, btScalar& radius) {

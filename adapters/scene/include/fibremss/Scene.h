@@ -53,6 +53,8 @@ struct LoadedScene {
   OutputSettings outputs;             ///< output settings
   AnalyticCase analytic;              ///< the exact case it reproduces (type "none": none)
   std::vector<std::string> warnings;  ///< things found while loading that a run can live with
+  std::vector<std::string> notes;     ///< what loading changed that a user should know
+                                      ///< (large jumps split into sub-poses, ...)
 
   /// Transform of bone b at pose p (identity where the bone has no motion).
   btTransform bonePose(size_t bone, int pose) const;

@@ -48,9 +48,12 @@ struct AttachmentArea {
 };
 
 struct FibreGenerationOptions {
-  int count = 64;    ///< fibres wanted
-  int samples = 64;  ///< points per fibre (arc-length resampled)
-  int grid = 48;     ///< voxels along the longest side of the muscle's bounding box
+  int count = 64;     ///< fibres wanted
+  int samples = 64;   ///< points per fibre (arc-length resampled)
+  int grid = 48;      ///< voxels along the longest side of the muscle's bounding box (first try)
+  int maxGrid = 192;  ///< when the areas do not connect or too few fibres arrive, the grid is
+                      ///< raised 1.5 times at a time up to this
+  double minShare = 0.9;  ///< fewer fibres than this share of `count` is an InputError
   btScalar coverageDistance = btScalar(0.005);  ///< quality: voxels within this of a fibre [m]
   btScalar crossingTolerance = btScalar(5e-4);  ///< quality: segments closer than this cross [m]
   btScalar minSeparation = btScalar(1e-3);      ///< fibres closer than this to an earlier one are
@@ -77,10 +80,12 @@ struct FibreQuality {
   size_t interiorVoxels = 0;     ///< voxels inside the muscle (the Laplace domain)
   double coverage = 0;           ///< fraction of interior voxels within coverageDistance of a fibre
   btScalar minLength = 0, medianLength = 0, maxLength = 0;  ///< fibre lengths [m]
-  int crossingPairs = 0;  ///< pairs of fibres with segments closer than crossingTolerance
-  int pointsOutside = 0;  ///< fibre points outside the surface beyond the tolerance
-  double rightEnds = 0;   ///< share of fibres starting at the origin and ending at the insertion
-  double seconds = 0;     ///< wall time
+  int crossingPairs = 0;     ///< pairs of fibres with segments closer than crossingTolerance
+  int pointsOutside = 0;     ///< fibre points outside the surface beyond the tolerance
+  double rightEnds = 0;      ///< share of fibres whose ends both lie within 1.5 voxels of their
+                             ///< area (its triangles; origin first, insertion last)
+  btScalar worstEndGap = 0;  ///< the largest distance of a fibre end from its area [m]
+  double seconds = 0;        ///< wall time
 };
 
 struct FibreGenerationResult {
@@ -93,14 +98,17 @@ struct FibreGenerationResult {
 
 /// The surface vertices of both areas as generateFibres() uses them (a far end resolved against
 /// the other area; a vertex in both areas left out of both, with a warning). Throws InputError
-/// (source `source`) for vertex indices out of range.
+/// (source `source`) for vertex indices out of range or an area with no surface vertex.
 void resolveAttachmentAreas(const TriangleMesh& surface, const AttachmentArea& origin,
                             const AttachmentArea& insertion, const std::string& source,
                             std::vector<uint32_t>& originIds, std::vector<uint32_t>& insertionIds,
                             std::vector<std::string>& warnings);
 
-/// Generates fibres inside `surface` (closed, outward, metres). Throws InputError (source
-/// `source`) when the surface or the areas make it impossible (e.g. both areas empty).
+/// Generates fibres inside `surface` (closed, outward, metres). A bone area keeps only its
+/// patches at an end of the muscle (not where the muscle passes over the bone). Throws
+/// InputError (source `source`) when the surface or the areas make it impossible (e.g. both
+/// areas empty), when no grid up to options.maxGrid connects the areas, or when fewer than
+/// options.minShare of the fibres asked for can be made (saying what to change).
 FibreGenerationResult generateFibres(const TriangleMesh& surface, const AttachmentArea& origin,
                                      const AttachmentArea& insertion,
                                      const FibreGenerationOptions& options,
