@@ -572,8 +572,8 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
     std::vector<std::string> all = overrides;
     all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
     const LoadedScene variant = loadScene(sceneNameOrPath, all);
-    const PreparedScene variantPrepared =
-        prepareScene(variant.bones, variant.muscles, variant.simulation.seed);
+    const PreparedScene variantPrepared = prepareScene(
+        variant.bones, variant.muscles, variant.simulation.seed, variant.simulation.threads);
     return runFibreMSS(variant, variantPrepared, fibreOptions);
   } else if (spec.family == "self-reference") {
     LoadedScene reference = scene;
@@ -623,13 +623,8 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   };
   const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
   log("preparing " + scene.name);
-<<<<<<< HEAD
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
-  const double duration = poseDuration(scene.simulation);
-=======
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
->>>>>>> reference
 
   Comparison comparison;
   comparison.scene = scene.name;
@@ -637,52 +632,6 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   if (!scene.muscles.empty()) comparison.resolution = scene.muscles.front().parameters.resolution;
   comparison.stepDeg = sweepStep(nlohmann::json::parse(scene.json, nullptr, false));
   std::vector<RunMetrics>& runs = comparison.runs;
-<<<<<<< HEAD
-  for (const MethodSpec& spec : specs) {
-    if (options.cancel && options.cancel->load()) break;
-    log("running " + spec.name);
-    // Stops after the current step on the user's cancel or when the time budget is spent.
-    std::atomic<bool> stop{false};
-    auto report = [&](const MethodProgress& p) {
-      if (options.progress) options.progress(p);
-      if ((options.cancel && options.cancel->load()) ||
-          (options.methodBudgetSeconds > 0 && p.seconds > options.methodBudgetSeconds)) {
-        stop.store(true);
-      }
-    };
-    MethodRunOptions methodOptions{report, &stop, options.methodBudgetSeconds};
-    FibreRunOptions fibreOptions;
-    fibreOptions.method = spec.name;
-    fibreOptions.cancel = &stop;
-    fibreOptions.frameEvery = 0;
-    fibreOptions.progress = [&](const RunProgress& p) {
-      report({spec.name, p.step, p.steps, p.iterations, p.seconds});
-    };
-    if (spec.family == "fibremss" && spec.overrides.empty()) {
-      runs.push_back(runFibreMSS(scene, prepared, fibreOptions));
-    } else if (spec.family == "fibremss") {
-      std::vector<std::string> all = overrides;
-      all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
-      const LoadedScene variant = loadScene(sceneNameOrPath, all);
-      const PreparedScene variantPrepared = prepareScene(
-          variant.bones, variant.muscles, variant.simulation.seed, variant.simulation.threads);
-      runs.push_back(runFibreMSS(variant, variantPrepared, fibreOptions));
-    } else if (spec.family == "self-reference") {
-      LoadedScene reference = scene;
-      const int f = std::max(1, options.selfReferenceFactor);
-      reference.simulation.timeStep /= static_cast<btScalar>(f);
-      reference.simulation.minTimeStep /= static_cast<btScalar>(f);
-      reference.simulation.iterations *= f;
-      runs.push_back(runFibreMSS(reference, prepared, fibreOptions));
-    } else if (spec.family == "equilibrium") {
-      LoadedScene converged = scene;
-      converged.simulation = equilibriumSettings(scene.simulation);
-      FibreRunOptions equilibriumOptions = fibreOptions;
-      int unconverged = 0;
-      equilibriumOptions.progress = [&](const RunProgress& p) {
-        unconverged += p.lastStep->iterations >= kEquilibriumIterations ? 1 : 0;
-        fibreOptions.progress(p);
-=======
   if (options.withReference) {
     ReferenceOptions referenceOptions = options.reference;
     referenceOptions.log = options.log;
@@ -690,7 +639,6 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     if (options.progress) {
       referenceOptions.progress = [&](const ReferenceProgress& p) {
         options.progress({"ccx " + p.muscle, p.step, p.steps, p.step, p.seconds});
->>>>>>> reference
       };
     }
     comparison.reference = computeReference(scene, prepared, referenceOptions);
