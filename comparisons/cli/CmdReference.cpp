@@ -38,7 +38,8 @@ void writeOut(const Reference& reference, const std::string& out) {
 void reference(ReferenceArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   std::fprintf(stderr, "preparing %s\n", scene.name.c_str());
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   ProgressLog progress;
   args.options.log = [&](const std::string& line) { progress.line(line); };
   args.options.progress = [&](const ReferenceProgress& p) {
