@@ -342,8 +342,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   }
   metrics.msPerStep = median(msPerStep);
   metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
-  metrics.timing = {medianOrZero(mss),    medianOrZero(volumeTerm), medianOrZero(muscleCd),
-                    medianOrZero(boneCd), medianOrZero(response),   medianOrZero(output)};
+  metrics.timing = {medianOrZero(mss),      medianOrZero(muscleCd), medianOrZero(boneCd),
+                    medianOrZero(response), medianOrZero(output),   medianOrZero(volumeTerm)};
   if (details) {
     *details = std::move(guard);
     details->spherePenetration = spherePenetration;

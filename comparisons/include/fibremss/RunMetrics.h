@@ -13,11 +13,11 @@ namespace fibremss {
 /// Median milliseconds per iteration spent in each part of a FibreMSS step (seed 004 Table 1).
 struct PartTiming {
   double mss = 0;       ///< spring forces + volume term + integration
-  double volume = 0;    ///< the volume term (part of mss)
   double muscleCd = 0;  ///< muscle–muscle collision detection
   double boneCd = 0;    ///< muscle–bone collision detection
   double response = 0;  ///< collision response
   double output = 0;    ///< the solver's fibres and surfaces (measuring for reports excluded)
+  double volume = 0;    ///< the volume term (part of mss)
 };
 
 /// An analytic case measured at the last pose, beside its exact answer (NaN: does not apply).

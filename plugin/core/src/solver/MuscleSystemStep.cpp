@@ -343,7 +343,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       const Clock::time_point volumeStart = Clock::now();
       addVolumeTerm(state, newOffsets);
       result.forcesMs = millisecondsSince(forcesStart);
-      result.volumeMs = millisecondsSince(volumeStart);
+      result.volumeMs = state.volumeOffsets.empty() ? 0 : millisecondsSince(volumeStart);
       if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
     });
 

@@ -1,0 +1,24 @@
+$runs << EOD
+1400 3 "fibremss (resolution=20)"
+EOD
+set terminal pngcairo size 1000,650 enhanced font 'DejaVu Sans,10'
+set output "/work/wt/material/comparison_test_partial_fem/speed_vs_error.png"
+set title 'Speed against error (one point per run; the FEM reference is the zero)'
+set xlabel 'ms per step (median wall time, log)'
+set ylabel 'RMS surface distance to FEM [mm] (log)'
+set logscale xy
+set grid
+set key off
+set offsets graph 0.15, graph 0.15, graph 0.15, graph 0.15
+plot $runs using 1:2 with points pt 7 ps 1.5 lc rgb '#1f77b4', $runs using 1:2:(int($0) % 2 ? '' : stringcolumn(3)) with labels offset char 0,1.2 font ',9', $runs using 1:2:(int($0) % 2 ? stringcolumn(3) : '') with labels offset char 0,-1.2 font ',9'
+set terminal svg size 1000,650 enhanced font 'DejaVu Sans,10'
+set output "/work/wt/material/comparison_test_partial_fem/speed_vs_error.svg"
+set title 'Speed against error (one point per run; the FEM reference is the zero)'
+set xlabel 'ms per step (median wall time, log)'
+set ylabel 'RMS surface distance to FEM [mm] (log)'
+set logscale xy
+set grid
+set key off
+set offsets graph 0.15, graph 0.15, graph 0.15, graph 0.15
+plot $runs using 1:2 with points pt 7 ps 1.5 lc rgb '#1f77b4', $runs using 1:2:(int($0) % 2 ? '' : stringcolumn(3)) with labels offset char 0,1.2 font ',9', $runs using 1:2:(int($0) % 2 ? stringcolumn(3) : '') with labels offset char 0,-1.2 font ',9'
+unset output
