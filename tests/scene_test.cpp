@@ -414,7 +414,8 @@ std::string declaredScene(const std::string& declarations,
       "surface": {"generator": {"type": "tube", "points": [[0, 5, 7], [0, -30, 8], [0, -60, 7]],
                                 "radii": [3, 3, 3]}},
       "fibres": )" +
-         fibres + ", " + declarations + ", \"fibre_count\": 16, \"resolution\": 12}]}";
+         fibres + ", " + (declarations.empty() ? "" : declarations + ", ") +
+         "\"fibre_count\": 16, \"resolution\": 12}]}";
 }
 
 }  // namespace
@@ -443,9 +444,8 @@ TEST(Attachments, DeclaredOriginAndInsertionInASceneFile) {
   ASSERT_EQ(again.muscles[0].attachments.size(), 2u);
   EXPECT_EQ(again.muscles[0].attachments[1].surfaceVertices, attachments[1].surfaceVertices);
   // Without declarations the nearest-bone rule stays: no attachments.
-  EXPECT_TRUE(loadScene(writeScene("undeclared.json", declaredScene(R"("name": "m")")))
-                  .muscles[0]
-                  .attachments.empty());
+  EXPECT_TRUE(
+      loadScene(writeScene("undeclared.json", declaredScene(""))).muscles[0].attachments.empty());
 }
 
 TEST(Attachments, BadDeclarationsNameTheField) {

@@ -220,7 +220,7 @@ TEST_F(VtpFiles, StripsAndLinesAndFramesWrittenByFibreMss) {
   for (size_t t = 0; t < 4; ++t)
     data.triangles.push_back({uint32_t(kConnectivity[3 * t]), uint32_t(kConnectivity[3 * t + 1]),
                               uint32_t(kConnectivity[3 * t + 2])});
-  data.pointScalars = {{"radius", {1, 2, 3, 4}}};
+  data.pointData.push_back({"radius", 1, std::vector<float>{1, 2, 3, 4}});
   const std::string frame = (directory_.path() / "frame.vtp").string();
   fibremss::writeVtp(frame, data);
   expectTetra(loadSurface(frame), "writeVtp");
