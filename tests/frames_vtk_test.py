@@ -54,8 +54,9 @@ def main():
     shutil.rmtree(work, ignore_errors=True)
     scene = os.path.join(source, "scenes", "json", "example-elbow.json")  # millimetres
     steps = 3
-    subprocess.run([fibremss, "run", scene, "--set", "resolution=12",
-                    "--set", "simulation.max_step_deg=180", "--steps", str(steps),
+    # max_step_deg=0: the sweep's 10° poses as given, no 5° sub-poses between them.
+    subprocess.run([fibremss, "run", scene, "--set", "resolution=12", "--set", "max_step_deg=0",
+                    "--steps", str(steps),
                     "--frame-every", "1", "--out", work], check=True, stdout=subprocess.DEVNULL)
     print("VTK", vtkVersion.GetVTKVersion())
     frames = os.path.join(work, "frames")

@@ -213,17 +213,20 @@ TEST_F(VtpFiles, StripsAndLinesAndFramesWrittenByFibreMss) {
                   .z(),
               0);
   EXPECT_EQ(loadFibres(write("lines.vtp", strip)).fibreCount(), 1u);
-  // The frames FibreMSS writes read back as the same surface.
+  // The frames FibreMSS writes (compressed, appended) read back as the same surface.
   fibremss::PolyData data;
   for (size_t i = 0; i < 4; ++i)
     data.points.push_back(btVector3(kPoints[3 * i], kPoints[3 * i + 1], kPoints[3 * i + 2]));
   for (size_t t = 0; t < 4; ++t)
     data.triangles.push_back({uint32_t(kConnectivity[3 * t]), uint32_t(kConnectivity[3 * t + 1]),
                               uint32_t(kConnectivity[3 * t + 2])});
+
   data.pointData.push_back({"radius", 1, std::vector<float>{1, 2, 3, 4}});
+  data.fieldData.push_back({"TimeValue", 1, std::vector<double>{0.5}});
+  data.pointScale = 1000;  // written in millimetres: read back at 0.001 m per unit
   const std::string frame = (directory_.path() / "frame.vtp").string();
-  fibremss::writeVtp(frame, data);
-  expectTetra(loadSurface(frame), "writeVtp");
+  fibremss::writeVtp(frame, data);  // appended raw, zlib blocks, UInt64 headers
+  expectTetra(loadSurface(frame, 0.001), "writeVtp");
 }
 
 TEST_F(VtpFiles, HostileFilesEndInInputErrorNamingWhatWasExpected) {

@@ -259,9 +259,10 @@ class XmlPolyDataReader {
       } else if (name == "Piece") {
         pieces_.push_back({attributes, tags_.lineAt(start)});
       } else if (name == "DataArray") {
-        if (pieces_.empty()) tags_.fail(start, "expected DataArray inside a <Piece>");
+        // Outside a Piece (FieldData of the whole data set): kept for nesting, never used.
+        const size_t piece = pieces_.empty() ? SIZE_MAX : pieces_.size() - 1;
         ArrayElement array{sections.empty() ? "" : sections.back(),
-                           pieces_.size() - 1,
+                           piece,
                            attributes,
                            contentBegin,
                            contentBegin,
