@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/MuscleMetrics.h"
+
 namespace fibremss {
 
 /// Median milliseconds per iteration spent in each part of a FibreMSS step (seed 004 Table 1).
@@ -57,8 +59,8 @@ struct RunMetrics {
   PartTiming timing;                    ///< per-part breakdown (FibreMSS)
   double maxPenetrationMm = kNone;      ///< surface vertices into bones' true meshes
   double meanPenetrationMm = kNone;     ///< mean over penetrating vertices
-  double volumeChangePct = kNone;       ///< final muscle volume against rest
-  double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
+  double volumeChangePct = kNone;       ///< final volume against rest [%], the worst muscle's
+  double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families), the worst muscle's
   double rmsToFemMm = kNone;            ///< surface vertex RMS against the FEM run
   double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
   /// Against the "equilibrium" run (FibreMSS converged at every pose): RMS over the poses, and
@@ -78,6 +80,10 @@ struct RunMetrics {
 
   AnalyticMetrics analytic;  ///< the scene's exact case, if it is one
 
+  /// Per muscle (FibreMSS): volume, penetration per bone, fixed particles, fibre length, worst
+  /// spring, rollbacks, freezes; the headline volume change and spring deviation are the worst
+  /// muscle's.
+  std::vector<MuscleResults> muscles;
   /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
   /// a NaN or exploded pose is left out.
   std::vector<std::vector<btVector3>> poseSurfaces;
