@@ -19,6 +19,7 @@
 #include "Validators.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/FibreRun.h"
+#include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
 
@@ -37,10 +38,17 @@ struct RunArgs {
 
 /// Exit codes beyond 0 (done), 1 (error) and 2 (bad input).
 constexpr int kExitSimulationFailed = 3;
+/// Every step ran, but the guard froze muscles on the way (on_failure=stop-body).
+constexpr int kExitMuscleFrozen = 4;
 
 /// What the numerical guard did, for summary.json.
 nlohmann::json guardJson(const FibreRunDetails& details, FailurePolicy policy) {
-  nlohmann::json frozen = nlohmann::json::array();
+  nlohmann::json frozen = nlohmann::json::array(), rollbacks = nlohmann::json::array();
+  for (const Rollback& rollback : details.rollbacks)
+    rollbacks.push_back({{"step", rollback.step},
+                         {"muscle", rollback.muscle},
+                         {"attempts", rollback.attempts},
+                         {"cause", rollback.nan ? "nan" : "exploded"}});
   for (const FrozenMuscle& muscle : details.frozen)
     frozen.push_back({{"muscle", muscle.name},
                       {"step", muscle.step},
@@ -48,7 +56,8 @@ nlohmann::json guardJson(const FibreRunDetails& details, FailurePolicy policy) {
   return {{"policy", toString(policy)},
           {"rolled_back_steps", details.rolledBackSteps},
           {"retries", details.retries},
-          {"frozen", frozen}};
+          {"frozen", frozen},
+          {"rollbacks", rollbacks}};
 }
 
 /// Muscles trapped between bones (StepStats::trappedMuscles), for summary.json.
@@ -122,6 +131,11 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
   if (details.rolledBackSteps > 0)
     std::printf("  numerical guard: %d step(s) rolled back, %d retries with a smaller dt\n",
                 details.rolledBackSteps, details.retries);
+  for (const Rollback& rollback : details.rollbacks)
+    std::printf("  step %d rolled back: muscle '%s' failed %d attempt(s) (%s)\n", rollback.step,
+                rollback.muscle.c_str(), rollback.attempts,
+                rollback.nan ? "NaN/inf" : "a spring beyond 3x its rest length");
+  if (!m.muscles.empty()) std::printf("\n%s\n", muscleTable(m.muscles).c_str());
   for (const FrozenMuscle& muscle : details.frozen)
     std::printf("  muscle '%s' frozen at step %d (%s)\n", muscle.name.c_str(), muscle.step,
                 muscle.nan ? "NaN/inf" : "exploded");
@@ -229,7 +243,11 @@ void run(const RunArgs& args) {
     printSummary(metrics, details, args, summary);
   std::fflush(stdout);
   if (metrics.interrupted) throw CLI::RuntimeError(kExitInterrupted);
-  if (metrics.failedStep >= 0) throw CLI::RuntimeError(kExitSimulationFailed);
+  // Under stop-body the others went on past a frozen muscle: every step ran.
+  const bool wentOn = scene.simulation.onFailure == FailurePolicy::StopBody &&
+                      !details.frozen.empty() && metrics.steps == steps;
+  if (metrics.failedStep >= 0)
+    throw CLI::RuntimeError(wentOn ? kExitMuscleFrozen : kExitSimulationFailed);
 }
 
 }  // namespace
@@ -242,8 +260,11 @@ void addRunCommand(CLI::App& app) {
       "One step per pose of the scene's motion. With --out DIR: DIR/frames/*.vtp and DIR/run.pvd "
       "(open in ParaView; binary, in the scene's units, at simulated seconds, arrays in "
       "docs/outputs.md), DIR/scene.json (the complete scene) and DIR/summary.json (with what "
-      "the numerical guard did: rolled-back steps, retries, frozen muscles). Exit code 3 when "
-      "the simulation failed (a muscle frozen, or NaN/explosion with on_failure=report), 130 "
+      "the numerical guard did: rolled-back steps, retries, frozen muscles; and per muscle: "
+      "volume, "
+      "penetration per bone, fixed particles, fibre length, worst spring). Exit code 3 when "
+      "the simulation failed (a muscle frozen, or NaN/explosion with on_failure=report), 4 when "
+      "with on_failure=stop-body every step ran but a muscle was frozen on the way, 130 "
       "when interrupted: Ctrl-C stops after the current step and every file written stays "
       "valid. Soak run: --loop --steps N --sample-every 1000.");
   addSceneArgs(*command, args->scene);

@@ -17,6 +17,7 @@
 #include "ReportScaling.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
+#include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/Stability.h"
 
@@ -684,6 +685,25 @@ bool thesisTable1(int resolution, double seconds[4]) {
   return true;
 }
 
+/// Per run that measured its muscles (FibreMSS), the per-muscle table: the worst muscle shows.
+std::string perMuscleReport(const nlohmann::json& runs) {
+  std::string out;
+  for (const auto& run : runs) {
+    const nlohmann::json& list = run.value("muscles", nlohmann::json::array());
+    if (!list.is_array() || list.empty()) continue;
+    std::vector<MuscleResults> muscles;
+    for (const auto& muscle : list) muscles.push_back(muscleResultsFromJson(muscle));
+    if (out.empty())
+      out =
+          "\n## Per muscle\n\nVolume change of each muscle at the last step and its worst "
+          "step, the deepest surface vertex in each bone's true mesh over all steps, particles "
+          "fixed per bone, mean fibre length, the largest spring stretch l/L0, step attempts "
+          "the numerical guard rolled back, and freezes.\n";
+    out += "\n### " + runLabel(run) + "\n\n" + muscleTable(muscles);
+  }
+  return out;
+}
+
 std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std::string>& plots) {
   std::ostringstream out;
   const nlohmann::json& runs = summary["runs"];
@@ -732,7 +752,7 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
   out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
          "iterations: Newton iterations).\n"
-      << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
+      << perMuscleReport(runs) << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
   const std::string coverageNote = referenceCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {

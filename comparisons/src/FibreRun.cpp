@@ -14,6 +14,7 @@
 #include "fibremss/Analytic.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/Measures.h"
+#include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 
 namespace fibremss {
@@ -52,12 +53,6 @@ double statusMemoryMb(const char* field) {
     status.ignore(1 << 12, '\n');
   }
   return RunMetrics::kNone;
-}
-
-bool allFinite(std::span<const btVector3> points) {
-  return std::all_of(points.begin(), points.end(), [](const btVector3& p) {
-    return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
-  });
 }
 
 /// The pose of step s: the scene's poses in order, then the last one held, or when looping
@@ -110,6 +105,9 @@ class BoneMeshes {
     inverses_.resize(distances_.size());
   }
 
+  /// The bones' distance trees (rest frames), as Measures.h takes them.
+  std::span<const MeshDistance* const> meshes() const { return pointers_; }
+
   /// Points (surface vertices) inside the bones placed at `transforms`; `depthsMm` (one per
   /// point) receives each one's depth [mm].
   Penetration points(std::span<const btVector3> points, std::span<const btTransform> transforms,
@@ -152,6 +150,56 @@ class BoneMeshes {
   std::vector<btTransform> inverses_;          ///< current → rest, per bone (scratch)
 };
 
+/// Per-muscle results over a run (MuscleMetrics.h) and what the numerical guard did to each
+/// muscle: rollbacks named by muscle and cause, freezes.
+class MuscleLedger {
+ public:
+  MuscleLedger(const MuscleSystem& system, std::span<const MuscleHandle> muscles,
+               const PreparedScene& prepared)
+      : system_(system), muscles_(muscles), seen_(muscles.size()) {
+    std::vector<std::string> boneNames;
+    for (const auto& bone : prepared.bones) boneNames.push_back(bone->name);
+    for (MuscleHandle muscle : muscles) results.emplace_back(system.settings(muscle), boneNames);
+  }
+
+  /// After step s: every muscle measured (a non-finite one keeps its earlier steps' results),
+  /// the muscles that failed a rolled-back attempt named in `guard.rollbacks`, the newly frozen
+  /// ones in `guard.frozen`. Returns whether every muscle was finite.
+  bool afterStep(int s, const StepStats& stats, const BoneMeshes& bones,
+                 std::span<const btTransform> transforms, FibreRunDetails& guard) {
+    bool finite = true;
+    for (size_t m = 0; m < muscles_.size(); ++m) {
+      const MuscleHandle muscle = muscles_[m];
+      const MuscleStep step = measureMuscle(system_.settings(muscle), system_.positions(muscle),
+                                            system_.surface(muscle), bones.meshes(), transforms);
+      finite = finite && step.finite;
+      MuscleResults& result = results[m];
+      result.add(s, step);
+      const MuscleFailures now = system_.failures(muscle);
+      const int attempts = now.attempts - seen_[m].attempts, nan = now.nan - seen_[m].nan;
+      seen_[m] = now;
+      if (attempts > 0 && stats.rolledBack) {
+        result.rollbacks += attempts;
+        guard.rollbacks.push_back({s, result.name, attempts, nan > 0});
+      }
+      if (system_.frozen(muscle) && !result.frozen) {
+        result.frozen = true;
+        result.frozenStep = s;
+        result.frozenCause = nan > 0 ? "nan" : "exploded";
+        guard.frozen.push_back({result.name, s, nan > 0});
+      }
+    }
+    return finite;
+  }
+
+  std::vector<MuscleResults> results;  ///< one per muscle, in order
+
+ private:
+  const MuscleSystem& system_;
+  std::span<const MuscleHandle> muscles_;
+  std::vector<MuscleFailures> seen_;  ///< each muscle's failures after the previous step
+};
+
 }  // namespace
 
 RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
@@ -171,21 +219,14 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   }
   BoneMeshes boneMeshes(prepared);
   std::vector<MuscleHandle> muscles;
-  double restVolume = 0, restLengthSum = 0;
-  std::vector<double> muscleRestVolumes, muscleRestLengths;
   for (const auto& muscle : prepared.muscles) {
     muscles.push_back(system.addMuscle(muscle, bones));
     metrics.particles += muscle->particleCount();
     metrics.springs += muscle->springs.size();
     metrics.boundaryParticles += muscle->boundaryParticles.size();
-    muscleRestVolumes.push_back(muscle->restSurface.empty() ? 0.0
-                                                            : meshVolume(muscle->restSurface));
-    restVolume += muscleRestVolumes.back();
-    double lengths = 0;
-    for (const Spring& spring : muscle->springs) lengths += spring.restLength;
-    muscleRestLengths.push_back(lengths);
-    restLengthSum += lengths;
   }
+  MuscleLedger ledger(system, muscles, prepared);
+  const bool stopBody = scene.simulation.onFailure == FailurePolicy::StopBody;
 
   const int steps = options.steps >= 0 ? options.steps : std::max(scene.poseCount, 1);
   const int frameEvery = options.frameEvery >= 0 ? options.frameEvery : scene.outputs.frameEvery;
@@ -201,7 +242,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   std::vector<std::vector<float>> surfaceDepthsMm(muscles.size());  // per muscle, this step
   double simulatedTime = 0;                                         // [s]
   FibreRunDetails guard;  // what the numerical guard did, and the soak samples
-  std::vector<bool> reportedFrozen(muscles.size(), false);
+  bool measured = false;  // some step's surfaces were finite
   double sampleSolverMs = 0;
   size_t candidateOverflows = 0;  // StepStats::candidateOverflows over the run
   long sampleIterations = 0;
@@ -223,14 +264,14 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     metrics.steps = s + 1;
     metrics.iterations += stats.iterations;
 
-    // Measures of this step: surface penetration into the bones, and at the last step the
-    // volume change and spring deviation of all muscles together.
+    // Measures of this step: each muscle's (and what the guard did to it), and the surface
+    // penetration into the bones of all muscles together.
     const auto measureStart = Clock::now();
-    bool finite = true;
+    const bool finite = ledger.afterStep(s, stats, boneMeshes, boneTransforms, guard);
+    measured = measured || finite;
     poseSurface.clear();
     for (MuscleHandle muscle : muscles) {
       std::span<const btVector3> surface = system.surface(muscle);
-      finite = finite && allFinite(surface) && allFinite(system.positions(muscle));
       poseSurface.insert(poseSurface.end(), surface.begin(), surface.end());
     }
     if (finite)
@@ -264,23 +305,21 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     measureMsPerStep.push_back(measureMs);
 
     candidateOverflows += stats.candidateOverflows;
-    // The guard's verdict: a frozen muscle or a failure left in place (Report) ends the run.
+    // The guard's verdict: a failure left in place (Report) ends the run, and so does a frozen
+    // muscle unless the policy is stop-body (then the others go on).
     guard.rolledBackSteps += stats.rolledBack ? 1 : 0;
     guard.retries += stats.retries;
     if (stats.trappedMuscles > 0) {
       if (guard.trappedSteps++ == 0) guard.firstTrappedStep = s;
       guard.trappedParticlesMax = std::max(guard.trappedParticlesMax, stats.trappedParticles);
     }
-    for (size_t m = 0; stats.newlyFrozen > 0 && m < muscles.size(); ++m)
-      if (system.frozen(muscles[m]) && !reportedFrozen[m]) {
-        reportedFrozen[m] = true;
-        const bool blamed = muscles[m].index == stats.failedMuscle.index &&
-                            muscles[m].generation == stats.failedMuscle.generation;
-        guard.frozen.push_back({system.settings(muscles[m]).name, s, blamed && stats.failedNan});
-      }
-    const bool failed = stats.failed || stats.newlyFrozen > 0;
-    metrics.nan = !finite || (failed && stats.failedNan);
-    metrics.exploded = failed && !metrics.nan;
+    const bool failed = stats.failed || stats.newlyFrozen > 0 || !finite;
+    const bool goesOn = failed && stopBody && finite && !stats.failed;
+    if (failed) {
+      metrics.nan = metrics.nan || !finite || stats.failedNan;
+      metrics.exploded = !metrics.nan;
+      if (metrics.failedStep < 0) metrics.failedStep = s;
+    }
 
     sampleSolverMs += stepMs;
     sampleIterations += stats.iterations;
@@ -307,10 +346,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       progress.lastStep = &stats;
       options.progress(progress);
     }
-    if (metrics.nan || metrics.exploded) {
-      metrics.failedStep = s;
-      break;
-    }
+    if (failed && !goesOn) break;
     if (frames && (s % frameEvery == 0 || s == steps - 1))
       frames->write({s, pose, poseLabel(scene, pose), simulatedTime}, system, muscles, prepared,
                     boneTransforms, surfaceDepthsMm);
@@ -321,25 +357,20 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
                  "traversed directly (same contacts, slower)\n",
                  candidateOverflows);
 
-  if (metrics.steps > 0 && !metrics.nan) {
+  // The headline: the steps measured before any failure, the worst muscle's figures.
+  if (measured) {
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
-    double volumeChange = 0, deviation = 0;
-    for (size_t m = 0; m < muscles.size(); ++m) {
-      const MuscleSettings& muscle = *prepared.muscles[m];
-      if (muscleRestVolumes[m] != 0)
-        volumeChange += muscleRestVolumes[m] *
-                        volumeChangePercent(muscle.restSurface, system.surface(muscles[m]));
-      if (muscleRestLengths[m] != 0)
-        deviation += muscleRestLengths[m] *
-                     springDeviationRatio(muscle.springs, system.positions(muscles[m]));
-    }
-    if (restVolume != 0) metrics.volumeChangePct = volumeChange / restVolume;
-    if (!muscles.empty())
-      metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
-                                         system.surface(muscles[0]));
-    if (restLengthSum != 0) metrics.springDeviationRatio = deviation / restLengthSum;
+    if (const MuscleResults* worst = worstVolumeMuscle(ledger.results))
+      metrics.volumeChangePct = worst->volumeChangePct;
+    for (const MuscleResults& muscle : ledger.results)
+      if (!(muscle.springDeviationRatio <= metrics.springDeviationRatio))
+        metrics.springDeviationRatio = muscle.springDeviationRatio;
   }
+  if (!muscles.empty() && !metrics.nan)
+    metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
+                                       system.surface(muscles[0]));
+  metrics.muscles = std::move(ledger.results);
   metrics.msPerStep = median(msPerStep);
   metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
   metrics.timing = {medianOrZero(mss),      medianOrZero(muscleCd), medianOrZero(boneCd),

@@ -45,6 +45,12 @@ AnalyticMetrics analyticFromJson(const nlohmann::json& o) {
   return a;
 }
 
+nlohmann::json musclesJson(const std::vector<MuscleResults>& muscles) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const MuscleResults& muscle : muscles) list.push_back(toJson(muscle));
+  return list;
+}
+
 }  // namespace
 
 nlohmann::json toJson(const RunMetrics& m) {
@@ -97,6 +103,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"peak_memory_mb", number(m.peakMemoryMb)},
       {"wall_seconds", m.wallSeconds},
       {"analytic", toJson(m.analytic)},
+      {"muscles", musclesJson(m.muscles)},
   };
 }
 
@@ -153,6 +160,8 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.peakMemoryMb = numberOr(o, "peak_memory_mb", m.peakMemoryMb);
   m.wallSeconds = numberOr(o, "wall_seconds", m.wallSeconds);
   if (auto a = o.find("analytic"); a != o.end()) m.analytic = analyticFromJson(*a);
+  if (auto list = o.find("muscles"); list != o.end() && list->is_array())
+    for (const auto& muscle : *list) m.muscles.push_back(muscleResultsFromJson(muscle));
   return m;
 }
 

@@ -47,6 +47,14 @@ struct FrozenMuscle {
   bool nan = false;  ///< it had NaN/inf (else: burst springs)
 };
 
+/// A muscle that failed attempts of a step the numerical guard rolled back.
+struct Rollback {
+  int step = 0;        ///< the step
+  std::string muscle;  ///< the muscle's name
+  int attempts = 0;    ///< attempts of the step it failed (the first try and retries)
+  bool nan = false;    ///< NaN/inf in one of them (else: springs beyond 3× their rest length)
+};
+
 /// The state of a long run every FibreRunOptions::sampleEvery iterations.
 struct SoakSample {
   int step = 0;               ///< steps done
@@ -70,6 +78,7 @@ struct FibreRunDetails {
   int rolledBackSteps = 0;           ///< steps the numerical guard rolled back
   int retries = 0;                   ///< attempts it repeated with a smaller dt, all steps
   std::vector<FrozenMuscle> frozen;  ///< muscles it froze, in order
+  std::vector<Rollback> rollbacks;   ///< per rolled-back step, each muscle that failed in it
   /// Steps after which a muscle was trapped between bones (StepStats::trappedMuscles > 0).
   int trappedSteps = 0;
   int firstTrappedStep = -1;        ///< the first of them (-1: none)
@@ -78,12 +87,15 @@ struct FibreRunDetails {
 };
 
 /// Runs the scene. Step s sets every bone to the scene's pose min(s, poseCount−1) (looping: s
-/// swept forth and back over the poses), steps the solver and measures: penetration of the muscle
-/// surfaces' vertices into the bones' true meshes (max over steps; mean over all penetrating
-/// vertices of all steps), and at the last step run the volume change (all muscles together) and
-/// the spring-deviation ratio. Stops at the first step the numerical guard could not save: a
-/// muscle frozen, or NaN/an explosion left in place (failedStep). Throws std::runtime_error if
-/// frames cannot be written.
+/// swept forth and back over the poses), steps the solver and measures every muscle
+/// (RunMetrics::muscles: volume change, penetration into each bone's true mesh, fibre length,
+/// worst spring, rollbacks, freezes) and the penetration of all muscle surfaces' vertices into
+/// the bones (max over steps; mean over all penetrating vertices of all steps). The headline
+/// volume change and spring deviation are the worst muscle's at its last finite step; steps
+/// before a failure keep their measures. Stops at the first step the numerical guard could not
+/// save (failedStep): NaN/an explosion left in place, or a muscle frozen, except under
+/// FailurePolicy::StopBody, where the other muscles go on to the last step (failedStep is then
+/// the first freeze). Throws std::runtime_error if frames cannot be written.
 /// `details`, when given, receives what RunMetrics has no place for.
 RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
                        const FibreRunOptions& options = {}, FibreRunDetails* details = nullptr);

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/MuscleMetrics.h"
+
 namespace fibremss {
 
 /// Median milliseconds per iteration spent in each part of a FibreMSS step (seed 004 Table 1).
@@ -58,11 +60,11 @@ struct RunMetrics {
   PartTiming timing;                 ///< per-part breakdown (FibreMSS)
   double maxPenetrationMm = kNone;   ///< surface vertices into bones' true meshes
   double meanPenetrationMm = kNone;  ///< mean over penetrating vertices
-  double volumeChangePct = kNone;    ///< final muscle volume against rest
+  double volumeChangePct = kNone;    ///< final volume against rest [%], the worst muscle's
   /// The largest |volume change| of one muscle at any pose [%] (FibreMSS), and that muscle.
   double worstMuscleVolumeChangePct = kNone;
   std::string worstVolumeMuscle;        ///< the muscle of worstMuscleVolumeChangePct
-  double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families)
+  double springDeviationRatio = kNone;  ///< Σ|l−L0|/ΣL0 (spring families), the worst muscle's
   double rmsToReferenceMm = kNone;      ///< surface vertex RMS against the CalculiX reference [mm]
   /// Symmetric nearest-surface RMS against the reference [mm]: every vertex's distance to the
   /// other surface, both ways (sliding along the surface is not counted), over all poses.
@@ -88,6 +90,10 @@ struct RunMetrics {
 
   AnalyticMetrics analytic;  ///< the scene's exact case, if it is one
 
+  /// Per muscle (FibreMSS): volume, penetration per bone, fixed particles, fibre length, worst
+  /// spring, rollbacks, freezes; the headline volume change and spring deviation are the worst
+  /// muscle's.
+  std::vector<MuscleResults> muscles;
   /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
   /// a NaN or exploded pose is left out.
   std::vector<std::vector<btVector3>> poseSurfaces;

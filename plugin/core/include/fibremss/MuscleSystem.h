@@ -81,6 +81,13 @@ struct StepStats {
   size_t trappedMuscles = 0;
 };
 
+/// How often the numerical guard found one muscle failing, over the system's life: each count is
+/// one attempt of a step (a first try or a retry) that the muscle failed.
+struct MuscleFailures {
+  int attempts = 0;  ///< attempts it failed (NaN/inf or burst springs)
+  int nan = 0;       ///< of them with NaN/inf (the others: springs beyond 3× their rest length)
+};
+
 /// What debugDraw draws (bit flags).
 enum DebugDrawFlag : int {
   kDrawParticles = 1,    ///< boundary particle spheres
@@ -123,6 +130,9 @@ class MuscleSystem {
   bool frozen(MuscleHandle muscle) const;
   /// Lets a frozen muscle move again from the state it was frozen in.
   void unfreeze(MuscleHandle muscle);
+  /// Step attempts the numerical guard found this muscle failing (a rollback, a retry or a
+  /// freeze followed each, except with FailurePolicy::Report).
+  MuscleFailures failures(MuscleHandle muscle) const;
 
   /// One simulation step: bones move from their last to their target transforms split over
   /// the iterations; pre-transform; iterations of forces, integration, collision detection and

@@ -129,7 +129,8 @@ struct MuscleState : ParticleState, ContactState, TreeState, GuardSnapshot {
   std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
   Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
   bool prepared = false;                           ///< workspace made for `preparedFor`
-  bool frozen = false;  ///< stopped by the numerical guard: skipped by every part of a step
+  bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
+  MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
 };
 
 }  // namespace fibremss

@@ -262,6 +262,10 @@ void MuscleSystem::unfreeze(MuscleHandle muscle) {
   impl_->muscle(muscle).frozen = false;
 }
 
+MuscleFailures MuscleSystem::failures(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).failures;
+}
+
 void MuscleSystem::step() {
   checkStepParameters(impl_->parameters, "MuscleSystem::step");
   impl_->guardedStep();

@@ -151,6 +151,8 @@ void MuscleSystem::Impl::guardedStep() {
         // What a trap tore stays torn once the bones let go: only more burst springs fail.
         if (health.explodedSprings <= state.tornSprings) continue;
       }
+      ++state.failures.attempts;
+      state.failures.nan += health.nan ? 1 : 0;
       if (blamed++ == 0) {
         failedMuscle = {slot, muscles.generations[slot]};
         failedNan = health.nan;

@@ -1,0 +1,77 @@
+#pragma once
+// Per-muscle results of a run (issue 16): each muscle measured at a step (MuscleStep, what a
+// per-step series is made of) and summed up over the run (MuscleResults, summary.json
+// "muscles"), so that the worst muscle shows instead of an average over all of them.
+#include <LinearMath/btTransform.h>
+
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
+
+namespace fibremss {
+
+/// One muscle measured at one step.
+struct MuscleStep {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  bool finite = true;                   ///< every particle and surface vertex is finite
+  double volumeChangePct = kNone;       ///< surface volume against rest [%]
+  std::vector<double> penetrationMm;    ///< per bone: deepest surface vertex inside it [mm]
+  double meanFibreLengthMm = kNone;     ///< mean length of the fibres [mm]
+  double worstSpringRatio = kNone;      ///< largest l / L0 of its springs
+  double springDeviationRatio = kNone;  ///< Σ|l − L0| / ΣL0 of its springs
+};
+
+/// Measures a muscle (its particles `positions`, deformed surface `surface`) against the bones'
+/// true meshes `bones` (rest frames) placed at `boneTransforms`. A muscle with a non-finite
+/// particle or vertex gets only `finite = false`.
+MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                         std::span<const btVector3> surface,
+                         std::span<const MeshDistance* const> bones,
+                         std::span<const btTransform> boneTransforms);
+
+/// A muscle's results over a run, from the steps it was measured at.
+struct MuscleResults {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  std::string name;                      ///< the muscle's name
+  std::vector<std::string> bones;        ///< bone names, the order of the per-bone fields
+  double volumeChangePct = kNone;        ///< at the last finite step [%]
+  double worstVolumeChangePct = kNone;   ///< of largest magnitude over the finite steps [%]
+  int worstVolumeStep = -1;              ///< the step of worstVolumeChangePct
+  std::vector<double> maxPenetrationMm;  ///< per bone: deepest surface vertex, all steps [mm]
+  std::vector<size_t> fixedParticles;    ///< per bone: particles fixed to it
+  bool frozen = false;                   ///< the numerical guard froze it
+  int frozenStep = -1;                   ///< the step that froze it
+  std::string frozenCause;               ///< "nan" or "exploded" (empty when not frozen)
+  int rollbacks = 0;                     ///< step attempts it failed that the guard rolled back
+  double fibreLengthRestMm = kNone;      ///< mean fibre length at rest [mm]
+  double fibreLengthLastMm = kNone;      ///< at the last finite step [mm]
+  double fibreLengthMinMm = kNone;       ///< smallest over the finite steps [mm]
+  double fibreLengthMaxMm = kNone;       ///< largest over the finite steps [mm]
+  double worstSpringRatio = kNone;       ///< largest l / L0 over the finite steps
+  double springDeviationRatio = kNone;   ///< Σ|l − L0| / ΣL0 at the last finite step
+  int lastStep = -1;                     ///< the last finite step measured (-1: none)
+
+  /// Name, bones, fixed particles per bone and the rest fibre length of `muscle`.
+  MuscleResults(const MuscleSettings& muscle, std::vector<std::string> boneNames);
+  MuscleResults() = default;
+  /// Adds step `step`'s measures (a non-finite step changes nothing: earlier steps' stay).
+  void add(int step, const MuscleStep& measures);
+};
+
+nlohmann::json toJson(const MuscleResults& results);
+/// Reads what toJson wrote (missing keys keep their defaults).
+MuscleResults muscleResultsFromJson(const nlohmann::json& object);
+
+/// The muscles as a Markdown table: volume change (last and worst), penetration and fixed
+/// particles per bone, mean fibre length, worst spring, rollbacks, frozen.
+std::string muscleTable(const std::vector<MuscleResults>& muscles);
+
+/// The muscle whose last volume change is largest in magnitude (null when none was measured).
+const MuscleResults* worstVolumeMuscle(const std::vector<MuscleResults>& muscles);
+
+}  // namespace fibremss

@@ -1,0 +1,180 @@
+#include "fibremss/MuscleMetrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "fibremss/Measures.h"
+
+namespace fibremss {
+namespace {
+
+bool allFinite(std::span<const btVector3> points) {
+  return std::all_of(points.begin(), points.end(), [](const btVector3& p) {
+    return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
+  });
+}
+
+nlohmann::json number(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+double numberAt(const nlohmann::json& object, const char* key, double fallback) {
+  auto it = object.find(key);
+  return it != object.end() && it->is_number() ? it->get<double>() : fallback;
+}
+
+/// "pelvis 0.31, femur 0.82" from per-bone values (bones whose value is `skip` left out).
+template <typename Value>
+std::string perBone(const std::vector<std::string>& bones, const std::vector<Value>& values,
+                    const char* format, Value skip) {
+  std::string text;
+  char number[32];
+  for (size_t b = 0; b < bones.size() && b < values.size(); ++b) {
+    if (values[b] == skip) continue;
+    std::snprintf(number, sizeof number, format, values[b]);
+    text += (text.empty() ? "" : ", ") + bones[b] + " " + number;
+  }
+  return text.empty() ? "none" : text;
+}
+
+}  // namespace
+
+MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                         std::span<const btVector3> surface,
+                         std::span<const MeshDistance* const> bones,
+                         std::span<const btTransform> boneTransforms) {
+  MuscleStep step;
+  step.finite = allFinite(positions) && allFinite(surface);
+  if (!step.finite) return step;
+  if (!muscle.restSurface.empty()) {
+    step.volumeChangePct = volumeChangePercent(muscle.restSurface, surface);
+    for (size_t b = 0; b < bones.size(); ++b)
+      step.penetrationMm.push_back(
+          measurePenetration(surface, bones.subspan(b, 1), boneTransforms.subspan(b, 1)).maxMm);
+  }
+  step.meanFibreLengthMm = 1000.0 * meanFibreLength(muscle, positions);
+  if (!muscle.springs.empty()) {
+    step.worstSpringRatio = worstSpringRatio(muscle.springs, positions);
+    step.springDeviationRatio = springDeviationRatio(muscle.springs, positions);
+  }
+  return step;
+}
+
+MuscleResults::MuscleResults(const MuscleSettings& muscle, std::vector<std::string> boneNames)
+    : name(muscle.name),
+      bones(std::move(boneNames)),
+      maxPenetrationMm(bones.size(), 0.0),
+      fixedParticles(fixedParticlesPerBone(muscle, bones.size())),
+      fibreLengthRestMm(1000.0 * meanFibreLength(muscle, muscle.restPositions)) {}
+
+void MuscleResults::add(int step, const MuscleStep& measures) {
+  if (!measures.finite) return;
+  const bool first = lastStep < 0;
+  lastStep = step;
+  volumeChangePct = measures.volumeChangePct;
+  if (std::isfinite(measures.volumeChangePct) &&
+      !(std::abs(measures.volumeChangePct) <= std::abs(worstVolumeChangePct))) {
+    worstVolumeChangePct = measures.volumeChangePct;
+    worstVolumeStep = step;
+  }
+  for (size_t b = 0; b < measures.penetrationMm.size() && b < maxPenetrationMm.size(); ++b)
+    maxPenetrationMm[b] = std::max(maxPenetrationMm[b], measures.penetrationMm[b]);
+  fibreLengthLastMm = measures.meanFibreLengthMm;
+  fibreLengthMinMm = first ? fibreLengthLastMm : std::min(fibreLengthMinMm, fibreLengthLastMm);
+  fibreLengthMaxMm = first ? fibreLengthLastMm : std::max(fibreLengthMaxMm, fibreLengthLastMm);
+  if (!(measures.worstSpringRatio <= worstSpringRatio))
+    worstSpringRatio = measures.worstSpringRatio;
+  springDeviationRatio = measures.springDeviationRatio;
+}
+
+nlohmann::json toJson(const MuscleResults& r) {
+  nlohmann::json penetration = nlohmann::json::object(), fixed = nlohmann::json::object();
+  for (size_t b = 0; b < r.bones.size(); ++b) {
+    if (b < r.maxPenetrationMm.size()) penetration[r.bones[b]] = number(r.maxPenetrationMm[b]);
+    if (b < r.fixedParticles.size()) fixed[r.bones[b]] = r.fixedParticles[b];
+  }
+  return {{"name", r.name},
+          {"volume_change_pct",
+           {{"last", number(r.volumeChangePct)},
+            {"worst", number(r.worstVolumeChangePct)},
+            {"worst_step", r.worstVolumeStep}}},
+          {"max_penetration_mm", penetration},
+          {"fixed_particles", fixed},
+          {"frozen", r.frozen},
+          {"frozen_step", r.frozenStep},
+          {"frozen_cause", r.frozenCause},
+          {"rollbacks", r.rollbacks},
+          {"fibre_length_mm",
+           {{"rest", number(r.fibreLengthRestMm)},
+            {"last", number(r.fibreLengthLastMm)},
+            {"min", number(r.fibreLengthMinMm)},
+            {"max", number(r.fibreLengthMaxMm)}}},
+          {"worst_spring_ratio", number(r.worstSpringRatio)},
+          {"spring_deviation_ratio", number(r.springDeviationRatio)},
+          {"last_step", r.lastStep}};
+}
+
+MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
+  MuscleResults r;
+  r.name = o.value("name", r.name);
+  if (auto v = o.find("volume_change_pct"); v != o.end() && v->is_object()) {
+    r.volumeChangePct = numberAt(*v, "last", r.volumeChangePct);
+    r.worstVolumeChangePct = numberAt(*v, "worst", r.worstVolumeChangePct);
+    r.worstVolumeStep = v->value("worst_step", r.worstVolumeStep);
+  }
+  if (auto p = o.find("max_penetration_mm"); p != o.end() && p->is_object())
+    for (auto it = p->begin(); it != p->end(); ++it) {
+      r.bones.push_back(it.key());
+      r.maxPenetrationMm.push_back(it->is_number() ? it->get<double>() : MuscleResults::kNone);
+    }
+  if (auto f = o.find("fixed_particles"); f != o.end() && f->is_object())
+    for (const std::string& bone : r.bones) r.fixedParticles.push_back(f->value(bone, size_t(0)));
+  r.frozen = o.value("frozen", r.frozen);
+  r.frozenStep = o.value("frozen_step", r.frozenStep);
+  r.frozenCause = o.value("frozen_cause", r.frozenCause);
+  r.rollbacks = o.value("rollbacks", r.rollbacks);
+  if (auto l = o.find("fibre_length_mm"); l != o.end() && l->is_object()) {
+    r.fibreLengthRestMm = numberAt(*l, "rest", r.fibreLengthRestMm);
+    r.fibreLengthLastMm = numberAt(*l, "last", r.fibreLengthLastMm);
+    r.fibreLengthMinMm = numberAt(*l, "min", r.fibreLengthMinMm);
+    r.fibreLengthMaxMm = numberAt(*l, "max", r.fibreLengthMaxMm);
+  }
+  r.worstSpringRatio = numberAt(o, "worst_spring_ratio", r.worstSpringRatio);
+  r.springDeviationRatio = numberAt(o, "spring_deviation_ratio", r.springDeviationRatio);
+  r.lastStep = o.value("last_step", r.lastStep);
+  return r;
+}
+
+std::string muscleTable(const std::vector<MuscleResults>& muscles) {
+  std::string table =
+      "| muscle | volume last % | volume worst % (step) | max penetration mm | fixed particles | "
+      "mean fibre mm rest / last / min / max | worst spring l/L0 | rollbacks | frozen |\n"
+      "|---|---|---|---|---|---|---|---|---|\n";
+  char line[512];
+  for (const MuscleResults& m : muscles) {
+    const std::string frozen =
+        m.frozen ? "at step " + std::to_string(m.frozenStep) + " (" + m.frozenCause + ")" : "no";
+    std::snprintf(
+        line, sizeof line,
+        "| %s | %.2f | %.2f (%d) | %s | %s | %.1f / %.1f / %.1f / %.1f | %.2f | %d | %s |\n",
+        m.name.c_str(), m.volumeChangePct, m.worstVolumeChangePct, m.worstVolumeStep,
+        perBone(m.bones, m.maxPenetrationMm, "%.2f", -1.0).c_str(),
+        perBone(m.bones, m.fixedParticles, "%zu", size_t(0)).c_str(), m.fibreLengthRestMm,
+        m.fibreLengthLastMm, m.fibreLengthMinMm, m.fibreLengthMaxMm, m.worstSpringRatio,
+        m.rollbacks, frozen.c_str());
+    table += line;
+  }
+  return table;
+}
+
+const MuscleResults* worstVolumeMuscle(const std::vector<MuscleResults>& muscles) {
+  const MuscleResults* worst = nullptr;
+  for (const MuscleResults& m : muscles)
+    if (std::isfinite(m.volumeChangePct) &&
+        (!worst || std::abs(m.volumeChangePct) > std::abs(worst->volumeChangePct)))
+      worst = &m;
+  return worst;
+}
+
+}  // namespace fibremss

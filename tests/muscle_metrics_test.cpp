@@ -1,0 +1,172 @@
+// Per-muscle results (issue 16): one muscle's measures on a deformation whose answers are known,
+// the run-long summary keeping the worst and the last finite step, the JSON round trip, and on
+// hip-pelvis: declared attachments run the flexion where the nearest-bone rule freezes the
+// iliacus, and under stop-body the other muscles go on past a frozen one.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "fibremss/FibreRun.h"
+#include "fibremss/MuscleMetrics.h"
+#include "fibremss/Scene.h"
+#include "support/GridMuscle.h"
+
+namespace fibremss {
+namespace {
+
+TEST(MuscleMetrics, MeasuresOfAKnownStretch) {
+  // The grid muscle (x from −12 to +12 mm, box surface ±12 × ±5 × ±5 mm) stretched 1.5× along x:
+  // its surface reaches ±18 mm into the cube bones (x from ±10 to ±30 mm, y and z within
+  // ±10 mm), where the nearest cube face is 5 mm away (at rest 2 mm, the x face).
+  const auto muscle = testing::gridMuscle();
+  const auto left = testing::cubeBone("left", {-0.02f, 0, 0});
+  const auto right = testing::cubeBone("right", {0.02f, 0, 0});
+  const MeshDistance leftMesh(left->mesh), rightMesh(right->mesh);
+  const MeshDistance* bones[] = {&leftMesh, &rightMesh};
+  const btTransform rest[] = {btTransform::getIdentity(), btTransform::getIdentity()};
+  auto stretched = [](std::span<const btVector3> points) {
+    std::vector<btVector3> out(points.begin(), points.end());
+    for (btVector3& p : out) p.setX(p.x() * btScalar(1.5));
+    return out;
+  };
+  const std::vector<btVector3> positions = stretched(muscle->restPositions);
+  const std::vector<btVector3> surface = stretched(muscle->restSurface.vertices);
+  const MuscleStep step = measureMuscle(*muscle, positions, surface, bones, rest);
+  ASSERT_TRUE(step.finite);
+  EXPECT_NEAR(step.volumeChangePct, 50.0, 1e-3);
+  ASSERT_EQ(step.penetrationMm.size(), 2u);
+  EXPECT_NEAR(step.penetrationMm[0], 5.0, 1e-3);
+  EXPECT_NEAR(step.penetrationMm[1], 5.0, 1e-3);
+  EXPECT_NEAR(step.meanFibreLengthMm, 36.0, 1e-3);  // 6 gaps of 4 mm, × 1.5
+  EXPECT_NEAR(step.worstSpringRatio, 1.5, 1e-5);    // the springs along x
+  const MuscleStep atRest =
+      measureMuscle(*muscle, muscle->restPositions, muscle->restSurface.vertices, bones, rest);
+  EXPECT_NEAR(atRest.volumeChangePct, 0.0, 1e-4);
+  ASSERT_EQ(atRest.penetrationMm.size(), 2u);
+  EXPECT_NEAR(atRest.penetrationMm[0], 2.0, 1e-3);
+  EXPECT_NEAR(atRest.worstSpringRatio, 1.0, 1e-6);
+  // A NaN anywhere: the step says only that.
+  std::vector<btVector3> broken = positions;
+  broken[5].setY(std::nan(""));
+  EXPECT_FALSE(measureMuscle(*muscle, broken, surface, bones, rest).finite);
+}
+
+TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
+  const auto muscle = testing::gridMuscle();
+  MuscleResults results(*muscle, {"left", "right"});
+  EXPECT_EQ(results.fixedParticles, (std::vector<size_t>{9, 9}));  // the grid's end layers
+  EXPECT_NEAR(results.fibreLengthRestMm, 24.0, 1e-3);
+  auto step = [](double volume, double penetrationLeft, double fibre, double spring) {
+    MuscleStep s;
+    s.volumeChangePct = volume;
+    s.penetrationMm = {penetrationLeft, 0.1};
+    s.meanFibreLengthMm = fibre;
+    s.worstSpringRatio = spring;
+    s.springDeviationRatio = spring - 1;
+    return s;
+  };
+  results.add(0, step(-1, 0.2, 25, 1.1));
+  results.add(1, step(-4, 0.9, 20, 1.6));
+  results.add(2, step(2, 0.3, 28, 1.2));
+  MuscleStep nan;
+  nan.finite = false;
+  results.add(3, nan);  // a failed last step keeps the good steps' results
+  EXPECT_EQ(results.lastStep, 2);
+  EXPECT_DOUBLE_EQ(results.volumeChangePct, 2);
+  EXPECT_DOUBLE_EQ(results.worstVolumeChangePct, -4);
+  EXPECT_EQ(results.worstVolumeStep, 1);
+  EXPECT_EQ(results.maxPenetrationMm, (std::vector<double>{0.9, 0.1}));
+  EXPECT_DOUBLE_EQ(results.fibreLengthLastMm, 28);
+  EXPECT_DOUBLE_EQ(results.fibreLengthMinMm, 20);
+  EXPECT_DOUBLE_EQ(results.fibreLengthMaxMm, 28);
+  EXPECT_DOUBLE_EQ(results.worstSpringRatio, 1.6);
+  EXPECT_NEAR(results.springDeviationRatio, 0.2, 1e-12);
+
+  const MuscleResults again = muscleResultsFromJson(toJson(results));
+  EXPECT_EQ(toJson(again), toJson(results));
+  EXPECT_EQ(again.bones, results.bones);
+  // The worst muscle by its last volume change, and the table names every bone.
+  MuscleResults other = results;
+  other.name = "other";
+  other.volumeChangePct = -3;
+  const std::vector<MuscleResults> both = {results, other};
+  EXPECT_EQ(worstVolumeMuscle(both)->name, "other");
+  const std::string table = muscleTable(both);
+  EXPECT_NE(table.find("| other | -3.00 | -4.00 (1) | left 0.90, right 0.10 | left 9, right 9"),
+            std::string::npos)
+      << table;
+}
+
+/// hip-pelvis without its muscles' origin and insertion: today's nearest-bone rule.
+LoadedScene nearestRuleHipPelvis(const std::vector<std::string>& overrides) {
+  nlohmann::json scene = nlohmann::json::parse(exportBuiltInScene("hip-pelvis"));
+  for (auto& muscle : scene["muscles"]) {
+    muscle.erase("origin");
+    muscle.erase("insertion");
+  }
+  const std::filesystem::path path =
+      std::filesystem::temp_directory_path() / "fibremss_hip_pelvis_nearest.json";
+  std::ofstream(path) << scene.dump();
+  return loadScene(path.string(), overrides);
+}
+
+const MuscleResults& muscleNamed(const RunMetrics& run, const std::string& name) {
+  for (const MuscleResults& muscle : run.muscles)
+    if (muscle.name == name) return muscle;
+  throw std::runtime_error("no muscle " + name);
+}
+
+TEST(HipPelvis, DeclaredAttachmentsRunTheFlexionWhereTheNearestBoneRuleFails) {
+  const LoadedScene declared = loadScene("hip-pelvis");
+  const PreparedScene prepared =
+      prepareScene(declared.bones, declared.muscles, declared.simulation.seed);
+  const RunMetrics run = runFibreMSS(declared, prepared);
+  EXPECT_EQ(run.steps, declared.poseCount);
+  EXPECT_EQ(run.failedStep, -1);
+  ASSERT_EQ(run.muscles.size(), 3u);
+  for (const MuscleResults& muscle : run.muscles) {
+    EXPECT_FALSE(muscle.frozen) << muscle.name;
+    EXPECT_EQ(muscle.rollbacks, 0) << muscle.name;
+    EXPECT_LT(muscle.worstSpringRatio, 3.0) << muscle.name;
+  }
+  // The nearest-bone rule fixes the iliacus' belly to the femoral head: it bursts.
+  const LoadedScene nearest = nearestRuleHipPelvis({});
+  const RunMetrics failed =
+      runFibreMSS(nearest, prepareScene(nearest.bones, nearest.muscles, nearest.simulation.seed));
+  EXPECT_GE(failed.failedStep, 0);
+  EXPECT_TRUE(muscleNamed(failed, "iliacus").frozen);
+}
+
+TEST(HipPelvis, UnderStopBodyTheOtherMusclesGoOnPastAFrozenOne) {
+  // 0 → 120° in 30° steps with the nearest-bone rule: the iliacus freezes before the last pose.
+  const LoadedScene scene =
+      nearestRuleHipPelvis({"on_failure=stop-body", "step_deg=30", "end_deg=120"});
+  FibreRunDetails details;
+  const RunMetrics run = runFibreMSS(
+      scene, prepareScene(scene.bones, scene.muscles, scene.simulation.seed), {}, &details);
+  EXPECT_EQ(run.steps, scene.poseCount);  // every pose ran
+  const MuscleResults& iliacus = muscleNamed(run, "iliacus");
+  ASSERT_TRUE(iliacus.frozen);
+  EXPECT_LT(iliacus.frozenStep, scene.poseCount - 1);
+  EXPECT_EQ(run.failedStep, iliacus.frozenStep);
+  ASSERT_EQ(details.frozen.size(), 1u);
+  EXPECT_EQ(details.frozen[0].name, "iliacus");
+  EXPECT_GE(iliacus.rollbacks, 1);
+  for (const Rollback& rollback : details.rollbacks) EXPECT_EQ(rollback.muscle, "iliacus");
+  for (const char* other : {"psoas", "gluteal"}) {
+    EXPECT_FALSE(muscleNamed(run, other).frozen) << other;
+    EXPECT_EQ(muscleNamed(run, other).lastStep, scene.poseCount - 1) << other;
+  }
+  // Under retry (the default) a frozen muscle still ends the run.
+  const LoadedScene retry = nearestRuleHipPelvis({"step_deg=30", "end_deg=120"});
+  const RunMetrics ended =
+      runFibreMSS(retry, prepareScene(retry.bones, retry.muscles, retry.simulation.seed));
+  ASSERT_GE(ended.failedStep, 0);
+  EXPECT_EQ(ended.steps, ended.failedStep + 1);
+}
+
+}  // namespace
+}  // namespace fibremss
