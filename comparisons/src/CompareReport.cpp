@@ -685,6 +685,14 @@ bool thesisTable1(int resolution, double seconds[4]) {
   return true;
 }
 
+/// A run's heading: its method, plus its scene overrides when it has any.
+std::string runLabel(const nlohmann::json& run) {
+  std::string label = text(run, "method");
+  const std::string overrides = joined(run.value("scene_overrides", nlohmann::json::array()), " ");
+  if (!overrides.empty()) label += " (" + overrides + ")";
+  return label;
+}
+
 /// Per run that measured its muscles (FibreMSS), the per-muscle table: the worst muscle shows.
 std::string perMuscleReport(const nlohmann::json& runs) {
   std::string out;
@@ -752,7 +760,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
   out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
          "iterations: Newton iterations).\n"
-      << perMuscleReport(runs) << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
+      << perMuscleReport(runs) << softBodyRatioReport(runs) << analyticReport(runs)
+      << equilibriumReport(runs);
   const std::string coverageNote = referenceCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {

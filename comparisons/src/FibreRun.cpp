@@ -277,13 +277,6 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     if (finite)
       for (size_t m = 0; m < muscles.size(); ++m) {
         std::span<const btVector3> surface = system.surface(muscles[m]);
-        if (muscleRestVolumes[m] != 0) {
-          const double change = volumeChangePercent(prepared.muscles[m]->restSurface, surface);
-          if (!(std::abs(change) <= std::abs(metrics.worstMuscleVolumeChangePct))) {
-            metrics.worstMuscleVolumeChangePct = change;
-            metrics.worstVolumeMuscle = prepared.muscles[m]->name;
-          }
-        }
         surfaceDepthsMm[m].resize(surface.size());
         penetration =
             combine(penetration, boneMeshes.points(surface, boneTransforms, surfaceDepthsMm[m]));
@@ -363,9 +356,16 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     metrics.meanPenetrationMm = penetration.meanMm;
     if (const MuscleResults* worst = worstVolumeMuscle(ledger.results))
       metrics.volumeChangePct = worst->volumeChangePct;
-    for (const MuscleResults& muscle : ledger.results)
+    for (const MuscleResults& muscle : ledger.results) {
       if (!(muscle.springDeviationRatio <= metrics.springDeviationRatio))
         metrics.springDeviationRatio = muscle.springDeviationRatio;
+      if (std::isfinite(muscle.worstVolumeChangePct) &&
+          !(std::abs(muscle.worstVolumeChangePct) <=
+            std::abs(metrics.worstMuscleVolumeChangePct))) {
+        metrics.worstMuscleVolumeChangePct = muscle.worstVolumeChangePct;
+        metrics.worstVolumeMuscle = muscle.name;
+      }
+    }
   }
   if (!muscles.empty() && !metrics.nan)
     metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
