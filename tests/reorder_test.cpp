@@ -127,6 +127,8 @@ TEST(Reorder, EveryIndexFollowsThePermutation) {
     EXPECT_EQ(muscle.fixedParticles, renumbered(old.fixedParticles, true));
     EXPECT_EQ(muscle.fibreParticles, renumbered(old.fibreParticles, false));
     EXPECT_EQ(muscle.skinParticles, renumbered(old.skinParticles, false));
+    EXPECT_EQ(muscle.tetParticles, renumbered(old.tetParticles, false));
+    EXPECT_EQ(muscle.tetInverseVolume, old.tetInverseVolume);
     // What is not per particle stays.
     EXPECT_EQ(muscle.fibreOffsets, old.fibreOffsets);
     EXPECT_EQ(muscle.skinWeights, old.skinWeights);

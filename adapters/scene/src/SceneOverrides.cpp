@@ -29,6 +29,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"damping", {Target::Section, "model"}},
       {"density", {Target::Section, "model"}},
       {"volume_stiffness", {Target::Section, "model"}},
+      {"fibre_stiffness_ratio", {Target::Section, "model"}},
       {"damping_scale", {Target::Section, "model"}},
       {"integrator", {Target::Section, "simulation"}},
       {"time_step", {Target::Section, "simulation"}},

@@ -65,10 +65,14 @@ struct MuscleSettings {
   std::vector<uint32_t> boundaryParticles;  ///< indices of boundary particles, ascending
   std::vector<uint32_t> fixedParticles;     ///< indices of fixed particles, ascending
 
-  btScalar particleMass = 0;   ///< the same for every particle [kg]
-  btScalar damping = 0;        ///< spring damping coefficient c [N·s/m]
-  btScalar volumeModulus = 0;  ///< K of the volume term (VolumeForces.h) [Pa]; 0: none
-  double restVolume = 0;       ///< volume enclosed by restSurface [m³]
+  btScalar particleMass = 0;  ///< the same for every particle [kg]
+  btScalar damping = 0;       ///< spring damping coefficient c [N·s/m]
+  double restVolume = 0;      ///< volume enclosed by restSurface [m³]
+  // Local volume terms (VolumeForces.h): the Delaunay tetrahedra of the particles whose centroid
+  // lies inside restSurface, without slivers; empty when volumeModulus is 0.
+  btScalar volumeModulus = 0;              ///< bulk modulus K of the volume terms [Pa]; 0: none
+  std::vector<uint32_t> tetParticles;      ///< 4 per tetrahedron, positive rest orientation
+  std::vector<btScalar> tetInverseVolume;  ///< per tetrahedron: 1 / (6·V0) [1/m³]
 
   std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
   SpringBlocks springBlocks;    ///< `springs` laid out for the AVX2 kernel (empty: not laid out)

@@ -30,9 +30,13 @@ struct SpringParameters {
   /// holds: 0.5 keeps that margin.
   btScalar dampingScale = 0.5;
   btScalar density = 1060;  ///< muscle density [kg/m³]; mass = density·volume / particles
-  /// Volume preservation: the muscle's bulk modulus against its enclosed volume's change, as a
-  /// multiple of the spring network's Young's modulus Σk·L0² / 3V (0: no volume term).
-  btScalar volumeStiffness = 0;
+  /// Local volume preservation: a bulk modulus K against each Delaunay tetrahedron's volume
+  /// change (energy ½·K·(V − V0)²/V0 per tetrahedron), as a multiple of the spring network's
+  /// Young's modulus E = Σk·L0² / 3V [1] (K in Pa = this × E; 0: off).
+  btScalar volumeStiffness = 4;
+  /// Stiffness of a spring along the local fibre direction over one across it [1]: a spring at
+  /// angle θ to the fibres gets k = κ/L0 · (ratio·cos²θ + sin²θ) (1: isotropic).
+  btScalar fibreStiffnessRatio = 1;
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).

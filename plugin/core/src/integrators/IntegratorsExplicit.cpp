@@ -167,7 +167,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
     }
     for (size_t s = 1; s < weights_.size(); ++s) {
       springForces(settings, stage.positions, stage.forces);
-      if (!muscle.volumeOffsets.empty()) addVolumeForces(muscle, stage.positions, stage.forces);
+      addTetrahedronForces(settings, stage.positions, stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();
       const btScalar offset = last ? 0 : offsets_[s] * dt;

@@ -394,7 +394,8 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   muscle.particleMass = parameters.springs.density * std::abs(volume) / btScalar(n);
 
   const KdTree particles(muscle.restPositions);
-  muscle.springs = detail::buildSprings(input, muscle.restPositions, particles);
+  muscle.springs =
+      detail::buildSprings(input, muscle.restPositions, particles, detail::fibreDirections(muscle));
   attachToBones(input, bones, boneInputs, muscle, warnings);
   if (detail::dropFixedSprings(muscle) > 0 && muscle.springs.empty())
     warnings.push_back(source + ": every spring links two fixed particles, nothing moves");
@@ -412,9 +413,10 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   double network = 0;  // Σ k·L0²
   for (const Spring& spring : muscle.springs)
     network += double(spring.stiffness) * spring.restLength * spring.restLength;
-  if (muscle.restVolume != 0)
-    muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * network /
-                                                 (3 * std::abs(muscle.restVolume)));
+  // The bulk modulus as a multiple of the network's Young's modulus E = Σk·L0² / 3V.
+  const double youngs = muscle.restVolume != 0 ? network / (3 * std::abs(muscle.restVolume)) : 0;
+  muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * youngs);
+  detail::buildVolumeTetrahedra(input, muscle);
   report.shortestSpring = muscle.springs.empty() ? 0 : muscle.springs.front().restLength;
   for (const Spring& spring : muscle.springs)
     report.shortestSpring = std::min(report.shortestSpring, spring.restLength);

@@ -45,8 +45,25 @@ size_t pushOutOf(std::span<btVector3> points, const MeshDistance& body, btScalar
 /// Springs of the muscle's layout (Springs.cpp), sorted by (a, b), a < b, no duplicates;
 /// rest length = distance, k = κ / L0. Throws InputError for unusable layouts or coincident
 /// particles.
+/// With directions (fibreDirections, empty: none) and springs.fibreStiffnessRatio ≠ 1, a spring
+/// at angle θ to the mean fibre direction of its ends gets k = κ/L0 · (ratio·cos²θ + sin²θ).
 std::vector<Spring> buildSprings(const MuscleInput& muscle, std::span<const btVector3> positions,
-                                 const KdTree& particles);
+                                 const KdTree& particles,
+                                 std::span<const btVector3> directions = {});
+
+/// Unit fibre direction at each particle (SpringsVolume.cpp): along its fibre between its two
+/// neighbours (one-sided at the ends); zero for a particle on no fibre of two or more particles.
+std::vector<btVector3> fibreDirections(const MuscleSettings& muscle);
+
+/// Tetrahedra whose shape quality 6√2·V/l³ (1: regular) is below this are slivers and get no
+/// volume term.
+constexpr double kMinTetrahedronQuality = 0.1;
+
+/// The local volume terms (SpringsVolume.cpp): when muscle.volumeModulus > 0, fills tetParticles
+/// and tetInverseVolume from the Delaunay tetrahedra of restPositions whose centroid lies inside
+/// restSurface, not all of whose particles are fixed, and that are not slivers; sorted by their
+/// particles; none when the particles do not span space. Call after the last reordering.
+void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle);
 
 /// Zeleny's damping estimate c = √(4·k̄·2m) (000 eq 2.11), k̄ the mean spring stiffness.
 btScalar zelenyDamping(std::span<const Spring> springs, btScalar particleMass);

@@ -75,10 +75,25 @@ std::vector<Pair> latticePairs(const MuscleInput& muscle, size_t fibreCount, boo
   return pairs;
 }
 
+/// ratio·cos²θ + sin²θ, θ the angle between the spring and the mean fibre direction at its ends
+/// (1 where neither end has one).
+btScalar anisotropyFactor(std::span<const btVector3> positions,
+                          std::span<const btVector3> directions, const Spring& spring,
+                          btScalar ratio) {
+  const btVector3 &first = directions[spring.a], &second = directions[spring.b];
+  // Fibre directions are lines, not arrows: align the second with the first before averaging.
+  const btVector3 fibre = first + (first.dot(second) < 0 ? -second : second);
+  if (!(fibre.length2() > 0)) return 1;
+  const btScalar cosine =
+      (positions[spring.b] - positions[spring.a]).dot(fibre) / (spring.restLength * fibre.length());
+  const btScalar cos2 = std::min(cosine * cosine, btScalar(1));
+  return ratio * cos2 + (1 - cos2);
+}
+
 }  // namespace
 
 std::vector<Spring> buildSprings(const MuscleInput& muscle, std::span<const btVector3> positions,
-                                 const KdTree& particles) {
+                                 const KdTree& particles, std::span<const btVector3> directions) {
   const SpringParameters& parameters = muscle.parameters.springs;
   if (!(parameters.kappa > 0))
     throw InputError(muscleSource(muscle), "springs.kappa",
@@ -111,6 +126,10 @@ std::vector<Spring> buildSprings(const MuscleInput& muscle, std::span<const btVe
                        "coincide (a zero-length spring): fibres overlap or repeat a point");
     springs.push_back({a, b, length, parameters.kappa / length});
   }
+  if (parameters.fibreStiffnessRatio != 1 && !directions.empty())
+    for (Spring& spring : springs)
+      spring.stiffness *=
+          anisotropyFactor(positions, directions, spring, parameters.fibreStiffnessRatio);
   return springs;
 }
 

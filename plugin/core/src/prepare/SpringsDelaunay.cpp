@@ -12,8 +12,14 @@ extern "C" {
 
 namespace fibremss::detail {
 
-std::vector<std::pair<uint32_t, uint32_t>> delaunayEdges(const MuscleInput& muscle,
-                                                         std::span<const btVector3> positions) {
+namespace {
+
+constexpr uint32_t kNone = UINT32_MAX;
+
+/// The lower Delaunay facets' particles, four per facet, kNone where a facet has fewer (a
+/// vertex at infinity from Qz).
+std::vector<std::array<uint32_t, 4>> delaunayFacets(const MuscleInput& muscle,
+                                                    std::span<const btVector3> positions) {
   if (positions.size() < 5)
     throw InputError(
         muscleSource(muscle), "springs.layout",
@@ -34,21 +40,20 @@ std::vector<std::pair<uint32_t, uint32_t>> delaunayEdges(const MuscleInput& musc
   char options[] = "qhull d Qt Qbb Qz";
   const int exitCode = qh_new_qhull(qh, 3, static_cast<int>(positions.size()), coordinates.data(),
                                     False, options, nullptr, messages);
-  std::vector<std::pair<uint32_t, uint32_t>> edges;
+  std::vector<std::array<uint32_t, 4>> tetrahedra;
   if (exitCode == 0) {
     facetT* facet;
     vertexT *vertex, **vertexp;
-    std::vector<uint32_t> ids;
     FORALLfacets {
       if (facet->upperdelaunay) continue;
-      ids.clear();
+      std::array<uint32_t, 4> ids{kNone, kNone, kNone, kNone};
+      size_t count = 0;
       FOREACHvertex_(facet->vertices) {
         const int id = qh_pointid(qh, vertex->point);
-        if (id >= 0 && size_t(id) < positions.size()) ids.push_back(static_cast<uint32_t>(id));
+        if (id >= 0 && size_t(id) < positions.size() && count < 4)
+          ids[count++] = static_cast<uint32_t>(id);
       }
-      for (size_t i = 0; i < ids.size(); ++i)
-        for (size_t j = i + 1; j < ids.size(); ++j)
-          edges.emplace_back(std::min(ids[i], ids[j]), std::max(ids[i], ids[j]));
+      tetrahedra.push_back(ids);
     }
   }
   qh_freeqhull(qh, !qh_ALL);
@@ -61,6 +66,25 @@ std::vector<std::pair<uint32_t, uint32_t>> delaunayEdges(const MuscleInput& musc
     throw InputError(muscleSource(muscle), "springs.layout",
                      "qhull cannot tetrahedralize the particles (coplanar or degenerate?): " +
                          message.substr(0, 400));
+  return tetrahedra;
+}
+
+}  // namespace
+
+std::vector<std::array<uint32_t, 4>> delaunayTetrahedra(const MuscleInput& muscle,
+                                                        std::span<const btVector3> positions) {
+  std::vector<std::array<uint32_t, 4>> tetrahedra = delaunayFacets(muscle, positions);
+  std::erase_if(tetrahedra, [](const std::array<uint32_t, 4>& t) { return t[3] == kNone; });
+  return tetrahedra;
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> delaunayEdges(const MuscleInput& muscle,
+                                                         std::span<const btVector3> positions) {
+  std::vector<std::pair<uint32_t, uint32_t>> edges;
+  for (const std::array<uint32_t, 4>& t : delaunayFacets(muscle, positions))
+    for (size_t i = 0; i < 4; ++i)
+      for (size_t j = i + 1; j < 4 && t[j] != kNone; ++j)
+        edges.emplace_back(std::min(t[i], t[j]), std::max(t[i], t[j]));
   return edges;
 }
 

@@ -11,6 +11,7 @@
 #include "collision/CollisionTrees.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
+#include "solver/Skin.h"
 
 class btCollisionObject;
 
@@ -59,12 +60,7 @@ struct ParticleState {
   std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
   bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
   std::vector<btVector3> surface;           ///< deformed surface vertices (output)
-  // The volume term (VolumeForces.h), empty without one.
-  std::vector<btVector3> volumeOrigins;   ///< every particle at the origin (the skin's offsets)
-  std::vector<btVector3> volumeOffsets;   ///< per surface vertex: the skin's Σ w·R(v − p) [m]
-  std::vector<btVector3> volumeSurface;   ///< per surface vertex: scratch, the skinned surface [m]
-  std::vector<btVector3> volumeGradient;  ///< per surface vertex: scratch, 6·∂V/∂s [m²]
-  double volume = 0;                      ///< volume of the skinned surface, last evaluated [m³]
+  SkinFrames skin;                          ///< local frames of the surface (empty: no surface)
 };
 
 /// A muscle's contact scratch: the pushes of this iteration's collision pairs and what the

@@ -11,7 +11,6 @@
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
-#include "VolumeForces.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
 
@@ -208,18 +207,11 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
   buildTree(*state, impl_->parameters.rebuildEveryStep);
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
-  if (hasVolumeTerm(s)) {
-    const size_t vertices = s.restSurface.vertices.size();
-    state->volumeOrigins.assign(n, btVector3(0, 0, 0));
-    for (auto* buffer : {&state->volumeOffsets, &state->volumeSurface, &state->volumeGradient})
-      buffer->assign(vertices, btVector3(0, 0, 0));
-    updateVolumeOffsets(*state, impl_->parameters.blendedPretransform);
-    state->volume = s.restVolume;
-  }
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
+    prepareSkinFrames(s, state->skin);
     deformSurface(s, state->positions, state->boneTransforms, impl_->parameters.blendedPretransform,
-                  state->surface);
+                  state->skin, state->surface);
   }
 
   size_t boundaryTotal = s.boundaryParticles.size();

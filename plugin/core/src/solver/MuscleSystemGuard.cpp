@@ -201,7 +201,7 @@ void MuscleSystem::Impl::guardedStep() {
     thread.contacts.clear();
     if (!state.surface.empty())
       deformSurface(*state.settings, state.positions, state.boneTransforms,
-                    parameters.blendedPretransform, state.surface);
+                    parameters.blendedPretransform, state.skin, state.surface);
   };
   size_t heldBones = 0;
   for (uint32_t slot : bones.order) heldBones += bones.states[slot]->heldNonFinite ? 1 : 0;

@@ -146,7 +146,6 @@ struct MuscleSystem::Impl {
   /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
   void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
   btScalar timeStep(const StepSize& size) const;
-  void addVolumeTerm(MuscleState& state, bool newOffsets) const;
   double volumeShare() const;
   void collideMusclePairs();
   void collide();

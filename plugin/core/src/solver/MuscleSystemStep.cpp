@@ -178,13 +178,6 @@ void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) cons
   followFixed(state);
 }
 
-// The volume term's forces (with new skin offsets when the bones moved) into state.forces.
-void MuscleSystem::Impl::addVolumeTerm(MuscleState& state, bool newOffsets) const {
-  if (state.volumeOffsets.empty()) return;
-  if (newOffsets) updateVolumeOffsets(state, parameters.blendedPretransform);
-  state.volume = addVolumeForces(state, state.positions, state.forces);
-}
-
 // The volume term's share of the force phase's thread time in this iteration (its wall time is
 // not measured apart: it runs in the same task as the springs).
 double MuscleSystem::Impl::volumeShare() const {
@@ -334,16 +327,16 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     const bool bonesMove = iteration <= motionIterations;
     if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
-    const bool newOffsets = bonesMove || iteration == 1;
     forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
       if (bonesMove) followBones(state);
       MuscleIterationResult& result = results[slot];
       const Clock::time_point forcesStart = Clock::now();
       result.forces = springForces(state);
       const Clock::time_point volumeStart = Clock::now();
-      addVolumeTerm(state, newOffsets);
+      addTetrahedronForces(*state.settings, state.positions, state.forces);
       result.forcesMs = millisecondsSince(forcesStart);
-      result.volumeMs = state.volumeOffsets.empty() ? 0 : millisecondsSince(volumeStart);
+      result.volumeMs =
+          state.settings->tetInverseVolume.empty() ? 0 : millisecondsSince(volumeStart);
       if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
     });
 
@@ -411,7 +404,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
     if (!state.surface.empty())
       deformSurface(*state.settings, state.positions, state.boneTransforms,
-                    parameters.blendedPretransform, state.surface);
+                    parameters.blendedPretransform, state.skin, state.surface);
   });
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];

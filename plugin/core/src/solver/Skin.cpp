@@ -1,45 +1,85 @@
 #include "Skin.h"
 
-#include "MuscleSystemPretransform.h"
+#include "fibremss/Pretransform.h"
 
 namespace fibremss {
+namespace {
+
+/// d·Dᵀ.
+btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
+  return btMatrix3x3(d.x() * e.x(), d.x() * e.y(), d.x() * e.z(), d.y() * e.x(), d.y() * e.y(),
+                     d.y() * e.z(), d.z() * e.x(), d.z() * e.y(), d.z() * e.z());
+}
+
+/// Σ over the springs with a used end of outer(x_b − x_a, X_b − X_a), into that end's entry of
+/// `sums` (which starts at zero).
+void sumMoments(const MuscleSettings& settings, std::span<const btVector3> positions,
+                std::span<const uint8_t> used, std::span<btMatrix3x3> sums) {
+  for (btMatrix3x3& m : sums) m.setValue(0, 0, 0, 0, 0, 0, 0, 0, 0);
+  const std::span<const btVector3> rest = settings.restPositions;
+  for (const Spring& spring : settings.springs) {
+    if (!used[spring.a] && !used[spring.b]) continue;
+    const btMatrix3x3 m =
+        outer(positions[spring.b] - positions[spring.a], rest[spring.b] - rest[spring.a]);
+    if (used[spring.a]) sums[spring.a] += m;
+    if (used[spring.b]) sums[spring.b] += m;
+  }
+}
+
+/// The rotation part of particle i's rigid pre-transform, as a matrix.
+btMatrix3x3 boneRotation(const MuscleSettings& settings,
+                         std::span<const btTransform> boneTransforms, uint32_t i, bool blended) {
+  btVector3 columns[3];
+  for (int c = 0; c < 3; ++c) {
+    btVector3 axis(0, 0, 0);
+    axis[c] = 1;
+    columns[c] = pretransformDirection(settings, boneTransforms, i, axis, blended);
+  }
+  return btMatrix3x3(columns[0].x(), columns[1].x(), columns[2].x(), columns[0].y(), columns[1].y(),
+                     columns[2].y(), columns[0].z(), columns[1].z(), columns[2].z());
+}
+
+}  // namespace
+
+void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames) {
+  const size_t n = settings.particleCount();
+  frames.used.assign(n, 0);
+  for (uint32_t p : settings.skinParticles) frames.used[p] = 1;
+  frames.restInverse.assign(n, btMatrix3x3::getIdentity());
+  frames.hasFrame.assign(n, 0);
+  frames.moments.assign(n, btMatrix3x3::getIdentity());
+  frames.deformations.assign(n, btMatrix3x3::getIdentity());
+  sumMoments(settings, settings.restPositions, frames.used, frames.moments);
+  for (uint32_t i = 0; i < n; ++i) {
+    if (!frames.used[i]) continue;
+    const btMatrix3x3& m = frames.moments[i];
+    const btScalar mean = (m[0][0] + m[1][1] + m[2][2]) / 3;
+    // Neighbours nearly on a plane or a line give no rotation out of it.
+    if (!(m.determinant() > btScalar(1e-3) * mean * mean * mean)) continue;
+    frames.restInverse[i] = m.inverse();
+    frames.hasFrame[i] = 1;
+  }
+}
 
 void deformSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
-                   std::span<const btTransform> boneTransforms, bool blended,
+                   std::span<const btTransform> boneTransforms, bool blended, SkinFrames& frames,
                    std::span<btVector3> surface) {
+  sumMoments(settings, positions, frames.used, frames.moments);
+  for (uint32_t i = 0; i < frames.used.size(); ++i) {
+    if (!frames.used[i]) continue;
+    const btMatrix3x3 deformation = frames.moments[i] * frames.restInverse[i];
+    frames.deformations[i] = frames.hasFrame[i] && deformation.determinant() > 0
+                                 ? deformation
+                                 : boneRotation(settings, boneTransforms, i, blended);
+  }
   const auto& rest = settings.restSurface.vertices;
   const size_t n = static_cast<size_t>(settings.skinNeighbours);
-  // The pre-transform is affine per particle: P(v) − P(p) = P's rotation part applied to v − p,
-  // so each binding costs one blended rotation instead of two blended transforms.
-#if FIBREMSS_SSE_PRETRANSFORM
-  const size_t count = boneTransforms.size();
-  if (blended && !settings.blendWeight.empty() && count <= kPackedBones) {
-    PackedTransform packed[kPackedBones];
-    for (size_t b = 0; b < count; ++b) packed[b] = packTransform(boneTransforms[b]);
-    const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
-    for (size_t v = 0; v < rest.size(); ++v) {
-      const __m128 vertex = _mm_load_ps(rest[v].m_floats);
-      __m128 moved = _mm_setzero_ps();
-      for (size_t j = v * n; j < (v + 1) * n; ++j) {
-        const uint32_t particle = settings.skinParticles[j];
-        const __m128 offset =
-            turnPacked(settings, packed, count, particle,
-                       _mm_sub_ps(vertex, _mm_load_ps(settings.restPositions[particle].m_floats)));
-        moved = _mm_add_ps(moved,
-                           _mm_mul_ps(_mm_add_ps(_mm_load_ps(positions[particle].m_floats), offset),
-                                      _mm_set1_ps(settings.skinWeights[j])));
-      }
-      _mm_store_ps(surface[v].m_floats, _mm_and_ps(moved, xyz));
-    }
-    return;
-  }
-#endif
   for (size_t v = 0; v < rest.size(); ++v) {
     btVector3 moved(0, 0, 0);
     for (size_t j = v * n; j < (v + 1) * n; ++j) {
       const uint32_t particle = settings.skinParticles[j];
-      const btVector3 offset = pretransformDirection(
-          settings, boneTransforms, particle, rest[v] - settings.restPositions[particle], blended);
+      const btVector3 offset =
+          frames.deformations[particle] * (rest[v] - settings.restPositions[particle]);
       moved += (positions[particle] + offset) * settings.skinWeights[j];
     }
     surface[v] = moved;

@@ -1,20 +1,40 @@
 #pragma once
 // The deformed surface (method.md §7), internal.
+#include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btTransform.h>
 
+#include <cstdint>
 #include <span>
+#include <vector>
 
 #include "fibremss/MuscleSettings.h"
 
 namespace fibremss {
 
-/// Each rest vertex is first moved by the weighted average of its skin particles' rigid
-/// pre-transforms (blended between two bones when `blended`, else their nearest bones as in the
-/// thesis), then by the weighted average displacement of those particles from their own
-/// pre-transformed rest positions. `boneTransforms[b]` is the current transform of the settings'
-/// bone index b; particles without a bone use the identity.
+/// Local frames of the particles that move the surface: the deformation of each one's spring
+/// neighbourhood, so that the surface turns and stretches with the material, not with a blend of
+/// bone rotations (which averages a 180° twist to nothing and keeps the layer between the
+/// particles and the surface rigid under stretch). Sized by prepareSkinFrames.
+struct SkinFrames {
+  std::vector<uint8_t> used;             ///< per particle: 1 when a surface vertex binds it
+  std::vector<btMatrix3x3> restInverse;  ///< per used particle: (Σ dX·dXᵀ)⁻¹ at rest [1/m²]
+  std::vector<uint8_t> hasFrame;         ///< per particle: its neighbours span space at rest
+  std::vector<btMatrix3x3> moments;      ///< scratch per particle: Σ dx·dXᵀ [m²]
+  std::vector<btMatrix3x3> deformations;  ///< scratch per particle: its local F [1]
+};
+
+/// Sizes `frames` for `settings` and fills used, restInverse and hasFrame (over the particle's
+/// springs: dX = X_b − X_a at rest).
+void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames);
+
+/// Each rest vertex v bound to particles p with weights w becomes Σ w·(x_p + F_p·(v − p)), F_p
+/// the least-squares deformation gradient of p's spring neighbourhood, (Σ dx·dXᵀ)(Σ dX·dXᵀ)⁻¹. A
+/// particle whose neighbours do not span space, or whose F is inverted, turns by its rigid
+/// pre-transform's rotation instead (blended between two bones when `blended`, else its nearest
+/// bone's). `boneTransforms[b]` is the current transform of the settings' bone index b;
+/// particles without a bone use the identity.
 void deformSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
-                   std::span<const btTransform> boneTransforms, bool blended,
+                   std::span<const btTransform> boneTransforms, bool blended, SkinFrames& frames,
                    std::span<btVector3> surface);
 
 }  // namespace fibremss

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "ParticleSimd.h"
+#include "VolumeForces.h"
 
 namespace fibremss {
 namespace {
@@ -217,6 +218,7 @@ btScalar stableTimeStep(const MuscleSettings& settings, Integrator kind) {
     if (!settings.isFixed(spring.a)) stiffness[spring.a] += spring.stiffness;
     if (!settings.isFixed(spring.b)) stiffness[spring.b] += spring.stiffness;
   }
+  addTetrahedronStiffness(settings, stiffness);
   const btScalar stiffest =
       stiffness.empty() ? 0 : *std::max_element(stiffness.begin(), stiffness.end());
   if (stiffest <= 0 || settings.particleMass <= 0) return kInfinity;

@@ -1,26 +1,26 @@
 #pragma once
-// The volume-preservation term of a muscle (issue 18), internal: a pressure on the skinned
-// surface against the deviation of the volume it encloses from the rest volume.
+// The volume-preservation terms of a muscle (issue 18), internal: one per tetrahedron of the
+// particles (MuscleSettings::tetParticles), against the change of its volume.
+#include <LinearMath/btVector3.h>
+
 #include <span>
 
-#include "MuscleState.h"
+#include "fibremss/MuscleSettings.h"
 
 namespace fibremss {
 
-/// True when the muscle has a volume term (settings.volumeModulus > 0 and a skinned surface).
-bool hasVolumeTerm(const MuscleSettings& settings);
+/// Adds the volume terms' forces at `positions` into `forces`: each tetrahedron of
+/// settings.tetParticles with volume V and rest volume V0 has the energy ½·K·(V − V0)²/V0
+/// (K = settings.volumeModulus), which gives its particle i the force K·(1 − V/V0)·∂V/∂x_i, with
+/// 1 − V/V0 clamped to [−1, 1] (a torn or inverted tetrahedron acts as one at 2·V0 or 0). One
+/// pass in the tetrahedra's order (AVX2: eight at a time, summed in the same order): the same
+/// sums for any thread count.
+void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces);
 
-/// The surface offsets of the skin (Skin.h) at the muscle's bone transforms: each vertex's
-/// Σ w·R(v − p) over its skin particles, so that the skinned surface is offsets + Σ w·x.
-/// Called when the bones moved; every other iteration reuses them.
-void updateVolumeOffsets(MuscleState& muscle, bool blended);
-
-/// Adds the volume term's forces at `positions` into `forces`: with the skinned surface s(x) =
-/// offsets + Σ w·x, its enclosed volume V and the rest volume V0, the energy
-/// ½·K·(V − V0)²/|V0| (K = settings.volumeModulus) gives each surface vertex the force
-/// K·(V0 − V)/|V0| · ∂V/∂s (a third of its area-weighted normal), spread over its skin particles
-/// by their weights. Returns V [m³]. Uses muscle.volumeSurface and volumeGradient as scratch.
-double addVolumeForces(MuscleState& muscle, std::span<const btVector3> positions,
-                       std::span<btVector3> forces);
+/// Adds to each free particle's row of `stiffness` half the Gershgorin bound of the volume
+/// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j| per tetrahedron [N/m]: stableTimeStep
+/// doubles spring rows the same way.
+void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness);
 
 }  // namespace fibremss
