@@ -1,9 +1,9 @@
 #include "VolumeForces.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "ParticleSimd.h"
-#include "SpringForces.h"
 
 namespace fibremss {
 namespace {
@@ -44,92 +44,6 @@ inline void addPacked(btVector3& force, __m128 f) {
   _mm_store_ps(force.m_floats, _mm_add_ps(_mm_load_ps(force.m_floats), f));
 }
 
-#if FIBREMSS_AVX2_PARTICLES
-/// Eight vectors in structure-of-arrays form, lane k holding vector k.
-struct Vectors8 {
-  __m256 x, y, z;
-};
-
-/// Corner `corner` of the eight tetrahedra from `t` (4 particles each), transposed.
-FIBREMSS_AVX2_PASS inline Vectors8 gatherCorner(std::span<const btVector3> positions,
-                                                const uint32_t* t, size_t corner) {
-  __m256 r[4];
-  for (size_t j = 0; j < 4; ++j)
-    r[j] = loadPair(positions[t[4 * j + corner]], positions[t[4 * (j + 4) + corner]]);
-  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpacklo_ps(r[2], r[3]);
-  const __m256 t2 = _mm256_unpackhi_ps(r[0], r[1]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
-  return {_mm256_shuffle_ps(t0, t1, 0x44), _mm256_shuffle_ps(t0, t1, 0xee),
-          _mm256_shuffle_ps(t2, t3, 0x44)};
-}
-
-FIBREMSS_AVX2_PASS inline Vectors8 minus(const Vectors8& a, const Vectors8& b) {
-  return {_mm256_sub_ps(a.x, b.x), _mm256_sub_ps(a.y, b.y), _mm256_sub_ps(a.z, b.z)};
-}
-
-/// a × b per lane with btVector3::cross's rounding.
-FIBREMSS_AVX2_PASS inline Vectors8 cross8(const Vectors8& a, const Vectors8& b) {
-  return {_mm256_sub_ps(_mm256_mul_ps(a.y, b.z), _mm256_mul_ps(a.z, b.y)),
-          _mm256_sub_ps(_mm256_mul_ps(a.z, b.x), _mm256_mul_ps(a.x, b.z)),
-          _mm256_sub_ps(_mm256_mul_ps(a.x, b.y), _mm256_mul_ps(a.y, b.x))};
-}
-
-FIBREMSS_AVX2_PASS inline Vectors8 scaled(const Vectors8& a, __m256 s) {
-  return {_mm256_mul_ps(a.x, s), _mm256_mul_ps(a.y, s), _mm256_mul_ps(a.z, s)};
-}
-
-/// The eight vectors back as one register each (w lanes 0).
-FIBREMSS_AVX2_PASS inline void scatterForm(const Vectors8& v, __m128 out[8]) {
-  const __m256 zero = _mm256_setzero_ps();
-  const __m256 xyLow = _mm256_unpacklo_ps(v.x, v.y), xyHigh = _mm256_unpackhi_ps(v.x, v.y);
-  const __m256 zLow = _mm256_unpacklo_ps(v.z, zero), zHigh = _mm256_unpackhi_ps(v.z, zero);
-  const __m256 lanes[4] = {
-      _mm256_shuffle_ps(xyLow, zLow, 0x44), _mm256_shuffle_ps(xyLow, zLow, 0xee),
-      _mm256_shuffle_ps(xyHigh, zHigh, 0x44), _mm256_shuffle_ps(xyHigh, zHigh, 0xee)};
-  for (size_t j = 0; j < 4; ++j) {
-    out[j] = _mm256_castps256_ps128(lanes[j]);
-    out[j + 4] = _mm256_extractf128_ps(lanes[j], 1);
-  }
-}
-
-/// The forces of the first count & ~7 tetrahedra, eight at a time (the scalar formula per lane,
-/// the sums into `forces` in tetrahedron order, then corner order). Returns how many it did.
-FIBREMSS_AVX2_PASS size_t tetrahedronForcesAvx2(const MuscleSettings& settings,
-                                                std::span<const btVector3> positions,
-                                                std::span<btVector3> forces, btScalar modulus) {
-  const size_t done = settings.tetInverseVolume.size() & ~size_t{7};
-  const __m256 one = _mm256_set1_ps(1), zero = _mm256_setzero_ps(), k = _mm256_set1_ps(modulus);
-  for (size_t first = 0; first < done; first += 8) {
-    const uint32_t* t = settings.tetParticles.data() + 4 * first;
-    const Vectors8 origin = gatherCorner(positions, t, 0);
-    const Vectors8 a = minus(gatherCorner(positions, t, 1), origin),
-                   b = minus(gatherCorner(positions, t, 2), origin),
-                   c = minus(gatherCorner(positions, t, 3), origin);
-    const Vectors8 ga = cross8(b, c), gb = cross8(c, a), gc = cross8(a, b);
-    const __m256 dot =
-        _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a.x, ga.x), _mm256_mul_ps(a.y, ga.y)),
-                      _mm256_mul_ps(a.z, ga.z));
-    const __m256 strain =
-        _mm256_sub_ps(one, _mm256_mul_ps(dot, _mm256_loadu_ps(&settings.tetInverseVolume[first])));
-    const __m256 kept = _mm256_and_ps(_mm256_cmp_ps(strain, _mm256_sub_ps(zero, one), _CMP_GE_OQ),
-                                      _mm256_cmp_ps(strain, one, _CMP_LE_OQ));
-    const __m256 scale = _mm256_mul_ps(k, _mm256_and_ps(kept, strain));
-    const Vectors8 fa = scaled(ga, scale), fb = scaled(gb, scale), fc = scaled(gc, scale);
-    const Vectors8 f0 = {
-        _mm256_sub_ps(_mm256_setzero_ps(), _mm256_add_ps(_mm256_add_ps(fa.x, fb.x), fc.x)),
-        _mm256_sub_ps(_mm256_setzero_ps(), _mm256_add_ps(_mm256_add_ps(fa.y, fb.y), fc.y)),
-        _mm256_sub_ps(_mm256_setzero_ps(), _mm256_add_ps(_mm256_add_ps(fa.z, fb.z), fc.z))};
-    __m128 corner[4][8];
-    scatterForm(f0, corner[0]);
-    scatterForm(fa, corner[1]);
-    scatterForm(fb, corner[2]);
-    scatterForm(fc, corner[3]);
-    for (size_t j = 0; j < 8; ++j)
-      for (size_t v = 0; v < 4; ++v) addPacked(forces[t[4 * j + v]], corner[v][j]);
-  }
-  return done;
-}
-#endif
-
 }  // namespace
 #endif
 
@@ -139,19 +53,11 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
   const uint32_t* t = settings.tetParticles.data();
   const size_t count = settings.tetInverseVolume.size();
 #if FIBREMSS_SSE_PARTICLES
-  size_t k = 0;
-#if FIBREMSS_AVX2_PARTICLES
-  if (fastestSpringKernel() == SpringKernel::avx2) {
-    k = tetrahedronForcesAvx2(settings, positions, forces, modulus);
-    t += 4 * k;
-  }
-#endif
   // Tetrahedra are sorted by their first particle: its force is summed in a register along the
   // run of tetrahedra that share it, then added once.
-  const size_t rest = k;
-  uint32_t first = k < count ? t[0] : 0;
+  uint32_t first = count ? t[0] : 0;
   __m128 firstForce = _mm_setzero_ps();
-  for (; k < count; ++k, t += 4) {
+  for (size_t k = 0; k < count; ++k, t += 4) {
     if (t[0] != first) {
       addPacked(forces[first], firstForce);
       first = t[0];
@@ -170,7 +76,7 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
     addPacked(forces[t[2]], fb);
     addPacked(forces[t[3]], fc);
   }
-  if (rest < count) addPacked(forces[first], firstForce);
+  if (count) addPacked(forces[first], firstForce);
 #else
   for (size_t k = 0; k < count; ++k, t += 4) {
     const btVector3 origin = positions[t[0]];

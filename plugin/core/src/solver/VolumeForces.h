@@ -11,10 +11,9 @@ namespace fibremss {
 
 /// Adds the volume terms' forces at `positions` into `forces`: each tetrahedron of
 /// settings.tetParticles with volume V and rest volume V0 has the energy ½·K·(V − V0)²/V0
-/// (K = settings.volumeModulus), which gives its particle i the force K·(1 − V/V0)·∂V/∂x_i, with
-/// 1 − V/V0 clamped to [−1, 1] (a torn or inverted tetrahedron acts as one at 2·V0 or 0). One
-/// pass in the tetrahedra's order (AVX2: eight at a time, summed in the same order): the same
-/// sums for any thread count.
+/// (K = settings.volumeModulus), which gives its particle i the force K·(1 − V/V0)·∂V/∂x_i, taken
+/// as 0 when V is outside [0, 2·V0] (crushed or torn). One pass in the tetrahedra's order: the
+/// same sums for any thread count.
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces);
 
