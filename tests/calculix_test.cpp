@@ -453,6 +453,9 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   d = definition;
   d.attachmentScale = 1.5;
   changed(scene, prepared, d);
+  d = definition;
+  d.contactPenalty = 0;
+  changed(scene, prepared, d);
   LoadedScene moved = scene;
   moved.muscles[0].parameters.attachmentDistance *= 2;
   changed(moved, prepared, definition);
