@@ -270,11 +270,15 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                   const FemDefinition& definition, const MethodRunOptions& options) {
   const auto start = Clock::now();
   FemScene sim(prepared, posesAt(scene, 0), definition);
-  char integrator[160];
+  char integrator[320];
   std::snprintf(integrator, sizeof integrator,
                 "Neo-Hookean FEM, btDeformableBodySolver (explicit elasticity, implicit damping, "
-                "%d substeps per pose, mass scaling +%.0f %%)",
-                definition.substepsPerPose, 100 * sim.addedMassShare());
+                "%d substeps per pose, then settling until no node is faster than %.3g mm/s (at "
+                "most %d substeps), mass scaling +%.0f %%, at least %d pins per bone (fewest: "
+                "%zu))",
+                definition.substepsPerPose, 1e3 * double(definition.settleSpeed),
+                definition.settleSubsteps, 100 * sim.addedMassShare(), definition.minPinsPerBone,
+                sim.fewestPinsPerBone());
   RunMetrics metrics = namedRun(scene, "fem", integrator);
   metrics.threads = 1;
   metrics.particles = sim.nodeCount();
@@ -298,12 +302,19 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
     return (options.cancel && options.cancel->load()) ||
            (options.budgetSeconds > 0 && secondsSince(start) > options.budgetSeconds);
   };
-  simulated.step = [&](std::span<const btTransform> t) { return sim.stepPose(t, outOfTime); };
+  int unsettled = 0;  // poses that did not settle within settleSubsteps
+  simulated.step = [&](std::span<const btTransform> t) {
+    const bool done = sim.stepPose(t, outOfTime);
+    unsettled += done && sim.lastSettleSubsteps() > definition.settleSubsteps;
+    return done;
+  };
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
   simulated.points = [&](size_t m) { return sim.nodePositions(m); };
   simulated.springDeviation = [] { return RunMetrics::kNone; };  // not a spring model
   simulated.iterationsPerStep = simulated.timeStepsPerStep = definition.substepsPerPose;
   runPoses(scene, prepared, simulated, options, start, metrics);
+  if (unsettled > 0)
+    metrics.integrator += "; " + std::to_string(unsettled) + " pose(s) did not settle";
   return metrics;
 }
 
