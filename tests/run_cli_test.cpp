@@ -147,6 +147,32 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   EXPECT_FALSE(fs::exists(out.path() / "frames/bone0_upper_00001.vtp"));
   // The complete scene is kept for reproducing the run.
   EXPECT_NO_THROW(nlohmann::json::parse(readFile(out.path() / "scene.json")));
+
+  // series.csv: one row per step and muscle, the same values as summary.json's "series", the
+  // times those of the frames.
+  std::istringstream csv(readFile(out.path() / "series.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  EXPECT_EQ(line,
+            "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
+            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts");
+  const nlohmann::json& series = summary.at("series");
+  ASSERT_EQ(series.size(), 2 * summary.at("muscles").size());
+  for (size_t row = 0; row < series.size(); ++row) {
+    ASSERT_TRUE(std::getline(csv, line)) << row;
+    std::vector<std::string> fields;
+    std::stringstream split(line);
+    for (std::string field; std::getline(split, field, ',');) fields.push_back(field);
+    ASSERT_EQ(fields.size(), 11u) << line;
+    const nlohmann::json& json = series[row];
+    EXPECT_EQ(std::stoi(fields[0]), json.at("step").get<int>());
+    EXPECT_NEAR(std::stod(fields[3]), times[size_t(json.at("step").get<int>())], 1e-9);
+    EXPECT_EQ(fields[4], json.at("muscle").get<std::string>());
+    EXPECT_NEAR(std::stod(fields[5]), json.at("volume_change_pct").get<double>(), 1e-4);
+    EXPECT_NEAR(std::stod(fields[7]), json.at("max_fibre_stretch").get<double>(), 1e-5);
+    EXPECT_GE(std::stod(fields[7]), 1.0);  // the largest of all segments' l / L0
+  }
+  EXPECT_FALSE(std::getline(csv, line));
 }
 
 TEST(RunCli, PrintsJsonWithoutWritingAnything) {

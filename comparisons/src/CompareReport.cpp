@@ -14,6 +14,7 @@
 #include <sstream>
 #include <tuple>
 
+#include "FrameWriter.h"
 #include "ReportScaling.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
@@ -781,6 +782,16 @@ std::vector<std::string> writeComparison(const nlohmann::json& summary, const st
   std::vector<std::string> written;
   writeFileAtomically((dir / "summary.json").string(), summary.dump(2) + "\n");
   written.push_back("summary.json");
+  // Per FibreMSS run, its per-step series as `fibremss run` writes it.
+  for (size_t r = 0; r < summary["runs"].size(); ++r) {
+    const nlohmann::json& run = summary["runs"][r];
+    const std::vector<SeriesRow> series = seriesFromJson(run.value("series", nlohmann::json()));
+    if (series.empty()) continue;
+    const std::string name =
+        "series_" + std::to_string(r) + "_" + fileSafe(run.value("method", "")) + ".csv";
+    writeFileAtomically((dir / name).string(), seriesCsv(series));
+    written.push_back(name);
+  }
 
   std::vector<std::string> plots;
   const nlohmann::json& runs = summary["runs"];
