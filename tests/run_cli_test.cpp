@@ -22,6 +22,7 @@
 
 #include "fibremss/FibreRun.h"
 #include "fibremss/Progress.h"
+#include "solver/SpringForces.h"
 #include "support/Process.h"
 
 namespace fibremss {
@@ -173,6 +174,49 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     EXPECT_GE(std::stod(fields[7]), 1.0);  // the largest of all segments' l / L0
   }
   EXPECT_FALSE(std::getline(csv, line));
+}
+
+TEST(Cli, VersionNamesBulletItsPrecisionTheKernelAndTheCompiler) {
+  const auto result = runProcess(cli() + " --version");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("fibremss " FIBREMSS_VERSION "\n"), std::string::npos)
+      << result.output;
+  const int bullet = btGetVersion();
+  EXPECT_NE(result.output.find("Bullet " + std::to_string(bullet / 100) + "." +
+                               std::to_string(bullet % 100) + ", btScalar " +
+                               (sizeof(btScalar) == 8 ? "double" : "float")),
+            std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find(std::string("spring kernel ") +
+                               springKernelName(fastestSpringKernel()) + " "),
+            std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find("compiler "), std::string::npos);
+  // The kernel is the one chosen at runtime: the environment can choose scalar.
+  const auto scalar = runProcess("FIBREMSS_SPRING_KERNEL=scalar " + cli() + " --version");
+  EXPECT_NE(scalar.output.find("spring kernel scalar "), std::string::npos) << scalar.output;
+}
+
+TEST(Cli, EveryWarningIsPrefixedAndOnStderr) {
+  // fusiform warns that fibres end on a bone without a fixed last particle: check and run say it
+  // the same way, on stderr only.
+  TemporaryDirectory out("fibremss_warnings");
+  for (const std::string command : {"check fusiform", "run fusiform --steps 1"}) {
+    SCOPED_TRACE(command);
+    const fs::path log = out.path() / "stderr.txt";
+    const auto result = runProcess(cli() + " " + command + " 2>" + log.string());
+    ASSERT_EQ(result.exitCode, 0) << result.output;
+    EXPECT_EQ(result.output.find("warning"), std::string::npos) << result.output;
+    const std::string errors = readFile(log);
+    EXPECT_NE(errors.find("fibremss: warning: muscle 'fusiform'"), std::string::npos) << errors;
+    std::istringstream lines(errors);
+    for (std::string line; std::getline(lines, line);) {
+      if (line.find("warning:") == std::string::npos && line.find("note:") == std::string::npos)
+        continue;
+      EXPECT_TRUE(line.starts_with("fibremss: warning: ") || line.starts_with("fibremss: note: "))
+          << line;
+    }
+  }
 }
 
 TEST(RunCli, PrintsJsonWithoutWritingAnything) {

@@ -19,6 +19,7 @@
 #include "Validators.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/FibreRun.h"
+#include "fibremss/Messages.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
@@ -174,18 +175,15 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
 
 void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
-  for (const std::string& warning : scene.warnings)
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
-  for (const std::string& note : scene.notes) std::fprintf(stderr, "note: %s\n", note.c_str());
+  printWarnings(scene.warnings);
+  printNotes(scene.notes);
   // A run that cannot write fails before preparing, and writes nothing before it prepared.
   if (!args.out.empty()) requireWritableDirectory(args.out);
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
-  for (const std::string& warning : prepared.report.warnings)
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
-  for (const std::string& warning : attachmentWarnings(scene, prepared))
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  printWarnings(prepared.report.warnings);
+  printWarnings(attachmentWarnings(scene, prepared));
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
   std::optional<OutputDirectory> outDir;  // locked against a second run into it
   if (!args.out.empty()) {

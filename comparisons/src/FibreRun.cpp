@@ -14,6 +14,7 @@
 #include "fibremss/Analytic.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Messages.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 
@@ -363,10 +364,8 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
                     boneTransforms, surfaceDepthsMm);
   }
   if (candidateOverflows > 0)
-    std::fprintf(stderr,
-                 "note: collision candidate lists overflowed %zu time(s): those pairs were "
-                 "traversed directly (same contacts, slower)\n",
-                 candidateOverflows);
+    printNote("collision candidate lists overflowed " + std::to_string(candidateOverflows) +
+              " time(s): those pairs were traversed directly (same contacts, slower)");
 
   // The headline: the steps measured before any failure, the worst muscle's figures.
   if (measured) {
