@@ -159,6 +159,10 @@ void FramePlayer::load() {
   for (size_t m = 0; m < frame.surfaces.size(); ++m)
     next.frame.muscles.push_back(surface(frame.surfaces[m], m));
   for (const std::string& file : frame.bones) next.frame.bones.push_back(bone(file));
+  // A still bone keeps its file from frame to frame; a moving one's earlier files go.
+  std::erase_if(bones_, [&](const auto& entry) {
+    return std::find(frame.bones.begin(), frame.bones.end(), entry.first) == frame.bones.end();
+  });
   if (debug_.muscleFlags & (kDrawParticles | kDrawFibres))
     for (const std::string& file : frame.particles)
       drawParticles(readVtp((fs::path(dir_) / file).string(), scale_), next.debug);

@@ -2,7 +2,7 @@
 // Plays the frames a run wrote (DIR/run.pvd and the .vtp files it lists, read with the io
 // layer's VTK XML reader): one frame per timestep of the collection, muscle surfaces with their
 // point-data arrays, bones, and on request the particles and fibres; play/pause, step, reset
-// and a scrub slider over the frames. Frames are read when shown (bones once per file).
+// and a scrub slider over the frames. Frames are read when shown (a still bone once).
 #include <chrono>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -57,7 +57,7 @@ class FramePlayer : public Source {
   Snapshot snapshot_;
   double readMs_ = 0;                              ///< time it took to read the shown frame [ms]
   std::chrono::steady_clock::time_point shownAt_;  ///< when the shown frame was loaded
-  std::map<std::string, ViewMesh> bones_;          ///< bone files read so far
+  std::map<std::string, ViewMesh> bones_;          ///< the shown frame's bone files, read
 };
 
 }  // namespace fibremss::viewer
