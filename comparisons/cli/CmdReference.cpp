@@ -11,6 +11,7 @@
 #include "ReferenceArgs.h"
 #include "SceneArgs.h"
 #include "fibremss/Messages.h"
+#include "fibremss/Output.h"
 
 namespace fibremss::cli {
 namespace {
@@ -54,9 +55,10 @@ void reference(ReferenceArgs& args) {
   };
   InterruptGuard interrupt;
   args.options.cancel = &interruptRequested;
+  const std::string out = args.out.empty() ? "reference-" + scene.name : args.out;
+  const OutputDirectory locked(out);  // a second writer into it is refused
   const Reference result = computeReference(scene, prepared, args.options);
   progress.finish();
-  const std::string out = args.out.empty() ? "reference-" + scene.name : args.out;
   writeOut(result, out);
   std::printf("%s\n", result.description.c_str());
   std::printf("poses solved: %d/%d%s\n", result.solution.solvedPoses(),
