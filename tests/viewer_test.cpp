@@ -268,6 +268,9 @@ TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   const std::string cli = std::string(FIBREMSS_CLI) + " view ";
   EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --colour-by pressure --screenshot /tmp/x.png").exitCode, 2);
+  // Penetration is in a run's frames, not in a scene stepped live.
+  EXPECT_EQ(runProcess(cli + "fusiform --colour-by penetration --screenshot /tmp/x.png").exitCode,
+            2);
   EXPECT_EQ(runProcess(cli + "fusiform --draw sparks --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --size 12 --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --camera 1 --screenshot /tmp/x.png").exitCode, 2);

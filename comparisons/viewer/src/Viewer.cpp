@@ -250,18 +250,25 @@ void renderFrame(Window& window, Session& session, Source& source, ViewerResult&
 }  // namespace
 
 const std::vector<std::string>& colourArrays() {
+  // Those a scene stepped live has first.
   static const std::vector<std::string> arrays{"fibre_stretch", "displacement", "muscle_id",
                                                "spring_strain", "penetration",  "fixed"};
   return arrays;
 }
 
 ViewerResult runViewer(const ViewerOptions& options) {
-  if (std::find(colourArrays().begin(), colourArrays().end(), options.colourBy) ==
-      colourArrays().end())
+  const auto& arrays = colourArrays();
+  // A scene stepped live has the first three; a run's frames all of them.
+  const auto end = options.runDir.empty() ? arrays.begin() + 3 : arrays.end();
+  if (std::find(arrays.begin(), end, options.colourBy) == end)
     throw InputError("--colour-by", "",
-                     "expected fibre_stretch, displacement, muscle_id, spring_strain, penetration "
-                     "or fixed, got '" +
-                         options.colourBy + "'");
+                     options.runDir.empty()
+                         ? "expected fibre_stretch, displacement or muscle_id for a scene stepped "
+                           "live (spring_strain, penetration and fixed: a run's frames), got '" +
+                               options.colourBy + "'"
+                         : "expected fibre_stretch, displacement, muscle_id, spring_strain, "
+                           "penetration or fixed, got '" +
+                               options.colourBy + "'");
   Session session;
   session.debug.muscleFlags = options.muscleDebugFlags;
   std::string title;
