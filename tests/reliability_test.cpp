@@ -468,6 +468,9 @@ TEST(Reliability2, MergingMalformedSummariesIsAnInputError) {
       {R"({"runs": [{"method": "fibremss", "muscles": [{"fixed_particles": {"femur": "x"}}]}]})",
        "runs[0].muscles[0].fixed_particles.femur"},
       {R"({"runs": [{"method": "fibremss", "muscles": {}}]})", "runs[0].muscles"},
+      {R"({"runs": [{"method": "fibremss", "series": [{"step": 0, "time_s": "late"}]}]})",
+       "runs[0].series[0].time_s"},
+      {R"({"runs": [{"method": "fibremss", "series": 5}]})", "runs[0].series"},
       {"not json", "not valid JSON"}};
   for (size_t i = 0; i < bad.size(); ++i) {
     const fs::path file = dir.path() / ("summary" + std::to_string(i) + ".json");

@@ -10,6 +10,7 @@
 #include "ProgressLog.h"
 #include "ReferenceArgs.h"
 #include "SceneArgs.h"
+#include "fibremss/Messages.h"
 #include "fibremss/Output.h"
 
 namespace fibremss::cli {
@@ -38,9 +39,13 @@ void writeOut(const Reference& reference, const std::string& out) {
 
 void reference(ReferenceArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
+  printWarnings(scene.warnings);
+  printNotes(scene.notes);
   std::fprintf(stderr, "preparing %s\n", scene.name.c_str());
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  printWarnings(prepared.report.warnings);
+  printWarnings(attachmentWarnings(scene, prepared));
   ProgressLog progress;
   args.options.log = [&](const std::string& line) { progress.line(line); };
   args.options.progress = [&](const ReferenceProgress& p) {

@@ -14,6 +14,7 @@
 #include <sstream>
 #include <tuple>
 
+#include "FrameWriter.h"
 #include "ReportScaling.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
@@ -609,6 +610,15 @@ void checkMuscles(const nlohmann::json& muscles, const std::string& source,
   }
 }
 
+/// Throws InputError naming the field of a run's `series` rows (MuscleMetrics.h) whose type
+/// seriesJson would not write.
+void checkSeries(const nlohmann::json& series, const std::string& source, const std::string& path) {
+  if (!series.is_array()) throw InputError(source, path, "expected an array of series rows");
+  const nlohmann::json expected = seriesJson({SeriesRow{}}).at(0);
+  for (size_t r = 0; r < series.size(); ++r)
+    checkRunFields(series[r], expected, source, path + "[" + std::to_string(r) + "]");
+}
+
 /// Throws InputError naming `path.key` for a field of a run whose type toJson would not write.
 void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
                     const std::string& source, const std::string& path) {
@@ -618,6 +628,8 @@ void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
     if (found == run.end()) continue;  // missing keys keep their defaults
     if (it.key() == "muscles")
       checkMuscles(*found, source, path + ".muscles");
+    else if (it.key() == "series")
+      checkSeries(*found, source, path + ".series");
     else if (it->is_object())
       checkRunFields(*found, *it, source, path + "." + it.key());
     else if (!sameKind(*found, *it))
@@ -804,6 +816,16 @@ std::vector<std::string> writeComparison(const nlohmann::json& summary, const st
   std::vector<std::string> written;
   writeFileAtomically((dir / "summary.json").string(), summary.dump(2) + "\n");
   written.push_back("summary.json");
+  // Per FibreMSS run, its per-step series as `fibremss run` writes it.
+  for (size_t r = 0; r < summary["runs"].size(); ++r) {
+    const nlohmann::json& run = summary["runs"][r];
+    const std::vector<SeriesRow> series = seriesFromJson(run.value("series", nlohmann::json()));
+    if (series.empty()) continue;
+    const std::string name =
+        "series_" + std::to_string(r) + "_" + fileSafe(run.value("method", "")) + ".csv";
+    writeFileAtomically((dir / name).string(), seriesCsv(series));
+    written.push_back(name);
+  }
 
   std::vector<std::string> plots;
   const nlohmann::json& runs = summary["runs"];

@@ -14,6 +14,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Messages.h"
 
 namespace fibremss {
 namespace {
@@ -633,9 +634,13 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     if (options.log) options.log(line);
   };
   const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
+  for (const std::string& warning : scene.warnings) log(warningLine(warning));
+  for (const std::string& note : scene.notes) log(noteLine(note));
   log("preparing " + scene.name);
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  for (const std::string& warning : prepared.report.warnings) log(warningLine(warning));
+  for (const std::string& warning : attachmentWarnings(scene, prepared)) log(warningLine(warning));
 
   Comparison comparison;
   comparison.scene = scene.name;
