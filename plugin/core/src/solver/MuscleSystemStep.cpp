@@ -191,7 +191,7 @@ double MuscleSystem::Impl::volumeShare() const {
 
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
 btScalar MuscleSystem::Impl::timeStep(const StepSize& size) const {
-  if (!parameters.adaptiveTimeStep) return size.timeStep;
+  if (size.exact || !parameters.adaptiveTimeStep) return size.timeStep;
   btScalar dt = size.timeStep;
   for (uint32_t slot : active) dt = std::min(dt, results[slot].safeTimeStep);
   return std::max(dt, size.minTimeStep);
@@ -306,7 +306,9 @@ void MuscleSystem::Impl::step(const StepSize& size) {
                return !(bones.states[slot]->last == bones.states[slot]->target);
              })) {
     motionIterations =
-        std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
+        size.exact
+            ? cap
+            : std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
   }  // else no bone moves in this step: the stop rules need not wait for an arrival
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
@@ -318,6 +320,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       placeAtBones(state);
       rebuildTree(state);
     });
+  beginBodyContacts();
 
   const bool adaptive = parameters.adaptiveTimeStep;
   int iteration = 0;
@@ -334,9 +337,10 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       result.forces = springForces(state);
       const Clock::time_point volumeStart = Clock::now();
       addTetrahedronForces(*state.settings, state.positions, state.forces);
-      result.forcesMs = millisecondsSince(forcesStart);
       result.volumeMs =
           state.settings->tetInverseVolume.empty() ? 0 : millisecondsSince(volumeStart);
+      addExternalForces(state, parameters.gravity, state.forces);
+      result.forcesMs = millisecondsSince(forcesStart);
       if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
     });
 
@@ -380,14 +384,17 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     stats.timing.mss += millisecondsSince(start);
 
     collide();
+    collideBodies(dt);
 
     const bool arrived = iteration >= motionIterations;
     bool stop = iteration >= cap;
-    if (parameters.stopRule == StopRule::Converged)
+    // A duration step runs all its iterations.
+    const StopRule rule = size.exact ? StopRule::Iterations : parameters.stopRule;
+    if (rule == StopRule::Converged)
       stop = stop || (arrived && stats.meanDisplacement < parameters.epsilon);
-    else if (parameters.stopRule == StopRule::TimeBudget)
+    else if (rule == StopRule::TimeBudget)
       stop = stop || millisecondsSince(stepStart) >= parameters.budgetMs;
-    else if (parameters.stopRule == StopRule::SpringDeviation)
+    else if (rule == StopRule::SpringDeviation)
       stop = stop || (arrived && stats.springDeviationRatio < parameters.deviationEpsilon);
     if (stop) {
       // A spent budget ends the step where it is: the bones jump the rest of the way.
@@ -399,6 +406,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     }
   }
   stats.iterations = iteration;
+  endBodyContacts();
 
   const Clock::time_point outputStart = Clock::now();
   forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
