@@ -231,6 +231,171 @@ struct Grid {
   }
 };
 
+/// The six face neighbours of a voxel, as index offsets.
+constexpr int kOffsets[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+
+/// Face neighbour d (of 6) of voxel `id` in `out`; false beyond the grid.
+bool neighbourOf(const Grid& grid, size_t id, int d, size_t& out) {
+  const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
+            k = int(id / (size_t(grid.n[0]) * grid.n[1]));
+  const int a = i + kOffsets[d][0], b = j + kOffsets[d][1], c = k + kOffsets[d][2];
+  if (a < 0 || b < 0 || c < 0 || a >= grid.n[0] || b >= grid.n[1] || c >= grid.n[2]) return false;
+  out = grid.index(a, b, c);
+  return true;
+}
+
+/// Voxel grid: every voxel's label, -1 outside, 0 free, 1 origin (u = 0), 2 insertion (u = 1):
+/// an inside voxel within a voxel of the surface takes the area most of its closest triangle's
+/// vertices are in.
+std::vector<int8_t> labelVoxels(const TriangleMesh& surface, const MeshDistance& distance,
+                                const Grid& grid, const std::vector<uint32_t>& originIds,
+                                const std::vector<uint32_t>& insertionIds) {
+  const auto& V = surface.vertices;
+  const btScalar h = grid.h;
+  std::vector<int8_t> label(grid.size(), -1);
+  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
+  for (uint32_t i : originIds) inOrigin[i] = 1;
+  for (uint32_t i : insertionIds) inInsertion[i] = 1;
+  for (int k = 0; k < grid.n[2]; ++k)
+    for (int j = 0; j < grid.n[1]; ++j)
+      for (int i = 0; i < grid.n[0]; ++i) {
+        const size_t id = grid.index(i, j, k);
+        const auto c = distance.closest(grid.centre(i, j, k));
+        if (!c.inside) continue;
+        label[id] = 0;
+        if (c.distance < h && c.triangle != UINT32_MAX) {
+          int o = 0, s = 0;
+          for (uint32_t v : surface.triangles[c.triangle]) o += inOrigin[v], s += inInsertion[v];
+          if (o > s)
+            label[id] = 1;
+          else if (s > o)
+            label[id] = 2;
+        }
+      }
+  return label;
+}
+
+/// Keeps the interior voxels connected to both areas (others would make the system singular).
+void keepConnectedVoxels(const Grid& grid, std::vector<int8_t>& label) {
+  const size_t N = grid.size();
+  std::vector<int> component(N, -1);
+  std::vector<size_t> stack;
+  int components = 0;
+  std::vector<std::array<bool, 2>> touches;
+  for (size_t id = 0; id < N; ++id) {
+    if (label[id] < 0 || component[id] >= 0) continue;
+    touches.push_back({false, false});
+    stack.push_back(id);
+    component[id] = components;
+    while (!stack.empty()) {
+      const size_t v = stack.back();
+      stack.pop_back();
+      if (label[v] == 1) touches.back()[0] = true;
+      if (label[v] == 2) touches.back()[1] = true;
+      for (int d = 0; d < 6; ++d) {
+        size_t w;
+        if (neighbourOf(grid, v, d, w) && label[w] >= 0 && component[w] < 0) {
+          component[w] = components;
+          stack.push_back(w);
+        }
+      }
+    }
+    ++components;
+  }
+  for (size_t id = 0; id < N; ++id)
+    if (label[id] >= 0 && !(touches[component[id]][0] && touches[component[id]][1])) label[id] = -1;
+}
+
+/// Laplace: 7-point stencil, Neumann at the surface, Dirichlet 0 / 1 at the areas; the field
+/// per voxel (0 outside).
+std::vector<double> solveField(const Grid& grid, const std::vector<int8_t>& label,
+                               const std::string& source, std::vector<std::string>& warnings) {
+  const size_t N = grid.size();
+  std::vector<int> unknown(N, -1);
+  int unknowns = 0;
+  for (size_t id = 0; id < N; ++id)
+    if (label[id] == 0) unknown[id] = unknowns++;
+  std::vector<double> u(N, 0);
+  for (size_t id = 0; id < N; ++id) u[id] = label[id] == 2 ? 1.0 : 0.0;
+  if (unknowns == 0) return u;
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(size_t(unknowns) * 7);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(unknowns);
+  for (size_t id = 0; id < N; ++id) {
+    if (unknown[id] < 0) continue;
+    const int row = unknown[id];
+    double degree = 0;
+    for (int d = 0; d < 6; ++d) {
+      size_t w;
+      if (!neighbourOf(grid, id, d, w) || label[w] < 0) continue;
+      degree += 1;
+      if (unknown[w] >= 0)
+        triplets.emplace_back(row, unknown[w], -1.0);
+      else if (label[w] == 2)
+        rhs[row] += 1.0;
+    }
+    triplets.emplace_back(row, row, std::max(degree, 1.0));
+  }
+  Eigen::SparseMatrix<double> A(unknowns, unknowns);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper,
+                           Eigen::IncompleteCholesky<double>>
+      solver;
+  solver.setTolerance(1e-8);
+  solver.setMaxIterations(5000);
+  solver.compute(A);
+  Eigen::VectorXd x = solver.solve(rhs);
+  if (solver.info() != Eigen::Success && solver.error() > 1e-4)
+    warnings.push_back(source + ": the Laplace solve did not converge (error " +
+                       std::to_string(solver.error()) + ")");
+  for (size_t id = 0; id < N; ++id)
+    if (unknown[id] >= 0) u[id] = std::clamp(x[unknown[id]], 0.0, 1.0);
+  return u;
+}
+
+/// Extends the field a few voxels outwards (mean of known neighbours) for interpolation.
+void extendField(const Grid& grid, const std::vector<int8_t>& label, std::vector<double>& u) {
+  const size_t N = grid.size();
+  std::vector<char> known(N, 0);
+  for (size_t id = 0; id < N; ++id) known[id] = label[id] >= 0;
+  for (int pass = 0; pass < 3; ++pass) {
+    std::vector<std::pair<size_t, double>> updates;
+    for (size_t id = 0; id < N; ++id) {
+      if (known[id]) continue;
+      double sum = 0;
+      int count = 0;
+      for (int d = 0; d < 6; ++d) {
+        size_t w;
+        if (neighbourOf(grid, id, d, w) && known[w]) sum += u[w], ++count;
+      }
+      if (count) updates.emplace_back(id, sum / count);
+    }
+    for (auto& [id, value] : updates) u[id] = value, known[id] = 1;
+  }
+}
+
+/// The field's gradient by central differences (one-sided at the grid's edges), 3 per voxel.
+std::vector<double> fieldGradient(const Grid& grid, const std::vector<double>& u) {
+  std::vector<double> gradient(grid.size() * 3, 0);
+  for (int k = 0; k < grid.n[2]; ++k)
+    for (int j = 0; j < grid.n[1]; ++j)
+      for (int i = 0; i < grid.n[0]; ++i) {
+        const int c[3] = {i, j, k};
+        const size_t id = grid.index(i, j, k);
+        for (int a = 0; a < 3; ++a) {
+          int lo3[3] = {i, j, k}, hi3[3] = {i, j, k};
+          lo3[a] = std::max(c[a] - 1, 0);
+          hi3[a] = std::min(c[a] + 1, grid.n[a] - 1);
+          const double span = double(hi3[a] - lo3[a]) * grid.h;
+          gradient[id * 3 + a] =
+              (u[grid.index(hi3[0], hi3[1], hi3[2])] - u[grid.index(lo3[0], lo3[1], lo3[2])]) /
+              span;
+        }
+      }
+  return gradient;
+}
+
 /// Arc-length resampling to `samples` points.
 std::vector<btVector3> resample(const std::vector<btVector3>& line, int samples) {
   std::vector<double> s(line.size(), 0);
@@ -354,149 +519,16 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
   const btScalar insideTolerance = options.insideTolerance > 0 ? options.insideTolerance : h / 4;
 
   const size_t N = grid.size();
-  std::vector<btScalar> sd(N);
-  std::vector<int8_t> label(N, -1);  // -1 outside, 0 free, 1 origin (u=0), 2 insertion (u=1)
-  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
-  for (uint32_t i : originIds) inOrigin[i] = 1;
-  for (uint32_t i : insertionIds) inInsertion[i] = 1;
-  for (int k = 0; k < grid.n[2]; ++k)
-    for (int j = 0; j < grid.n[1]; ++j)
-      for (int i = 0; i < grid.n[0]; ++i) {
-        const size_t id = grid.index(i, j, k);
-        const btVector3 p = grid.centre(i, j, k);
-        const auto c = distance.closest(p);
-        sd[id] = c.inside ? -c.distance : c.distance;
-        if (!c.inside) continue;
-        label[id] = 0;
-        if (c.distance < h && c.triangle != UINT32_MAX) {
-          int o = 0, s = 0;
-          for (uint32_t v : surface.triangles[c.triangle]) o += inOrigin[v], s += inInsertion[v];
-          if (o > s)
-            label[id] = 1;
-          else if (s > o)
-            label[id] = 2;
-        }
-      }
-
-  // Keep the interior voxels connected to both areas (others would make the system singular).
-  const int offsets[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-  auto neighbour = [&](size_t id, int d, size_t& out) {
-    const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
-              k = int(id / (size_t(grid.n[0]) * grid.n[1]));
-    const int a = i + offsets[d][0], b = j + offsets[d][1], c = k + offsets[d][2];
-    if (a < 0 || b < 0 || c < 0 || a >= grid.n[0] || b >= grid.n[1] || c >= grid.n[2]) return false;
-    out = grid.index(a, b, c);
-    return true;
-  };
-  {
-    std::vector<int> component(N, -1);
-    std::vector<size_t> stack;
-    int components = 0;
-    std::vector<std::array<bool, 2>> touches;
-    for (size_t id = 0; id < N; ++id) {
-      if (label[id] < 0 || component[id] >= 0) continue;
-      touches.push_back({false, false});
-      stack.push_back(id);
-      component[id] = components;
-      while (!stack.empty()) {
-        const size_t v = stack.back();
-        stack.pop_back();
-        if (label[v] == 1) touches.back()[0] = true;
-        if (label[v] == 2) touches.back()[1] = true;
-        for (int d = 0; d < 6; ++d) {
-          size_t w;
-          if (neighbour(v, d, w) && label[w] >= 0 && component[w] < 0) {
-            component[w] = components;
-            stack.push_back(w);
-          }
-        }
-      }
-      ++components;
-    }
-    for (size_t id = 0; id < N; ++id)
-      if (label[id] >= 0 && !(touches[component[id]][0] && touches[component[id]][1]))
-        label[id] = -1;
-  }
+  std::vector<int8_t> label = labelVoxels(surface, distance, grid, originIds, insertionIds);
+  keepConnectedVoxels(grid, label);
   for (size_t id = 0; id < N; ++id) q.interiorVoxels += label[id] >= 0;
   if (q.interiorVoxels == 0) return false;
-
-  // Laplace: 7-point stencil, Neumann at the surface, Dirichlet 0 / 1 at the areas.
-  std::vector<int> unknown(N, -1);
-  int unknowns = 0;
-  for (size_t id = 0; id < N; ++id)
-    if (label[id] == 0) unknown[id] = unknowns++;
-  std::vector<double> u(N, 0);
-  for (size_t id = 0; id < N; ++id) u[id] = label[id] == 2 ? 1.0 : 0.0;
-  if (unknowns > 0) {
-    std::vector<Eigen::Triplet<double>> triplets;
-    triplets.reserve(size_t(unknowns) * 7);
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(unknowns);
-    for (size_t id = 0; id < N; ++id) {
-      if (unknown[id] < 0) continue;
-      const int row = unknown[id];
-      double degree = 0;
-      for (int d = 0; d < 6; ++d) {
-        size_t w;
-        if (!neighbour(id, d, w) || label[w] < 0) continue;
-        degree += 1;
-        if (unknown[w] >= 0)
-          triplets.emplace_back(row, unknown[w], -1.0);
-        else if (label[w] == 2)
-          rhs[row] += 1.0;
-      }
-      triplets.emplace_back(row, row, std::max(degree, 1.0));
-    }
-    Eigen::SparseMatrix<double> A(unknowns, unknowns);
-    A.setFromTriplets(triplets.begin(), triplets.end());
-    Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper,
-                             Eigen::IncompleteCholesky<double>>
-        solver;
-    solver.setTolerance(1e-8);
-    solver.setMaxIterations(5000);
-    solver.compute(A);
-    Eigen::VectorXd x = solver.solve(rhs);
-    if (solver.info() != Eigen::Success && solver.error() > 1e-4)
-      result.warnings.push_back(source + ": the Laplace solve did not converge (error " +
-                                std::to_string(solver.error()) + ")");
-    for (size_t id = 0; id < N; ++id)
-      if (unknown[id] >= 0) u[id] = std::clamp(x[unknown[id]], 0.0, 1.0);
-  }
-  // Extend the field a few voxels outwards (mean of known neighbours) for interpolation.
-  {
-    std::vector<char> known(N, 0);
-    for (size_t id = 0; id < N; ++id) known[id] = label[id] >= 0;
-    for (int pass = 0; pass < 3; ++pass) {
-      std::vector<std::pair<size_t, double>> updates;
-      for (size_t id = 0; id < N; ++id) {
-        if (known[id]) continue;
-        double sum = 0;
-        int count = 0;
-        for (int d = 0; d < 6; ++d) {
-          size_t w;
-          if (neighbour(id, d, w) && known[w]) sum += u[w], ++count;
-        }
-        if (count) updates.emplace_back(id, sum / count);
-      }
-      for (auto& [id, value] : updates) u[id] = value, known[id] = 1;
-    }
-  }
-  // Gradient by central differences (one-sided at the grid's edges).
-  std::vector<double> gradient(N * 3, 0);
-  for (int k = 0; k < grid.n[2]; ++k)
-    for (int j = 0; j < grid.n[1]; ++j)
-      for (int i = 0; i < grid.n[0]; ++i) {
-        const int c[3] = {i, j, k};
-        const size_t id = grid.index(i, j, k);
-        for (int a = 0; a < 3; ++a) {
-          int lo3[3] = {i, j, k}, hi3[3] = {i, j, k};
-          lo3[a] = std::max(c[a] - 1, 0);
-          hi3[a] = std::min(c[a] + 1, grid.n[a] - 1);
-          const double span = double(hi3[a] - lo3[a]) * h;
-          gradient[id * 3 + a] =
-              (u[grid.index(hi3[0], hi3[1], hi3[2])] - u[grid.index(lo3[0], lo3[1], lo3[2])]) /
-              span;
-        }
-      }
+  std::vector<double> u = solveField(grid, label, source, result.warnings);
+  extendField(grid, label, u);
+  const std::vector<double> gradient = fieldGradient(grid, u);
+  const auto neighbour = [&](size_t id, int d, size_t& out) {
+    return neighbourOf(grid, id, d, out);
+  };
 
   // Vertex normals (area weighted) for moving seeds inside.
   std::vector<btVector3> normals(V.size(), btVector3(0, 0, 0));
@@ -609,9 +641,9 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
           if (!points) continue;
           const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
                     k = int(id / (size_t(grid.n[0]) * grid.n[1]));
-          const btVector3 edge =
-              btVector3(btScalar(offsets[d][0]), btScalar(offsets[d][1]), btScalar(offsets[d][2])) *
-              h;
+          const btVector3 edge = btVector3(btScalar(kOffsets[d][0]), btScalar(kOffsets[d][1]),
+                                           btScalar(kOffsets[d][2])) *
+                                 h;
           points->push_back(grid.centre(i, j, k) + edge * btScalar(a / (a - b)));
         }
       return count;
@@ -631,6 +663,8 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
       poolNormals.push_back(normals[v].length2() > 0 ? normals[v].normalized()
                                                      : btVector3(0, 0, 0));
     }
+    std::vector<char> inOrigin(V.size(), 0);
+    for (uint32_t i : originIds) inOrigin[i] = 1;
     std::vector<uint32_t> areaTriangles;
     std::vector<double> cumulative;
     double total = 0;
