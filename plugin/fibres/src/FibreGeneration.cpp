@@ -493,6 +493,123 @@ void resolveAreas(const TriangleMesh& surface, const AttachmentArea& origin,
   result.insertionArea = std::move(insertionIds);
 }
 
+using Lines = std::vector<std::vector<btVector3>>;
+
+/// Quality: lengths, points outside, right ends (each end within 1.5 voxels `h`, the field's
+/// resolution, of its area's triangles: those with a vertex in the area).
+void measureFibres(const TriangleMesh& surface, const MeshDistance& distance,
+                   const std::vector<uint32_t>& originIds,
+                   const std::vector<uint32_t>& insertionIds, const Lines& lines,
+                   btScalar insideTolerance, btScalar h, FibreQuality& q) {
+  const auto& V = surface.vertices;
+  std::vector<btScalar> lengths;
+  int right = 0;
+  auto areaSurface = [&](const std::vector<uint32_t>& ids) {
+    std::vector<char> in(V.size(), 0);
+    for (uint32_t i : ids) in[i] = 1;
+    TriangleMesh area;
+    area.vertices = V;
+    for (const auto& t : surface.triangles)
+      if (in[t[0]] || in[t[1]] || in[t[2]]) area.triangles.push_back(t);
+    return MeshDistance(area);
+  };
+  const MeshDistance originSurface = areaSurface(originIds);
+  const MeshDistance insertionSurface = areaSurface(insertionIds);
+  for (const auto& l : lines) {
+    btScalar length = 0;
+    for (size_t i = 1; i < l.size(); ++i) length += l[i].distance(l[i - 1]);
+    lengths.push_back(length);
+    for (const auto& p : l) q.pointsOutside += distance.signedDistance(p) > insideTolerance;
+    const btScalar gap = std::max(originSurface.closest(l.front()).distance,
+                                  insertionSurface.closest(l.back()).distance);
+    q.worstEndGap = std::max(q.worstEndGap, gap);
+    right += gap <= btScalar(1.5) * h;
+  }
+  if (!lengths.empty()) {
+    std::sort(lengths.begin(), lengths.end());
+    q.minLength = lengths.front();
+    q.maxLength = lengths.back();
+    q.medianLength = lengths[lengths.size() / 2];
+    q.rightEnds = double(right) / double(lines.size());
+  }
+}
+
+/// Coverage: interior voxels within `r` (coverageDistance) of a fibre point (points dense
+/// enough).
+void measureCoverage(const Grid& grid, const std::vector<int8_t>& label, const Lines& lines,
+                     btScalar r, FibreQuality& q) {
+  const btScalar h = grid.h;
+  const size_t N = grid.size();
+  std::vector<char> covered(N, 0);
+  const int reach = int(std::ceil(r / h));
+  for (const auto& l : lines) {
+    std::vector<btVector3> dense;
+    for (size_t i = 1; i < l.size(); ++i) {
+      const int parts = std::max(1, int(std::ceil(l[i].distance(l[i - 1]) / (r / 2))));
+      for (int s = 0; s < parts; ++s) dense.push_back(l[i - 1].lerp(l[i], btScalar(s) / parts));
+    }
+    dense.push_back(l.back());
+    for (const auto& p : dense) {
+      const btVector3 g = (p - grid.lower) / h;
+      const int ci = int(std::lround(g.x())), cj = int(std::lround(g.y())),
+                ck = int(std::lround(g.z()));
+      for (int k = std::max(0, ck - reach); k <= std::min(grid.n[2] - 1, ck + reach); ++k)
+        for (int j = std::max(0, cj - reach); j <= std::min(grid.n[1] - 1, cj + reach); ++j)
+          for (int i = std::max(0, ci - reach); i <= std::min(grid.n[0] - 1, ci + reach); ++i)
+            if (grid.centre(i, j, k).distance2(p) <= r * r) covered[grid.index(i, j, k)] = 1;
+    }
+  }
+  size_t hit = 0;
+  for (size_t id = 0; id < N; ++id) hit += label[id] >= 0 && covered[id];
+  q.coverage = double(hit) / double(q.interiorVoxels);
+}
+
+/// Crossings: fibre pairs with segments closer than the tolerance (hash grid of segments).
+void countCrossings(const Grid& grid, const Lines& lines, const FibreGenerationOptions& options,
+                    FibreQuality& q) {
+  const btScalar tol = options.crossingTolerance;
+  const btScalar cell = std::max(tol * 4, grid.h);
+  struct Seg {
+    uint32_t fibre, index;
+  };
+  std::unordered_map<uint64_t, std::vector<Seg>> buckets;
+  auto key = [&](int i, int j, int k) {
+    return (uint64_t(uint32_t(i + 1048576)) << 42) ^ (uint64_t(uint32_t(j + 1048576)) << 21) ^
+           uint64_t(uint32_t(k + 1048576));
+  };
+  auto cellOf = [&](const btVector3& p, int c[3]) {
+    for (int a = 0; a < 3; ++a) c[a] = int(std::floor((p[a] - grid.lower[a]) / cell));
+  };
+  for (uint32_t f = 0; f < lines.size(); ++f)
+    for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
+      int c[3];
+      cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
+      buckets[key(c[0], c[1], c[2])].push_back({f, s});
+    }
+  std::vector<char> pair(lines.size() * lines.size(), 0);
+  const btScalar segmentLength = lines.empty() ? 0 : q.maxLength / btScalar(options.samples - 1);
+  const int reach = 1 + int(std::ceil(segmentLength / cell));
+  for (uint32_t f = 0; f < lines.size(); ++f)
+    for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
+      int c[3];
+      cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
+      for (int dk = -reach; dk <= reach; ++dk)
+        for (int dj = -reach; dj <= reach; ++dj)
+          for (int di = -reach; di <= reach; ++di) {
+            auto it = buckets.find(key(c[0] + di, c[1] + dj, c[2] + dk));
+            if (it == buckets.end()) continue;
+            for (const Seg& other : it->second) {
+              if (other.fibre <= f || pair[f * lines.size() + other.fibre]) continue;
+              if (segmentDistance2(lines[f][s], lines[f][s + 1], lines[other.fibre][other.index],
+                                   lines[other.fibre][other.index + 1]) < double(tol) * tol) {
+                pair[f * lines.size() + other.fibre] = 1;
+                ++q.crossingPairs;
+              }
+            }
+          }
+    }
+}
+
 /// Voxelises the muscle at `gridSize` voxels along its longest side, solves the field and
 /// traces up to options.count fibres into `result`. False when no interior voxel connects the
 /// two areas at this grid.
@@ -764,108 +881,9 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
   for (const auto& l : lines) result.fibres.addFibre(l);
   q.generated = int(lines.size());
 
-  // Quality: lengths, points outside, right ends (each end within 1.5 voxels, the field's
-  // resolution, of its area's triangles: those with a vertex in the area).
-  std::vector<btScalar> lengths;
-  int right = 0;
-  auto areaSurface = [&](const std::vector<uint32_t>& ids) {
-    std::vector<char> in(V.size(), 0);
-    for (uint32_t i : ids) in[i] = 1;
-    TriangleMesh area;
-    area.vertices = V;
-    for (const auto& t : surface.triangles)
-      if (in[t[0]] || in[t[1]] || in[t[2]]) area.triangles.push_back(t);
-    return MeshDistance(area);
-  };
-  const MeshDistance originSurface = areaSurface(originIds);
-  const MeshDistance insertionSurface = areaSurface(insertionIds);
-  for (const auto& l : lines) {
-    btScalar length = 0;
-    for (size_t i = 1; i < l.size(); ++i) length += l[i].distance(l[i - 1]);
-    lengths.push_back(length);
-    for (const auto& p : l) q.pointsOutside += distance.signedDistance(p) > insideTolerance;
-    const btScalar gap = std::max(originSurface.closest(l.front()).distance,
-                                  insertionSurface.closest(l.back()).distance);
-    q.worstEndGap = std::max(q.worstEndGap, gap);
-    right += gap <= btScalar(1.5) * h;
-  }
-  if (!lengths.empty()) {
-    std::sort(lengths.begin(), lengths.end());
-    q.minLength = lengths.front();
-    q.maxLength = lengths.back();
-    q.medianLength = lengths[lengths.size() / 2];
-    q.rightEnds = double(right) / double(lines.size());
-  }
-  // Coverage: interior voxels within coverageDistance of a fibre point (points dense enough).
-  {
-    std::vector<char> covered(N, 0);
-    const btScalar r = options.coverageDistance;
-    const int reach = int(std::ceil(r / h));
-    for (const auto& l : lines) {
-      std::vector<btVector3> dense;
-      for (size_t i = 1; i < l.size(); ++i) {
-        const int parts = std::max(1, int(std::ceil(l[i].distance(l[i - 1]) / (r / 2))));
-        for (int s = 0; s < parts; ++s) dense.push_back(l[i - 1].lerp(l[i], btScalar(s) / parts));
-      }
-      dense.push_back(l.back());
-      for (const auto& p : dense) {
-        const btVector3 g = (p - grid.lower) / h;
-        const int ci = int(std::lround(g.x())), cj = int(std::lround(g.y())),
-                  ck = int(std::lround(g.z()));
-        for (int k = std::max(0, ck - reach); k <= std::min(grid.n[2] - 1, ck + reach); ++k)
-          for (int j = std::max(0, cj - reach); j <= std::min(grid.n[1] - 1, cj + reach); ++j)
-            for (int i = std::max(0, ci - reach); i <= std::min(grid.n[0] - 1, ci + reach); ++i)
-              if (grid.centre(i, j, k).distance2(p) <= r * r) covered[grid.index(i, j, k)] = 1;
-      }
-    }
-    size_t hit = 0;
-    for (size_t id = 0; id < N; ++id) hit += label[id] >= 0 && covered[id];
-    q.coverage = double(hit) / double(q.interiorVoxels);
-  }
-  // Crossings: fibre pairs with segments closer than the tolerance (hash grid of segments).
-  {
-    const btScalar tol = options.crossingTolerance;
-    const btScalar cell = std::max(tol * 4, h);
-    struct Seg {
-      uint32_t fibre, index;
-    };
-    std::unordered_map<uint64_t, std::vector<Seg>> buckets;
-    auto key = [&](int i, int j, int k) {
-      return (uint64_t(uint32_t(i + 1048576)) << 42) ^ (uint64_t(uint32_t(j + 1048576)) << 21) ^
-             uint64_t(uint32_t(k + 1048576));
-    };
-    auto cellOf = [&](const btVector3& p, int c[3]) {
-      for (int a = 0; a < 3; ++a) c[a] = int(std::floor((p[a] - grid.lower[a]) / cell));
-    };
-    for (uint32_t f = 0; f < lines.size(); ++f)
-      for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
-        int c[3];
-        cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
-        buckets[key(c[0], c[1], c[2])].push_back({f, s});
-      }
-    std::vector<char> pair(lines.size() * lines.size(), 0);
-    const btScalar segmentLength = lines.empty() ? 0 : q.maxLength / btScalar(options.samples - 1);
-    const int reach = 1 + int(std::ceil(segmentLength / cell));
-    for (uint32_t f = 0; f < lines.size(); ++f)
-      for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
-        int c[3];
-        cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
-        for (int dk = -reach; dk <= reach; ++dk)
-          for (int dj = -reach; dj <= reach; ++dj)
-            for (int di = -reach; di <= reach; ++di) {
-              auto it = buckets.find(key(c[0] + di, c[1] + dj, c[2] + dk));
-              if (it == buckets.end()) continue;
-              for (const Seg& other : it->second) {
-                if (other.fibre <= f || pair[f * lines.size() + other.fibre]) continue;
-                if (segmentDistance2(lines[f][s], lines[f][s + 1], lines[other.fibre][other.index],
-                                     lines[other.fibre][other.index + 1]) < double(tol) * tol) {
-                  pair[f * lines.size() + other.fibre] = 1;
-                  ++q.crossingPairs;
-                }
-              }
-            }
-      }
-  }
+  measureFibres(surface, distance, originIds, insertionIds, lines, insideTolerance, h, q);
+  measureCoverage(grid, label, lines, options.coverageDistance, q);
+  countCrossings(grid, lines, options, q);
   return true;
 }
 
