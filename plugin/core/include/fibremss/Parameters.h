@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <string>
 
+#include "fibremss/TaskScheduler.h"
+
 namespace fibremss {
 
 /// How particles of one muscle are linked by springs (method.md §3).
@@ -82,6 +84,10 @@ enum class StopRule : uint8_t {
   Converged,        ///< mean displacement below epsilon (or iteration cap reached)
   TimeBudget,       ///< wall-clock budget per step spent (or iteration cap reached)
   SpringDeviation,  ///< spring-deviation ratio Σ|l−L0| / ΣL0 below deviationEpsilon (or cap)
+  /// Estimated distance to the pose's equilibrium below `tolerance` (or cap): the mean
+  /// displacement d of an iteration times r/(1 − r), r the rate at which d shrank over the last
+  /// 8 iterations (the remaining sum of steps of a linearly converging iteration).
+  Equilibrium,
 };
 
 /// How the solver steps (method.md §4–§5).
@@ -95,6 +101,7 @@ struct SimulationParameters {
   btScalar epsilon = 1e-6;                   ///< convergence threshold: mean displacement [m]
   btScalar budgetMs = 10;                    ///< time budget per step [ms]
   btScalar deviationEpsilon = 1e-3;  ///< threshold of the spring-deviation stop rule (ratio)
+  btScalar tolerance = 5e-4;         ///< equilibrium stop rule: estimated distance to it [m]
   bool rebuildEveryStep = false;     ///< thesis behaviour: rebuild trees and state each step
   /// Pre-transform particles of muscles spanning two bones by a blend of both bones' motions
   /// (MuscleSettings::blendBoneA/B/Weight); false: by the nearest bone only, as the thesis did
@@ -107,6 +114,9 @@ struct SimulationParameters {
   btScalar initialNoise = 0;      ///< random displacement of free particles at start [m]
 
   int threads = 0;  ///< worker threads of the solver (0: the machine's hardware threads)
+  /// The host's task system (TaskScheduler.h); when set it runs every task of the step and
+  /// `threads` is ignored (its workerCount counts the workers).
+  TaskScheduler scheduler;
 
   BoneCollision boneCollision = BoneCollision::Spheres;  ///< muscle–bone detection
   btScalar distanceFieldCell = 0.001;                    ///< cell size of bone distance fields [m]
