@@ -86,7 +86,8 @@ enum class StopRule : uint8_t {
   SpringDeviation,  ///< spring-deviation ratio Σ|l−L0| / ΣL0 below deviationEpsilon (or cap)
   /// Estimated distance to the pose's equilibrium below `tolerance` (or cap): the mean
   /// displacement d of an iteration times r/(1 − r), r the rate at which d shrank over the last
-  /// 8 iterations (the remaining sum of steps of a linearly converging iteration).
+  /// 16 iterations (the remaining sum of steps of a linearly converging iteration), once r no
+  /// longer slows down from one such window to the next.
   Equilibrium,
 };
 
