@@ -126,6 +126,52 @@ TEST(CalculixInput, QuadraticTetrahedraShareTheirMidsideNodes) {
       << "edge 2-3 of the first is edge 2-3 of the second";
 }
 
+TEST(CalculixInput, BoundaryFacesAreTheFacesNoOtherTetrahedronShares) {
+  // Two tetrahedra sharing the face {1, 2, 3}: 8 faces, 6 on the boundary.
+  const std::vector<uint32_t> tetrahedra = {0, 1, 2, 3, 4, 2, 1, 3};
+  const auto faces = boundaryFaces(tetrahedra);
+  ASSERT_EQ(faces.size(), 6u);
+  // CalculiX's C3D4 face k by local corners: 1: 1-2-3, 2: 1-4-2, 3: 2-4-3, 4: 3-4-1.
+  constexpr int kCorners[4][3] = {{0, 1, 2}, {0, 3, 1}, {1, 3, 2}, {2, 3, 0}};
+  for (const auto& [element, face] : faces) {
+    std::set<uint32_t> corners;
+    for (int k : kCorners[face - 1]) corners.insert(tetrahedra[element * 4 + k]);
+    EXPECT_NE(corners, (std::set<uint32_t>{1, 2, 3})) << "the shared face is inside";
+  }
+}
+
+TEST(CalculixInput, WritesTheObstaclesAndTheirContactOnlyWithAStiffness) {
+  CalculixJob job;
+  job.nodes = {{0, 0, 0},  {1, 0, 0},  {0, 1, 0},  {0, 0, 1},
+               {0, 0, -1}, {1, 0, -1}, {0, 1, -1}, {0, 0, -2}};
+  job.connectivity = {0, 1, 2, 3};
+  job.prescribed = {4, 5, 6, 7};
+  job.steps = {{{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}}};
+  job.contact.tetrahedra = {4, 5, 6, 7};
+  job.contact.faces = boundaryFaces(job.contact.tetrahedra);
+  job.contact.slaves = {0, 1, 2};
+  std::ostringstream without;
+  writeCalculixInput(without, job);
+  EXPECT_EQ(without.str().find("*CONTACT PAIR"), std::string::npos) << "stiffness 0: none";
+  job.contact.stiffness = 1e7;
+  job.contact.tension = 5;
+  std::ostringstream with;
+  writeCalculixInput(with, job);
+  const std::string text = with.str();
+  EXPECT_NE(text.find("*ELEMENT, TYPE=C3D4, ELSET=EBONE\n2, 5, 6, 7, 8\n"), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("*SURFACE, NAME=SBONE, TYPE=ELEMENT\n2, S1\n2, S2\n2, S3\n2, S4\n"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("*NSET, NSET=NSLAVE\n1, 2, 3\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("PRESSURE-OVERCLOSURE=LINEAR\n10000000, 5\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("*CONTACT PAIR, INTERACTION=FRICTIONLESS, TYPE=NODE TO SURFACE\n"
+                      "SMUSCLE, SBONE\n"),
+            std::string::npos)
+      << text;
+  EXPECT_LT(text.find("*CONTACT PAIR"), text.find("*STEP")) << "model data before the steps";
+}
+
 TEST(CalculixDat, ReadsTablesRowsAndTotals) {
   std::istringstream dat(
       "\n displacements (vx,vy,vz) for set NPRINT and time  0.5000000E+00\n\n"
@@ -247,6 +293,72 @@ TEST(CalculixRun, BarUnderTensionMatchesTheClosedFormNeoHookeanAnswerC3D10) {
   expectClosedFormBar(CalculixElement::C3D10);
 }
 
+/// The bar pushed 3 mm down by its top face onto a rigid plate 1 mm below it: with contact its
+/// bottom face stops on the plate (within the penalty's overclosure), without it passes 2 mm in.
+double lowestBottomNodeMm(double contactStiffness) {
+  TemporaryDirectory dir("ccx_contact_test");
+  const TriangleMesh surface = barSurface();
+  const TetMesh bar = tetgenMesh(surface, {}, dir.path().string(), "bar");
+  const TetMesh plate = tetgenMesh(subdivided(testing::boxMesh(btVector3(-0.005f, -0.005f, -0.006f),
+                                                               btVector3(0.015f, 0.015f, -0.001f)),
+                                              2),
+                                   {}, dir.path().string(), "plate");
+  CalculixJob job;
+  job.title = "bar pushed onto a plate";
+  job.material = {.youngsModulus = 100e3, .poissonRatio = 0.3};
+  job.nodes = bar.nodes;
+  for (const auto& t : bar.tetrahedra)
+    job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
+  job.steps.resize(1);
+  for (uint32_t n = 0; n < bar.nodes.size(); ++n) {
+    if (bar.nodes[n].z() > 0.04f - 1e-7f) {
+      job.prescribed.push_back(n);
+      job.steps[0].push_back(btVector3(0, 0, -0.003f));
+    } else if (n < surface.vertices.size()) {
+      job.contact.slaves.push_back(n);
+      if (bar.nodes[n].z() < 1e-7f) job.printed.push_back(n);
+    }
+  }
+  for (const btVector3& x : plate.nodes) {
+    job.prescribed.push_back(static_cast<uint32_t>(job.nodes.size()));
+    job.steps[0].push_back(btVector3(0, 0, 0));
+    job.nodes.push_back(x);
+  }
+  const auto first = static_cast<uint32_t>(bar.nodes.size());
+  for (const auto& t : plate.tetrahedra)
+    for (uint32_t corner : t) job.contact.tetrahedra.push_back(first + corner);
+  job.contact.faces = boundaryFaces(job.contact.tetrahedra);
+  job.contact.stiffness = contactStiffness;
+  job.contact.tension = 1e-3 * job.material.youngsModulus;
+  job.initialIncrement = 0.25;
+  {
+    std::ofstream out(dir.path() / "bar.inp");
+    writeCalculixInput(out, job);
+  }
+  const int status =
+      runProgram({"ccx", "-i", "bar"}, dir.path().string(), (dir.path() / "ccx.log").string());
+  EXPECT_EQ(status, 0);
+  std::ifstream dat(dir.path() / "bar.dat");
+  const auto tables = readCalculixDat(dat, "bar.dat");
+  const auto ends = stepEndTables(tables, "displacements", "NPRINT", 1);
+  if (ends.size() != 1) return NAN;
+  double lowest = INFINITY;
+  for (size_t row = 0; row < ends[0]->ids.size(); ++row)
+    lowest = std::min(lowest, 1e3 * (job.nodes[size_t(ends[0]->ids[row] - 1)].z() +
+                                     ends[0]->values[row * 3 + 2]));
+  return lowest;
+}
+
+TEST(CalculixRun, ABarPushedOntoARigidPlateStopsOnItOnlyWithContact) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  EXPECT_NEAR(lowestBottomNodeMm(0), -3, 1e-3) << "no contact: it passes through";
+  // K = 5e4 × E as the reference uses: ~5 kPa of contact pressure overcloses ~1 µm.
+  const double lowest = lowestBottomNodeMm(5e4 * 100e3);
+  EXPECT_GT(lowest, -1.01) << "stops on the plate's top at z = -1 mm";
+  EXPECT_LT(lowest, -0.99) << "and touches it";
+}
+
 TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   ReferenceGates gates;
   EXPECT_FALSE(gates.passed()) << "nothing computed";
@@ -340,6 +452,9 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   changed(scene, prepared, d);
   d = definition;
   d.attachmentScale = 1.5;
+  changed(scene, prepared, d);
+  d = definition;
+  d.contactPenalty = 0;
   changed(scene, prepared, d);
   LoadedScene moved = scene;
   moved.muscles[0].parameters.attachmentDistance *= 2;

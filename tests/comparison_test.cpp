@@ -248,6 +248,13 @@ TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   }
   EXPECT_EQ(summary["runs"][0]["method"], "fibremss");
   EXPECT_TRUE(summary["runs"][0]["rms_to_reference_mm"].is_null()) << "no reference";
+  // The FibreMSS run's series, one row per pose (one muscle), as `fibremss run` writes it; the
+  // FEM run has none.
+  const nlohmann::json& series = summary["runs"][0]["series"];
+  EXPECT_EQ(series.size(), summary["runs"][0]["steps"].get<size_t>());
+  EXPECT_TRUE(summary["runs"][1]["series"].empty());
+  EXPECT_EQ(readFile(out / "series_0_fibremss.csv"), seriesCsv(seriesFromJson(series)));
+  EXPECT_FALSE(fs::exists(out / "series_1_fem.csv"));
 
   std::string problem;
   EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;

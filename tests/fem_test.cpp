@@ -219,6 +219,40 @@ TEST(FemScene, FollowsATranslatedBone) {
   EXPECT_LT(std::abs(volumeChangePercent(scene.muscles[0]->restSurface, surface)), 10.0);
 }
 
+/// How far the free-swinging rod's surface moves [mm RMS] when a pose reached in 10 substeps
+/// (too few: the free end still swings) is held for one more pose.
+double heldPoseMotionMm(const PreparedScene& scene, FemDefinition definition) {
+  const btTransform rest = btTransform::getIdentity();
+  const btTransform moved(btQuaternion::getIdentity(), btVector3(0, 0.01f, 0));
+  definition.substepsPerPose = 10;
+  definition.freeNodesFollowBones = false;
+  FemScene fem(scene, {&rest, 1}, definition);
+  std::vector<btVector3> reached, held;
+  fem.stepPose({&moved, 1});
+  fem.surface(0, reached);
+  fem.stepPose({&moved, 1});
+  fem.surface(0, held);
+  return rmsDistanceMm(held, reached);
+}
+
+TEST(FemScene, EveryAttachingBoneHoldsTheMinimumPinsAndAPoseSettles) {
+  // A coarse grid pins few nodes by distance alone; each bone then gets its nearest nodes.
+  const PreparedScene scene = rodScene();
+  const btTransform rest = btTransform::getIdentity();
+  const FemDefinition few{.mesher = {.targetCells = 60}, .minPinsPerBone = 0};
+  const size_t byDistance = FemScene(scene, {&rest, 1}, few).fewestPinsPerBone();
+  FemDefinition definition = few;
+  definition.minPinsPerBone = static_cast<int>(byDistance) + 5;
+  EXPECT_EQ(FemScene(scene, {&rest, 1}, definition).fewestPinsPerBone(), byDistance + 5);
+  // Settling brings a pose nearer its equilibrium: holding it moves the surface less.
+  FemDefinition unsettled = definition;
+  unsettled.settleSubsteps = 0;
+  const double without = heldPoseMotionMm(scene, unsettled);
+  const double with = heldPoseMotionMm(scene, definition);
+  EXPECT_GT(without, 0.5) << "10 substeps leave the free end swinging";
+  EXPECT_LT(with, 0.5 * without);
+}
+
 TEST(FemScene, BoneContactKeepsFreeNodesOutsideAMovingBone) {
   // A plate bone under the rod rises 6 mm, 4 mm into it: without contact the nodes it
   // passes stay inside; with contact every node ends outside the moved plate.

@@ -1,6 +1,7 @@
 #!/usr/bin/python3
 """Frames of `fibremss run` read back by real clients: VTK 9's vtkXMLPolyDataReader and
-ParaView 5.11's PVD reader (Debian's python3-paraview, which brings its VTK 9 along).
+ParaView 5.11's PVD reader (Debian's python3-paraview, which brings its VTK 9 along); the
+glTF frames (--format gltf) by VTK's vtkGLTFReader.
 
 Usage: frames_vtk_test.py FIBREMSS SOURCE_DIR WORK_DIR. Exits 77 (ctest: skipped) with a message
 when the Python modules are not installed."""
@@ -12,6 +13,7 @@ import sys
 
 try:
     from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+    from vtkmodules.vtkIOGeometry import vtkGLTFReader
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkCommonCore import vtkVersion
     import paraview.simple as pvs
@@ -57,7 +59,8 @@ def main():
     # max_step_deg=0: the sweep's 10° poses as given, no 5° sub-poses between them.
     subprocess.run([fibremss, "run", scene, "--set", "resolution=12", "--set", "max_step_deg=0",
                     "--steps", str(steps),
-                    "--frame-every", "1", "--out", work], check=True, stdout=subprocess.DEVNULL)
+                    "--frame-every", "1", "--format", "vtk,gltf", "--out", work], check=True,
+                   stdout=subprocess.DEVNULL)
     print("VTK", vtkVersion.GetVTKVersion())
     frames = os.path.join(work, "frames")
 
@@ -126,6 +129,27 @@ def main():
         for b in range(blocks.GetNumberOfBlocks()):
             block = blocks.GetBlock(b)
             check(block is not None and block.GetNumberOfPoints() > 0, f"part {b} at t={time}")
+
+    # glTF: each frame's .glb holds the muscle and both bones; the muscle's vertices are the
+    # surface frame's, in metres (glTF's unit) where the .vtp has millimetres.
+    for step in range(steps):
+        gltf = vtkGLTFReader()
+        gltf.SetFileName(os.path.join(work, "gltf", f"frame_{step:05d}.glb"))
+        gltf.Update()
+        meshes = []
+        it = gltf.GetOutput().NewIterator()
+        it.InitTraversal()
+        while not it.IsDoneWithTraversal():
+            meshes.append(it.GetCurrentDataObject())
+            it.GoToNextItem()
+        check(len(meshes) == 3, f"step {step}: {len(meshes)} glTF meshes, expected 3")
+        surface = read_vtp(os.path.join(frames, f"muscle0_flexor_surface_{step:05d}.vtp"))
+        muscle = [m for m in meshes if m.GetNumberOfPoints() == surface.GetNumberOfPoints()]
+        check(len(muscle) == 1, f"step {step}: no glTF mesh with the surface's vertex count")
+        if muscle:
+            error = abs(1000 * vtk_to_numpy(muscle[0].GetPoints().GetData()) -
+                        vtk_to_numpy(surface.GetPoints().GetData())).max()
+            check(error < 1e-3, f"step {step}: glTF vertices {error} mm off the surface frame's")
 
     if failures:
         print(f"{len(failures)} check(s) failed")

@@ -4,6 +4,7 @@
 // iliacus, and under stop-body the other muscles go on past a frozen one.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -42,12 +43,21 @@ TEST(MuscleMetrics, MeasuresOfAKnownStretch) {
   EXPECT_NEAR(step.penetrationMm[1], 5.0, 1e-3);
   EXPECT_NEAR(step.meanFibreLengthMm, 36.0, 1e-3);  // 6 gaps of 4 mm, × 1.5
   EXPECT_NEAR(step.worstSpringRatio, 1.5, 1e-5);    // the springs along x
+  EXPECT_NEAR(step.maxFibreStretch, 1.5, 1e-5);     // every fibre segment
+  EXPECT_NEAR(step.maxPenetrationMm(), 5.0, 1e-3);
   const MuscleStep atRest =
       measureMuscle(*muscle, muscle->restPositions, muscle->restSurface.vertices, bones, rest);
   EXPECT_NEAR(atRest.volumeChangePct, 0.0, 1e-4);
   ASSERT_EQ(atRest.penetrationMm.size(), 2u);
   EXPECT_NEAR(atRest.penetrationMm[0], 2.0, 1e-3);
   EXPECT_NEAR(atRest.worstSpringRatio, 1.0, 1e-6);
+  EXPECT_NEAR(atRest.maxFibreStretch, 1.0, 1e-6);
+  // One particle of a fibre moved 1 mm along it: the segment before it 5/4, after it 3/4.
+  std::vector<btVector3> moved = muscle->restPositions;
+  moved[3].setX(moved[3].x() + btScalar(0.001));
+  const MuscleStep one = measureMuscle(*muscle, moved, muscle->restSurface.vertices, bones, rest);
+  EXPECT_NEAR(one.maxFibreStretch, 1.25, 1e-5);
+  EXPECT_NEAR(one.meanFibreLengthMm, 24.0, 1e-4);  // the fibre's length did not change
   // A NaN anywhere: the step says only that.
   std::vector<btVector3> broken = positions;
   broken[5].setY(std::nan(""));
@@ -100,6 +110,35 @@ TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
       << table;
 }
 
+TEST(MuscleMetrics, SeriesCsvAndJsonCarryEveryRow) {
+  SeriesRow a;
+  a.step = 3;
+  a.pose = 2;
+  a.poseLabel = 22.5;
+  a.timeS = 0.125;
+  a.muscle = "rectus, femoris";
+  a.measures.volumeChangePct = -1.25;
+  a.measures.meanFibreLengthMm = 101.5;
+  a.measures.maxFibreStretch = 1.0625;
+  a.measures.penetrationMm = {0.5, 2.25, 0};  // the deepest bone's counts
+  a.measures.boneContacts = 7;
+  a.solverContacts = 41;
+  SeriesRow b = a;
+  b.muscle = "vastus";
+  b.measures = MuscleStep{};  // a step not measured (NaN): its fields left empty
+  b.measures.finite = false;
+  EXPECT_EQ(seriesCsv({a, b}),
+            "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
+            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts\n"
+            "3,2,22.5,0.125,\"rectus, femoris\",-1.25,101.5,1.0625,2.25,7,41\n"
+            "3,2,22.5,0.125,vastus,,,,,0,41\n");
+  const nlohmann::json json = seriesJson({a, b});
+  ASSERT_EQ(json.size(), 2u);
+  EXPECT_EQ(json[0].at("max_penetration_mm"), 2.25);
+  EXPECT_TRUE(json[1].at("volume_change_pct").is_null());
+  EXPECT_EQ(seriesCsv(seriesFromJson(json)), seriesCsv({a, b}));
+}
+
 /// hip-pelvis without its muscles' origin and insertion: today's nearest-bone rule.
 LoadedScene nearestRuleHipPelvis(const std::vector<std::string>& overrides) {
   nlohmann::json scene = nlohmann::json::parse(exportBuiltInScene("hip-pelvis"));
@@ -123,7 +162,8 @@ TEST(HipPelvis, DeclaredAttachmentsRunTheFlexionWhereTheNearestBoneRuleFails) {
   const LoadedScene declared = loadScene("hip-pelvis");
   const PreparedScene prepared =
       prepareScene(declared.bones, declared.muscles, declared.simulation.seed);
-  const RunMetrics run = runFibreMSS(declared, prepared);
+  FibreRunDetails details;
+  const RunMetrics run = runFibreMSS(declared, prepared, {}, &details);
   EXPECT_EQ(run.steps, declared.poseCount);
   EXPECT_EQ(run.failedStep, -1);
   ASSERT_EQ(run.muscles.size(), 3u);
@@ -132,6 +172,34 @@ TEST(HipPelvis, DeclaredAttachmentsRunTheFlexionWhereTheNearestBoneRuleFails) {
     EXPECT_EQ(muscle.rollbacks, 0) << muscle.name;
     EXPECT_LT(muscle.worstSpringRatio, 3.0) << muscle.name;
   }
+  // The series: every step and muscle in order at the pose's label and increasing times; each
+  // muscle's rows agree with its run-long results; the bone contacts add up to the run's.
+  ASSERT_EQ(run.series.size(), size_t(run.steps) * run.muscles.size());
+  size_t contacts = 0;
+  for (size_t m = 0; m < run.muscles.size(); ++m) {
+    const MuscleResults& muscle = run.muscles[m];
+    double shortest = INFINITY, longest = -INFINITY, worstVolume = 0;
+    for (int s = 0; s < run.steps; ++s) {
+      const SeriesRow& row = run.series[size_t(s) * run.muscles.size() + m];
+      EXPECT_EQ(row.step, s);
+      EXPECT_EQ(row.muscle, muscle.name);
+      EXPECT_DOUBLE_EQ(row.poseLabel, declared.poseLabels.at(size_t(row.pose)));
+      if (s > 0) {
+        EXPECT_GT(row.timeS, run.series[size_t(s - 1) * run.muscles.size() + m].timeS);
+      }
+      shortest = std::min(shortest, row.measures.meanFibreLengthMm);
+      longest = std::max(longest, row.measures.meanFibreLengthMm);
+      if (std::abs(row.measures.volumeChangePct) > std::abs(worstVolume))
+        worstVolume = row.measures.volumeChangePct;
+      contacts += row.measures.boneContacts;
+    }
+    const SeriesRow& last = run.series[size_t(run.steps - 1) * run.muscles.size() + m];
+    EXPECT_DOUBLE_EQ(last.measures.volumeChangePct, muscle.volumeChangePct);
+    EXPECT_DOUBLE_EQ(worstVolume, muscle.worstVolumeChangePct);
+    EXPECT_DOUBLE_EQ(shortest, muscle.fibreLengthMinMm);
+    EXPECT_DOUBLE_EQ(longest, muscle.fibreLengthMaxMm);
+  }
+  EXPECT_EQ(contacts, details.spherePenetration.penetrating);
   // The nearest-bone rule fixes the iliacus' belly to the femoral head: it bursts.
   const LoadedScene nearest = nearestRuleHipPelvis({});
   const RunMetrics failed =

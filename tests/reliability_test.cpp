@@ -183,6 +183,22 @@ TEST(Reliability2, APlyHeaderDeclaringMoreThanTheFileHoldsIsRefusedAtOnce) {
   EXPECT_NE(result.output.find("bytes follow the header"), std::string::npos) << result.output;
 }
 
+TEST(Reliability2, AnOffHeaderDeclaringMoreThanTheFileHoldsIsRefused) {
+  TemporaryDirectory dir("fibremss_off");
+  const fs::path off = dir.path() / "bone.off";
+  const std::string body = "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  writeFile(off, "OFF\n# a tetrahedron\n4 4 0\n" + body);
+  EXPECT_EQ(loadSurface(off.string(), 0.001).triangles.size(), 4u);  // an honest header loads
+  writeFile(off, "OFF\n# a tetrahedron\n200000000 4 0\n" + body);
+  try {
+    loadSurface(off.string(), 0.001);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("declares 200000000 vertices"), std::string::npos)
+        << e.what();
+  }
+}
+
 // --- Row 5: VTK with 2 000 000 empty POLYGONS cells -----------------------------------------
 
 TEST(Reliability2, SkippedVtkCellsAreCountedNotListed) {
@@ -350,6 +366,29 @@ TEST(Reliability2, ASecondWriterIntoALockedOutputDirectoryIsRefused) {
   EXPECT_TRUE(fs::exists(out / "summary.json"));
 }
 
+TEST(Reliability2, EverySubcommandThatWritesADirectoryTakesItsLock) {
+  TemporaryDirectory dir("fibremss_lock_all");
+  const fs::path done = dir.path() / "done", out = dir.path() / "out";
+  const std::string compare =
+      "compare fusiform --no-fronts --no-reference --methods fibremss --set resolution=6";
+  ASSERT_EQ(cli(compare + " --out " + done.string()).exitCode, 0);
+  const OutputDirectory first(out.string());  // as a running writer holds it
+  for (const std::string& command : std::vector<std::string>{
+           compare, "reference fusiform --no-gates --set resolution=6", "merge " + done.string()}) {
+    const ProcessResult second = cli(command + " --out " + out.string());
+    EXPECT_EQ(second.exitCode, 2) << command << "\n" << second.output;
+    EXPECT_NE(second.output.find("another fibremss process is writing"), std::string::npos)
+        << command << "\n"
+        << second.output;
+  }
+  for (const char* file : {"summary.json", "report.md", "reference.json", "stability.json"})
+    EXPECT_FALSE(fs::exists(out / file)) << file;
+  // Unlocked, the same summary (with its per-muscle list) merges.
+  const ProcessResult merged =
+      cli("merge " + done.string() + " --out " + (dir.path() / "m").string());
+  EXPECT_EQ(merged.exitCode, 0) << merged.output;
+}
+
 // --- Row 12: duplicate JSON keys -------------------------------------------------------------
 
 TEST(Reliability2, DuplicateJsonKeysAreAnErrorNamingTheKey) {
@@ -424,6 +463,14 @@ TEST(Reliability2, MergingMalformedSummariesIsAnInputError) {
       {R"({"runs": []})", "no runs"},
       {R"({"runs": [{"method": "fibremss"}], "machine": {"cpu": 5}})", "machine"},
       {R"({"runs": 3})", "runs"},
+      {R"({"runs": [{"method": "fibremss", "muscles": [{"frozen": 1}]}]})",
+       "runs[0].muscles[0].frozen"},
+      {R"({"runs": [{"method": "fibremss", "muscles": [{"fixed_particles": {"femur": "x"}}]}]})",
+       "runs[0].muscles[0].fixed_particles.femur"},
+      {R"({"runs": [{"method": "fibremss", "muscles": {}}]})", "runs[0].muscles"},
+      {R"({"runs": [{"method": "fibremss", "series": [{"step": 0, "time_s": "late"}]}]})",
+       "runs[0].series[0].time_s"},
+      {R"({"runs": [{"method": "fibremss", "series": 5}]})", "runs[0].series"},
       {"not json", "not valid JSON"}};
   for (size_t i = 0; i < bad.size(); ++i) {
     const fs::path file = dir.path() / ("summary" + std::to_string(i) + ".json");

@@ -22,6 +22,7 @@
 
 #include "fibremss/FibreRun.h"
 #include "fibremss/Progress.h"
+#include "solver/SpringForces.h"
 #include "support/Process.h"
 
 namespace fibremss {
@@ -147,6 +148,75 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   EXPECT_FALSE(fs::exists(out.path() / "frames/bone0_upper_00001.vtp"));
   // The complete scene is kept for reproducing the run.
   EXPECT_NO_THROW(nlohmann::json::parse(readFile(out.path() / "scene.json")));
+
+  // series.csv: one row per step and muscle, the same values as summary.json's "series", the
+  // times those of the frames.
+  std::istringstream csv(readFile(out.path() / "series.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  EXPECT_EQ(line,
+            "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
+            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts");
+  const nlohmann::json& series = summary.at("series");
+  ASSERT_EQ(series.size(), 2 * summary.at("muscles").size());
+  for (size_t row = 0; row < series.size(); ++row) {
+    ASSERT_TRUE(std::getline(csv, line)) << row;
+    std::vector<std::string> fields;
+    std::stringstream split(line);
+    for (std::string field; std::getline(split, field, ',');) fields.push_back(field);
+    ASSERT_EQ(fields.size(), 11u) << line;
+    const nlohmann::json& json = series[row];
+    EXPECT_EQ(std::stoi(fields[0]), json.at("step").get<int>());
+    EXPECT_NEAR(std::stod(fields[3]), times[size_t(json.at("step").get<int>())], 1e-9);
+    EXPECT_EQ(fields[4], json.at("muscle").get<std::string>());
+    EXPECT_NEAR(std::stod(fields[5]), json.at("volume_change_pct").get<double>(), 1e-4);
+    EXPECT_NEAR(std::stod(fields[7]), json.at("max_fibre_stretch").get<double>(), 1e-5);
+    EXPECT_GE(std::stod(fields[7]), 1.0);  // the largest of all segments' l / L0
+  }
+  EXPECT_FALSE(std::getline(csv, line));
+}
+
+TEST(Cli, VersionNamesBulletItsPrecisionTheKernelAndTheCompiler) {
+  const auto result = runProcess(cli() + " --version");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("fibremss " FIBREMSS_VERSION "\n"), std::string::npos)
+      << result.output;
+  const int bullet = btGetVersion();
+  EXPECT_NE(result.output.find("Bullet " + std::to_string(bullet / 100) + "." +
+                               std::to_string(bullet % 100) + ", btScalar " +
+                               (sizeof(btScalar) == 8 ? "double" : "float")),
+            std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find(std::string("spring kernel ") +
+                               springKernelName(fastestSpringKernel()) + " "),
+            std::string::npos)
+      << result.output;
+  EXPECT_NE(result.output.find("compiler "), std::string::npos);
+  // The kernel is the one chosen at runtime: the environment can choose scalar.
+  const auto scalar = runProcess("FIBREMSS_SPRING_KERNEL=scalar " + cli() + " --version");
+  EXPECT_NE(scalar.output.find("spring kernel scalar "), std::string::npos) << scalar.output;
+}
+
+TEST(Cli, EveryWarningIsPrefixedAndOnStderr) {
+  // fusiform warns that fibres end on a bone without a fixed last particle: check and run say it
+  // the same way, on stderr only.
+  TemporaryDirectory out("fibremss_warnings");
+  for (const std::string command : {"check fusiform", "run fusiform --steps 1"}) {
+    SCOPED_TRACE(command);
+    const fs::path log = out.path() / "stderr.txt";
+    const auto result = runProcess(cli() + " " + command + " 2>" + log.string());
+    ASSERT_EQ(result.exitCode, 0) << result.output;
+    EXPECT_EQ(result.output.find("warning"), std::string::npos) << result.output;
+    const std::string errors = readFile(log);
+    EXPECT_NE(errors.find("fibremss: warning: muscle 'fusiform'"), std::string::npos) << errors;
+    std::istringstream lines(errors);
+    for (std::string line; std::getline(lines, line);) {
+      if (line.find("warning:") == std::string::npos && line.find("note:") == std::string::npos)
+        continue;
+      EXPECT_TRUE(line.starts_with("fibremss: warning: ") || line.starts_with("fibremss: note: "))
+          << line;
+    }
+  }
 }
 
 TEST(RunCli, PrintsJsonWithoutWritingAnything) {

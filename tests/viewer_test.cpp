@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <set>
 #include <string>
@@ -16,6 +17,7 @@
 
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Scene.h"
+#include "fibremss/VtkFiles.h"
 #include "support/Process.h"
 
 namespace fibremss {
@@ -55,6 +57,18 @@ bool isBackground(const std::array<int, 3>& c) {
 /// The first muscle's palette colour is red; lit, it stays clearly red (bones are ivory).
 bool isFirstMuscleColour(const std::array<int, 3>& c) {
   return c[0] > c[1] + 40 && c[0] > c[2] + 40;
+}
+
+/// The first muscle's colour at `point`'s pixel and the pixels 2 px around it.
+void expectFirstMuscleAround(const Image& image, const Camera& camera, const Vec3& point) {
+  const viewer::Pixel pixel = camera.project(point, image.width, image.height);
+  ASSERT_TRUE(pixel.visible);
+  for (int dx : {-2, 0, 2})
+    for (int dy : {-2, 0, 2}) {
+      const std::array<int, 3> c = image.at(int(pixel.x) + dx, int(pixel.y) + dy);
+      EXPECT_TRUE(isFirstMuscleColour(c)) << "at " << pixel.x + dx << "," << pixel.y + dy << ": "
+                                          << c[0] << " " << c[1] << " " << c[2];
+    }
 }
 
 TEST(ViewerCamera, ProjectsTheFramedBoxIntoTheImageAndItsCentreToTheMiddle) {
@@ -106,18 +120,25 @@ std::vector<Vec3> muscleCentroids(const std::string& name, int steps) {
   return centroids;
 }
 
-TEST(Viewer, ScreenshotDrawsTheMuscleWhereTheSimulationPutsItAndBackgroundElsewhere) {
-  TemporaryDirectory directory("fibremss_viewer_test");
+/// A 320 × 240 screenshot without the panel, muscles coloured by muscle_id, after `steps`.
+viewer::ViewerOptions screenshotOptions(const std::string& png, int steps) {
   viewer::ViewerOptions options;
-  options.scene = "fusiform";
-  options.steps = 3;
-  options.screenshot = (directory.path() / "fusiform.png").string();
+  options.steps = steps;
+  options.screenshot = png;
   options.width = 320;
   options.height = 240;
   options.colourBy = "muscle_id";
   options.hideUi = true;
   options.azimuthDeg = 20;
   options.elevationDeg = 10;
+  return options;
+}
+
+TEST(Viewer, ScreenshotDrawsTheMuscleWhereTheSimulationPutsItAndBackgroundElsewhere) {
+  TemporaryDirectory directory("fibremss_viewer_test");
+  viewer::ViewerOptions options =
+      screenshotOptions((directory.path() / "fusiform.png").string(), 3);
+  options.scene = "fusiform";
   const viewer::ViewerResult result = viewer::runViewer(options);
   EXPECT_EQ(result.steps, 3);
 
@@ -134,15 +155,8 @@ TEST(Viewer, ScreenshotDrawsTheMuscleWhereTheSimulationPutsItAndBackgroundElsewh
   ASSERT_EQ(centroids.size(), 1u);
   ASSERT_EQ(result.viewX, 0);  // no panel
   ASSERT_EQ(result.viewWidth, image.width);
-  const viewer::Pixel pixel = result.camera.project(centroids[0], image.width, image.height);
-  ASSERT_TRUE(pixel.visible);
   // The muscle covers its projected centroid and a few pixels around it.
-  for (int dx : {-2, 0, 2})
-    for (int dy : {-2, 0, 2}) {
-      const std::array<int, 3> c = image.at(int(pixel.x) + dx, int(pixel.y) + dy);
-      EXPECT_TRUE(isFirstMuscleColour(c)) << "at " << pixel.x + dx << "," << pixel.y + dy << ": "
-                                          << c[0] << " " << c[1] << " " << c[2];
-    }
+  expectFirstMuscleAround(image, result.camera, centroids[0]);
   // And it is a shape, not a smear: a minority of the image.
   size_t muscle = 0;
   for (int y = 0; y < image.height; ++y)
@@ -211,10 +225,52 @@ TEST(Viewer, ARunsDirectoryShowsTheSceneItRan) {
             2);
 }
 
+TEST(Viewer, PlaysARunsFramesAndDrawsTheMuscleWhereTheFrameSaysWithoutItsScene) {
+  TemporaryDirectory directory("fibremss_view_frames_test");
+  const std::filesystem::path out = directory.path() / "run";
+  ASSERT_EQ(runProcess(std::string(FIBREMSS_CLI) + " run fusiform --steps 3 --frame-every 1 " +
+                       "--out " + out.string() + " > /dev/null 2>&1")
+                .exitCode,
+            0);
+  // The frames alone: nothing left to simulate from.
+  std::filesystem::remove(out / "scene.json");
+  const PolyDataFile frame = readVtp((out / "frames/muscle0_fusiform_surface_00002.vtp").string());
+  btVector3 sum(0, 0, 0);
+  for (const btVector3& v : frame.points) sum += v;
+  sum /= btScalar(frame.points.size());
+  const Vec3 centroid{float(sum.x()), float(sum.y()), float(sum.z())};
+
+  // The third frame.
+  viewer::ViewerOptions options = screenshotOptions((directory.path() / "frames.png").string(), 2);
+  options.runDir = out.string();
+  const viewer::ViewerResult result = viewer::runViewer(options);
+  EXPECT_EQ(result.steps, 2);
+  const Image image(options.screenshot);
+  ASSERT_EQ(image.width, 320);
+  EXPECT_TRUE(isBackground(image.at(1, 1)));
+  expectFirstMuscleAround(image, result.camera, centroid);
+  // Through the command: frames beyond the last show the last, coloured by an array only the
+  // frames have; a collection without frames is bad input.
+  const std::string png = (directory.path() / "cli.png").string();
+  const auto view =
+      runProcess(std::string(FIBREMSS_CLI) + " view " + out.string() +
+                 " --frames 9 --colour-by penetration --size 200x150 --screenshot " + png);
+  ASSERT_EQ(view.exitCode, 0) << view.output;
+  EXPECT_NE(view.output.find("(200x150, after 2 frames)"), std::string::npos) << view.output;
+  std::ofstream(out / "run.pvd") << "<VTKFile type=\"Collection\"><Collection/></VTKFile>";
+  EXPECT_EQ(runProcess(std::string(FIBREMSS_CLI) + " view " + out.string() + " --screenshot " +
+                       png + " 2>/dev/null")
+                .exitCode,
+            2);
+}
+
 TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   const std::string cli = std::string(FIBREMSS_CLI) + " view ";
   EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --colour-by pressure --screenshot /tmp/x.png").exitCode, 2);
+  // Penetration is in a run's frames, not in a scene stepped live.
+  EXPECT_EQ(runProcess(cli + "fusiform --colour-by penetration --screenshot /tmp/x.png").exitCode,
+            2);
   EXPECT_EQ(runProcess(cli + "fusiform --draw sparks --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --size 12 --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --camera 1 --screenshot /tmp/x.png").exitCode, 2);

@@ -12,6 +12,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Output.h"
+#include "fibremss/VtkFiles.h"
 #include "support/Process.h"
 
 namespace fs = std::filesystem;
@@ -297,3 +298,48 @@ TEST_F(VtpFiles, SharedOpenSimGeometryLoadsInMetres) {
   EXPECT_GT(upper.y() - lower.y(), 0.3);
   EXPECT_LT(upper.y() - lower.y(), 0.5);
 }
+
+namespace fibremss {
+namespace {
+
+TEST(VtpFrames, PointDataAndACollectionReadBackAsWritten) {
+  testing::TemporaryDirectory dir("fibremss_vtp_frames");
+  PolyData data;
+  data.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  data.pointScale = 1000;
+  data.triangles = {{0, 1, 2}, {0, 2, 3}};
+  data.lineIndices = {0, 1, 3};
+  data.lineOffsets = {0, 3};
+  data.pointData = {{"stretch", 1, std::vector<float>{1.0f, 1.25f, 0.5f, 2.0f}},
+                    {"id", 1, std::vector<int32_t>{7, 7, 7, 7}},
+                    {"d", 3, std::vector<double>{0, 0, 0, 1, 2, 3, -1, 0, 0.5, 4, 4, 4}}};
+  const std::string path = (dir.path() / "a.vtp").string();
+  writeVtp(path, data);
+  const PolyDataFile file = readVtp(path, 0.001);
+  ASSERT_EQ(file.points.size(), 4u);
+  EXPECT_NEAR(file.points[1].x(), 1.0, 1e-6);
+  EXPECT_EQ(file.triangles.size(), 2u);
+  EXPECT_EQ(file.lineIndices, data.lineIndices);
+  ASSERT_EQ(file.pointData.size(), 3u);
+  EXPECT_EQ(file.array("stretch")->values, (std::vector<float>{1.0f, 1.25f, 0.5f, 2.0f}));
+  EXPECT_EQ(file.array("id")->values, (std::vector<float>{7, 7, 7, 7}));
+  EXPECT_EQ(file.array("d")->components, 3);
+  EXPECT_EQ(file.array("d")->values[5], 3.0f);
+  EXPECT_EQ(file.array("none"), nullptr);
+
+  PvdCollection pvd;
+  pvd.add(0.5, "a.vtp", 0);
+  pvd.add(0.5, "b.vtp", 1);
+  pvd.add(0.00457108166301623, "c.vtp", 0);
+  pvd.write((dir.path() / "run.pvd").string());
+  const std::vector<PvdDataSet> sets = readPvd((dir.path() / "run.pvd").string());
+  ASSERT_EQ(sets.size(), 3u);
+  EXPECT_EQ(sets[1].file, "b.vtp");
+  EXPECT_EQ(sets[1].part, 1);
+  EXPECT_DOUBLE_EQ(sets[2].time, 0.00457108166301623);
+  std::ofstream(dir.path() / "bad.pvd") << "<VTKFile type=\"PolyData\"></VTKFile>";
+  EXPECT_THROW(readPvd((dir.path() / "bad.pvd").string()), InputError);
+}
+
+}  // namespace
+}  // namespace fibremss

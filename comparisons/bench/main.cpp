@@ -1,9 +1,12 @@
 // fibremss_bench: Google Benchmark suite of the step's kernels on thigh13 (R = 20, 40), each
 // timed alone on one thread while the other parts of the iteration run untimed, plus whole
-// iterations with 1 and 2 threads. `fibremss_bench --callgrind-kernels R` instead runs each
+// iterations with 1 and 2 threads, and the haptic query MuscleWorld/MuscleSystem::contactWrench
+// of a probe pressed into a muscle. `fibremss_bench --callgrind-kernels R` instead runs each
 // kernel once under callgrind's client requests (comparisons/bench/callgrind.sh);
 // `fibremss_bench --thread-scaling R [ROUNDS]` alternates 1 and 2 threads in one run, alone and
 // with a busy loop of its own on one core, and prints the medians and their ratio.
+#include <BulletCollision/CollisionShapes/btSphereShape.h>
+#include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <benchmark/benchmark.h>
 #include <pthread.h>
 #include <sched.h>
@@ -75,6 +78,47 @@ void benchIteration(benchmark::State& state) {
   state.counters["particles"] = static_cast<double>(scene.particles());
 }
 
+/// The haptic query: a kinematic sphere probe (radius 5 mm) pressed 2 mm into the surface of
+/// thigh13's first muscle, at its first boundary particle, its contact taken by one step; then
+/// contactWrench at a pose up to 0.2 mm deeper, moving by 25 µm per call (a device read at 1 kHz
+/// between the muscles' steps). Its own scene: the contact body changes the others' steps.
+void benchContactWrench(benchmark::State& state) {
+  static std::map<int, std::unique_ptr<BenchScene>> scenes;
+  const int resolution = static_cast<int>(state.range(0));
+  auto& scene = scenes[resolution];
+  if (!scene) scene = std::make_unique<BenchScene>(resolution, 1);
+  MuscleSystem& system = scene->system();
+  const MuscleHandle muscle = system.muscles().front();
+  const MuscleSettings& settings = system.settings(muscle);
+  const std::span<const btVector3> positions = system.positions(muscle);
+  btVector3 centroid(0, 0, 0);
+  for (const btVector3& p : positions) centroid += p;
+  centroid /= static_cast<btScalar>(positions.size());
+  const btVector3 touched = positions[settings.boundaryParticles.front()];
+  const btScalar radius = btScalar(0.005);
+  const btVector3 outward = (touched - centroid).normalized();
+  const btVector3 centre = touched + outward * (radius + settings.radii[0] - btScalar(0.002));
+  btSphereShape shape(radius);
+  btRigidBody probe(0, nullptr, &shape);
+  probe.setCollisionFlags(probe.getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+  probe.setWorldTransform(btTransform(btQuaternion::getIdentity(), centre));
+  const btCollisionObject* bodies[] = {&probe};
+  system.setContactBodies(bodies);
+  system.step();  // bones still: the muscle takes the probe's dent
+  size_t contacts = 0;
+  int call = 0;
+  for (auto _ : state) {
+    const btVector3 jitter = outward * (btScalar(2.5e-5) * static_cast<btScalar>(++call % 8));
+    const ContactWrench wrench =
+        system.contactWrench(probe, btTransform(btQuaternion::getIdentity(), centre - jitter));
+    contacts = std::max(contacts, wrench.contacts);
+    benchmark::DoNotOptimize(wrench);
+  }
+  system.setContactBodies({});
+  state.counters["contacts"] = static_cast<double>(contacts);  // most in one query
+  state.counters["particles"] = static_cast<double>(scene->particles());
+}
+
 void registerAll() {
   for (Part part : kParts)
     benchmark::RegisterBenchmark(partName(part), benchPart, part)
@@ -86,6 +130,11 @@ void registerAll() {
       ->ArgNames({"R", "threads"})
       ->Unit(benchmark::kMillisecond)
       ->UseRealTime();
+  benchmark::RegisterBenchmark("contact-wrench", benchContactWrench)
+      ->Arg(20)
+      ->Arg(40)
+      ->ArgName("R")
+      ->Unit(benchmark::kMicrosecond);
 }
 
 /// Each kernel once (after two warm-up iterations), then one whole step of kIterationsPerStep

@@ -11,6 +11,7 @@
 #include "Commands.h"
 #include "SceneArgs.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Messages.h"
 #include "fibremss/Output.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
@@ -142,18 +143,17 @@ void runCheck(const CheckArgs& args) {
   const auto loadStart = Clock::now();
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
-  for (const auto& warning : scene.warnings) std::cerr << "fibremss: warning: " << warning << "\n";
-  for (const auto& note : scene.notes) std::cerr << "fibremss: note: " << note << "\n";
+  printWarnings(scene.warnings);
+  printNotes(scene.notes);
 
   if (!args.out.empty()) requireWritableDirectory(args.out);  // fail before preparing
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
-  for (const auto& warning : prepared.report.warnings)
-    std::cerr << "fibremss: warning: " << warning << "\n";
+  printWarnings(prepared.report.warnings);
   const nlohmann::ordered_json preparation = preparationReport(prepared.report, scene);
   std::vector<std::string> warnings = prepared.report.warnings;
   for (auto& warning : attachmentWarnings(scene, prepared)) {
-    std::cerr << "fibremss: warning: " << warning << "\n";
+    printWarning(warning);
     warnings.push_back(std::move(warning));
   }
 

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "Commands.h"
@@ -17,6 +18,7 @@
 #include "Validators.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/CompareReport.h"
+#include "fibremss/Output.h"
 #include "fibremss/Progress.h"
 #include "fibremss/Stability.h"
 
@@ -95,10 +97,14 @@ void compare(CompareArgs& args) {
   };
   InterruptGuard interrupt;
   args.options.cancel = &interruptRequested;
+  // Locked against a second writer from the start when named, else once the scene names it.
+  std::optional<OutputDirectory> locked;
+  if (!args.out.empty()) locked.emplace(args.out);
   const Comparison comparison = runComparison(args.scene.scene, args.scene.overrides, args.options);
   progress.finish();
 
   const std::string out = args.out.empty() ? "compare-" + comparison.scene : args.out;
+  if (!locked) locked.emplace(out);
   const nlohmann::json summary = summaryJson(comparison, commandLine());
   const std::vector<std::string> files = writeComparison(summary, out);
 

@@ -13,6 +13,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/FibreGeneration.h"
 #include "fibremss/MeshIO.h"
+#include "fibremss/Messages.h"
 
 namespace fibremss::cli {
 namespace {
@@ -123,7 +124,7 @@ AttachmentArea readArea(const std::string& text, const FibresArgs& args, Triangl
 void run(const FibresArgs& args) {
   MeshReport report;
   const TriangleMesh surface = loadSurface(args.muscle, args.scale, &report);
-  for (const auto& warning : report.warnings) std::cout << "warning: " << warning << "\n";
+  printWarnings(report.warnings);
   TriangleMesh originBone, insertionBone;
   const AttachmentArea origin = readArea(args.origin, args, originBone, "--origin");
   const AttachmentArea insertion = readArea(args.insertion, args, insertionBone, "--insertion");
@@ -138,7 +139,7 @@ void run(const FibresArgs& args) {
   options.sectionSeeds = args.seeds == "section";
   const FibreGenerationResult result =
       generateFibres(surface, origin, insertion, options, args.muscle);
-  for (const auto& warning : result.warnings) std::cout << "warning: " << warning << "\n";
+  printWarnings(result.warnings);
   saveFibresVtk(args.out, result.fibres, args.scale);
   const FibreQuality& q = result.quality;
   std::cout << std::fixed << std::setprecision(2);

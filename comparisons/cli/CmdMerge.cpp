@@ -7,6 +7,7 @@
 
 #include "Commands.h"
 #include "fibremss/CompareReport.h"
+#include "fibremss/Output.h"
 
 namespace fibremss::cli {
 namespace {
@@ -20,6 +21,7 @@ void merge(const MergeArgs& args) {
   std::vector<nlohmann::json> summaries;
   for (const std::string& input : args.inputs) summaries.push_back(readSummary(input));
   const nlohmann::json merged = mergeSummaries(summaries, args.inputs);
+  const OutputDirectory locked(args.out);  // a second writer into it is refused
   const std::vector<std::string> files = writeComparison(merged, args.out);
   std::printf("merged %zu runs from %zu summaries; wrote", merged["runs"].size(), summaries.size());
   for (const std::string& file : files) std::printf(" %s/%s", args.out.c_str(), file.c_str());

@@ -10,6 +10,8 @@
 #include "ProgressLog.h"
 #include "ReferenceArgs.h"
 #include "SceneArgs.h"
+#include "fibremss/Messages.h"
+#include "fibremss/Output.h"
 
 namespace fibremss::cli {
 namespace {
@@ -37,9 +39,13 @@ void writeOut(const Reference& reference, const std::string& out) {
 
 void reference(ReferenceArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
+  printWarnings(scene.warnings);
+  printNotes(scene.notes);
   std::fprintf(stderr, "preparing %s\n", scene.name.c_str());
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  printWarnings(prepared.report.warnings);
+  printWarnings(attachmentWarnings(scene, prepared));
   ProgressLog progress;
   args.options.log = [&](const std::string& line) { progress.line(line); };
   args.options.progress = [&](const ReferenceProgress& p) {
@@ -49,9 +55,10 @@ void reference(ReferenceArgs& args) {
   };
   InterruptGuard interrupt;
   args.options.cancel = &interruptRequested;
+  const std::string out = args.out.empty() ? "reference-" + scene.name : args.out;
+  const OutputDirectory locked(out);  // a second writer into it is refused
   const Reference result = computeReference(scene, prepared, args.options);
   progress.finish();
-  const std::string out = args.out.empty() ? "reference-" + scene.name : args.out;
   writeOut(result, out);
   std::printf("%s\n", result.description.c_str());
   std::printf("poses solved: %d/%d%s\n", result.solution.solvedPoses(),

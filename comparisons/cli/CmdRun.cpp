@@ -19,6 +19,7 @@
 #include "Validators.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/FibreRun.h"
+#include "fibremss/Messages.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
@@ -34,6 +35,7 @@ struct RunArgs {
   bool json = false;     ///< --json: the summary as JSON on stdout
   bool loop = false;     ///< --loop: sweep the motion forth and back past its last pose
   long sampleEvery = 0;  ///< --sample-every K: soak sample every K iterations (0: none)
+  std::vector<std::string> formats{"vtk"};  ///< --format: frame formats (vtk, gltf)
 };
 
 /// Exit codes beyond 0 (done), 1 (error) and 2 (bad input).
@@ -158,27 +160,30 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
         soak.at("ms_per_iteration_max").get<double>());
   }
   if (m.interrupted) std::printf("  interrupted after %d steps\n", m.steps);
-  if (!args.out.empty() && details.frames > 0)
-    std::printf("  wrote %s/summary.json and %d frame(s) (%s/run.pvd)\n", args.out.c_str(),
-                details.frames, args.out.c_str());
-  else if (!args.out.empty())
-    std::printf("  wrote %s/summary.json\n", args.out.c_str());
+  if (args.out.empty()) return;
+  std::string frames;
+  if (details.frames > 0) {
+    const bool vtk = std::ranges::count(args.formats, "vtk") > 0;
+    const bool gltf = std::ranges::count(args.formats, "gltf") > 0;
+    frames = " and " + std::to_string(details.frames) + " frame(s) (" +
+             (vtk ? args.out + "/run.pvd" : "") + (vtk && gltf ? ", " : "") +
+             (gltf ? args.out + "/gltf/*.glb" : "") + ")";
+  }
+  std::printf("  wrote %s/summary.json, %s/series.csv%s\n", args.out.c_str(), args.out.c_str(),
+              frames.c_str());
 }
 
 void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
-  for (const std::string& warning : scene.warnings)
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
-  for (const std::string& note : scene.notes) std::fprintf(stderr, "note: %s\n", note.c_str());
+  printWarnings(scene.warnings);
+  printNotes(scene.notes);
   // A run that cannot write fails before preparing, and writes nothing before it prepared.
   if (!args.out.empty()) requireWritableDirectory(args.out);
   std::fprintf(stderr, "preparing %s ...\n", scene.name.c_str());
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
-  for (const std::string& warning : prepared.report.warnings)
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
-  for (const std::string& warning : attachmentWarnings(scene, prepared))
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  printWarnings(prepared.report.warnings);
+  printWarnings(attachmentWarnings(scene, prepared));
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
   std::optional<OutputDirectory> outDir;  // locked against a second run into it
   if (!args.out.empty()) {
@@ -190,10 +195,13 @@ void run(const RunArgs& args) {
     // A previous run's would mislead.
     std::filesystem::remove(args.out + "/summary.json");
     std::filesystem::remove(args.out + "/soak.csv");
+    std::filesystem::remove(args.out + "/series.csv");
   }
 
   FibreRunOptions options;
   options.outDir = args.out;
+  options.vtkFrames = std::ranges::count(args.formats, "vtk") > 0;
+  options.gltfFrames = std::ranges::count(args.formats, "gltf") > 0;
   options.frameEvery = args.frameEvery;
   options.steps = args.steps;
   options.keepPoseSurfaces = false;
@@ -235,7 +243,10 @@ void run(const RunArgs& args) {
   if (!details.samples.empty()) summary["soak"] = soakJson(details.samples);
   if (!args.out.empty() && !details.samples.empty())
     writeFileAtomically(args.out + "/soak.csv", soakCsv(details.samples));
-  if (!args.out.empty()) writeFileAtomically(args.out + "/summary.json", summary.dump(2) + "\n");
+  if (!args.out.empty()) {
+    writeFileAtomically(args.out + "/series.csv", seriesCsv(metrics.series));
+    writeFileAtomically(args.out + "/summary.json", summary.dump(2) + "\n");
+  }
 
   if (args.json)
     std::cout << summary.dump(2) << "\n";
@@ -259,7 +270,10 @@ void addRunCommand(CLI::App& app) {
   command->footer(
       "One step per pose of the scene's motion. With --out DIR: DIR/frames/*.vtp and DIR/run.pvd "
       "(open in ParaView; binary, in the scene's units, at simulated seconds, arrays in "
-      "docs/outputs.md), DIR/scene.json (the complete scene) and DIR/summary.json (with what "
+      "docs/outputs.md), DIR/scene.json (the complete scene), DIR/series.csv (per step and muscle: "
+      "pose label, "
+      "simulated time, volume, mean fibre length, largest fibre stretch, deepest penetration, "
+      "contacts; the same as summary.json 'series') and DIR/summary.json (with what "
       "the numerical guard did: rolled-back steps, retries, frozen muscles; and per muscle: "
       "volume, "
       "penetration per bone, fixed particles, fibre length, worst spring). Exit code 3 when "
@@ -279,6 +293,14 @@ void addRunCommand(CLI::App& app) {
                    "Write a frame every K-th step (0: no frames; default: the scene's "
                    "outputs.frame_every)")
       ->check(nonNegativeInteger());
+  command
+      ->add_option("--format", args->formats,
+                   "Frame formats, comma-separated: vtk (frames/*.vtp and run.pvd for ParaView, "
+                   "scene units) and/or gltf (gltf/frame_NNNNN.glb, glTF 2.0 binary in metres: "
+                   "muscle surfaces and bones, for game engines, three.js, glTF viewers)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"vtk", "gltf"}))
+      ->capture_default_str();
   command->add_flag("--json", args->json, "Print the summary as JSON instead of text");
   command->add_flag("--loop", args->loop,
                     "Past the last pose, sweep the motion back to the first and forth again (with "

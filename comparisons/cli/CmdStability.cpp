@@ -46,7 +46,9 @@ void stability(StabilityArgs& args) {
   args.options.cancel = &interruptRequested;
   const StabilityMatrix matrix = runStabilityMatrix(cases, args.options);
 
-  std::filesystem::create_directories(args.out);
+  // Its cases are validated inside the matrix: nothing is written before, locked to write.
+  const OutputDirectory locked(args.out);
+
   writeFileAtomically(args.out + "/stability.json",
                       stabilityJson(matrix, args.options).dump(1) + "\n");
   const std::string markdown = stabilityMarkdown(matrix, args.options);

@@ -12,6 +12,7 @@
 #include "Commands.h"
 #include "SceneArgs.h"
 #include "fibremss/Error.h"
+#include "fibremss/Messages.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/viewer/Viewer.h"
 
@@ -49,25 +50,29 @@ struct ViewArgs {
   std::string size = "1280x800";  ///< --size WxH
 };
 
-/// SCENE, or for a run's directory the complete scene it ran (DIR/scene.json), stepped live:
-/// playing the frames themselves is not implemented yet.
-std::string sceneToView(const std::string& scene) {
-  if (!std::filesystem::is_directory(scene)) return scene;
-  const std::filesystem::path file = std::filesystem::path(scene) / "scene.json";
-  if (!std::filesystem::is_regular_file(file))
+/// What `fibremss view SCENE` shows: a run's directory with frames (DIR/run.pvd) is played;
+/// one without (--frame-every 0) steps the scene it ran (DIR/scene.json) live; anything else is
+/// a scene to step live.
+void chooseSource(const std::string& scene, viewer::ViewerOptions& options) {
+  options.scene = scene;
+  if (!std::filesystem::is_directory(scene)) return;
+  const std::filesystem::path dir(scene);
+  if (std::filesystem::is_regular_file(dir / "run.pvd")) {
+    options.runDir = scene;
+    return;
+  }
+  if (!std::filesystem::is_regular_file(dir / "scene.json"))
     throw InputError(scene, "",
                      "expected a built-in scene, a scene file or a run's directory (fibremss run "
-                     "--out DIR) with scene.json");
-  std::fprintf(stderr,
-               "note: playing a run's frames is not implemented yet; stepping its scene (%s) "
-               "live instead\n",
-               file.c_str());
-  return file.string();
+                     "--out DIR) with run.pvd or scene.json");
+  printNote("no frames in " + scene + " (run.pvd); stepping its scene (" +
+            (dir / "scene.json").string() + ") live instead");
+  options.scene = (dir / "scene.json").string();
 }
 
 void view(ViewArgs& args) {
   viewer::ViewerOptions& options = args.options;
-  options.scene = sceneToView(args.scene.scene);
+  chooseSource(args.scene.scene, options);
   options.overrides = args.scene.overrides;
   options.muscleDebugFlags = drawFlags(args.draw);
   if (args.camera.size() < 2 || args.camera.size() > 3)
@@ -83,8 +88,8 @@ void view(ViewArgs& args) {
                      "expected WIDTHxHEIGHT in pixels (16 to 8192), got '" + args.size + "'");
   const viewer::ViewerResult result = viewer::runViewer(options);
   if (!options.screenshot.empty())
-    std::printf("wrote %s (%dx%d, after %d steps)\n", options.screenshot.c_str(), result.width,
-                result.height, result.steps);
+    std::printf("wrote %s (%dx%d, after %d %s)\n", options.screenshot.c_str(), result.width,
+                result.height, result.steps, options.runDir.empty() ? "steps" : "frames");
 }
 
 }  // namespace
@@ -94,26 +99,30 @@ void addViewCommand(CLI::App& app) {
   args->camera = {args->options.azimuthDeg, args->options.elevationDeg, args->options.zoom};
   CLI::App* command = app.add_subcommand(
       "view",
-      "Watch a scene step live: bones, muscles coloured by an array, particles, fibres, "
-      "contacts, the per-part timings");
+      "Watch a scene step live, or play a run's frames: bones, muscles coloured by an array, "
+      "particles, fibres, contacts, the per-part timings");
   command->footer(
-      "In the window: space plays or pauses, S or the right arrow steps, R resets, F frames the "
-      "scene, H hides the panel, Q quits; drag to orbit, right or middle drag (or shift+drag) "
+      "In the window: space plays or pauses, S or the right arrow steps (a frame of a run), R "
+      "resets, the slider scrubs a run's frames, F frames the scene, H hides the panel, Q quits; "
+      "drag to orbit, right or middle drag (or shift+drag) "
       "to pan, the wheel zooms. Without a display, --screenshot works under `xvfb-run -a`.");
   addSceneArgs(*command, args->scene);
   command->get_option("scene")->description(
-      "Built-in scene name (see `fibremss scenes`), .json file, or a run's directory (its "
-      "scene.json is stepped live)");
+      "Built-in scene name (see `fibremss scenes`), .json file, or a run's directory (`fibremss "
+      "run --out DIR`: its frames are played; without frames its scene.json is stepped live)");
   command->add_option("--screenshot", args->options.screenshot,
                       "Write this PNG after --frames steps and exit (no interaction)");
   command
-      ->add_option("--frames", args->options.steps,
-                   "Steps to take before the first picture (default 0: the scene at rest)")
+      ->add_option(
+          "--frames", args->options.steps,
+          "Steps to take (frames to advance, for a run) before the first picture (default 0: the "
+          "scene at rest, the run's first frame)")
       ->check(CLI::NonNegativeNumber);
   command
       ->add_option("--colour-by,--color-by", args->options.colourBy,
                    "Colour muscles by fibre_stretch (current/rest length along the fibres), "
-                   "displacement (from rest, scene units) or muscle_id")
+                   "displacement (|current - rest|, scene units) or muscle_id; a run's frames also "
+                   "by spring_strain, penetration (scene units) or fixed")
       ->capture_default_str();
   command
       ->add_option("--draw", args->draw,

@@ -32,6 +32,12 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
                   "bounds the tetrahedron volume by 1/8)")
       ->capture_default_str()
       ->check(CLI::Range(0, 3));
+  command
+      .add_option("--ccx-contact", options.definition.contactPenalty,
+                  "Reference muscle-bone contact: penalty slope K = this x E [1/m] (frictionless, "
+                  "node to surface, every bone a rigid obstacle); 0: no contact")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e9));
   command.add_flag("--reference-cached-only", options.cachedOnly,
                    "Use the reference (and each gate's solve) only if it is in the cache; what is "
                    "not there is reported missing, not computed");

@@ -1,10 +1,14 @@
 // The fibremss command-line tool. Exit codes (docs/bad-inputs.md): 0 done, 2 bad input or usage,
 // 3 a run that failed numerically, 130 interrupted; 1 only for an internal error.
+#include <LinearMath/btScalar.h>
+
 #include <exception>
 #include <iostream>
+#include <string>
 
 #include "Commands.h"
 #include "fibremss/Error.h"
+#include "fibremss/Kernel.h"
 
 namespace {
 
@@ -20,11 +24,38 @@ int exitFor(const CLI::App& app, const CLI::ParseError& e) {
   return kExitBadInput;
 }
 
+/// What --version prints: FibreMSS's version, Bullet's version and btScalar precision, the
+/// spring-force kernel chosen at runtime, the compiler.
+std::string versionText() {
+  const int bullet = btGetVersion();
+#if defined(__clang__)
+  const std::string compiler = "clang " __clang_version__;
+#elif defined(__GNUC__)
+  const std::string compiler = "GCC " __VERSION__;
+#else
+  const std::string compiler = "unknown";
+#endif
+  return "fibremss " FIBREMSS_VERSION
+         "\n"
+         "Bullet " +
+         std::to_string(bullet / 100) + "." + std::to_string(bullet % 100) + ", btScalar " +
+         (sizeof(btScalar) == sizeof(double) ? "double" : "float") +
+         "\n"
+         "spring kernel " +
+         fibremss::activeSpringKernel() +
+         " (chosen at runtime; FIBREMSS_SPRING_KERNEL=scalar|sse2|avx2 picks another)\n"
+         "compiler " +
+         compiler;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"FibreMSS: fibre-sampled mass-spring muscles with sphere collision for Bullet"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", versionText,
+                       "Print the version, Bullet's version and precision, the SIMD kernel and the "
+                       "compiler, and exit");
   app.footer(
       "Exit codes (every subcommand): 0 done, 2 bad input or usage, 3 a run that failed "
       "numerically, 130 interrupted (docs/bad-inputs.md).");

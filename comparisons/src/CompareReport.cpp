@@ -14,6 +14,7 @@
 #include <sstream>
 #include <tuple>
 
+#include "FrameWriter.h"
 #include "ReportScaling.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
@@ -588,6 +589,36 @@ bool sameKind(const nlohmann::json& value, const nlohmann::json& expected) {
   return value.type() == expected.type();
 }
 
+void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
+                    const std::string& source, const std::string& path);
+
+/// Throws InputError naming the field of a run's `muscles` list (MuscleMetrics.h) whose type
+/// toJson(MuscleResults) would not write: objects of its fields, numbers per bone.
+void checkMuscles(const nlohmann::json& muscles, const std::string& source,
+                  const std::string& path) {
+  if (!muscles.is_array()) throw InputError(source, path, "expected an array of muscle objects");
+  const nlohmann::json expected = toJson(MuscleResults{});
+  for (size_t m = 0; m < muscles.size(); ++m) {
+    const std::string at = path + "[" + std::to_string(m) + "]";
+    checkRunFields(muscles[m], expected, source, at);
+    for (const char* perBone : {"max_penetration_mm", "fixed_particles"}) {
+      const nlohmann::json values = muscles[m].value(perBone, nlohmann::json::object());
+      for (const auto& [bone, value] : values.items())
+        if (!value.is_number() && !value.is_null())
+          throw InputError(source, at + "." + perBone + "." + bone, "expected a number");
+    }
+  }
+}
+
+/// Throws InputError naming the field of a run's `series` rows (MuscleMetrics.h) whose type
+/// seriesJson would not write.
+void checkSeries(const nlohmann::json& series, const std::string& source, const std::string& path) {
+  if (!series.is_array()) throw InputError(source, path, "expected an array of series rows");
+  const nlohmann::json expected = seriesJson({SeriesRow{}}).at(0);
+  for (size_t r = 0; r < series.size(); ++r)
+    checkRunFields(series[r], expected, source, path + "[" + std::to_string(r) + "]");
+}
+
 /// Throws InputError naming `path.key` for a field of a run whose type toJson would not write.
 void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
                     const std::string& source, const std::string& path) {
@@ -595,7 +626,11 @@ void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
   for (auto it = expected.begin(); it != expected.end(); ++it) {
     const auto found = run.find(it.key());
     if (found == run.end()) continue;  // missing keys keep their defaults
-    if (it->is_object())
+    if (it.key() == "muscles")
+      checkMuscles(*found, source, path + ".muscles");
+    else if (it.key() == "series")
+      checkSeries(*found, source, path + ".series");
+    else if (it->is_object())
       checkRunFields(*found, *it, source, path + "." + it.key());
     else if (!sameKind(*found, *it))
       throw InputError(source, path + "." + it.key(),
@@ -781,6 +816,16 @@ std::vector<std::string> writeComparison(const nlohmann::json& summary, const st
   std::vector<std::string> written;
   writeFileAtomically((dir / "summary.json").string(), summary.dump(2) + "\n");
   written.push_back("summary.json");
+  // Per FibreMSS run, its per-step series as `fibremss run` writes it.
+  for (size_t r = 0; r < summary["runs"].size(); ++r) {
+    const nlohmann::json& run = summary["runs"][r];
+    const std::vector<SeriesRow> series = seriesFromJson(run.value("series", nlohmann::json()));
+    if (series.empty()) continue;
+    const std::string name =
+        "series_" + std::to_string(r) + "_" + fileSafe(run.value("method", "")) + ".csv";
+    writeFileAtomically((dir / name).string(), seriesCsv(series));
+    written.push_back(name);
+  }
 
   std::vector<std::string> plots;
   const nlohmann::json& runs = summary["runs"];

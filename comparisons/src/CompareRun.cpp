@@ -14,6 +14,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Messages.h"
 
 namespace fibremss {
 namespace {
@@ -270,11 +271,15 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
                   const FemDefinition& definition, const MethodRunOptions& options) {
   const auto start = Clock::now();
   FemScene sim(prepared, posesAt(scene, 0), definition);
-  char integrator[160];
+  char integrator[320];
   std::snprintf(integrator, sizeof integrator,
                 "Neo-Hookean FEM, btDeformableBodySolver (explicit elasticity, implicit damping, "
-                "%d substeps per pose, mass scaling +%.0f %%)",
-                definition.substepsPerPose, 100 * sim.addedMassShare());
+                "%d substeps per pose, then settling until no node is faster than %.3g mm/s (at "
+                "most %d substeps), mass scaling +%.0f %%, at least %d pins per bone (fewest: "
+                "%zu))",
+                definition.substepsPerPose, 1e3 * double(definition.settleSpeed),
+                definition.settleSubsteps, 100 * sim.addedMassShare(), definition.minPinsPerBone,
+                sim.fewestPinsPerBone());
   RunMetrics metrics = namedRun(scene, "fem", integrator);
   metrics.threads = 1;
   metrics.particles = sim.nodeCount();
@@ -298,12 +303,19 @@ RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
     return (options.cancel && options.cancel->load()) ||
            (options.budgetSeconds > 0 && secondsSince(start) > options.budgetSeconds);
   };
-  simulated.step = [&](std::span<const btTransform> t) { return sim.stepPose(t, outOfTime); };
+  int unsettled = 0;  // poses that did not settle within settleSubsteps
+  simulated.step = [&](std::span<const btTransform> t) {
+    const bool done = sim.stepPose(t, outOfTime);
+    unsettled += done && sim.lastSettleSubsteps() > definition.settleSubsteps;
+    return done;
+  };
   simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
   simulated.points = [&](size_t m) { return sim.nodePositions(m); };
   simulated.springDeviation = [] { return RunMetrics::kNone; };  // not a spring model
   simulated.iterationsPerStep = simulated.timeStepsPerStep = definition.substepsPerPose;
   runPoses(scene, prepared, simulated, options, start, metrics);
+  if (unsettled > 0)
+    metrics.integrator += "; " + std::to_string(unsettled) + " pose(s) did not settle";
   return metrics;
 }
 
@@ -622,9 +634,13 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     if (options.log) options.log(line);
   };
   const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
+  for (const std::string& warning : scene.warnings) log(warningLine(warning));
+  for (const std::string& note : scene.notes) log(noteLine(note));
   log("preparing " + scene.name);
   const PreparedScene prepared =
       prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  for (const std::string& warning : prepared.report.warnings) log(warningLine(warning));
+  for (const std::string& warning : attachmentWarnings(scene, prepared)) log(warningLine(warning));
 
   Comparison comparison;
   comparison.scene = scene.name;

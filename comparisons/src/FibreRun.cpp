@@ -14,6 +14,7 @@
 #include "fibremss/Analytic.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Messages.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 
@@ -162,19 +163,30 @@ class MuscleLedger {
     for (MuscleHandle muscle : muscles) results.emplace_back(system.settings(muscle), boneNames);
   }
 
-  /// After step s: every muscle measured (a non-finite one keeps its earlier steps' results),
-  /// the muscles that failed a rolled-back attempt named in `guard.rollbacks`, the newly frozen
-  /// ones in `guard.frozen`. Returns whether every muscle was finite.
-  bool afterStep(int s, const StepStats& stats, const BoneMeshes& bones,
+  /// After step s (at `where`): every muscle measured (a non-finite one keeps its earlier
+  /// steps' results) with its free spheres' depth in the bones, a series row each, the muscles
+  /// that failed a rolled-back attempt named in `guard.rollbacks`, the newly frozen ones in
+  /// `guard.frozen`. Returns whether every muscle was finite.
+  bool afterStep(const SeriesRow& where, const StepStats& stats, BoneMeshes& bones,
                  std::span<const btTransform> transforms, FibreRunDetails& guard) {
     bool finite = true;
+    const int s = where.step;
     for (size_t m = 0; m < muscles_.size(); ++m) {
       const MuscleHandle muscle = muscles_[m];
-      const MuscleStep step = measureMuscle(system_.settings(muscle), system_.positions(muscle),
-                                            system_.surface(muscle), bones.meshes(), transforms);
+      const MuscleSettings& settings = system_.settings(muscle);
+      MuscleStep step = measureMuscle(settings, system_.positions(muscle), system_.surface(muscle),
+                                      bones.meshes(), transforms);
+      if (step.finite) {
+        const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
+        step.boneContacts = spheres.penetrating;
+        spherePenetration = combine(spherePenetration, spheres);
+      }
       finite = finite && step.finite;
       MuscleResults& result = results[m];
       result.add(s, step);
+      series.push_back(where);
+      series.back().muscle = result.name;
+      series.back().measures = std::move(step);
       const MuscleFailures now = system_.failures(muscle);
       const int attempts = now.attempts - seen_[m].attempts, nan = now.nan - seen_[m].nan;
       seen_[m] = now;
@@ -193,6 +205,9 @@ class MuscleLedger {
   }
 
   std::vector<MuscleResults> results;  ///< one per muscle, in order
+  std::vector<SeriesRow> series;       ///< per step, per muscle
+  /// Free boundary particles' spheres in the bones, all finite muscles and steps.
+  Penetration spherePenetration;
 
  private:
   const MuscleSystem& system_;
@@ -232,12 +247,13 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   const int frameEvery = options.frameEvery >= 0 ? options.frameEvery : scene.outputs.frameEvery;
   std::unique_ptr<FrameWriter> frames;
   if (!options.outDir.empty() && frameEvery > 0)
-    frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale);
+    frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale,
+                                           FrameFormats{options.vtkFrames, options.gltfFrames});
 
   std::vector<btTransform> boneTransforms(bones.size(), btTransform::getIdentity());
   std::vector<double> msPerStep, msPerIteration, mss, volumeTerm, muscleCd, boneCd, response,
       output, measureMsPerStep;
-  Penetration penetration, spherePenetration;
+  Penetration penetration;
   std::vector<btVector3> poseSurface;
   std::vector<std::vector<float>> surfaceDepthsMm(muscles.size());  // per muscle, this step
   double simulatedTime = 0;                                         // [s]
@@ -267,7 +283,13 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     // Measures of this step: each muscle's (and what the guard did to it), and the surface
     // penetration into the bones of all muscles together.
     const auto measureStart = Clock::now();
-    const bool finite = ledger.afterStep(s, stats, boneMeshes, boneTransforms, guard);
+    SeriesRow where;
+    where.step = s;
+    where.pose = pose;
+    where.poseLabel = poseLabel(scene, pose);
+    where.timeS = simulatedTime;
+    where.solverContacts = stats.contacts;
+    const bool finite = ledger.afterStep(where, stats, boneMeshes, boneTransforms, guard);
     measured = measured || finite;
     poseSurface.clear();
     for (MuscleHandle muscle : muscles) {
@@ -280,9 +302,6 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
         surfaceDepthsMm[m].resize(surface.size());
         penetration =
             combine(penetration, boneMeshes.points(surface, boneTransforms, surfaceDepthsMm[m]));
-        spherePenetration = combine(
-            spherePenetration, boneMeshes.spheres(system.settings(muscles[m]),
-                                                  system.positions(muscles[m]), boneTransforms));
       }
     const double measureMs = millisecondsSince(measureStart);
 
@@ -341,14 +360,12 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     }
     if (failed && !goesOn) break;
     if (frames && (s % frameEvery == 0 || s == steps - 1))
-      frames->write({s, pose, poseLabel(scene, pose), simulatedTime}, system, muscles, prepared,
+      frames->write({s, pose, where.poseLabel, simulatedTime}, system, muscles, prepared,
                     boneTransforms, surfaceDepthsMm);
   }
   if (candidateOverflows > 0)
-    std::fprintf(stderr,
-                 "note: collision candidate lists overflowed %zu time(s): those pairs were "
-                 "traversed directly (same contacts, slower)\n",
-                 candidateOverflows);
+    printNote("collision candidate lists overflowed " + std::to_string(candidateOverflows) +
+              " time(s): those pairs were traversed directly (same contacts, slower)");
 
   // The headline: the steps measured before any failure, the worst muscle's figures.
   if (measured) {
@@ -371,13 +388,14 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
                                        system.surface(muscles[0]));
   metrics.muscles = std::move(ledger.results);
+  metrics.series = std::move(ledger.series);
   metrics.msPerStep = median(msPerStep);
   metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
   metrics.timing = {medianOrZero(mss),      medianOrZero(muscleCd), medianOrZero(boneCd),
                     medianOrZero(response), medianOrZero(output),   medianOrZero(volumeTerm)};
   if (details) {
     *details = std::move(guard);
-    details->spherePenetration = spherePenetration;
+    details->spherePenetration = ledger.spherePenetration;
     details->frames = frames ? frames->frames() : 0;
     details->measureMsPerStep = median(measureMsPerStep);
   }

@@ -1,20 +1,22 @@
 #include "FrameWriter.h"
 
+#include <array>
 #include <cctype>
 #include <cstdio>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/Gltf.h"
 
 namespace fibremss {
-namespace {
 
-/// A name usable in a file name: letters, digits, '-' and '_' kept, anything else '_'.
 std::string fileSafe(const std::string& name) {
   std::string safe = name.empty() ? "unnamed" : name;
   for (char& c : safe)
     if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
   return safe;
 }
+
+namespace {
 
 /// Per surface vertex, the skin-weighted average of a per-particle value (method.md §7).
 std::vector<float> onSurface(const MuscleSettings& muscle, std::span<const float> particleValues) {
@@ -80,19 +82,47 @@ void particleSpringStrain(const MuscleSettings& muscle, std::span<const btVector
 }
 
 FrameWriter::FrameWriter(const std::string& outDir, const OutputSettings& settings,
-                         double unitScale)
-    : outDir_(outDir), settings_(settings), sceneUnitsPerMetre_(btScalar(1.0 / unitScale)) {}
+                         double unitScale, FrameFormats formats)
+    : outDir_(outDir),
+      settings_(settings),
+      formats_(formats),
+      sceneUnitsPerMetre_(btScalar(1.0 / unitScale)) {}
 
 void FrameWriter::write(const FrameInfo& info, const MuscleSystem& system,
                         std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
                         std::span<const btTransform> boneTransforms,
                         std::span<const std::vector<float>> surfaceDepthsMm) {
-  int part = 0;
-  for (size_t m = 0; m < muscles.size(); ++m)
-    writeMuscle(info, m, system, muscles[m], surfaceDepthsMm[m], part);
-  writeBones(info, prepared, boneTransforms, part);
-  pvd_.write(outDir_ + "/run.pvd");
+  if (formats_.vtk) {
+    int part = 0;
+    for (size_t m = 0; m < muscles.size(); ++m)
+      writeMuscle(info, m, system, muscles[m], surfaceDepthsMm[m], part);
+    writeBones(info, prepared, boneTransforms, part);
+    pvd_.write(outDir_ + "/run.pvd");
+  }
+  if (formats_.gltf) writeGltf(info, system, muscles, prepared, boneTransforms);
   ++frames_;
+}
+
+void FrameWriter::writeGltf(const FrameInfo& info, const MuscleSystem& system,
+                            std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
+                            std::span<const btTransform> boneTransforms) const {
+  constexpr std::array<float, 4> kMuscle{0.75f, 0.25f, 0.22f, 1}, kBone{0.86f, 0.84f, 0.76f, 1};
+  std::vector<GltfMesh> meshes;
+  for (size_t m = 0; m < muscles.size(); ++m) {
+    const MuscleSettings& muscle = system.settings(muscles[m]);
+    if (muscle.restSurface.empty()) continue;
+    meshes.push_back({"muscle" + std::to_string(m) + "_" + fileSafe(muscle.name),
+                      system.surface(muscles[m]), muscle.restSurface.triangles, kMuscle});
+  }
+  std::vector<TriangleMesh> bones;  // placed where they are
+  for (size_t b = 0; b < prepared.bones.size(); ++b)
+    bones.push_back(transformed(prepared.bones[b]->mesh, boneTransforms[b]));
+  for (size_t b = 0; b < bones.size(); ++b)
+    meshes.push_back({"bone" + std::to_string(b) + "_" + fileSafe(prepared.bones[b]->name),
+                      bones[b].vertices, bones[b].triangles, kBone});
+  char name[32];
+  std::snprintf(name, sizeof name, "/gltf/frame_%05d.glb", info.step);
+  writeGlb(outDir_ + name, meshes);
 }
 
 void FrameWriter::writeMuscle(const FrameInfo& info, size_t m, const MuscleSystem& system,

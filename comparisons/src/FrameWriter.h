@@ -13,6 +13,9 @@
 
 namespace fibremss {
 
+/// A name usable in a file name: letters, digits, '-' and '_' kept, anything else '_'.
+std::string fileSafe(const std::string& name);
+
 /// Per particle: current / rest length of the fibre segments it belongs to (their lengths
 /// summed, so a particle between two segments averages them; 1 off every fibre).
 void particleFibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions,
@@ -31,12 +34,20 @@ struct FrameInfo {
   double time = 0;       ///< simulated time at the end of the step [s]
 };
 
-/// Writes the frames of a run in the scene's units: per muscle its deformed surface and its
+/// The formats a frame is written in.
+struct FrameFormats {
+  bool vtk = true;    ///< frames/*.vtp and run.pvd (ParaView), in the scene's units
+  bool gltf = false;  ///< gltf/frame_NNNNN.glb: muscle surfaces and bones, in metres
+};
+
+/// Writes the frames of a run. VTK in the scene's units: per muscle its deformed surface and its
 /// particles (fibres as lines), per bone its mesh where it is, again only once it moved, and
-/// run.pvd listing them all at their simulated times.
+/// run.pvd listing them all at their simulated times. glTF: one .glb per frame with every
+/// muscle's deformed surface and every bone where it is.
 class FrameWriter {
  public:
-  FrameWriter(const std::string& outDir, const OutputSettings& settings, double unitScale);
+  FrameWriter(const std::string& outDir, const OutputSettings& settings, double unitScale,
+              FrameFormats formats = {});
 
   /// One frame. `surfaceDepthsMm[m]`: depth of muscle m's surface vertices in the bones [mm].
   void write(const FrameInfo& info, const MuscleSystem& system,
@@ -51,11 +62,15 @@ class FrameWriter {
                    std::span<const float> depthsMm, int& part);
   void writeBones(const FrameInfo& info, const PreparedScene& prepared,
                   std::span<const btTransform> boneTransforms, int& part);
+  void writeGltf(const FrameInfo& info, const MuscleSystem& system,
+                 std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
+                 std::span<const btTransform> boneTransforms) const;
   std::vector<DataArray> frameFields(const FrameInfo& info) const;
   void add(double time, const std::string& file, const PolyData& data, int part);
 
   std::string outDir_;
   const OutputSettings& settings_;
+  FrameFormats formats_;
   btScalar sceneUnitsPerMetre_;
   PvdCollection pvd_;
   std::vector<std::string> boneFiles_;      ///< per bone, the file of its latest placement

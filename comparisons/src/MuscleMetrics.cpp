@@ -38,7 +38,102 @@ std::string perBone(const std::vector<std::string>& bones, const std::vector<Val
   return text.empty() ? "none" : text;
 }
 
+/// Largest current / rest length of the muscle's fibre segments (NaN without fibres).
+double maxFibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions) {
+  double stretch = MuscleStep::kNone;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f)
+    for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k) {
+      const uint32_t a = muscle.fibreParticles[k - 1], b = muscle.fibreParticles[k];
+      const double rest = muscle.restPositions[a].distance(muscle.restPositions[b]);
+      const double ratio = rest > 0 ? positions[a].distance(positions[b]) / rest : 1.0;
+      if (!(ratio <= stretch)) stretch = ratio;
+    }
+  return stretch;
+}
+
+/// A CSV field: the number, or empty when not finite.
+std::string csvNumber(double value, const char* format) {
+  if (!std::isfinite(value)) return "";
+  char text[32];
+  std::snprintf(text, sizeof text, format, value);
+  return text;
+}
+
+/// A CSV field for text: quoted (quotes doubled) when it holds a comma, quote or line break.
+std::string csvText(const std::string& text) {
+  if (text.find_first_of(",\"\n\r") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) quoted += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return quoted + "\"";
+}
+
 }  // namespace
+
+double MuscleStep::maxPenetrationMm() const {
+  double deepest = kNone;
+  for (double depth : penetrationMm)
+    if (!(depth <= deepest)) deepest = depth;
+  return deepest;
+}
+
+std::string seriesCsv(const std::vector<SeriesRow>& rows) {
+  std::string csv =
+      "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
+      "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts\n";
+  for (const SeriesRow& row : rows) {
+    const MuscleStep& m = row.measures;
+    csv += std::to_string(row.step) + "," + std::to_string(row.pose) + "," +
+           csvNumber(row.poseLabel, "%.10g") + "," + csvNumber(row.timeS, "%.10g") + "," +
+           csvText(row.muscle) + "," + csvNumber(m.volumeChangePct, "%.6g") + "," +
+           csvNumber(m.meanFibreLengthMm, "%.6g") + "," + csvNumber(m.maxFibreStretch, "%.6g") +
+           "," + csvNumber(m.maxPenetrationMm(), "%.6g") + "," + std::to_string(m.boneContacts) +
+           "," + std::to_string(row.solverContacts) + "\n";
+  }
+  return csv;
+}
+
+nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
+  nlohmann::json array = nlohmann::json::array();
+  for (const SeriesRow& row : rows) {
+    const MuscleStep& m = row.measures;
+    array.push_back({{"step", row.step},
+                     {"pose", row.pose},
+                     {"pose_label", number(row.poseLabel)},
+                     {"time_s", number(row.timeS)},
+                     {"muscle", row.muscle},
+                     {"volume_change_pct", number(m.volumeChangePct)},
+                     {"mean_fibre_length_mm", number(m.meanFibreLengthMm)},
+                     {"max_fibre_stretch", number(m.maxFibreStretch)},
+                     {"max_penetration_mm", number(m.maxPenetrationMm())},
+                     {"bone_contacts", m.boneContacts},
+                     {"solver_contacts", row.solverContacts}});
+  }
+  return array;
+}
+
+std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
+  std::vector<SeriesRow> rows;
+  if (!array.is_array()) return rows;
+  for (const nlohmann::json& o : array) {
+    SeriesRow row;
+    row.step = o.value("step", row.step);
+    row.pose = o.value("pose", row.pose);
+    row.poseLabel = numberAt(o, "pose_label", row.poseLabel);
+    row.timeS = numberAt(o, "time_s", row.timeS);
+    row.muscle = o.value("muscle", row.muscle);
+    MuscleStep& m = row.measures;
+    m.volumeChangePct = numberAt(o, "volume_change_pct", m.volumeChangePct);
+    m.meanFibreLengthMm = numberAt(o, "mean_fibre_length_mm", m.meanFibreLengthMm);
+    m.maxFibreStretch = numberAt(o, "max_fibre_stretch", m.maxFibreStretch);
+    if (const double depth = numberAt(o, "max_penetration_mm", MuscleStep::kNone);
+        std::isfinite(depth))
+      m.penetrationMm = {depth};
+    m.boneContacts = o.value("bone_contacts", m.boneContacts);
+    row.solverContacts = o.value("solver_contacts", row.solverContacts);
+    rows.push_back(std::move(row));
+  }
+  return rows;
+}
 
 MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3> positions,
                          std::span<const btVector3> surface,
@@ -54,6 +149,7 @@ MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3
           measurePenetration(surface, bones.subspan(b, 1), boneTransforms.subspan(b, 1)).maxMm);
   }
   step.meanFibreLengthMm = 1000.0 * meanFibreLength(muscle, positions);
+  step.maxFibreStretch = maxFibreStretch(muscle, positions);
   if (!muscle.springs.empty()) {
     step.worstSpringRatio = worstSpringRatio(muscle.springs, positions);
     step.springDeviationRatio = springDeviationRatio(muscle.springs, positions);

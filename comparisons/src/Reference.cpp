@@ -201,7 +201,13 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
               << " mesh of each muscle's surface (level " << definition.mesher.refinement << "; "
               << base.nodes << " nodes, " << base.elements << " tetrahedra), material within "
               << definition.attachmentScale << "x the attachment distance of a bone moves with it ("
-              << base.prescribedNodes << " nodes); no contact";
+              << base.prescribedNodes << " nodes); ";
+  if (definition.contactPenalty > 0)
+    description << "frictionless muscle-bone contact (penalty " << definition.contactPenalty * 1e-3
+                << " E per mm of overclosure, every bone a rigid obstacle), no muscle-muscle "
+                   "contact";
+  else
+    description << "no contact";
   reference.description = description.str();
   return reference;
 }

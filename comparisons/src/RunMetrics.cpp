@@ -104,6 +104,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"wall_seconds", m.wallSeconds},
       {"analytic", toJson(m.analytic)},
       {"muscles", musclesJson(m.muscles)},
+      {"series", seriesJson(m.series)},
   };
 }
 
@@ -162,6 +163,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   if (auto a = o.find("analytic"); a != o.end()) m.analytic = analyticFromJson(*a);
   if (auto list = o.find("muscles"); list != o.end() && list->is_array())
     for (const auto& muscle : *list) m.muscles.push_back(muscleResultsFromJson(muscle));
+  if (auto series = o.find("series"); series != o.end()) m.series = seriesFromJson(*series);
   return m;
 }
 

@@ -1,13 +1,22 @@
 // Embedding FibreMSS in a Bullet application: one world holding a FibreMSS muscle, the bones
-// it is attached to (kinematic rigid bodies driven by the scene's motion) and a btSoftBody
-// falling next to them. Usage: fibremss_embed_example [STEPS]
+// it is attached to (kinematic rigid bodies driven by the scene's motion), a btSoftBody
+// falling next to them and a rigid ball dropped on the muscle (two-way contact: the muscle dents,
+// the ball gets the reaction). Usage: fibremss_embed_example [STEPS] [pose]
+// The world runs in MuscleTime::Dynamic: Bullet's dt is the muscles' simulated time, so the ball
+// and the muscle share one clock and exchange momentum. `pose` runs the library's default
+// instead, the quasi-static pose mode (one muscle pose per Bullet step; see MuscleWorld.h), which
+// suits kinematic tools and slow bodies: a thrown ball bounces off harder than it came.
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
 #include <BulletSoftBody/btSoftBodyHelpers.h>
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <exception>
 #include <memory>
 #include <vector>
@@ -41,6 +50,7 @@ btVector3 centroid(const btSoftBody& body) {
 
 int main(int argc, char** argv) try {
   const int steps = argc > 1 ? std::atoi(argv[1]) : 10;
+  const bool dynamic = !(argc > 2 && std::strcmp(argv[2], "pose") == 0);
 
   // 1. A muscle with its bones: the built-in "fusiform" scene, prepared (particles, springs,
   //    radii, bone spheres). A real application would load its own scene file the same way.
@@ -59,6 +69,13 @@ int main(int argc, char** argv) try {
   world.setGravity(btVector3(0, btScalar(-9.81), 0));
   world.getWorldInfo().m_gravity = world.getGravity();
   world.getWorldInfo().m_sparsesdf.Initialize();
+  // What Bullet's dt means to the muscles, and two-way contact with the world's rigid bodies
+  // (on by default): fibremss/RigidContact.h.
+  fibremss::WorldCoupling coupling;
+  coupling.time = dynamic ? fibremss::MuscleTime::Dynamic : fibremss::MuscleTime::QuasiStaticPose;
+  world.setCoupling(coupling);
+  std::printf("timeStep: %s\n", dynamic ? "dynamic (Bullet's dt is the muscles' simulated time)"
+                                        : "quasi-static pose (one muscle step per Bullet step)");
 
   // 3. Bones: kinematic bodies with the bones' meshes. 4. The muscle, attached to them.
   std::vector<std::unique_ptr<fibremss::BoneBody>> boneBodies;
@@ -78,7 +95,26 @@ int main(int argc, char** argv) try {
   ball->getCollisionShape()->setMargin(btScalar(0.002));  // Bullet's default 0.25 m is huge here
   world.addSoftBody(ball);
 
-  // 6. Step: the bones glide from the first to the last pose of the scene's motion, a little
+  // 6. A rigid ball (8 mm, 20 g) thrown at the muscle's belly from 1 cm beside it: it hits the
+  //    muscle's particle spheres, dents the muscle and takes the reaction. Any btRigidBody that
+  //    is not a bone collides with the muscles: a probe, a hand, a floor.
+  btScalar halfWidth = 0;  // the belly's half width along z
+  for (const btVector3& p : world.muscleSystem().positions(muscle))
+    if (std::abs(p.y() - muscleCentre.y()) < btScalar(0.005))
+      halfWidth = std::max(halfWidth, std::abs(p.z() - muscleCentre.z()));
+  const btScalar ballRadius = btScalar(0.008), ballMass = btScalar(0.02);
+  btSphereShape ballShape(ballRadius);
+  btVector3 ballInertia(0, 0, 0);
+  ballShape.calculateLocalInertia(ballMass, ballInertia);
+  btRigidBody rigidBall(ballMass, nullptr, &ballShape, ballInertia);
+  rigidBall.setWorldTransform(
+      btTransform(btQuaternion::getIdentity(),
+                  muscleCentre - btVector3(0, 0, halfWidth + ballRadius + btScalar(0.01))));
+  rigidBall.setLinearVelocity(btVector3(0, 0, btScalar(0.6)));
+  rigidBall.setActivationState(DISABLE_DEACTIVATION);
+  world.addRigidBody(&rigidBall);
+
+  // 7. Step: the bones glide from the first to the last pose of the scene's motion, a little
   //    per step; one Bullet step is one FibreMSS step. Print what moved.
   const int lastPose = scene.poseCount - 1;
   for (int step = 0; step < steps; ++step) {
@@ -90,17 +126,24 @@ int main(int argc, char** argv) try {
     const fibremss::StepStats& stats = world.muscleSystem().lastStep();
     const btVector3 m = centroid(world.muscleSystem().positions(muscle));
     const btVector3 s = centroid(*ball);
+    // What the rigid ball received in the muscles' step, and the haptic query at its pose.
+    const fibremss::BodyContact contact = world.bodyContact(&rigidBall);
+    const fibremss::ContactWrench wrench = world.contactWrench(rigidBall);
     std::printf(
         "step %2d: muscle centre (%.4f %.4f %.4f) m, %d iterations, %zu contacts, %.2f ms; "
-        "soft ball centre y %.4f m\n",
-        step, m.x(), m.y(), m.z(), stats.iterations, stats.contacts, stats.timing.total, s.y());
+        "soft ball centre y %.4f m; rigid ball z %.4f m, %zu muscle contacts, force %.4f N, "
+        "wrench %.4f N\n",
+        step, m.x(), m.y(), m.z(), stats.iterations, stats.contacts, stats.timing.total, s.y(),
+        rigidBall.getWorldTransform().getOrigin().z(), contact.contacts, contact.force.z(),
+        wrench.force.z());
     if (stats.nan || stats.exploded) {
       std::fprintf(stderr, "the muscle became unstable at step %d\n", step);
       return 1;
     }
   }
 
-  // 7. Tear down in reverse: muscle and bones leave the world before their bodies are freed.
+  // 8. Tear down in reverse: bodies, muscle and bones leave the world before they are freed.
+  world.removeRigidBody(&rigidBall);
   world.removeMuscle(muscle);
   for (fibremss::BoneHandle bone : bones) world.removeBone(bone);
   world.removeSoftBody(ball);

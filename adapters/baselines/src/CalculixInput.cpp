@@ -1,4 +1,6 @@
 // CalculiX input (.inp) for the static reference, and the quadratic tetrahedra it can use.
+#include <algorithm>
+#include <array>
 #include <map>
 #include <ostream>
 #include <utility>
@@ -27,6 +29,32 @@ void writeMesh(std::ostream& out, const CalculixJob& job) {
     for (size_t i = 0; i < perElement; ++i) out << ", " << job.connectivity[e * perElement + i] + 1;
     out << "\n";
   }
+}
+
+/// The obstacles' elements after the body's, their rigid material, the master and slave
+/// surfaces and the penalty contact between them.
+void writeContact(std::ostream& out, const CalculixJob& job) {
+  const CalculixContact& contact = job.contact;
+  const size_t perElement = job.element == CalculixElement::C3D4 ? 4 : 10;
+  const size_t first = job.connectivity.size() / perElement + 1;  // its first element number
+  out << "*ELEMENT, TYPE=C3D4, ELSET=EBONE\n";
+  for (size_t e = 0; e * 4 < contact.tetrahedra.size(); ++e) {
+    out << first + e;
+    for (size_t i = 0; i < 4; ++i) out << ", " << contact.tetrahedra[e * 4 + i] + 1;
+    out << "\n";
+  }
+  out << "*MATERIAL, NAME=BONE\n*ELASTIC\n"
+      << job.material.youngsModulus * 1e3 << ", 0.3\n"
+      << "*SOLID SECTION, ELSET=EBONE, MATERIAL=BONE\n*SURFACE, NAME=SBONE, TYPE=ELEMENT\n";
+  for (const auto& [element, face] : contact.faces)
+    out << first + element << ", S" << int(face) << "\n";
+  out << "*NSET, NSET=NSLAVE\n";
+  writeIds(out, contact.slaves);
+  out << "*SURFACE, NAME=SMUSCLE, TYPE=NODE\nNSLAVE\n"
+      << "*SURFACE INTERACTION, NAME=FRICTIONLESS\n"
+      << "*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR\n"
+      << contact.stiffness << ", " << contact.tension << "\n"
+      << "*CONTACT PAIR, INTERACTION=FRICTIONLESS, TYPE=NODE TO SURFACE\nSMUSCLE, SBONE\n";
 }
 
 void writeStep(std::ostream& out, const CalculixJob& job, size_t step) {
@@ -58,8 +86,30 @@ void writeCalculixInput(std::ostream& out, const CalculixJob& job) {
   out << "*MATERIAL, NAME=MUSCLE\n*HYPERELASTIC, NEO HOOKE\n"
       << job.material.c10() << ", " << job.material.d1() << "\n"
       << "*SOLID SECTION, ELSET=EALL, MATERIAL=MUSCLE\n";
+  if (job.contact.stiffness > 0 && !job.contact.faces.empty() && !job.contact.slaves.empty())
+    writeContact(out, job);
   for (size_t step = 0; step < job.steps.size(); ++step) writeStep(out, job, step);
   out.precision(precision);
+}
+
+std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32_t>& tetrahedra) {
+  // CalculiX's C3D4 faces by local corners: 1: 1-2-3, 2: 1-4-2, 3: 2-4-3, 4: 3-4-1.
+  constexpr int kFaces[4][3] = {{0, 1, 2}, {0, 3, 1}, {1, 3, 2}, {2, 3, 0}};
+  std::map<std::array<uint32_t, 3>, std::pair<uint32_t, uint8_t>> once;
+  std::map<std::array<uint32_t, 3>, int> count;
+  for (uint32_t e = 0; e * 4 < tetrahedra.size(); ++e)
+    for (uint8_t f = 0; f < 4; ++f) {
+      std::array<uint32_t, 3> key{};
+      for (int k = 0; k < 3; ++k) key[k] = tetrahedra[e * 4 + kFaces[f][k]];
+      std::sort(key.begin(), key.end());
+      once[key] = {e, static_cast<uint8_t>(f + 1)};
+      ++count[key];
+    }
+  std::vector<std::pair<uint32_t, uint8_t>> faces;
+  for (const auto& [key, face] : once)
+    if (count[key] == 1) faces.push_back(face);
+  std::sort(faces.begin(), faces.end());
+  return faces;
 }
 
 std::vector<btVector3> quadraticTetrahedra(const TetMesh& mesh,

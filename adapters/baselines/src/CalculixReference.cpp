@@ -24,7 +24,8 @@ struct MuscleJob {
   CalculixJob job;
   size_t surfaceVertices = 0;  ///< printed nodes: the surface vertices 0..n-1
   size_t tetrahedra = 0;
-  std::string stem;  ///< file stem in the work directory
+  std::string stem;          ///< file stem in the work directory
+  size_t attachedNodes = 0;  ///< the muscle's nodes that move with a bone
   /// Surface vertices preparation moved (out of a bone): they move with the bone they are
   /// attached to, so per step their position is that bone's transform of the prepared vertex.
   std::vector<uint32_t> moved;
@@ -65,6 +66,39 @@ void setElements(CalculixJob& job, const TetMesh& mesh) {
 /// Bone b's transform of pose p (the rest pose after the last one: the return step).
 btTransform stepTransform(const LoadedScene& scene, size_t bone, int step, int poses) {
   return step < poses ? scene.bonePose(bone, step) : btTransform::getIdentity();
+}
+
+/// The bones as rigid contact obstacles of the job (CalculixContact): each bone's rest mesh
+/// meshed by tetgen, its nodes appended and prescribed to follow the bone at every step, the
+/// muscle's free surface vertices the slaves.
+void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedScene& prepared,
+                    const CalculixDefinition& definition, const std::string& workDir) {
+  CalculixJob& job = result.job;
+  CalculixContact& contact = job.contact;
+  const int steps = static_cast<int>(job.steps.size()), poses = std::max(scene.poseCount, 1);
+  TetgenDefinition mesher = definition.mesher;
+  mesher.refinement = 0;
+  for (size_t b = 0; b < prepared.bones.size(); ++b) {
+    const TetMesh bone = tetgenMesh(prepared.bones[b]->mesh, mesher, workDir,
+                                    result.stem + "-bone" + std::to_string(b));
+    const auto first = static_cast<uint32_t>(job.nodes.size());
+    for (const btVector3& x : bone.nodes) {
+      job.prescribed.push_back(static_cast<uint32_t>(job.nodes.size()));
+      job.nodes.push_back(x);
+      for (int p = 0; p < steps; ++p)
+        job.steps[static_cast<size_t>(p)].push_back(stepTransform(scene, b, p, poses) * x - x);
+    }
+    for (const auto& t : bone.tetrahedra)
+      for (uint32_t corner : t) contact.tetrahedra.push_back(first + corner);
+  }
+  contact.faces = boundaryFaces(contact.tetrahedra);
+  std::vector<bool> held(result.surfaceVertices, false);
+  for (uint32_t n : job.prescribed)
+    if (n < held.size()) held[n] = true;
+  for (uint32_t v = 0; v < result.surfaceVertices; ++v)
+    if (!held[v]) contact.slaves.push_back(v);
+  contact.stiffness = definition.contactPenalty * definition.material.youngsModulus;
+  contact.tension = 1e-3 * definition.material.youngsModulus;
 }
 
 /// Meshes the muscle's surface as loaded (preparation's push out of the bones makes the
@@ -121,6 +155,8 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
           muscle.restSurface.vertices[v]);
   }
   for (uint32_t v = 0; v < result.surfaceVertices; ++v) job.printed.push_back(v);
+  result.attachedNodes = job.prescribed.size();
+  if (definition.contactPenalty > 0) addBoneContact(result, scene, prepared, definition, workDir);
   return result;
 }
 
@@ -222,7 +258,7 @@ CalculixSolution solveCalculixReference(
     const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir);
     solution.nodes += muscle.job.nodes.size();
     solution.elements += muscle.tetrahedra;
-    solution.prescribedNodes += muscle.job.prescribed.size();
+    solution.prescribedNodes += muscle.attachedNodes;
     solution.inputFiles.push_back(workDir + "/" + muscle.stem + ".inp");
     const int steps = static_cast<int>(muscle.job.steps.size());
     int reported = -1;

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <limits>
+#include <map>
 #include <span>
 #include <stdexcept>
 #include <utility>
@@ -71,6 +72,24 @@ struct FemScene::Impl {
   std::unique_ptr<btDeformableNeoHookeanForce> force;
   double youngsModulus = 0;   ///< E used [Pa]
   double addedMassShare = 0;  ///< mass added by scaleMasses / free nodes' mass before it
+  size_t fewestPins = std::numeric_limits<size_t>::max();  ///< per bone of a muscle (pinAtLeast)
+  int lastSettleSubsteps = 0;                              ///< of the last pose
+
+  /// Every free node's velocity scaled by `kept` (settling's drag).
+  void dragNodes(btScalar kept) {
+    for (Muscle& muscle : muscles)
+      for (int n = 0; n < muscle.body->m_nodes.size(); ++n) muscle.body->m_nodes[n].m_v *= kept;
+  }
+
+  /// The fastest free node's speed [m/s].
+  btScalar fastestNode() const {
+    btScalar fastest = 0;
+    for (const Muscle& muscle : muscles)
+      for (int n = 0; n < muscle.body->m_nodes.size(); ++n)
+        if (muscle.body->m_nodes[n].m_im > 0)
+          fastest = std::max(fastest, muscle.body->m_nodes[n].m_v.length());
+    return fastest / definition.lengthScale;
+  }
 
   /// E from the definition or matched to all muscles' springs together, then the force.
   void addElasticity() {
@@ -199,6 +218,31 @@ struct FemScene::Impl {
     }
   }
 
+  /// Every bone fixing particles of the muscle gets at least minPinsPerBone pinned nodes: the
+  /// unpinned nodes nearest to its fixed particles.
+  void pinAtLeast(const MuscleSettings& s, const TetMesh& mesh, std::vector<int32_t>& pinBone) {
+    std::map<int32_t, std::vector<uint32_t>> fixedOf;  // bone → its fixed particles
+    for (uint32_t p : s.fixedParticles) fixedOf[s.fixedBone[p]].push_back(p);
+    for (const auto& [bone, particles] : fixedOf) {
+      const auto pins = std::count(pinBone.begin(), pinBone.end(), bone);
+      std::vector<std::pair<btScalar, uint32_t>> candidates;  // distance², node
+      for (uint32_t n = 0; n < mesh.nodes.size(); ++n) {
+        if (pinBone[n] >= 0) continue;
+        btScalar nearest = std::numeric_limits<btScalar>::infinity();
+        for (uint32_t p : particles)
+          nearest = std::min(nearest, mesh.nodes[n].distance2(s.restPositions[p]));
+        candidates.emplace_back(nearest, n);
+      }
+      const size_t wanted =
+          static_cast<size_t>(std::max<long>(definition.minPinsPerBone - pins, 0));
+      const size_t take = std::min(wanted, candidates.size());
+      std::partial_sort(candidates.begin(), candidates.begin() + static_cast<long>(take),
+                        candidates.end());
+      for (size_t k = 0; k < take; ++k) pinBone[candidates[k].second] = bone;
+      fewestPins = std::min(fewestPins, static_cast<size_t>(pins) + take);
+    }
+  }
+
   void addMuscle(std::shared_ptr<const MuscleSettings> settings) {
     const MuscleSettings& s = *settings;
     Muscle muscle;
@@ -242,6 +286,8 @@ struct FemScene::Impl {
       }
       if (pinBone[best] < 0) pinBone[best] = s.fixedBone[p];
     }
+
+    pinAtLeast(s, mesh, pinBone);
 
     // Lumped masses: a quarter of every adjacent tetrahedron's mass.
     std::vector<btScalar> masses(nodes, 0);
@@ -411,8 +457,29 @@ bool FemScene::stepPose(std::span<const btTransform> targets, const std::functio
     m.world->stepSimulation(dt, 0);
     m.projectNodes(previous, dt);
   }
+  // Settling: the bones stay at the targets until no node moves faster than the tolerance.
+  m.lastSettleSubsteps = 0;
+  while (m.fastestNode() > m.definition.settleSpeed) {
+    if (m.lastSettleSubsteps == m.definition.settleSubsteps) {
+      ++m.lastSettleSubsteps;  // did not settle
+      break;
+    }
+    if (stop && stop()) return false;
+    m.world->stepSimulation(dt, 0);
+    m.projectNodes(m.boneTransforms, dt);
+    m.dragNodes(m.definition.settleDrag);
+    ++m.lastSettleSubsteps;
+  }
   for (Impl::Muscle& muscle : m.muscles) m.readPositions(muscle);
   return true;
+}
+
+size_t FemScene::fewestPinsPerBone() const {
+  return impl_->fewestPins;
+}
+
+int FemScene::lastSettleSubsteps() const {
+  return impl_->lastSettleSubsteps;
 }
 
 size_t FemScene::muscleCount() const {

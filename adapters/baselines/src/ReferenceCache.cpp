@@ -136,6 +136,7 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
   h.value(definition.attachmentScale);
   h.value(definition.returnToRest);
   h.value(definition.initialIncrement);
+  h.value(definition.contactPenalty);
   return h.hex();
 }
 

@@ -74,10 +74,37 @@ void checkPlyCounts(const std::string& path) {
   if (!name.empty()) closeElement();
 }
 
+/// An OFF header's vertex and face counts against the file's size: assimp reserves memory for
+/// them as declared. An ASCII vertex takes at least 6 bytes ("0 0 0\n"), a face at least 2.
+void checkOffCounts(const std::string& path) {
+  std::ifstream file(path);
+  std::string line, word;
+  uint64_t vertices = 0, faces = 0;
+  if (!std::getline(file, line)) return;
+  std::istringstream first(line);
+  first >> word;
+  if (word.size() < 3 || word.compare(word.size() - 3, 3, "OFF") != 0) return;
+  std::istringstream counts(line.substr(line.find(word) + word.size()));
+  while (!(counts >> vertices >> faces)) {  // counts on the next line that is no comment
+    if (!std::getline(file, line)) return;
+    if (line.empty() || line[0] == '#') continue;
+    counts = std::istringstream(line);
+  }
+  const long double needed = 6.0L * vertices + 2.0L * faces;
+  const uint64_t size = std::filesystem::file_size(path);
+  if (needed > static_cast<long double>(size))
+    throw InputError(path, "header",
+                     "declares " + std::to_string(vertices) + " vertices and " +
+                         std::to_string(faces) + " faces, which need at least " +
+                         std::to_string(static_cast<uint64_t>(needed)) +
+                         " bytes, but the file has " + std::to_string(size));
+}
+
 }  // namespace
 
 TriangleMesh readAssimpSurface(const std::string& path, double scale) {
   checkPlyCounts(path);
+  checkOffCounts(path);
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS,
                               aiComponent_NORMALS | aiComponent_TANGENTS_AND_BITANGENTS |

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/VtkFiles.h"
 
 namespace fibremss::meshio {
 
@@ -29,6 +30,7 @@ struct VtkPolyData {
   std::vector<std::array<uint32_t, 3>> triangles;  ///< fan-triangulated polygons and strips
   IndexPolylines lines;                            ///< LINES cells, unchained
   std::vector<std::string> warnings;               ///< cells skipped (fewer than 3 points, ...)
+  std::vector<PointArray> pointData;  ///< VTK XML only: the PointData arrays every piece has
 };
 
 /// Points and `l` polylines of an OBJ file.

@@ -362,6 +362,37 @@ class XmlPolyDataReader {
       const uint64_t cells = count(piece, key);
       if (cells > 0) readCells(p, section, cells, base, size_t(points));
     }
+    readPointData(p, points);
+  }
+
+  /// The piece's PointData arrays appended to those of the pieces before it; an array some
+  /// piece lacks is dropped.
+  void readPointData(size_t p, uint64_t points) {
+    std::vector<PointArray> arrays;
+    for (const ArrayElement& array : arrays_) {
+      if (array.piece != p || array.section != "PointData") continue;
+      const std::string components = array.attributes.get("NumberOfComponents", "1");
+      int n = 0;
+      const auto [end, error] =
+          std::from_chars(components.data(), components.data() + components.size(), n);
+      if (error != std::errc() || end != components.data() + components.size() || n < 1 || n > 16)
+        failArray(array, "expected NumberOfComponents from 1 to 16, found \"" + components + "\"");
+      PointArray read{array.attributes.get("Name"), n, {}};
+      for (double value : reals(array, uint64_t(n) * points)) read.values.push_back(float(value));
+      arrays.push_back(std::move(read));
+    }
+    if (p == 0) {
+      data_.pointData = std::move(arrays);
+      return;
+    }
+    std::erase_if(data_.pointData, [&](PointArray& kept) {
+      auto same = std::find_if(arrays.begin(), arrays.end(), [&](const PointArray& a) {
+        return a.name == kept.name && a.components == kept.components;
+      });
+      if (same == arrays.end()) return true;
+      kept.values.insert(kept.values.end(), same->values.begin(), same->values.end());
+      return false;
+    });
   }
 
   void readCells(size_t p, const std::string& section, uint64_t cells, size_t base, size_t points) {

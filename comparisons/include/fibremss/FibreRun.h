@@ -26,7 +26,9 @@ struct RunProgress {
 
 /// How to run. The defaults run every pose of the scene without writing anything.
 struct FibreRunOptions {
-  std::string outDir;   ///< write frames and run.pvd here ("": write nothing)
+  std::string outDir;       ///< write frames and run.pvd here ("": write nothing)
+  bool vtkFrames = true;    ///< frames as VTK XML (frames/*.vtp, run.pvd)
+  bool gltfFrames = false;  ///< frames as glTF 2.0 binary (gltf/frame_NNNNN.glb)
   int frameEvery = -1;  ///< a frame every k-th step (the first and last included); < 0: the scene's
                         ///< outputs.frameEvery; 0: no frames
   int steps = -1;       ///< steps to run (< 0: one per pose); steps past the last pose hold it

@@ -24,6 +24,13 @@ struct MuscleStep {
   double meanFibreLengthMm = kNone;     ///< mean length of the fibres [mm]
   double worstSpringRatio = kNone;      ///< largest l / L0 of its springs
   double springDeviationRatio = kNone;  ///< Σ|l − L0| / ΣL0 of its springs
+  double maxFibreStretch = kNone;       ///< largest l / L0 of its fibre segments
+  /// Its free boundary particles whose collision sphere reaches into a bone's true mesh (filled
+  /// by runFibreMSS from its sphere test; measureMuscle leaves 0).
+  size_t boneContacts = 0;
+
+  /// The deepest surface vertex inside any bone [mm] (NaN when not measured).
+  double maxPenetrationMm() const;
 };
 
 /// Measures a muscle (its particles `positions`, deformed surface `surface`) against the bones'
@@ -33,6 +40,27 @@ MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3
                          std::span<const btVector3> surface,
                          std::span<const MeshDistance* const> bones,
                          std::span<const btTransform> boneTransforms);
+
+/// One muscle at one step: a row of series.csv and of summary.json "series", what a user plots
+/// against the joint angle.
+struct SeriesRow {
+  int step = 0;               ///< solver step (0: the first)
+  int pose = 0;               ///< pose of the motion at that step
+  double poseLabel = 0;       ///< the pose's label (LoadedScene::poseLabels, e.g. a joint angle)
+  double timeS = 0;           ///< simulated time at the end of the step [s]
+  std::string muscle;         ///< the muscle's name
+  MuscleStep measures;        ///< the muscle's measures at that step
+  size_t solverContacts = 0;  ///< sphere pairs the solver found overlapping in the step's last
+                              ///< iteration, all muscles, muscle–muscle and muscle–bone
+                              ///< (StepStats::contacts)
+};
+
+/// The series as CSV: a header, then one line per row (a value not measured is left empty).
+std::string seriesCsv(const std::vector<SeriesRow>& rows);
+/// The series as a JSON array of objects with the CSV's column names (null: not measured).
+nlohmann::json seriesJson(const std::vector<SeriesRow>& rows);
+/// Reads what seriesJson wrote (per-bone penetration comes back as the one deepest value).
+std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array);
 
 /// A muscle's results over a run, from the steps it was measured at.
 struct MuscleResults {

@@ -94,6 +94,9 @@ struct RunMetrics {
   /// spring, rollbacks, freezes; the headline volume change and spring deviation are the worst
   /// muscle's.
   std::vector<MuscleResults> muscles;
+  /// Per step, per muscle (FibreMSS): volume, mean fibre length, largest fibre stretch,
+  /// deepest penetration, contacts; the steps in order, the muscles in scene order within each.
+  std::vector<SeriesRow> series;
   /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
   /// a NaN or exploded pose is left out.
   std::vector<std::vector<btVector3>> poseSurfaces;

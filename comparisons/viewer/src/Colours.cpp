@@ -63,7 +63,8 @@ Range arrayRange(const ViewFrame& frame, const std::string& array, Range& extrem
     return *it;
   };
   const float bottom = at(0.01), top = at(0.99);
-  return {bottom, std::max(top, bottom + 1e-6f)};
+  // A sparse array (penetration: 0 nearly everywhere) keeps its few values in view.
+  return {bottom, std::max(top > bottom ? top : extremes.high, bottom + 1e-6f)};
 }
 
 Rgb colourOf(const std::string& array, float value, const Range& range) {

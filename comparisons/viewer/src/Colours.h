@@ -19,7 +19,8 @@ struct Range {
 
 /// The range of `array` over every muscle of the frame that holds 98 % of the values (a few
 /// outliers, e.g. at tendon ends, would leave the rest one pale colour); for a stretch,
-/// symmetric about 1. `extremes` receives the true smallest and largest value.
+/// symmetric about 1; up to the largest value when 98 % of them are equal (e.g. penetration).
+/// `extremes` receives the true smallest and largest value.
 Range arrayRange(const ViewFrame& frame, const std::string& array, Range& extremes);
 /// The colour of `value` of `array` in `range`.
 Rgb colourOf(const std::string& array, float value, const Range& range);

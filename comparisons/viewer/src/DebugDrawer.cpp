@@ -2,6 +2,8 @@
 
 #include <cstdio>
 
+#include "fibremss/Messages.h"
+
 namespace fibremss::viewer {
 namespace {
 
@@ -36,7 +38,7 @@ void DebugDrawer::drawContactPoint(const btVector3& point, const btVector3& norm
 }
 
 void DebugDrawer::reportErrorWarning(const char* warning) {
-  std::fprintf(stderr, "warning: Bullet: %s\n", warning);
+  printWarning(std::string("Bullet: ") + warning);
 }
 
 }  // namespace fibremss::viewer

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "fibremss/Messages.h"
+
 namespace fibremss::viewer {
 namespace {
 
@@ -55,13 +57,13 @@ void skinned(const MuscleSettings& muscle, const std::vector<float>& perParticle
 
 LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& overrides)
     : scene_(loadScene(scene, overrides)) {
-  for (const std::string& warning : scene_.warnings)
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  printWarnings(scene_.warnings);
+  printNotes(scene_.notes);
   std::fprintf(stderr, "preparing %s ...\n", scene_.name.c_str());
   prepared_ =
       prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed, scene_.simulation.threads);
-  for (const std::string& warning : prepared_.report.warnings)
-    std::fprintf(stderr, "warning: %s\n", warning.c_str());
+  printWarnings(prepared_.report.warnings);
+  printWarnings(attachmentWarnings(scene_, prepared_));
 
   dispatcher_ = std::make_unique<btCollisionDispatcher>(&configuration_);
   world_ = std::make_unique<MuscleWorld>(dispatcher_.get(), &broadphase_, &solver_, &configuration_,

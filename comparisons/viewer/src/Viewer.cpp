@@ -16,6 +16,7 @@
 
 #include "Colours.h"
 #include "DebugDrawer.h"
+#include "FramePlayer.h"
 #include "LivePlayer.h"
 #include "Renderer.h"
 #include "Source.h"
@@ -154,8 +155,11 @@ void drawLegend(const std::string& array, const Range& range) {
 void appearanceControls(Session& session) {
   RenderSettings& render = session.render;
   if (ImGui::BeginCombo("colour by", render.colourBy.c_str())) {
-    for (const std::string& array : colourArrays())
+    for (const std::string& array : colourArrays()) {
+      const auto& muscles = session.shown.frame.muscles;
+      if (!muscles.empty() && !muscles.front().array(array)) continue;  // not in this source
       if (ImGui::Selectable(array.c_str(), array == render.colourBy)) render.colourBy = array;
+    }
     ImGui::EndCombo();
   }
   ImGui::Checkbox("auto range (98 % of the values)", &session.autoRange);
@@ -246,22 +250,40 @@ void renderFrame(Window& window, Session& session, Source& source, ViewerResult&
 }  // namespace
 
 const std::vector<std::string>& colourArrays() {
-  static const std::vector<std::string> arrays{"fibre_stretch", "displacement", "muscle_id"};
+  // Those a scene stepped live has first.
+  static const std::vector<std::string> arrays{"fibre_stretch", "displacement", "muscle_id",
+                                               "spring_strain", "penetration",  "fixed"};
   return arrays;
 }
 
 ViewerResult runViewer(const ViewerOptions& options) {
-  if (std::find(colourArrays().begin(), colourArrays().end(), options.colourBy) ==
-      colourArrays().end())
-    throw InputError(
-        "--colour-by", "",
-        "expected fibre_stretch, displacement or muscle_id, got '" + options.colourBy + "'");
-  auto scene = std::make_unique<LiveScene>(options.scene, options.overrides);
-  scene->loop = options.loop;
-  const std::string title = "FibreMSS - " + scene->scene().name;
+  const auto& arrays = colourArrays();
+  // A scene stepped live has the first three; a run's frames all of them.
+  const auto end = options.runDir.empty() ? arrays.begin() + 3 : arrays.end();
+  if (std::find(arrays.begin(), end, options.colourBy) == end)
+    throw InputError("--colour-by", "",
+                     options.runDir.empty()
+                         ? "expected fibre_stretch, displacement or muscle_id for a scene stepped "
+                           "live (spring_strain, penetration and fixed: a run's frames), got '" +
+                               options.colourBy + "'"
+                         : "expected fibre_stretch, displacement, muscle_id, spring_strain, "
+                           "penetration or fixed, got '" +
+                               options.colourBy + "'");
   Session session;
   session.debug.muscleFlags = options.muscleDebugFlags;
-  std::unique_ptr<Source> source = std::make_unique<LivePlayer>(std::move(scene), session.debug);
+  std::string title;
+  std::unique_ptr<Source> source;
+  if (!options.runDir.empty()) {
+    auto frames = std::make_unique<FramePlayer>(options.runDir, session.debug);
+    frames->loop = options.loop;
+    source = std::move(frames);
+    title = "FibreMSS - " + options.runDir;
+  } else {
+    auto scene = std::make_unique<LiveScene>(options.scene, options.overrides);
+    scene->loop = options.loop;
+    title = "FibreMSS - " + scene->scene().name;
+    source = std::make_unique<LivePlayer>(std::move(scene), session.debug);
+  }
   const bool screenshot = !options.screenshot.empty();
   source->advance(screenshot ? options.steps : 0);  // a screenshot shows the scene after them
   source->fetch(session.shown);

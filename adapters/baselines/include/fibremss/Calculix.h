@@ -56,6 +56,20 @@ struct NeoHookeMaterial {
   double d1() const { return 6 * (1 - 2 * poissonRatio) / youngsModulus; }  ///< [1/Pa]
 };
 
+/// Rigid obstacles of a job (the bones): linear tetrahedra whose every node is prescribed (so
+/// they move rigidly with their bone), their boundary faces the master surface of a
+/// frictionless node-to-surface penalty contact with the body's free surface nodes.
+struct CalculixContact {
+  std::vector<uint32_t> tetrahedra;  ///< 4 node indices (into CalculixJob::nodes) per element
+  /// The master surface: per boundary face, its element (index into `tetrahedra` / 4) and
+  /// CalculiX's face number of a C3D4 (1: nodes 1-2-3, 2: 1-4-2, 3: 2-4-3, 4: 3-4-1).
+  std::vector<std::pair<uint32_t, uint8_t>> faces;
+  std::vector<uint32_t> slaves;  ///< body nodes that may touch it (free surface nodes)
+  /// Linear pressure-overclosure slope K [Pa/m]; 0: none (no contact written).
+  double stiffness = 0;
+  double tension = 0;  ///< σ∞: the small tension at large clearance CalculiX asks for [Pa]
+};
+
 /// One CalculiX job: a body, its material and a sequence of static steps (NLGEOM), each giving
 /// the displacement of every prescribed node from the rest position.
 struct CalculixJob {
@@ -69,7 +83,12 @@ struct CalculixJob {
   std::vector<uint32_t> printed;              ///< nodes whose displacements are printed
   double initialIncrement = 1;                ///< first increment, share of a step
   double minimumIncrement = 1e-4;             ///< smallest increment before ccx gives up
+  CalculixContact contact;                    ///< rigid obstacles (none when stiffness is 0)
 };
+
+/// The boundary faces of linear tetrahedra (4 node indices each) as CalculiX numbers them:
+/// (element, face 1–4) for every face no other element shares.
+std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32_t>& tetrahedra);
 
 /// Writes the job as CalculiX input (*NODE, *ELEMENT, *NSET, *HYPERELASTIC NEO HOOKE, one
 /// *STEP NLGEOM *STATIC per step with *BOUNDARY values and *NODE PRINT of U). Node and element

@@ -31,8 +31,13 @@ struct CalculixDefinition {
   TetgenDefinition mesher;       ///< tetgen settings and the refinement level
   btScalar attachmentScale = 1;  ///< × each muscle's attachment distance (the ±50 % gate)
   bool returnToRest = true;      ///< a last step back to the rest pose (the return gate)
-  double initialIncrement = 1;   ///< first increment of a step (ccx cuts it back as needed)
-  std::string program = "ccx";   ///< the CalculiX executable (PATH is searched)
+  /// Muscle–bone contact: every bone meshed (tetgen) as a rigid obstacle whose boundary is a
+  /// frictionless node-to-surface penalty contact for the muscle's free surface nodes, with
+  /// the pressure-overclosure slope K = contactPenalty × E [1/m] (50 per mm: 1 µm of
+  /// overclosure carries 5 % of E). 0: no contact (the muscle passes through bones).
+  double contactPenalty = 5e4;
+  double initialIncrement = 1;  ///< first increment of a step (ccx cuts it back as needed)
+  std::string program = "ccx";  ///< the CalculiX executable (PATH is searched)
 };
 
 /// Where a reference solve is, after every step ccx finishes.

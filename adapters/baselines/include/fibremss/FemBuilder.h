@@ -61,6 +61,19 @@ struct FemDefinition {
   bool freeNodesFollowBones = true;
   btScalar attachmentDistance = 0;  ///< nodes this close to a fixed particle are pinned to its
                                     ///< bone [m]; 0: one voxel edge
+  /// At least this many nodes are pinned to each bone that fixes particles of a muscle: the
+  /// nodes nearest to those particles (a coarse grid can leave an end with 2–4 pins, and it
+  /// swings almost rigidly).
+  int minPinsPerBone = 12;
+  /// Per-pose settling (dynamic relaxation towards the pose's static equilibrium): after its
+  /// substeps the bones stay and the world steps on, every free node's velocity scaled by
+  /// settleDrag after each substep, until no node is faster than settleSpeed [m/s] (a
+  /// thousandth of a mm per 0.5 ms substep: 2 mm/s), at most settleSubsteps more substeps (0:
+  /// no settling). Without the drag Bullet's light damping lets a pose swing for seconds; with
+  /// it a slow mode still creeps (fem_test: 0.35 mm in the next pose, 0.98 mm without).
+  btScalar settleSpeed = 0.002f;
+  int settleSubsteps = 300;
+  btScalar settleDrag = 0.9f;  ///< velocity kept per settling substep (1: none)
   /// Bullet units per metre inside the reference's world (centimetres, as the btSoftBody
   /// baseline). Lengths are scaled by it, the Lamé parameters divided by it, masses and time
   /// kept, so the motion in metres is the same.
@@ -85,9 +98,13 @@ class FemScene {
   bool stepPose(std::span<const btTransform> targets, const std::function<bool()>& stop = {});
 
   size_t muscleCount() const;
-  size_t nodeCount() const;                     ///< nodes of all muscles
-  size_t tetrahedronCount() const;              ///< tetrahedra of all muscles
-  size_t pinnedCount() const;                   ///< pinned nodes of all muscles
+  size_t nodeCount() const;         ///< nodes of all muscles
+  size_t tetrahedronCount() const;  ///< tetrahedra of all muscles
+  size_t pinnedCount() const;       ///< pinned nodes of all muscles
+  /// Fewest nodes pinned to one bone of one muscle (over the bones fixing its particles).
+  size_t fewestPinsPerBone() const;
+  /// Settling substeps the last pose took; settleSubsteps + 1 when it did not settle.
+  int lastSettleSubsteps() const;
   const TetMesh& tetMesh(size_t muscle) const;  ///< rest mesh
   /// Node positions of one muscle, as of the last step.
   std::span<const btVector3> nodePositions(size_t muscle) const;

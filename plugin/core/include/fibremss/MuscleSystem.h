@@ -13,6 +13,7 @@
 
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/Parameters.h"
+#include "fibremss/RigidContact.h"
 
 class btCollisionObject;
 
@@ -141,6 +142,36 @@ class MuscleSystem {
   /// never throws for numerical reasons, only InputError for parameters() that were changed to
   /// values no step can run with (a dt of 0 or below, ...).
   void step();
+  /// A step that advances the muscles by exactly `duration` of simulated time [s]: k =
+  /// max(iterations, ⌈duration / timeStep⌉) iterations of duration/k (fixed, whatever the stop
+  /// rule and adaptiveTimeStep say), bones moving over all of them (MuscleTime::Dynamic).
+  /// InputError for a duration that is not finite and > 0.
+  void step(btScalar duration);
+
+  /// The rigid bodies the muscles collide with from the next step on (fibremss/RigidContact.h):
+  /// shapes convex, compound or static planes (others never touch); pose, velocities and mass
+  /// read at each step's start. The system keeps the pointers until the next call: clear it
+  /// (setContactBodies({})) before deleting a body. MuscleWorld and MuscleAction set them from
+  /// their world before every step. InputError for a null body. Allocates (not step()).
+  void setContactBodies(std::span<const btCollisionObject* const> bodies);
+  /// What `body` received from the muscles in the last step (zero when it was no contact body);
+  /// the caller applies the impulses to it (MuscleWorld and MuscleAction do).
+  BodyContact bodyContact(const btCollisionObject* body) const;
+  /// The haptic query (seed 003 §5.2): the force and torque (about `transform`'s origin, a
+  /// btRigidBody's centre of mass) the muscles exert on `body` if it stood at `transform`: the
+  /// last step's mean reaction plus, for every free boundary particle sphere its shape overlaps
+  /// there, Hooke's law with the particle's local stiffness (Σ k/3 of its springs) along the
+  /// contact normal. At the pose the last step ended with that term is about 0; as a tool moves
+  /// in between steps it follows at once. Reads the particles as of the last step; no allocation;
+  /// not concurrently with step().
+  ContactWrench contactWrench(const btCollisionObject& body, const btTransform& transform) const;
+  /// An external force [N] held on one particle of a muscle (added to its spring forces every
+  /// iteration, until changed or cleared; fixed particles ignore it; Pbd and Xpbd too, which
+  /// predict without forces). InputError for a particle index beyond the muscle or a non-finite
+  /// force. Allocates on the muscle's first one.
+  void setExternalForce(MuscleHandle muscle, uint32_t particle, const btVector3& force);
+  /// Removes every external force of the muscle (SimulationParameters::gravity stays).
+  void clearExternalForces(MuscleHandle muscle);
 
   const StepStats& lastStep() const;
   SimulationParameters& parameters();

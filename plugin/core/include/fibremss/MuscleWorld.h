@@ -5,13 +5,23 @@
 // soft bodies moved) is one FibreMSS step; bones are collision objects whose world transform
 // the muscles read at each step.
 //
-// timeStep: Bullet's internal step (stepSimulation's fixedTimeStep) is not FibreMSS's dt. The
-// muscles run in the thesis' quasi-static pose mode: each internal Bullet step is one FibreMSS
-// step, which moves the muscles from the bones' previous transforms to their current ones in
-// up to SimulationParameters::iterations iterations of SimulationParameters::timeStep each (its
-// own, simulated-time dt; see docs/integrators.md). So the muscles follow the bones' poses
-// whatever Bullet's dt, and a pose's cost does not depend on it; call stepSimulation(dt, 1, dt)
-// to take exactly one FibreMSS step per call.
+// timeStep: what Bullet's internal step (stepSimulation's fixedTimeStep) means to the muscles is
+// WorldCoupling::time (fibremss/RigidContact.h). MuscleTime::QuasiStaticPose (the default, the
+// thesis' mode): each internal Bullet step is one FibreMSS step, which moves the muscles from the
+// bones' previous transforms to their current ones in up to SimulationParameters::iterations
+// iterations of SimulationParameters::timeStep each (its own, simulated-time dt; see
+// docs/integrators.md), so the muscles follow the bones' poses whatever Bullet's dt and a pose's
+// cost does not depend on it; call stepSimulation(dt, 1, dt) to take exactly one FibreMSS step
+// per call. MuscleTime::Dynamic: each internal Bullet step of dt advances the muscles by exactly
+// dt of simulated time (MuscleSystem::step(duration)): one clock for muscles and rigid bodies.
+//
+// Two-way contact (WorldCoupling::rigidContact, on by default): the world's rigid bodies and
+// collision objects that are not bones (a ball, a probe, a hand; dynamic, kinematic or static),
+// found through the world's broadphase near the muscles, collide with the muscles' particle
+// spheres; the muscles deform and dynamic bodies receive the reaction impulses after the
+// muscles' step (Dynamic: exactly the momentum the particles lost; QuasiStaticPose: the step's
+// mean contact force times Bullet's dt). contactWrench answers the haptic query.
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 #include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
 
 #include <memory>
@@ -19,8 +29,11 @@
 #include <vector>
 
 #include "fibremss/MuscleSystem.h"
+#include "fibremss/RigidContact.h"
 
 namespace fibremss {
+
+class RigidCoupling;
 
 class MuscleWorld : public btSoftRigidDynamicsWorld {
  public:
@@ -56,6 +69,25 @@ class MuscleWorld : public btSoftRigidDynamicsWorld {
   /// FibreMSS steps taken so far: one per internal Bullet step.
   long muscleSteps() const { return muscleSteps_; }
 
+  /// How the muscles meet the world: the meaning of Bullet's dt, two-way contact with rigid
+  /// bodies (fibremss/RigidContact.h). InputError for a reach that is not finite and ≥ 0.
+  void setCoupling(const WorldCoupling& coupling);
+  const WorldCoupling& coupling() const { return coupling_; }
+
+  /// What `body` received from the muscles in the last FibreMSS step (MuscleSystem::bodyContact):
+  /// impulse, angular impulse, mean force and torque, contacts. Zero for a body out of reach.
+  BodyContact bodyContact(const btCollisionObject* body) const {
+    return muscles_.bodyContact(body);
+  }
+  /// The haptic query (MuscleSystem::contactWrench) at the body's current world transform, or at
+  /// `transform` (a tool's pose read from a device at 1 kHz, between the muscles' steps).
+  ContactWrench contactWrench(const btCollisionObject& body) const {
+    return muscles_.contactWrench(body, body.getWorldTransform());
+  }
+  ContactWrench contactWrench(const btCollisionObject& body, const btTransform& transform) const {
+    return muscles_.contactWrench(body, transform);
+  }
+
   /// What debugDrawWorld draws of the muscles (DebugDrawFlag bits; 0 draws nothing).
   void setMuscleDebugFlags(int flags) { muscleDebugFlags_ = flags; }
   int muscleDebugFlags() const { return muscleDebugFlags_; }
@@ -65,13 +97,14 @@ class MuscleWorld : public btSoftRigidDynamicsWorld {
   /// asks for wireframes, AABBs or normals (when Bullet draws its actions).
   void debugDrawWorld() override;
 
-  /// Bullet's removal; a bone's body also stops being a bone (its muscles treat it as gone), so
-  /// deleting the body afterwards leaves no pointer to it.
+  /// Bullet's removal; a bone's body also stops being a bone (its muscles treat it as gone), a
+  /// contact body stops being one, so deleting the body afterwards leaves no pointer to it.
   void removeCollisionObject(btCollisionObject* object) override;
   void removeRigidBody(btRigidBody* body) override;
 
  protected:
-  /// Bullet's internal step (rigid and soft bodies, actions), then one FibreMSS step.
+  /// Bullet's internal step (rigid and soft bodies, actions), then one FibreMSS step with the
+  /// contact bodies in reach, then their reaction impulses.
   void internalSingleStepSimulation(btScalar timeStep) override;
 
  private:
@@ -87,6 +120,8 @@ class MuscleWorld : public btSoftRigidDynamicsWorld {
   std::vector<Bone> bones_;                                   ///< bones added through this world
   int muscleDebugFlags_ = kDrawParticles | kDrawBoneSpheres;  ///< DebugDrawFlag bits
   long muscleSteps_ = 0;                                      ///< FibreMSS steps taken
+  WorldCoupling coupling_;                                    ///< time meaning, rigid contact
+  std::unique_ptr<RigidCoupling> rigid_;                      ///< contact bodies of the step
 };
 
 }  // namespace fibremss

@@ -2,6 +2,7 @@
 // Definition structs with defaults (Box2D style): everything a scene can set about the model.
 // All quantities are SI (metres, kilograms, seconds, newtons).
 #include <LinearMath/btScalar.h>
+#include <LinearMath/btVector3.h>
 
 #include <cstdint>
 #include <string>
@@ -118,6 +119,9 @@ struct SimulationParameters {
   /// The host's task system (TaskScheduler.h); when set it runs every task of the step and
   /// `threads` is ignored (its workerCount counts the workers).
   TaskScheduler scheduler;
+  /// Acceleration of gravity on every free particle [m/s²]; zero (the default, as in the thesis)
+  /// adds nothing. MuscleWorld does not copy the world's gravity: set it here.
+  btVector3 gravity{0, 0, 0};
 
   BoneCollision boneCollision = BoneCollision::Spheres;  ///< muscle–bone detection
   btScalar distanceFieldCell = 0.001;                    ///< cell size of bone distance fields [m]

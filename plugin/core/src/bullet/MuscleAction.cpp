@@ -1,9 +1,27 @@
 #include "fibremss/MuscleAction.h"
 
+#include <BulletCollision/CollisionDispatch/btCollisionWorld.h>
+
+#include "RigidCoupling.h"
+
 namespace fibremss {
 
-void MuscleAction::updateAction(btCollisionWorld*, btScalar) {
-  muscles_.step();
+MuscleAction::MuscleAction(const SimulationParameters& parameters)
+    : muscles_(parameters), rigid_(std::make_unique<RigidCoupling>()) {}
+
+MuscleAction::~MuscleAction() = default;
+
+void MuscleAction::updateAction(btCollisionWorld* world, btScalar timeStep) {
+  rigid_->step(*world, muscles_, coupling_, timeStep);
+}
+
+void MuscleAction::setCoupling(const WorldCoupling& coupling) {
+  checkCoupling(coupling, "MuscleAction::setCoupling");
+  coupling_ = coupling;
+}
+
+void MuscleAction::forgetBody(const btCollisionObject* body) {
+  rigid_->forget(body, muscles_);
 }
 
 void MuscleAction::debugDraw(btIDebugDraw* drawer) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "RigidCoupling.h"
 #include "fibremss/Error.h"
 
 namespace fibremss {
@@ -13,7 +14,8 @@ MuscleWorld::MuscleWorld(btDispatcher* dispatcher, btBroadphaseInterface* broadp
                          btConstraintSolver* solver, btCollisionConfiguration* configuration,
                          const SimulationParameters& parameters, btSoftBodySolver* softSolver)
     : btSoftRigidDynamicsWorld(dispatcher, broadphase, solver, configuration, softSolver),
-      muscles_(parameters) {}
+      muscles_(parameters),
+      rigid_(std::make_unique<RigidCoupling>()) {}
 
 MuscleWorld::~MuscleWorld() = default;
 
@@ -52,13 +54,20 @@ void MuscleWorld::forgetBoneBody(const btCollisionObject* body) {
   bones_.erase(it);
 }
 
+void MuscleWorld::setCoupling(const WorldCoupling& coupling) {
+  checkCoupling(coupling, "MuscleWorld::setCoupling");
+  coupling_ = coupling;
+}
+
 void MuscleWorld::removeCollisionObject(btCollisionObject* object) {
   forgetBoneBody(object);
+  rigid_->forget(object, muscles_);
   btSoftRigidDynamicsWorld::removeCollisionObject(object);
 }
 
 void MuscleWorld::removeRigidBody(btRigidBody* body) {
   forgetBoneBody(body);
+  rigid_->forget(body, muscles_);
   btSoftRigidDynamicsWorld::removeRigidBody(body);
 }
 
@@ -75,7 +84,7 @@ bool MuscleWorld::removeMuscle(MuscleHandle muscle) {
 
 void MuscleWorld::internalSingleStepSimulation(btScalar timeStep) {
   btSoftRigidDynamicsWorld::internalSingleStepSimulation(timeStep);
-  muscles_.step();
+  rigid_->step(*this, muscles_, coupling_, timeStep);
   ++muscleSteps_;
 }
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
+#include "contact/BodyContacts.h"
 #include "solver/ParticleSimd.h"
 #include "solver/SpringForces.h"
 #include "solver/VolumeForces.h"
@@ -136,8 +137,8 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
                        std::span<const btScalar> weights)
       : kind_(kind), offsets_(offsets), weights_(weights) {}
 
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters&, btScalar dt,
-                            btScalar) const override {
+  IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
+                            btScalar dt, btScalar) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     const btScalar damping = settings.damping;
@@ -168,6 +169,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
     for (size_t s = 1; s < weights_.size(); ++s) {
       springForces(settings, stage.positions, stage.forces);
       if (!muscle.volumeOffsets.empty()) addVolumeForces(muscle, stage.positions, stage.forces);
+      addExternalForces(muscle, parameters.gravity, stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();
       const btScalar offset = last ? 0 : offsets_[s] * dt;

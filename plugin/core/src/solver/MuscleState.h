@@ -9,6 +9,7 @@
 
 #include "collision/BoneDistanceField.h"
 #include "collision/CollisionTrees.h"
+#include "contact/InteractionState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
 
@@ -118,10 +119,10 @@ struct GuardSnapshot {
   std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
 };
 
-/// A muscle: settings, its bones and slot, and the state a step changes in four parts (stages
+/// A muscle: settings, its bones and slot, and the state a step changes in five parts (stages
 /// that need one part can take it alone). Solver settings are not here: the step passes them to
 /// the stages.
-struct MuscleState : ParticleState, ContactState, TreeState, GuardSnapshot {
+struct MuscleState : ParticleState, ContactState, TreeState, GuardSnapshot, InteractionState {
   std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
   std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
   std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)

@@ -65,6 +65,9 @@ StepSize smallerSteps(const SimulationParameters& requested, int halvings) {
   return smaller;
 }
 
+/// Most iterations a duration step splits into before its dt grows past timeStep.
+constexpr double kMaxExactIterations = 1 << 20;
+
 void add(StepTiming& sum, const StepTiming& part) {
   sum.mss += part.mss;
   sum.volume += part.volume;
@@ -105,6 +108,18 @@ void restoreGoodState(MuscleState& muscle) {
   forgetBoneSides(muscle);
 }
 
+StepSize MuscleSystem::Impl::stepSize(int halvings) const {
+  if (!(duration > 0)) return smallerSteps(parameters, halvings);
+  // k = max(iterations, ⌈duration / timeStep⌉) iterations of duration / k.
+  SimulationParameters exact = parameters;
+  const double split = std::ceil(double(duration) / double(parameters.timeStep));
+  exact.iterations = std::max(parameters.iterations, int(std::min(split, kMaxExactIterations)));
+  exact.timeStep = exact.minTimeStep = duration / static_cast<btScalar>(exact.iterations);
+  StepSize size = smallerSteps(exact, halvings);
+  size.exact = true;
+  return size;
+}
+
 void MuscleSystem::Impl::guardedStep() {
   const Clock::time_point start = Clock::now();
   const uint64_t number = stepCount++;
@@ -120,7 +135,7 @@ void MuscleSystem::Impl::guardedStep() {
     bone.goodCurrent = bone.current;
   }
   const btScalar goodPreviousDt = previousDt;
-  StepSize size = smallerSteps(parameters, 0);
+  StepSize size = stepSize(0);
 
   StepTiming spent;
   int iterations = 0, retries = 0;
@@ -179,7 +194,7 @@ void MuscleSystem::Impl::guardedStep() {
     }
     previousDt = goodPreviousDt;
     rolledBack = true;
-    size = smallerSteps(parameters, retry ? ++retries : 0);
+    size = stepSize(retry ? ++retries : 0);
   }
 
   // A frozen muscle rides with its bones (each one's motion over the whole step, from where it

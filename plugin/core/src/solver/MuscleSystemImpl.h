@@ -13,6 +13,7 @@
 #include "SpringForces.h"
 #include "TaskPool.h"
 #include "collision/CollisionPairs.h"
+#include "contact/BodyContacts.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 
@@ -100,6 +101,9 @@ struct StepSize {
   btScalar timeStep = 0;     ///< largest dt (SimulationParameters::timeStep) [s]
   btScalar minTimeStep = 0;  ///< smallest adaptive dt (SimulationParameters::minTimeStep) [s]
   int iterations = 1;        ///< iteration cap (SimulationParameters::iterations, at least 1)
+  /// MuscleTime::Dynamic: exactly `iterations` iterations of the fixed dt `timeStep`, bones
+  /// moving over all of them, whatever the stop rule and adaptiveTimeStep say.
+  bool exact = false;
 };
 
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
@@ -119,12 +123,18 @@ struct MuscleSystem::Impl {
   std::vector<MuscleContact> pairContacts;  ///< room for every muscle pair's contacts
   uint32_t musclesAdded = 0;                ///< counts additions, seeds each muscle's noise
   btScalar previousDt = 0;                  ///< dt of the last iteration (0: none yet)
+  uint64_t stepCount = 0;                   ///< steps taken (the guard numbers them)
   bool pushesPending = false;  ///< collide() left pushes that the next forces phase applies
   /// Iterations over which the equilibrium stop rule measures how fast the steps shrink.
   static constexpr size_t kEquilibriumWindow = 16;
   /// Mean displacements of the last two windows of iterations since the bones arrived.
   std::array<double, 2 * kEquilibriumWindow + 1> recentDisplacements{};
-  uint64_t stepCount = 0;  ///< steps taken (the guard numbers them)
+  /// Simulated time the running step must advance (MuscleSystem::step(duration)); 0: a pose step.
+  btScalar duration = 0;
+  std::vector<const btCollisionObject*> contactSources;  ///< setContactBodies' bodies
+  std::vector<ContactBodyState> contactBodies;  ///< those bodies as the running step sees them
+  std::vector<BodyContact> bodyResults;         ///< what each received in the last step
+  mutable TreeTraversalStack queryStack;        ///< contactWrench's traversal stack
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
@@ -177,6 +187,14 @@ struct MuscleSystem::Impl {
   void forcesPhase(bool bonesMove, bool newOffsets);
   void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
   void step(const StepSize& size);
+  /// The sizes of a step attempt after `halvings` retries (smaller dt, more iterations): the
+  /// parameters', or those of a `duration` step (StepSize::exact).
+  StepSize stepSize(int halvings) const;
+  // Contact bodies (MuscleSystemContact.cpp): read at each attempt's start, collided after every
+  // iteration's response, their totals made into bodyResults at the end.
+  void beginBodyContacts();
+  void collideBodies(btScalar dt);
+  void endBodyContacts();
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
 };
 

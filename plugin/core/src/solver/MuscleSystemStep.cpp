@@ -203,7 +203,7 @@ double MuscleSystem::Impl::threadShare(
 
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
 btScalar MuscleSystem::Impl::timeStep(const StepSize& size) const {
-  if (!parameters.adaptiveTimeStep) return size.timeStep;
+  if (size.exact || !parameters.adaptiveTimeStep) return size.timeStep;
   btScalar dt = size.timeStep;
   for (uint32_t slot : active) dt = std::min(dt, results[slot].safeTimeStep);
   return std::max(dt, size.minTimeStep);
@@ -315,6 +315,7 @@ void MuscleSystem::Impl::forcesPhase(bool bonesMove, bool newOffsets) {
     const Clock::time_point volumeStart = Clock::now();
     addVolumeTerm(state, newOffsets);
     result.volumeMs = state.volumeOffsets.empty() ? 0 : millisecondsSince(volumeStart);
+    addExternalForces(state, parameters.gravity, state.forces);
     if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
     result.forcesMs = millisecondsSince(forcesStart);
   });
@@ -454,7 +455,9 @@ void MuscleSystem::Impl::step(const StepSize& size) {
                return !(bones.states[slot]->last == bones.states[slot]->target);
              })) {
     motionIterations =
-        std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
+        size.exact
+            ? cap
+            : std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
   }  // else no bone moves in this step: the stop rules need not wait for an arrival
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
@@ -466,6 +469,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       placeAtBones(state);
       rebuildTree(state);
     });
+  beginBodyContacts();
 
   int iteration = 0;
   while (true) {
@@ -474,11 +478,17 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
     forcesPhase(bonesMove, bonesMove || iteration == 1);
-    integrateAndRefit(integrator, timeStep(size));
+    const btScalar dt = timeStep(size);
+    integrateAndRefit(integrator, dt);
     collide();
+    // Contact bodies meet the particles after this iteration's response.
+    if (!contactBodies.empty()) applyResponse();
+    collideBodies(dt);
 
     const bool arrived = iteration >= motionIterations;
-    if (iteration >= cap || stopRuleMet(arrived, iteration - motionIterations, stepStart)) {
+    // A duration step runs all its iterations.
+    const bool ruled = !size.exact && stopRuleMet(arrived, iteration - motionIterations, stepStart);
+    if (iteration >= cap || ruled) {
       const Clock::time_point start = Clock::now();
       // A spent budget ends the step where it is: the bones jump the rest of the way.
       if (!arrived) moveBones(1, true);
@@ -490,6 +500,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     }
   }
   stats.iterations = iteration;
+  endBodyContacts();
 
   const Clock::time_point outputStart = Clock::now();
   forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {

@@ -1,5 +1,6 @@
 #pragma once
-// `fibremss view`: an interactive window (GLFW, OpenGL, Dear ImGui) that steps a scene live:
+// `fibremss view`: an interactive window (GLFW, OpenGL, Dear ImGui) that steps a scene live
+// or plays a run's frames:
 // bones, muscle surfaces coloured by an array, particles, fibres, springs, bone spheres and
 // contacts through the world's btIDebugDraw, play/pause/step/pose, the per-part timings, an
 // orbit/pan/zoom camera. With a screenshot path it renders once after some steps, writes a
@@ -13,13 +14,16 @@ namespace fibremss::viewer {
 
 /// What to show and how; the defaults open a window on the scene at rest.
 struct ViewerOptions {
-  std::string scene;                   ///< built-in scene name or .json path
+  std::string scene;  ///< built-in scene name or .json path
+  /// Play the frames of this run's directory (DIR/run.pvd, as `fibremss run --out DIR` wrote
+  /// them) instead of stepping `scene` ("": step `scene` live).
+  std::string runDir;
   std::vector<std::string> overrides;  ///< key=value scene overrides, in order
   std::string screenshot;  ///< write this PNG after `steps` steps and return ("": interactive)
-  int steps = 0;           ///< steps taken before the first picture
+  int steps = 0;           ///< steps taken (frames advanced) before the first picture
   int width = 1280;        ///< window width [px]
   int height = 800;        ///< window height [px]
-  std::string colourBy = "fibre_stretch";  ///< muscle_id, fibre_stretch or displacement
+  std::string colourBy = "fibre_stretch";  ///< one of colourArrays()
   int muscleDebugFlags = 0;                ///< DebugDrawFlag bits drawn through the world's drawer
   bool bones = true;                       ///< draw the bone meshes
   float surfaceOpacity = 1;                ///< muscle surfaces' opacity (0 hides them)
@@ -45,7 +49,8 @@ struct ViewerResult {
 /// opened or the PNG not written.
 ViewerResult runViewer(const ViewerOptions& options);
 
-/// The arrays muscles can be coloured by.
+/// The arrays muscles can be coloured by (a scene stepped live has fibre_stretch, displacement
+/// and muscle_id; a run's frames all of them).
 const std::vector<std::string>& colourArrays();
 
 }  // namespace fibremss::viewer

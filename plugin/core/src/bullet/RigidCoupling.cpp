@@ -1,0 +1,136 @@
+#include "RigidCoupling.h"
+
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletCollision/CollisionDispatch/btCollisionWorld.h>
+#include <BulletDynamics/Dynamics/btRigidBody.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "fibremss/Error.h"
+#include "solver/MuscleSystemAccess.h"
+
+namespace fibremss {
+namespace {
+
+/// Whether the muscles collide with `object` (its broadphase proxy `proxy`): a rigid body or a
+/// plain collision object that responds to contacts, not a bone, filters accepting both ways.
+bool contactCandidate(const btCollisionObject& object, const btBroadphaseProxy& proxy,
+                      const MuscleSystemAccess::Impl& impl, const WorldCoupling& coupling) {
+  const int type = object.getInternalType();
+  if ((type != btCollisionObject::CO_RIGID_BODY &&
+       type != btCollisionObject::CO_COLLISION_OBJECT) ||
+      !object.hasContactResponse())
+    return false;
+  if (!(proxy.m_collisionFilterGroup & coupling.contactMask) ||
+      !(coupling.contactGroup & proxy.m_collisionFilterMask))
+    return false;
+  for (uint32_t slot : impl.bones.order)
+    if (impl.bones.states[slot]->body == &object) return false;
+  return true;
+}
+
+/// The union of the unfrozen muscles' tree bounds grown by `reach`; false when there are none.
+bool muscleBounds(const MuscleSystemAccess::Impl& impl, btScalar reach, btDbvtVolume& bounds) {
+  bool any = false;
+  for (uint32_t slot : impl.muscles.order) {
+    const MuscleState& muscle = *impl.muscles.states[slot];
+    if (muscle.frozen || muscle.tree.empty()) continue;
+    if (any)
+      Merge(bounds, muscle.tree.bounds(0), bounds);
+    else
+      bounds = muscle.tree.bounds(0);
+    any = true;
+  }
+  if (any) bounds.Expand(btVector3(reach, reach, reach));
+  return any;
+}
+
+/// Collects the candidates among the leaves of a btDbvtBroadphase's trees.
+struct ProxyCollector : btDbvt::ICollide {
+  const MuscleSystemAccess::Impl& impl;
+  const WorldCoupling& coupling;
+  std::vector<const btCollisionObject*>& bodies;
+  ProxyCollector(const MuscleSystemAccess::Impl& i, const WorldCoupling& c,
+                 std::vector<const btCollisionObject*>& b)
+      : impl(i), coupling(c), bodies(b) {}
+  void Process(const btDbvtNode* leaf) override {
+    const auto* proxy = static_cast<const btBroadphaseProxy*>(leaf->data);
+    const auto* object = static_cast<const btCollisionObject*>(proxy->m_clientObject);
+    if (object && contactCandidate(*object, *proxy, impl, coupling)) bodies.push_back(object);
+  }
+};
+
+}  // namespace
+
+void checkCoupling(const WorldCoupling& coupling, const char* call) {
+  if (!(coupling.reach >= 0) || !std::isfinite(coupling.reach))
+    throw InputError(call, "WorldCoupling::reach", "expected a finite distance ≥ 0 m");
+}
+
+void RigidCoupling::gather(btCollisionWorld& world, MuscleSystem& muscles,
+                           const WorldCoupling& coupling) {
+  bodies_.clear();
+  const MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(muscles);
+  btDbvtVolume bounds = btDbvtVolume::FromMM(btVector3(0, 0, 0), btVector3(0, 0, 0));
+  if (coupling.rigidContact && muscleBounds(impl, coupling.reach, bounds)) {
+    if (auto* broadphase = dynamic_cast<btDbvtBroadphase*>(world.getBroadphase())) {
+      ProxyCollector collector(impl, coupling, bodies_);
+      for (const btDbvt& set : broadphase->m_sets)
+        set.collideTVNoStackAlloc(set.m_root, bounds, stack_, collector);
+    } else {
+      const btCollisionObjectArray& objects = world.getCollisionObjectArray();
+      for (int k = 0; k < objects.size(); ++k) {
+        const btBroadphaseProxy* proxy = objects[k]->getBroadphaseHandle();
+        if (proxy && Intersect(bounds, btDbvtVolume::FromMM(proxy->m_aabbMin, proxy->m_aabbMax)) &&
+            contactCandidate(*objects[k], *proxy, impl, coupling))
+          bodies_.push_back(objects[k]);
+      }
+    }
+    // The world's order, whatever the broadphase's tree looks like.
+    std::sort(bodies_.begin(), bodies_.end(),
+              [](const btCollisionObject* a, const btCollisionObject* b) {
+                return a->getWorldArrayIndex() < b->getWorldArrayIndex();
+              });
+  }
+  muscles.setContactBodies(bodies_);
+}
+
+void RigidCoupling::apply(const MuscleSystem& muscles, btScalar scale, bool moved) const {
+  for (const btCollisionObject* object : bodies_) {
+    auto* body = const_cast<btRigidBody*>(btRigidBody::upcast(object));
+    if (!body || body->isStaticOrKinematicObject()) continue;
+    const BodyContact contact = muscles.bodyContact(object);
+    if (contact.impulse.isZero() && contact.angularImpulse.isZero()) continue;
+    body->activate();
+    if (moved) {
+      body->setWorldTransform(contact.transform);
+      body->setInterpolationWorldTransform(contact.transform);
+    }
+    body->applyCentralImpulse(contact.impulse * scale);
+    body->applyTorqueImpulse(contact.angularImpulse * scale);
+  }
+}
+
+void RigidCoupling::step(btCollisionWorld& world, MuscleSystem& muscles,
+                         const WorldCoupling& coupling, btScalar timeStep) {
+  gather(world, muscles, coupling);
+  if (coupling.time == MuscleTime::Dynamic) {
+    muscles.step(timeStep);
+    apply(muscles, 1, true);
+    return;
+  }
+  muscles.step();
+  // The pose step ran the muscles' own time: the body takes its mean force over Bullet's dt.
+  const double time = muscles.lastStep().simulatedTime;
+  apply(muscles, time > 0 ? static_cast<btScalar>(timeStep / time) : btScalar(0), false);
+}
+
+void RigidCoupling::forget(const btCollisionObject* object, MuscleSystem& muscles) {
+  const auto it = std::find(bodies_.begin(), bodies_.end(), object);
+  if (it == bodies_.end()) return;
+  bodies_.erase(it);
+  muscles.setContactBodies(bodies_);
+}
+
+}  // namespace fibremss

@@ -1,0 +1,173 @@
+#include "BodyContacts.h"
+
+#include <BulletCollision/CollisionDispatch/btCollisionObject.h>
+#include <BulletCollision/CollisionShapes/btCollisionShape.h>
+#include <BulletDynamics/Dynamics/btRigidBody.h>
+#include <LinearMath/btTransformUtil.h>
+
+#include "ShapeContact.h"
+
+namespace fibremss {
+namespace {
+
+/// Calls onLeaf(particle) for every leaf of the muscle's tree whose bounds overlap `box`.
+template <typename OnLeaf>
+void forLeavesIn(const SphereTree& tree, const btDbvtVolume& box, TreeTraversalStack& stack,
+                 OnLeaf&& onLeaf) {
+  if (tree.empty()) return;
+  stack.clear();
+  stack.push_back({0, -1});
+  while (!stack.empty()) {
+    const int32_t n = stack.back().first;
+    stack.pop_back();
+    if (!boundsOverlap(tree.bounds(n), box)) continue;
+    const SphereTree::Node& node = tree.node(n);
+    if (node.sphere >= 0) {
+      onLeaf(static_cast<uint32_t>(node.sphere));
+    } else {
+      stack.push_back({node.children[0], -1});
+      stack.push_back({node.children[1], -1});
+    }
+  }
+}
+
+/// `box` grown by `margin` on every side.
+btDbvtVolume grown(const btDbvtVolume& box, btScalar margin) {
+  const btVector3 m(margin, margin, margin);
+  return btDbvtVolume::FromMM(box.Mins() - m, box.Maxs() + m);
+}
+
+/// How far a particle may have left its leaf's bounds since the tree's refit: the collision
+/// response's pushes, at most about two radii.
+btScalar leafSlack(const MuscleState& muscle) {
+  return 2 * muscle.meanRadius;
+}
+
+/// The response of particle i of `muscle` to `contact` with `body`; returns the impulse the
+/// particle received [N·s].
+btVector3 respond(MuscleState& muscle, uint32_t i, const ContactBodyState& body,
+                  const ShapeContact& contact, btScalar dt, bool hasVelocities) {
+  const btVector3& n = contact.normal;
+  const btVector3 surface = body.linear + body.angular.cross(contact.point - body.centre);
+  const btScalar mass = muscle.settings->particleMass;
+  btVector3 moved = muscle.positions[i] - muscle.previous[i];
+  const btScalar approach = (moved - surface * dt).dot(n);
+  if (approach < 0) moved -= n * approach;
+  btVector3 impulse = n * (approach < 0 ? -mass * approach / dt : btScalar(0));
+  if (hasVelocities) {
+    btVector3& v = muscle.velocities[i];
+    const btScalar into = (v - surface).dot(n);
+    impulse = n * (into < 0 ? -mass * into : btScalar(0));
+    if (into < 0) v -= n * into;
+  }
+  muscle.positions[i] += n * contact.depth;
+  muscle.previous[i] = muscle.positions[i] - moved;
+  return impulse;
+}
+
+/// Places the body at `transform`: its centre of mass and bounds follow.
+void placeContactBody(ContactBodyState& state, const btTransform& transform) {
+  state.transform = transform;
+  // A btRigidBody's world transform is its centre of mass's.
+  state.centre = transform.getOrigin();
+  if (!state.touchable) return;
+  btVector3 lower, upper;
+  state.body->getCollisionShape()->getAabb(transform, lower, upper);
+  state.bounds = btDbvtVolume::FromMM(lower, upper);
+}
+
+}  // namespace
+
+ContactBodyState readContactBody(const btCollisionObject& body) {
+  ContactBodyState state;
+  state.body = &body;
+  const btCollisionShape* shape = body.getCollisionShape();
+  state.touchable = shape && touchableShape(*shape);
+  placeContactBody(state, body.getWorldTransform());
+  if (const btRigidBody* rigid = btRigidBody::upcast(&body)) {
+    state.linear = rigid->getLinearVelocity();
+    state.angular = rigid->getAngularVelocity();
+    if (!rigid->isStaticOrKinematicObject()) {
+      state.inverseMass = rigid->getInvMass();
+      state.inverseInertia = rigid->getInvInertiaTensorWorld();
+    }
+  }
+  return state;
+}
+
+void moveContactBody(ContactBodyState& body, btScalar time) {
+  if (body.linear.isZero() && body.angular.isZero()) return;
+  btTransform moved;
+  btTransformUtil::integrateTransform(body.transform, body.linear, body.angular, time, moved);
+  placeContactBody(body, moved);
+}
+
+void prepareInteraction(MuscleState& muscle, size_t bodies) {
+  if (muscle.bodyImpulses.size() != bodies) muscle.bodyImpulses.resize(bodies);
+  const MuscleSettings& settings = *muscle.settings;
+  if (bodies == 0 || muscle.contactStiffness.size() == settings.particleCount()) return;
+  muscle.contactStiffness.assign(settings.particleCount(), 0);
+  for (const Spring& spring : settings.springs) {
+    muscle.contactStiffness[spring.a] += spring.stiffness / 3;
+    muscle.contactStiffness[spring.b] += spring.stiffness / 3;
+  }
+}
+
+void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies, btScalar dt,
+                   bool hasVelocities, TreeTraversalStack& stack) {
+  const MuscleSettings& settings = *muscle.settings;
+  for (size_t k = 0; k < bodies.size(); ++k) {
+    BodyImpulse& sum = muscle.bodyImpulses[k];
+    sum = BodyImpulse{};
+    const ContactBodyState& body = bodies[k];
+    if (!body.touchable || muscle.tree.empty()) continue;
+    const btDbvtVolume box = grown(body.bounds, leafSlack(muscle));
+    if (!boundsOverlap(muscle.tree.bounds(0), box)) continue;
+    const btCollisionShape& shape = *body.body->getCollisionShape();
+    forLeavesIn(muscle.tree, box, stack, [&](uint32_t i) {
+      if (settings.isFixed(i)) return;
+      ShapeContact contact;
+      if (!sphereShapeContact(shape, body.transform, muscle.positions[i], settings.radii[i],
+                              contact))
+        return;
+      const btVector3 impulse = respond(muscle, i, body, contact, dt, hasVelocities);
+      sum.linear -= impulse;
+      sum.angular -= (contact.point - body.centre).cross(impulse);
+      ++sum.contacts;
+    });
+  }
+}
+
+void addHookeWrench(const MuscleState& muscle, const btCollisionObject& body,
+                    const btTransform& transform, const btVector3& centre,
+                    TreeTraversalStack& stack, ContactWrench& wrench) {
+  const btCollisionShape* shape = body.getCollisionShape();
+  if (!shape || !touchableShape(*shape) || muscle.tree.empty() || muscle.contactStiffness.empty())
+    return;
+  btVector3 lower, upper;
+  shape->getAabb(transform, lower, upper);
+  const btDbvtVolume box = grown(btDbvtVolume::FromMM(lower, upper), leafSlack(muscle));
+  if (!boundsOverlap(muscle.tree.bounds(0), box)) return;
+  const MuscleSettings& settings = *muscle.settings;
+  forLeavesIn(muscle.tree, box, stack, [&](uint32_t i) {
+    ShapeContact contact;
+    if (settings.isFixed(i) ||
+        !sphereShapeContact(*shape, transform, muscle.positions[i], settings.radii[i], contact))
+      return;
+    const btVector3 force = contact.normal * (-muscle.contactStiffness[i] * contact.depth);
+    wrench.force += force;
+    wrench.torque += (contact.point - centre).cross(force);
+    ++wrench.contacts;
+  });
+}
+
+void addExternalForces(const MuscleState& muscle, const btVector3& gravity,
+                       std::span<btVector3> forces) {
+  const bool held = !muscle.externalForces.empty();
+  if (!held && gravity.isZero()) return;
+  const btVector3 weight = gravity * muscle.settings->particleMass;
+  for (uint32_t i : muscle.freeParticles)
+    forces[i] += held ? weight + muscle.externalForces[i] : weight;
+}
+
+}  // namespace fibremss

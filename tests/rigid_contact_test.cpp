@@ -1,0 +1,474 @@
+// Two-way contact with rigid bodies (issue 19 step 4, fibremss/RigidContact.h) in real Bullet
+// worlds: a ball dropped on a muscle lying on a bone stops on it (never through), the muscle
+// dents and recovers; momentum is conserved between a ball and a free muscle; a probe pressed
+// deeper feels more force; the dynamic time mode advances exactly Bullet's dt; without contact
+// bodies a step is bit-identical to the plain solver's; any thread count gives the same bits;
+// the contact path allocates nothing; exact sphere–shape contacts.
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletCollision/CollisionShapes/btBoxShape.h>
+#include <BulletCollision/CollisionShapes/btCapsuleShape.h>
+#include <BulletCollision/CollisionShapes/btConvexHullShape.h>
+#include <BulletCollision/CollisionShapes/btSphereShape.h>
+#include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "contact/ShapeContact.h"
+#include "fibremss/BoneBody.h"
+#include "fibremss/Error.h"
+#include "fibremss/MuscleAction.h"
+#include "fibremss/MuscleWorld.h"
+#include "support/AllocationCounter.h"
+#include "support/SlabMuscle.h"
+
+namespace fibremss {
+namespace {
+
+using testing::slabBone;
+using testing::slabMuscle;
+
+constexpr btScalar kSpacing = btScalar(0.004);  // slab particle spacing [m]
+constexpr int kSide = 9;                        // particles along x and z
+constexpr int kLayers = 3;                      // particles along y
+constexpr btScalar kWidth = (kSide - 1) * kSpacing;
+constexpr btScalar kTop = (kLayers - 1) * kSpacing + kSpacing / 2;  // slab's upper surface [m]
+constexpr btScalar kBulletStep = btScalar(1.0 / 480);               // fixed Bullet step [s]
+
+SimulationParameters slabParameters(int threads = 1) {
+  SimulationParameters parameters;
+  parameters.timeStep = btScalar(5e-5);  // below the slab's stable dt (about 1e-4 s)
+  parameters.iterations = 20;
+  parameters.threads = threads;
+  return parameters;
+}
+
+/// A dynamic sphere body with its shape and motion state.
+struct Ball {
+  btSphereShape shape;
+  btDefaultMotionState motion;
+  btRigidBody body;
+  Ball(btScalar radius, btScalar mass, const btVector3& centre)
+      : shape(radius),
+        motion(btTransform(btQuaternion::getIdentity(), centre)),
+        body(mass, &motion, &shape, inertia(shape, mass)) {
+    body.setActivationState(DISABLE_DEACTIVATION);
+  }
+  static btVector3 inertia(btSphereShape& shape, btScalar mass) {
+    btVector3 i(0, 0, 0);
+    shape.calculateLocalInertia(mass, i);
+    return i;
+  }
+  btScalar bottom() const { return body.getWorldTransform().getOrigin().y() - shape.getRadius(); }
+};
+
+/// A MuscleWorld with slab muscles lying on one slab bone (x side by side), Dynamic time.
+struct SlabWorld {
+  btSoftBodyRigidBodyCollisionConfiguration configuration;
+  btCollisionDispatcher dispatcher{&configuration};
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  MuscleWorld world;
+  std::unique_ptr<BoneBody> bone;
+  BoneHandle boneHandle;
+  std::vector<MuscleHandle> muscles;
+
+  explicit SlabWorld(int slabs = 1, int threads = 1, btScalar kappa = 5)
+      : world(&dispatcher, &broadphase, &solver, &configuration, slabParameters(threads)) {
+    world.setGravity(btVector3(0, btScalar(-9.81), 0));
+    WorldCoupling coupling;
+    coupling.time = MuscleTime::Dynamic;
+    world.setCoupling(coupling);
+    const btScalar pitch = kWidth + kSpacing + btScalar(0.0005);
+    bone = std::make_unique<BoneBody>(slabBone(pitch * slabs, kWidth, kSpacing));
+    boneHandle = world.addBone(bone->settings(), bone->body());
+    for (int s = 0; s < slabs; ++s)
+      muscles.push_back(world.addMuscle(slabMuscle(kSide, kLayers, kSide, kSpacing, kappa,
+                                                   btScalar(0.3), true, btVector3(pitch * s, 0, 0)),
+                                        std::span(&boneHandle, 1)));
+  }
+  ~SlabWorld() {
+    for (MuscleHandle m : muscles) world.removeMuscle(m);
+    world.removeBone(boneHandle);
+  }
+  void step(int count = 1) {
+    for (int k = 0; k < count; ++k) world.stepSimulation(kBulletStep, 1, kBulletStep);
+  }
+  /// Mean y of the top layer's particles within `radius` of (x, z).
+  btScalar topHeight(MuscleHandle muscle, btScalar x, btScalar z, btScalar radius) const {
+    const std::span<const btVector3> p = world.muscleSystem().positions(muscle);
+    const MuscleSettings& settings = world.muscleSystem().settings(muscle);
+    btScalar sum = 0;
+    int count = 0;
+    for (size_t i = 0; i < p.size(); ++i) {
+      const btVector3& rest = settings.restPositions[i];
+      if (rest.y() < (kLayers - 1) * kSpacing - 1e-6f) continue;
+      if (btVector3(rest.x() - x, 0, rest.z() - z).length() > radius) continue;
+      sum += p[i].y();
+      ++count;
+    }
+    return count ? sum / btScalar(count) : 0;
+  }
+};
+
+// ---- The ball on the muscle ----------------------------------------------------------------
+
+TEST(RigidContact, ABallDroppedOnAMuscleStopsOnItAndTheMuscleDentsAndRecovers) {
+  SlabWorld f;
+  const MuscleHandle slab = f.muscles.front();
+  const btScalar centre = kWidth / 2;
+  f.step(20);  // the muscle at rest on its bone
+  const btScalar restTop = f.topHeight(slab, centre, centre, 1.5f * kSpacing);
+
+  const btScalar radius = 0.008f, mass = 0.02f;
+  Ball ball(radius, mass, btVector3(centre, kTop + radius + 0.01f, centre));
+  const btScalar dropped = ball.bottom();
+  f.world.addRigidBody(&ball.body);
+  btScalar lowest = dropped, highestAfter = 0, deepestDent = 0;
+  btVector3 reported(0, 0, 0);
+  btVector3 measured(0, 0, 0);  // Δp of the ball that is not gravity's
+  size_t touching = 0;
+  bool bounced = false;
+  for (int s = 0; s < 240; ++s) {  // half a second
+    const btVector3 before = ball.body.getLinearVelocity();
+    f.step();
+    const btVector3 after = ball.body.getLinearVelocity();
+    measured += (after - before - f.world.getGravity() * kBulletStep) * mass;
+    const BodyContact contact = f.world.bodyContact(&ball.body);
+    reported += contact.impulse;
+    touching += contact.contacts > 0 ? 1 : 0;
+    if (touching > 0) {
+      highestAfter = std::max(highestAfter, ball.bottom());
+      bounced = bounced || after.y() > 0.1f;
+    }
+    lowest = std::min(lowest, ball.bottom());
+    deepestDent =
+        std::max(deepestDent, restTop - f.topHeight(slab, centre, centre, 1.5f * kSpacing));
+    ASSERT_FALSE(f.world.muscleSystem().lastStep().nan) << "step " << s;
+  }
+  ASSERT_GT(touching, 0u) << "the ball never touched the muscle";
+  // Never through: the ball's lowest point stays well above the bottom layer (y = 0).
+  EXPECT_GT(lowest, kTop - 3 * kSpacing / 2) << "lowest " << lowest;
+  // It bounced off the muscle (or came to rest on it), and lower than it was dropped from: the
+  // contact makes no energy.
+  const bool resting =
+      ball.body.getLinearVelocity().length() < 0.02f && std::abs(ball.bottom() - kTop) < kSpacing;
+  EXPECT_TRUE(bounced || resting);
+  EXPECT_LT(highestAfter, dropped - 1e-3f);
+  EXPECT_GT(deepestDent, 2e-4f) << "the muscle did not dent";
+  // The momentum the ball exchanged with the muscle is the impulse reported, within 1 %.
+  ASSERT_GT(reported.length(), mass * 0.44f);  // at least the impact momentum
+  EXPECT_LT((measured - reported).length(), 0.01f * reported.length())
+      << "measured " << measured.y() << " reported " << reported.y();
+
+  // Take the ball away: the muscle recovers its shape.
+  f.world.removeRigidBody(&ball.body);
+  f.step(240);
+  EXPECT_NEAR(f.topHeight(slab, centre, centre, 1.5f * kSpacing), restTop, 5e-5f);
+  EXPECT_EQ(f.world.bodyContact(&ball.body).contacts, 0u);
+}
+
+TEST(RigidContact, MomentumIsConservedBetweenABallAndAFreeMuscle) {
+  btSoftBodyRigidBodyCollisionConfiguration configuration;
+  btCollisionDispatcher dispatcher(&configuration);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, slabParameters());
+  world.setGravity(btVector3(0, 0, 0));
+  WorldCoupling coupling;
+  coupling.time = MuscleTime::Dynamic;
+  world.setCoupling(coupling);
+  // A free slab without damping (internal forces only): its momentum is the centre's motion.
+  const auto settings = slabMuscle(5, 3, 5, kSpacing, 5, 0, false);
+  const MuscleHandle slab = world.addMuscle(settings, {});
+  const btScalar muscleMass = settings->particleMass * btScalar(settings->particleCount());
+  const auto centreOf = [&] {
+    btVector3 sum(0, 0, 0);
+    for (const btVector3& p : world.muscleSystem().positions(slab)) sum += p;
+    return sum / btScalar(settings->particleCount());
+  };
+  const btScalar mass = 0.01f, speed = 0.3f;
+  Ball ball(0.006f, mass, btVector3(-0.012f, kSpacing, 2 * kSpacing));
+  ball.body.setLinearVelocity(btVector3(speed, 0, 0));
+  world.addRigidBody(&ball.body);
+  int apart = 0, steps = 0;
+  bool touched = false;
+  // Until the two have separated for 20 steps.
+  for (; steps < 2000 && apart < 20; ++steps) {
+    world.stepSimulation(kBulletStep, 1, kBulletStep);
+    const bool touching = world.bodyContact(&ball.body).contacts > 0;
+    touched = touched || touching;
+    apart = touched && !touching ? apart + 1 : 0;
+  }
+  ASSERT_TRUE(touched);
+  ASSERT_EQ(apart, 20) << "still in contact after " << steps << " steps";
+  const btVector3 start = centreOf();
+  world.stepSimulation(kBulletStep, 1, kBulletStep);
+  const btVector3 muscleVelocity = (centreOf() - start) / kBulletStep;
+  const btVector3 total = ball.body.getLinearVelocity() * mass + muscleVelocity * muscleMass;
+  EXPECT_GT(muscleVelocity.x(), 0.1f * speed) << "the ball did not push the muscle";
+  EXPECT_LT((total - btVector3(mass * speed, 0, 0)).length(), 0.01f * mass * speed)
+      << "before " << mass * speed << " after " << total.x() << " " << total.y() << " "
+      << total.z();
+  world.removeRigidBody(&ball.body);
+}
+
+// ---- The probe -----------------------------------------------------------------------------
+
+TEST(RigidContact, AProbePressedDeeperIntoAMuscleFeelsMoreForce) {
+  SlabWorld f;
+  const btScalar centre = kWidth / 2, radius = 0.005f;
+  btSphereShape shape(radius);
+  btRigidBody probe(0, nullptr, &shape);  // kinematic: the user moves it
+  probe.setCollisionFlags(probe.getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+  probe.setActivationState(DISABLE_DEACTIVATION);
+  const auto place = [&](btScalar depth) {
+    return btTransform(btQuaternion::getIdentity(),
+                       btVector3(centre, kTop + radius - depth, centre + 0.0007f));
+  };
+  probe.setWorldTransform(place(-0.002f));
+  f.world.addRigidBody(&probe);
+  std::vector<btScalar> forces;
+  for (btScalar depth : {0.0005f, 0.001f, 0.0015f, 0.002f, 0.0025f}) {
+    probe.setWorldTransform(place(depth));
+    f.step(120);  // a quarter second at this depth: settled
+    const ContactWrench wrench = f.world.contactWrench(probe);
+    EXPECT_GT(wrench.contacts, 0u) << depth;
+    EXPECT_NEAR(wrench.force.y(), f.world.bodyContact(&probe).force.y(),
+                0.05f * std::abs(wrench.force.y()))
+        << "at the pose of the last step the Hooke term is small";
+    // Between steps, the haptic query follows the tool at once: deeper is stronger.
+    EXPECT_GT(f.world.contactWrench(probe, place(depth + 0.0003f)).force.y(), wrench.force.y());
+    forces.push_back(wrench.force.y());
+  }
+  for (size_t k = 0; k < forces.size(); ++k) {
+    EXPECT_GT(forces[k], 0) << "the muscle pushes the probe up";
+    if (k > 0) {
+      EXPECT_GT(forces[k], forces[k - 1]) << "depth " << k;
+    }
+  }
+  f.world.removeRigidBody(&probe);
+}
+
+// ---- Time and identity ---------------------------------------------------------------------
+
+TEST(RigidContact, DynamicTimeAdvancesExactlyBulletsStep) {
+  SlabWorld f;
+  f.step();
+  const StepStats& stats = f.world.muscleSystem().lastStep();
+  // k = max(20, ⌈(1/480) / 5e-5⌉) = 42 iterations of dt/k.
+  EXPECT_EQ(stats.iterations, 42);
+  EXPECT_NEAR(stats.simulatedTime, kBulletStep, 1e-9);
+  EXPECT_FLOAT_EQ(stats.lastTimeStep, kBulletStep / 42);
+  EXPECT_THROW(f.world.muscleSystem().step(btScalar(0)), InputError);
+  WorldCoupling bad;
+  bad.reach = -1;
+  EXPECT_THROW(f.world.setCoupling(bad), InputError);
+}
+
+/// Positions after `steps` steps of a grid muscle between two moving bones: in a MuscleWorld
+/// with `coupling` and, when `farBall`, a dynamic ball far out of reach; or (`plain`) in a bare
+/// MuscleSystem without any world, the path before contact existed.
+std::vector<btVector3> gridRun(bool plain, const WorldCoupling& coupling, bool farBall) {
+  SimulationParameters parameters = slabParameters();
+  parameters.iterations = 15;
+  const auto settings = slabMuscle(5, 3, 4, kSpacing, 2, btScalar(0.2), true);
+  const auto boneSettings = slabBone(4 * kSpacing, 3 * kSpacing, kSpacing);
+  const auto moved = [](int s) {
+    return btTransform(btQuaternion(btVector3(0, 0, 1), btScalar(0.01) * s),
+                       btVector3(btScalar(0.0005) * s, 0, 0));
+  };
+  const int steps = 8;
+  if (plain) {
+    MuscleSystem system(parameters);
+    const BoneHandle bone = system.addBone(boneSettings);
+    const MuscleHandle muscle = system.addMuscle(settings, std::span(&bone, 1));
+    for (int s = 1; s <= steps; ++s) {
+      system.setBoneTransform(bone, moved(s));
+      system.step();
+    }
+    const std::span<const btVector3> p = system.positions(muscle);
+    return {p.begin(), p.end()};
+  }
+  btSoftBodyRigidBodyCollisionConfiguration configuration;
+  btCollisionDispatcher dispatcher(&configuration);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
+  world.setCoupling(coupling);
+  BoneBody bone(boneSettings);
+  const BoneHandle handle = world.addBone(bone.settings(), bone.body());
+  const MuscleHandle muscle = world.addMuscle(settings, std::span(&handle, 1));
+  Ball ball(0.01f, 0.1f, btVector3(5, 5, 5));
+  if (farBall) world.addRigidBody(&ball.body);
+  for (int s = 1; s <= steps; ++s) {
+    bone.setTransform(moved(s));
+    world.stepSimulation(btScalar(1.0 / 60), 0);
+  }
+  const std::span<const btVector3> p = world.muscleSystem().positions(muscle);
+  std::vector<btVector3> positions(p.begin(), p.end());
+  if (farBall) world.removeRigidBody(&ball.body);
+  world.removeMuscle(muscle);
+  world.removeBone(handle);
+  return positions;
+}
+
+bool sameBits(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(btVector3)) == 0;
+}
+
+TEST(RigidContact, WithoutContactBodiesTheDefaultsAreBitIdenticalToThePlainSolver) {
+  const std::vector<btVector3> plain = gridRun(true, {}, false);
+  WorldCoupling off;
+  off.rigidContact = false;
+  EXPECT_TRUE(sameBits(gridRun(false, {}, false), plain)) << "defaults, no body";
+  EXPECT_TRUE(sameBits(gridRun(false, {}, true), plain)) << "defaults, a ball out of reach";
+  EXPECT_TRUE(sameBits(gridRun(false, off, true), plain)) << "contact off";
+}
+
+/// The ball and muscle positions of two slabs a ball lands on across both, with `threads`.
+std::vector<btVector3> twoSlabDrop(int threads) {
+  SlabWorld f(2, threads);
+  const btScalar pitch = kWidth + kSpacing + btScalar(0.0005);
+  Ball ball(0.008f, 0.02f, btVector3(pitch - kSpacing, kTop + 0.009f, kWidth / 2));
+  f.world.addRigidBody(&ball.body);
+  size_t touching = 0;
+  for (int s = 0; s < 60; ++s) {
+    f.step();
+    touching += f.world.bodyContact(&ball.body).contacts;
+  }
+  EXPECT_GT(touching, 0u);
+  std::vector<btVector3> result{ball.body.getWorldTransform().getOrigin(),
+                                ball.body.getLinearVelocity(), ball.body.getAngularVelocity()};
+  for (MuscleHandle m : f.muscles) {
+    const std::span<const btVector3> p = f.world.muscleSystem().positions(m);
+    result.insert(result.end(), p.begin(), p.end());
+  }
+  f.world.removeRigidBody(&ball.body);
+  return result;
+}
+
+TEST(RigidContact, OneAndTwoThreadsGiveTheSameBits) {
+  EXPECT_TRUE(sameBits(twoSlabDrop(1), twoSlabDrop(2)));
+}
+
+TEST(RigidContact, TheContactPathAllocatesNothing) {
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
+  {
+    SlabWorld f(2, 2);
+    // A kinematic ball held 2 mm deep in the slab: contacts in every step.
+    Ball ball(0.008f, 0, btVector3(kWidth / 2, kTop + 0.006f, kWidth / 2));
+    ball.body.setCollisionFlags(ball.body.getCollisionFlags() |
+                                btCollisionObject::CF_KINEMATIC_OBJECT);
+    f.world.addRigidBody(&ball.body);
+    // MuscleAction's path (gather through the broadphase, step, impulses) called directly:
+    // Bullet's own step allocates contact manifolds of its own pairs.
+    MuscleAction action(slabParameters(2));
+    WorldCoupling coupling;
+    coupling.time = MuscleTime::Dynamic;
+    action.setCoupling(coupling);
+    const BoneHandle bone = action.muscleSystem().addBone(f.bone->settings(), f.bone->body());
+    action.muscleSystem().addMuscle(
+        slabMuscle(kSide, kLayers, kSide, kSpacing, 5, btScalar(0.3), true), std::span(&bone, 1));
+    action.updateAction(&f.world, kBulletStep);  // first step: the lists grow to the bodies
+    f.step(2);
+    testing::allocationCount = 0;
+    testing::countingArmed = true;
+    for (int s = 0; s < 10; ++s) {
+      action.updateAction(&f.world, kBulletStep);
+      (void)f.world.contactWrench(ball.body);
+    }
+    testing::countingArmed = false;
+    EXPECT_GT(action.muscleSystem().bodyContact(&ball.body).contacts, 0u) << "no contact ran";
+    EXPECT_EQ(testing::allocationCount.load(), 0);
+    f.world.removeRigidBody(&ball.body);
+  }
+  btAlignedAllocSetCustom(nullptr, nullptr);
+}
+
+// ---- Gravity and external forces -----------------------------------------------------------
+
+TEST(RigidContact, GravityAndExternalForcesMoveFreeParticles) {
+  SimulationParameters parameters = slabParameters();
+  parameters.gravity = btVector3(0, -9.81f, 0);
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(slabBone(kWidth, kWidth, kSpacing));
+  const auto settings = slabMuscle(kSide, kLayers, kSide, kSpacing, 5, btScalar(0.3), true);
+  const MuscleHandle muscle = system.addMuscle(settings, std::span(&bone, 1));
+  const size_t top = settings->particleCount() - 1;
+  for (int s = 0; s < 20; ++s) system.step(kBulletStep);
+  EXPECT_LT(system.positions(muscle)[top].y(), settings->restPositions[top].y()) << "sags";
+  const btScalar sagged = system.positions(muscle)[top].y();
+  system.setExternalForce(muscle, static_cast<uint32_t>(top), btVector3(0, 0.5f, 0));
+  for (int s = 0; s < 20; ++s) system.step(kBulletStep);
+  EXPECT_GT(system.positions(muscle)[top].y(), sagged + 1e-4f) << "pulled up";
+  EXPECT_THROW(system.setExternalForce(muscle, 100000, btVector3(0, 1, 0)), InputError);
+  EXPECT_THROW(system.setExternalForce(muscle, 0, btVector3(NAN, 0, 0)), InputError);
+  system.clearExternalForces(muscle);
+}
+
+// ---- Exact contacts with shapes ------------------------------------------------------------
+
+TEST(ShapeContact, SpheresBoxesCapsulesAndConvexHullsGiveTheirSignedDistances) {
+  const btTransform pose(btQuaternion(btVector3(1, 2, 3).normalized(), 0.7f),
+                         btVector3(0.1f, -0.2f, 0.05f));
+  btBoxShape box(btVector3(0.02f, 0.01f, 0.015f));
+  btConvexHullShape hull;
+  for (int corner = 0; corner < 8; ++corner)
+    hull.addPoint(btVector3(corner & 1 ? 0.02f : -0.02f, corner & 2 ? 0.01f : -0.01f,
+                            corner & 4 ? 0.015f : -0.015f));
+  hull.setMargin(0);
+  btSphereShape sphere(0.01f);
+  btCapsuleShape capsule(0.005f, 0.02f);  // radius, height of the cylinder part (y)
+  std::mt19937 random(3);
+  std::uniform_real_distribution<btScalar> unit(-0.03f, 0.03f);
+  const btScalar r = 0.004f;
+  int boxHits = 0;
+  for (int k = 0; k < 2000; ++k) {
+    const btVector3 local(unit(random), unit(random), unit(random));
+    const btVector3 p = pose * local;
+    ShapeContact a, b;
+    const bool hitBox = sphereShapeContact(box, pose, p, r, a);
+    // Outside the box: the distance to the clamped point.
+    btVector3 clamped = local;
+    clamped.setMax(-box.getHalfExtentsWithMargin());
+    clamped.setMin(box.getHalfExtentsWithMargin());
+    const btScalar outside = (local - clamped).length();
+    if (outside > 1e-4f) {
+      ASSERT_EQ(hitBox, outside < r) << k;
+      if (hitBox) {
+        ++boxHits;
+        EXPECT_NEAR(a.depth, r - outside, 1e-5f);
+        EXPECT_NEAR(a.point.distance(pose * clamped), 0, 1e-5f);
+      }
+    }
+    // The hull of the same box agrees (GJK/EPA), inside too.
+    ASSERT_EQ(sphereShapeContact(hull, pose, p, r, b), hitBox) << k;
+    if (hitBox) {
+      EXPECT_NEAR(b.depth, a.depth, 2e-4f) << k;
+      EXPECT_GT(b.normal.dot(a.normal), 0.98f)
+          << k << " outside " << outside << " depth " << a.depth << " " << b.depth;
+    }
+    // The sphere and the capsule: distance to a centre point and to the axis segment.
+    const btScalar toCentre = local.length() - 0.01f;
+    ASSERT_EQ(sphereShapeContact(sphere, pose, p, r, a), toCentre < r);
+    if (toCentre < r) {
+      EXPECT_NEAR(a.depth, r - toCentre, 1e-5f);
+    }
+    const btVector3 axis(0, std::clamp(local.y(), btScalar(-0.01), btScalar(0.01)), 0);
+    const btScalar toAxis = (local - axis).length() - 0.005f;
+    ASSERT_EQ(sphereShapeContact(capsule, pose, p, r, a), toAxis < r);
+    if (toAxis < r) {
+      EXPECT_NEAR(a.depth, r - toAxis, 1e-5f);
+      EXPECT_NEAR(a.normal.dot(pose.getBasis() * (local - axis).normalized()), 1, 1e-4f);
+    }
+  }
+  EXPECT_GT(boxHits, 50);
+}
+
+}  // namespace
+}  // namespace fibremss
