@@ -7,9 +7,9 @@
 namespace fibremss {
 namespace {
 
-/// Busy-wait rounds before yielding: a few microseconds, about the serial gaps between the
-/// phases of an iteration.
-constexpr int kSpinRounds = 500;
+/// Busy-wait rounds before yielding: a few tens of microseconds, longer than the serial gaps
+/// between the phases of an iteration, shorter than the gaps between steps.
+constexpr int kSpinRounds = 4000;
 /// Rounds of giving the core away (sched_yield) before sleeping: a thread of another process
 /// that holds this core runs, and the wait still wakes within a time slice.
 constexpr int kYieldRounds = 64;
