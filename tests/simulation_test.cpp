@@ -1,5 +1,7 @@
 // MuscleSystem dynamics (method.md §4–§5): spring oscillation and damping against the analytic
 // solutions, relaxation, fixed particles following bones, determinism, no allocation in step().
+#include <BulletCollision/CollisionShapes/btBoxShape.h>
+#include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <LinearMath/btAlignedAllocator.h>
 #include <LinearMath/btIDebugDraw.h>
 #include <gtest/gtest.h>
@@ -586,26 +588,41 @@ TEST(Allocation, StepAllocatesNothing) {
   {
     SimulationParameters parameters;
     parameters.iterations = 20;
-    for (bool rebuild : {false, true}) {
-      parameters.rebuildEveryStep = rebuild;
-      MuscleSystem system(parameters);
-      const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
-      auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
-      auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
-      a->damping = b->damping = zelenyDamping(*a);
-      system.addMuscle(a, std::span(&bone, 1));
-      system.addMuscle(b, std::span(&bone, 1));
-      testing::allocationCount = 0;
-      testing::countingArmed = true;
-      for (int s = 0; s < 10; ++s) {
-        system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
-        system.step();
+    // A box pressed into the side of the first muscle: the contact body path (issue 19 step 4).
+    btBoxShape boxShape(btVector3(0.004f, 0.01f, 0.005f));
+    btRigidBody box(0.05f, nullptr, &boxShape, btVector3(1e-5f, 1e-5f, 1e-5f));
+    box.setWorldTransform(
+        btTransform(btQuaternion::getIdentity(), btVector3(-0.0055f, 0.005f, 0.015f)));
+    box.setLinearVelocity(btVector3(0.05f, 0, 0));  // moving in: impulses in every step
+    const btCollisionObject* bodies[] = {&box};
+    for (bool rebuild : {false, true})
+      for (bool contact : {false, true}) {
+        parameters.rebuildEveryStep = rebuild;
+        MuscleSystem system(parameters);
+        const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
+        auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
+        auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
+        a->damping = b->damping = zelenyDamping(*a);
+        system.addMuscle(a, std::span(&bone, 1));
+        system.addMuscle(b, std::span(&bone, 1));
+        if (contact) system.setContactBodies(bodies);
+        size_t contacts = 0, touched = 0;
+        testing::allocationCount = 0;
+        testing::countingArmed = true;
+        for (int s = 0; s < 10; ++s) {
+          system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
+          system.step();
+          contacts += system.lastStep().contacts;
+          touched += system.bodyContact(&box).impulse.isZero() ? 0 : 1;
+        }
+        testing::countingArmed = false;
+        EXPECT_GT(contacts, 0u);  // collision ran
+        if (contact) {
+          EXPECT_GT(touched, 0u) << "the box touched";
+        }
+        EXPECT_EQ(testing::allocationCount.load(), 0)
+            << (rebuild ? "rebuild" : "animation") << " mode" << (contact ? ", contact body" : "");
       }
-      testing::countingArmed = false;
-      EXPECT_GT(system.lastStep().contacts, 0u);  // collision ran
-      EXPECT_EQ(testing::allocationCount.load(), 0)
-          << (rebuild ? "rebuild" : "animation") << " mode";
-    }
   }
   btAlignedAllocSetCustom(nullptr, nullptr);
 }

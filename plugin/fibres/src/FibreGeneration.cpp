@@ -231,6 +231,171 @@ struct Grid {
   }
 };
 
+/// The six face neighbours of a voxel, as index offsets.
+constexpr int kOffsets[6][3] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+
+/// Face neighbour d (of 6) of voxel `id` in `out`; false beyond the grid.
+bool neighbourOf(const Grid& grid, size_t id, int d, size_t& out) {
+  const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
+            k = int(id / (size_t(grid.n[0]) * grid.n[1]));
+  const int a = i + kOffsets[d][0], b = j + kOffsets[d][1], c = k + kOffsets[d][2];
+  if (a < 0 || b < 0 || c < 0 || a >= grid.n[0] || b >= grid.n[1] || c >= grid.n[2]) return false;
+  out = grid.index(a, b, c);
+  return true;
+}
+
+/// Voxel grid: every voxel's label, -1 outside, 0 free, 1 origin (u = 0), 2 insertion (u = 1):
+/// an inside voxel within a voxel of the surface takes the area most of its closest triangle's
+/// vertices are in.
+std::vector<int8_t> labelVoxels(const TriangleMesh& surface, const MeshDistance& distance,
+                                const Grid& grid, const std::vector<uint32_t>& originIds,
+                                const std::vector<uint32_t>& insertionIds) {
+  const auto& V = surface.vertices;
+  const btScalar h = grid.h;
+  std::vector<int8_t> label(grid.size(), -1);
+  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
+  for (uint32_t i : originIds) inOrigin[i] = 1;
+  for (uint32_t i : insertionIds) inInsertion[i] = 1;
+  for (int k = 0; k < grid.n[2]; ++k)
+    for (int j = 0; j < grid.n[1]; ++j)
+      for (int i = 0; i < grid.n[0]; ++i) {
+        const size_t id = grid.index(i, j, k);
+        const auto c = distance.closest(grid.centre(i, j, k));
+        if (!c.inside) continue;
+        label[id] = 0;
+        if (c.distance < h && c.triangle != UINT32_MAX) {
+          int o = 0, s = 0;
+          for (uint32_t v : surface.triangles[c.triangle]) o += inOrigin[v], s += inInsertion[v];
+          if (o > s)
+            label[id] = 1;
+          else if (s > o)
+            label[id] = 2;
+        }
+      }
+  return label;
+}
+
+/// Keeps the interior voxels connected to both areas (others would make the system singular).
+void keepConnectedVoxels(const Grid& grid, std::vector<int8_t>& label) {
+  const size_t N = grid.size();
+  std::vector<int> component(N, -1);
+  std::vector<size_t> stack;
+  int components = 0;
+  std::vector<std::array<bool, 2>> touches;
+  for (size_t id = 0; id < N; ++id) {
+    if (label[id] < 0 || component[id] >= 0) continue;
+    touches.push_back({false, false});
+    stack.push_back(id);
+    component[id] = components;
+    while (!stack.empty()) {
+      const size_t v = stack.back();
+      stack.pop_back();
+      if (label[v] == 1) touches.back()[0] = true;
+      if (label[v] == 2) touches.back()[1] = true;
+      for (int d = 0; d < 6; ++d) {
+        size_t w;
+        if (neighbourOf(grid, v, d, w) && label[w] >= 0 && component[w] < 0) {
+          component[w] = components;
+          stack.push_back(w);
+        }
+      }
+    }
+    ++components;
+  }
+  for (size_t id = 0; id < N; ++id)
+    if (label[id] >= 0 && !(touches[component[id]][0] && touches[component[id]][1])) label[id] = -1;
+}
+
+/// Laplace: 7-point stencil, Neumann at the surface, Dirichlet 0 / 1 at the areas; the field
+/// per voxel (0 outside).
+std::vector<double> solveField(const Grid& grid, const std::vector<int8_t>& label,
+                               const std::string& source, std::vector<std::string>& warnings) {
+  const size_t N = grid.size();
+  std::vector<int> unknown(N, -1);
+  int unknowns = 0;
+  for (size_t id = 0; id < N; ++id)
+    if (label[id] == 0) unknown[id] = unknowns++;
+  std::vector<double> u(N, 0);
+  for (size_t id = 0; id < N; ++id) u[id] = label[id] == 2 ? 1.0 : 0.0;
+  if (unknowns == 0) return u;
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(size_t(unknowns) * 7);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(unknowns);
+  for (size_t id = 0; id < N; ++id) {
+    if (unknown[id] < 0) continue;
+    const int row = unknown[id];
+    double degree = 0;
+    for (int d = 0; d < 6; ++d) {
+      size_t w;
+      if (!neighbourOf(grid, id, d, w) || label[w] < 0) continue;
+      degree += 1;
+      if (unknown[w] >= 0)
+        triplets.emplace_back(row, unknown[w], -1.0);
+      else if (label[w] == 2)
+        rhs[row] += 1.0;
+    }
+    triplets.emplace_back(row, row, std::max(degree, 1.0));
+  }
+  Eigen::SparseMatrix<double> A(unknowns, unknowns);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper,
+                           Eigen::IncompleteCholesky<double>>
+      solver;
+  solver.setTolerance(1e-8);
+  solver.setMaxIterations(5000);
+  solver.compute(A);
+  Eigen::VectorXd x = solver.solve(rhs);
+  if (solver.info() != Eigen::Success && solver.error() > 1e-4)
+    warnings.push_back(source + ": the Laplace solve did not converge (error " +
+                       std::to_string(solver.error()) + ")");
+  for (size_t id = 0; id < N; ++id)
+    if (unknown[id] >= 0) u[id] = std::clamp(x[unknown[id]], 0.0, 1.0);
+  return u;
+}
+
+/// Extends the field a few voxels outwards (mean of known neighbours) for interpolation.
+void extendField(const Grid& grid, const std::vector<int8_t>& label, std::vector<double>& u) {
+  const size_t N = grid.size();
+  std::vector<char> known(N, 0);
+  for (size_t id = 0; id < N; ++id) known[id] = label[id] >= 0;
+  for (int pass = 0; pass < 3; ++pass) {
+    std::vector<std::pair<size_t, double>> updates;
+    for (size_t id = 0; id < N; ++id) {
+      if (known[id]) continue;
+      double sum = 0;
+      int count = 0;
+      for (int d = 0; d < 6; ++d) {
+        size_t w;
+        if (neighbourOf(grid, id, d, w) && known[w]) sum += u[w], ++count;
+      }
+      if (count) updates.emplace_back(id, sum / count);
+    }
+    for (auto& [id, value] : updates) u[id] = value, known[id] = 1;
+  }
+}
+
+/// The field's gradient by central differences (one-sided at the grid's edges), 3 per voxel.
+std::vector<double> fieldGradient(const Grid& grid, const std::vector<double>& u) {
+  std::vector<double> gradient(grid.size() * 3, 0);
+  for (int k = 0; k < grid.n[2]; ++k)
+    for (int j = 0; j < grid.n[1]; ++j)
+      for (int i = 0; i < grid.n[0]; ++i) {
+        const int c[3] = {i, j, k};
+        const size_t id = grid.index(i, j, k);
+        for (int a = 0; a < 3; ++a) {
+          int lo3[3] = {i, j, k}, hi3[3] = {i, j, k};
+          lo3[a] = std::max(c[a] - 1, 0);
+          hi3[a] = std::min(c[a] + 1, grid.n[a] - 1);
+          const double span = double(hi3[a] - lo3[a]) * grid.h;
+          gradient[id * 3 + a] =
+              (u[grid.index(hi3[0], hi3[1], hi3[2])] - u[grid.index(lo3[0], lo3[1], lo3[2])]) /
+              span;
+        }
+      }
+  return gradient;
+}
+
 /// Arc-length resampling to `samples` points.
 std::vector<btVector3> resample(const std::vector<btVector3>& line, int samples) {
   std::vector<double> s(line.size(), 0);
@@ -328,6 +493,123 @@ void resolveAreas(const TriangleMesh& surface, const AttachmentArea& origin,
   result.insertionArea = std::move(insertionIds);
 }
 
+using Lines = std::vector<std::vector<btVector3>>;
+
+/// Quality: lengths, points outside, right ends (each end within 1.5 voxels `h`, the field's
+/// resolution, of its area's triangles: those with a vertex in the area).
+void measureFibres(const TriangleMesh& surface, const MeshDistance& distance,
+                   const std::vector<uint32_t>& originIds,
+                   const std::vector<uint32_t>& insertionIds, const Lines& lines,
+                   btScalar insideTolerance, btScalar h, FibreQuality& q) {
+  const auto& V = surface.vertices;
+  std::vector<btScalar> lengths;
+  int right = 0;
+  auto areaSurface = [&](const std::vector<uint32_t>& ids) {
+    std::vector<char> in(V.size(), 0);
+    for (uint32_t i : ids) in[i] = 1;
+    TriangleMesh area;
+    area.vertices = V;
+    for (const auto& t : surface.triangles)
+      if (in[t[0]] || in[t[1]] || in[t[2]]) area.triangles.push_back(t);
+    return MeshDistance(area);
+  };
+  const MeshDistance originSurface = areaSurface(originIds);
+  const MeshDistance insertionSurface = areaSurface(insertionIds);
+  for (const auto& l : lines) {
+    btScalar length = 0;
+    for (size_t i = 1; i < l.size(); ++i) length += l[i].distance(l[i - 1]);
+    lengths.push_back(length);
+    for (const auto& p : l) q.pointsOutside += distance.signedDistance(p) > insideTolerance;
+    const btScalar gap = std::max(originSurface.closest(l.front()).distance,
+                                  insertionSurface.closest(l.back()).distance);
+    q.worstEndGap = std::max(q.worstEndGap, gap);
+    right += gap <= btScalar(1.5) * h;
+  }
+  if (!lengths.empty()) {
+    std::sort(lengths.begin(), lengths.end());
+    q.minLength = lengths.front();
+    q.maxLength = lengths.back();
+    q.medianLength = lengths[lengths.size() / 2];
+    q.rightEnds = double(right) / double(lines.size());
+  }
+}
+
+/// Coverage: interior voxels within `r` (coverageDistance) of a fibre point (points dense
+/// enough).
+void measureCoverage(const Grid& grid, const std::vector<int8_t>& label, const Lines& lines,
+                     btScalar r, FibreQuality& q) {
+  const btScalar h = grid.h;
+  const size_t N = grid.size();
+  std::vector<char> covered(N, 0);
+  const int reach = int(std::ceil(r / h));
+  for (const auto& l : lines) {
+    std::vector<btVector3> dense;
+    for (size_t i = 1; i < l.size(); ++i) {
+      const int parts = std::max(1, int(std::ceil(l[i].distance(l[i - 1]) / (r / 2))));
+      for (int s = 0; s < parts; ++s) dense.push_back(l[i - 1].lerp(l[i], btScalar(s) / parts));
+    }
+    dense.push_back(l.back());
+    for (const auto& p : dense) {
+      const btVector3 g = (p - grid.lower) / h;
+      const int ci = int(std::lround(g.x())), cj = int(std::lround(g.y())),
+                ck = int(std::lround(g.z()));
+      for (int k = std::max(0, ck - reach); k <= std::min(grid.n[2] - 1, ck + reach); ++k)
+        for (int j = std::max(0, cj - reach); j <= std::min(grid.n[1] - 1, cj + reach); ++j)
+          for (int i = std::max(0, ci - reach); i <= std::min(grid.n[0] - 1, ci + reach); ++i)
+            if (grid.centre(i, j, k).distance2(p) <= r * r) covered[grid.index(i, j, k)] = 1;
+    }
+  }
+  size_t hit = 0;
+  for (size_t id = 0; id < N; ++id) hit += label[id] >= 0 && covered[id];
+  q.coverage = double(hit) / double(q.interiorVoxels);
+}
+
+/// Crossings: fibre pairs with segments closer than the tolerance (hash grid of segments).
+void countCrossings(const Grid& grid, const Lines& lines, const FibreGenerationOptions& options,
+                    FibreQuality& q) {
+  const btScalar tol = options.crossingTolerance;
+  const btScalar cell = std::max(tol * 4, grid.h);
+  struct Seg {
+    uint32_t fibre, index;
+  };
+  std::unordered_map<uint64_t, std::vector<Seg>> buckets;
+  auto key = [&](int i, int j, int k) {
+    return (uint64_t(uint32_t(i + 1048576)) << 42) ^ (uint64_t(uint32_t(j + 1048576)) << 21) ^
+           uint64_t(uint32_t(k + 1048576));
+  };
+  auto cellOf = [&](const btVector3& p, int c[3]) {
+    for (int a = 0; a < 3; ++a) c[a] = int(std::floor((p[a] - grid.lower[a]) / cell));
+  };
+  for (uint32_t f = 0; f < lines.size(); ++f)
+    for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
+      int c[3];
+      cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
+      buckets[key(c[0], c[1], c[2])].push_back({f, s});
+    }
+  std::vector<char> pair(lines.size() * lines.size(), 0);
+  const btScalar segmentLength = lines.empty() ? 0 : q.maxLength / btScalar(options.samples - 1);
+  const int reach = 1 + int(std::ceil(segmentLength / cell));
+  for (uint32_t f = 0; f < lines.size(); ++f)
+    for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
+      int c[3];
+      cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
+      for (int dk = -reach; dk <= reach; ++dk)
+        for (int dj = -reach; dj <= reach; ++dj)
+          for (int di = -reach; di <= reach; ++di) {
+            auto it = buckets.find(key(c[0] + di, c[1] + dj, c[2] + dk));
+            if (it == buckets.end()) continue;
+            for (const Seg& other : it->second) {
+              if (other.fibre <= f || pair[f * lines.size() + other.fibre]) continue;
+              if (segmentDistance2(lines[f][s], lines[f][s + 1], lines[other.fibre][other.index],
+                                   lines[other.fibre][other.index + 1]) < double(tol) * tol) {
+                pair[f * lines.size() + other.fibre] = 1;
+                ++q.crossingPairs;
+              }
+            }
+          }
+    }
+}
+
 /// Voxelises the muscle at `gridSize` voxels along its longest side, solves the field and
 /// traces up to options.count fibres into `result`. False when no interior voxel connects the
 /// two areas at this grid.
@@ -354,149 +636,16 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
   const btScalar insideTolerance = options.insideTolerance > 0 ? options.insideTolerance : h / 4;
 
   const size_t N = grid.size();
-  std::vector<btScalar> sd(N);
-  std::vector<int8_t> label(N, -1);  // -1 outside, 0 free, 1 origin (u=0), 2 insertion (u=1)
-  std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
-  for (uint32_t i : originIds) inOrigin[i] = 1;
-  for (uint32_t i : insertionIds) inInsertion[i] = 1;
-  for (int k = 0; k < grid.n[2]; ++k)
-    for (int j = 0; j < grid.n[1]; ++j)
-      for (int i = 0; i < grid.n[0]; ++i) {
-        const size_t id = grid.index(i, j, k);
-        const btVector3 p = grid.centre(i, j, k);
-        const auto c = distance.closest(p);
-        sd[id] = c.inside ? -c.distance : c.distance;
-        if (!c.inside) continue;
-        label[id] = 0;
-        if (c.distance < h && c.triangle != UINT32_MAX) {
-          int o = 0, s = 0;
-          for (uint32_t v : surface.triangles[c.triangle]) o += inOrigin[v], s += inInsertion[v];
-          if (o > s)
-            label[id] = 1;
-          else if (s > o)
-            label[id] = 2;
-        }
-      }
-
-  // Keep the interior voxels connected to both areas (others would make the system singular).
-  const int offsets[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-  auto neighbour = [&](size_t id, int d, size_t& out) {
-    const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
-              k = int(id / (size_t(grid.n[0]) * grid.n[1]));
-    const int a = i + offsets[d][0], b = j + offsets[d][1], c = k + offsets[d][2];
-    if (a < 0 || b < 0 || c < 0 || a >= grid.n[0] || b >= grid.n[1] || c >= grid.n[2]) return false;
-    out = grid.index(a, b, c);
-    return true;
-  };
-  {
-    std::vector<int> component(N, -1);
-    std::vector<size_t> stack;
-    int components = 0;
-    std::vector<std::array<bool, 2>> touches;
-    for (size_t id = 0; id < N; ++id) {
-      if (label[id] < 0 || component[id] >= 0) continue;
-      touches.push_back({false, false});
-      stack.push_back(id);
-      component[id] = components;
-      while (!stack.empty()) {
-        const size_t v = stack.back();
-        stack.pop_back();
-        if (label[v] == 1) touches.back()[0] = true;
-        if (label[v] == 2) touches.back()[1] = true;
-        for (int d = 0; d < 6; ++d) {
-          size_t w;
-          if (neighbour(v, d, w) && label[w] >= 0 && component[w] < 0) {
-            component[w] = components;
-            stack.push_back(w);
-          }
-        }
-      }
-      ++components;
-    }
-    for (size_t id = 0; id < N; ++id)
-      if (label[id] >= 0 && !(touches[component[id]][0] && touches[component[id]][1]))
-        label[id] = -1;
-  }
+  std::vector<int8_t> label = labelVoxels(surface, distance, grid, originIds, insertionIds);
+  keepConnectedVoxels(grid, label);
   for (size_t id = 0; id < N; ++id) q.interiorVoxels += label[id] >= 0;
   if (q.interiorVoxels == 0) return false;
-
-  // Laplace: 7-point stencil, Neumann at the surface, Dirichlet 0 / 1 at the areas.
-  std::vector<int> unknown(N, -1);
-  int unknowns = 0;
-  for (size_t id = 0; id < N; ++id)
-    if (label[id] == 0) unknown[id] = unknowns++;
-  std::vector<double> u(N, 0);
-  for (size_t id = 0; id < N; ++id) u[id] = label[id] == 2 ? 1.0 : 0.0;
-  if (unknowns > 0) {
-    std::vector<Eigen::Triplet<double>> triplets;
-    triplets.reserve(size_t(unknowns) * 7);
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(unknowns);
-    for (size_t id = 0; id < N; ++id) {
-      if (unknown[id] < 0) continue;
-      const int row = unknown[id];
-      double degree = 0;
-      for (int d = 0; d < 6; ++d) {
-        size_t w;
-        if (!neighbour(id, d, w) || label[w] < 0) continue;
-        degree += 1;
-        if (unknown[w] >= 0)
-          triplets.emplace_back(row, unknown[w], -1.0);
-        else if (label[w] == 2)
-          rhs[row] += 1.0;
-      }
-      triplets.emplace_back(row, row, std::max(degree, 1.0));
-    }
-    Eigen::SparseMatrix<double> A(unknowns, unknowns);
-    A.setFromTriplets(triplets.begin(), triplets.end());
-    Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper,
-                             Eigen::IncompleteCholesky<double>>
-        solver;
-    solver.setTolerance(1e-8);
-    solver.setMaxIterations(5000);
-    solver.compute(A);
-    Eigen::VectorXd x = solver.solve(rhs);
-    if (solver.info() != Eigen::Success && solver.error() > 1e-4)
-      result.warnings.push_back(source + ": the Laplace solve did not converge (error " +
-                                std::to_string(solver.error()) + ")");
-    for (size_t id = 0; id < N; ++id)
-      if (unknown[id] >= 0) u[id] = std::clamp(x[unknown[id]], 0.0, 1.0);
-  }
-  // Extend the field a few voxels outwards (mean of known neighbours) for interpolation.
-  {
-    std::vector<char> known(N, 0);
-    for (size_t id = 0; id < N; ++id) known[id] = label[id] >= 0;
-    for (int pass = 0; pass < 3; ++pass) {
-      std::vector<std::pair<size_t, double>> updates;
-      for (size_t id = 0; id < N; ++id) {
-        if (known[id]) continue;
-        double sum = 0;
-        int count = 0;
-        for (int d = 0; d < 6; ++d) {
-          size_t w;
-          if (neighbour(id, d, w) && known[w]) sum += u[w], ++count;
-        }
-        if (count) updates.emplace_back(id, sum / count);
-      }
-      for (auto& [id, value] : updates) u[id] = value, known[id] = 1;
-    }
-  }
-  // Gradient by central differences (one-sided at the grid's edges).
-  std::vector<double> gradient(N * 3, 0);
-  for (int k = 0; k < grid.n[2]; ++k)
-    for (int j = 0; j < grid.n[1]; ++j)
-      for (int i = 0; i < grid.n[0]; ++i) {
-        const int c[3] = {i, j, k};
-        const size_t id = grid.index(i, j, k);
-        for (int a = 0; a < 3; ++a) {
-          int lo3[3] = {i, j, k}, hi3[3] = {i, j, k};
-          lo3[a] = std::max(c[a] - 1, 0);
-          hi3[a] = std::min(c[a] + 1, grid.n[a] - 1);
-          const double span = double(hi3[a] - lo3[a]) * h;
-          gradient[id * 3 + a] =
-              (u[grid.index(hi3[0], hi3[1], hi3[2])] - u[grid.index(lo3[0], lo3[1], lo3[2])]) /
-              span;
-        }
-      }
+  std::vector<double> u = solveField(grid, label, source, result.warnings);
+  extendField(grid, label, u);
+  const std::vector<double> gradient = fieldGradient(grid, u);
+  const auto neighbour = [&](size_t id, int d, size_t& out) {
+    return neighbourOf(grid, id, d, out);
+  };
 
   // Vertex normals (area weighted) for moving seeds inside.
   std::vector<btVector3> normals(V.size(), btVector3(0, 0, 0));
@@ -609,9 +758,9 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
           if (!points) continue;
           const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
                     k = int(id / (size_t(grid.n[0]) * grid.n[1]));
-          const btVector3 edge =
-              btVector3(btScalar(offsets[d][0]), btScalar(offsets[d][1]), btScalar(offsets[d][2])) *
-              h;
+          const btVector3 edge = btVector3(btScalar(kOffsets[d][0]), btScalar(kOffsets[d][1]),
+                                           btScalar(kOffsets[d][2])) *
+                                 h;
           points->push_back(grid.centre(i, j, k) + edge * btScalar(a / (a - b)));
         }
       return count;
@@ -631,6 +780,8 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
       poolNormals.push_back(normals[v].length2() > 0 ? normals[v].normalized()
                                                      : btVector3(0, 0, 0));
     }
+    std::vector<char> inOrigin(V.size(), 0);
+    for (uint32_t i : originIds) inOrigin[i] = 1;
     std::vector<uint32_t> areaTriangles;
     std::vector<double> cumulative;
     double total = 0;
@@ -730,108 +881,9 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
   for (const auto& l : lines) result.fibres.addFibre(l);
   q.generated = int(lines.size());
 
-  // Quality: lengths, points outside, right ends (each end within 1.5 voxels, the field's
-  // resolution, of its area's triangles: those with a vertex in the area).
-  std::vector<btScalar> lengths;
-  int right = 0;
-  auto areaSurface = [&](const std::vector<uint32_t>& ids) {
-    std::vector<char> in(V.size(), 0);
-    for (uint32_t i : ids) in[i] = 1;
-    TriangleMesh area;
-    area.vertices = V;
-    for (const auto& t : surface.triangles)
-      if (in[t[0]] || in[t[1]] || in[t[2]]) area.triangles.push_back(t);
-    return MeshDistance(area);
-  };
-  const MeshDistance originSurface = areaSurface(originIds);
-  const MeshDistance insertionSurface = areaSurface(insertionIds);
-  for (const auto& l : lines) {
-    btScalar length = 0;
-    for (size_t i = 1; i < l.size(); ++i) length += l[i].distance(l[i - 1]);
-    lengths.push_back(length);
-    for (const auto& p : l) q.pointsOutside += distance.signedDistance(p) > insideTolerance;
-    const btScalar gap = std::max(originSurface.closest(l.front()).distance,
-                                  insertionSurface.closest(l.back()).distance);
-    q.worstEndGap = std::max(q.worstEndGap, gap);
-    right += gap <= btScalar(1.5) * h;
-  }
-  if (!lengths.empty()) {
-    std::sort(lengths.begin(), lengths.end());
-    q.minLength = lengths.front();
-    q.maxLength = lengths.back();
-    q.medianLength = lengths[lengths.size() / 2];
-    q.rightEnds = double(right) / double(lines.size());
-  }
-  // Coverage: interior voxels within coverageDistance of a fibre point (points dense enough).
-  {
-    std::vector<char> covered(N, 0);
-    const btScalar r = options.coverageDistance;
-    const int reach = int(std::ceil(r / h));
-    for (const auto& l : lines) {
-      std::vector<btVector3> dense;
-      for (size_t i = 1; i < l.size(); ++i) {
-        const int parts = std::max(1, int(std::ceil(l[i].distance(l[i - 1]) / (r / 2))));
-        for (int s = 0; s < parts; ++s) dense.push_back(l[i - 1].lerp(l[i], btScalar(s) / parts));
-      }
-      dense.push_back(l.back());
-      for (const auto& p : dense) {
-        const btVector3 g = (p - grid.lower) / h;
-        const int ci = int(std::lround(g.x())), cj = int(std::lround(g.y())),
-                  ck = int(std::lround(g.z()));
-        for (int k = std::max(0, ck - reach); k <= std::min(grid.n[2] - 1, ck + reach); ++k)
-          for (int j = std::max(0, cj - reach); j <= std::min(grid.n[1] - 1, cj + reach); ++j)
-            for (int i = std::max(0, ci - reach); i <= std::min(grid.n[0] - 1, ci + reach); ++i)
-              if (grid.centre(i, j, k).distance2(p) <= r * r) covered[grid.index(i, j, k)] = 1;
-      }
-    }
-    size_t hit = 0;
-    for (size_t id = 0; id < N; ++id) hit += label[id] >= 0 && covered[id];
-    q.coverage = double(hit) / double(q.interiorVoxels);
-  }
-  // Crossings: fibre pairs with segments closer than the tolerance (hash grid of segments).
-  {
-    const btScalar tol = options.crossingTolerance;
-    const btScalar cell = std::max(tol * 4, h);
-    struct Seg {
-      uint32_t fibre, index;
-    };
-    std::unordered_map<uint64_t, std::vector<Seg>> buckets;
-    auto key = [&](int i, int j, int k) {
-      return (uint64_t(uint32_t(i + 1048576)) << 42) ^ (uint64_t(uint32_t(j + 1048576)) << 21) ^
-             uint64_t(uint32_t(k + 1048576));
-    };
-    auto cellOf = [&](const btVector3& p, int c[3]) {
-      for (int a = 0; a < 3; ++a) c[a] = int(std::floor((p[a] - grid.lower[a]) / cell));
-    };
-    for (uint32_t f = 0; f < lines.size(); ++f)
-      for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
-        int c[3];
-        cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
-        buckets[key(c[0], c[1], c[2])].push_back({f, s});
-      }
-    std::vector<char> pair(lines.size() * lines.size(), 0);
-    const btScalar segmentLength = lines.empty() ? 0 : q.maxLength / btScalar(options.samples - 1);
-    const int reach = 1 + int(std::ceil(segmentLength / cell));
-    for (uint32_t f = 0; f < lines.size(); ++f)
-      for (uint32_t s = 0; s + 1 < lines[f].size(); ++s) {
-        int c[3];
-        cellOf((lines[f][s] + lines[f][s + 1]) / 2, c);
-        for (int dk = -reach; dk <= reach; ++dk)
-          for (int dj = -reach; dj <= reach; ++dj)
-            for (int di = -reach; di <= reach; ++di) {
-              auto it = buckets.find(key(c[0] + di, c[1] + dj, c[2] + dk));
-              if (it == buckets.end()) continue;
-              for (const Seg& other : it->second) {
-                if (other.fibre <= f || pair[f * lines.size() + other.fibre]) continue;
-                if (segmentDistance2(lines[f][s], lines[f][s + 1], lines[other.fibre][other.index],
-                                     lines[other.fibre][other.index + 1]) < double(tol) * tol) {
-                  pair[f * lines.size() + other.fibre] = 1;
-                  ++q.crossingPairs;
-                }
-              }
-            }
-      }
-  }
+  measureFibres(surface, distance, originIds, insertionIds, lines, insideTolerance, h, q);
+  measureCoverage(grid, label, lines, options.coverageDistance, q);
+  countCrossings(grid, lines, options, q);
   return true;
 }
 
