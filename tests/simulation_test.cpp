@@ -541,6 +541,44 @@ TEST(StopRules, SpringDeviationStopsOnceTheRatioIsBelowEpsilon) {
   EXPECT_LT(system.lastStep().springDeviationRatio, parameters.deviationEpsilon);
 }
 
+// The equilibrium rule stops once its estimate of the distance left is below the tolerance:
+// before the cap, and (checked against the same box run until it no longer moves) within a
+// small multiple of it. The estimate extrapolates the shrinking steps, so it stops well before
+// the steps themselves are that small.
+TEST(StopRules, EquilibriumStopsNearTheConvergedState) {
+  StopRule rule = StopRule::Iterations;
+  ASSERT_TRUE(fromString("equilibrium", rule));
+  EXPECT_EQ(rule, StopRule::Equilibrium);
+  EXPECT_NEAR(loadScene("fusiform", {"stop=equilibrium", "tolerance=0.2"}).simulation.tolerance,
+              0.2e-3, 1e-9);  // scene units: millimetres
+  const auto relax = [](StopRule stop, btScalar tolerance, int cap) {
+    auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);  // stretched by 20 %
+    box->damping = zelenyDamping(*box) / 4;
+    SimulationParameters parameters;
+    parameters.stopRule = stop;
+    parameters.iterations = cap;
+    parameters.tolerance = tolerance;
+    parameters.epsilon = 1e-8;  // 10 nm per iteration: the float floor is near
+    MuscleSystem system(parameters);
+    const BoneHandle bone = system.addBone(makeBone());
+    const MuscleHandle muscle = system.addMuscle(box, std::span(&bone, 1));
+    system.step();
+    const auto x = system.positions(muscle);
+    return std::pair(std::vector<btVector3>(x.begin(), x.end()), system.lastStep().iterations);
+  };
+  const auto [settled, settledIterations] = relax(StopRule::Converged, 0, 20000);
+  ASSERT_LT(settledIterations, 20000);
+  const btScalar tolerance = 1e-4;  // 0.1 mm; the stretch moves the free end by 9 mm
+  const auto [stopped, iterations] = relax(StopRule::Equilibrium, tolerance, 20000);
+  EXPECT_GT(iterations, 20);
+  EXPECT_LT(iterations, settledIterations);
+  double squares = 0;
+  for (size_t i = 0; i < settled.size(); ++i) squares += settled[i].distance2(stopped[i]);
+  const double rms = std::sqrt(squares / static_cast<double>(settled.size()));
+  EXPECT_LT(rms, 3 * tolerance);
+  EXPECT_GT(rms, 0);
+}
+
 TEST(Determinism, SameInputGivesBitwiseIdenticalPositions) {
   for (Integrator integrator : {Integrator::Verlet, Integrator::SemiImplicitEuler}) {
     const std::vector<btVector3> first = noisyRun(integrator);

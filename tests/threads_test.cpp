@@ -1,12 +1,14 @@
-// The solver's threads (plugin/core/src/solver/TaskPool.h, MuscleSystemStep.cpp): every task runs
-// once on a valid thread, and a step gives bit-identical particles for any thread count, because
-// each muscle's work is independent and every sum runs in a fixed order; frozen muscles only ride
-// with their bones.
+// The solver's threads (plugin/core/src/solver/TaskPool.h, MuscleSystemStep.cpp) and a host's
+// scheduler in their place (fibremss/TaskScheduler.h): every task runs once on a valid thread, and
+// a step gives bit-identical particles for any thread count, because each muscle's work is
+// independent and every sum runs in a fixed order; frozen muscles only ride with their bones.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
 #include <memory>
+#include <thread>
 #include <vector>
 
 #include "fibremss/MuscleSystem.h"
@@ -131,4 +133,96 @@ TEST(Threads, AFrozenMuscleIsSkippedByEveryPart) {
   EXPECT_TRUE(sameBits(frozen.positions[0], alone.positions[0]));
   EXPECT_TRUE(sameBits(frozen.surfaces[0], alone.surfaces[0]));
   EXPECT_FALSE(sameBits(moving.positions[0], frozen.positions[0]));
+}
+
+namespace {
+
+/// A host application's task system in the Box2D v3 style: every enqueued task runs on worker
+/// threads of the host's own (started per task, ranges handed out by a counter), never on the
+/// caller's; it counts the tasks and items it ran.
+class HostScheduler {
+ public:
+  explicit HostScheduler(uint32_t workers) : workers_(workers) {}
+
+  TaskScheduler scheduler() { return {&enqueue, &finish, this, workers_}; }
+  size_t tasks() const { return tasks_.load(); }
+  size_t items() const { return items_.load(); }
+
+ private:
+  struct Job {
+    TaskCallback task = nullptr;
+    void* context = nullptr;
+    uint32_t count = 0;
+    std::atomic<uint32_t> next{0};
+    std::vector<std::thread> threads;
+  };
+
+  static void* enqueue(TaskCallback task, uint32_t count, uint32_t minRange, void* context,
+                       void* user) {
+    HostScheduler& host = *static_cast<HostScheduler*>(user);
+    auto job = std::make_unique<Job>();
+    job->task = task;
+    job->context = context;
+    job->count = count;
+    ++host.tasks_;
+    const uint32_t range = std::max(1u, minRange);
+    for (uint32_t worker = 0; worker < host.workers_; ++worker)
+      job->threads.emplace_back([&host, running = job.get(), worker, range] {
+        for (uint32_t begin = running->next.fetch_add(range); begin < running->count;
+             begin = running->next.fetch_add(range)) {
+          const uint32_t end = std::min(running->count, begin + range);
+          running->task(begin, end, worker, running->context);
+          host.items_ += end - begin;
+        }
+      });
+    return job.release();
+  }
+
+  static void finish(void* handle, void*) {
+    const std::unique_ptr<Job> job(static_cast<Job*>(handle));
+    for (std::thread& thread : job->threads) thread.join();
+  }
+
+  uint32_t workers_;
+  std::atomic<size_t> tasks_{0};
+  std::atomic<size_t> items_{0};
+};
+
+}  // namespace
+
+// SimulationParameters::scheduler: the host's task system runs every task of the step (none on
+// the plugin's pool, which starts no thread) with the same bits as the plugin's own threads.
+TEST(HostScheduler, RunsTheStepWithTheSameBitsAsThePool) {
+  const Outcome own = simulate(1);
+  HostScheduler host(3);
+  LoadedScene scene;
+  const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+  const Outcome hosted = fibremss::testing::stepThroughPoses(
+      scene, prepared, prepared.muscles, 2,
+      [&](MuscleSystem& system, const std::vector<MuscleHandle>&) {
+        system.parameters().scheduler = host.scheduler();
+        EXPECT_EQ(system.threads(), 3u);
+      });
+  EXPECT_GT(host.tasks(), 2u * 20u);  // several tasks per iteration, 20 iterations per step
+  EXPECT_GE(host.items(), host.tasks());
+  for (size_t m = 0; m < own.positions.size(); ++m) {
+    EXPECT_TRUE(sameBits(own.positions[m], hosted.positions[m])) << "muscle " << m;
+    EXPECT_TRUE(sameBits(own.surfaces[m], hosted.surfaces[m])) << "muscle " << m;
+  }
+  EXPECT_EQ(hosted.contacts, own.contacts);
+}
+
+TEST(HostScheduler, RunsPreparationWithTheSameBits) {
+  const LoadedScene scene = loadScene("hip-flexion");
+  const PreparedScene own = prepareScene(scene.bones, scene.muscles, scene.simulation.seed, 1);
+  HostScheduler host(2);
+  const PreparedScene hosted =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, 1, host.scheduler());
+  EXPECT_GE(host.tasks(), 5u);  // bones, three muscle stages, coverage
+  EXPECT_GE(host.items(), scene.bones.size() + 4 * scene.muscles.size());
+  ASSERT_EQ(own.muscles.size(), hosted.muscles.size());
+  for (size_t m = 0; m < own.muscles.size(); ++m) {
+    EXPECT_TRUE(sameBits(own.muscles[m]->restPositions, hosted.muscles[m]->restPositions));
+    EXPECT_EQ(own.muscles[m]->springs.size(), hosted.muscles[m]->springs.size());
+  }
 }

@@ -2,19 +2,30 @@
 // timed alone on one thread while the other parts of the iteration run untimed, plus whole
 // iterations with 1 and 2 threads, and the haptic query MuscleWorld/MuscleSystem::contactWrench
 // of a probe pressed into a muscle. `fibremss_bench --callgrind-kernels R` instead runs each
-// kernel once under callgrind's client requests (comparisons/bench/callgrind.sh).
+// kernel once under callgrind's client requests (comparisons/bench/callgrind.sh);
+// `fibremss_bench --thread-scaling R [ROUNDS]` alternates 1 and 2 threads in one run, alone and
+// with a busy loop of its own on one core, and prints the medians and their ratio.
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <benchmark/benchmark.h>
+#include <pthread.h>
+#include <sched.h>
 #include <valgrind/callgrind.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
+#include <thread>
 #include <utility>
+#include <vector>
 
 #include "BenchScene.h"
 
@@ -160,12 +171,81 @@ int callgrindKernels(int resolution) {
   return 0;
 }
 
+/// Milliseconds per iteration of `steps` whole steps of kIterationsPerStep iterations with
+/// `threads` solver threads.
+double msPerIteration(BenchScene& scene, int threads, int steps) {
+  scene.system().parameters().threads = threads;
+  scene.stepPose();  // starts the pool for this thread count outside the timing
+  const auto start = std::chrono::steady_clock::now();
+  for (int k = 0; k < steps; ++k) scene.stepPose();
+  const std::chrono::duration<double, std::milli> elapsed =
+      std::chrono::steady_clock::now() - start;
+  return elapsed.count() / (steps * kIterationsPerStep);
+}
+
+double median(std::vector<double> values) {
+  std::sort(values.begin(), values.end());
+  const size_t n = values.size();
+  return n % 2 ? values[n / 2] : (values[n / 2 - 1] + values[n / 2]) / 2;
+}
+
+/// A CPU-bound loop on core 0 (another process's work on one core) while it lives.
+class BusyCore {
+ public:
+  BusyCore()
+      : thread_([this] {
+          cpu_set_t core;
+          CPU_ZERO(&core);
+          CPU_SET(0, &core);
+          pthread_setaffinity_np(pthread_self(), sizeof(core), &core);
+          volatile uint64_t spin = 0;
+          while (!stop_.load(std::memory_order_relaxed)) spin = spin + 1;
+        }) {}
+  ~BusyCore() {
+    stop_ = true;
+    thread_.join();
+  }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+/// Thread scaling in one run (issue 18): 1 and 2 solver threads alternated `rounds` times on
+/// thigh13 at `resolution`, then again with a busy loop on one core; medians per configuration.
+int threadScaling(int resolution, int rounds) {
+  BenchScene scene(resolution, 1);
+  scene.system().parameters().iterations = kIterationsPerStep;
+  scene.system().parameters().stopRule = StopRule::Iterations;
+  constexpr int kSteps = 4;
+  std::printf("thigh13 R=%d, %zu particles, %d rounds of %d iterations per configuration\n",
+              resolution, scene.particles(), rounds, kSteps * kIterationsPerStep);
+  for (const bool busy : {false, true}) {
+    std::optional<BusyCore> loop;
+    if (busy) loop.emplace();
+    std::vector<double> one, two;
+    for (int round = 0; round < rounds; ++round) {
+      one.push_back(msPerIteration(scene, 1, kSteps));
+      two.push_back(msPerIteration(scene, 2, kSteps));
+    }
+    std::ifstream loadavg("/proc/loadavg");
+    std::string load;
+    std::getline(loadavg, load);
+    std::printf("%-22s 1 thread %.3f ms/iteration, 2 threads %.3f ms/iteration: %.2fx  (load %s)\n",
+                busy ? "one core busy:" : "alone:", median(one), median(two),
+                median(one) / median(two), load.c_str());
+  }
+  return 0;
+}
+
 }  // namespace
 }  // namespace fibremss::bench
 
 int main(int argc, char** argv) {
   if (argc == 3 && std::strcmp(argv[1], "--callgrind-kernels") == 0)
     return fibremss::bench::callgrindKernels(std::atoi(argv[2]));
+  if (argc >= 3 && std::strcmp(argv[1], "--thread-scaling") == 0)
+    return fibremss::bench::threadScaling(std::atoi(argv[2]), argc > 3 ? std::atoi(argv[3]) : 15);
   fibremss::bench::registerAll();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

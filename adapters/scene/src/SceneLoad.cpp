@@ -341,6 +341,8 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
   parameters.budgetMs = btScalar(simulation.number("budget_ms", defaults.budgetMs, 0, kInf, true));
   parameters.deviationEpsilon =
       btScalar(simulation.number("deviation_epsilon", defaults.deviationEpsilon, 0, kInf, true));
+  parameters.tolerance =
+      btScalar(simulation.number("tolerance", defaults.tolerance / scale, 0, kInf, true) * scale);
   parameters.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
   parameters.blendedPretransform =
       simulation.boolean("blended_pretransform", defaults.blendedPretransform);

@@ -38,6 +38,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"stop", {Target::Section, "simulation"}},
       {"iterations", {Target::Section, "simulation"}},
       {"epsilon", {Target::Section, "simulation"}},
+      {"tolerance", {Target::Section, "simulation"}},
       {"budget_ms", {Target::Section, "simulation"}},
       {"rebuild_every_step", {Target::Section, "simulation"}},
       {"deviation_epsilon", {Target::Section, "simulation"}},

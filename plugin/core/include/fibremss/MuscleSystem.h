@@ -176,7 +176,8 @@ class MuscleSystem {
   const StepStats& lastStep() const;
   SimulationParameters& parameters();
   const SimulationParameters& parameters() const;
-  /// Threads a step computes with: parameters().threads, or the machine's hardware threads for 0.
+  /// Threads a step computes with: parameters().threads, or the machine's hardware threads for 0;
+  /// with a host scheduler (SimulationParameters::scheduler) its workerCount.
   unsigned threads() const;
 
   std::span<const btVector3> positions(MuscleHandle muscle) const;  ///< current particles

@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <string>
 
+#include "fibremss/TaskScheduler.h"
+
 namespace fibremss {
 
 /// How particles of one muscle are linked by springs (method.md §3).
@@ -87,6 +89,11 @@ enum class StopRule : uint8_t {
   Converged,        ///< mean displacement below epsilon (or iteration cap reached)
   TimeBudget,       ///< wall-clock budget per step spent (or iteration cap reached)
   SpringDeviation,  ///< spring-deviation ratio Σ|l−L0| / ΣL0 below deviationEpsilon (or cap)
+  /// Estimated distance to the pose's equilibrium below `tolerance` (or cap): the mean
+  /// displacement d of an iteration times r/(1 − r), r the rate at which d shrank over the last
+  /// 16 iterations (the remaining sum of steps of a linearly converging iteration), once r no
+  /// longer slows down from one such window to the next.
+  Equilibrium,
 };
 
 /// How the solver steps (method.md §4–§5).
@@ -100,6 +107,7 @@ struct SimulationParameters {
   btScalar epsilon = 1e-6;                   ///< convergence threshold: mean displacement [m]
   btScalar budgetMs = 10;                    ///< time budget per step [ms]
   btScalar deviationEpsilon = 1e-3;  ///< threshold of the spring-deviation stop rule (ratio)
+  btScalar tolerance = 5e-4;         ///< equilibrium stop rule: estimated distance to it [m]
   bool rebuildEveryStep = false;     ///< thesis behaviour: rebuild trees and state each step
   /// Pre-transform particles of muscles spanning two bones by a blend of both bones' motions
   /// (MuscleSettings::blendBoneA/B/Weight); false: by the nearest bone only, as the thesis did
@@ -112,6 +120,9 @@ struct SimulationParameters {
   btScalar initialNoise = 0;      ///< random displacement of free particles at start [m]
 
   int threads = 0;  ///< worker threads of the solver (0: the machine's hardware threads)
+  /// The host's task system (TaskScheduler.h); when set it runs every task of the step and
+  /// `threads` is ignored (its workerCount counts the workers).
+  TaskScheduler scheduler;
   /// Acceleration of gravity on every free particle [m/s²]; zero (the default, as in the thesis)
   /// adds nothing. MuscleWorld does not copy the world's gravity: set it here.
   btVector3 gravity{0, 0, 0};

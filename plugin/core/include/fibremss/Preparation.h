@@ -8,6 +8,7 @@
 #include "fibremss/Geometry.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/Parameters.h"
+#include "fibremss/TaskScheduler.h"
 
 namespace fibremss {
 
@@ -97,5 +98,11 @@ void requirePreparationMemory(const std::vector<BoneInput>& bones,
 /// for any count. Throws InputError for unusable input.
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
                            const std::vector<MuscleInput>& muscles, uint32_t seed, int threads = 0);
+
+/// prepareScene with its tasks run by the host's scheduler when `scheduler` is present (else on
+/// `threads` threads): SimulationParameters::scheduler for preparation. The same result.
+PreparedScene prepareScene(const std::vector<BoneInput>& bones,
+                           const std::vector<MuscleInput>& muscles, uint32_t seed, int threads,
+                           const TaskScheduler& scheduler);
 
 }  // namespace fibremss

@@ -32,24 +32,37 @@ constexpr btScalar kMergeFraction = btScalar(0.25);
 /// Surface vertices inside a bone at rest move this share of the spacing beyond its surface.
 constexpr btScalar kSurfaceMarginFraction = btScalar(0.01);
 
-/// Runs task(i) for i in [0, count) on up to `threads` threads (TaskPool::resolve: 0 is the
-/// hardware threads); rethrows the exception of the lowest failing i.
+/// Who runs preparation's tasks: the host's scheduler when present, else up to `threads`
+/// threads started for each batch (TaskPool::resolve: 0 is the hardware threads).
+struct Workers {
+  int threads = 0;            ///< SimulationParameters::threads
+  const TaskScheduler& host;  ///< SimulationParameters::scheduler
+};
+
+/// Runs task(i) for i in [0, count) on `workers`; rethrows the exception of the lowest failing i.
 template <typename Task>
-void parallelFor(size_t count, int threads, Task task) {
+void parallelFor(size_t count, const Workers& workers, Task task) {
   std::vector<std::exception_ptr> errors(count);
-  std::atomic<size_t> next{0};
-  auto worker = [&] {
-    for (size_t i = next++; i < count; i = next++) try {
-        task(i);
-      } catch (...) {
-        errors[i] = std::current_exception();
-      }
+  const auto run = [&](size_t i) {
+    try {
+      task(i);
+    } catch (...) {
+      errors[i] = std::current_exception();
+    }
   };
-  const size_t used = std::min<size_t>(count, TaskPool::resolve(threads));
-  std::vector<std::thread> pool;
-  for (size_t t = 1; t < used; ++t) pool.emplace_back(worker);
-  worker();
-  for (auto& thread : pool) thread.join();
+  if (workers.host.present()) {
+    TaskPool(1, workers.host).run(count, [&](size_t i, unsigned) { run(i); });
+  } else {
+    std::atomic<size_t> next{0};
+    auto worker = [&] {
+      for (size_t i = next++; i < count; i = next++) run(i);
+    };
+    const size_t used = std::min<size_t>(count, TaskPool::resolve(workers.threads));
+    std::vector<std::thread> pool;
+    for (size_t t = 1; t < used; ++t) pool.emplace_back(worker);
+    worker();
+    for (auto& thread : pool) thread.join();
+  }
   for (const auto& error : errors)
     if (error) std::rethrow_exception(error);
 }
@@ -426,6 +439,13 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
 
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
                            const std::vector<MuscleInput>& muscles, uint32_t seed, int threads) {
+  return prepareScene(bones, muscles, seed, threads, TaskScheduler{});
+}
+
+PreparedScene prepareScene(const std::vector<BoneInput>& bones,
+                           const std::vector<MuscleInput>& muscles, uint32_t seed, int threads,
+                           const TaskScheduler& scheduler) {
+  const Workers workers{threads, scheduler};
   const auto start = std::chrono::steady_clock::now();
   requirePreparationMemory(bones, muscles);
   PreparedScene scene;
@@ -433,7 +453,7 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   std::vector<BoneShape> shapes(bones.size());
   std::vector<BoneSettings> boneSettings(bones.size());
   std::vector<detail::BoneSphereReport> sphereReports(bones.size());
-  parallelFor(bones.size(), threads, [&](size_t b) {
+  parallelFor(bones.size(), workers, [&](size_t b) {
     checkMesh("bone '" + bones[b].name + "'", "mesh", bones[b].mesh);
     shapes[b].distance = std::make_unique<MeshDistance>(bones[b].mesh);
     pointBounds(bones[b].mesh.vertices, shapes[b].lower, shapes[b].upper);
@@ -449,14 +469,14 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   std::vector<MusclePreparationReport>& muscleReports = scene.report.muscles;
   muscleReports.resize(muscles.size());
   std::vector<std::unique_ptr<MeshDistance>> surfaces(muscles.size());
-  parallelFor(muscles.size(), threads, [&](size_t m) {
+  parallelFor(muscles.size(), workers, [&](size_t m) {
     muscleSettings[m] = sampleMuscle(muscles[m], m, bones.size(), seed);
     surfaces[m] = std::make_unique<MeshDistance>(muscles[m].surface);
   });
-  parallelFor(muscles.size(), threads, [&](size_t m) {
+  parallelFor(muscles.size(), workers, [&](size_t m) {
     separateMuscle(muscles[m], m, shapes, surfaces, muscleSettings[m], muscleReports[m]);
   });
-  parallelFor(muscles.size(), threads, [&](size_t m) {
+  parallelFor(muscles.size(), workers, [&](size_t m) {
     finishMuscle(muscles[m], shapes, bones, muscleWarnings[m], muscleSettings[m], muscleReports[m]);
   });
 
@@ -495,7 +515,7 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
         " bone spheres shrunk around muscle particles inside them");
 
   scene.report.surfaceCoverage.assign(muscles.size(), 0);
-  parallelFor(muscles.size(), threads, [&](size_t m) {
+  parallelFor(muscles.size(), workers, [&](size_t m) {
     scene.report.surfaceCoverage[m] = detail::surfaceCoverage(muscleSettings[m]);
   });
   for (auto& bone : boneSettings)

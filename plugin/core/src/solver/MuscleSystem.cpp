@@ -274,7 +274,7 @@ const SimulationParameters& MuscleSystem::parameters() const {
 }
 
 unsigned MuscleSystem::threads() const {
-  return TaskPool::resolve(impl_->parameters.threads);
+  return TaskPool::resolve(impl_->parameters.threads, impl_->parameters.scheduler);
 }
 
 std::span<const btVector3> MuscleSystem::positions(MuscleHandle muscle) const {

@@ -2,6 +2,9 @@
 // MuscleSystem's private state (internal): body slots, scratch buffers, stats, and the step
 // pipeline of method.md §5 (MuscleSystemStep.cpp).
 #include <algorithm>
+#include <array>
+#include <chrono>
+#include <initializer_list>
 #include <memory>
 #include <string>
 #include <vector>
@@ -15,6 +18,8 @@
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss {
+
+class TimeIntegrator;
 
 /// Slots with generations (Box2D style ids): a removed slot is reused with a new generation.
 template <typename State>
@@ -63,8 +68,13 @@ struct MuscleIterationResult {
   btScalar safeTimeStep = 0;  ///< eq 5.1 bound of this muscle (adaptive dt only)
   double displacement = 0;    ///< Σ |Δx| of the integration
   bool finite = true;         ///< the integration stayed finite
-  double forcesMs = 0;        ///< thread time of the springs and the volume term
+  double responseMs = 0;      ///< thread time of the last iteration's response
+  double forcesMs = 0;        ///< thread time of bone motion, springs, volume term and dt bound
   double volumeMs = 0;        ///< thread time of the volume term
+  double integrateMs = 0;     ///< thread time of the integration
+  double refitMs = 0;         ///< thread time of the tree refit
+  double pushesMs = 0;        ///< thread time of the muscle pairs' pushes
+  double boneMs = 0;          ///< thread time of the muscle–bone pairs
 };
 
 /// Two muscles whose bounds meet in this iteration and the contacts their pair task recorded.
@@ -114,6 +124,11 @@ struct MuscleSystem::Impl {
   uint32_t musclesAdded = 0;                ///< counts additions, seeds each muscle's noise
   btScalar previousDt = 0;                  ///< dt of the last iteration (0: none yet)
   uint64_t stepCount = 0;                   ///< steps taken (the guard numbers them)
+  bool pushesPending = false;  ///< collide() left pushes that the next forces phase applies
+  /// Iterations over which the equilibrium stop rule measures how fast the steps shrink.
+  static constexpr size_t kEquilibriumWindow = 16;
+  /// Mean displacements of the last two windows of iterations since the bones arrived.
+  std::array<double, 2 * kEquilibriumWindow + 1> recentDisplacements{};
   /// Simulated time the running step must advance (MuscleSystem::step(duration)); 0: a pose step.
   btScalar duration = 0;
   std::vector<const btCollisionObject*> contactSources;  ///< setContactBodies' bodies
@@ -156,9 +171,20 @@ struct MuscleSystem::Impl {
   /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
   void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
   btScalar timeStep(const StepSize& size) const;
-  double volumeShare() const;
+  using Clock = std::chrono::steady_clock;
+  double distanceToEquilibrium(int settled);
+  /// Whether parameters.stopRule ends the step after this iteration (the cap aside).
+  bool stopRuleMet(bool arrived, int settled, Clock::time_point stepStart);
+  double threadShare(double MuscleIterationResult::*part,
+                     std::initializer_list<double MuscleIterationResult::*> phase) const;
   void collideMusclePairs();
+  void pushMusclePairs(MuscleState& state, uint32_t slot, TreeTraversalStack& stack);
   void collide();
+  void respond(MuscleState& state) const;
+  /// The pushes of the last collide() applied to every muscle (after the last iteration).
+  void applyResponse();
+  void forcesPhase(bool bonesMove);
+  void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
   void step(const StepSize& size);
   /// The sizes of a step attempt after `halvings` retries (smaller dt, more iterations): the
   /// parameters', or those of a `duration` step (StepSize::exact).

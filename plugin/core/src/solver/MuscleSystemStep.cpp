@@ -111,8 +111,10 @@ void MuscleSystem::Impl::followFixed(MuscleState& state) const {
 }
 
 void MuscleSystem::Impl::prepareWorkers() {
-  const unsigned threads = TaskPool::resolve(parameters.threads);
-  if (!pool || pool->threads() != threads) pool = std::make_unique<TaskPool>(threads);
+  const TaskScheduler& host = parameters.scheduler;
+  const unsigned threads = TaskPool::resolve(parameters.threads, host);
+  if (!pool || pool->threads() != threads || !(pool->host() == host))
+    pool = std::make_unique<TaskPool>(threads, host);
   scratch.resize(threads);
   // Each thread logs an even share of the drawing capacity; a full log still counts.
   const size_t share = (contacts.ends.size() / threads + 1) & ~size_t{1};
@@ -178,15 +180,18 @@ void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) cons
   followFixed(state);
 }
 
-// The volume term's share of the force phase's thread time in this iteration (its wall time is
-// not measured apart: it runs in the same task as the springs).
-double MuscleSystem::Impl::volumeShare() const {
-  double volume = 0, forces = 0;
+// The share of a phase's wall time that `part` took: its thread time over all active muscles
+// divided by the thread time of every part of the phase (parts of one task are not timed apart
+// on the wall clock: they run in the same task).
+double MuscleSystem::Impl::threadShare(
+    double MuscleIterationResult::*part,
+    std::initializer_list<double MuscleIterationResult::*> phase) const {
+  double partMs = 0, phaseMs = 0;
   for (uint32_t slot : active) {
-    volume += results[slot].volumeMs;
-    forces += results[slot].forcesMs;
+    partMs += results[slot].*part;
+    for (double MuscleIterationResult::*member : phase) phaseMs += results[slot].*member;
   }
-  return forces > 0 ? volume / forces : 0;
+  return phaseMs > 0 ? partMs / phaseMs : 0;
 }
 
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
@@ -227,45 +232,182 @@ void MuscleSystem::Impl::collideMusclePairs() {
     collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
                    scratch[thread].contacts, pair.contacts);
   });
-  forEachMuscle([&](MuscleState&, uint32_t slot, unsigned thread) {
-    for (uint32_t k : musclePairs[slot]) {
-      const MusclePairTask& pair = pairTasks[k];
-      pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot,
-                         scratch[thread].stack, pair.contacts);
-    }
-  });
 }
 
+// A muscle's share of its pairs' contacts, in insertion order of its partners.
+void MuscleSystem::Impl::pushMusclePairs(MuscleState& state, uint32_t slot,
+                                         TreeTraversalStack& stack) {
+  for (uint32_t k : musclePairs[slot]) {
+    const MusclePairTask& pair = pairTasks[k];
+    pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot, stack,
+                       pair.contacts);
+  }
+}
+
+// Collision of one iteration after every muscle's tree is refitted (integrateAndRefit): the
+// muscle pairs (one task per pair), then per muscle its pairs' pushes and its bones. The pushes
+// are applied by the next forces phase (or applyResponse after the last iteration).
 void MuscleSystem::Impl::collide() {
-  Clock::time_point start = Clock::now();
   contacts.clear();
-  const bool any = parameters.muscleMuscle || parameters.muscleBone;
-  if (any) forEachMuscle([](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+  if (!parameters.muscleMuscle && !parameters.muscleBone) return;
+  Clock::time_point start = Clock::now();
   if (parameters.muscleMuscle) collideMusclePairs();
   stats.timing.muscleCd += millisecondsSince(start);
-
   start = Clock::now();
-  if (parameters.muscleBone)
-    forEachMuscle([&](MuscleState& state, uint32_t, unsigned thread) {
+  forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned thread) {
+    MuscleIterationResult& result = results[slot];
+    const Clock::time_point pushesStart = Clock::now();
+    if (parameters.muscleMuscle) pushMusclePairs(state, slot, scratch[thread].stack);
+    const Clock::time_point boneStart = Clock::now();
+    if (parameters.muscleBone)
       for (uint32_t boneSlot : bones.order)
         collideMuscleBone(state, *bones.states[boneSlot], scratch[thread].stack,
                           scratch[thread].contacts);
-    });
+    result.pushesMs =
+        millisecondsSince(pushesStart) - (result.boneMs = millisecondsSince(boneStart));
+  });
   gatherContacts();
-  stats.timing.boneCd += millisecondsSince(start);
-
-  start = Clock::now();
-  const bool hasVelocities = integratorFor(parameters.integrator).usesVelocities();
-  const bool sliding = parameters.slidingContacts;
-  if (any)
-    forEachMuscle([hasVelocities, sliding](MuscleState& state, uint32_t, unsigned) {
-      applyPushes(state, hasVelocities, sliding);
-    });
+  const double wall = millisecondsSince(start);
+  const double pushes =
+      threadShare(&MuscleIterationResult::pushesMs,
+                  {&MuscleIterationResult::pushesMs, &MuscleIterationResult::boneMs});
+  stats.timing.muscleCd += pushes * wall;
+  stats.timing.boneCd += (1 - pushes) * wall;
   stats.contacts = contacts.found;
   stats.candidates = contacts.candidates;
   for (uint32_t slot : muscles.order)
     stats.candidateOverflows += std::exchange(muscles.states[slot]->candidateOverflows, 0);
-  stats.timing.response += millisecondsSince(start);
+  pushesPending = true;
+}
+
+// The pushes of the last collide() on a muscle (response), once.
+void MuscleSystem::Impl::respond(MuscleState& state) const {
+  if (!pushesPending) return;
+  applyPushes(state, integratorFor(parameters.integrator).usesVelocities(),
+              parameters.slidingContacts);
+}
+
+void MuscleSystem::Impl::applyResponse() {
+  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { respond(state); });
+  pushesPending = false;
+}
+
+// Per muscle: the last iteration's response, this iteration's bone motion, spring and volume
+// forces and the muscle's eq 5.1 bound; then the reductions (in insertion order: the same sums
+// for every thread count).
+void MuscleSystem::Impl::forcesPhase(bool bonesMove) {
+  const Clock::time_point start = Clock::now();
+  forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+    MuscleIterationResult& result = results[slot];
+    const Clock::time_point responseStart = Clock::now();
+    respond(state);
+    const Clock::time_point forcesStart = Clock::now();
+    result.responseMs = millisecondsSince(responseStart) - millisecondsSince(forcesStart);
+    if (bonesMove) followBones(state);
+    result.forces = springForces(state);
+    const Clock::time_point volumeStart = Clock::now();
+    addTetrahedronForces(*state.settings, state.positions, state.forces);
+    result.volumeMs = state.settings->tetInverseVolume.empty() ? 0 : millisecondsSince(volumeStart);
+    addExternalForces(state, parameters.gravity, state.forces);
+    if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+    result.forcesMs = millisecondsSince(forcesStart);
+  });
+  pushesPending = false;
+  double deviation = 0;
+  double restSum = 0;
+  // Judged on the last iteration: tearing while bones move heals.
+  stats.exploded = false;
+  stats.overstretchedSprings = 0;
+  for (uint32_t slot : muscles.order) {
+    if (muscles.states[slot]->frozen) continue;
+    const SpringForceResult& forces = results[slot].forces;
+    deviation += forces.deviation;
+    stats.exploded = stats.exploded || forces.exploded;
+    stats.overstretchedSprings += forces.overstretched;
+    restSum += muscles.states[slot]->restLengthSum;
+  }
+  stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
+  const double wall = millisecondsSince(start);
+  const std::initializer_list<double MuscleIterationResult::*> phase = {
+      &MuscleIterationResult::responseMs, &MuscleIterationResult::forcesMs};
+  const double response = threadShare(&MuscleIterationResult::responseMs, phase);
+  stats.timing.response += response * wall;
+  stats.timing.mss += (1 - response) * wall;
+  stats.timing.volume += threadShare(&MuscleIterationResult::volumeMs, phase) * wall;
+}
+
+// Per muscle: the integrator's advance by dt, then the refit of its sphere tree; the mean
+// displacement reduced in insertion order.
+void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btScalar dt) {
+  const Clock::time_point start = Clock::now();
+  const btScalar lastDt = previousDt > 0 ? previousDt : dt;
+  const bool refit = parameters.muscleMuscle || parameters.muscleBone;
+  forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+    MuscleIterationResult& result = results[slot];
+    const Clock::time_point integrateStart = Clock::now();
+    const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
+    result.displacement = integration.displacement;
+    result.finite = integration.finite;
+    const Clock::time_point refitStart = Clock::now();
+    if (refit) refitTree(state);
+    result.refitMs = millisecondsSince(refitStart);
+    result.integrateMs = millisecondsSince(integrateStart) - result.refitMs;
+  });
+  double displacement = 0;
+  size_t freeCount = 0;
+  for (uint32_t slot : muscles.order) {
+    if (muscles.states[slot]->frozen) continue;
+    displacement += results[slot].displacement;
+    freeCount += muscles.states[slot]->freeParticles.size();
+    if (!results[slot].finite) stats.nan = true;
+  }
+  stats.lastTimeStep = previousDt = dt;
+  stats.simulatedTime += dt;
+  stats.meanDisplacement =
+      freeCount ? static_cast<btScalar>(displacement / static_cast<double>(freeCount)) : 0;
+  const double wall = millisecondsSince(start);
+  const double refitShare =
+      threadShare(&MuscleIterationResult::refitMs,
+                  {&MuscleIterationResult::integrateMs, &MuscleIterationResult::refitMs});
+  stats.timing.mss += (1 - refitShare) * wall;
+  stats.timing.muscleCd += refitShare * wall;
+}
+
+// The estimated distance to equilibrium after `settled` iterations since the bones arrived: the
+// mean displacement d times r/(1 − r), r = (d / d of W iterations ago)^(1/W) (the remaining
+// steps of a linearly converging iteration), W = kEquilibriumWindow. Infinity until two windows
+// are full, while d does not shrink, or while the rate still slows down (1 − r less than half
+// what it was a window earlier): a slow mode is then still emerging from under faster ones that
+// dominate d, and d alone would miss its distance.
+double MuscleSystem::Impl::distanceToEquilibrium(int settled) {
+  constexpr size_t kWindow = kEquilibriumWindow;
+  const size_t slots = recentDisplacements.size();
+  const size_t k = static_cast<size_t>(settled);
+  const double d = stats.meanDisplacement;
+  recentDisplacements[k % slots] = d;
+  if (k < 2 * kWindow) return HUGE_VAL;
+  const double middle = recentDisplacements[(k - kWindow) % slots];
+  const double first = recentDisplacements[(k - 2 * kWindow) % slots];
+  if (!(d < middle) || !(middle < first)) return HUGE_VAL;
+  const double rate = std::pow(d / middle, 1.0 / kWindow);
+  const double before = std::pow(middle / first, 1.0 / kWindow);
+  if (1 - rate < (1 - before) / 2) return HUGE_VAL;
+  return d * rate / (1 - rate);
+}
+
+bool MuscleSystem::Impl::stopRuleMet(bool arrived, int settled, Clock::time_point stepStart) {
+  switch (parameters.stopRule) {
+    case StopRule::Converged:
+      return arrived && stats.meanDisplacement < parameters.epsilon;
+    case StopRule::TimeBudget:
+      return millisecondsSince(stepStart) >= parameters.budgetMs;
+    case StopRule::SpringDeviation:
+      return arrived && stats.springDeviationRatio < parameters.deviationEpsilon;
+    case StopRule::Equilibrium:
+      return arrived && distanceToEquilibrium(settled) < parameters.tolerance;
+    default:
+      return false;
+  }
 }
 
 void MuscleSystem::Impl::step(const StepSize& size) {
@@ -322,86 +464,31 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     });
   beginBodyContacts();
 
-  const bool adaptive = parameters.adaptiveTimeStep;
   int iteration = 0;
   while (true) {
     ++iteration;
-    Clock::time_point start = Clock::now();
     const bool bonesMove = iteration <= motionIterations;
     if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
-    forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
-      if (bonesMove) followBones(state);
-      MuscleIterationResult& result = results[slot];
-      const Clock::time_point forcesStart = Clock::now();
-      result.forces = springForces(state);
-      const Clock::time_point volumeStart = Clock::now();
-      addTetrahedronForces(*state.settings, state.positions, state.forces);
-      result.volumeMs =
-          state.settings->tetInverseVolume.empty() ? 0 : millisecondsSince(volumeStart);
-      addExternalForces(state, parameters.gravity, state.forces);
-      result.forcesMs = millisecondsSince(forcesStart);
-      if (adaptive) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
-    });
-
-    // Reduced in insertion order: the same sums for every thread count.
-    double deviation = 0;
-    double restSum = 0;
-    // Judged on the last iteration: tearing while bones move heals.
-    stats.exploded = false;
-    stats.overstretchedSprings = 0;
-    for (uint32_t slot : muscles.order) {
-      if (muscles.states[slot]->frozen) continue;
-      const SpringForceResult& forces = results[slot].forces;
-      deviation += forces.deviation;
-      stats.exploded = stats.exploded || forces.exploded;
-      stats.overstretchedSprings += forces.overstretched;
-      restSum += muscles.states[slot]->restLengthSum;
-    }
-    stats.springDeviationRatio = restSum > 0 ? static_cast<btScalar>(deviation / restSum) : 0;
-    stats.timing.volume += volumeShare() * millisecondsSince(start);
-
+    forcesPhase(bonesMove);
     const btScalar dt = timeStep(size);
-    const btScalar lastDt = previousDt > 0 ? previousDt : dt;
-    forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
-      const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
-      results[slot].displacement = integration.displacement;
-      results[slot].finite = integration.finite;
-    });
-    double displacement = 0;
-    size_t freeCount = 0;
-    for (uint32_t slot : muscles.order) {
-      const MuscleState& state = *muscles.states[slot];
-      if (state.frozen) continue;
-      displacement += results[slot].displacement;
-      freeCount += state.freeParticles.size();
-      if (!results[slot].finite) stats.nan = true;
-    }
-    stats.lastTimeStep = previousDt = dt;
-    stats.simulatedTime += dt;
-    stats.meanDisplacement =
-        freeCount ? static_cast<btScalar>(displacement / static_cast<double>(freeCount)) : 0;
-    stats.timing.mss += millisecondsSince(start);
-
+    integrateAndRefit(integrator, dt);
     collide();
+    // Contact bodies meet the particles after this iteration's response.
+    if (!contactBodies.empty()) applyResponse();
     collideBodies(dt);
 
     const bool arrived = iteration >= motionIterations;
-    bool stop = iteration >= cap;
     // A duration step runs all its iterations.
-    const StopRule rule = size.exact ? StopRule::Iterations : parameters.stopRule;
-    if (rule == StopRule::Converged)
-      stop = stop || (arrived && stats.meanDisplacement < parameters.epsilon);
-    else if (rule == StopRule::TimeBudget)
-      stop = stop || millisecondsSince(stepStart) >= parameters.budgetMs;
-    else if (rule == StopRule::SpringDeviation)
-      stop = stop || (arrived && stats.springDeviationRatio < parameters.deviationEpsilon);
-    if (stop) {
+    const bool ruled = !size.exact && stopRuleMet(arrived, iteration - motionIterations, stepStart);
+    if (iteration >= cap || ruled) {
+      const Clock::time_point start = Clock::now();
       // A spent budget ends the step where it is: the bones jump the rest of the way.
-      if (!arrived) {
-        moveBones(1, true);
+      if (!arrived) moveBones(1, true);
+      applyResponse();
+      stats.timing.response += millisecondsSince(start);
+      if (!arrived)
         forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { followBones(state); });
-      }
       break;
     }
   }

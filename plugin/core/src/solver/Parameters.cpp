@@ -42,11 +42,12 @@ constexpr std::array<std::pair<Integrator, const char*>, 10> kIntegrators{{
     {Integrator::Pbd, "pbd"},
     {Integrator::Xpbd, "xpbd"},
 }};
-constexpr std::array<std::pair<StopRule, const char*>, 4> kStopRules{{
+constexpr std::array<std::pair<StopRule, const char*>, 5> kStopRules{{
     {StopRule::Iterations, "iterations"},
     {StopRule::Converged, "converged"},
     {StopRule::TimeBudget, "budget"},
     {StopRule::SpringDeviation, "spring-deviation"},
+    {StopRule::Equilibrium, "equilibrium"},
 }};
 constexpr std::array<std::pair<BoneCollision, const char*>, 2> kBoneCollisions{{
     {BoneCollision::Spheres, "spheres"},

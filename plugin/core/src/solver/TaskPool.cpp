@@ -7,9 +7,12 @@
 namespace fibremss {
 namespace {
 
-/// Busy-wait rounds before sleeping: a few tens of microseconds, longer than the serial gaps
+/// Busy-wait rounds before yielding: a few tens of microseconds, longer than the serial gaps
 /// between the phases of an iteration, shorter than the gaps between steps.
 constexpr int kSpinRounds = 4000;
+/// Rounds of giving the core away (sched_yield) before sleeping: a thread of another process
+/// that holds this core runs, and the wait still wakes within a time slice.
+constexpr int kYieldRounds = 64;
 
 void relax() {
 #if defined(__SSE2__)
@@ -19,13 +22,17 @@ void relax() {
 #endif
 }
 
-/// Waits until `value` differs from `old`: spins first, then sleeps (futex on Linux).
+/// Waits until `value` differs from `old`: spins briefly, then yields the core, then sleeps
+/// (futex on Linux).
 template <typename T>
 T awaitChange(const std::atomic<T>& value, T old) {
-  for (int round = 0; round < kSpinRounds; ++round) {
+  for (int round = 0; round < kSpinRounds + kYieldRounds; ++round) {
     const T now = value.load(std::memory_order_acquire);
     if (now != old) return now;
-    relax();
+    if (round < kSpinRounds)
+      relax();
+    else
+      std::this_thread::yield();
   }
   value.wait(old, std::memory_order_acquire);
   return value.load(std::memory_order_acquire);
@@ -38,8 +45,8 @@ unsigned TaskPool::resolve(int threads) {
   return std::max(1u, std::thread::hardware_concurrency());
 }
 
-TaskPool::TaskPool(unsigned threads) {
-  const unsigned total = threads == 0 ? resolve(0) : threads;
+TaskPool::TaskPool(unsigned threads, const TaskScheduler& host) : host_(host) {
+  const unsigned total = host_.present() ? 1 : threads == 0 ? resolve(0) : threads;
   workers_.reserve(total - 1);
   for (unsigned t = 1; t < total; ++t) workers_.emplace_back([this, t] { loop(t); });
 }
@@ -51,7 +58,21 @@ TaskPool::~TaskPool() {
   for (std::thread& worker : workers_) worker.join();
 }
 
+void TaskPool::runOnHost(size_t count, Call call, void* context) const {
+  struct Job {
+    Call call;
+    void* context;
+  } job{call, context};
+  const TaskCallback task = [](uint32_t begin, uint32_t end, uint32_t worker, void* erased) {
+    const Job& running = *static_cast<const Job*>(erased);
+    for (uint32_t index = begin; index < end; ++index) running.call(running.context, index, worker);
+  };
+  void* handle = host_.enqueueTask(task, static_cast<uint32_t>(count), 1, &job, host_.userContext);
+  if (handle) host_.finishTask(handle, host_.userContext);
+}
+
 void TaskPool::runErased(size_t count, Call call, void* context) {
+  if (host_.present() && count > 0) return runOnHost(count, call, context);
   if (workers_.empty() || count <= 1) {
     for (size_t index = 0; index < count; ++index) call(context, index, 0);
     return;
