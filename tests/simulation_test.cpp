@@ -235,6 +235,30 @@ TEST(Relaxation, StretchedFusiformMuscleRelaxesAndSettles) {
   EXPECT_LT(lastChange, 0.5 * firstChange);
 }
 
+TEST(Relaxation, ATimedStepKeepsEveryIterationWithinTheStableTimeStep) {
+  // A Bullet frame (1/60 s) of simulated time in 20 iterations would take 0.83 ms each, longer
+  // than the stable dt of fusiform's springs and volume term: that exploded at once (the embed
+  // example in MuscleTime::Dynamic). The step takes more, shorter iterations instead.
+  const LoadedScene scene = loadScene("fusiform", {"resolution=12"});
+  ASSERT_GT(scene.muscles.at(0).parameters.springs.volumeStiffness, 0) << "on by default";
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  SimulationParameters parameters = scene.simulation;
+  parameters.iterations = 20;
+  MuscleSystem system(parameters);
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  system.addMuscle(prepared.muscles.at(0), bones);
+  const btScalar frame = btScalar(1.0 / 60.0);
+  for (int step = 0; step < 5; ++step) {
+    system.step(frame);
+    const StepStats& stats = system.lastStep();
+    ASSERT_FALSE(stats.nan || stats.exploded || stats.failed) << "step " << step;
+    EXPECT_EQ(stats.retries, 0) << "no halving needed";
+    EXPECT_GT(stats.iterations, 20) << "the stable dt asks for more than 20";
+    EXPECT_NEAR(stats.simulatedTime, frame, 1e-6);
+  }
+}
+
 TEST(Relaxation, OneStepOfSeventyIterationsRelaxesMostOfTheStretch) {
   auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);
   box->damping = zelenyDamping(*box);

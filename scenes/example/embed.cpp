@@ -54,9 +54,9 @@ int main(int argc, char** argv) try {
 
   // 1. A muscle with its bones: the built-in "fusiform" scene, prepared (particles, springs,
   //    radii, bone spheres). A real application would load its own scene file the same way.
-  //    Springs only: in the dynamic time mode the volume term (issue 18, on by default) makes
-  //    the muscle explode at the first step (Bullet's dt split into iterations longer than the
-  //    volume term's stable dt; open).
+  //    Springs only, so that 20 iterations per Bullet step suffice: with the volume term (on
+  //    by default) a 1/60 s step of the dynamic time mode takes 215 shorter iterations, each
+  //    within the term's stable dt.
   const fibremss::LoadedScene scene =
       fibremss::loadScene("fusiform", {"resolution=12", "volume_stiffness=0"});
   const fibremss::PreparedScene prepared = fibremss::prepareScene(

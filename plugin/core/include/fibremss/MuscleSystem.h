@@ -143,7 +143,8 @@ class MuscleSystem {
   /// values no step can run with (a dt of 0 or below, ...).
   void step();
   /// A step that advances the muscles by exactly `duration` of simulated time [s]: k =
-  /// max(iterations, ⌈duration / timeStep⌉) iterations of duration/k (fixed, whatever the stop
+  /// max(iterations, ⌈duration / dt⌉) iterations of duration/k, dt the smaller of timeStep and
+  /// every muscle's stable dt (springs and volume term) (fixed, whatever the stop
   /// rule and adaptiveTimeStep say), bones moving over all of them (MuscleTime::Dynamic).
   /// InputError for a duration that is not finite and > 0.
   void step(btScalar duration);

@@ -26,8 +26,9 @@ enum class MuscleTime : uint8_t {
   /// Contact bodies receive the step's mean contact force times Bullet's dt.
   QuasiStaticPose,
   /// Each internal Bullet step of dt advances the muscles by exactly dt of simulated time in
-  /// k = max(iterations, ⌈dt / timeStep⌉) iterations of dt/k (fixed, whatever the stop rule
-  /// and adaptiveTimeStep say; bones move over all k): muscles and rigid bodies share one
+  /// k = max(iterations, ⌈dt / min(timeStep, stable dt)⌉) iterations of dt/k (the stable dt of
+  /// every muscle's springs and volume term; fixed, whatever the stop rule and adaptiveTimeStep
+  /// say; bones move over all k): muscles and rigid bodies share one
   /// clock, and contact bodies receive exactly the impulses of the step (momentum conserved).
   Dynamic,
 };

@@ -110,9 +110,15 @@ void restoreGoodState(MuscleState& muscle) {
 
 StepSize MuscleSystem::Impl::stepSize(int halvings) const {
   if (!(duration > 0)) return smallerSteps(parameters, halvings);
-  // k = max(iterations, ⌈duration / timeStep⌉) iterations of duration / k.
+  // k = max(iterations, ⌈duration / dt⌉) iterations of duration / k, dt the smaller of
+  // timeStep and every muscle's stable dt (springs and volume term: an exact step has no
+  // adaptive bound).
   SimulationParameters exact = parameters;
-  const double split = std::ceil(double(duration) / double(parameters.timeStep));
+  btScalar bound = parameters.timeStep;
+  for (uint32_t slot : muscles.order)
+    if (!muscles.states[slot]->frozen)
+      bound = std::min(bound, muscles.states[slot]->stableTimeStep);
+  const double split = std::ceil(double(duration) / double(bound));
   exact.iterations = std::max(parameters.iterations, int(std::min(split, kMaxExactIterations)));
   exact.timeStep = exact.minTimeStep = duration / static_cast<btScalar>(exact.iterations);
   StepSize size = smallerSteps(exact, halvings);
