@@ -206,6 +206,18 @@ TEST(CalculixDat, NamesTheLineOfARowThatIsNotNumbers) {
   }
 }
 
+/// Writes `job` as DIR/bar.inp, runs ccx on it (expecting success) and returns the tables of
+/// its .dat.
+std::vector<CalculixTable> solveBar(const std::filesystem::path& dir, const CalculixJob& job) {
+  {
+    std::ofstream out(dir / "bar.inp");
+    writeCalculixInput(out, job);
+  }
+  EXPECT_EQ(runProgram({"ccx", "-i", "bar"}, dir.string(), (dir / "ccx.log").string()), 0);
+  std::ifstream dat(dir / "bar.dat");
+  return readCalculixDat(dat, "bar.dat");
+}
+
 /// The Neo-Hookean bar's lateral stretch under an axial stretch λ with free sides (σ_lateral = 0
 /// for W = C10(Ī1−3) + (J−1)²/D1), by bisection.
 double lateralStretch(const NeoHookeMaterial& material, double lambda) {
@@ -256,15 +268,7 @@ void expectClosedFormBar(CalculixElement element) {
     }
   }
   ASSERT_GT(job.printed.size(), 20u);
-  {
-    std::ofstream out(dir.path() / "bar.inp");
-    writeCalculixInput(out, job);
-  }
-  const int status =
-      runProgram({"ccx", "-i", "bar"}, dir.path().string(), (dir.path() / "ccx.log").string());
-  ASSERT_EQ(status, 0);
-  std::ifstream dat(dir.path() / "bar.dat");
-  const auto tables = readCalculixDat(dat, "bar.dat");
+  const auto tables = solveBar(dir.path(), job);
   const auto ends = stepEndTables(tables, "displacements", "NPRINT", 2);
   ASSERT_EQ(ends.size(), 2u);
   double worst = 0, back = 0;
@@ -331,15 +335,7 @@ double lowestBottomNodeMm(double contactStiffness) {
   job.contact.stiffness = contactStiffness;
   job.contact.tension = 1e-3 * job.material.youngsModulus;
   job.initialIncrement = 0.25;
-  {
-    std::ofstream out(dir.path() / "bar.inp");
-    writeCalculixInput(out, job);
-  }
-  const int status =
-      runProgram({"ccx", "-i", "bar"}, dir.path().string(), (dir.path() / "ccx.log").string());
-  EXPECT_EQ(status, 0);
-  std::ifstream dat(dir.path() / "bar.dat");
-  const auto tables = readCalculixDat(dat, "bar.dat");
+  const auto tables = solveBar(dir.path(), job);
   const auto ends = stepEndTables(tables, "displacements", "NPRINT", 1);
   if (ends.size() != 1) return NAN;
   double lowest = INFINITY;
