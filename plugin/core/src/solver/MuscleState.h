@@ -35,6 +35,8 @@ struct BoneState {
   uint32_t slot = 0;    ///< the bone's slot in its system (names it in per-particle memory)
   /// Signed distance field of the mesh, bone frame (BoneCollision::DistanceField), or null.
   std::unique_ptr<const BoneDistanceField> field;
+  /// Closest points on the true mesh, bone frame: the surface-contact stage's (liftOutOfBone).
+  std::unique_ptr<const MeshDistance> mesh;
   btTransform goodLast = btTransform::getIdentity();     ///< `last` at the step's start (guard)
   btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
 };

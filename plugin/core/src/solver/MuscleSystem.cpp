@@ -11,6 +11,7 @@
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "collision/SurfaceContact.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
 
@@ -24,6 +25,17 @@ MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
 }
 
 MuscleSystem::~MuscleSystem() = default;
+
+void MuscleSystem::Impl::deform(MuscleState& state) const {
+  if (state.surface.empty()) return;
+  deformSurface(*state.settings, state.positions, state.boneTransforms,
+                parameters.blendedPretransform, state.skin, state.surface);
+  if (!parameters.surfaceContact) return;
+  for (uint32_t slot : bones.order) {
+    const BoneState& bone = *bones.states[slot];
+    liftOutOfBone(*bone.mesh, bone.current, state.skin.layer, state.surface);
+  }
+}
 
 BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
                                  const btCollisionObject* body) {
@@ -41,9 +53,10 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   if (body) state->last = state->target = state->current = body->getWorldTransform();
   state->tree.build(settings->sphereCentres, settings->sphereRadii);
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
+  state->mesh = std::make_unique<const MeshDistance>(settings->mesh);
   if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
     state->field = std::make_unique<const BoneDistanceField>(
-        MeshDistance(settings->mesh), impl_->parameters.distanceFieldCell,
+        *state->mesh, impl_->parameters.distanceFieldCell,
         kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
   state->settings = std::move(settings);
   const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
@@ -210,8 +223,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
     prepareSkinFrames(s, state->skin);
-    deformSurface(s, state->positions, state->boneTransforms, impl_->parameters.blendedPretransform,
-                  state->skin, state->surface);
+    impl_->deform(*state);
   }
 
   size_t boundaryTotal = s.boundaryParticles.size();
