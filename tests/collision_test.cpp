@@ -336,7 +336,7 @@ TEST(SurfaceContact, VerticesInsideABoneMoveOntoItsSurfaceWithinReach) {
   // bone frame and placed with it.
   const TriangleMesh cube =
       testing::boxMesh(btVector3(-0.01f, -0.01f, -0.01f), btVector3(0.01f, 0.01f, 0.01f));
-  const MeshDistance bone(cube);
+  const ContactMesh bone(cube);
   const btTransform placed(btQuaternion(btVector3(0, 0, 1), btScalar(SIMD_PI / 6)),
                            btVector3(0.1f, -0.05f, 0.02f));
   const btVector3 local[] = {
@@ -349,13 +349,16 @@ TEST(SurfaceContact, VerticesInsideABoneMoveOntoItsSurfaceWithinReach) {
   for (const btVector3& p : local) surface.push_back(placed * p);
   const std::vector<btVector3> before = surface;
   const std::vector<btScalar> reach(surface.size(), btScalar(0.003));
-  EXPECT_EQ(liftOutOfBone(bone, placed, reach, surface), 2u);
+  const btVector3 far(1, 1, 1), near = placed.getOrigin();
+  EXPECT_EQ(liftOutOfBone(bone, placed, reach, far, far * 2, surface), 0u);  // bounds miss
+  EXPECT_EQ(surface, before);
+  EXPECT_EQ(liftOutOfBone(bone, placed, reach, near - far, near + far, surface), 2u);
   const btTransform toBone = placed.inverse();
   EXPECT_NEAR((toBone * surface[0]).x(), 0.01, 1e-6);
   EXPECT_NEAR((toBone * surface[0]).y(), 0.002, 1e-6);
   EXPECT_NEAR((toBone * surface[1]).y(), -0.01, 1e-6);
   EXPECT_NEAR((toBone * surface[1]).x(), 0.002, 1e-6);
-  for (int v : {0, 1}) EXPECT_GT(bone.signedDistance(toBone * surface[v]), -1e-6) << v;
+  for (int v : {0, 1}) EXPECT_GT(bone.distance.signedDistance(toBone * surface[v]), -1e-6) << v;
   EXPECT_EQ(surface[2], before[2]);
   EXPECT_EQ(surface[3], before[3]);
 }

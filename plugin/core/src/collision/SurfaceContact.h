@@ -15,12 +15,23 @@
 
 namespace fibremss {
 
-/// Moves every vertex of `surface` (world frame) that lies inside `bone` (its mesh in the bone
-/// frame, placed at `boneToWorld`) at most `reach[v]` [m] deep onto the mesh's closest point; a
-/// deeper vertex stays where it is (the closest-point query stops at its reach, which makes a
-/// vertex far from the bone cost a box test or two). Returns how many vertices moved. No
+/// A bone as surface contact sees it: closest points on its true mesh and the mesh's bounds,
+/// bone frame. Built once per bone (allocates).
+struct ContactMesh {
+  explicit ContactMesh(const TriangleMesh& mesh);
+  MeshDistance distance;  ///< closest points [m]
+  btVector3 lower;        ///< lower corner of the mesh's bounds [m]
+  btVector3 upper;        ///< upper corner [m]
+};
+
+/// Moves every vertex of `surface` (world frame) that lies inside `bone` (placed at
+/// `boneToWorld`) at most `reach[v]` [m] deep onto the mesh's closest point; a deeper vertex stays
+/// where it is (the closest-point query stops at its reach, which makes a vertex far from the bone
+/// cost a box test or two). `lower`, `upper`: world bounds of the surface grown by the largest
+/// reach; nothing is tested when the bone's bounds miss them. Returns how many vertices moved. No
 /// allocation; thread-safe for different surfaces.
-size_t liftOutOfBone(const MeshDistance& bone, const btTransform& boneToWorld,
-                     std::span<const btScalar> reach, std::span<btVector3> surface);
+size_t liftOutOfBone(const ContactMesh& bone, const btTransform& boneToWorld,
+                     std::span<const btScalar> reach, const btVector3& lower,
+                     const btVector3& upper, std::span<btVector3> surface);
 
 }  // namespace fibremss

@@ -2,6 +2,7 @@
 
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 
+#include <algorithm>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -11,7 +12,6 @@
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
-#include "collision/SurfaceContact.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
 
@@ -31,9 +31,14 @@ void MuscleSystem::Impl::deform(MuscleState& state) const {
   deformSurface(*state.settings, state.positions, state.boneTransforms,
                 parameters.blendedPretransform, state.skin, state.surface);
   if (!parameters.surfaceContact) return;
+  btVector3 lower, upper;
+  pointBounds(state.surface, lower, upper);
+  const btScalar reach = *std::max_element(state.skin.layer.begin(), state.skin.layer.end());
+  const btVector3 margin(reach, reach, reach);
   for (uint32_t slot : bones.order) {
     const BoneState& bone = *bones.states[slot];
-    liftOutOfBone(*bone.mesh, bone.current, state.skin.layer, state.surface);
+    liftOutOfBone(*bone.mesh, bone.current, state.skin.layer, lower - margin, upper + margin,
+                  state.surface);
   }
 }
 
@@ -53,10 +58,10 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   if (body) state->last = state->target = state->current = body->getWorldTransform();
   state->tree.build(settings->sphereCentres, settings->sphereRadii);
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
-  state->mesh = std::make_unique<const MeshDistance>(settings->mesh);
+  state->mesh = std::make_unique<const ContactMesh>(settings->mesh);
   if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
     state->field = std::make_unique<const BoneDistanceField>(
-        *state->mesh, impl_->parameters.distanceFieldCell,
+        state->mesh->distance, impl_->parameters.distanceFieldCell,
         kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
   state->settings = std::move(settings);
   const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
