@@ -12,7 +12,9 @@
 #include <vector>
 
 #include "collision/CollisionTrees.h"
+#include "collision/SurfaceContact.h"
 #include "fibremss/MuscleSystem.h"
+#include "support/GridMuscle.h"
 #include "support/SolverFixtures.h"
 
 namespace fibremss {
@@ -327,6 +329,68 @@ TEST(Tunnelling, TheSameParticleTunnelsWithAFixedLargeStep) {
   parameters.timeStep = 3e-4;
   const std::vector<double> x = pulledThroughBone(parameters, 200);
   EXPECT_LT(*std::min_element(x.begin(), x.end()), -0.012);
+}
+
+TEST(SurfaceContact, VerticesInsideABoneMoveOntoItsSurfaceWithinReach) {
+  // A cube bone of side 2 cm at the origin, turned 30° about z and moved; vertices given in the
+  // bone frame and placed with it.
+  const TriangleMesh cube =
+      testing::boxMesh(btVector3(-0.01f, -0.01f, -0.01f), btVector3(0.01f, 0.01f, 0.01f));
+  const ContactMesh bone(cube);
+  const btTransform placed(btQuaternion(btVector3(0, 0, 1), btScalar(SIMD_PI / 6)),
+                           btVector3(0.1f, -0.05f, 0.02f));
+  const btVector3 local[] = {
+      {0.009f, 0.002f, 0.001f},  // 1 mm inside the +x face: onto it
+      {0.002f, -0.0085f, 0},     // 1.5 mm inside the −y face: onto it
+      {0.012f, 0, 0},            // outside: stays
+      {0, 0, 0},                 // 10 mm deep, beyond the reach: stays
+  };
+  std::vector<btVector3> surface;
+  for (const btVector3& p : local) surface.push_back(placed * p);
+  const std::vector<btVector3> before = surface;
+  const std::vector<btScalar> reach(surface.size(), btScalar(0.003));
+  const btVector3 far(1, 1, 1), near = placed.getOrigin();
+  EXPECT_EQ(liftOutOfBone(bone, placed, reach, far, far * 2, surface), 0u);  // bounds miss
+  EXPECT_EQ(surface, before);
+  EXPECT_EQ(liftOutOfBone(bone, placed, reach, near - far, near + far, surface), 2u);
+  const btTransform toBone = placed.inverse();
+  EXPECT_NEAR((toBone * surface[0]).x(), 0.01, 1e-6);
+  EXPECT_NEAR((toBone * surface[0]).y(), 0.002, 1e-6);
+  EXPECT_NEAR((toBone * surface[1]).y(), -0.01, 1e-6);
+  EXPECT_NEAR((toBone * surface[1]).x(), 0.002, 1e-6);
+  for (int v : {0, 1}) EXPECT_GT(bone.distance.signedDistance(toBone * surface[v]), -1e-6) << v;
+  EXPECT_EQ(surface[2], before[2]);
+  EXPECT_EQ(surface[3], before[3]);
+}
+
+TEST(SurfaceContact, TheSystemsSurfaceStaysOutOfTheBoneOnlyWhenSwitchedOn) {
+  // The grid muscle (surface y up to 5 mm, its particles up to 4 mm) with a slab bone above it
+  // from y = 4.5 mm: with muscle–bone collision off, nothing keeps the surface's +y corners out
+  // of it (0.5 mm deep); surface contact lifts them onto the bone.
+  auto bone = std::make_shared<BoneSettings>();
+  bone->name = "above";
+  bone->mesh = testing::boxMesh({-0.03f, 0.0045f, -0.03f}, {0.03f, 0.03f, 0.03f});
+  bone->sphereCentres = {btVector3(0, 0.017f, 0)};
+  bone->sphereRadii = {btScalar(0.012)};
+  for (const bool on : {false, true}) {
+    SimulationParameters parameters;
+    parameters.surfaceContact = on;
+    parameters.muscleBone = false;
+    MuscleSystem system(parameters);
+    const BoneHandle ends[] = {system.addBone(testing::cubeBone("left", {-0.02f, 0, 0})),
+                               system.addBone(testing::cubeBone("right", {0.02f, 0, 0}))};
+    system.addBone(bone);
+    const MuscleHandle muscle = system.addMuscle(testing::gridMuscle(), ends);
+    system.step();
+    const MeshDistance mesh(bone->mesh);
+    btScalar deepest = 0;
+    for (const btVector3& v : system.surface(muscle))
+      deepest = std::min(deepest, mesh.signedDistance(v));
+    if (on)
+      EXPECT_GT(deepest, -1e-6);
+    else
+      EXPECT_LT(deepest, btScalar(-0.0004));
+  }
 }
 
 }  // namespace

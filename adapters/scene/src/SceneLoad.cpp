@@ -388,6 +388,7 @@ void readCollision(Fields& collision, double scale, SimulationParameters& parame
   parameters.penetrationRecovery =
       collision.boolean("penetration_recovery", defaults.penetrationRecovery);
   parameters.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
+  parameters.surfaceContact = collision.boolean("surface_contact", defaults.surfaceContact);
 }
 
 /// The top-level "analytic" object: which exact case the scene is, and its geometry.

@@ -59,6 +59,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"distance_field_cell", {Target::Section, "collision"}},
       {"penetration_recovery", {Target::Section, "collision"}},
       {"sliding_contacts", {Target::Section, "collision"}},
+      {"surface_contact", {Target::Section, "collision"}},
       {"muscle_bone", {Target::Section, "collision"}},
       {"frame_every", {Target::Section, "outputs"}},
       {"surfaces", {Target::Section, "outputs"}},

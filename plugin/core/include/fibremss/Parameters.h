@@ -136,6 +136,10 @@ struct SimulationParameters {
   /// removes only the part into the push; false: the thesis' x(t−dt) = x(t), which makes
   /// contacts stick (muscles sliding past each other tear, scenes/json/REAL-ANATOMY.md).
   bool slidingContacts = true;
+  /// Surface contact: after the skin, a surface vertex inside a bone's true mesh moves onto its
+  /// surface (the layer between the boundary spheres and the surface squashed on the bone);
+  /// false: the surface is the skin alone (method.md §7).
+  bool surfaceContact = true;
 
   bool diagonalJacobian = false;    ///< implicit integrators: diagonal-only Jacobian (seed 002)
   btScalar solverTolerance = 1e-6;  ///< implicit integrators: CG relative residual

@@ -9,6 +9,7 @@
 
 #include "collision/BoneDistanceField.h"
 #include "collision/CollisionTrees.h"
+#include "collision/SurfaceContact.h"
 #include "contact/InteractionState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
@@ -35,6 +36,8 @@ struct BoneState {
   uint32_t slot = 0;    ///< the bone's slot in its system (names it in per-particle memory)
   /// Signed distance field of the mesh, bone frame (BoneCollision::DistanceField), or null.
   std::unique_ptr<const BoneDistanceField> field;
+  /// The true mesh as the surface-contact stage queries it (liftOutOfBone), bone frame.
+  std::unique_ptr<const ContactMesh> mesh;
   btTransform goodLast = btTransform::getIdentity();     ///< `last` at the step's start (guard)
   btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
 };

@@ -2,6 +2,7 @@
 
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 
+#include <algorithm>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -25,6 +26,22 @@ MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
 
 MuscleSystem::~MuscleSystem() = default;
 
+void MuscleSystem::Impl::deform(MuscleState& state) const {
+  if (state.surface.empty()) return;
+  deformSurface(*state.settings, state.positions, state.boneTransforms,
+                parameters.blendedPretransform, state.skin, state.surface);
+  if (!parameters.surfaceContact) return;
+  btVector3 lower, upper;
+  pointBounds(state.surface, lower, upper);
+  const btScalar reach = *std::max_element(state.skin.layer.begin(), state.skin.layer.end());
+  const btVector3 margin(reach, reach, reach);
+  for (uint32_t slot : bones.order) {
+    const BoneState& bone = *bones.states[slot];
+    liftOutOfBone(*bone.mesh, bone.current, state.skin.layer, lower - margin, upper + margin,
+                  state.surface);
+  }
+}
+
 BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
                                  const btCollisionObject* body) {
   if (!settings) throw InputError("MuscleSystem::addBone", "", "null settings");
@@ -41,9 +58,10 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   if (body) state->last = state->target = state->current = body->getWorldTransform();
   state->tree.build(settings->sphereCentres, settings->sphereRadii);
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
+  state->mesh = std::make_unique<const ContactMesh>(settings->mesh);
   if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
     state->field = std::make_unique<const BoneDistanceField>(
-        MeshDistance(settings->mesh), impl_->parameters.distanceFieldCell,
+        state->mesh->distance, impl_->parameters.distanceFieldCell,
         kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
   state->settings = std::move(settings);
   const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
@@ -210,8 +228,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   if (skinned) {
     state->surface.resize(s.restSurface.vertices.size());
     prepareSkinFrames(s, state->skin);
-    deformSurface(s, state->positions, state->boneTransforms, impl_->parameters.blendedPretransform,
-                  state->skin, state->surface);
+    impl_->deform(*state);
   }
 
   size_t boundaryTotal = s.boundaryParticles.size();

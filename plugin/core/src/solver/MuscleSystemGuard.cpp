@@ -18,7 +18,6 @@
 #include <cmath>
 
 #include "MuscleSystemImpl.h"
-#include "Skin.h"
 #include "fibremss/Measures.h"
 #include "integrators/Integrators.h"
 
@@ -220,9 +219,7 @@ void MuscleSystem::Impl::guardedStep() {
         applyPushes(state, velocities, parameters.slidingContacts);
       }
     thread.contacts.clear();
-    if (!state.surface.empty())
-      deformSurface(*state.settings, state.positions, state.boneTransforms,
-                    parameters.blendedPretransform, state.skin, state.surface);
+    deform(state);
   };
   size_t heldBones = 0;
   for (uint32_t slot : bones.order) heldBones += bones.states[slot]->heldNonFinite ? 1 : 0;

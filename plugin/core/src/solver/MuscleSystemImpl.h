@@ -164,6 +164,8 @@ struct MuscleSystem::Impl {
   void placeAtBones(MuscleState& state) const;
   void pretransform(MuscleState& state, bool rotateVelocities) const;
   void followFixed(MuscleState& state) const;
+  /// The muscle's output surface (if it has one): the skin, then surface contact.
+  void deform(MuscleState& state) const;
   void moveBones(btScalar share, bool arrive);
   /// The bone motion a muscle follows: this iteration's, or all of it since the step began (what
   /// carries a frozen muscle, which skipped the iterations).

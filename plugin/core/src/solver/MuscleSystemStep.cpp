@@ -6,7 +6,8 @@
 // step) and fixed particles are set to T·rest. Then per iteration: spring forces → dt (eq 5.1 or
 // fixed) → integration → tree refit (only past the skin) → muscle–muscle and muscle–bone pairs →
 // response. The thesis mode (rebuildEveryStep) instead jumps the bones, restarts particles from
-// rest moved by their pre-transform, and rebuilds the trees. Output: deformed surfaces.
+// rest moved by their pre-transform, and rebuilds the trees. Output: deformed surfaces (the skin,
+// then surface contact).
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 
 #include <algorithm>
@@ -17,7 +18,6 @@
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
 #include "MuscleSystemPretransform.h"
-#include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
 #include "VolumeForces.h"
@@ -496,11 +496,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   endBodyContacts();
 
   const Clock::time_point outputStart = Clock::now();
-  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
-    if (!state.surface.empty())
-      deformSurface(*state.settings, state.positions, state.boneTransforms,
-                    parameters.blendedPretransform, state.skin, state.surface);
-  });
+  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { deform(state); });
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.last = bone.current = bone.target;

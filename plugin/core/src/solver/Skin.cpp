@@ -1,5 +1,8 @@
 #include "Skin.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "fibremss/Pretransform.h"
 
 namespace fibremss {
@@ -49,6 +52,7 @@ void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames) {
   frames.hasFrame.assign(n, 0);
   frames.moments.assign(n, btMatrix3x3::getIdentity());
   frames.deformations.assign(n, btMatrix3x3::getIdentity());
+  frames.layer.assign(settings.restSurface.vertices.size(), 0);
   sumMoments(settings, settings.restPositions, frames.used, frames.moments);
   for (uint32_t i = 0; i < n; ++i) {
     if (!frames.used[i]) continue;
@@ -83,6 +87,10 @@ void deformSurface(const MuscleSettings& settings, std::span<const btVector3> po
       moved += (positions[particle] + offset) * settings.skinWeights[j];
     }
     surface[v] = moved;
+    btScalar nearest2 = SIMD_INFINITY;
+    for (size_t j = v * n; j < (v + 1) * n; ++j)
+      nearest2 = std::min(nearest2, moved.distance2(positions[settings.skinParticles[j]]));
+    frames.layer[v] = std::sqrt(nearest2);
   }
 }
 
