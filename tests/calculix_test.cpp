@@ -375,6 +375,24 @@ TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   EXPECT_FALSE(gates.passed());
 }
 
+TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {
+  ReferenceGates gates;
+  gates.spreadMm = 0.6;
+  gates.poses = 7;
+  std::vector<std::string> lines = gateLines(gates);
+  ASSERT_GE(lines.size(), 3u);
+  EXPECT_NE(lines[1].find("not computed"), std::string::npos) << lines[1];
+  EXPECT_EQ(lines[1].find("FAILS"), std::string::npos) << "no verdict on what was not solved";
+  gates.refinementMm = 0.1;
+  gates.refinementPoses = 2;
+  gates.attachmentLowMm = gates.attachmentHighMm = 0.2;
+  gates.attachmentLowPoses = gates.attachmentHighPoses = 7;
+  lines = gateLines(gates);
+  EXPECT_NE(lines[1].find("over 2/7 poses"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("passes"), std::string::npos) << lines[1];
+  EXPECT_EQ(lines[2].find("poses"), std::string::npos) << "every pose compared: " << lines[2];
+}
+
 TEST(ReferenceGates, SpreadIsBetweenTheBestRunOfEachMethod) {
   std::vector<RunMetrics> runs(5);
   const char* names[] = {"calculix", "fibremss", "fibremss:iterations=280", "btsoftbody", "fem"};

@@ -58,11 +58,12 @@ double number(const nlohmann::json& run, const char* key) {
   return it != run.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
-/// " (k/N poses)" when the run's RMS to the reference covers k of its N poses, k < N (the
-/// reference or the run failed or stopped early); "" otherwise or for summaries without counts.
-std::string referenceCoverage(const nlohmann::json& run) {
-  const double covered = number(run, "rms_to_reference_poses"), poses = number(run, "poses");
-  if (!std::isfinite(number(run, "rms_to_reference_mm")) || !(covered >= 0) || !(covered < poses)) {
+/// " (k/N poses)" when the run's RMS `rms` ("rms_to_reference", "rms_to_self_reference")
+/// covers k of its N poses, k < N (the reference or the run failed or stopped early); ""
+/// otherwise or for summaries without counts.
+std::string coverage(const nlohmann::json& run, const std::string& rms) {
+  const double covered = number(run, (rms + "_poses").c_str()), poses = number(run, "poses");
+  if (!std::isfinite(number(run, (rms + "_mm").c_str())) || !(covered >= 0) || !(covered < poses)) {
     return "";
   }
   return " (" + cell(covered) + "/" + cell(poses) + " poses)";
@@ -73,8 +74,8 @@ std::string referenceCoverage(const nlohmann::json& run) {
 std::string referenceCoverageNote(const nlohmann::json& runs) {
   std::string list;
   for (const auto& run : runs) {
-    const std::string coverage = referenceCoverage(run);
-    if (!coverage.empty()) list += (list.empty() ? "" : ", ") + text(run, "method") + coverage;
+    const std::string poses = coverage(run, "rms_to_reference");
+    if (!poses.empty()) list += (list.empty() ? "" : ", ") + text(run, "method") + poses;
   }
   if (list.empty()) return "";
   std::string why;
@@ -185,7 +186,10 @@ std::map<std::string, std::vector<std::tuple<double, double, std::string>>> fron
     const double ms = number(run, "ms_per_step"), error = number(run, key);
     if (!(ms > 0) || !(error > 0) || text(run, "method") == "calculix") continue;
     const auto [family, knob] = frontOf(text(run, "method"));
-    const std::string label = text(run, "method") + referenceCoverage(run);
+    const std::string rms(key);  // "rms_to_..._mm" has a pose count, other errors none
+    const bool counted = rms.size() > 3 && rms.compare(rms.size() - 3, 3, "_mm") == 0;
+    const std::string label =
+        text(run, "method") + (counted ? coverage(run, rms.substr(0, rms.size() - 3)) : "");
     std::set<std::string> joins = knob.empty() ? knobs[family] : std::set<std::string>{knob};
     if (joins.empty()) joins.insert("");
     for (const std::string& j : joins) {
@@ -855,12 +859,12 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
         << run.value("steps", 0) << " | " << field(run, "ms_per_step") << " | "
         << field(run, "ms_per_iteration") << " | " << field(run, "max_penetration_mm") << " | "
         << field(run, "mean_penetration_mm") << " | " << field(run, "volume_change_pct") << " | "
-        << field(run, "rms_to_reference_mm") << referenceCoverage(run) << " | "
+        << field(run, "rms_to_reference_mm") << coverage(run, "rms_to_reference") << " | "
         << field(run, "shape_rms_to_reference_mm") << " | "
         << (worst.empty() ? "—" : worst + " " + field(run, "worst_muscle_rms_mm")) << " | "
-        << field(run, "rms_to_self_reference_mm") << " | " << field(run, "spring_deviation_ratio")
-        << " | " << failed << " | " << field(run, "peak_memory_mb") << " | "
-        << field(run, "wall_seconds") << " |\n";
+        << field(run, "rms_to_self_reference_mm") << coverage(run, "rms_to_self_reference") << " | "
+        << field(run, "spring_deviation_ratio") << " | " << failed << " | "
+        << field(run, "peak_memory_mb") << " | " << field(run, "wall_seconds") << " |\n";
   }
   out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "

@@ -277,7 +277,9 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
   };
   std::string refinement = "one level finer (" + (g.refinedBy.empty() ? "\u2014" : g.refinedBy) +
                            "): moves it " + mm(g.refinementMm) + " RMS" + over(g.refinementPoses);
-  if (std::isnan(g.spreadMm))
+  if (std::isnan(g.refinementMm))
+    refinement += ": not computed";
+  else if (std::isnan(g.spreadMm))
     refinement +=
         " (passes when below a third of the spread between the methods: needs a comparison)";
   else
