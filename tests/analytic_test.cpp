@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/CompareReport.h"
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/MuscleSystem.h"
@@ -188,6 +189,55 @@ TEST(VolumeTerm, StepAllocatesNothing) {
     EXPECT_EQ(testing::allocationCount.load(), 0);
   }
   btAlignedAllocSetCustom(nullptr, nullptr);
+}
+
+}  // namespace
+}  // namespace fibremss
+
+namespace fibremss {
+namespace {
+
+/// A run of `method` whose stretch measured `volumePct` against the exact +0.2 %.
+nlohmann::json stretchRun(const std::string& method, double volumePct, double ms) {
+  RunMetrics run;
+  run.method = method;
+  run.msPerStep = ms;
+  run.threads = 1;
+  run.analytic.type = "cylinder-stretch";
+  run.analytic.poissonRatio = 0.4;
+  run.analytic.exactPoissonRatio = 0.49;
+  run.analytic.volumeChangePct = volumePct;
+  run.analytic.exactVolumeChangePct = 0.2;
+  return toJson(run);
+}
+
+// An analytic case is ranked by its exact answer even when the reference fails a gate (the
+// RMS ranking is refused), each family by its best run; other scenes have no such ranking.
+TEST(AnalyticRanking, RanksFamiliesByTheirBestVolumeErrorWhateverTheReferenceGates) {
+  nlohmann::json summary = {
+      {"scene", "cylinder-stretch"},
+      {"reference", {{"gates", {{"return_mm", 0}, {"refinement_mm", 1}, {"spread_mm", 0.1}}}}},
+      {"runs",
+       {stretchRun("calculix", 0.3, 1000), stretchRun("fem", 1.2, 50),
+        stretchRun("fibremss:iterations=35", 3.2, 5), stretchRun("fibremss", 0.6, 10),
+        stretchRun("btsoftbody", 4.6, 20)}}};
+  const std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("**No ranking** by RMS"), std::string::npos) << report;
+  const size_t at = report.find("## Ranking by the exact answer");
+  ASSERT_NE(at, std::string::npos) << report;
+  const std::string section = report.substr(at, report.find("\n## ", at + 1) - at);
+  const size_t first = section.find("1. fibremss: 0.4 points off");
+  const size_t second = section.find("2. fem: 1 points off");
+  const size_t third = section.find("3. btsoftbody: 4.4 points off");
+  EXPECT_NE(first, std::string::npos) << section;
+  EXPECT_LT(first, second);
+  EXPECT_LT(second, third);
+  EXPECT_EQ(section.find("fibremss:iterations=35"), std::string::npos)
+      << "a family is ranked by its best run";
+  EXPECT_NE(section.find("The CalculiX reference itself: 0.1 points off"), std::string::npos);
+
+  for (auto& run : summary["runs"]) run.erase("analytic"), run.erase("volume_error_to_exact_pct");
+  EXPECT_EQ(reportMarkdown(summary, {}).find("Ranking by the exact answer"), std::string::npos);
 }
 
 }  // namespace

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -12,6 +14,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include "fibremss/Error.h"
 #include "fibremss/Reference.h"
@@ -372,6 +375,24 @@ TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   EXPECT_FALSE(gates.passed());
 }
 
+TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {
+  ReferenceGates gates;
+  gates.spreadMm = 0.6;
+  gates.poses = 7;
+  std::vector<std::string> lines = gateLines(gates);
+  ASSERT_GE(lines.size(), 3u);
+  EXPECT_NE(lines[1].find("not computed"), std::string::npos) << lines[1];
+  EXPECT_EQ(lines[1].find("FAILS"), std::string::npos) << "no verdict on what was not solved";
+  gates.refinementMm = 0.1;
+  gates.refinementPoses = 2;
+  gates.attachmentLowMm = gates.attachmentHighMm = 0.2;
+  gates.attachmentLowPoses = gates.attachmentHighPoses = 7;
+  lines = gateLines(gates);
+  EXPECT_NE(lines[1].find("over 2/7 poses"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find("passes"), std::string::npos) << lines[1];
+  EXPECT_EQ(lines[2].find("poses"), std::string::npos) << "every pose compared: " << lines[2];
+}
+
 TEST(ReferenceGates, SpreadIsBetweenTheBestRunOfEachMethod) {
   std::vector<RunMetrics> runs(5);
   const char* names[] = {"calculix", "fibremss", "fibremss:iterations=280", "btsoftbody", "fem"};
@@ -520,6 +541,62 @@ TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
   EXPECT_NE(second.output.find("(from the cache)"), std::string::npos) << second.output;
   const nlohmann::json again = nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
   EXPECT_EQ(again["gates"], gates) << "the cache gives the same reference";
+}
+
+TEST(ReferenceCommand, TwoProcessesSolvingOneKeyAtOnceBothGetTheWholeReference) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_race_test");
+  const std::string scene = coarseFusiform(dir.path());
+  const std::filesystem::path cache = dir.path() / "cache";
+  auto command = [&](const char* out) {
+    return std::string(FIBREMSS_CLI) + " reference " + scene +
+           " --set resolution=8 --no-gates --cache " + cache.string() + " --out " +
+           (dir.path() / out).string() + " > " + (dir.path() / out).string() + ".log 2>&1";
+  };
+  // Sharing ccx's files, one process read the other's half-written results (a return step
+  // reported failed that ccx had solved). While they run, no entry may be visible before it
+  // is whole (surfaces.bin in it): each solves in its own directory.
+  std::atomic<bool> done{false};
+  testing::ProcessResult both;
+  std::thread runner([&] {
+    both = testing::runProcess("(" + command("a") + ") & (" + command("b") +
+                               "); status=$?; wait $! && exit $status");
+    done = true;
+  });
+  bool sawOwnDirectory = false, sawPartialEntry = false;
+  while (!done) {
+    std::error_code error;
+    for (std::filesystem::directory_iterator it(cache, error), end; !error && it != end;
+         it.increment(error)) {
+      const std::string name = it->path().filename().string();
+      if (name.find(".solving-") != std::string::npos)
+        sawOwnDirectory = true;
+      else if (!std::filesystem::exists(it->path() / "surfaces.bin", error))
+        sawPartialEntry = true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  runner.join();
+  ASSERT_EQ(both.exitCode, 0) << readText(dir.path() / "a.log") << readText(dir.path() / "b.log");
+  EXPECT_TRUE(sawOwnDirectory);
+  EXPECT_FALSE(sawPartialEntry) << "an entry was visible while being solved";
+  for (const char* out : {"a", "b"}) {
+    SCOPED_TRACE(out);
+    const nlohmann::json reference =
+        nlohmann::json::parse(readText(dir.path() / out / "reference.json"));
+    for (const auto& pose : reference["poses"]) EXPECT_TRUE(pose["solved"].get<bool>());
+    EXPECT_EQ(reference["return_failure"], "");
+    EXPECT_LT(reference["gates"]["return_mm"].get<double>(), kReturnGateMm);
+  }
+  int entries = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(cache)) {
+    EXPECT_EQ(entry.path().filename().string().find(".solving-"), std::string::npos)
+        << "no solve's own directory is left";
+    EXPECT_TRUE(std::filesystem::exists(entry.path() / "surfaces.bin"));
+    ++entries;
+  }
+  EXPECT_EQ(entries, 1);
 }
 
 TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {

@@ -415,6 +415,26 @@ TEST(MergeAndReport, SaysWhenRmsToTheReferenceCoversFewerPosesThanTheRun) {
   EXPECT_EQ(readFile(out / "report.md").find("covers fewer poses"), std::string::npos);
 }
 
+TEST(MergeAndReport, SaysOverHowManyPosesARunStoppedByItsBudgetIsMeasured) {
+  // No reference (the main job without its cache): a run stopped by its time budget after 3
+  // of 13 poses has an RMS to the self-reference over those 3, and says so.
+  nlohmann::json summary = madeSummary(2, 20);
+  nlohmann::json& run = summary["runs"][0];
+  run["rms_to_reference_mm"] = nullptr;
+  run["poses"] = 13;
+  run["steps"] = 3;
+  run["interrupted"] = true;
+  run["rms_to_self_reference_mm"] = 4.8;
+  run["rms_to_self_reference_poses"] = 3;
+  const fs::path out = scratch("budget_stopped");
+  writeComparison(summary, out.string());
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("| 4.8 (3/13 poses) |"), std::string::npos) << report;
+  EXPECT_NE(report.find("stopped (time budget)"), std::string::npos) << report;
+  EXPECT_NE(readFile(out / "speed_vs_error.gp").find("(3/13 poses)"), std::string::npos)
+      << "point label";
+}
+
 TEST(MergeAndReport, FourResolutionsGiveTable1ColumnsInOrder) {
   const fs::path out = scratch("merged_resolutions");
   std::vector<nlohmann::json> cells;

@@ -58,11 +58,12 @@ double number(const nlohmann::json& run, const char* key) {
   return it != run.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
-/// " (k/N poses)" when the run's RMS to the reference covers k of its N poses, k < N (the
-/// reference or the run failed or stopped early); "" otherwise or for summaries without counts.
-std::string referenceCoverage(const nlohmann::json& run) {
-  const double covered = number(run, "rms_to_reference_poses"), poses = number(run, "poses");
-  if (!std::isfinite(number(run, "rms_to_reference_mm")) || !(covered >= 0) || !(covered < poses)) {
+/// " (k/N poses)" when the run's RMS `rms` ("rms_to_reference", "rms_to_self_reference")
+/// covers k of its N poses, k < N (the reference or the run failed or stopped early); ""
+/// otherwise or for summaries without counts.
+std::string coverage(const nlohmann::json& run, const std::string& rms) {
+  const double covered = number(run, (rms + "_poses").c_str()), poses = number(run, "poses");
+  if (!std::isfinite(number(run, (rms + "_mm").c_str())) || !(covered >= 0) || !(covered < poses)) {
     return "";
   }
   return " (" + cell(covered) + "/" + cell(poses) + " poses)";
@@ -73,8 +74,8 @@ std::string referenceCoverage(const nlohmann::json& run) {
 std::string referenceCoverageNote(const nlohmann::json& runs) {
   std::string list;
   for (const auto& run : runs) {
-    const std::string coverage = referenceCoverage(run);
-    if (!coverage.empty()) list += (list.empty() ? "" : ", ") + text(run, "method") + coverage;
+    const std::string poses = coverage(run, "rms_to_reference");
+    if (!poses.empty()) list += (list.empty() ? "" : ", ") + text(run, "method") + poses;
   }
   if (list.empty()) return "";
   std::string why;
@@ -140,6 +141,9 @@ std::string bothTerminals(const std::string& stem, const std::string& body) {
          quoted(stem + ".svg") + "\n" + body + "unset output\n";
 }
 
+/// An analytic case's error measure per run: |volume change − exact| [percentage points].
+constexpr const char* kExactErrorKey = "volume_error_to_exact_pct";
+
 /// The error axis: RMS to the CalculiX reference where some run has one, else to the
 /// self-reference.
 const char* errorKey(const nlohmann::json& runs) {
@@ -182,7 +186,10 @@ std::map<std::string, std::vector<std::tuple<double, double, std::string>>> fron
     const double ms = number(run, "ms_per_step"), error = number(run, key);
     if (!(ms > 0) || !(error > 0) || text(run, "method") == "calculix") continue;
     const auto [family, knob] = frontOf(text(run, "method"));
-    const std::string label = text(run, "method") + referenceCoverage(run);
+    const std::string rms(key);  // "rms_to_..._mm" has a pose count, other errors none
+    const bool counted = rms.size() > 3 && rms.compare(rms.size() - 3, 3, "_mm") == 0;
+    const std::string label =
+        text(run, "method") + (counted ? coverage(run, rms.substr(0, rms.size() - 3)) : "");
     std::set<std::string> joins = knob.empty() ? knobs[family] : std::set<std::string>{knob};
     if (joins.empty()) joins.insert("");
     for (const std::string& j : joins) {
@@ -195,14 +202,12 @@ std::map<std::string, std::vector<std::tuple<double, double, std::string>>> fron
   return lines;
 }
 
-std::string speedVsErrorScript(const nlohmann::json& summary, const std::string& stem) {
-  const nlohmann::json& runs = summary["runs"];
-  const char* key = errorKey(runs);
-  const bool reference = std::string(key) == "rms_to_reference_mm";
-  const auto lines = frontLines(runs, key);
-  std::ostringstream data, body, plot;
+/// The fronts as gnuplot data blocks ($line0 ...) and the plot command drawing them (one
+/// labelled line per title); the command is empty when there are none.
+std::pair<std::string, std::string> frontPlot(const nlohmann::json& runs, const char* key) {
+  std::ostringstream data, plot;
   int index = 0;
-  for (const auto& [title, points] : lines) {
+  for (const auto& [title, points] : frontLines(runs, key)) {
     data << "$line" << index << " << EOD\n";
     for (const auto& [ms, error, label] : points)
       data << ms << " " << error << " " << quoted(label) << "\n";
@@ -213,36 +218,60 @@ std::string speedVsErrorScript(const nlohmann::json& summary, const std::string&
          << " using 1:2:3 with labels offset char 0,1 font ',8' notitle";
     ++index;
   }
+  return {data.str(), plot.str()};
+}
+
+/// Axes, title and the fronts (or a note that there are none) of a speed–error plot.
+std::string frontAxes(const std::string& title, const std::string& ylabel,
+                      const std::string& plot) {
+  std::string body = "set title " + quoted(title) +
+                     "\nset xlabel 'ms per pose (median wall time, log)'\nset ylabel " +
+                     quoted(ylabel) +
+                     "\nset logscale xy\nset grid\nset key outside right top font ',9'\n";
+  if (plot.empty())
+    return body +
+           "set xrange [0.1:1000]\nset yrange [0.01:100]\nset label 1 'no run has both a time and "
+           "an error' at graph 0.5,0.5 center\nplot 1/0 notitle\nunset label 1\n";
+  return body + "set offsets graph 0.1, graph 0.1, graph 0.2, graph 0.2\n" + plot + "\n";
+}
+
+std::string speedVsErrorScript(const nlohmann::json& summary, const std::string& stem) {
+  const nlohmann::json& runs = summary["runs"];
+  const char* key = errorKey(runs);
+  const bool reference = std::string(key) == "rms_to_reference_mm";
+  const auto [data, plot] = frontPlot(runs, key);
+  std::ostringstream marks;
   const nlohmann::json gates =
       summary.value("reference", nlohmann::json::object()).value("gates", nlohmann::json::object());
   const double band = number(gates, "refinement_mm");
-  std::string title = reference
-                          ? "Speed against error: one line per method (its cost knob swept)"
-                          : "Speed against error to the self-reference (no CalculiX reference)";
-  body << "set title " << quoted(title) << "\n"
-       << "set xlabel 'ms per pose (median wall time, log)'\n"
-       << "set ylabel "
-       << quoted(reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
-                           : "RMS surface distance to the self-reference [mm] (log)")
-       << "\nset logscale xy\nset grid\nset key outside right top font ',9'\n";
   if (reference && summary.contains("reference") && !gates.value("passed", false)) {
-    body << "set label 4 'the reference FAILS a gate: no ranking (report.md, Reference)' at graph "
-            "0.5, graph 0.96 center font ',10' tc rgb '#b00000'\n";
+    marks << "set label 4 'the reference FAILS a gate: no ranking (report.md, Reference)' at graph "
+             "0.5, graph 0.96 center font ',10' tc rgb '#b00000'\n";
   }
   if (reference && band > 0) {
-    body << "set object 1 rect from graph 0, graph 0 to graph 1, first " << band
-         << " fc rgb '#dddddd' fs solid 0.6 noborder behind\n"
-         << "set label 3 " << quoted("reference's mesh-refinement spread")
-         << " at graph 0.02, first " << band << " offset 0,0.6 font ',8' tc rgb '#606060'\n";
+    marks << "set object 1 rect from graph 0, graph 0 to graph 1, first " << band
+          << " fc rgb '#dddddd' fs solid 0.6 noborder behind\n"
+          << "set label 3 " << quoted("reference's mesh-refinement spread")
+          << " at graph 0.02, first " << band << " offset 0,0.6 font ',8' tc rgb '#606060'\n";
   }
-  if (index == 0) {
-    body << "set xrange [0.1:1000]\nset yrange [0.01:100]\n"
-         << "set label 1 'no run has both a time and an error to a reference' at graph 0.5,0.5 "
-            "center\nplot 1/0 notitle\nunset label 1\n";
-  } else {
-    body << "set offsets graph 0.1, graph 0.1, graph 0.2, graph 0.2\n" << plot.str() << "\n";
-  }
-  return data.str() + bothTerminals(stem, body.str());
+  const std::string body =
+      marks.str() +
+      frontAxes(reference ? "Speed against error: one line per method (its cost knob swept)"
+                          : "Speed against error to the self-reference (no CalculiX reference)",
+                reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
+                          : "RMS surface distance to the self-reference [mm] (log)",
+                plot);
+  return data + bothTerminals(stem, body);
+}
+
+/// An analytic case's fronts: each method's volume change off the exact answer against its
+/// cost (no reference involved).
+std::string exactErrorScript(const nlohmann::json& runs, const std::string& stem) {
+  const auto [data, plot] = frontPlot(runs, kExactErrorKey);
+  return data +
+         bothTerminals(stem, frontAxes("Speed against error to the exact answer "
+                                       "(analytic case: no reference needed)",
+                                       "|volume change - exact| [percentage points] (log)", plot));
 }
 
 std::string penetrationScript(const nlohmann::json& runs, const std::string& stem) {
@@ -414,6 +443,10 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.attachmentLowMm = number(gates, "attachment_low_mm");
   g.attachmentHighMm = number(gates, "attachment_high_mm");
   g.spreadMm = number(gates, "spread_mm");
+  g.poses = gates.value("poses", 0);
+  g.refinementPoses = gates.value("refinement_poses", 0);
+  g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
+  g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());
   return g;
 }
@@ -480,8 +513,13 @@ std::string referenceSection(const nlohmann::json& summary) {
   for (const std::string& line : gateLines(gates)) out << "- " << line << "\n";
   const char* key = "rms_to_reference_mm";
   if (!gates.passed()) {
-    out << "\n**No ranking**: the reference does not pass its gates, so differences between the "
-           "methods are not shown to be larger than the reference's own uncertainty.\n";
+    out << "\n**No ranking** by RMS: the reference does not pass its gates, so differences "
+           "between the methods are not shown to be larger than the reference's own "
+           "uncertainty."
+        << (bestPerFamily(summary["runs"], kExactErrorKey).empty()
+                ? ""
+                : " This is an analytic case: the methods are ranked by the exact answer below.")
+        << "\n";
     return out.str();
   }
   out << "\n**Ranking** by each method's best RMS to the reference over the runs that finished "
@@ -490,6 +528,42 @@ std::string referenceSection(const nlohmann::json& summary) {
   for (const auto& [error, run] : bestPerFamily(summary["runs"], key))
     out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " mm at "
         << cell(number(*run, "ms_per_step")) << " ms per pose (" << threadsText(*run) << ")\n";
+  return out.str();
+}
+
+/// On an analytic case, the ranking by the exact answer, which needs no reference and so no
+/// gate: each method family's best run by |volume change − exact|, the reference's own error
+/// beside it. Empty for other scenes.
+std::string exactRanking(const nlohmann::json& runs) {
+  const auto ranked = bestPerFamily(runs, kExactErrorKey);
+  if (ranked.empty()) return "";
+  const auto measure = [](const nlohmann::json& run) {
+    const nlohmann::json a = run.value("analytic", nlohmann::json::object());
+    char text[96];
+    if (a.value("type", std::string()) == "cylinder-stretch")
+      std::snprintf(text, sizeof text, "effective ν %.3g, exact %.3g", number(a, "poisson_ratio"),
+                    number(a, "exact_poisson_ratio"));
+    else
+      std::snprintf(text, sizeof text, "mid radius %.3g r0, exact %.3g",
+                    number(a, "mid_radius_ratio"), number(a, "exact_mid_radius_ratio"));
+    return std::string(text);
+  };
+  std::ostringstream out;
+  out << "\n## Ranking by the exact answer\n\nAn analytic case has an exact answer, so its "
+         "methods are ranked against it, not against the CalculiX reference (no gate applies): "
+         "each method family's best run by |volume change − exact| in percentage points (the "
+         "volume follows the effective Poisson ratio under stretch and the radius under twist; "
+         "surface RMS cannot separate methods that all lie within the reference's own "
+         "uncertainty of it). `exact_error_vs_ms.png` draws each front.\n\n";
+  int rank = 0;
+  for (const auto& [error, run] : ranked)
+    out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " points off ("
+        << measure(*run) << ") at " << cell(number(*run, "ms_per_step")) << " ms per pose ("
+        << threadsText(*run) << ")\n";
+  for (const auto& run : runs)
+    if (text(run, "method") == "calculix" && std::isfinite(number(run, kExactErrorKey)))
+      out << "\nThe CalculiX reference itself: " << cell(number(run, kExactErrorKey))
+          << " points off (" << measure(run) << "; its discretisation and ν).\n";
   return out.str();
 }
 
@@ -785,12 +859,12 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
         << run.value("steps", 0) << " | " << field(run, "ms_per_step") << " | "
         << field(run, "ms_per_iteration") << " | " << field(run, "max_penetration_mm") << " | "
         << field(run, "mean_penetration_mm") << " | " << field(run, "volume_change_pct") << " | "
-        << field(run, "rms_to_reference_mm") << referenceCoverage(run) << " | "
+        << field(run, "rms_to_reference_mm") << coverage(run, "rms_to_reference") << " | "
         << field(run, "shape_rms_to_reference_mm") << " | "
         << (worst.empty() ? "—" : worst + " " + field(run, "worst_muscle_rms_mm")) << " | "
-        << field(run, "rms_to_self_reference_mm") << " | " << field(run, "spring_deviation_ratio")
-        << " | " << failed << " | " << field(run, "peak_memory_mb") << " | "
-        << field(run, "wall_seconds") << " |\n";
+        << field(run, "rms_to_self_reference_mm") << coverage(run, "rms_to_self_reference") << " | "
+        << field(run, "spring_deviation_ratio") << " | " << failed << " | "
+        << field(run, "peak_memory_mb") << " | " << field(run, "wall_seconds") << " |\n";
   }
   out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
@@ -804,8 +878,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
       if (plot.rfind("speed_vs_error", 0) == 0) out << coverageNote;
     }
   }
-  out << referenceSection(summary) << table1(runs) << integratorsReport(runs) << scalingReport(runs)
-      << "\n"
+  out << referenceSection(summary) << exactRanking(runs) << table1(runs) << integratorsReport(runs)
+      << scalingReport(runs) << "\n"
       << describeMethods() << runSettings(runs);
   return out.str();
 }
@@ -836,6 +910,8 @@ std::vector<std::string> writeComparison(const nlohmann::json& summary, const st
     plots.push_back(name + ".svg");
   };
   plot("speed_vs_error", speedVsErrorScript(summary, (dir / "speed_vs_error").string()));
+  if (!bestPerFamily(runs, kExactErrorKey).empty())
+    plot("exact_error_vs_ms", exactErrorScript(runs, (dir / "exact_error_vs_ms").string()));
   if (anySweep(runs))
     plot("penetration_vs_step", penetrationScript(runs, (dir / "penetration_vs_step").string()));
   writeFileAtomically((dir / "report.md").string(), reportMarkdown(summary, plots));

@@ -131,12 +131,14 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared,
       {&low, "attachment distance x0.5"},
       {&high, "attachment distance x1.5"}};
   double* results[] = {&gates.refinementMm, &gates.attachmentLowMm, &gates.attachmentHighMm};
+  int* compared[] = {&gates.refinementPoses, &gates.attachmentLowPoses, &gates.attachmentHighPoses};
   for (size_t v = 0; v < 3; ++v) {
     CalculixSolution solution;
     if (options.cancel && options.cancel->load()) return;
     if (!solveVariant(scene, prepared, *variants[v].first, options, variants[v].second, solution))
       continue;
     *results[v] = rmsBetweenSolutions(base, solution);
+    *compared[v] = std::min(base.solvedPoses(), solution.solvedPoses());
     const std::string more = failures(solution, variants[v].second);
     if (!more.empty()) gates.failures += (gates.failures.empty() ? "" : "; ") + more;
   }
@@ -187,6 +189,7 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   }
   const CalculixSolution& base = reference.solution;
   reference.gates.failures = failures(base, "reference");
+  reference.gates.poses = static_cast<int>(base.poseSurfaces.size());
   if (!base.returnSurface.empty())
     reference.gates.returnMm = rmsDistanceMm(base.returnSurface, restSurfaces(prepared));
   if (options.gates && !(options.cancel && options.cancel->load()))
@@ -239,6 +242,10 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"refinement_passes", g.refinementPasses()},
             {"attachment_low_mm", number(g.attachmentLowMm)},
             {"attachment_high_mm", number(g.attachmentHighMm)},
+            {"poses", g.poses},
+            {"refinement_poses", g.refinementPoses},
+            {"attachment_low_poses", g.attachmentLowPoses},
+            {"attachment_high_poses", g.attachmentHighPoses},
             {"failures", g.failures},
             {"passed", g.passed()}}},
           {"nodes", s.nodes},
@@ -262,17 +269,26 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
                   (std::isnan(g.returnMm) ? "not computed"
                    : g.returnPasses()     ? "passes"
                                           : "FAILS"));
+  // " over k/N poses" where a gate compared fewer poses than the motion has.
+  const auto over = [&](int compared) {
+    return compared < g.poses && compared > 0
+               ? " over " + std::to_string(compared) + "/" + std::to_string(g.poses) + " poses"
+               : std::string();
+  };
   std::string refinement = "one level finer (" + (g.refinedBy.empty() ? "\u2014" : g.refinedBy) +
-                           "): moves it " + mm(g.refinementMm) + " RMS";
-  if (std::isnan(g.spreadMm))
+                           "): moves it " + mm(g.refinementMm) + " RMS" + over(g.refinementPoses);
+  if (std::isnan(g.refinementMm))
+    refinement += ": not computed";
+  else if (std::isnan(g.spreadMm))
     refinement +=
         " (passes when below a third of the spread between the methods: needs a comparison)";
   else
     refinement += " against a third of the methods' spread " + mm(g.spreadMm / 3) + ": " +
                   (g.refinementPasses() ? "passes" : "FAILS");
   lines.push_back(refinement);
-  lines.push_back("attachment distance x0.5 / x1.5: moves it " + mm(g.attachmentLowMm) + " / " +
-                  mm(g.attachmentHighMm) + " RMS (stated, not a pass/fail gate)");
+  lines.push_back("attachment distance x0.5 / x1.5: moves it " + mm(g.attachmentLowMm) +
+                  over(g.attachmentLowPoses) + " / " + mm(g.attachmentHighMm) +
+                  over(g.attachmentHighPoses) + " RMS (stated, not a pass/fail gate)");
   if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
   return lines;
 }

@@ -103,6 +103,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"peak_memory_mb", number(m.peakMemoryMb)},
       {"wall_seconds", m.wallSeconds},
       {"analytic", toJson(m.analytic)},
+      {"volume_error_to_exact_pct", number(m.analytic.volumeErrorPct())},
       {"muscles", musclesJson(m.muscles)},
       {"series", seriesJson(m.series)},
   };

@@ -1,6 +1,8 @@
 // The reference cache: key, binary store of a solution, and the cached solve.
 #include "fibremss/ReferenceCache.h"
 
+#include <unistd.h>
+
 #include <array>
 #include <cstdint>
 #include <cstdio>
@@ -214,8 +216,24 @@ CalculixSolution cachedCalculixReference(
   const bool found = loadSolution(stored, solution);
   if (fromCache) *fromCache = found;
   if (found) return solution;
-  solution = solveCalculixReference(scene, prepared, definition, entry, progress, cancel);
-  if (!solution.interrupted) saveSolution(stored, solution);
+  // Solved in a directory of this process's own, moved into place whole: two processes
+  // solving the same key at once (two comparisons of one scene) must not share ccx's files.
+  const std::string work = entry + ".solving-" + std::to_string(getpid());
+  std::filesystem::remove_all(work);
+  solution = solveCalculixReference(scene, prepared, definition, work, progress, cancel);
+  if (solution.interrupted) {
+    std::filesystem::remove_all(work);
+    return solution;
+  }
+  for (std::string& file : solution.inputFiles) file = entry + file.substr(work.size());
+  saveSolution(work + "/surfaces.bin", solution);
+  std::error_code error;
+  std::filesystem::rename(work, entry, error);  // fails when the entry is not empty
+  if (error && !loadSolution(stored, solution)) {
+    std::filesystem::remove_all(entry);  // a solve stopped before it stored anything
+    std::filesystem::rename(work, entry);
+  }
+  std::filesystem::remove_all(work);  // another process stored the entry first: its is kept
   return solution;
 }
 

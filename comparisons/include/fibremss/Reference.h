@@ -38,6 +38,10 @@ struct ReferenceGates {
   std::string refinedBy;  ///< what "one level finer" was (quadratic elements or the next level)
   double attachmentLowMm = RunMetrics::kNone;   ///< RMS with the attachment distance × 0.5
   double attachmentHighMm = RunMetrics::kNone;  ///< RMS with it × 1.5
+  /// Poses each gate compared (both solves solved them) of the reference's `poses`: a gate
+  /// over fewer poses than the motion's says so.
+  int poses = 0;
+  int refinementPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
   std::string failures;  ///< poses ccx did not finish, of the reference or a gate's solve
   /// The spread between the methods compared [mm] (NaN until a comparison sets it) and the
   /// refinement gate's verdict against it.

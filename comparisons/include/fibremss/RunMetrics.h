@@ -3,6 +3,7 @@
 // btSoftBody and FEM, written to summary.json by `run` and `compare`.
 #include <LinearMath/btVector3.h>
 
+#include <cmath>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -35,6 +36,10 @@ struct AnalyticMetrics {
   double midRotationDeg = kNone;        ///< twist: rotation of the mid-section about the axis [°]
   double exactMidRotationDeg = kNone;   ///< exact (half the end's twist)
   double rotationErrorDeg = kNone;  ///< twist: largest |rotation − exact| over 9 sections [°]
+
+  /// |volume change − exact| [percentage points]: the measure methods are ranked by on an
+  /// analytic case (no reference needed); NaN when either is missing.
+  double volumeErrorPct() const { return std::abs(volumeChangePct - exactVolumeChangePct); }
 };
 
 /// One run's results. NaN marks a metric that does not apply or was not measured.

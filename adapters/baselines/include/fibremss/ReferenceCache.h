@@ -29,9 +29,11 @@ void saveSolution(const std::string& path, const CalculixSolution& solution);
 /// is not such a file (truncated, other format).
 bool loadSolution(const std::string& path, CalculixSolution& solution);
 
-/// The solution stored under the key in `cacheDir/<key>/` or, when absent, solved there
-/// (solveCalculixReference) and stored unless interrupted. `fromCache` (may be null) tells
-/// which.
+/// The solution stored under the key in `cacheDir/<key>/` or, when absent, solved
+/// (solveCalculixReference) in `cacheDir/<key>.solving-<pid>/`, which becomes `<key>/` once
+/// stored (removed when interrupted), so that processes solving the same key at once never
+/// share ccx's files; when another one stored it first, its solution is returned. `fromCache`
+/// (may be null) tells whether it came from the cache.
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const std::string& cacheDir, const std::function<void(const ReferenceProgress&)>& progress,
