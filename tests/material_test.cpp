@@ -2,7 +2,11 @@
 // anisotropy along the fibres, and what the anisotropy does to a stretched cylinder.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstring>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -11,6 +15,8 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "solver/SpringForces.h"
+#include "solver/VolumeForces.h"
 
 namespace fibremss {
 namespace {
@@ -51,6 +57,93 @@ TEST(VolumeTetrahedra, LieInsideTheSurfaceWithTheirRestVolume) {
   const MuscleSettings off = preparedCylinder("cylinder-stretch", {"volume_stiffness=0"});
   EXPECT_TRUE(off.tetParticles.empty());
   EXPECT_EQ(off.volumeModulus, 0);
+}
+
+/// The volume terms' forces at x in double precision, tetrahedron by tetrahedron: K(1 − V/V0)
+/// times ∂V/∂x_i, 0 outside [0, 2·V0].
+std::vector<btVector3> referenceVolumeForces(const MuscleSettings& muscle,
+                                             const std::vector<btVector3>& x) {
+  std::vector<std::array<double, 3>> f(x.size(), {0, 0, 0});
+  const auto edge = [&](uint32_t i, uint32_t o) {
+    return std::array<double, 3>{double(x[i].x()) - x[o].x(), double(x[i].y()) - x[o].y(),
+                                 double(x[i].z()) - x[o].z()};
+  };
+  const auto cross = [](const std::array<double, 3>& u, const std::array<double, 3>& v) {
+    return std::array<double, 3>{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                                 u[0] * v[1] - u[1] * v[0]};
+  };
+  for (size_t k = 0; k < muscle.tetInverseVolume.size(); ++k) {
+    const uint32_t* t = &muscle.tetParticles[4 * k];
+    const auto a = edge(t[1], t[0]), b = edge(t[2], t[0]), c = edge(t[3], t[0]);
+    const std::array<double, 3> g[3] = {cross(b, c), cross(c, a), cross(a, b)};
+    const double ratio =
+        (a[0] * g[0][0] + a[1] * g[0][1] + a[2] * g[0][2]) * double(muscle.tetInverseVolume[k]);
+    const double strain = std::abs(1 - ratio) <= 1 ? 1 - ratio : 0;
+    const double scale = double(muscle.volumeModulus) / 6 * strain;
+    for (size_t i = 0; i < 3; ++i)
+      for (size_t d = 0; d < 3; ++d) {
+        f[t[i + 1]][d] += g[i][d] * scale;
+        f[t[0]][d] -= g[i][d] * scale;
+      }
+  }
+  std::vector<btVector3> out;
+  for (const auto& v : f) out.emplace_back(btScalar(v[0]), btScalar(v[1]), btScalar(v[2]));
+  return out;
+}
+
+std::vector<btVector3> volumeForces(const MuscleSettings& muscle, const std::vector<btVector3>& x,
+                                    SpringKernel kernel) {
+  std::vector<btVector3> forces(x.size(), btVector3(0, 0, 0));
+  addTetrahedronForces(muscle, x, forces, kernel);
+  return forces;
+}
+
+// Every kernel, on every count of tetrahedra up to three groups of four and on all of them
+// (groups and the tail one at a time), at jittered positions: within float rounding of the
+// double-precision sums; AVX2 (the SSE2 instructions VEX-encoded) gives SSE2's bits.
+TEST(VolumeForces, EveryKernelMatchesTheReference) {
+  const MuscleSettings muscle = preparedCylinder("cylinder-stretch", {});
+  std::mt19937 random(18);
+  std::uniform_real_distribution<float> jitter(-1, 1);
+  const btScalar amplitude = btScalar(0.05) * muscle.springs.front().restLength;
+  std::vector<btVector3> x(muscle.restPositions.begin(), muscle.restPositions.end());
+  for (btVector3& p : x) p += btVector3(jitter(random), jitter(random), jitter(random)) * amplitude;
+  const size_t all = muscle.tetInverseVolume.size();
+  for (size_t count : {size_t(0), size_t(1), size_t(3), size_t(4), size_t(5), size_t(7), size_t(8),
+                       size_t(11), size_t(12), size_t(13), all}) {
+    MuscleSettings part = muscle;
+    part.tetParticles.resize(4 * count);
+    part.tetInverseVolume.resize(count);
+    const std::vector<btVector3> reference = referenceVolumeForces(part, x);
+    btScalar largest = 0;
+    for (const btVector3& f : reference) largest = std::max(largest, f.length());
+    ASSERT_TRUE(count == 0 || largest > 0) << count;
+    std::vector<btVector3> sse2;
+    for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2}) {
+      if (!springKernelAvailable(kernel)) continue;
+      const std::vector<btVector3> forces = volumeForces(part, x, kernel);
+      for (size_t i = 0; i < x.size(); ++i)
+        ASSERT_LE((forces[i] - reference[i]).length(), btScalar(1e-4) * largest)
+            << springKernelName(kernel) << ", " << count << " tetrahedra, particle " << i;
+      if (kernel == SpringKernel::sse2) sse2 = forces;
+      if (kernel == SpringKernel::avx2 && !sse2.empty()) {
+        EXPECT_EQ(std::memcmp(forces.data(), sse2.data(), sizeof(btVector3) * x.size()), 0)
+            << count;
+      }
+    }
+  }
+}
+
+// Beyond twice its rest volume a tetrahedron is torn and pulls nothing back, in every kernel.
+TEST(VolumeForces, TornTetrahedraGiveNoForce) {
+  const MuscleSettings muscle = preparedCylinder("cylinder-stretch", {});
+  std::vector<btVector3> x(muscle.restPositions.begin(), muscle.restPositions.end());
+  for (btVector3& p : x) p *= btScalar(1.5);  // every volume × 3.375
+  for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2}) {
+    if (!springKernelAvailable(kernel)) continue;
+    for (const btVector3& f : volumeForces(muscle, x, kernel))
+      ASSERT_EQ(f, btVector3(0, 0, 0)) << springKernelName(kernel);
+  }
 }
 
 /// cos θ of a spring against the cylinder's axis (y), the fibres' direction.

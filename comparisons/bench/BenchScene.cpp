@@ -5,6 +5,7 @@
 #include "fibremss/Preparation.h"
 #include "integrators/Integrators.h"
 #include "solver/TimeStep.h"
+#include "solver/VolumeForces.h"
 
 namespace fibremss::bench {
 
@@ -12,6 +13,8 @@ const char* partName(Part part) {
   switch (part) {
     case Part::SpringForces:
       return "spring-forces";
+    case Part::VolumeForces:
+      return "volume-forces";
     case Part::AdaptiveTimeStep:
       return "adaptive-dt";
     case Part::Integration:
@@ -57,6 +60,12 @@ void BenchScene::run(Part part) {
   switch (part) {
     case Part::SpringForces:
       for (uint32_t slot : impl.muscles.order) springForces(*impl.muscles.states[slot]);
+      break;
+    case Part::VolumeForces:
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        addTetrahedronForces(*state.settings, state.positions, state.forces);
+      }
       break;
     case Part::AdaptiveTimeStep:
       dt_ = parameters.timeStep;

@@ -13,6 +13,7 @@ namespace fibremss::bench {
 /// The parts of one iteration, in order (method.md §5).
 enum class Part {
   SpringForces,       ///< spring forces of every muscle
+  VolumeForces,       ///< the volume terms' forces of every muscle (issue 18)
   AdaptiveTimeStep,   ///< the adaptive dt bound of every muscle (eq 5.1), and the dt
   Integration,        ///< the integrator's advance of every muscle
   TreeRefit,          ///< refitTree of every muscle (a refit only past the skin)
@@ -20,9 +21,9 @@ enum class Part {
   MuscleBonePairs,    ///< every muscle against every bone (lists while they hold)
   Response,           ///< pushes applied to every muscle
 };
-constexpr Part kParts[] = {Part::SpringForces, Part::AdaptiveTimeStep,  Part::Integration,
-                           Part::TreeRefit,    Part::MuscleMusclePairs, Part::MuscleBonePairs,
-                           Part::Response};
+constexpr Part kParts[] = {Part::SpringForces,    Part::VolumeForces, Part::AdaptiveTimeStep,
+                           Part::Integration,     Part::TreeRefit,    Part::MuscleMusclePairs,
+                           Part::MuscleBonePairs, Part::Response};
 
 /// Name of a part as benchmarks and the callgrind reference print it.
 const char* partName(Part part);

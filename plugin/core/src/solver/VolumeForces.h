@@ -5,6 +5,7 @@
 
 #include <span>
 
+#include "SpringForces.h"
 #include "fibremss/MuscleSettings.h"
 
 namespace fibremss {
@@ -12,10 +13,16 @@ namespace fibremss {
 /// Adds the volume terms' forces at `positions` into `forces`: each tetrahedron of
 /// settings.tetParticles with volume V and rest volume V0 has the energy ½·K·(V − V0)²/V0
 /// (K = settings.volumeModulus), which gives its particle i the force K·(1 − V/V0)·∂V/∂x_i, taken
-/// as 0 when V is outside [0, 2·V0] (crushed or torn). One pass in the tetrahedra's order: the
-/// same sums for any thread count.
+/// as 0 when V is outside [0, 2·V0] (crushed or torn). On the spring kernel's instruction set
+/// (fastestSpringKernel): with SSE2 or AVX2 (the same instructions VEX-encoded, no FMA: the same
+/// bits) four tetrahedra at a time, one from each quarter of the list, then the rest one at a
+/// time; scalar, one at a time. A fixed order for a given kernel: the same sums for any thread
+/// count.
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces);
+/// The same on `kernel`'s instruction set (tests compare them).
+void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, SpringKernel kernel);
 
 /// Adds to each free particle's row of `stiffness` half the Gershgorin bound of the volume
 /// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j| per tetrahedron [N/m]: stableTimeStep
