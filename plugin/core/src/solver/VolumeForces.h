@@ -14,10 +14,10 @@ namespace fibremss {
 /// settings.tetParticles with volume V and rest volume V0 has the energy ½·K·(V − V0)²/V0
 /// (K = settings.volumeModulus), which gives its particle i the force K·(1 − V/V0)·∂V/∂x_i, taken
 /// as 0 when V is outside [0, 2·V0] (crushed or torn). On the spring kernel's instruction set
-/// (fastestSpringKernel): with SSE2 or AVX2 (the same instructions VEX-encoded, no FMA: the same
-/// bits) four tetrahedra at a time, one from each quarter of the list, then the rest one at a
-/// time; scalar, one at a time. A fixed order for a given kernel: the same sums for any thread
-/// count.
+/// (fastestSpringKernel): with SSE2 four tetrahedra at a time, one from each quarter of the
+/// list, then the rest one at a time; with AVX2 two such groups at a time (no FMA, the same
+/// order: SSE2's bits); scalar, one at a time. A fixed order for a given kernel: the same sums
+/// for any thread count.
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces);
 /// The same on `kernel`'s instruction set (tests compare them).
