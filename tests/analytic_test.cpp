@@ -107,6 +107,67 @@ TEST(AnalyticMeasure, ExactTorsionHasNoRotationErrorKeepsRadiusAndVolume) {
   EXPECT_NEAR(measureAnalytic(c, rest, half).rotationErrorDeg, 81, 0.5);
 }
 
+TEST(AnalyticScenes, SpherePlanesNamesItsPlateAndClosesIn) {
+  const LoadedScene scene = loadScene("sphere-planes");
+  const AnalyticCase& c = scene.analytic;
+  EXPECT_EQ(c.type, "sphere-planes");
+  ASSERT_GE(c.plateBone, 0);
+  EXPECT_EQ(scene.bones[size_t(c.plateBone)].name, "plane-top");
+  EXPECT_NEAR(c.axisStart.distance(c.axisEnd), 0.03, 1e-6);  // R
+  EXPECT_GT(scene.poseCount, 2);
+  EXPECT_GT(scene.muscles[0].surface.vertices.size(), 10000u) << "a patch of several edges";
+  EXPECT_THROW(loadScene("sphere-planes", {"analytic.plate=femur"}), InputError);
+}
+
+/// The rest surface with every vertex beyond the plane y = `height` moved onto it.
+std::vector<btVector3> flattened(const TriangleMesh& rest, double height) {
+  return deformed(rest, [&](const btVector3& p) {
+    return btVector3(p.x(), std::min(p.y(), btScalar(height)), p.z());
+  });
+}
+
+TEST(AnalyticMeasure, AFlattenedSphereReadsItsPatchRadius) {
+  // sphere-planes' sphere (R = 30 mm, ~1 mm edges) cut by planes whose circles of contact have
+  // radius 2.7–5.5 mm (Hertz's at δ = 0.25–1 mm). The nodal area reads them within 5 %; the
+  // farthest touching vertex lags by up to 13 % at this resolution.
+  const LoadedScene scene = loadScene("sphere-planes");
+  const TriangleMesh& rest = scene.muscles[0].surface;
+  const double radius = 0.03;
+  for (double patch : {0.0027, 0.0039, 0.0055}) {
+    const double height = std::sqrt(radius * radius - patch * patch);
+    EXPECT_NEAR(contactRadius(rest, flattened(rest, height), btVector3(0, btScalar(height), 0),
+                              btVector3(0, 1, 0), 1e-9),
+                patch, 0.05 * patch)
+        << patch;
+  }
+  EXPECT_EQ(contactRadius(rest, rest.vertices, btVector3(0, 0.031f, 0), btVector3(0, 1, 0), 1e-6),
+            0)
+      << "a plate 1 mm clear touches nothing";
+  // A tolerance takes in the vertices near the plate: 1 mm of it on the round sphere is the
+  // circle 1 mm below its top, radius √(2R·1 mm − 1 mm²) = 7.7 mm.
+  EXPECT_NEAR(contactRadius(rest, rest.vertices, btVector3(0, 0.03f, 0), btVector3(0, 1, 0), 1e-3),
+              std::sqrt(2 * 0.03 * 1e-3 - 1e-6), 0.05 * 0.0077);
+}
+
+TEST(AnalyticMeasure, ContactAtAPoseTakesThePlatesApproachAndHertzsRadius) {
+  const LoadedScene scene = loadScene("sphere-planes");
+  const TriangleMesh& rest = scene.muscles[0].surface;
+  const int last = scene.poseCount - 1;
+  const double approach = 0.5e-3;  // the scene's last pose
+  const ContactPose cut = measureContact(scene, rest, flattened(rest, 0.03 - approach), last);
+  EXPECT_EQ(cut.pose, last);
+  EXPECT_NEAR(cut.approachMm, 0.5, 1e-4);
+  EXPECT_NEAR(cut.exactRadiusMm, std::sqrt(30 * 0.5), 1e-3) << "Hertz: √(Rδ)";
+  // A surface that only gives way where the plate cuts it (no elastic response) lies on the
+  // plate over the circle √(2Rδ − δ²): √2 × Hertz's.
+  EXPECT_NEAR(cut.radiusMm, std::sqrt(2 * 30 * 0.5 - 0.25), 0.05 * 5.45);
+  const ContactPose rest0 = measureContact(scene, rest, rest.vertices, 0);
+  EXPECT_EQ(rest0.approachMm, 0);
+  EXPECT_EQ(rest0.exactRadiusMm, 0);
+  EXPECT_TRUE(std::isnan(measureContact(loadScene("fusiform"), rest, rest.vertices, 0).radiusMm))
+      << "not a sphere-planes case";
+}
+
 TEST(AnalyticRun, ShortFibreMSSRunsMeasureEveryFigureAndRoundTripThroughJson) {
   for (const char* name : {"cylinder-stretch", "cylinder-twist"}) {
     const LoadedScene scene =
@@ -132,6 +193,32 @@ TEST(AnalyticRun, ShortFibreMSSRunsMeasureEveryFigureAndRoundTripThroughJson) {
     EXPECT_DOUBLE_EQ(back.midRadiusRatio, m.midRadiusRatio);
     EXPECT_DOUBLE_EQ(back.exactVolumeChangePct, m.exactVolumeChangePct);
   }
+}
+
+TEST(AnalyticRun, ASpherePlanesRunMeasuresTheContactAtEveryPose) {
+  const LoadedScene scene =
+      loadScene("sphere-planes", {"resolution=20", "fibre_count=24", "simulation.iterations=300"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  FibreRunOptions options;
+  options.keepPoseSurfaces = false;
+  const RunMetrics run = runFibreMSS(scene, prepared, options);
+  const AnalyticMetrics& m = run.analytic;
+  ASSERT_EQ(m.type, "sphere-planes");
+  ASSERT_EQ(m.contact.size(), size_t(scene.poseCount));
+  for (size_t p = 0; p < m.contact.size(); ++p) {
+    EXPECT_EQ(m.contact[p].pose, int(p));
+    EXPECT_GE(m.contact[p].radiusMm, 0);  // 0 where the surface stands off the plate
+    EXPECT_NEAR(m.contact[p].exactRadiusMm, std::sqrt(30 * m.contact[p].approachMm), 1e-3);
+    if (p > 0) {
+      EXPECT_GT(m.contact[p].approachMm, m.contact[p - 1].approachMm) << "closing in";
+    }
+  }
+  EXPECT_TRUE(std::isfinite(m.volumeChangePct));
+  const AnalyticMetrics back = runMetricsFromJson(toJson(run)).analytic;
+  ASSERT_EQ(back.contact.size(), m.contact.size());
+  EXPECT_DOUBLE_EQ(back.contact.back().radiusMm, m.contact.back().radiusMm);
+  EXPECT_DOUBLE_EQ(back.contact.back().exactRadiusMm, m.contact.back().exactRadiusMm);
+  EXPECT_NE(analyticLine(m).find("Hertz"), std::string::npos);
 }
 
 /// A run of a cylinder scene at a coarser sampling, with `overrides`.

@@ -12,6 +12,10 @@ namespace {
 
 constexpr double kBand = 1e-3;  // half-width of a section along the axis [m]
 constexpr double kDegrees = 180.0 / M_PI;
+/// Contact tolerance as a share of the plate's approach δ: on Hertz's exact surface the gap
+/// outside the patch opens as (r − a)^(3/2) and reaches δ/300 at r = 1.02 a, so the measure
+/// reads the exact answer within +2 %.
+constexpr double kContactTolerance = 1.0 / 300;
 
 /// Lateral stretch s of a compressible Neo-Hookean solid (C10 (Ī1 − 3) + (J − 1)² / D1)
 /// stretched by `a` along one axis with free sides: the root of σ_lateral / μ =
@@ -89,6 +93,7 @@ AnalyticMetrics exactAnalytic(const AnalyticCase& analytic, const TriangleMesh& 
   AnalyticMetrics exact;
   if (analytic.type == "none") return exact;
   exact.type = analytic.type;
+  if (analytic.type == "sphere-planes") return exact;  // per pose: measureContact
   if (analytic.type == "cylinder-stretch") {
     const double s = lateralStretch(analytic.stretch, analytic.poissonRatio);
     exact.exactMidRadiusRatio = s;
@@ -107,6 +112,7 @@ AnalyticMetrics measureAnalytic(const AnalyticCase& analytic, const TriangleMesh
   AnalyticMetrics metrics = exactAnalytic(analytic, rest);
   if (metrics.type.empty() || deformed.size() != rest.vertices.size()) return metrics;
   metrics.volumeChangePct = volumeChangePercent(rest, deformed);
+  if (metrics.type == "sphere-planes") return metrics;
   const Section mid = measureSection(analytic, rest, deformed, 0.5);
   metrics.midRadiusRatio = mid.radius / mid.restRadius;
   if (analytic.type == "cylinder-stretch") {
@@ -124,9 +130,69 @@ AnalyticMetrics measureAnalytic(const AnalyticCase& analytic, const TriangleMesh
   return metrics;
 }
 
+double contactRadius(const TriangleMesh& rest, std::span<const btVector3> deformed,
+                     const btVector3& face, const btVector3& normal, double tolerance) {
+  std::vector<char> touching(deformed.size());
+  for (size_t v = 0; v < deformed.size(); ++v)
+    touching[v] = (deformed[v] - face).dot(normal) >= -tolerance;
+  double area = 0;  // each touching vertex's third of its triangles, projected on the plate
+  for (const auto& t : rest.triangles) {
+    if (t[0] >= deformed.size() || t[1] >= deformed.size() || t[2] >= deformed.size()) continue;
+    const int count = touching[t[0]] + touching[t[1]] + touching[t[2]];
+    if (count == 0) continue;
+    const btVector3 cross =
+        (deformed[t[1]] - deformed[t[0]]).cross(deformed[t[2]] - deformed[t[0]]);
+    area += count / 3.0 * std::abs(double(cross.dot(normal))) / 2;
+  }
+  return std::sqrt(area / M_PI);
+}
+
+ContactPose measureContact(const LoadedScene& scene, const TriangleMesh& rest,
+                           std::span<const btVector3> deformed, int pose) {
+  const AnalyticCase& analytic = scene.analytic;
+  ContactPose contact;
+  contact.pose = pose;
+  if (analytic.type != "sphere-planes" || analytic.plateBone < 0) return contact;
+  const btTransform plate = scene.bonePose(static_cast<size_t>(analytic.plateBone), pose);
+  const btVector3 out = (analytic.axisEnd - analytic.axisStart).normalized();
+  const btVector3 face = plate * analytic.axisEnd;
+  const double approach = std::max(0.0, double((analytic.axisEnd - face).dot(out)));
+  const double radius = analytic.axisStart.distance(analytic.axisEnd);
+  contact.approachMm = 1000 * approach;
+  contact.exactRadiusMm = 1000 * std::sqrt(radius * approach);
+  contact.radiusMm = 1000 * contactRadius(rest, deformed, face, plate.getBasis() * out,
+                                          kContactTolerance * approach);
+  return contact;
+}
+
+AnalyticMetrics measureAnalyticPoses(const LoadedScene& scene, const TriangleMesh& rest,
+                                     const std::vector<std::vector<btVector3>>& poseSurfaces) {
+  if (poseSurfaces.empty()) return exactAnalytic(scene.analytic, rest);
+  auto firstMuscle = [&](const std::vector<btVector3>& surface) {
+    return std::span<const btVector3>(surface).first(
+        std::min(rest.vertices.size(), surface.size()));
+  };
+  AnalyticMetrics metrics = measureAnalytic(scene.analytic, rest, firstMuscle(poseSurfaces.back()));
+  if (metrics.type != "sphere-planes") return metrics;
+  for (size_t p = 0; p < poseSurfaces.size(); ++p)
+    metrics.contact.push_back(
+        measureContact(scene, rest, firstMuscle(poseSurfaces[p]), static_cast<int>(p)));
+  return metrics;
+}
+
 std::string analyticLine(const AnalyticMetrics& m) {
   if (m.type.empty()) return "";
   char line[320];
+  if (m.type == "sphere-planes") {
+    std::string text = m.type + ": contact radius [mm] (Hertz √(Rδ))";
+    for (const ContactPose& c : m.contact) {
+      std::snprintf(line, sizeof line, "%s δ %.3g mm: %.3g (%.3g)", c.pose ? "," : "", c.approachMm,
+                    c.radiusMm, c.exactRadiusMm);
+      text += line;
+    }
+    std::snprintf(line, sizeof line, "; volume %+.3g %%", m.volumeChangePct);
+    return text + line;
+  }
   if (m.type == "cylinder-stretch") {
     std::snprintf(line, sizeof line,
                   "%s: effective Poisson ratio %.3g (exact %.3g), volume %+.3g %% (exact %+.3g "
@@ -147,12 +213,22 @@ std::string analyticLine(const AnalyticMetrics& m) {
 
 namespace {
 
-std::string cell(const nlohmann::json& object, const char* key, const char* format) {
-  auto it = object.find(key);
-  if (it == object.end() || !it->is_number()) return "—";
+/// The value in `format`, "—" when it is not a finite number.
+std::string formatted(double value, const char* format) {
+  if (!std::isfinite(value)) return "—";
   char text[32];
-  std::snprintf(text, sizeof text, format, it->get<double>());
+  std::snprintf(text, sizeof text, format, value);
   return text;
+}
+
+/// object[key] if it is a number, else NaN.
+double numberAt(const nlohmann::json& object, const char* key) {
+  auto it = object.find(key);
+  return it == object.end() || !it->is_number() ? NAN : it->get<double>();
+}
+
+std::string cell(const nlohmann::json& object, const char* key, const char* format) {
+  return formatted(numberAt(object, key), format);
 }
 
 /// A row of the analytic table; `prefix` "" for the measured fields, "exact_" for the answer.
@@ -165,6 +241,41 @@ std::string analyticRow(const std::string& name, const nlohmann::json& a,
          field("volume_change_pct", "%+.2f") + " | " + field("mid_radius_ratio", "%.4f") + " | " +
          field("mid_rotation_deg", "%.2f") + " | " +
          (prefix.empty() ? cell(a, "rotation_error_deg", "%.2f") : std::string("0")) + " |\n";
+}
+
+/// sphere-planes: a row per pose of one run (approach, contact radius, Hertz's, their ratio).
+std::string contactRows(const std::string& name, const nlohmann::json& a) {
+  std::string rows;
+  auto contact = a.find("contact");
+  if (contact == a.end() || !contact->is_array()) return rows;
+  for (const auto& c : *contact) {
+    rows += "| " + name + " | " + std::to_string(c.value("pose", 0)) + " | " +
+            cell(c, "approach_mm", "%.3f") + " | " + cell(c, "radius_mm", "%.2f") + " | " +
+            cell(c, "exact_radius_mm", "%.2f") + " | " +
+            formatted(numberAt(c, "radius_mm") / numberAt(c, "exact_radius_mm"), "%.3f") + " |\n";
+  }
+  return rows;
+}
+
+std::string contactReport(const nlohmann::json& runs) {
+  std::string rows;
+  for (const auto& run : runs) {
+    auto a = run.find("analytic");
+    if (a != run.end() && a->is_object())
+      rows += contactRows(run.value("method", std::string("?")), *a);
+  }
+  return "\n## Analytic case: sphere-planes\n\nA sphere of radius R between two rigid plates "
+         "that close in on it by δ each (frictionless). Exact (small strain, δ ≪ R): by symmetry "
+         "the centre stays, and each plate is a Hertz contact of the sphere with a rigid flat, "
+         "a = √(Rδ) (Johnson, Contact Mechanics, 1985, §4.2: a³ = 3PR/4E*, δ = a²/R, with δ the "
+         "approach of the plate to the sphere's centre; "
+         "finite-sphere correction: comparisons/README.md). Measured on the muscle's surface at "
+         "each pose: the vertices "
+         "within δ/300 of the upper plate's face or beyond it, each with a third of the area of "
+         "its triangles projected on the plate, a = √(A/π) (on Hertz's exact surface it reads "
+         "within +2 %).\n\n| method | pose | δ [mm] | contact radius [mm] | Hertz √(Rδ) [mm] | "
+         "ratio |\n|---|---|---|---|---|---|\n" +
+         rows;
 }
 
 }  // namespace
@@ -180,6 +291,7 @@ std::string analyticReport(const nlohmann::json& runs) {
   }
   if (!exact) return "";
   const std::string type = exact->value("type", std::string("?"));
+  if (type == "sphere-planes") return contactReport(runs);
   const bool stretch = type == "cylinder-stretch";
   return "\n## Analytic case: " + type + "\n\n" +
          (stretch ? "A straight cylinder stretched along its axis by its attachments; exact: the "

@@ -154,12 +154,9 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
     metrics.meanPenetrationMm = penetration.meanMm;
     if (!metrics.poseSurfaces.empty())
       metrics.volumeChangePct = volumeChangePct(prepared, metrics.poseSurfaces.back());
-    if (!prepared.muscles.empty() && !metrics.poseSurfaces.empty()) {
-      const std::span<const btVector3> last = metrics.poseSurfaces.back();
-      const TriangleMesh& rest = prepared.muscles[0]->restSurface;
-      metrics.analytic = measureAnalytic(scene.analytic, rest,
-                                         last.first(std::min(rest.vertices.size(), last.size())));
-    }
+    if (!prepared.muscles.empty() && !metrics.poseSurfaces.empty())
+      metrics.analytic =
+          measureAnalyticPoses(scene, prepared.muscles[0]->restSurface, metrics.poseSurfaces);
     metrics.springDeviationRatio = sim.springDeviation();
   }
   metrics.peakMemoryMb = peakMemoryMb();

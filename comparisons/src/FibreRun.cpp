@@ -255,6 +255,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       output, measureMsPerStep;
   Penetration penetration;
   std::vector<btVector3> poseSurface;
+  std::vector<ContactPose> contact;                                 // sphere-planes: per step
   std::vector<std::vector<float>> surfaceDepthsMm(muscles.size());  // per muscle, this step
   double simulatedTime = 0;                                         // [s]
   FibreRunDetails guard;  // what the numerical guard did, and the soak samples
@@ -349,6 +350,9 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       sampleIterations = 0;
     }
     if (options.keepPoseSurfaces) metrics.poseSurfaces.push_back(poseSurface);
+    if (finite && !muscles.empty() && scene.analytic.type == "sphere-planes")
+      contact.push_back(measureContact(scene, prepared.muscles[0]->restSurface,
+                                       system.surface(muscles[0]), pose));
     if (options.progress) {
       RunProgress progress;
       progress.step = s + 1;
@@ -384,9 +388,11 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       }
     }
   }
-  if (!muscles.empty() && !metrics.nan)
+  if (!muscles.empty() && !metrics.nan) {
     metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
                                        system.surface(muscles[0]));
+    if (metrics.analytic.type == "sphere-planes") metrics.analytic.contact = std::move(contact);
+  }
   metrics.muscles = std::move(ledger.results);
   metrics.series = std::move(ledger.series);
   metrics.msPerStep = median(msPerStep);

@@ -98,12 +98,9 @@ RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepa
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
     metrics.volumeChangePct = volumeChangePct(prepared, metrics.poseSurfaces.back());
-    if (!prepared.muscles.empty()) {
-      const std::span<const btVector3> last = metrics.poseSurfaces.back();
-      const TriangleMesh& rest = prepared.muscles[0]->restSurface;
-      metrics.analytic = measureAnalytic(scene.analytic, rest,
-                                         last.first(std::min(rest.vertices.size(), last.size())));
-    }
+    if (!prepared.muscles.empty() && !metrics.poseSurfaces.empty())
+      metrics.analytic =
+          measureAnalyticPoses(scene, prepared.muscles[0]->restSurface, metrics.poseSurfaces);
   }
   if (metrics.steps < metrics.poses) metrics.failedStep = metrics.steps;
   return metrics;

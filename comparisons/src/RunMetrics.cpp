@@ -17,7 +17,14 @@ double numberOr(const nlohmann::json& object, const char* key, double fallback) 
 
 nlohmann::json toJson(const AnalyticMetrics& a) {
   if (a.type.empty()) return nullptr;
+  nlohmann::json contact = nlohmann::json::array();
+  for (const ContactPose& c : a.contact)
+    contact.push_back({{"pose", c.pose},
+                       {"approach_mm", number(c.approachMm)},
+                       {"radius_mm", number(c.radiusMm)},
+                       {"exact_radius_mm", number(c.exactRadiusMm)}});
   return {{"type", a.type},
+          {"contact", contact},
           {"poisson_ratio", number(a.poissonRatio)},
           {"exact_poisson_ratio", number(a.exactPoissonRatio)},
           {"volume_change_pct", number(a.volumeChangePct)},
@@ -42,6 +49,15 @@ AnalyticMetrics analyticFromJson(const nlohmann::json& o) {
   a.midRotationDeg = numberOr(o, "mid_rotation_deg", a.midRotationDeg);
   a.exactMidRotationDeg = numberOr(o, "exact_mid_rotation_deg", a.exactMidRotationDeg);
   a.rotationErrorDeg = numberOr(o, "rotation_error_deg", a.rotationErrorDeg);
+  if (auto contact = o.find("contact"); contact != o.end() && contact->is_array())
+    for (const auto& c : *contact) {
+      ContactPose pose;
+      pose.pose = c.value("pose", 0);
+      pose.approachMm = numberOr(c, "approach_mm", pose.approachMm);
+      pose.radiusMm = numberOr(c, "radius_mm", pose.radiusMm);
+      pose.exactRadiusMm = numberOr(c, "exact_radius_mm", pose.exactRadiusMm);
+      a.contact.push_back(pose);
+    }
   return a;
 }
 

@@ -154,7 +154,7 @@ std::vector<BuiltInScene> builtInScenes() {
       {"tension-spike", "a short muscle whose attachments jump 40 mm apart in one pose, then hold"},
       {"pinch", "a muscle between two bones that pass each other like shear blades"},
       {"sphere-denoise", "a sphere of 3840 particles perturbed by noise, no bones (integrators)"},
-      {"sphere-planes", "a soft noisy sphere trapped between two immobile planes"},
+      {"sphere-planes", "a soft noisy sphere squeezed between two closing plates"},
       {"cylinder-stretch",
        "a straight cylindrical muscle stretched 10 % by its attachments (exact answer known)"},
       {"cylinder-twist",

@@ -75,15 +75,17 @@ Json pinchScene() {
 
 namespace {
 
-Json sphereMuscle() {
+constexpr double kSphereRadius = 30;  // [mm]
+
+Json sphereMuscle(int subdivisions) {
   // 64 chords × resolution 60 = 3840 particles (seed 002's sphere had 3840 vertices).
   return Json{{"name", "sphere"},
               {"surface",
                {{"generator",
                  {{"type", "ellipsoid"},
                   {"centre", vec({0, 0, 0})},
-                  {"radii", vec({30, 30, 30})},
-                  {"subdivisions", 3}}}}},
+                  {"radii", vec({kSphereRadius, kSphereRadius, kSphereRadius})},
+                  {"subdivisions", subdivisions}}}}},
               {"fibres", {{"generator", {{"type", "chords"}, {"axis", vec({0, 0, 1})}}}}},
               {"fibre_count", 64},
               {"resolution", 60},
@@ -95,7 +97,7 @@ Json sphereMuscle() {
 Json sphereDenoiseScene() {
   Json scene =
       header("sphere-denoise", "a sphere of 3840 particles perturbed by 0.2 mm of noise, no bones");
-  scene["muscles"] = Json::array({sphereMuscle()});
+  scene["muscles"] = Json::array({sphereMuscle(3)});
   // Noise a fifth of the ~1 mm sample spacing: 1.5 mm left jittered short springs beyond 3×
   // their rest length before the first iteration (flagged as exploded at step 0).
   scene["simulation"] = {
@@ -104,21 +106,33 @@ Json sphereDenoiseScene() {
 }
 
 Json spherePlanesScene() {
-  // Planes (thin boxes) whose faces cut 0.5 mm into the sphere, so collision must squeeze it
-  // between them; light noise as in sphere-denoise. (3 mm of noise, three sample spacings,
-  // made the double-precision self-reference tear springs beyond 3×.)
-  Json scene = header("sphere-planes", "a soft noisy sphere trapped between two immobile planes");
-  auto plane = [](double y) {
+  // Two plates (thin boxes) touch the sphere at rest and close in on it, each by δ = 0.25 and
+  // 0.5 mm (δ/R ≤ 1.7 %: Hertz's small-strain contact), so collision must squeeze it between
+  // them; light noise as in sphere-denoise. (3 mm of noise, three sample spacings, made the
+  // double-precision self-reference tear springs beyond 3×.) The surface is finer than
+  // sphere-denoise's (10 242 vertices, ~1 mm edges) so that the contact patch, radius
+  // √(Rδ) = 2.7–3.9 mm, spans several edges.
+  Json scene = header("sphere-planes", "a soft noisy sphere squeezed between two closing plates");
+  auto plate = [](double side) {
     return Json{{"type", "box"},
-                {"centre", vec({0, btScalar(y), 0})},
+                {"centre", vec({0, btScalar(side * (kSphereRadius + 2)), 0})},
                 {"size", vec({120, 4, 120})},
                 {"divisions", Json::array({12, 1, 12})}};
   };
-  scene["bones"] =
-      Json::array({bone("plane-top", plane(31.5)), bone("plane-bottom", plane(-31.5))});
-  scene["muscles"] = Json::array({sphereMuscle()});
+  std::vector<btTransform> down, up;
+  for (const double approach : {0.0, 0.25, 0.5}) {
+    down.emplace_back(btQuaternion::getIdentity(), btVector3(0, btScalar(-approach), 0));
+    up.emplace_back(btQuaternion::getIdentity(), btVector3(0, btScalar(approach), 0));
+  }
+  scene["bones"] = Json::array({bone("plane-top", plate(1), keyframes(down)),
+                                bone("plane-bottom", plate(-1), keyframes(up))});
+  scene["muscles"] = Json::array({sphereMuscle(5)});
   scene["simulation"] = {
       {"stop", "converged"}, {"epsilon", 0.001}, {"iterations", 5000}, {"initial_noise", 0.2}};
+  scene["analytic"] = {{"type", "sphere-planes"},
+                       {"axis_start", vec({0, 0, 0})},
+                       {"axis_end", vec({0, btScalar(kSphereRadius), 0})},
+                       {"plate", "plane-top"}};
   return scene;
 }
 

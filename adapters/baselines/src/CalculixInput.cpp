@@ -1,6 +1,7 @@
 // CalculiX input (.inp) for the static reference, and the quadratic tetrahedra it can use.
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <map>
 #include <ostream>
 #include <utility>
@@ -57,6 +58,23 @@ void writeContact(std::ostream& out, const CalculixJob& job) {
       << "*CONTACT PAIR, INTERACTION=FRICTIONLESS, TYPE=NODE TO SURFACE\nSMUSCLE, SBONE\n";
 }
 
+/// Each equation's non-zero terms, the largest first (CalculiX eliminates the first term's
+/// degree of freedom, so its coefficient must not be small).
+void writeEquations(std::ostream& out, const CalculixJob& job) {
+  for (const CalculixEquation& equation : job.equations) {
+    std::array<int, 3> axes{0, 1, 2};
+    std::sort(axes.begin(), axes.end(), [&](int a, int b) {
+      return std::abs(equation.direction[a]) > std::abs(equation.direction[b]);
+    });
+    const auto terms = std::count_if(axes.begin(), axes.end(),
+                                     [&](int axis) { return equation.direction[axis] != 0; });
+    out << "*EQUATION\n" << terms << "\n";
+    for (long i = 0; i < terms; ++i)
+      out << equation.node + 1 << ", " << axes[size_t(i)] + 1 << ", "
+          << equation.direction[axes[size_t(i)]] << (i + 1 == terms ? "\n" : ", ");
+  }
+}
+
 void writeStep(std::ostream& out, const CalculixJob& job, size_t step) {
   out << "*STEP, NLGEOM, INC=10000\n*STATIC\n"
       << job.initialIncrement << ", 1., " << job.minimumIncrement << ", 1.\n*BOUNDARY\n";
@@ -86,6 +104,7 @@ void writeCalculixInput(std::ostream& out, const CalculixJob& job) {
   out << "*MATERIAL, NAME=MUSCLE\n*HYPERELASTIC, NEO HOOKE\n"
       << job.material.c10() << ", " << job.material.d1() << "\n"
       << "*SOLID SECTION, ELSET=EALL, MATERIAL=MUSCLE\n";
+  writeEquations(out, job);
   if (job.contact.stiffness > 0 && !job.contact.faces.empty() && !job.contact.slaves.empty())
     writeContact(out, job);
   for (size_t step = 0; step < job.steps.size(); ++step) writeStep(out, job, step);

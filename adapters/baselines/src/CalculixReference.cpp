@@ -52,6 +52,40 @@ void attach(const std::vector<btVector3>& nodes, const std::vector<MeshDistance>
   }
 }
 
+/// A body no bone holds, squeezed between symmetric plates (sphere-planes): its rigid-body
+/// modes, which a static solve cannot take (frictionless contact resists no rotation of a
+/// sphere about its centre), held without changing the answer. By the plates' symmetry the
+/// centre stays, the mid-plane stays a plane and nothing turns about the axis: the node nearest
+/// the centre is fixed, and of the nodes farthest from the axis (within 10 % of it) the one
+/// nearest the mid-plane, A, and the one most nearly a quarter turn from it, B, keep their
+/// axial place; A also keeps its place around the axis. Returns the fixed node.
+uint32_t holdBySymmetry(CalculixJob& job, const AnalyticCase& analytic) {
+  const btVector3 centre = analytic.axisStart;
+  const btVector3 axis = (analytic.axisEnd - analytic.axisStart).normalized();
+  auto offAxis = [&](uint32_t n) {
+    const btVector3 d = job.nodes[n] - centre;
+    return d - axis * d.dot(axis);
+  };
+  uint32_t fixed = 0;
+  btScalar widest = 0;
+  for (uint32_t n = 0; n < job.nodes.size(); ++n) {
+    if (job.nodes[n].distance2(centre) < job.nodes[fixed].distance2(centre)) fixed = n;
+    widest = std::max(widest, offAxis(n).length());
+  }
+  // A: the widest nodes' nearest to the mid-plane; B: theirs most nearly a quarter turn from A.
+  const auto wide = [&](uint32_t n) { return offAxis(n).length() >= btScalar(0.9) * widest; };
+  const auto height = [&](uint32_t n) { return std::abs((job.nodes[n] - centre).dot(axis)); };
+  uint32_t a = fixed, b = fixed;
+  for (uint32_t n = 0; n < job.nodes.size(); ++n)
+    if (wide(n) && (a == fixed || height(n) < height(a))) a = n;
+  const btVector3 around = axis.cross(offAxis(a)).normalized();
+  const auto turn = [&](uint32_t n) { return offAxis(n).normalized().dot(around); };
+  for (uint32_t n = 0; n < job.nodes.size(); ++n)
+    if (wide(n) && (b == fixed || turn(n) > turn(b))) b = n;
+  job.equations = {{a, around}, {a, axis}, {b, axis}};
+  return fixed;
+}
+
 /// The job's elements (C3D4, or C3D10 with midside nodes) on the mesh.
 void setElements(CalculixJob& job, const TetMesh& mesh) {
   if (job.element == CalculixElement::C3D10) {
@@ -128,7 +162,8 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
       scene.muscles[m].parameters.attachmentDistance * definition.attachmentScale;
   std::vector<int> boneOf;
   attach(job.nodes, bones, distance, job.prescribed, boneOf);
-  if (job.prescribed.empty()) {
+  const bool symmetric = job.prescribed.empty() && scene.analytic.type == "sphere-planes";
+  if (job.prescribed.empty() && !symmetric) {
     throw InputError("muscles[" + std::to_string(m) + "]", muscle.name,
                      "no material within the attachment distance (" +
                          std::to_string(distance * 1000) +
@@ -156,6 +191,10 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
   }
   for (uint32_t v = 0; v < result.surfaceVertices; ++v) job.printed.push_back(v);
   result.attachedNodes = job.prescribed.size();
+  if (symmetric) {
+    job.prescribed.push_back(holdBySymmetry(job, scene.analytic));
+    for (std::vector<btVector3>& u : job.steps) u.emplace_back(0, 0, 0);
+  }
   if (definition.contactPenalty > 0) addBoneContact(result, scene, prepared, definition, workDir);
   return result;
 }

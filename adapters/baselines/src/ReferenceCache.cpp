@@ -139,6 +139,10 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
   h.value(definition.returnToRest);
   h.value(definition.initialIncrement);
   h.value(definition.contactPenalty);
+  if (scene.analytic.type == "sphere-planes") {  // held by its symmetry (no other key changes)
+    h.text(scene.analytic.type);
+    h.points({scene.analytic.axisStart, scene.analytic.axisEnd});
+  }
   return h.hex();
 }
 

@@ -391,12 +391,13 @@ void readCollision(Fields& collision, double scale, SimulationParameters& parame
   parameters.surfaceContact = collision.boolean("surface_contact", defaults.surfaceContact);
 }
 
-/// The top-level "analytic" object: which exact case the scene is, and its geometry.
-AnalyticCase readAnalytic(Fields& analytic, double scale) {
+/// The top-level "analytic" object: which exact case the scene is, and its geometry (a
+/// sphere-planes case names its plate among `bones`).
+AnalyticCase readAnalytic(Fields& analytic, double scale, const std::vector<BoneInput>& bones) {
   const AnalyticCase defaults;
   AnalyticCase result;
-  result.type =
-      analytic.choice("type", defaults.type, {"none", "cylinder-stretch", "cylinder-twist"});
+  result.type = analytic.choice("type", defaults.type,
+                                {"none", "cylinder-stretch", "cylinder-twist", "sphere-planes"});
   result.axisStart = analytic.vector3("axis_start", defaults.axisStart) * btScalar(scale);
   result.axisEnd = analytic.vector3("axis_end", defaults.axisEnd) * btScalar(scale);
   result.stretch = analytic.number("stretch", defaults.stretch, 0, kInf, true);
@@ -404,6 +405,12 @@ AnalyticCase readAnalytic(Fields& analytic, double scale) {
   result.poissonRatio = analytic.number("poisson_ratio", defaults.poissonRatio, 0, 0.4999);
   if (result.type != "none" && result.axisStart.distance(result.axisEnd) <= 0)
     analytic.fail("axis_end", "must differ from axis_start for an analytic case");
+  const std::string plate = analytic.text("plate", "");
+  for (size_t b = 0; b < bones.size(); ++b)
+    if (bones[b].name == plate) result.plateBone = static_cast<int>(b);
+  if (result.type == "sphere-planes" && result.plateBone < 0)
+    analytic.fail("plate", "must name the bone whose face touches the sphere at axis_end (\"" +
+                               plate + "\" is no bone of the scene)");
   return result;
 }
 
@@ -480,7 +487,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   result.outputs.writeParticles = outputs.boolean("particles", true);
   result.outputs.writeFibres = outputs.boolean("fibres", true);
   Fields analytic = root.object("analytic");
-  result.analytic = readAnalytic(analytic, reader.scale);
+  result.analytic = readAnalytic(analytic, reader.scale, result.bones);
 
   root.set("bones", std::move(completeBones));
   root.set("muscles", std::move(completeMuscles));

@@ -1,9 +1,11 @@
 #pragma once
 // The analytic tier: an exact case's answer and what a run's surface says about it (a straight
-// cylinder stretched or twisted between its attachments, fibremss::AnalyticCase).
+// cylinder stretched or twisted between its attachments, a sphere squeezed between two plates;
+// fibremss::AnalyticCase).
 #include <nlohmann/json.hpp>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "fibremss/Geometry.h"
 #include "fibremss/RunMetrics.h"
@@ -26,6 +28,28 @@ AnalyticMetrics exactAnalytic(const AnalyticCase& analytic, const TriangleMesh& 
 /// case is "none".
 AnalyticMetrics measureAnalytic(const AnalyticCase& analytic, const TriangleMesh& rest,
                                 std::span<const btVector3> deformed);
+
+/// The radius [m] of the patch where `deformed` (vertices in the order of `rest`) lies on a
+/// plate whose face passes through `face` with unit normal `normal` (out of the body, into the
+/// plate): the vertices within `tolerance` [m] of the face or beyond it, each counted with a
+/// third of the area of its triangles projected on the plate (a nodal area: unbiased to first
+/// order in the edge length, where the farthest touching vertex lags the edge by up to an edge
+/// and whole-triangle areas by half of one); a = √(A/π).
+double contactRadius(const TriangleMesh& rest, std::span<const btVector3> deformed,
+                     const btVector3& face, const btVector3& normal, double tolerance);
+
+/// sphere-planes at `pose`: the plate's approach δ towards the centre (from where its face
+/// touches the rest sphere), the contact radius on it (tolerance δ/300: on Hertz's exact
+/// surface the gap outside the patch reaches it at 1.02 a) and Hertz's √(Rδ). NaN figures for
+/// any other case.
+ContactPose measureContact(const LoadedScene& scene, const TriangleMesh& rest,
+                           std::span<const btVector3> deformed, int pose);
+
+/// The scene's case on the first muscle of per-pose surfaces (each all muscles' vertices, the
+/// first muscle's first): measureAnalytic at the last pose and, for sphere-planes,
+/// measureContact at every pose. No surfaces: the exact answers only.
+AnalyticMetrics measureAnalyticPoses(const LoadedScene& scene, const TriangleMesh& rest,
+                                     const std::vector<std::vector<btVector3>>& poseSurfaces);
 
 /// One line for the terminal: each measured figure with the exact one in parentheses ("" when
 /// the metrics have no case).

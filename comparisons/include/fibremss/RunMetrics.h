@@ -23,10 +23,21 @@ struct PartTiming {
   double volume = 0;    ///< the volume term (part of mss)
 };
 
-/// An analytic case measured at the last pose, beside its exact answer (NaN: does not apply).
+/// sphere-planes at one pose: the plate's approach, the contact patch's radius on it and Hertz's.
+struct ContactPose {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  int pose = 0;
+  double approachMm = kNone;     ///< δ: how far the plate moved towards the centre [mm]
+  double radiusMm = kNone;       ///< contact radius of the surface on the plate [mm]
+  double exactRadiusMm = kNone;  ///< Hertz: √(Rδ) [mm]
+};
+
+/// An analytic case measured at the last pose (sphere-planes: at every pose), beside its exact
+/// answer (NaN: does not apply).
 struct AnalyticMetrics {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
-  std::string type;                     ///< "cylinder-stretch", "cylinder-twist" ("": none)
+  /// "cylinder-stretch", "cylinder-twist", "sphere-planes" ("": none)
+  std::string type;
   double poissonRatio = kNone;          ///< effective ν = −ln(r/r0) / ln(stretch), mid-section
   double exactPoissonRatio = kNone;     ///< the homogeneous Neo-Hookean answer's
   double volumeChangePct = kNone;       ///< the muscle's volume against rest [%]
@@ -35,7 +46,8 @@ struct AnalyticMetrics {
   double exactMidRadiusRatio = kNone;   ///< exact
   double midRotationDeg = kNone;        ///< twist: rotation of the mid-section about the axis [°]
   double exactMidRotationDeg = kNone;   ///< exact (half the end's twist)
-  double rotationErrorDeg = kNone;  ///< twist: largest |rotation − exact| over 9 sections [°]
+  double rotationErrorDeg = kNone;   ///< twist: largest |rotation − exact| over 9 sections [°]
+  std::vector<ContactPose> contact;  ///< sphere-planes: per pose (step) measured
 
   /// |volume change − exact| [percentage points]: the measure methods are ranked by on an
   /// analytic case (no reference needed); NaN when either is missing.

@@ -70,6 +70,12 @@ struct CalculixContact {
   double tension = 0;  ///< σ∞: the small tension at large clearance CalculiX asks for [Pa]
 };
 
+/// A node kept from moving along a direction: direction · u = 0 (*EQUATION).
+struct CalculixEquation {
+  uint32_t node = 0;             ///< 0-based
+  btVector3 direction{0, 0, 0};  ///< unit vector
+};
+
 /// One CalculiX job: a body, its material and a sequence of static steps (NLGEOM), each giving
 /// the displacement of every prescribed node from the rest position.
 struct CalculixJob {
@@ -84,15 +90,16 @@ struct CalculixJob {
   double initialIncrement = 1;                ///< first increment, share of a step
   double minimumIncrement = 1e-4;             ///< smallest increment before ccx gives up
   CalculixContact contact;                    ///< rigid obstacles (none when stiffness is 0)
+  std::vector<CalculixEquation> equations;    ///< in every step (no node also prescribed)
 };
 
 /// The boundary faces of linear tetrahedra (4 node indices each) as CalculiX numbers them:
 /// (element, face 1–4) for every face no other element shares.
 std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32_t>& tetrahedra);
 
-/// Writes the job as CalculiX input (*NODE, *ELEMENT, *NSET, *HYPERELASTIC NEO HOOKE, one
-/// *STEP NLGEOM *STATIC per step with *BOUNDARY values and *NODE PRINT of U). Node and element
-/// numbers are the indices + 1.
+/// Writes the job as CalculiX input (*NODE, *ELEMENT, *NSET, *HYPERELASTIC NEO HOOKE,
+/// *EQUATION, one *STEP NLGEOM *STATIC per step with *BOUNDARY values and *NODE PRINT of U).
+/// Node and element numbers are the indices + 1.
 void writeCalculixInput(std::ostream& out, const CalculixJob& job);
 
 /// The C3D10 mesh of a linear one: one node added at the midpoint of every edge, numbered after

@@ -73,7 +73,9 @@ struct CalculixSolution {
 /// Meshes every muscle and solves its poses with ccx in `workDir` (created; the .inp, .dat,
 /// .sta and logs of each muscle are kept there). A pose ccx does not finish is reported in
 /// poseFailures (with ccx's last error line), never dropped. Throws InputError for a muscle
-/// that tetgen cannot mesh or that has no material near any bone.
+/// that tetgen cannot mesh or that has no material near any bone, unless the scene is a
+/// sphere-planes case: then the sphere is held by its symmetry (the node nearest its centre
+/// fixed, three nodes' equations against rigid rotation; no effect on the exact answer).
 CalculixSolution solveCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const std::string& workDir, const std::function<void(const ReferenceProgress&)>& progress = {},

@@ -25,16 +25,25 @@ struct OutputSettings {
 };
 
 /// An exact case the scene reproduces (the analytic tier): a straight cylindrical muscle whose
-/// free length (between its attachments) is stretched or twisted by its bones. `run` and
-/// `compare` measure its first muscle at the last pose beside the exact answer.
+/// free length (between its attachments) is stretched or twisted by its bones, or a sphere
+/// squeezed between two plates (Hertz). `run` and `compare` measure its first muscle beside the
+/// exact answer: the cylinders at the last pose, the sphere's contact radius at every pose.
 struct AnalyticCase {
-  std::string type = "none";     ///< "none", "cylinder-stretch" or "cylinder-twist"
-  btVector3 axisStart{0, 0, 0};  ///< rest axis where the free length starts (the fixed side) [m]
-  btVector3 axisEnd{0, 0, 0};    ///< rest axis where the free length ends [m]
-  double stretch = 1;            ///< free length at the last pose / at rest (symmetric about the
-                                 ///< middle, along the axis)
+  /// "none", "cylinder-stretch", "cylinder-twist" or "sphere-planes"
+  std::string type = "none";
+  /// Cylinders: the rest axis where the free length starts (the fixed side); sphere-planes: the
+  /// sphere's centre [m].
+  btVector3 axisStart{0, 0, 0};
+  /// Cylinders: the rest axis where the free length ends; sphere-planes: where the plate's face
+  /// touches the rest sphere (|axisEnd − axisStart| is the sphere's radius R) [m].
+  btVector3 axisEnd{0, 0, 0};
+  double stretch = 1;   ///< free length at the last pose / at rest (symmetric about the
+                        ///< middle, along the axis)
   double twistDeg = 0;  ///< rotation of the axisEnd side about start → end at the last pose [°]
   double poissonRatio = 0.49;  ///< ν of the continuum the exact stretch answer is for
+  /// sphere-planes: the bone (index into LoadedScene::bones) whose face touches the sphere at
+  /// axisEnd at rest; its approach towards the centre at a pose is δ (-1: none).
+  int plateBone = -1;
 };
 
 /// A scene resolved into what preparation and simulation take; all SI.
