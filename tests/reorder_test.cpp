@@ -129,6 +129,7 @@ TEST(Reorder, EveryIndexFollowsThePermutation) {
     EXPECT_EQ(muscle.skinParticles, renumbered(old.skinParticles, false));
     EXPECT_EQ(muscle.tetParticles, renumbered(old.tetParticles, false));
     EXPECT_EQ(muscle.tetInverseVolume, old.tetInverseVolume);
+    EXPECT_EQ(muscle.tetRestGradient, old.tetRestGradient);
     // What is not per particle stays.
     EXPECT_EQ(muscle.fibreOffsets, old.fibreOffsets);
     EXPECT_EQ(muscle.skinWeights, old.skinWeights);

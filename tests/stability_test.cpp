@@ -182,6 +182,25 @@ TEST(StabilityMatrix, HardCasesAtSmallResolution) {
   EXPECT_EQ(markdown.find("unavailable |") != std::string::npos, unavailable > 0);
 }
 
+// Issue 18: with the volume term on (the default), Verlet at its measured stable step survives a
+// hip sweep. Before the term's stiffness was held at its rest value (G0/G) and poorly shaped
+// tetrahedra softened, sliver tetrahedra of gluteus medius flipped between inverted and torn
+// already at rest at the calibrated step (their force switched off outside [0, 2·V0], so the
+// calibration did not see it) and this sweep exploded at step 14.
+TEST(StabilityMatrix, VerletHipSweepWithTheVolumeTermAtItsStableStep) {
+  StabilityOptions options;
+  options.integrators = {"verlet"};
+  options.dtFactors = {1};
+  const auto matrix = fibremss::runStabilityMatrix(
+      {fibremss::parseStabilityCase("hip-extension:step_deg=4")}, options);
+  ASSERT_EQ(matrix.stableSteps.size(), 1u);
+  ASSERT_TRUE(matrix.stableSteps[0].found);
+  ASSERT_EQ(matrix.cells.size(), 1u);
+  const auto& cell = matrix.cells[0];
+  EXPECT_EQ(cell.outcome, CellOutcome::Ok)
+      << toString(cell.outcome) << "@" << cell.failedStep << " at dt " << cell.dt;
+}
+
 // Ctrl-C (options.cancel) set when the first case starts: the calibration is complete, no cell
 // runs, both files say interrupted; set before anything runs, the calibration stops too; a run
 // cancelled stops after its first step and says interrupted, not timeout.

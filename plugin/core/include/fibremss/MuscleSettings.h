@@ -73,6 +73,9 @@ struct MuscleSettings {
   btScalar volumeModulus = 0;              ///< bulk modulus K of the volume terms [Pa]; 0: none
   std::vector<uint32_t> tetParticles;      ///< 4 per tetrahedron, positive rest orientation
   std::vector<btScalar> tetInverseVolume;  ///< per tetrahedron: 1 / (6·V0) [1/m³]
+  /// per tetrahedron: G0 = Σ over its four particles of |∂(6V)/∂x_i|² at rest, capped for
+  /// poorly shaped ones (VolumeForces.h) [m⁴]
+  std::vector<btScalar> tetRestGradient;
 
   std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
   SpringBlocks springBlocks;    ///< `springs` laid out for the AVX2 kernel (empty: not laid out)

@@ -59,10 +59,17 @@ std::vector<btVector3> fibreDirections(const MuscleSettings& muscle);
 /// volume term.
 constexpr double kMinTetrahedronQuality = 0.1;
 
-/// The local volume terms (SpringsVolume.cpp): when muscle.volumeModulus > 0, fills tetParticles
-/// and tetInverseVolume from the Delaunay tetrahedra of restPositions whose centroid lies inside
-/// restSurface, not all of whose particles are fixed, and that are not slivers; sorted by their
-/// particles; none when the particles do not span space. Call after the last reordering.
+/// A tetrahedron's G0 (MuscleSettings::tetRestGradient) is at most this times (6·V0)^(4/3): a
+/// regular one has 3·2^(2/3) ≈ 4.76, a sliver of quality 0.1 about 100. Capping softens the
+/// poorly shaped ones (quality below about 0.5), whose stiffness K·G0/(36·V0) would otherwise
+/// set the largest stable step (issue 18: the Verlet hard-case matrix).
+constexpr double kMaxRestGradient = 12;
+
+/// The local volume terms (SpringsVolume.cpp): when muscle.volumeModulus > 0, fills tetParticles,
+/// tetInverseVolume and tetRestGradient from the Delaunay tetrahedra of restPositions whose
+/// centroid lies inside restSurface, not all of whose particles are fixed, and that are not
+/// slivers; sorted by their particles; none when the particles do not span space. Call after the
+/// last reordering.
 void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle);
 
 /// Zeleny's damping estimate c = √(4·k̄·2m) (000 eq 2.11), k̄ the mean spring stiffness.

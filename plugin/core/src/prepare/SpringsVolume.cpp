@@ -23,11 +23,20 @@ double tetrahedronQuality(std::span<const btVector3> x, const std::array<uint32_
   return edge > 0 ? std::sqrt(2.0) * std::abs(sixVolume) / (edge * edge * edge) : 0;
 }
 
+/// Σ_i |∂(6V)/∂x_i|² of tetrahedron t at x: the squared lengths of the three cross products of
+/// its edges from vertex 0 and of their sum (vertex 0's gradient, negated).
+btScalar squaredVolumeGradient(std::span<const btVector3> x, const std::array<uint32_t, 4>& t) {
+  const btVector3 a = x[t[1]] - x[t[0]], b = x[t[2]] - x[t[0]], c = x[t[3]] - x[t[0]];
+  const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b);
+  return ga.length2() + gb.length2() + gc.length2() + (ga + gb + gc).length2();
+}
+
 }  // namespace
 
 void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle) {
   muscle.tetParticles.clear();
   muscle.tetInverseVolume.clear();
+  muscle.tetRestGradient.clear();
   if (!(muscle.volumeModulus > 0) || muscle.particleCount() < 5) return;
   const std::span<const btVector3> x = muscle.restPositions;
   std::vector<std::array<uint32_t, 4>> kept;
@@ -54,11 +63,17 @@ void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle) {
   std::sort(kept.begin(), kept.end());
   muscle.tetParticles.reserve(4 * kept.size());
   muscle.tetInverseVolume.reserve(kept.size());
+  muscle.tetRestGradient.reserve(kept.size());
   for (const std::array<uint32_t, 4>& t : kept) {
     double sixVolume = 0;
     tetrahedronQuality(x, t, sixVolume);
     muscle.tetParticles.insert(muscle.tetParticles.end(), t.begin(), t.end());
     muscle.tetInverseVolume.push_back(static_cast<btScalar>(1 / sixVolume));
+    // A poorly shaped tetrahedron is stiff along its gradient out of proportion to its volume
+    // (K·G0/(36·V0)): capped, it keeps its rest volume with a softer term.
+    const double cap = kMaxRestGradient * std::pow(sixVolume, 4.0 / 3);
+    muscle.tetRestGradient.push_back(
+        static_cast<btScalar>(std::min(double(squaredVolumeGradient(x, t)), cap)));
   }
 }
 

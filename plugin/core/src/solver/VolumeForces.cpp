@@ -8,26 +8,40 @@
 namespace fibremss {
 namespace {
 
-/// 1 − V/V0 from V/V0 for the force, 0 outside [0, 2·V0]: a tetrahedron beyond twice its rest
-/// volume is torn (V grows with the cube of a stretch, and the pieces of a torn muscle must not
-/// be pulled back together), an inverted one is crushed (between bones: pushing it open would
-/// fight the contact).
+/// A tetrahedron's squared gradient G is bounded below by this share of its rest G0 in the
+/// normalisation G0/G: only a tetrahedron shrunk towards a point comes near it.
+constexpr btScalar kMinGradientShare = btScalar(0.01);
+
+/// The tetrahedra of a muscle (MuscleSettings::tetParticles, tetInverseVolume, tetRestGradient).
+struct Tetrahedra {
+  const uint32_t* particles;
+  const btScalar* inverseVolume;  ///< 1/(6·V0) [1/m³]
+  const btScalar* restGradient;   ///< G0 [m⁴]
+};
+
+/// 1 − V/V0 from V/V0 for the force, clamped to [−1, 1]: an inverted tetrahedron is pushed open
+/// and one beyond twice its rest volume pulled together with the force of strain ±1 (scaled by
+/// G0/G, so the pull of a stretched one fades as it grows), never switched off: a switch would
+/// hide an oscillation that a time step too large for the term starts (the tetrahedron flips
+/// between inverted and torn with no force on it) from every check.
 inline btScalar clampedStrain(btScalar ratio) {
-  const btScalar strain = 1 - ratio;
-  return std::abs(strain) <= 1 ? strain : 0;
+  return std::min(std::max(1 - ratio, btScalar(-1)), btScalar(1));
 }
 
 /// Tetrahedra [begin, end) one at a time, modulus a sixth of K (the scalar kernel, and the
 /// SIMD passes' last count mod 4).
-void scalarTetrahedra(const uint32_t* t, const btScalar* inverseVolume, size_t begin, size_t end,
-                      btScalar modulus, const btVector3* x, btVector3* f) {
+void scalarTetrahedra(Tetrahedra t, size_t begin, size_t end, btScalar modulus, const btVector3* x,
+                      btVector3* f) {
   for (size_t k = begin; k < end; ++k) {
-    const uint32_t* tk = t + 4 * k;
+    const uint32_t* tk = t.particles + 4 * k;
     const btVector3 origin = x[tk[0]];
     const btVector3 a = x[tk[1]] - origin, b = x[tk[2]] - origin, c = x[tk[3]] - origin;
-    const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b);
-    const btScalar scale = modulus * clampedStrain(a.dot(ga) * inverseVolume[k]);
-    f[tk[0]] -= (ga + gb + gc) * scale;
+    const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b), g0 = ga + gb + gc;
+    const btScalar gradient = ga.length2() + gb.length2() + gc.length2() + g0.length2();
+    const btScalar rest = t.restGradient[k];
+    const btScalar scale = modulus * clampedStrain(a.dot(ga) * t.inverseVolume[k]) * rest /
+                           std::max(gradient, rest * kMinGradientShare);
+    f[tk[0]] -= g0 * scale;
     f[tk[1]] += ga * scale;
     f[tk[2]] += gb * scale;
     f[tk[3]] += gc * scale;
@@ -84,10 +98,14 @@ inline void fromLanes(const Lanes<Float4>& v, __m128 (&out)[4]) {
   out[3] = _mm_movehl_ps(z23, xy23);
 }
 
-/// clampedStrain per lane: the strain, 0 where |strain| > 1 (and for NaN).
+/// clampedStrain per lane (−1 for NaN).
 inline __m128 clampedStrains(__m128 strain) {
-  const __m128 magnitude = _mm_and_ps(strain, _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff)));
-  return _mm_and_ps(strain, _mm_cmple_ps(magnitude, _mm_set1_ps(1)));
+  return _mm_min_ps(_mm_max_ps(strain, _mm_set1_ps(-1)), _mm_set1_ps(1));
+}
+
+/// The larger of a and b per lane.
+inline __m128 larger(__m128 a, __m128 b) {
+  return _mm_max_ps(a, b);
 }
 
 #if FIBREMSS_AVX2_PARTICLES
@@ -109,9 +127,11 @@ FIBREMSS_AVX2_PASS inline void fromLanes(const Lanes<Float8>& v, __m256 (&out)[4
 }
 
 FIBREMSS_AVX2_PASS inline __m256 clampedStrains(__m256 strain) {
-  const __m256 magnitude =
-      _mm256_and_ps(strain, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff)));
-  return _mm256_and_ps(strain, _mm256_cmp_ps(magnitude, _mm256_set1_ps(1), _CMP_LE_OS));
+  return _mm256_min_ps(_mm256_max_ps(strain, _mm256_set1_ps(-1)), _mm256_set1_ps(1));
+}
+
+FIBREMSS_AVX2_PASS inline __m256 larger(__m256 a, __m256 b) {
+  return _mm256_max_ps(a, b);
 }
 #endif
 
@@ -126,6 +146,12 @@ __attribute__((always_inline)) inline Lanes<V> scaled(const Lanes<V>& g, V s) {
   return {g.x * s, g.y * s, g.z * s};
 }
 
+/// a · b per lane, in btVector3::dot's order.
+template <class V>
+__attribute__((always_inline)) inline V dot(const Lanes<V>& a, const Lanes<V>& b) {
+  return (a.x * b.x + a.y * b.y) + a.z * b.z;
+}
+
 /// (a + b) + c per lane.
 template <class V>
 __attribute__((always_inline)) inline Lanes<V> sum(const Lanes<V>& a, const Lanes<V>& b,
@@ -134,13 +160,15 @@ __attribute__((always_inline)) inline Lanes<V> sum(const Lanes<V>& a, const Lane
 }
 
 /// Tetrahedra k, k + groups, k + 2·groups and k + 3·groups (one per lane) of group k: their
-/// particles in i[j], their 1/(6·V0) in the returned lanes.
-inline __m128 groupTetrahedra(const uint32_t* t, const btScalar* inverseVolume, size_t k,
-                              size_t groups, uint32_t (&i)[4][4]) {
+/// particles in i[j], their 1/(6·V0) in the returned lanes, their G0 in `restGradient`.
+inline __m128 groupTetrahedra(Tetrahedra t, size_t k, size_t groups, uint32_t (&i)[4][4],
+                              __m128& restGradient) {
   for (size_t j = 0; j < 4; ++j)
-    for (size_t v = 0; v < 4; ++v) i[j][v] = t[4 * (k + j * groups) + v];
-  return _mm_setr_ps(inverseVolume[k], inverseVolume[k + groups], inverseVolume[k + 2 * groups],
-                     inverseVolume[k + 3 * groups]);
+    for (size_t v = 0; v < 4; ++v) i[j][v] = t.particles[4 * (k + j * groups) + v];
+  restGradient = _mm_setr_ps(t.restGradient[k], t.restGradient[k + groups],
+                             t.restGradient[k + 2 * groups], t.restGradient[k + 3 * groups]);
+  return _mm_setr_ps(t.inverseVolume[k], t.inverseVolume[k + groups],
+                     t.inverseVolume[k + 2 * groups], t.inverseVolume[k + 3 * groups]);
 }
 
 /// The four lanes' forces at their particles; vertex 0's force is minus the others' sum.
@@ -152,19 +180,20 @@ inline void addGroupForces(const uint32_t (&i)[4][4], const __m128 (&force)[4][4
 }
 
 /// The forces (per vertex, per lane) of tetrahedra whose edges from vertex 0 are edge[0..2][j]
-/// in lane j, with 1/(6·V0) `inverse` and modulus a sixth of K: force[0] is the sum of the
-/// others, to subtract.
+/// in lane j, with 1/(6·V0) `inverse`, G0 `rest` and modulus a sixth of K: force[0] is the sum
+/// of the others, to subtract.
 template <class V>
 __attribute__((always_inline)) inline void tetrahedronLanes(const V (&edge)[3][4], V inverse,
-                                                            V modulus, V (&force)[4][4]) {
+                                                            V rest, V modulus, V (&force)[4][4]) {
   const Lanes<V> a = toLanes(edge[0][0], edge[0][1], edge[0][2], edge[0][3]),
                  b = toLanes(edge[1][0], edge[1][1], edge[1][2], edge[1][3]),
                  c = toLanes(edge[2][0], edge[2][1], edge[2][2], edge[2][3]);
-  const Lanes<V> ga = cross(b, c), gb = cross(c, a), gc = cross(a, b);
-  const V sixVolume = (a.x * ga.x + a.y * ga.y) + a.z * ga.z;
-  const V s = modulus * clampedStrains(btScalar(1) - sixVolume * inverse);
+  const Lanes<V> ga = cross(b, c), gb = cross(c, a), gc = cross(a, b), g0 = sum(ga, gb, gc);
+  const V gradient = ((dot(ga, ga) + dot(gb, gb)) + dot(gc, gc)) + dot(g0, g0);
+  const V s = modulus * clampedStrains(btScalar(1) - dot(a, ga) * inverse) * rest /
+              larger(gradient, rest * kMinGradientShare);
   const Lanes<V> fa = scaled(ga, s), fb = scaled(gb, s), fc = scaled(gc, s);
-  fromLanes(sum(fa, fb, fc), force[0]);
+  fromLanes(scaled(g0, s), force[0]);
   fromLanes(fa, force[1]);
   fromLanes(fb, force[2]);
   fromLanes(fc, force[3]);
@@ -174,50 +203,50 @@ __attribute__((always_inline)) inline void tetrahedronLanes(const V (&edge)[3][4
 /// k < groups, in that order (addTetrahedronForces, modulus a sixth of K). The four lie in four
 /// quarters of the sorted list, so they rarely share a particle: their stores do not wait on one
 /// another. Indices are read before the stores (which may alias anything).
-__attribute__((always_inline)) inline void tetrahedronGroups(const uint32_t* t,
-                                                             const btScalar* inverseVolume,
-                                                             size_t first, size_t groups,
-                                                             btScalar modulus, const btVector3* x,
-                                                             btVector3* f) {
+__attribute__((always_inline)) inline void tetrahedronGroups(Tetrahedra t, size_t first,
+                                                             size_t groups, btScalar modulus,
+                                                             const btVector3* x, btVector3* f) {
   for (size_t k = first; k < groups; ++k) {
     uint32_t i[4][4];
-    const __m128 inverse = groupTetrahedra(t, inverseVolume, k, groups, i);
+    __m128 rest;
+    const __m128 inverse = groupTetrahedra(t, k, groups, i, rest);
     __m128 edge[3][4];
     for (size_t j = 0; j < 4; ++j)
       for (size_t e = 0; e < 3; ++e)
         edge[e][j] = loadVector(x[i[j][e + 1]]) - loadVector(x[i[j][0]]);
     __m128 force[4][4];
-    tetrahedronLanes(edge, inverse, _mm_set1_ps(modulus), force);
+    tetrahedronLanes(edge, inverse, rest, _mm_set1_ps(modulus), force);
     addGroupForces(i, force, f);
   }
 }
 
-void ssePass(const uint32_t* t, const btScalar* inverseVolume, size_t count, btScalar modulus,
-             const btVector3* x, btVector3* f) {
+void ssePass(Tetrahedra t, size_t count, btScalar modulus, const btVector3* x, btVector3* f) {
   const size_t groups = count / 4;
-  tetrahedronGroups(t, inverseVolume, 0, groups, modulus, x, f);
-  scalarTetrahedra(t, inverseVolume, 4 * groups, count, modulus, x, f);
+  tetrahedronGroups(t, 0, groups, modulus, x, f);
+  scalarTetrahedra(t, 4 * groups, count, modulus, x, f);
 }
 
 #if FIBREMSS_AVX2_PARTICLES
 /// Groups k and k + 1 of tetrahedronGroups in the two halves of __m256 registers (AVX without
 /// FMA: each lane rounds as there), their forces added in its order: the same bits as ssePass.
 /// An odd last group and the tail as there.
-FIBREMSS_AVX2_PASS void avxPass(const uint32_t* t, const btScalar* inverseVolume, size_t count,
-                                btScalar modulus, const btVector3* x, btVector3* f) {
+FIBREMSS_AVX2_PASS void avxPass(Tetrahedra t, size_t count, btScalar modulus, const btVector3* x,
+                                btVector3* f) {
   const size_t groups = count / 4;
   size_t k = 0;
   for (; k + 1 < groups; k += 2) {
     uint32_t i[2][4][4];
-    const __m128 inverse0 = groupTetrahedra(t, inverseVolume, k, groups, i[0]);
-    const __m128 inverse1 = groupTetrahedra(t, inverseVolume, k + 1, groups, i[1]);
+    __m128 rest0, rest1;
+    const __m128 inverse0 = groupTetrahedra(t, k, groups, i[0], rest0);
+    const __m128 inverse1 = groupTetrahedra(t, k + 1, groups, i[1], rest1);
     __m256 edge[3][4];
     for (size_t j = 0; j < 4; ++j)
       for (size_t e = 0; e < 3; ++e)
         edge[e][j] =
             loadPair(x[i[0][j][e + 1]], x[i[1][j][e + 1]]) - loadPair(x[i[0][j][0]], x[i[1][j][0]]);
     __m256 force[4][4];
-    tetrahedronLanes(edge, _mm256_set_m128(inverse1, inverse0), _mm256_set1_ps(modulus), force);
+    tetrahedronLanes(edge, _mm256_set_m128(inverse1, inverse0), _mm256_set_m128(rest1, rest0),
+                     _mm256_set1_ps(modulus), force);
     __m128 half[2][4][4];
     for (size_t v = 0; v < 4; ++v)
       for (size_t j = 0; j < 4; ++j) {
@@ -227,8 +256,8 @@ FIBREMSS_AVX2_PASS void avxPass(const uint32_t* t, const btScalar* inverseVolume
     addGroupForces(i[0], half[0], f);
     addGroupForces(i[1], half[1], f);
   }
-  tetrahedronGroups(t, inverseVolume, k, groups, modulus, x, f);
-  scalarTetrahedra(t, inverseVolume, 4 * groups, count, modulus, x, f);
+  tetrahedronGroups(t, k, groups, modulus, x, f);
+  scalarTetrahedra(t, 4 * groups, count, modulus, x, f);
 }
 #endif
 
@@ -238,18 +267,18 @@ FIBREMSS_AVX2_PASS void avxPass(const uint32_t* t, const btScalar* inverseVolume
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces, [[maybe_unused]] SpringKernel kernel) {
   const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
-  const uint32_t* t = settings.tetParticles.data();
-  const btScalar* inverseVolume = settings.tetInverseVolume.data();
+  const Tetrahedra t{settings.tetParticles.data(), settings.tetInverseVolume.data(),
+                     settings.tetRestGradient.data()};
   const size_t count = settings.tetInverseVolume.size();
 #if FIBREMSS_AVX2_PARTICLES
   if (kernel == SpringKernel::avx2)
-    return avxPass(t, inverseVolume, count, modulus, positions.data(), forces.data());
+    return avxPass(t, count, modulus, positions.data(), forces.data());
 #endif
 #if FIBREMSS_SSE_PARTICLES
   if (kernel != SpringKernel::scalar)
-    return ssePass(t, inverseVolume, count, modulus, positions.data(), forces.data());
+    return ssePass(t, count, modulus, positions.data(), forces.data());
 #endif
-  scalarTetrahedra(t, inverseVolume, 0, count, modulus, positions.data(), forces.data());
+  scalarTetrahedra(t, 0, count, modulus, positions.data(), forces.data());
 }
 
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
@@ -265,8 +294,10 @@ void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar>
     const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b);
     const btScalar g[4] = {(ga + gb + gc).length(), ga.length(), gb.length(), gc.length()};
     const btScalar sum = g[0] + g[1] + g[2] + g[3];
-    // K/V0 · (g/6)(Σg/6) with 1/V0 = 6·inverse: K·inverse·g·Σg/6, halved.
-    const btScalar scale = settings.volumeModulus * settings.tetInverseVolume[k] * sum / 12;
+    const btScalar gradient = g[0] * g[0] + g[1] * g[1] + g[2] * g[2] + g[3] * g[3];
+    // K/V0 · (g/6)(Σg/6) · G0/G with 1/V0 = 6·inverse: K·inverse·g·Σg/6 · G0/G, halved.
+    const btScalar scale = settings.volumeModulus * settings.tetInverseVolume[k] * sum / 12 *
+                           settings.tetRestGradient[k] / gradient;
     for (size_t i = 0; i < 4; ++i)
       if (!settings.isFixed(t[i])) stiffness[t[i]] += g[i] * scale;
   }

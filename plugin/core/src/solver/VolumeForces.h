@@ -11,13 +11,18 @@
 namespace fibremss {
 
 /// Adds the volume terms' forces at `positions` into `forces`: each tetrahedron of
-/// settings.tetParticles with volume V and rest volume V0 has the energy ½·K·(V − V0)²/V0
-/// (K = settings.volumeModulus), which gives its particle i the force K·(1 − V/V0)·∂V/∂x_i, taken
-/// as 0 when V is outside [0, 2·V0] (crushed or torn). On the spring kernel's instruction set
-/// (fastestSpringKernel): with SSE2 four tetrahedra at a time, one from each quarter of the
-/// list, then the rest one at a time; with AVX2 two such groups at a time (no FMA, the same
-/// order: SSE2's bits); scalar, one at a time. A fixed order for a given kernel: the same sums
-/// for any thread count.
+/// settings.tetParticles with volume V and rest volume V0 gives its particle i the force
+/// K·s·(G0/G)·∂V/∂x_i (K = settings.volumeModulus), s = 1 − V/V0 clamped to [−1, 1], G the sum
+/// over its four particles of |∂(6V)/∂x_i|² (at least G0/100), G0 settings.tetRestGradient (G at
+/// rest, capped for poorly shaped tetrahedra). Near rest, uncapped, that is the gradient of the
+/// energy ½·K·(V − V0)²/V0; the factor G0/G keeps the
+/// term's stiffness K·G0/(36·V0) along its gradient what it was at rest however the
+/// tetrahedron is deformed (without it the stiffness grows with the squared face areas, and a
+/// fixed step that is stable at rest is not once the muscle moves). On the spring kernel's
+/// instruction set (fastestSpringKernel): with SSE2 four tetrahedra at a time, one from each
+/// quarter of the list, then the rest one at a time; with AVX2 two such groups at a time (no FMA,
+/// the same order: SSE2's bits); scalar, one at a time. A fixed order for a given kernel: the same
+/// sums for any thread count.
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces);
 /// The same on `kernel`'s instruction set (tests compare them).
@@ -25,8 +30,8 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
                           std::span<btVector3> forces, SpringKernel kernel);
 
 /// Adds to each free particle's row of `stiffness` half the Gershgorin bound of the volume
-/// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j| per tetrahedron [N/m]: stableTimeStep
-/// doubles spring rows the same way.
+/// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j|·G0/G per tetrahedron [N/m]:
+/// stableTimeStep doubles spring rows the same way.
 void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness);
 
 }  // namespace fibremss
