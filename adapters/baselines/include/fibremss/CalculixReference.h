@@ -6,9 +6,10 @@
 // that bone (prescribed displacements per pose). The surface meshed is the loaded one:
 // preparation moves surface vertices that lie inside a bone out of it, which makes thigh13's
 // prepared surfaces self-intersect (24–481 facet pairs per muscle, tetgen -d); those vertices
-// are attached, so the reference reports them where that bone carries the prepared vertex. Not
-// modelled: contact (muscle–bone and muscle–muscle), gravity, activation; each muscle is solved on
-// its own.
+// are attached, so the reference reports them where that bone carries the prepared vertex.
+// Muscle–bone contact is modelled (bones as rigid tetgen-meshed obstacles, penalty contact:
+// `contactPenalty`). Not modelled: muscle–muscle contact, gravity, activation; each muscle is
+// solved on its own.
 #include <atomic>
 #include <functional>
 #include <string>
@@ -22,8 +23,9 @@ namespace fibremss {
 
 /// What the reference solves and how.
 struct CalculixDefinition {
-  /// Neo-Hookean, ν = 0.49 (muscle is nearly incompressible). With every load a prescribed
-  /// displacement (no gravity, no contact) the displacements do not depend on E; E is stated.
+  /// Neo-Hookean, ν = 0.49 (muscle is nearly incompressible). Every load is a prescribed
+  /// displacement (no gravity) and the contact penalty scales with E, so the displacements do
+  /// not depend on E; E is stated.
   NeoHookeMaterial material;
   /// Linear tetrahedra; the mesh-refinement gate solves the same mesh with quadratic C3D10
   /// (which also measures C3D4's volumetric locking at ν = 0.49; comparisons/README.md).
