@@ -31,6 +31,7 @@ void MuscleSystem::Impl::deform(MuscleState& state) const {
   deformSurface(*state.settings, state.positions, state.boneTransforms,
                 parameters.blendedPretransform, state.skin, state.surface);
   if (!parameters.surfaceContact) return;
+  measureLayer(*state.settings, state.positions, state.surface, state.skin);
   btVector3 lower, upper;
   pointBounds(state.surface, lower, upper);
   const btScalar reach = *std::max_element(state.skin.layer.begin(), state.skin.layer.end());

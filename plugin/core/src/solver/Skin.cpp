@@ -87,9 +87,16 @@ void deformSurface(const MuscleSettings& settings, std::span<const btVector3> po
       moved += (positions[particle] + offset) * settings.skinWeights[j];
     }
     surface[v] = moved;
+  }
+}
+
+void measureLayer(const MuscleSettings& settings, std::span<const btVector3> positions,
+                  std::span<const btVector3> surface, SkinFrames& frames) {
+  const size_t n = static_cast<size_t>(settings.skinNeighbours);
+  for (size_t v = 0; v < surface.size(); ++v) {
     btScalar nearest2 = SIMD_INFINITY;
     for (size_t j = v * n; j < (v + 1) * n; ++j)
-      nearest2 = std::min(nearest2, moved.distance2(positions[settings.skinParticles[j]]));
+      nearest2 = std::min(nearest2, surface[v].distance2(positions[settings.skinParticles[j]]));
     frames.layer[v] = std::sqrt(nearest2);
   }
 }

@@ -21,7 +21,7 @@ struct SkinFrames {
   std::vector<uint8_t> hasFrame;         ///< per particle: its neighbours span space at rest
   std::vector<btMatrix3x3> moments;      ///< scratch per particle: Σ dx·dXᵀ [m²]
   std::vector<btMatrix3x3> deformations;  ///< scratch per particle: its local F [1]
-  /// Per surface vertex, after deformSurface: its distance from the nearest particle it binds
+  /// Per surface vertex, after measureLayer: its distance from the nearest particle it binds
   /// [m]. A vertex lies at most this deep in a bone that particle is outside of: the
   /// surface-contact stage looks no deeper.
   std::vector<btScalar> layer;
@@ -36,9 +36,14 @@ void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames);
 /// particle whose neighbours do not span space, or whose F is inverted, turns by its rigid
 /// pre-transform's rotation instead (blended between two bones when `blended`, else its nearest
 /// bone's). `boneTransforms[b]` is the current transform of the settings' bone index b;
-/// particles without a bone use the identity. Fills frames.layer.
+/// particles without a bone use the identity.
 void deformSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
                    std::span<const btTransform> boneTransforms, bool blended, SkinFrames& frames,
                    std::span<btVector3> surface);
+
+/// frames.layer from the deformed `surface` (deformSurface's) and the particles it binds; only
+/// the surface-contact stage reads it.
+void measureLayer(const MuscleSettings& settings, std::span<const btVector3> positions,
+                  std::span<const btVector3> surface, SkinFrames& frames);
 
 }  // namespace fibremss
