@@ -411,6 +411,83 @@ TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {
   EXPECT_EQ(lines[2].find("poses"), std::string::npos) << "every pose compared: " << lines[2];
 }
 
+TEST(ReferenceGates, ExcludedPosesAreNoFailureButAGateThatFailsStillBlocks) {
+  ReferenceGates gates;
+  gates.returnMm = 0.1;
+  gates.refinementMm = 0.1;
+  gates.spreadMm = 0.6;
+  gates.poses = 7;
+  gates.refinementPoses = gates.attachmentLowPoses = gates.attachmentHighPoses = 2;
+  gates.excluded = "poses 2 to 6 of 7: no continuum equilibrium: the bones close across it";
+  EXPECT_TRUE(gates.passed()) << "poses without a continuum equilibrium do not block the ranking";
+  const std::vector<std::string> lines = gateLines(gates);
+  const auto has = [&](const std::string& text) {
+    return std::any_of(lines.begin(), lines.end(), [&](const std::string& line) {
+      return line.find(text) != std::string::npos;
+    });
+  };
+  EXPECT_TRUE(has("excluded, not ccx failures")) << lines.back();
+  EXPECT_TRUE(has("no continuum equilibrium"));
+  EXPECT_FALSE(has("ccx did not solve"));
+  EXPECT_TRUE(has("over 2/7 poses")) << "the gates say what they covered";
+  gates.refinementMm = 0.25;  // above a third of the spread: a gate that applies and fails
+  EXPECT_FALSE(gates.passed());
+  gates.refinementMm = 0.1;
+  gates.failures = "reference pose 1: muscle m: *ERROR: increment size smaller than minimum";
+  EXPECT_FALSE(gates.passed()) << "a pose ccx failed still blocks it";
+  gates.failures.clear();
+
+  // A return gate that cannot apply prints — with why and does not block; one that applies
+  // and was not computed still does.
+  gates.returnMm = RunMetrics::kNone;
+  EXPECT_FALSE(gates.passed());
+  gates.returnNotApplicable = "the motion does not return to rest, and ccx did not solve it";
+  EXPECT_TRUE(gates.passed());
+  const std::string line = gateLines(gates).front();
+  EXPECT_NE(line.find("\u2014 (does not apply, not blocking: the motion does not return"),
+            std::string::npos)
+      << line;
+}
+
+TEST(ContinuumCut, PinchsBladesCloseAcrossTheMuscleFromPose2) {
+  const LoadedScene scene = loadScene("pinch");
+  std::vector<MeshDistance> bones;
+  for (const BoneInput& bone : scene.bones) bones.emplace_back(bone.mesh);
+  const ContinuumCut cut = findContinuumCut(scene, bones);
+  // Pose 1 leaves 10.2 mm between the blades (10 mm apart, 2 mm side by side); from pose 2 on
+  // they have passed each other with their facing sides 2 mm apart, twice the attachment
+  // distance being 8 mm.
+  EXPECT_EQ(cut.pose, 2) << cut.reason;
+  EXPECT_GE(cut.gapMm, 2 - 1e-3);
+  EXPECT_LT(cut.gapMm, 3.5) << "the samples lie within a grid step (2 mm) of the slot";
+  EXPECT_NE(cut.reason.find("blade-a and blade-b"), std::string::npos) << cut.reason;
+  EXPECT_NE(cut.reason.find("muscle pinched"), std::string::npos) << cut.reason;
+  for (const char* other : {"fusiform", "cylinder-twist", "cylinder-stretch", "sphere-planes"}) {
+    const LoadedScene s = loadScene(other);
+    std::vector<MeshDistance> b;
+    for (const BoneInput& bone : s.bones) b.emplace_back(bone.mesh);
+    EXPECT_EQ(findContinuumCut(s, b).pose, -1) << other;
+  }
+}
+
+TEST(ContinuumCut, IsWhereTheGapFallsBelowTwiceTheAttachmentDistanceNotWhereItStarts) {
+  // sphere-planes: the plates touch the 60 mm sphere at rest and close in by 0.25 mm each per
+  // pose (59.5, then 59 mm apart). The gap is measured, not guessed: with the bound (twice the
+  // attachment distance) at 59.6 mm the first pose is cut, at 58.8 none; at 80 mm the plates
+  // were closer than that at rest already, which is the scene's rest state, no cut.
+  const auto cutAt = [](const char* attachment) {
+    const LoadedScene scene = loadScene("sphere-planes", {attachment});
+    std::vector<MeshDistance> bones;
+    for (const BoneInput& bone : scene.bones) bones.emplace_back(bone.mesh);
+    return findContinuumCut(scene, bones);
+  };
+  const ContinuumCut cut = cutAt("attachment_distance=29.8");
+  EXPECT_EQ(cut.pose, 1) << cut.reason;
+  EXPECT_NEAR(cut.gapMm, 59.5, 0.01);
+  EXPECT_EQ(cutAt("attachment_distance=29.4").pose, -1);
+  EXPECT_EQ(cutAt("attachment_distance=40").pose, -1);
+}
+
 TEST(ReferenceGates, SpreadIsBetweenTheBestRunOfEachMethod) {
   std::vector<RunMetrics> runs(5);
   const char* names[] = {"calculix", "fibremss", "fibremss:iterations=280", "btsoftbody", "fem"};
@@ -447,7 +524,21 @@ TEST(ReferenceCache, StoresAndReadsBackASolution) {
   EXPECT_EQ(back.newtonIterations, 42);
   EXPECT_EQ(back.inputFiles, solution.inputFiles);
   EXPECT_EQ(back.solvedPoses(), 1);
+  EXPECT_EQ(back.cut.pose, -1);
   EXPECT_FALSE(loadSolution((dir.path() / "absent.bin").string(), back));
+
+  solution.cut = {1, 2.0, "no continuum equilibrium: the bones close across it"};
+  saveSolution(path, solution);
+  ASSERT_TRUE(loadSolution(path, back));
+  EXPECT_EQ(back.cut.pose, 1);
+  EXPECT_EQ(back.cut.gapMm, 2.0);
+  EXPECT_EQ(back.cut.reason, solution.cut.reason);
+  // An entry stored before the cut existed ends after its input files: read as no cut.
+  const auto size = std::filesystem::file_size(path);
+  std::filesystem::resize_file(path, size - 2 * 8 - (8 + solution.cut.reason.size()));
+  ASSERT_TRUE(loadSolution(path, back));
+  EXPECT_EQ(back.cut.pose, -1);
+  EXPECT_EQ(back.inputFiles, solution.inputFiles);
   std::filesystem::resize_file(path, 30);
   EXPECT_THROW(loadSolution(path, back), InputError);
 }
@@ -607,6 +698,91 @@ TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
   EXPECT_NE(second.output.find("(from the cache)"), std::string::npos) << second.output;
   const nlohmann::json again = nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
   EXPECT_EQ(again["gates"], gates) << "the cache gives the same reference";
+}
+
+/// A built-in scene with a coarser tube surface (slices × sections vertices).
+std::string coarseTube(const std::filesystem::path& dir, const char* name, int slices,
+                       int sections) {
+  nlohmann::json scene = nlohmann::json::parse(exportBuiltInScene(name));
+  nlohmann::json& generator = scene["muscles"][0]["surface"]["generator"];
+  generator["slices"] = slices;
+  generator["sections"] = sections;
+  const std::filesystem::path path = dir / (std::string("coarse-") + name + ".json");
+  std::ofstream(path) << scene.dump(2);
+  return path.string();
+}
+
+/// `fibremss reference SCENE --no-gates` into dir/cache and dir/out.
+testing::ProcessResult referenceWithoutGates(const std::filesystem::path& dir,
+                                             const std::string& scene) {
+  return testing::runProcess(std::string(FIBREMSS_CLI) + " reference " + scene +
+                             " --set resolution=8 --no-gates --cache " + (dir / "cache").string() +
+                             " --out " + (dir / "out").string() + " 2>&1");
+}
+
+TEST(ReferenceCommand, PinchsPosesPastTheCutAreExcludedNotFailed) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_cut_test");
+  const auto result = referenceWithoutGates(dir.path(), coarseTube(dir.path(), "pinch", 16, 12));
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("poses solved: 2/7"), std::string::npos) << result.output;
+  EXPECT_EQ(result.output.find("gate: ccx did not solve"), std::string::npos) << result.output;
+  const nlohmann::json reference =
+      nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  for (int p = 0; p < 7; ++p) {
+    SCOPED_TRACE(p);
+    const nlohmann::json& pose = reference["poses"][p];
+    EXPECT_EQ(pose["solved"].get<bool>(), p < 2);
+    EXPECT_EQ(pose["failure"], "") << "no pose is a ccx failure";
+    EXPECT_EQ(pose["excluded"].get<std::string>().empty(), p < 2);
+  }
+  const nlohmann::json& gates = reference["gates"];
+  EXPECT_EQ(gates["failures"], "");
+  EXPECT_NE(gates["excluded"].get<std::string>().find("poses 2 to 6 of 7: no continuum"),
+            std::string::npos)
+      << gates["excluded"];
+  // The motion ends at pose 6, not at rest: the steps back from pose 1 are the reference's own.
+  // ccx 2.20 stops on them (a NaN as the blades release the muscle): the gate does not apply
+  // and blocks nothing. Solved, it must pass.
+  if (reference["return_failure"] == "") {
+    EXPECT_LT(gates["return_mm"].get<double>(), kReturnGateMm);
+  } else {
+    EXPECT_NE(gates["return_not_applicable"].get<std::string>().find("does not return to rest"),
+              std::string::npos)
+        << gates;
+    EXPECT_NE(result.output.find("does not apply, not blocking"), std::string::npos);
+  }
+}
+
+TEST(ReferenceCommand, ATwistReturnsToRestRetracingItsPoses) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_twist_test");
+  const auto result =
+      referenceWithoutGates(dir.path(), coarseTube(dir.path(), "cylinder-twist", 12, 12));
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  const nlohmann::json reference =
+      nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  // Straight back from 180° in one step, ccx moves the turned end's nodes through the axis.
+  EXPECT_EQ(reference["return_failure"], "");
+  EXPECT_LT(reference["gates"]["return_mm"].get<double>(), kReturnGateMm);
+  const std::string input = readText(dir.path() / "out/inp/muscle0.inp");
+  size_t steps = 0;
+  for (size_t at = input.find("*STEP"); at != std::string::npos; at = input.find("*STEP", at + 1))
+    ++steps;
+  EXPECT_EQ(steps, 5u + 4u) << "0°, 45°, 90°, 135°, 180°, then 135°, 90°, 45° and rest";
+  // Each 45° step's increments turn the end by 2.5° at most ("initial, period, min, max").
+  std::istringstream lines(input);
+  std::vector<double> largest;
+  for (std::string line; std::getline(lines, line);) {
+    if (line != "*STATIC") continue;
+    std::getline(lines, line);
+    largest.push_back(std::stod(line.substr(line.rfind(',') + 1)));
+  }
+  ASSERT_EQ(largest.size(), steps);
+  EXPECT_EQ(largest[0], 1) << "pose 0 is the rest pose: nothing turns";
+  for (size_t s = 1; s < steps; ++s) EXPECT_NEAR(largest[s], 2.5 / 45, 1e-6) << s;
 }
 
 TEST(ReferenceCommand, TwoProcessesSolvingOneKeyAtOnceBothGetTheWholeReference) {

@@ -83,6 +83,9 @@ std::string referenceCoverageNote(const nlohmann::json& runs) {
     if (text(run, "method") == "calculix" && run.value("failed_step", -1) >= 0) {
       why = " ccx did not solve the reference's pose " + cell(number(run, "failed_step")) +
             " (report.md, Reference); later poses have no reference.";
+    } else if (text(run, "method") == "calculix" && run.value("excluded_from", -1) >= 0) {
+      why = " The reference excludes the poses from " + cell(number(run, "excluded_from")) +
+            " on (" + text(run, "exclusion") + "); they are no ccx failure and count in no RMS.";
     }
   }
   return "\n**RMS to the reference covers fewer poses than the runs** (poses 0 to k−1 of N "
@@ -90,6 +93,18 @@ std::string referenceCoverageNote(const nlohmann::json& runs) {
          list + "." + why +
          " Read those RMS values (and their points in the plot) as that many poses' error, not "
          "the whole motion's.\n";
+}
+
+/// "reference: k/N poses (the others have no continuum equilibrium: the bones close across the
+/// muscle)" for the plot of a reference with excluded poses.
+std::string referencePosesLabel(const nlohmann::json& reference) {
+  int solved = 0, poses = 0;
+  for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
+    ++poses;
+    solved += pose.value("solved", false) ? 1 : 0;
+  }
+  return "reference: " + std::to_string(solved) + "/" + std::to_string(poses) +
+         " poses (the others: no continuum equilibrium, the bones close across the muscle)";
 }
 
 /// gnuplot string literal.
@@ -247,6 +262,10 @@ std::string speedVsErrorScript(const nlohmann::json& summary, const std::string&
   if (reference && summary.contains("reference") && !gates.value("passed", false)) {
     marks << "set label 4 'the reference FAILS a gate: no ranking (report.md, Reference)' at graph "
              "0.5, graph 0.96 center font ',10' tc rgb '#b00000'\n";
+  }
+  if (reference && !gates.value("excluded", std::string()).empty()) {
+    marks << "set label 5 " << quoted(referencePosesLabel(summary["reference"]))
+          << " at graph 0.5, graph 0.91 center font ',8' tc rgb '#606060'\n";
   }
   if (reference && band > 0) {
     marks << "set object 1 rect from graph 0, graph 0 to graph 1, first " << band
@@ -438,6 +457,7 @@ std::string table1(const nlohmann::json& runs) {
 ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   ReferenceGates g;
   g.returnMm = number(gates, "return_mm");
+  g.returnNotApplicable = gates.value("return_not_applicable", std::string());
   g.refinementMm = number(gates, "refinement_mm");
   g.refinedBy = gates.value("refined_by", std::string());
   g.attachmentLowMm = number(gates, "attachment_low_mm");
@@ -448,6 +468,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
   g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());
+  g.excluded = gates.value("excluded", std::string());
   return g;
 }
 
@@ -494,18 +515,23 @@ std::string referenceSection(const nlohmann::json& summary) {
     return out.str();
   }
   out << reference.value("description", std::string()) << ".\n\n";
-  int solved = 0, poses = 0;
+  int solved = 0, poses = 0, excluded = 0;
   for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
     ++poses;
     if (pose.value("solved", false))
       ++solved;
+    else if (!pose.value("excluded", std::string()).empty())
+      ++excluded;  // said once, in the gates' "excluded" line
     else
       out << "- pose " << poses - 1 << " not solved: " << pose.value("failure", std::string())
           << "\n";
   }
-  out << "Poses solved: " << solved << "/" << poses << " ("
-      << (reference.value("from_cache", false) ? "from the cache" : "solved by this run") << ", "
-      << cell(reference.value("seconds", nlohmann::json())) << " s of tetgen and ccx; "
+  out << "Poses solved: " << solved << "/" << poses
+      << (excluded > 0
+              ? " (" + std::to_string(excluded) + " excluded: no continuum equilibrium, see below)"
+              : std::string())
+      << " (" << (reference.value("from_cache", false) ? "from the cache" : "solved by this run")
+      << ", " << cell(reference.value("seconds", nlohmann::json())) << " s of tetgen and ccx; "
       << reference.value("newton_iterations", 0) << " Newton iterations in "
       << reference.value("increments", 0) << " increments; cache key "
       << reference.value("key", std::string()) << ").\n\nGates:\n\n";
@@ -851,6 +877,9 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
     if (run.value("interrupted", false)) failed = "stopped (time budget)";
     if (text(run, "method") == "calculix" && run.value("failed_step", -1) >= 0)
       failed = "ccx did not solve pose " + std::to_string(run.value("failed_step", -1));
+    else if (text(run, "method") == "calculix" && run.value("excluded_from", -1) >= 0)
+      failed = "no (poses from " + std::to_string(run.value("excluded_from", -1)) +
+               " excluded: no continuum equilibrium)";
     const std::string worst = text(run, "worst_muscle");
     out << "| " << text(run, "method") << " | " << field(run, "threads") << " | "
         << text(run, "scene") << " | "

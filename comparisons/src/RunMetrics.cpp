@@ -115,6 +115,8 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"nan", m.nan},
       {"exploded", m.exploded},
       {"failed_step", m.failedStep},
+      {"excluded_from", m.excludedFrom},
+      {"exclusion", m.exclusion},
       {"interrupted", m.interrupted},
       {"peak_memory_mb", number(m.peakMemoryMb)},
       {"wall_seconds", m.wallSeconds},
@@ -174,6 +176,8 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.nan = o.value("nan", m.nan);
   m.exploded = o.value("exploded", m.exploded);
   m.failedStep = o.value("failed_step", m.failedStep);
+  m.excludedFrom = o.value("excluded_from", m.excludedFrom);
+  m.exclusion = o.value("exclusion", m.exclusion);
   m.interrupted = o.value("interrupted", m.interrupted);
   m.peakMemoryMb = numberOr(o, "peak_memory_mb", m.peakMemoryMb);
   m.wallSeconds = numberOr(o, "wall_seconds", m.wallSeconds);

@@ -73,6 +73,10 @@ Json cylinderTwistScene() {
   scene["bones"] = Json::array(
       {bone("plate-lower", plate(-1)), bone("plate-upper", plate(1), keyframes(turns))});
   scene["analytic"] = analytic("cylinder-twist", 1, 180);
+  // The poses as given (45° each), not split into 5° sub-poses: the static answer does not
+  // depend on the path, and the CalculiX reference solves 5 poses instead of 37 (FibreMSS's
+  // last pose is the same within 0.1°: mid section 90.26° against 90.35° with 5° poses).
+  scene["simulation"]["max_step_deg"] = 45;
   return scene;
 }
 

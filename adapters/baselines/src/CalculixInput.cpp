@@ -76,8 +76,10 @@ void writeEquations(std::ostream& out, const CalculixJob& job) {
 }
 
 void writeStep(std::ostream& out, const CalculixJob& job, size_t step) {
+  const double largest = step < job.maximumIncrements.size() ? job.maximumIncrements[step] : 1;
   out << "*STEP, NLGEOM, INC=10000\n*STATIC\n"
-      << job.initialIncrement << ", 1., " << job.minimumIncrement << ", 1.\n*BOUNDARY\n";
+      << std::min(job.initialIncrement, largest) << ", 1., "
+      << std::min(job.minimumIncrement, largest) << ", " << largest << "\n*BOUNDARY\n";
   const std::vector<btVector3>& u = job.steps[step];
   for (size_t i = 0; i < job.prescribed.size(); ++i) {
     const uint32_t id = job.prescribed[i] + 1;

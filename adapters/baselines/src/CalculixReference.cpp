@@ -1,5 +1,5 @@
 // The CalculiX static reference: per muscle a tetgen mesh, its attached nodes, one ccx job with
-// a step per pose (and one back to rest), the printed surface displacements read back.
+// a step per pose (and steps back to rest), the printed surface displacements read back.
 #include "fibremss/CalculixReference.h"
 
 #include <algorithm>
@@ -98,18 +98,97 @@ void setElements(CalculixJob& job, const TetMesh& mesh) {
 }
 
 /// Bone b's transform of pose p (the rest pose after the last one: the return step).
-btTransform stepTransform(const LoadedScene& scene, size_t bone, int step, int poses) {
-  return step < poses ? scene.bonePose(bone, step) : btTransform::getIdentity();
+btTransform stepTransform(const LoadedScene& scene, size_t bone, int pose) {
+  return pose >= 0 ? scene.bonePose(bone, pose) : btTransform::getIdentity();
+}
+
+/// The largest turn of any bone between poses `from` and `to` (-1: rest) [°].
+double largestTurnDeg(const LoadedScene& scene, size_t bones, int from, int to) {
+  double largest = 0;
+  for (size_t b = 0; b < bones; ++b) {
+    const btQuaternion q =
+        (stepTransform(scene, b, to) * stepTransform(scene, b, from).inverse()).getRotation();
+    const double w = std::min(1.0, std::abs(double(q.w())));
+    largest = std::max(largest, 2 * std::acos(w) * 180 / M_PI);
+  }
+  return largest;
+}
+
+/// The largest increment of each of the job's steps (share of it): no bone turns more than
+/// 2.5° and no attached node moves more than 1 mm within one. ccx's Newton on a twisted
+/// cylinder (C3D4, ν 0.49) diverged on 5° increments from 25° of twist on, converged in 2
+/// iterations on 1.25° ones, and ended on a NaN within a 45° step whose increments it let grow
+/// to 11°; pinch's step back from pose 1 (7 mm) ended on a NaN at its second try, 1.75 mm.
+std::vector<double> maximumIncrements(const LoadedScene& scene, size_t bones,
+                                      const std::vector<int>& steps, const CalculixJob& job) {
+  constexpr double kIncrementTurnDeg = 2.5, kIncrementMove = 1e-3;
+  std::vector<double> largest;
+  for (size_t s = 0; s < steps.size(); ++s) {
+    const double turn = largestTurnDeg(scene, bones, s == 0 ? -1 : steps[s - 1], steps[s]);
+    double move = 0;
+    for (size_t i = 0; i < job.prescribed.size(); ++i)
+      move = std::max(
+          move,
+          double((job.steps[s][i] - (s == 0 ? btVector3(0, 0, 0) : job.steps[s - 1][i])).length()));
+    largest.push_back(std::min(
+        {1.0, kIncrementTurnDeg / std::max(turn, 1e-9), kIncrementMove / std::max(move, 1e-12)}));
+  }
+  return largest;
+}
+
+/// The pose each step of the job ends at (-1: rest): the first `poses` poses, then with
+/// `returnToRest` back to rest retracing them, each return step to the earliest pose (or rest)
+/// that no bone turns more than kReturnTurnDeg from. Within a step ccx moves a prescribed node
+/// along a straight line: a bone turned 180° straight back would pass its nodes through its
+/// axis (cylinder-twist's return), a turn of 45° squeezes them by 8 % at most on the way.
+std::vector<int> stepPoses(const LoadedScene& scene, size_t bones, int poses, bool returnToRest) {
+  constexpr double kReturnTurnDeg = 45;
+  std::vector<int> steps;
+  for (int p = 0; p < poses; ++p) steps.push_back(p);
+  for (int at = poses - 1; returnToRest && (steps.empty() || steps.back() >= 0);) {
+    int to = -1;
+    // 0.001° of slack: a float rotation of exactly 45° reads back as 45.0001°.
+    while (to < at - 1 && largestTurnDeg(scene, bones, at, to) > kReturnTurnDeg + 1e-3) ++to;
+    steps.push_back(to);
+    at = to;
+  }
+  return steps;
+}
+
+/// The muscle's nodes on its surface: the surface vertices and, for C3D10, the midside nodes of
+/// its boundary faces (left out, they would pass into a bone unresisted: a sphere pressed by
+/// plates read 24 % over Hertz as C3D10 with corner slaves only).
+std::vector<bool> surfaceNodes(const MuscleJob& muscle) {
+  const CalculixJob& job = muscle.job;
+  std::vector<bool> surface(job.nodes.size(), false);
+  std::fill_n(surface.begin(), muscle.surfaceVertices, true);
+  if (job.element != CalculixElement::C3D10) return surface;
+  constexpr size_t kNodes = 10;
+  std::vector<uint32_t> corners;
+  for (size_t e = 0; e * kNodes < job.connectivity.size(); ++e)
+    corners.insert(corners.end(), job.connectivity.begin() + long(e * kNodes),
+                   job.connectivity.begin() + long(e * kNodes + 4));
+  // The midside node of corners (i, j) is node 4 + k for the k-th of quadraticTetrahedra's
+  // edges {0,1}, {1,2}, {2,0}, {0,3}, {1,3}, {2,3}; each face's corners as boundaryFaces numbers
+  // them (1: 0-1-2, 2: 0-3-1, 3: 1-3-2, 4: 2-3-0) give its three edges.
+  constexpr int kFaceEdges[4][3] = {{0, 1, 2}, {3, 4, 0}, {4, 5, 1}, {5, 3, 2}};
+  for (const auto& [element, face] : boundaryFaces(corners))
+    for (int k : kFaceEdges[face - 1]) surface[job.connectivity[element * kNodes + 4 + k]] = true;
+  return surface;
 }
 
 /// The bones as rigid contact obstacles of the job (CalculixContact): each bone's rest mesh
 /// meshed by tetgen, its nodes appended and prescribed to follow the bone at every step, the
-/// muscle's free surface vertices the slaves.
+/// muscle's free surface nodes (surfaceNodes) the slaves.
 void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedScene& prepared,
-                    const CalculixDefinition& definition, const std::string& workDir) {
+                    const CalculixDefinition& definition, const std::string& workDir,
+                    const std::vector<int>& steps) {
   CalculixJob& job = result.job;
   CalculixContact& contact = job.contact;
-  const int steps = static_cast<int>(job.steps.size()), poses = std::max(scene.poseCount, 1);
+  std::vector<bool> slave = surfaceNodes(result);
+  for (uint32_t n : job.prescribed) slave[n] = false;
+  for (uint32_t n = 0; n < slave.size(); ++n)
+    if (slave[n]) contact.slaves.push_back(n);
   TetgenDefinition mesher = definition.mesher;
   mesher.refinement = 0;
   for (size_t b = 0; b < prepared.bones.size(); ++b) {
@@ -119,28 +198,24 @@ void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedS
     for (const btVector3& x : bone.nodes) {
       job.prescribed.push_back(static_cast<uint32_t>(job.nodes.size()));
       job.nodes.push_back(x);
-      for (int p = 0; p < steps; ++p)
-        job.steps[static_cast<size_t>(p)].push_back(stepTransform(scene, b, p, poses) * x - x);
+      for (size_t s = 0; s < steps.size(); ++s)
+        job.steps[s].push_back(stepTransform(scene, b, steps[s]) * x - x);
     }
     for (const auto& t : bone.tetrahedra)
       for (uint32_t corner : t) contact.tetrahedra.push_back(first + corner);
   }
   contact.faces = boundaryFaces(contact.tetrahedra);
-  std::vector<bool> held(result.surfaceVertices, false);
-  for (uint32_t n : job.prescribed)
-    if (n < held.size()) held[n] = true;
-  for (uint32_t v = 0; v < result.surfaceVertices; ++v)
-    if (!held[v]) contact.slaves.push_back(v);
   contact.stiffness = definition.contactPenalty * definition.material.youngsModulus;
   contact.tension = 1e-3 * definition.material.youngsModulus;
 }
 
 /// Meshes the muscle's surface as loaded (preparation's push out of the bones makes the
 /// prepared surface self-intersect where it overlapped a bone), attaches nodes within the
-/// attachment distance of a bone and prescribes their displacement per step.
+/// attachment distance of a bone and prescribes their displacement per step: the first
+/// step to its pose of `steps` (stepPoses).
 MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, size_t m,
                     const std::vector<MeshDistance>& bones, const CalculixDefinition& definition,
-                    const std::string& workDir) {
+                    const std::string& workDir, const std::vector<int>& steps) {
   const MuscleSettings& muscle = *prepared.muscles[m];
   const TriangleMesh& loaded = scene.muscles[m].surface;
   if (loaded.vertices.size() != muscle.restSurface.vertices.size()) {
@@ -169,24 +244,23 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
                          std::to_string(distance * 1000) +
                          " mm) of a bone: the static reference needs the muscle held");
   }
-  const int poses = std::max(scene.poseCount, 1);
-  const int steps = poses + (definition.returnToRest ? 1 : 0);
-  for (int p = 0; p < steps; ++p) {
+  for (const int pose : steps) {
     std::vector<btVector3>& u = job.steps.emplace_back();
     for (size_t i = 0; i < job.prescribed.size(); ++i) {
       const btVector3& x = job.nodes[job.prescribed[i]];
-      u.push_back(stepTransform(scene, static_cast<size_t>(boneOf[i]), p, poses) * x - x);
+      u.push_back(stepTransform(scene, static_cast<size_t>(boneOf[i]), pose) * x - x);
     }
   }
+  job.maximumIncrements = maximumIncrements(scene, prepared.bones.size(), steps, job);
   // Prescribed nodes are ascending: the surface vertices among them come first.
-  result.movedPositions.resize(static_cast<size_t>(steps));
+  result.movedPositions.resize(steps.size());
   for (size_t i = 0; i < job.prescribed.size() && job.prescribed[i] < loaded.vertices.size(); ++i) {
     const uint32_t v = job.prescribed[i];
     if (muscle.restSurface.vertices[v] == loaded.vertices[v]) continue;
     result.moved.push_back(v);
-    for (int p = 0; p < steps; ++p)
-      result.movedPositions[static_cast<size_t>(p)].push_back(
-          stepTransform(scene, static_cast<size_t>(boneOf[i]), p, poses) *
+    for (size_t s = 0; s < steps.size(); ++s)
+      result.movedPositions[s].push_back(
+          stepTransform(scene, static_cast<size_t>(boneOf[i]), steps[s]) *
           muscle.restSurface.vertices[v]);
   }
   for (uint32_t v = 0; v < result.surfaceVertices; ++v) job.printed.push_back(v);
@@ -195,7 +269,8 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
     job.prescribed.push_back(holdBySymmetry(job, scene.analytic));
     for (std::vector<btVector3>& u : job.steps) u.emplace_back(0, 0, 0);
   }
-  if (definition.contactPenalty > 0) addBoneContact(result, scene, prepared, definition, workDir);
+  if (definition.contactPenalty > 0)
+    addBoneContact(result, scene, prepared, definition, workDir, steps);
   return result;
 }
 
@@ -288,24 +363,27 @@ CalculixSolution solveCalculixReference(
   std::filesystem::create_directories(workDir);
   std::vector<MeshDistance> bones;
   for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
-  const int poses = std::max(scene.poseCount, 1);
   CalculixSolution solution;
-  solution.poseSurfaces.assign(static_cast<size_t>(poses), {});
-  solution.poseFailures.assign(static_cast<size_t>(poses), "");
+  solution.cut = findContinuumCut(scene, bones);
+  const int poses = solution.cut.pose >= 0 ? solution.cut.pose : std::max(scene.poseCount, 1);
+  const std::vector<int> steps =
+      stepPoses(scene, prepared.bones.size(), poses, definition.returnToRest);
+  solution.poseSurfaces.assign(static_cast<size_t>(std::max(scene.poseCount, 1)), {});
+  solution.poseFailures.assign(solution.poseSurfaces.size(), "");
   const size_t muscles = prepared.muscles.size();
   for (size_t m = 0; m < muscles && !solution.interrupted; ++m) {
-    const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir);
+    const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir, steps);
     solution.nodes += muscle.job.nodes.size();
     solution.elements += muscle.tetrahedra;
     solution.prescribedNodes += muscle.attachedNodes;
     solution.inputFiles.push_back(workDir + "/" + muscle.stem + ".inp");
-    const int steps = static_cast<int>(muscle.job.steps.size());
+    const int stepCount = static_cast<int>(steps.size());
     int reported = -1;
     const auto poll = [&](int done) {
       if (progress && done != reported) {
         reported = done;
         progress({prepared.muscles[m]->name, static_cast<int>(m), static_cast<int>(muscles), done,
-                  steps, secondsSince(start)});
+                  stepCount, secondsSince(start)});
       }
       if (cancel && cancel->load()) solution.interrupted = true;
       return !solution.interrupted;
@@ -320,9 +398,10 @@ CalculixSolution solveCalculixReference(
     solution.newtonIterations += sta.iterations;
     if (solution.interrupted) failure = "interrupted";
     const std::string blame = "muscle " + prepared.muscles[m]->name + ": " + failure;
-    for (int s = 0; s < steps; ++s) {
-      std::vector<btVector3>& surface = stepSurfaces[static_cast<size_t>(s)];
+    for (int s = 0; s < stepCount; ++s) {
       const bool pose = s < poses;
+      if (!pose && s + 1 < stepCount) continue;  // on the way back to rest: only its end counts
+      std::vector<btVector3>& surface = stepSurfaces[static_cast<size_t>(s)];
       std::vector<btVector3>& into =
           pose ? solution.poseSurfaces[static_cast<size_t>(s)] : solution.returnSurface;
       std::string& why =
@@ -336,7 +415,8 @@ CalculixSolution solveCalculixReference(
   for (size_t p = 0; solution.interrupted && p <= solution.poseSurfaces.size(); ++p) {
     const bool pose = p < solution.poseSurfaces.size();
     std::string& why = pose ? solution.poseFailures[p] : solution.returnFailure;
-    if (why.empty()) why = "interrupted";
+    const bool excluded = pose && static_cast<int>(p) >= poses;  // past the cut: not solved
+    if (why.empty() && !excluded) why = "interrupted";
     (pose ? solution.poseSurfaces[p] : solution.returnSurface).clear();
   }
   solution.seconds = secondsSince(start);

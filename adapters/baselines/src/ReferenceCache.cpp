@@ -139,6 +139,14 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
   h.value(definition.returnToRest);
   h.value(definition.initialIncrement);
   h.value(definition.contactPenalty);
+  // Poses past a continuum cut are not solved: the same scene's entries from before the cut
+  // was found hold ccx's failures there instead. Scenes without a cut keep their keys.
+  std::vector<MeshDistance> bones;
+  for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
+  if (const ContinuumCut cut = findContinuumCut(scene, bones); cut.pose >= 0) {
+    h.text("continuum cut");
+    h.value(cut.pose);
+  }
   if (scene.analytic.type == "sphere-planes") {  // held by its symmetry (no other key changes)
     h.text(scene.analytic.type);
     h.points({scene.analytic.axisStart, scene.analytic.axisEnd});
@@ -176,6 +184,11 @@ void saveSolution(const std::string& path, const CalculixSolution& solution) {
     out.write(reinterpret_cast<const char*>(&solution.seconds), sizeof solution.seconds);
     writeText(out, std::to_string(solution.inputFiles.size()));
     for (const std::string& file : solution.inputFiles) writeText(out, file);
+    // The continuum cut after what older entries hold (they are read as having none).
+    const int64_t cut = solution.cut.pose;
+    out.write(reinterpret_cast<const char*>(&cut), sizeof cut);
+    out.write(reinterpret_cast<const char*>(&solution.cut.gapMm), sizeof solution.cut.gapMm);
+    writeText(out, solution.cut.reason);
     if (!out) throw std::runtime_error("cannot write " + temporary);
   }
   std::filesystem::rename(temporary, path);
@@ -207,6 +220,10 @@ bool loadSolution(const std::string& path, CalculixSolution& solution) {
   solution.seconds = read.value<double>();
   const size_t files = std::stoul(read.text());
   for (size_t f = 0; f < files; ++f) solution.inputFiles.push_back(read.text());
+  if (in.peek() == std::char_traits<char>::eof()) return true;  // stored before the cut was
+  solution.cut.pose = static_cast<int>(read.value<int64_t>());
+  solution.cut.gapMm = read.value<double>();
+  solution.cut.reason = read.text();
   return true;
 }
 

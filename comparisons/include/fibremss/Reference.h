@@ -33,7 +33,10 @@ inline constexpr double kRefinementShareOfSpread = 1.0 / 3.0;
 
 /// The reference's gates. NaN where not computed.
 struct ReferenceGates {
-  double returnMm = RunMetrics::kNone;      ///< RMS at rest after the motion, to the rest surface
+  double returnMm = RunMetrics::kNone;  ///< RMS at rest after the motion, to the rest surface
+  /// Why the return gate does not apply ("" : it does): the motion itself does not return to
+  /// rest and ccx did not solve the steps the reference adds back to it.
+  std::string returnNotApplicable;
   double refinementMm = RunMetrics::kNone;  ///< RMS one level finer against the reference
   std::string refinedBy;  ///< what "one level finer" was (quadratic elements or the next level)
   double attachmentLowMm = RunMetrics::kNone;   ///< RMS with the attachment distance × 0.5
@@ -43,14 +46,21 @@ struct ReferenceGates {
   int poses = 0;
   int refinementPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
   std::string failures;  ///< poses ccx did not finish, of the reference or a gate's solve
+  /// Poses without a continuum equilibrium ("poses k to N-1 of N: why"; ContinuumCut): not
+  /// solved, not failures; the RMS, the gates and the ranking cover the poses before them.
+  std::string excluded;
   /// The spread between the methods compared [mm] (NaN until a comparison sets it) and the
   /// refinement gate's verdict against it.
   double spreadMm = RunMetrics::kNone;
 
   bool returnPasses() const { return returnMm <= kReturnGateMm; }
   bool refinementPasses() const { return refinementMm < kRefinementShareOfSpread * spreadMm; }
-  /// Both gates passed and every pose solved: rankings may be reported.
-  bool passed() const { return returnPasses() && refinementPasses() && failures.empty(); }
+  /// Both gates passed (the return gate where it applies) and every pose solved but those
+  /// excluded: rankings may be reported.
+  bool passed() const {
+    return (returnPasses() || !returnNotApplicable.empty()) && refinementPasses() &&
+           failures.empty();
+  }
 };
 
 /// A computed reference.

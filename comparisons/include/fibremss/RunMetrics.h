@@ -101,9 +101,13 @@ struct RunMetrics {
   bool nan = false;                 ///< a NaN or inf appeared
   bool exploded = false;            ///< stability criteria violated
   int failedStep = -1;              ///< step where it failed, -1 if none
-  bool interrupted = false;         ///< stopped by the user (Ctrl-C)
-  double peakMemoryMb = kNone;      ///< peak resident set of the process
-  double wallSeconds = 0;           ///< whole run
+  /// The reference: its first pose without a continuum equilibrium (not solved, not a
+  /// failure; ContinuumCut), -1 if none, and why.
+  int excludedFrom = -1;
+  std::string exclusion;
+  bool interrupted = false;     ///< stopped by the user (Ctrl-C)
+  double peakMemoryMb = kNone;  ///< peak resident set of the process
+  double wallSeconds = 0;       ///< whole run
 
   AnalyticMetrics analytic;  ///< the scene's exact case, if it is one
 

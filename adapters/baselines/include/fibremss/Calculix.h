@@ -89,8 +89,10 @@ struct CalculixJob {
   std::vector<uint32_t> printed;              ///< nodes whose displacements are printed
   double initialIncrement = 1;                ///< first increment, share of a step
   double minimumIncrement = 1e-4;             ///< smallest increment before ccx gives up
-  CalculixContact contact;                    ///< rigid obstacles (none when stiffness is 0)
-  std::vector<CalculixEquation> equations;    ///< in every step (no node also prescribed)
+  /// Per step, its largest increment (share of the step; also bounds the first); empty: 1.
+  std::vector<double> maximumIncrements;
+  CalculixContact contact;                  ///< rigid obstacles (none when stiffness is 0)
+  std::vector<CalculixEquation> equations;  ///< in every step (no node also prescribed)
 };
 
 /// The boundary faces of linear tetrahedra (4 node indices each) as CalculiX numbers them:

@@ -32,15 +32,35 @@ struct CalculixDefinition {
   CalculixElement element = CalculixElement::C3D4;
   TetgenDefinition mesher;       ///< tetgen settings and the refinement level
   btScalar attachmentScale = 1;  ///< × each muscle's attachment distance (the ±50 % gate)
-  bool returnToRest = true;      ///< a last step back to the rest pose (the return gate)
+  /// Steps back to the rest pose after the poses (the return gate), retracing them so that no
+  /// bone turns more than 45° in one step.
+  bool returnToRest = true;
   /// Muscle–bone contact: every bone meshed (tetgen) as a rigid obstacle whose boundary is a
-  /// frictionless node-to-surface penalty contact for the muscle's free surface nodes, with
-  /// the pressure-overclosure slope K = contactPenalty × E [1/m] (50 per mm: 1 µm of
-  /// overclosure carries 5 % of E). 0: no contact (the muscle passes through bones).
+  /// frictionless node-to-surface penalty contact for the muscle's free surface nodes (C3D10:
+  /// midside ones too), with the pressure-overclosure slope K = contactPenalty × E [1/m] (50
+  /// per mm: 1 µm of overclosure carries 5 % of E). 0: no contact (the muscle passes through
+  /// bones).
   double contactPenalty = 5e4;
   double initialIncrement = 1;  ///< first increment of a step (ccx cuts it back as needed)
   std::string program = "ccx";  ///< the CalculiX executable (PATH is searched)
 };
+
+/// Where the motion leaves no static continuum equilibrium. Two bones close across a muscle:
+/// some point of the muscle's rest volume lies d_a from one bone and d_b from another with
+/// d_a + d_b below twice the muscle's attachment distance, where at rest that pair left more
+/// room than that. Material there is within the attachment distance of both bones (FibreMSS's
+/// rule moves it with each), so the muscle must be cut (pinch's blades passing like shears); a
+/// static continuum has no answer at that pose, nor at any later one (the muscle is torn).
+struct ContinuumCut {
+  int pose = -1;       ///< first pose without a continuum equilibrium; -1: every pose has one
+  double gapMm = 0;    ///< the smallest d_a + d_b there [mm]
+  std::string reason;  ///< why, in words: the bones, the muscle, the gap and its bound
+};
+
+/// Finds the first pose where two bones close across a muscle (ContinuumCut), sampling each
+/// muscle's loaded volume on a grid of half its attachment distance (coarser for a big muscle:
+/// at most ~10^5 grid points each). `bones` are the bones' rest meshes in scene order.
+ContinuumCut findContinuumCut(const LoadedScene& scene, const std::vector<MeshDistance>& bones);
 
 /// Where a reference solve is, after every step ccx finishes.
 struct ReferenceProgress {
@@ -48,7 +68,7 @@ struct ReferenceProgress {
   int muscleIndex = 0;
   int muscles = 0;
   int step = 0;        ///< steps finished of this muscle's job
-  int steps = 0;       ///< steps in it (the poses, then the return to rest)
+  int steps = 0;       ///< steps in it (the poses, then the steps back to rest)
   double seconds = 0;  ///< since the solve started
 };
 
@@ -67,6 +87,9 @@ struct CalculixSolution {
   double seconds = 0;                    ///< wall time of tetgen and ccx
   std::vector<std::string> inputFiles;   ///< the .inp files, one per muscle
   bool interrupted = false;              ///< cancelled before the end
+  /// Poses from cut.pose on are not solved (no continuum equilibrium: not a ccx failure; their
+  /// poseFailures stay ""); the return step starts from the last pose before it.
+  ContinuumCut cut;
 
   /// Poses solved, counted from the first (a failed pose ends the run of solved ones).
   int solvedPoses() const;
@@ -74,8 +97,9 @@ struct CalculixSolution {
 
 /// Meshes every muscle and solves its poses with ccx in `workDir` (created; the .inp, .dat,
 /// .sta and logs of each muscle are kept there). A pose ccx does not finish is reported in
-/// poseFailures (with ccx's last error line), never dropped. Throws InputError for a muscle
-/// that tetgen cannot mesh or that has no material near any bone, unless the scene is a
+/// poseFailures (with ccx's last error line), never dropped. Poses past a continuum cut
+/// (findContinuumCut) are not given to ccx: `cut` says which and why. Throws InputError for a
+/// muscle that tetgen cannot mesh or that has no material near any bone, unless the scene is a
 /// sphere-planes case: then the sphere is held by its symmetry (the node nearest its centre
 /// fixed, three nodes' equations against rigid rotation; no effect on the exact answer).
 CalculixSolution solveCalculixReference(
