@@ -21,9 +21,12 @@ namespace fibremss {
 constexpr size_t kTetrahedronWork = 4;
 
 /// Work per chunk by default, in springs (a tetrahedron counts kTetrahedronWork): thigh13 R=40
-/// (about 950 000) splits into about 30 chunks, a muscle of resolution 20 or less mostly stays
-/// whole.
-constexpr size_t kForceChunkWork = 32768;
+/// (about 74 000 per muscle) runs 60 chunks, four or five per muscle; at R=20 two per muscle.
+/// Halving it from 32 768 (28 chunks at R=40, R=20 muscles whole) raised the pool's schedule
+/// bound on 2 threads from 1.93× to 1.94× at R=40 and from 1.88× to 1.91× at R=20; at 1 thread
+/// a 10-iteration step at R=40 costs +1.9 % instructions against one task per muscle
+/// (docs/performance.md).
+constexpr size_t kForceChunkWork = 16384;
 
 /// One chunk of a muscle's forces pass.
 struct ForceChunk {

@@ -379,7 +379,9 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
     if (c > 0) {
       const ForceChunk& chunk = state.forceChunks[c];
       const btVector3* add = state.chunkForces.data() + state.chunkBase[c];
-      for (uint32_t i = chunk.lower; i < chunk.upper; ++i) state.forces[i] += add[i];
+      // All four lanes (w is 0 in both), one vector add per particle.
+      for (uint32_t i = chunk.lower; i < chunk.upper; ++i)
+        for (int k = 0; k < 4; ++k) state.forces[i].m_floats[k] += add[i].m_floats[k];
     }
     result.forces.deviation += state.chunkSprings[c].deviation;
     result.forces.overstretched += state.chunkSprings[c].overstretched;
