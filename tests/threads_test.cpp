@@ -1,7 +1,8 @@
 // The solver's threads (plugin/core/src/solver/TaskPool.h, MuscleSystemStep.cpp) and a host's
 // scheduler in their place (fibremss/TaskScheduler.h): every task runs once on a valid thread, and
-// a step gives bit-identical particles for any thread count, because each muscle's work is
-// independent and every sum runs in a fixed order; frozen muscles only ride with their bones.
+// a step gives bit-identical particles for any thread count, because each task's work is
+// independent and every sum runs in a fixed order (a muscle's force chunks too: ForceChunks.h);
+// frozen muscles only ride with their bones.
 #include <gtest/gtest.h>
 
 #include <algorithm>
