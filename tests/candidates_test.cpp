@@ -164,7 +164,7 @@ bool snapshotAt(const MuscleState& muscle, const std::vector<btVector3>& positio
 
 /// One iteration's collision as the step runs it: trees refitted, pairs, response.
 void collideOnce(MuscleSystemAccess::Impl& impl) {
-  impl.forEachMuscle([](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+  impl.forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
   impl.collide();
   impl.applyResponse();
 }
@@ -185,7 +185,8 @@ TEST(CandidateLists, TreesCarriedByBonesFindEveryContact) {
   size_t contacts = 0, skipped = 0;
   for (int k = 1; k <= kIterations; ++k) {
     impl.moveBones(btScalar(k) / kIterations, k == kIterations);
-    impl.forEachMuscle([&](MuscleState& state, uint32_t, unsigned) { impl.followBones(state); });
+    impl.forEachMuscle("follow bones",
+                       [&](MuscleState& state, uint32_t, unsigned) { impl.followBones(state); });
     for (size_t m = 0; m < order.size(); ++m) before[m] = impl.muscles.states[order[m]]->positions;
     const size_t exact = contactsOfEveryPair(impl);
     collideOnce(impl);

@@ -21,6 +21,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "solver/MuscleSystemAccess.h"
 #include "support/AllocationCounter.h"
 #include "support/SolverFixtures.h"
 
@@ -624,34 +625,39 @@ TEST(Allocation, StepAllocatesNothing) {
         btTransform(btQuaternion::getIdentity(), btVector3(-0.0055f, 0.005f, 0.015f)));
     box.setLinearVelocity(btVector3(0.05f, 0, 0));  // moving in: impulses in every step
     const btCollisionObject* bodies[] = {&box};
-    for (bool rebuild : {false, true})
-      for (bool contact : {false, true}) {
-        parameters.rebuildEveryStep = rebuild;
-        MuscleSystem system(parameters);
-        const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
-        auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
-        auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
-        a->damping = b->damping = zelenyDamping(*a);
-        system.addMuscle(a, std::span(&bone, 1));
-        system.addMuscle(b, std::span(&bone, 1));
-        if (contact) system.setContactBodies(bodies);
-        size_t contacts = 0, touched = 0;
-        testing::allocationCount = 0;
-        testing::countingArmed = true;
-        for (int s = 0; s < 10; ++s) {
-          system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
-          system.step();
-          contacts += system.lastStep().contacts;
-          touched += system.bodyContact(&box).impulse.isZero() ? 0 : 1;
+    // The forces of a box in one task, and in chunks (kForceChunkWork splits larger muscles).
+    for (size_t chunkWork : {kForceChunkWork, size_t{64}})
+      for (bool rebuild : {false, true})
+        for (bool contact : {false, true}) {
+          parameters.rebuildEveryStep = rebuild;
+          MuscleSystem system(parameters);
+          MuscleSystemAccess::impl(system).forceChunkWork = chunkWork;
+          const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
+          auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
+          auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
+          a->damping = b->damping = zelenyDamping(*a);
+          system.addMuscle(a, std::span(&bone, 1));
+          system.addMuscle(b, std::span(&bone, 1));
+          if (contact) system.setContactBodies(bodies);
+          size_t contacts = 0, touched = 0;
+          testing::allocationCount = 0;
+          testing::countingArmed = true;
+          for (int s = 0; s < 10; ++s) {
+            system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
+            system.step();
+            contacts += system.lastStep().contacts;
+            touched += system.bodyContact(&box).impulse.isZero() ? 0 : 1;
+          }
+          testing::countingArmed = false;
+          EXPECT_GT(contacts, 0u);  // collision ran
+          if (contact) {
+            EXPECT_GT(touched, 0u) << "the box touched";
+          }
+          EXPECT_EQ(MuscleSystemAccess::impl(system).chunked, chunkWork < kForceChunkWork);
+          EXPECT_EQ(testing::allocationCount.load(), 0)
+              << (rebuild ? "rebuild" : "animation") << " mode" << (contact ? ", contact body" : "")
+              << ", chunks of " << chunkWork;
         }
-        testing::countingArmed = false;
-        EXPECT_GT(contacts, 0u);  // collision ran
-        if (contact) {
-          EXPECT_GT(touched, 0u) << "the box touched";
-        }
-        EXPECT_EQ(testing::allocationCount.load(), 0)
-            << (rebuild ? "rebuild" : "animation") << " mode" << (contact ? ", contact body" : "");
-      }
   }
   btAlignedAllocSetCustom(nullptr, nullptr);
 }

@@ -1,11 +1,14 @@
 // The solver's threads (plugin/core/src/solver/TaskPool.h, MuscleSystemStep.cpp) and a host's
 // scheduler in their place (fibremss/TaskScheduler.h): every task runs once on a valid thread, and
-// a step gives bit-identical particles for any thread count, because each muscle's work is
-// independent and every sum runs in a fixed order; frozen muscles only ride with their bones.
+// a step gives bit-identical particles for any thread count, because each task's work is
+// independent and every sum runs in a fixed order (a muscle's force chunks too: ForceChunks.h);
+// frozen muscles only ride with their bones.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <memory>
 #include <thread>
@@ -14,7 +17,9 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "solver/ForceChunks.h"
 #include "solver/MuscleSystemAccess.h"
+#include "solver/VolumeForces.h"
 #include "support/ThighSteps.h"
 
 using namespace fibremss;
@@ -67,21 +72,130 @@ bool sameBits(const std::vector<btVector3>& a, const std::vector<btVector3>& b) 
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(btVector3)) == 0;
 }
 
+/// Expects `other` (a run on `threads` threads) to have `one`'s bits: every muscle's particles
+/// and surface, and the last iteration's contacts.
+void expectSameBits(const Outcome& one, const Outcome& other, int threads) {
+  ASSERT_EQ(other.positions.size(), one.positions.size());
+  for (size_t m = 0; m < one.positions.size(); ++m) {
+    EXPECT_TRUE(sameBits(one.positions[m], other.positions[m]))
+        << "muscle " << m << ", " << threads << " threads";
+    EXPECT_TRUE(sameBits(one.surfaces[m], other.surfaces[m]))
+        << "muscle " << m << ", " << threads << " threads";
+  }
+  EXPECT_EQ(other.contacts, one.contacts);
+}
+
 }  // namespace
 
 TEST(Threads, AnyThreadCountGivesTheSameBits) {
   const Outcome one = simulate(1);
   EXPECT_GT(one.contacts, 0u);  // the muscles touch: the muscle pairs ran
-  for (int threads : {2, 3}) {
-    const Outcome many = simulate(threads);
-    ASSERT_EQ(many.positions.size(), one.positions.size());
-    for (size_t m = 0; m < one.positions.size(); ++m) {
-      EXPECT_TRUE(sameBits(one.positions[m], many.positions[m]))
-          << "muscle " << m << ", " << threads << " threads";
-      EXPECT_TRUE(sameBits(one.surfaces[m], many.surfaces[m]))
-          << "muscle " << m << ", " << threads << " threads";
+  for (int threads : {2, 3}) expectSameBits(one, simulate(threads), threads);
+}
+
+namespace {
+
+/// A host scheduler that runs every task at once, on the calling thread, from the last index to
+/// the first (worker indices 0, 1, 2 in turn): the reverse of the pool's order on one thread.
+TaskScheduler backwards() {
+  TaskScheduler scheduler;
+  scheduler.enqueueTask = [](TaskCallback task, uint32_t count, uint32_t, void* context,
+                             void*) -> void* {
+    for (uint32_t k = count; k-- > 0;) task(k, k + 1, k % 3, context);
+    return nullptr;  // done: nothing to finish
+  };
+  scheduler.finishTask = [](void*, void*) {};
+  scheduler.workerCount = 3;
+  return scheduler;
+}
+
+/// The first two muscles of thigh13 stepped as simulate() does with `threads` threads (0: on
+/// backwards(), reported as 0 threads), their forces passes split into chunks of about `chunkWork`
+/// (resolution 8 gives about 1 000 springs and 500 tetrahedra per muscle); checks that each has
+/// more than one chunk when `chunked`.
+Outcome simulateChunked(int threads, size_t chunkWork, bool chunked) {
+  LoadedScene scene;
+  const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+  return fibremss::testing::stepThroughPoses(
+      scene, prepared, {prepared.muscles[0], prepared.muscles[1]}, std::max(threads, 1),
+      [&](MuscleSystem& system, const std::vector<MuscleHandle>& handles) {
+        if (threads == 0) system.parameters().scheduler = backwards();
+        MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
+        impl.forceChunkWork = chunkWork;
+        impl.prepareWorkers();  // plans the chunks
+        for (MuscleHandle handle : handles)
+          EXPECT_EQ(impl.muscles.states[handle.index]->forceChunks.size() > 1, chunked);
+      });
+}
+
+}  // namespace
+
+// Chunks of one muscle finish in another order on other thread counts, and in the reverse order
+// on a scheduler that runs the tasks backwards: each chunk sums into its own buffer and the
+// buffers are added in chunk order, so the bits do not change (summed in the order they finish,
+// the backwards run's would). The chunks do change the bits against one task per muscle, by
+// rounding only.
+TEST(Threads, ChunkedForcesGiveTheSameBitsInAnyOrder) {
+  constexpr size_t kWork = 100;
+  const Outcome one = simulateChunked(1, kWork, true);
+  for (int threads : {0, 2, 3}) expectSameBits(one, simulateChunked(threads, kWork, true), threads);
+  const Outcome whole = simulateChunked(1, SIZE_MAX, false);
+  size_t differing = 0;
+  double largest = 0;
+  for (size_t m = 0; m < one.positions.size(); ++m) {
+    differing += !sameBits(one.positions[m], whole.positions[m]);
+    for (size_t i = 0; i < one.positions[m].size(); ++i)
+      largest = std::max(largest, double(one.positions[m][i].distance(whole.positions[m][i])));
+  }
+  EXPECT_GT(differing, 0u);
+  EXPECT_LT(largest, 1e-4);  // metres: rounding, against a particle spacing of centimetres
+}
+
+// Every kernel's chunks take each spring and tetrahedron once, in ranges that begin where the
+// kernel may begin (a run of one a, a group of eight lanes), and touch only particles inside their
+// window; their forces add up to the whole pass's (to rounding).
+TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
+  LoadedScene scene;
+  const MuscleSettings& settings = *fibremss::testing::preparedThigh(scene).muscles.front();
+  const size_t n = settings.particleCount();
+  std::vector<btVector3> x(settings.restPositions.begin(), settings.restPositions.end());
+  for (size_t i = 0; i < n; ++i)  // off rest, so that every spring and tetrahedron pulls
+    x[i] += btVector3(btScalar(1e-3) * std::sin(btScalar(i)),
+                      btScalar(1e-3) * std::cos(btScalar(i)), 0);
+  for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2}) {
+    if (!springKernelAvailable(kernel)) continue;
+    const std::vector<ForceChunk> chunks = forceChunks(settings, kernel, 300);
+    ASSERT_GT(chunks.size(), 3u) << springKernelName(kernel);
+    EXPECT_EQ(chunks.front().springBegin, 0u);
+    EXPECT_EQ(chunks.back().springEnd, springLayoutSize(settings, kernel));
+    EXPECT_EQ(chunks.back().tetEnd, settings.tetInverseVolume.size());
+    std::vector<btVector3> whole(n), sum(n, btVector3(0, 0, 0)), part(n);
+    springForces(settings, x, whole, kernel);
+    addTetrahedronForces(settings, x, whole, kernel);
+    for (size_t c = 0; c < chunks.size(); ++c) {
+      const ForceChunk& chunk = chunks[c];
+      if (c > 0) {
+        EXPECT_EQ(chunk.springBegin, chunks[c - 1].springEnd);
+        EXPECT_EQ(chunk.tetBegin, chunks[c - 1].tetEnd);
+      }
+      EXPECT_EQ(springLayoutBoundary(settings, kernel, chunk.springBegin), chunk.springBegin);
+      std::fill(part.begin(), part.end(), btVector3(0, 0, 0));
+      addSpringForces(settings, x, part, kernel, chunk.springBegin, chunk.springEnd);
+      addTetrahedronForces(settings, x, part, kernel, chunk.tetBegin, chunk.tetEnd);
+      for (uint32_t i = 0; i < n; ++i) {
+        const bool outside = i < chunk.lower || i >= chunk.upper;
+        EXPECT_TRUE(!outside || part[i] == btVector3(0, 0, 0))
+            << "chunk " << c << ", particle " << i;
+        sum[i] += part[i];
+      }
     }
-    EXPECT_EQ(many.contacts, one.contacts);
+    double largest = 0, scale = 0;
+    for (size_t i = 0; i < n; ++i) {
+      largest = std::max(largest, double((sum[i] - whole[i]).length()));
+      scale = std::max(scale, double(whole[i].length()));
+    }
+    EXPECT_GT(scale, 0);
+    EXPECT_LT(largest, 1e-5 * scale) << springKernelName(kernel);
   }
 }
 

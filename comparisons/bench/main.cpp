@@ -171,16 +171,25 @@ int callgrindKernels(int resolution) {
   return 0;
 }
 
-/// Milliseconds per iteration of `steps` whole steps of kIterationsPerStep iterations with
-/// `threads` solver threads.
+/// `steps` steps of the scene's poses; the iterations they ran (the guard's retries included).
+int stepPoses(BenchScene& scene, int steps) {
+  int iterations = 0;
+  for (int k = 0; k < steps; ++k) {
+    scene.stepPose();
+    iterations += scene.system().lastStep().iterations;
+  }
+  return iterations;
+}
+
+/// Milliseconds per iteration of `steps` steps with `threads` solver threads.
 double msPerIteration(BenchScene& scene, int threads, int steps) {
   scene.system().parameters().threads = threads;
   scene.stepPose();  // starts the pool for this thread count outside the timing
   const auto start = std::chrono::steady_clock::now();
-  for (int k = 0; k < steps; ++k) scene.stepPose();
+  const int iterations = stepPoses(scene, steps);
   const std::chrono::duration<double, std::milli> elapsed =
       std::chrono::steady_clock::now() - start;
-  return elapsed.count() / (steps * kIterationsPerStep);
+  return elapsed.count() / iterations;
 }
 
 double median(std::vector<double> values) {
@@ -211,15 +220,89 @@ class BusyCore {
   std::thread thread_;
 };
 
-/// Thread scaling in one run (issue 18): 1 and 2 solver threads alternated `rounds` times on
-/// thigh13 at `resolution`, then again with a busy loop on one core; medians per configuration.
+/// The balance of an iteration's tasks at 1 thread (issue 18), from thread CPU time (which
+/// other processes' load does not inflate): per phase its share of the iteration, its largest
+/// task's share of the phase and its speed-up on 2 threads under the pool's schedule of the
+/// measured tasks; then two bounds of the whole iteration's speed-up on 2–4 threads, the work
+/// outside tasks counted serial: the critical path (each phase max(largest task, work / T)) and
+/// the pool's schedule (TaskProfile::Phase::scheduleMs).
+void balanceReport(BenchScene& scene, int steps, size_t chunkWork) {
+  MuscleSystem& system = scene.system();
+  MuscleSystemAccess::impl(system).forceChunkWork = chunkWork;
+  system.parameters().threads = 1;
+  scene.stepPose();
+  TaskProfile profile;
+  TaskPool& pool = *MuscleSystemAccess::impl(system).pool;
+  pool.attach(&profile);
+  const int iterations = stepPoses(scene, steps);
+  pool.attach(nullptr);
+  const double perIteration = 1.0 / iterations;
+  double tasksMs = 0, boundMs[4] = {}, scheduleMs[4] = {};
+  for (const TaskProfile::Phase& phase : profile.phases) tasksMs += phase.taskMs * perIteration;
+  const double serial = profile.outsideMs * perIteration;
+  const double iterationMs = tasksMs + serial;
+  std::printf("%-20s %8s %9s %10s %9s %12s %11s\n", "phase (1 thread)", "runs/it", "tasks/run",
+              "CPU ms/it", "of the it", "largest task", "2 threads");
+  for (const TaskProfile::Phase& phase : profile.phases) {
+    if (!phase.name) break;
+    for (unsigned t = 1; t < 4; ++t) {
+      boundMs[t] += phase.boundMs[t] * perIteration;
+      scheduleMs[t] += phase.scheduleMs[t] * perIteration;
+    }
+    std::printf("%-20s %8.2f %9.1f %10.4f %8.1f%% %11.1f%% %10.2fx\n", phase.name,
+                static_cast<double>(phase.runs) * perIteration,
+                static_cast<double>(phase.tasks) / static_cast<double>(phase.runs),
+                phase.taskMs * perIteration, 100 * phase.taskMs * perIteration / iterationMs,
+                100 * phase.largestMs / phase.taskMs, phase.taskMs / phase.scheduleMs[1]);
+  }
+  std::printf("iteration %.3f ms CPU, %.3f ms outside tasks (%.1f%%)\n", iterationMs, serial,
+              100 * serial / iterationMs);
+  for (const auto& [name, ms] :
+       {std::pair{"critical-path bound", boundMs}, std::pair{"pool's schedule", scheduleMs}})
+    std::printf("  speed-up, %-20s 2 threads %.2fx, 3 threads %.2fx, 4 threads %.2fx\n", name,
+                iterationMs / (serial + ms[1]), iterationMs / (serial + ms[2]),
+                iterationMs / (serial + ms[3]));
+}
+
+/// Per-thread busy time (thread CPU time in tasks) of 2 threads over `steps` steps, against
+/// their wall time.
+void busyReport(BenchScene& scene, int steps) {
+  MuscleSystem& system = scene.system();
+  system.parameters().threads = 2;
+  scene.stepPose();
+  TaskProfile profile;
+  TaskPool& pool = *MuscleSystemAccess::impl(system).pool;
+  pool.attach(&profile);
+  const auto start = std::chrono::steady_clock::now();
+  const int iterations = stepPoses(scene, steps);
+  const std::chrono::duration<double, std::milli> wall = std::chrono::steady_clock::now() - start;
+  pool.attach(nullptr);
+  const double perIteration = 1.0 / iterations;
+  std::printf(
+      "2 threads: busy in tasks %.3f (caller) / %.3f (worker) ms per iteration of %.3f ms "
+      "wall\n",
+      profile.busyMs[0] * perIteration, profile.busyMs[1] * perIteration,
+      wall.count() * perIteration);
+}
+
+/// Thread scaling in one run (issue 18) on whole poses of thigh13 at `resolution` (the scene's
+/// iterations per pose): the balance of the tasks (balanceReport, with the forces phase in one
+/// task per muscle and in chunks) and the busy time of 2 threads, then 1 and 2 solver threads
+/// alternated `rounds` times, alone and with a busy loop on one core; medians per configuration
+/// in ms per iteration (the iterations counted, not assumed).
 int threadScaling(int resolution, int rounds) {
   BenchScene scene(resolution, 1);
-  scene.system().parameters().iterations = kIterationsPerStep;
   scene.system().parameters().stopRule = StopRule::Iterations;
-  constexpr int kSteps = 4;
-  std::printf("thigh13 R=%d, %zu particles, %d rounds of %d iterations per configuration\n",
-              resolution, scene.particles(), rounds, kSteps * kIterationsPerStep);
+  constexpr int kSteps = 2;
+  std::printf(
+      "thigh13 R=%d, %zu particles, poses of %d iterations, %d rounds of %d poses per "
+      "configuration\n",
+      resolution, scene.particles(), scene.system().parameters().iterations, rounds, kSteps);
+  std::printf("-- forces phase in one task per muscle:\n");
+  balanceReport(scene, kSteps, SIZE_MAX);
+  std::printf("-- forces phase in chunks (the default):\n");
+  balanceReport(scene, kSteps, kForceChunkWork);
+  busyReport(scene, kSteps);
   for (const bool busy : {false, true}) {
     std::optional<BusyCore> loop;
     if (busy) loop.emplace();

@@ -36,11 +36,11 @@ void MuscleSystem::Impl::collideBodies(btScalar dt) {
   if (contactBodies.empty()) return;
   // Without muscle or bone collision, collide() refitted no tree.
   if (!parameters.muscleMuscle && !parameters.muscleBone)
-    forEachMuscle([](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+    forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
   if (duration > 0)
     for (ContactBodyState& body : contactBodies) moveContactBody(body, dt);
   const bool velocities = integratorFor(parameters.integrator).usesVelocities();
-  forEachMuscle([&](MuscleState& state, uint32_t, unsigned thread) {
+  forEachMuscle("contact bodies", [&](MuscleState& state, uint32_t, unsigned thread) {
     fibremss::collideBodies(state, contactBodies, dt, velocities, scratch[thread].stack);
   });
   // In insertion order: the same sums for every thread count.

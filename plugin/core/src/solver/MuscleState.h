@@ -3,6 +3,7 @@
 // allocated once when the body is added. The immutable settings are shared, never copied.
 #include <LinearMath/btTransform.h>
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -13,6 +14,7 @@
 #include "contact/InteractionState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
+#include "solver/ForceChunks.h"
 #include "solver/Skin.h"
 
 class btCollisionObject;
@@ -111,6 +113,22 @@ struct TreeState {
   size_t candidateOverflows = 0;  ///< listings or pair contact records that overflowed, unsummed
 };
 
+/// A muscle's forces pass in chunks (ForceChunks.h): one task per chunk; the task that finishes
+/// the muscle's last chunk adds the chunks' buffers to `forces` in chunk order.
+struct ChunkState {
+  std::vector<ForceChunk> forceChunks;  ///< at least one; chunk 0 sums into ParticleState::forces
+  size_t chunkWork = 0;                 ///< the work per chunk forceChunks was made for
+  /// The forces of chunks c ≥ 1 [N]: chunk c's particle i at chunkForces[chunkBase[c] + i] for
+  /// i in its [lower, upper), the windows one after the other (a window may start later than
+  /// the last ended, never earlier than its chunk's lower: the base is never negative).
+  std::vector<btVector3> chunkForces;
+  std::vector<size_t> chunkBase;                ///< see chunkForces (chunk 0: unused)
+  std::vector<SpringForceResult> chunkSprings;  ///< what each chunk's springs measured
+  std::vector<double> chunkMs;                  ///< thread time of each chunk's task [ms]
+  std::vector<double> chunkVolumeMs;            ///< thread time of each chunk's volume term [ms]
+  std::atomic<size_t> chunksLeft{0};            ///< chunks of the running pass not yet done
+};
+
 /// The last good state (MuscleSystemGuard.cpp): saved at the start of a step, same sizes.
 struct GuardSnapshot {
   std::vector<btVector3> goodPositions;   ///< positions at the start of the step [m]
@@ -118,10 +136,15 @@ struct GuardSnapshot {
   std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
 };
 
-/// A muscle: settings, its bones and slot, and the state a step changes in five parts (stages
+/// A muscle: settings, its bones and slot, and the state a step changes in six parts (stages
 /// that need one part can take it alone). Solver settings are not here: the step passes them to
 /// the stages.
-struct MuscleState : ParticleState, ContactState, TreeState, GuardSnapshot, InteractionState {
+struct MuscleState : ParticleState,
+                     ChunkState,
+                     ContactState,
+                     TreeState,
+                     GuardSnapshot,
+                     InteractionState {
   std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
   std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
   std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)

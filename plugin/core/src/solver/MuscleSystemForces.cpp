@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "MuscleState.h"
 #include "ParticleSimd.h"
 #include "SpringForces.h"
 
@@ -240,14 +241,14 @@ FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_
   return deviation;
 }
 
-/// Every spring block on AVX2 (settings.springBlocks, laid out for these springs).
-FIBREMSS_AVX2 void avx2Springs(const SpringBlocks& blocks, const btVector3* x, btVector3* f,
-                               SpringForceResult& result) {
+/// The spring blocks' lanes [begin, end) on AVX2 (settings.springBlocks, laid out for these
+/// springs; begin and end multiples of 8).
+FIBREMSS_AVX2 void avx2Springs(const SpringBlocks& blocks, size_t begin, size_t end,
+                               const btVector3* x, btVector3* f, SpringForceResult& result) {
   const BlockArrays arrays{blocks.a.data(), blocks.b.data(), blocks.restLength.data(),
                            blocks.stiffness.data()};
-  const size_t lanes = blocks.b.size();
-  for (size_t s = 0; s < lanes; s += kDeviationBlock) {
-    const __m256 sums = addSpringBlocksAvx2(arrays, s, std::min(kDeviationBlock, lanes - s), x, f,
+  for (size_t s = begin; s < end; s += kDeviationBlock) {
+    const __m256 sums = addSpringBlocksAvx2(arrays, s, std::min(kDeviationBlock, end - s), x, f,
                                             result.overstretched);
     result.deviation +=
         laneSum(_mm256_castps256_ps128(sums)) + laneSum(_mm256_extractf128_ps(sums, 1));
@@ -358,26 +359,44 @@ void layoutSprings(MuscleSettings& settings) {
   settings.springBlocks = springBlocksFor(settings);
 }
 
-SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
-                               std::span<btVector3> forces, [[maybe_unused]] SpringKernel kernel) {
-  const Spring* springs = settings.springs.data();
-  const size_t count = settings.springs.size();
-  const btVector3* x = positions.data();
-  std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));
-  btVector3* f = forces.data();
+SpringKernel springLayoutKernel(const MuscleSettings& settings, SpringKernel kernel) {
+  if (kernel != SpringKernel::avx2) return kernel;
+  // Not laid out: the springs as they are.
+  return settings.springBlocks.springCount == settings.springs.size() ? kernel : SpringKernel::sse2;
+}
 
+size_t springLayoutSize(const MuscleSettings& settings, SpringKernel kernel) {
+  return springLayoutKernel(settings, kernel) == SpringKernel::avx2 ? settings.springBlocks.b.size()
+                                                                    : settings.springs.size();
+}
+
+size_t springLayoutBoundary(const MuscleSettings& settings, SpringKernel kernel, size_t index) {
+  const size_t size = springLayoutSize(settings, kernel);
+  if (index >= size) return size;
+  if (springLayoutKernel(settings, kernel) == SpringKernel::avx2)
+    return std::min(size, (index + 7) & ~size_t{7});  // a group of eight lanes
+  const std::vector<Spring>& springs = settings.springs;
+  while (index > 0 && index < size && springs[index].a == springs[index - 1].a) ++index;
+  return index;
+}
+
+SpringForceResult addSpringForces(const MuscleSettings& settings,
+                                  std::span<const btVector3> positions, std::span<btVector3> forces,
+                                  SpringKernel kernel, size_t begin, size_t end) {
+  const btVector3* x = positions.data();
+  btVector3* f = forces.data();
   SpringForceResult result;
-  if (count == 0) return result;
+  if (begin >= end) return result;
+  kernel = springLayoutKernel(settings, kernel);
 #if FIBREMSS_AVX2_SPRINGS
   if (kernel == SpringKernel::avx2) {
-    if (settings.springBlocks.springCount == count) {
-      avx2Springs(settings.springBlocks, x, f, result);
-      result.exploded = result.overstretched > 0;
-      return result;
-    }
-    kernel = SpringKernel::sse2;  // not laid out: the springs as they are
+    avx2Springs(settings.springBlocks, begin, end, x, f, result);
+    result.exploded = result.overstretched > 0;
+    return result;
   }
 #endif
+  const Spring* springs = settings.springs.data() + begin;
+  const size_t count = end - begin;
   RunSum tail{springs[0].a, btVector3(0, 0, 0)};
   size_t s = 0;
 #if FIBREMSS_SSE_SPRINGS
@@ -387,6 +406,13 @@ SpringForceResult springForces(const MuscleSettings& settings, std::span<const b
   f[tail.particle] += tail.sum;
   result.exploded = result.overstretched > 0;
   return result;
+}
+
+SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                               std::span<btVector3> forces, SpringKernel kernel) {
+  std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));
+  return addSpringForces(settings, positions, forces, kernel, 0,
+                         springLayoutSize(settings, kernel));
 }
 
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,

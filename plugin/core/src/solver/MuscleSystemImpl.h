@@ -77,6 +77,13 @@ struct MuscleIterationResult {
   double boneMs = 0;          ///< thread time of the muscle–bone pairs
 };
 
+/// One task of the forces phase: a chunk of a muscle's forces pass (ForceChunks.h).
+struct ForceTask {
+  uint32_t slot = 0;   ///< the muscle's slot
+  uint32_t chunk = 0;  ///< its chunk
+  size_t work = 0;     ///< the chunk's work (larger first)
+};
+
 /// Two muscles whose bounds meet in this iteration and the contacts their pair task recorded.
 struct MusclePairTask {
   uint32_t a = 0;           ///< slot of the first muscle (earlier in insertion order)
@@ -117,7 +124,11 @@ struct MuscleSystem::Impl {
   std::vector<ThreadScratch> scratch;          ///< per thread of the pool
   std::vector<uint32_t> active;                ///< unfrozen muscle slots, largest first
   std::vector<MuscleIterationResult> results;  ///< per muscle slot, this iteration
-  std::vector<MusclePairTask> pairTasks;       ///< muscle pairs of this iteration, in pair order
+  std::vector<ForceTask> forceTasks;           ///< every chunk of the active muscles, largest first
+  bool chunked = false;  ///< an active muscle's forces pass has more than one chunk
+  /// Work per chunk of the forces pass (ForceChunks.h); tests set less to split small muscles.
+  size_t forceChunkWork = kForceChunkWork;
+  std::vector<MusclePairTask> pairTasks;  ///< muscle pairs of this iteration, in pair order
   /// Per slot: its pairTasks in insertion order of the partners (the order its pushes sum in).
   std::vector<std::vector<uint32_t>> musclePairs;
   std::vector<MuscleContact> pairContacts;  ///< room for every muscle pair's contacts
@@ -150,12 +161,14 @@ struct MuscleSystem::Impl {
   /// Starts the pool for parameters.threads and sizes the per-thread and per-muscle scratch;
   /// allocates only when the thread count or the bodies changed (never in the iterations).
   void prepareWorkers();
-  /// Runs task(state, thread) for every active muscle on the pool.
+  /// Runs task(state, thread) for every active muscle on the pool (`phase` names the run in
+  /// a TaskProfile).
   template <typename Task>
-  void forEachMuscle(Task&& task) {
-    pool->run(active.size(), [&](size_t k, unsigned thread) {
-      task(*muscles.states[active[k]], active[k], thread);
-    });
+  void forEachMuscle(const char* phase, Task&& task) {
+    pool->run(
+        active.size(),
+        [&](size_t k, unsigned thread) { task(*muscles.states[active[k]], active[k], thread); },
+        phase);
   }
   /// Moves the contacts each thread logged into `contacts` (counts always; ends while room).
   void gatherContacts();
@@ -185,6 +198,17 @@ struct MuscleSystem::Impl {
   void respond(MuscleState& state) const;
   /// The pushes of the last collide() applied to every muscle (after the last iteration).
   void applyResponse();
+  /// The muscle's force chunks for forceChunkWork and their buffers (allocates only when the
+  /// work per chunk changed or the muscle is new).
+  void planChunks(MuscleState& state) const;
+  /// forceTasks of the active muscles, largest first.
+  void orderForceTasks();
+  /// The muscle's last response and this iteration's bone motion, timed into `result`.
+  void moveMuscle(MuscleState& state, MuscleIterationResult& result, bool bonesMove) const;
+  /// One chunk of a muscle's forces; the muscle's last chunk to finish runs finishForces.
+  void forceTask(const ForceTask& task, bool bonesMove);
+  /// The chunks' buffers added in chunk order, external forces, the muscle's eq 5.1 bound.
+  void finishForces(MuscleState& state, MuscleIterationResult& result);
   void forcesPhase(bool bonesMove);
   void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
   void step(const StepSize& size);

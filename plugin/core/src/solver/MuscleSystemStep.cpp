@@ -123,6 +123,12 @@ void MuscleSystem::Impl::prepareWorkers() {
     thread.stack.reserve(4096);
   }
   const size_t slots = muscles.states.size();
+  size_t chunks = 0;
+  for (uint32_t slot : muscles.order) {
+    planChunks(*muscles.states[slot]);
+    chunks += muscles.states[slot]->forceChunks.size();
+  }
+  forceTasks.reserve(chunks);
   active.reserve(slots);
   results.resize(slots);
   pairTasks.reserve(slots * (slots - std::min<size_t>(slots, 1)) / 2);
@@ -133,6 +139,41 @@ void MuscleSystem::Impl::prepareWorkers() {
   for (uint32_t a : muscles.order)
     for (const CandidateList& list : muscles.states[a]->muscleLists) room += list.pairs.size();
   if (pairContacts.size() < room) pairContacts.resize(room);
+}
+
+void MuscleSystem::Impl::planChunks(MuscleState& state) const {
+  if (state.chunkWork == forceChunkWork && !state.forceChunks.empty()) return;
+  const MuscleSettings& settings = *state.settings;
+  state.forceChunks = forceChunks(settings, fastestSpringKernel(), forceChunkWork);
+  state.chunkWork = forceChunkWork;
+  const size_t count = state.forceChunks.size();
+  state.chunkBase.assign(count, 0);
+  size_t end = 0;  // of the last window in chunkForces
+  for (size_t c = 1; c < count; ++c) {
+    const ForceChunk& chunk = state.forceChunks[c];
+    const size_t start = std::max<size_t>(end, chunk.lower);
+    state.chunkBase[c] = start - chunk.lower;
+    end = start + (chunk.upper - chunk.lower);
+  }
+  state.chunkForces.assign(end, btVector3(0, 0, 0));
+  state.chunkSprings.assign(count, SpringForceResult{});
+  state.chunkMs.assign(count, 0);
+  state.chunkVolumeMs.assign(count, 0);
+}
+
+void MuscleSystem::Impl::orderForceTasks() {
+  forceTasks.clear();
+  chunked = false;
+  for (uint32_t slot : active) {
+    const std::vector<ForceChunk>& chunks = muscles.states[slot]->forceChunks;
+    chunked = chunked || chunks.size() > 1;
+    for (uint32_t c = 0; c < chunks.size(); ++c) forceTasks.push_back({slot, c, chunks[c].work});
+  }
+  // Largest first: handed out in this order, the threads finish close together.
+  std::sort(forceTasks.begin(), forceTasks.end(), [](const ForceTask& x, const ForceTask& y) {
+    if (x.work != y.work) return x.work > y.work;
+    return x.slot != y.slot ? x.slot < y.slot : x.chunk < y.chunk;
+  });
 }
 
 void MuscleSystem::Impl::gatherContacts() {
@@ -227,11 +268,14 @@ void MuscleSystem::Impl::collideMusclePairs() {
       room += capacity;
     }
   }
-  pool->run(pairTasks.size(), [&](size_t k, unsigned thread) {
-    MusclePairTask& pair = pairTasks[k];
-    collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
-                   scratch[thread].contacts, pair.contacts);
-  });
+  pool->run(
+      pairTasks.size(),
+      [&](size_t k, unsigned thread) {
+        MusclePairTask& pair = pairTasks[k];
+        collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
+                       scratch[thread].contacts, pair.contacts);
+      },
+      "muscle pairs");
 }
 
 // A muscle's share of its pairs' contacts, in insertion order of its partners.
@@ -254,7 +298,7 @@ void MuscleSystem::Impl::collide() {
   if (parameters.muscleMuscle) collideMusclePairs();
   stats.timing.muscleCd += millisecondsSince(start);
   start = Clock::now();
-  forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned thread) {
+  forEachMuscle("pushes and bones", [&](MuscleState& state, uint32_t slot, unsigned thread) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point pushesStart = Clock::now();
     if (parameters.muscleMuscle) pushMusclePairs(state, slot, scratch[thread].stack);
@@ -288,30 +332,88 @@ void MuscleSystem::Impl::respond(MuscleState& state) const {
 }
 
 void MuscleSystem::Impl::applyResponse() {
-  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { respond(state); });
+  forEachMuscle("response", [this](MuscleState& state, uint32_t, unsigned) { respond(state); });
   pushesPending = false;
 }
 
-// Per muscle: the last iteration's response, this iteration's bone motion, spring and volume
-// forces and the muscle's eq 5.1 bound; then the reductions (in insertion order: the same sums
-// for every thread count).
+// The last iteration's response, then this iteration's bone motion (timed as forces).
+void MuscleSystem::Impl::moveMuscle(MuscleState& state, MuscleIterationResult& result,
+                                    bool bonesMove) const {
+  const Clock::time_point start = Clock::now();
+  respond(state);
+  const Clock::time_point followStart = Clock::now();
+  if (bonesMove) followBones(state);
+  result.forcesMs += millisecondsSince(followStart);
+  result.responseMs = millisecondsSince(start) - millisecondsSince(followStart);
+}
+
+void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
+  MuscleState& state = *muscles.states[task.slot];
+  MuscleIterationResult& result = results[task.slot];
+  const MuscleSettings& settings = *state.settings;
+  if (state.forceChunks.size() == 1) moveMuscle(state, result, bonesMove);  // whole: moved here
+  const Clock::time_point start = Clock::now();
+  const ForceChunk& chunk = state.forceChunks[task.chunk];
+  std::span<btVector3> forces = state.forces;
+  if (task.chunk == 0) {
+    std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));
+  } else {
+    forces = std::span(state.chunkForces).subspan(state.chunkBase[task.chunk], chunk.upper);
+    std::fill(forces.begin() + chunk.lower, forces.end(), btVector3(0, 0, 0));
+  }
+  const SpringKernel kernel = fastestSpringKernel();
+  state.chunkSprings[task.chunk] = addSpringForces(settings, state.positions, forces, kernel,
+                                                   chunk.springBegin, chunk.springEnd);
+  const Clock::time_point volumeStart = Clock::now();
+  addTetrahedronForces(settings, state.positions, forces, kernel, chunk.tetBegin, chunk.tetEnd);
+  state.chunkVolumeMs[task.chunk] = millisecondsSince(volumeStart);
+  state.chunkMs[task.chunk] = millisecondsSince(start);
+  if (state.chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) finishForces(state, result);
+}
+
+void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult& result) {
+  const Clock::time_point start = Clock::now();
+  result.forces = SpringForceResult{};
+  result.volumeMs = 0;
+  for (size_t c = 0; c < state.forceChunks.size(); ++c) {
+    if (c > 0) {
+      const ForceChunk& chunk = state.forceChunks[c];
+      const btVector3* add = state.chunkForces.data() + state.chunkBase[c];
+      // All four lanes (w is 0 in both), one vector add per particle.
+      for (uint32_t i = chunk.lower; i < chunk.upper; ++i)
+        for (int k = 0; k < 4; ++k) state.forces[i].m_floats[k] += add[i].m_floats[k];
+    }
+    result.forces.deviation += state.chunkSprings[c].deviation;
+    result.forces.overstretched += state.chunkSprings[c].overstretched;
+    result.forcesMs += state.chunkMs[c];
+    result.volumeMs += state.chunkVolumeMs[c];
+  }
+  result.forces.exploded = result.forces.overstretched > 0;
+  if (state.settings->tetInverseVolume.empty()) result.volumeMs = 0;
+  addExternalForces(state, parameters.gravity, state.forces);
+  if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+  result.forcesMs += millisecondsSince(start);
+}
+
+// Per chunk of every muscle (the largest first): spring and volume forces; the muscle's last
+// chunk adds them up and takes the muscle's eq 5.1 bound. The last iteration's response and this
+// iteration's bone motion come first: in the task of a muscle in one chunk, in a run of their
+// own for muscles in more (their chunks read every particle). Then the reductions (in insertion
+// order: the same sums for every thread count).
 void MuscleSystem::Impl::forcesPhase(bool bonesMove) {
   const Clock::time_point start = Clock::now();
-  forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
-    MuscleIterationResult& result = results[slot];
-    const Clock::time_point responseStart = Clock::now();
-    respond(state);
-    const Clock::time_point forcesStart = Clock::now();
-    result.responseMs = millisecondsSince(responseStart) - millisecondsSince(forcesStart);
-    if (bonesMove) followBones(state);
-    result.forces = springForces(state);
-    const Clock::time_point volumeStart = Clock::now();
-    addTetrahedronForces(*state.settings, state.positions, state.forces);
-    result.volumeMs = state.settings->tetInverseVolume.empty() ? 0 : millisecondsSince(volumeStart);
-    addExternalForces(state, parameters.gravity, state.forces);
-    if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
-    result.forcesMs = millisecondsSince(forcesStart);
-  });
+  for (uint32_t slot : active) {
+    MuscleState& state = *muscles.states[slot];
+    state.chunksLeft.store(state.forceChunks.size(), std::memory_order_relaxed);
+    results[slot].forcesMs = 0;
+  }
+  if (chunked)
+    forEachMuscle("move chunked muscles", [&](MuscleState& state, uint32_t slot, unsigned) {
+      if (state.forceChunks.size() > 1) moveMuscle(state, results[slot], bonesMove);
+    });
+  pool->run(
+      forceTasks.size(), [&](size_t k, unsigned) { forceTask(forceTasks[k], bonesMove); },
+      "forces");
   pushesPending = false;
   double deviation = 0;
   double restSum = 0;
@@ -342,7 +444,7 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
   const Clock::time_point start = Clock::now();
   const btScalar lastDt = previousDt > 0 ? previousDt : dt;
   const bool refit = parameters.muscleMuscle || parameters.muscleBone;
-  forEachMuscle([&](MuscleState& state, uint32_t slot, unsigned) {
+  forEachMuscle("integrate and refit", [&](MuscleState& state, uint32_t slot, unsigned) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
     const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
@@ -426,6 +528,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   };
   std::sort(active.begin(), active.end(),
             [&](uint32_t x, uint32_t y) { return cost(x) != cost(y) ? cost(x) > cost(y) : x < y; });
+  orderForceTasks();
 
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
@@ -458,7 +561,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     resolveBones(state);
   }
   if (rebuild)
-    forEachMuscle([this](MuscleState& state, uint32_t, unsigned) {
+    forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
       placeAtBones(state);
       rebuildTree(state);
     });
@@ -488,7 +591,8 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       applyResponse();
       stats.timing.response += millisecondsSince(start);
       if (!arrived)
-        forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { followBones(state); });
+        forEachMuscle("follow bones",
+                      [this](MuscleState& state, uint32_t, unsigned) { followBones(state); });
       break;
     }
   }
@@ -496,7 +600,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   endBodyContacts();
 
   const Clock::time_point outputStart = Clock::now();
-  forEachMuscle([this](MuscleState& state, uint32_t, unsigned) { deform(state); });
+  forEachMuscle("output", [this](MuscleState& state, uint32_t, unsigned) { deform(state); });
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.last = bone.current = bone.target;

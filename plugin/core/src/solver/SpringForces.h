@@ -3,9 +3,11 @@
 #include <cstddef>
 #include <span>
 
-#include "MuscleState.h"
+#include "fibremss/MuscleSettings.h"
 
 namespace fibremss {
+
+struct MuscleState;
 
 /// What one spring-force pass measured.
 struct SpringForceResult {
@@ -52,6 +54,21 @@ SpringForceResult springForces(const MuscleSettings& settings, std::span<const b
 /// springForces on the given kernel, which must be available (tests compare the kernels).
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces, SpringKernel kernel);
+
+/// The kernel springForces runs for `kernel` on `settings`: AVX2 only with springBlocks laid out
+/// for these springs, else SSE2.
+SpringKernel springLayoutKernel(const MuscleSettings& settings, SpringKernel kernel);
+/// The length of `kernel`'s layout of the springs: lanes of settings.springBlocks (AVX2), else
+/// springs. springForces runs [0, springLayoutSize).
+size_t springLayoutSize(const MuscleSettings& settings, SpringKernel kernel);
+/// The first index ≥ `index` where a range of `kernel`'s layout may begin or end: a multiple of
+/// eight lanes (AVX2), else the first spring of a run of springs that share a; at most the size.
+size_t springLayoutBoundary(const MuscleSettings& settings, SpringKernel kernel, size_t index);
+/// The forces of the layout's range [begin, end) (boundaries, see springLayoutBoundary) added into
+/// `forces` (not zeroed), in the order springForces takes them; what they measured.
+SpringForceResult addSpringForces(const MuscleSettings& settings,
+                                  std::span<const btVector3> positions, std::span<btVector3> forces,
+                                  SpringKernel kernel, size_t begin, size_t end);
 
 /// The muscle's spring forces at its positions, into muscle.forces.
 SpringForceResult springForces(MuscleState& muscle);

@@ -1,5 +1,8 @@
 #include "TaskPool.h"
 
+#include <ctime>
+#include <span>
+
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -38,7 +41,30 @@ T awaitChange(const std::atomic<T>& value, T old) {
   return value.load(std::memory_order_acquire);
 }
 
+/// When `threads` equally fast threads finish tasks of `ms` handed out in order, each to the
+/// first thread free (TaskPool::work) [ms].
+double scheduleEnd(std::span<const double> ms, unsigned threads) {
+  double free[TaskProfile::kThreads] = {};
+  for (double task : ms) *std::min_element(free, free + threads) += task;
+  return *std::max_element(free, free + threads);
+}
+
 }  // namespace
+
+double threadCpuMs() {
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
+}
+
+TaskProfile::Phase& TaskProfile::phase(const char* name) {
+  for (Phase& slot : phases)
+    if (slot.name == name || !slot.name) {
+      slot.name = name;
+      return slot;
+    }
+  return phases[kPhases - 1];
+}
 
 unsigned TaskPool::resolve(int threads) {
   if (threads > 0) return static_cast<unsigned>(threads);
@@ -48,6 +74,7 @@ unsigned TaskPool::resolve(int threads) {
 TaskPool::TaskPool(unsigned threads, const TaskScheduler& host) : host_(host) {
   const unsigned total = host_.present() ? 1 : threads == 0 ? resolve(0) : threads;
   workers_.reserve(total - 1);
+  times_.resize(host_.present() ? resolve(1, host_) : total);
   for (unsigned t = 1; t < total; ++t) workers_.emplace_back([this, t] { loop(t); });
 }
 
@@ -91,6 +118,62 @@ void TaskPool::runErased(size_t count, Call call, void* context) {
   work(0);
   for (size_t finished = done_.load(); finished != count; finished = done_.load())
     awaitChange(done_, finished);
+}
+
+void TaskPool::attach(TaskProfile* profile) {
+  profile_ = profile;
+  lastEndMs_ = -1;
+  if (!profile) return;
+  // The median time between two back-to-back reads.
+  constexpr int kReads = 201;
+  double gaps[kReads];
+  for (double& gap : gaps) {
+    const double first = threadCpuMs();
+    gap = threadCpuMs() - first;
+  }
+  std::nth_element(gaps, gaps + kReads / 2, gaps + kReads);
+  clockMs_ = gaps[kReads / 2];
+}
+
+void TaskPool::runProfiled(size_t count, Call call, void* context, const char* phase) {
+  const double beginMs = threadCpuMs();
+  if (lastEndMs_ >= 0) profile_->outsideMs += std::max(0.0, beginMs - lastEndMs_ - clockMs_);
+  struct Profiled {
+    Call call;
+    void* context;
+    std::vector<ThreadTimes>& times;
+    std::vector<double>& taskMs;
+    double clockMs;
+  } profiled{call, context, times_, taskMs_, clockMs_};
+  const Call timed = [](void* erased, size_t index, unsigned thread) {
+    const Profiled& job = *static_cast<const Profiled*>(erased);
+    const double start = threadCpuMs();
+    job.call(job.context, index, thread);
+    const double ms = std::max(0.0, threadCpuMs() - start - job.clockMs);
+    ThreadTimes& own = job.times[thread];
+    own.totalMs += ms;
+    own.largestMs = std::max(own.largestMs, ms);
+    job.taskMs[index] = ms;
+  };
+  std::fill(times_.begin(), times_.end(), ThreadTimes{});
+  if (taskMs_.size() < count) taskMs_.resize(count);
+  runErased(count, timed, &profiled);
+  TaskProfile::Phase& slot = profile_->phase(phase);
+  double total = 0, largest = 0;
+  for (size_t t = 0; t < times_.size(); ++t) {
+    total += times_[t].totalMs;
+    largest = std::max(largest, times_[t].largestMs);
+    if (t < TaskProfile::kThreads) profile_->busyMs[t] += times_[t].totalMs;
+  }
+  ++slot.runs;
+  slot.tasks += count;
+  slot.taskMs += total;
+  slot.largestMs += largest;
+  for (unsigned t = 0; t < TaskProfile::kThreads; ++t) {
+    slot.boundMs[t] += std::max(largest, total / (t + 1));
+    slot.scheduleMs[t] += scheduleEnd({taskMs_.data(), count}, t + 1);
+  }
+  lastEndMs_ = threadCpuMs();
 }
 
 void TaskPool::work(unsigned thread) {

@@ -1,8 +1,9 @@
 #pragma once
 // A small fixed pool of worker threads owned by the plugin (Debian's Bullet has no task
-// scheduler), internal. A step is a fork–join of a dozen per-muscle tasks per phase, several
-// phases per iteration: it wants a cheap wake-up and no allocation more than work stealing,
-// and a pool of its own adds no dependency to the library.
+// scheduler), internal. A step is a fork–join of a dozen to a few dozen tasks per phase (per
+// muscle, per chunk of a muscle's forces, per muscle pair), several phases per iteration: it wants
+// a cheap wake-up and no allocation more than work stealing, and a pool of its own adds no
+// dependency to the library.
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
@@ -14,6 +15,40 @@
 #include "fibremss/TaskScheduler.h"
 
 namespace fibremss {
+
+/// The thread CPU time of the tasks of every run() while attached to a pool (TaskPool::attach),
+/// per phase name: fibremss_bench's balance report (issue 18). Thread CPU time does not count
+/// the time another process holds the core, so the shares hold on a loaded machine. A profiled
+/// run reads the thread clock twice per task.
+struct TaskProfile {
+  static constexpr size_t kPhases = 16;    ///< distinct phase names kept (more: the last slot)
+  static constexpr unsigned kThreads = 8;  ///< thread counts the bounds are given for
+  /// What the runs of one phase cost.
+  struct Phase {
+    const char* name = nullptr;  ///< run()'s phase name (null: an unused slot)
+    size_t runs = 0;             ///< run() calls
+    size_t tasks = 0;            ///< tasks run
+    double taskMs = 0;           ///< Σ of the tasks' thread CPU time [ms]
+    double largestMs = 0;        ///< Σ over runs of the run's largest task [ms]
+    /// Σ over runs of max(largest task, task time / T) for T = index + 1: no schedule of the
+    /// run's tasks on T threads ends sooner (the critical-path bound) [ms].
+    double boundMs[kThreads] = {};
+    /// Σ over runs of the end of the pool's own schedule of the measured tasks on T = index + 1
+    /// equally fast threads (each task, in index order, to the first thread free) [ms].
+    double scheduleMs[kThreads] = {};
+  };
+  Phase phases[kPhases];         ///< by first appearance of the name
+  double busyMs[kThreads] = {};  ///< thread CPU time in tasks per pool thread (0: the caller) [ms]
+  /// The caller's thread CPU time between runs (from the end of one to the start of the next):
+  /// the serial work between the phases [ms].
+  double outsideMs = 0;
+
+  /// The slot of phase `name` (pointer identity: names are string literals).
+  Phase& phase(const char* name);
+};
+
+/// The calling thread's CPU time [ms] (CLOCK_THREAD_CPUTIME_ID).
+double threadCpuMs();
 
 /// threads − 1 workers plus the calling thread. run() hands out task indices one at a time
 /// from a shared counter (largest tasks first balances best), so which thread runs a task
@@ -37,14 +72,23 @@ class TaskPool {
   const TaskScheduler& host() const { return host_; }
 
   /// Calls task(index, thread) for every index in [0, count) and returns when all are done;
-  /// thread < threads() names the running thread's scratch (0: the caller).
+  /// thread < threads() names the running thread's scratch (0: the caller). `phase` names the
+  /// run in an attached profile.
   template <typename Task>
-  void run(size_t count, Task&& task) {
+  void run(size_t count, Task&& task, const char* phase = "tasks") {
     auto call = [](void* context, size_t index, unsigned thread) {
       (*static_cast<std::remove_reference_t<Task>*>(context))(index, thread);
     };
-    runErased(count, call, const_cast<void*>(static_cast<const void*>(&task)));
+    void* context = const_cast<void*>(static_cast<const void*>(&task));
+    if (profile_)
+      runProfiled(count, call, context, phase);
+    else
+      runErased(count, call, context);
   }
+
+  /// Records every later run() in `profile` (null: stops). Not during a run. Measures what a
+  /// read of the thread clock costs, which every task's time then leaves out.
+  void attach(TaskProfile* profile);
 
   /// The thread count a `threads` setting means (0: hardware threads, at least 1).
   static unsigned resolve(int threads);
@@ -57,6 +101,8 @@ class TaskPool {
   using Call = void (*)(void* context, size_t index, unsigned thread);
 
   void runErased(size_t count, Call call, void* context);
+  /// runErased with each task's thread CPU time added to profile_.
+  void runProfiled(size_t count, Call call, void* context, const char* phase);
   /// runErased on the host scheduler: one enqueued task, then its finish.
   void runOnHost(size_t count, Call call, void* context) const;
   /// Runs tasks of the current job until the counter passes its end.
@@ -74,6 +120,16 @@ class TaskPool {
   size_t count_ = 0;                     ///< tasks of the current job
   Call call_ = nullptr;                  ///< the current job's trampoline
   void* context_ = nullptr;              ///< the current job's task object
+  TaskProfile* profile_ = nullptr;       ///< attached profile, or null
+  /// A profiled run's sums per thread, each written by its own thread only.
+  struct alignas(64) ThreadTimes {
+    double totalMs = 0;    ///< Σ task thread CPU time in this run [ms]
+    double largestMs = 0;  ///< largest task in this run [ms]
+  };
+  std::vector<ThreadTimes> times_;  ///< per thread of the pool
+  std::vector<double> taskMs_;      ///< a profiled run's task times by index [ms]
+  double clockMs_ = 0;              ///< what one read of the thread clock costs [ms]
+  double lastEndMs_ = -1;           ///< the caller's thread clock when the last run ended [ms]
 };
 
 }  // namespace fibremss

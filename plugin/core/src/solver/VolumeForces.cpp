@@ -265,11 +265,13 @@ FIBREMSS_AVX2_PASS void avxPass(Tetrahedra t, size_t count, btScalar modulus, co
 #endif
 
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
-                          std::span<btVector3> forces, [[maybe_unused]] SpringKernel kernel) {
+                          std::span<btVector3> forces, [[maybe_unused]] SpringKernel kernel,
+                          size_t begin, size_t end) {
   const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
-  const Tetrahedra t{settings.tetParticles.data(), settings.tetInverseVolume.data(),
-                     settings.tetRestGradient.data()};
-  const size_t count = settings.tetInverseVolume.size();
+  const Tetrahedra t{settings.tetParticles.data() + 4 * begin,
+                     settings.tetInverseVolume.data() + begin,
+                     settings.tetRestGradient.data() + begin};
+  const size_t count = end - begin;
 #if FIBREMSS_AVX2_PARTICLES
   if (kernel == SpringKernel::avx2)
     return avxPass(t, count, modulus, positions.data(), forces.data());
@@ -279,6 +281,11 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
     return ssePass(t, count, modulus, positions.data(), forces.data());
 #endif
   scalarTetrahedra(t, 0, count, modulus, positions.data(), forces.data());
+}
+
+void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, SpringKernel kernel) {
+  addTetrahedronForces(settings, positions, forces, kernel, 0, settings.tetInverseVolume.size());
 }
 
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,

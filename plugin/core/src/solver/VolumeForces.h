@@ -28,6 +28,11 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
 /// The same on `kernel`'s instruction set (tests compare them).
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces, SpringKernel kernel);
+/// The same for the tetrahedra [begin, end) only, grouped as if they were the whole list (a task's
+/// share of the muscle: the order depends on the range, not on the thread).
+void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, SpringKernel kernel, size_t begin,
+                          size_t end);
 
 /// Adds to each free particle's row of `stiffness` half the Gershgorin bound of the volume
 /// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j|·G0/G per tetrahedron [N/m]:
