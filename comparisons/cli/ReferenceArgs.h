@@ -38,6 +38,13 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
                   "node to surface, every bone a rigid obstacle); 0: no contact")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e9));
+  command
+      .add_option("--ccx-memory", options.definition.memoryLimitGiB,
+                  "Memory limit of each ccx run [GiB] (its address space); a run that exceeds "
+                  "it fails with a message per pose instead of taking the machine's memory; 0: "
+                  "no limit")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   command.add_flag("--reference-cached-only", options.cachedOnly,
                    "Use the reference (and each gate's solve) only if it is in the cache; what is "
                    "not there is reported missing, not computed");

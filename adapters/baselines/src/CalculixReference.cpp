@@ -15,6 +15,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+/// What a failure says after an allocation error when ccx ran under a memory limit.
+constexpr const char* kMemoryLimitNote = "ccx's memory limit is ";
+
 double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
@@ -104,7 +107,7 @@ btTransform stepTransform(const LoadedScene& scene, size_t bone, int step, int p
 
 /// The bones as rigid contact obstacles of the job (CalculixContact): each bone's rest mesh
 /// meshed by tetgen, its nodes appended and prescribed to follow the bone at every step, the
-/// muscle's free surface vertices the slaves.
+/// muscle's free surface nodes (midside nodes of C3D10 included) the slaves.
 void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedScene& prepared,
                     const CalculixDefinition& definition, const std::string& workDir) {
   CalculixJob& job = result.job;
@@ -126,11 +129,10 @@ void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedS
       for (uint32_t corner : t) contact.tetrahedra.push_back(first + corner);
   }
   contact.faces = boundaryFaces(contact.tetrahedra);
-  std::vector<bool> held(result.surfaceVertices, false);
-  for (uint32_t n : job.prescribed)
-    if (n < held.size()) held[n] = true;
-  for (uint32_t v = 0; v < result.surfaceVertices; ++v)
-    if (!held[v]) contact.slaves.push_back(v);
+  std::vector<bool> held(job.nodes.size(), false);
+  for (uint32_t n : job.prescribed) held[n] = true;
+  for (uint32_t n : surfaceNodes(job, result.surfaceVertices))
+    if (!held[n]) contact.slaves.push_back(n);
   contact.stiffness = definition.contactPenalty * definition.material.youngsModulus;
   contact.tension = 1e-3 * definition.material.youngsModulus;
 }
@@ -222,13 +224,21 @@ StaSummary readSta(const std::string& path) {
   return summary;
 }
 
-/// The last line of ccx's log that says what went wrong ("*ERROR ..."), else its exit status.
-std::string ccxFailure(const std::string& logPath, int status) {
+/// The last line of ccx's log that says what went wrong ("*ERROR ..."), else its exit status;
+/// a failed allocation names the memory limit it ran into.
+std::string ccxFailure(const std::string& logPath, int status, double memoryLimitGiB) {
   std::ifstream in(logPath);
   std::string line, error;
   while (std::getline(in, line))
     if (line.find("ERROR") != std::string::npos) error = line.substr(line.find_first_not_of(' '));
-  return error.empty() ? "ccx stopped (exit " + std::to_string(status) + ")" : error;
+  if (error.empty()) return "ccx stopped (exit " + std::to_string(status) + ")";
+  if (memoryLimitGiB > 0 && error.find("allocat") != std::string::npos) {
+    std::ostringstream limit;
+    limit << error << " (" << kMemoryLimitNote << memoryLimitGiB
+          << " GiB: --ccx-memory sets it, 0 for none)";
+    return limit.str();
+  }
+  return error;
 }
 
 /// Runs one muscle's job; per step the surface positions (empty where ccx gave none) and the
@@ -245,8 +255,10 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
   }
   std::filesystem::remove(base + ".sta");
   std::filesystem::remove(base + ".dat");
-  const int status = runProgram({definition.program, "-i", muscle.stem}, workDir, base + ".log",
-                                [&] { return poll(readSta(base + ".sta").stepsDone); });
+  const int status = runProgram(
+      {definition.program, "-i", muscle.stem}, workDir, base + ".log",
+      [&] { return poll(readSta(base + ".sta").stepsDone); },
+      static_cast<uint64_t>(definition.memoryLimitGiB * (1ull << 30)));
   sta = readSta(base + ".sta");
   std::ifstream dat(base + ".dat");
   const std::vector<CalculixTable> tables = readCalculixDat(dat, base + ".dat");
@@ -267,7 +279,9 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
     for (size_t i = 0; i < muscle.moved.size(); ++i)
       surface[muscle.moved[i]] = muscle.movedPositions[s][i];
   }
-  failure = static_cast<int>(ends.size()) == steps ? "" : ccxFailure(base + ".log", status);
+  failure = static_cast<int>(ends.size()) == steps
+                ? ""
+                : ccxFailure(base + ".log", status, definition.memoryLimitGiB);
 }
 
 }  // namespace
@@ -278,6 +292,13 @@ int CalculixSolution::solvedPoses() const {
          !poseSurfaces[static_cast<size_t>(solved)].empty())
     ++solved;
   return solved;
+}
+
+bool CalculixSolution::hitMemoryLimit() const {
+  const auto named = [](const std::string& failure) {
+    return failure.find(kMemoryLimitNote) != std::string::npos;
+  };
+  return named(returnFailure) || std::any_of(poseFailures.begin(), poseFailures.end(), named);
 }
 
 CalculixSolution solveCalculixReference(
