@@ -442,6 +442,22 @@ TEST(ReferenceGates, SpreadIsBetweenTheBestRunOfEachMethod) {
   EXPECT_TRUE(std::isnan(methodSpreadMm(runs)));
 }
 
+TEST(ReferenceOptions, SpherePlanesIsSolvedAsC3D10WithAStifferPenaltyUnlessGiven) {
+  const LoadedScene sphere = loadScene("sphere-planes", {});
+  const LoadedScene fusiform = loadScene("fusiform", {});
+  ReferenceOptions options;
+  const CalculixDefinition chosen = sceneDefinition(sphere, options);
+  EXPECT_EQ(chosen.element, CalculixElement::C3D10);
+  EXPECT_EQ(chosen.contactPenalty, kSpherePlanesContactPenalty);
+  const CalculixDefinition other = sceneDefinition(fusiform, options);
+  EXPECT_EQ(other.element, CalculixElement::C3D4) << "other scenes keep the defaults";
+  EXPECT_EQ(other.contactPenalty, CalculixDefinition().contactPenalty);
+  options.elementGiven = options.contactPenaltyGiven = true;
+  const CalculixDefinition given = sceneDefinition(sphere, options);
+  EXPECT_EQ(given.element, CalculixElement::C3D4) << "the command line's choice stands";
+  EXPECT_EQ(given.contactPenalty, CalculixDefinition().contactPenalty);
+}
+
 TEST(ReferenceCache, StoresAndReadsBackASolution) {
   TemporaryDirectory dir("reference_cache_test");
   CalculixSolution solution;
