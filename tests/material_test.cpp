@@ -176,8 +176,10 @@ btScalar axialCosine(const MuscleSettings& muscle, const Spring& spring) {
 }
 
 TEST(Anisotropy, SpringsAlongTheFibresGetTheRatio) {
-  const MuscleSettings iso = preparedCylinder("cylinder-stretch", {});
-  const MuscleSettings aniso = preparedCylinder("cylinder-stretch", {"fibre_stiffness_ratio=3"});
+  // By length, so that the factor is the anisotropy's alone (by volume the network is rescaled).
+  const MuscleSettings iso = preparedCylinder("cylinder-stretch", {"spring_stiffness=length"});
+  const MuscleSettings aniso =
+      preparedCylinder("cylinder-stretch", {"spring_stiffness=length", "fibre_stiffness_ratio=3"});
   ASSERT_EQ(iso.springs.size(), aniso.springs.size());
   size_t along = 0, across = 0;
   for (size_t s = 0; s < iso.springs.size(); ++s) {
@@ -237,6 +239,47 @@ TEST(Anisotropy, StretchingAlongTheFibresTakesMoreForce) {
   ASSERT_GT(iso, 0);
   EXPECT_GT(aniso / iso, 1.5);
   EXPECT_LT(aniso / iso, 3);
+}
+
+/// Σ k·L0² of the springs whose midpoint lies in y ∈ [low, high] over the muscle's volume there
+/// (the surface sampled on a 2 mm grid): the modulus of that slab of the network [Pa].
+double slabModulus(const MuscleSettings& muscle, btScalar low, btScalar high) {
+  double network = 0;
+  for (const Spring& spring : muscle.springs) {
+    const btScalar y =
+        (muscle.restPositions[spring.a].y() + muscle.restPositions[spring.b].y()) / 2;
+    if (y >= low && y < high)
+      network += double(spring.stiffness) * spring.restLength * spring.restLength;
+  }
+  const MeshDistance surface(muscle.restSurface);
+  const btScalar step = 0.002;
+  size_t inside = 0;
+  for (btScalar x = -0.025; x < 0.025; x += step)
+    for (btScalar y = low + step / 2; y < high; y += step)
+      for (btScalar z = -0.025; z < 0.025; z += step) inside += surface.inside(btVector3(x, y, z));
+  return network / (double(inside) * step * step * step);
+}
+
+TEST(SpringStiffness, ByVolumeTheSpindlesThinEndIsAsStiffPerVolumeAsItsBelly) {
+  // fusiform: as many fibres through its 6 mm ends as through its 20 mm belly. By length
+  // (k = κ/L0) an end slab holds about the belly's Σk·L0² in a quarter of its volume; by volume
+  // the springs share the stiffness as a continuum's E·A would.
+  const auto prepare = [](const char* rule) {
+    const LoadedScene scene =
+        loadScene("fusiform", {"resolution=30", std::string("spring_stiffness=") + rule});
+    return *prepareScene(scene.bones, scene.muscles, scene.simulation.seed).muscles.at(0);
+  };
+  const MuscleSettings volume = prepare("volume"), length = prepare("length");
+  const btScalar endLow = 0.095, endHigh = 0.125, bellyLow = -0.015, bellyHigh = 0.015;
+  const double byVolume =
+      slabModulus(volume, endLow, endHigh) / slabModulus(volume, bellyLow, bellyHigh);
+  const double byLength =
+      slabModulus(length, endLow, endHigh) / slabModulus(length, bellyLow, bellyHigh);
+  EXPECT_GT(byLength, 2) << "by length the thin end is stiffer per volume";
+  EXPECT_GT(byVolume, 0.67);
+  EXPECT_LT(byVolume, 1.5);
+  // The network's modulus is shared, not changed: the same Σk·L0² (fixed springs dropped alike).
+  EXPECT_NEAR(volume.volumeModulus, length.volumeModulus, 0.1 * length.volumeModulus);
 }
 
 }  // namespace

@@ -91,8 +91,12 @@ std::vector<BoneInput> endBonesAnd(std::vector<BoneInput> more) {
   return bones;
 }
 
-void expectWellFormedSprings(const MuscleSettings& muscle, btScalar kappa) {
+/// Sorted springs with their rest lengths; k = κ/L0 by length, and by volume k·L0 varies but the
+/// network keeps κ/L0's Σ k·L0² = κ·Σ L0 (these muscles have no fixed springs to drop).
+void expectWellFormedSprings(const MuscleSettings& muscle, const SpringParameters& parameters) {
   ASSERT_FALSE(muscle.springs.empty());
+  const btScalar kappa = parameters.kappa;
+  double network = 0, lengths = 0;
   for (size_t s = 0; s < muscle.springs.size(); ++s) {
     const Spring& spring = muscle.springs[s];
     ASSERT_LT(spring.a, spring.b);
@@ -105,8 +109,13 @@ void expectWellFormedSprings(const MuscleSettings& muscle, btScalar kappa) {
     const btScalar distance =
         (muscle.restPositions[spring.a] - muscle.restPositions[spring.b]).length();
     EXPECT_NEAR(spring.restLength, distance, 1e-7);
-    EXPECT_NEAR(spring.stiffness * spring.restLength, kappa, kappa * 1e-5);
+    if (parameters.stiffness == SpringStiffness::Length)
+      EXPECT_NEAR(spring.stiffness * spring.restLength, kappa, kappa * 1e-5);
+    EXPECT_GT(spring.stiffness, 0);
+    network += double(spring.stiffness) * spring.restLength * spring.restLength;
+    lengths += spring.restLength;
   }
+  EXPECT_NEAR(network, kappa * lengths, kappa * lengths * 1e-4);
 }
 
 PreparedScene prepareOne(const MuscleInput& muscle, std::vector<BoneInput> bones = {},
@@ -205,7 +214,7 @@ TEST(Springs, LatticeCountsMatchTheGrid) {
                            size_t(rows) * (columns - 1) * samples +
                            size_t(rows) * columns * (samples - 1);
   EXPECT_EQ(six.muscles[0]->springs.size(), expected6);
-  expectWellFormedSprings(*six.muscles[0], input.parameters.springs.kappa);
+  expectWellFormedSprings(*six.muscles[0], input.parameters.springs);
 
   input.parameters.springs.layout = SpringLayout::Lattice26;
   const PreparedScene all = prepareOne(input);
@@ -214,7 +223,7 @@ TEST(Springs, LatticeCountsMatchTheGrid) {
   const size_t expected26 =
       (size_t(3 * rows - 2) * (3 * columns - 2) * (3 * samples - 2) - cells) / 2;
   EXPECT_EQ(all.muscles[0]->springs.size(), expected26);
-  expectWellFormedSprings(*all.muscles[0], input.parameters.springs.kappa);
+  expectWellFormedSprings(*all.muscles[0], input.parameters.springs);
   // Lattice6 neighbours are one step apart in exactly one grid direction (grid index: fibre ·
   // samples + place along it; preparation renumbers the particles).
   const MuscleSettings& lattice = *six.muscles[0];
@@ -254,7 +263,7 @@ TEST(Springs, NearestNeighboursOnALine) {
   std::set<std::pair<uint32_t, uint32_t>> actual;
   for (const Spring& s : two.muscles[0]->springs) actual.emplace(s.a, s.b);
   EXPECT_EQ(actual, expected);
-  expectWellFormedSprings(*two.muscles[0], input.parameters.springs.kappa);
+  expectWellFormedSprings(*two.muscles[0], input.parameters.springs);
 
   input.parameters.springs.neighbours = 1;
   const PreparedScene one = prepareOne(input);
@@ -286,7 +295,7 @@ TEST(Springs, NearestNeighbourUnionContainsEveryParticlesNearest) {
   const MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 8);
   const PreparedScene scene = prepareOne(input);
   const MuscleSettings& muscle = *scene.muscles[0];
-  expectWellFormedSprings(muscle, input.parameters.springs.kappa);
+  expectWellFormedSprings(muscle, input.parameters.springs);
   std::set<std::pair<uint32_t, uint32_t>> pairs;
   for (const Spring& s : muscle.springs) pairs.emplace(s.a, s.b);
   std::vector<int> degree(muscle.particleCount(), 0);
@@ -341,7 +350,7 @@ TEST(Springs, DelaunayContainsTheNearestNeighbourGraph) {
   input.parameters.springs.layout = SpringLayout::Delaunay;
   const PreparedScene scene = prepareOne(input);
   const MuscleSettings& muscle = *scene.muscles[0];
-  expectWellFormedSprings(muscle, input.parameters.springs.kappa);
+  expectWellFormedSprings(muscle, input.parameters.springs);
   std::set<std::pair<uint32_t, uint32_t>> pairs;
   for (const Spring& s : muscle.springs) pairs.emplace(s.a, s.b);
   for (uint32_t i = 0; i < muscle.particleCount(); ++i) {
@@ -461,7 +470,7 @@ TEST(MergeParticles, ConvergingFibresMergeAndNoSpringIsShorterThanTheDistance) {
   EXPECT_EQ(muscle.particleCount(), report.sampledParticles - report.mergedParticles);
   // The step is about 5 mm (10 cm / 20); a quarter of it is the merge distance.
   EXPECT_NEAR(report.mergeDistance, 0.25 * 0.1 / 20, 0.25 * 0.1 / 20 * 0.05);
-  expectWellFormedSprings(muscle, input.parameters.springs.kappa);
+  expectWellFormedSprings(muscle, input.parameters.springs);
   btScalar shortest = 1;
   for (const Spring& spring : muscle.springs) shortest = std::min(shortest, spring.restLength);
   EXPECT_EQ(report.shortestSpring, shortest);

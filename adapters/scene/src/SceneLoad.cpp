@@ -301,6 +301,9 @@ SpringParameters readModel(Fields& model) {
   fromString(layout, springs.layout);
   springs.neighbours = model.integer("neighbours", springs.neighbours, 1, 1000);
   springs.kappa = btScalar(model.number("kappa", springs.kappa, 0, kInf, true));
+  fromString(
+      model.choice("spring_stiffness", toString(springs.stiffness), namesOf<SpringStiffness>()),
+      springs.stiffness);
   const Json* damping = model.raw("damping");
   if (!damping || (damping->is_string() && damping->get<std::string>() == "auto")) {
     model.set("damping", "auto");

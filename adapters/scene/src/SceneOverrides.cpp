@@ -26,6 +26,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"layout", {Target::Section, "model"}},
       {"neighbours", {Target::Section, "model"}},
       {"kappa", {Target::Section, "model"}},
+      {"spring_stiffness", {Target::Section, "model"}},
       {"damping", {Target::Section, "model"}},
       {"density", {Target::Section, "model"}},
       {"volume_stiffness", {Target::Section, "model"}},

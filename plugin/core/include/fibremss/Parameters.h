@@ -19,11 +19,25 @@ enum class SpringLayout : uint8_t {
   Lattice26,          ///< fibre grid × samples, 26-neighbourhood
 };
 
+/// How a muscle's springs share the network's stiffness.
+enum class SpringStiffness : uint8_t {
+  /// k = κ/L0 times the volume of muscle around the spring per length of spring (its particles'
+  /// quarters of the interior tetrahedra over the Σ L0 of their springs), scaled so that the
+  /// network's Σ k·L0² is that of κ/L0 (default). A fibre-sampled muscle has as many fibres through
+  /// a thin end as through its
+  /// belly, so with κ/L0 the end is as stiff as the belly; a continuum's is E·A, and the end
+  /// stretches more (fusiform's equilibrium: 1.46 mm RMS to the CalculiX reference by length,
+  /// 0.39 mm by volume).
+  Volume,
+  Length,  ///< k = κ / L0 (the thesis, method.md §3)
+};
+
 /// Springs and masses of one muscle (method.md §3).
 struct SpringParameters {
   SpringLayout layout = SpringLayout::NearestNeighbours;  ///< spring layout
   int neighbours = 18;                                    ///< N for the N-nearest layout
-  btScalar kappa = 1.0;   ///< material constant κ [N]; spring stiffness k = κ / L0
+  btScalar kappa = 1.0;  ///< material constant κ [N]; spring stiffness k = κ / L0
+  SpringStiffness stiffness = SpringStiffness::Volume;  ///< how the springs share κ
   btScalar damping = -1;  ///< damping coefficient c [N·s/m]; < 0: Zeleny's estimate × scale
   /// Factor on Zeleny's estimate (used when damping < 0). The estimate damps the stiffest
   /// modes critically and so over-damps the slow, whole-muscle ones, which then creep. Measured
@@ -151,12 +165,14 @@ struct SimulationParameters {
 };
 
 const char* toString(SpringLayout layout);
+const char* toString(SpringStiffness rule);
 const char* toString(Integrator integrator);
 const char* toString(StopRule rule);
 const char* toString(BoneCollision mode);
 const char* toString(FailurePolicy policy);
 /// Parse by name (as in toString); return false for an unknown name.
 bool fromString(const std::string& name, SpringLayout& layout);
+bool fromString(const std::string& name, SpringStiffness& rule);
 bool fromString(const std::string& name, Integrator& integrator);
 bool fromString(const std::string& name, StopRule& rule);
 bool fromString(const std::string& name, BoneCollision& mode);

@@ -409,6 +409,13 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   const KdTree particles(muscle.restPositions);
   muscle.springs =
       detail::buildSprings(input, muscle.restPositions, particles, detail::fibreDirections(muscle));
+  std::vector<detail::Tetrahedron> interior =
+      detail::interiorTetrahedra(input, muscle.restPositions, muscle.restSurface);
+  if (parameters.springs.stiffness == SpringStiffness::Volume &&
+      !detail::shareStiffnessByVolume(muscle.restPositions, interior, muscle.springs))
+    warnings.push_back(source +
+                       ": the particles enclose no volume to share the springs' stiffness by; "
+                       "they keep k = κ/L0 (spring_stiffness \"length\")");
   attachToBones(input, bones, boneInputs, muscle, warnings);
   if (detail::dropFixedSprings(muscle) > 0 && muscle.springs.empty())
     warnings.push_back(source + ": every spring links two fixed particles, nothing moves");
@@ -421,7 +428,9 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
         return bones[static_cast<size_t>(bone)].distance->closest(p, limit).distance;
       });
   detail::bindSurface(muscle, particles, parameters.skinNeighbours);
-  detail::reorderParticles(muscle, detail::mortonOrder(muscle.restPositions));
+  const std::vector<uint32_t> order = detail::mortonOrder(muscle.restPositions);
+  detail::reorderParticles(muscle, order);
+  detail::renumberTetrahedra(interior, order);
   muscle.restVolume = meshVolume(muscle.restSurface);
   double network = 0;  // Σ k·L0²
   for (const Spring& spring : muscle.springs)
@@ -429,7 +438,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   // The bulk modulus as a multiple of the network's Young's modulus E = Σk·L0² / 3V.
   const double youngs = muscle.restVolume != 0 ? network / (3 * std::abs(muscle.restVolume)) : 0;
   muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * youngs);
-  detail::buildVolumeTetrahedra(input, muscle);
+  detail::buildVolumeTetrahedra(muscle, interior);
   report.shortestSpring = muscle.springs.empty() ? 0 : muscle.springs.front().restLength;
   for (const Spring& spring : muscle.springs)
     report.shortestSpring = std::min(report.shortestSpring, spring.restLength);

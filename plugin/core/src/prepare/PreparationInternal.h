@@ -1,6 +1,7 @@
 #pragma once
 // The stages of preparation (method.md §2, §3, §6), one file each; prepareScene() in
 // Preparation.cpp runs them in order. Internal to the library.
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <random>
@@ -65,12 +66,34 @@ constexpr double kMinTetrahedronQuality = 0.1;
 /// set the largest stable step (issue 18: the Verlet hard-case matrix).
 constexpr double kMaxRestGradient = 12;
 
+/// Four particle indices.
+using Tetrahedron = std::array<uint32_t, 4>;
+
+/// A muscle's interior tetrahedra (SpringsVolume.cpp): the Delaunay tetrahedra of `positions`
+/// whose centroid lies inside `surface` (Delaunay fills the convex hull, and over a concave
+/// surface that lies outside the muscle), in qhull's order and orientation; none when there are
+/// fewer than five particles or they do not span space.
+std::vector<Tetrahedron> interiorTetrahedra(const MuscleInput& input,
+                                            std::span<const btVector3> positions,
+                                            const TriangleMesh& surface);
+
+/// Renames the tetrahedra's particles after reorderParticles(muscle, order): old particle
+/// order[k] becomes k.
+void renumberTetrahedra(std::vector<Tetrahedron>& tetrahedra, std::span<const uint32_t> order);
+
+/// SpringStiffness::Volume (SpringsVolume.cpp): multiplies each spring's k (κ/L0 times its
+/// anisotropy) by V_a/S_a + V_b/S_b, V a particle's quarter of the interior tetrahedra around it
+/// (at least a quarter of the median) and S the Σ L0 of its springs, then scales all springs so
+/// that the network's Σ k·L0² (its modulus) is what it was: each particle's springs then hold
+/// Σ k·L0² in proportion to its volume. Returns false, changing nothing, when the tetrahedra
+/// give no volume.
+bool shareStiffnessByVolume(std::span<const btVector3> positions,
+                            std::span<const Tetrahedron> interior, std::vector<Spring>& springs);
+
 /// The local volume terms (SpringsVolume.cpp): when muscle.volumeModulus > 0, fills tetParticles,
-/// tetInverseVolume and tetRestGradient from the Delaunay tetrahedra of restPositions whose
-/// centroid lies inside restSurface, not all of whose particles are fixed, and that are not
-/// slivers; sorted by their particles; none when the particles do not span space. Call after the
-/// last reordering.
-void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle);
+/// tetInverseVolume and tetRestGradient from the interior tetrahedra (numbered as restPositions)
+/// not all of whose particles are fixed and that are not slivers; sorted by their particles.
+void buildVolumeTetrahedra(MuscleSettings& muscle, std::span<const Tetrahedron> interior);
 
 /// Zeleny's damping estimate c = √(4·k̄·2m) (000 eq 2.11), k̄ the mean spring stiffness.
 btScalar zelenyDamping(std::span<const Spring> springs, btScalar particleMass);

@@ -1,5 +1,7 @@
-// Local volume terms (issue 18): the Delaunay tetrahedra of a muscle's particles that lie inside
-// its surface and are not slivers, with their rest volumes, for VolumeForces.h.
+// The interior tetrahedra of a muscle's particles (the Delaunay tetrahedra inside its surface) and
+// what preparation makes of them: the springs' share of the network's stiffness by the volume
+// around them, and the local volume terms (issue 18: those that are not slivers, with their rest
+// volumes, for VolumeForces.h).
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -13,8 +15,7 @@ namespace {
 
 /// Shape quality 6√2·V / l³ of a tetrahedron (l the root mean square of its six edges): 1 for
 /// the regular one, 0 for a flat one. Returns it with 6V (signed) in `sixVolume`.
-double tetrahedronQuality(std::span<const btVector3> x, const std::array<uint32_t, 4>& t,
-                          double& sixVolume) {
+double tetrahedronQuality(std::span<const btVector3> x, const Tetrahedron& t, double& sixVolume) {
   const btVector3 a = x[t[1]] - x[t[0]], b = x[t[2]] - x[t[0]], c = x[t[3]] - x[t[0]];
   sixVolume = double(a.dot(b.cross(c)));
   const double edges2 = double(a.length2() + b.length2() + c.length2() + (b - a).length2() +
@@ -25,7 +26,7 @@ double tetrahedronQuality(std::span<const btVector3> x, const std::array<uint32_
 
 /// Σ_i |∂(6V)/∂x_i|² of tetrahedron t at x: the squared lengths of the three cross products of
 /// its edges from vertex 0 and of their sum (vertex 0's gradient, negated).
-btScalar squaredVolumeGradient(std::span<const btVector3> x, const std::array<uint32_t, 4>& t) {
+btScalar squaredVolumeGradient(std::span<const btVector3> x, const Tetrahedron& t) {
   const btVector3 a = x[t[1]] - x[t[0]], b = x[t[2]] - x[t[0]], c = x[t[3]] - x[t[0]];
   const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b);
   return ga.length2() + gb.length2() + gc.length2() + (ga + gb + gc).length2();
@@ -33,21 +34,76 @@ btScalar squaredVolumeGradient(std::span<const btVector3> x, const std::array<ui
 
 }  // namespace
 
-void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle) {
+std::vector<Tetrahedron> interiorTetrahedra(const MuscleInput& input,
+                                            std::span<const btVector3> positions,
+                                            const TriangleMesh& surface) {
+  if (positions.size() < 5) return {};
+  std::vector<Tetrahedron> all;
+  try {
+    all = delaunayTetrahedra(input, positions);
+  } catch (const InputError&) {
+    return {};  // particles on a line or a plane enclose no volume
+  }
+  const MeshDistance inside(surface);
+  std::erase_if(all, [&](const Tetrahedron& t) {
+    const btVector3 centroid =
+        (positions[t[0]] + positions[t[1]] + positions[t[2]] + positions[t[3]]) * btScalar(0.25);
+    return !inside.inside(centroid);
+  });
+  return all;
+}
+
+void renumberTetrahedra(std::vector<Tetrahedron>& tetrahedra, std::span<const uint32_t> order) {
+  std::vector<uint32_t> renamed(order.size());
+  for (uint32_t k = 0; k < order.size(); ++k) renamed[order[k]] = k;
+  for (Tetrahedron& t : tetrahedra)
+    for (uint32_t& i : t) i = renamed[i];
+}
+
+bool shareStiffnessByVolume(std::span<const btVector3> x, std::span<const Tetrahedron> interior,
+                            std::vector<Spring>& springs) {
+  std::vector<double> volume(x.size(), 0.0);  // each particle's quarter of its tetrahedra [m³]
+  for (const Tetrahedron& t : interior) {
+    double sixVolume = 0;
+    tetrahedronQuality(x, t, sixVolume);
+    for (uint32_t i : t) volume[i] += std::abs(sixVolume) / 24;
+  }
+  std::vector<double> lengths(x.size(), 0.0);  // Σ L0 of each particle's springs [m]
+  for (const Spring& spring : springs) {
+    lengths[spring.a] += spring.restLength;
+    lengths[spring.b] += spring.restLength;
+  }
+  // A particle at the edge of the particles' hull whose tetrahedra all fall outside the surface
+  // still has muscle around it (the layer out to the surface): at least a quarter of the median.
+  std::vector<double> sorted = volume;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double floor = sorted[sorted.size() / 2] / 4;
+  if (!(floor > 0)) return false;
+  double before = 0, after = 0;  // Σ k·L0² of the length rule and of the shares
+  std::vector<double> factor(springs.size());
+  for (size_t e = 0; e < springs.size(); ++e) {
+    const Spring& spring = springs[e];
+    const double share = std::max(volume[spring.a], floor) / lengths[spring.a] +
+                         std::max(volume[spring.b], floor) / lengths[spring.b];
+    factor[e] = share;  // [m²]
+    const double energy = double(spring.stiffness) * spring.restLength * spring.restLength;
+    before += energy;
+    after += energy * factor[e];
+  }
+  if (!(after > 0)) return false;
+  for (size_t e = 0; e < springs.size(); ++e)
+    springs[e].stiffness = static_cast<btScalar>(springs[e].stiffness * factor[e] * before / after);
+  return true;
+}
+
+void buildVolumeTetrahedra(MuscleSettings& muscle, std::span<const Tetrahedron> interior) {
   muscle.tetParticles.clear();
   muscle.tetInverseVolume.clear();
   muscle.tetRestGradient.clear();
-  if (!(muscle.volumeModulus > 0) || muscle.particleCount() < 5) return;
+  if (!(muscle.volumeModulus > 0)) return;
   const std::span<const btVector3> x = muscle.restPositions;
-  std::vector<std::array<uint32_t, 4>> kept;
-  const MeshDistance surface(muscle.restSurface);
-  std::vector<std::array<uint32_t, 4>> all;
-  try {
-    all = delaunayTetrahedra(input, x);
-  } catch (const InputError&) {
-    return;  // particles on a line or a plane enclose no volume to keep
-  }
-  for (std::array<uint32_t, 4> t : all) {
+  std::vector<Tetrahedron> kept;
+  for (Tetrahedron t : interior) {
     if (std::all_of(t.begin(), t.end(), [&](uint32_t i) { return muscle.isFixed(i); })) continue;
     std::sort(t.begin(), t.end());
     double sixVolume = 0;
@@ -55,16 +111,13 @@ void buildVolumeTetrahedra(const MuscleInput& input, MuscleSettings& muscle) {
     // normal out of all proportion to their volume: the explicit dt would have to shrink.
     if (tetrahedronQuality(x, t, sixVolume) < kMinTetrahedronQuality) continue;
     if (sixVolume < 0) std::swap(t[2], t[3]);
-    // Delaunay fills the convex hull: tetrahedra over a concave surface lie outside the muscle.
-    const btVector3 centroid = (x[t[0]] + x[t[1]] + x[t[2]] + x[t[3]]) * btScalar(0.25);
-    if (!surface.inside(centroid)) continue;
     kept.push_back(t);
   }
   std::sort(kept.begin(), kept.end());
   muscle.tetParticles.reserve(4 * kept.size());
   muscle.tetInverseVolume.reserve(kept.size());
   muscle.tetRestGradient.reserve(kept.size());
-  for (const std::array<uint32_t, 4>& t : kept) {
+  for (const Tetrahedron& t : kept) {
     double sixVolume = 0;
     tetrahedronQuality(x, t, sixVolume);
     muscle.tetParticles.insert(muscle.tetParticles.end(), t.begin(), t.end());

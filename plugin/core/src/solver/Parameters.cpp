@@ -30,6 +30,10 @@ constexpr std::array<std::pair<SpringLayout, const char*>, 4> kLayouts{{
     {SpringLayout::Lattice6, "lattice6"},
     {SpringLayout::Lattice26, "lattice26"},
 }};
+constexpr std::array<std::pair<SpringStiffness, const char*>, 2> kStiffnessRules{{
+    {SpringStiffness::Volume, "volume"},
+    {SpringStiffness::Length, "length"},
+}};
 constexpr std::array<std::pair<Integrator, const char*>, 10> kIntegrators{{
     {Integrator::Verlet, "verlet"},
     {Integrator::SemiImplicitEuler, "semi-implicit-euler"},
@@ -64,6 +68,9 @@ constexpr std::array<std::pair<FailurePolicy, const char*>, 3> kFailurePolicies{
 const char* toString(SpringLayout layout) {
   return nameOf(kLayouts, layout);
 }
+const char* toString(SpringStiffness rule) {
+  return nameOf(kStiffnessRules, rule);
+}
 const char* toString(Integrator integrator) {
   return nameOf(kIntegrators, integrator);
 }
@@ -84,6 +91,9 @@ bool fromString(const std::string& name, FailurePolicy& policy) {
 }
 bool fromString(const std::string& name, SpringLayout& layout) {
   return valueOf(kLayouts, name, layout);
+}
+bool fromString(const std::string& name, SpringStiffness& rule) {
+  return valueOf(kStiffnessRules, name, rule);
 }
 bool fromString(const std::string& name, Integrator& integrator) {
   return valueOf(kIntegrators, name, integrator);
