@@ -109,8 +109,9 @@ void expectWellFormedSprings(const MuscleSettings& muscle, const SpringParameter
     const btScalar distance =
         (muscle.restPositions[spring.a] - muscle.restPositions[spring.b]).length();
     EXPECT_NEAR(spring.restLength, distance, 1e-7);
-    if (parameters.stiffness == SpringStiffness::Length)
+    if (parameters.stiffness == SpringStiffness::Length) {
       EXPECT_NEAR(spring.stiffness * spring.restLength, kappa, kappa * 1e-5);
+    }
     EXPECT_GT(spring.stiffness, 0);
     network += double(spring.stiffness) * spring.restLength * spring.restLength;
     lengths += spring.restLength;
