@@ -254,6 +254,18 @@ double lateralStretch(const NeoHookeMaterial& material, double lambda) {
   return 0.5 * (low + high);
 }
 
+/// The job's nodes and elements on `mesh`: its tetrahedra as C3D4, or made quadratic (C3D10).
+void setBarElements(CalculixJob& job, const TetMesh& mesh, CalculixElement element) {
+  job.element = element;
+  if (element == CalculixElement::C3D10) {
+    job.nodes = quadraticTetrahedra(mesh, job.connectivity);
+    return;
+  }
+  job.nodes = mesh.nodes;
+  for (const auto& t : mesh.tetrahedra)
+    job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
+}
+
 /// The bar stretched 10 % along z by its end faces, moved as the homogeneous closed-form
 /// answer; then back to rest. Its free surface nodes must follow that answer.
 void expectClosedFormBar(CalculixElement element) {
@@ -264,13 +276,7 @@ void expectClosedFormBar(CalculixElement element) {
   job.title = "bar under tension";
   job.element = element;
   job.material = {.youngsModulus = 100e3, .poissonRatio = 0.3};
-  if (element == CalculixElement::C3D10) {
-    job.nodes = quadraticTetrahedra(mesh, job.connectivity);
-  } else {
-    job.nodes = mesh.nodes;
-    for (const auto& t : mesh.tetrahedra)
-      job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
-  }
+  setBarElements(job, mesh, element);
   const double lambda = 1.1, mu = lateralStretch(job.material, lambda);
   ASSERT_LT(mu, 0.98) << "ν = 0.3 narrows the bar";
   const auto exact = [&](const btVector3& x) {
@@ -320,8 +326,10 @@ TEST(CalculixRun, BarUnderTensionMatchesTheClosedFormNeoHookeanAnswerC3D10) {
 
 /// The bar pushed 3 mm down by its top face onto a rigid plate 1 mm below it: with contact its
 /// bottom face stops on the plate (within the penalty's overclosure), without it passes 2 mm in.
-double lowestBottomNodeMm(double contactStiffness) {
-  TemporaryDirectory dir("ccx_contact_test");
+/// Returns the lowest of the bottom face's nodes (midside nodes of C3D10 included) [mm].
+double lowestBottomNodeMm(double contactStiffness,
+                          CalculixElement element = CalculixElement::C3D4) {
+  TemporaryDirectory dir(std::string("ccx_contact_test_") + toString(element));
   const TriangleMesh surface = barSurface();
   const TetMesh bar = tetgenMesh(surface, {}, dir.path().string(), "bar");
   const TetMesh plate = tetgenMesh(subdivided(testing::boxMesh(btVector3(-0.005f, -0.005f, -0.006f),
@@ -331,25 +339,25 @@ double lowestBottomNodeMm(double contactStiffness) {
   CalculixJob job;
   job.title = "bar pushed onto a plate";
   job.material = {.youngsModulus = 100e3, .poissonRatio = 0.3};
-  job.nodes = bar.nodes;
-  for (const auto& t : bar.tetrahedra)
-    job.connectivity.insert(job.connectivity.end(), t.begin(), t.end());
+  setBarElements(job, bar, element);
   job.steps.resize(1);
-  for (uint32_t n = 0; n < bar.nodes.size(); ++n) {
-    if (bar.nodes[n].z() > 0.04f - 1e-7f) {
+  for (uint32_t n = 0; n < job.nodes.size(); ++n) {
+    if (job.nodes[n].z() > 0.04f - 1e-7f) {
       job.prescribed.push_back(n);
       job.steps[0].push_back(btVector3(0, 0, -0.003f));
-    } else if (n < surface.vertices.size()) {
-      job.contact.slaves.push_back(n);
-      if (bar.nodes[n].z() < 1e-7f) job.printed.push_back(n);
     }
   }
+  for (uint32_t n : surfaceNodes(job, surface.vertices.size())) {
+    if (job.nodes[n].z() > 0.04f - 1e-7f) continue;
+    job.contact.slaves.push_back(n);
+    if (job.nodes[n].z() < 1e-7f) job.printed.push_back(n);
+  }
+  const auto first = static_cast<uint32_t>(job.nodes.size());
   for (const btVector3& x : plate.nodes) {
     job.prescribed.push_back(static_cast<uint32_t>(job.nodes.size()));
     job.steps[0].push_back(btVector3(0, 0, 0));
     job.nodes.push_back(x);
   }
-  const auto first = static_cast<uint32_t>(bar.nodes.size());
   for (const auto& t : plate.tetrahedra)
     for (uint32_t corner : t) job.contact.tetrahedra.push_back(first + corner);
   job.contact.faces = boundaryFaces(job.contact.tetrahedra);
@@ -374,6 +382,14 @@ TEST(CalculixRun, ABarPushedOntoARigidPlateStopsOnItOnlyWithContact) {
   const double lowest = lowestBottomNodeMm(5e4 * 100e3);
   EXPECT_GT(lowest, -1.01) << "stops on the plate's top at z = -1 mm";
   EXPECT_LT(lowest, -0.99) << "and touches it";
+}
+
+TEST(CalculixRun, AQuadraticBarPushedOntoARigidPlateKeepsEveryNodeOnIt) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  const double lowest = lowestBottomNodeMm(5e4 * 100e3, CalculixElement::C3D10);
+  EXPECT_GT(lowest, -1.001) << "no node of the bottom face, midside nodes included, in the plate";
+  EXPECT_LT(lowest, -0.999) << "and touches it";
 }
 
 TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
@@ -503,6 +519,22 @@ TEST(ReferenceGates, SpreadIsBetweenTheBestRunOfEachMethod) {
   EXPECT_TRUE(std::isnan(methodSpreadMm(runs)));
 }
 
+TEST(ReferenceOptions, SpherePlanesIsSolvedAsC3D10WithAStifferPenaltyUnlessGiven) {
+  const LoadedScene sphere = loadScene("sphere-planes", {});
+  const LoadedScene fusiform = loadScene("fusiform", {});
+  ReferenceOptions options;
+  const CalculixDefinition chosen = sceneDefinition(sphere, options);
+  EXPECT_EQ(chosen.element, CalculixElement::C3D10);
+  EXPECT_EQ(chosen.contactPenalty, kSpherePlanesContactPenalty);
+  const CalculixDefinition other = sceneDefinition(fusiform, options);
+  EXPECT_EQ(other.element, CalculixElement::C3D4) << "other scenes keep the defaults";
+  EXPECT_EQ(other.contactPenalty, CalculixDefinition().contactPenalty);
+  options.elementGiven = options.contactPenaltyGiven = true;
+  const CalculixDefinition given = sceneDefinition(sphere, options);
+  EXPECT_EQ(given.element, CalculixElement::C3D4) << "the command line's choice stands";
+  EXPECT_EQ(given.contactPenalty, CalculixDefinition().contactPenalty);
+}
+
 TEST(ReferenceCache, StoresAndReadsBackASolution) {
   TemporaryDirectory dir("reference_cache_test");
   CalculixSolution solution;
@@ -554,6 +586,9 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   const LoadedScene again =
       loadScene("fusiform", {"resolution=6", "fibre_count=8", "iterations=500"});
   EXPECT_EQ(referenceCacheKey(again, prepared, definition), key) << "solver settings do not matter";
+  CalculixDefinition limited = definition;
+  limited.memoryLimitGiB = 1;
+  EXPECT_EQ(referenceCacheKey(scene, prepared, limited), key) << "nor ccx's memory limit";
 
   std::set<std::string> keys{key};
   int change = 0;
@@ -570,6 +605,8 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   d = definition;
   d.element = CalculixElement::C3D10;
   changed(scene, prepared, d);
+  d.contactPenalty = 0;
+  changed(scene, prepared, d);  // C3D10 without contact
   d = definition;
   d.mesher.refinement = 1;
   changed(scene, prepared, d);
@@ -783,6 +820,29 @@ TEST(ReferenceCommand, ATwistReturnsToRestRetracingItsPoses) {
   ASSERT_EQ(largest.size(), steps);
   EXPECT_EQ(largest[0], 1) << "pose 0 is the rest pose: nothing turns";
   for (size_t s = 1; s < steps; ++s) EXPECT_NEAR(largest[s], 2.5 / 45, 1e-6) << s;
+}
+
+TEST(ReferenceCommand, ACcxRunOverItsMemoryLimitFailsEveryPoseNamingItAndIsSolvedAgain) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_memory_test");
+  const std::string command =
+      std::string(FIBREMSS_CLI) + " reference " + coarseFusiform(dir.path()) +
+      " --set resolution=8 --no-gates --cache " + (dir.path() / "cache").string() + " --out " +
+      (dir.path() / "out").string() + " 2>&1";
+  // 0.1 GiB: ccx starts, and fails allocating its matrix structure.
+  const auto limited = testing::runProcess(command + " --ccx-memory 0.1");
+  ASSERT_EQ(limited.exitCode, 0) << limited.output;
+  EXPECT_NE(limited.output.find("poses solved: 0/3\n"), std::string::npos) << limited.output;
+  EXPECT_NE(limited.output.find("reference pose 0: muscle fusiform: *ERROR in u_calloc: error "
+                                "allocating memory (ccx's memory limit is 0.1 GiB"),
+            std::string::npos)
+      << limited.output;
+  const auto enough = testing::runProcess(command);
+  ASSERT_EQ(enough.exitCode, 0) << enough.output;
+  EXPECT_NE(enough.output.find("poses solved: 3/3\n"), std::string::npos)
+      << "a failure at the limit is not kept in the cache\n"
+      << enough.output;
 }
 
 TEST(ReferenceCommand, TwoProcessesSolvingOneKeyAtOnceBothGetTheWholeReference) {

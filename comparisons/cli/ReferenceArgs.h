@@ -15,11 +15,13 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
   command
       .add_option("--ccx-element", options.definition.element,
                   "Reference element: C3D4 (linear tetrahedra; the refinement gate solves C3D10) "
-                  "or C3D10 (quadratic; the gate solves the next mesh level)")
+                  "or C3D10 (quadratic; the gate solves the next mesh level); sphere-planes "
+                  "defaults to C3D10")
       ->transform(CLI::CheckedTransformer(
           std::map<std::string, CalculixElement>{{"C3D10", CalculixElement::C3D10},
                                                  {"C3D4", CalculixElement::C3D4}},
           CLI::ignore_case))
+      ->each([&options](const std::string&) { options.elementGiven = true; })
       ->default_str("C3D4");
   command
       .add_option("--ccx-poisson", options.definition.material.poissonRatio,
@@ -35,9 +37,18 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
   command
       .add_option("--ccx-contact", options.definition.contactPenalty,
                   "Reference muscle-bone contact: penalty slope K = this x E [1/m] (frictionless, "
-                  "node to surface, every bone a rigid obstacle); 0: no contact")
+                  "node to surface, every bone a rigid obstacle); 0: no contact; sphere-planes "
+                  "defaults to 5e6")
+      ->each([&options](const std::string&) { options.contactPenaltyGiven = true; })
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e9));
+  command
+      .add_option("--ccx-memory", options.definition.memoryLimitGiB,
+                  "Memory limit of each ccx run [GiB] (its address space); a run that exceeds "
+                  "it fails with a message per pose instead of taking the machine's memory; 0: "
+                  "no limit")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e6));
   command.add_flag("--reference-cached-only", options.cachedOnly,
                    "Use the reference (and each gate's solve) only if it is in the cache; what is "
                    "not there is reported missing, not computed");

@@ -195,11 +195,20 @@ double methodSpreadMm(const std::vector<RunMetrics>& runs) {
   return best.size() == 1 ? high : high - low;
 }
 
+CalculixDefinition sceneDefinition(const LoadedScene& scene, const ReferenceOptions& options) {
+  CalculixDefinition definition = options.definition;
+  if (scene.analytic.type != "sphere-planes") return definition;
+  if (!options.elementGiven) definition.element = CalculixElement::C3D10;
+  if (!options.contactPenaltyGiven) definition.contactPenalty = kSpherePlanesContactPenalty;
+  return definition;
+}
+
 Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
                            const ReferenceOptions& options) {
   ReferenceOptions resolved = options;
   if (resolved.cacheDir.empty()) resolved.cacheDir = defaultReferenceCacheDir();
-  const CalculixDefinition& definition = options.definition;
+  resolved.definition = sceneDefinition(scene, options);
+  const CalculixDefinition& definition = resolved.definition;
   Reference reference;
   reference.key = referenceCacheKey(scene, prepared, definition);
   reference.cacheEntry = resolved.cacheDir + "/" + reference.key;

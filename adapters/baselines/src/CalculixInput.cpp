@@ -133,6 +133,25 @@ std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32
   return faces;
 }
 
+std::vector<uint32_t> surfaceNodes(const CalculixJob& job, size_t surfaceVertices) {
+  std::vector<uint32_t> nodes(surfaceVertices);
+  for (size_t v = 0; v < surfaceVertices; ++v) nodes[v] = static_cast<uint32_t>(v);
+  if (job.element != CalculixElement::C3D10) return nodes;
+  std::vector<uint32_t> corners;
+  corners.reserve(job.connectivity.size() / 10 * 4);
+  for (size_t e = 0; e * 10 < job.connectivity.size(); ++e)
+    corners.insert(corners.end(), job.connectivity.begin() + long(e * 10),
+                   job.connectivity.begin() + long(e * 10 + 4));
+  // Per C3D4 face (boundaryFaces' numbering), the connectivity slots of its three edges' midside
+  // nodes (quadraticTetrahedra's order: 1-2, 2-3, 3-1, 1-4, 2-4, 3-4 in slots 4-9).
+  constexpr int kMidsides[4][3] = {{4, 5, 6}, {7, 8, 4}, {8, 9, 5}, {9, 7, 6}};
+  for (const auto& [element, face] : boundaryFaces(corners))
+    for (int slot : kMidsides[face - 1]) nodes.push_back(job.connectivity[element * 10 + slot]);
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  return nodes;
+}
+
 std::vector<btVector3> quadraticTetrahedra(const TetMesh& mesh,
                                            std::vector<uint32_t>& connectivity) {
   std::vector<btVector3> nodes = mesh.nodes;

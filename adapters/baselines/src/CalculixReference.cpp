@@ -15,6 +15,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+/// What a failure says after an allocation error when ccx ran under a memory limit.
+constexpr const char* kMemoryLimitNote = "ccx's memory limit is ";
+
 double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
@@ -155,40 +158,14 @@ std::vector<int> stepPoses(const LoadedScene& scene, size_t bones, int poses, bo
   return steps;
 }
 
-/// The muscle's nodes on its surface: the surface vertices and, for C3D10, the midside nodes of
-/// its boundary faces (left out, they would pass into a bone unresisted: a sphere pressed by
-/// plates read 24 % over Hertz as C3D10 with corner slaves only).
-std::vector<bool> surfaceNodes(const MuscleJob& muscle) {
-  const CalculixJob& job = muscle.job;
-  std::vector<bool> surface(job.nodes.size(), false);
-  std::fill_n(surface.begin(), muscle.surfaceVertices, true);
-  if (job.element != CalculixElement::C3D10) return surface;
-  constexpr size_t kNodes = 10;
-  std::vector<uint32_t> corners;
-  for (size_t e = 0; e * kNodes < job.connectivity.size(); ++e)
-    corners.insert(corners.end(), job.connectivity.begin() + long(e * kNodes),
-                   job.connectivity.begin() + long(e * kNodes + 4));
-  // The midside node of corners (i, j) is node 4 + k for the k-th of quadraticTetrahedra's
-  // edges {0,1}, {1,2}, {2,0}, {0,3}, {1,3}, {2,3}; each face's corners as boundaryFaces numbers
-  // them (1: 0-1-2, 2: 0-3-1, 3: 1-3-2, 4: 2-3-0) give its three edges.
-  constexpr int kFaceEdges[4][3] = {{0, 1, 2}, {3, 4, 0}, {4, 5, 1}, {5, 3, 2}};
-  for (const auto& [element, face] : boundaryFaces(corners))
-    for (int k : kFaceEdges[face - 1]) surface[job.connectivity[element * kNodes + 4 + k]] = true;
-  return surface;
-}
-
 /// The bones as rigid contact obstacles of the job (CalculixContact): each bone's rest mesh
 /// meshed by tetgen, its nodes appended and prescribed to follow the bone at every step, the
-/// muscle's free surface nodes (surfaceNodes) the slaves.
+/// muscle's free surface nodes (midside nodes of C3D10 included) the slaves.
 void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedScene& prepared,
                     const CalculixDefinition& definition, const std::string& workDir,
                     const std::vector<int>& steps) {
   CalculixJob& job = result.job;
   CalculixContact& contact = job.contact;
-  std::vector<bool> slave = surfaceNodes(result);
-  for (uint32_t n : job.prescribed) slave[n] = false;
-  for (uint32_t n = 0; n < slave.size(); ++n)
-    if (slave[n]) contact.slaves.push_back(n);
   TetgenDefinition mesher = definition.mesher;
   mesher.refinement = 0;
   for (size_t b = 0; b < prepared.bones.size(); ++b) {
@@ -205,6 +182,10 @@ void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedS
       for (uint32_t corner : t) contact.tetrahedra.push_back(first + corner);
   }
   contact.faces = boundaryFaces(contact.tetrahedra);
+  std::vector<bool> held(job.nodes.size(), false);
+  for (uint32_t n : job.prescribed) held[n] = true;
+  for (uint32_t n : surfaceNodes(job, result.surfaceVertices))
+    if (!held[n]) contact.slaves.push_back(n);
   contact.stiffness = definition.contactPenalty * definition.material.youngsModulus;
   contact.tension = 1e-3 * definition.material.youngsModulus;
 }
@@ -297,13 +278,21 @@ StaSummary readSta(const std::string& path) {
   return summary;
 }
 
-/// The last line of ccx's log that says what went wrong ("*ERROR ..."), else its exit status.
-std::string ccxFailure(const std::string& logPath, int status) {
+/// The last line of ccx's log that says what went wrong ("*ERROR ..."), else its exit status;
+/// a failed allocation names the memory limit it ran into.
+std::string ccxFailure(const std::string& logPath, int status, double memoryLimitGiB) {
   std::ifstream in(logPath);
   std::string line, error;
   while (std::getline(in, line))
     if (line.find("ERROR") != std::string::npos) error = line.substr(line.find_first_not_of(' '));
-  return error.empty() ? "ccx stopped (exit " + std::to_string(status) + ")" : error;
+  if (error.empty()) return "ccx stopped (exit " + std::to_string(status) + ")";
+  if (memoryLimitGiB > 0 && error.find("allocat") != std::string::npos) {
+    std::ostringstream limit;
+    limit << error << " (" << kMemoryLimitNote << memoryLimitGiB
+          << " GiB: --ccx-memory sets it, 0 for none)";
+    return limit.str();
+  }
+  return error;
 }
 
 /// Runs one muscle's job; per step the surface positions (empty where ccx gave none) and the
@@ -320,8 +309,10 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
   }
   std::filesystem::remove(base + ".sta");
   std::filesystem::remove(base + ".dat");
-  const int status = runProgram({definition.program, "-i", muscle.stem}, workDir, base + ".log",
-                                [&] { return poll(readSta(base + ".sta").stepsDone); });
+  const int status = runProgram(
+      {definition.program, "-i", muscle.stem}, workDir, base + ".log",
+      [&] { return poll(readSta(base + ".sta").stepsDone); },
+      static_cast<uint64_t>(definition.memoryLimitGiB * (1ull << 30)));
   sta = readSta(base + ".sta");
   std::ifstream dat(base + ".dat");
   const std::vector<CalculixTable> tables = readCalculixDat(dat, base + ".dat");
@@ -342,7 +333,9 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
     for (size_t i = 0; i < muscle.moved.size(); ++i)
       surface[muscle.moved[i]] = muscle.movedPositions[s][i];
   }
-  failure = static_cast<int>(ends.size()) == steps ? "" : ccxFailure(base + ".log", status);
+  failure = static_cast<int>(ends.size()) == steps
+                ? ""
+                : ccxFailure(base + ".log", status, definition.memoryLimitGiB);
 }
 
 }  // namespace
@@ -353,6 +346,13 @@ int CalculixSolution::solvedPoses() const {
          !poseSurfaces[static_cast<size_t>(solved)].empty())
     ++solved;
   return solved;
+}
+
+bool CalculixSolution::hitMemoryLimit() const {
+  const auto named = [](const std::string& failure) {
+    return failure.find(kMemoryLimitNote) != std::string::npos;
+  };
+  return named(returnFailure) || std::any_of(poseFailures.begin(), poseFailures.end(), named);
 }
 
 CalculixSolution solveCalculixReference(

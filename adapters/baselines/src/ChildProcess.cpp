@@ -2,9 +2,11 @@
 // directory, output to a log file, polled so that a long solve shows progress and can be
 // cancelled.
 #include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <csignal>
@@ -23,10 +25,13 @@
 namespace fibremss {
 namespace {
 
-/// In the child: into `workDir`, stdout and stderr to `logPath`, then exec. Never returns.
+/// In the child: into `workDir`, its address space limited to `memoryLimit` bytes (0: not
+/// limited), stdout and stderr to `logPath`, then exec. Never returns.
 [[noreturn]] void execChild(const std::vector<std::string>& argv, const std::string& workDir,
-                            const std::string& logPath) {
+                            const std::string& logPath, uint64_t memoryLimit) {
   if (!workDir.empty() && chdir(workDir.c_str()) != 0) _exit(126);
+  const rlimit limit{memoryLimit, memoryLimit};
+  if (memoryLimit > 0 && setrlimit(RLIMIT_AS, &limit) != 0) _exit(126);
   const int log = open(logPath.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
   if (log < 0) _exit(126);
   dup2(log, STDOUT_FILENO);
@@ -50,11 +55,12 @@ int exitStatus(int status) {
 }  // namespace
 
 int runProgram(const std::vector<std::string>& argv, const std::string& workDir,
-               const std::string& logPath, const std::function<bool()>& poll) {
+               const std::string& logPath, const std::function<bool()>& poll,
+               uint64_t memoryLimit) {
   if (argv.empty()) throw std::runtime_error("runProgram: no program given");
   const pid_t child = fork();
   if (child < 0) throw std::runtime_error("cannot start " + argv[0] + ": " + std::strerror(errno));
-  if (child == 0) execChild(argv, workDir, logPath);
+  if (child == 0) execChild(argv, workDir, logPath, memoryLimit);
   int status = 0;
   for (;;) {
     const pid_t done = waitpid(child, &status, WNOHANG);
@@ -72,6 +78,12 @@ int runProgram(const std::vector<std::string>& argv, const std::string& workDir,
   const int code = exitStatus(status);
   if (code == 127) throw std::runtime_error("cannot run '" + argv[0] + "' (not installed?)");
   return code;
+}
+
+double defaultCalculixMemoryGiB() {
+  const double physical =
+      double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE)) / double(1ull << 30);
+  return physical > 0 ? std::min(8.0, physical / 2) : 8.0;
 }
 
 std::string calculixVersion(const std::string& program) {

@@ -147,6 +147,9 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
     h.text("continuum cut");
     h.value(cut.pose);
   }
+  // C3D10 under contact: the midside nodes became contact slaves (no other key changes).
+  if (definition.element == CalculixElement::C3D10 && definition.contactPenalty > 0)
+    h.text("C3D10 midside slaves");
   if (scene.analytic.type == "sphere-planes") {  // held by its symmetry (no other key changes)
     h.text(scene.analytic.type);
     h.points({scene.analytic.axisStart, scene.analytic.axisEnd});
@@ -234,9 +237,10 @@ CalculixSolution cachedCalculixReference(
   const std::string entry = cacheDir + "/" + referenceCacheKey(scene, prepared, definition);
   const std::string stored = entry + "/surfaces.bin";
   CalculixSolution solution;
-  const bool found = loadSolution(stored, solution);
+  const bool found = loadSolution(stored, solution) && !solution.hitMemoryLimit();
   if (fromCache) *fromCache = found;
   if (found) return solution;
+  if (solution.hitMemoryLimit()) std::filesystem::remove_all(entry);  // solved again
   // Solved in a directory of this process's own, moved into place whole: two processes
   // solving the same key at once (two comparisons of one scene) must not share ccx's files.
   const std::string work = entry + ".solving-" + std::to_string(getpid());

@@ -22,7 +22,21 @@ struct ReferenceOptions {
   std::function<void(const std::string&)> log;             ///< one line of news (may be empty)
   std::function<void(const ReferenceProgress&)> progress;  ///< while ccx runs (may be empty)
   const std::atomic<bool>* cancel = nullptr;               ///< stop when true
+  /// Whether `definition`'s element / contact penalty were given (the command line's
+  /// --ccx-element / --ccx-contact); where not, a scene may choose its own (sceneDefinition).
+  bool elementGiven = false;
+  bool contactPenaltyGiven = false;
 };
+
+/// The contact penalty of a sphere-planes reference (× E per metre): 100× the default, so that
+/// C3D10's surface nodes stay within 1.5 µm of the plates (with the default they go 0.1–0.28
+/// mm in; comparisons/README.md).
+inline constexpr double kSpherePlanesContactPenalty = 5e6;
+
+/// `options.definition` for `scene`: a sphere-planes case is solved as C3D10 with
+/// kSpherePlanesContactPenalty where the options do not give the element or the penalty. C3D4
+/// at ν 0.49 locks and reads Hertz's contact radius 5–12 % short (comparisons/README.md).
+CalculixDefinition sceneDefinition(const LoadedScene& scene, const ReferenceOptions& options);
 
 /// The bound of the return-to-rest gate [mm]: the surface at rest after the motion, RMS to the
 /// prepared rest surface.

@@ -64,7 +64,8 @@ struct CalculixContact {
   /// The master surface: per boundary face, its element (index into `tetrahedra` / 4) and
   /// CalculiX's face number of a C3D4 (1: nodes 1-2-3, 2: 1-4-2, 3: 2-4-3, 4: 3-4-1).
   std::vector<std::pair<uint32_t, uint8_t>> faces;
-  std::vector<uint32_t> slaves;  ///< body nodes that may touch it (free surface nodes)
+  /// Body nodes that may touch it: the free ones of surfaceNodes (C3D10's midside nodes too).
+  std::vector<uint32_t> slaves;
   /// Linear pressure-overclosure slope K [Pa/m]; 0: none (no contact written).
   double stiffness = 0;
   double tension = 0;  ///< σ∞: the small tension at large clearance CalculiX asks for [Pa]
@@ -98,6 +99,12 @@ struct CalculixJob {
 /// The boundary faces of linear tetrahedra (4 node indices each) as CalculiX numbers them:
 /// (element, face 1–4) for every face no other element shares.
 std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32_t>& tetrahedra);
+
+/// The body's nodes on its boundary, ascending: the surface vertices [0, surfaceVertices) and,
+/// for C3D10, the midside nodes of its boundary faces. A contact's slaves must be all of them:
+/// a midside node left out passes into the obstacle unresisted (a quadratic face between
+/// corners that touch sags through it).
+std::vector<uint32_t> surfaceNodes(const CalculixJob& job, size_t surfaceVertices);
 
 /// Writes the job as CalculiX input (*NODE, *ELEMENT, *NSET, *HYPERELASTIC NEO HOOKE,
 /// *EQUATION, one *STEP NLGEOM *STATIC per step with *BOUNDARY values and *NODE PRINT of U).
@@ -133,10 +140,16 @@ std::vector<const CalculixTable*> stepEndTables(const std::vector<CalculixTable>
 
 /// Runs `argv` (argv[0] searched on PATH) in `workDir` with stdout and stderr to `logPath`.
 /// `poll` is called about every 0.2 s while it runs; returning false kills the process.
-/// Returns its exit status (128 + signal when killed). Throws std::runtime_error when it cannot
-/// be started.
+/// `memoryLimit` [bytes] bounds its address space (setrlimit RLIMIT_AS; 0: no bound), so that a
+/// runaway solve fails its allocation instead of taking the machine's memory. Returns its exit
+/// status (128 + signal when killed). Throws std::runtime_error when it cannot be started.
 int runProgram(const std::vector<std::string>& argv, const std::string& workDir,
-               const std::string& logPath, const std::function<bool()>& poll = {});
+               const std::string& logPath, const std::function<bool()>& poll = {},
+               uint64_t memoryLimit = 0);
+
+/// The default memory limit of a ccx run [GiB]: 8, or half the machine's memory if that is
+/// less (a 24 GiB machine shared with other work keeps two thirds of it).
+double defaultCalculixMemoryGiB();
 
 /// "ccx <version>" as `ccx -v` prints it (cached per process); "ccx (unknown version)" when it
 /// prints none. Throws std::runtime_error when the program cannot be run.

@@ -8,8 +8,8 @@
 // prepared surfaces self-intersect (24–481 facet pairs per muscle, tetgen -d); those vertices
 // are attached, so the reference reports them where that bone carries the prepared vertex.
 // Muscle–bone contact is modelled (bones as rigid tetgen-meshed obstacles, penalty contact:
-// `contactPenalty`). Not modelled: muscle–muscle contact, gravity, activation; each muscle is
-// solved on its own.
+// `contactPenalty`; every free surface node a slave, C3D10's midside nodes included).
+// Not modelled: muscle–muscle contact, gravity, activation; each muscle is solved on its own.
 #include <atomic>
 #include <functional>
 #include <string>
@@ -43,6 +43,10 @@ struct CalculixDefinition {
   double contactPenalty = 5e4;
   double initialIncrement = 1;  ///< first increment of a step (ccx cuts it back as needed)
   std::string program = "ccx";  ///< the CalculiX executable (PATH is searched)
+  /// Address-space limit of each ccx run [GiB] (0: none). A run that exceeds it fails its
+  /// allocation and its poses are reported failed, naming the limit. Not in the cache key: it
+  /// changes whether a solve finishes, never its result.
+  double memoryLimitGiB = defaultCalculixMemoryGiB();
 };
 
 /// Where the motion leaves no static continuum equilibrium. Two bones close across a muscle:
@@ -93,6 +97,9 @@ struct CalculixSolution {
 
   /// Poses solved, counted from the first (a failed pose ends the run of solved ones).
   int solvedPoses() const;
+  /// Whether a ccx run failed an allocation under its memory limit (a failure names the
+  /// limit): the cache solves such a key again instead of giving it back.
+  bool hitMemoryLimit() const;
 };
 
 /// Meshes every muscle and solves its poses with ccx in `workDir` (created; the .inp, .dat,
