@@ -15,11 +15,8 @@ constexpr btScalar kFar = std::numeric_limits<btScalar>::infinity();
 /// Grid points inside the muscle's surface, spaced half its attachment distance (or wider, so
 /// that its bounding box holds at most kMaxGridPoints).
 std::vector<btVector3> volumeSamples(const TriangleMesh& surface, btScalar attachment) {
-  btVector3 low = surface.vertices.front(), high = low;
-  for (const btVector3& v : surface.vertices) {
-    low.setMin(v);
-    high.setMax(v);
-  }
+  btVector3 low, high;
+  pointBounds(surface.vertices, low, high);
   const btVector3 size = high - low;
   const double box = double(size.x()) * double(size.y()) * double(size.z());
   const btScalar spacing =

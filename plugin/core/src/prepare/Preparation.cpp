@@ -409,10 +409,12 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   const KdTree particles(muscle.restPositions);
   muscle.springs =
       detail::buildSprings(input, muscle.restPositions, particles, detail::fibreDirections(muscle));
-  std::vector<detail::Tetrahedron> interior =
-      detail::interiorTetrahedra(input, muscle.restPositions, muscle.restSurface);
-  if (parameters.springs.stiffness == SpringStiffness::Volume &&
-      !detail::shareStiffnessByVolume(muscle.restPositions, interior, muscle.springs))
+  const bool byVolume = parameters.springs.stiffness == SpringStiffness::Volume;
+  // The Delaunay only where the springs or the volume terms use it.
+  std::vector<detail::Tetrahedron> interior;
+  if (byVolume || parameters.springs.volumeStiffness > 0)
+    interior = detail::interiorTetrahedra(input, muscle.restPositions, muscle.restSurface);
+  if (byVolume && !detail::shareStiffnessByVolume(muscle.restPositions, interior, muscle.springs))
     warnings.push_back(source +
                        ": the particles enclose no volume to share the springs' stiffness by; "
                        "they keep k = κ/L0 (spring_stiffness \"length\")");
