@@ -40,7 +40,8 @@ constexpr Integrator kIntegrators[] = {Integrator::Verlet,
                                        Integrator::ImplicitMidpoint,
                                        Integrator::Bdf2,
                                        Integrator::Pbd,
-                                       Integrator::Xpbd};
+                                       Integrator::Xpbd,
+                                       Integrator::Projective};
 
 constexpr bool kFloat = sizeof(btScalar) == sizeof(float);
 
@@ -343,7 +344,7 @@ TEST(Stability, ExplicitBoundsFollowTheStabilityRegions) {
   EXPECT_LT(stableTimeStep(*chain, Integrator::Rk2), 0.01 * verlet);
   EXPECT_NEAR(stableTimeStep(*chain, Integrator::Rk4) / verlet, std::sqrt(2.0), 1e-3);
   for (Integrator kind : {Integrator::ImplicitEuler, Integrator::ImplicitMidpoint, Integrator::Bdf2,
-                          Integrator::Pbd, Integrator::Xpbd})
+                          Integrator::Pbd, Integrator::Xpbd, Integrator::Projective})
     EXPECT_TRUE(std::isinf(stableTimeStep(*chain, kind))) << toString(kind);
 }
 
@@ -581,6 +582,65 @@ TEST(Bdf2History, FollowsThePretransformAndContacts) {
   bench.step(dt);
   EXPECT_EQ(bench.state.velocities[1], btVector3(0, 0, 0));
   EXPECT_EQ(bench.state.positions[1], stopped);
+}
+
+// --- projective: near the equilibrium in far fewer iterations ----------------------------------
+
+/// fusiform (resolution 40: 2 560 particles, springs by volume and the volume terms), prepared
+/// once.
+const PreparedScene& preparedFusiform(LoadedScene& scene) {
+  static const LoadedScene loaded = loadScene("fusiform");
+  static const PreparedScene prepared =
+      prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
+  scene = loaded;
+  return prepared;
+}
+
+/// fusiform stepped from rest to pose 1 by `kind` in `iterations` iterations, the bones moving
+/// over the first `motion` of them, stop `rule` (epsilon 1 nm for Converged): the particles.
+std::vector<btVector3> fusiformPose(Integrator kind, StopRule rule, int iterations, int motion) {
+  LoadedScene scene;
+  const PreparedScene& prepared = preparedFusiform(scene);
+  SimulationParameters parameters = scene.simulation;
+  parameters.threads = 1;
+  parameters.integrator = kind;
+  parameters.stopRule = rule;
+  parameters.epsilon = 1e-9;
+  parameters.iterations = iterations;
+  parameters.motionFraction = static_cast<btScalar>(motion) / static_cast<btScalar>(iterations);
+  MuscleSystem system(parameters);
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);
+  for (size_t b = 0; b < bones.size(); ++b) system.setBoneTransform(bones[b], scene.bonePose(b, 1));
+  system.step();
+  EXPECT_FALSE(system.lastStep().nan || system.lastStep().exploded) << toString(kind);
+  const auto x = system.positions(muscle);
+  return {x.begin(), x.end()};
+}
+
+/// RMS distance between two sets of the same particles [m].
+double rmsDistance(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
+  double sum = 0;
+  for (size_t i = 0; i < a.size(); ++i) sum += (a[i] - b[i]).length2();
+  return std::sqrt(sum / static_cast<double>(a.size()));
+}
+
+TEST(Projective, ComesWithinTheEquilibriumToleranceInTenIterations) {
+  // The equilibrium does not depend on the iteration that finds it: Verlet run until its mean
+  // step is below 1 nm is the reference. Issue 18 asks for a pose within 0.5 mm of it; the
+  // projective step must come within half that in 10 iterations (the bones jump in the first),
+  // where Verlet with ten times as many (the bones over 10) must not: the whole-muscle modes
+  // that a local step needs thousands of iterations for are what the global step solves.
+  const auto equilibrium = fusiformPose(Integrator::Verlet, StopRule::Converged, 200000, 10);
+  const double projective =
+      rmsDistance(fusiformPose(Integrator::Projective, StopRule::Iterations, 10, 1), equilibrium);
+  const double verlet =
+      rmsDistance(fusiformPose(Integrator::Verlet, StopRule::Iterations, 100, 10), equilibrium);
+  RecordProperty("projective_mm", std::to_string(1e3 * projective));
+  RecordProperty("verlet_mm", std::to_string(1e3 * verlet));
+  EXPECT_LT(projective, 0.25e-3);
+  EXPECT_GT(verlet, 0.5e-3);
 }
 
 // --- every integrator in a MuscleSystem with collision ------------------------------------------

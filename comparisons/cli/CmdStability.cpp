@@ -39,7 +39,7 @@ void stability(StabilityArgs& args) {
       throw InputError("--integrators", name,
                        "unknown integrator; one of verlet, "
                        "semi-implicit-euler, explicit-euler, rk2, rk4, "
-                       "implicit-euler, implicit-midpoint, bdf2, pbd, xpbd");
+                       "implicit-euler, implicit-midpoint, bdf2, pbd, xpbd, projective");
   }
   args.options.log = [](const std::string& line) { std::fprintf(stderr, "%s\n", line.c_str()); };
   InterruptGuard interrupt;

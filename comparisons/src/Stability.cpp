@@ -196,7 +196,7 @@ const char* toString(CellOutcome outcome) {
 
 std::vector<std::string> allIntegratorNames() {
   std::vector<std::string> names;
-  for (int i = 0; i <= static_cast<int>(Integrator::Xpbd); ++i)
+  for (int i = 0; i <= static_cast<int>(Integrator::Projective); ++i)
     names.emplace_back(toString(static_cast<Integrator>(i)));
   return names;
 }

@@ -372,6 +372,8 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
       simulation.integer("solver_iterations", defaults.solverIterations, 1, 100000);
   parameters.constraintIterations =
       simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
+  parameters.projectiveRho =
+      btScalar(simulation.number("projective_rho", defaults.projectiveRho, 0, 0.999));
   fromString(
       simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
       parameters.onFailure);

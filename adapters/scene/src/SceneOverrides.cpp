@@ -52,6 +52,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"solver_tolerance", {Target::Section, "simulation"}},
       {"solver_iterations", {Target::Section, "simulation"}},
       {"constraint_iterations", {Target::Section, "simulation"}},
+      {"projective_rho", {Target::Section, "simulation"}},
       {"on_failure", {Target::Section, "simulation"}},
       {"max_retries", {Target::Section, "simulation"}},
       {"max_step_deg", {Target::Section, "simulation"}},

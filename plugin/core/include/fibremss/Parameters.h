@@ -82,6 +82,9 @@ enum class Integrator : uint8_t {
   Bdf2,               ///< second-order backward differentiation, one Newton step, CG
   Pbd,                ///< position-based dynamics: distance constraints per spring
   Xpbd,               ///< extended PBD: compliant distance constraints (compliance from κ)
+  /// projective dynamics' local/global step for springs as an equilibrium solver: x += A⁻¹·F
+  /// with A the springs' constant Laplacian over the free particles, factored once per muscle
+  Projective,
 };
 
 /// How muscles find bones (method.md §6; seed 002 Table 4.31).
@@ -159,6 +162,10 @@ struct SimulationParameters {
   btScalar solverTolerance = 1e-6;  ///< implicit integrators: CG relative residual
   int solverIterations = 50;        ///< implicit integrators: CG iteration cap
   int constraintIterations = 4;     ///< PBD/XPBD: constraint passes per iteration (averaged Jacobi)
+  /// Projective: the estimated spectral radius ρ of the plain iteration x += A⁻¹·F [1]; each
+  /// step is over-relaxed by ω = 2/(1 + √(1 − ρ²)) with momentum ω − 1 (the limit of Wang 2015's
+  /// Chebyshev weights); 0: the plain iteration.
+  btScalar projectiveRho = 0.9;
 
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap

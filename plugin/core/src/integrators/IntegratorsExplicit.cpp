@@ -82,11 +82,7 @@ class VerletIntegrator final : public TimeIntegrator {
     for (size_t k = advanceVerletVector(muscle, keep, forceScale, result.displacement);
          k < muscle.freeParticles.size(); ++k) {
       const uint32_t i = muscle.freeParticles[k];
-      const btVector3 x = muscle.positions[i];
-      const btVector3 step = (x - muscle.previous[i]) * keep + muscle.forces[i] * forceScale;
-      muscle.previous[i] = x;
-      muscle.positions[i] = x + step;
-      result.displacement += step.length();
+      result.displacement += heavyBallStep(muscle, i, muscle.forces[i], keep, forceScale);
     }
     result.finite = std::isfinite(result.displacement);
     return result;

@@ -34,7 +34,7 @@ constexpr std::array<std::pair<SpringStiffness, const char*>, 2> kStiffnessRules
     {SpringStiffness::Volume, "volume"},
     {SpringStiffness::Length, "length"},
 }};
-constexpr std::array<std::pair<Integrator, const char*>, 10> kIntegrators{{
+constexpr std::array<std::pair<Integrator, const char*>, 11> kIntegrators{{
     {Integrator::Verlet, "verlet"},
     {Integrator::SemiImplicitEuler, "semi-implicit-euler"},
     {Integrator::ExplicitEuler, "explicit-euler"},
@@ -45,6 +45,7 @@ constexpr std::array<std::pair<Integrator, const char*>, 10> kIntegrators{{
     {Integrator::Bdf2, "bdf2"},
     {Integrator::Pbd, "pbd"},
     {Integrator::Xpbd, "xpbd"},
+    {Integrator::Projective, "projective"},
 }};
 constexpr std::array<std::pair<StopRule, const char*>, 5> kStopRules{{
     {StopRule::Iterations, "iterations"},

@@ -293,13 +293,20 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
   addTetrahedronForces(settings, positions, forces, fastestSpringKernel());
 }
 
-void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
+RestGradients restTetrahedronGradients(const MuscleSettings& settings, size_t k) {
   const std::span<const btVector3> x = settings.restPositions;
+  const uint32_t* t = settings.tetParticles.data() + 4 * k;
+  const btVector3 a = x[t[1]] - x[t[0]], b = x[t[2]] - x[t[0]], c = x[t[3]] - x[t[0]];
+  const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b);
+  return {{-(ga + gb + gc), ga, gb, gc}};
+}
+
+void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
   const uint32_t* t = settings.tetParticles.data();
   for (size_t k = 0; k < settings.tetInverseVolume.size(); ++k, t += 4) {
-    const btVector3 a = x[t[1]] - x[t[0]], b = x[t[2]] - x[t[0]], c = x[t[3]] - x[t[0]];
-    const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b);
-    const btScalar g[4] = {(ga + gb + gc).length(), ga.length(), gb.length(), gc.length()};
+    const RestGradients rest = restTetrahedronGradients(settings, k);
+    btScalar g[4];
+    for (size_t i = 0; i < 4; ++i) g[i] = rest.gradients[i].length();
     const btScalar sum = g[0] + g[1] + g[2] + g[3];
     const btScalar gradient = g[0] * g[0] + g[1] * g[1] + g[2] * g[2] + g[3] * g[3];
     // K/V0 · (g/6)(Σg/6) · G0/G with 1/V0 = 6·inverse: K·inverse·g·Σg/6 · G0/G, halved.

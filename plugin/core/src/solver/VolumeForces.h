@@ -34,6 +34,13 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
                           std::span<btVector3> forces, SpringKernel kernel, size_t begin,
                           size_t end);
 
+/// The gradients ∂(6V)/∂x_i at rest of a tetrahedron's four particles (tetParticles' order).
+struct RestGradients {
+  btVector3 gradients[4];  ///< ∂(6V)/∂x_i [m²]
+};
+/// RestGradients of tetrahedron `k` of settings.tetParticles.
+RestGradients restTetrahedronGradients(const MuscleSettings& settings, size_t k);
+
 /// Adds to each free particle's row of `stiffness` half the Gershgorin bound of the volume
 /// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j|·G0/G per tetrahedron [N/m]:
 /// stableTimeStep doubles spring rows the same way.
