@@ -33,6 +33,12 @@ struct ReferenceOptions {
 /// mm in; comparisons/README.md).
 inline constexpr double kSpherePlanesContactPenalty = 5e6;
 
+/// Where ccx fails a pose of a solve (not on its memory limit), the solve is done once more
+/// with its increments × this (CalculixDefinition::incrementScale; its own cache key). pinch
+/// with the attachment distance x0.5 ends on a NaN at 86 % of pose 1 with 1 mm increments and
+/// solves with 0.25 mm ones in 29 increments of 2–5 Newton iterations (comparisons/README.md).
+inline constexpr double kFinerIncrements = 0.25;
+
 /// `options.definition` for `scene`: a sphere-planes case is solved as C3D10 with
 /// kSpherePlanesContactPenalty where the options do not give the element or the penalty. C3D4
 /// at ν 0.49 locks and reads Hertz's contact radius 5–12 % short (comparisons/README.md).
