@@ -253,10 +253,27 @@ TEST(VolumeTerm, WithoutItTheSpringsAloneGainVolumeUnderStretch) {
   EXPECT_EQ(springs.timing.volume, 0);
 }
 
+// The enclosed-volume term alone (a pressure on the particles' boundary, no local terms) keeps a
+// stretched cylinder's volume and a twisted one's radius, which the springs alone do not.
+TEST(VolumeTerm, TheEnclosedVolumeAloneKeepsTheCylindersVolume) {
+  const RunMetrics stretch =
+      cylinderRun("cylinder-stretch", {"volume_stiffness=0", "enclosed_volume_stiffness=4"});
+  ASSERT_FALSE(stretch.nan || stretch.exploded);
+  EXPECT_LE(std::abs(stretch.analytic.volumeChangePct), 1);
+  EXPECT_GT(stretch.analytic.poissonRatio, 0.45);
+  EXPECT_GT(stretch.timing.volume, 0);
+
+  const RunMetrics twist =
+      cylinderRun("cylinder-twist", {"volume_stiffness=0", "enclosed_volume_stiffness=4"});
+  ASSERT_FALSE(twist.nan || twist.exploded);
+  EXPECT_GE(twist.analytic.midRadiusRatio, 0.95);
+  EXPECT_LE(std::abs(twist.analytic.volumeChangePct), 2);
+}
+
 TEST(VolumeTerm, StepAllocatesNothing) {
   const LoadedScene scene =
-      loadScene("cylinder-twist",
-                {"resolution=10", "fibre_count=16", "stop=iterations", "simulation.iterations=20"});
+      loadScene("cylinder-twist", {"resolution=10", "fibre_count=16", "stop=iterations",
+                                   "simulation.iterations=20", "enclosed_volume_stiffness=4"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   {

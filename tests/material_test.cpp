@@ -175,6 +175,93 @@ btScalar axialCosine(const MuscleSettings& muscle, const Spring& spring) {
          spring.restLength;
 }
 
+// The coarse local terms: the Delaunay tetrahedra of a subset of the particles, inside the
+// surface, several times fewer than those of all of them.
+TEST(VolumeTetrahedra, CoarseningTakesFewerOnASubsetOfTheParticles) {
+  const MuscleSettings all = preparedCylinder("cylinder-stretch", {});
+  const MuscleSettings coarse = preparedCylinder("cylinder-stretch", {"volume_coarsening=2"});
+  const size_t count = coarse.tetInverseVolume.size();
+  ASSERT_GT(count, 0);
+  EXPECT_LT(count, all.tetInverseVolume.size() / 3);
+  std::vector<uint8_t> used(coarse.particleCount(), 0);
+  for (uint32_t i : coarse.tetParticles) used[i] = 1;
+  EXPECT_LT(std::count(used.begin(), used.end(), 1), coarse.particleCount() / 2);
+  const MeshDistance surface(coarse.restSurface);
+  const auto& x = coarse.restPositions;
+  for (size_t k = 0; k < count; ++k) {
+    const uint32_t* t = &coarse.tetParticles[4 * k];
+    EXPECT_GT((x[t[1]] - x[t[0]]).dot((x[t[2]] - x[t[0]]).cross(x[t[3]] - x[t[0]])), 0) << k;
+    EXPECT_TRUE(surface.inside((x[t[0]] + x[t[1]] + x[t[2]] + x[t[3]]) * btScalar(0.25))) << k;
+  }
+}
+
+// The enclosed-volume term's faces bound the interior tetrahedra: every edge is crossed as often
+// one way as the other (a closed surface, consistently turned), and they enclose at least the
+// local terms' tetrahedra (those less the slivers) and less than the muscle's surface.
+TEST(EnclosedVolume, TheFacesAreClosedAndEncloseTheTetrahedra) {
+  const MuscleSettings muscle =
+      preparedCylinder("cylinder-stretch", {"enclosed_volume_stiffness=4"});
+  const std::vector<uint32_t>& faces = muscle.enclosedFaces;
+  ASSERT_GT(faces.size(), 0);
+  ASSERT_EQ(faces.size() % 3, 0);
+  EXPECT_GT(muscle.enclosedModulus, 0);
+  std::vector<std::pair<uint32_t, uint32_t>> edges, reversed;
+  for (size_t k = 0; k < faces.size(); k += 3)
+    for (size_t v = 0; v < 3; ++v) {
+      const uint32_t a = faces[k + v], b = faces[k + (v + 1) % 3];
+      edges.emplace_back(a, b);
+      reversed.emplace_back(b, a);
+    }
+  std::sort(edges.begin(), edges.end());
+  std::sort(reversed.begin(), reversed.end());
+  EXPECT_EQ(edges, reversed);
+  double tetrahedra = 0;
+  for (btScalar inverse : muscle.tetInverseVolume) tetrahedra += 1 / (6 * double(inverse));
+  EXPECT_GE(muscle.enclosedRestVolume, tetrahedra * (1 - 1e-4));
+  EXPECT_LT(muscle.enclosedRestVolume, muscle.restVolume);
+  EXPECT_DOUBLE_EQ(enclosedParticleVolume(muscle, muscle.restPositions), muscle.enclosedRestVolume);
+
+  const MuscleSettings off = preparedCylinder("cylinder-stretch", {});
+  EXPECT_TRUE(off.enclosedFaces.empty());
+  EXPECT_EQ(off.enclosedModulus, 0);
+}
+
+// The force on each particle is K·(1 − V/V0) times the volume's gradient, which a central
+// difference of enclosedParticleVolume measures (at jittered, shrunk positions).
+TEST(EnclosedVolume, ForcesAreThePressureTimesAFiniteDifferenceOfTheVolume) {
+  MuscleSettings muscle = preparedCylinder("cylinder-stretch", {"enclosed_volume_stiffness=4"});
+  std::mt19937 random(18);
+  std::uniform_real_distribution<float> jitter(-1, 1);
+  const btScalar spacing = muscle.springs.front().restLength;
+  btVector3 centre(0, 0, 0);
+  for (const btVector3& p : muscle.restPositions) centre += p;
+  centre /= btScalar(muscle.particleCount());
+  std::vector<btVector3> x;
+  for (const btVector3& p : muscle.restPositions)
+    x.push_back(centre + (p - centre) * btScalar(0.98) +
+                btVector3(jitter(random), jitter(random), jitter(random)) * spacing *
+                    btScalar(0.05));
+  std::vector<btVector3> forces(x.size(), btVector3(0, 0, 0));
+  addEnclosedVolumeForces(muscle, x, forces);
+  const double strain = 1 - enclosedParticleVolume(muscle, x) / muscle.enclosedRestVolume;
+  ASSERT_GT(strain, 0.03);  // shrunk by 2 % in each direction
+  const double pressure = double(muscle.enclosedModulus) * strain;
+  double largest = 0;
+  for (const btVector3& f : forces) largest = std::max(largest, double(f.length()) / pressure);
+  ASSERT_GT(largest, 0);
+  const btScalar h = btScalar(1e-3) * spacing;
+  for (uint32_t i = 0; i < x.size(); i += 7)
+    for (int d = 0; d < 3; ++d) {
+      std::vector<btVector3> moved = x;
+      moved[i][d] = x[i][d] + h;
+      const double up = enclosedParticleVolume(muscle, moved);
+      moved[i][d] = x[i][d] - h;
+      const double down = enclosedParticleVolume(muscle, moved);
+      const double gradient = (up - down) / (double(x[i][d] + h) - double(x[i][d] - h));
+      EXPECT_NEAR(forces[i][d] / pressure, gradient, 0.02 * largest) << i << " " << d;
+    }
+}
+
 TEST(Anisotropy, SpringsAlongTheFibresGetTheRatio) {
   // By length, so that the factor is the anisotropy's alone (by volume the network is rescaled).
   const MuscleSettings iso = preparedCylinder("cylinder-stretch", {"spring_stiffness=length"});

@@ -319,6 +319,10 @@ SpringParameters readModel(Fields& model) {
   springs.density = btScalar(model.number("density", springs.density, 0, kInf, true));
   springs.volumeStiffness =
       btScalar(model.number("volume_stiffness", springs.volumeStiffness, 0, 1e6));
+  springs.enclosedVolumeStiffness =
+      btScalar(model.number("enclosed_volume_stiffness", springs.enclosedVolumeStiffness, 0, 1e6));
+  springs.volumeCoarsening =
+      btScalar(model.number("volume_coarsening", springs.volumeCoarsening, 1, 100));
   springs.fibreStiffnessRatio =
       btScalar(model.number("fibre_stiffness_ratio", springs.fibreStiffnessRatio, 0, 1e3, true));
   return springs;

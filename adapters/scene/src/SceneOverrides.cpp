@@ -30,6 +30,8 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"damping", {Target::Section, "model"}},
       {"density", {Target::Section, "model"}},
       {"volume_stiffness", {Target::Section, "model"}},
+      {"enclosed_volume_stiffness", {Target::Section, "model"}},
+      {"volume_coarsening", {Target::Section, "model"}},
       {"fibre_stiffness_ratio", {Target::Section, "model"}},
       {"damping_scale", {Target::Section, "model"}},
       {"integrator", {Target::Section, "simulation"}},

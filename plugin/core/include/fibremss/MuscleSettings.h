@@ -76,6 +76,12 @@ struct MuscleSettings {
   /// per tetrahedron: G0 = Σ over its four particles of |∂(6V)/∂x_i|² at rest, capped for
   /// poorly shaped ones (VolumeForces.h) [m⁴]
   std::vector<btScalar> tetRestGradient;
+  // Enclosed-volume term (VolumeForces.h): one pressure per muscle on the volume the interior
+  // Delaunay tetrahedra (all of them, slivers too) enclose, through the faces of their boundary;
+  // empty when enclosedModulus is 0.
+  btScalar enclosedModulus = 0;  ///< bulk modulus K of the enclosed-volume term [Pa]; 0: none
+  std::vector<uint32_t> enclosedFaces;  ///< 3 per boundary face, counter-clockwise from outside
+  double enclosedRestVolume = 0;        ///< volume enclosedFaces enclose at rest [m³]
 
   std::vector<Spring> springs;  ///< contiguous, no duplicates, sorted by (a, b)
   SpringBlocks springBlocks;    ///< `springs` laid out for the AVX2 kernel (empty: not laid out)

@@ -51,6 +51,14 @@ struct SpringParameters {
   /// change (energy ½·K·(V − V0)²/V0 per tetrahedron), as a multiple of the spring network's
   /// Young's modulus E = Σk·L0² / 3V [1] (K in Pa = this × E; 0: off).
   btScalar volumeStiffness = 4;
+  /// Whole-muscle volume preservation: a bulk modulus K against the change of the volume the
+  /// muscle's interior tetrahedra enclose (energy ½·K·(V − V0)²/V0 per muscle, a pressure on the
+  /// boundary of the particles), as a multiple of E like volumeStiffness [1] (0: off).
+  btScalar enclosedVolumeStiffness = 0;
+  /// The local volume terms on fewer, larger tetrahedra: 1 takes the Delaunay tetrahedra of all
+  /// the particles; c > 1 those of a subset in which no two particles lie closer than c times
+  /// the first one's distance to its nearest particle (kept greedily in particle order) [1].
+  btScalar volumeCoarsening = 1;
   /// Stiffness of a spring along the local fibre direction over one across it [1]: a spring at
   /// angle θ to the fibres gets k = κ/L0 · (ratio·cos²θ + sin²θ) (1: isotropic).
   btScalar fibreStiffnessRatio = 1;

@@ -169,6 +169,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
     for (size_t s = 1; s < weights_.size(); ++s) {
       springForces(settings, stage.positions, stage.forces);
       addTetrahedronForces(settings, stage.positions, stage.forces);
+      addEnclosedVolumeForces(settings, stage.positions, stage.forces);
       addExternalForces(muscle, parameters.gravity, stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();

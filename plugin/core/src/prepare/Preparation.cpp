@@ -410,14 +410,22 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   muscle.springs =
       detail::buildSprings(input, muscle.restPositions, particles, detail::fibreDirections(muscle));
   const bool byVolume = parameters.springs.stiffness == SpringStiffness::Volume;
-  // The Delaunay only where the springs or the volume terms use it.
+  // The Delaunay only where the springs or a volume term use it.
   std::vector<detail::Tetrahedron> interior;
-  if (byVolume || parameters.springs.volumeStiffness > 0)
+  if (byVolume || parameters.springs.volumeStiffness > 0 ||
+      parameters.springs.enclosedVolumeStiffness > 0)
     interior = detail::interiorTetrahedra(input, muscle.restPositions, muscle.restSurface);
   if (byVolume && !detail::shareStiffnessByVolume(muscle.restPositions, interior, muscle.springs))
     warnings.push_back(source +
                        ": the particles enclose no volume to share the springs' stiffness by; "
                        "they keep k = κ/L0 (spring_stiffness \"length\")");
+  // The local volume terms' tetrahedra: the interior ones, or a coarser set's.
+  std::vector<detail::Tetrahedron> coarse;
+  const bool coarsened =
+      parameters.springs.volumeStiffness > 0 && parameters.springs.volumeCoarsening > 1;
+  if (coarsened)
+    coarse = detail::coarseTetrahedra(input, muscle.restPositions, particles, muscle.restSurface,
+                                      parameters.springs.volumeCoarsening);
   attachToBones(input, bones, boneInputs, muscle, warnings);
   if (detail::dropFixedSprings(muscle) > 0 && muscle.springs.empty())
     warnings.push_back(source + ": every spring links two fixed particles, nothing moves");
@@ -433,6 +441,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   const std::vector<uint32_t> order = detail::mortonOrder(muscle.restPositions);
   detail::reorderParticles(muscle, order);
   detail::renumberTetrahedra(interior, order);
+  detail::renumberTetrahedra(coarse, order);
   muscle.restVolume = meshVolume(muscle.restSurface);
   double network = 0;  // Σ k·L0²
   for (const Spring& spring : muscle.springs)
@@ -440,7 +449,10 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   // The bulk modulus as a multiple of the network's Young's modulus E = Σk·L0² / 3V.
   const double youngs = muscle.restVolume != 0 ? network / (3 * std::abs(muscle.restVolume)) : 0;
   muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * youngs);
-  detail::buildVolumeTetrahedra(muscle, interior);
+  detail::buildVolumeTetrahedra(muscle, coarsened ? coarse : interior);
+  muscle.enclosedModulus =
+      static_cast<btScalar>(parameters.springs.enclosedVolumeStiffness * youngs);
+  detail::buildEnclosedVolume(muscle, interior);
   report.shortestSpring = muscle.springs.empty() ? 0 : muscle.springs.front().restLength;
   for (const Spring& spring : muscle.springs)
     report.shortestSpring = std::min(report.shortestSpring, spring.restLength);

@@ -77,6 +77,14 @@ std::vector<Tetrahedron> interiorTetrahedra(const MuscleInput& input,
                                             std::span<const btVector3> positions,
                                             const TriangleMesh& surface);
 
+/// The interior tetrahedra (interiorTetrahedra) of a subset of `positions`: particles taken in
+/// order, each dropping those closer to it than `coarsening` times its distance to its nearest
+/// particle (`particles` indexes `positions`); numbered as `positions`.
+std::vector<Tetrahedron> coarseTetrahedra(const MuscleInput& input,
+                                          std::span<const btVector3> positions,
+                                          const KdTree& particles, const TriangleMesh& surface,
+                                          double coarsening);
+
 /// Renames the tetrahedra's particles after reorderParticles(muscle, order): old particle
 /// order[k] becomes k.
 void renumberTetrahedra(std::vector<Tetrahedron>& tetrahedra, std::span<const uint32_t> order);
@@ -94,6 +102,12 @@ bool shareStiffnessByVolume(std::span<const btVector3> positions,
 /// tetInverseVolume and tetRestGradient from the interior tetrahedra (numbered as restPositions)
 /// not all of whose particles are fixed and that are not slivers; sorted by their particles.
 void buildVolumeTetrahedra(MuscleSettings& muscle, std::span<const Tetrahedron> interior);
+
+/// The enclosed-volume term (SpringsVolume.cpp): when muscle.enclosedModulus > 0, fills
+/// enclosedFaces with the boundary of the interior tetrahedra (numbered as restPositions; all of
+/// them, so that the faces are closed) and enclosedRestVolume with the volume they enclose; none
+/// when that is not positive.
+void buildEnclosedVolume(MuscleSettings& muscle, std::span<const Tetrahedron> interior);
 
 /// Zeleny's damping estimate c = √(4·k̄·2m) (000 eq 2.11), k̄ the mean spring stiffness.
 btScalar zelenyDamping(std::span<const Spring> springs, btScalar particleMass);

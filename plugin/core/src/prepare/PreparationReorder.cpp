@@ -12,7 +12,7 @@ namespace {
 
 // A new field of MuscleSettings may hold particle indices or per-particle values: remap it in
 // reorderParticles, then update this size (libstdc++, x86-64).
-static_assert(sizeof(MuscleSettings) == 640 + 2 * sizeof(btScalar),
+static_assert(sizeof(MuscleSettings) == 680 + 2 * sizeof(btScalar),
               "MuscleSettings changed: remap its new fields in reorderParticles");
 
 /// Spreads the low 10 bits of v to every third bit (bit i to bit 3i).
@@ -90,8 +90,10 @@ void reorderParticles(MuscleSettings& muscle, std::span<const uint32_t> order) {
   std::sort(muscle.fixedParticles.begin(), muscle.fixedParticles.end());
   renumber(muscle.fibreParticles);
   renumber(muscle.skinParticles);
-  // Each keeps its sequence, hence its orientation (tetInverseVolume and tetRestGradient hold).
+  // Each keeps its sequence, hence its orientation (tetInverseVolume and tetRestGradient hold,
+  // and the faces still face out).
   renumber(muscle.tetParticles);
+  renumber(muscle.enclosedFaces);
 
   for (Spring& spring : muscle.springs) {
     spring.a = rank[spring.a];

@@ -7,8 +7,10 @@
 #include <numeric>
 
 #include "PreparationInternal.h"
+#include "PreparationKdTree.h"
 #include "SpringsDelaunay.h"
 #include "fibremss/Error.h"
+#include "solver/VolumeForces.h"
 
 namespace fibremss::detail {
 namespace {
@@ -51,6 +53,31 @@ std::vector<Tetrahedron> interiorTetrahedra(const MuscleInput& input,
     return !inside.inside(centroid);
   });
   return all;
+}
+
+std::vector<Tetrahedron> coarseTetrahedra(const MuscleInput& input,
+                                          std::span<const btVector3> positions,
+                                          const KdTree& particles, const TriangleMesh& surface,
+                                          double coarsening) {
+  std::vector<uint8_t> dropped(positions.size(), 0);
+  std::vector<uint32_t> kept;
+  std::vector<btVector3> subset;
+  std::vector<std::pair<uint32_t, btScalar>> near;
+  for (uint32_t i = 0; i < positions.size(); ++i) {
+    if (dropped[i]) continue;
+    uint32_t nearest[2];
+    btScalar distance2[2];
+    if (particles.nearest(positions[i], 2, nearest, distance2) < 2) continue;
+    kept.push_back(i);
+    subset.push_back(positions[i]);
+    particles.within(positions[i], static_cast<btScalar>(coarsening) * std::sqrt(distance2[1]),
+                     near);
+    for (const auto& [j, d2] : near) dropped[j] = 1;
+  }
+  std::vector<Tetrahedron> tetrahedra = interiorTetrahedra(input, subset, surface);
+  for (Tetrahedron& t : tetrahedra)
+    for (uint32_t& i : t) i = kept[i];
+  return tetrahedra;
 }
 
 void renumberTetrahedra(std::vector<Tetrahedron>& tetrahedra, std::span<const uint32_t> order) {
@@ -128,6 +155,64 @@ void buildVolumeTetrahedra(MuscleSettings& muscle, std::span<const Tetrahedron> 
     muscle.tetRestGradient.push_back(
         static_cast<btScalar>(std::min(double(squaredVolumeGradient(x, t)), cap)));
   }
+}
+
+namespace {
+
+/// A face of a tetrahedron as its particles in ascending order and the orientation it had: +1
+/// when it was an even permutation of them, −1 when odd.
+struct OrientedFace {
+  std::array<uint32_t, 3> particles;
+  int sign;
+};
+
+OrientedFace orientedFace(uint32_t p, uint32_t q, uint32_t r) {
+  const int inversions = int(p > q) + int(p > r) + int(q > r);
+  std::array<uint32_t, 3> sorted{p, q, r};
+  std::sort(sorted.begin(), sorted.end());
+  return {sorted, inversions % 2 == 0 ? 1 : -1};
+}
+
+/// The faces of the tetrahedra's boundary, counter-clockwise from outside: each tetrahedron
+/// turned to positive volume at x gives its four faces outward; a face two of them share comes
+/// once each way and cancels.
+std::vector<uint32_t> boundaryFaces(std::span<const btVector3> x,
+                                    std::span<const Tetrahedron> tetrahedra) {
+  std::vector<OrientedFace> faces;
+  faces.reserve(4 * tetrahedra.size());
+  for (Tetrahedron t : tetrahedra) {
+    double sixVolume = 0;
+    tetrahedronQuality(x, t, sixVolume);
+    if (sixVolume < 0) std::swap(t[2], t[3]);
+    faces.push_back(orientedFace(t[1], t[2], t[3]));
+    faces.push_back(orientedFace(t[0], t[3], t[2]));
+    faces.push_back(orientedFace(t[0], t[1], t[3]));
+    faces.push_back(orientedFace(t[0], t[2], t[1]));
+  }
+  std::sort(faces.begin(), faces.end(),
+            [](const OrientedFace& a, const OrientedFace& b) { return a.particles < b.particles; });
+  std::vector<uint32_t> boundary;
+  for (size_t k = 0; k < faces.size();) {
+    int sign = 0;
+    const std::array<uint32_t, 3>& f = faces[k].particles;
+    for (; k < faces.size() && faces[k].particles == f; ++k) sign += faces[k].sign;
+    for (int copy = 0; copy < std::abs(sign); ++copy) {
+      const bool even = sign > 0;
+      boundary.insert(boundary.end(), {f[0], even ? f[1] : f[2], even ? f[2] : f[1]});
+    }
+  }
+  return boundary;
+}
+
+}  // namespace
+
+void buildEnclosedVolume(MuscleSettings& muscle, std::span<const Tetrahedron> interior) {
+  muscle.enclosedFaces.clear();
+  muscle.enclosedRestVolume = 0;
+  if (!(muscle.enclosedModulus > 0)) return;
+  muscle.enclosedFaces = boundaryFaces(muscle.restPositions, interior);
+  muscle.enclosedRestVolume = enclosedParticleVolume(muscle, muscle.restPositions);
+  if (!(muscle.enclosedRestVolume > 0)) muscle.enclosedFaces.clear();
 }
 
 std::vector<btVector3> fibreDirections(const MuscleSettings& muscle) {

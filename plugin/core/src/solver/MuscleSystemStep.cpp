@@ -366,6 +366,7 @@ void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
                                                    chunk.springBegin, chunk.springEnd);
   const Clock::time_point volumeStart = Clock::now();
   addTetrahedronForces(settings, state.positions, forces, kernel, chunk.tetBegin, chunk.tetEnd);
+  if (task.chunk == 0) addEnclosedVolumeForces(settings, state.positions, forces);
   state.chunkVolumeMs[task.chunk] = millisecondsSince(volumeStart);
   state.chunkMs[task.chunk] = millisecondsSince(start);
   if (state.chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) finishForces(state, result);
@@ -389,7 +390,8 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
     result.volumeMs += state.chunkVolumeMs[c];
   }
   result.forces.exploded = result.forces.overstretched > 0;
-  if (state.settings->tetInverseVolume.empty()) result.volumeMs = 0;
+  if (state.settings->tetInverseVolume.empty() && state.settings->enclosedFaces.empty())
+    result.volumeMs = 0;
   addExternalForces(state, parameters.gravity, state.forces);
   if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
   result.forcesMs += millisecondsSince(start);

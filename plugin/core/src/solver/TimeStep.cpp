@@ -219,6 +219,7 @@ btScalar stableTimeStep(const MuscleSettings& settings, Integrator kind) {
     if (!settings.isFixed(spring.b)) stiffness[spring.b] += spring.stiffness;
   }
   addTetrahedronStiffness(settings, stiffness);
+  addEnclosedVolumeStiffness(settings, stiffness);
   const btScalar stiffest =
       stiffness.empty() ? 0 : *std::max_element(stiffness.begin(), stiffness.end());
   if (stiffest <= 0 || settings.particleMass <= 0) return kInfinity;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "ParticleSimd.h"
 
@@ -291,6 +292,54 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
 void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces) {
   addTetrahedronForces(settings, positions, forces, fastestSpringKernel());
+}
+
+double enclosedParticleVolume(const MuscleSettings& settings,
+                              std::span<const btVector3> positions) {
+  const std::span<const uint32_t> faces = settings.enclosedFaces;
+  if (faces.empty()) return 0;
+  const btVector3 origin = positions[faces[0]];
+  double sixVolume = 0;
+  for (size_t k = 0; k < faces.size(); k += 3) {
+    const btVector3 a = positions[faces[k]];
+    const btVector3 normal = (positions[faces[k + 1]] - a).cross(positions[faces[k + 2]] - a);
+    sixVolume += double((a - origin).dot(normal));
+  }
+  return sixVolume / 6;
+}
+
+void addEnclosedVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                             std::span<btVector3> forces) {
+  const std::span<const uint32_t> faces = settings.enclosedFaces;
+  if (faces.empty()) return;
+  const double ratio = enclosedParticleVolume(settings, positions) / settings.enclosedRestVolume;
+  const btScalar scale = settings.enclosedModulus / 6 * clampedStrain(static_cast<btScalar>(ratio));
+  for (size_t k = 0; k < faces.size(); k += 3) {
+    const btVector3 a = positions[faces[k]];
+    const btVector3 force =
+        (positions[faces[k + 1]] - a).cross(positions[faces[k + 2]] - a) * scale;
+    forces[faces[k]] += force;
+    forces[faces[k + 1]] += force;
+    forces[faces[k + 2]] += force;
+  }
+}
+
+void addEnclosedVolumeStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
+  const std::span<const uint32_t> faces = settings.enclosedFaces;
+  if (faces.empty()) return;
+  const std::span<const btVector3> x = settings.restPositions;
+  std::vector<btVector3> gradient(x.size(), btVector3(0, 0, 0));  // ∂V/∂x_i at rest [m²]
+  for (size_t k = 0; k < faces.size(); k += 3) {
+    const btVector3 normal = (x[faces[k + 1]] - x[faces[k]]).cross(x[faces[k + 2]] - x[faces[k]]);
+    for (size_t v = 0; v < 3; ++v) gradient[faces[k + v]] += normal / 6;
+  }
+  double squared = 0;
+  for (uint32_t i = 0; i < x.size(); ++i)
+    if (!settings.isFixed(i)) squared += double(gradient[i].length2());
+  const auto half =
+      static_cast<btScalar>(settings.enclosedModulus * squared / settings.enclosedRestVolume / 2);
+  for (uint32_t i = 0; i < x.size(); ++i)
+    if (!settings.isFixed(i)) stiffness[i] += half;
 }
 
 void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {

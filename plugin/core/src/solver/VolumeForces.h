@@ -1,6 +1,8 @@
 #pragma once
 // The volume-preservation terms of a muscle (issue 18), internal: one per tetrahedron of the
-// particles (MuscleSettings::tetParticles), against the change of its volume.
+// particles (MuscleSettings::tetParticles), against the change of its volume, and one for the
+// whole muscle (MuscleSettings::enclosedFaces), against the change of the volume its particles
+// enclose.
 #include <LinearMath/btVector3.h>
 
 #include <span>
@@ -38,5 +40,24 @@ void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVect
 /// terms' stiffness at rest, K/V0·|∂V/∂x_i|·Σ_j |∂V/∂x_j|·G0/G per tetrahedron [N/m]:
 /// stableTimeStep doubles spring rows the same way.
 void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness);
+
+/// The volume settings.enclosedFaces enclose at `positions` [m³]: the cones of the faces from the
+/// first face's first particle, each in float, summed in double.
+double enclosedParticleVolume(const MuscleSettings& settings, std::span<const btVector3> positions);
+
+/// Adds the enclosed-volume term's forces at `positions` into `forces`: each particle i of
+/// settings.enclosedFaces gets K·s·∂V/∂x_i (K = settings.enclosedModulus, V
+/// enclosedParticleVolume, V0 settings.enclosedRestVolume, s = 1 − V/V0 clamped to [−1, 1]), with
+/// ∂V/∂x_i a sixth of the sum of (x_b − x_a) × (x_c − x_a) over the faces (a, b, c) around i (the
+/// gradient of V, the faces being closed): the gradient of the energy ½·K·(V − V0)²/V0, a pressure
+/// K·s on the boundary of the particles. One pass over the faces for V, one for the forces; a
+/// fixed order, the same sums for any thread count.
+void addEnclosedVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                             std::span<btVector3> forces);
+
+/// Adds to each free particle's row of `stiffness` half of K/V0·Σ_j |∂V/∂x_j|² at rest (j over
+/// the free particles): the largest eigenvalue of the term's stiffness K/V0·g·gᵀ, which bounds
+/// its share of the system's largest one whatever the other terms' rows are [N/m].
+void addEnclosedVolumeStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness);
 
 }  // namespace fibremss
