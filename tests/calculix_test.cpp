@@ -409,6 +409,17 @@ TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   gates.returnMm = 0.4;
   gates.failures = "reference pose 3: no convergence";
   EXPECT_FALSE(gates.passed());
+  // pinch's C3D10 solve stopped in pose 1: its 0 mm over the rest pose alone is no pass.
+  gates.failures.clear();
+  gates.solvedPoses = 2;
+  gates.refinementPoses = 1;
+  gates.refinementMm = 0;
+  EXPECT_FALSE(gates.refinementPasses());
+  EXPECT_NE(gateLines(gates)[1].find("FAILS (over fewer poses than the reference solved)"),
+            std::string::npos)
+      << gateLines(gates)[1];
+  gates.refinementPoses = 2;
+  EXPECT_TRUE(gates.passed());
 }
 
 TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {

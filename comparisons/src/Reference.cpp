@@ -304,6 +304,7 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   }
   reference.gates.excluded = excludedPoses(solution);
   reference.gates.poses = static_cast<int>(solution.poseSurfaces.size());
+  reference.gates.solvedPoses = solution.solvedPoses();
   if (!solution.returnSurface.empty())
     reference.gates.returnMm = rmsDistanceMm(solution.returnSurface, restSurfaces(prepared));
   if (options.gates && !(options.cancel && options.cancel->load()))
@@ -367,6 +368,7 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"attachment_high_mm", number(g.attachmentHighMm)},
             {"poses", g.poses},
             {"refinement_poses", g.refinementPoses},
+            {"solved_poses", g.solvedPoses},
             {"attachment_low_poses", g.attachmentLowPoses},
             {"attachment_high_poses", g.attachmentHighPoses},
             {"failures", g.failures},
@@ -412,7 +414,10 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
         " (passes when below a third of the spread between the methods: needs a comparison)";
   else
     refinement += " against a third of the methods' spread " + mm(g.spreadMm / 3) + ": " +
-                  (g.refinementPasses() ? "passes" : "FAILS");
+                  (g.refinementPasses()                ? "passes"
+                   : g.refinementPoses < g.solvedPoses ? "FAILS (over fewer poses than the "
+                                                         "reference solved)"
+                                                       : "FAILS");
   lines.push_back(refinement);
   lines.push_back("attachment distance x0.5 / x1.5: moves it " + mm(g.attachmentLowMm) +
                   over(g.attachmentLowPoses) + " / " + mm(g.attachmentHighMm) +

@@ -65,6 +65,9 @@ struct ReferenceGates {
   /// over fewer poses than the motion's says so.
   int poses = 0;
   int refinementPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
+  /// Poses the reference itself solved: the refinement gate passes only over all of them (a
+  /// finer solve that stopped early has measured the easy poses alone).
+  int solvedPoses = 0;
   std::string failures;  ///< poses ccx did not finish, of the reference or a gate's solve
   /// Poses without a continuum equilibrium ("poses k to N-1 of N: why"; ContinuumCut): not
   /// solved, not failures; the RMS, the gates and the ranking cover the poses before them.
@@ -74,7 +77,9 @@ struct ReferenceGates {
   double spreadMm = RunMetrics::kNone;
 
   bool returnPasses() const { return returnMm <= kReturnGateMm; }
-  bool refinementPasses() const { return refinementMm < kRefinementShareOfSpread * spreadMm; }
+  bool refinementPasses() const {
+    return refinementMm < kRefinementShareOfSpread * spreadMm && refinementPoses >= solvedPoses;
+  }
   /// Both gates passed (the return gate where it applies) and every pose solved but those
   /// excluded: rankings may be reported.
   bool passed() const {
