@@ -5,9 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
@@ -407,6 +409,17 @@ TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   gates.returnMm = 0.4;
   gates.failures = "reference pose 3: no convergence";
   EXPECT_FALSE(gates.passed());
+  // pinch's C3D10 solve stopped in pose 1: its 0 mm over the rest pose alone is no pass.
+  gates.failures.clear();
+  gates.solvedPoses = 2;
+  gates.refinementPoses = 1;
+  gates.refinementMm = 0;
+  EXPECT_FALSE(gates.refinementPasses());
+  EXPECT_NE(gateLines(gates)[1].find("FAILS (over fewer poses than the reference solved)"),
+            std::string::npos)
+      << gateLines(gates)[1];
+  gates.refinementPoses = 2;
+  EXPECT_TRUE(gates.passed());
 }
 
 TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {
@@ -465,11 +478,16 @@ TEST(ReferenceGates, ExcludedPosesAreNoFailureButAGateThatFailsStillBlocks) {
       << line;
 }
 
-TEST(ContinuumCut, PinchsBladesCloseAcrossTheMuscleFromPose2) {
-  const LoadedScene scene = loadScene("pinch");
+/// The scene's continuum cut with its attachment distances × `scale`.
+ContinuumCut cutOf(const LoadedScene& scene, btScalar scale = 1) {
   std::vector<MeshDistance> bones;
   for (const BoneInput& bone : scene.bones) bones.emplace_back(bone.mesh);
-  const ContinuumCut cut = findContinuumCut(scene, bones);
+  return findContinuumCut(scene, bones, sampleContinuum(scene), scale);
+}
+
+TEST(ContinuumCut, PinchsBladesCloseAcrossTheMuscleFromPose2) {
+  const LoadedScene scene = loadScene("pinch");
+  const ContinuumCut cut = cutOf(scene);
   // Pose 1 leaves 10.2 mm between the blades (10 mm apart, 2 mm side by side); from pose 2 on
   // they have passed each other with their facing sides 2 mm apart, twice the attachment
   // distance being 8 mm.
@@ -478,12 +496,25 @@ TEST(ContinuumCut, PinchsBladesCloseAcrossTheMuscleFromPose2) {
   EXPECT_LT(cut.gapMm, 3.5) << "the samples lie within a grid step (2 mm) of the slot";
   EXPECT_NE(cut.reason.find("blade-a and blade-b"), std::string::npos) << cut.reason;
   EXPECT_NE(cut.reason.find("muscle pinched"), std::string::npos) << cut.reason;
-  for (const char* other : {"fusiform", "cylinder-twist", "cylinder-stretch", "sphere-planes"}) {
-    const LoadedScene s = loadScene(other);
-    std::vector<MeshDistance> b;
-    for (const BoneInput& bone : s.bones) b.emplace_back(bone.mesh);
-    EXPECT_EQ(findContinuumCut(s, b).pose, -1) << other;
-  }
+  EXPECT_NE(cut.reason.find("twice its attachment distance (8.0 mm)"), std::string::npos)
+      << cut.reason;
+  for (const char* other : {"fusiform", "cylinder-twist", "cylinder-stretch", "sphere-planes"})
+    for (const btScalar scale : {0.5f, 1.0f, 1.5f})
+      EXPECT_EQ(cutOf(loadScene(other), scale).pose, -1) << other << " x" << scale;
+}
+
+TEST(ContinuumCut, MovesWithTheAttachmentScaleOfAGatesSolve) {
+  // With 1.5x the attachment distance (6 mm) the bound is 12 mm: pose 1's 10.2 mm between the
+  // blades already cuts (ccx stopped there, "increment size smaller than minimum", with the
+  // muscle's top attached to one blade and its bottom to the other). Halved (2 mm, bound 4 mm)
+  // the cut stays at pose 2, where the blades are 2.0 mm apart.
+  const LoadedScene scene = loadScene("pinch");
+  const ContinuumCut wider = cutOf(scene, 1.5f);
+  EXPECT_EQ(wider.pose, 1) << wider.reason;
+  EXPECT_NEAR(wider.gapMm, 10.2, 1.0);
+  EXPECT_NE(wider.reason.find("twice 1.5x its attachment distance (12.0 mm)"), std::string::npos)
+      << wider.reason;
+  EXPECT_EQ(cutOf(scene, 0.5f).pose, 2);
 }
 
 TEST(ContinuumCut, IsWhereTheGapFallsBelowTwiceTheAttachmentDistanceNotWhereItStarts) {
@@ -492,10 +523,7 @@ TEST(ContinuumCut, IsWhereTheGapFallsBelowTwiceTheAttachmentDistanceNotWhereItSt
   // attachment distance) at 59.6 mm the first pose is cut, at 58.8 none; at 80 mm the plates
   // were closer than that at rest already, which is the scene's rest state, no cut.
   const auto cutAt = [](const char* attachment) {
-    const LoadedScene scene = loadScene("sphere-planes", {attachment});
-    std::vector<MeshDistance> bones;
-    for (const BoneInput& bone : scene.bones) bones.emplace_back(bone.mesh);
-    return findContinuumCut(scene, bones);
+    return cutOf(loadScene("sphere-planes", {attachment}));
   };
   const ContinuumCut cut = cutAt("attachment_distance=29.8");
   EXPECT_EQ(cut.pose, 1) << cut.reason;
@@ -580,20 +608,23 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   const LoadedScene scene = loadScene("fusiform", {"resolution=6", "fibre_count=8"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   const CalculixDefinition definition;
-  const std::string key = referenceCacheKey(scene, prepared, definition);
+  const ContinuumCut none;
+  const std::string key = referenceCacheKey(scene, prepared, definition, none);
   EXPECT_EQ(key.size(), 16u);
-  EXPECT_EQ(referenceCacheKey(scene, prepared, definition), key) << "stable";
+  EXPECT_EQ(referenceCacheKey(scene, prepared, definition, none), key) << "stable";
   const LoadedScene again =
       loadScene("fusiform", {"resolution=6", "fibre_count=8", "iterations=500"});
-  EXPECT_EQ(referenceCacheKey(again, prepared, definition), key) << "solver settings do not matter";
+  EXPECT_EQ(referenceCacheKey(again, prepared, definition, none), key)
+      << "solver settings do not matter";
   CalculixDefinition limited = definition;
   limited.memoryLimitGiB = 1;
-  EXPECT_EQ(referenceCacheKey(scene, prepared, limited), key) << "nor ccx's memory limit";
+  EXPECT_EQ(referenceCacheKey(scene, prepared, limited, none), key) << "nor ccx's memory limit";
 
   std::set<std::string> keys{key};
   int change = 0;
-  auto changed = [&](const LoadedScene& s, const PreparedScene& p, const CalculixDefinition& d) {
-    EXPECT_TRUE(keys.insert(referenceCacheKey(s, p, d)).second) << "change " << change;
+  auto changed = [&](const LoadedScene& s, const PreparedScene& p, const CalculixDefinition& d,
+                     const ContinuumCut& cut = {}) {
+    EXPECT_TRUE(keys.insert(referenceCacheKey(s, p, d, cut)).second) << "change " << change;
     ++change;
   };
   CalculixDefinition d = definition;
@@ -619,6 +650,18 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   d = definition;
   d.contactPenalty = 0;
   changed(scene, prepared, d);
+  d = definition;
+  d.incrementScale = 0.25;
+  changed(scene, prepared, d);
+  ContinuumCut cut;
+  cut.pose = 1;
+  changed(scene, prepared, definition, cut);
+  cut.pose = 2;
+  changed(scene, prepared, definition, cut);
+  cut.reason = "another reason, the same pose";
+  EXPECT_EQ(referenceCacheKey(scene, prepared, definition, cut),
+            referenceCacheKey(scene, prepared, definition, {2, 0, ""}))
+      << "only the cut's pose";
   LoadedScene moved = scene;
   moved.muscles[0].parameters.attachmentDistance *= 2;
   changed(moved, prepared, definition);
@@ -672,6 +715,56 @@ std::string coarseSpherePlanes(const std::filesystem::path& dir) {
   return path.string();
 }
 
+TEST(CalculixRun, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibrium) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("ccx_increments_test");
+  // The coarse fusiform whose lower bar moves 2 mm per pose (not 15): a few increments.
+  nlohmann::json json = nlohmann::json::parse(readText(coarseFusiform(dir.path())));
+  for (int pose = 1; pose < 3; ++pose)
+    json["bones"][1]["motion"]["keyframes"][pose]["translation"] = {0, -2 * pose, 0};
+  const std::filesystem::path path = dir.path() / "short-fusiform.json";
+  std::ofstream(path) << json.dump(2);
+  const LoadedScene scene = loadScene(path.string(), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  CalculixDefinition definition;
+  definition.returnToRest = false;
+  CalculixDefinition finer = definition;
+  finer.incrementScale = 0.25;
+  const std::filesystem::path coarseDir = dir.path() / "coarse", fineDir = dir.path() / "fine";
+  const CalculixSolution coarse =
+      solveCalculixReference(scene, prepared, definition, {}, coarseDir.string());
+  const CalculixSolution fine =
+      solveCalculixReference(scene, prepared, finer, {}, fineDir.string());
+  ASSERT_EQ(scene.poseCount, 3);
+  ASSERT_EQ(coarse.solvedPoses(), 3) << coarse.poseFailures[1] << coarse.poseFailures[2];
+  ASSERT_EQ(fine.solvedPoses(), 3) << fine.poseFailures[1] << fine.poseFailures[2];
+  // The lower bar moves 2 mm in each of poses 1 and 2 (pose 0 is rest: one increment): at
+  // most 1 mm, or 0.25 mm, per increment, and ccx may cut back further.
+  EXPECT_GE(coarse.increments, 1 + 2 * 2);
+  EXPECT_LT(coarse.increments, 1 + 2 * 8) << "the default is not already that fine";
+  EXPECT_GE(fine.increments, 1 + 2 * 8);
+  // Each moving step's *STATIC line (initial, period, minimum, largest increment) starts and
+  // is bounded at 0.25 mm of its 2 mm.
+  std::istringstream input(readText(fineDir / "muscle0.inp"));
+  std::vector<std::array<double, 4>> statics;
+  for (std::string line; std::getline(input, line);) {
+    if (line != "*STATIC") continue;
+    std::getline(input, line);
+    std::array<double, 4>& row = statics.emplace_back();
+    ASSERT_EQ(std::sscanf(line.c_str(), "%lf, %lf, %lf, %lf", &row[0], &row[1], &row[2], &row[3]),
+              4)
+        << line;
+  }
+  ASSERT_EQ(statics.size(), 3u);
+  for (size_t step = 1; step < 3; ++step) {
+    EXPECT_NEAR(statics[step][3], 0.125, 1e-3) << step;
+    EXPECT_EQ(statics[step][0], statics[step][3]) << step;
+  }
+  // The same hyperelastic equilibrium (frictionless contact: no path dependence) either way.
+  EXPECT_LT(rmsBetweenSolutions(coarse, fine), 1e-3) << "mm";
+}
+
 TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");
@@ -683,7 +776,7 @@ TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {
   definition.returnToRest = false;
   // Held by its symmetry alone: no node is attached to a plate.
   const CalculixSolution solution =
-      solveCalculixReference(scene, prepared, definition, (dir.path() / "ccx").string());
+      solveCalculixReference(scene, prepared, definition, {}, (dir.path() / "ccx").string());
   EXPECT_EQ(solution.prescribedNodes, 0u);
   ASSERT_EQ(solution.solvedPoses(), 2) << solution.poseFailures[1];
   const ContactPose contact =

@@ -465,6 +465,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.spreadMm = number(gates, "spread_mm");
   g.poses = gates.value("poses", 0);
   g.refinementPoses = gates.value("refinement_poses", 0);
+  g.solvedPoses = gates.value("solved_poses", 0);
   g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
   g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());

@@ -118,13 +118,15 @@ double largestTurnDeg(const LoadedScene& scene, size_t bones, int from, int to) 
 }
 
 /// The largest increment of each of the job's steps (share of it): no bone turns more than
-/// 2.5° and no attached node moves more than 1 mm within one. ccx's Newton on a twisted
+/// 2.5° and no attached node moves more than 1 mm within one, both × `scale`
+/// (CalculixDefinition::incrementScale). ccx's Newton on a twisted
 /// cylinder (C3D4, ν 0.49) diverged on 5° increments from 25° of twist on, converged in 2
 /// iterations on 1.25° ones, and ended on a NaN within a 45° step whose increments it let grow
 /// to 11°; pinch's step back from pose 1 (7 mm) ended on a NaN at its second try, 1.75 mm.
 std::vector<double> maximumIncrements(const LoadedScene& scene, size_t bones,
-                                      const std::vector<int>& steps, const CalculixJob& job) {
-  constexpr double kIncrementTurnDeg = 2.5, kIncrementMove = 1e-3;
+                                      const std::vector<int>& steps, const CalculixJob& job,
+                                      double scale) {
+  const double turnDeg = 2.5 * scale, largestMove = 1e-3 * scale;
   std::vector<double> largest;
   for (size_t s = 0; s < steps.size(); ++s) {
     const double turn = largestTurnDeg(scene, bones, s == 0 ? -1 : steps[s - 1], steps[s]);
@@ -133,8 +135,8 @@ std::vector<double> maximumIncrements(const LoadedScene& scene, size_t bones,
       move = std::max(
           move,
           double((job.steps[s][i] - (s == 0 ? btVector3(0, 0, 0) : job.steps[s - 1][i])).length()));
-    largest.push_back(std::min(
-        {1.0, kIncrementTurnDeg / std::max(turn, 1e-9), kIncrementMove / std::max(move, 1e-12)}));
+    largest.push_back(
+        std::min({1.0, turnDeg / std::max(turn, 1e-9), largestMove / std::max(move, 1e-12)}));
   }
   return largest;
 }
@@ -232,7 +234,8 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
       u.push_back(stepTransform(scene, static_cast<size_t>(boneOf[i]), pose) * x - x);
     }
   }
-  job.maximumIncrements = maximumIncrements(scene, prepared.bones.size(), steps, job);
+  job.maximumIncrements =
+      maximumIncrements(scene, prepared.bones.size(), steps, job, definition.incrementScale);
   // Prescribed nodes are ascending: the surface vertices among them come first.
   result.movedPositions.resize(steps.size());
   for (size_t i = 0; i < job.prescribed.size() && job.prescribed[i] < loaded.vertices.size(); ++i) {
@@ -357,14 +360,15 @@ bool CalculixSolution::hitMemoryLimit() const {
 
 CalculixSolution solveCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
-    const std::string& workDir, const std::function<void(const ReferenceProgress&)>& progress,
+    const ContinuumCut& cut, const std::string& workDir,
+    const std::function<void(const ReferenceProgress&)>& progress,
     const std::atomic<bool>* cancel) {
   const auto start = Clock::now();
   std::filesystem::create_directories(workDir);
   std::vector<MeshDistance> bones;
   for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
   CalculixSolution solution;
-  solution.cut = findContinuumCut(scene, bones);
+  solution.cut = cut;
   const int poses = solution.cut.pose >= 0 ? solution.cut.pose : std::max(scene.poseCount, 1);
   const std::vector<int> steps =
       stepPoses(scene, prepared.bones.size(), poses, definition.returnToRest);

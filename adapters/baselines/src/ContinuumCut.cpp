@@ -51,45 +51,60 @@ std::vector<btScalar> pairGaps(const std::vector<btVector3>& samples,
   return gaps;
 }
 
+/// Why pose's pair (a, b) cuts the muscle; `scale`: × its attachment distance (said when not 1).
 std::string reasonText(const LoadedScene& scene, size_t a, size_t b, size_t muscle, btScalar gap,
-                       btScalar rest, btScalar bound) {
+                       btScalar rest, btScalar bound, btScalar scale) {
+  char times[32] = "";
+  if (scale != 1) std::snprintf(times, sizeof times, "%gx ", double(scale));
   char text[512];
   std::snprintf(text, sizeof text,
                 "no continuum equilibrium: bones %s and %s close to %.1f mm across muscle %s "
-                "(%s at rest), below twice its attachment distance (%.1f mm): the material "
+                "(%s at rest), below twice %sits attachment distance (%.1f mm): the material "
                 "between them would move with both, so the muscle must be cut",
                 scene.bones[a].name.c_str(), scene.bones[b].name.c_str(), 1000 * double(gap),
                 scene.muscles[muscle].name.c_str(),
                 std::isinf(rest)
                     ? "farther than that"
                     : (std::to_string(std::lround(1000 * double(rest))) + " mm").c_str(),
-                1000 * double(bound));
+                times, 1000 * double(bound));
   return text;
 }
 
 }  // namespace
 
-ContinuumCut findContinuumCut(const LoadedScene& scene, const std::vector<MeshDistance>& bones) {
+ContinuumSamples sampleContinuum(const LoadedScene& scene) {
+  ContinuumSamples samples;
+  for (const MuscleInput& muscle : scene.muscles) {
+    const btScalar attachment = muscle.parameters.attachmentDistance;
+    samples.muscles.push_back(muscle.surface.vertices.empty() || !(attachment > 0)
+                                  ? std::vector<btVector3>()
+                                  : volumeSamples(muscle.surface, attachment));
+  }
+  return samples;
+}
+
+ContinuumCut findContinuumCut(const LoadedScene& scene, const std::vector<MeshDistance>& bones,
+                              const ContinuumSamples& samples, btScalar attachmentScale) {
   ContinuumCut cut;
   const size_t n = bones.size();
   if (n < 2) return cut;
   const int poses = std::max(scene.poseCount, 1);
-  for (size_t m = 0; m < scene.muscles.size(); ++m) {
-    const MuscleInput& muscle = scene.muscles[m];
-    const btScalar bound = 2 * muscle.parameters.attachmentDistance;
-    if (muscle.surface.vertices.empty() || !(bound > 0)) continue;
-    const std::vector<btVector3> samples = volumeSamples(muscle.surface, bound / 2);
+  for (size_t m = 0; m < scene.muscles.size() && m < samples.muscles.size(); ++m) {
+    const std::vector<btVector3>& inside = samples.muscles[m];
+    const btScalar bound = 2 * scene.muscles[m].parameters.attachmentDistance * attachmentScale;
+    if (inside.empty() || !(bound > 0)) continue;
     const std::vector<btScalar> rest =
-        pairGaps(samples, bones, std::vector<btTransform>(n, btTransform::getIdentity()), bound);
+        pairGaps(inside, bones, std::vector<btTransform>(n, btTransform::getIdentity()), bound);
     const int last = cut.pose < 0 ? poses : cut.pose;  // an earlier muscle's cut stands
     for (int p = 0; p < last; ++p) {
       std::vector<btTransform> transforms;
       for (size_t b = 0; b < n; ++b) transforms.push_back(scene.bonePose(b, p));
-      const std::vector<btScalar> gaps = pairGaps(samples, bones, transforms, bound);
+      const std::vector<btScalar> gaps = pairGaps(inside, bones, transforms, bound);
       for (size_t pair = 0; pair < gaps.size(); ++pair) {
         if (!(gaps[pair] < bound) || rest[pair] < bound) continue;  // closed already at rest
         cut = {p, 1000 * double(gaps[pair]),
-               reasonText(scene, pair / n, pair % n, m, gaps[pair], rest[pair], bound)};
+               reasonText(scene, pair / n, pair % n, m, gaps[pair], rest[pair], bound,
+                          attachmentScale)};
         break;
       }
       if (cut.pose == p) break;

@@ -112,7 +112,7 @@ class Reader {
 }  // namespace
 
 std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& prepared,
-                              const CalculixDefinition& definition) {
+                              const CalculixDefinition& definition, const ContinuumCut& cut) {
   Hasher h;
   h.text("fibremss calculix reference 2");
   h.text(calculixVersion(definition.program));
@@ -141,11 +141,13 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
   h.value(definition.contactPenalty);
   // Poses past a continuum cut are not solved: the same scene's entries from before the cut
   // was found hold ccx's failures there instead. Scenes without a cut keep their keys.
-  std::vector<MeshDistance> bones;
-  for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
-  if (const ContinuumCut cut = findContinuumCut(scene, bones); cut.pose >= 0) {
+  if (cut.pose >= 0) {
     h.text("continuum cut");
     h.value(cut.pose);
+  }
+  if (definition.incrementScale != 1) {  // finer increments (no other key changes)
+    h.text("increment scale");
+    h.value(definition.incrementScale);
   }
   // C3D10 under contact: the midside nodes became contact slaves (no other key changes).
   if (definition.element == CalculixElement::C3D10 && definition.contactPenalty > 0)
@@ -232,9 +234,10 @@ bool loadSolution(const std::string& path, CalculixSolution& solution) {
 
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
-    const std::string& cacheDir, const std::function<void(const ReferenceProgress&)>& progress,
-    const std::atomic<bool>* cancel, bool* fromCache) {
-  const std::string entry = cacheDir + "/" + referenceCacheKey(scene, prepared, definition);
+    const ContinuumCut& cut, const std::string& cacheDir,
+    const std::function<void(const ReferenceProgress&)>& progress, const std::atomic<bool>* cancel,
+    bool* fromCache) {
+  const std::string entry = cacheDir + "/" + referenceCacheKey(scene, prepared, definition, cut);
   const std::string stored = entry + "/surfaces.bin";
   CalculixSolution solution;
   const bool found = loadSolution(stored, solution) && !solution.hitMemoryLimit();
@@ -245,7 +248,7 @@ CalculixSolution cachedCalculixReference(
   // solving the same key at once (two comparisons of one scene) must not share ccx's files.
   const std::string work = entry + ".solving-" + std::to_string(getpid());
   std::filesystem::remove_all(work);
-  solution = solveCalculixReference(scene, prepared, definition, work, progress, cancel);
+  solution = solveCalculixReference(scene, prepared, definition, cut, work, progress, cancel);
   if (solution.interrupted) {
     std::filesystem::remove_all(work);
     return solution;

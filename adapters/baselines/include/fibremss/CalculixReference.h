@@ -42,6 +42,13 @@ struct CalculixDefinition {
   /// bones).
   double contactPenalty = 5e4;
   double initialIncrement = 1;  ///< first increment of a step (ccx cuts it back as needed)
+  /// × the largest increment of every step: at 1 no bone turns more than 2.5° and no attached
+  /// node moves more than 1 mm within one increment. A reference that ccx fails is solved again
+  /// at a quarter of it (comparisons' Reference.h: kFinerIncrements): ccx cuts an increment back
+  /// where Newton diverges slowly, but exits where a diverging contact iteration turns to NaN
+  /// first (pinch with the attachment distance x0.5: a 10.9 m correction at 86 % of pose 1,
+  /// then "matrix found to be singular"). In the cache key only where it is not 1.
+  double incrementScale = 1;
   std::string program = "ccx";  ///< the CalculiX executable (PATH is searched)
   /// Address-space limit of each ccx run [GiB] (0: none). A run that exceeds it fails its
   /// allocation and its poses are reported failed, naming the limit. Not in the cache key: it
@@ -61,10 +68,22 @@ struct ContinuumCut {
   std::string reason;  ///< why, in words: the bones, the muscle, the gap and its bound
 };
 
-/// Finds the first pose where two bones close across a muscle (ContinuumCut), sampling each
-/// muscle's loaded volume on a grid of half its attachment distance (coarser for a big muscle:
-/// at most ~10^5 grid points each). `bones` are the bones' rest meshes in scene order.
-ContinuumCut findContinuumCut(const LoadedScene& scene, const std::vector<MeshDistance>& bones);
+/// Each muscle's loaded volume sampled on a grid of half its attachment distance (coarser for a
+/// big muscle: at most ~10^5 grid points each): where findContinuumCut measures the bones'
+/// gaps. Taking them is most of a cut's cost (thigh13 R=20: about 1.5 s) and depends on the
+/// scene's muscles alone, so it is done once per scene.
+struct ContinuumSamples {
+  std::vector<std::vector<btVector3>> muscles;  ///< per muscle, points inside it [m]
+};
+
+ContinuumSamples sampleContinuum(const LoadedScene& scene);
+
+/// Finds the first pose where two bones close across a muscle (ContinuumCut) at its samples,
+/// with each muscle's attachment distance × `attachmentScale` (the attachment gates' solves
+/// attach more or less material, so their cut can come earlier or later). `bones` are the
+/// bones' rest meshes in scene order.
+ContinuumCut findContinuumCut(const LoadedScene& scene, const std::vector<MeshDistance>& bones,
+                              const ContinuumSamples& samples, btScalar attachmentScale = 1);
 
 /// Where a reference solve is, after every step ccx finishes.
 struct ReferenceProgress {
@@ -104,14 +123,16 @@ struct CalculixSolution {
 
 /// Meshes every muscle and solves its poses with ccx in `workDir` (created; the .inp, .dat,
 /// .sta and logs of each muscle are kept there). A pose ccx does not finish is reported in
-/// poseFailures (with ccx's last error line), never dropped. Poses past a continuum cut
-/// (findContinuumCut) are not given to ccx: `cut` says which and why. Throws InputError for a
+/// poseFailures (with ccx's last error line), never dropped. Poses from `cut.pose` on
+/// (findContinuumCut at the definition's attachment scale) are not given to ccx; the
+/// solution's `cut` is it. Throws InputError for a
 /// muscle that tetgen cannot mesh or that has no material near any bone, unless the scene is a
 /// sphere-planes case: then the sphere is held by its symmetry (the node nearest its centre
 /// fixed, three nodes' equations against rigid rotation; no effect on the exact answer).
 CalculixSolution solveCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
-    const std::string& workDir, const std::function<void(const ReferenceProgress&)>& progress = {},
+    const ContinuumCut& cut, const std::string& workDir,
+    const std::function<void(const ReferenceProgress&)>& progress = {},
     const std::atomic<bool>* cancel = nullptr);
 
 }  // namespace fibremss

@@ -14,8 +14,10 @@ namespace fibremss {
 /// 16 hex digits (FNV-1a, 64 bits) of the reference's inputs (above). The scene's solver
 /// settings (iterations, dt, resolution's springs) are not part of it: they do not change the
 /// static reference.
+/// `cut`: findContinuumCut at the definition's attachment scale (hashed only where there is
+/// one, so that scenes without a cut keep their keys).
 std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& prepared,
-                              const CalculixDefinition& definition);
+                              const CalculixDefinition& definition, const ContinuumCut& cut);
 
 /// $FIBREMSS_CACHE, else $XDG_CACHE_HOME/fibremss, else $HOME/.cache/fibremss; then
 /// "/reference".
@@ -36,7 +38,8 @@ bool loadSolution(const std::string& path, CalculixSolution& solution);
 /// (may be null) tells whether it came from the cache.
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
-    const std::string& cacheDir, const std::function<void(const ReferenceProgress&)>& progress,
-    const std::atomic<bool>* cancel, bool* fromCache);
+    const ContinuumCut& cut, const std::string& cacheDir,
+    const std::function<void(const ReferenceProgress&)>& progress, const std::atomic<bool>* cancel,
+    bool* fromCache);
 
 }  // namespace fibremss
