@@ -150,9 +150,9 @@ void runGnuplot(const std::string& script, const std::string& scriptPath,
 
 /// Sets both terminals in turn: the same plot as PNG and SVG.
 std::string bothTerminals(const std::string& stem, const std::string& body) {
-  return "set terminal pngcairo size 1000,650 enhanced font 'DejaVu Sans,10'\nset output " +
+  return "set terminal pngcairo size 1000,650 noenhanced font 'DejaVu Sans,10'\nset output " +
          quoted(stem + ".png") + "\n" + body +
-         "set terminal svg size 1000,650 enhanced font 'DejaVu Sans,10'\nset output " +
+         "set terminal svg size 1000,650 noenhanced font 'DejaVu Sans,10'\nset output " +
          quoted(stem + ".svg") + "\n" + body + "unset output\n";
 }
 
@@ -242,7 +242,7 @@ std::string frontAxes(const std::string& title, const std::string& ylabel,
   std::string body = "set title " + quoted(title) +
                      "\nset xlabel 'ms per pose (median wall time, log)'\nset ylabel " +
                      quoted(ylabel) +
-                     "\nset logscale xy\nset grid\nset key outside right top font ',9'\n";
+                     "\nset logscale xy\nset grid\nset key outside below center font ',9'\n";
   if (plot.empty())
     return body +
            "set xrange [0.1:1000]\nset yrange [0.01:100]\nset label 1 'no run has both a time and "
@@ -314,7 +314,7 @@ std::string penetrationScript(const nlohmann::json& runs, const std::string& ste
   }
   std::string body =
       "set title 'Hip sweep: deepest muscle surface vertex in a bone against the step size'\n"
-      "set xlabel 'step\\_deg [degrees per pose]'\nset ylabel 'max penetration [mm]'\n"
+      "set xlabel 'step_deg [degrees per pose]'\nset ylabel 'max penetration [mm]'\n"
       "set grid\nset key top left\nset offsets graph 0.05, graph 0.05, graph 0.1, 0\n" +
       plot.str() + "\n";
   return blocks + bothTerminals(stem, body);
