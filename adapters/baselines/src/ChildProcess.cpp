@@ -26,8 +26,10 @@ namespace fibremss {
 namespace {
 
 /// In the child: into `workDir`, its address space limited to `memoryLimit` bytes (0: not
-/// limited), stdout and stderr to `logPath`, then exec. Never returns.
-[[noreturn]] void execChild(const std::vector<std::string>& argv, const std::string& workDir,
+/// limited), stdout and stderr to `logPath`, then exec `args` (null-terminated, built before the
+/// fork: the child allocates nothing, since malloc after fork is unsafe in a threaded process
+/// and fails under the limit in a sanitizer build). Never returns.
+[[noreturn]] void execChild(char* const* args, const std::string& workDir,
                             const std::string& logPath, uint64_t memoryLimit) {
   if (!workDir.empty() && chdir(workDir.c_str()) != 0) _exit(126);
   const rlimit limit{memoryLimit, memoryLimit};
@@ -39,10 +41,7 @@ namespace {
   close(log);
   const int null = open("/dev/null", O_RDONLY);
   if (null >= 0) dup2(null, STDIN_FILENO);
-  std::vector<char*> args;
-  for (const std::string& arg : argv) args.push_back(const_cast<char*>(arg.c_str()));
-  args.push_back(nullptr);
-  execvp(args[0], args.data());
+  execvp(args[0], args);
   _exit(127);
 }
 
@@ -58,9 +57,12 @@ int runProgram(const std::vector<std::string>& argv, const std::string& workDir,
                const std::string& logPath, const std::function<bool()>& poll,
                uint64_t memoryLimit) {
   if (argv.empty()) throw std::runtime_error("runProgram: no program given");
+  std::vector<char*> args;
+  for (const std::string& arg : argv) args.push_back(const_cast<char*>(arg.c_str()));
+  args.push_back(nullptr);
   const pid_t child = fork();
   if (child < 0) throw std::runtime_error("cannot start " + argv[0] + ": " + std::strerror(errno));
-  if (child == 0) execChild(argv, workDir, logPath, memoryLimit);
+  if (child == 0) execChild(args.data(), workDir, logPath, memoryLimit);
   int status = 0;
   for (;;) {
     const pid_t done = waitpid(child, &status, WNOHANG);
