@@ -176,6 +176,13 @@ TEST(CalculixInput, WritesTheObstaclesAndTheirContactOnlyWithAStiffness) {
             std::string::npos)
       << text;
   EXPECT_LT(text.find("*CONTACT PAIR"), text.find("*STEP")) << "model data before the steps";
+  job.contact.sliding = ContactSliding::Small;
+  std::ostringstream small;
+  writeCalculixInput(small, job);
+  EXPECT_NE(small.str().find("*CONTACT PAIR, INTERACTION=FRICTIONLESS, TYPE=NODE TO SURFACE, "
+                             "SMALL SLIDING\nSMUSCLE, SBONE\n"),
+            std::string::npos)
+      << small.str();
 }
 
 TEST(CalculixInput, WritesEachEquationsLargestTermFirstBeforeTheSteps) {
@@ -563,6 +570,21 @@ TEST(ReferenceOptions, SpherePlanesIsSolvedAsC3D10WithAStifferPenaltyUnlessGiven
   EXPECT_EQ(given.contactPenalty, CalculixDefinition().contactPenalty);
 }
 
+TEST(ReferenceOptions, ContactSlidingIsTheScenesUnlessGiven) {
+  const LoadedScene pinch = loadScene("pinch", {});
+  ReferenceOptions options;
+  EXPECT_EQ(sceneDefinition(pinch, options).contactSliding, ContactSliding::Small);
+  for (const char* name : {"fusiform", "cylinder-twist", "sphere-planes"})
+    EXPECT_EQ(sceneDefinition(loadScene(name, {}), options).contactSliding, ContactSliding::Finite)
+        << name << ": finite sliding, as before";
+  const LoadedScene set = loadScene("fusiform", {"reference.contact_sliding=small"});
+  EXPECT_EQ(sceneDefinition(set, options).contactSliding, ContactSliding::Small);
+  options.contactSlidingGiven = true;
+  EXPECT_EQ(sceneDefinition(pinch, options).contactSliding, ContactSliding::Finite)
+      << "the command line's choice stands";
+  EXPECT_THROW(loadScene("pinch", {"reference.contact_sliding=large"}), InputError);
+}
+
 TEST(ReferenceCache, StoresAndReadsBackASolution) {
   TemporaryDirectory dir("reference_cache_test");
   CalculixSolution solution;
@@ -653,6 +675,18 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   d = definition;
   d.incrementScale = 0.25;
   changed(scene, prepared, d);
+  d = definition;
+  d.contactSliding = ContactSliding::Small;
+  changed(scene, prepared, d);
+  d.element = CalculixElement::C3D10;
+  changed(scene, prepared, d);  // the gate's C3D10 solve with small sliding
+  CalculixDefinition noContact = definition;
+  noContact.contactPenalty = 0;
+  d = noContact;
+  d.contactSliding = ContactSliding::Small;
+  EXPECT_EQ(referenceCacheKey(scene, prepared, d, none),
+            referenceCacheKey(scene, prepared, noContact, none))
+      << "without contact the sliding does not matter";
   ContinuumCut cut;
   cut.pose = 1;
   changed(scene, prepared, definition, cut);
@@ -713,6 +747,48 @@ std::string coarseSpherePlanes(const std::filesystem::path& dir) {
   const std::filesystem::path path = dir / "coarse-sphere-planes.json";
   std::ofstream(path) << scene.dump(2);
   return path.string();
+}
+
+TEST(ReferenceRetry, AFailedPoseOrReturnStepIsRetriedNotAStopOrAnInterruption) {
+  CalculixSolution solution;
+  solution.poseSurfaces = {{{0, 0, 0}}, {}};
+  solution.poseFailures = {"", ""};
+  EXPECT_EQ(ccxFailureToRetry(solution), "");
+  solution.returnFailure = "muscle m: *ERROR: increment size smaller than minimum";
+  EXPECT_EQ(ccxFailureToRetry(solution), "return to rest: " + solution.returnFailure)
+      << "a failed return step is retried as a failed pose is";
+  solution.poseFailures[1] = "muscle m: ccx stopped (exit 255)";
+  EXPECT_EQ(ccxFailureToRetry(solution), "pose 1: muscle m: ccx stopped (exit 255)");
+  solution.interrupted = true;
+  EXPECT_EQ(ccxFailureToRetry(solution), "") << "interrupted: not retried";
+  solution.interrupted = false;
+  solution.returnFailure = "muscle m: *ERROR in u_calloc (ccx's memory limit is 8 GiB)";
+  solution.poseFailures[1] = solution.returnFailure;
+  EXPECT_EQ(ccxFailureToRetry(solution), "") << "stopped on its memory limit: not retried";
+}
+
+TEST(CalculixRun, AnInterruptedSolveWithoutAReturnStepReportsNoReturnFailure) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("ccx_interrupted_test");
+  const LoadedScene scene = loadScene(coarseFusiform(dir.path()), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const std::atomic<bool> cancel{true};
+  for (const bool returnToRest : {false, true}) {
+    SCOPED_TRACE(returnToRest);
+    CalculixDefinition definition;
+    definition.returnToRest = returnToRest;  // a gate's solve has none
+    const CalculixSolution solution =
+        solveCalculixReference(scene, prepared, definition, {},
+                               (dir.path() / std::to_string(returnToRest)).string(), {}, &cancel);
+    EXPECT_TRUE(solution.interrupted);
+    EXPECT_NE(solution.poseFailures[0].find("interrupted"), std::string::npos);
+    EXPECT_EQ(solution.returnFailure.find("interrupted") != std::string::npos, returnToRest)
+        << solution.returnFailure;
+    if (!returnToRest) {
+      EXPECT_EQ(solution.returnFailure, "");
+    }
+  }
 }
 
 TEST(CalculixRun, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibrium) {
@@ -858,6 +934,9 @@ TEST(ReferenceCommand, PinchsPosesPastTheCutAreExcludedNotFailed) {
   ASSERT_EQ(result.exitCode, 0) << result.output;
   EXPECT_NE(result.output.find("poses solved: 2/7"), std::string::npos) << result.output;
   EXPECT_EQ(result.output.find("gate: ccx did not solve"), std::string::npos) << result.output;
+  EXPECT_NE(readText(dir.path() / "out/inp/muscle0.inp").find("NODE TO SURFACE, SMALL SLIDING"),
+            std::string::npos)
+      << "pinch's reference tracks its blades' contact with small sliding";
   const nlohmann::json reference =
       nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
   for (int p = 0; p < 7; ++p) {

@@ -43,6 +43,18 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e9));
   command
+      .add_option("--ccx-sliding", options.definition.contactSliding,
+                  "Reference muscle-bone contact tracking: finite (ccx's default) or small "
+                  "(SMALL SLIDING: each node keeps its bone face through an increment's "
+                  "iterations); "
+                  "default: the scene's reference.contact_sliding")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, ContactSliding>{{"finite", ContactSliding::Finite},
+                                                {"small", ContactSliding::Small}},
+          CLI::ignore_case))
+      ->each([&options](const std::string&) { options.contactSlidingGiven = true; })
+      ->default_str("the scene's");
+  command
       .add_option("--ccx-memory", options.definition.memoryLimitGiB,
                   "Memory limit of each ccx run [GiB] (its address space); a run that exceeds "
                   "it fails with a message per pose instead of taking the machine's memory; 0: "

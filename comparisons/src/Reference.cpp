@@ -75,25 +75,16 @@ bool solveOnce(const LoadedScene& scene, const PreparedScene& prepared, SceneCut
   return true;
 }
 
-/// The first pose ccx failed ("" : none, or it stopped on its memory limit or was interrupted,
-/// which finer increments do not mend).
-std::string firstCcxFailure(const CalculixSolution& solution) {
-  if (solution.interrupted || solution.hitMemoryLimit()) return "";
-  for (size_t p = 0; p < solution.poseFailures.size(); ++p)
-    if (!solution.poseFailures[p].empty())
-      return "pose " + std::to_string(p) + ": " + solution.poseFailures[p];
-  return "";
-}
-
-/// solveOnce of `definition`, and where ccx failed a pose, once more at kFinerIncrements of its
-/// increments (kept when that solve is found or solved; with options.cachedOnly and not in the
-/// cache, the first solve's failures stand). False when the first is not in the cache.
+/// solveOnce of `definition`, and where ccx failed a pose or the return step
+/// (ccxFailureToRetry), once more at kFinerIncrements of its increments (kept when that solve is
+/// found or solved; with options.cachedOnly and not in the cache, the first solve's failures
+/// stand). False when the first is not in the cache.
 bool solveVariant(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
                   const CalculixDefinition& definition, const ReferenceOptions& options,
                   const std::string& what, Solve& solve) {
   solve.definition = definition;
   if (!solveOnce(scene, prepared, cuts, options, what, solve)) return false;
-  const std::string failure = firstCcxFailure(solve.solution);
+  const std::string failure = ccxFailureToRetry(solve.solution);
   if (failure.empty() || (options.cancel && options.cancel->load())) return true;
   Solve finer;
   finer.definition = definition;
@@ -236,6 +227,15 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
 
 }  // namespace
 
+std::string ccxFailureToRetry(const CalculixSolution& solution) {
+  if (solution.interrupted || solution.hitMemoryLimit()) return "";
+  for (size_t p = 0; p < solution.poseFailures.size(); ++p)
+    if (!solution.poseFailures[p].empty())
+      return "pose " + std::to_string(p) + ": " + solution.poseFailures[p];
+  if (!solution.returnFailure.empty()) return "return to rest: " + solution.returnFailure;
+  return "";
+}
+
 double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b) {
   const size_t poses = static_cast<size_t>(std::min(a.solvedPoses(), b.solvedPoses()));
   if (poses == 0) return RunMetrics::kNone;
@@ -266,6 +266,8 @@ double methodSpreadMm(const std::vector<RunMetrics>& runs) {
 
 CalculixDefinition sceneDefinition(const LoadedScene& scene, const ReferenceOptions& options) {
   CalculixDefinition definition = options.definition;
+  if (!options.contactSlidingGiven && scene.reference.contactSliding == "small")
+    definition.contactSliding = ContactSliding::Small;
   if (scene.analytic.type != "sphere-planes") return definition;
   if (!options.elementGiven) definition.element = CalculixElement::C3D10;
   if (!options.contactPenaltyGiven) definition.contactPenalty = kSpherePlanesContactPenalty;
@@ -326,8 +328,8 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
                 << " (ccx failed a pose at the default 2.5 deg / 1 mm); ";
   if (definition.contactPenalty > 0)
     description << "frictionless muscle-bone contact (penalty " << definition.contactPenalty * 1e-3
-                << " E per mm of overclosure, every bone a rigid obstacle), no muscle-muscle "
-                   "contact";
+                << " E per mm of overclosure, " << toString(definition.contactSliding)
+                << " sliding, every bone a rigid obstacle), no muscle-muscle contact";
   else
     description << "no contact";
   reference.description = description.str();

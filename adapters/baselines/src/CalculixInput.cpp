@@ -55,7 +55,9 @@ void writeContact(std::ostream& out, const CalculixJob& job) {
       << "*SURFACE INTERACTION, NAME=FRICTIONLESS\n"
       << "*SURFACE BEHAVIOR, PRESSURE-OVERCLOSURE=LINEAR\n"
       << contact.stiffness << ", " << contact.tension << "\n"
-      << "*CONTACT PAIR, INTERACTION=FRICTIONLESS, TYPE=NODE TO SURFACE\nSMUSCLE, SBONE\n";
+      << "*CONTACT PAIR, INTERACTION=FRICTIONLESS, TYPE=NODE TO SURFACE"
+      << (contact.sliding == ContactSliding::Small ? ", SMALL SLIDING" : "")
+      << "\nSMUSCLE, SBONE\n";
 }
 
 /// Each equation's non-zero terms, the largest first (CalculiX eliminates the first term's
@@ -93,6 +95,10 @@ void writeStep(std::ostream& out, const CalculixJob& job, size_t step) {
 
 const char* toString(CalculixElement element) {
   return element == CalculixElement::C3D4 ? "C3D4" : "C3D10";
+}
+
+const char* toString(ContactSliding sliding) {
+  return sliding == ContactSliding::Small ? "small" : "finite";
 }
 
 void writeCalculixInput(std::ostream& out, const CalculixJob& job) {

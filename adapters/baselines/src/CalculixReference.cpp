@@ -190,6 +190,7 @@ void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedS
     if (!held[n]) contact.slaves.push_back(n);
   contact.stiffness = definition.contactPenalty * definition.material.youngsModulus;
   contact.tension = 1e-3 * definition.material.youngsModulus;
+  contact.sliding = definition.contactSliding;
 }
 
 /// Meshes the muscle's surface as loaded (preparation's push out of the bones makes the
@@ -420,7 +421,8 @@ CalculixSolution solveCalculixReference(
     const bool pose = p < solution.poseSurfaces.size();
     std::string& why = pose ? solution.poseFailures[p] : solution.returnFailure;
     const bool excluded = pose && static_cast<int>(p) >= poses;  // past the cut: not solved
-    if (why.empty() && !excluded) why = "interrupted";
+    const bool returns = pose || definition.returnToRest;        // a gate's solve has no return
+    if (why.empty() && !excluded && returns) why = "interrupted";
     (pose ? solution.poseSurfaces[p] : solution.returnSurface).clear();
   }
   solution.seconds = secondsSince(start);

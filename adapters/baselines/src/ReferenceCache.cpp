@@ -149,6 +149,11 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
     h.text("increment scale");
     h.value(definition.incrementScale);
   }
+  // Small sliding (where a scene chooses it; no other key changes).
+  if (definition.contactPenalty > 0 && definition.contactSliding != ContactSliding::Finite) {
+    h.text("contact sliding");
+    h.value(definition.contactSliding);
+  }
   // C3D10 under contact: the midside nodes became contact slaves (no other key changes).
   if (definition.element == CalculixElement::C3D10 && definition.contactPenalty > 0)
     h.text("C3D10 midside slaves");

@@ -497,6 +497,9 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   result.outputs.writeFibres = outputs.boolean("fibres", true);
   Fields analytic = root.object("analytic");
   result.analytic = readAnalytic(analytic, reader.scale, result.bones);
+  Fields reference = root.object("reference");
+  result.reference.contactSliding =
+      reference.choice("contact_sliding", result.reference.contactSliding, {"finite", "small"});
 
   root.set("bones", std::move(completeBones));
   root.set("muscles", std::move(completeMuscles));
@@ -505,6 +508,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   root.set("collision", collision.finish());
   root.set("outputs", outputs.finish());
   root.set("analytic", analytic.finish());
+  root.set("reference", reference.finish());
   result.json.clear();
   writePretty(root.finish(), 0, result.json);
   return result;

@@ -22,10 +22,12 @@ struct ReferenceOptions {
   std::function<void(const std::string&)> log;             ///< one line of news (may be empty)
   std::function<void(const ReferenceProgress&)> progress;  ///< while ccx runs (may be empty)
   const std::atomic<bool>* cancel = nullptr;               ///< stop when true
-  /// Whether `definition`'s element / contact penalty were given (the command line's
-  /// --ccx-element / --ccx-contact); where not, a scene may choose its own (sceneDefinition).
+  /// Whether `definition`'s element / contact penalty / contact sliding were given (the
+  /// command line's --ccx-element / --ccx-contact / --ccx-sliding); where not, a scene may
+  /// choose its own (sceneDefinition).
   bool elementGiven = false;
   bool contactPenaltyGiven = false;
+  bool contactSlidingGiven = false;
 };
 
 /// The contact penalty of a sphere-planes reference (× E per metre): 100× the default, so that
@@ -33,7 +35,7 @@ struct ReferenceOptions {
 /// mm in; comparisons/README.md).
 inline constexpr double kSpherePlanesContactPenalty = 5e6;
 
-/// Where ccx fails a pose of a solve (not on its memory limit), the solve is done once more
+/// Where ccx fails a pose or the return step of a solve (ccxFailureToRetry), it is done once more
 /// with its increments × this (CalculixDefinition::incrementScale; its own cache key). pinch
 /// with the attachment distance x0.5 ends on a NaN at 86 % of pose 1 with 1 mm increments and
 /// solves with 0.25 mm ones in 29 increments of 2–5 Newton iterations (comparisons/README.md).
@@ -41,7 +43,9 @@ inline constexpr double kFinerIncrements = 0.25;
 
 /// `options.definition` for `scene`: a sphere-planes case is solved as C3D10 with
 /// kSpherePlanesContactPenalty where the options do not give the element or the penalty. C3D4
-/// at ν 0.49 locks and reads Hertz's contact radius 5–12 % short (comparisons/README.md).
+/// at ν 0.49 locks and reads Hertz's contact radius 5–12 % short (comparisons/README.md). The
+/// contact sliding is the scene's (`reference.contact_sliding`) where the options do not give
+/// it; the gates' solves start from this definition, so they use the same formulation.
 CalculixDefinition sceneDefinition(const LoadedScene& scene, const ReferenceOptions& options);
 
 /// The bound of the return-to-rest gate [mm]: the surface at rest after the motion, RMS to the
@@ -104,6 +108,11 @@ struct Reference {
 /// variants; fills the metrics as runPoses does for the simulated methods.
 Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
                            const ReferenceOptions& options);
+
+/// What a solve is retried at kFinerIncrements for: the first pose ccx failed ("pose k: why"),
+/// else its failed return step ("return to rest: why"); "" when none failed, or when it was
+/// interrupted or stopped on its memory limit (which finer increments do not mend).
+std::string ccxFailureToRetry(const CalculixSolution& solution);
 
 /// RMS over the poses both solved of two solutions' surfaces [mm] (NaN if none shared).
 double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b);

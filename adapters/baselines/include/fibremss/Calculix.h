@@ -47,6 +47,17 @@ enum class CalculixElement : uint8_t {
 };
 const char* toString(CalculixElement element);
 
+/// How CalculiX tracks a node-to-surface contact (its *CONTACT PAIR's SMALL SLIDING). Both pair
+/// each slave node with a master face at the start of every increment (the face moves with its
+/// body); they differ within an increment's Newton iterations.
+enum class ContactSliding : uint8_t {
+  Finite,  ///< ccx's default: paired anew in each of the first 8 iterations as well
+  /// SMALL SLIDING: the pairs of the increment's start kept through its iterations: right where
+  /// a node slides along the master surface by much less than a face within one increment
+  Small,
+};
+const char* toString(ContactSliding sliding);
+
 /// Compressible Neo-Hookean material as CalculiX writes it:
 /// W = C10 (Ī1 − 3) + (J − 1)² / D1 with C10 = μ/2 = E / (4(1+ν)), D1 = 2/K = 6(1−2ν)/E.
 struct NeoHookeMaterial {
@@ -69,6 +80,7 @@ struct CalculixContact {
   /// Linear pressure-overclosure slope K [Pa/m]; 0: none (no contact written).
   double stiffness = 0;
   double tension = 0;  ///< σ∞: the small tension at large clearance CalculiX asks for [Pa]
+  ContactSliding sliding = ContactSliding::Finite;  ///< how the pairs are tracked
 };
 
 /// A node kept from moving along a direction: direction · u = 0 (*EQUATION).

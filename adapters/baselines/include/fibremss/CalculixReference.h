@@ -41,6 +41,11 @@ struct CalculixDefinition {
   /// per mm: 1 µm of overclosure carries 5 % of E). 0: no contact (the muscle passes through
   /// bones).
   double contactPenalty = 5e4;
+  /// How ccx tracks that contact (finite sliding: its default). A scene chooses small sliding
+  /// where its muscle slides little against the bones within a step (LoadedScene::reference):
+  /// pinch's C3D10 solve stops in pose 1 with finite sliding and solves with small
+  /// (comparisons/README.md). In the cache key only where it is small.
+  ContactSliding contactSliding = ContactSliding::Finite;
   double initialIncrement = 1;  ///< first increment of a step (ccx cuts it back as needed)
   /// × the largest increment of every step: at 1 no bone turns more than 2.5° and no attached
   /// node moves more than 1 mm within one increment. A reference that ccx fails is solved again

@@ -46,6 +46,15 @@ struct AnalyticCase {
   int plateBone = -1;
 };
 
+/// How the scene's CalculiX reference (`fibremss reference`, `compare`) is solved where the
+/// scene needs its own choice.
+struct ReferenceSettings {
+  /// Muscle–bone contact: "finite" sliding (ccx's default) or "small" sliding (each muscle
+  /// surface node keeps the bone face it was paired with at the start of an increment through
+  /// that increment's Newton iterations), for the reference and all its gates' solves alike.
+  std::string contactSliding = "finite";
+};
+
 /// A scene resolved into what preparation and simulation take; all SI.
 struct LoadedScene {
   std::string name;                   ///< scene name (built-in name or file stem)
@@ -61,6 +70,7 @@ struct LoadedScene {
   SimulationParameters simulation;    ///< solver settings
   OutputSettings outputs;             ///< output settings
   AnalyticCase analytic;              ///< the exact case it reproduces (type "none": none)
+  ReferenceSettings reference;        ///< how its CalculiX reference is solved
   std::vector<std::string> warnings;  ///< things found while loading that a run can live with
   std::vector<std::string> notes;     ///< what loading changed that a user should know
                                       ///< (large jumps split into sub-poses, ...)
