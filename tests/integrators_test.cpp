@@ -633,13 +633,12 @@ double rmsDistance(const std::vector<btVector3>& a, const std::vector<btVector3>
 TEST(Projective, ComesWithinTheEquilibriumToleranceInTenIterations) {
   // The equilibrium does not depend on the iteration that finds it: the projective step run
   // until its mean step is below 10 nm is the reference (about 650 iterations; a step
-  // (A + W)⁻¹·F that small leaves forces F ≈ 0 whatever the matrix). Verlet run to 1 nm, which
-  // the test took before (50 times as long), ended 0.041 mm from it, and 20 000 projective
-  // iterations 0.4 µm (the contacts' hold leaves it a floor above 1 nm). Issue 18 asks for a pose
-  // within 0.5 mm of it; the projective step must come within half that in 10 iterations (the bones
-  // jump in the first), where Verlet with ten times as many (the bones over 10) must not: the
-  // whole-muscle modes that a local step needs thousands of iterations for are what the global step
-  // solves.
+  // (A + W)⁻¹·F that small leaves forces F ≈ 0 whatever the matrix). Its 20 000-iteration state
+  // lies 0.041 mm from Verlet run to 1 nm, the reference before, which took 50 times as long.
+  // Issue 18 asks for a pose within 0.5 mm of it; the projective step must come within half
+  // that in 10 iterations (the bones jump in the first), where Verlet with ten times as many
+  // (the bones over 10) must not: the whole-muscle modes that a local step needs thousands of
+  // iterations for are what the global step solves.
   const auto equilibrium = fusiformPose(Integrator::Projective, StopRule::Converged, 20000, 1);
   const double projective =
       rmsDistance(fusiformPose(Integrator::Projective, StopRule::Iterations, 10, 1), equilibrium);
