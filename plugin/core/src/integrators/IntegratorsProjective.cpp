@@ -63,6 +63,7 @@ struct NumericCholesky {
 };
 
 /// The factor L of P·(A + W)·Pᵀ as the solve reads it, the contact weights and the solve's buffer.
+/// A rollback of the guard keeps W: it shapes the iteration's path, not its fixed point.
 struct ProjectiveWorkspace final : IntegratorWorkspace {
   std::vector<int> columnStart;     ///< L by columns: entries [columnStart[j], columnStart[j+1])
   std::vector<int> rows;            ///< row of each entry (a column's first: its diagonal)
