@@ -93,6 +93,23 @@ TEST(Threads, AnyThreadCountGivesTheSameBits) {
   for (int threads : {2, 3}) expectSameBits(one, simulate(threads), threads);
 }
 
+// The projective solver refactors a muscle's matrix when its contacts change, inside that
+// muscle's task: the same bits for any thread count too.
+TEST(Threads, TheProjectiveSolversContactsGiveTheSameBits) {
+  const auto run = [](int threads) {
+    LoadedScene scene;
+    const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+    return fibremss::testing::stepThroughPoses(
+        scene, prepared, prepared.muscles, threads,
+        [](MuscleSystem& system, const std::vector<MuscleHandle>&) {
+          system.parameters().integrator = Integrator::Projective;
+        });
+  };
+  const Outcome one = run(1);
+  EXPECT_GT(one.contacts, 0u);
+  for (int threads : {2, 3}) expectSameBits(one, run(threads), threads);
+}
+
 namespace {
 
 /// A host scheduler that runs every task at once, on the calling thread, from the last index to

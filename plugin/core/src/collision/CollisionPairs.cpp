@@ -415,6 +415,7 @@ void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {
     }
     muscle.pushes[i].setZero();
     muscle.pushCounts[i] = 0;
+    muscle.pushedLast[i] = 1;
   }
   muscle.pinched = pinched;
 }

@@ -1,17 +1,21 @@
 // The projective integrator (docs/integrators.md): projective dynamics' local/global iteration
 // for springs (Liu et al. 2013) as a solver for the pose's equilibrium, without inertia. Its
 // global step L·x⁺ = J·d is, with the spring forces F(x) = J·d − L·x, the step x⁺ = x + L⁻¹·F(x):
-// a fixed-point iteration preconditioned by the constant matrix A = L + c·V over the free
-// particles. L = Σ k·(e_a − e_b)(e_a − e_b)ᵀ is the springs' Laplacian (a spring to a fixed
-// particle adds k to its free end's diagonal: fixed particles are Dirichlet, and F already holds
-// their pull); V is the same kind of matrix for the volume terms: each tetrahedron's stiffness at
-// rest, K/V0·∂V/∂x_i·∂V/∂x_jᵀ·G0/G, with the outer product replaced by the dot product (its
-// trace), weighted by c = kVolumeWeight. A acts alike on x, y and z, so one sparse Cholesky
-// factor (AMD ordering, computed in double, kept in btScalar: it only preconditions, the forces
-// alone set the fixed point) serves all three; it is made once per muscle. Unlike a local
-// iteration (Verlet needs O(diameter²) iterations for the whole-muscle modes) each step moves
-// every particle by the whole muscle's response to the forces. Contacts stay projections after
-// the step, which the global step undoes every iteration: see docs/integrators.md.
+// a fixed-point iteration preconditioned by the matrix A + W over the free particles. L = Σ
+// k·(e_a − e_b)(e_a − e_b)ᵀ is the springs' Laplacian (a spring to a fixed particle adds k to its
+// free end's diagonal: fixed particles are Dirichlet, and F already holds their pull); A = L + c·V,
+// V the same kind of matrix for the volume terms: each tetrahedron's stiffness at rest,
+// K/V0·∂V/∂x_i·∂V/∂x_jᵀ·G0/G, with the outer product replaced by the dot product (its trace),
+// weighted by c = kVolumeWeight. W holds the contacts: projective dynamics' constraint x_i = p_i
+// with weight kContactWeight·A_ii on each particle a contact pushed (lately), its target p_i the
+// pushed position itself (the response moved the particle there before the forces), so W adds to
+// the diagonal only and the right-hand side stays F. A particle in W is held nearly in place by
+// the global step while the rest of the muscle answers around it; without W the step moves a
+// pushed particle back where the springs alone want it, into the bone or the other muscle, every
+// iteration. A + W acts alike on x, y and z, so one sparse Cholesky factor (AMD ordering, computed
+// in double, kept in btScalar: it only preconditions, the forces alone set the fixed point)
+// serves all three; the ordering and pattern are found once per muscle, the values again
+// whenever W changes (same pattern: only the diagonal changes).
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
@@ -33,13 +37,42 @@ using Factor = Eigen::SimplicialLLT<Matrix, Eigen::Lower, Eigen::AMDOrdering<int
 /// mm from the equilibrium; 1 let the volume terms overshoot (+59 % volume).
 constexpr double kVolumeWeight = 1.5;
 
-/// The Cholesky factor L of P·A·Pᵀ and the solve's buffer.
+/// Contacts enter A with this weight times the particle's diagonal entry [1]. Measured on the
+/// hard-case matrix (docs/performance.md, "Projective solver"): 10 passes every cell at ρ 0.9,
+/// 100 fails pinch.
+constexpr double kContactWeight = 10;
+/// A particle leaves W after this many iterations without a push [iterations]. Measured on
+/// thigh13 at resolution 20, 10 iterations per pose: a hold of 1 000 refactors in 156 of 1 690
+/// muscle-iterations, a hold of 10 in 634, at the same distance to Verlet's equilibrium run.
+constexpr uint16_t kContactHold = 1000;
+
+/// The numeric Cholesky factorisation of P·(A + W)·Pᵀ on the pattern Eigen's analysis found
+/// (up-looking, as Eigen's SimplicialLLT and CSparse's cs_chol do it): row k of L from column k
+/// of the upper triangle, its pattern found by walking the elimination tree. Buffers sized once.
+struct NumericCholesky {
+  std::vector<int> upperStart;  ///< P·A·Pᵀ's upper triangle by columns: [start[k], start[k+1])
+  std::vector<int> upperRows;   ///< row of each entry
+  std::vector<double> upperValues;  ///< value of each entry, without W [N/m]
+  std::vector<int> diagonalEntry;   ///< index of column k's diagonal in upperValues
+  std::vector<int> parent;          ///< elimination tree: first row below L's diagonal, −1: root
+  std::vector<double> lower;        ///< L's entries as L's pattern orders them [√(N/m)]
+  std::vector<double> scatter;      ///< row k of L being formed (zero between rows)
+  std::vector<int> tags;            ///< the row that last visited each column
+  std::vector<int> pattern;         ///< stack of the columns of row k, in topological order
+  std::vector<int> filled;          ///< entries of each column of L stored so far
+};
+
+/// The factor L of P·(A + W)·Pᵀ as the solve reads it, the contact weights and the solve's buffer.
+/// A rollback of the guard keeps W: it shapes the iteration's path, not its fixed point.
 struct ProjectiveWorkspace final : IntegratorWorkspace {
   std::vector<int> columnStart;     ///< L by columns: entries [columnStart[j], columnStart[j+1])
   std::vector<int> rows;            ///< row of each entry (a column's first: its diagonal)
   std::vector<btScalar> values;     ///< L's entries, the diagonal inverted [√(N/m), its inverse]
   std::vector<int> order;           ///< free particle k → its row P·k in the factor
   std::vector<btVector3> solution;  ///< per row: the forces [N], then the step A⁻¹·F [m]
+  std::vector<double> weights;      ///< W per row: kContactWeight·A_kk while held, else 0 [N/m]
+  std::vector<uint16_t> idle;       ///< per row: iterations since its particle's last push
+  NumericCholesky numeric;          ///< what a new factor of A + W needs
 };
 
 /// The scalar matrix A over the free particles (the 3n × 3n one is A ⊗ I₃) [N/m].
@@ -97,12 +130,117 @@ void solveInPlace(const ProjectiveWorkspace& w, btVector3* x) {
   }
 }
 
-/// x⁺ = x + ω·A⁻¹·F(x) + (ω − 1)·(x − x⁻): the projective step over-relaxed with momentum.
+/// w.numeric for the factor's ordering and pattern (w.columnStart, w.rows): P·A·Pᵀ's upper
+/// triangle, the elimination tree read off L's pattern, the buffers.
+void prepareNumeric(const Matrix& lowerA, const Factor& factor, ProjectiveWorkspace& w) {
+  NumericCholesky& c = w.numeric;
+  Matrix upper(lowerA.rows(), lowerA.cols());
+  upper.selfadjointView<Eigen::Upper>() =
+      lowerA.selfadjointView<Eigen::Lower>().twistedBy(factor.permutationP());
+  upper.makeCompressed();
+  const auto n = static_cast<int>(upper.cols());
+  c.upperStart.assign(upper.outerIndexPtr(), upper.outerIndexPtr() + n + 1);
+  c.upperRows.assign(upper.innerIndexPtr(), upper.innerIndexPtr() + upper.nonZeros());
+  c.upperValues.assign(upper.valuePtr(), upper.valuePtr() + upper.nonZeros());
+  c.diagonalEntry.assign(n, -1);
+  c.parent.assign(n, -1);
+  for (int k = 0; k < n; ++k) {
+    for (int p = c.upperStart[k]; p < c.upperStart[k + 1]; ++p)
+      if (c.upperRows[p] == k) c.diagonalEntry[k] = p;
+    if (w.columnStart[k + 1] > w.columnStart[k] + 1) c.parent[k] = w.rows[w.columnStart[k] + 1];
+  }
+  c.lower.assign(w.rows.size(), 0);
+  c.scatter.assign(n, 0);
+  c.tags.assign(n, -1);
+  c.pattern.assign(n, 0);
+  c.filled.assign(n, 0);
+}
+
+/// Pushes column k of the upper triangle onto c.pattern (from `top` down): the columns i < k
+/// whose L(k, i) is non-zero, each path up the elimination tree in topological order; scatters
+/// the column's values. Returns the new top.
+int rowPattern(NumericCholesky& c, int k, int top) {
+  for (int p = c.upperStart[k]; p < c.upperStart[k + 1]; ++p) {
+    int i = c.upperRows[p];
+    c.scatter[i] += c.upperValues[p];
+    int length = 0;
+    for (; c.tags[i] != k; i = c.parent[i]) {
+      c.pattern[length++] = i;
+      c.tags[i] = k;
+    }
+    while (length > 0) c.pattern[--top] = c.pattern[--length];
+  }
+  return top;
+}
+
+/// w.numeric.lower = L of P·(A + W)·Pᵀ on L's pattern (w.columnStart, w.rows): row by row, each a
+/// sparse triangular solve against the rows above. A + W is positive definite (A is, W ≥ 0).
+void factorNumerically(ProjectiveWorkspace& w) {
+  NumericCholesky& c = w.numeric;
+  const int* start = w.columnStart.data();
+  const int* rows = w.rows.data();
+  const auto n = static_cast<int>(w.weights.size());
+  std::fill(c.filled.begin(), c.filled.end(), 0);
+  for (int k = 0; k < n; ++k) {
+    c.tags[k] = k;
+    int top = rowPattern(c, k, n);
+    double diagonal = c.scatter[k] + w.weights[k];
+    c.scatter[k] = 0;
+    for (; top < n; ++top) {
+      const int i = c.pattern[top];
+      const double entry = c.scatter[i] / c.lower[start[i]];
+      c.scatter[i] = 0;
+      const int end = start[i] + c.filled[i];
+      for (int p = start[i] + 1; p < end; ++p) c.scatter[rows[p]] -= c.lower[p] * entry;
+      diagonal -= entry * entry;
+      c.lower[end] = entry;
+      ++c.filled[i];
+    }
+    c.lower[start[k] + c.filled[k]++] = std::sqrt(diagonal);
+  }
+}
+
+/// w.values from w.numeric.lower: btScalar, each column's diagonal inverted.
+void storeFactor(ProjectiveWorkspace& w) {
+  const double* lower = w.numeric.lower.data();
+  for (size_t j = 0; j + 1 < w.columnStart.size(); ++j)
+    for (int p = w.columnStart[j]; p < w.columnStart[j + 1]; ++p)
+      w.values[p] = static_cast<btScalar>(p == w.columnStart[j] ? 1 / lower[p] : lower[p]);
+}
+
+/// Puts the particles the last response pushed into W and takes out those kContactHold
+/// iterations without a push (clearing the flags it reads). Returns whether W changed.
+bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w) {
+  bool changed = false;
+  const NumericCholesky& c = w.numeric;
+  for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
+    const auto row = static_cast<size_t>(w.order[k]);
+    uint8_t& pushed = muscle.pushedLast[muscle.freeParticles[k]];
+    double& weight = w.weights[row];
+    if (pushed) {
+      pushed = 0;
+      w.idle[row] = 0;
+      if (weight > 0) continue;
+      weight = kContactWeight * c.upperValues[c.diagonalEntry[row]];
+      changed = true;
+    } else if (weight > 0 && ++w.idle[row] > kContactHold) {
+      weight = 0;
+      changed = true;
+    }
+  }
+  return changed;
+}
+
+/// x⁺ = x + ω·(A + W)⁻¹·F(x) + (ω − 1)·(x − x⁻): the projective step over-relaxed with momentum.
 class ProjectiveIntegrator final : public TimeIntegrator {
  public:
   IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters, btScalar,
                             btScalar) const override {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
+    if (holdContacts(muscle, w)) {
+      factorNumerically(w);
+      storeFactor(w);
+    }
     const std::vector<uint32_t>& free = muscle.freeParticles;
     for (size_t k = 0; k < free.size(); ++k) w.solution[w.order[k]] = muscle.forces[free[k]];
     solveInPlace(w, w.solution.data());
@@ -120,8 +258,8 @@ class ProjectiveIntegrator final : public TimeIntegrator {
 
  protected:
   std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const override {
-    const MuscleSettings& settings = *muscle.settings;
-    const Factor factor(assemble(settings, muscle.freeParticles));
+    const Matrix matrix = assemble(*muscle.settings, muscle.freeParticles);
+    const Factor factor(matrix);
     if (factor.info() != Eigen::Success)
       throw InputError("integrator", "projective",
                        "the muscle's spring matrix is not positive definite");
@@ -130,13 +268,15 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     w->columnStart.assign(lower.outerIndexPtr(), lower.outerIndexPtr() + lower.cols() + 1);
     w->rows.assign(lower.innerIndexPtr(), lower.innerIndexPtr() + lower.nonZeros());
     w->values.resize(static_cast<size_t>(lower.nonZeros()));
-    for (Eigen::Index j = 0; j < lower.cols(); ++j)
-      for (int p = w->columnStart[j]; p < w->columnStart[j + 1]; ++p)
-        w->values[p] = static_cast<btScalar>(p == w->columnStart[j] ? 1 / lower.valuePtr()[p]
-                                                                    : lower.valuePtr()[p]);
     const auto& permutation = factor.permutationP().indices();
     w->order.assign(permutation.data(), permutation.data() + permutation.size());
-    w->solution.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
+    const size_t n = muscle.freeParticles.size();
+    w->solution.assign(n, btVector3(0, 0, 0));
+    w->weights.assign(n, 0);
+    w->idle.assign(n, 0);
+    prepareNumeric(matrix, factor, *w);
+    factorNumerically(*w);
+    storeFactor(*w);
     return w;
   }
 };

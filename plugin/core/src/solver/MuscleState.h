@@ -74,6 +74,9 @@ struct ParticleState {
 struct ContactState {
   std::vector<btVector3> pushes;     ///< collision pushes accumulated this iteration [m]
   std::vector<uint32_t> pushCounts;  ///< pairs that pushed each particle this iteration
+  /// 1 for a particle the last response pushed, until the projective integrator reads it (it
+  /// clears every flag it reads; other integrators leave them set) [flag].
+  std::vector<uint8_t> pushedLast;
 
   /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
   /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).

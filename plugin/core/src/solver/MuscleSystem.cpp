@@ -178,6 +178,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->forces.assign(n, btVector3(0, 0, 0));
   state->pushes.assign(n, btVector3(0, 0, 0));
   state->pushCounts.assign(n, 0);
+  state->pushedLast.assign(n, 0);
   state->pinchBones.assign(n, -1);
   state->firstBonePushes.assign(n, btVector3(0, 0, 0));
   state->otherBonePushes.assign(n, btVector3(0, 0, 0));
