@@ -4,11 +4,14 @@
 #include "fibremss/Calculix.h"
 
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -1071,6 +1074,49 @@ TEST(ReferenceCommand, TwoProcessesSolvingOneKeyAtOnceBothGetTheWholeReference) 
     ++entries;
   }
   EXPECT_EQ(entries, 1);
+}
+
+// Ctrl-C while ccx solves: exit 130, a plain message, nothing written to --out and no solve's
+// own directory left in the cache (the .inp files it would have copied went with it).
+TEST(ReferenceCommand, AnInterruptedSolveWritesNothingAndExits130) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_interrupt_test");
+  const std::string scene = coarseFusiform(dir.path());
+  const std::filesystem::path cache = dir.path() / "cache", out = dir.path() / "out";
+  const std::string log = (dir.path() / "log").string();
+  const pid_t child = fork();
+  ASSERT_NE(child, -1);
+  if (child == 0) {
+    std::freopen(log.c_str(), "w", stderr);
+    std::freopen("/dev/null", "w", stdout);
+    execl(FIBREMSS_CLI, FIBREMSS_CLI, "reference", scene.c_str(), "--set", "resolution=8",
+          "--no-gates", "--cache", cache.c_str(), "--out", out.c_str(),
+          static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  // Wait for ccx's input in the solve's own directory: the signal then arrives during the solve.
+  bool solving = false;
+  for (int i = 0; i < 1200 && !solving; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::error_code error;
+    for (std::filesystem::directory_iterator it(cache, error), end; !error && it != end;
+         it.increment(error))
+      solving |= it->path().filename().string().find(".solving-") != std::string::npos &&
+                 std::filesystem::exists(it->path() / "muscle0.inp", error);
+  }
+  kill(child, SIGINT);
+  int status = 0;
+  waitpid(child, &status, 0);
+  ASSERT_TRUE(solving) << "no solve started within a minute: " << readText(log);
+  ASSERT_TRUE(WIFEXITED(status)) << readText(log);
+  EXPECT_EQ(WEXITSTATUS(status), 130) << readText(log);
+  EXPECT_NE(readText(log).find("interrupted: nothing written"), std::string::npos) << readText(log);
+  EXPECT_FALSE(std::filesystem::exists(out / "reference.json"));
+  EXPECT_FALSE(std::filesystem::exists(out / "inp"));
+  for (const auto& entry : std::filesystem::directory_iterator(cache))
+    EXPECT_EQ(entry.path().filename().string().find(".solving-"), std::string::npos)
+        << entry.path();
 }
 
 TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {

@@ -59,6 +59,11 @@ void reference(ReferenceArgs& args) {
   const OutputDirectory locked(out);  // a second writer into it is refused
   const Reference result = computeReference(scene, prepared, args.options);
   progress.finish();
+  if (interruptRequested.load()) {
+    // Nothing half-written: what was solved before the signal stays in the cache.
+    std::fprintf(stderr, "interrupted: nothing written to %s\n", out.c_str());
+    throw CLI::RuntimeError(kExitInterrupted);
+  }
   writeOut(result, out);
   std::printf("%s\n", result.description.c_str());
   std::printf("poses solved: %d/%d%s\n", result.solution.solvedPoses(),
@@ -68,7 +73,6 @@ void reference(ReferenceArgs& args) {
   std::printf("wrote %s/reference.json and %zu .inp file(s) in %s/inp (cache entry %s)\n",
               out.c_str(), result.solution.inputFiles.size(), out.c_str(),
               result.cacheEntry.c_str());
-  if (interruptRequested.load()) throw CLI::RuntimeError(kExitInterrupted);
 }
 
 }  // namespace

@@ -256,6 +256,7 @@ CalculixSolution cachedCalculixReference(
   solution = solveCalculixReference(scene, prepared, definition, cut, work, progress, cancel);
   if (solution.interrupted) {
     std::filesystem::remove_all(work);
+    solution.inputFiles.clear();  // they were in the work directory
     return solution;
   }
   for (std::string& file : solution.inputFiles) file = entry + file.substr(work.size());
