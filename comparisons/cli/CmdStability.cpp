@@ -35,11 +35,11 @@ void stability(StabilityArgs& args) {
                                 args.overrides.end());
   for (const std::string& name : args.options.integrators) {
     Integrator kind{};
-    if (!fromString(name, kind))
-      throw InputError("--integrators", name,
-                       "unknown integrator; one of verlet, "
-                       "semi-implicit-euler, explicit-euler, rk2, rk4, "
-                       "implicit-euler, implicit-midpoint, bdf2, pbd, xpbd, projective");
+    if (fromString(name, kind)) continue;
+    std::string known;
+    for (const std::string& each : allIntegratorNames())
+      known += (known.empty() ? "" : ", ") + each;
+    throw InputError("--integrators", name, "unknown integrator; one of " + known);
   }
   args.options.log = [](const std::string& line) { std::fprintf(stderr, "%s\n", line.c_str()); };
   InterruptGuard interrupt;

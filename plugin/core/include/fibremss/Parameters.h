@@ -91,7 +91,8 @@ enum class Integrator : uint8_t {
   Pbd,                ///< position-based dynamics: distance constraints per spring
   Xpbd,               ///< extended PBD: compliant distance constraints (compliance from κ)
   /// projective dynamics' local/global step for springs as an equilibrium solver: x += A⁻¹·F
-  /// with A the springs' constant Laplacian over the free particles, factored once per muscle
+  /// with A the springs' Laplacian over the free particles plus the contacts' weights, its
+  /// pattern analysed once per muscle and refactored when the contact set changes
   Projective,
 };
 
