@@ -336,6 +336,49 @@ TEST(CalculixRun, BarUnderTensionMatchesTheClosedFormNeoHookeanAnswerC3D10) {
   expectClosedFormBar(CalculixElement::C3D10);
 }
 
+/// A plate whose top is 1 mm below the bar and a second, thicker one lower down that cuts
+/// into it from the side: one surface that intersects itself, as thigh13's pelvis does.
+TriangleMesh overlappingPlates() {
+  TriangleMesh plates = subdivided(
+      testing::boxMesh(btVector3(-0.005f, -0.005f, -0.006f), btVector3(0.015f, 0.015f, -0.001f)),
+      2);
+  const TriangleMesh lower =
+      testing::boxMesh(btVector3(0.01f, -0.01f, -0.012f), btVector3(0.03f, 0.02f, -0.003f));
+  const auto first = static_cast<uint32_t>(plates.vertices.size());
+  plates.vertices.insert(plates.vertices.end(), lower.vertices.begin(), lower.vertices.end());
+  for (const auto& t : lower.triangles)
+    plates.triangles.push_back({first + t[0], first + t[1], first + t[2]});
+  return plates;
+}
+
+TEST(CalculixInput, AnObstacleMeshFacesOutWithPositiveTetrahedraEvenWhereTetgenRefuses) {
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("obstacle_test");
+  TriangleMesh plates = overlappingPlates();
+  EXPECT_THROW(tetgenMesh(plates, {}, dir.path().string(), "plates"), InputError)
+      << "tetgen refuses a surface that intersects itself";
+  for (const bool reversed : {false, true}) {
+    if (reversed)
+      for (auto& t : plates.triangles) std::swap(t[1], t[2]);
+    const ObstacleMesh mesh = obstacleMesh(plates);
+    ASSERT_EQ(mesh.faces.size(), plates.triangles.size());
+    ASSERT_EQ(mesh.tetrahedra.size(), 4 * plates.triangles.size());
+    for (size_t f = 0; f < mesh.faces.size(); ++f) {
+      const auto [element, face] = mesh.faces[f];
+      EXPECT_EQ(face, 1) << "face 1: corners 1-2-3";
+      const uint32_t* t = &mesh.tetrahedra[4 * element];
+      const btVector3 &a = mesh.nodes[t[0]], &b = mesh.nodes[t[1]], &c = mesh.nodes[t[2]];
+      const btVector3 inward = (b - a).cross(c - a);
+      EXPECT_GT(inward.dot(mesh.nodes[t[3]] - a), 0) << "a C3D4 of positive volume";
+      // The triangle's outward normal (its own winding, flipped back when reversed).
+      const auto& tri = plates.triangles[f];
+      const btVector3 normal = (plates.vertices[tri[1]] - plates.vertices[tri[0]])
+                                   .cross(plates.vertices[tri[2]] - plates.vertices[tri[0]]);
+      EXPECT_LT(inward.dot(reversed ? -normal : normal), 0) << "face 1 faces out";
+    }
+  }
+}
+
 /// The bar pushed 3 mm down by its top face onto a rigid plate 1 mm below it: with contact its
 /// bottom face stops on the plate (within the penalty's overclosure), without it passes 2 mm in.
 /// Returns the lowest of the bottom face's nodes (midside nodes of C3D10 included) [mm].
@@ -344,10 +387,7 @@ double lowestBottomNodeMm(double contactStiffness,
   TemporaryDirectory dir(std::string("ccx_contact_test_") + toString(element));
   const TriangleMesh surface = barSurface();
   const TetMesh bar = tetgenMesh(surface, {}, dir.path().string(), "bar");
-  const TetMesh plate = tetgenMesh(subdivided(testing::boxMesh(btVector3(-0.005f, -0.005f, -0.006f),
-                                                               btVector3(0.015f, 0.015f, -0.001f)),
-                                              2),
-                                   {}, dir.path().string(), "plate");
+  const ObstacleMesh plate = obstacleMesh(overlappingPlates());
   CalculixJob job;
   job.title = "bar pushed onto a plate";
   job.material = {.youngsModulus = 100e3, .poissonRatio = 0.3};
@@ -370,9 +410,8 @@ double lowestBottomNodeMm(double contactStiffness,
     job.steps[0].push_back(btVector3(0, 0, 0));
     job.nodes.push_back(x);
   }
-  for (const auto& t : plate.tetrahedra)
-    for (uint32_t corner : t) job.contact.tetrahedra.push_back(first + corner);
-  job.contact.faces = boundaryFaces(job.contact.tetrahedra);
+  for (uint32_t corner : plate.tetrahedra) job.contact.tetrahedra.push_back(first + corner);
+  job.contact.faces = plate.faces;
   job.contact.stiffness = contactStiffness;
   job.contact.tension = 1e-3 * job.material.youngsModulus;
   job.initialIncrement = 0.25;

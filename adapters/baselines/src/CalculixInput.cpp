@@ -139,6 +139,25 @@ std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32
   return faces;
 }
 
+ObstacleMesh obstacleMesh(const TriangleMesh& surface) {
+  ObstacleMesh mesh;
+  mesh.nodes = surface.vertices;
+  const bool outward = meshVolume(surface) >= 0;
+  for (const auto& t : surface.triangles) {
+    // Corners ordered so that the apex lies on the positive side of face 1 (1-2-3), as a
+    // C3D4 of positive volume has it: face 1's outward normal is then the surface's.
+    const uint32_t a = t[0], b = outward ? t[2] : t[1], c = outward ? t[1] : t[2];
+    const btVector3 &pa = surface.vertices[a], &pb = surface.vertices[b], &pc = surface.vertices[c];
+    const btVector3 inward = (pb - pa).cross(pc - pa).normalized();
+    const btScalar longest = std::max({(pb - pa).length(), (pc - pb).length(), (pa - pc).length()});
+    const auto apex = static_cast<uint32_t>(mesh.nodes.size());
+    mesh.nodes.push_back((pa + pb + pc) / btScalar(3) + inward * (longest / 2));
+    mesh.faces.emplace_back(static_cast<uint32_t>(mesh.tetrahedra.size() / 4), uint8_t{1});
+    mesh.tetrahedra.insert(mesh.tetrahedra.end(), {a, b, c, apex});
+  }
+  return mesh;
+}
+
 std::vector<uint32_t> surfaceNodes(const CalculixJob& job, size_t surfaceVertices) {
   std::vector<uint32_t> nodes(surfaceVertices);
   for (size_t v = 0; v < surfaceVertices; ++v) nodes[v] = static_cast<uint32_t>(v);

@@ -160,30 +160,29 @@ std::vector<int> stepPoses(const LoadedScene& scene, size_t bones, int poses, bo
   return steps;
 }
 
-/// The bones as rigid contact obstacles of the job (CalculixContact): each bone's rest mesh
-/// meshed by tetgen, its nodes appended and prescribed to follow the bone at every step, the
-/// muscle's free surface nodes (midside nodes of C3D10 included) the slaves.
+/// The bones as rigid contact obstacles of the job (CalculixContact): each bone's rest surface
+/// as an obstacle mesh (obstacleMesh: its triangles the master surface; thigh13's pelvis
+/// intersects itself at its bends, which tetgen refuses), its nodes appended and prescribed to
+/// follow the bone at every step, the muscle's free surface nodes (midside nodes of C3D10
+/// included) the slaves.
 void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedScene& prepared,
-                    const CalculixDefinition& definition, const std::string& workDir,
-                    const std::vector<int>& steps) {
+                    const CalculixDefinition& definition, const std::vector<int>& steps) {
   CalculixJob& job = result.job;
   CalculixContact& contact = job.contact;
-  TetgenDefinition mesher = definition.mesher;
-  mesher.refinement = 0;
   for (size_t b = 0; b < prepared.bones.size(); ++b) {
-    const TetMesh bone = tetgenMesh(prepared.bones[b]->mesh, mesher, workDir,
-                                    result.stem + "-bone" + std::to_string(b));
+    const ObstacleMesh bone = obstacleMesh(prepared.bones[b]->mesh);
     const auto first = static_cast<uint32_t>(job.nodes.size());
+    const auto elements = static_cast<uint32_t>(contact.tetrahedra.size() / 4);
     for (const btVector3& x : bone.nodes) {
       job.prescribed.push_back(static_cast<uint32_t>(job.nodes.size()));
       job.nodes.push_back(x);
       for (size_t s = 0; s < steps.size(); ++s)
         job.steps[s].push_back(stepTransform(scene, b, steps[s]) * x - x);
     }
-    for (const auto& t : bone.tetrahedra)
-      for (uint32_t corner : t) contact.tetrahedra.push_back(first + corner);
+    for (uint32_t corner : bone.tetrahedra) contact.tetrahedra.push_back(first + corner);
+    for (const auto& [element, face] : bone.faces)
+      contact.faces.emplace_back(elements + element, face);
   }
-  contact.faces = boundaryFaces(contact.tetrahedra);
   std::vector<bool> held(job.nodes.size(), false);
   for (uint32_t n : job.prescribed) held[n] = true;
   for (uint32_t n : surfaceNodes(job, result.surfaceVertices))
@@ -254,8 +253,7 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
     job.prescribed.push_back(holdBySymmetry(job, scene.analytic));
     for (std::vector<btVector3>& u : job.steps) u.emplace_back(0, 0, 0);
   }
-  if (definition.contactPenalty > 0)
-    addBoneContact(result, scene, prepared, definition, workDir, steps);
+  if (definition.contactPenalty > 0) addBoneContact(result, scene, prepared, definition, steps);
   return result;
 }
 

@@ -112,6 +112,21 @@ struct CalculixJob {
 /// (element, face 1–4) for every face no other element shares.
 std::vector<std::pair<uint32_t, uint8_t>> boundaryFaces(const std::vector<uint32_t>& tetrahedra);
 
+/// A rigid obstacle's elements: nodes, C3D4 tetrahedra (4 indices into `nodes` each) and the
+/// faces its contact's master surface is made of (element, CalculiX face number).
+struct ObstacleMesh {
+  std::vector<btVector3> nodes;                     ///< rest positions [m]
+  std::vector<uint32_t> tetrahedra;                 ///< 4 node indices per element
+  std::vector<std::pair<uint32_t, uint8_t>> faces;  ///< the master surface, facing out
+};
+
+/// A closed surface as a rigid obstacle without meshing its interior: its vertices first (in
+/// order), then per triangle a tetrahedron with an apex of its own on the inner side (half the
+/// triangle's longest edge from it along its inward normal), whose face 1 is the triangle
+/// facing out. Every node of an obstacle is prescribed, so its elements carry nothing but the
+/// master faces, and any surface works: one that intersects itself (which tetgen refuses) too.
+ObstacleMesh obstacleMesh(const TriangleMesh& surface);
+
 /// The body's nodes on its boundary, ascending: the surface vertices [0, surfaceVertices) and,
 /// for C3D10, the midside nodes of its boundary faces. A contact's slaves must be all of them:
 /// a midside node left out passes into the obstacle unresisted (a quadratic face between
