@@ -1158,6 +1158,30 @@ TEST(ReferenceCommand, AnInterruptedSolveWritesNothingAndExits130) {
         << entry.path();
 }
 
+TEST(ReferenceCommand, ASolveThatFailsLeavesNoWorkInTheCacheAndNoResult) {
+  REQUIRE_PROGRAM("ccx");
+  TemporaryDirectory dir("reference_failure_test");
+  const std::string scene = coarseFusiform(dir.path());
+  const std::filesystem::path cache = dir.path() / "cache", out = dir.path() / "out";
+  // ccx on the PATH and tetgen not: the solve fails meshing, inside its own work directory.
+  const std::filesystem::path bin = dir.path() / "bin";
+  std::filesystem::create_directories(bin);
+  std::filesystem::create_symlink(testing::runProcess("command -v ccx | tr -d '\\n'").output,
+                                  bin / "ccx");
+  const testing::ProcessResult result =
+      testing::runProcess("PATH=" + bin.string() + " " + FIBREMSS_CLI + " reference " + scene +
+                          " --set resolution=8 --no-gates --cache " + cache.string() + " --out " +
+                          out.string() + " 2>&1");
+  EXPECT_NE(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("cannot run 'tetgen'"), std::string::npos) << result.output;
+  EXPECT_FALSE(std::filesystem::exists(out / "reference.json"));
+  ASSERT_TRUE(std::filesystem::is_directory(cache))
+      << "the failure came after the cache's work began";
+  for (const auto& entry : std::filesystem::directory_iterator(cache))
+    EXPECT_EQ(entry.path().filename().string().find(".solving-"), std::string::npos)
+        << entry.path() << " left in the cache";
+}
+
 TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");

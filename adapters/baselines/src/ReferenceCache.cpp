@@ -253,7 +253,13 @@ CalculixSolution cachedCalculixReference(
   // solving the same key at once (two comparisons of one scene) must not share ccx's files.
   const std::string work = entry + ".solving-" + std::to_string(getpid());
   std::filesystem::remove_all(work);
-  solution = solveCalculixReference(scene, prepared, definition, cut, work, progress, cancel);
+  try {
+    solution = solveCalculixReference(scene, prepared, definition, cut, work, progress, cancel);
+  } catch (...) {  // a failed solve (tetgen or ccx not found, a surface tetgen refuses)
+    std::error_code ignored;
+    std::filesystem::remove_all(work, ignored);
+    throw;
+  }
   if (solution.interrupted) {
     std::filesystem::remove_all(work);
     solution.inputFiles.clear();  // they were in the work directory
