@@ -1117,9 +1117,9 @@ TEST(ReferenceCommand, TwoProcessesSolvingOneKeyAtOnceBothGetTheWholeReference) 
 
 // Ctrl-C while ccx solves: exit 130, a plain message, nothing written to --out and no solve's
 // own directory left in the cache (the .inp files it would have copied went with it).
-TEST(ReferenceCommand, AnInterruptedSolveWritesNothingAndExits130) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
+/// `fibremss reference` sent `signal` while ccx solves: it stops ccx, writes nothing to --out,
+/// leaves no work directory in the cache and exits 128 + signal.
+void expectAnInterruptedSolveWritesNothing(int signal) {
   TemporaryDirectory dir("reference_interrupt_test");
   const std::string scene = coarseFusiform(dir.path());
   const std::filesystem::path cache = dir.path() / "cache", out = dir.path() / "out";
@@ -1144,18 +1144,30 @@ TEST(ReferenceCommand, AnInterruptedSolveWritesNothingAndExits130) {
       solving |= it->path().filename().string().find(".solving-") != std::string::npos &&
                  std::filesystem::exists(it->path() / "muscle0.inp", error);
   }
-  kill(child, SIGINT);
+  kill(child, signal);
   int status = 0;
   waitpid(child, &status, 0);
   ASSERT_TRUE(solving) << "no solve started within a minute: " << readText(log);
   ASSERT_TRUE(WIFEXITED(status)) << readText(log);
-  EXPECT_EQ(WEXITSTATUS(status), 130) << readText(log);
+  EXPECT_EQ(WEXITSTATUS(status), 128 + signal) << readText(log);
   EXPECT_NE(readText(log).find("interrupted: nothing written"), std::string::npos) << readText(log);
   EXPECT_FALSE(std::filesystem::exists(out / "reference.json"));
   EXPECT_FALSE(std::filesystem::exists(out / "inp"));
   for (const auto& entry : std::filesystem::directory_iterator(cache))
     EXPECT_EQ(entry.path().filename().string().find(".solving-"), std::string::npos)
         << entry.path();
+}
+
+TEST(ReferenceCommand, AnInterruptedSolveWritesNothingAndExits130) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  expectAnInterruptedSolveWritesNothing(SIGINT);
+}
+
+TEST(ReferenceCommand, ATerminatedSolveStopsCcxWritesNothingAndExits143) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  expectAnInterruptedSolveWritesNothing(SIGTERM);
 }
 
 TEST(ReferenceCommand, ASolveThatFailsLeavesNoWorkInTheCacheAndNoResult) {

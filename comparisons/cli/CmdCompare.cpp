@@ -120,7 +120,7 @@ void compare(CompareArgs& args) {
   std::printf("wrote");
   for (const std::string& file : files) std::printf(" %s/%s", out.c_str(), file.c_str());
   std::printf("\n");
-  if (interruptRequested.load()) throw CLI::RuntimeError(kExitInterrupted);
+  if (interruptRequested.load()) throw CLI::RuntimeError(interruptExitCode());
 }
 
 }  // namespace

@@ -62,7 +62,7 @@ void reference(ReferenceArgs& args) {
   if (interruptRequested.load()) {
     // Nothing half-written: what was solved before the signal stays in the cache.
     std::fprintf(stderr, "interrupted: nothing written to %s\n", out.c_str());
-    throw CLI::RuntimeError(kExitInterrupted);
+    throw CLI::RuntimeError(interruptExitCode());
   }
   writeOut(result, out);
   std::printf("%s\n", result.description.c_str());

@@ -253,7 +253,7 @@ void run(const RunArgs& args) {
   else
     printSummary(metrics, details, args, summary);
   std::fflush(stdout);
-  if (metrics.interrupted) throw CLI::RuntimeError(kExitInterrupted);
+  if (metrics.interrupted) throw CLI::RuntimeError(interruptExitCode());
   // Under stop-body the others went on past a frozen muscle: every step ran.
   const bool wentOn = scene.simulation.onFailure == FailurePolicy::StopBody &&
                       !details.frozen.empty() && metrics.steps == steps;

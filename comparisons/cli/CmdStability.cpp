@@ -55,7 +55,7 @@ void stability(StabilityArgs& args) {
   writeFileAtomically(args.out + "/stability.md", markdown);
   std::printf("%s\nwrote %s/stability.json %s/stability.md\n", markdown.c_str(), args.out.c_str(),
               args.out.c_str());
-  if (matrix.interrupted) throw CLI::RuntimeError(kExitInterrupted);
+  if (matrix.interrupted) throw CLI::RuntimeError(interruptExitCode());
 }
 
 }  // namespace

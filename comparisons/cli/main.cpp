@@ -1,5 +1,6 @@
 // The fibremss command-line tool. Exit codes (docs/bad-inputs.md): 0 done, 2 bad input or usage,
-// 3 a run that failed numerically, 130 interrupted; 1 only for an internal error.
+// 3 a run that failed numerically, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); 1 only for
+// an internal error.
 #include <LinearMath/btScalar.h>
 
 #include <exception>
@@ -58,7 +59,7 @@ int main(int argc, char** argv) {
                        "compiler, and exit");
   app.footer(
       "Exit codes (every subcommand): 0 done, 2 bad input or usage, 3 a run that failed "
-      "numerically, 130 interrupted (docs/bad-inputs.md).");
+      "numerically, 130 interrupted by Ctrl-C, 143 by SIGTERM (docs/bad-inputs.md).");
   fibremss::cli::addScenesCommand(app);
   fibremss::cli::addCheckCommand(app);
   fibremss::cli::addRunCommand(app);
