@@ -508,6 +508,27 @@ TEST(MergeAndReport, SaysWhichPosesTheBtSoftBodyRatioCovers) {
       << report;
 }
 
+TEST(MergeAndReport, TakesAnAnalyticScenesMeasuresAndNamesABadField) {
+  RunMetrics run;
+  run.scene = run.analytic.type = "sphere-planes";
+  run.method = "fibremss";
+  run.analytic.contact.push_back({.pose = 1, .approachMm = 2, .radiusMm = 5, .exactRadiusMm = 5.5});
+  nlohmann::json summary = {
+      {"scene", "sphere-planes"}, {"machine", machineJson()}, {"runs", {toJson(run)}}};
+  const nlohmann::json merged = mergeSummaries({summary, summary}, {"a", "b"});
+  ASSERT_EQ(merged["runs"].size(), 2u);
+  EXPECT_EQ(merged["runs"][1]["analytic"], toJson(run)["analytic"]);
+  summary["runs"][0]["analytic"]["contact"][0]["radius_mm"] = "wide";
+  try {
+    mergeSummaries({summary}, {"a"});
+    FAIL() << "a text where a radius belongs was taken";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("runs[0].analytic.contact[0].radius_mm"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(MergeAndReport, RejectsSomethingThatIsNotASummary) {
   const fs::path dir = scratch("not_summary");
   fs::create_directories(dir);

@@ -720,6 +720,27 @@ void checkSeries(const nlohmann::json& series, const std::string& source, const 
     checkRunFields(series[r], expected, source, path + "[" + std::to_string(r) + "]");
 }
 
+/// Throws InputError naming the field of a run's `analytic` (null: the scene has no exact
+/// answer; else AnalyticMetrics' fields and its `contact` rows) whose type toJson would not
+/// write.
+void checkAnalytic(const nlohmann::json& analytic, const std::string& source,
+                   const std::string& path) {
+  if (analytic.is_null()) return;
+  RunMetrics filled;  // toJson(RunMetrics{}) writes null for "analytic": its fields from one
+  filled.analytic.type = "cylinder-stretch";
+  filled.analytic.contact.emplace_back();
+  nlohmann::json expected = toJson(filled)["analytic"];
+  const nlohmann::json row = expected["contact"].at(0);
+  expected.erase("contact");
+  checkRunFields(analytic, expected, source, path);
+  const auto contact = analytic.find("contact");
+  if (contact == analytic.end()) return;
+  if (!contact->is_array())
+    throw InputError(source, path + ".contact", "expected an array of contact rows");
+  for (size_t r = 0; r < contact->size(); ++r)
+    checkRunFields((*contact)[r], row, source, path + ".contact[" + std::to_string(r) + "]");
+}
+
 /// Throws InputError naming `path.key` for a field of a run whose type toJson would not write.
 void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
                     const std::string& source, const std::string& path) {
@@ -731,6 +752,8 @@ void checkRunFields(const nlohmann::json& run, const nlohmann::json& expected,
       checkMuscles(*found, source, path + ".muscles");
     else if (it.key() == "series")
       checkSeries(*found, source, path + ".series");
+    else if (it.key() == "analytic")
+      checkAnalytic(*found, source, path + ".analytic");
     else if (it->is_object())
       checkRunFields(*found, *it, source, path + "." + it.key());
     else if (!sameKind(*found, *it))
