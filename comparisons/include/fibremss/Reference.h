@@ -63,9 +63,10 @@ inline constexpr double kRefinementShareOfSpread = 1.0 / 3.0;
 /// blade face through an increment) the change under halving is half the reference's own
 /// increment error, as one level finer estimates the mesh's; where it does not (frictionless
 /// contact with finite sliding, no contact: a path-independent hyperelastic equilibrium) it
-/// shows as a change near ccx's tolerance. A quarter costs twice as much again (pinch's C3D4
-/// reference: 93 s at 0.25x; cylinder-twist's poses about 20 min at 1x) for the same verdict
-/// where the error is first order. comparisons/README.md has what it measured.
+/// shows as a change near ccx's tolerance (fusiform, the cylinders: 10⁻⁷–3·10⁻⁴ mm; pinch 0.14
+/// mm). A quarter would cost twice as much again (cylinder-twist's halved solve: 147
+/// increments, 19 min wall) for the same verdict where the error is first order
+/// (comparisons/README.md, "Gates and fronts of the four scenes").
 inline constexpr double kIncrementGateFactor = 0.5;
 
 /// The reference's gates. NaN where not computed.
