@@ -615,5 +615,32 @@ TEST(PlotLayout, EachPointIsLabelledOnceWithItsVariantAndTheBandIsTheLargerGate)
   EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
 }
 
+TEST(MergeAndReport, RanksOnlyWhenTheIncrementGateIsComputedAndPasses) {
+  nlohmann::json summary = pinchLikeSummary();
+  nlohmann::json& gates = summary["reference"]["gates"];
+  gates = {{"return_mm", 0},           {"refinement_mm", 0.289}, {"refinement_poses", 2},
+           {"spread_mm", 1.04},        {"solved_poses", 2},      {"poses", 7},
+           {"increments_scale", 0.125}};
+  // Written before the increment gate existed (or not in the cache): not computed, no ranking.
+  std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("- increments halved (x0.125 of the default 2.5 deg / 1 mm): moves it — "
+                        "RMS: not computed"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("**No ranking**"), std::string::npos);
+  gates["increments_mm"] = 0.143;
+  gates["increments_poses"] = 2;
+  report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("moves it 0.143 mm RMS over 2/7 poses against a third of the methods' "
+                        "spread 0.347 mm: passes"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("**Ranking**"), std::string::npos) << report;
+  gates["increments_mm"] = 0.35;  // above a third of the spread
+  report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("spread 0.347 mm: FAILS"), std::string::npos) << report;
+  EXPECT_NE(report.find("**No ranking**"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace fibremss
