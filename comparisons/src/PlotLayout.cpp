@@ -11,7 +11,7 @@ namespace {
 // The speed–error plots' plot area on their 1000×650 canvas (measured on pinch's, key of two
 // rows below it) and the size of an 8-point DejaVu Sans label on it [pixels].
 constexpr double kAreaWidthPx = 890, kAreaHeightPx = 500;
-constexpr double kCharWidthPx = 5.8, kLabelHeightPx = 12;
+constexpr double kCharWidthPx = 6.2, kLabelHeightPx = 12;
 /// A point's half size (pt 7 at ps 1.2) and the gap between it and its label [pixels].
 constexpr double kPointRadiusPx = 6, kGapPx = 3;
 
@@ -53,9 +53,15 @@ std::vector<PlotLabel> candidates(const LabelledPoint& p) {
                 {0, -up - 2 * kHeight, "center"}};
   std::vector<PlotLabel> labels;
   for (const auto& place : places) {
-    const double x = p.x + place.dx, y = p.y + place.dy;
-    labels.push_back(
-        {p.text, x, y, place.justify, labelBox(p.text, x, y, place.justify), labels.size() >= 8});
+    double x = p.x + place.dx;
+    const double y = p.y + place.dy;
+    PlotBox box = labelBox(p.text, x, y, place.justify);
+    // Above or below a point by the plot's side: slid along until it is inside (by 10⁻⁶).
+    if (place.dx == 0) {
+      const double slide = box.left < 0 ? 1e-6 - box.left : std::min(0.0, 1 - 1e-6 - box.right);
+      x += slide, box.left += slide, box.right += slide;
+    }
+    labels.push_back({p.text, x, y, place.justify, box, labels.size() >= 8});
   }
   return labels;
 }

@@ -53,8 +53,9 @@ PlotBox labelBox(const std::string& text, double x, double y, const char* justif
 
 /// Each point's label, placed in turn at the first of these places that overlaps nothing
 /// placed before it, no point, no line and stays inside the plot: above, below, right, left,
-/// the four diagonals, then one and two label heights farther above and below. Where every
-/// place overlaps something, the one that overlaps least. `lines` are the fronts (points
+/// the four diagonals, then one and two label heights farther above and below (one above or
+/// below a point by the plot's side slid along until it is inside). Where every place
+/// overlaps something, the one that overlaps least. `lines` are the fronts (points
 /// joined in order, graph fractions); `taken` the boxes of labels already set (titles, notes).
 std::vector<PlotLabel> placeLabels(const std::vector<LabelledPoint>& points,
                                    const std::vector<std::vector<LabelledPoint>>& lines,
