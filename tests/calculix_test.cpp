@@ -448,6 +448,7 @@ TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   EXPECT_FALSE(gates.passed()) << "nothing computed";
   gates.returnMm = 0.4;
   gates.refinementMm = 0.1;
+  gates.incrementsMm = 0.1;
   gates.spreadMm = 0.6;
   EXPECT_TRUE(gates.passed());
   gates.spreadMm = 0.3;  // a third is 0.1: not below it
@@ -460,7 +461,7 @@ TEST(ReferenceGates, PassOnlyWithinTheirBoundsAndEveryPoseSolved) {
   EXPECT_FALSE(gates.passed());
   // pinch's C3D10 solve stopped in pose 1: its 0 mm over the rest pose alone is no pass.
   gates.failures.clear();
-  gates.solvedPoses = 2;
+  gates.solvedPoses = gates.incrementsPoses = 2;
   gates.refinementPoses = 1;
   gates.refinementMm = 0;
   EXPECT_FALSE(gates.refinementPasses());
@@ -479,6 +480,9 @@ TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {
   ASSERT_GE(lines.size(), 3u);
   EXPECT_NE(lines[1].find("not computed"), std::string::npos) << lines[1];
   EXPECT_EQ(lines[1].find("FAILS"), std::string::npos) << "no verdict on what was not solved";
+  EXPECT_NE(lines[2].find("increments halved (\u2014): moves it \u2014 RMS: not computed"),
+            std::string::npos)
+      << lines[2];
   gates.refinementMm = 0.1;
   gates.refinementPoses = 2;
   gates.attachmentLowMm = gates.attachmentHighMm = 0.2;
@@ -486,16 +490,17 @@ TEST(ReferenceGates, LinesSayWhatWasNotComputedAndOverHowManyPoses) {
   lines = gateLines(gates);
   EXPECT_NE(lines[1].find("over 2/7 poses"), std::string::npos) << lines[1];
   EXPECT_NE(lines[1].find("passes"), std::string::npos) << lines[1];
-  EXPECT_EQ(lines[2].find("poses"), std::string::npos) << "every pose compared: " << lines[2];
+  EXPECT_EQ(lines[3].find("poses"), std::string::npos) << "every pose compared: " << lines[3];
 }
 
 TEST(ReferenceGates, ExcludedPosesAreNoFailureButAGateThatFailsStillBlocks) {
   ReferenceGates gates;
   gates.returnMm = 0.1;
-  gates.refinementMm = 0.1;
+  gates.refinementMm = gates.incrementsMm = 0.1;
   gates.spreadMm = 0.6;
   gates.poses = 7;
-  gates.refinementPoses = gates.attachmentLowPoses = gates.attachmentHighPoses = 2;
+  gates.refinementPoses = gates.incrementsPoses = gates.attachmentLowPoses =
+      gates.attachmentHighPoses = 2;
   gates.excluded = "poses 2 to 6 of 7: no continuum equilibrium: the bones close across it";
   EXPECT_TRUE(gates.passed()) << "poses without a continuum equilibrium do not block the ranking";
   const std::vector<std::string> lines = gateLines(gates);
@@ -525,6 +530,78 @@ TEST(ReferenceGates, ExcludedPosesAreNoFailureButAGateThatFailsStillBlocks) {
   EXPECT_NE(line.find("\u2014 (does not apply, not blocking: the motion does not return"),
             std::string::npos)
       << line;
+}
+
+TEST(ReferenceGates, IncrementsHalvedIsJudgedAsRefinementIsAndBlocksTheRanking) {
+  // Every other gate passes: the increment gate alone decides.
+  ReferenceGates gates;
+  gates.returnMm = 0.01;
+  gates.refinementMm = 0.05;
+  gates.spreadMm = 0.9;  // a third: 0.3 mm
+  gates.poses = gates.solvedPoses = gates.refinementPoses = 2;
+  EXPECT_FALSE(gates.passed()) << "not computed: no ranking";
+  EXPECT_NE(gateLines(gates)[2].find(": not computed"), std::string::npos) << gateLines(gates)[2];
+  gates.incrementsMm = 0.277;  // pinch's pose 1, 0.25x against 0.0625x (session 12)
+  gates.incrementsScale = 0.125;
+  gates.incrementsPoses = 2;
+  EXPECT_TRUE(gates.incrementsPass());
+  EXPECT_TRUE(gates.passed());
+  EXPECT_EQ(gateLines(gates)[2],
+            "increments halved (x0.125 of the default 2.5 deg / 1 mm): moves it 0.277 mm RMS "
+            "against a third of the methods' spread 0.3 mm: passes");
+  gates.incrementsMm = 0.3;  // not below a third of the spread
+  EXPECT_FALSE(gates.incrementsPass());
+  EXPECT_FALSE(gates.passed()) << "a failed increment gate blocks the ranking";
+  EXPECT_NE(gateLines(gates)[2].find(": FAILS"), std::string::npos) << gateLines(gates)[2];
+  gates.incrementsMm = 0;  // no change at all, but over the rest pose alone
+  gates.incrementsPoses = 1;
+  EXPECT_FALSE(gates.passed());
+  EXPECT_NE(gateLines(gates)[2].find("FAILS (over fewer poses than the reference solved)"),
+            std::string::npos)
+      << gateLines(gates)[2];
+  gates.spreadMm = RunMetrics::kNone;
+  gates.incrementsPoses = 2;
+  EXPECT_NE(gateLines(gates)[2].find("needs a comparison"), std::string::npos);
+}
+
+TEST(ReferenceCache, EachGatesKeyIsTheReferencesWithOneChangeAndNoReturnStep) {
+  REQUIRE_PROGRAM("ccx");
+  const LoadedScene scene = loadScene("fusiform", {"resolution=6", "fibre_count=8"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const auto key = [&](const CalculixDefinition& d) {
+    return referenceCacheKey(scene, prepared, d, {});
+  };
+  // At the default increments, and where the reference was solved only when retried finer.
+  for (const double scale : {1.0, kFinerIncrements}) {
+    SCOPED_TRACE(scale);
+    CalculixDefinition reference;
+    reference.incrementScale = scale;
+    reference.contactSliding = ContactSliding::Small;
+    const GateDefinitions gates = gateDefinitions(reference);
+    // The gates solved before the increment gate existed are built as they were, so their
+    // cache entries stay valid: the reference without its return step, one thing changed.
+    CalculixDefinition low = reference;
+    low.returnToRest = false;
+    CalculixDefinition high = low, finer = low, increments = low;
+    low.attachmentScale = 0.5f;
+    high.attachmentScale = 1.5f;
+    finer.element = CalculixElement::C3D10;
+    increments.incrementScale = scale * kIncrementGateFactor;
+    EXPECT_EQ(key(gates.attachmentLow), key(low));
+    EXPECT_EQ(key(gates.attachmentHigh), key(high));
+    EXPECT_EQ(key(gates.finer), key(finer));
+    EXPECT_EQ(key(gates.increments), key(increments)) << "only its increments differ";
+    const std::set<std::string> keys{key(reference), key(low), key(high), key(finer),
+                                     key(increments)};
+    EXPECT_EQ(keys.size(), 5u) << "five solves, five cache entries";
+  }
+  CalculixDefinition quadratic;
+  quadratic.element = CalculixElement::C3D10;
+  const GateDefinitions gates = gateDefinitions(quadratic);
+  EXPECT_EQ(gates.finer.mesher.refinement, 1) << "a C3D10 reference: the next mesh level";
+  EXPECT_EQ(gates.refinedBy, "mesh level 1");
+  EXPECT_EQ(gates.increments.element, CalculixElement::C3D10);
+  EXPECT_EQ(gates.increments.mesher.refinement, 0);
 }
 
 /// The scene's continuum cut with its attachment distances × `scale`.
@@ -935,6 +1012,13 @@ TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
   const nlohmann::json& gates = reference["gates"];
   EXPECT_LT(gates["return_mm"].get<double>(), kReturnGateMm) << "no contact: back at rest";
   EXPECT_GT(gates["refinement_mm"].get<double>(), 0) << "C3D10 differs from C3D4";
+  EXPECT_EQ(gates["increments_scale"].get<double>(), kIncrementGateFactor);
+  EXPECT_EQ(gates["increments_poses"].get<int>(), 3);
+  // Frictionless contact with finite sliding and no contact at all leave a path-independent
+  // hyperelastic equilibrium: halving the increments changes it by ccx's tolerance alone.
+  EXPECT_LT(gates["increments_mm"].get<double>(), 1e-2);
+  EXPECT_NE(first.output.find("gate: increments halved (x0.5 of the default"), std::string::npos)
+      << first.output;
   // The coarse mesh's nodes near the bars are the same within 2, 4 and 6 mm: 0 is possible.
   EXPECT_GE(gates["attachment_low_mm"].get<double>(), 0);
   EXPECT_GE(gates["attachment_high_mm"].get<double>(), 0);
@@ -1222,8 +1306,14 @@ TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
   }
   const nlohmann::json& gates = summary["reference"]["gates"];
   EXPECT_TRUE(gates["spread_mm"].is_number());
+  EXPECT_TRUE(gates["increments_mm"].is_number());
+  EXPECT_NE(result.output.find("reference gate: increments halved"), std::string::npos)
+      << result.output;
   const std::string report = readText(dir.path() / "out/report.md");
   EXPECT_NE(report.find("## Reference"), std::string::npos);
+  EXPECT_NE(report.find("- increments halved (x0.5 of the default 2.5 deg / 1 mm): moves it"),
+            std::string::npos)
+      << report;
   EXPECT_NE(report.find(gates["passed"].get<bool>() ? "**Ranking**" : "**No ranking**"),
             std::string::npos)
       << report;

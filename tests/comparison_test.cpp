@@ -7,11 +7,13 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "fibremss/Compare.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Error.h"
+#include "fibremss/PlotLayout.h"
 #include "support/Process.h"
 
 namespace fibremss {
@@ -408,7 +410,7 @@ TEST(MergeAndReport, SaysWhenRmsToTheReferenceCoversFewerPosesThanTheRun) {
   EXPECT_NE(report.find("ccx did not solve the reference's pose 1"), std::string::npos) << report;
   EXPECT_NE(report.find("| 3 (1/13 poses) |"), std::string::npos) << "table cell: " << report;
   const std::string script = readFile(out / "speed_vs_error.gp");
-  EXPECT_NE(script.find("(1/13 poses)"), std::string::npos) << "point label: " << script;
+  EXPECT_NE(script.find("(1/13 poses)"), std::string::npos) << "point label or note: " << script;
   std::string problem;
   EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
 
@@ -436,7 +438,7 @@ TEST(MergeAndReport, SaysOverHowManyPosesARunStoppedByItsBudgetIsMeasured) {
   EXPECT_NE(report.find("| 4.8 (3/13 poses) |"), std::string::npos) << report;
   EXPECT_NE(report.find("stopped (time budget)"), std::string::npos) << report;
   EXPECT_NE(readFile(out / "speed_vs_error.gp").find("(3/13 poses)"), std::string::npos)
-      << "point label";
+      << "point label or note";
 }
 
 TEST(MergeAndReport, FourResolutionsGiveTable1ColumnsInOrder) {
@@ -535,6 +537,130 @@ TEST(MergeAndReport, RejectsSomethingThatIsNotASummary) {
   std::ofstream(dir / "summary.json") << "{\"scene\": \"x\"}";
   EXPECT_THROW(mergeSummaries({readSummary(dir.string())}, {dir.string()}), InputError);
   EXPECT_THROW(readSummary((dir / "missing").string()), InputError);
+}
+
+/// pinch's fronts (2026-11-27, session 12: ms per pose, RMS to the reference [mm]): fourteen
+/// points within 7–600 ms and 0.9–2.3 mm, seven of them within a factor 2 in time.
+nlohmann::json pinchLikeSummary() {
+  const std::tuple<const char*, double, double, int> runs[] = {
+      {"calculix", 13214, 0, 1},
+      {"fibremss:iterations=35", 7.38, 2.153, 2},
+      {"fibremss", 11.7, 1.985, 2},
+      {"fibremss:iterations=140", 25.8, 1.939, 2},
+      {"fibremss:iterations=280", 45.2, 2.161, 2},
+      {"fibremss:resolution=20", 6.80, 2.236, 2},
+      {"fibremss:resolution=80", 24.9, 1.849, 2},
+      {"self-reference", 92.5, 1.971, 2},
+      {"btsoftbody:iterations=8", 80.1, 1.247, 1},
+      {"btsoftbody", 95.6, 1.090, 1},
+      {"btsoftbody:iterations=32", 126.7, 0.927, 1},
+      {"fem:substeps=75", 88.4, 1.835, 1},
+      {"fem", 183.5, 1.995, 1},
+      {"fem:substeps=300", 605.5, 2.140, 1}};
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& [method, ms, rms, threads] : runs) {
+    RunMetrics run;
+    run.scene = "pinch";
+    run.method = method;
+    run.msPerStep = ms;
+    run.rmsToReferenceMm = rms;
+    run.threads = threads;
+    list.push_back(toJson(run));
+  }
+  return {{"scene", "pinch"},
+          {"reference",
+           {{"gates", {{"refinement_mm", 0.289}, {"increments_mm", 0.143}, {"passed", true}}}}},
+          {"runs", list}};
+}
+
+TEST(PlotLayout, LogRangesPutTheValuesWithinTheirMarginsAndTicsInsideThem) {
+  const LogRange range = logRangeOver({0.93, 2.24, 0.289, NAN, -1}, 0.1, 0.2);
+  EXPECT_NEAR(range.fraction(0.289), 0.1, 1e-9);
+  EXPECT_NEAR(range.fraction(2.24), 0.8, 1e-9);
+  for (const double tic : logTics(range)) {
+    EXPECT_GE(tic, range.low);
+    EXPECT_LE(tic, range.high);
+  }
+  // 1.27 decades from 0.216 to 4.0 mm: 0.2 and 5 fall outside.
+  EXPECT_EQ(logTics(range), (std::vector<double>{0.5, 1, 2}));
+  // One value: half a decade around it, so its neighbours' tics still show.
+  const LogRange one = logRangeOver({3.0}, 0, 0);
+  EXPECT_NEAR(std::log10(one.high / one.low), 0.5, 1e-9);
+  EXPECT_NEAR(one.fraction(3.0), 0.5, 1e-9);
+  EXPECT_EQ(logTics(logRangeOver({1e-3, 1e3}, 0, 0)).size(), 7u) << "over 4 decades: 10^k only";
+}
+
+TEST(PlotLayout, CrowdedLabelsCoverNoOtherLabelNorPointAndStayInsideThePlot) {
+  // Seven points within a label's width of each other, on two lines.
+  std::vector<LabelledPoint> points;
+  std::vector<std::vector<LabelledPoint>> lines(2);
+  for (int i = 0; i < 7; ++i) {
+    points.push_back(
+        {0.2 + 0.02 * i, 0.5 + 0.01 * (i % 3), "iterations=" + std::to_string(35 << i)});
+    lines[static_cast<size_t>(i % 2)].push_back(points.back());
+  }
+  const PlotBox note = labelBox("the reference FAILS a gate", 0.5, 0.96, "center");
+  const std::vector<PlotLabel> labels = placeLabels(points, lines, {note});
+  ASSERT_EQ(labels.size(), points.size());
+  for (size_t a = 0; a < labels.size(); ++a) {
+    const PlotBox& box = labels[a].box;
+    EXPECT_GE(box.left, 0);
+    EXPECT_LE(box.right, 1);
+    EXPECT_GE(box.bottom, 0);
+    EXPECT_LE(box.top, 1);
+    EXPECT_EQ(overlapArea(box, note), 0);
+    for (size_t b = a + 1; b < labels.size(); ++b)
+      EXPECT_EQ(overlapArea(box, labels[b].box), 0) << labels[a].text << " / " << labels[b].text;
+    for (const LabelledPoint& p : points)
+      EXPECT_FALSE(p.x > box.left && p.x < box.right && p.y > box.bottom && p.y < box.top)
+          << labels[a].text << " covers the point of " << p.text;
+  }
+}
+
+TEST(PlotLayout, EachPointIsLabelledOnceWithItsVariantAndTheBandIsTheLargerGate) {
+  const fs::path out = scratch("pinch_like_plot");
+  writeComparison(pinchLikeSummary(), out.string());
+  const std::string script = readFile(out / "speed_vs_error.gp");
+  // The default runs join every line of their family but are labelled once (per terminal).
+  const auto count = [&](const std::string& text) {
+    size_t n = 0;
+    for (size_t at = 0; (at = script.find(text, at)) != std::string::npos; at += text.size()) ++n;
+    return n;
+  };
+  EXPECT_EQ(count(" \"fibremss\" at graph"), 2u) << script;
+  EXPECT_EQ(count("\"iterations=140\" at graph"), 2u) << "the variant: the legend names the family";
+  EXPECT_EQ(count("fibremss:iterations"), 0u) << script;
+  EXPECT_EQ(count("first 0.289"), 2u) << "the band: the larger of the two gates' moves";
+  EXPECT_NE(script.find("set yrange"), std::string::npos);
+  std::string problem;
+  EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;
+}
+
+TEST(MergeAndReport, RanksOnlyWhenTheIncrementGateIsComputedAndPasses) {
+  nlohmann::json summary = pinchLikeSummary();
+  nlohmann::json& gates = summary["reference"]["gates"];
+  gates = {{"return_mm", 0},           {"refinement_mm", 0.289}, {"refinement_poses", 2},
+           {"spread_mm", 1.04},        {"solved_poses", 2},      {"poses", 7},
+           {"increments_scale", 0.125}};
+  // Written before the increment gate existed (or not in the cache): not computed, no ranking.
+  std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("- increments halved (x0.125 of the default 2.5 deg / 1 mm): moves it — "
+                        "RMS: not computed"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("**No ranking**"), std::string::npos);
+  gates["increments_mm"] = 0.143;
+  gates["increments_poses"] = 2;
+  report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("moves it 0.143 mm RMS over 2/7 poses against a third of the methods' "
+                        "spread 0.347 mm: passes"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("**Ranking**"), std::string::npos) << report;
+  gates["increments_mm"] = 0.35;  // above a third of the spread
+  report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("spread 0.347 mm: FAILS"), std::string::npos) << report;
+  EXPECT_NE(report.find("**No ranking**"), std::string::npos);
 }
 
 }  // namespace

@@ -65,8 +65,9 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
                    "Use the reference (and each gate's solve) only if it is in the cache; what is "
                    "not there is reported missing, not computed");
   command.add_flag("!--no-gates", options.gates,
-                   "Skip the reference's gate solves (one level finer, attachment distance "
-                   "x0.5 and x1.5); the comparison then reports no ranking");
+                   "Skip the reference's gate solves (attachment distance x0.5 and x1.5, "
+                   "increments halved, one level finer); the comparison then reports no "
+                   "ranking");
 }
 
 }  // namespace fibremss::cli

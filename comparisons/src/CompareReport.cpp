@@ -20,6 +20,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
+#include "fibremss/PlotLayout.h"
 #include "fibremss/Stability.h"
 
 namespace fibremss {
@@ -188,109 +189,242 @@ std::string threadsText(const nlohmann::json& run) {
                        : "threads not recorded";
 }
 
-/// Lines of the plot: title → points (ms per pose, error, label), sorted by ms.
-std::map<std::string, std::vector<std::tuple<double, double, std::string>>> frontLines(
-    const nlohmann::json& runs, const char* key) {
+/// A point of a front: ms per pose, error, its label (the run's variant, or its method where it
+/// has none: the legend names the family) and the poses its RMS covers (" (k/N poses)" or "").
+struct FrontPoint {
+  double ms = 0, error = 0;
+  std::string label, coverage;
+  bool operator<(const FrontPoint& o) const {
+    return std::tie(ms, error, label) < std::tie(o.ms, o.error, o.label);
+  }
+  bool operator==(const FrontPoint& o) const {
+    return ms == o.ms && error == o.error && label == o.label;
+  }
+};
+
+/// Lines of the plot: title → points, sorted by ms.
+std::map<std::string, std::vector<FrontPoint>> frontLines(const nlohmann::json& runs,
+                                                          const char* key) {
   std::map<std::string, std::set<std::string>> knobs;  // family → knobs swept
   for (const auto& run : runs) {
     const auto [family, knob] = frontOf(text(run, "method"));
     if (!knob.empty()) knobs[family].insert(knob);
   }
-  std::map<std::string, std::vector<std::tuple<double, double, std::string>>> lines;
+  std::map<std::string, std::vector<FrontPoint>> lines;
   for (const auto& run : runs) {
     const double ms = number(run, "ms_per_step"), error = number(run, key);
-    if (!(ms > 0) || !(error > 0) || text(run, "method") == "calculix") continue;
-    const auto [family, knob] = frontOf(text(run, "method"));
+    const std::string method = text(run, "method");
+    if (!(ms > 0) || !(error > 0) || method == "calculix") continue;
+    const auto [family, knob] = frontOf(method);
     const std::string rms(key);  // "rms_to_..._mm" has a pose count, other errors none
     const bool counted = rms.size() > 3 && rms.compare(rms.size() - 3, 3, "_mm") == 0;
-    const std::string label =
-        text(run, "method") + (counted ? coverage(run, rms.substr(0, rms.size() - 3)) : "");
+    const size_t colon = method.find(':');
+    const FrontPoint point{ms, error,
+                           colon == std::string::npos ? method : method.substr(colon + 1),
+                           counted ? coverage(run, rms.substr(0, rms.size() - 3)) : ""};
     std::set<std::string> joins = knob.empty() ? knobs[family] : std::set<std::string>{knob};
     if (joins.empty()) joins.insert("");
     for (const std::string& j : joins) {
       const std::string title =
           family + (j.empty() ? "" : " (" + j + ")") + ", " + threadsText(run);
-      lines[title].emplace_back(ms, error, label);
+      lines[title].push_back(point);
     }
   }
   for (auto& [title, points] : lines) std::sort(points.begin(), points.end());
   return lines;
 }
 
-/// The fronts as gnuplot data blocks ($line0 ...) and the plot command drawing them (one
-/// labelled line per title); the command is empty when there are none.
-std::pair<std::string, std::string> frontPlot(const nlohmann::json& runs, const char* key) {
+/// What a speed–error figure shows besides its fronts: title, y label, the reference's gate
+/// spread as a grey band (0: none) and notes centred along the top (text, colour).
+struct FigureText {
+  std::string title, ylabel;
+  double band = 0;
+  std::string bandLabel;
+  std::vector<std::pair<std::string, std::string>> notes;
+};
+
+/// Each distinct point once, labelled with its coverage unless every point has the same one,
+/// which is then added to `notes` instead.
+std::vector<FrontPoint> labelledPoints(const std::map<std::string, std::vector<FrontPoint>>& lines,
+                                       std::vector<std::pair<std::string, std::string>>& notes) {
+  std::vector<FrontPoint> points;
+  for (const auto& [title, line] : lines) points.insert(points.end(), line.begin(), line.end());
+  std::sort(points.begin(), points.end());
+  points.erase(std::unique(points.begin(), points.end()), points.end());
+  const bool same = std::all_of(points.begin(), points.end(), [&](const FrontPoint& p) {
+    return p.coverage == points.front().coverage;
+  });
+  if (same && !points.empty() && !points.front().coverage.empty())
+    notes.emplace_back("every point's RMS" + points.front().coverage, "#606060");
+  for (FrontPoint& p : points)
+    if (!same) p.label += p.coverage;
+  return points;
+}
+
+/// The gnuplot line setting a label.
+std::string labelCommand(int number, const PlotLabel& label, const std::string& style) {
+  char at[64];
+  std::snprintf(at, sizeof at, " at graph %.4f, graph %.4f %s", label.x, label.y, label.justify);
+  return "set label " + std::to_string(number) + " " + quoted(label.text) + at + " " + style +
+         " front\n";
+}
+
+/// A thin grey line from a point to its label's near edge (a label set a row or more away).
+std::string leaderCommand(int number, const LabelledPoint& point, const PlotLabel& label) {
+  const double edge = label.y > point.y ? label.box.bottom : label.box.top;
+  char text[128];
+  std::snprintf(text, sizeof text,
+                "set arrow %d from graph %.4f, graph %.4f to graph %.4f, graph %.4f nohead lw 0.5 "
+                "lc rgb '#909090' back\n",
+                number, point.x, point.y, point.x, edge);
+  return text;
+}
+
+/// A log axis' range and its tics (logTics).
+std::string axisCommands(const char* axis, const LogRange& range) {
+  std::string tics;
+  for (const double v : logTics(range)) {
+    char value[32];
+    std::snprintf(value, sizeof value, "%g", v);
+    tics += (tics.empty() ? "" : ", ") + std::string(value);
+  }
+  char text[96];
+  std::snprintf(text, sizeof text, "set %srange [%.6g:%.6g]\nset format %s '%%g'\n", axis,
+                range.low, range.high, axis);
+  return text + std::string("set ") + axis + "tics (" + tics + ")\n";
+}
+
+/// The notes, centred one under the other along the top (labels 1, 2, ...), and their boxes.
+std::string noteCommands(const std::vector<std::pair<std::string, std::string>>& notes,
+                         std::vector<PlotBox>& taken) {
+  std::string commands;
+  for (size_t n = 0; n < notes.size(); ++n) {
+    const double at = 0.965 - 0.05 * static_cast<double>(n);
+    const PlotLabel label{notes[n].first, 0.5, at, "center",
+                          labelBox(notes[n].first, 0.5, at, "center")};
+    taken.push_back(label.box);
+    commands +=
+        labelCommand(static_cast<int>(n + 1), label, "font ',8' tc rgb '" + notes[n].second + "'");
+  }
+  return commands;
+}
+
+/// The grey band up to `band` [the y axis' unit] with its label just above it, and its box.
+std::string bandCommands(double band, const std::string& text, const LogRange& y,
+                         std::vector<PlotBox>& taken) {
+  const PlotBox size = labelBox(text, 0.01, 0, "left");
+  const double at = y.fraction(band) + 0.6 * (size.top - size.bottom);
+  const PlotLabel label{text, 0.01, at, "left", labelBox(text, 0.01, at, "left")};
+  taken.push_back(label.box);
+  char rect[96];
+  std::snprintf(rect, sizeof rect, "set object 1 rect from graph 0, graph 0 to graph 1, first %.6g",
+                band);
+  return rect + std::string(" fc rgb '#dddddd' fs solid 0.6 noborder behind\n") +
+         labelCommand(9, label, "font ',8' tc rgb '#606060'");
+}
+
+/// The fronts as data blocks ($line0 ...) and the plot command drawing them, one line per
+/// title; `joined` gets each line's points in graph fractions.
+std::pair<std::string, std::string> frontData(
+    const std::map<std::string, std::vector<FrontPoint>>& lines, const LogRange& x,
+    const LogRange& y, std::vector<std::vector<LabelledPoint>>& joined) {
   std::ostringstream data, plot;
   int index = 0;
-  for (const auto& [title, points] : frontLines(runs, key)) {
+  for (const auto& [title, line] : lines) {
+    auto& drawn = joined.emplace_back();
     data << "$line" << index << " << EOD\n";
-    for (const auto& [ms, error, label] : points)
-      data << ms << " " << error << " " << quoted(label) << "\n";
+    for (const FrontPoint& p : line) {
+      data << p.ms << " " << p.error << "\n";
+      drawn.push_back({x.fraction(p.ms), y.fraction(p.error), ""});
+    }
     data << "EOD\n";
     plot << (index ? ", " : "plot ") << "$line" << index
          << " using 1:2 with linespoints pt 7 ps 1.2 lw 2 lc " << index + 1 << " title "
-         << quoted(title) << ", $line" << index
-         << " using 1:2:3 with labels offset char 0,1 font ',8' notitle";
+         << quoted(title);
     ++index;
   }
-  return {data.str(), plot.str()};
+  return {data.str(), plot.str() + "\n"};
 }
 
-/// Axes, title and the fronts (or a note that there are none) of a speed–error plot.
-std::string frontAxes(const std::string& title, const std::string& ylabel,
-                      const std::string& plot) {
-  std::string body = "set title " + quoted(title) +
+/// A speed–error figure: the gnuplot data blocks and the body drawing its axes (explicit log
+/// ranges over the points and the band), notes, band and fronts, every point's label placed
+/// where it covers nothing else (placeLabels).
+std::pair<std::string, std::string> frontFigure(const nlohmann::json& runs, const char* key,
+                                                const FigureText& figure) {
+  const auto lines = frontLines(runs, key);
+  std::string body = "set title " + quoted(figure.title) +
                      "\nset xlabel 'ms per pose (median wall time, log)'\nset ylabel " +
-                     quoted(ylabel) +
+                     quoted(figure.ylabel) +
                      "\nset logscale xy\nset grid\nset key outside below center font ',9'\n";
-  if (plot.empty())
-    return body +
-           "set xrange [0.1:1000]\nset yrange [0.01:100]\nset label 1 'no run has both a time and "
-           "an error' at graph 0.5,0.5 center\nplot 1/0 notitle\nunset label 1\n";
-  return body + "set offsets graph 0.1, graph 0.1, graph 0.2, graph 0.2\n" + plot + "\n";
+  auto notes = figure.notes;
+  const std::vector<FrontPoint> points = labelledPoints(lines, notes);
+  std::vector<PlotBox> taken;
+  body += noteCommands(notes, taken);
+  if (lines.empty())
+    return {"", body +
+                    "set xrange [0.1:1000]\nset yrange [0.01:100]\nset label 99 'no run has "
+                    "both a time and an error' at graph 0.5,0.5 center\nplot 1/0 notitle\n"
+                    "unset label\n"};
+  std::vector<double> ms, errors{figure.band};
+  for (const FrontPoint& p : points) ms.push_back(p.ms), errors.push_back(p.error);
+  // Room along the top for the notes.
+  const LogRange x = logRangeOver(ms, 0.08, 0.08),
+                 y = logRangeOver(errors, 0.08, 0.1 + 0.06 * static_cast<double>(notes.size()));
+  body += axisCommands("x", x) + axisCommands("y", y);
+  if (figure.band > 0) body += bandCommands(figure.band, figure.bandLabel, y, taken);
+  std::vector<std::vector<LabelledPoint>> joined;
+  const auto [data, plot] = frontData(lines, x, y, joined);
+  std::vector<LabelledPoint> marks;
+  for (const FrontPoint& p : points)
+    marks.push_back({x.fraction(p.ms), y.fraction(p.error), p.label});
+  const std::vector<PlotLabel> labels = placeLabels(marks, joined, taken);
+  for (size_t n = 0; n < labels.size(); ++n) {
+    body += labelCommand(static_cast<int>(n) + 10, labels[n], "font ',8'");
+    if (labels[n].leader) body += leaderCommand(static_cast<int>(n) + 1, marks[n], labels[n]);
+  }
+  return {data, body + plot + "unset label\nunset object\nunset arrow\n"};
+}
+
+/// The reference's gate spread [mm]: the larger of what one level finer and halved increments
+/// move it (both judged against the methods' spread); NaN where neither was computed.
+double gateSpreadMm(const nlohmann::json& gates) {
+  const double finer = number(gates, "refinement_mm"), increments = number(gates, "increments_mm");
+  if (std::isnan(finer)) return increments;
+  return std::isnan(increments) ? finer : std::max(finer, increments);
 }
 
 std::string speedVsErrorScript(const nlohmann::json& summary, const std::string& stem) {
   const nlohmann::json& runs = summary["runs"];
   const char* key = errorKey(runs);
   const bool reference = std::string(key) == "rms_to_reference_mm";
-  const auto [data, plot] = frontPlot(runs, key);
-  std::ostringstream marks;
+  FigureText figure;
+  figure.title = reference ? "Speed against error: one line per method (its cost knob swept)"
+                           : "Speed against error to the self-reference (no CalculiX reference)";
+  figure.ylabel = reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
+                            : "RMS surface distance to the self-reference [mm] (log)";
   const nlohmann::json gates =
       summary.value("reference", nlohmann::json::object()).value("gates", nlohmann::json::object());
-  const double band = number(gates, "refinement_mm");
-  if (reference && summary.contains("reference") && !gates.value("passed", false)) {
-    marks << "set label 4 'the reference FAILS a gate: no ranking (report.md, Reference)' at graph "
-             "0.5, graph 0.96 center font ',10' tc rgb '#b00000'\n";
+  if (reference && summary.contains("reference") && !gates.value("passed", false))
+    figure.notes.emplace_back("the reference FAILS a gate: no ranking (report.md, Reference)",
+                              "#b00000");
+  if (reference && !gates.value("excluded", std::string()).empty())
+    figure.notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");
+  if (reference && gateSpreadMm(gates) > 0) {
+    figure.band = gateSpreadMm(gates);
+    figure.bandLabel = "reference's gate spread (one level finer, increments halved)";
   }
-  if (reference && !gates.value("excluded", std::string()).empty()) {
-    marks << "set label 5 " << quoted(referencePosesLabel(summary["reference"]))
-          << " at graph 0.5, graph 0.91 center font ',8' tc rgb '#606060'\n";
-  }
-  if (reference && band > 0) {
-    marks << "set object 1 rect from graph 0, graph 0 to graph 1, first " << band
-          << " fc rgb '#dddddd' fs solid 0.6 noborder behind\n"
-          << "set label 3 " << quoted("reference's mesh-refinement spread")
-          << " at graph 0.02, first " << band << " offset 0,0.6 font ',8' tc rgb '#606060'\n";
-  }
-  const std::string body =
-      marks.str() +
-      frontAxes(reference ? "Speed against error: one line per method (its cost knob swept)"
-                          : "Speed against error to the self-reference (no CalculiX reference)",
-                reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
-                          : "RMS surface distance to the self-reference [mm] (log)",
-                plot);
+  const auto [data, body] = frontFigure(runs, key, figure);
   return data + bothTerminals(stem, body);
 }
 
 /// An analytic case's fronts: each method's volume change off the exact answer against its
 /// cost (no reference involved).
 std::string exactErrorScript(const nlohmann::json& runs, const std::string& stem) {
-  const auto [data, plot] = frontPlot(runs, kExactErrorKey);
-  return data +
-         bothTerminals(stem, frontAxes("Speed against error to the exact answer "
-                                       "(analytic case: no reference needed)",
-                                       "|volume change - exact| [percentage points] (log)", plot));
+  FigureText figure;
+  figure.title = "Speed against error to the exact answer (analytic case: no reference needed)";
+  figure.ylabel = "|volume change - exact| [percentage points] (log)";
+  const auto [data, body] = frontFigure(runs, kExactErrorKey, figure);
+  return data + bothTerminals(stem, body);
 }
 
 std::string penetrationScript(const nlohmann::json& runs, const std::string& stem) {
@@ -460,6 +594,9 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.returnNotApplicable = gates.value("return_not_applicable", std::string());
   g.refinementMm = number(gates, "refinement_mm");
   g.refinedBy = gates.value("refined_by", std::string());
+  g.incrementsMm = number(gates, "increments_mm");
+  g.incrementsScale = number(gates, "increments_scale");
+  g.incrementsPoses = gates.value("increments_poses", 0);
   g.attachmentLowMm = number(gates, "attachment_low_mm");
   g.attachmentHighMm = number(gates, "attachment_high_mm");
   g.spreadMm = number(gates, "spread_mm");

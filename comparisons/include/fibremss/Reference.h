@@ -1,6 +1,7 @@
 #pragma once
 // The CalculiX reference as `reference` and `compare` use it: the cached solve, its gates
-// (return to rest, mesh refinement, attachment distance ±50 %) and its metrics as a run.
+// (return to rest, mesh refinement, increments halved, attachment distance ±50 %) and its
+// metrics as a run.
 #include <atomic>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -15,7 +16,9 @@ namespace fibremss {
 struct ReferenceOptions {
   CalculixDefinition definition;  ///< material, element, mesher, attachment rule
   std::string cacheDir;           ///< "" : defaultReferenceCacheDir()
-  bool gates = true;  ///< also solve one level finer and with the attachment distance ±50 %
+  /// Also solve the gates' variants: attachment distance ±50 %, increments halved, one level
+  /// finer (gateDefinitions).
+  bool gates = true;
   /// Take the reference (and each gate's solve) only from the cache; what is not there is not
   /// computed (Reference::missing, gates left out). For jobs that must stay short.
   bool cachedOnly = false;
@@ -51,9 +54,20 @@ CalculixDefinition sceneDefinition(const LoadedScene& scene, const ReferenceOpti
 /// The bound of the return-to-rest gate [mm]: the surface at rest after the motion, RMS to the
 /// prepared rest surface.
 inline constexpr double kReturnGateMm = 0.5;
-/// The mesh-refinement gate passes when one level finer moves the reference by less than this
-/// share of the spread between the methods compared.
+/// The mesh-refinement and increment gates pass when their solve moves the reference by less
+/// than this share of the spread between the methods compared.
 inline constexpr double kRefinementShareOfSpread = 1.0 / 3.0;
+/// The increment gate solves the reference with every increment bound × this. Halving is the
+/// step's counterpart of one mesh level (which halves the edge length): where the answer
+/// depends on the increment to first order (pinch's small-sliding contact keeps each node's
+/// blade face through an increment) the change under halving is half the reference's own
+/// increment error, as one level finer estimates the mesh's; where it does not (frictionless
+/// contact with finite sliding, no contact: a path-independent hyperelastic equilibrium) it
+/// shows as a change near ccx's tolerance (fusiform, the cylinders: 10⁻⁷–3·10⁻⁴ mm; pinch 0.14
+/// mm). A quarter would cost twice as much again (cylinder-twist's halved solve: 147
+/// increments, 19 min wall) for the same verdict where the error is first order
+/// (comparisons/README.md, "Gates and fronts of the four scenes").
+inline constexpr double kIncrementGateFactor = 0.5;
 
 /// The reference's gates. NaN where not computed.
 struct ReferenceGates {
@@ -63,32 +77,41 @@ struct ReferenceGates {
   std::string returnNotApplicable;
   double refinementMm = RunMetrics::kNone;  ///< RMS one level finer against the reference
   std::string refinedBy;  ///< what "one level finer" was (quadratic elements or the next level)
+  /// RMS with every increment bound × kIncrementGateFactor against the reference [mm].
+  double incrementsMm = RunMetrics::kNone;
+  /// That solve's increment bounds × the default ones (2.5° / 1 mm; CalculixDefinition::
+  /// incrementScale): 0.5 for a reference at the default, 0.125 for one retried at 0.25.
+  double incrementsScale = RunMetrics::kNone;
   double attachmentLowMm = RunMetrics::kNone;   ///< RMS with the attachment distance × 0.5
   double attachmentHighMm = RunMetrics::kNone;  ///< RMS with it × 1.5
   /// Poses each gate compared (both solves solved them) of the reference's `poses`: a gate
   /// over fewer poses than the motion's says so.
   int poses = 0;
-  int refinementPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
-  /// Poses the reference itself solved: the refinement gate passes only over all of them (a
-  /// finer solve that stopped early has measured the easy poses alone).
+  int refinementPoses = 0, incrementsPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
+  /// Poses the reference itself solved: the refinement and increment gates pass only over all
+  /// of them (a finer solve that stopped early has measured the easy poses alone).
   int solvedPoses = 0;
   std::string failures;  ///< poses ccx did not finish, of the reference or a gate's solve
   /// Poses without a continuum equilibrium ("poses k to N-1 of N: why"; ContinuumCut): not
   /// solved, not failures; the RMS, the gates and the ranking cover the poses before them.
   std::string excluded;
   /// The spread between the methods compared [mm] (NaN until a comparison sets it) and the
-  /// refinement gate's verdict against it.
+  /// refinement and increment gates' verdicts against it.
   double spreadMm = RunMetrics::kNone;
 
   bool returnPasses() const { return returnMm <= kReturnGateMm; }
-  bool refinementPasses() const {
-    return refinementMm < kRefinementShareOfSpread * spreadMm && refinementPoses >= solvedPoses;
+  /// Whether a solve that moved the reference by `mm` over `compared` poses passes: below a
+  /// third of the spread, over every pose the reference solved.
+  bool withinSpread(double mm, int compared) const {
+    return mm < kRefinementShareOfSpread * spreadMm && compared >= solvedPoses;
   }
-  /// Both gates passed (the return gate where it applies) and every pose solved but those
+  bool refinementPasses() const { return withinSpread(refinementMm, refinementPoses); }
+  bool incrementsPass() const { return withinSpread(incrementsMm, incrementsPoses); }
+  /// Every gate passed (the return gate where it applies) and every pose solved but those
   /// excluded: rankings may be reported.
   bool passed() const {
     return (returnPasses() || !returnNotApplicable.empty()) && refinementPasses() &&
-           failures.empty();
+           incrementsPass() && failures.empty();
   }
 };
 
@@ -104,8 +127,22 @@ struct Reference {
   std::string description;  ///< one sentence: element, ν, mesh, attachments, ccx version
 };
 
-/// Solves (or finds in the cache) the reference and, with options.gates, its three gate
-/// variants; fills the metrics as runPoses does for the simulated methods.
+/// The gates' solves, each the reference's definition (its increments and contact sliding
+/// included) with one thing changed and no return step: cheapest first, as solveGates runs
+/// them (each is cached as it ends, so a stopped run keeps the cheap ones).
+struct GateDefinitions {
+  CalculixDefinition attachmentLow;   ///< attachment distance × 0.5
+  CalculixDefinition attachmentHigh;  ///< attachment distance × 1.5
+  CalculixDefinition increments;      ///< every increment bound × kIncrementGateFactor
+  /// One level finer: C3D4 made quadratic (C3D10) on the same tetrahedra, or for a C3D10
+  /// reference the next mesh level.
+  CalculixDefinition finer;
+  std::string refinedBy;  ///< what "one level finer" is, in words
+};
+GateDefinitions gateDefinitions(const CalculixDefinition& reference);
+
+/// Solves (or finds in the cache) the reference and, with options.gates, its four gate
+/// variants (gateDefinitions); fills the metrics as runPoses does for the simulated methods.
 Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
                            const ReferenceOptions& options);
 
@@ -129,7 +166,8 @@ double methodSpreadMm(const std::vector<RunMetrics>& runs);
 nlohmann::json referenceJson(const Reference& reference);
 
 /// The gates as lines of text, one per gate: value, bound and verdict ("—" where a value is
-/// missing); the refinement gate says "needs a comparison" while spreadMm is NaN.
+/// missing); the refinement and increment gates say "needs a comparison" while spreadMm is
+/// NaN.
 std::vector<std::string> gateLines(const ReferenceGates& gates);
 
 }  // namespace fibremss
