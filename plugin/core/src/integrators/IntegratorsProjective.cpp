@@ -15,7 +15,8 @@
 // iteration. A + W acts alike on x, y and z, so one sparse Cholesky factor (AMD ordering, computed
 // in double, kept in btScalar: it only preconditions, the forces alone set the fixed point)
 // serves all three; the ordering and pattern are found once per muscle, the values again
-// whenever W changes (same pattern: only the diagonal changes).
+// whenever W changes (same pattern: only the diagonal changes), and then only in the rows of L a
+// changed diagonal reaches: its own and those above it in the elimination tree.
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
@@ -24,6 +25,7 @@
 
 #include "IntegratorsInternal.h"
 #include "fibremss/Error.h"
+#include "solver/ParticleSimd.h"
 #include "solver/VolumeForces.h"
 
 namespace fibremss {
@@ -59,7 +61,9 @@ struct NumericCholesky {
   std::vector<double> scatter;      ///< row k of L being formed (zero between rows)
   std::vector<int> tags;            ///< the row that last visited each column
   std::vector<int> pattern;         ///< stack of the columns of row k, in topological order
-  std::vector<int> filled;          ///< entries of each column of L stored so far
+  /// 1 for a row of L to recompute: a row whose W changed and every row above it in the
+  /// elimination tree (L's other rows and columns do not depend on it), else 0.
+  std::vector<uint8_t> stale;
 };
 
 /// The factor L of P·(A + W)·Pᵀ as the solve reads it, the contact weights and the solve's buffer.
@@ -113,12 +117,30 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<uint32_t>& fre
 }
 
 /// Solves L·Lᵀ·z = b in place for the three coordinates of `x` together (entries of a column:
-/// its inverted diagonal, then the rows below it).
+/// its inverted diagonal, then the rows below it). With SSE each entry is one vector product and
+/// difference over x, y, z (and w, which stays 0): per lane the scalar code's operations, so the
+/// same bits.
 void solveInPlace(const ProjectiveWorkspace& w, btVector3* x) {
   const int* start = w.columnStart.data();
   const int* rows = w.rows.data();
   const btScalar* values = w.values.data();
   const auto n = static_cast<int>(w.columnStart.size()) - 1;
+#if FIBREMSS_SSE_PARTICLES
+  for (int j = 0; j < n; ++j) {
+    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(values[start[j]]));
+    _mm_store_ps(x[j].m_floats, xj);
+    for (int p = start[j] + 1; p < start[j + 1]; ++p) {
+      float* target = x[rows[p]].m_floats;
+      _mm_store_ps(target, _mm_sub_ps(_mm_load_ps(target), _mm_mul_ps(xj, _mm_set1_ps(values[p]))));
+    }
+  }
+  for (int j = n - 1; j >= 0; --j) {
+    __m128 sum = loadVector(x[j]);
+    for (int p = start[j] + 1; p < start[j + 1]; ++p)
+      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(x[rows[p]]), _mm_set1_ps(values[p])));
+    _mm_store_ps(x[j].m_floats, _mm_mul_ps(sum, _mm_set1_ps(values[start[j]])));
+  }
+#else
   for (int j = 0; j < n; ++j) {
     const btVector3 xj = x[j] *= values[start[j]];
     for (int p = start[j] + 1; p < start[j + 1]; ++p) x[rows[p]] -= xj * values[p];
@@ -128,6 +150,7 @@ void solveInPlace(const ProjectiveWorkspace& w, btVector3* x) {
     for (int p = start[j] + 1; p < start[j + 1]; ++p) sum -= x[rows[p]] * values[p];
     x[j] = sum * values[start[j]];
   }
+#endif
 }
 
 /// w.numeric for the factor's ordering and pattern (w.columnStart, w.rows): P·A·Pᵀ's upper
@@ -153,7 +176,7 @@ void prepareNumeric(const Matrix& lowerA, const Factor& factor, ProjectiveWorksp
   c.scatter.assign(n, 0);
   c.tags.assign(n, -1);
   c.pattern.assign(n, 0);
-  c.filled.assign(n, 0);
+  c.stale.assign(n, 1);
 }
 
 /// Pushes column k of the upper triangle onto c.pattern (from `top` down): the columns i < k
@@ -173,46 +196,59 @@ int rowPattern(NumericCholesky& c, int k, int top) {
   return top;
 }
 
-/// w.numeric.lower = L of P·(A + W)·Pᵀ on L's pattern (w.columnStart, w.rows): row by row, each a
-/// sparse triangular solve against the rows above. A + W is positive definite (A is, W ≥ 0).
-void factorNumerically(ProjectiveWorkspace& w) {
+/// Marks `row` and its ancestors in the elimination tree stale (a diagonal change there reaches
+/// only them).
+void markStale(NumericCholesky& c, int row) {
+  for (int i = row; i >= 0 && !c.stale[i]; i = c.parent[i]) c.stale[i] = 1;
+}
+
+/// Row k of L of P·(A + W)·Pᵀ into w.numeric.lower: a sparse triangular solve against the rows
+/// above (each L(k, i) in column i found by its row, as a column's rows ascend).
+void factorRow(ProjectiveWorkspace& w, int k) {
   NumericCholesky& c = w.numeric;
   const int* start = w.columnStart.data();
   const int* rows = w.rows.data();
   const auto n = static_cast<int>(w.weights.size());
-  std::fill(c.filled.begin(), c.filled.end(), 0);
-  for (int k = 0; k < n; ++k) {
-    c.tags[k] = k;
-    int top = rowPattern(c, k, n);
-    double diagonal = c.scatter[k] + w.weights[k];
-    c.scatter[k] = 0;
-    for (; top < n; ++top) {
-      const int i = c.pattern[top];
-      const double entry = c.scatter[i] / c.lower[start[i]];
-      c.scatter[i] = 0;
-      const int end = start[i] + c.filled[i];
-      for (int p = start[i] + 1; p < end; ++p) c.scatter[rows[p]] -= c.lower[p] * entry;
-      diagonal -= entry * entry;
-      c.lower[end] = entry;
-      ++c.filled[i];
-    }
-    c.lower[start[k] + c.filled[k]++] = std::sqrt(diagonal);
+  c.tags[k] = k;
+  int top = rowPattern(c, k, n);
+  double diagonal = c.scatter[k] + w.weights[k];
+  c.scatter[k] = 0;
+  for (; top < n; ++top) {
+    const int i = c.pattern[top];
+    const double entry = c.scatter[i] / c.lower[start[i]];
+    c.scatter[i] = 0;
+    const auto end =
+        static_cast<int>(std::lower_bound(rows + start[i] + 1, rows + start[i + 1], k) - rows);
+    for (int p = start[i] + 1; p < end; ++p) c.scatter[rows[p]] -= c.lower[p] * entry;
+    diagonal -= entry * entry;
+    c.lower[end] = entry;
   }
+  c.lower[start[k]] = std::sqrt(diagonal);
 }
 
-/// w.values from w.numeric.lower: btScalar, each column's diagonal inverted.
-void storeFactor(ProjectiveWorkspace& w) {
-  const double* lower = w.numeric.lower.data();
-  for (size_t j = 0; j + 1 < w.columnStart.size(); ++j)
+/// Recomputes L's stale rows (the other rows and columns keep their values: the same as a whole
+/// new factor, to the bit) and stores the stale columns in w.values: btScalar, each column's
+/// diagonal inverted. A + W is positive definite (A is, W ≥ 0).
+void refactor(ProjectiveWorkspace& w) {
+  NumericCholesky& c = w.numeric;
+  const auto n = static_cast<int>(w.weights.size());
+  std::fill(c.tags.begin(), c.tags.end(), -1);
+  for (int k = 0; k < n; ++k)
+    if (c.stale[k]) factorRow(w, k);
+  const double* lower = c.lower.data();
+  for (int j = 0; j < n; ++j) {
+    if (!c.stale[j]) continue;
+    c.stale[j] = 0;
     for (int p = w.columnStart[j]; p < w.columnStart[j + 1]; ++p)
       w.values[p] = static_cast<btScalar>(p == w.columnStart[j] ? 1 / lower[p] : lower[p]);
+  }
 }
 
 /// Puts the particles the last response pushed into W and takes out those kContactHold
 /// iterations without a push (clearing the flags it reads). Returns whether W changed.
 bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w) {
   bool changed = false;
-  const NumericCholesky& c = w.numeric;
+  NumericCholesky& c = w.numeric;
   for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
     const auto row = static_cast<size_t>(w.order[k]);
     uint8_t& pushed = muscle.pushedLast[muscle.freeParticles[k]];
@@ -222,11 +258,13 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w) {
       w.idle[row] = 0;
       if (weight > 0) continue;
       weight = kContactWeight * c.upperValues[c.diagonalEntry[row]];
-      changed = true;
     } else if (weight > 0 && ++w.idle[row] > kContactHold) {
       weight = 0;
-      changed = true;
+    } else {
+      continue;
     }
+    markStale(c, static_cast<int>(row));
+    changed = true;
   }
   return changed;
 }
@@ -237,10 +275,7 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters, btScalar,
                             btScalar) const override {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
-    if (holdContacts(muscle, w)) {
-      factorNumerically(w);
-      storeFactor(w);
-    }
+    if (holdContacts(muscle, w)) refactor(w);
     const std::vector<uint32_t>& free = muscle.freeParticles;
     for (size_t k = 0; k < free.size(); ++k) w.solution[w.order[k]] = muscle.forces[free[k]];
     solveInPlace(w, w.solution.data());
@@ -275,8 +310,7 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     w->weights.assign(n, 0);
     w->idle.assign(n, 0);
     prepareNumeric(matrix, factor, *w);
-    factorNumerically(*w);
-    storeFactor(*w);
+    refactor(*w);
     return w;
   }
 };
