@@ -21,6 +21,7 @@
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "IntegratorsInternal.h"
@@ -47,6 +48,9 @@ constexpr double kContactWeight = 10;
 /// thigh13 at resolution 20, 10 iterations per pose: a hold of 1 000 refactors in 156 of 1 690
 /// muscle-iterations, a hold of 10 in 634, at the same distance to Verlet's equilibrium run.
 constexpr uint16_t kContactHold = 1000;
+/// What a rank-one update costs per entry of L it visits, in entries a new factor visits [1]
+/// (the inner loops as compiled for x86-64 with SSE2: 15 instructions per entry against 10).
+constexpr double kUpdateCost = 1.5;
 
 /// The numeric Cholesky factorisation of P·(A + W)·Pᵀ on the pattern Eigen's analysis found
 /// (up-looking, as Eigen's SimplicialLLT and CSparse's cs_chol do it): row k of L from column k
@@ -64,6 +68,9 @@ struct NumericCholesky {
   /// 1 for a row of L to recompute: a row whose W changed and every row above it in the
   /// elimination tree (L's other rows and columns do not depend on it), else 0.
   std::vector<uint8_t> stale;
+  std::vector<long> rowWork;      ///< per row: the entries its refactorisation visits [1]
+  std::vector<int> changedRows;   ///< rows whose W changed since the factor was last brought up
+  std::vector<double> changedBy;  ///< and by how much [N/m]
 };
 
 /// The factor L of P·(A + W)·Pᵀ as the solve reads it, the contact weights and the solve's buffer.
@@ -129,14 +136,14 @@ void solveInPlace(const ProjectiveWorkspace& w, btVector3* x) {
   for (int j = 0; j < n; ++j) {
     const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(values[start[j]]));
     _mm_store_ps(x[j].m_floats, xj);
-    for (int p = start[j] + 1; p < start[j + 1]; ++p) {
+    for (int p = start[j] + 1, end = start[j + 1]; p < end; ++p) {
       float* target = x[rows[p]].m_floats;
       _mm_store_ps(target, _mm_sub_ps(_mm_load_ps(target), _mm_mul_ps(xj, _mm_set1_ps(values[p]))));
     }
   }
   for (int j = n - 1; j >= 0; --j) {
     __m128 sum = loadVector(x[j]);
-    for (int p = start[j] + 1; p < start[j + 1]; ++p)
+    for (int p = start[j] + 1, end = start[j + 1]; p < end; ++p)
       sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(x[rows[p]]), _mm_set1_ps(values[p])));
     _mm_store_ps(x[j].m_floats, _mm_mul_ps(sum, _mm_set1_ps(values[start[j]])));
   }
@@ -177,6 +184,9 @@ void prepareNumeric(const Matrix& lowerA, const Factor& factor, ProjectiveWorksp
   c.tags.assign(n, -1);
   c.pattern.assign(n, 0);
   c.stale.assign(n, 1);
+  c.rowWork.assign(n, 0);
+  c.changedRows.reserve(n);
+  c.changedBy.reserve(n);
 }
 
 /// Pushes column k of the upper triangle onto c.pattern (from `top` down): the columns i < k
@@ -203,7 +213,8 @@ void markStale(NumericCholesky& c, int row) {
 }
 
 /// Row k of L of P·(A + W)·Pᵀ into w.numeric.lower: a sparse triangular solve against the rows
-/// above (each L(k, i) in column i found by its row, as a column's rows ascend).
+/// above (each L(k, i) in column i found by its row, as a column's rows ascend). Records the
+/// entries it visited in rowWork[k].
 void factorRow(ProjectiveWorkspace& w, int k) {
   NumericCholesky& c = w.numeric;
   const int* start = w.columnStart.data();
@@ -213,6 +224,7 @@ void factorRow(ProjectiveWorkspace& w, int k) {
   int top = rowPattern(c, k, n);
   double diagonal = c.scatter[k] + w.weights[k];
   c.scatter[k] = 0;
+  long work = 0;
   for (; top < n; ++top) {
     const int i = c.pattern[top];
     const double entry = c.scatter[i] / c.lower[start[i]];
@@ -220,28 +232,88 @@ void factorRow(ProjectiveWorkspace& w, int k) {
     const auto end =
         static_cast<int>(std::lower_bound(rows + start[i] + 1, rows + start[i + 1], k) - rows);
     for (int p = start[i] + 1; p < end; ++p) c.scatter[rows[p]] -= c.lower[p] * entry;
+    work += end - start[i];
     diagonal -= entry * entry;
     c.lower[end] = entry;
   }
   c.lower[start[k]] = std::sqrt(diagonal);
+  c.rowWork[k] = work;
 }
 
-/// Recomputes L's stale rows (the other rows and columns keep their values: the same as a whole
-/// new factor, to the bit) and stores the stale columns in w.values: btScalar, each column's
-/// diagonal inverted. A + W is positive definite (A is, W ≥ 0).
-void refactor(ProjectiveWorkspace& w) {
+/// w.values from w.numeric.lower in the stale columns (btScalar, each column's diagonal inverted);
+/// clears the marks.
+void storeStale(ProjectiveWorkspace& w) {
   NumericCholesky& c = w.numeric;
-  const auto n = static_cast<int>(w.weights.size());
-  std::fill(c.tags.begin(), c.tags.end(), -1);
-  for (int k = 0; k < n; ++k)
-    if (c.stale[k]) factorRow(w, k);
   const double* lower = c.lower.data();
-  for (int j = 0; j < n; ++j) {
+  for (size_t j = 0; j < c.stale.size(); ++j) {
     if (!c.stale[j]) continue;
     c.stale[j] = 0;
     for (int p = w.columnStart[j]; p < w.columnStart[j + 1]; ++p)
       w.values[p] = static_cast<btScalar>(p == w.columnStart[j] ? 1 / lower[p] : lower[p]);
   }
+  c.changedRows.clear();
+  c.changedBy.clear();
+}
+
+/// Recomputes L's stale rows from A + W (the other rows and columns keep their values) and stores
+/// them. A + W is positive definite (A is, W ≥ 0).
+void refactor(ProjectiveWorkspace& w) {
+  NumericCholesky& c = w.numeric;
+  std::fill(c.tags.begin(), c.tags.end(), -1);
+  for (size_t k = 0; k < c.stale.size(); ++k)
+    if (c.stale[k]) factorRow(w, static_cast<int>(k));
+  storeStale(w);
+}
+
+/// L·Lᵀ + δ·e_s·e_sᵀ in place (δ [N/m] the change of row s's weight): the rank-one update
+/// (δ > 0) or downdate of the Cholesky factor by rotations, column by column up s's path in the
+/// elimination tree (the only columns it changes). Returns false if a downdate met a pivot that
+/// is not positive (rounding; then L is part-updated and the caller refactors).
+bool rankOneUpdate(ProjectiveWorkspace& w, int s, double delta) {
+  NumericCholesky& c = w.numeric;
+  double* x = c.scatter.data();  // zero outside the path walked
+  double* lower = c.lower.data();
+  const int* start = w.columnStart.data();
+  const int* rows = w.rows.data();
+  const double sign = delta > 0 ? 1 : -1;
+  x[s] = std::sqrt(std::abs(delta));
+  bool definite = true;
+  for (int k = s; k >= 0; k = c.parent[k]) {
+    const double xk = std::exchange(x[k], 0);
+    const double pivot = lower[start[k]];
+    const double squared = pivot * pivot + sign * xk * xk;
+    definite = definite && squared > 0;
+    if (!definite) continue;  // walks on to clear x
+    const double diagonal = std::sqrt(squared);
+    const double cosine = diagonal / pivot, sine = xk / pivot, inverse = pivot / diagonal;
+    lower[start[k]] = diagonal;
+    for (int p = start[k] + 1; p < start[k + 1]; ++p) {
+      double& xi = x[rows[p]];
+      const double l = (lower[p] + sign * sine * xi) * inverse;
+      xi = cosine * xi - sine * l;
+      lower[p] = l;
+    }
+  }
+  return definite;
+}
+
+/// The factor of P·(A + W)·Pᵀ after W changed in c.changedRows: a rank-one update per changed row
+/// where their paths up the tree visit fewer entries than a new factor of the stale rows would
+/// (kUpdateCost each), else the new factor.
+void updateFactor(ProjectiveWorkspace& w) {
+  NumericCholesky& c = w.numeric;
+  long refactorWork = 0, updateWork = 0;
+  for (size_t k = 0; k < c.stale.size(); ++k)
+    if (c.stale[k]) refactorWork += c.rowWork[k];
+  for (int s : c.changedRows)
+    for (int k = s; k >= 0; k = c.parent[k]) updateWork += w.columnStart[k + 1] - w.columnStart[k];
+  bool updated = kUpdateCost * static_cast<double>(updateWork) < static_cast<double>(refactorWork);
+  for (size_t r = 0; updated && r < c.changedRows.size(); ++r)
+    updated = rankOneUpdate(w, c.changedRows[r], c.changedBy[r]);
+  if (updated)
+    storeStale(w);
+  else
+    refactor(w);
 }
 
 /// Puts the particles the last response pushed into W and takes out those kContactHold
@@ -258,11 +330,14 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w) {
       w.idle[row] = 0;
       if (weight > 0) continue;
       weight = kContactWeight * c.upperValues[c.diagonalEntry[row]];
+      c.changedBy.push_back(weight);
     } else if (weight > 0 && ++w.idle[row] > kContactHold) {
+      c.changedBy.push_back(-weight);
       weight = 0;
     } else {
       continue;
     }
+    c.changedRows.push_back(static_cast<int>(row));
     markStale(c, static_cast<int>(row));
     changed = true;
   }
@@ -275,7 +350,7 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters, btScalar,
                             btScalar) const override {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
-    if (holdContacts(muscle, w)) refactor(w);
+    if (holdContacts(muscle, w)) updateFactor(w);
     const std::vector<uint32_t>& free = muscle.freeParticles;
     for (size_t k = 0; k < free.size(); ++k) w.solution[w.order[k]] = muscle.forces[free[k]];
     solveInPlace(w, w.solution.data());
