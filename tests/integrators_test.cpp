@@ -650,6 +650,94 @@ TEST(Projective, ComesWithinTheEquilibriumToleranceInTenIterations) {
   EXPECT_GT(verlet, 0.5e-3);
 }
 
+/// The projective step's residual |(A + W)·Δ − F| at its largest over the free particles [N]:
+/// A the springs' matrix (a spring to a fixed particle adds to its free end's diagonal), W
+/// kContactWeight·A_ii on the `held` particles (the integrator's own constants: 10).
+double projectiveResidual(const MuscleState& state, const std::vector<btVector3>& step,
+                          const std::vector<bool>& held) {
+  const MuscleSettings& settings = *state.settings;
+  std::vector<btVector3> product(step.size(), btVector3(0, 0, 0));
+  std::vector<double> diagonal(step.size(), 0);
+  for (const Spring& spring : settings.springs) {
+    const btVector3 difference = step[spring.a] - step[spring.b];
+    product[spring.a] += difference * spring.stiffness;
+    product[spring.b] -= difference * spring.stiffness;
+    diagonal[spring.a] += spring.stiffness;
+    diagonal[spring.b] += spring.stiffness;
+  }
+  double worst = 0;
+  for (uint32_t i : state.freeParticles) {
+    const btScalar weight = held[i] ? static_cast<btScalar>(10 * diagonal[i]) : 0;
+    worst = std::max<double>(worst, (product[i] + step[i] * weight - state.forces[i]).length());
+  }
+  return worst;
+}
+
+TEST(Projective, TheStepSolvesWithTheContactsHeldAfterUpdatesAndNewRows) {
+  // Contacts that come and go change A + W's diagonal, and the factor follows by rank-one
+  // updates and downdates (a few rows) or by new rows of L (many): whichever, the step from a
+  // fixed configuration with ρ = 0 must be Δ = (A + W)⁻¹·F for the contacts held at the time.
+  // A 7 × 7 × 7 grid, its z = 0 layer fixed: the top two layers pushed at once (98 rows: new
+  // rows of L, cheaper than 98 updates), then five single particles (updates), which leave one by
+  // one 1 000 iterations later (downdates) while the top layers stay pushed.
+  constexpr int kSide = 7;
+  std::vector<btVector3> points;
+  for (int z = 0; z < kSide; ++z)
+    for (int y = 0; y < kSide; ++y)
+      for (int x = 0; x < kSide; ++x) points.emplace_back(x * 0.01f, y * 0.01f, z * 0.01f);
+  auto settings = particles(points, 1e-4, 0);
+  for (uint32_t a = 0; a < points.size(); ++a) {
+    if (points[a].z() == 0) testing::fix(*settings, a, 0);
+    for (uint32_t b = a + 1; b < points.size(); ++b) {
+      const btScalar rest = (points[b] - points[a]).length();
+      if (rest < 0.015f) link(*settings, a, b, 100 / rest, rest);
+    }
+  }
+  Bench bench(settings, Integrator::Projective);
+  bench.parameters.projectiveRho = 0;
+  bench.state.pushedLast.assign(points.size(), 0);
+  // A configuration off rest (a shear growing with height), the same before every step.
+  std::vector<btVector3> displaced = points;
+  for (btVector3& x : displaced) x += btVector3(0.2f * x.z() * x.z() / 0.06f, 0, 0.001f * x.x());
+  std::vector<bool> held(points.size(), false);
+  const auto stepWith = [&](const std::vector<uint32_t>& pushed) {
+    for (uint32_t i = 0; i < points.size(); ++i) bench.place(i, displaced[i]);
+    for (uint32_t i : pushed) bench.state.pushedLast[i] = 1;
+    bench.step(1e-3f);
+    std::vector<btVector3> step(points.size());
+    for (uint32_t i = 0; i < points.size(); ++i) step[i] = bench.state.positions[i] - displaced[i];
+    return step;
+  };
+  std::vector<uint32_t> top;
+  for (uint32_t i = 0; i < points.size(); ++i)
+    if (i >= (kSide - 2) * kSide * kSide) top.push_back(i);
+  for (uint32_t i : top) held[i] = true;
+  double force = 0;
+  auto step = stepWith(top);
+  for (uint32_t i : bench.state.freeParticles)
+    force = std::max<double>(force, bench.state.forces[i].length());
+  // Float positions hold the step to about 1e-7 of their size: the residual to about 1e-4 of F.
+  const double tolerance = 1e-3 * force;
+  EXPECT_LT(projectiveResidual(bench.state, step, held), tolerance);
+  EXPECT_GT(projectiveResidual(bench.state, step, std::vector<bool>(points.size(), false)),
+            100 * tolerance);                           // the check sees W
+  const uint32_t singles[] = {60, 117, 171, 200, 222};  // below the top layers
+  for (uint32_t single : singles) {
+    std::vector<uint32_t> pushed = top;
+    pushed.push_back(single);
+    held[single] = true;
+    step = stepWith(pushed);
+    EXPECT_LT(projectiveResidual(bench.state, step, held), tolerance) << single;
+  }
+  for (int k = 0; k < 1001; ++k) step = stepWith(top);  // each single idles past the hold
+  const std::vector<bool> stillHeld = held;
+  for (uint32_t single : singles) held[single] = false;
+  const double residual = projectiveResidual(bench.state, step, held);
+  RecordProperty("residual_of_force", std::to_string(residual / force));
+  EXPECT_LT(residual, tolerance);
+  EXPECT_GT(projectiveResidual(bench.state, step, stillHeld), 100 * tolerance);
+}
+
 // --- every integrator in a MuscleSystem with collision ------------------------------------------
 
 /// A 3 × 3 × 5 block of particles 5 mm apart, springs between all pairs closer than 1.8 spacings

@@ -92,7 +92,8 @@ enum class Integrator : uint8_t {
   Xpbd,               ///< extended PBD: compliant distance constraints (compliance from κ)
   /// projective dynamics' local/global step for springs as an equilibrium solver: x += A⁻¹·F
   /// with A the springs' Laplacian over the free particles plus the contacts' weights, its
-  /// pattern analysed once per muscle and refactored when the contact set changes
+  /// pattern analysed once per muscle, its factor updated (rank-one) or partly refactored when
+  /// the contact set changes
   Projective,
 };
 
