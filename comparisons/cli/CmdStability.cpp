@@ -2,6 +2,7 @@
 // stable step measured, then every case × integrator × multiple of it, each run judged and
 // time-boxed; writes stability.json and stability.md. Ctrl-C stops after the running step and
 // writes both files marked interrupted (exit 130).
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -26,13 +27,29 @@ struct StabilityArgs {
   StabilityOptions options;            ///< integrators, factors, boxes
 };
 
+/// The key of an override "key=value".
+std::string overrideKey(const std::string& text) {
+  return text.substr(0, text.find('='));
+}
+
+/// Appends the user's --set overrides after the defaults, dropping a default the user sets again
+/// (it would be overridden anyway, and the report would print both).
+void addOverrides(std::vector<std::string>& defaults, const std::vector<std::string>& user) {
+  auto setByUser = [&](const std::string& text) {
+    for (const std::string& u : user)
+      if (overrideKey(u) == overrideKey(text)) return true;
+    return false;
+  };
+  defaults.erase(std::remove_if(defaults.begin(), defaults.end(), setByUser), defaults.end());
+  defaults.insert(defaults.end(), user.begin(), user.end());
+}
+
 void stability(StabilityArgs& args) {
   std::vector<StabilityCase> cases;
   for (const std::string& text : args.cases) cases.push_back(parseStabilityCase(text));
   if (cases.empty()) cases = defaultHardCases();
   if (!args.calibration.empty()) args.options.calibration = parseStabilityCase(args.calibration);
-  args.options.overrides.insert(args.options.overrides.end(), args.overrides.begin(),
-                                args.overrides.end());
+  addOverrides(args.options.overrides, args.overrides);
   for (const std::string& name : args.options.integrators) {
     Integrator kind{};
     if (fromString(name, kind)) continue;
