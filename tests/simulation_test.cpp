@@ -699,7 +699,8 @@ TEST(ForceResidual, FallsAsTheIterationConvergesAndStopsTheResidualRule) {
 }
 
 // A free particle pulled by a spring into a bone sphere rests on it: the contact holds the pull,
-// so its residual is 0 (counted as held), though the force on it is the spring's.
+// so its residual is 0 (counted as held), though the force on it is the spring's; once collision
+// is off the contact no longer holds it.
 TEST(ForceResidual, LeavesOutWhatAContactHolds) {
   const btScalar k = 10, rest = 0.01;
   auto muscle = makeMuscle({{0.01, 0, 0}, {0.04, 0, 0}}, 1e-5, 0.02, 0.001);
@@ -716,6 +717,15 @@ TEST(ForceResidual, LeavesOutWhatAContactHolds) {
   const ForceResidual residual = system.forceResidual(handle);
   EXPECT_EQ(residual.contactParticles, 1u);
   EXPECT_LT(residual.rmsForce, 1e-4 * k * (0.026 - rest));  // the spring pulls with k·0.016
+  // A step with collision switched off: what the last response pushed no longer holds, so the
+  // spring's pull counts again.
+  system.parameters().muscleMuscle = false;
+  system.parameters().muscleBone = false;
+  system.parameters().iterations = 1;
+  system.step();
+  const ForceResidual released = system.forceResidual(handle);
+  EXPECT_EQ(released.contactParticles, 0u);
+  EXPECT_GT(released.rmsForce, 0.5 * k * 0.016);
 }
 
 TEST(Determinism, SameInputGivesBitwiseIdenticalPositions) {

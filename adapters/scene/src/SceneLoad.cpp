@@ -378,6 +378,10 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
       simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
   parameters.projectiveRho =
       btScalar(simulation.number("projective_rho", defaults.projectiveRho, 0, 0.999));
+  parameters.projectiveContactWeight = btScalar(
+      simulation.number("projective_contact_weight", defaults.projectiveContactWeight, 0.01, 1e4));
+  parameters.persistentContacts =
+      simulation.boolean("persistent_contacts", defaults.persistentContacts);
   fromString(
       simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
       parameters.onFailure);

@@ -55,6 +55,8 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"solver_iterations", {Target::Section, "simulation"}},
       {"constraint_iterations", {Target::Section, "simulation"}},
       {"projective_rho", {Target::Section, "simulation"}},
+      {"projective_contact_weight", {Target::Section, "simulation"}},
+      {"persistent_contacts", {Target::Section, "simulation"}},
       {"on_failure", {Target::Section, "simulation"}},
       {"max_retries", {Target::Section, "simulation"}},
       {"max_step_deg", {Target::Section, "simulation"}},

@@ -181,6 +181,17 @@ struct SimulationParameters {
   /// step is over-relaxed by ω = 2/(1 + √(1 − ρ²)) with momentum ω − 1 (the limit of Wang 2015's
   /// Chebyshev weights); 0: the plain iteration.
   btScalar projectiveRho = 0.9;
+  /// Projective: a particle a contact pushed is held in the global step's matrix with this
+  /// weight times its diagonal entry [1]. 10 passes the hard-case matrix's hip-extension cells
+  /// (100 failed pinch); 1 lets a contact particle slide sooner, which the `equilibrium` method
+  /// uses (docs/performance.md, "Persistent contacts").
+  btScalar projectiveContactWeight = 10;
+  /// Projective: persistent contacts (TimeIntegrator::holdsContacts): a pushed particle's force
+  /// into its push is held by the contact in the solve, and each contact is left a slop deep so
+  /// that it persists; the step's fixed point is then the equilibrium with contacts. Off by
+  /// default: on thigh13 R=20 it left the worst pose's residual after 10–40 iterations 1.2–1.4×
+  /// higher; the `equilibrium` method turns it on (docs/performance.md, "Persistent contacts").
+  bool persistentContacts = false;
 
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap

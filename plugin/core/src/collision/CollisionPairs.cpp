@@ -18,13 +18,6 @@ constexpr btScalar kOpposed = btScalar(-0.5);
 /// least this share of their lengths (an edge or a rounded end of a bone next to it).
 constexpr btScalar kWayOut = btScalar(0.05);
 
-/// `velocity` without its part into the unit push direction `normal`: no rebound, and what
-/// moves along the contact keeps moving (frictionless sliding).
-btVector3 withoutApproach(const btVector3& velocity, const btVector3& normal) {
-  const btScalar into = velocity.dot(normal);
-  return into < 0 ? velocity - normal * into : velocity;
-}
-
 void addPush(MuscleState& muscle, uint32_t i, const btVector3& push) {
   muscle.pushes[i] += push;
   ++muscle.pushCounts[i];
@@ -404,10 +397,10 @@ void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {
     const btScalar depth = push.length();
     if (sliding && depth > 0) {
       const btVector3 normal = push / depth;
-      const btVector3 moved = withoutApproach(muscle.positions[i] - muscle.previous[i], normal);
+      const btVector3 moved = withoutInto(muscle.positions[i] - muscle.previous[i], normal);
       muscle.positions[i] += push;
       muscle.previous[i] = muscle.positions[i] - moved;
-      if (hasVelocities) muscle.velocities[i] = withoutApproach(muscle.velocities[i], normal);
+      if (hasVelocities) muscle.velocities[i] = withoutInto(muscle.velocities[i], normal);
     } else {
       muscle.positions[i] += push;
       muscle.previous[i] = muscle.positions[i];
@@ -418,6 +411,19 @@ void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {
     muscle.pushedLast[i] = 1;
   }
   muscle.pinched = pinched;
+}
+
+void leaveContactSlop(MuscleState& muscle, btScalar slop) {
+  const MuscleSettings& settings = *muscle.settings;
+  for (uint32_t i : settings.boundaryParticles) {
+    if (muscle.pushRounds[i] != muscle.contactRound) continue;
+    const btVector3& push = muscle.lastPushes[i];
+    const btScalar depth = push.length();
+    if (!(depth > 0)) continue;
+    const btVector3 back = push * (std::min(depth, slop * settings.radii[i]) / depth);
+    muscle.positions[i] -= back;
+    muscle.previous[i] -= back;
+  }
 }
 
 }  // namespace fibremss

@@ -130,11 +130,28 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversal
 /// sides belong to positions that no longer exist).
 void forgetBoneSides(MuscleState& muscle);
 
+/// The slop an integrator that holds contacts (TimeIntegrator::holdsContacts) leaves in every
+/// contact, as a share of the particle's radius [1] (leaveContactSlop).
+constexpr btScalar kContactSlop = btScalar(0.01);
+
+/// `v` without its part into the unit direction `normal` (a push's, out of the contact): the
+/// approach a contact stops, or the force it holds; what points along or out of it stays.
+inline btVector3 withoutInto(const btVector3& v, const btVector3& normal) {
+  const btScalar into = v.dot(normal);
+  return into < 0 ? v - normal * into : v;
+}
+
 /// Moves every pushed particle by its accumulated push and removes its velocity into the push
 /// (when `sliding`, SimulationParameters::slidingContacts; else all of it: previous = position,
 /// velocities zeroed when the integrator `hasVelocities`); clears the pushes. A particle two bones
 /// press from opposite sides (pinched: no room between them) is moved to equal overlaps and out
 /// sideways where the bones leave a way out; muscle.pinched counts such particles.
 void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding);
+
+/// After applyPushes, for an integrator that holds contacts: every particle the response just
+/// pushed (recordPushes: pushRounds[i] == contactRound) moves back along its push by `slop` times
+/// its radius (at most the push), x and x(t−dt) alike, so that it rests that much inside its
+/// contact and the next iteration finds the contact again (persistent contacts).
+void leaveContactSlop(MuscleState& muscle, btScalar slop);
 
 }  // namespace fibremss

@@ -40,6 +40,11 @@ class TimeIntegrator {
   /// Whether the integrator keeps explicit velocities (they are rotated by the pre-transform
   /// and zeroed on contact).
   virtual bool usesVelocities() const = 0;
+  /// Whether the integrator holds contacts as constraints with `parameters`
+  /// (SimulationParameters::persistentContacts; advance() takes a pushed particle's force into its
+  /// push out, contactNormal): the response then records its pushes in every iteration and
+  /// leaves each contact a slop deep so that it persists (leaveContactSlop).
+  virtual bool holdsContacts(const SimulationParameters&) const { return false; }
 
  protected:
   /// The workspace advance() needs for `muscle`, or null when it needs none.

@@ -7,16 +7,22 @@
 // V the same kind of matrix for the volume terms: each tetrahedron's stiffness at rest,
 // K/V0·∂V/∂x_i·∂V/∂x_jᵀ·G0/G, with the outer product replaced by the dot product (its trace),
 // weighted by c = kVolumeWeight. W holds the contacts: projective dynamics' constraint x_i = p_i
-// with weight kContactWeight·A_ii on each particle a contact pushed (lately), its target p_i the
-// pushed position itself (the response moved the particle there before the forces), so W adds to
-// the diagonal only and the right-hand side stays F. A particle in W is held nearly in place by
-// the global step while the rest of the muscle answers around it; without W the step moves a
-// pushed particle back where the springs alone want it, into the bone or the other muscle, every
-// iteration. A + W acts alike on x, y and z, so one sparse Cholesky factor (AMD ordering, computed
-// in double, kept in btScalar: it only preconditions, the forces alone set the fixed point)
-// serves all three; the ordering and pattern are found once per muscle, the values again
-// whenever W changes (same pattern: only the diagonal changes), and then only in the rows of L a
-// changed diagonal reaches: its own and those above it in the elimination tree.
+// with weight projectiveContactWeight·A_ii on each particle a contact pushed (lately), its target
+// p_i the pushed position itself (the response moved the particle there before the forces), so W
+// adds to the diagonal only and the right-hand side stays F. A particle in W is held nearly in
+// place by the global step while the rest of the muscle answers around it; without W the step moves
+// a pushed particle back where the springs alone want it, into the bone or the other muscle, every
+// iteration. With persistent contacts (SimulationParameters::persistentContacts) a particle the
+// last response pushed also gives up the part of its force into the push
+// (what the contact holds, contactNormal: the force residual's rule) before the solve, while the
+// response leaves every contact a slop deep (kContactSlop) so that it is found again: the step's
+// fixed point is then the equilibrium with contacts, where the residual is 0 (the force a pushed
+// particle kept would otherwise be spread over its neighbours by (A + W)⁻¹ and moved back by the
+// next push, every iteration). A + W acts alike on x, y and z, so one sparse Cholesky factor (AMD
+// ordering, computed in double, kept in btScalar: it only preconditions, the forces alone set the
+// fixed point) serves all three; the ordering and pattern are found once per muscle, the values
+// again whenever W changes (same pattern: only the diagonal changes), and then only in the rows of
+// L a changed diagonal reaches: its own and those above it in the elimination tree.
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
@@ -25,8 +31,10 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
+#include "collision/CollisionPairs.h"
 #include "fibremss/Error.h"
 #include "solver/ParticleSimd.h"
+#include "solver/Residual.h"
 #include "solver/VolumeForces.h"
 
 namespace fibremss {
@@ -40,10 +48,6 @@ using Factor = Eigen::SimplicialLLT<Matrix, Eigen::Lower, Eigen::AMDOrdering<int
 /// mm from the equilibrium; 1 let the volume terms overshoot (+59 % volume).
 constexpr double kVolumeWeight = 1.5;
 
-/// Contacts enter A with this weight times the particle's diagonal entry [1]. Measured on the
-/// hard-case matrix (docs/performance.md, "Projective solver"): 10 passes every cell at ρ 0.9,
-/// 100 fails pinch.
-constexpr double kContactWeight = 10;
 /// A particle leaves W after this many iterations without a push [iterations]. Measured on
 /// thigh13 at resolution 20, 10 iterations per pose: a hold of 1 000 refactors in 156 of 1 690
 /// muscle-iterations, a hold of 10 in 634, at the same distance to Verlet's equilibrium run.
@@ -81,9 +85,10 @@ struct ProjectiveWorkspace final : IntegratorWorkspace {
   std::vector<btScalar> values;     ///< L's entries, the diagonal inverted [√(N/m), its inverse]
   std::vector<int> order;           ///< free particle k → its row P·k in the factor
   std::vector<btVector3> solution;  ///< per row: the forces [N], then the step A⁻¹·F [m]
-  std::vector<double> weights;      ///< W per row: kContactWeight·A_kk while held, else 0 [N/m]
-  std::vector<uint16_t> idle;       ///< per row: iterations since its particle's last push
-  NumericCholesky numeric;          ///< what a new factor of A + W needs
+  std::vector<double>
+      weights;  ///< W per row: projectiveContactWeight·A_kk while held, else 0 [N/m]
+  std::vector<uint16_t> idle;  ///< per row: iterations since its particle's last push
+  NumericCholesky numeric;     ///< what a new factor of A + W needs
 };
 
 /// The scalar matrix A over the free particles (the 3n × 3n one is A ⊗ I₃) [N/m].
@@ -325,9 +330,10 @@ void updateFactor(ProjectiveWorkspace& w) {
     refactor(w);
 }
 
-/// Puts the particles the last response pushed into W and takes out those kContactHold
-/// iterations without a push (clearing the flags it reads). Returns whether W changed.
-bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w) {
+/// Puts the particles the last response pushed into W (with `weight` times their diagonal entry,
+/// SimulationParameters::projectiveContactWeight) and takes out those kContactHold iterations
+/// without a push (clearing the flags it reads). Returns whether W changed.
+bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWeight) {
   bool changed = false;
   NumericCholesky& c = w.numeric;
   for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
@@ -338,7 +344,7 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w) {
       pushed = 0;
       w.idle[row] = 0;
       if (weight > 0) continue;
-      weight = kContactWeight * c.upperValues[c.diagonalEntry[row]];
+      weight = contactWeight * c.upperValues[c.diagonalEntry[row]];
       c.changedBy.push_back(weight);
     } else if (weight > 0 && ++w.idle[row] > kContactHold) {
       c.changedBy.push_back(-weight);
@@ -359,9 +365,13 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters, btScalar,
                             btScalar) const override {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
-    if (holdContacts(muscle, w)) updateFactor(w);
+    if (holdContacts(muscle, w, parameters.projectiveContactWeight)) updateFactor(w);
     const std::vector<uint32_t>& free = muscle.freeParticles;
-    for (size_t k = 0; k < free.size(); ++k) w.solution[w.order[k]] = muscle.forces[free[k]];
+    const bool held = holdsContacts(parameters);
+    for (size_t k = 0; k < free.size(); ++k) {
+      const btVector3& force = muscle.forces[free[k]];
+      w.solution[w.order[k]] = held ? withoutInto(force, contactNormal(muscle, free[k])) : force;
+    }
     solveInPlace(w, w.solution.data());
     const double rho = parameters.projectiveRho;
     const auto omega = static_cast<btScalar>(2 / (1 + std::sqrt(1 - rho * rho)));
@@ -373,6 +383,9 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     return result;
   }
   bool usesVelocities() const override { return false; }
+  bool holdsContacts(const SimulationParameters& parameters) const override {
+    return parameters.persistentContacts;
+  }
   Integrator kind() const override { return Integrator::Projective; }
 
  protected:

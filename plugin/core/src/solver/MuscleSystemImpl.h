@@ -202,7 +202,8 @@ struct MuscleSystem::Impl {
   void collideMusclePairs();
   void pushMusclePairs(MuscleState& state, uint32_t slot, TreeTraversalStack& stack);
   void collide();
-  /// The pushes of the last collide() on the muscle; `record`: kept for the force residual.
+  /// The pushes of the last collide() on the muscle; `record` (or an integrator that holds
+  /// contacts): kept for the force residual and the integrator (recordPushes).
   void respond(MuscleState& state, bool record) const;
   /// The pushes of the last collide() applied to every muscle and recorded for the force residual
   /// (after the last iteration, before a residual check, or with contact bodies every iteration).

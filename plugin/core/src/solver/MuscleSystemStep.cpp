@@ -294,7 +294,11 @@ void MuscleSystem::Impl::pushMusclePairs(MuscleState& state, uint32_t slot,
 // are applied by the next forces phase (or applyResponse after the last iteration).
 void MuscleSystem::Impl::collide() {
   contacts.clear();
-  if (!parameters.muscleMuscle && !parameters.muscleBone) return;
+  if (!parameters.muscleMuscle && !parameters.muscleBone) {
+    // A round without contacts: what the last response pushed holds no longer (contactNormal).
+    for (uint32_t slot : active) ++muscles.states[slot]->contactRound;
+    return;
+  }
   Clock::time_point start = Clock::now();
   if (parameters.muscleMuscle) collideMusclePairs();
   stats.timing.muscleCd += millisecondsSince(start);
@@ -328,9 +332,11 @@ void MuscleSystem::Impl::collide() {
 // The pushes of the last collide() on a muscle (response), once.
 void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   if (!pushesPending) return;
-  if (record) recordPushes(state);
-  applyPushes(state, integratorFor(parameters.integrator).usesVelocities(),
-              parameters.slidingContacts);
+  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
+  const bool holds = integrator.holdsContacts(parameters);
+  if (record || holds) recordPushes(state);
+  applyPushes(state, integrator.usesVelocities(), parameters.slidingContacts);
+  if (holds) leaveContactSlop(state, kContactSlop);
 }
 
 void MuscleSystem::Impl::applyResponse() {

@@ -6,6 +6,7 @@
 #include "MuscleState.h"
 #include "SpringForces.h"
 #include "VolumeForces.h"
+#include "collision/CollisionPairs.h"
 #include "contact/BodyContacts.h"
 
 namespace fibremss {
@@ -32,12 +33,6 @@ void addEnclosedTraces(const MuscleSettings& settings, std::vector<btScalar>& tr
   const std::vector<btVector3> gradient = enclosedRestGradients(settings);
   const auto scale = static_cast<btScalar>(settings.enclosedModulus / settings.enclosedRestVolume);
   for (size_t i = 0; i < gradient.size(); ++i) trace[i] += scale * gradient[i].length2();
-}
-
-/// `force` without its part against the unit push direction `normal` (what the contact holds).
-btVector3 withoutHeldPart(const btVector3& force, const btVector3& normal) {
-  const btScalar into = force.dot(normal);
-  return into < 0 ? force - normal * into : force;
 }
 
 }  // namespace
@@ -85,6 +80,14 @@ void recordPushes(MuscleState& muscle) {
   }
 }
 
+btVector3 contactNormal(const MuscleState& muscle, uint32_t i) {
+  const uint32_t round = muscle.contactRound;
+  if (round == 0 || muscle.pushRounds[i] != round) return btVector3(0, 0, 0);
+  const btVector3& push = muscle.lastPushes[i];
+  const btScalar length = push.length();
+  return length > 0 ? push / length : btVector3(0, 0, 0);
+}
+
 ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity) {
   const MuscleSettings& settings = *muscle.settings;
   std::vector<btVector3>& r = muscle.residual;
@@ -94,12 +97,10 @@ ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity) {
   addExternalForces(muscle, gravity, r);
   for (uint32_t i : settings.fixedParticles) r[i].setZero();
   ResidualSums sums;
-  const uint32_t round = muscle.contactRound;
   for (uint32_t i : muscle.freeParticles) {
-    const btScalar push =
-        muscle.pushRounds[i] == round && round > 0 ? muscle.lastPushes[i].length() : btScalar(0);
-    if (push > 0) {
-      r[i] = withoutHeldPart(r[i], muscle.lastPushes[i] / push);
+    const btVector3 normal = contactNormal(muscle, i);
+    if (!normal.isZero()) {
+      r[i] = withoutInto(r[i], normal);
       ++sums.contactParticles;
     }
     const double force = r[i].length();

@@ -5,6 +5,7 @@
 #include <LinearMath/btVector3.h>
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "fibremss/MuscleSettings.h"
@@ -38,11 +39,15 @@ struct ResidualSums {
 /// them). The step's last response calls it; the iterations' responses do not.
 void recordPushes(MuscleState& muscle);
 
+/// The unit direction of the push the last response gave particle i (pushRounds[i] ==
+/// contactRound: recorded and not since superseded), or zero when that response did not push it.
+/// A contact there holds the part of the particle's force into it (withoutInto).
+btVector3 contactNormal(const MuscleState& muscle, uint32_t i);
+
 /// Fills muscle.residual with the force residual at muscle.positions (ForceResidual: springs on
 /// fastestSpringKernel in one pass, every volume term, m·gravity and external forces; a particle
-/// pushed in the last response, pushRounds[i] == contactRound, keeps its force minus the part
-/// into its push's direction when that part points against the push) and returns its sums.
-/// Attached particles get 0 and are not counted. No allocation; one fixed order.
+/// pushed in the last response keeps its force without the part into its contactNormal) and returns
+/// its sums. Attached particles get 0 and are not counted. No allocation; one fixed order.
 ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity);
 
 }  // namespace fibremss
