@@ -31,8 +31,8 @@ void touchParticles(const MuscleSettings& settings, SpringKernel kernel, ForceCh
       touch(chunk, settings.springs[s].b);
     }
   }
-  for (size_t k = 4 * chunk.tetBegin; k < 4 * chunk.tetEnd; ++k)
-    touch(chunk, settings.tetParticles[k]);
+  for (size_t k = settings.fanOffsets[chunk.fanBegin]; k < settings.fanOffsets[chunk.fanEnd]; ++k)
+    touch(chunk, settings.fanParticles[k]);
 }
 
 }  // namespace
@@ -40,21 +40,25 @@ void touchParticles(const MuscleSettings& settings, SpringKernel kernel, ForceCh
 std::vector<ForceChunk> forceChunks(const MuscleSettings& settings, SpringKernel kernel,
                                     size_t work) {
   const size_t springs = springLayoutSize(settings, kernel);
-  const size_t tetrahedra = settings.tetInverseVolume.size();
-  const size_t total = springs + kTetrahedronWork * tetrahedra;
+  const std::span<const uint32_t> offsets = settings.fanOffsets;
+  const size_t particles = offsets.back();  // of the fans, with repeats
+  const size_t total = springs + kFanParticleWork * particles;
   const size_t count = std::max<size_t>(1, (total + work / 2) / std::max<size_t>(work, 1));
   std::vector<ForceChunk> chunks(count);
-  size_t springBegin = 0;
+  size_t springBegin = 0, fanBegin = 0;
   for (size_t c = 0; c < count; ++c) {
     ForceChunk& chunk = chunks[c];
     chunk.springBegin = springBegin;
     chunk.springEnd =
         std::max(springBegin, springLayoutBoundary(settings, kernel, springs * (c + 1) / count));
     springBegin = chunk.springEnd;
-    chunk.tetBegin = tetrahedra * c / count;
-    chunk.tetEnd = tetrahedra * (c + 1) / count;
-    chunk.work =
-        chunk.springEnd - chunk.springBegin + kTetrahedronWork * (chunk.tetEnd - chunk.tetBegin);
+    chunk.fanBegin = fanBegin;  // the fans whose particles start below the chunk's share
+    chunk.fanEnd = static_cast<size_t>(
+        std::lower_bound(offsets.begin(), offsets.end() - 1, particles * (c + 1) / count) -
+        offsets.begin());
+    fanBegin = chunk.fanEnd;
+    chunk.work = chunk.springEnd - chunk.springBegin +
+                 kFanParticleWork * (offsets[chunk.fanEnd] - offsets[chunk.fanBegin]);
     touchParticles(settings, kernel, chunk);
   }
   return chunks;

@@ -365,7 +365,7 @@ void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
   state.chunkSprings[task.chunk] = addSpringForces(settings, state.positions, forces, kernel,
                                                    chunk.springBegin, chunk.springEnd);
   const Clock::time_point volumeStart = Clock::now();
-  addTetrahedronForces(settings, state.positions, forces, kernel, chunk.tetBegin, chunk.tetEnd);
+  addLocalVolumeForces(settings, state.positions, forces, kernel, chunk.fanBegin, chunk.fanEnd);
   if (task.chunk == 0) addEnclosedVolumeForces(settings, state.positions, forces);
   state.chunkVolumeMs[task.chunk] = millisecondsSince(volumeStart);
   state.chunkMs[task.chunk] = millisecondsSince(start);
@@ -390,7 +390,7 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
     result.volumeMs += state.chunkVolumeMs[c];
   }
   result.forces.exploded = result.forces.overstretched > 0;
-  if (state.settings->tetInverseVolume.empty() && state.settings->enclosedFaces.empty())
+  if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
     result.volumeMs = 0;
   addExternalForces(state, parameters.gravity, state.forces);
   if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
