@@ -165,8 +165,9 @@ TEST(Threads, ChunkedForcesGiveTheSameBitsInAnyOrder) {
 }
 
 // Every kernel's chunks take each spring and tetrahedron once, in ranges that begin where the
-// kernel may begin (a run of one a, a group of eight lanes), and touch only particles inside their
-// window; their forces add up to the whole pass's (to rounding).
+// kernel may begin (a run of one a, a group of eight lanes; for the fans a whole number of lane
+// groups into a class of fans, or its end), and touch only particles inside their window; their
+// forces add up to the whole pass's (to rounding).
 TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
   LoadedScene scene;
   const MuscleSettings& settings = *fibremss::testing::preparedThigh(scene).muscles.front();
@@ -192,6 +193,14 @@ TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
         EXPECT_EQ(chunk.fanBegin, chunks[c - 1].fanEnd);
       }
       EXPECT_EQ(springLayoutBoundary(settings, kernel, chunk.springBegin), chunk.springBegin);
+      const auto count = [&](size_t k) {
+        return settings.fanOffsets[k + 1] - settings.fanOffsets[k];
+      };
+      size_t classStart = chunk.fanEnd;  // of the class fan fanEnd − 1 and fanEnd share, if any
+      if (chunk.fanEnd < settings.fanInverseVolume.size() && chunk.fanEnd > 0 &&
+          count(chunk.fanEnd - 1) == count(chunk.fanEnd))
+        while (classStart > 0 && count(classStart - 1) == count(chunk.fanEnd)) --classStart;
+      EXPECT_EQ((chunk.fanEnd - classStart) % kFanLaneGroup, 0u) << "chunk " << c;
       std::fill(part.begin(), part.end(), btVector3(0, 0, 0));
       addSpringForces(settings, x, part, kernel, chunk.springBegin, chunk.springEnd);
       addLocalVolumeForces(settings, x, part, kernel, chunk.fanBegin, chunk.fanEnd);
@@ -209,6 +218,24 @@ TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
     }
     EXPECT_GT(scale, 0);
     EXPECT_LT(largest, 1e-5 * scale) << springKernelName(kernel);
+  }
+}
+
+// A chunk's buffer cleared and added to the muscle's forces lane by lane, whatever the length
+// (the wide kernel's blocks and the rest): the bits of the scalar sums.
+TEST(ForceChunks, BuffersAddLaneByLane) {
+  for (size_t n : {0, 1, 3, 4, 5, 9, 37}) {
+    std::vector<btVector3> to(n), from(n), expected(n);
+    for (size_t i = 0; i < n; ++i) {
+      const auto v = static_cast<btScalar>(i);
+      to[i] = btVector3(std::sin(v), btScalar(1) / (v + 3), -v);
+      from[i] = btVector3(std::cos(v), v * btScalar(0.1), btScalar(1) / (v + 7));
+      for (int k = 0; k < 4; ++k) expected[i].m_floats[k] = to[i].m_floats[k] + from[i].m_floats[k];
+    }
+    addForces(to, from);
+    EXPECT_EQ(std::memcmp(to.data(), expected.data(), n * sizeof(btVector3)), 0) << n;
+    clearForces(to);
+    for (const btVector3& v : to) EXPECT_EQ(v, btVector3(0, 0, 0)) << n;
   }
 }
 

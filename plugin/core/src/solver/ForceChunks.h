@@ -40,6 +40,12 @@ struct ForceChunk {
   size_t work = 0;       ///< springs (or lanes) + kFanParticleWork · the fans' particles
 };
 
+/// Sets every vector of `forces` to zero (a chunk's buffer before its pass).
+void clearForces(std::span<btVector3> forces);
+/// to[i] += from[i] over all four lanes (w is 0 in both: a chunk's buffer added to the muscle's
+/// forces); per lane the same sum whatever the instruction set.
+void addForces(std::span<btVector3> to, std::span<const btVector3> from);
+
 /// The muscle's forces pass in about total work / `work` chunks of nearly equal work (at least
 /// one) for `kernel`'s spring layout.
 std::vector<ForceChunk> forceChunks(const MuscleSettings& settings, SpringKernel kernel,

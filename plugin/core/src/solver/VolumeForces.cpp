@@ -43,30 +43,6 @@ void scalarFan(const MuscleSettings& settings, size_t k, btScalar modulus, const
   for (size_t v = 0; v < p.size(); ++v) f[p[v]] += g.gradients[v] * scale;
 }
 
-/// The fans [begin, end) that have `count` particles: a range (the fans are sorted by count).
-std::pair<size_t, size_t> fanClass(const MuscleSettings& settings, size_t begin, size_t end,
-                                   size_t count) {
-  const auto size = [&](size_t k) { return settings.fanOffsets[k + 1] - settings.fanOffsets[k]; };
-  size_t first = begin, last = end;
-  while (first < last) {  // the first fan with at least `count` particles
-    const size_t mid = first + (last - first) / 2;
-    if (size(mid) < count)
-      first = mid + 1;
-    else
-      last = mid;
-  }
-  size_t stop = first;
-  last = end;
-  while (stop < last) {  // the first with more
-    const size_t mid = stop + (last - stop) / 2;
-    if (size(mid) <= count)
-      stop = mid + 1;
-    else
-      last = mid;
-  }
-  return {first, stop};
-}
-
 }  // namespace
 
 #if FIBREMSS_SSE_PARTICLES
@@ -338,13 +314,26 @@ void fanClassForces(const MuscleSettings& settings, size_t begin, size_t end, bt
 template <size_t Count>
 void fanForces(const MuscleSettings& settings, size_t begin, size_t end, btScalar modulus,
                SpringKernel kernel, const btVector3* x, btVector3* f) {
-  const auto [first, last] = fanClass(settings, begin, end, Count);
-  fanClassForces<Count>(settings, first, last, modulus, kernel, x, f);
+  // The fans before `begin` have fewer particles: [begin, last) are those with Count.
+  const size_t last = fansUpTo(settings, begin, end, Count);
+  fanClassForces<Count>(settings, begin, last, modulus, kernel, x, f);
   if constexpr (Count < kMaxFanTetrahedra + 3)
-    fanForces<Count + 1>(settings, last, end, modulus, kernel, x, f);
+    if (last < end) fanForces<Count + 1>(settings, last, end, modulus, kernel, x, f);
 }
 
 }  // namespace
+
+size_t fansUpTo(const MuscleSettings& settings, size_t begin, size_t end, size_t count) {
+  const std::span<const uint32_t> offsets = settings.fanOffsets;
+  while (begin < end) {
+    const size_t mid = begin + (end - begin) / 2;
+    if (offsets[mid + 1] - offsets[mid] <= count)
+      begin = mid + 1;
+    else
+      end = mid;
+  }
+  return begin;
+}
 
 void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces, SpringKernel kernel, size_t begin,

@@ -42,6 +42,14 @@ void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVect
 /// The most tetrahedra in one fan of the local volume terms (MuscleSettings::fanParticles).
 constexpr size_t kMaxFanTetrahedra = 4;
 
+/// Fans the widest kernel takes at a time (AVX2: two groups of four); a class's fans beyond a
+/// multiple of it from the start of a call's range go four at a time, then one at a time.
+constexpr size_t kFanLaneGroup = 8;
+
+/// The first fan of [begin, end) with more than `count` particles (end if none): the fans are
+/// sorted by their count of particles, so [begin, that) are those with at most `count`.
+size_t fansUpTo(const MuscleSettings& settings, size_t begin, size_t end, size_t count);
+
 /// The byte offsets of `particles` in an array of btVector3 (MuscleSettings::fanBytes). Throws
 /// std::length_error when they do not fit 32 bits.
 std::vector<uint32_t> fanBytes(std::span<const uint32_t> particles);
