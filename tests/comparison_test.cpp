@@ -225,6 +225,26 @@ INSTANTIATE_TEST_SUITE_P(BuiltInScenes, EveryMethod, ::testing::Values("fusiform
                            return name;
                          });
 
+// The equilibrium method stops each pose on the force residual: every pose of its run is below
+// kEquilibriumResidual (none at the cap), and the default run, 70 iterations, is further from
+// equilibrium by both measures.
+TEST(EquilibriumMethod, StopsEveryPoseBelowTheResidualTolerance) {
+  CompareOptions options;
+  options.methods = {"equilibrium", "fibremss"};
+  options.withReference = false;
+  options.fronts = false;
+  const Comparison comparison = runComparison("fusiform", {"resolution=12"}, options);
+  ASSERT_EQ(comparison.runs.size(), 2u);
+  const RunMetrics& equilibrium = comparison.runs[0];
+  const RunMetrics& fibre = comparison.runs[1];
+  EXPECT_EQ(equilibrium.unconvergedPoses, 0);
+  ASSERT_EQ(equilibrium.residualRmsMmPerPose.size(), static_cast<size_t>(equilibrium.steps));
+  for (double rms : equilibrium.residualRmsMmPerPose) EXPECT_LT(rms, 1000 * kEquilibriumResidual);
+  EXPECT_GT(fibre.residualRmsMm, equilibrium.residualRmsMm);
+  EXPECT_GT(fibre.rmsToEquilibriumMm, 0);
+  EXPECT_EQ(equilibrium.rmsToEquilibriumMm, 0);
+}
+
 TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   const fs::path out = scratch("cli");
   const testing::ProcessResult result = runCli(
@@ -261,6 +281,14 @@ TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   EXPECT_TRUE(summary["runs"][1]["series"].empty());
   EXPECT_EQ(readFile(out / "series_0_fibremss.csv"), seriesCsv(seriesFromJson(series)));
   EXPECT_FALSE(fs::exists(out / "series_1_fem.csv"));
+  // The FibreMSS run's force residual after every pose, its worst pose's in the headline; none
+  // for FEM (null, "—" in the report).
+  const nlohmann::json& fibre = summary["runs"][0];
+  EXPECT_EQ(fibre["residual_rms_mm_per_pose"].size(), fibre["steps"].get<size_t>());
+  EXPECT_GT(fibre["residual_rms_mm"].get<double>(), 0);
+  EXPECT_GE(fibre["residual_max_mm"].get<double>(), fibre["residual_rms_mm"].get<double>());
+  EXPECT_GE(fibre["residual_worst_pose"].get<int>(), 0);
+  EXPECT_TRUE(summary["runs"][1]["residual_rms_mm"].is_null());
 
   std::string problem;
   EXPECT_TRUE(wellFormedXml(readFile(out / "speed_vs_error.svg"), problem)) << problem;

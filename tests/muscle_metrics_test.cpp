@@ -123,15 +123,18 @@ TEST(MuscleMetrics, SeriesCsvAndJsonCarryEveryRow) {
   a.measures.penetrationMm = {0.5, 2.25, 0};  // the deepest bone's counts
   a.measures.boneContacts = 7;
   a.solverContacts = 41;
+  a.measures.residualRmsMm = 0.015;
+  a.measures.residualMaxMm = 0.25;
   SeriesRow b = a;
   b.muscle = "vastus";
   b.measures = MuscleStep{};  // a step not measured (NaN): its fields left empty
   b.measures.finite = false;
   EXPECT_EQ(seriesCsv({a, b}),
             "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
-            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts\n"
-            "3,2,22.5,0.125,\"rectus, femoris\",-1.25,101.5,1.0625,2.25,7,41\n"
-            "3,2,22.5,0.125,vastus,,,,,0,41\n");
+            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
+            "residual_max_mm\n"
+            "3,2,22.5,0.125,\"rectus, femoris\",-1.25,101.5,1.0625,2.25,7,41,0.015,0.25\n"
+            "3,2,22.5,0.125,vastus,,,,,0,41,,\n");
   const nlohmann::json json = seriesJson({a, b});
   ASSERT_EQ(json.size(), 2u);
   EXPECT_EQ(json[0].at("max_penetration_mm"), 2.25);

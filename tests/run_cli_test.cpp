@@ -156,7 +156,8 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   ASSERT_TRUE(std::getline(csv, line));
   EXPECT_EQ(line,
             "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
-            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts");
+            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
+            "residual_max_mm");
   const nlohmann::json& series = summary.at("series");
   ASSERT_EQ(series.size(), 2 * summary.at("muscles").size());
   for (size_t row = 0; row < series.size(); ++row) {
@@ -164,7 +165,7 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     std::vector<std::string> fields;
     std::stringstream split(line);
     for (std::string field; std::getline(split, field, ',');) fields.push_back(field);
-    ASSERT_EQ(fields.size(), 11u) << line;
+    ASSERT_EQ(fields.size(), 13u) << line;
     const nlohmann::json& json = series[row];
     EXPECT_EQ(std::stoi(fields[0]), json.at("step").get<int>());
     EXPECT_NEAR(std::stod(fields[3]), times[size_t(json.at("step").get<int>())], 1e-9);
@@ -172,6 +173,9 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     EXPECT_NEAR(std::stod(fields[5]), json.at("volume_change_pct").get<double>(), 1e-4);
     EXPECT_NEAR(std::stod(fields[7]), json.at("max_fibre_stretch").get<double>(), 1e-5);
     EXPECT_GE(std::stod(fields[7]), 1.0);  // the largest of all segments' l / L0
+    // The force residual: measured at every step, the largest at least the RMS.
+    EXPECT_NEAR(std::stod(fields[11]), json.at("residual_rms_mm").get<double>(), 1e-6);
+    EXPECT_GE(std::stod(fields[12]), std::stod(fields[11]));
   }
   EXPECT_FALSE(std::getline(csv, line));
 }

@@ -604,6 +604,120 @@ TEST(StopRules, EquilibriumStopsNearTheConvergedState) {
   EXPECT_GT(rms, 0);
 }
 
+// A particle held by three orthogonal springs of stiffness k, the one along x stretched by s:
+// its force is k·s, its diagonal block of the Hessian k·I, so k_i (a third of the trace) is k and
+// the equivalent displacement exactly s, the move that cancels the force (a Jacobi step).
+TEST(ForceResidual, OfAParticleOnThreeSpringsIsItsStretch) {
+  const btScalar k = 40, rest = 0.01, s = 0.002;
+  auto muscle = makeMuscle({{rest + s, 0, 0}, {0, 0, 0}, {rest + s, rest, 0}, {rest + s, 0, rest}},
+                           1e-5, 0.01);
+  for (uint32_t anchor : {1u, 2u, 3u}) {
+    fix(*muscle, anchor, 0);
+    addSpring(*muscle, 0, anchor, k, rest);
+  }
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(muscle, std::span(&bone, 1));
+  const ForceResidual residual = system.forceResidual(handle);
+  EXPECT_EQ(residual.particles, 1u);
+  EXPECT_EQ(residual.contactParticles, 0u);
+  EXPECT_NEAR(residual.rmsForce, k * s, 1e-5 * k * s);
+  EXPECT_NEAR(residual.maxDisplacement, s, 1e-5 * s);
+  EXPECT_NEAR(residual.rmsDisplacement, s, 1e-5 * s);
+  const auto r = system.residualForces(handle);
+  EXPECT_NEAR(r[0].x(), -k * s, 1e-5 * k * s);                   // towards the anchor along x
+  EXPECT_TRUE(r[1].isZero() && r[2].isZero() && r[3].isZero());  // attached: not counted
+  // Gravity is part of the model's forces (an unbalanced weight is a residual too).
+  system.parameters().gravity = btVector3(0, 0, -9.81f);
+  EXPECT_NEAR(system.forceResidual(handle).rmsForce,
+              btVector3(-k * s, 0, btScalar(-9.81e-5)).length(), 1e-5 * k * s);
+}
+
+// fusiform as prepared (springs and volume terms), placed at rest: no force anywhere but
+// rounding; the same muscle with its free particles moved is far from it.
+TEST(ForceResidual, IsZeroAtTheRestStateOfAnUnloadedMuscle) {
+  static const LoadedScene loaded = loadScene("fusiform");
+  const PreparedScene prepared = prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
+  MuscleSystem system;
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  ASSERT_FALSE(prepared.muscles[0]->tetInverseVolume.empty());  // the volume terms count too
+  const MuscleHandle handle = system.addMuscle(prepared.muscles[0], bones);
+  const ForceResidual rest = system.forceResidual(handle);
+  EXPECT_GT(rest.particles, 100u);
+  EXPECT_LT(rest.rmsDisplacement, 1e-8);  // 10 nm: rounding of float lengths and volumes
+  EXPECT_LT(rest.maxDisplacement, 1e-7);
+  // Noise of 0.1 mm on the free particles: a residual of that order.
+  SimulationParameters noisy;
+  noisy.initialNoise = 1e-4;
+  MuscleSystem moved(noisy);
+  std::vector<BoneHandle> movedBones;
+  for (const auto& bone : prepared.bones) movedBones.push_back(moved.addBone(bone));
+  const ForceResidual far = moved.forceResidual(moved.addMuscle(prepared.muscles[0], movedBones));
+  EXPECT_GT(far.rmsDisplacement, 2e-5);
+  EXPECT_LT(far.rmsDisplacement, 1e-3);
+}
+
+// A stretched box relaxing: its residual falls step by step, and the residual stop rule ends a
+// step once the residual's RMS equivalent displacement is below the tolerance, before the cap.
+TEST(ForceResidual, FallsAsTheIterationConvergesAndStopsTheResidualRule) {
+  StopRule rule = StopRule::Iterations;
+  ASSERT_TRUE(fromString("residual", rule));
+  EXPECT_EQ(rule, StopRule::Residual);
+  const auto box = [] {
+    auto settings = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);  // stretched by 20 %
+    settings->damping = zelenyDamping(*settings) / 4;
+    return settings;
+  };
+  MuscleSystem system;  // 70 iterations per step
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(box(), std::span(&bone, 1));
+  std::vector<double> residuals{system.forceResidual(handle).rmsDisplacement};
+  for (int s = 0; s < 20; ++s) {
+    system.step();
+    residuals.push_back(system.forceResidual(handle).rmsDisplacement);
+  }
+  EXPECT_GT(residuals[0], 1e-4);  // the free end layer pulled by springs 20 % long
+  // Falling every step until the float floor (a few nm on these 5 mm springs) is near.
+  for (size_t s = 1; s < residuals.size() && residuals[s - 1] > 1e-8; ++s)
+    EXPECT_LT(residuals[s], residuals[s - 1]) << s;
+  EXPECT_LT(residuals.back(), 1e-4 * residuals[0]);
+
+  SimulationParameters parameters;
+  parameters.stopRule = StopRule::Residual;
+  parameters.tolerance = 1e-6;  // 1 µm
+  parameters.iterations = 20000;
+  MuscleSystem ruled(parameters);
+  const BoneHandle ruledBone = ruled.addBone(makeBone());
+  const MuscleHandle ruledHandle = ruled.addMuscle(box(), std::span(&ruledBone, 1));
+  ruled.step();
+  const int iterations = ruled.lastStep().iterations;
+  EXPECT_LT(iterations, 20000);
+  // No bone moves: checked every 16 iterations from the first.
+  EXPECT_EQ(iterations % MuscleSystemAccess::Impl::kResidualCheckEvery, 0);
+  EXPECT_LT(ruled.forceResidual(ruledHandle).rmsDisplacement, parameters.tolerance);
+}
+
+// A free particle pulled by a spring into a bone sphere rests on it: the contact holds the pull,
+// so its residual is 0 (counted as held), though the force on it is the spring's.
+TEST(ForceResidual, LeavesOutWhatAContactHolds) {
+  const btScalar k = 10, rest = 0.01;
+  auto muscle = makeMuscle({{0.01, 0, 0}, {0.04, 0, 0}}, 1e-5, 0.02, 0.001);
+  fix(*muscle, 1, 0);
+  addSpring(*muscle, 0, 1, k, rest);  // 0.03 long: pulls the particle towards +x
+  SimulationParameters parameters;
+  parameters.iterations = 2000;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone({{0.02, 0, 0}}, {0.005}));
+  const MuscleHandle handle = system.addMuscle(muscle, std::span(&bone, 1));
+  system.step();
+  const btVector3 x = system.positions(handle)[0];
+  ASSERT_NEAR(x.x(), 0.014, 1e-4);  // on the sphere: 0.02 − 0.005 − 0.001
+  const ForceResidual residual = system.forceResidual(handle);
+  EXPECT_EQ(residual.contactParticles, 1u);
+  EXPECT_LT(residual.rmsForce, 1e-4 * k * (0.026 - rest));  // the spring pulls with k·0.016
+}
+
 TEST(Determinism, SameInputGivesBitwiseIdenticalPositions) {
   for (Integrator integrator : {Integrator::Verlet, Integrator::SemiImplicitEuler}) {
     const std::vector<btVector3> first = noisyRun(integrator);
@@ -630,6 +744,9 @@ TEST(Allocation, StepAllocatesNothing) {
       for (bool rebuild : {false, true})
         for (bool contact : {false, true}) {
           parameters.rebuildEveryStep = rebuild;
+          // The residual rule checks (never met at 0) run in the step too.
+          parameters.stopRule = StopRule::Residual;
+          parameters.tolerance = 0;
           MuscleSystem system(parameters);
           MuscleSystemAccess::impl(system).forceChunkWork = chunkWork;
           const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));

@@ -72,8 +72,8 @@ bool sameBits(const std::vector<btVector3>& a, const std::vector<btVector3>& b) 
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(btVector3)) == 0;
 }
 
-/// Expects `other` (a run on `threads` threads) to have `one`'s bits: every muscle's particles
-/// and surface, and the last iteration's contacts.
+/// Expects `other` (a run on `threads` threads) to have `one`'s bits: every muscle's particles,
+/// surface and force residual, and the last iteration's contacts.
 void expectSameBits(const Outcome& one, const Outcome& other, int threads) {
   ASSERT_EQ(other.positions.size(), one.positions.size());
   for (size_t m = 0; m < one.positions.size(); ++m) {
@@ -81,15 +81,22 @@ void expectSameBits(const Outcome& one, const Outcome& other, int threads) {
         << "muscle " << m << ", " << threads << " threads";
     EXPECT_TRUE(sameBits(one.surfaces[m], other.surfaces[m]))
         << "muscle " << m << ", " << threads << " threads";
+    EXPECT_TRUE(sameBits(one.residuals[m], other.residuals[m]))
+        << "muscle " << m << ", " << threads << " threads";
   }
   EXPECT_EQ(other.contacts, one.contacts);
+  EXPECT_EQ(other.residual.rmsDisplacement, one.residual.rmsDisplacement) << threads << " threads";
+  EXPECT_EQ(other.residual.maxForce, one.residual.maxForce) << threads << " threads";
+  EXPECT_EQ(other.residual.contactParticles, one.residual.contactParticles);
 }
 
 }  // namespace
 
 TEST(Threads, AnyThreadCountGivesTheSameBits) {
   const Outcome one = simulate(1);
-  EXPECT_GT(one.contacts, 0u);  // the muscles touch: the muscle pairs ran
+  EXPECT_GT(one.contacts, 0u);                   // the muscles touch: the muscle pairs ran
+  EXPECT_GT(one.residual.contactParticles, 0u);  // and the residual has particles they hold
+  EXPECT_GT(one.residual.rmsDisplacement, 0);
   for (int threads : {2, 3}) expectSameBits(one, simulate(threads), threads);
 }
 

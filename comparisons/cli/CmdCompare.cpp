@@ -115,6 +115,15 @@ void compare(CompareArgs& args) {
                   run.method.c_str(), run.rmsToEquilibriumMm, run.worstPoseRmsToEquilibriumMm,
                   run.msPerStep);
   for (const RunMetrics& run : comparison.runs)
+    if (std::isfinite(run.residualRmsMm))
+      std::printf(
+          "%-28s residual RMS / max %.3g / %.3g mm (%.3g / %.3g N), worst pose %d%s\n",
+          run.method.c_str(), run.residualRmsMm, run.residualMaxMm, run.residualRmsN,
+          run.residualMaxN, run.residualWorstPose,
+          run.unconvergedPoses > 0
+              ? (", " + std::to_string(run.unconvergedPoses) + " pose(s) at the cap").c_str()
+              : "");
+  for (const RunMetrics& run : comparison.runs)
     if (!run.analytic.type.empty())
       std::printf("%-28s %s\n", run.method.c_str(), analyticLine(run.analytic).c_str());
   std::printf("wrote");
@@ -138,7 +147,8 @@ void addCompareCommand(CLI::App& app) {
   command
       ->add_option(
           "--methods", args->methods,
-          "Comma-separated methods: fibremss, self-reference, equilibrium (run to convergence), "
+          "Comma-separated methods: fibremss, self-reference, equilibrium (the projective solver "
+          "until the force residual is below 1e-5 mm), "
           "btsoftbody, fem, "
           "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
           "(one variant per integrator), btsoftbody:iterations=N, fem:substeps=N (N or xF: F "

@@ -151,11 +151,39 @@ class BoneMeshes {
   std::vector<btTransform> inverses_;          ///< current → rest, per bone (scratch)
 };
 
+/// The force residual of all muscles together after a step: sums of squares over the free
+/// particles and the largest, of the equivalent displacement [mm², mm] and the force [N², N].
+struct PoseResidual {
+  double displacementSquares = 0, forceSquares = 0, maxMm = 0, maxN = 0;
+  size_t particles = 0, contacts = 0;  ///< free particles; of them held by a contact
+};
+
+/// Step s's force residual (`pose`, NaN where the step was not finite) into the per-pose lists,
+/// and the headline fields when its RMS equivalent displacement is the largest so far.
+void addPoseResidual(RunMetrics& metrics, const PoseResidual& pose, bool finite, int s) {
+  const double count = finite && pose.particles > 0 ? static_cast<double>(pose.particles) : NAN;
+  const double rmsMm = std::sqrt(pose.displacementSquares / count);
+  const double rmsN = std::sqrt(pose.forceSquares / count);
+  const double maxMm = std::isnan(count) ? NAN : pose.maxMm;
+  const double maxN = std::isnan(count) ? NAN : pose.maxN;
+  metrics.residualRmsMmPerPose.push_back(rmsMm);
+  metrics.residualMaxMmPerPose.push_back(maxMm);
+  metrics.residualRmsNPerPose.push_back(rmsN);
+  metrics.residualMaxNPerPose.push_back(maxN);
+  if (std::isnan(rmsMm) || rmsMm <= metrics.residualRmsMm) return;
+  metrics.residualWorstPose = s;
+  metrics.residualRmsMm = rmsMm;
+  metrics.residualMaxMm = maxMm;
+  metrics.residualRmsN = rmsN;
+  metrics.residualMaxN = maxN;
+  metrics.residualContacts = pose.contacts;
+}
+
 /// Per-muscle results over a run (MuscleMetrics.h) and what the numerical guard did to each
 /// muscle: rollbacks named by muscle and cause, freezes.
 class MuscleLedger {
  public:
-  MuscleLedger(const MuscleSystem& system, std::span<const MuscleHandle> muscles,
+  MuscleLedger(MuscleSystem& system, std::span<const MuscleHandle> muscles,
                const PreparedScene& prepared)
       : system_(system), muscles_(muscles), seen_(muscles.size()) {
     std::vector<std::string> boneNames;
@@ -164,12 +192,14 @@ class MuscleLedger {
   }
 
   /// After step s (at `where`): every muscle measured (a non-finite one keeps its earlier
-  /// steps' results) with its free spheres' depth in the bones, a series row each, the muscles
+  /// steps' results) with its free spheres' depth in the bones and its force residual (all of
+  /// them together in `poseResidual`), a series row each, the muscles
   /// that failed a rolled-back attempt named in `guard.rollbacks`, the newly frozen ones in
   /// `guard.frozen`. Returns whether every muscle was finite.
   bool afterStep(const SeriesRow& where, const StepStats& stats, BoneMeshes& bones,
                  std::span<const btTransform> transforms, FibreRunDetails& guard) {
     bool finite = true;
+    poseResidual = PoseResidual{};
     const int s = where.step;
     for (size_t m = 0; m < muscles_.size(); ++m) {
       const MuscleHandle muscle = muscles_[m];
@@ -180,6 +210,7 @@ class MuscleLedger {
         const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
         step.boneContacts = spheres.penetrating;
         spherePenetration = combine(spherePenetration, spheres);
+        addResidual(system_.forceResidual(muscle), step);
       }
       finite = finite && step.finite;
       MuscleResults& result = results[m];
@@ -204,13 +235,27 @@ class MuscleLedger {
     return finite;
   }
 
+  PoseResidual poseResidual;           ///< of the last afterStep (its finite muscles)
   std::vector<MuscleResults> results;  ///< one per muscle, in order
   std::vector<SeriesRow> series;       ///< per step, per muscle
   /// Free boundary particles' spheres in the bones, all finite muscles and steps.
   Penetration spherePenetration;
 
  private:
-  const MuscleSystem& system_;
+  /// A muscle's residual into its measures and the pose's sums.
+  void addResidual(const ForceResidual& residual, MuscleStep& step) {
+    step.residualRmsMm = 1000 * residual.rmsDisplacement;
+    step.residualMaxMm = 1000 * residual.maxDisplacement;
+    const auto count = static_cast<double>(residual.particles);
+    poseResidual.displacementSquares += step.residualRmsMm * step.residualRmsMm * count;
+    poseResidual.forceSquares += residual.rmsForce * residual.rmsForce * count;
+    poseResidual.maxMm = std::max(poseResidual.maxMm, step.residualMaxMm);
+    poseResidual.maxN = std::max(poseResidual.maxN, residual.maxForce);
+    poseResidual.particles += residual.particles;
+    poseResidual.contacts += residual.contactParticles;
+  }
+
+  MuscleSystem& system_;
   std::span<const MuscleHandle> muscles_;
   std::vector<MuscleFailures> seen_;  ///< each muscle's failures after the previous step
 };
@@ -349,6 +394,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       sampleSolverMs = 0;
       sampleIterations = 0;
     }
+    addPoseResidual(metrics, ledger.poseResidual, finite, s);
     if (options.keepPoseSurfaces) metrics.poseSurfaces.push_back(poseSurface);
     if (finite && !muscles.empty() && scene.analytic.type == "sphere-planes")
       contact.push_back(measureContact(scene, prepared.muscles[0]->restSurface,

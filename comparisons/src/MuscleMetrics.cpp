@@ -79,7 +79,8 @@ double MuscleStep::maxPenetrationMm() const {
 std::string seriesCsv(const std::vector<SeriesRow>& rows) {
   std::string csv =
       "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
-      "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts\n";
+      "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
+      "residual_max_mm\n";
   for (const SeriesRow& row : rows) {
     const MuscleStep& m = row.measures;
     csv += std::to_string(row.step) + "," + std::to_string(row.pose) + "," +
@@ -87,7 +88,8 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
            csvText(row.muscle) + "," + csvNumber(m.volumeChangePct, "%.6g") + "," +
            csvNumber(m.meanFibreLengthMm, "%.6g") + "," + csvNumber(m.maxFibreStretch, "%.6g") +
            "," + csvNumber(m.maxPenetrationMm(), "%.6g") + "," + std::to_string(m.boneContacts) +
-           "," + std::to_string(row.solverContacts) + "\n";
+           "," + std::to_string(row.solverContacts) + "," + csvNumber(m.residualRmsMm, "%.6g") +
+           "," + csvNumber(m.residualMaxMm, "%.6g") + "\n";
   }
   return csv;
 }
@@ -106,7 +108,9 @@ nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
                      {"max_fibre_stretch", number(m.maxFibreStretch)},
                      {"max_penetration_mm", number(m.maxPenetrationMm())},
                      {"bone_contacts", m.boneContacts},
-                     {"solver_contacts", row.solverContacts}});
+                     {"solver_contacts", row.solverContacts},
+                     {"residual_rms_mm", number(m.residualRmsMm)},
+                     {"residual_max_mm", number(m.residualMaxMm)}});
   }
   return array;
 }
@@ -130,6 +134,8 @@ std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
       m.penetrationMm = {depth};
     m.boneContacts = o.value("bone_contacts", m.boneContacts);
     row.solverContacts = o.value("solver_contacts", row.solverContacts);
+    m.residualRmsMm = numberAt(o, "residual_rms_mm", m.residualRmsMm);
+    m.residualMaxMm = numberAt(o, "residual_max_mm", m.residualMaxMm);
     rows.push_back(std::move(row));
   }
   return rows;

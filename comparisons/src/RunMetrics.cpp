@@ -9,6 +9,21 @@ nlohmann::json number(double value) {
   return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
 }
 
+/// The values as a JSON array (NaN: null).
+nlohmann::json numbers(const std::vector<double>& values) {
+  nlohmann::json array = nlohmann::json::array();
+  for (double value : values) array.push_back(number(value));
+  return array;
+}
+
+/// What `numbers` wrote under `key` (null: NaN), or nothing.
+std::vector<double> numbersAt(const nlohmann::json& object, const char* key) {
+  std::vector<double> values;
+  if (auto it = object.find(key); it != object.end() && it->is_array())
+    for (const auto& v : *it) values.push_back(v.is_number() ? v.get<double>() : RunMetrics::kNone);
+  return values;
+}
+
 double numberOr(const nlohmann::json& object, const char* key, double fallback) {
   auto it = object.find(key);
   if (it == object.end() || !it->is_number()) return fallback;
@@ -70,8 +85,6 @@ nlohmann::json musclesJson(const std::vector<MuscleResults>& muscles) {
 }  // namespace
 
 nlohmann::json toJson(const RunMetrics& m) {
-  nlohmann::json perPose = nlohmann::json::array();
-  for (double rms : m.rmsToReferencePerPoseMm) perPose.push_back(number(rms));
   return {
       {"scene", m.scene},
       {"method", m.method},
@@ -104,12 +117,22 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"shape_rms_to_reference_mm", number(m.shapeRmsToReferenceMm)},
       {"worst_muscle", m.worstMuscle},
       {"worst_muscle_rms_mm", number(m.worstMuscleRmsMm)},
-      {"rms_to_reference_per_pose_mm", perPose},
+      {"rms_to_reference_per_pose_mm", numbers(m.rmsToReferencePerPoseMm)},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
       {"rms_to_equilibrium_mm", number(m.rmsToEquilibriumMm)},
       {"worst_pose_rms_to_equilibrium_mm", number(m.worstPoseRmsToEquilibriumMm)},
       {"rms_to_equilibrium_poses", m.rmsToEquilibriumPoses},
       {"unconverged_poses", m.unconvergedPoses},
+      {"residual_rms_mm", number(m.residualRmsMm)},
+      {"residual_max_mm", number(m.residualMaxMm)},
+      {"residual_rms_n", number(m.residualRmsN)},
+      {"residual_max_n", number(m.residualMaxN)},
+      {"residual_worst_pose", m.residualWorstPose},
+      {"residual_contact_particles", m.residualContacts},
+      {"residual_rms_mm_per_pose", numbers(m.residualRmsMmPerPose)},
+      {"residual_max_mm_per_pose", numbers(m.residualMaxMmPerPose)},
+      {"residual_rms_n_per_pose", numbers(m.residualRmsNPerPose)},
+      {"residual_max_n_per_pose", numbers(m.residualMaxNPerPose)},
       {"rms_to_reference_poses", m.rmsToReferencePoses},
       {"rms_to_self_reference_poses", m.rmsToSelfReferencePoses},
       {"nan", m.nan},
@@ -162,15 +185,23 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.shapeRmsToReferenceMm = numberOr(o, "shape_rms_to_reference_mm", m.shapeRmsToReferenceMm);
   m.worstMuscle = o.value("worst_muscle", m.worstMuscle);
   m.worstMuscleRmsMm = numberOr(o, "worst_muscle_rms_mm", m.worstMuscleRmsMm);
-  if (auto it = o.find("rms_to_reference_per_pose_mm"); it != o.end() && it->is_array())
-    for (const auto& v : *it)
-      m.rmsToReferencePerPoseMm.push_back(v.is_number() ? v.get<double>() : RunMetrics::kNone);
+  m.rmsToReferencePerPoseMm = numbersAt(o, "rms_to_reference_per_pose_mm");
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
   m.rmsToEquilibriumMm = numberOr(o, "rms_to_equilibrium_mm", m.rmsToEquilibriumMm);
   m.worstPoseRmsToEquilibriumMm =
       numberOr(o, "worst_pose_rms_to_equilibrium_mm", m.worstPoseRmsToEquilibriumMm);
   m.rmsToEquilibriumPoses = o.value("rms_to_equilibrium_poses", m.rmsToEquilibriumPoses);
   m.unconvergedPoses = o.value("unconverged_poses", m.unconvergedPoses);
+  m.residualRmsMm = numberOr(o, "residual_rms_mm", m.residualRmsMm);
+  m.residualMaxMm = numberOr(o, "residual_max_mm", m.residualMaxMm);
+  m.residualRmsN = numberOr(o, "residual_rms_n", m.residualRmsN);
+  m.residualMaxN = numberOr(o, "residual_max_n", m.residualMaxN);
+  m.residualWorstPose = o.value("residual_worst_pose", m.residualWorstPose);
+  m.residualContacts = o.value("residual_contact_particles", m.residualContacts);
+  m.residualRmsMmPerPose = numbersAt(o, "residual_rms_mm_per_pose");
+  m.residualMaxMmPerPose = numbersAt(o, "residual_max_mm_per_pose");
+  m.residualRmsNPerPose = numbersAt(o, "residual_rms_n_per_pose");
+  m.residualMaxNPerPose = numbersAt(o, "residual_max_n_per_pose");
   m.rmsToReferencePoses = o.value("rms_to_reference_poses", m.rmsToReferencePoses);
   m.rmsToSelfReferencePoses = o.value("rms_to_self_reference_poses", m.rmsToSelfReferencePoses);
   m.nan = o.value("nan", m.nan);

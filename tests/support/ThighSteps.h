@@ -25,6 +25,8 @@ struct StepOutcome {
   std::vector<std::vector<btVector3>> positions;  ///< per muscle after the steps
   std::vector<std::vector<btVector3>> surfaces;   ///< per muscle after the steps
   size_t contacts = 0;                            ///< contacts of the last iteration
+  std::vector<std::vector<btVector3>> residuals;  ///< per muscle: residualForces after the steps
+  ForceResidual residual;                         ///< forceResidual() after the steps
 };
 
 /// Two steps through the first poses, 20 iterations each, with `threads` threads: the prepared
@@ -56,6 +58,11 @@ inline StepOutcome stepThroughPoses(
     outcome.surfaces.emplace_back(surface.begin(), surface.end());
   }
   outcome.contacts = system.lastStep().contacts;
+  outcome.residual = system.forceResidual();
+  for (MuscleHandle handle : handles) {
+    const auto r = system.residualForces(handle);
+    outcome.residuals.emplace_back(r.begin(), r.end());
+  }
   return outcome;
 }
 

@@ -28,6 +28,10 @@ struct MuscleStep {
   /// Its free boundary particles whose collision sphere reaches into a bone's true mesh (filled
   /// by runFibreMSS from its sphere test; measureMuscle leaves 0).
   size_t boneContacts = 0;
+  /// Its force residual (MuscleSystem::forceResidual; filled by runFibreMSS): RMS and largest
+  /// equivalent displacement over its free particles [mm].
+  double residualRmsMm = kNone;
+  double residualMaxMm = kNone;  ///< see residualRmsMm [mm]
 
   /// The deepest surface vertex inside any bone [mm] (NaN when not measured).
   double maxPenetrationMm() const;

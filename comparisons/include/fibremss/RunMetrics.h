@@ -95,8 +95,21 @@ struct RunMetrics {
   double rmsToEquilibriumMm = kNone;
   double worstPoseRmsToEquilibriumMm = kNone;  ///< the largest per-pose RMS to equilibrium
   int rmsToEquilibriumPoses = 0;               ///< poses rmsToEquilibriumMm covers
-  int unconvergedPoses = 0;     ///< "equilibrium" run: poses that hit the iteration cap unconverged
-  int rmsToReferencePoses = 0;  ///< poses rmsToReferenceMm covers (both reached them intact)
+  int unconvergedPoses = 0;  ///< "equilibrium" run: poses that hit the iteration cap unconverged
+  /// The force residual after each step measured (FibreMSS; MuscleSystem::forceResidual, all
+  /// muscles): RMS and largest over the free particles of the equivalent displacement |r_i|/k_i
+  /// [mm] and of the force |r_i| [N], one entry per step (NaN: the step was not finite).
+  std::vector<double> residualRmsMmPerPose;
+  std::vector<double> residualMaxMmPerPose;  ///< see residualRmsMmPerPose [mm]
+  std::vector<double> residualRmsNPerPose;   ///< see residualRmsMmPerPose [N]
+  std::vector<double> residualMaxNPerPose;   ///< see residualRmsMmPerPose [N]
+  int residualWorstPose = -1;       ///< the step of the largest RMS equivalent displacement
+  double residualRmsMm = kNone;     ///< that step's RMS equivalent displacement [mm]
+  double residualMaxMm = kNone;     ///< that step's largest equivalent displacement [mm]
+  double residualRmsN = kNone;      ///< that step's RMS force [N]
+  double residualMaxN = kNone;      ///< that step's largest force [N]
+  size_t residualContacts = 0;      ///< that step's particles a contact held (ForceResidual)
+  int rmsToReferencePoses = 0;      ///< poses rmsToReferenceMm covers (both reached them intact)
   int rmsToSelfReferencePoses = 0;  ///< poses rmsToSelfReferenceMm covers
   bool nan = false;                 ///< a NaN or inf appeared
   bool exploded = false;            ///< stability criteria violated

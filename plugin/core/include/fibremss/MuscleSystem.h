@@ -89,6 +89,24 @@ struct MuscleFailures {
   int nan = 0;       ///< of them with NaN/inf (the others: springs beyond 3× their rest length)
 };
 
+/// How far the particles are from a static equilibrium of the model (MuscleSystem::forceResidual):
+/// the net force on each free particle from everything the model's energy contains (springs, the
+/// volume terms, gravity and external forces; not damping or inertia), with a contact's share
+/// taken out: a particle the last collision response pushed keeps only the part a frictionless
+/// contact cannot hold (its force into the push direction is held by the contact; its force along
+/// the contact and out of it is not). Attached particles are not counted.
+struct ForceResidual {
+  size_t particles = 0;         ///< free particles counted
+  size_t contactParticles = 0;  ///< of them pushed by the last collision response
+  double rmsForce = 0;          ///< RMS over the particles of |r_i| [N]
+  double maxForce = 0;          ///< largest |r_i| [N]
+  /// RMS of |r_i| / k_i [m]: the move that cancels r_i of a particle alone, its neighbours held,
+  /// k_i its stiffness averaged over directions (a third of the trace of its diagonal block of the
+  /// energy's Hessian at rest: Σ k/3 of its springs plus the volume terms'); one Jacobi step.
+  double rmsDisplacement = 0;
+  double maxDisplacement = 0;  ///< largest |r_i| / k_i [m]
+};
+
 /// What debugDraw draws (bit flags).
 enum DebugDrawFlag : int {
   kDrawParticles = 1,    ///< boundary particle spheres
@@ -173,6 +191,16 @@ class MuscleSystem {
   void setExternalForce(MuscleHandle muscle, uint32_t particle, const btVector3& force);
   /// Removes every external force of the muscle (SimulationParameters::gravity stays).
   void clearExternalForces(MuscleHandle muscle);
+
+  /// The force residual of every muscle together at its current particles (ForceResidual), as
+  /// of the last step; each muscle's per-particle residual kept for residualForces. Bit-identical
+  /// for any thread count; no allocation; not concurrently with step().
+  ForceResidual forceResidual();
+  /// The force residual of one muscle (ForceResidual). InputError for a stale or unknown handle.
+  ForceResidual forceResidual(MuscleHandle muscle);
+  /// The per-particle residual r_i [N] of the last forceResidual call that covered the muscle
+  /// (zero for attached particles; all zero before any call).
+  std::span<const btVector3> residualForces(MuscleHandle muscle) const;
 
   const StepStats& lastStep() const;
   SimulationParameters& parameters();

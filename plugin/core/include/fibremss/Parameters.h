@@ -121,6 +121,10 @@ enum class StopRule : uint8_t {
   /// 16 iterations (the remaining sum of steps of a linearly converging iteration), once r no
   /// longer slows down from one such window to the next.
   Equilibrium,
+  /// The force residual's RMS equivalent displacement (ForceResidual::rmsDisplacement, the
+  /// unfrozen muscles together) below `tolerance` (or cap), checked every 16 iterations once the
+  /// bones arrived: a measure of the equilibrium itself, not of how fast the iteration moves.
+  Residual,
 };
 
 /// How the solver steps (method.md §4–§5).
@@ -134,8 +138,9 @@ struct SimulationParameters {
   btScalar epsilon = 1e-6;                   ///< convergence threshold: mean displacement [m]
   btScalar budgetMs = 10;                    ///< time budget per step [ms]
   btScalar deviationEpsilon = 1e-3;  ///< threshold of the spring-deviation stop rule (ratio)
-  btScalar tolerance = 5e-4;         ///< equilibrium stop rule: estimated distance to it [m]
-  bool rebuildEveryStep = false;     ///< thesis behaviour: rebuild trees and state each step
+  /// Equilibrium stop rule: estimated distance to it; Residual: RMS equivalent displacement [m]
+  btScalar tolerance = 5e-4;
+  bool rebuildEveryStep = false;  ///< thesis behaviour: rebuild trees and state each step
   /// Pre-transform particles of muscles spanning two bones by a blend of both bones' motions
   /// (MuscleSettings::blendBoneA/B/Weight); false: by the nearest bone only, as the thesis did
   /// (which tears such muscles apart at the boundary between the bones' regions).

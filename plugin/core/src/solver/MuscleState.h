@@ -139,7 +139,18 @@ struct GuardSnapshot {
   std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
 };
 
-/// A muscle: settings, its bones and slot, and the state a step changes in six parts (stages
+/// What the force residual keeps per particle (Residual.h), size particleCount().
+struct ResidualState {
+  std::vector<btVector3> residual;  ///< the last forceResidual's r_i [N]
+  /// k_i of the force residual's equivalent displacement (residualStiffness) [N/m]
+  std::vector<btScalar> residualStiffness;
+  /// The push the last recorded response (recordPushes) gave each particle [m], valid where
+  /// pushRounds[i] == contactRound (that response was the last and pushed it).
+  std::vector<btVector3> lastPushes;
+  std::vector<uint32_t> pushRounds;  ///< contactRound of each particle's last push (0: none)
+};
+
+/// A muscle: settings, its bones and slot, and the state a step changes in seven parts (stages
 /// that need one part can take it alone). Solver settings are not here: the step passes them to
 /// the stages.
 struct MuscleState : ParticleState,
@@ -147,7 +158,8 @@ struct MuscleState : ParticleState,
                      ContactState,
                      TreeState,
                      GuardSnapshot,
-                     InteractionState {
+                     InteractionState,
+                     ResidualState {
   std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
   std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
   std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)

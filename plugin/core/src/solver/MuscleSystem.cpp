@@ -9,6 +9,7 @@
 
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
+#include "Residual.h"
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
@@ -187,6 +188,10 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->pushes.assign(n, btVector3(0, 0, 0));
   state->pushCounts.assign(n, 0);
   state->pushedLast.assign(n, 0);
+  state->lastPushes.assign(n, btVector3(0, 0, 0));
+  state->pushRounds.assign(n, 0);
+  state->residual.assign(n, btVector3(0, 0, 0));
+  state->residualStiffness = residualStiffness(s);
   state->pinchBones.assign(n, -1);
   state->firstBonePushes.assign(n, btVector3(0, 0, 0));
   state->otherBonePushes.assign(n, btVector3(0, 0, 0));
@@ -302,6 +307,20 @@ const SimulationParameters& MuscleSystem::parameters() const {
 
 unsigned MuscleSystem::threads() const {
   return TaskPool::resolve(impl_->parameters.threads, impl_->parameters.scheduler);
+}
+
+ForceResidual MuscleSystem::forceResidual() {
+  return impl_->residualOf(impl_->muscles.order).summary();
+}
+
+ForceResidual MuscleSystem::forceResidual(MuscleHandle muscle) {
+  impl_->muscle(muscle);  // InputError for a stale handle
+  const uint32_t slot = muscle.index;
+  return impl_->residualOf(std::span(&slot, 1)).summary();
+}
+
+std::span<const btVector3> MuscleSystem::residualForces(MuscleHandle muscle) const {
+  return impl_->muscle(muscle).residual;
 }
 
 std::span<const btVector3> MuscleSystem::positions(MuscleHandle muscle) const {

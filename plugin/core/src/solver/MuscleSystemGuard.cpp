@@ -216,6 +216,7 @@ void MuscleSystem::Impl::guardedStep() {
         refitTree(state);
         for (uint32_t slot : bones.order)
           collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
+        recordPushes(state);
         applyPushes(state, velocities, parameters.slidingContacts);
       }
     thread.contacts.clear();

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "MuscleState.h"
+#include "Residual.h"
 #include "SpringForces.h"
 #include "TaskPool.h"
 #include "collision/CollisionPairs.h"
@@ -124,6 +125,7 @@ struct MuscleSystem::Impl {
   std::vector<ThreadScratch> scratch;          ///< per thread of the pool
   std::vector<uint32_t> active;                ///< unfrozen muscle slots, largest first
   std::vector<MuscleIterationResult> results;  ///< per muscle slot, this iteration
+  std::vector<ResidualSums> residuals;         ///< per muscle slot, the last force residual
   std::vector<ForceTask> forceTasks;           ///< every chunk of the active muscles, largest first
   bool chunked = false;  ///< an active muscle's forces pass has more than one chunk
   /// Work per chunk of the forces pass (ForceChunks.h); tests set less to split small muscles.
@@ -190,13 +192,20 @@ struct MuscleSystem::Impl {
   double distanceToEquilibrium(int settled);
   /// Whether parameters.stopRule ends the step after this iteration (the cap aside).
   bool stopRuleMet(bool arrived, int settled, Clock::time_point stepStart);
+  /// Iterations between two checks of the residual stop rule (each costs about a forces pass).
+  static constexpr int kResidualCheckEvery = 16;
+  /// The force residual of the muscles in `slots` (one task per muscle on the pool when it runs,
+  /// else in order), summed in the order of `slots`: the same for any thread count.
+  ResidualSums residualOf(std::span<const uint32_t> slots);
   double threadShare(double MuscleIterationResult::*part,
                      std::initializer_list<double MuscleIterationResult::*> phase) const;
   void collideMusclePairs();
   void pushMusclePairs(MuscleState& state, uint32_t slot, TreeTraversalStack& stack);
   void collide();
-  void respond(MuscleState& state) const;
-  /// The pushes of the last collide() applied to every muscle (after the last iteration).
+  /// The pushes of the last collide() on the muscle; `record`: kept for the force residual.
+  void respond(MuscleState& state, bool record) const;
+  /// The pushes of the last collide() applied to every muscle and recorded for the force residual
+  /// (after the last iteration, before a residual check, or with contact bodies every iteration).
   void applyResponse();
   /// The muscle's force chunks for forceChunkWork and their buffers (allocates only when the
   /// work per chunk changed or the muscle is new).

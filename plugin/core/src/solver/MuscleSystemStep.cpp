@@ -131,6 +131,7 @@ void MuscleSystem::Impl::prepareWorkers() {
   forceTasks.reserve(chunks);
   active.reserve(slots);
   results.resize(slots);
+  residuals.resize(slots);
   pairTasks.reserve(slots * (slots - std::min<size_t>(slots, 1)) / 2);
   musclePairs.resize(slots);
   for (std::vector<uint32_t>& pairs : musclePairs) pairs.reserve(slots);
@@ -325,14 +326,16 @@ void MuscleSystem::Impl::collide() {
 }
 
 // The pushes of the last collide() on a muscle (response), once.
-void MuscleSystem::Impl::respond(MuscleState& state) const {
+void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   if (!pushesPending) return;
+  if (record) recordPushes(state);
   applyPushes(state, integratorFor(parameters.integrator).usesVelocities(),
               parameters.slidingContacts);
 }
 
 void MuscleSystem::Impl::applyResponse() {
-  forEachMuscle("response", [this](MuscleState& state, uint32_t, unsigned) { respond(state); });
+  forEachMuscle("response",
+                [this](MuscleState& state, uint32_t, unsigned) { respond(state, true); });
   pushesPending = false;
 }
 
@@ -340,7 +343,7 @@ void MuscleSystem::Impl::applyResponse() {
 void MuscleSystem::Impl::moveMuscle(MuscleState& state, MuscleIterationResult& result,
                                     bool bonesMove) const {
   const Clock::time_point start = Clock::now();
-  respond(state);
+  respond(state, false);
   const Clock::time_point followStart = Clock::now();
   if (bonesMove) followBones(state);
   result.forcesMs += millisecondsSince(followStart);
@@ -509,9 +512,28 @@ bool MuscleSystem::Impl::stopRuleMet(bool arrived, int settled, Clock::time_poin
       return arrived && stats.springDeviationRatio < parameters.deviationEpsilon;
     case StopRule::Equilibrium:
       return arrived && distanceToEquilibrium(settled) < parameters.tolerance;
+    case StopRule::Residual:
+      if (!arrived || settled % kResidualCheckEvery != 0) return false;
+      applyResponse();  // the residual of the state this iteration leaves (bit for bit as later)
+      return residualOf(active).summary().rmsDisplacement < parameters.tolerance;
     default:
       return false;
   }
+}
+
+ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
+  if (residuals.size() < muscles.states.size()) residuals.resize(muscles.states.size());
+  const auto task = [&](size_t k, unsigned) {
+    residuals[slots[k]] = muscleResidual(*muscles.states[slots[k]], parameters.gravity);
+  };
+  if (pool) {
+    pool->run(slots.size(), task, "residual");
+  } else {
+    for (size_t k = 0; k < slots.size(); ++k) task(k, 0);
+  }
+  ResidualSums total;
+  for (uint32_t slot : slots) total.add(residuals[slot]);
+  return total;
 }
 
 void MuscleSystem::Impl::step(const StepSize& size) {

@@ -47,12 +47,13 @@ constexpr std::array<std::pair<Integrator, const char*>, 11> kIntegrators{{
     {Integrator::Xpbd, "xpbd"},
     {Integrator::Projective, "projective"},
 }};
-constexpr std::array<std::pair<StopRule, const char*>, 5> kStopRules{{
+constexpr std::array<std::pair<StopRule, const char*>, 6> kStopRules{{
     {StopRule::Iterations, "iterations"},
     {StopRule::Converged, "converged"},
     {StopRule::TimeBudget, "budget"},
     {StopRule::SpringDeviation, "spring-deviation"},
     {StopRule::Equilibrium, "equilibrium"},
+    {StopRule::Residual, "residual"},
 }};
 constexpr std::array<std::pair<BoneCollision, const char*>, 2> kBoneCollisions{{
     {BoneCollision::Spheres, "spheres"},

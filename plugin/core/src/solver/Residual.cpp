@@ -1,0 +1,123 @@
+#include "Residual.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "MuscleState.h"
+#include "SpringForces.h"
+#include "VolumeForces.h"
+#include "contact/BodyContacts.h"
+
+namespace fibremss {
+namespace {
+
+/// Adds K·inverse·(G0/G)/6·|∂(6V)/∂x_i|² of each tetrahedron to its particles' traces
+/// (1/V0 = 6·inverse, ∂V/∂x_i a sixth of the gradient; G the rest gradient sum, uncapped).
+void addTetrahedronTraces(const MuscleSettings& settings, std::vector<btScalar>& trace) {
+  for (size_t k = 0; k < settings.tetInverseVolume.size(); ++k) {
+    const RestGradients rest = restTetrahedronGradients(settings, k);
+    btScalar gradient = 0;
+    for (const btVector3& g : rest.gradients) gradient += g.length2();
+    if (!(gradient > 0)) continue;
+    const btScalar scale = settings.volumeModulus * settings.tetInverseVolume[k] *
+                           settings.tetRestGradient[k] / gradient / 6;
+    for (size_t i = 0; i < 4; ++i)
+      trace[settings.tetParticles[4 * k + i]] += scale * rest.gradients[i].length2();
+  }
+}
+
+/// Adds K/V0·|∂V/∂x_i|² of the enclosed-volume term at rest to its particles' traces.
+void addEnclosedTraces(const MuscleSettings& settings, std::vector<btScalar>& trace) {
+  const std::vector<uint32_t>& faces = settings.enclosedFaces;
+  if (faces.empty()) return;
+  const std::vector<btVector3>& x = settings.restPositions;
+  std::vector<btVector3> gradient(x.size(), btVector3(0, 0, 0));  // ∂V/∂x_i [m²]
+  for (size_t k = 0; k < faces.size(); k += 3) {
+    const btVector3 normal = (x[faces[k + 1]] - x[faces[k]]).cross(x[faces[k + 2]] - x[faces[k]]);
+    for (size_t v = 0; v < 3; ++v) gradient[faces[k + v]] += normal / 6;
+  }
+  const auto scale = static_cast<btScalar>(settings.enclosedModulus / settings.enclosedRestVolume);
+  for (size_t i = 0; i < x.size(); ++i) trace[i] += scale * gradient[i].length2();
+}
+
+/// `force` without its part against the unit push direction `normal` (what the contact holds).
+btVector3 withoutHeldPart(const btVector3& force, const btVector3& normal) {
+  const btScalar into = force.dot(normal);
+  return into < 0 ? force - normal * into : force;
+}
+
+}  // namespace
+
+std::vector<btScalar> residualStiffness(const MuscleSettings& settings) {
+  std::vector<btScalar> trace(settings.particleCount(), 0);
+  for (const Spring& spring : settings.springs) {
+    trace[spring.a] += spring.stiffness;
+    trace[spring.b] += spring.stiffness;
+  }
+  addTetrahedronTraces(settings, trace);
+  addEnclosedTraces(settings, trace);
+  for (btScalar& k : trace) k /= 3;
+  return trace;
+}
+
+void ResidualSums::add(const ResidualSums& other) {
+  forceSquares += other.forceSquares;
+  displacementSquares += other.displacementSquares;
+  maxForce = std::max(maxForce, other.maxForce);
+  maxDisplacement = std::max(maxDisplacement, other.maxDisplacement);
+  particles += other.particles;
+  contactParticles += other.contactParticles;
+}
+
+ForceResidual ResidualSums::summary() const {
+  ForceResidual residual;
+  residual.particles = particles;
+  residual.contactParticles = contactParticles;
+  residual.maxForce = maxForce;
+  residual.maxDisplacement = maxDisplacement;
+  if (particles == 0) return residual;
+  const auto count = static_cast<double>(particles);
+  residual.rmsForce = std::sqrt(forceSquares / count);
+  residual.rmsDisplacement = std::sqrt(displacementSquares / count);
+  return residual;
+}
+
+void recordPushes(MuscleState& muscle) {
+  const uint32_t round = muscle.contactRound + 1;  // applyPushes counts it first
+  for (uint32_t i : muscle.settings->boundaryParticles) {
+    if (muscle.pushCounts[i] == 0) continue;
+    muscle.lastPushes[i] = muscle.pushes[i];
+    muscle.pushRounds[i] = round;
+  }
+}
+
+ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity) {
+  const MuscleSettings& settings = *muscle.settings;
+  std::vector<btVector3>& r = muscle.residual;
+  springForces(settings, muscle.positions, r);
+  addTetrahedronForces(settings, muscle.positions, r);
+  addEnclosedVolumeForces(settings, muscle.positions, r);
+  addExternalForces(muscle, gravity, r);
+  for (uint32_t i : settings.fixedParticles) r[i].setZero();
+  ResidualSums sums;
+  const uint32_t round = muscle.contactRound;
+  for (uint32_t i : muscle.freeParticles) {
+    const btScalar push =
+        muscle.pushRounds[i] == round && round > 0 ? muscle.lastPushes[i].length() : btScalar(0);
+    if (push > 0) {
+      r[i] = withoutHeldPart(r[i], muscle.lastPushes[i] / push);
+      ++sums.contactParticles;
+    }
+    const double force = r[i].length();
+    const btScalar k = muscle.residualStiffness[i];
+    const double displacement = k > 0 ? force / k : 0;
+    sums.forceSquares += force * force;
+    sums.displacementSquares += displacement * displacement;
+    sums.maxForce = std::max(sums.maxForce, force);
+    sums.maxDisplacement = std::max(sums.maxDisplacement, displacement);
+  }
+  sums.particles = muscle.freeParticles.size();
+  return sums;
+}
+
+}  // namespace fibremss

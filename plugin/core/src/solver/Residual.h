@@ -1,0 +1,48 @@
+#pragma once
+// The force residual of a muscle (MuscleSystem::forceResidual), internal: the model's net force
+// on each free particle at its current position, a contact's share taken out, and its size as a
+// force and as an equivalent displacement.
+#include <LinearMath/btVector3.h>
+
+#include <cstddef>
+#include <vector>
+
+#include "fibremss/MuscleSettings.h"
+#include "fibremss/MuscleSystem.h"
+
+namespace fibremss {
+
+struct MuscleState;
+
+/// k_i of every particle [N/m]: a third of the trace of its 3×3 diagonal block of the energy's
+/// Hessian at rest, i.e. Σ k/3 of its springs plus K/(3·V0)·|∂V/∂x_i|² of each volume term it is
+/// in (the tetrahedra's with their G0/G factor at rest, and the enclosed volume's). 0 for a
+/// particle in no term. Allocates (made once when the muscle is added).
+std::vector<btScalar> residualStiffness(const MuscleSettings& settings);
+
+/// Sums over particles that combine across muscles in a fixed order.
+struct ResidualSums {
+  double forceSquares = 0;         ///< Σ |r_i|² [N²]
+  double displacementSquares = 0;  ///< Σ (|r_i|/k_i)² [m²]
+  double maxForce = 0;             ///< largest |r_i| [N]
+  double maxDisplacement = 0;      ///< largest |r_i|/k_i [m]
+  size_t particles = 0;            ///< free particles
+  size_t contactParticles = 0;     ///< of them pushed by the last response
+
+  void add(const ResidualSums& other);  ///< `other`'s particles counted too
+  ForceResidual summary() const;        ///< RMS and maxima
+};
+
+/// Keeps the pushes the next applyPushes applies for the force residual (lastPushes, stamped
+/// with that response's contactRound in pushRounds; a pinched particle's as the pairs summed
+/// them). The step's last response calls it; the iterations' responses do not.
+void recordPushes(MuscleState& muscle);
+
+/// Fills muscle.residual with the force residual at muscle.positions (ForceResidual: springs on
+/// fastestSpringKernel in one pass, every volume term, m·gravity and external forces; a particle
+/// pushed in the last response, pushRounds[i] == contactRound, keeps its force minus the part
+/// into its push's direction when that part points against the push) and returns its sums.
+/// Attached particles get 0 and are not counted. No allocation; one fixed order.
+ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity);
+
+}  // namespace fibremss
