@@ -25,12 +25,6 @@ inline btScalar clampedStrain(btScalar ratio) {
   return std::min(std::max(1 - ratio, btScalar(-1)), btScalar(1));
 }
 
-/// The particles of fan k and their count, m + 3 for m tetrahedra (MuscleSettings::fanParticles).
-inline std::span<const uint32_t> fanParticles(const MuscleSettings& settings, size_t k) {
-  return {settings.fanParticles.data() + settings.fanOffsets[k],
-          settings.fanOffsets[k + 1] - settings.fanOffsets[k]};
-}
-
 /// Fan k's forces alone (the scalar kernel, and the groups' tails), modulus a sixth of K: the
 /// lanes' operations in their order.
 void scalarFan(const MuscleSettings& settings, size_t k, btScalar modulus, const btVector3* x,

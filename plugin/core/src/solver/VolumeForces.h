@@ -67,6 +67,12 @@ struct FanGradients {
 /// the same in the same order.
 FanGradients fanGradients(const btVector3* x, std::span<const uint32_t> p);
 
+/// The particles of fan k and their count, m + 3 for m tetrahedra (MuscleSettings::fanParticles).
+inline std::span<const uint32_t> fanParticles(const MuscleSettings& settings, size_t k) {
+  return {settings.fanParticles.data() + settings.fanOffsets[k],
+          settings.fanOffsets[k + 1] - settings.fanOffsets[k]};
+}
+
 /// The gradients ∂(6V)/∂x_i at rest of a tetrahedron's four particles (tetParticles' order).
 struct RestGradients {
   btVector3 gradients[4];  ///< ∂(6V)/∂x_i [m²]
