@@ -27,16 +27,10 @@ void addFanTraces(const MuscleSettings& settings, std::vector<btScalar>& trace) 
 
 /// Adds K/V0·|∂V/∂x_i|² of the enclosed-volume term at rest to its particles' traces.
 void addEnclosedTraces(const MuscleSettings& settings, std::vector<btScalar>& trace) {
-  const std::vector<uint32_t>& faces = settings.enclosedFaces;
-  if (faces.empty()) return;
-  const std::vector<btVector3>& x = settings.restPositions;
-  std::vector<btVector3> gradient(x.size(), btVector3(0, 0, 0));  // ∂V/∂x_i [m²]
-  for (size_t k = 0; k < faces.size(); k += 3) {
-    const btVector3 normal = (x[faces[k + 1]] - x[faces[k]]).cross(x[faces[k + 2]] - x[faces[k]]);
-    for (size_t v = 0; v < 3; ++v) gradient[faces[k + v]] += normal / 6;
-  }
+  if (settings.enclosedFaces.empty()) return;
+  const std::vector<btVector3> gradient = enclosedRestGradients(settings);
   const auto scale = static_cast<btScalar>(settings.enclosedModulus / settings.enclosedRestVolume);
-  for (size_t i = 0; i < x.size(); ++i) trace[i] += scale * gradient[i].length2();
+  for (size_t i = 0; i < gradient.size(); ++i) trace[i] += scale * gradient[i].length2();
 }
 
 /// `force` without its part against the unit push direction `normal` (what the contact holds).

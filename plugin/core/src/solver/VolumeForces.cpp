@@ -376,15 +376,21 @@ void addEnclosedVolumeForces(const MuscleSettings& settings, std::span<const btV
   }
 }
 
-void addEnclosedVolumeStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
+std::vector<btVector3> enclosedRestGradients(const MuscleSettings& settings) {
   const std::span<const uint32_t> faces = settings.enclosedFaces;
-  if (faces.empty()) return;
   const std::span<const btVector3> x = settings.restPositions;
-  std::vector<btVector3> gradient(x.size(), btVector3(0, 0, 0));  // ∂V/∂x_i at rest [m²]
+  std::vector<btVector3> gradient(x.size(), btVector3(0, 0, 0));
   for (size_t k = 0; k < faces.size(); k += 3) {
     const btVector3 normal = (x[faces[k + 1]] - x[faces[k]]).cross(x[faces[k + 2]] - x[faces[k]]);
     for (size_t v = 0; v < 3; ++v) gradient[faces[k + v]] += normal / 6;
   }
+  return gradient;
+}
+
+void addEnclosedVolumeStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
+  if (settings.enclosedFaces.empty()) return;
+  const std::span<const btVector3> x = settings.restPositions;
+  const std::vector<btVector3> gradient = enclosedRestGradients(settings);
   double squared = 0;
   for (uint32_t i = 0; i < x.size(); ++i)
     if (!settings.isFixed(i)) squared += double(gradient[i].length2());

@@ -99,6 +99,10 @@ double enclosedParticleVolume(const MuscleSettings& settings, std::span<const bt
 void addEnclosedVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                              std::span<btVector3> forces);
 
+/// ∂V/∂x_i of the volume settings.enclosedFaces enclose, at rest, per particle (zero for a
+/// particle on no face) [m²]. Allocates (start-up only).
+std::vector<btVector3> enclosedRestGradients(const MuscleSettings& settings);
+
 /// Adds to each free particle's row of `stiffness` half of K/V0·Σ_j |∂V/∂x_j|² at rest (j over
 /// the free particles): the largest eigenvalue of the term's stiffness K/V0·g·gᵀ, which bounds
 /// its share of the system's largest one whatever the other terms' rows are [N/m].
