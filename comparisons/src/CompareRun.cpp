@@ -345,6 +345,7 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation)
   converged.stopRule = StopRule::Residual;
   converged.tolerance = static_cast<btScalar>(kEquilibriumResidual);
   converged.iterations = kEquilibriumIterations;
+  converged.projectiveRho = static_cast<btScalar>(kEquilibriumRho);
   converged.motionFraction = static_cast<btScalar>(double(motion) / kEquilibriumIterations);
   return converged;
 }
