@@ -160,23 +160,27 @@ __attribute__((always_inline)) inline Lanes<V> plus(const Lanes<V>& a, const Lan
   return {a.x + b.x, a.y + b.y, a.z + b.z};
 }
 
-/// The gradients ∂(6V)/∂x_i (per particle, lane-wise) of fans with Ring ring particles whose
-/// edges from particle a are edge[0][j] (to b) and edge[1 + r][j] (to ring particle r) in lane
-/// j, a's negated (grad[0], to subtract), and the scale of their forces K/6·s·G0/G, with 1/(6·V0)
-/// `inverse`, G0 `rest` and modulus a sixth of K: scalarFan's operations lane-wise.
-template <size_t Ring, class V>
-__attribute__((always_inline)) inline V fanLanes(const V (&edge)[Ring + 1][4], V inverse, V rest,
-                                                 V modulus, Lanes<V> (&grad)[Ring + 2]) {
-  const Lanes<V> e = toLanes(edge[0][0], edge[0][1], edge[0][2], edge[0][3]);
-  Lanes<V> u[Ring];
-  for (size_t r = 0; r < Ring; ++r)
-    u[r] = toLanes(edge[1 + r][0], edge[1 + r][1], edge[1 + r][2], edge[1 + r][3]);
-  Lanes<V> gb = cross(u[0], u[1]);
-  for (size_t r = 1; r + 1 < Ring; ++r) gb = plus(gb, cross(u[r], u[r + 1]));
+/// The gradients ∂(6V)/∂x_i (per particle, lane-wise) of fans with Ring ring particles,
+/// `edge(0)` their edges from particle a to b and `edge(1 + r)` to ring particle r, a's negated
+/// (grad[0], to subtract), and the scale of their forces K/6·s·G0/G, with 1/(6·V0) `inverse`,
+/// G0 `rest` and modulus a sixth of K: scalarFan's operations lane-wise. Each ring edge is
+/// loaded once, as its cross products need it, so that only two are live at a time.
+template <size_t Ring, class V, class Edge>
+__attribute__((always_inline)) inline V fanLanes(const Edge& edge, V inverse, V rest, V modulus,
+                                                 Lanes<V> (&grad)[Ring + 2]) {
+  const Lanes<V> e = edge(0);
   Lanes<V>* g = grad + 2;
-  g[0] = cross(u[1], e);
-  for (size_t r = 1; r + 1 < Ring; ++r) g[r] = cross(e, difference(u[r - 1], u[r + 1]));
-  g[Ring - 1] = cross(e, u[Ring - 2]);
+  Lanes<V> before = edge(1), here = edge(2);  // u_r−1 and u_r as r goes round
+  Lanes<V> gb = cross(before, here);
+  g[0] = cross(here, e);
+  for (size_t r = 2; r < Ring; ++r) {
+    const Lanes<V> next = edge(1 + r);
+    gb = plus(gb, cross(here, next));
+    g[r - 1] = cross(e, difference(before, next));
+    before = here;
+    here = next;
+  }
+  g[Ring - 1] = cross(e, before);
   Lanes<V> sum = gb;
   V gradient = dot(gb, gb);
   for (size_t r = 0; r < Ring; ++r) {
@@ -213,13 +217,14 @@ __attribute__((always_inline)) inline void fanGroups(const MuscleSettings& setti
                                                      const btVector3* x, btVector3* f) {
   const uint32_t* b = settings.fanBytes.data() + settings.fanOffsets[first];
   for (size_t k = first; k < first + 4 * groups; k += 4, b += 4 * Count) {
-    __m128 edge[Count - 1][4];
-#pragma GCC unroll 4
-    for (size_t j = 0; j < 4; ++j) {
-      const __m128 origin = loadVector(at(x, b[Count * j]));
-      for (size_t v = 1; v < Count; ++v)
-        edge[v - 1][j] = loadVector(at(x, b[Count * j + v])) - origin;
-    }
+    __m128 origin[4];
+    for (size_t j = 0; j < 4; ++j) origin[j] = loadVector(at(x, b[Count * j]));
+    const auto edge = [&](size_t v) {  // particle 1 + v of each lane's fan less its particle a
+      const auto from = [&](size_t j) {
+        return loadVector(at(x, b[Count * j + 1 + v])) - origin[j];
+      };
+      return toLanes(from(0), from(1), from(2), from(3));
+    };
     Lanes<Float4> grad[Count];
     const Float4 scale =
         fanLanes<Count - 2>(edge, _mm_loadu_ps(&settings.fanInverseVolume[k]),
@@ -255,13 +260,15 @@ FIBREMSS_AVX2_PASS void avxFanClass(const MuscleSettings& settings, size_t begin
   for (; g + 1 < groups; g += 2, b += 8 * Count) {
     const size_t k = begin + 4 * g;
     const uint32_t* second = b + 4 * Count;  // the second group's byte offsets
-    __m256 edge[Count - 1][4];
-#pragma GCC unroll 4
-    for (size_t j = 0; j < 4; ++j) {
-      const __m256 origin = loadPair(at(x, b[Count * j]), at(x, second[Count * j]));
-      for (size_t v = 1; v < Count; ++v)
-        edge[v - 1][j] = loadPair(at(x, b[Count * j + v]), at(x, second[Count * j + v])) - origin;
-    }
+    __m256 origin[4];
+    for (size_t j = 0; j < 4; ++j)
+      origin[j] = loadPair(at(x, b[Count * j]), at(x, second[Count * j]));
+    const auto edge = [&](size_t v) __attribute__((always_inline)) {  // as fanGroups' edge
+      const auto from = [&](size_t j) __attribute__((always_inline)) {
+        return loadPair(at(x, b[Count * j + 1 + v]), at(x, second[Count * j + 1 + v])) - origin[j];
+      };
+      return toLanes(from(0), from(1), from(2), from(3));
+    };
     Lanes<Float8> grad[Count];
     const Float8 scale = fanLanes<Count - 2>(edge, _mm256_loadu_ps(&settings.fanInverseVolume[k]),
                                              _mm256_loadu_ps(&settings.fanRestGradient[k]),
