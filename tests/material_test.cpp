@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "fibremss/Analytic.h"
+#include "fibremss/Error.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
@@ -65,39 +66,49 @@ TEST(VolumeTetrahedra, LieInsideTheSurfaceWithTheirRestVolume) {
   EXPECT_EQ(off.volumeModulus, 0);
 }
 
-/// The volume terms' forces at x in double precision, tetrahedron by tetrahedron: K·s·(G0/G)
-/// times ∂V/∂x_i, s = 1 − V/V0 clamped to [−1, 1], G = Σ|∂(6V)/∂x_i|² at least G0/100.
+/// The volume terms' forces at x in double precision for fans [begin, end), each from its
+/// tetrahedra (a, b, r_k, r_k+1) one by one: K·s·(G0/G) times ∂V/∂x_i, s = 1 − V/V0 clamped to
+/// [−1, 1], V and ∂V/∂x_i the sums over its tetrahedra, G = Σ|∂(6V)/∂x_i|² at least G0/100.
 std::vector<btVector3> referenceVolumeForces(const MuscleSettings& muscle,
-                                             const std::vector<btVector3>& x) {
-  std::vector<std::array<double, 3>> f(x.size(), {0, 0, 0});
+                                             const std::vector<btVector3>& x, size_t begin,
+                                             size_t end) {
+  using Vector = std::array<double, 3>;
+  std::vector<Vector> f(x.size(), {0, 0, 0});
   const auto edge = [&](uint32_t i, uint32_t o) {
-    return std::array<double, 3>{double(x[i].x()) - x[o].x(), double(x[i].y()) - x[o].y(),
-                                 double(x[i].z()) - x[o].z()};
+    return Vector{double(x[i].x()) - x[o].x(), double(x[i].y()) - x[o].y(),
+                  double(x[i].z()) - x[o].z()};
   };
-  const auto cross = [](const std::array<double, 3>& u, const std::array<double, 3>& v) {
-    return std::array<double, 3>{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
-                                 u[0] * v[1] - u[1] * v[0]};
+  const auto cross = [](const Vector& u, const Vector& v) {
+    return Vector{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
   };
-  for (size_t k = 0; k < muscle.tetInverseVolume.size(); ++k) {
-    const uint32_t* t = &muscle.tetParticles[4 * k];
-    const auto a = edge(t[1], t[0]), b = edge(t[2], t[0]), c = edge(t[3], t[0]);
-    const std::array<double, 3> g[3] = {cross(b, c), cross(c, a), cross(a, b)};
-    const auto dot = [](const std::array<double, 3>& u, const std::array<double, 3>& v) {
-      return u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
-    };
-    const std::array<double, 3> g0 = {g[0][0] + g[1][0] + g[2][0], g[0][1] + g[1][1] + g[2][1],
-                                      g[0][2] + g[1][2] + g[2][2]};
-    const double gradient = dot(g[0], g[0]) + dot(g[1], g[1]) + dot(g[2], g[2]) + dot(g0, g0);
-    const double rest = muscle.tetRestGradient[k];
-    const double ratio = dot(a, g[0]) * double(muscle.tetInverseVolume[k]);
-    const double strain = std::clamp(1 - ratio, -1.0, 1.0);
+  const auto dot = [](const Vector& u, const Vector& v) {
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+  };
+  for (size_t k = begin; k < end; ++k) {
+    const uint32_t* p = &muscle.fanParticles[muscle.fanOffsets[k]];
+    const size_t count = muscle.fanOffsets[k + 1] - muscle.fanOffsets[k];
+    std::vector<Vector> g(count, {0, 0, 0});  // ∂(6V)/∂x of the fan's particles
+    double sixVolume = 0;
+    for (size_t r = 2; r + 1 < count; ++r) {  // tetrahedron (a, b, r_k, r_k+1)
+      const size_t t[4] = {0, 1, r, r + 1};
+      const Vector a = edge(p[t[1]], p[t[0]]), b = edge(p[t[2]], p[t[0]]),
+                   c = edge(p[t[3]], p[t[0]]);
+      const Vector gt[3] = {cross(b, c), cross(c, a), cross(a, b)};
+      sixVolume += dot(a, gt[0]);
+      for (size_t i = 0; i < 3; ++i)
+        for (size_t d = 0; d < 3; ++d) {
+          g[t[i + 1]][d] += gt[i][d];
+          g[t[0]][d] -= gt[i][d];
+        }
+    }
+    double gradient = 0;
+    for (const Vector& gi : g) gradient += dot(gi, gi);
+    const double rest = muscle.fanRestGradient[k];
+    const double strain = std::clamp(1 - sixVolume * double(muscle.fanInverseVolume[k]), -1.0, 1.0);
     const double scale =
         double(muscle.volumeModulus) / 6 * strain * rest / std::max(gradient, 0.01 * rest);
-    for (size_t i = 0; i < 3; ++i)
-      for (size_t d = 0; d < 3; ++d) {
-        f[t[i + 1]][d] += g[i][d] * scale;
-        f[t[0]][d] -= g[i][d] * scale;
-      }
+    for (size_t i = 0; i < count; ++i)
+      for (size_t d = 0; d < 3; ++d) f[p[i]][d] += g[i][d] * scale;
   }
   std::vector<btVector3> out;
   for (const auto& v : f) out.emplace_back(btScalar(v[0]), btScalar(v[1]), btScalar(v[2]));
@@ -105,15 +116,21 @@ std::vector<btVector3> referenceVolumeForces(const MuscleSettings& muscle,
 }
 
 std::vector<btVector3> volumeForces(const MuscleSettings& muscle, const std::vector<btVector3>& x,
-                                    SpringKernel kernel) {
+                                    SpringKernel kernel, size_t begin, size_t end) {
   std::vector<btVector3> forces(x.size(), btVector3(0, 0, 0));
-  addTetrahedronForces(muscle, x, forces, kernel);
+  addLocalVolumeForces(muscle, x, forces, kernel, begin, end);
   return forces;
 }
 
-// Every kernel, on every count of tetrahedra up to three groups of four and on all of them
-// (groups and the tail one at a time), at jittered positions: within float rounding of the
-// double-precision sums; AVX2 (the SSE2 instructions VEX-encoded) gives SSE2's bits.
+std::vector<btVector3> volumeForces(const MuscleSettings& muscle, const std::vector<btVector3>& x,
+                                    SpringKernel kernel) {
+  return volumeForces(muscle, x, kernel, 0, muscle.fanInverseVolume.size());
+}
+
+// Every kernel, from the first fan of each count of particles on, on every count of fans up to
+// three groups of four and on all of them (groups, pairs of groups and the tail one at a time),
+// at jittered positions: within float rounding of the double-precision sums over the fans'
+// tetrahedra; AVX2 (the SSE2 instructions VEX-encoded) gives SSE2's bits.
 TEST(VolumeForces, EveryKernelMatchesTheReference) {
   const MuscleSettings muscle = preparedCylinder("cylinder-stretch", {});
   std::mt19937 random(18);
@@ -121,31 +138,114 @@ TEST(VolumeForces, EveryKernelMatchesTheReference) {
   const btScalar amplitude = btScalar(0.05) * muscle.springs.front().restLength;
   std::vector<btVector3> x(muscle.restPositions.begin(), muscle.restPositions.end());
   for (btVector3& p : x) p += btVector3(jitter(random), jitter(random), jitter(random)) * amplitude;
-  const size_t all = muscle.tetInverseVolume.size();
-  for (size_t count : {size_t(0), size_t(1), size_t(3), size_t(4), size_t(5), size_t(7), size_t(8),
-                       size_t(11), size_t(12), size_t(13), all}) {
-    MuscleSettings part = muscle;
-    part.tetParticles.resize(4 * count);
-    part.tetInverseVolume.resize(count);
-    part.tetRestGradient.resize(count);
-    const std::vector<btVector3> reference = referenceVolumeForces(part, x);
+  const size_t all = muscle.fanInverseVolume.size();
+  std::vector<size_t> starts{0};  // the first fan of each count of particles
+  for (size_t k = 1; k < all; ++k)
+    if (muscle.fanOffsets[k + 1] - muscle.fanOffsets[k] !=
+        muscle.fanOffsets[k] - muscle.fanOffsets[k - 1])
+      starts.push_back(k);
+  ASSERT_EQ(starts.size(), kMaxFanTetrahedra);  // fans of 1 .. 4 tetrahedra
+  std::vector<std::pair<size_t, size_t>> ranges{{0, all}};
+  for (size_t start : starts)
+    for (size_t count : {size_t(0), size_t(1), size_t(3), size_t(4), size_t(5), size_t(7),
+                         size_t(8), size_t(11), size_t(12), size_t(13), size_t(21)})
+      ranges.emplace_back(start, std::min(all, start + count));
+  for (const auto& [begin, end] : ranges) {
+    const std::vector<btVector3> reference = referenceVolumeForces(muscle, x, begin, end);
     btScalar largest = 0;
     for (const btVector3& f : reference) largest = std::max(largest, f.length());
-    ASSERT_TRUE(count == 0 || largest > 0) << count;
+    ASSERT_TRUE(begin == end || largest > 0) << begin << ".." << end;
     std::vector<btVector3> sse2;
     for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2}) {
       if (!springKernelAvailable(kernel)) continue;
-      const std::vector<btVector3> forces = volumeForces(part, x, kernel);
+      const std::vector<btVector3> forces = volumeForces(muscle, x, kernel, begin, end);
       for (size_t i = 0; i < x.size(); ++i)
         ASSERT_LE((forces[i] - reference[i]).length(), btScalar(1e-4) * largest)
-            << springKernelName(kernel) << ", " << count << " tetrahedra, particle " << i;
+            << springKernelName(kernel) << ", fans " << begin << ".." << end << ", particle " << i;
       if (kernel == SpringKernel::sse2) sse2 = forces;
       if (kernel == SpringKernel::avx2 && !sse2.empty()) {
         EXPECT_EQ(std::memcmp(forces.data(), sse2.data(), sizeof(btVector3) * x.size()), 0)
-            << count;
+            << begin << ".." << end;
       }
     }
   }
+}
+
+// The fans hold the local terms' tetrahedra, each once: fans of one to four tetrahedra around an
+// edge, no particle twice, each tetrahedron positive at rest and the fan's 1/(6·V0) that of
+// their sum; and they take at most 60 % of the tetrahedra's particle visits (what the kernel
+// gathers and scatters: the reason for fans).
+TEST(VolumeTetrahedra, FansHoldEveryTetrahedronOnce) {
+  const MuscleSettings muscle = preparedCylinder("cylinder-stretch", {});
+  const auto& x = muscle.restPositions;
+  std::vector<std::array<uint32_t, 4>> fromFans, tetrahedra;
+  for (size_t k = 0; k < muscle.fanInverseVolume.size(); ++k) {
+    const std::vector<uint32_t> p(muscle.fanParticles.begin() + muscle.fanOffsets[k],
+                                  muscle.fanParticles.begin() + muscle.fanOffsets[k + 1]);
+    ASSERT_GE(p.size(), 4);
+    ASSERT_LE(p.size(), kMaxFanTetrahedra + 3);
+    std::vector<uint32_t> sorted = p;
+    std::sort(sorted.begin(), sorted.end());
+    EXPECT_EQ(std::adjacent_find(sorted.begin(), sorted.end()), sorted.end()) << k;
+    double sixVolume = 0;
+    for (size_t r = 2; r + 1 < p.size(); ++r) {
+      const double six = (x[p[1]] - x[p[0]]).dot((x[p[r]] - x[p[0]]).cross(x[p[r + 1]] - x[p[0]]));
+      EXPECT_GT(six, 0) << k;
+      sixVolume += six;
+      std::array<uint32_t, 4> t{p[0], p[1], p[r], p[r + 1]};
+      std::sort(t.begin(), t.end());
+      fromFans.push_back(t);
+    }
+    EXPECT_NEAR(sixVolume * muscle.fanInverseVolume[k], 1, 1e-3) << k;
+  }
+  for (size_t k = 0; k < muscle.tetInverseVolume.size(); ++k) {
+    std::array<uint32_t, 4> t;
+    std::copy_n(muscle.tetParticles.begin() + 4 * k, 4, t.begin());
+    std::sort(t.begin(), t.end());
+    tetrahedra.push_back(t);
+  }
+  std::sort(fromFans.begin(), fromFans.end());
+  std::sort(tetrahedra.begin(), tetrahedra.end());
+  EXPECT_EQ(fromFans, tetrahedra);
+  EXPECT_LT(muscle.fanParticles.size(), 0.6 * muscle.tetParticles.size());
+}
+
+// addMuscle refuses fans the kernels cannot take (named in the error), and runs fans whose byte
+// offsets were left stale on a copy that has them right: the same forces as prepared.
+TEST(VolumeTetrahedra, AddMuscleChecksTheFansAndLaysOutTheirOffsets) {
+  const LoadedScene scene = loadScene("cylinder-stretch", coarse({}));
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const MuscleSettings& muscle = *prepared.muscles.at(0);
+  ASSERT_GT(muscle.fanInverseVolume.size(), 1u);
+  const auto add = [&](MuscleSettings settings, MuscleSystem& system) {
+    std::vector<BoneHandle> bones;
+    for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+    return system.addMuscle(std::make_shared<const MuscleSettings>(std::move(settings)), bones);
+  };
+  const auto refused = [&](MuscleSettings bad) {
+    MuscleSystem system;
+    try {
+      add(std::move(bad), system);
+    } catch (const InputError& error) {
+      return std::string(error.what()).find("volume fans") != std::string::npos;
+    }
+    return false;
+  };
+  MuscleSettings shortOffsets = muscle;
+  shortOffsets.fanOffsets.pop_back();
+  EXPECT_TRUE(refused(shortOffsets));
+  MuscleSettings unsorted = muscle;  // the last fan (the most particles) first
+  std::swap(unsorted.fanOffsets[1], unsorted.fanOffsets[unsorted.fanOffsets.size() - 2]);
+  EXPECT_TRUE(refused(unsorted));
+  MuscleSettings outside = muscle;
+  outside.fanParticles.back() = static_cast<uint32_t>(muscle.particleCount());
+  EXPECT_TRUE(refused(outside));
+
+  MuscleSettings stale = muscle;
+  std::fill(stale.fanBytes.begin(), stale.fanBytes.end(), 0u);
+  MuscleSystem system;
+  const MuscleHandle handle = add(stale, system);
+  EXPECT_EQ(system.settings(handle).fanBytes, muscle.fanBytes);
 }
 
 // Beyond twice its rest volume a tetrahedron's strain is clamped to −1 and its pull fades as it

@@ -130,6 +130,10 @@ TEST(Reorder, EveryIndexFollowsThePermutation) {
     EXPECT_EQ(muscle.tetParticles, renumbered(old.tetParticles, false));
     EXPECT_EQ(muscle.tetInverseVolume, old.tetInverseVolume);
     EXPECT_EQ(muscle.tetRestGradient, old.tetRestGradient);
+    EXPECT_EQ(muscle.fanParticles, renumbered(old.fanParticles, false));
+    EXPECT_EQ(muscle.fanOffsets, old.fanOffsets);
+    EXPECT_EQ(muscle.fanInverseVolume, old.fanInverseVolume);
+    EXPECT_EQ(muscle.fanRestGradient, old.fanRestGradient);
     // What is not per particle stays.
     EXPECT_EQ(muscle.fibreOffsets, old.fibreOffsets);
     EXPECT_EQ(muscle.skinWeights, old.skinWeights);

@@ -64,7 +64,7 @@ void BenchScene::run(Part part) {
     case Part::VolumeForces:
       for (uint32_t slot : impl.muscles.order) {
         MuscleState& state = *impl.muscles.states[slot];
-        addTetrahedronForces(*state.settings, state.positions, state.forces);
+        addLocalVolumeForces(*state.settings, state.positions, state.forces);
       }
       break;
     case Part::AdaptiveTimeStep:

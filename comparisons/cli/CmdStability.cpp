@@ -20,11 +20,11 @@ namespace fibremss::cli {
 namespace {
 
 struct StabilityArgs {
-  std::vector<std::string> cases;      ///< CASE... (empty: the hard cases)
-  std::vector<std::string> overrides;  ///< --set, every case
-  std::string out = "stability";       ///< --out DIR
-  std::string calibration;             ///< --calibrate CASE ("": the options' default)
-  StabilityOptions options;            ///< integrators, factors, boxes
+  std::vector<std::string> cases;        ///< CASE... (empty: the hard cases)
+  std::vector<std::string> overrides;    ///< --set, every case
+  std::string out = "stability";         ///< --out DIR
+  std::vector<std::string> calibration;  ///< --calibrate CASE,... (empty: the options' default)
+  StabilityOptions options;              ///< integrators, factors, boxes
 };
 
 /// The key of an override "key=value".
@@ -48,7 +48,11 @@ void stability(StabilityArgs& args) {
   std::vector<StabilityCase> cases;
   for (const std::string& text : args.cases) cases.push_back(parseStabilityCase(text));
   if (cases.empty()) cases = defaultHardCases();
-  if (!args.calibration.empty()) args.options.calibration = parseStabilityCase(args.calibration);
+  if (!args.calibration.empty()) {
+    args.options.calibration.clear();
+    for (const std::string& text : args.calibration)
+      args.options.calibration.push_back(parseStabilityCase(text));
+  }
   addOverrides(args.options.overrides, args.overrides);
   for (const std::string& name : args.options.integrators) {
     Integrator kind{};
@@ -105,9 +109,11 @@ void addStabilityCommand(CLI::App& app) {
       ->delimiter(',')
       ->capture_default_str()
       ->check(positiveNumber());
-  command->add_option("--calibrate", args->calibration,
-                      "Case on which each integrator's stable step is measured (default: "
-                      "hip-extension)");
+  command
+      ->add_option("--calibrate", args->calibration,
+                   "Comma-separated cases on which each integrator's stable step is measured, "
+                   "the smallest kept (default: hip-extension,pinch,tension-spike)")
+      ->delimiter(',');
   command->add_option("--out", args->out, "Output directory")->capture_default_str();
   command
       ->add_option("--cell-seconds", args->options.cellSeconds,

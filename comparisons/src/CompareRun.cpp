@@ -345,6 +345,7 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation)
   converged.stopRule = StopRule::Residual;
   converged.tolerance = static_cast<btScalar>(kEquilibriumResidual);
   converged.iterations = kEquilibriumIterations;
+  converged.projectiveRho = static_cast<btScalar>(kEquilibriumRho);
   converged.motionFraction = static_cast<btScalar>(double(motion) / kEquilibriumIterations);
   // Persistent contacts, their particles held lighter (they slide to rest sooner): thigh13 R=20's
   // median pose left a residual about 7x below weight 10's at the cap (1.1e-4 against 7.2e-4 mm;

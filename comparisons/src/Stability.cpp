@@ -150,11 +150,12 @@ std::string seconds(double value) {
   return text;
 }
 
-/// The bisection of findStableStep on an already prepared calibration case.
-StableStep calibrate(PreparedCase& prepared, const std::string& integrator,
-                     const StabilityOptions& options) {
+/// The bisection of findStableStep on one already prepared calibration case.
+StableStep calibrate(PreparedCase& prepared, const StabilityCase& calibrationCase,
+                     const std::string& integrator, const StabilityOptions& options) {
   StableStep result;
   result.integrator = integrator;
+  result.limitedBy = calibrationCase.label;
   Integrator kind{};
   if (!fromString(integrator, kind))
     throw InputError("--integrators", integrator, "unknown integrator");
@@ -162,7 +163,7 @@ StableStep calibrate(PreparedCase& prepared, const std::string& integrator,
   if (!result.available) return result;
   auto stable = [&](double dt) {
     ++result.probes;
-    const StabilityCell cell = runPrepared(prepared, options.calibration.label, integrator, dt,
+    const StabilityCell cell = runPrepared(prepared, calibrationCase.label, integrator, dt,
                                            options.calibrationSteps, options);
     // Energy is no criterion here: relaxing noise from rest, it grows from zero at any dt.
     return cell.outcome == CellOutcome::Ok || cell.outcome == CellOutcome::Energy;
@@ -183,6 +184,34 @@ StableStep calibrate(PreparedCase& prepared, const std::string& integrator,
     (stable(middle) ? low : high) = middle;
   }
   result.dt = low;
+  return result;
+}
+
+/// Every calibration case prepared (first pose held, noise added), in options.calibration order.
+std::vector<PreparedCase> prepareCalibration(const StabilityOptions& options) {
+  if (options.calibration.empty())
+    throw InputError("--calibrate", "", "at least one calibration case is needed");
+  std::vector<PreparedCase> prepared;
+  for (const StabilityCase& calibrationCase : options.calibration)
+    prepared.push_back(prepareCase(calibrationCase, options, true));
+  return prepared;
+}
+
+/// findStableStep on prepared calibration cases: each case's bisection, the smallest step kept.
+StableStep calibrateAll(std::vector<PreparedCase>& prepared, const std::string& integrator,
+                        const StabilityOptions& options) {
+  StableStep result = calibrate(prepared.front(), options.calibration.front(), integrator, options);
+  for (size_t c = 1; c < prepared.size() && result.available && result.found; ++c) {
+    if (cancelled(options)) break;
+    const StableStep step = calibrate(prepared[c], options.calibration[c], integrator, options);
+    result.probes += step.probes;
+    result.capped = result.capped && step.capped;
+    if (!step.found || step.dt < result.dt) {
+      result.dt = step.dt;
+      result.found = step.found;
+      result.limitedBy = step.limitedBy;
+    }
+  }
   return result;
 }
 
@@ -300,15 +329,23 @@ StabilityCell runStabilityCell(const StabilityCase& stabilityCase, const std::st
   }
 }
 
-StableStep findStableStep(const std::string& integrator, const StabilityOptions& options) {
-  PreparedCase prepared = prepareCase(options.calibration, options, true);
-  return calibrate(prepared, integrator, options);
+std::string calibrationLabels(const StabilityOptions& options) {
+  std::string labels;
+  for (const StabilityCase& c : options.calibration)
+    labels += (labels.empty() ? "" : ", ") + c.label;
+  return labels;
 }
 
-StabilityCell runCalibrationProbe(const std::string& integrator, double dt,
+StableStep findStableStep(const std::string& integrator, const StabilityOptions& options) {
+  std::vector<PreparedCase> prepared = prepareCalibration(options);
+  return calibrateAll(prepared, integrator, options);
+}
+
+StabilityCell runCalibrationProbe(const StabilityCase& calibrationCase,
+                                  const std::string& integrator, double dt,
                                   const StabilityOptions& options) {
-  PreparedCase prepared = prepareCase(options.calibration, options, true);
-  return runPrepared(prepared, options.calibration.label, integrator, dt, options.calibrationSteps,
+  PreparedCase prepared = prepareCase(calibrationCase, options, true);
+  return runPrepared(prepared, calibrationCase.label, integrator, dt, options.calibrationSteps,
                      options);
 }
 
@@ -316,7 +353,8 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
                                    const StabilityOptions& options) {
   // Every scene loads (files, fields, overrides) before any work: bad input is an InputError,
   // not a matrix of error cells after minutes of calibration.
-  loadScene(options.calibration.scene, caseOverrides(options.calibration, options));
+  for (const StabilityCase& calibrationCase : options.calibration)
+    loadScene(calibrationCase.scene, caseOverrides(calibrationCase, options));
   for (const StabilityCase& stabilityCase : cases)
     loadScene(stabilityCase.scene, caseOverrides(stabilityCase, options));
   const auto start = Clock::now();
@@ -328,10 +366,10 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
       options.integrators.empty() ? allIntegratorNames() : options.integrators;
 
   {
-    log(options, "calibrating on " + options.calibration.label);
-    PreparedCase calibration = prepareCase(options.calibration, options, true);
+    log(options, "calibrating on " + calibrationLabels(options));
+    std::vector<PreparedCase> calibration = prepareCalibration(options);
     for (const std::string& integrator : integrators) {
-      const StableStep step = calibrate(calibration, integrator, options);
+      const StableStep step = calibrateAll(calibration, integrator, options);
       if (cancelled(options)) break;  // its bisection was cut short
       matrix.stableSteps.push_back(step);
       if (!step.available)
@@ -339,7 +377,8 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
       else
         log(options, "  " + integrator + ": stable step " + (step.capped ? ">= " : "") +
                          seconds(step.dt) + " s" + (step.found ? "" : " (none found; lowest)") +
-                         " after " + std::to_string(step.probes) + " probes");
+                         " on " + step.limitedBy + " after " + std::to_string(step.probes) +
+                         " probes");
     }
   }
 

@@ -36,24 +36,29 @@ std::string stableStepText(const StableStep& step) {
   return text;
 }
 
+nlohmann::json caseJson(const StabilityCase& c) {
+  return {{"label", c.label},
+          {"scene", c.scene},
+          {"overrides", c.overrides},
+          {"kappa_factor", c.kappaFactor}};
+}
+
 }  // namespace
 
 nlohmann::json stabilityJson(const StabilityMatrix& matrix, const StabilityOptions& options) {
   nlohmann::json cases = nlohmann::json::array(), steps = nlohmann::json::array(),
                  cells = nlohmann::json::array();
-  for (const StabilityCase& c : matrix.cases) {
-    cases.push_back({{"label", c.label},
-                     {"scene", c.scene},
-                     {"overrides", c.overrides},
-                     {"kappa_factor", c.kappaFactor}});
-  }
+  for (const StabilityCase& c : matrix.cases) cases.push_back(caseJson(c));
+  nlohmann::json calibrationCases = nlohmann::json::array();
+  for (const StabilityCase& c : options.calibration) calibrationCases.push_back(caseJson(c));
   for (const StableStep& s : matrix.stableSteps) {
     steps.push_back({{"integrator", s.integrator},
                      {"available", s.available},
                      {"dt", s.dt},
                      {"capped", s.capped},
                      {"found", s.found},
-                     {"probes", s.probes}});
+                     {"probes", s.probes},
+                     {"limited_by", s.limitedBy}});
   }
   for (const StabilityCell& cell : matrix.cells) {
     nlohmann::json energy = nlohmann::json::array();
@@ -74,9 +79,7 @@ nlohmann::json stabilityJson(const StabilityMatrix& matrix, const StabilityOptio
   }
   return {{"overrides", matrix.overrides},
           {"calibration",
-           {{"case", options.calibration.label},
-            {"scene", options.calibration.scene},
-            {"overrides", options.calibration.overrides},
+           {{"cases", calibrationCases},
             {"steps", options.calibrationSteps},
             {"noise", options.calibrationNoise},
             {"low", options.calibrationLow},
@@ -109,21 +112,23 @@ std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOpti
         << "stopped where it was (`interrupted`); cells not run show `—`.\n\n";
 
   out << "## Stable steps\n\n"
-      << "Measured, not derived: the largest fixed dt at which `" << options.calibration.label
-      << "`, its first pose held for " << options.calibrationSteps
+      << "Measured, not derived: the largest fixed dt at which each of `"
+      << calibrationLabels(options) << "`, its first pose held for " << options.calibrationSteps
       << " steps and its free particles displaced by up to "
       << number(options.calibrationNoise * 1000)
       << " mm at the start, ends without NaN/inf and without a spring beyond 3× its rest length "
-         "(the integrator's numerical limit on that spring network, free of the motion); "
+         "(the integrator's numerical limit on that spring network, free of the motion; the "
+         "smallest of the cases' steps, so that ×1 is stable on each case's own network); "
          "geometric bisection between "
       << number(options.calibrationLow) << " and " << number(options.calibrationHigh)
       << " s down to a ratio of " << number(options.calibrationRatio)
       << " (≥: stable at the largest dt tried). The cells then run the whole motion at a "
          "multiple of it; with a fixed iteration count per pose, dt also sets how fast the "
          "motion is in simulated time.\n\n"
-      << "| integrator | stable step | probes |\n|---|---|---|\n";
+      << "| integrator | stable step | set by | probes |\n|---|---|---|---|\n";
   for (const StableStep& step : matrix.stableSteps)
-    out << "| " << step.integrator << " | " << stableStepText(step) << " | " << step.probes
+    out << "| " << step.integrator << " | " << stableStepText(step) << " | "
+        << (step.available && !step.capped ? step.limitedBy : "—") << " | " << step.probes
         << " |\n";
 
   out << "\n## Matrix\n\nRows: cases; columns: integrator × factor on its stable step. "

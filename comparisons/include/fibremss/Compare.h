@@ -25,6 +25,12 @@ namespace fibremss {
 inline constexpr double kEquilibriumResidual = 1e-8;
 /// Its iteration cap per pose (a pose that reaches it is counted in RunMetrics::unconvergedPoses).
 inline constexpr int kEquilibriumIterations = 3000;
+/// Its projective ρ (SimulationParameters::projectiveRho; momentum ω = 2/(1 + √(1 − ρ²))): a run
+/// of thousands of iterations is left with the slowest modes, whose rate is closer to 1 than the
+/// 0.9 a 10-iteration pose is tuned for. fusiform R=12 with the fans, pose 2, iterations to a
+/// 1e-5 mm residual: ρ 0.9 none within 3 000 (1.2e-5 mm plateau), 0.98 2 544, 0.99 1 632, 0.995
+/// 1 088; with per-tetrahedron terms 496, 208, 144, 96 (docs/performance.md).
+inline constexpr double kEquilibriumRho = 0.99;
 /// The time-to-accuracy figure's bound: a pose within this RMS of its equilibrium [mm].
 inline constexpr double kEquilibriumAccuracyMm = 0.5;
 
@@ -93,9 +99,8 @@ int sharedPoses(const RunMetrics& a, const RunMetrics& b);
 double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose = nullptr);
 
 /// The scene's settings for the "equilibrium" method: the projective integrator and the residual
-/// stop rule at kEquilibriumResidual with kEquilibriumIterations as the cap, the bones moving over
-/// as many
-/// iterations as in the scene's own settings.
+/// stop rule at kEquilibriumResidual with kEquilibriumIterations as the cap, ρ kEquilibriumRho,
+/// the bones moving over as many iterations as in the scene's own settings.
 SimulationParameters equilibriumSettings(const SimulationParameters& simulation);
 
 /// Fills rmsToReferenceMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the

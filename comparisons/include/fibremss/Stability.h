@@ -60,7 +60,12 @@ struct StabilityOptions {
   std::vector<std::string> integrators;                 ///< names (empty: all ten)
   std::vector<double> dtFactors{1, 2, 5, 10, 100};      ///< multiples of the stable step
   std::vector<std::string> overrides{"resolution=12"};  ///< applied to every case (first)
-  StabilityCase calibration{"hip-extension", "hip-extension", {}, 1};  ///< stable-step scene
+  /// The stable-step cases: an integrator's stable step is the smallest of theirs, so that ×1 is
+  /// stable on every case's own network (not only on one scene's: the volume term makes pinch's
+  /// and tension-spike's stiffer than hip-extension's).
+  std::vector<StabilityCase> calibration{{"hip-extension", "hip-extension", {}, 1},
+                                         {"pinch", "pinch", {}, 1},
+                                         {"tension-spike", "tension-spike", {}, 1}};
   int calibrationSteps = 3;        ///< steps of each calibration probe
   double calibrationNoise = 1e-4;  ///< probes: free particles displaced up to this at start [m]
   double calibrationLow = 1e-7;    ///< smallest dt tried [s]
@@ -90,14 +95,15 @@ struct StabilityCell {
   std::vector<double> kineticEnergy;      ///< per step [J] (see runStabilityCell)
 };
 
-/// One integrator's stable step on the calibration case.
+/// One integrator's stable step on the calibration cases (the smallest of theirs).
 struct StableStep {
   std::string integrator;  ///< integrator name
   bool available = true;   ///< false: not implemented
-  double dt = 0;           ///< largest dt found stable [s] (calibrationLow when none was)
-  bool capped = false;     ///< stable even at calibrationHigh
-  bool found = true;       ///< false: unstable even at calibrationLow
-  int probes = 0;          ///< runs the bisection made
+  double dt = 0;           ///< largest dt found stable on every case [s] (calibrationLow when none)
+  bool capped = false;     ///< stable even at calibrationHigh on every case
+  bool found = true;       ///< false: unstable even at calibrationLow on some case
+  int probes = 0;          ///< runs the bisections made, all cases together
+  std::string limitedBy;   ///< label of the case that set dt (the first one with the smallest)
 };
 
 /// Runs `stabilityCase` (prepared here) with `integrator` at a fixed `dt`, the guard set to
@@ -109,15 +115,20 @@ struct StableStep {
 StabilityCell runStabilityCell(const StabilityCase& stabilityCase, const std::string& integrator,
                                double dt, const StabilityOptions& options);
 
-/// The largest stable fixed dt of `integrator` on options.calibration, by geometric bisection
-/// between calibrationLow and calibrationHigh. A probe holds the case's first pose for
-/// calibrationSteps steps, its free particles displaced by up to calibrationNoise at the start,
-/// and passes without NaN/inf and without a spring beyond 3× its rest length: the numerical
-/// stability limit of the integrator on that spring network, free of the motion (with a fixed
-/// iteration count per pose, a small dt makes the motion itself violent).
+/// The largest stable fixed dt of `integrator` on every case of options.calibration: per case by
+/// geometric bisection between calibrationLow and calibrationHigh, then the smallest. A probe
+/// holds the case's first pose for calibrationSteps steps, its free particles displaced by up to
+/// calibrationNoise at the start, and passes without NaN/inf and without a spring beyond 3× its
+/// rest length: the numerical stability limit of the integrator on that spring network, free of
+/// the motion (with a fixed iteration count per pose, a small dt makes the motion itself
+/// violent).
 StableStep findStableStep(const std::string& integrator, const StabilityOptions& options);
-/// One probe of findStableStep at `dt` (its outcome: ok, nan or exploded with the step).
-StabilityCell runCalibrationProbe(const std::string& integrator, double dt,
+/// The calibration cases' labels, comma-separated ("hip-extension, pinch, tension-spike").
+std::string calibrationLabels(const StabilityOptions& options);
+/// One probe of findStableStep on `calibrationCase` at `dt` (its outcome: ok, nan or exploded
+/// with the step).
+StabilityCell runCalibrationProbe(const StabilityCase& calibrationCase,
+                                  const std::string& integrator, double dt,
                                   const StabilityOptions& options);
 
 /// The whole matrix.

@@ -76,6 +76,18 @@ struct MuscleSettings {
   /// per tetrahedron: G0 = Σ over its four particles of |∂(6V)/∂x_i|² at rest, capped for
   /// poorly shaped ones (VolumeForces.h) [m⁴]
   std::vector<btScalar> tetRestGradient;
+  // The same tetrahedra as fans around their edges, each fan one volume term (its m ≤ 4
+  // tetrahedra's summed volume): fan f is the particles a, b, r_0 .. r_m at
+  // fanParticles[fanOffsets[f] .. fanOffsets[f+1]), its tetrahedra (a, b, r_k, r_k+1) of positive
+  // rest orientation; sorted by their count of particles. The forces and the stable step use the
+  // fans; the projective solver's matrix the tetrahedra.
+  std::vector<uint32_t> fanParticles;   ///< particle indices, m + 3 per fan of m tetrahedra
+  std::vector<uint32_t> fanOffsets{0};  ///< fan count + 1 entries
+  std::vector<uint32_t> fanBytes;       ///< fanParticles × sizeof(btVector3): the kernels' offsets
+  std::vector<btScalar> fanInverseVolume;  ///< per fan: 1 / (6·V0) [1/m³]
+  /// per fan: G0 = Σ over its particles of |∂(6V)/∂x_i|² at rest, capped for poorly shaped ones
+  /// [m⁴]
+  std::vector<btScalar> fanRestGradient;
   // Enclosed-volume term (VolumeForces.h): one pressure per muscle on the volume the interior
   // Delaunay tetrahedra (all of them, slivers too) enclose, through the faces of their boundary;
   // empty when enclosedModulus is 0.

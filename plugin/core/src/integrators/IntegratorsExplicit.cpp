@@ -164,7 +164,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
     }
     for (size_t s = 1; s < weights_.size(); ++s) {
       springForces(settings, stage.positions, stage.forces);
-      addTetrahedronForces(settings, stage.positions, stage.forces);
+      addLocalVolumeForces(settings, stage.positions, stage.forces);
       addEnclosedVolumeForces(settings, stage.positions, stage.forces);
       addExternalForces(muscle, parameters.gravity, stage.forces);
       const btScalar weight = weights_[s];

@@ -6,13 +6,14 @@
 #include <utility>
 
 #include "solver/SpringForces.h"
+#include "solver/VolumeForces.h"
 
 namespace fibremss::detail {
 namespace {
 
 // A new field of MuscleSettings may hold particle indices or per-particle values: remap it in
 // reorderParticles, then update this size (libstdc++, x86-64).
-static_assert(sizeof(MuscleSettings) == 680 + 2 * sizeof(btScalar),
+static_assert(sizeof(MuscleSettings) == 680 + 120 + 2 * sizeof(btScalar),
               "MuscleSettings changed: remap its new fields in reorderParticles");
 
 /// Spreads the low 10 bits of v to every third bit (bit i to bit 3i).
@@ -93,6 +94,8 @@ void reorderParticles(MuscleSettings& muscle, std::span<const uint32_t> order) {
   // Each keeps its sequence, hence its orientation (tetInverseVolume and tetRestGradient hold,
   // and the faces still face out).
   renumber(muscle.tetParticles);
+  renumber(muscle.fanParticles);
+  muscle.fanBytes = fanBytes(muscle.fanParticles);
   renumber(muscle.enclosedFaces);
 
   for (Spring& spring : muscle.springs) {

@@ -123,7 +123,159 @@ bool shareStiffnessByVolume(std::span<const btVector3> x, std::span<const Tetrah
   return true;
 }
 
+namespace {
+
+/// Tetrahedron k has the edge (i, j), i < j.
+struct EdgeIncidence {
+  uint32_t i, j, k;
+  auto operator<=>(const EdgeIncidence&) const = default;
+};
+
+/// The tetrahedra around one edge (i, j): incidences [first, first + count).
+struct EdgeShell {
+  uint32_t a, b;
+  size_t first, count;
+};
+
+/// Every edge of the tetrahedra with the tetrahedra around it (`incidences` sorted), the edges
+/// with more tetrahedra first, then by their particles.
+std::vector<EdgeShell> edgeShells(std::span<const Tetrahedron> tetrahedra,
+                                  std::vector<EdgeIncidence>& incidences) {
+  for (uint32_t k = 0; k < tetrahedra.size(); ++k)
+    for (int p = 0; p < 4; ++p)
+      for (int q = p + 1; q < 4; ++q)
+        incidences.push_back({std::min(tetrahedra[k][p], tetrahedra[k][q]),
+                              std::max(tetrahedra[k][p], tetrahedra[k][q]), k});
+  std::sort(incidences.begin(), incidences.end());
+  std::vector<EdgeShell> shells;
+  for (size_t s = 0; s < incidences.size();) {
+    size_t e = s;
+    while (e < incidences.size() && incidences[e].i == incidences[s].i &&
+           incidences[e].j == incidences[s].j)
+      ++e;
+    shells.push_back({incidences[s].i, incidences[s].j, s, e - s});
+    s = e;
+  }
+  std::stable_sort(shells.begin(), shells.end(),
+                   [](const EdgeShell& l, const EdgeShell& r) { return l.count > r.count; });
+  return shells;
+}
+
+/// The unused tetrahedra around `shell` in their order around it: each as the step p → q of the
+/// ring (turned so that (a, b, p, q) has positive volume at x) and its index; empty when two
+/// steps leave or reach the same particle (the tetrahedra do not fan around the edge).
+std::vector<std::array<uint32_t, 3>> ringSteps(std::span<const btVector3> x,
+                                               std::span<const Tetrahedron> tetrahedra,
+                                               std::span<const EdgeIncidence> around,
+                                               const EdgeShell& shell,
+                                               const std::vector<uint8_t>& used) {
+  std::vector<std::array<uint32_t, 3>> steps;  // p, q, tetrahedron
+  for (const EdgeIncidence& incidence : around) {
+    if (used[incidence.k]) continue;
+    uint32_t other[2], n = 0;
+    for (uint32_t v : tetrahedra[incidence.k])
+      if (v != shell.a && v != shell.b) other[n++] = v;
+    const btVector3 e = x[shell.b] - x[shell.a];
+    if (e.dot((x[other[0]] - x[shell.a]).cross(x[other[1]] - x[shell.a])) < 0)
+      std::swap(other[0], other[1]);
+    steps.push_back({other[0], other[1], incidence.k});
+  }
+  for (size_t u = 0; u < steps.size(); ++u)
+    for (size_t w = u + 1; w < steps.size(); ++w)
+      if (steps[u][0] == steps[w][0] || steps[u][1] == steps[w][1]) return {};
+  return steps;
+}
+
+/// The steps in runs around the edge: each run a chain p → q → … of consecutive steps; a closed
+/// ring without one of them.
+std::vector<std::vector<size_t>> ringRuns(const std::vector<std::array<uint32_t, 3>>& steps) {
+  const auto find = [&](uint32_t particle, int end) -> size_t {
+    for (size_t u = 0; u < steps.size(); ++u)
+      if (steps[u][static_cast<size_t>(end)] == particle) return u;
+    return steps.size();
+  };
+  std::vector<uint8_t> placed(steps.size(), 0);
+  std::vector<std::vector<size_t>> runs;
+  for (size_t start = 0; start < steps.size(); ++start) {
+    if (placed[start]) continue;
+    size_t first = start;  // back to the run's first step (or once around a ring)
+    for (size_t previous = find(steps[first][0], 1);
+         previous < steps.size() && previous != start && !placed[previous];
+         previous = find(steps[first][0], 1))
+      first = previous;
+    std::vector<size_t> run{first};
+    placed[first] = 1;
+    for (size_t next = find(steps[first][1], 0); next < steps.size() && !placed[next];
+         next = find(steps[run.back()][1], 0)) {
+      run.push_back(next);
+      placed[next] = 1;
+    }
+    // A closed ring loses its last step, so that no fan has a particle twice.
+    if (run.size() > 1 && steps[run.back()][1] == steps[run.front()][0]) run.pop_back();
+    runs.push_back(std::move(run));
+  }
+  return runs;
+}
+
+/// The tetrahedra as fans around their edges (MuscleSettings::fanParticles): greedily, runs of
+/// at least `size` unused tetrahedra around an edge, edges with more tetrahedra first, for size
+/// kMaxFanTetrahedra down to 2, cut into fans of at most kMaxFanTetrahedra; the rest one each.
+/// A fan's particles are a, b, r_0 .. r_m (m tetrahedra (a, b, r_k, r_k+1), positive at x).
+std::vector<std::vector<uint32_t>> fansOf(std::span<const btVector3> x,
+                                          std::span<const Tetrahedron> tetrahedra) {
+  std::vector<EdgeIncidence> incidences;
+  const std::vector<EdgeShell> shells = edgeShells(tetrahedra, incidences);
+  std::vector<uint8_t> used(tetrahedra.size(), 0);
+  std::vector<std::vector<uint32_t>> fans;
+  for (size_t size = kMaxFanTetrahedra; size >= 2; --size)
+    for (const EdgeShell& shell : shells) {
+      const auto steps = ringSteps(
+          x, tetrahedra, std::span(incidences).subspan(shell.first, shell.count), shell, used);
+      if (steps.size() < size) continue;
+      for (const std::vector<size_t>& run : ringRuns(steps))
+        for (size_t from = 0; from + size <= run.size(); from += kMaxFanTetrahedra) {
+          const size_t to = std::min(run.size(), from + kMaxFanTetrahedra);
+          std::vector<uint32_t> fan{shell.a, shell.b};
+          for (size_t u = from; u < to; ++u) {
+            fan.push_back(steps[run[u]][0]);
+            used[steps[run[u]][2]] = 1;
+          }
+          fan.push_back(steps[run[to - 1]][1]);
+          fans.push_back(std::move(fan));
+        }
+    }
+  for (uint32_t k = 0; k < tetrahedra.size(); ++k)
+    if (!used[k]) fans.push_back({tetrahedra[k].begin(), tetrahedra[k].end()});
+  std::sort(fans.begin(), fans.end(), [](const auto& l, const auto& r) {
+    return l.size() != r.size() ? l.size() < r.size() : l < r;
+  });
+  return fans;
+}
+
+/// Fills the muscle's fans from `fans` (fansOf) with their rest volumes and G0.
+void buildFans(MuscleSettings& muscle, const std::vector<std::vector<uint32_t>>& fans) {
+  muscle.fanParticles.clear();
+  muscle.fanOffsets.assign(1, 0);
+  muscle.fanInverseVolume.clear();
+  muscle.fanRestGradient.clear();
+  for (const std::vector<uint32_t>& fan : fans) {
+    const FanGradients rest = fanGradients(muscle.restPositions.data(), fan);
+    muscle.fanParticles.insert(muscle.fanParticles.end(), fan.begin(), fan.end());
+    muscle.fanOffsets.push_back(static_cast<uint32_t>(muscle.fanParticles.size()));
+    const double sixVolume = rest.sixVolume;
+    muscle.fanInverseVolume.push_back(static_cast<btScalar>(1 / sixVolume));
+    // A poorly shaped fan is stiff along its gradient out of proportion to its volume
+    // (K·G0/(36·V0)): capped, it keeps its rest volume with a softer term.
+    const double cap = kMaxRestGradient * std::pow(sixVolume, 4.0 / 3);
+    muscle.fanRestGradient.push_back(static_cast<btScalar>(std::min(double(rest.squared), cap)));
+  }
+  muscle.fanBytes = fanBytes(muscle.fanParticles);
+}
+
+}  // namespace
+
 void buildVolumeTetrahedra(MuscleSettings& muscle, std::span<const Tetrahedron> interior) {
+  buildFans(muscle, {});
   muscle.tetParticles.clear();
   muscle.tetInverseVolume.clear();
   muscle.tetRestGradient.clear();
@@ -155,6 +307,7 @@ void buildVolumeTetrahedra(MuscleSettings& muscle, std::span<const Tetrahedron> 
     muscle.tetRestGradient.push_back(
         static_cast<btScalar>(std::min(double(squaredVolumeGradient(x, t)), cap)));
   }
+  buildFans(muscle, fansOf(x, kept));
 }
 
 namespace {

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 
+#include "ParticleSimd.h"
+#include "VolumeForces.h"
+
 namespace fibremss {
 namespace {
 
@@ -31,30 +34,92 @@ void touchParticles(const MuscleSettings& settings, SpringKernel kernel, ForceCh
       touch(chunk, settings.springs[s].b);
     }
   }
-  for (size_t k = 4 * chunk.tetBegin; k < 4 * chunk.tetEnd; ++k)
-    touch(chunk, settings.tetParticles[k]);
+  for (size_t k = settings.fanOffsets[chunk.fanBegin]; k < settings.fanOffsets[chunk.fanEnd]; ++k)
+    touch(chunk, settings.fanParticles[k]);
 }
 
+/// `end` moved to the nearest multiple of kFanLaneGroup fans from the start of its class (the
+/// fans with as many particles as fan `end`), at most to the class's end: a chunk's share of a
+/// class then runs in whole lane groups, with fans one at a time only at the class's end.
+size_t groupedFanEnd(const MuscleSettings& settings, size_t end) {
+  const std::span<const uint32_t> offsets = settings.fanOffsets;
+  const size_t fans = offsets.size() - 1;
+  if (end >= fans) return fans;
+  const size_t count = offsets[end + 1] - offsets[end];
+  const size_t first = fansUpTo(settings, 0, end, count - 1);
+  const size_t last = fansUpTo(settings, end, fans, count);
+  const size_t grouped = first + (end - first + kFanLaneGroup / 2) / kFanLaneGroup * kFanLaneGroup;
+  return std::min(grouped, last);
+}
+
+#if FIBREMSS_AVX2_PARTICLES
+/// clearForces four vectors per iteration (float: two per 256-bit store).
+FIBREMSS_AVX2_PASS void clearForcesAvx2(std::span<btVector3> forces) {
+  float* f = forces.data()->m_floats;
+  const size_t floats = 4 * forces.size(), blocks = floats & ~size_t{15};
+  const __m256 zero = _mm256_setzero_ps();
+  for (size_t k = 0; k < blocks; k += 16) {
+    _mm256_storeu_ps(f + k, zero);
+    _mm256_storeu_ps(f + k + 8, zero);
+  }
+  std::fill(f + blocks, f + floats, 0.0f);
+}
+
+/// addForces four vectors per iteration.
+FIBREMSS_AVX2_PASS void addForcesAvx2(std::span<btVector3> to, std::span<const btVector3> from) {
+  float* t = to.data()->m_floats;
+  const float* f = from.data()->m_floats;
+  const size_t floats = 4 * to.size(), blocks = floats & ~size_t{15};
+  for (size_t k = 0; k < blocks; k += 16) {
+    _mm256_storeu_ps(t + k, _mm256_add_ps(_mm256_loadu_ps(t + k), _mm256_loadu_ps(f + k)));
+    _mm256_storeu_ps(t + k + 8,
+                     _mm256_add_ps(_mm256_loadu_ps(t + k + 8), _mm256_loadu_ps(f + k + 8)));
+  }
+  for (size_t k = blocks; k < floats; ++k) t[k] += f[k];
+}
+#endif
+
 }  // namespace
+
+void clearForces(std::span<btVector3> forces) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2) return clearForcesAvx2(forces);
+#endif
+  std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));
+}
+
+void addForces(std::span<btVector3> to, std::span<const btVector3> from) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2) return addForcesAvx2(to, from);
+#endif
+  for (size_t i = 0; i < to.size(); ++i)
+    for (int k = 0; k < 4; ++k) to[i].m_floats[k] += from[i].m_floats[k];
+}
 
 std::vector<ForceChunk> forceChunks(const MuscleSettings& settings, SpringKernel kernel,
                                     size_t work) {
   const size_t springs = springLayoutSize(settings, kernel);
-  const size_t tetrahedra = settings.tetInverseVolume.size();
-  const size_t total = springs + kTetrahedronWork * tetrahedra;
+  const std::span<const uint32_t> offsets = settings.fanOffsets;
+  const size_t particles = offsets.back();  // of the fans, with repeats
+  const size_t total = springs + kFanParticleWork * particles;
   const size_t count = std::max<size_t>(1, (total + work / 2) / std::max<size_t>(work, 1));
   std::vector<ForceChunk> chunks(count);
-  size_t springBegin = 0;
+  size_t springBegin = 0, fanBegin = 0;
   for (size_t c = 0; c < count; ++c) {
     ForceChunk& chunk = chunks[c];
     chunk.springBegin = springBegin;
     chunk.springEnd =
         std::max(springBegin, springLayoutBoundary(settings, kernel, springs * (c + 1) / count));
     springBegin = chunk.springEnd;
-    chunk.tetBegin = tetrahedra * c / count;
-    chunk.tetEnd = tetrahedra * (c + 1) / count;
-    chunk.work =
-        chunk.springEnd - chunk.springBegin + kTetrahedronWork * (chunk.tetEnd - chunk.tetBegin);
+    chunk.fanBegin = fanBegin;  // the fans whose particles start below the chunk's share
+    chunk.fanEnd = std::max(
+        fanBegin, groupedFanEnd(settings, static_cast<size_t>(
+                                              std::lower_bound(offsets.begin(), offsets.end() - 1,
+                                                               particles * (c + 1) / count) -
+                                              offsets.begin())));
+    fanBegin = chunk.fanEnd;
+    chunk.work = chunk.springEnd - chunk.springBegin +
+                 kFanParticleWork * (offsets[chunk.fanEnd] - offsets[chunk.fanBegin]);
     touchParticles(settings, kernel, chunk);
   }
   return chunks;

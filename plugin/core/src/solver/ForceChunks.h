@@ -16,15 +16,15 @@
 
 namespace fibremss {
 
-/// What one tetrahedron of the volume term costs against one spring (kernel instructions on
-/// AVX2: about 63 against 17, thigh13 R=40 under callgrind).
-constexpr size_t kTetrahedronWork = 4;
+/// What one particle of a volume term's fan costs against one spring (kernel instructions on
+/// AVX2, thigh13 R=20 under callgrind: about 16 per fan particle, 17 per spring).
+constexpr size_t kFanParticleWork = 1;
 
-/// Work per chunk by default, in springs (a tetrahedron counts kTetrahedronWork): thigh13 R=40
-/// (about 74 000 per muscle) runs 60 chunks, four or five per muscle; at R=20 two per muscle.
-/// Halving it from 32 768 (28 chunks at R=40, R=20 muscles whole) raised the pool's schedule
-/// bound on 2 threads from 1.93× to 1.94× at R=40 and from 1.88× to 1.91× at R=20; at 1 thread
-/// a 10-iteration step at R=40 costs +1.9 % instructions against one task per muscle
+/// Work per chunk by default, in springs (a fan's particle counts kFanParticleWork): thigh13 R=40
+/// runs 39 chunks, R=20 20 (one term per tetrahedron, counted 4 springs each, gave 60 and 26).
+/// Halving it from 32 768 (then 28 chunks at R=40, R=20 muscles whole) raised the pool's
+/// schedule bound on 2 threads from 1.93× to 1.94× at R=40 and from 1.88× to 1.91× at R=20; at 1
+/// thread a 10-iteration step at R=40 costs +1.9 % instructions against one task per muscle
 /// (docs/performance.md).
 constexpr size_t kForceChunkWork = 16384;
 
@@ -33,12 +33,18 @@ struct ForceChunk {
   /// Its springs: a range of the kernel's layout (springLayoutSize; its ends are boundaries).
   size_t springBegin = 0;
   size_t springEnd = 0;  ///< see springBegin
-  size_t tetBegin = 0;   ///< its tetrahedra [tetBegin, tetEnd) of settings.tetParticles
-  size_t tetEnd = 0;     ///< see tetBegin
+  size_t fanBegin = 0;   ///< its volume terms: fans [fanBegin, fanEnd) of settings.fanOffsets
+  size_t fanEnd = 0;     ///< see fanBegin
   uint32_t lower = 0;    ///< the particles its springs and tetrahedra touch: [lower, upper)
   uint32_t upper = 0;    ///< see lower
-  size_t work = 0;       ///< springs (or lanes) + kTetrahedronWork · tetrahedra
+  size_t work = 0;       ///< springs (or lanes) + kFanParticleWork · the fans' particles
 };
+
+/// Sets every vector of `forces` to zero (a chunk's buffer before its pass).
+void clearForces(std::span<btVector3> forces);
+/// to[i] += from[i] over all four lanes (w is 0 in both: a chunk's buffer added to the muscle's
+/// forces); per lane the same sum whatever the instruction set.
+void addForces(std::span<btVector3> to, std::span<const btVector3> from);
 
 /// The muscle's forces pass in about total work / `work` chunks of nearly equal work (at least
 /// one) for `kernel`'s spring layout.

@@ -13,6 +13,7 @@
 #include "Skin.h"
 #include "SpringForces.h"
 #include "TimeStep.h"
+#include "VolumeForces.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
 
@@ -111,6 +112,13 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       laidOut->springBlocks = std::move(blocks);
       settings = std::move(laidOut);
     }
+  }
+  checkFans(*settings, "MuscleSystem::addMuscle");
+  // The volume kernels read the fans' particles as byte offsets (fanBytes): the same for those.
+  if (std::vector<uint32_t> bytes = fanBytes(settings->fanParticles); bytes != settings->fanBytes) {
+    auto laidOut = std::make_shared<MuscleSettings>(*settings);
+    laidOut->fanBytes = std::move(bytes);
+    settings = std::move(laidOut);
   }
   const MuscleSettings& s = *settings;
   const char* source = "MuscleSystem::addMuscle";

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "VolumeForces.h"
 #include "fibremss/Error.h"
 
 namespace fibremss {
@@ -55,6 +56,31 @@ void checkRadii(std::span<const btScalar> radii, const std::string& call) {
     if (!(radii[i] >= 0) || !(radii[i] <= kMaxCoordinate))
       throw InputError(call, "radius " + std::to_string(i),
                        "expected a finite radius in [0, 1e6] m, got " + format(radii[i]));
+}
+
+void checkFans(const MuscleSettings& settings, const std::string& call) {
+  const std::string where = "muscle '" + settings.name + "' volume fans";
+  const std::vector<uint32_t>& offsets = settings.fanOffsets;
+  const size_t fans = settings.fanInverseVolume.size();
+  if (settings.fanRestGradient.size() != fans || offsets.size() != fans + 1 || offsets[0] != 0 ||
+      offsets.back() != settings.fanParticles.size())
+    throw InputError(call, where,
+                     "expected fanOffsets from 0 to fanParticles' size, one entry more than the " +
+                         std::to_string(fans) + " of fanInverseVolume and fanRestGradient");
+  for (size_t k = 0; k < fans; ++k) {
+    const size_t count = offsets[k + 1] >= offsets[k] ? offsets[k + 1] - offsets[k] : 0;
+    const size_t least = k > 0 ? offsets[k] - offsets[k - 1] : 4;
+    if (count < least || count > kMaxFanTetrahedra + 3)
+      throw InputError(call, where + ", fan " + std::to_string(k),
+                       "expected 4 to " + std::to_string(kMaxFanTetrahedra + 3) +
+                           " particles, no fewer than the fan before, got " +
+                           std::to_string(count));
+  }
+  for (uint32_t i : settings.fanParticles)
+    if (i >= settings.particleCount())
+      throw InputError(call, where,
+                       "expected particle indices below " +
+                           std::to_string(settings.particleCount()) + ", got " + std::to_string(i));
 }
 
 bool finiteTransform(const btTransform& transform) {

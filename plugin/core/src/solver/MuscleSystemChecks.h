@@ -5,6 +5,7 @@
 #include <string>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
 #include "fibremss/Parameters.h"
 
 namespace fibremss {
@@ -20,6 +21,11 @@ void checkPoints(std::span<const btVector3> points, const std::string& call,
 
 /// Every radius finite in [0, kMaxCoordinate].
 void checkRadii(std::span<const btScalar> radii, const std::string& call);
+
+/// The local volume terms' fans consistent: fanOffsets from 0 to fanParticles' size with one
+/// entry more than fanInverseVolume and fanRestGradient have, each fan 4 to kMaxFanTetrahedra + 3
+/// particles of the muscle, the fans sorted by their count (the kernels take them by count).
+void checkFans(const MuscleSettings& settings, const std::string& call);
 
 /// Whether the transform's rotation and translation are finite.
 bool finiteTransform(const btTransform& transform);

@@ -365,16 +365,16 @@ void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
   const ForceChunk& chunk = state.forceChunks[task.chunk];
   std::span<btVector3> forces = state.forces;
   if (task.chunk == 0) {
-    std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));
+    clearForces(forces);
   } else {
     forces = std::span(state.chunkForces).subspan(state.chunkBase[task.chunk], chunk.upper);
-    std::fill(forces.begin() + chunk.lower, forces.end(), btVector3(0, 0, 0));
+    clearForces(forces.subspan(chunk.lower));
   }
   const SpringKernel kernel = fastestSpringKernel();
   state.chunkSprings[task.chunk] = addSpringForces(settings, state.positions, forces, kernel,
                                                    chunk.springBegin, chunk.springEnd);
   const Clock::time_point volumeStart = Clock::now();
-  addTetrahedronForces(settings, state.positions, forces, kernel, chunk.tetBegin, chunk.tetEnd);
+  addLocalVolumeForces(settings, state.positions, forces, kernel, chunk.fanBegin, chunk.fanEnd);
   if (task.chunk == 0) addEnclosedVolumeForces(settings, state.positions, forces);
   state.chunkVolumeMs[task.chunk] = millisecondsSince(volumeStart);
   state.chunkMs[task.chunk] = millisecondsSince(start);
@@ -388,10 +388,10 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
   for (size_t c = 0; c < state.forceChunks.size(); ++c) {
     if (c > 0) {
       const ForceChunk& chunk = state.forceChunks[c];
-      const btVector3* add = state.chunkForces.data() + state.chunkBase[c];
-      // All four lanes (w is 0 in both), one vector add per particle.
-      for (uint32_t i = chunk.lower; i < chunk.upper; ++i)
-        for (int k = 0; k < 4; ++k) state.forces[i].m_floats[k] += add[i].m_floats[k];
+      const size_t count = chunk.upper - chunk.lower;
+      addForces(std::span(state.forces).subspan(chunk.lower, count),
+                std::span<const btVector3>(state.chunkForces)
+                    .subspan(state.chunkBase[c] + chunk.lower, count));
     }
     result.forces.deviation += state.chunkSprings[c].deviation;
     result.forces.overstretched += state.chunkSprings[c].overstretched;
@@ -399,7 +399,7 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
     result.volumeMs += state.chunkVolumeMs[c];
   }
   result.forces.exploded = result.forces.overstretched > 0;
-  if (state.settings->tetInverseVolume.empty() && state.settings->enclosedFaces.empty())
+  if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
     result.volumeMs = 0;
   addExternalForces(state, parameters.gravity, state.forces);
   if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);

@@ -12,18 +12,17 @@
 namespace fibremss {
 namespace {
 
-/// Adds K·inverse·(G0/G)/6·|∂(6V)/∂x_i|² of each tetrahedron to its particles' traces
-/// (1/V0 = 6·inverse, ∂V/∂x_i a sixth of the gradient; G the rest gradient sum, uncapped).
-void addTetrahedronTraces(const MuscleSettings& settings, std::vector<btScalar>& trace) {
-  for (size_t k = 0; k < settings.tetInverseVolume.size(); ++k) {
-    const RestGradients rest = restTetrahedronGradients(settings, k);
-    btScalar gradient = 0;
-    for (const btVector3& g : rest.gradients) gradient += g.length2();
-    if (!(gradient > 0)) continue;
-    const btScalar scale = settings.volumeModulus * settings.tetInverseVolume[k] *
-                           settings.tetRestGradient[k] / gradient / 6;
-    for (size_t i = 0; i < 4; ++i)
-      trace[settings.tetParticles[4 * k + i]] += scale * rest.gradients[i].length2();
+/// Adds K·inverse·(G0/G)/6·|∂(6V)/∂x_i|² of each fan of the local volume terms to its
+/// particles' traces (1/V0 = 6·inverse, ∂V/∂x_i a sixth of the gradient; G the rest gradient
+/// sum, uncapped).
+void addFanTraces(const MuscleSettings& settings, std::vector<btScalar>& trace) {
+  for (size_t k = 0; k < settings.fanInverseVolume.size(); ++k) {
+    const std::span<const uint32_t> p = fanParticles(settings, k);
+    const FanGradients rest = fanGradients(settings.restPositions.data(), p);
+    if (!(rest.squared > 0)) continue;
+    const btScalar scale = settings.volumeModulus * settings.fanInverseVolume[k] *
+                           settings.fanRestGradient[k] / rest.squared / 6;
+    for (size_t v = 0; v < p.size(); ++v) trace[p[v]] += scale * rest.gradients[v].length2();
   }
 }
 
@@ -43,7 +42,7 @@ std::vector<btScalar> residualStiffness(const MuscleSettings& settings) {
     trace[spring.a] += spring.stiffness;
     trace[spring.b] += spring.stiffness;
   }
-  addTetrahedronTraces(settings, trace);
+  addFanTraces(settings, trace);
   addEnclosedTraces(settings, trace);
   for (btScalar& k : trace) k /= 3;
   return trace;
@@ -92,7 +91,7 @@ ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity) {
   const MuscleSettings& settings = *muscle.settings;
   std::vector<btVector3>& r = muscle.residual;
   springForces(settings, muscle.positions, r);
-  addTetrahedronForces(settings, muscle.positions, r);
+  addLocalVolumeForces(settings, muscle.positions, r);
   addEnclosedVolumeForces(settings, muscle.positions, r);
   addExternalForces(muscle, gravity, r);
   for (uint32_t i : settings.fixedParticles) r[i].setZero();

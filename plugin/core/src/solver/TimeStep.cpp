@@ -218,7 +218,7 @@ btScalar stableTimeStep(const MuscleSettings& settings, Integrator kind) {
     if (!settings.isFixed(spring.a)) stiffness[spring.a] += spring.stiffness;
     if (!settings.isFixed(spring.b)) stiffness[spring.b] += spring.stiffness;
   }
-  addTetrahedronStiffness(settings, stiffness);
+  addLocalVolumeStiffness(settings, stiffness);
   addEnclosedVolumeStiffness(settings, stiffness);
   const btScalar stiffest =
       stiffness.empty() ? 0 : *std::max_element(stiffness.begin(), stiffness.end());

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <type_traits>
 #include <vector>
 
 #include "ParticleSimd.h"
@@ -13,13 +16,6 @@ namespace {
 /// normalisation G0/G: only a tetrahedron shrunk towards a point comes near it.
 constexpr btScalar kMinGradientShare = btScalar(0.01);
 
-/// The tetrahedra of a muscle (MuscleSettings::tetParticles, tetInverseVolume, tetRestGradient).
-struct Tetrahedra {
-  const uint32_t* particles;
-  const btScalar* inverseVolume;  ///< 1/(6·V0) [1/m³]
-  const btScalar* restGradient;   ///< G0 [m⁴]
-};
-
 /// 1 − V/V0 from V/V0 for the force, clamped to [−1, 1]: an inverted tetrahedron is pushed open
 /// and one beyond twice its rest volume pulled together with the force of strain ±1 (scaled by
 /// G0/G, so the pull of a stretched one fades as it grows), never switched off: a switch would
@@ -29,24 +25,16 @@ inline btScalar clampedStrain(btScalar ratio) {
   return std::min(std::max(1 - ratio, btScalar(-1)), btScalar(1));
 }
 
-/// Tetrahedra [begin, end) one at a time, modulus a sixth of K (the scalar kernel, and the
-/// SIMD passes' last count mod 4).
-void scalarTetrahedra(Tetrahedra t, size_t begin, size_t end, btScalar modulus, const btVector3* x,
-                      btVector3* f) {
-  for (size_t k = begin; k < end; ++k) {
-    const uint32_t* tk = t.particles + 4 * k;
-    const btVector3 origin = x[tk[0]];
-    const btVector3 a = x[tk[1]] - origin, b = x[tk[2]] - origin, c = x[tk[3]] - origin;
-    const btVector3 ga = b.cross(c), gb = c.cross(a), gc = a.cross(b), g0 = ga + gb + gc;
-    const btScalar gradient = ga.length2() + gb.length2() + gc.length2() + g0.length2();
-    const btScalar rest = t.restGradient[k];
-    const btScalar scale = modulus * clampedStrain(a.dot(ga) * t.inverseVolume[k]) * rest /
-                           std::max(gradient, rest * kMinGradientShare);
-    f[tk[0]] -= g0 * scale;
-    f[tk[1]] += ga * scale;
-    f[tk[2]] += gb * scale;
-    f[tk[3]] += gc * scale;
-  }
+/// Fan k's forces alone (the scalar kernel, and the groups' tails), modulus a sixth of K: the
+/// lanes' operations in their order.
+void scalarFan(const MuscleSettings& settings, size_t k, btScalar modulus, const btVector3* x,
+               btVector3* f) {
+  const std::span<const uint32_t> p = fanParticles(settings, k);
+  const FanGradients g = fanGradients(x, p);
+  const btScalar rest = settings.fanRestGradient[k];
+  const btScalar scale = modulus * clampedStrain(g.sixVolume * settings.fanInverseVolume[k]) *
+                         rest / std::max(g.squared, rest * kMinGradientShare);
+  for (size_t v = 0; v < p.size(); ++v) f[p[v]] += g.gradients[v] * scale;
 }
 
 }  // namespace
@@ -160,138 +148,235 @@ __attribute__((always_inline)) inline Lanes<V> sum(const Lanes<V>& a, const Lane
   return {(a.x + b.x) + c.x, (a.y + b.y) + c.y, (a.z + b.z) + c.z};
 }
 
-/// Tetrahedra k, k + groups, k + 2·groups and k + 3·groups (one per lane) of group k: their
-/// particles in i[j], their 1/(6·V0) in the returned lanes, their G0 in `restGradient`.
-inline __m128 groupTetrahedra(Tetrahedra t, size_t k, size_t groups, uint32_t (&i)[4][4],
-                              __m128& restGradient) {
-  for (size_t j = 0; j < 4; ++j)
-    for (size_t v = 0; v < 4; ++v) i[j][v] = t.particles[4 * (k + j * groups) + v];
-  restGradient = _mm_setr_ps(t.restGradient[k], t.restGradient[k + groups],
-                             t.restGradient[k + 2 * groups], t.restGradient[k + 3 * groups]);
-  return _mm_setr_ps(t.inverseVolume[k], t.inverseVolume[k + groups],
-                     t.inverseVolume[k + 2 * groups], t.inverseVolume[k + 3 * groups]);
-}
-
-/// The four lanes' forces at their particles; vertex 0's force is minus the others' sum.
-inline void addGroupForces(const uint32_t (&i)[4][4], const __m128 (&force)[4][4], btVector3* f) {
-  for (size_t j = 0; j < 4; ++j) {
-    subtractPacked(f[i[j][0]], force[0][j]);
-    for (size_t v = 1; v < 4; ++v) addPacked(f[i[j][v]], force[v][j]);
-  }
-}
-
-/// The forces (per vertex, per lane) of tetrahedra whose edges from vertex 0 are edge[0..2][j]
-/// in lane j, with 1/(6·V0) `inverse`, G0 `rest` and modulus a sixth of K: force[0] is the sum
-/// of the others, to subtract.
+/// (a − b) per lane.
 template <class V>
-__attribute__((always_inline)) inline void tetrahedronLanes(const V (&edge)[3][4], V inverse,
-                                                            V rest, V modulus, V (&force)[4][4]) {
-  const Lanes<V> a = toLanes(edge[0][0], edge[0][1], edge[0][2], edge[0][3]),
-                 b = toLanes(edge[1][0], edge[1][1], edge[1][2], edge[1][3]),
-                 c = toLanes(edge[2][0], edge[2][1], edge[2][2], edge[2][3]);
-  const Lanes<V> ga = cross(b, c), gb = cross(c, a), gc = cross(a, b), g0 = sum(ga, gb, gc);
-  const V gradient = ((dot(ga, ga) + dot(gb, gb)) + dot(gc, gc)) + dot(g0, g0);
-  const V s = modulus * clampedStrains(btScalar(1) - dot(a, ga) * inverse) * rest /
-              larger(gradient, rest * kMinGradientShare);
-  const Lanes<V> fa = scaled(ga, s), fb = scaled(gb, s), fc = scaled(gc, s);
-  fromLanes(scaled(g0, s), force[0]);
-  fromLanes(fa, force[1]);
-  fromLanes(fb, force[2]);
-  fromLanes(fc, force[3]);
+__attribute__((always_inline)) inline Lanes<V> difference(const Lanes<V>& a, const Lanes<V>& b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
 }
 
-/// The forces of tetrahedra k, k + groups, k + 2·groups and k + 3·groups (one per lane) for each
-/// k < groups, in that order (addTetrahedronForces, modulus a sixth of K). The four lie in four
-/// quarters of the sorted list, so they rarely share a particle: their stores do not wait on one
-/// another. Indices are read before the stores (which may alias anything).
-__attribute__((always_inline)) inline void tetrahedronGroups(Tetrahedra t, size_t first,
-                                                             size_t groups, btScalar modulus,
-                                                             const btVector3* x, btVector3* f) {
-  for (size_t k = first; k < groups; ++k) {
-    uint32_t i[4][4];
-    __m128 rest;
-    const __m128 inverse = groupTetrahedra(t, k, groups, i, rest);
-    __m128 edge[3][4];
-    for (size_t j = 0; j < 4; ++j)
-      for (size_t e = 0; e < 3; ++e)
-        edge[e][j] = loadVector(x[i[j][e + 1]]) - loadVector(x[i[j][0]]);
-    __m128 force[4][4];
-    tetrahedronLanes(edge, inverse, rest, _mm_set1_ps(modulus), force);
-    addGroupForces(i, force, f);
+/// a + b per lane.
+template <class V>
+__attribute__((always_inline)) inline Lanes<V> plus(const Lanes<V>& a, const Lanes<V>& b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+
+/// The gradients ∂(6V)/∂x_i (per particle, lane-wise) of fans with Ring ring particles,
+/// `edge(0)` their edges from particle a to b and `edge(1 + r)` to ring particle r, a's negated
+/// (grad[0], to subtract), and the scale of their forces K/6·s·G0/G, with 1/(6·V0) `inverse`,
+/// G0 `rest` and modulus a sixth of K: scalarFan's operations lane-wise. Each ring edge is
+/// loaded once, as its cross products need it, so that only two are live at a time.
+template <size_t Ring, class V, class Edge>
+__attribute__((always_inline)) inline V fanLanes(const Edge& edge, V inverse, V rest, V modulus,
+                                                 Lanes<V> (&grad)[Ring + 2]) {
+  const Lanes<V> e = edge(0);
+  Lanes<V>* g = grad + 2;
+  Lanes<V> before = edge(1), here = edge(2);  // u_r−1 and u_r as r goes round
+  Lanes<V> gb = cross(before, here);
+  g[0] = cross(here, e);
+  for (size_t r = 2; r < Ring; ++r) {
+    const Lanes<V> next = edge(1 + r);
+    gb = plus(gb, cross(here, next));
+    g[r - 1] = cross(e, difference(before, next));
+    before = here;
+    here = next;
+  }
+  g[Ring - 1] = cross(e, before);
+  Lanes<V> sum = gb;
+  V gradient = dot(gb, gb);
+  for (size_t r = 0; r < Ring; ++r) {
+    sum = plus(sum, g[r]);
+    gradient = gradient + dot(g[r], g[r]);
+  }
+  gradient = gradient + dot(sum, sum);
+  grad[0] = sum;
+  grad[1] = gb;
+  return modulus * clampedStrains(btScalar(1) - dot(e, gb) * inverse) * rest /
+         larger(gradient, rest * kMinGradientShare);
+}
+
+/// f[i] += force, or −= for a fan's particle a (v = 0).
+inline void addFanForce(size_t v, btVector3& f, __m128 force) {
+  if (v == 0)
+    subtractPacked(f, force);
+  else
+    addPacked(f, force);
+}
+
+/// The vector `offset` bytes after `base` (MuscleSettings::fanBytes).
+template <class T>
+inline T& at(T* base, uint32_t offset) {
+  using Byte = std::conditional_t<std::is_const_v<T>, const char, char>;
+  return *reinterpret_cast<T*>(reinterpret_cast<Byte*>(base) + offset);
+}
+
+/// The fans [first, first + 4·groups) of Count particles each, four at a time (one per lane):
+/// lane j's particles at the byte offsets b[Count·j ..] of the group's.
+template <size_t Count>
+__attribute__((always_inline)) inline void fanGroups(const MuscleSettings& settings, size_t first,
+                                                     size_t groups, btScalar modulus,
+                                                     const btVector3* x, btVector3* f) {
+  const uint32_t* b = settings.fanBytes.data() + settings.fanOffsets[first];
+  for (size_t k = first; k < first + 4 * groups; k += 4, b += 4 * Count) {
+    __m128 origin[4];
+    for (size_t j = 0; j < 4; ++j) origin[j] = loadVector(at(x, b[Count * j]));
+    const auto edge = [&](size_t v) {  // particle 1 + v of each lane's fan less its particle a
+      const auto from = [&](size_t j) {
+        return loadVector(at(x, b[Count * j + 1 + v])) - origin[j];
+      };
+      return toLanes(from(0), from(1), from(2), from(3));
+    };
+    Lanes<Float4> grad[Count];
+    const Float4 scale =
+        fanLanes<Count - 2>(edge, _mm_loadu_ps(&settings.fanInverseVolume[k]),
+                            _mm_loadu_ps(&settings.fanRestGradient[k]), _mm_set1_ps(modulus), grad);
+#pragma GCC unroll 8
+    for (size_t v = 0; v < Count; ++v) {  // particle by particle, each lane's
+      __m128 force[4];
+      fromLanes(scaled(grad[v], scale), force);
+      for (size_t j = 0; j < 4; ++j) addFanForce(v, at(f, b[Count * j + v]), force[j]);
+    }
   }
 }
 
-void ssePass(Tetrahedra t, size_t count, btScalar modulus, const btVector3* x, btVector3* f) {
-  const size_t groups = count / 4;
-  tetrahedronGroups(t, 0, groups, modulus, x, f);
-  scalarTetrahedra(t, 4 * groups, count, modulus, x, f);
+template <size_t Count>
+void sseFanClass(const MuscleSettings& settings, size_t begin, size_t end, btScalar modulus,
+                 const btVector3* x, btVector3* f) {
+  const size_t groups = (end - begin) / 4;
+  fanGroups<Count>(settings, begin, groups, modulus, x, f);
+  for (size_t k = begin + 4 * groups; k < end; ++k) scalarFan(settings, k, modulus, x, f);
 }
 
 #if FIBREMSS_AVX2_PARTICLES
-/// Groups k and k + 1 of tetrahedronGroups in the two halves of __m256 registers (AVX without
-/// FMA: each lane rounds as there), their forces added in its order: the same bits as ssePass.
-/// An odd last group and the tail as there.
-FIBREMSS_AVX2_PASS void avxPass(Tetrahedra t, size_t count, btScalar modulus, const btVector3* x,
-                                btVector3* f) {
-  const size_t groups = count / 4;
-  size_t k = 0;
-  for (; k + 1 < groups; k += 2) {
-    uint32_t i[2][4][4];
-    __m128 rest0, rest1;
-    const __m128 inverse0 = groupTetrahedra(t, k, groups, i[0], rest0);
-    const __m128 inverse1 = groupTetrahedra(t, k + 1, groups, i[1], rest1);
-    __m256 edge[3][4];
+/// addFanForce on the vector `offset` bytes after `base`, as VEX instructions on an indexed
+/// address: GCC otherwise adds base and offset into a register first, one instruction more per
+/// particle and lane (callgrind, thigh13 R=20: the step 1 089.8 → 1 070.0 M instructions). The
+/// same operations (an addition's operands swapped, which IEEE addition allows): the same bits.
+FIBREMSS_AVX2_PASS inline void addFanForceAt(size_t v, btVector3* base, uint32_t offset,
+                                             __m128 force) {
+  char* const at = reinterpret_cast<char*>(base);
+  const uint64_t bytes = offset;
+  __m128 sum;
+  if (v == 0)
+    asm volatile(
+        "vmovaps (%[at],%[bytes]), %[sum]\n\t"
+        "vsubps %[force], %[sum], %[sum]\n\t"
+        "vmovaps %[sum], (%[at],%[bytes])"
+        : [sum] "=&x"(sum)
+        : [at] "r"(at), [bytes] "r"(bytes), [force] "x"(force)
+        : "memory");
+  else
+    asm volatile(
+        "vaddps (%[at],%[bytes]), %[force], %[sum]\n\t"
+        "vmovaps %[sum], (%[at],%[bytes])"
+        : [sum] "=&x"(sum)
+        : [at] "r"(at), [bytes] "r"(bytes), [force] "x"(force)
+        : "memory");
+}
+
+/// Groups k and k + 1 of fanGroups in the two halves of __m256 registers (AVX without FMA: each
+/// lane rounds as there), their forces added in its order (the first group's, particle by
+/// particle, then the second's): the same bits as sseFanClass. An odd
+/// last group and the tail as there.
+template <size_t Count>
+FIBREMSS_AVX2_PASS void avxFanClass(const MuscleSettings& settings, size_t begin, size_t end,
+                                    btScalar modulus, const btVector3* x, btVector3* f) {
+  const size_t groups = (end - begin) / 4;
+  size_t g = 0;
+  const uint32_t* b = settings.fanBytes.data() + settings.fanOffsets[begin];
+  for (; g + 1 < groups; g += 2, b += 8 * Count) {
+    const size_t k = begin + 4 * g;
+    const uint32_t* second = b + 4 * Count;  // the second group's byte offsets
+    __m256 origin[4];
     for (size_t j = 0; j < 4; ++j)
-      for (size_t e = 0; e < 3; ++e)
-        edge[e][j] =
-            loadPair(x[i[0][j][e + 1]], x[i[1][j][e + 1]]) - loadPair(x[i[0][j][0]], x[i[1][j][0]]);
-    __m256 force[4][4];
-    tetrahedronLanes(edge, _mm256_set_m128(inverse1, inverse0), _mm256_set_m128(rest1, rest0),
-                     _mm256_set1_ps(modulus), force);
-    __m128 half[2][4][4];
-    for (size_t v = 0; v < 4; ++v)
+      origin[j] = loadPair(at(x, b[Count * j]), at(x, second[Count * j]));
+    const auto edge = [&](size_t v) __attribute__((always_inline)) {  // as fanGroups' edge
+      const auto from = [&](size_t j) __attribute__((always_inline)) {
+        return loadPair(at(x, b[Count * j + 1 + v]), at(x, second[Count * j + 1 + v])) - origin[j];
+      };
+      return toLanes(from(0), from(1), from(2), from(3));
+    };
+    Lanes<Float8> grad[Count];
+    const Float8 scale = fanLanes<Count - 2>(edge, _mm256_loadu_ps(&settings.fanInverseVolume[k]),
+                                             _mm256_loadu_ps(&settings.fanRestGradient[k]),
+                                             _mm256_set1_ps(modulus), grad);
+    __m128 later[Count][4];  // the second group's, added after the first's
+#pragma GCC unroll 8
+    for (size_t v = 0; v < Count; ++v) {
+      __m256 force[4];
+      fromLanes(scaled(grad[v], scale), force);
       for (size_t j = 0; j < 4; ++j) {
-        half[0][v][j] = _mm256_castps256_ps128(force[v][j]);
-        half[1][v][j] = _mm256_extractf128_ps(force[v][j], 1);
+        addFanForceAt(v, f, b[Count * j + v], _mm256_castps256_ps128(force[j]));
+        later[v][j] = _mm256_extractf128_ps(force[j], 1);
       }
-    addGroupForces(i[0], half[0], f);
-    addGroupForces(i[1], half[1], f);
+    }
+#pragma GCC unroll 8
+    for (size_t v = 0; v < Count; ++v)
+      for (size_t j = 0; j < 4; ++j) addFanForceAt(v, f, second[Count * j + v], later[v][j]);
   }
-  tetrahedronGroups(t, k, groups, modulus, x, f);
-  scalarTetrahedra(t, 4 * groups, count, modulus, x, f);
+  fanGroups<Count>(settings, begin + 4 * g, groups - g, modulus, x, f);
+  for (size_t k = begin + 4 * groups; k < end; ++k) scalarFan(settings, k, modulus, x, f);
 }
 #endif
 
 }  // namespace
 #endif
 
-void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
-                          std::span<btVector3> forces, [[maybe_unused]] SpringKernel kernel,
-                          size_t begin, size_t end) {
-  const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
-  const Tetrahedra t{settings.tetParticles.data() + 4 * begin,
-                     settings.tetInverseVolume.data() + begin,
-                     settings.tetRestGradient.data() + begin};
-  const size_t count = end - begin;
+namespace {
+
+/// The fans [begin, end) with Count particles on `kernel`'s instruction set.
+template <size_t Count>
+void fanClassForces(const MuscleSettings& settings, size_t begin, size_t end, btScalar modulus,
+                    [[maybe_unused]] SpringKernel kernel, const btVector3* x, btVector3* f) {
 #if FIBREMSS_AVX2_PARTICLES
-  if (kernel == SpringKernel::avx2)
-    return avxPass(t, count, modulus, positions.data(), forces.data());
+  if (kernel == SpringKernel::avx2) return avxFanClass<Count>(settings, begin, end, modulus, x, f);
 #endif
 #if FIBREMSS_SSE_PARTICLES
   if (kernel != SpringKernel::scalar)
-    return ssePass(t, count, modulus, positions.data(), forces.data());
+    return sseFanClass<Count>(settings, begin, end, modulus, x, f);
 #endif
-  scalarTetrahedra(t, 0, count, modulus, positions.data(), forces.data());
+  for (size_t k = begin; k < end; ++k) scalarFan(settings, k, modulus, x, f);
 }
 
-void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+/// fanClassForces for every count from Count up to that of kMaxFanTetrahedra.
+template <size_t Count>
+void fanForces(const MuscleSettings& settings, size_t begin, size_t end, btScalar modulus,
+               SpringKernel kernel, const btVector3* x, btVector3* f) {
+  // The fans before `begin` have fewer particles: [begin, last) are those with Count.
+  const size_t last = fansUpTo(settings, begin, end, Count);
+  fanClassForces<Count>(settings, begin, last, modulus, kernel, x, f);
+  if constexpr (Count < kMaxFanTetrahedra + 3)
+    if (last < end) fanForces<Count + 1>(settings, last, end, modulus, kernel, x, f);
+}
+
+}  // namespace
+
+size_t fansUpTo(const MuscleSettings& settings, size_t begin, size_t end, size_t count) {
+  const std::span<const uint32_t> offsets = settings.fanOffsets;
+  while (begin < end) {
+    const size_t mid = begin + (end - begin) / 2;
+    if (offsets[mid + 1] - offsets[mid] <= count)
+      begin = mid + 1;
+    else
+      end = mid;
+  }
+  return begin;
+}
+
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, SpringKernel kernel, size_t begin,
+                          size_t end) {
+  const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
+  fanForces<4>(settings, begin, end, modulus, kernel, positions.data(), forces.data());
+}
+
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces, SpringKernel kernel) {
-  addTetrahedronForces(settings, positions, forces, kernel, 0, settings.tetInverseVolume.size());
+  addLocalVolumeForces(settings, positions, forces, kernel, 0, settings.fanInverseVolume.size());
 }
 
-void addTetrahedronForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces) {
-  addTetrahedronForces(settings, positions, forces, fastestSpringKernel());
+  addLocalVolumeForces(settings, positions, forces, fastestSpringKernel());
 }
 
 double enclosedParticleVolume(const MuscleSettings& settings,
@@ -348,6 +433,42 @@ void addEnclosedVolumeStiffness(const MuscleSettings& settings, std::span<btScal
     if (!settings.isFixed(i)) stiffness[i] += half;
 }
 
+std::vector<uint32_t> fanBytes(std::span<const uint32_t> particles) {
+  std::vector<uint32_t> bytes(particles.size());
+  for (size_t k = 0; k < particles.size(); ++k) {
+    if (particles[k] > UINT32_MAX / sizeof(btVector3))
+      throw std::length_error("a volume term's particle offset does not fit 32 bits");
+    bytes[k] = particles[k] * uint32_t{sizeof(btVector3)};
+  }
+  return bytes;
+}
+
+FanGradients fanGradients(const btVector3* x, std::span<const uint32_t> p) {
+  const size_t ring = p.size() - 2;
+  btVector3 u[kMaxFanTetrahedra + 1];
+  std::fill(std::begin(u), std::end(u), btVector3(0, 0, 0));  // ring ≥ 2: set for the compiler
+  FanGradients out;
+  btVector3* g = out.gradients + 2;
+  const btVector3 origin = x[p[0]], e = x[p[1]] - origin;
+  for (size_t r = 0; r < ring; ++r) u[r] = x[p[2 + r]] - origin;
+  btVector3 gb = u[0].cross(u[1]);
+  for (size_t r = 1; r + 1 < ring; ++r) gb += u[r].cross(u[r + 1]);
+  g[0] = u[1].cross(e);
+  for (size_t r = 1; r + 1 < ring; ++r) g[r] = e.cross(u[r - 1] - u[r + 1]);
+  g[ring - 1] = e.cross(u[ring - 2]);
+  btVector3 sum = gb;
+  out.squared = gb.length2();
+  for (size_t r = 0; r < ring; ++r) {
+    sum += g[r];
+    out.squared += g[r].length2();
+  }
+  out.squared += sum.length2();
+  out.gradients[0] = -sum;
+  out.gradients[1] = gb;
+  out.sixVolume = e.dot(gb);
+  return out;
+}
+
 RestGradients restTetrahedronGradients(const MuscleSettings& settings, size_t k) {
   const std::span<const btVector3> x = settings.restPositions;
   const uint32_t* t = settings.tetParticles.data() + 4 * k;
@@ -356,19 +477,21 @@ RestGradients restTetrahedronGradients(const MuscleSettings& settings, size_t k)
   return {{-(ga + gb + gc), ga, gb, gc}};
 }
 
-void addTetrahedronStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
-  const uint32_t* t = settings.tetParticles.data();
-  for (size_t k = 0; k < settings.tetInverseVolume.size(); ++k, t += 4) {
-    const RestGradients rest = restTetrahedronGradients(settings, k);
-    btScalar g[4];
-    for (size_t i = 0; i < 4; ++i) g[i] = rest.gradients[i].length();
-    const btScalar sum = g[0] + g[1] + g[2] + g[3];
-    const btScalar gradient = g[0] * g[0] + g[1] * g[1] + g[2] * g[2] + g[3] * g[3];
+void addLocalVolumeStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness) {
+  for (size_t k = 0; k < settings.fanInverseVolume.size(); ++k) {
+    const std::span<const uint32_t> p = fanParticles(settings, k);
+    const FanGradients rest = fanGradients(settings.restPositions.data(), p);
+    btScalar g[kMaxFanTetrahedra + 3], sum = 0, gradient = 0;
+    for (size_t v = 0; v < p.size(); ++v) {
+      g[v] = rest.gradients[v].length();
+      sum += g[v];
+      gradient += g[v] * g[v];
+    }
     // K/V0 · (g/6)(Σg/6) · G0/G with 1/V0 = 6·inverse: K·inverse·g·Σg/6 · G0/G, halved.
-    const btScalar scale = settings.volumeModulus * settings.tetInverseVolume[k] * sum / 12 *
-                           settings.tetRestGradient[k] / gradient;
-    for (size_t i = 0; i < 4; ++i)
-      if (!settings.isFixed(t[i])) stiffness[t[i]] += g[i] * scale;
+    const btScalar scale = settings.volumeModulus * settings.fanInverseVolume[k] * sum / 12 *
+                           settings.fanRestGradient[k] / gradient;
+    for (size_t v = 0; v < p.size(); ++v)
+      if (!settings.isFixed(p[v])) stiffness[p[v]] += g[v] * scale;
   }
 }
 
