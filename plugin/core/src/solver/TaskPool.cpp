@@ -1,5 +1,6 @@
 #include "TaskPool.h"
 
+#include <chrono>
 #include <ctime>
 #include <span>
 
@@ -122,10 +123,10 @@ void TaskPool::runErased(size_t count, Call call, void* context) {
   generation_.notify_all();
   work(0);
   if (done_.load() == count) return;
-  const int64_t waitStart = threadCpuNs();
+  const auto waitStart = std::chrono::steady_clock::now();
   for (size_t finished = done_.load(); finished != count; finished = done_.load())
     awaitChange(done_, finished);
-  waitNs_ += threadCpuNs() - waitStart;
+  waitNs_ += std::chrono::nanoseconds(std::chrono::steady_clock::now() - waitStart).count();
 }
 
 void TaskPool::attach(TaskProfile* profile) {

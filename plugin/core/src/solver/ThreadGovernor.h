@@ -3,8 +3,10 @@
 // 18), internal. Another process that holds a core preempts a worker in the middle of a task,
 // and the caller then waits at the join for the worker's next time slice: two threads can be
 // slower than one. Over each window of iterations the governor takes the CPU time the threads
-// spent working: the caller's thread CPU time less what it spent waiting at the joins, plus the
-// workers' in tasks (TaskPool::joinTimes). The caller alone would need that work divided by the
+// spent working: the caller's thread CPU time less its wall time waiting at the joins, plus the
+// workers' thread CPU time in tasks (TaskPool::joinTimes). A wait short of the spin is CPU time;
+// a longer one (a worker preempted in a task, or late) also takes off the time the caller slept:
+// it counts against all threads. The caller alone would need that work divided by the
 // share of a core it gets when alone (from its windows alone, the latest weighing half; 1 until
 // one ran), so all threads pay while their window's wall time is shorter than that. Stalls, a
 // worker that gets no core, and threads that share one all show in the same window's figures.
@@ -34,7 +36,7 @@ class ThreadGovernor {
   struct Times {
     double wallMs = 0;    ///< wall time
     double callerMs = 0;  ///< the caller's thread CPU time
-    double waitMs = 0;    ///< the caller's thread CPU time waiting at the joins
+    double waitMs = 0;    ///< the caller's wall time waiting at the joins
     double workerMs = 0;  ///< the workers' thread CPU time in tasks
   };
 
