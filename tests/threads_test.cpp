@@ -79,6 +79,10 @@ int governed(ThreadGovernor& governor, int iterations, const Times& parallel, co
 constexpr int kWindow = ThreadGovernor::kWindow;
 /// Iterations in which the governor surely reached its longest interval from a switch.
 constexpr int kCycle = ThreadGovernor::kLongestInterval + 3 * kWindow;
+/// Iterations after a kCycle: a probe of kWindow at most once per kLongestInterval, and the
+/// most of them that can be probes.
+constexpr int kLater = 4 * kCycle;
+constexpr int kProbed = (kLater / ThreadGovernor::kLongestInterval + 1) * kWindow;
 
 // Iterations of 2 ms of work on a core of their own [ms]: wall, caller, its waits, workers.
 constexpr Times kAlone{2.0, 2.0, 0, 0};
@@ -105,8 +109,7 @@ TEST(ThreadGovernor, RunsOnTheCallerAloneWhileAllThreadsDoNotPay) {
   EXPECT_EQ(governed(governor, kWindow, kCoreBusy, kAlone), 0);
   EXPECT_FALSE(governor.parallel());
   EXPECT_GT(governed(governor, kCycle, kCoreBusy, kAlone), kCycle * 9 / 10);
-  const int later = 4 * kCycle;  // a probe of kWindow at most every kLongestInterval
-  EXPECT_GT(governed(governor, later, kCoreBusy, kAlone), later - later / 50);
+  EXPECT_GE(governed(governor, kLater, kCoreBusy, kAlone), kLater - kProbed);
   governed(governor, kCycle, kIdle, kAlone);  // the other process has stopped
   EXPECT_TRUE(governor.parallel());
   EXPECT_EQ(governed(governor, kCycle, kIdle, kAlone), 0);
@@ -121,8 +124,7 @@ TEST(ThreadGovernor, WeighsTheWorkByTheShareOfACoreTheCallerGetsAlone) {
   constexpr Times kLoaded{3.0, 1.5, 0.1, 1.0};  // 2.4 ms of work, 4.8 ms alone
   governed(governor, kCycle, kLoaded, kHalfCore);
   EXPECT_TRUE(governor.parallel());
-  const int later = 4 * kCycle;
-  EXPECT_LT(governed(governor, later, kLoaded, kHalfCore), later / 50);
+  EXPECT_LE(governed(governor, kLater, kLoaded, kHalfCore), kProbed);
 }
 
 namespace {

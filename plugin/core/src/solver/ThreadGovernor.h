@@ -25,12 +25,13 @@ namespace fibremss {
 
 class ThreadGovernor {
  public:
-  /// Iterations per window.
-  static constexpr int kWindow = 10;
+  /// Iterations per window: enough that one window's verdict is not the machine's noise (a
+  /// wrong switch to the caller alone lasts at least kFirstInterval).
+  static constexpr int kWindow = 20;
   /// Iterations before the first probe after a switch; each probe that confirms the mode
   /// doubles it, up to kLongestInterval.
   static constexpr int kFirstInterval = 4 * kWindow;
-  static constexpr int kLongestInterval = 64 * kWindow;
+  static constexpr int kLongestInterval = 32 * kWindow;
 
   /// What one iteration, or a window of them, took [ms].
   struct Times {
