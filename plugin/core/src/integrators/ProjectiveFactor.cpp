@@ -17,6 +17,7 @@ using Permutation = Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int
 /// What a rank-one update costs per entry of L it visits, in entries a new factor visits [1]
 /// (the inner loops as compiled for x86-64 with SSE2: 15 instructions per entry against 10).
 constexpr double kUpdateCost = 1.5;
+
 }  // namespace
 
 ProjectiveFactor::ProjectiveFactor(const Matrix& lowerA) {

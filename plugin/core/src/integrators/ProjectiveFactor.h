@@ -33,7 +33,8 @@ class ProjectiveFactor {
   double matrixDiagonal(int row) const { return upperValues_[diagonalEntry_[row]]; }
   /// W's entry in `row` [N/m].
   double weight(int row) const { return weights_[row]; }
-  /// Sets W's entry in `row` [N/m]; L follows at the next update().
+  /// Sets W's entry in `row` [N/m], at most once per row between updates (the change lists are
+  /// sized for one change per row); L follows at the next update().
   void setWeight(int row, double weight);
   /// Brings L up to date with the weights set since the last update: a rank-one update per
   /// changed row where their paths up the elimination tree visit fewer entries than new values
