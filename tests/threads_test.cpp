@@ -19,7 +19,6 @@
 #include "fibremss/Scene.h"
 #include "solver/ForceChunks.h"
 #include "solver/MuscleSystemAccess.h"
-#include "solver/ThreadGovernor.h"
 #include "solver/VolumeForces.h"
 #include "support/ThighSteps.h"
 
@@ -45,86 +44,6 @@ TEST(TaskPool, RunsEveryTaskOnceOnAThreadItOwns) {
 TEST(TaskPool, ZeroMeansTheHardwareThreads) {
   EXPECT_EQ(TaskPool::resolve(0), std::max(1u, std::thread::hardware_concurrency()));
   EXPECT_EQ(TaskPool::resolve(3), 3u);
-}
-
-TEST(TaskPool, RunsEveryTaskOnTheCallerWhenNotSpread) {
-  TaskPool pool(3);
-  pool.spread(false);
-  std::vector<int> runs(100);
-  std::atomic<bool> onCaller{true};
-  const std::thread::id caller = std::this_thread::get_id();
-  pool.run(runs.size(), [&](size_t index, unsigned thread) {
-    ++runs[index];  // one thread only: no race
-    if (thread != 0 || std::this_thread::get_id() != caller) onCaller = false;
-  });
-  EXPECT_TRUE(onCaller.load());
-  EXPECT_EQ(std::count(runs.begin(), runs.end(), 1), 100);
-}
-
-namespace {
-
-using Times = ThreadGovernor::Times;
-
-/// Records `iterations` iterations on `governor`, each taking `parallel` on all threads and
-/// `serial` on the caller alone; returns those it ran on the caller alone.
-int governed(ThreadGovernor& governor, int iterations, const Times& parallel, const Times& serial) {
-  int alone = 0;
-  for (int i = 0; i < iterations; ++i) {
-    alone += !governor.parallel();
-    governor.record(governor.parallel() ? parallel : serial);
-  }
-  return alone;
-}
-
-constexpr int kWindow = ThreadGovernor::kWindow;
-/// Iterations in which the governor surely reached its longest interval from a switch.
-constexpr int kCycle = ThreadGovernor::kLongestInterval + 3 * kWindow;
-/// Iterations after a kCycle: a probe of kWindow at most once per kLongestInterval, and the
-/// most of them that can be probes.
-constexpr int kLater = 4 * kCycle;
-constexpr int kProbed = (kLater / ThreadGovernor::kLongestInterval + 1) * kWindow;
-
-// Iterations of 2 ms of work on a core of their own [ms]: wall, caller, its waits, workers.
-constexpr Times kAlone{2.0, 2.0, 0, 0};
-constexpr Times kIdle{1.05, 1.05, 0.05, 0.95};  // two threads on an idle machine: 1.9x
-// Another process holds a core: the worker runs a quarter of the time, the caller waits for it.
-constexpr Times kCoreBusy{2.2, 1.6, 0.1, 0.5};
-
-}  // namespace
-
-// Two threads that do more work than their wall time (an idle machine): all threads, and no
-// probe of the caller alone (one thread cannot take less wall time than its CPU time).
-TEST(ThreadGovernor, KeepsAllThreadsWhileTheirWorkExceedsTheirWallTime) {
-  ThreadGovernor governor;
-  EXPECT_EQ(governed(governor, 10 * kCycle, kIdle, kAlone), 0);
-  EXPECT_TRUE(governor.parallel());
-}
-
-// Two threads whose work is less than their wall time (the waits for a preempted worker): the
-// caller alone from the first window's end, with probes of all threads ever more rarely (the
-// interval doubles up to kLongestInterval); back to all threads within a longest interval once
-// they pay again.
-TEST(ThreadGovernor, RunsOnTheCallerAloneWhileAllThreadsDoNotPay) {
-  ThreadGovernor governor;
-  EXPECT_EQ(governed(governor, kWindow, kCoreBusy, kAlone), 0);
-  EXPECT_FALSE(governor.parallel());
-  EXPECT_GT(governed(governor, kCycle, kCoreBusy, kAlone), kCycle * 9 / 10);
-  EXPECT_GE(governed(governor, kLater, kCoreBusy, kAlone), kLater - kProbed);
-  governed(governor, kCycle, kIdle, kAlone);  // the other process has stopped
-  EXPECT_TRUE(governor.parallel());
-  EXPECT_EQ(governed(governor, kCycle, kIdle, kAlone), 0);
-}
-
-// A machine so loaded that the caller alone gets half a core: two threads whose work is less than
-// their wall time still beat it, which the governor learns from its windows on the caller alone.
-// It then keeps all threads and refreshes that share now and then (ever more rarely).
-TEST(ThreadGovernor, WeighsTheWorkByTheShareOfACoreTheCallerGetsAlone) {
-  ThreadGovernor governor;
-  constexpr Times kHalfCore{4.0, 2.0, 0, 0};
-  constexpr Times kLoaded{3.0, 1.5, 0.1, 1.0};  // 2.4 ms of work, 4.8 ms alone
-  governed(governor, kCycle, kLoaded, kHalfCore);
-  EXPECT_TRUE(governor.parallel());
-  EXPECT_LE(governed(governor, kLater, kLoaded, kHalfCore), kProbed);
 }
 
 namespace {
@@ -172,33 +91,6 @@ void expectSameBits(const Outcome& one, const Outcome& other, int threads) {
 }
 
 }  // namespace
-
-// The thread governor (SimulationParameters::adaptiveThreads) made to start on the caller alone
-// and probe two threads from the step's second window: its probe and what it chooses after it
-// leave the bits of one thread.
-TEST(Threads, TheThreadGovernorsSwitchesGiveTheSameBits) {
-  const Outcome one = simulate(1);
-  LoadedScene scene;
-  const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
-  const Outcome mixed = fibremss::testing::stepThroughPoses(
-      scene, prepared, prepared.muscles, 2,
-      [&](MuscleSystem& system, const std::vector<MuscleHandle>&) {
-        system.parameters().adaptiveThreads = true;
-        MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
-        impl.prepareWorkers();  // the governor for 2 threads
-        // Two threads that do not pay: the caller alone from the first iteration.
-        ThreadGovernor& governor = impl.governor;
-        while (governor.parallel()) governor.record({1.0, 0.5, 0, 0});
-        // Then alone until a window before its first probe of two threads: the step's first
-        // window runs alone, its second probes two threads.
-        for (int i = kWindow; i < ThreadGovernor::kFirstInterval; ++i)
-          governor.record({1.0, 1.0, 0, 0});
-        ASSERT_FALSE(governor.parallel());
-      });
-  EXPECT_GT(mixed.serialIterations, 0);
-  EXPECT_LT(mixed.serialIterations, 2 * 20);  // and it probed two threads
-  expectSameBits(one, mixed, 2);
-}
 
 TEST(Threads, AnyThreadCountGivesTheSameBits) {
   const Outcome one = simulate(1);

@@ -3,9 +3,8 @@
 // iterations with 1 and 2 threads, and the haptic query MuscleWorld/MuscleSystem::contactWrench
 // of a probe pressed into a muscle. `fibremss_bench --callgrind-kernels R` instead runs each
 // kernel once under callgrind's client requests (comparisons/bench/callgrind.sh);
-// `fibremss_bench --thread-scaling R [ROUNDS]` alternates 1 thread, 2 threads and 2 adaptive
-// threads in one run, alone and with a busy loop of its own on one core, and prints the medians
-// and their ratios.
+// `fibremss_bench --thread-scaling R [ROUNDS]` alternates 1 and 2 threads in one run, alone and
+// with a busy loop of its own on one core, and prints the medians and their ratio.
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <benchmark/benchmark.h>
@@ -22,7 +21,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
-#include <span>
+#include <optional>
 #include <string>
 #include <thread>
 #include <utility>
@@ -172,39 +171,25 @@ int callgrindKernels(int resolution) {
   return 0;
 }
 
-/// `steps` steps of the scene's poses; the iterations they ran (the guard's retries included),
-/// and adds those run on one thread alone (StepStats::serialIterations) to `serial`.
-int stepPoses(BenchScene& scene, int steps, long* serial = nullptr) {
+/// `steps` steps of the scene's poses; the iterations they ran (the guard's retries included).
+int stepPoses(BenchScene& scene, int steps) {
   int iterations = 0;
   for (int k = 0; k < steps; ++k) {
     scene.stepPose();
     iterations += scene.system().lastStep().iterations;
-    if (serial) *serial += scene.system().lastStep().serialIterations;
   }
   return iterations;
 }
 
-/// A thread setting the thread-scaling runs compare.
-struct ThreadSetting {
-  const char* name;  ///< as printed
-  int threads;       ///< SimulationParameters::threads
-  bool adaptive;     ///< SimulationParameters::adaptiveThreads
-};
-
-/// Milliseconds per iteration of `steps` steps with `setting`; adds the iterations to
-/// `iterations` and those run on one thread alone to `serial`.
-double msPerIteration(BenchScene& scene, const ThreadSetting& setting, int steps, long& iterations,
-                      long& serial) {
-  SimulationParameters& parameters = scene.system().parameters();
-  parameters.threads = setting.threads;
-  parameters.adaptiveThreads = setting.adaptive;
+/// Milliseconds per iteration of `steps` steps with `threads` solver threads.
+double msPerIteration(BenchScene& scene, int threads, int steps) {
+  scene.system().parameters().threads = threads;
   scene.stepPose();  // starts the pool for this thread count outside the timing
   const auto start = std::chrono::steady_clock::now();
-  const int ran = stepPoses(scene, steps, &serial);
+  const int iterations = stepPoses(scene, steps);
   const std::chrono::duration<double, std::milli> elapsed =
       std::chrono::steady_clock::now() - start;
-  iterations += ran;
-  return elapsed.count() / ran;
+  return elapsed.count() / iterations;
 }
 
 double median(std::vector<double> values) {
@@ -284,7 +269,6 @@ void balanceReport(BenchScene& scene, int steps, size_t chunkWork) {
 void busyReport(BenchScene& scene, int steps) {
   MuscleSystem& system = scene.system();
   system.parameters().threads = 2;
-  system.parameters().adaptiveThreads = false;  // both threads in every iteration
   scene.stepPose();
   TaskProfile profile;
   TaskPool& pool = *MuscleSystemAccess::impl(system).pool;
@@ -301,31 +285,11 @@ void busyReport(BenchScene& scene, int steps) {
       wall.count() * perIteration);
 }
 
-/// The medians of `rounds` rounds of `settings` alternated (A B C A B C …) in ms per iteration,
-/// printed with their speed-up over the first and the share of iterations run on one thread.
-void alternate(BenchScene& scene, const char* label, std::span<const ThreadSetting> settings,
-               int rounds, int steps) {
-  std::vector<std::vector<double>> ms(settings.size());
-  std::vector<long> iterations(settings.size()), serial(settings.size());
-  for (int round = 0; round < rounds; ++round)
-    for (size_t s = 0; s < settings.size(); ++s)
-      ms[s].push_back(msPerIteration(scene, settings[s], steps, iterations[s], serial[s]));
-  std::ifstream loadavg("/proc/loadavg");
-  std::string load;
-  std::getline(loadavg, load);
-  std::printf("%s (load %s)\n", label, load.c_str());
-  for (size_t s = 0; s < settings.size(); ++s)
-    std::printf("  %-26s %.3f ms/iteration  %.2fx  (%.1f%% of iterations on one thread)\n",
-                settings[s].name, median(ms[s]), median(ms[0]) / median(ms[s]),
-                100.0 * static_cast<double>(serial[s]) / static_cast<double>(iterations[s]));
-}
-
 /// Thread scaling in one run (issue 18) on whole poses of thigh13 at `resolution` (the scene's
 /// iterations per pose): the balance of the tasks (balanceReport, with the forces phase in one
-/// task per muscle and in chunks) and the busy time of 2 threads, then 1 thread, 2 threads in
-/// every iteration and 2 adaptive threads (ThreadGovernor) alternated `rounds` times, alone and
-/// with a busy loop on one core; medians per setting in ms per iteration (the iterations counted,
-/// not assumed).
+/// task per muscle and in chunks) and the busy time of 2 threads, then 1 and 2 solver threads
+/// alternated `rounds` times, alone and with a busy loop on one core; medians per configuration
+/// in ms per iteration (the iterations counted, not assumed).
 int threadScaling(int resolution, int rounds) {
   BenchScene scene(resolution, 1);
   scene.system().parameters().stopRule = StopRule::Iterations;
@@ -339,12 +303,21 @@ int threadScaling(int resolution, int rounds) {
   std::printf("-- forces phase in chunks (the default):\n");
   balanceReport(scene, kSteps, kForceChunkWork);
   busyReport(scene, kSteps);
-  constexpr ThreadSetting kSettings[] = {{"1 thread", 1, false},
-                                         {"2 threads, every iteration", 2, false},
-                                         {"2 threads, adaptive", 2, true}};
-  alternate(scene, "alone:", kSettings, rounds, kSteps);
-  const BusyCore loop;
-  alternate(scene, "one core busy:", kSettings, rounds, kSteps);
+  for (const bool busy : {false, true}) {
+    std::optional<BusyCore> loop;
+    if (busy) loop.emplace();
+    std::vector<double> one, two;
+    for (int round = 0; round < rounds; ++round) {
+      one.push_back(msPerIteration(scene, 1, kSteps));
+      two.push_back(msPerIteration(scene, 2, kSteps));
+    }
+    std::ifstream loadavg("/proc/loadavg");
+    std::string load;
+    std::getline(loadavg, load);
+    std::printf("%-22s 1 thread %.3f ms/iteration, 2 threads %.3f ms/iteration: %.2fx  (load %s)\n",
+                busy ? "one core busy:" : "alone:", median(one), median(two),
+                median(one) / median(two), load.c_str());
+  }
   return 0;
 }
 

@@ -110,8 +110,6 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
   std::printf("%s: %s, %s: %d steps, %ld iterations, %.3g ms per iteration (median)\n",
               m.scene.c_str(), m.method.c_str(), m.integrator.c_str(), m.steps, m.iterations,
               m.msPerIteration);
-  std::printf("  threads %d, %ld of the iterations on one thread alone (adaptive_threads)\n",
-              m.threads, m.serialIterations);
   std::printf("  particles %zu (boundary %zu), springs %zu, bone spheres %zu\n", m.particles,
               m.boundaryParticles, m.springs, m.boneSpheres);
   std::printf(

@@ -325,7 +325,6 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     simulatedTime += stats.simulatedTime;
     metrics.steps = s + 1;
     metrics.iterations += stats.iterations;
-    metrics.serialIterations += stats.serialIterations;
 
     // Measures of this step: each muscle's (and what the guard did to it), and the surface
     // penetration into the bones of all muscles together.

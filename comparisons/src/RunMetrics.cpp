@@ -97,7 +97,6 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"poses", m.poses},
       {"iterations", m.iterations},
       {"threads", m.threads},
-      {"serial_iterations", m.serialIterations},
       {"ms_per_step", number(m.msPerStep)},
       {"ms_per_iteration", number(m.msPerIteration)},
       {"ms_per_time_step", number(m.msPerTimeStep)},
@@ -164,7 +163,6 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.poses = o.value("poses", m.poses);
   m.iterations = o.value("iterations", m.iterations);
   m.threads = o.value("threads", m.threads);
-  m.serialIterations = o.value("serial_iterations", m.serialIterations);
   m.msPerStep = numberOr(o, "ms_per_step", m.msPerStep);
   m.msPerIteration = numberOr(o, "ms_per_iteration", m.msPerIteration);
   m.msPerTimeStep = numberOr(o, "ms_per_time_step", m.msPerTimeStep);

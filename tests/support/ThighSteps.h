@@ -27,19 +27,17 @@ struct StepOutcome {
   size_t contacts = 0;                            ///< contacts of the last iteration
   std::vector<std::vector<btVector3>> residuals;  ///< per muscle: residualForces after the steps
   ForceResidual residual;                         ///< forceResidual() after the steps
-  int serialIterations = 0;                       ///< Σ StepStats::serialIterations of the steps
 };
 
-/// Two steps through the first poses, 20 iterations each, with `threads` threads in every
-/// iteration (no thread governor): the prepared bones and the given muscles; `before` (if set)
-/// sees the system and the muscles' handles before the first step.
+/// Two steps through the first poses, 20 iterations each, with `threads` threads: the prepared
+/// bones and the given muscles; `before` (if set) sees the system and the muscles' handles
+/// before the first step.
 inline StepOutcome stepThroughPoses(
     const LoadedScene& scene, const PreparedScene& prepared,
     const std::vector<std::shared_ptr<const MuscleSettings>>& muscles, int threads,
     const std::function<void(MuscleSystem&, const std::vector<MuscleHandle>&)>& before = {}) {
   SimulationParameters parameters = scene.simulation;
   parameters.threads = threads;
-  parameters.adaptiveThreads = false;
   parameters.iterations = 20;
   MuscleSystem system(parameters);
   std::vector<BoneHandle> bones;
@@ -47,13 +45,12 @@ inline StepOutcome stepThroughPoses(
   std::vector<MuscleHandle> handles;
   for (const auto& muscle : muscles) handles.push_back(system.addMuscle(muscle, bones));
   if (before) before(system, handles);
-  StepOutcome outcome;
   for (int pose = 1; pose <= 2; ++pose) {
     for (size_t b = 0; b < bones.size(); ++b)
       system.setBoneTransform(bones[b], scene.bonePose(b, pose % scene.poseCount));
     system.step();
-    outcome.serialIterations += system.lastStep().serialIterations;
   }
+  StepOutcome outcome;
   for (MuscleHandle handle : handles) {
     const auto x = system.positions(handle);
     const auto surface = system.surface(handle);

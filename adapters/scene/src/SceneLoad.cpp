@@ -369,7 +369,6 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
       btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, 1 / scale) *
                scale);  // at most 1 m: more throws particles beyond any muscle
   parameters.threads = simulation.integer("threads", defaults.threads, 0, 1024);
-  parameters.adaptiveThreads = simulation.boolean("adaptive_threads", defaults.adaptiveThreads);
   parameters.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
   parameters.solverTolerance =
       btScalar(simulation.number("solver_tolerance", defaults.solverTolerance, 0, 1, true));

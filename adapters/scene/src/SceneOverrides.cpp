@@ -50,7 +50,6 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"seed", {Target::Section, "simulation"}},
       {"initial_noise", {Target::Section, "simulation"}},
       {"threads", {Target::Section, "simulation"}},
-      {"adaptive_threads", {Target::Section, "simulation"}},
       {"diagonal_jacobian", {Target::Section, "simulation"}},
       {"solver_tolerance", {Target::Section, "simulation"}},
       {"solver_iterations", {Target::Section, "simulation"}},

@@ -74,9 +74,6 @@ struct RunMetrics {
   /// Median wall time of one time step: a FibreMSS iteration (one integration step of dt), a
   /// Bullet world substep (btSoftBody, FEM).
   double msPerTimeStep = kNone;
-  /// Of `iterations`, those FibreMSS ran on one thread alone although `threads` were there: the
-  /// thread governor found one faster, or probed it (SimulationParameters::adaptiveThreads).
-  long serialIterations = 0;
   PartTiming timing;                 ///< per-part breakdown (FibreMSS)
   double maxPenetrationMm = kNone;   ///< surface vertices into bones' true meshes
   double meanPenetrationMm = kNone;  ///< mean over penetrating vertices

@@ -55,9 +55,6 @@ struct StepStats {
   /// Candidate lists or contact records that overflowed their capacity in this step (each pair fell
   /// back to a direct tree traversal: slower, the same contacts).
   size_t candidateOverflows = 0;
-  /// Of the iterations, those run on the calling thread alone (SimulationParameters::
-  /// adaptiveThreads: one thread was the faster, or a probe of it); the others ran on all threads.
-  int serialIterations = 0;
   btScalar springDeviationRatio = 0;  ///< Σ|l−L0| / ΣL0 over all muscles, last iteration
   StepTiming timing;                  ///< per-part wall time
   bool nan = false;                   ///< a NaN or inf appeared

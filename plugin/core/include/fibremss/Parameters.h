@@ -152,11 +152,6 @@ struct SimulationParameters {
   btScalar initialNoise = 0;      ///< random displacement of free particles at start [m]
 
   int threads = 0;  ///< worker threads of the solver (0: the machine's hardware threads)
-  /// Time the iterations and run them on the calling thread alone while that is faster than on
-  /// all `threads` (another process holding a core can make them slower), probing both now and
-  /// then; the same bits either way (StepStats::serialIterations counts them). false: every
-  /// iteration on all `threads`. A host `scheduler` is always used.
-  bool adaptiveThreads = true;
   /// The host's task system (TaskScheduler.h); when set it runs every task of the step and
   /// `threads` is ignored (its workerCount counts the workers).
   TaskScheduler scheduler;

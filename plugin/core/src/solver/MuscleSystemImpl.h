@@ -13,7 +13,6 @@
 #include "Residual.h"
 #include "SpringForces.h"
 #include "TaskPool.h"
-#include "ThreadGovernor.h"
 #include "collision/CollisionPairs.h"
 #include "contact/BodyContacts.h"
 #include "fibremss/Error.h"
@@ -139,9 +138,6 @@ struct MuscleSystem::Impl {
   btScalar previousDt = 0;                  ///< dt of the last iteration (0: none yet)
   uint64_t stepCount = 0;                   ///< steps taken (the guard numbers them)
   bool pushesPending = false;  ///< collide() left pushes that the next forces phase applies
-  /// Whether an iteration runs on the pool's threads or the caller alone (adaptiveThreads); new
-  /// with each pool.
-  ThreadGovernor governor;
   /// Iterations over which the equilibrium stop rule measures how fast the steps shrink.
   static constexpr size_t kEquilibriumWindow = 16;
   /// Mean displacements of the last two windows of iterations since the bones arrived.

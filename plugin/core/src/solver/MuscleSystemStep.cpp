@@ -113,10 +113,8 @@ void MuscleSystem::Impl::followFixed(MuscleState& state) const {
 void MuscleSystem::Impl::prepareWorkers() {
   const TaskScheduler& host = parameters.scheduler;
   const unsigned threads = TaskPool::resolve(parameters.threads, host);
-  if (!pool || pool->threads() != threads || !(pool->host() == host)) {
+  if (!pool || pool->threads() != threads || !(pool->host() == host))
     pool = std::make_unique<TaskPool>(threads, host);
-    governor = ThreadGovernor();
-  }
   scratch.resize(threads);
   // Each thread logs an even share of the drawing capacity; a full log still counts.
   const size_t share = (contacts.ends.size() / threads + 1) & ~size_t{1};
@@ -599,14 +597,9 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     });
   beginBodyContacts();
 
-  const bool governed =
-      parameters.adaptiveThreads && pool->threads() > 1 && !pool->host().present();
   int iteration = 0;
   while (true) {
     ++iteration;
-    const bool parallel = !governed || governor.begin(pool->joinTimes());
-    pool->spread(parallel);
-    stats.serialIterations += !parallel;
     const bool bonesMove = iteration <= motionIterations;
     if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
@@ -621,7 +614,6 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     const bool arrived = iteration >= motionIterations;
     // A duration step runs all its iterations.
     const bool ruled = !size.exact && stopRuleMet(arrived, iteration - motionIterations, stepStart);
-    if (governed) governor.end(pool->joinTimes());
     if (iteration >= cap || ruled) {
       const Clock::time_point start = Clock::now();
       // A spent budget ends the step where it is: the bones jump the rest of the way.

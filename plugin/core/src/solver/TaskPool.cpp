@@ -1,6 +1,5 @@
 #include "TaskPool.h"
 
-#include <chrono>
 #include <ctime>
 #include <span>
 
@@ -50,17 +49,12 @@ double scheduleEnd(std::span<const double> ms, unsigned threads) {
   return *std::max_element(free, free + threads);
 }
 
-/// The calling thread's CPU time [ns].
-int64_t threadCpuNs() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return int64_t{now.tv_sec} * 1'000'000'000 + now.tv_nsec;
-}
-
 }  // namespace
 
 double threadCpuMs() {
-  return static_cast<double>(threadCpuNs()) * 1e-6;
+  timespec now{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
+  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
 }
 
 TaskProfile::Phase& TaskProfile::phase(const char* name) {
@@ -106,7 +100,7 @@ void TaskPool::runOnHost(size_t count, Call call, void* context) const {
 
 void TaskPool::runErased(size_t count, Call call, void* context) {
   if (host_.present() && count > 0) return runOnHost(count, call, context);
-  if (workers_.empty() || !parallel_ || count <= 1) {
+  if (workers_.empty() || count <= 1) {
     for (size_t index = 0; index < count; ++index) call(context, index, 0);
     return;
   }
@@ -122,11 +116,8 @@ void TaskPool::runErased(size_t count, Call call, void* context) {
   generation_.store(closed + 1);
   generation_.notify_all();
   work(0);
-  if (done_.load() == count) return;
-  const auto waitStart = std::chrono::steady_clock::now();
   for (size_t finished = done_.load(); finished != count; finished = done_.load())
     awaitChange(done_, finished);
-  waitNs_ += std::chrono::nanoseconds(std::chrono::steady_clock::now() - waitStart).count();
 }
 
 void TaskPool::attach(TaskProfile* profile) {
@@ -199,11 +190,8 @@ void TaskPool::loop(unsigned thread) {
     if (stopping_.load()) return;
     if (seen % 2 == 1) continue;  // being set up: wait for it to open
     inside_.fetch_add(1);
-    const bool open = generation_.load() == seen;  // else it closed before we got in
-    const int64_t start = open ? threadCpuNs() : 0;
-    if (open) work(thread);
+    if (generation_.load() == seen) work(thread);  // else it closed before we got in
     inside_.fetch_sub(1);
-    if (open) workerNs_.fetch_add(threadCpuNs() - start, std::memory_order_relaxed);
   }
 }
 

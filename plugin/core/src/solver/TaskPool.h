@@ -50,14 +50,6 @@ struct TaskProfile {
 /// The calling thread's CPU time [ms] (CLOCK_THREAD_CPUTIME_ID).
 double threadCpuMs();
 
-/// What a pool's joins cost and gained, running totals since its construction (ThreadGovernor).
-struct JoinTimes {
-  /// Wall time the caller waited for the workers' tasks after its own (a thread-clock read costs
-  /// about 1 µs, a wall-clock read 45 ns) [ms].
-  double waitMs = 0;
-  double workerMs = 0;  ///< thread CPU time the workers spent running tasks [ms]
-};
-
 /// threads − 1 workers plus the calling thread. run() hands out task indices one at a time
 /// from a shared counter (largest tasks first balances best), so which thread runs a task
 /// varies: tasks must write only their own outputs, or scratch of the thread index they get.
@@ -78,15 +70,6 @@ class TaskPool {
   unsigned threads() const { return resolve(static_cast<int>(workers_.size()) + 1, host_); }
   /// The host scheduler run() hands tasks to (empty: the pool's own threads).
   const TaskScheduler& host() const { return host_; }
-  /// Whether later runs use the pool's workers (true, the default) or only the caller, thread
-  /// 0 (ThreadGovernor). A host scheduler, when present, runs every run() either way.
-  void spread(bool parallel) { parallel_ = parallel; }
-  /// The joins' totals so far; a worker adds its time after its last task of a run, so a run's
-  /// may arrive during the next.
-  JoinTimes joinTimes() const {
-    return {static_cast<double>(waitNs_) * 1e-6,
-            static_cast<double>(workerNs_.load(std::memory_order_relaxed)) * 1e-6};
-  }
 
   /// Calls task(index, thread) for every index in [0, count) and returns when all are done;
   /// thread < threads() names the running thread's scratch (0: the caller). `phase` names the
@@ -134,9 +117,6 @@ class TaskPool {
   std::atomic<size_t> next_{0};          ///< next task index of the current job
   std::atomic<size_t> done_{0};          ///< tasks of the current job finished
   std::atomic<bool> stopping_{false};    ///< set by the destructor
-  bool parallel_ = true;                 ///< spread(): runs use the workers
-  int64_t waitNs_ = 0;                   ///< JoinTimes::waitMs [ns]
-  std::atomic<int64_t> workerNs_{0};     ///< JoinTimes::workerMs [ns]
   size_t count_ = 0;                     ///< tasks of the current job
   Call call_ = nullptr;                  ///< the current job's trampoline
   void* context_ = nullptr;              ///< the current job's task object
