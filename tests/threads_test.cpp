@@ -240,7 +240,10 @@ TEST(ForceChunks, BuffersAddLaneByLane) {
       for (int k = 0; k < 4; ++k) expected[i].m_floats[k] = to[i].m_floats[k] + from[i].m_floats[k];
     }
     addForces(to, from);
-    EXPECT_EQ(std::memcmp(to.data(), expected.data(), n * sizeof(btVector3)), 0) << n;
+    // memcmp's pointers must not be null, which an empty vector's data() may be.
+    if (n > 0) {
+      EXPECT_EQ(std::memcmp(to.data(), expected.data(), n * sizeof(btVector3)), 0) << n;
+    }
     clearForces(to);
     for (const btVector3& v : to) EXPECT_EQ(v, btVector3(0, 0, 0)) << n;
   }

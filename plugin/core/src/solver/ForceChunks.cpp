@@ -55,6 +55,7 @@ size_t groupedFanEnd(const MuscleSettings& settings, size_t end) {
 #if FIBREMSS_AVX2_PARTICLES
 /// clearForces four vectors per iteration (float: two per 256-bit store).
 FIBREMSS_AVX2_PASS void clearForcesAvx2(std::span<btVector3> forces) {
+  if (forces.empty()) return;  // data() may be null: no member to take
   float* f = forces.data()->m_floats;
   const size_t floats = 4 * forces.size(), blocks = floats & ~size_t{15};
   const __m256 zero = _mm256_setzero_ps();
@@ -67,6 +68,7 @@ FIBREMSS_AVX2_PASS void clearForcesAvx2(std::span<btVector3> forces) {
 
 /// addForces four vectors per iteration.
 FIBREMSS_AVX2_PASS void addForcesAvx2(std::span<btVector3> to, std::span<const btVector3> from) {
+  if (to.empty()) return;  // data() may be null: no member to take
   float* t = to.data()->m_floats;
   const float* f = from.data()->m_floats;
   const size_t floats = 4 * to.size(), blocks = floats & ~size_t{15};
