@@ -4,7 +4,6 @@
 #include <cstdlib>
 #include <cstring>
 #include <stdexcept>
-#include <type_traits>
 
 #include "MuscleState.h"
 #include "ParticleSimd.h"
@@ -163,13 +162,6 @@ FIBREMSS_AVX2 void transpose(__m256& r0, __m256& r1, __m256& r2, __m256& r3) {
   r3 = _mm256_castpd_ps(_mm256_unpackhi_pd(t1, t3));
 }
 
-/// The vector `offset` bytes into `base`.
-template <typename Vector>
-Vector& at(Vector* base, uint32_t offset) {
-  using Byte = std::conditional_t<std::is_const_v<Vector>, const char, char>;
-  return *reinterpret_cast<Vector*>(reinterpret_cast<Byte*>(base) + offset);
-}
-
 /// Overstretched springs among the lanes of a group whose mask bit is set in `beyond`: padding
 /// lanes (b = a; a spring has a ≠ b) are not springs; they are beyond only with a non-finite
 /// x[a].
@@ -233,10 +225,12 @@ FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_
                              _mm256_castps256_ps128(f2),   _mm256_castps256_ps128(f3),
                              _mm256_extractf128_ps(f0, 1), _mm256_extractf128_ps(f1, 1),
                              _mm256_extractf128_ps(f2, 1), _mm256_extractf128_ps(f3, 1)};
-    for (int k = 0; k < 8; ++k) store(at(f, b[k]), _mm_add_ps(force[k], loadVector(at(f, b[k]))));
-    const __m256 rows = _mm256_add_ps(_mm256_add_ps(f0, f1), _mm256_add_ps(f2, f3));
-    store(at(f, a0), _mm_sub_ps(loadVector(at(f, a0)), _mm256_castps256_ps128(rows)));
-    store(at(f, a1), _mm_sub_ps(loadVector(at(f, a1)), _mm256_extractf128_ps(rows, 1)));
+    for (int k = 0; k < 8; ++k) addAt(f, b[k], force[k]);
+    // The force on a, negated: f[a] + (−Σ) is f[a] − Σ bit for bit.
+    const __m256 rows = _mm256_xor_ps(_mm256_add_ps(_mm256_add_ps(f0, f1), _mm256_add_ps(f2, f3)),
+                                      _mm256_set1_ps(-0.0f));
+    addAt(f, a0, _mm256_castps256_ps128(rows));
+    addAt(f, a1, _mm256_extractf128_ps(rows, 1));
   }
   return deviation;
 }

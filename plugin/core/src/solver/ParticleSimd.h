@@ -18,7 +18,17 @@
 #define FIBREMSS_AVX2_PARTICLES 0
 #endif
 
+#include <cstdint>
+#include <type_traits>
+
 namespace fibremss {
+
+/// The vector `offset` bytes after `base` (the kernels' particle byte offsets).
+template <class T>
+inline T& at(T* base, uint32_t offset) {
+  using Byte = std::conditional_t<std::is_const_v<T>, const char, char>;
+  return *reinterpret_cast<T*>(reinterpret_cast<Byte*>(base) + offset);
+}
 
 #if FIBREMSS_SSE_PARTICLES
 /// |v|² of four vectors, one per lane, in btVector3::length2's order: (x² + y²) + z².
@@ -37,6 +47,18 @@ inline __m128 loadVector(const btVector3& v) {
 /// Vectors v and w in the low and high half of one register.
 FIBREMSS_AVX2_PASS inline __m256 loadPair(const btVector3& v, const btVector3& w) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(loadVector(v)), loadVector(w), 1);
+}
+
+/// The vector `offset` bytes after `base` plus `force`, stored back: a VEX load-add and a store
+/// through an indexed address. GCC otherwise adds base and offset into a register first, one
+/// instruction more per scatter (callgrind, thigh13 R=20: the fans' step 1 089.8 → 1 070.0 M
+/// instructions). force + f, rounded once: the same bits as _mm_add_ps either way round.
+FIBREMSS_AVX2_PASS inline void addAt(btVector3* base, uint32_t offset, __m128 force) {
+  __m128 sum;
+  asm("vaddps %[f], %[force], %[sum]\n\t"
+      "vmovaps %[sum], %[f]"
+      : [sum] "=&x"(sum), [f] "+m"(at(reinterpret_cast<__m128*>(base), offset))
+      : [force] "x"(force));
 }
 
 /// |v|² of eight vectors given as loadPair(v_j, v_{j+4}) for j = 0..3: lane k holds v_k's, in

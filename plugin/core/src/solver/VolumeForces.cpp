@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
-#include <type_traits>
 #include <vector>
 
 #include "ParticleSimd.h"
@@ -25,8 +24,7 @@ inline btScalar clampedStrain(btScalar ratio) {
   return std::min(std::max(1 - ratio, btScalar(-1)), btScalar(1));
 }
 
-/// Fan k's forces alone (the scalar kernel, and the groups' tails), modulus a sixth of K: the
-/// lanes' operations in their order.
+/// Fan k's forces alone (the scalar kernel), modulus a sixth of K: the lanes' operations.
 void scalarFan(const MuscleSettings& settings, size_t k, btScalar modulus, const btVector3* x,
                btVector3* f) {
   const std::span<const uint32_t> p = fanParticles(settings, k);
@@ -46,11 +44,6 @@ namespace {
 /// particle is forwarded from this store (btVector3's 8 + 4 byte stores are not).
 inline void addPacked(btVector3& force, __m128 f) {
   _mm_store_ps(force.m_floats, _mm_add_ps(_mm_load_ps(force.m_floats), f));
-}
-
-/// forces[i] -= f, as addPacked.
-inline void subtractPacked(btVector3& force, __m128 f) {
-  _mm_store_ps(force.m_floats, _mm_sub_ps(_mm_load_ps(force.m_floats), f));
 }
 
 // The templates below run on Float8 only inlined into avxPass (always_inline), compiled for AVX:
@@ -162,9 +155,10 @@ __attribute__((always_inline)) inline Lanes<V> plus(const Lanes<V>& a, const Lan
 
 /// The gradients ∂(6V)/∂x_i (per particle, lane-wise) of fans with Ring ring particles,
 /// `edge(0)` their edges from particle a to b and `edge(1 + r)` to ring particle r, a's negated
-/// (grad[0], to subtract), and the scale of their forces K/6·s·G0/G, with 1/(6·V0) `inverse`,
-/// G0 `rest` and modulus a sixth of K: scalarFan's operations lane-wise. Each ring edge is
-/// loaded once, as its cross products need it, so that only two are live at a time.
+/// (grad[0]: its force is grad[0] times the negated scale, added), and the scale of their forces
+/// K/6·s·G0/G, with 1/(6·V0) `inverse`, G0 `rest` and modulus a sixth of K: scalarFan's operations
+/// lane-wise. Each ring edge is loaded once, as its cross products need it, so that only two are
+/// live at a time.
 template <size_t Ring, class V, class Edge>
 __attribute__((always_inline)) inline V fanLanes(const Edge& edge, V inverse, V rest, V modulus,
                                                  Lanes<V> (&grad)[Ring + 2]) {
@@ -194,127 +188,125 @@ __attribute__((always_inline)) inline V fanLanes(const Edge& edge, V inverse, V 
          larger(gradient, rest * kMinGradientShare);
 }
 
-/// f[i] += force, or −= for a fan's particle a (v = 0).
-inline void addFanForce(size_t v, btVector3& f, __m128 force) {
-  if (v == 0)
-    subtractPacked(f, force);
-  else
-    addPacked(f, force);
-}
-
-/// The vector `offset` bytes after `base` (MuscleSettings::fanBytes).
-template <class T>
-inline T& at(T* base, uint32_t offset) {
-  using Byte = std::conditional_t<std::is_const_v<T>, const char, char>;
-  return *reinterpret_cast<T*>(reinterpret_cast<Byte*>(base) + offset);
-}
-
-/// The fans [first, first + 4·groups) of Count particles each, four at a time (one per lane):
-/// lane j's particles at the byte offsets b[Count·j ..] of the group's.
+/// Four fans of Count particles, one per lane, lane j's particles at the byte offsets
+/// b[Count·j ..] and its 1/(6·V0) and G0 in inverse[j] and rest[j]: their gradients (fanLanes)
+/// into grad, and the scale of their forces.
 template <size_t Count>
-__attribute__((always_inline)) inline void fanGroups(const MuscleSettings& settings, size_t first,
-                                                     size_t groups, btScalar modulus,
-                                                     const btVector3* x, btVector3* f) {
-  const uint32_t* b = settings.fanBytes.data() + settings.fanOffsets[first];
-  for (size_t k = first; k < first + 4 * groups; k += 4, b += 4 * Count) {
-    __m128 origin[4];
-    for (size_t j = 0; j < 4; ++j) origin[j] = loadVector(at(x, b[Count * j]));
-    const auto edge = [&](size_t v) {  // particle 1 + v of each lane's fan less its particle a
-      const auto from = [&](size_t j) {
-        return loadVector(at(x, b[Count * j + 1 + v])) - origin[j];
-      };
-      return toLanes(from(0), from(1), from(2), from(3));
-    };
-    Lanes<Float4> grad[Count];
-    const Float4 scale =
-        fanLanes<Count - 2>(edge, _mm_loadu_ps(&settings.fanInverseVolume[k]),
-                            _mm_loadu_ps(&settings.fanRestGradient[k]), _mm_set1_ps(modulus), grad);
-#pragma GCC unroll 8
-    for (size_t v = 0; v < Count; ++v) {  // particle by particle, each lane's
-      __m128 force[4];
-      fromLanes(scaled(grad[v], scale), force);
-      for (size_t j = 0; j < 4; ++j) addFanForce(v, at(f, b[Count * j + v]), force[j]);
-    }
-  }
+__attribute__((always_inline)) inline Float4 groupLanes(const uint32_t* b, const btScalar* inverse,
+                                                        const btScalar* rest, btScalar modulus,
+                                                        const btVector3* x,
+                                                        Lanes<Float4> (&grad)[Count]) {
+  __m128 origin[4];
+  for (size_t j = 0; j < 4; ++j) origin[j] = loadVector(at(x, b[Count * j]));
+  const auto edge = [&](size_t v) {  // particle 1 + v of each lane's fan less its particle a
+    const auto from = [&](size_t j) { return loadVector(at(x, b[Count * j + 1 + v])) - origin[j]; };
+    return toLanes(from(0), from(1), from(2), from(3));
+  };
+  return fanLanes<Count - 2>(edge, _mm_loadu_ps(inverse), _mm_loadu_ps(rest), _mm_set1_ps(modulus),
+                             grad);
 }
 
+/// Adds particle v's forces of groupLanes' fans in lanes [0, lanes) (a's with the scale negated).
+template <size_t Count>
+__attribute__((always_inline)) inline void addGroupForces(size_t v, const Lanes<Float4>& grad,
+                                                          Float4 scale, const uint32_t* b,
+                                                          btVector3* f, size_t lanes = 4) {
+  __m128 force[4];
+  fromLanes(scaled(grad, v == 0 ? -scale : scale), force);
+  for (size_t j = 0; j < lanes; ++j) addPacked(at(f, b[Count * j + v]), force[j]);
+}
+
+/// The fans [k, end) of Count particles, fewer than eight, at the byte offsets b: a group of
+/// four, then the rest (one to three) as a group whose missing lanes repeat its first fan (their
+/// forces not added).
+template <size_t Count>
+void fanClassEnd(const MuscleSettings& settings, size_t k, size_t end, const uint32_t* b,
+                 btScalar modulus, const btVector3* x, btVector3* f) {
+  const btScalar* const inverse = settings.fanInverseVolume.data();
+  const btScalar* const rest = settings.fanRestGradient.data();
+  Lanes<Float4> grad[Count];
+  if (end - k >= 4) {
+    const Float4 scale = groupLanes<Count>(b, inverse + k, rest + k, modulus, x, grad);
+#pragma GCC unroll 8
+    for (size_t v = 0; v < Count; ++v) addGroupForces<Count>(v, grad[v], scale, b, f);
+    k += 4;
+    b += 4 * Count;
+  }
+  const size_t lanes = end - k;
+  if (lanes == 0) return;
+  uint32_t bytes[4 * Count];
+  btScalar laneInverse[4], laneRest[4];
+  for (size_t j = 0; j < 4; ++j) {
+    const size_t fan = j < lanes ? j : 0;
+    std::copy_n(b + Count * fan, Count, bytes + Count * j);
+    laneInverse[j] = inverse[k + fan];
+    laneRest[j] = rest[k + fan];
+  }
+  const Float4 scale = groupLanes<Count>(bytes, laneInverse, laneRest, modulus, x, grad);
+  for (size_t v = 0; v < Count; ++v) addGroupForces<Count>(v, grad[v], scale, bytes, f, lanes);
+}
+
+/// The fans [begin, end) of Count particles each: two groups of four at a time (one fan per
+/// lane), their forces added particle by particle, for each the first group's four, then the
+/// second's (avxFanClass' order); then fanClassEnd.
 template <size_t Count>
 void sseFanClass(const MuscleSettings& settings, size_t begin, size_t end, btScalar modulus,
                  const btVector3* x, btVector3* f) {
-  const size_t groups = (end - begin) / 4;
-  fanGroups<Count>(settings, begin, groups, modulus, x, f);
-  for (size_t k = begin + 4 * groups; k < end; ++k) scalarFan(settings, k, modulus, x, f);
+  const btScalar* const inverse = settings.fanInverseVolume.data();
+  const btScalar* const rest = settings.fanRestGradient.data();
+  const uint32_t* b = settings.fanBytes.data() + settings.fanOffsets[begin];
+  size_t k = begin;
+  for (; k + 8 <= end; k += 8, b += 8 * Count) {
+    const uint32_t* second = b + 4 * Count;  // the second group's byte offsets
+    Lanes<Float4> first[Count], next[Count];
+    const Float4 scale = groupLanes<Count>(b, inverse + k, rest + k, modulus, x, first);
+    const Float4 nextScale =
+        groupLanes<Count>(second, inverse + k + 4, rest + k + 4, modulus, x, next);
+    for (size_t v = 0; v < Count; ++v) {
+      addGroupForces<Count>(v, first[v], scale, b, f);
+      addGroupForces<Count>(v, next[v], nextScale, second, f);
+    }
+  }
+  fanClassEnd<Count>(settings, k, end, b, modulus, x, f);
 }
 
 #if FIBREMSS_AVX2_PARTICLES
-/// addFanForce on the vector `offset` bytes after `base`, as VEX instructions on an indexed
-/// address: GCC otherwise adds base and offset into a register first, one instruction more per
-/// particle and lane (callgrind, thigh13 R=20: the step 1 089.8 → 1 070.0 M instructions). The
-/// same operations (an addition's operands swapped, which IEEE addition allows): the same bits.
-FIBREMSS_AVX2_PASS inline void addFanForceAt(size_t v, btVector3* base, uint32_t offset,
-                                             __m128 force) {
-  char* const at = reinterpret_cast<char*>(base);
-  const uint64_t bytes = offset;
-  __m128 sum;
-  if (v == 0)
-    asm volatile(
-        "vmovaps (%[at],%[bytes]), %[sum]\n\t"
-        "vsubps %[force], %[sum], %[sum]\n\t"
-        "vmovaps %[sum], (%[at],%[bytes])"
-        : [sum] "=&x"(sum)
-        : [at] "r"(at), [bytes] "r"(bytes), [force] "x"(force)
-        : "memory");
-  else
-    asm volatile(
-        "vaddps (%[at],%[bytes]), %[force], %[sum]\n\t"
-        "vmovaps %[sum], (%[at],%[bytes])"
-        : [sum] "=&x"(sum)
-        : [at] "r"(at), [bytes] "r"(bytes), [force] "x"(force)
-        : "memory");
-}
-
-/// Groups k and k + 1 of fanGroups in the two halves of __m256 registers (AVX without FMA: each
-/// lane rounds as there), their forces added in its order (the first group's, particle by
-/// particle, then the second's): the same bits as sseFanClass. An odd
-/// last group and the tail as there.
+/// sseFanClass with its two groups in the two halves of __m256 registers (AVX without FMA: each
+/// lane rounds as there), their forces added in its order: the same bits. The class's end as
+/// there.
 template <size_t Count>
 FIBREMSS_AVX2_PASS void avxFanClass(const MuscleSettings& settings, size_t begin, size_t end,
                                     btScalar modulus, const btVector3* x, btVector3* f) {
-  const size_t groups = (end - begin) / 4;
-  size_t g = 0;
   const uint32_t* b = settings.fanBytes.data() + settings.fanOffsets[begin];
-  for (; g + 1 < groups; g += 2, b += 8 * Count) {
-    const size_t k = begin + 4 * g;
+  // Read through locals: the force stores may alias settings' vectors as far as GCC knows.
+  const btScalar* const inverseVolume = settings.fanInverseVolume.data();
+  const btScalar* const restGradient = settings.fanRestGradient.data();
+  size_t k = begin;
+  for (; k + 8 <= end; k += 8, b += 8 * Count) {
     const uint32_t* second = b + 4 * Count;  // the second group's byte offsets
     __m256 origin[4];
     for (size_t j = 0; j < 4; ++j)
       origin[j] = loadPair(at(x, b[Count * j]), at(x, second[Count * j]));
-    const auto edge = [&](size_t v) __attribute__((always_inline)) {  // as fanGroups' edge
+    const auto edge = [&](size_t v) __attribute__((always_inline)) {  // as groupLanes' edge
       const auto from = [&](size_t j) __attribute__((always_inline)) {
         return loadPair(at(x, b[Count * j + 1 + v]), at(x, second[Count * j + 1 + v])) - origin[j];
       };
       return toLanes(from(0), from(1), from(2), from(3));
     };
     Lanes<Float8> grad[Count];
-    const Float8 scale = fanLanes<Count - 2>(edge, _mm256_loadu_ps(&settings.fanInverseVolume[k]),
-                                             _mm256_loadu_ps(&settings.fanRestGradient[k]),
-                                             _mm256_set1_ps(modulus), grad);
-    __m128 later[Count][4];  // the second group's, added after the first's
+    const Float8 scale =
+        fanLanes<Count - 2>(edge, _mm256_loadu_ps(inverseVolume + k),
+                            _mm256_loadu_ps(restGradient + k), _mm256_set1_ps(modulus), grad);
 #pragma GCC unroll 8
-    for (size_t v = 0; v < Count; ++v) {
+    for (size_t v = 0; v < Count; ++v) {  // particle by particle, the first group's, the second's
       __m256 force[4];
-      fromLanes(scaled(grad[v], scale), force);
-      for (size_t j = 0; j < 4; ++j) {
-        addFanForceAt(v, f, b[Count * j + v], _mm256_castps256_ps128(force[j]));
-        later[v][j] = _mm256_extractf128_ps(force[j], 1);
-      }
+      fromLanes(scaled(grad[v], v == 0 ? -scale : scale), force);
+      for (size_t j = 0; j < 4; ++j) addAt(f, b[Count * j + v], _mm256_castps256_ps128(force[j]));
+      for (size_t j = 0; j < 4; ++j)
+        addAt(f, second[Count * j + v], _mm256_extractf128_ps(force[j], 1));
     }
-#pragma GCC unroll 8
-    for (size_t v = 0; v < Count; ++v)
-      for (size_t j = 0; j < 4; ++j) addFanForceAt(v, f, second[Count * j + v], later[v][j]);
   }
-  fanGroups<Count>(settings, begin + 4 * g, groups - g, modulus, x, f);
-  for (size_t k = begin + 4 * groups; k < end; ++k) scalarFan(settings, k, modulus, x, f);
+  fanClassEnd<Count>(settings, k, end, b, modulus, x, f);
 }
 #endif
 
@@ -352,9 +344,13 @@ void fanForces(const MuscleSettings& settings, size_t begin, size_t end, btScala
 
 size_t fansUpTo(const MuscleSettings& settings, size_t begin, size_t end, size_t count) {
   const std::span<const uint32_t> offsets = settings.fanOffsets;
+  const auto within = [&](size_t k) { return offsets[k + 1] - offsets[k] <= count; };
+  // A range inside one class (most of a chunk's) needs no search.
+  if (begin == end || !within(begin)) return begin;
+  if (within(end - 1)) return end;
   while (begin < end) {
     const size_t mid = begin + (end - begin) / 2;
-    if (offsets[mid + 1] - offsets[mid] <= count)
+    if (within(mid))
       begin = mid + 1;
     else
       end = mid;

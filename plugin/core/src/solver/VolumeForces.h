@@ -24,10 +24,11 @@ namespace fibremss {
 /// a fixed step that is stable at rest is not once the muscle moves). A fan of m tetrahedra
 /// gathers and scatters m + 3 particles and takes 2m + 1 cross products, where its tetrahedra
 /// one by one would take 4m and 3m. On the spring kernel's instruction set
-/// (fastestSpringKernel): with SSE2 four fans with as many particles at a time, then the rest of
-/// that count one at a time; with AVX2 two such groups at a time (no FMA, the same order: SSE2's
-/// bits); scalar, one at a time. A fixed order for a given kernel: the same sums for any thread
-/// count.
+/// (fastestSpringKernel): with SSE2 two groups of four fans with as many particles at a time,
+/// their forces added particle by particle (the first group's four, then the second's), then a
+/// group of four and a group of the rest (its missing lanes repeating a fan); with AVX2 the two
+/// groups in one register (no FMA, the same order: SSE2's bits); scalar, one at a time. A fixed
+/// order for a given kernel: the same sums for any thread count.
 void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces);
 /// The same on `kernel`'s instruction set (tests compare them).
@@ -42,8 +43,8 @@ void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVect
 /// The most tetrahedra in one fan of the local volume terms (MuscleSettings::fanParticles).
 constexpr size_t kMaxFanTetrahedra = 4;
 
-/// Fans the widest kernel takes at a time (AVX2: two groups of four); a class's fans beyond a
-/// multiple of it from the start of a call's range go four at a time, then one at a time.
+/// Fans the widest kernel takes at a time (two groups of four); a class's fans beyond a multiple
+/// of it from the start of a call's range go as a group of four, then a group of the rest.
 constexpr size_t kFanLaneGroup = 8;
 
 /// The first fan of [begin, end) with more than `count` particles (end if none): the fans are
