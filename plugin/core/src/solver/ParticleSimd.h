@@ -1,8 +1,9 @@
 #pragma once
-// SIMD helpers of the per-particle passes (Verlet, adaptive dt, pre-transform), internal. The
-// float build on x86-64 has SSE2; AVX2 functions are compiled for their own target and run only
-// when the CPU has it (the spring kernel's choice, fastestSpringKernel). AVX2 without FMA: the
-// compiler cannot contract a product and a sum, so each lane rounds as the scalar code does.
+// SIMD helpers of the per-particle passes (Verlet, adaptive dt, pre-transform) and of the force
+// kernels' gathers and scatters, internal. The float build on x86-64 has SSE2; AVX2 functions are
+// compiled for their own target and run only when the CPU has it (the spring kernel's choice,
+// fastestSpringKernel). AVX2 without FMA: the compiler cannot contract a product and a sum, so
+// each lane rounds as the scalar code does.
 #include <LinearMath/btVector3.h>
 
 #if defined(__SSE2__) && !defined(BT_USE_DOUBLE_PRECISION)
