@@ -816,14 +816,16 @@ TEST(Projective, TheStepSolvesWithTheContactsHeldAfterUpdatesAndNewRows) {
 
 // --- every integrator in a MuscleSystem with collision ------------------------------------------
 
-/// A 3 × 3 × 5 block of particles 5 mm apart, springs between all pairs closer than 1.8 spacings
-/// (k = κ/L0, κ = 1 N), the z = 0 layer fixed to bone 0, every particle a 2.5 mm sphere.
-std::shared_ptr<MuscleSettings> block() {
+/// A 3 × 3 × 5 block of particles 5 mm apart from z = `base` up, springs between all pairs closer
+/// than 1.8 spacings (k = κ/L0, κ = `kappa` N), layer `fixedLayer` (0: the lowest) fixed to bone
+/// 0, every particle a 2.5 mm sphere.
+std::shared_ptr<MuscleSettings> block(btScalar base = 0, uint32_t fixedLayer = 0,
+                                      btScalar kappa = 1) {
   const btScalar spacing = 0.005;
   std::vector<btVector3> points;
   for (int z = 0; z < 5; ++z)
     for (int y = 0; y < 3; ++y)
-      for (int x = 0; x < 3; ++x) points.emplace_back(x * spacing, y * spacing, z * spacing);
+      for (int x = 0; x < 3; ++x) points.emplace_back(x * spacing, y * spacing, base + z * spacing);
   auto settings = particles(points, 3e-5, 0);
   double stiffnessSum = 0;
   for (uint32_t a = 0; a < points.size(); ++a) {
@@ -831,12 +833,12 @@ std::shared_ptr<MuscleSettings> block() {
     settings->radii[a] = spacing / 2;
     settings->boundaryParticles.push_back(a);
     settings->nearestBone[a] = 0;
-    if (points[a].z() == 0) testing::fix(*settings, a, 0);
+    if (a / 9 == fixedLayer) testing::fix(*settings, a, 0);
     for (uint32_t b = a + 1; b < points.size(); ++b) {
       const btScalar rest = (points[b] - points[a]).length();
       if (rest > 1.8f * spacing) continue;
-      link(*settings, a, b, 1 / rest, rest);
-      stiffnessSum += 1 / rest;
+      link(*settings, a, b, kappa / rest, rest);
+      stiffnessSum += kappa / rest;
     }
   }
   // Half the critical damping of the mean spring (as the scenes' dampingScale does).
@@ -871,6 +873,49 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
   // No particle deeper in the bone than the slop (1 % of its 2.5 mm radius) and rounding.
   for (const btVector3& x : system.positions(muscle))
     EXPECT_GT((x - btVector3(0.005f, -0.002f, 0.012f)).length(), 0.0075f - 0.03f * 0.0025f);
+}
+
+/// The force residual (RMS equivalent displacement [m]) of two blocks pressed into each other,
+/// solved by the projective integrator with persistent contacts and `pairReactions`: a stiff
+/// block fixed at its bottom (z = 0) and one a quarter as stiff fixed at its top, whose bottom
+/// layer starts 3 mm into the first block's top layer.
+double pressedBlocksResidual(bool pairReactions, int& iterations) {
+  SimulationParameters parameters;
+  parameters.integrator = Integrator::Projective;
+  parameters.persistentContacts = true;
+  parameters.pairReactions = pairReactions;
+  parameters.projectiveContactWeight = 1;
+  parameters.stopRule = StopRule::Residual;
+  parameters.tolerance = 1e-8;
+  parameters.iterations = 3000;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(testing::makeBone({{0.1, 0.1, -0.1}}, {0.001}));
+  system.addMuscle(block(), std::span(&bone, 1));
+  system.addMuscle(block(0.022f, 4, 0.25f), std::span(&bone, 1));
+  system.step();
+  iterations = system.lastStep().iterations;
+  const ForceResidual residual = system.forceResidual();
+  EXPECT_GT(residual.contactParticles, 0u);
+  return residual.rmsDisplacement;
+}
+
+TEST(Projective, ProvesAnEquilibriumOfTwoMusclesPressedTogether) {
+  // Two blocks of unequal stiffness press into each other. The residual holds a contact pair's
+  // reaction only where its two particles' pushes balance (equal and opposite along the pair's
+  // normal). With pair reactions in the solve the step's fixed point is that equilibrium and the
+  // residual reaches its float floor within the cap. With each particle holding its own force
+  // into its push, any touching state is a fixed point: the stiff block keeps pressing harder
+  // than the soft one pushes back, and the residual stays far above the tolerance.
+  int iterations = 0;
+  const double paired = pressedBlocksResidual(true, iterations);
+  RecordProperty("paired_iterations", iterations);
+  RecordProperty("paired_residual_mm", std::to_string(1e3 * paired));
+  EXPECT_LT(iterations, 3000);
+  EXPECT_LT(paired, 1e-8);
+  const double own = pressedBlocksResidual(false, iterations);
+  RecordProperty("own_residual_mm", std::to_string(1e3 * own));
+  EXPECT_EQ(iterations, 3000);
+  EXPECT_GT(own, 100e-8);
 }
 
 class EveryIntegrator : public ::testing::TestWithParam<Integrator> {};

@@ -382,6 +382,7 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
       simulation.number("projective_contact_weight", defaults.projectiveContactWeight, 0.01, 1e4));
   parameters.persistentContacts =
       simulation.boolean("persistent_contacts", defaults.persistentContacts);
+  parameters.pairReactions = simulation.boolean("pair_reactions", defaults.pairReactions);
   fromString(
       simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
       parameters.onFailure);

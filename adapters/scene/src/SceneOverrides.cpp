@@ -57,6 +57,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"projective_rho", {Target::Section, "simulation"}},
       {"projective_contact_weight", {Target::Section, "simulation"}},
       {"persistent_contacts", {Target::Section, "simulation"}},
+      {"pair_reactions", {Target::Section, "simulation"}},
       {"on_failure", {Target::Section, "simulation"}},
       {"max_retries", {Target::Section, "simulation"}},
       {"max_step_deg", {Target::Section, "simulation"}},

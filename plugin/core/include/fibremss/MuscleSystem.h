@@ -91,10 +91,13 @@ struct MuscleFailures {
 
 /// How far the particles are from a static equilibrium of the model (MuscleSystem::forceResidual):
 /// the net force on each free particle from everything the model's energy contains (springs, the
-/// volume terms, gravity and external forces; not damping or inertia), with a contact's share
-/// taken out: a particle the last collision response pushed keeps only the part a frictionless
-/// contact cannot hold (its force into the push direction is held by the contact; its force along
-/// the contact and out of it is not). Attached particles are not counted.
+/// volume terms, gravity and external forces; not damping or inertia), with the reactions of the
+/// last collision response's frictionless contacts added: a bone contact pushes its particle out
+/// along the bone's push with any force ≥ 0; a contact of two muscles' particles gives them equal
+/// and opposite forces along the pair's normal (Newton's third law), so two muscles that press
+/// into each other with unequal forces keep the difference. The reactions (≥ 0) are those that
+/// leave the smallest Σ (|r_i|/k_i)², found by a fixed number of Gauss–Seidel sweeps: an upper
+/// bound on the best set's residual. Attached particles are not counted.
 struct ForceResidual {
   size_t particles = 0;         ///< free particles counted
   size_t contactParticles = 0;  ///< of them pushed by the last collision response

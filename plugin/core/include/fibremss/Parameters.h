@@ -192,6 +192,14 @@ struct SimulationParameters {
   /// default: on thigh13 R=20 it left the worst pose's residual after 10–40 iterations 1.2–1.4×
   /// higher; the `equilibrium` method turns it on (docs/performance.md, "Persistent contacts").
   bool persistentContacts = false;
+  /// Projective with persistentContacts: what a contact holds in the solve is its reaction
+  /// (MuscleSystem::forceResidual's rule): equal and opposite along the pair's normal for two
+  /// muscles' particles (Newton's third law), any push out of a bone, the reactions that leave the
+  /// smallest residual; else each pushed particle's own force into its push (two muscles may
+  /// then press into each other with unequal forces). Off: two blocks pressed together reach
+  /// their equilibrium with it (test Projective.ProvesAnEquilibriumOfTwoMusclesPressedTogether),
+  /// but thigh13 R=20 diverged with it at every ρ tried (docs/performance.md, "Contact pairs").
+  bool pairReactions = false;
 
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap

@@ -126,7 +126,8 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
     if (holdContacts(muscle, w, parameters.projectiveContactWeight)) w.factor.update();
     const std::vector<uint32_t>& free = muscle.freeParticles;
-    const bool held = holdsContacts(parameters);
+    // With pair reactions the step added the contacts' reactions to the forces already.
+    const bool held = holdsContacts(parameters) && !parameters.pairReactions;
     for (size_t k = 0; k < free.size(); ++k) {
       const btVector3& force = muscle.forces[free[k]];
       w.solution[w.factor.row(k)] =

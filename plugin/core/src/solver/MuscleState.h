@@ -148,6 +148,12 @@ struct ResidualState {
   /// pushRounds[i] == contactRound (that response was the last and pushed it).
   std::vector<btVector3> lastPushes;
   std::vector<uint32_t> pushRounds;  ///< contactRound of each particle's last push (0: none)
+  /// The bones' share of lastPushes (the sum of every bone's push on the particle) [m], valid
+  /// where lastPushes is; zero for a particle only muscles pushed.
+  std::vector<btVector3> lastBonePushes;
+  /// Scratch of the contact reactions (ContactReactions.h): per particle, what its bone contact
+  /// holds along the unit bone push [N].
+  std::vector<btScalar> boneReactions;
 };
 
 /// A muscle: settings, its bones and slot, and the state a step changes in seven parts (stages

@@ -90,6 +90,8 @@ struct MusclePairTask {
   uint32_t a = 0;           ///< slot of the first muscle (earlier in insertion order)
   uint32_t b = 0;           ///< slot of the second muscle
   MuscleContacts contacts;  ///< in pairContacts, sized by the pair's candidate list
+  uint32_t roundA = 0;      ///< `a`'s contactRound once the response applies these contacts
+  uint32_t roundB = 0;      ///< `b`'s contactRound once the response applies these contacts
 };
 
 /// What a handle that finds no body is (Slots::find compares the slot's generation).
@@ -134,9 +136,14 @@ struct MuscleSystem::Impl {
   /// Per slot: its pairTasks in insertion order of the partners (the order its pushes sum in).
   std::vector<std::vector<uint32_t>> musclePairs;
   std::vector<MuscleContact> pairContacts;  ///< room for every muscle pair's contacts
-  uint32_t musclesAdded = 0;                ///< counts additions, seeds each muscle's noise
-  btScalar previousDt = 0;                  ///< dt of the last iteration (0: none yet)
-  uint64_t stepCount = 0;                   ///< steps taken (the guard numbers them)
+  /// Per entry of pairContacts: the reaction its contact holds (addContactReactions) [N].
+  std::vector<btScalar> pairReactions;
+  /// The bone contacts addContactReactions relaxes, as (slot, particle); room for every
+  /// boundary particle.
+  std::vector<std::pair<uint32_t, uint32_t>> boneContacts;
+  uint32_t musclesAdded = 0;   ///< counts additions, seeds each muscle's noise
+  btScalar previousDt = 0;     ///< dt of the last iteration (0: none yet)
+  uint64_t stepCount = 0;      ///< steps taken (the guard numbers them)
   bool pushesPending = false;  ///< collide() left pushes that the next forces phase applies
   /// Iterations over which the equilibrium stop rule measures how fast the steps shrink.
   static constexpr size_t kEquilibriumWindow = 16;
@@ -200,6 +207,11 @@ struct MuscleSystem::Impl {
   double threadShare(double MuscleIterationResult::*part,
                      std::initializer_list<double MuscleIterationResult::*> phase) const;
   void collideMusclePairs();
+  /// Adds to each muscle's `forces` (its `forces` member or `residual`) the reactions of the
+  /// contacts the last response applied (ContactReactions.cpp): muscle pairs of pairTasks, and
+  /// the bone contacts of the muscles in `slots`. No allocation; one fixed order.
+  void addContactReactions(std::vector<btVector3> MuscleState::*forces,
+                           std::span<const uint32_t> slots);
   void pushMusclePairs(MuscleState& state, uint32_t slot, TreeTraversalStack& stack);
   void collide();
   /// The pushes of the last collide() on the muscle; `record` (or an integrator that holds

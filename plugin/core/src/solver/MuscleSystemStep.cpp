@@ -140,6 +140,11 @@ void MuscleSystem::Impl::prepareWorkers() {
   for (uint32_t a : muscles.order)
     for (const CandidateList& list : muscles.states[a]->muscleLists) room += list.pairs.size();
   if (pairContacts.size() < room) pairContacts.resize(room);
+  if (pairReactions.size() < room) pairReactions.resize(room);
+  size_t boundary = 0;
+  for (uint32_t slot : muscles.order)
+    boundary += muscles.states[slot]->settings->boundaryParticles.size();
+  boneContacts.reserve(boundary);
 }
 
 void MuscleSystem::Impl::planChunks(MuscleState& state) const {
@@ -265,7 +270,11 @@ void MuscleSystem::Impl::collideMusclePairs() {
       const size_t capacity = b < first.muscleLists.size() ? first.muscleLists[b].pairs.size() : 0;
       musclePairs[a].push_back(static_cast<uint32_t>(pairTasks.size()));
       musclePairs[b].push_back(static_cast<uint32_t>(pairTasks.size()));
-      pairTasks.push_back({a, b, {pairContacts.data() + room, capacity}});
+      pairTasks.push_back({a,
+                           b,
+                           {pairContacts.data() + room, capacity},
+                           first.contactRound + 1,
+                           second.contactRound + 1});
       room += capacity;
     }
   }
@@ -529,16 +538,19 @@ bool MuscleSystem::Impl::stopRuleMet(bool arrived, int settled, Clock::time_poin
 
 ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
   if (residuals.size() < muscles.states.size()) residuals.resize(muscles.states.size());
+  // Every muscle's forces: a contact pair's reaction depends on both muscles'.
+  const std::vector<uint32_t>& all = muscles.order;
   const auto task = [&](size_t k, unsigned) {
-    residuals[slots[k]] = muscleResidual(*muscles.states[slots[k]], parameters.gravity);
+    muscleForceResidual(*muscles.states[all[k]], parameters.gravity);
   };
   if (pool) {
-    pool->run(slots.size(), task, "residual");
+    pool->run(all.size(), task, "residual");
   } else {
-    for (size_t k = 0; k < slots.size(); ++k) task(k, 0);
+    for (size_t k = 0; k < all.size(); ++k) task(k, 0);
   }
+  addContactReactions(&MuscleState::residual, all);
   ResidualSums total;
-  for (uint32_t slot : slots) total.add(residuals[slot]);
+  for (uint32_t slot : slots) total.add(residuals[slot] = residualSums(*muscles.states[slot]));
   return total;
 }
 
@@ -547,6 +559,8 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   stats = StepStats{};
   const TimeIntegrator& integrator = integratorFor(parameters.integrator);
   const int cap = size.iterations;
+  // The solve holds what the contacts' reactions hold (ContactReactions.cpp).
+  const bool pairReactionsHeld = integrator.holdsContacts(parameters) && parameters.pairReactions;
   prepareWorkers();
   // Largest muscles first: handed out in this order, the threads finish close together.
   active.clear();
@@ -604,6 +618,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     if (bonesMove)
       moveBones(static_cast<btScalar>(iteration) / motionIterations, iteration == motionIterations);
     forcesPhase(bonesMove);
+    if (pairReactionsHeld) addContactReactions(&MuscleState::forces, active);
     const btScalar dt = timeStep(size);
     integrateAndRefit(integrator, dt);
     collide();

@@ -6,7 +6,6 @@
 #include "MuscleState.h"
 #include "SpringForces.h"
 #include "VolumeForces.h"
-#include "collision/CollisionPairs.h"
 #include "contact/BodyContacts.h"
 
 namespace fibremss {
@@ -76,6 +75,9 @@ void recordPushes(MuscleState& muscle) {
     if (muscle.pushCounts[i] == 0) continue;
     muscle.lastPushes[i] = muscle.pushes[i];
     muscle.pushRounds[i] = round;
+    muscle.lastBonePushes[i] = muscle.pinchBones[i] >= 0
+                                   ? muscle.firstBonePushes[i] + muscle.otherBonePushes[i]
+                                   : btVector3(0, 0, 0);
   }
 }
 
@@ -87,7 +89,7 @@ btVector3 contactNormal(const MuscleState& muscle, uint32_t i) {
   return length > 0 ? push / length : btVector3(0, 0, 0);
 }
 
-ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity) {
+void muscleForceResidual(MuscleState& muscle, const btVector3& gravity) {
   const MuscleSettings& settings = *muscle.settings;
   std::vector<btVector3>& r = muscle.residual;
   springForces(settings, muscle.positions, r);
@@ -95,14 +97,13 @@ ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity) {
   addEnclosedVolumeForces(settings, muscle.positions, r);
   addExternalForces(muscle, gravity, r);
   for (uint32_t i : settings.fixedParticles) r[i].setZero();
+}
+
+ResidualSums residualSums(const MuscleState& muscle) {
   ResidualSums sums;
   for (uint32_t i : muscle.freeParticles) {
-    const btVector3 normal = contactNormal(muscle, i);
-    if (!normal.isZero()) {
-      r[i] = withoutInto(r[i], normal);
-      ++sums.contactParticles;
-    }
-    const double force = r[i].length();
+    if (!contactNormal(muscle, i).isZero()) ++sums.contactParticles;
+    const double force = muscle.residual[i].length();
     const btScalar k = muscle.residualStiffness[i];
     const double displacement = k > 0 ? force / k : 0;
     sums.forceSquares += force * force;

@@ -36,7 +36,8 @@ struct ResidualSums {
 
 /// Keeps the pushes the next applyPushes applies for the force residual (lastPushes, stamped
 /// with that response's contactRound in pushRounds; a pinched particle's as the pairs summed
-/// them). The step's last response calls it; the iterations' responses do not.
+/// them; the bones' share of it in lastBonePushes). The step's last response calls it; the
+/// iterations' responses do not, unless the integrator holds contacts.
 void recordPushes(MuscleState& muscle);
 
 /// The unit direction of the push the last response gave particle i (pushRounds[i] ==
@@ -44,10 +45,13 @@ void recordPushes(MuscleState& muscle);
 /// A contact there holds the part of the particle's force into it (withoutInto).
 btVector3 contactNormal(const MuscleState& muscle, uint32_t i);
 
-/// Fills muscle.residual with the force residual at muscle.positions (ForceResidual: springs on
-/// fastestSpringKernel in one pass, every volume term, m·gravity and external forces; a particle
-/// pushed in the last response keeps its force without the part into its contactNormal) and returns
-/// its sums. Attached particles get 0 and are not counted. No allocation; one fixed order.
-ResidualSums muscleResidual(MuscleState& muscle, const btVector3& gravity);
+/// Fills muscle.residual with the model's net force at muscle.positions (ForceResidual: springs
+/// on fastestSpringKernel in one pass, every volume term, m·gravity and external forces), before
+/// the contacts' reactions (addContactReactions); attached particles get 0. No allocation.
+void muscleForceResidual(MuscleState& muscle, const btVector3& gravity);
+
+/// The sums of muscle.residual over the free particles (contactParticles: those with a
+/// contactNormal), in one fixed order.
+ResidualSums residualSums(const MuscleState& muscle);
 
 }  // namespace fibremss
