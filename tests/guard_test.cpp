@@ -99,8 +99,9 @@ std::vector<btVector3> carried(const MuscleSettings& muscle, std::vector<btVecto
   const btTransform deltas[2] = {btTransform::getIdentity(),
                                  Rig::rightAt(step) * Rig::rightAt(step - 1).inverse()};
   for (uint32_t i = 0; i < x.size(); ++i)
-    x[i] = muscle.isFixed(i) ? transforms[muscle.fixedBone[i]] * muscle.restPositions[i]
-                             : pretransformPoint(muscle, deltas, i, x[i], true);
+    x[i] = muscle.isFixed(i)
+               ? transforms[muscle.fixedBone[i]] * muscle.restPositions[i]
+               : pretransformPoint(muscle, deltas, i, x[i], true, PretransformBlend::Linear);
   return x;
 }
 

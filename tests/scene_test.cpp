@@ -94,6 +94,7 @@ TEST(Scene, DefaultsFilledIn) {
   EXPECT_FLOAT_EQ(scene.simulation.deviationEpsilon, simulation.deviationEpsilon);
   EXPECT_EQ(scene.simulation.rebuildEveryStep, simulation.rebuildEveryStep);
   EXPECT_EQ(scene.simulation.blendedPretransform, simulation.blendedPretransform);
+  EXPECT_EQ(scene.simulation.pretransformBlend, simulation.pretransformBlend);
   EXPECT_FLOAT_EQ(scene.simulation.motionFraction, simulation.motionFraction);
   EXPECT_FLOAT_EQ(scene.simulation.initialNoise, simulation.initialNoise);
   EXPECT_FLOAT_EQ(muscle.parameters.springs.dampingScale, muscleDefaults.springs.dampingScale);
@@ -187,6 +188,8 @@ TEST(Scene, ErrorsNameFieldAndFile) {
       {"negative-dt.json", sphereScene(R"(, "simulation": {"dt": -0.001})"), "simulation.dt"},
       {"neighbours.json", sphereScene(R"(, "model": {"neighbours": 0})"), "model.neighbours"},
       {"layout.json", sphereScene(R"(, "model": {"layout": "hexagonal"})"), "model.layout"},
+      {"blend.json", sphereScene(R"(, "simulation": {"pretransform_blend": "cubic"})"),
+       "simulation.pretransform_blend"},
       {"damping.json", sphereScene(R"(, "model": {"damping": "lots"})"), "model.damping"},
       {"units.json", sphereScene(R"(, "units": "inch")"), "units"},
       {"bool.json", sphereScene(R"(, "collision": {"muscle_bone": 1})"), "collision.muscle_bone"},

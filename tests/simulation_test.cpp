@@ -496,6 +496,15 @@ TEST(TwoBoneMuscles, HipExtensionInTenDegreeStepsStaysWhole) {
   EXPECT_EQ(result.overstretched, 0u);
   EXPECT_LT(result.maxSpringRatio, 3.0);
   EXPECT_LT(result.maxEdgeGrowth, nearest.maxEdgeGrowth);
+  // The dual-quaternion blend through the solver's own path (the bones' motions converted once
+  // per iteration) keeps the muscles as whole as the linear one.
+  const SweepResult dual =
+      sweep("hip-extension", {"resolution=10", "step_deg=10", "pretransform_blend=dual_quaternion"},
+            true);
+  EXPECT_FALSE(dual.nan);
+  EXPECT_EQ(dual.overstretched, 0u);
+  EXPECT_LT(dual.maxSpringRatio, 3.0);
+  EXPECT_LT(dual.maxEdgeGrowth, nearest.maxEdgeGrowth);
 }
 
 /// fusiform pulled to its last pose, then single iterations: the spring-deviation ratio after

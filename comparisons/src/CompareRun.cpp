@@ -618,12 +618,14 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
   } else if (spec.family == "btsoftbody") {
     SoftBodyDefinition definition = options.softBody;
     definition.poseDuration = static_cast<btScalar>(duration);
+    definition.pretransformBlend = scene.simulation.pretransformBlend;
     definition.positionIterations = knob(spec, "iterations", definition.positionIterations);
     definition.substepsPerPose = knob(spec, "substeps", definition.substepsPerPose);
     return runSoftBody(scene, prepared, definition, methodOptions);
   }
   FemDefinition definition = options.fem;
   definition.poseDuration = static_cast<btScalar>(duration);
+  definition.pretransformBlend = scene.simulation.pretransformBlend;
   definition.substepsPerPose = knob(spec, "substeps", definition.substepsPerPose);
   definition.mesher.targetCells = knob(spec, "cells", definition.mesher.targetCells);
   return runFem(scene, prepared, definition, methodOptions);

@@ -376,8 +376,9 @@ struct FemScene::Impl {
     for (int n = 0; n < muscle.body->m_nodes.size(); ++n) {
       btSoftBody::Node& node = muscle.body->m_nodes[n];
       if (node.m_im > 0) {
-        moveNodeWithBones(*muscle.settings, deltas, muscle.nearestParticle[static_cast<size_t>(n)],
-                          definition.lengthScale, node);
+        moveNodeWithBones(*muscle.settings, deltas, definition.pretransformBlend,
+                          muscle.nearestParticle[static_cast<size_t>(n)], definition.lengthScale,
+                          node);
       }
     }
   }

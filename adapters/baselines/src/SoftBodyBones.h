@@ -55,14 +55,15 @@ inline void advanceBones(std::span<const btTransform> from, std::span<const btTr
 }
 
 /// Moves a free node (position and previous position, in Bullet units `scale` per metre) by
-/// the bone motion `deltas` blended as FibreMSS pre-transforms `particle` (method.md §4), and
-/// turns its velocity with the blend's rotation: the node keeps its motion relative to its
-/// bones instead of being dragged after them by the pinned nodes alone.
+/// the bone motion `deltas` blended (by `blend`) as FibreMSS pre-transforms `particle`
+/// (method.md §4), and turns its velocity with the blend's rotation: the node keeps its motion
+/// relative to its bones instead of being dragged after them by the pinned nodes alone.
 inline void moveNodeWithBones(const MuscleSettings& settings, std::span<const btTransform> deltas,
-                              uint32_t particle, btScalar scale, btSoftBody::Node& node) {
-  node.m_x = pretransformPoint(settings, deltas, particle, node.m_x / scale, true) * scale;
-  node.m_q = pretransformPoint(settings, deltas, particle, node.m_q / scale, true) * scale;
-  node.m_v = pretransformDirection(settings, deltas, particle, node.m_v, true);
+                              PretransformBlend blend, uint32_t particle, btScalar scale,
+                              btSoftBody::Node& node) {
+  node.m_x = pretransformPoint(settings, deltas, particle, node.m_x / scale, true, blend) * scale;
+  node.m_q = pretransformPoint(settings, deltas, particle, node.m_q / scale, true, blend) * scale;
+  node.m_v = pretransformDirection(settings, deltas, particle, node.m_v, true, blend);
 }
 
 }  // namespace fibremss

@@ -312,7 +312,8 @@ struct SoftBodyScene::Impl {
     const btScalar scale = definition.lengthScale;
     for (uint32_t i = 0; i < s.particleCount(); ++i) {
       if (!s.isFixed(i))
-        moveNodeWithBones(s, deltas, i, scale, muscle.body->m_nodes[static_cast<int>(i)]);
+        moveNodeWithBones(s, deltas, definition.pretransformBlend, i, scale,
+                          muscle.body->m_nodes[static_cast<int>(i)]);
     }
   }
 

@@ -353,6 +353,9 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
   parameters.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
   parameters.blendedPretransform =
       simulation.boolean("blended_pretransform", defaults.blendedPretransform);
+  fromString(simulation.choice("pretransform_blend", toString(defaults.pretransformBlend),
+                               namesOf<PretransformBlend>()),
+             parameters.pretransformBlend);
   parameters.motionFraction =
       btScalar(simulation.number("motion_fraction", defaults.motionFraction, 0, 1, true));
   const Json* seed = simulation.raw("seed");

@@ -46,6 +46,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"rebuild_every_step", {Target::Section, "simulation"}},
       {"deviation_epsilon", {Target::Section, "simulation"}},
       {"blended_pretransform", {Target::Section, "simulation"}},
+      {"pretransform_blend", {Target::Section, "simulation"}},
       {"motion_fraction", {Target::Section, "simulation"}},
       {"seed", {Target::Section, "simulation"}},
       {"initial_noise", {Target::Section, "simulation"}},

@@ -59,6 +59,8 @@ struct FemDefinition {
   /// nearest particle), as in the btSoftBody baseline; without it the pinned nodes alone drag
   /// them and thigh13's first moving pose inverts tetrahedra within 7 substeps.
   bool freeNodesFollowBones = true;
+  /// How free nodes blend their two bones' motions (the scene's simulation.pretransform_blend)
+  PretransformBlend pretransformBlend = PretransformBlend::Linear;
   btScalar attachmentDistance = 0;  ///< nodes this close to a fixed particle are pinned to its
                                     ///< bone [m]; 0: one voxel edge
   /// At least this many nodes are pinned to each bone that fixes particles of a muscle: the

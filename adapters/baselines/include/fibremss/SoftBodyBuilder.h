@@ -42,11 +42,13 @@ struct SoftBodyDefinition {
   int clusterIterations = 2;         ///< m_cfg.citerations (cluster contacts, per world step)
   btScalar velocityDamping = 0.1f;   ///< m_cfg.kDP: share of node velocity removed per step
   bool freeNodesFollowBones = true;  ///< move free nodes by their bones' motion each substep
-  int clustersPerMuscle = 48;        ///< free-node clusters for CL_SS (k-means by position); 48
-                                     ///< vs 24: thigh13 R=20 rest links 1.12× vs 1.55×, same cost
-  bool softSoftCollision = true;     ///< CL_SS between muscles (no self-collision)
-  bool boneCollision = true;         ///< SDF_RS against the bones' triangle meshes
-  int stiffnessLevels = 16;          ///< distinct link materials per muscle
+  /// How free nodes blend their two bones' motions (the scene's simulation.pretransform_blend)
+  PretransformBlend pretransformBlend = PretransformBlend::Linear;
+  int clustersPerMuscle = 48;     ///< free-node clusters for CL_SS (k-means by position); 48
+                                  ///< vs 24: thigh13 R=20 rest links 1.12× vs 1.55×, same cost
+  bool softSoftCollision = true;  ///< CL_SS between muscles (no self-collision)
+  bool boneCollision = true;      ///< SDF_RS against the bones' triangle meshes
+  int stiffnessLevels = 16;       ///< distinct link materials per muscle
   btScalar sdfVoxelSize =
       0.003f;  ///< btSparseSdf voxel edge [m] (Bullet's 0.25 is for metres-sized toys)
   /// Bullet units per metre inside the baseline's world. Bullet extrudes every bone triangle

@@ -103,6 +103,18 @@ enum class BoneCollision : uint8_t {
   DistanceField,  ///< signed distance grid of the bone mesh in the bone frame
 };
 
+/// How the pre-transform of a particle between two bones (method.md §4) combines their rigid
+/// motions with its blend weight w.
+enum class PretransformBlend : uint8_t {
+  /// The weighted sum of the two motions' displacements (linear blend skinning): a large
+  /// rotation in one step pulls points towards the axis (at w = ½ and 180° onto it).
+  Linear,
+  /// The normalised weighted sum of the two motions as unit dual quaternions (Kavan et al.'s
+  /// dual-quaternion skinning): a rigid motion for every w, which keeps the distance to a common
+  /// rotation axis.
+  DualQuaternion,
+};
+
 /// What the numerical guard does when a step produces NaN/inf or explodes.
 enum class FailurePolicy : uint8_t {
   Retry,     ///< roll back, retry with a smaller dt up to maxRetries times, then stop the body
@@ -145,6 +157,9 @@ struct SimulationParameters {
   /// (MuscleSettings::blendBoneA/B/Weight); false: by the nearest bone only, as the thesis did
   /// (which tears such muscles apart at the boundary between the bones' regions).
   bool blendedPretransform = true;
+  /// How the blended pre-transform combines the two bones' motions (docs/performance.md,
+  /// "A dual-quaternion pre-transform").
+  PretransformBlend pretransformBlend = PretransformBlend::Linear;
   btScalar motionFraction = 0.5;  ///< bones reach their target after this share of `iterations`
   bool muscleMuscle = true;       ///< collide muscles with each other
   bool muscleBone = true;         ///< collide muscles with bones
@@ -211,6 +226,7 @@ const char* toString(Integrator integrator);
 const char* toString(StopRule rule);
 const char* toString(BoneCollision mode);
 const char* toString(FailurePolicy policy);
+const char* toString(PretransformBlend blend);
 /// Parse by name (as in toString); return false for an unknown name.
 bool fromString(const std::string& name, SpringLayout& layout);
 bool fromString(const std::string& name, SpringStiffness& rule);
@@ -218,5 +234,6 @@ bool fromString(const std::string& name, Integrator& integrator);
 bool fromString(const std::string& name, StopRule& rule);
 bool fromString(const std::string& name, BoneCollision& mode);
 bool fromString(const std::string& name, FailurePolicy& policy);
+bool fromString(const std::string& name, PretransformBlend& blend);
 
 }  // namespace fibremss

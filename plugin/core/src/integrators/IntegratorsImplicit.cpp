@@ -263,10 +263,10 @@ class ImplicitIntegrator final : public TimeIntegrator {
       const btVector3& v = muscle.velocities[i];
       if (v == w.writtenVelocities[k]) continue;
       if (pretransformDirection(settings, muscle.boneDeltas, i, w.writtenVelocities[k],
-                                parameters.blendedPretransform) == v)
+                                parameters.blendedPretransform, parameters.pretransformBlend) == v)
         w.previousVelocities[k] =
             pretransformDirection(settings, muscle.boneDeltas, i, w.previousVelocities[k],
-                                  parameters.blendedPretransform);
+                                  parameters.blendedPretransform, parameters.pretransformBlend);
       else
         w.previousVelocities[k] = v;
     }

@@ -14,6 +14,7 @@
 #include "contact/InteractionState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
+#include "fibremss/Pretransform.h"
 #include "solver/ForceChunks.h"
 #include "solver/Skin.h"
 
@@ -64,9 +65,11 @@ struct ParticleState {
   double restLengthSum = 0;                 ///< Σ L0 over the springs [m]
   std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
   std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
-  bool bonesMoving = false;                 ///< some bone of the muscle moves in this iteration
-  std::vector<btVector3> surface;           ///< deformed surface vertices (output)
-  SkinFrames skin;                          ///< local frames of the surface (empty: no surface)
+  /// boneDeltas as dual quaternions, for PretransformBlend::DualQuaternion (rotation; [m])
+  std::vector<DualQuaternion> boneDualDeltas;
+  bool bonesMoving = false;        ///< some bone of the muscle moves in this iteration
+  std::vector<btVector3> surface;  ///< deformed surface vertices (output)
+  SkinFrames skin;                 ///< local frames of the surface (empty: no surface)
 };
 
 /// A muscle's contact scratch: the pushes of this iteration's collision pairs and what the

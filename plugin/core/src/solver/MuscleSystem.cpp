@@ -31,7 +31,8 @@ MuscleSystem::~MuscleSystem() = default;
 void MuscleSystem::Impl::deform(MuscleState& state) const {
   if (state.surface.empty()) return;
   deformSurface(*state.settings, state.positions, state.boneTransforms,
-                parameters.blendedPretransform, state.skin, state.surface);
+                parameters.blendedPretransform, parameters.pretransformBlend, state.skin,
+                state.surface);
   if (!parameters.surfaceContact) return;
   measureLayer(*state.settings, state.positions, state.surface, state.skin);
   btVector3 lower, upper;
@@ -178,6 +179,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->boneSlots.assign(bones.size(), -1);
   state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
   state->boneDeltas.assign(bones.size(), btTransform::getIdentity());
+  state->boneDualDeltas.assign(bones.size(), dualQuaternionOf(nullptr));
   state->positions.resize(n);
   state->previous.resize(n);
   state->velocities.assign(n, btVector3(0, 0, 0));

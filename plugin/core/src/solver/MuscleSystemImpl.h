@@ -185,6 +185,8 @@ struct MuscleSystem::Impl {
   void resolveBones(MuscleState& state) const;
   void placeAtBones(MuscleState& state) const;
   void pretransform(MuscleState& state, bool rotateVelocities) const;
+  void movePretransformed(MuscleState& state, uint32_t i, bool rotateVelocities) const;
+  void pretransformDualQuaternions(MuscleState& state, bool rotateVelocities) const;
   void followFixed(MuscleState& state) const;
   /// The muscle's output surface (if it has one): the skin, then surface contact.
   void deform(MuscleState& state) const;

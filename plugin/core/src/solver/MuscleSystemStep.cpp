@@ -60,7 +60,7 @@ void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
     state.positions[i] =
         fixed ? *fixed * settings.restPositions[i]
               : pretransformPoint(settings, state.boneTransforms, i, settings.restPositions[i],
-                                  parameters.blendedPretransform);
+                                  parameters.blendedPretransform, parameters.pretransformBlend);
     state.previous[i] = state.positions[i];
     state.velocities[i].setZero();
   }
@@ -72,6 +72,9 @@ void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities)
   if (!state.bonesMoving) return;
   const MuscleSettings& settings = *state.settings;
   const bool blended = parameters.blendedPretransform;
+  const PretransformBlend blend = parameters.pretransformBlend;
+  if (blended && !settings.blendWeight.empty() && blend == PretransformBlend::DualQuaternion)
+    return pretransformDualQuaternions(state, rotateVelocities);
 #if FIBREMSS_SSE_PRETRANSFORM
   // The common case (Verlet, blended, a few bones) with the transforms packed once.
   const size_t count = state.boneDeltas.size();
@@ -88,14 +91,49 @@ void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities)
     return;
   }
 #endif
+  for (uint32_t i : state.freeParticles) movePretransformed(state, i, rotateVelocities);
+}
+
+// One free particle's x, x(t−dt) and (rotateVelocities) velocity by pretransformPoint/Direction.
+void MuscleSystem::Impl::movePretransformed(MuscleState& state, uint32_t i,
+                                            bool rotateVelocities) const {
+  const MuscleSettings& settings = *state.settings;
+  const bool blended = parameters.blendedPretransform;
+  const PretransformBlend blend = parameters.pretransformBlend;
+  state.positions[i] =
+      pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended, blend);
+  state.previous[i] =
+      pretransformPoint(settings, state.boneDeltas, i, state.previous[i], blended, blend);
+  if (rotateVelocities)
+    state.velocities[i] =
+        pretransformDirection(settings, state.boneDeltas, i, state.velocities[i], blended, blend);
+}
+
+// The dual-quaternion pre-transform with the bones' motions converted once: one blend per
+// particle moves x, x(t−dt) and the velocity; particles on one bone take pretransformPoint's.
+void MuscleSystem::Impl::pretransformDualQuaternions(MuscleState& state,
+                                                     bool rotateVelocities) const {
+  const MuscleSettings& settings = *state.settings;
+  for (size_t b = 0; b < state.boneDeltas.size(); ++b)
+    state.boneDualDeltas[b] = dualQuaternionOf(&state.boneDeltas[b]);
+  const DualQuaternion identity = dualQuaternionOf(nullptr);
+  const auto motionOf = [&](int32_t bone) -> const DualQuaternion& {
+    return bone >= 0 && static_cast<size_t>(bone) < state.boneDualDeltas.size()
+               ? state.boneDualDeltas[bone]
+               : identity;
+  };
   for (uint32_t i : state.freeParticles) {
-    state.positions[i] =
-        pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended);
-    state.previous[i] =
-        pretransformPoint(settings, state.boneDeltas, i, state.previous[i], blended);
+    if (!blendsDualQuaternions(settings, i, PretransformBlend::DualQuaternion)) {
+      movePretransformed(state, i, rotateVelocities);
+      continue;
+    }
+    const RigidMotion motion =
+        blendDualQuaternions(motionOf(settings.blendBoneA[i]), motionOf(settings.blendBoneB[i]),
+                             settings.blendWeight[i]);
+    state.positions[i] = moveRigidly(motion, state.positions[i]);
+    state.previous[i] = moveRigidly(motion, state.previous[i]);
     if (rotateVelocities)
-      state.velocities[i] =
-          pretransformDirection(settings, state.boneDeltas, i, state.velocities[i], blended);
+      state.velocities[i] = rotateByQuaternion(motion.rotation, state.velocities[i]);
   }
 }
 

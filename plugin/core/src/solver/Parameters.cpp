@@ -64,6 +64,10 @@ constexpr std::array<std::pair<FailurePolicy, const char*>, 3> kFailurePolicies{
     {FailurePolicy::StopBody, "stop-body"},
     {FailurePolicy::Report, "report"},
 }};
+constexpr std::array<std::pair<PretransformBlend, const char*>, 2> kPretransformBlends{{
+    {PretransformBlend::Linear, "linear"},
+    {PretransformBlend::DualQuaternion, "dual_quaternion"},
+}};
 
 }  // namespace
 
@@ -84,6 +88,12 @@ const char* toString(BoneCollision mode) {
 }
 const char* toString(FailurePolicy policy) {
   return nameOf(kFailurePolicies, policy);
+}
+const char* toString(PretransformBlend blend) {
+  return nameOf(kPretransformBlends, blend);
+}
+bool fromString(const std::string& name, PretransformBlend& blend) {
+  return valueOf(kPretransformBlends, name, blend);
 }
 bool fromString(const std::string& name, BoneCollision& mode) {
   return valueOf(kBoneCollisions, name, mode);

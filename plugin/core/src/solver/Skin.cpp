@@ -31,12 +31,13 @@ void sumMoments(const MuscleSettings& settings, std::span<const btVector3> posit
 
 /// The rotation part of particle i's rigid pre-transform, as a matrix.
 btMatrix3x3 boneRotation(const MuscleSettings& settings,
-                         std::span<const btTransform> boneTransforms, uint32_t i, bool blended) {
+                         std::span<const btTransform> boneTransforms, uint32_t i, bool blended,
+                         PretransformBlend blend) {
   btVector3 columns[3];
   for (int c = 0; c < 3; ++c) {
     btVector3 axis(0, 0, 0);
     axis[c] = 1;
-    columns[c] = pretransformDirection(settings, boneTransforms, i, axis, blended);
+    columns[c] = pretransformDirection(settings, boneTransforms, i, axis, blended, blend);
   }
   return btMatrix3x3(columns[0].x(), columns[1].x(), columns[2].x(), columns[0].y(), columns[1].y(),
                      columns[2].y(), columns[0].z(), columns[1].z(), columns[2].z());
@@ -66,15 +67,15 @@ void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames) {
 }
 
 void deformSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
-                   std::span<const btTransform> boneTransforms, bool blended, SkinFrames& frames,
-                   std::span<btVector3> surface) {
+                   std::span<const btTransform> boneTransforms, bool blended,
+                   PretransformBlend blend, SkinFrames& frames, std::span<btVector3> surface) {
   sumMoments(settings, positions, frames.used, frames.moments);
   for (uint32_t i = 0; i < frames.used.size(); ++i) {
     if (!frames.used[i]) continue;
     const btMatrix3x3 deformation = frames.moments[i] * frames.restInverse[i];
     frames.deformations[i] = frames.hasFrame[i] && deformation.determinant() > 0
                                  ? deformation
-                                 : boneRotation(settings, boneTransforms, i, blended);
+                                 : boneRotation(settings, boneTransforms, i, blended, blend);
   }
   const auto& rest = settings.restSurface.vertices;
   const size_t n = static_cast<size_t>(settings.skinNeighbours);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "fibremss/MuscleSettings.h"
+#include "fibremss/Parameters.h"
 
 namespace fibremss {
 
@@ -34,12 +35,12 @@ void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames);
 /// Each rest vertex v bound to particles p with weights w becomes Σ w·(x_p + F_p·(v − p)), F_p
 /// the least-squares deformation gradient of p's spring neighbourhood, (Σ dx·dXᵀ)(Σ dX·dXᵀ)⁻¹. A
 /// particle whose neighbours do not span space, or whose F is inverted, turns by its rigid
-/// pre-transform's rotation instead (blended between two bones when `blended`, else its nearest
-/// bone's). `boneTransforms[b]` is the current transform of the settings' bone index b;
+/// pre-transform's rotation instead (blended between two bones by `blend` when `blended`, else
+/// its nearest bone's). `boneTransforms[b]` is the current transform of the settings' bone index b;
 /// particles without a bone use the identity.
 void deformSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
-                   std::span<const btTransform> boneTransforms, bool blended, SkinFrames& frames,
-                   std::span<btVector3> surface);
+                   std::span<const btTransform> boneTransforms, bool blended,
+                   PretransformBlend blend, SkinFrames& frames, std::span<btVector3> surface);
 
 /// frames.layer from the deformed `surface` (deformSurface's) and the particles it binds; only
 /// the surface-contact stage reads it.
