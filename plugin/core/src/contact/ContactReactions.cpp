@@ -69,8 +69,7 @@ void MuscleSystem::Impl::addContactReactions(std::vector<btVector3> MuscleState:
       if (muscle.pushRounds[i] != muscle.contactRound || muscle.contactRound == 0 ||
           muscle.lastBonePushes[i].isZero())
         continue;
-      muscle.boneReactions[i] = 0;
-      if (boneContacts.size() < boneContacts.capacity()) boneContacts.push_back({slot, i});
+      if (boneContacts.size() < boneContacts.capacity()) boneContacts.push_back({slot, i, 0});
     }
   }
   std::fill(pairReactions.begin(), pairReactions.end(), btScalar(0));
@@ -84,9 +83,10 @@ void MuscleSystem::Impl::addContactReactions(std::vector<btVector3> MuscleState:
       for (size_t k = 0; k < count; ++k)
         relaxPair(pair.contacts.records[k], a, b, a.*forces, b.*forces, lambda[k]);
     }
-    for (const auto& [slot, i] : boneContacts) {
-      MuscleState& muscle = *muscles.states[slot];
-      relaxBone(muscle.lastBonePushes[i], (muscle.*forces)[i], muscle.boneReactions[i]);
+    for (BoneContact& contact : boneContacts) {
+      MuscleState& muscle = *muscles.states[contact.slot];
+      relaxBone(muscle.lastBonePushes[contact.particle], (muscle.*forces)[contact.particle],
+                contact.reaction);
     }
   }
 }

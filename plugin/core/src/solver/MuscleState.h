@@ -154,9 +154,6 @@ struct ResidualState {
   /// The bones' share of lastPushes (the sum of every bone's push on the particle) [m], valid
   /// where lastPushes is; zero for a particle only muscles pushed.
   std::vector<btVector3> lastBonePushes;
-  /// Scratch of the contact reactions (ContactReactions.h): per particle, what its bone contact
-  /// holds along the unit bone push [N].
-  std::vector<btScalar> boneReactions;
 };
 
 /// A muscle: settings, its bones and slot, and the state a step changes in seven parts (stages

@@ -193,7 +193,6 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->lastPushes.assign(n, btVector3(0, 0, 0));
   state->pushRounds.assign(n, 0);
   state->lastBonePushes.assign(n, btVector3(0, 0, 0));
-  state->boneReactions.assign(n, 0);
   state->residual.assign(n, btVector3(0, 0, 0));
   state->residualStiffness = residualStiffness(s);
   state->pinchBones.assign(n, -1);

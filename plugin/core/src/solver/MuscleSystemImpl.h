@@ -138,12 +138,16 @@ struct MuscleSystem::Impl {
   std::vector<MuscleContact> pairContacts;  ///< room for every muscle pair's contacts
   /// Per entry of pairContacts: the reaction its contact holds (addContactReactions) [N].
   std::vector<btScalar> pairReactions;
-  /// The bone contacts addContactReactions relaxes, as (slot, particle); room for every
-  /// boundary particle.
-  std::vector<std::pair<uint32_t, uint32_t>> boneContacts;
-  uint32_t musclesAdded = 0;   ///< counts additions, seeds each muscle's noise
-  btScalar previousDt = 0;     ///< dt of the last iteration (0: none yet)
-  uint64_t stepCount = 0;      ///< steps taken (the guard numbers them)
+  /// A bone contact addContactReactions relaxes.
+  struct BoneContact {
+    uint32_t slot;      ///< the muscle's slot
+    uint32_t particle;  ///< the pushed particle
+    btScalar reaction;  ///< what the contact holds along the unit bone push [N]
+  };
+  std::vector<BoneContact> boneContacts;  ///< room for every boundary particle
+  uint32_t musclesAdded = 0;              ///< counts additions, seeds each muscle's noise
+  btScalar previousDt = 0;                ///< dt of the last iteration (0: none yet)
+  uint64_t stepCount = 0;                 ///< steps taken (the guard numbers them)
   bool pushesPending = false;  ///< collide() left pushes that the next forces phase applies
   /// Iterations over which the equilibrium stop rule measures how fast the steps shrink.
   static constexpr size_t kEquilibriumWindow = 16;
