@@ -642,6 +642,32 @@ TEST(ForceResidual, OfAParticleOnThreeSpringsIsItsStretch) {
               btVector3(-k * s, 0, btScalar(-9.81e-5)).length(), 1e-5 * k * s);
 }
 
+// The whole-system call keeps each muscle's share: lastForceResidual reads it without computing
+// again, the same bits as the one-muscle call, and nothing before any call.
+TEST(ForceResidual, KeepsEachMusclesShareOfTheLastCall) {
+  MuscleSystem system;
+  const BoneHandle bone = system.addBone(makeBone());
+  std::vector<MuscleHandle> handles;
+  for (btScalar stretch : {btScalar(0.001), btScalar(0.003)}) {
+    auto muscle = makeMuscle({{0.01f + stretch, 0, 0}, {0, 0, 0}}, 1e-5, 0.01);
+    fix(*muscle, 1, 0);
+    addSpring(*muscle, 0, 1, 40, 0.01);
+    handles.push_back(system.addMuscle(muscle, std::span(&bone, 1)));
+  }
+  EXPECT_EQ(system.lastForceResidual(handles[0]).particles, 0u);
+  const ForceResidual all = system.forceResidual();
+  EXPECT_EQ(all.particles, 2u);
+  for (MuscleHandle handle : handles) {
+    const ForceResidual kept = system.lastForceResidual(handle);
+    const ForceResidual own = system.forceResidual(handle);
+    EXPECT_EQ(kept.particles, 1u);
+    EXPECT_EQ(kept.rmsForce, own.rmsForce);
+    EXPECT_EQ(kept.maxDisplacement, own.maxDisplacement);
+  }
+  EXPECT_NE(system.lastForceResidual(handles[0]).rmsForce,
+            system.lastForceResidual(handles[1]).rmsForce);
+}
+
 // fusiform as prepared (springs and volume terms), placed at rest: no force anywhere but
 // rounding; the same muscle with its free particles moved is far from it.
 TEST(ForceResidual, IsZeroAtTheRestStateOfAnUnloadedMuscle) {

@@ -200,6 +200,7 @@ class MuscleLedger {
                  std::span<const btTransform> transforms, FibreRunDetails& guard) {
     bool finite = true;
     poseResidual = PoseResidual{};
+    system_.forceResidual();  // every muscle's at once: a contact pair's reaction needs both
     const int s = where.step;
     for (size_t m = 0; m < muscles_.size(); ++m) {
       const MuscleHandle muscle = muscles_[m];
@@ -210,7 +211,7 @@ class MuscleLedger {
         const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
         step.boneContacts = spheres.penetrating;
         spherePenetration = combine(spherePenetration, spheres);
-        addResidual(system_.forceResidual(muscle), step);
+        addResidual(system_.lastForceResidual(muscle), step);
       }
       finite = finite && step.finite;
       MuscleResults& result = results[m];

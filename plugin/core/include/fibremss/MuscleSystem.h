@@ -201,6 +201,9 @@ class MuscleSystem {
   ForceResidual forceResidual();
   /// The force residual of one muscle (ForceResidual). InputError for a stale or unknown handle.
   ForceResidual forceResidual(MuscleHandle muscle);
+  /// The muscle's share of the last forceResidual call that covered it, without computing it
+  /// again (no particles before any call). InputError for a stale or unknown handle.
+  ForceResidual lastForceResidual(MuscleHandle muscle) const;
   /// The per-particle residual r_i [N] of the last forceResidual call that covered the muscle
   /// (zero for attached particles; all zero before any call).
   std::span<const btVector3> residualForces(MuscleHandle muscle) const;

@@ -322,6 +322,12 @@ ForceResidual MuscleSystem::forceResidual(MuscleHandle muscle) {
   return impl_->residualOf(std::span(&slot, 1)).summary();
 }
 
+ForceResidual MuscleSystem::lastForceResidual(MuscleHandle muscle) const {
+  impl_->muscle(muscle);  // InputError for a stale handle
+  const std::vector<ResidualSums>& residuals = impl_->residuals;
+  return muscle.index < residuals.size() ? residuals[muscle.index].summary() : ForceResidual{};
+}
+
 std::span<const btVector3> MuscleSystem::residualForces(MuscleHandle muscle) const {
   return impl_->muscle(muscle).residual;
 }
