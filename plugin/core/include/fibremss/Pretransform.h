@@ -61,8 +61,11 @@ inline btVector3 moveRigidly(const RigidMotion& motion, const btVector3& p) {
   return rotateByQuaternion(motion.rotation, p) + motion.translation;
 }
 
-/// transforms[bone], or null for no bone / a bone beyond the span (the identity).
-inline const btTransform* boneTransformOf(std::span<const btTransform> transforms, int32_t bone) {
+/// transforms[bone] (a btTransform or a DualQuaternion), or null for no bone / a bone beyond
+/// them (the identity).
+template <class Transforms>
+inline auto boneTransformOf(const Transforms& transforms, int32_t bone)
+    -> decltype(transforms.data()) {
   return bone >= 0 && static_cast<size_t>(bone) < transforms.size() ? &transforms[bone] : nullptr;
 }
 

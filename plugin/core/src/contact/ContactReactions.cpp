@@ -33,9 +33,8 @@ bool current(const MusclePairTask& pair, const MuscleState& a, const MuscleState
 /// of `b` along −n; kUnpushed: fixed, it takes any force), the forces `fa`, `fb` kept current.
 void relaxPair(const MuscleContact& c, MuscleState& a, MuscleState& b, std::vector<btVector3>& fa,
                std::vector<btVector3>& fb, btScalar& lambda) {
-  const btScalar depth = c.push.length();
-  if (!(depth > 0)) return;
-  const btVector3 n = c.push / depth;
+  const btVector3 n = unitOrZero(c.push);
+  if (n.isZero()) return;
   const btScalar wi = c.i == kUnpushed ? 0 : weight(a, c.i);
   const btScalar wj = c.j == kUnpushed ? 0 : weight(b, c.j);
   if (!(wi + wj > 0)) return;
@@ -50,9 +49,8 @@ void relaxPair(const MuscleContact& c, MuscleState& a, MuscleState& b, std::vect
 
 /// One Gauss–Seidel update of particle i's bone reaction (along its bone push `push`).
 void relaxBone(const btVector3& push, btVector3& force, btScalar& lambda) {
-  const btScalar depth = push.length();
-  if (!(depth > 0)) return;
-  const btVector3 n = push / depth;
+  const btVector3 n = unitOrZero(push);
+  if (n.isZero()) return;
   const btScalar next = std::max<btScalar>(0, lambda - force.dot(n));
   force += n * (next - lambda);
   lambda = next;

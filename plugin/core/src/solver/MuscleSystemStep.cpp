@@ -118,9 +118,8 @@ void MuscleSystem::Impl::pretransformDualQuaternions(MuscleState& state,
     state.boneDualDeltas[b] = dualQuaternionOf(&state.boneDeltas[b]);
   const DualQuaternion identity = dualQuaternionOf(nullptr);
   const auto motionOf = [&](int32_t bone) -> const DualQuaternion& {
-    return bone >= 0 && static_cast<size_t>(bone) < state.boneDualDeltas.size()
-               ? state.boneDualDeltas[bone]
-               : identity;
+    const DualQuaternion* motion = boneTransformOf(state.boneDualDeltas, bone);
+    return motion ? *motion : identity;
   };
   for (uint32_t i : state.freeParticles) {
     if (!blendsDualQuaternions(settings, i, PretransformBlend::DualQuaternion)) {

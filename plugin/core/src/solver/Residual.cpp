@@ -84,9 +84,7 @@ void recordPushes(MuscleState& muscle) {
 btVector3 contactNormal(const MuscleState& muscle, uint32_t i) {
   const uint32_t round = muscle.contactRound;
   if (round == 0 || muscle.pushRounds[i] != round) return btVector3(0, 0, 0);
-  const btVector3& push = muscle.lastPushes[i];
-  const btScalar length = push.length();
-  return length > 0 ? push / length : btVector3(0, 0, 0);
+  return unitOrZero(muscle.lastPushes[i]);
 }
 
 void muscleForceResidual(MuscleState& muscle, const btVector3& gravity) {

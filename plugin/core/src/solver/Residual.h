@@ -40,6 +40,12 @@ struct ResidualSums {
 /// iterations' responses do not, unless the integrator holds contacts.
 void recordPushes(MuscleState& muscle);
 
+/// v / |v|, or zero for a zero (or NaN) vector: the direction of a push, none when it is zero.
+inline btVector3 unitOrZero(const btVector3& v) {
+  const btScalar length = v.length();
+  return length > 0 ? v / length : btVector3(0, 0, 0);
+}
+
 /// The unit direction of the push the last response gave particle i (pushRounds[i] ==
 /// contactRound: recorded and not since superseded), or zero when that response did not push it.
 /// A contact there holds the part of the particle's force into it (withoutInto).
