@@ -271,6 +271,28 @@ TEST(Relaxation, OneStepOfSeventyIterationsRelaxesMostOfTheStretch) {
   EXPECT_LT(system.lastStep().springDeviationRatio, 0.5 * 0.2);
 }
 
+TEST(Relaxation, ASphereShrunkToAPointDoesNotHoldTheStepOnItsFloor) {
+  // Shrinking at rest leaves a sphere that touches a bone as small as 3e-8 m (hip-pelvis'
+  // iliacus). Eq 5.1 by that radius asked for dt near 1e-8 s, so every iteration of every muscle
+  // ran on min_dt; the step radius is at least a tenth of the muscle's mean.
+  const auto relaxedDt = [](btScalar cornerRadius) {
+    auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);
+    box->damping = zelenyDamping(*box);
+    box->radii.back() = cornerRadius;  // the free corner farthest from the fixed layer
+    MuscleSystem system;
+    const BoneHandle bone = system.addBone(makeBone());
+    system.addMuscle(box, std::span(&bone, 1));
+    system.step();
+    EXPECT_FALSE(system.lastStep().nan || system.lastStep().exploded);
+    return system.lastStep().lastTimeStep;
+  };
+  const btScalar whole = relaxedDt(0.0025), point = relaxedDt(btScalar(3e-8));
+  const btScalar floor = SimulationParameters{}.minTimeStep;
+  EXPECT_GT(whole, 2 * floor) << "the box relaxes above min_dt";
+  EXPECT_GT(point, 2 * floor);
+  EXPECT_GE(point, whole / 2);
+}
+
 TEST(BoneMotion, FixedParticlesSitExactlyOnTheirBoneAfterEveryStep) {
   auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
   box->damping = zelenyDamping(*box);

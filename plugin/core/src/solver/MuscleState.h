@@ -58,7 +58,7 @@ struct ParticleState {
   std::vector<btVector3> previous;          ///< x(t−dt) [m]
   std::vector<btVector3> velocities;        ///< for velocity-based integrators [m/s]
   std::vector<btVector3> forces;            ///< spring forces of this iteration [N]
-  std::vector<btScalar> stepRadius;         ///< r of eq 5.1: own radius, or the mean for inner ones
+  std::vector<btScalar> stepRadius;         ///< eq 5.1's r [m]: own, ≥ meanRadius/10; inner: mean
   std::vector<uint32_t> freeParticles;      ///< indices of particles that are not fixed
   btScalar stableTimeStep = 0;              ///< largest dt for which damped Verlet stays stable [s]
   btScalar meanRadius = 0;                  ///< mean boundary radius [m]

@@ -18,6 +18,14 @@
 #include "integrators/Integrators.h"
 
 namespace fibremss {
+namespace {
+/// The smallest r of eq 5.1, as a share of the muscle's mean boundary radius. Shrinking at rest
+/// leaves a sphere that touches a bone or another muscle as small as 3e-8 m (hip-pelvis' iliacus
+/// over the femoral head); bounding the step by it held every muscle's dt on `min_dt` and the
+/// iliacus 3.5 % short of its volume (docs/performance.md, "The step radius"). Any share from
+/// 0.05 to 1 gave hip-pelvis the same bits; 0.01 did not lift every iteration.
+constexpr btScalar kLeastStepRadiusShare = btScalar(0.1);
+}  // namespace
 
 MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
     : impl_(std::make_unique<Impl>()) {
@@ -219,8 +227,10 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   }
   state->meanRadius = static_cast<btScalar>(radiusSum);
   state->stepRadius.resize(n);
+  const btScalar leastStepRadius = kLeastStepRadiusShare * state->meanRadius;
   for (uint32_t i = 0; i < n; ++i)
-    state->stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? s.radii[i] : state->meanRadius;
+    state->stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? std::max(s.radii[i], leastStepRadius)
+                                                             : state->meanRadius;
   state->stableTimeStep = stableTimeStep(s);
   for (const Spring& spring : s.springs) state->restLengthSum += spring.restLength;
 
