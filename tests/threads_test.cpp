@@ -228,9 +228,9 @@ TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
   }
 }
 
-// A chunk's buffer cleared and added to the muscle's forces lane by lane, whatever the length
+// A chunk's buffer added to the muscle's forces lane by lane and left clear, whatever the length
 // (the wide kernel's blocks and the rest): the bits of the scalar sums.
-TEST(ForceChunks, BuffersAddLaneByLane) {
+TEST(ForceChunks, BuffersMoveLaneByLane) {
   for (size_t n : {0, 1, 3, 4, 5, 9, 37}) {
     std::vector<btVector3> to(n), from(n), expected(n);
     for (size_t i = 0; i < n; ++i) {
@@ -239,11 +239,12 @@ TEST(ForceChunks, BuffersAddLaneByLane) {
       from[i] = btVector3(std::cos(v), v * btScalar(0.1), btScalar(1) / (v + 7));
       for (int k = 0; k < 4; ++k) expected[i].m_floats[k] = to[i].m_floats[k] + from[i].m_floats[k];
     }
-    addForces(to, from);
+    moveForces(to, from);
     // memcmp's pointers must not be null, which an empty vector's data() may be.
     if (n > 0) {
       EXPECT_EQ(std::memcmp(to.data(), expected.data(), n * sizeof(btVector3)), 0) << n;
     }
+    for (const btVector3& v : from) EXPECT_EQ(v, btVector3(0, 0, 0)) << n;
     clearForces(to);
     for (const btVector3& v : to) EXPECT_EQ(v, btVector3(0, 0, 0)) << n;
   }

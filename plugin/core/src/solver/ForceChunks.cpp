@@ -3,7 +3,6 @@
 #include <algorithm>
 
 #include "ParticleSimd.h"
-#include "VolumeForces.h"
 
 namespace fibremss {
 namespace {
@@ -66,18 +65,25 @@ FIBREMSS_AVX2_PASS void clearForcesAvx2(std::span<btVector3> forces) {
   std::fill(f + blocks, f + floats, 0.0f);
 }
 
-/// addForces four vectors per iteration.
-FIBREMSS_AVX2_PASS void addForcesAvx2(std::span<btVector3> to, std::span<const btVector3> from) {
+/// moveForces four vectors per iteration.
+FIBREMSS_AVX2_PASS void moveForcesAvx2(std::span<btVector3> to, std::span<btVector3> from) {
   if (to.empty()) return;  // data() may be null: no member to take
   float* t = to.data()->m_floats;
-  const float* f = from.data()->m_floats;
+  float* f = from.data()->m_floats;
   const size_t floats = 4 * to.size(), blocks = floats & ~size_t{15};
+  const __m256 zero = _mm256_setzero_ps();
+#pragma GCC unroll 4
   for (size_t k = 0; k < blocks; k += 16) {
     _mm256_storeu_ps(t + k, _mm256_add_ps(_mm256_loadu_ps(t + k), _mm256_loadu_ps(f + k)));
     _mm256_storeu_ps(t + k + 8,
                      _mm256_add_ps(_mm256_loadu_ps(t + k + 8), _mm256_loadu_ps(f + k + 8)));
+    _mm256_storeu_ps(f + k, zero);
+    _mm256_storeu_ps(f + k + 8, zero);
   }
-  for (size_t k = blocks; k < floats; ++k) t[k] += f[k];
+  for (size_t k = blocks; k < floats; ++k) {
+    t[k] += f[k];
+    f[k] = 0;
+  }
 }
 #endif
 
@@ -90,12 +96,21 @@ void clearForces(std::span<btVector3> forces) {
   std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));
 }
 
-void addForces(std::span<btVector3> to, std::span<const btVector3> from) {
+void moveForces(std::span<btVector3> to, std::span<btVector3> from) {
 #if FIBREMSS_AVX2_PARTICLES
-  if (fastestSpringKernel() == SpringKernel::avx2) return addForcesAvx2(to, from);
+  if (fastestSpringKernel() == SpringKernel::avx2) return moveForcesAvx2(to, from);
 #endif
-  for (size_t i = 0; i < to.size(); ++i)
-    for (int k = 0; k < 4; ++k) to[i].m_floats[k] += from[i].m_floats[k];
+  for (size_t i = 0; i < to.size(); ++i) {
+#if FIBREMSS_SSE_PARTICLES  // SSE2: a whole vector per instruction
+    _mm_store_ps(to[i].m_floats, _mm_add_ps(loadVector(to[i]), loadVector(from[i])));
+    _mm_store_ps(from[i].m_floats, _mm_setzero_ps());
+#else
+    for (int k = 0; k < 4; ++k) {
+      to[i].m_floats[k] += from[i].m_floats[k];
+      from[i].m_floats[k] = 0;
+    }
+#endif
+  }
 }
 
 std::vector<ForceChunk> forceChunks(const MuscleSettings& settings, SpringKernel kernel,
@@ -120,6 +135,7 @@ std::vector<ForceChunk> forceChunks(const MuscleSettings& settings, SpringKernel
                                                                particles * (c + 1) / count) -
                                               offsets.begin())));
     fanBegin = chunk.fanEnd;
+    chunk.fanClasses = fanClasses(settings, chunk.fanBegin, chunk.fanEnd);
     chunk.work = chunk.springEnd - chunk.springBegin +
                  kFanParticleWork * (offsets[chunk.fanEnd] - offsets[chunk.fanBegin]);
     touchParticles(settings, kernel, chunk);

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "SpringForces.h"
+#include "VolumeForces.h"
 #include "fibremss/MuscleSettings.h"
 
 namespace fibremss {
@@ -32,19 +33,21 @@ constexpr size_t kForceChunkWork = 16384;
 struct ForceChunk {
   /// Its springs: a range of the kernel's layout (springLayoutSize; its ends are boundaries).
   size_t springBegin = 0;
-  size_t springEnd = 0;  ///< see springBegin
-  size_t fanBegin = 0;   ///< its volume terms: fans [fanBegin, fanEnd) of settings.fanOffsets
-  size_t fanEnd = 0;     ///< see fanBegin
-  uint32_t lower = 0;    ///< the particles its springs and tetrahedra touch: [lower, upper)
-  uint32_t upper = 0;    ///< see lower
-  size_t work = 0;       ///< springs (or lanes) + kFanParticleWork · the fans' particles
+  size_t springEnd = 0;   ///< see springBegin
+  size_t fanBegin = 0;    ///< its volume terms: fans [fanBegin, fanEnd) of settings.fanOffsets
+  size_t fanEnd = 0;      ///< see fanBegin
+  FanClasses fanClasses;  ///< [fanBegin, fanEnd) cut by class (the kernel's ranges)
+  uint32_t lower = 0;     ///< the particles its springs and tetrahedra touch: [lower, upper)
+  uint32_t upper = 0;     ///< see lower
+  size_t work = 0;        ///< springs (or lanes) + kFanParticleWork · the fans' particles
 };
 
-/// Sets every vector of `forces` to zero (a chunk's buffer before its pass).
+/// Sets every vector of `forces` to zero (chunk 0's, the muscle's forces, before its pass).
 void clearForces(std::span<btVector3> forces);
-/// to[i] += from[i] over all four lanes (w is 0 in both: a chunk's buffer added to the muscle's
-/// forces); per lane the same sum whatever the instruction set.
-void addForces(std::span<btVector3> to, std::span<const btVector3> from);
+/// to[i] += from[i] over all four lanes (w is 0 in both), then from[i] = 0: a chunk's buffer added
+/// to the muscle's forces and left clear for its next pass, in one pass over it; per lane the same
+/// sum whatever the instruction set.
+void moveForces(std::span<btVector3> to, std::span<btVector3> from);
 
 /// The muscle's forces pass in about total work / `work` chunks of nearly equal work (at least
 /// one) for `kernel`'s spring layout.

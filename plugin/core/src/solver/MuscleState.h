@@ -126,7 +126,8 @@ struct ChunkState {
   size_t chunkWork = 0;                 ///< the work per chunk forceChunks was made for
   /// The forces of chunks c ≥ 1 [N]: chunk c's particle i at chunkForces[chunkBase[c] + i] for
   /// i in its [lower, upper), the windows one after the other (a window may start later than
-  /// the last ended, never earlier than its chunk's lower: the base is never negative).
+  /// the last ended, never earlier than its chunk's lower: the base is never negative). Zero
+  /// between passes: finishForces moves each window out (moveForces), no chunk clears its own.
   std::vector<btVector3> chunkForces;
   std::vector<size_t> chunkBase;                ///< see chunkForces (chunk 0: unused)
   std::vector<SpringForceResult> chunkSprings;  ///< what each chunk's springs measured

@@ -410,17 +410,15 @@ void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
   const Clock::time_point start = Clock::now();
   const ForceChunk& chunk = state.forceChunks[task.chunk];
   std::span<btVector3> forces = state.forces;
-  if (task.chunk == 0) {
+  if (task.chunk == 0)
     clearForces(forces);
-  } else {
+  else  // clear: finishForces moved its last pass out
     forces = std::span(state.chunkForces).subspan(state.chunkBase[task.chunk], chunk.upper);
-    clearForces(forces.subspan(chunk.lower));
-  }
   const SpringKernel kernel = fastestSpringKernel();
   state.chunkSprings[task.chunk] = addSpringForces(settings, state.positions, forces, kernel,
                                                    chunk.springBegin, chunk.springEnd);
   const Clock::time_point volumeStart = Clock::now();
-  addLocalVolumeForces(settings, state.positions, forces, kernel, chunk.fanBegin, chunk.fanEnd);
+  addLocalVolumeForces(settings, state.positions, forces, kernel, chunk.fanClasses);
   if (task.chunk == 0) addEnclosedVolumeForces(settings, state.positions, forces);
   state.chunkVolumeMs[task.chunk] = millisecondsSince(volumeStart);
   state.chunkMs[task.chunk] = millisecondsSince(start);
@@ -435,9 +433,8 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
     if (c > 0) {
       const ForceChunk& chunk = state.forceChunks[c];
       const size_t count = chunk.upper - chunk.lower;
-      addForces(std::span(state.forces).subspan(chunk.lower, count),
-                std::span<const btVector3>(state.chunkForces)
-                    .subspan(state.chunkBase[c] + chunk.lower, count));
+      moveForces(std::span(state.forces).subspan(chunk.lower, count),
+                 std::span(state.chunkForces).subspan(state.chunkBase[c] + chunk.lower, count));
     }
     result.forces.deviation += state.chunkSprings[c].deviation;
     result.forces.overstretched += state.chunkSprings[c].overstretched;

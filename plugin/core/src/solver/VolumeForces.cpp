@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <stdexcept>
 #include <vector>
 
@@ -216,6 +217,21 @@ __attribute__((always_inline)) inline void addGroupForces(size_t v, const Lanes<
   for (size_t j = 0; j < lanes; ++j) addPacked(at(f, b[Count * j + v]), force[j]);
 }
 
+/// A group of four lanes for the `lanes` (one to four) fans from fan k on, at the byte offsets b:
+/// their byte offsets, 1/(6·V0) and G0 into bytes, inverse and rest, lane j ≥ lanes repeating the
+/// first fan's (memcpy: GCC calls memmove for a std::copy_n of Count, and copies a loop element
+/// by element).
+template <size_t Count>
+inline void paddedGroup(const MuscleSettings& settings, size_t k, size_t lanes, const uint32_t* b,
+                        uint32_t (&bytes)[4 * Count], btScalar* inverse, btScalar* rest) {
+  for (size_t j = 0; j < 4; ++j) {
+    const size_t fan = j < lanes ? j : 0;
+    std::memcpy(bytes + Count * j, b + Count * fan, sizeof(uint32_t) * Count);
+    inverse[j] = settings.fanInverseVolume[k + fan];
+    rest[j] = settings.fanRestGradient[k + fan];
+  }
+}
+
 /// The fans [k, end) of Count particles, fewer than eight, at the byte offsets b: a group of
 /// four, then the rest (one to three) as a group whose missing lanes repeat its first fan (their
 /// forces not added).
@@ -236,12 +252,7 @@ void fanClassEnd(const MuscleSettings& settings, size_t k, size_t end, const uin
   if (lanes == 0) return;
   uint32_t bytes[4 * Count];
   btScalar laneInverse[4], laneRest[4];
-  for (size_t j = 0; j < 4; ++j) {
-    const size_t fan = j < lanes ? j : 0;
-    std::copy_n(b + Count * fan, Count, bytes + Count * j);
-    laneInverse[j] = inverse[k + fan];
-    laneRest[j] = rest[k + fan];
-  }
+  paddedGroup<Count>(settings, k, lanes, b, bytes, laneInverse, laneRest);
   const Float4 scale = groupLanes<Count>(bytes, laneInverse, laneRest, modulus, x, grad);
   for (size_t v = 0; v < Count; ++v) addGroupForces<Count>(v, grad[v], scale, bytes, f, lanes);
 }
@@ -271,9 +282,69 @@ void sseFanClass(const MuscleSettings& settings, size_t begin, size_t end, btSca
 }
 
 #if FIBREMSS_AVX2_PARTICLES
-/// sseFanClass with its two groups in the two halves of __m256 registers (AVX without FMA: each
-/// lane rounds as there), their forces added in its order: the same bits. The class's end as
-/// there.
+/// groupLanes for two groups of four fans at once, the first at the byte offsets b (its 1/(6·V0)
+/// and G0 in inverse[0..4) and rest[0..4)) in the low halves of __m256 registers, the second at
+/// `second` (inverse[4..8), rest[4..8)) in the high halves: per lane the same operations (AVX
+/// without FMA: each lane rounds as there).
+template <size_t Count>
+FIBREMSS_AVX2_PASS __attribute__((always_inline)) inline Float8 pairLanes(
+    const uint32_t* b, const uint32_t* second, const btScalar* inverse, const btScalar* rest,
+    btScalar modulus, const btVector3* x, Lanes<Float8> (&grad)[Count]) {
+  __m256 origin[4];
+  for (size_t j = 0; j < 4; ++j)
+    origin[j] = loadPair(at(x, b[Count * j]), at(x, second[Count * j]));
+  const auto edge = [&](size_t v) __attribute__((always_inline)) {  // as groupLanes' edge
+    const auto from = [&](size_t j) __attribute__((always_inline)) {
+      return loadPair(at(x, b[Count * j + 1 + v]), at(x, second[Count * j + 1 + v])) - origin[j];
+    };
+    return toLanes(from(0), from(1), from(2), from(3));
+  };
+  return fanLanes<Count - 2>(edge, _mm256_loadu_ps(inverse), _mm256_loadu_ps(rest),
+                             _mm256_set1_ps(modulus), grad);
+}
+
+/// Particle v's forces of pairLanes' fans (a's with the scale negated), lane j's in force[j]: the
+/// first group's in its low half, the second's in its high half.
+FIBREMSS_AVX2_PASS __attribute__((always_inline)) inline void pairForces(size_t v,
+                                                                         const Lanes<Float8>& grad,
+                                                                         Float8 scale,
+                                                                         __m256 (&force)[4]) {
+  fromLanes(scaled(grad, v == 0 ? -scale : scale), force);
+}
+
+/// fanClassEnd on AVX2: five to seven fans [k, end) as one pair of groups, the second's missing
+/// lanes repeating its first fan, their forces added in fanClassEnd's order (the first group's
+/// for every particle, then the rest's): the same bits, one gradient pass instead of two. Fewer
+/// fans as there.
+template <size_t Count>
+FIBREMSS_AVX2_PASS void avxFanClassEnd(const MuscleSettings& settings, size_t k, size_t end,
+                                       const uint32_t* b, btScalar modulus, const btVector3* x,
+                                       btVector3* f) {
+  if (end - k <= 4) return fanClassEnd<Count>(settings, k, end, b, modulus, x, f);
+  const size_t lanes = end - k - 4;  // of the second group
+  uint32_t second[4 * Count];
+  btScalar inverse[8], rest[8];
+  for (size_t j = 0; j < 4; ++j) {
+    inverse[j] = settings.fanInverseVolume[k + j];
+    rest[j] = settings.fanRestGradient[k + j];
+  }
+  paddedGroup<Count>(settings, k + 4, lanes, b + 4 * Count, second, inverse + 4, rest + 4);
+  Lanes<Float8> grad[Count];
+  const Float8 scale = pairLanes<Count>(b, second, inverse, rest, modulus, x, grad);
+  __m256 force[4];
+  for (size_t v = 0; v < Count; ++v) {
+    pairForces(v, grad[v], scale, force);
+    for (size_t j = 0; j < 4; ++j) addAt(f, b[Count * j + v], _mm256_castps256_ps128(force[j]));
+  }
+  for (size_t v = 0; v < Count; ++v) {
+    pairForces(v, grad[v], scale, force);
+    for (size_t j = 0; j < lanes; ++j)
+      addAt(f, second[Count * j + v], _mm256_extractf128_ps(force[j], 1));
+  }
+}
+
+/// sseFanClass with its two groups in the two halves of __m256 registers (pairLanes), their
+/// forces added in its order: the same bits. The class's end as there (avxFanClassEnd).
 template <size_t Count>
 FIBREMSS_AVX2_PASS void avxFanClass(const MuscleSettings& settings, size_t begin, size_t end,
                                     btScalar modulus, const btVector3* x, btVector3* f) {
@@ -284,29 +355,19 @@ FIBREMSS_AVX2_PASS void avxFanClass(const MuscleSettings& settings, size_t begin
   size_t k = begin;
   for (; k + 8 <= end; k += 8, b += 8 * Count) {
     const uint32_t* second = b + 4 * Count;  // the second group's byte offsets
-    __m256 origin[4];
-    for (size_t j = 0; j < 4; ++j)
-      origin[j] = loadPair(at(x, b[Count * j]), at(x, second[Count * j]));
-    const auto edge = [&](size_t v) __attribute__((always_inline)) {  // as groupLanes' edge
-      const auto from = [&](size_t j) __attribute__((always_inline)) {
-        return loadPair(at(x, b[Count * j + 1 + v]), at(x, second[Count * j + 1 + v])) - origin[j];
-      };
-      return toLanes(from(0), from(1), from(2), from(3));
-    };
     Lanes<Float8> grad[Count];
     const Float8 scale =
-        fanLanes<Count - 2>(edge, _mm256_loadu_ps(inverseVolume + k),
-                            _mm256_loadu_ps(restGradient + k), _mm256_set1_ps(modulus), grad);
+        pairLanes<Count>(b, second, inverseVolume + k, restGradient + k, modulus, x, grad);
 #pragma GCC unroll 8
     for (size_t v = 0; v < Count; ++v) {  // particle by particle, the first group's, the second's
       __m256 force[4];
-      fromLanes(scaled(grad[v], v == 0 ? -scale : scale), force);
+      pairForces(v, grad[v], scale, force);
       for (size_t j = 0; j < 4; ++j) addAt(f, b[Count * j + v], _mm256_castps256_ps128(force[j]));
       for (size_t j = 0; j < 4; ++j)
         addAt(f, second[Count * j + v], _mm256_extractf128_ps(force[j], 1));
     }
   }
-  fanClassEnd<Count>(settings, k, end, b, modulus, x, f);
+  avxFanClassEnd<Count>(settings, k, end, b, modulus, x, f);
 }
 #endif
 
@@ -329,15 +390,15 @@ void fanClassForces(const MuscleSettings& settings, size_t begin, size_t end, bt
   for (size_t k = begin; k < end; ++k) scalarFan(settings, k, modulus, x, f);
 }
 
-/// fanClassForces for every count from Count up to that of kMaxFanTetrahedra.
+/// fanClassForces for every count from Count up to that of kMaxFanTetrahedra, each on its class
+/// of `classes`.
 template <size_t Count>
-void fanForces(const MuscleSettings& settings, size_t begin, size_t end, btScalar modulus,
+void fanForces(const MuscleSettings& settings, const FanClasses& classes, btScalar modulus,
                SpringKernel kernel, const btVector3* x, btVector3* f) {
-  // The fans before `begin` have fewer particles: [begin, last) are those with Count.
-  const size_t last = fansUpTo(settings, begin, end, Count);
-  fanClassForces<Count>(settings, begin, last, modulus, kernel, x, f);
+  const size_t begin = classes.at[Count - 4], end = classes.at[Count - 3];
+  if (begin < end) fanClassForces<Count>(settings, begin, end, modulus, kernel, x, f);
   if constexpr (Count < kMaxFanTetrahedra + 3)
-    if (last < end) fanForces<Count + 1>(settings, last, end, modulus, kernel, x, f);
+    fanForces<Count + 1>(settings, classes, modulus, kernel, x, f);
 }
 
 }  // namespace
@@ -358,11 +419,25 @@ size_t fansUpTo(const MuscleSettings& settings, size_t begin, size_t end, size_t
   return begin;
 }
 
+FanClasses fanClasses(const MuscleSettings& settings, size_t begin, size_t end) {
+  FanClasses classes;
+  classes.at[0] = begin;
+  for (size_t c = 0; c < kMaxFanTetrahedra; ++c)
+    classes.at[c + 1] = fansUpTo(settings, classes.at[c], end, c + 4);
+  return classes;
+}
+
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, SpringKernel kernel,
+                          const FanClasses& classes) {
+  const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
+  fanForces<4>(settings, classes, modulus, kernel, positions.data(), forces.data());
+}
+
 void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces, SpringKernel kernel, size_t begin,
                           size_t end) {
-  const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
-  fanForces<4>(settings, begin, end, modulus, kernel, positions.data(), forces.data());
+  addLocalVolumeForces(settings, positions, forces, kernel, fanClasses(settings, begin, end));
 }
 
 void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,

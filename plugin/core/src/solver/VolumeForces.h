@@ -13,6 +13,9 @@
 
 namespace fibremss {
 
+/// The most tetrahedra in one fan of the local volume terms (MuscleSettings::fanParticles).
+constexpr size_t kMaxFanTetrahedra = 4;
+
 /// Adds the local volume terms' forces at `positions` into `forces`: each fan of
 /// settings.fanParticles (m ≤ kMaxFanTetrahedra tetrahedra around an edge) with volume V (its
 /// tetrahedra's sum) and rest volume V0 gives its particle i the force K·s·(G0/G)·∂V/∂x_i (K =
@@ -40,8 +43,18 @@ void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVect
                           std::span<btVector3> forces, SpringKernel kernel, size_t begin,
                           size_t end);
 
-/// The most tetrahedra in one fan of the local volume terms (MuscleSettings::fanParticles).
-constexpr size_t kMaxFanTetrahedra = 4;
+/// A range of fans cut by their count of particles (they are sorted by it): those with c + 4
+/// particles (c + 1 tetrahedra) are [at[c], at[c + 1]).
+struct FanClasses {
+  size_t at[kMaxFanTetrahedra + 1] = {};  ///< fan indices, at[0] the range's first
+};
+/// The FanClasses of the fans [begin, end).
+FanClasses fanClasses(const MuscleSettings& settings, size_t begin, size_t end);
+/// addLocalVolumeForces for the fans `classes` cut, found once (a force chunk's, so that a step
+/// does not search them again).
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, SpringKernel kernel,
+                          const FanClasses& classes);
 
 /// Fans the widest kernel takes at a time (two groups of four); a class's fans beyond a multiple
 /// of it from the start of a call's range go as a group of four, then a group of the rest.
