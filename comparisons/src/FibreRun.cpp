@@ -198,41 +198,15 @@ class MuscleLedger {
   /// `guard.frozen`. Returns whether every muscle was finite.
   bool afterStep(const SeriesRow& where, const StepStats& stats, BoneMeshes& bones,
                  std::span<const btTransform> transforms, FibreRunDetails& guard) {
-    bool finite = true;
     poseResidual = PoseResidual{};
-    system_.forceResidual();  // every muscle's at once: a contact pair's reaction needs both
-    const int s = where.step;
-    for (size_t m = 0; m < muscles_.size(); ++m) {
-      const MuscleHandle muscle = muscles_[m];
-      const MuscleSettings& settings = system_.settings(muscle);
-      MuscleStep step = measureMuscle(settings, system_.positions(muscle), system_.surface(muscle),
-                                      bones.meshes(), transforms);
-      if (step.finite) {
-        const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
-        step.boneContacts = spheres.penetrating;
-        spherePenetration = combine(spherePenetration, spheres);
-        addResidual(system_.lastForceResidual(muscle), step);
-      }
-      finite = finite && step.finite;
-      MuscleResults& result = results[m];
-      result.add(s, step);
-      series.push_back(where);
-      series.back().muscle = result.name;
-      series.back().measures = std::move(step);
-      const MuscleFailures now = system_.failures(muscle);
-      const int attempts = now.attempts - seen_[m].attempts, nan = now.nan - seen_[m].nan;
-      seen_[m] = now;
-      if (attempts > 0 && stats.rolledBack) {
-        result.rollbacks += attempts;
-        guard.rollbacks.push_back({s, result.name, attempts, nan > 0});
-      }
-      if (system_.frozen(muscle) && !result.frozen) {
-        result.frozen = true;
-        result.frozenStep = s;
-        result.frozenCause = nan > 0 ? "nan" : "exploded";
-        guard.frozen.push_back({result.name, s, nan > 0});
-      }
-    }
+    measured_.clear();
+    for (MuscleHandle muscle : muscles_) measured_.push_back(measure(muscle, bones, transforms));
+    // Every muscle's residual in one call (a contact pair's reaction needs both muscles), after
+    // the measures: the next step starts from the caches it leaves, as when each muscle's own
+    // call came last (thigh13 R=40 ms_per_step read about 5 % higher with the call first).
+    system_.forceResidual();
+    bool finite = true;
+    for (size_t m = 0; m < muscles_.size(); ++m) finite = record(m, where, stats, guard) && finite;
     return finite;
   }
 
@@ -243,6 +217,49 @@ class MuscleLedger {
   Penetration spherePenetration;
 
  private:
+  /// A muscle's measures after a step, with its free spheres' depth in the bones when finite.
+  MuscleStep measure(MuscleHandle muscle, BoneMeshes& bones,
+                     std::span<const btTransform> transforms) {
+    const MuscleSettings& settings = system_.settings(muscle);
+    MuscleStep step = measureMuscle(settings, system_.positions(muscle), system_.surface(muscle),
+                                    bones.meshes(), transforms);
+    if (step.finite) {
+      const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
+      step.boneContacts = spheres.penetrating;
+      spherePenetration = combine(spherePenetration, spheres);
+    }
+    return step;
+  }
+
+  /// Muscle m's measures (measured_[m]) with its residual into its results and a series row;
+  /// its rollbacks and a new freeze into `guard`. Returns whether it was finite.
+  bool record(size_t m, const SeriesRow& where, const StepStats& stats, FibreRunDetails& guard) {
+    const MuscleHandle muscle = muscles_[m];
+    MuscleStep& step = measured_[m];
+    const bool finite = step.finite;
+    if (finite) addResidual(system_.lastForceResidual(muscle), step);
+    const int s = where.step;
+    MuscleResults& result = results[m];
+    result.add(s, step);
+    series.push_back(where);
+    series.back().muscle = result.name;
+    series.back().measures = std::move(step);
+    const MuscleFailures now = system_.failures(muscle);
+    const int attempts = now.attempts - seen_[m].attempts, nan = now.nan - seen_[m].nan;
+    seen_[m] = now;
+    if (attempts > 0 && stats.rolledBack) {
+      result.rollbacks += attempts;
+      guard.rollbacks.push_back({s, result.name, attempts, nan > 0});
+    }
+    if (system_.frozen(muscle) && !result.frozen) {
+      result.frozen = true;
+      result.frozenStep = s;
+      result.frozenCause = nan > 0 ? "nan" : "exploded";
+      guard.frozen.push_back({result.name, s, nan > 0});
+    }
+    return finite;
+  }
+
   /// A muscle's residual into its measures and the pose's sums.
   void addResidual(const ForceResidual& residual, MuscleStep& step) {
     step.residualRmsMm = 1000 * residual.rmsDisplacement;
@@ -259,6 +276,7 @@ class MuscleLedger {
   MuscleSystem& system_;
   std::span<const MuscleHandle> muscles_;
   std::vector<MuscleFailures> seen_;  ///< each muscle's failures after the previous step
+  std::vector<MuscleStep> measured_;  ///< each muscle's measures in the current afterStep
 };
 
 }  // namespace
