@@ -189,7 +189,7 @@ TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
     ASSERT_GT(chunks.size(), 3u) << springKernelName(kernel);
     EXPECT_EQ(chunks.front().springBegin, 0u);
     EXPECT_EQ(chunks.back().springEnd, springLayoutSize(settings, kernel));
-    EXPECT_EQ(chunks.back().fanEnd, settings.fanInverseVolume.size());
+    EXPECT_EQ(chunks.back().fanEnd(), settings.fanInverseVolume.size());
     std::vector<btVector3> whole(n), sum(n, btVector3(0, 0, 0)), part(n);
     springForces(settings, x, whole, kernel);
     addLocalVolumeForces(settings, x, whole, kernel);
@@ -197,20 +197,20 @@ TEST(ForceChunks, TakeEverySpringAndTetrahedronOnce) {
       const ForceChunk& chunk = chunks[c];
       if (c > 0) {
         EXPECT_EQ(chunk.springBegin, chunks[c - 1].springEnd);
-        EXPECT_EQ(chunk.fanBegin, chunks[c - 1].fanEnd);
+        EXPECT_EQ(chunk.fanBegin(), chunks[c - 1].fanEnd());
       }
       EXPECT_EQ(springLayoutBoundary(settings, kernel, chunk.springBegin), chunk.springBegin);
       const auto count = [&](size_t k) {
         return settings.fanOffsets[k + 1] - settings.fanOffsets[k];
       };
-      size_t classStart = chunk.fanEnd;  // of the class fan fanEnd − 1 and fanEnd share, if any
-      if (chunk.fanEnd < settings.fanInverseVolume.size() && chunk.fanEnd > 0 &&
-          count(chunk.fanEnd - 1) == count(chunk.fanEnd))
-        while (classStart > 0 && count(classStart - 1) == count(chunk.fanEnd)) --classStart;
-      EXPECT_EQ((chunk.fanEnd - classStart) % kFanLaneGroup, 0u) << "chunk " << c;
+      size_t classStart = chunk.fanEnd();  // of the class fan fanEnd − 1 and fanEnd share, if any
+      if (chunk.fanEnd() < settings.fanInverseVolume.size() && chunk.fanEnd() > 0 &&
+          count(chunk.fanEnd() - 1) == count(chunk.fanEnd()))
+        while (classStart > 0 && count(classStart - 1) == count(chunk.fanEnd())) --classStart;
+      EXPECT_EQ((chunk.fanEnd() - classStart) % kFanLaneGroup, 0u) << "chunk " << c;
       std::fill(part.begin(), part.end(), btVector3(0, 0, 0));
       addSpringForces(settings, x, part, kernel, chunk.springBegin, chunk.springEnd);
-      addLocalVolumeForces(settings, x, part, kernel, chunk.fanBegin, chunk.fanEnd);
+      addLocalVolumeForces(settings, x, part, kernel, chunk.fanBegin(), chunk.fanEnd());
       for (uint32_t i = 0; i < n; ++i) {
         const bool outside = i < chunk.lower || i >= chunk.upper;
         EXPECT_TRUE(!outside || part[i] == btVector3(0, 0, 0))

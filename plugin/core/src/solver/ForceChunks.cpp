@@ -33,7 +33,8 @@ void touchParticles(const MuscleSettings& settings, SpringKernel kernel, ForceCh
       touch(chunk, settings.springs[s].b);
     }
   }
-  for (size_t k = settings.fanOffsets[chunk.fanBegin]; k < settings.fanOffsets[chunk.fanEnd]; ++k)
+  for (size_t k = settings.fanOffsets[chunk.fanBegin()]; k < settings.fanOffsets[chunk.fanEnd()];
+       ++k)
     touch(chunk, settings.fanParticles[k]);
 }
 
@@ -128,16 +129,16 @@ std::vector<ForceChunk> forceChunks(const MuscleSettings& settings, SpringKernel
     chunk.springEnd =
         std::max(springBegin, springLayoutBoundary(settings, kernel, springs * (c + 1) / count));
     springBegin = chunk.springEnd;
-    chunk.fanBegin = fanBegin;  // the fans whose particles start below the chunk's share
-    chunk.fanEnd = std::max(
+    // The fans whose particles start below the chunk's share.
+    const size_t fanEnd = std::max(
         fanBegin, groupedFanEnd(settings, static_cast<size_t>(
                                               std::lower_bound(offsets.begin(), offsets.end() - 1,
                                                                particles * (c + 1) / count) -
                                               offsets.begin())));
-    fanBegin = chunk.fanEnd;
-    chunk.fanClasses = fanClasses(settings, chunk.fanBegin, chunk.fanEnd);
+    chunk.fanClasses = fanClasses(settings, fanBegin, fanEnd);
     chunk.work = chunk.springEnd - chunk.springBegin +
-                 kFanParticleWork * (offsets[chunk.fanEnd] - offsets[chunk.fanBegin]);
+                 kFanParticleWork * (offsets[fanEnd] - offsets[fanBegin]);
+    fanBegin = fanEnd;
     touchParticles(settings, kernel, chunk);
   }
   return chunks;

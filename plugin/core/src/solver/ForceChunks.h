@@ -33,13 +33,16 @@ constexpr size_t kForceChunkWork = 16384;
 struct ForceChunk {
   /// Its springs: a range of the kernel's layout (springLayoutSize; its ends are boundaries).
   size_t springBegin = 0;
-  size_t springEnd = 0;   ///< see springBegin
-  size_t fanBegin = 0;    ///< its volume terms: fans [fanBegin, fanEnd) of settings.fanOffsets
-  size_t fanEnd = 0;      ///< see fanBegin
-  FanClasses fanClasses;  ///< [fanBegin, fanEnd) cut by class (the kernel's ranges)
-  uint32_t lower = 0;     ///< the particles its springs and tetrahedra touch: [lower, upper)
-  uint32_t upper = 0;     ///< see lower
-  size_t work = 0;        ///< springs (or lanes) + kFanParticleWork · the fans' particles
+  size_t springEnd = 0;  ///< see springBegin
+  /// Its volume terms: fans [fanBegin(), fanEnd()) of settings.fanOffsets, cut by class (the
+  /// kernel's ranges).
+  FanClasses fanClasses;
+  uint32_t lower = 0;  ///< the particles its springs and tetrahedra touch: [lower, upper)
+  uint32_t upper = 0;  ///< see lower
+  size_t work = 0;     ///< springs (or lanes) + kFanParticleWork · the fans' particles
+
+  size_t fanBegin() const { return fanClasses.at[0]; }                ///< its first fan
+  size_t fanEnd() const { return fanClasses.at[kMaxFanTetrahedra]; }  ///< past its last fan
 };
 
 /// Sets every vector of `forces` to zero (chunk 0's, the muscle's forces, before its pass).
