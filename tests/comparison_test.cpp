@@ -245,6 +245,22 @@ TEST(EquilibriumMethod, StopsEveryPoseBelowTheResidualTolerance) {
   EXPECT_EQ(equilibrium.rmsToEquilibriumMm, 0);
 }
 
+// --equilibrium-cap raises the cap without changing the path: the bones still move over the
+// scene's own motion iterations (70 × 0.5 = 35).
+TEST(EquilibriumMethod, ACapKeepsTheBonesMotionIterations) {
+  SimulationParameters scene;
+  scene.iterations = 70;
+  scene.motionFraction = 0.5f;
+  const SimulationParameters usual = equilibriumSettings(scene);
+  const SimulationParameters longer = equilibriumSettings(scene, 12000);
+  EXPECT_EQ(usual.iterations, kEquilibriumIterations);
+  EXPECT_EQ(longer.iterations, 12000);
+  EXPECT_NEAR(usual.motionFraction * btScalar(usual.iterations), 35, 1e-2);
+  EXPECT_NEAR(longer.motionFraction * btScalar(longer.iterations), 35, 1e-2);
+  EXPECT_EQ(longer.stopRule, StopRule::Residual);
+  EXPECT_EQ(longer.projectiveRho, usual.projectiveRho);
+}
+
 TEST(CompareCommand, WritesReportJsonAndWellFormedPlots) {
   const fs::path out = scratch("cli");
   const testing::ProcessResult result = runCli(
@@ -411,6 +427,69 @@ TEST(MergeAndReport, MergedReportHasTable1RatiosAndTheSweepPlot) {
   EXPECT_NE(report.find("The thesis' timings (seed 004 Table 1)"), std::string::npos);
   EXPECT_NE(report.find("| MSS | 5 / 18.66 (3.73×) |"), std::string::npos) << report;
   EXPECT_NE(report.find("| total | 10 / 56.84 (5.68×) |"), std::string::npos) << report;
+}
+
+TEST(MusclesToEquilibrium, NamesTheWorstMuscleOverThePosesAndTheWorstMuscleAtAPose) {
+  // Muscle a (2 vertices) is 3 mm off at both poses, b (1 vertex) 0 then 4 mm: a is worst over
+  // the poses (3 against sqrt(8) = 2.83 mm), b at pose 1 the worst single muscle and pose.
+  const std::vector<btVector3> rest = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.02f, 0}};
+  std::vector<RunMetrics> runs(2);
+  runs[0].method = "equilibrium";
+  runs[1].method = "fibremss";
+  for (const btScalar b : {0.0f, 0.004f}) {
+    runs[0].poseSurfaces.push_back(rest);
+    runs[1].poseSurfaces.push_back({rest[0] + btVector3(0.003f, 0, 0),
+                                    rest[1] + btVector3(0, 0.003f, 0),
+                                    rest[2] + btVector3(0, 0, b)});
+  }
+  const std::vector<SurfaceBlock> blocks = {{"a", 2}, {"b", 1}};
+  fillRms(runs);
+  fillMusclesToEquilibrium(runs, blocks);
+  const RunMetrics& run = runs[1];
+  ASSERT_EQ(run.rmsToEquilibriumPerPoseMm.size(), 2u);
+  EXPECT_NEAR(run.rmsToEquilibriumPerPoseMm[0], std::sqrt(6.0), 1e-4);
+  EXPECT_NEAR(run.rmsToEquilibriumPerPoseMm[1], std::sqrt(34.0 / 3), 1e-4);
+  EXPECT_EQ(run.worstPoseToEquilibrium, 1);
+  EXPECT_NEAR(run.worstPoseRmsToEquilibriumMm, run.rmsToEquilibriumPerPoseMm[1], 1e-9);
+  ASSERT_EQ(run.musclesToEquilibrium.size(), 2u);
+  EXPECT_EQ(run.musclesToEquilibrium[1].muscle, "b");
+  EXPECT_NEAR(run.musclesToEquilibrium[1].perPoseMm[0], 0.0, 1e-4);
+  EXPECT_NEAR(run.musclesToEquilibrium[1].rmsMm, std::sqrt(8.0), 1e-4);
+  EXPECT_EQ(run.worstMuscleToEquilibrium, "a");
+  EXPECT_NEAR(run.worstMuscleRmsToEquilibriumMm, 3.0, 1e-4);
+  EXPECT_EQ(run.worstMusclePoseToEquilibrium.muscle, "b");
+  EXPECT_EQ(run.worstMusclePoseToEquilibrium.pose, 1);
+  EXPECT_NEAR(run.worstMusclePoseToEquilibrium.rmsMm, 4.0, 1e-4);
+  EXPECT_EQ(runs[0].worstMuscleRmsToEquilibriumMm, 0.0) << "the equilibrium run against itself";
+
+  // summary.json keeps them; a summary written before them reads back as not measured.
+  const RunMetrics read = runMetricsFromJson(toJson(run));
+  EXPECT_EQ(read.worstMusclePoseToEquilibrium.muscle, "b");
+  EXPECT_EQ(read.worstMusclePoseToEquilibrium.pose, 1);
+  EXPECT_EQ(read.musclesToEquilibrium[0].perPoseMm, run.musclesToEquilibrium[0].perPoseMm);
+  EXPECT_EQ(read.worstPoseToEquilibrium, 1);
+  nlohmann::json old = toJson(run);
+  for (const char* key : {"muscles_to_equilibrium", "worst_muscle_pose_to_equilibrium",
+                          "worst_pose_to_equilibrium", "worst_muscle_rms_to_equilibrium_mm"})
+    old.erase(key);
+  const RunMetrics before = runMetricsFromJson(old);
+  EXPECT_TRUE(before.musclesToEquilibrium.empty());
+  EXPECT_EQ(before.worstPoseToEquilibrium, -1);
+  EXPECT_TRUE(std::isnan(before.worstMuscleRmsToEquilibriumMm));
+
+  // The report's table names both; blocks that do not split the surfaces leave a run without.
+  nlohmann::json summary = madeSummary(2, 20);
+  summary["runs"] = {toJson(runs[0]), toJson(run)};
+  const fs::path out = scratch("muscles_to_equilibrium");
+  writeComparison(summary, out.string());
+  const std::string report = readFile(out / "report.md");
+  EXPECT_NE(report.find("| 3.37 (pose 1) | a 3; b at pose 1 4 |"), std::string::npos) << report;
+  std::vector<RunMetrics> mismatched(2);
+  mismatched[0] = runs[0], mismatched[1].method = "fibremss";
+  mismatched[1].poseSurfaces = runs[1].poseSurfaces;
+  fillMusclesToEquilibrium(mismatched, std::vector<SurfaceBlock>{{"a", 2}, {"b", 2}});
+  EXPECT_TRUE(mismatched[1].musclesToEquilibrium.empty());
+  EXPECT_EQ(mismatched[1].worstPoseToEquilibrium, -1);
 }
 
 TEST(MergeAndReport, SaysWhenRmsToTheReferenceCoversFewerPosesThanTheRun) {

@@ -111,9 +111,14 @@ void compare(CompareArgs& args) {
   printTable(comparison);
   for (const RunMetrics& run : comparison.runs)
     if (std::isfinite(run.worstPoseRmsToEquilibriumMm) && run.method != "equilibrium")
-      std::printf("%-28s RMS to equilibrium %.3g mm, worst pose %.3g mm, %.3g ms per pose\n",
-                  run.method.c_str(), run.rmsToEquilibriumMm, run.worstPoseRmsToEquilibriumMm,
-                  run.msPerStep);
+      std::printf(
+          "%-28s RMS to equilibrium %.3g mm, worst pose %.3g mm (pose %d), worst muscle %s %.3g "
+          "mm, worst muscle at a pose %s at pose %d %.3g mm, %.3g ms per pose\n",
+          run.method.c_str(), run.rmsToEquilibriumMm, run.worstPoseRmsToEquilibriumMm,
+          run.worstPoseToEquilibrium, run.worstMuscleToEquilibrium.c_str(),
+          run.worstMuscleRmsToEquilibriumMm, run.worstMusclePoseToEquilibrium.muscle.c_str(),
+          run.worstMusclePoseToEquilibrium.pose, run.worstMusclePoseToEquilibrium.rmsMm,
+          run.msPerStep);
   for (const RunMetrics& run : comparison.runs)
     if (std::isfinite(run.residualRmsMm))
       std::printf(
@@ -198,6 +203,12 @@ void addCompareCommand(CLI::App& app) {
                    "step and is reported over the steps it did (0: no limit)")
       ->capture_default_str()
       ->check(nonNegativeNumber());
+  command
+      ->add_option("--equilibrium-cap", args->options.equilibriumIterations,
+                   "The equilibrium method's iteration cap per pose (a pose that reaches it is "
+                   "counted as unconverged)")
+      ->capture_default_str()
+      ->check(positiveInteger());
   command->callback([args] { compare(*args); });
 }
 

@@ -745,6 +745,23 @@ std::string residualCell(const nlohmann::json& run) {
          field(run, "residual_worst_pose");
 }
 
+/// A run's farthest muscle from the equilibrium run: "name RMS over the poses; name at pose k
+/// RMS" [mm]; "—" where it was not measured (summaries before the per-muscle distances).
+std::string worstMuscleCell(const nlohmann::json& run) {
+  const nlohmann::json worst = run.value("worst_muscle_pose_to_equilibrium", nlohmann::json());
+  if (!std::isfinite(number(run, "worst_muscle_rms_to_equilibrium_mm")) || !worst.is_object())
+    return "—";
+  return text(run, "worst_muscle_to_equilibrium") + " " +
+         field(run, "worst_muscle_rms_to_equilibrium_mm") + "; " + text(worst, "muscle") +
+         " at pose " + field(worst, "pose") + " " + field(worst, "rms_mm");
+}
+
+/// " (pose k)", k the run's worst pose to the equilibrium run; "" where not recorded.
+std::string poseOf(const nlohmann::json& run) {
+  const double pose = number(run, "worst_pose_to_equilibrium");
+  return pose >= 0 ? " (pose " + cell(pose) + ")" : "";
+}
+
 /// The time-to-accuracy figure: every run measured against an "equilibrium" run, its worst pose's
 /// RMS to that equilibrium and ms per pose, and the fastest run whose every pose is within
 /// kEquilibriumAccuracyMm. Empty without an equilibrium run.
@@ -758,8 +775,8 @@ std::string equilibriumReport(const nlohmann::json& runs) {
     const double ms = number(run, "ms_per_step");
     rows += "| " + method + " | " + cell(number(run, "threads")) + " | " +
             field(run, "iterations") + " | " + cell(ms) + " | " +
-            field(run, "rms_to_equilibrium_mm") + " | " + cell(worst) + " | " + residualCell(run) +
-            " |\n";
+            field(run, "rms_to_equilibrium_mm") + " | " + cell(worst) + poseOf(run) + " | " +
+            worstMuscleCell(run) + " | " + residualCell(run) + " |\n";
     if (worst <= kEquilibriumAccuracyMm && ms < fastestMs) fastestMs = ms, fastest = method;
   }
   if (rows.empty()) return "";
@@ -779,9 +796,11 @@ std::string equilibriumReport(const nlohmann::json& runs) {
          "mm (from the previous pose's equilibrium)." +
          unconverged +
          " Per run: the RMS of the surface vertices to it over all poses, the worst pose's "
-         "RMS, and the run's own residual.\n\n| method | threads | iterations | ms/pose | RMS to "
-         "equilibrium [mm] | worst pose [mm] | residual RMS / max [mm] (N), worst pose "
-         "|\n|---|---|---|---|---|---|---|\n" +
+         "RMS, the farthest muscle (its RMS over all poses; the muscle and pose with the largest "
+         "single RMS; `muscles_to_equilibrium` in summary.json has every muscle and pose), and "
+         "the run's own residual.\n\n| method | threads | iterations | ms/pose | RMS to "
+         "equilibrium [mm] | worst pose [mm] | worst muscle [mm] | residual RMS / max [mm] (N), "
+         "worst pose |\n|---|---|---|---|---|---|---|---|\n" +
          rows + "\nTime to accuracy (every pose within " + bound + " RMS of its equilibrium): " +
          (fastest.empty() ? std::string("no run reached it")
                           : "**" + cell(fastestMs) + " ms per pose** (" + fastest + ")") +

@@ -335,7 +335,7 @@ double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPos
   return std::sqrt(sum / static_cast<double>(poses));
 }
 
-SimulationParameters equilibriumSettings(const SimulationParameters& simulation) {
+SimulationParameters equilibriumSettings(const SimulationParameters& simulation, int cap) {
   SimulationParameters converged = simulation;
   const int motion = std::max(1, static_cast<int>(std::lround(simulation.motionFraction *
                                                               std::max(1, simulation.iterations))));
@@ -344,9 +344,9 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation)
   converged.integrator = Integrator::Projective;
   converged.stopRule = StopRule::Residual;
   converged.tolerance = static_cast<btScalar>(kEquilibriumResidual);
-  converged.iterations = kEquilibriumIterations;
+  converged.iterations = std::max(cap, motion);
   converged.projectiveRho = static_cast<btScalar>(kEquilibriumRho);
-  converged.motionFraction = static_cast<btScalar>(double(motion) / kEquilibriumIterations);
+  converged.motionFraction = static_cast<btScalar>(double(motion) / converged.iterations);
   // Persistent contacts, their particles held lighter (they slide to rest sooner): thigh13 R=20's
   // median pose left a residual about 7x below weight 10's at the cap (1.1e-4 against 7.2e-4 mm;
   // docs/performance.md, "Persistent contacts").
@@ -380,6 +380,84 @@ void fillRms(std::vector<RunMetrics>& runs) {
           std::isnan(run.rmsToEquilibriumMm) ? 0 : sharedPoses(run, *equilibrium);
     }
   }
+}
+
+std::vector<SurfaceBlock> surfaceBlocks(const PreparedScene& prepared) {
+  std::vector<SurfaceBlock> blocks;
+  for (const auto& muscle : prepared.muscles)
+    blocks.push_back({muscle->name, muscle->restSurface.vertices.size()});
+  return blocks;
+}
+
+namespace {
+
+/// Each muscle's vertex RMS per shared pose of `run` against `equilibrium` into `muscles`, and
+/// the whole surface's per pose into `perPose`; false when the blocks do not split a surface.
+bool musclePoseRms(const RunMetrics& run, const RunMetrics& equilibrium,
+                   std::span<const SurfaceBlock> blocks, std::vector<MuscleToEquilibrium>& muscles,
+                   std::vector<double>& perPose) {
+  size_t total = 0;
+  for (const SurfaceBlock& block : blocks) total += block.vertices;
+  const size_t poses = static_cast<size_t>(sharedPoses(run, equilibrium));
+  for (size_t p = 0; p < poses; ++p) {
+    const std::span<const btVector3> a = run.poseSurfaces[p], b = equilibrium.poseSurfaces[p];
+    if (total == 0 || a.size() != total || b.size() != total) return false;
+    double squares = 0;
+    size_t offset = 0;
+    for (size_t m = 0; m < blocks.size(); ++m) {
+      const size_t count = blocks[m].vertices;
+      const double rms =
+          count ? rmsDistanceMm(a.subspan(offset, count), b.subspan(offset, count)) : 0.0;
+      muscles[m].perPoseMm.push_back(rms);
+      squares += rms * rms * static_cast<double>(count);
+      offset += count;
+    }
+    perPose.push_back(std::sqrt(squares / static_cast<double>(total)));
+  }
+  return poses > 0;
+}
+
+/// Root mean square of `values` (each one pose's RMS over the same vertices).
+double rmsOf(const std::vector<double>& values) {
+  double squares = 0;
+  for (double v : values) squares += v * v;
+  return std::sqrt(squares / static_cast<double>(values.size()));
+}
+
+/// `run`'s per-pose and per-muscle distances to `equilibrium` and their worst pose and muscle.
+void fillMuscles(RunMetrics& run, const RunMetrics& equilibrium,
+                 std::span<const SurfaceBlock> blocks) {
+  std::vector<MuscleToEquilibrium> muscles(blocks.size());
+  std::vector<double> perPose;
+  if (!musclePoseRms(run, equilibrium, blocks, muscles, perPose)) return;
+  run.worstPoseToEquilibrium =
+      static_cast<int>(std::max_element(perPose.begin(), perPose.end()) - perPose.begin());
+  run.rmsToEquilibriumPerPoseMm = std::move(perPose);
+  run.worstMuscleRmsToEquilibriumMm = -1;
+  run.worstMusclePoseToEquilibrium = {"", -1, -1.0};
+  for (size_t m = 0; m < blocks.size(); ++m) {
+    MuscleToEquilibrium& muscle = muscles[m];
+    muscle.muscle = blocks[m].muscle;
+    muscle.rmsMm = rmsOf(muscle.perPoseMm);
+    if (muscle.rmsMm > run.worstMuscleRmsToEquilibriumMm)
+      run.worstMuscleToEquilibrium = muscle.muscle,
+      run.worstMuscleRmsToEquilibriumMm = muscle.rmsMm;
+    for (size_t p = 0; p < muscle.perPoseMm.size(); ++p)
+      if (muscle.perPoseMm[p] > run.worstMusclePoseToEquilibrium.rmsMm)
+        run.worstMusclePoseToEquilibrium = {muscle.muscle, static_cast<int>(p),
+                                            muscle.perPoseMm[p]};
+  }
+  run.musclesToEquilibrium = std::move(muscles);
+}
+
+}  // namespace
+
+void fillMusclesToEquilibrium(std::vector<RunMetrics>& runs, std::span<const SurfaceBlock> blocks) {
+  const auto found = std::find_if(runs.begin(), runs.end(),
+                                  [](const RunMetrics& r) { return r.method == "equilibrium"; });
+  if (found == runs.end()) return;
+  const RunMetrics& equilibrium = *found;  // its poseSurfaces are not written below
+  for (RunMetrics& run : runs) fillMuscles(run, equilibrium, blocks);
 }
 
 double shapeRmsMm(const TriangleMesh& a, const TriangleMesh& b) {
@@ -602,11 +680,11 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
     return runFibreMSS(reference, prepared, fibreOptions);
   } else if (spec.family == "equilibrium") {
     LoadedScene converged = scene;
-    converged.simulation = equilibriumSettings(scene.simulation);
+    converged.simulation = equilibriumSettings(scene.simulation, options.equilibriumIterations);
     FibreRunOptions equilibriumOptions = fibreOptions;
     int unconverged = 0;
     equilibriumOptions.progress = [&](const RunProgress& p) {
-      unconverged += p.lastStep->iterations >= kEquilibriumIterations ? 1 : 0;
+      unconverged += p.lastStep->iterations >= converged.simulation.iterations ? 1 : 0;
       fibreOptions.progress(p);
     };
     RunMetrics metrics = runFibreMSS(converged, prepared, equilibriumOptions);
@@ -677,6 +755,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     runs.back().poses = std::max(scene.poseCount, 1);
   }
   fillRms(runs);
+  fillMusclesToEquilibrium(runs, surfaceBlocks(prepared));
   fillReferenceShapes(runs, prepared);
   if (comparison.reference && !comparison.reference->missing)
     comparison.reference->gates.spreadMm = methodSpreadMm(runs);

@@ -30,6 +30,35 @@ double numberOr(const nlohmann::json& object, const char* key, double fallback) 
   return it->get<double>();
 }
 
+nlohmann::json toJson(const std::vector<MuscleToEquilibrium>& muscles) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const MuscleToEquilibrium& m : muscles)
+    list.push_back(
+        {{"muscle", m.muscle}, {"rms_mm", number(m.rmsMm)}, {"per_pose_mm", numbers(m.perPoseMm)}});
+  return list;
+}
+
+std::vector<MuscleToEquilibrium> musclesToEquilibriumFromJson(const nlohmann::json& object) {
+  std::vector<MuscleToEquilibrium> muscles;
+  if (auto list = object.find("muscles_to_equilibrium"); list != object.end() && list->is_array())
+    for (const auto& m : *list)
+      muscles.push_back({m.value("muscle", std::string()), numberOr(m, "rms_mm", RunMetrics::kNone),
+                         numbersAt(m, "per_pose_mm")});
+  return muscles;
+}
+
+nlohmann::json toJson(const MusclePoseRms& worst) {
+  return {{"muscle", worst.muscle}, {"pose", worst.pose}, {"rms_mm", number(worst.rmsMm)}};
+}
+
+MusclePoseRms musclePoseRmsFromJson(const nlohmann::json& object) {
+  MusclePoseRms worst;
+  if (auto o = object.find("worst_muscle_pose_to_equilibrium"); o != object.end() && o->is_object())
+    worst = {o->value("muscle", worst.muscle), o->value("pose", worst.pose),
+             numberOr(*o, "rms_mm", worst.rmsMm)};
+  return worst;
+}
+
 nlohmann::json toJson(const AnalyticMetrics& a) {
   if (a.type.empty()) return nullptr;
   nlohmann::json contact = nlohmann::json::array();
@@ -122,6 +151,12 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"rms_to_equilibrium_mm", number(m.rmsToEquilibriumMm)},
       {"worst_pose_rms_to_equilibrium_mm", number(m.worstPoseRmsToEquilibriumMm)},
       {"rms_to_equilibrium_poses", m.rmsToEquilibriumPoses},
+      {"rms_to_equilibrium_per_pose_mm", numbers(m.rmsToEquilibriumPerPoseMm)},
+      {"worst_pose_to_equilibrium", m.worstPoseToEquilibrium},
+      {"worst_muscle_to_equilibrium", m.worstMuscleToEquilibrium},
+      {"worst_muscle_rms_to_equilibrium_mm", number(m.worstMuscleRmsToEquilibriumMm)},
+      {"worst_muscle_pose_to_equilibrium", toJson(m.worstMusclePoseToEquilibrium)},
+      {"muscles_to_equilibrium", toJson(m.musclesToEquilibrium)},
       {"unconverged_poses", m.unconvergedPoses},
       {"residual_rms_mm", number(m.residualRmsMm)},
       {"residual_max_mm", number(m.residualMaxMm)},
@@ -191,6 +226,13 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.worstPoseRmsToEquilibriumMm =
       numberOr(o, "worst_pose_rms_to_equilibrium_mm", m.worstPoseRmsToEquilibriumMm);
   m.rmsToEquilibriumPoses = o.value("rms_to_equilibrium_poses", m.rmsToEquilibriumPoses);
+  m.rmsToEquilibriumPerPoseMm = numbersAt(o, "rms_to_equilibrium_per_pose_mm");
+  m.worstPoseToEquilibrium = o.value("worst_pose_to_equilibrium", m.worstPoseToEquilibrium);
+  m.worstMuscleToEquilibrium = o.value("worst_muscle_to_equilibrium", m.worstMuscleToEquilibrium);
+  m.worstMuscleRmsToEquilibriumMm =
+      numberOr(o, "worst_muscle_rms_to_equilibrium_mm", m.worstMuscleRmsToEquilibriumMm);
+  m.worstMusclePoseToEquilibrium = musclePoseRmsFromJson(o);
+  m.musclesToEquilibrium = musclesToEquilibriumFromJson(o);
   m.unconvergedPoses = o.value("unconverged_poses", m.unconvergedPoses);
   m.residualRmsMm = numberOr(o, "residual_rms_mm", m.residualRmsMm);
   m.residualMaxMm = numberOr(o, "residual_max_mm", m.residualMaxMm);

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -62,6 +63,8 @@ struct CompareOptions {
   const std::atomic<bool>* cancel = nullptr;            ///< stop after the current step when true
   double methodBudgetSeconds = 0;  ///< > 0: a method stops after the step that passes this wall
                                    ///< time (its metrics cover the steps done, interrupted set)
+  /// The "equilibrium" method's iteration cap per pose (--equilibrium-cap).
+  int equilibriumIterations = kEquilibriumIterations;
 };
 
 /// Iterations counted for the pose duration when the stop rule makes them only a cap.
@@ -99,13 +102,29 @@ int sharedPoses(const RunMetrics& a, const RunMetrics& b);
 double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose = nullptr);
 
 /// The scene's settings for the "equilibrium" method: the projective integrator and the residual
-/// stop rule at kEquilibriumResidual with kEquilibriumIterations as the cap, ρ kEquilibriumRho,
+/// stop rule at kEquilibriumResidual with `cap` iterations per pose at most, ρ kEquilibriumRho,
 /// the bones moving over as many iterations as in the scene's own settings.
-SimulationParameters equilibriumSettings(const SimulationParameters& simulation);
+SimulationParameters equilibriumSettings(const SimulationParameters& simulation,
+                                         int cap = kEquilibriumIterations);
 
 /// Fills rmsToReferenceMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the
 /// "calculix", "self-reference" and "equilibrium" runs among them (each gets 0 against itself).
 void fillRms(std::vector<RunMetrics>& runs);
+
+/// One muscle's share of a run's concatenated pose surfaces (RunMetrics::poseSurfaces).
+struct SurfaceBlock {
+  std::string muscle;   ///< the muscle's name
+  size_t vertices = 0;  ///< its surface vertices, in scene order after the previous blocks'
+};
+
+/// The blocks of `prepared`'s muscles, in scene order.
+std::vector<SurfaceBlock> surfaceBlocks(const PreparedScene& prepared);
+
+/// Against the "equilibrium" run among `runs`: each run's vertex RMS per pose, its worst pose,
+/// each muscle's RMS over the poses and per pose (`blocks` split the surfaces), the muscle with
+/// the largest RMS over the poses and the muscle and pose with the largest single RMS. A run
+/// without a shared pose, or whose surfaces the blocks do not split, keeps none.
+void fillMusclesToEquilibrium(std::vector<RunMetrics>& runs, std::span<const SurfaceBlock> blocks);
 
 /// Against the "calculix" run among `runs`: each run's vertex RMS per pose, shape RMS
 /// (symmetric nearest-surface distance, per muscle surface) and worst muscle (largest vertex

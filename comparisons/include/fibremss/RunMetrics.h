@@ -54,6 +54,22 @@ struct AnalyticMetrics {
   double volumeErrorPct() const { return std::abs(volumeChangePct - exactVolumeChangePct); }
 };
 
+/// One muscle's surface vertex RMS to the "equilibrium" run (compare's fillMusclesToEquilibrium).
+struct MuscleToEquilibrium {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  std::string muscle;             ///< the muscle's name
+  double rmsMm = kNone;           ///< over the poses both runs reached [mm]
+  std::vector<double> perPoseMm;  ///< per pose both reached, in order [mm]
+};
+
+/// The largest surface vertex RMS to the "equilibrium" run of one muscle at one pose.
+struct MusclePoseRms {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  std::string muscle;    ///< the muscle ("": none measured)
+  int pose = -1;         ///< the pose (index into poseSurfaces; -1: none)
+  double rmsMm = kNone;  ///< its RMS [mm]
+};
+
 /// One run's results. NaN marks a metric that does not apply or was not measured.
 struct RunMetrics {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
@@ -93,8 +109,15 @@ struct RunMetrics {
   /// Against the "equilibrium" run (FibreMSS converged at every pose): RMS over the poses, and
   /// the worst pose's RMS.
   double rmsToEquilibriumMm = kNone;
-  double worstPoseRmsToEquilibriumMm = kNone;  ///< the largest per-pose RMS to equilibrium
-  int rmsToEquilibriumPoses = 0;               ///< poses rmsToEquilibriumMm covers
+  double worstPoseRmsToEquilibriumMm = kNone;     ///< the largest per-pose RMS to equilibrium
+  int rmsToEquilibriumPoses = 0;                  ///< poses rmsToEquilibriumMm covers
+  std::vector<double> rmsToEquilibriumPerPoseMm;  ///< vertex RMS per pose both reached [mm]
+  int worstPoseToEquilibrium = -1;  ///< the pose of worstPoseRmsToEquilibriumMm (-1: none)
+  /// Per muscle (scene order): its vertex RMS to the equilibrium run, over the poses and per pose.
+  std::vector<MuscleToEquilibrium> musclesToEquilibrium;
+  std::string worstMuscleToEquilibrium;          ///< the muscle with the largest RMS over poses
+  double worstMuscleRmsToEquilibriumMm = kNone;  ///< its RMS over the poses [mm]
+  MusclePoseRms worstMusclePoseToEquilibrium;    ///< the farthest muscle at any single pose
   int unconvergedPoses = 0;  ///< "equilibrium" run: poses that hit the iteration cap unconverged
   /// The force residual after each step measured (FibreMSS; MuscleSystem::forceResidual, all
   /// muscles): RMS and largest over the free particles of the equivalent displacement |r_i|/k_i
