@@ -392,7 +392,8 @@ std::vector<SurfaceBlock> surfaceBlocks(const PreparedScene& prepared) {
 namespace {
 
 /// Each muscle's vertex RMS per shared pose of `run` against `equilibrium` into `muscles`, and
-/// the whole surface's per pose into `perPose`; false when the blocks do not split a surface.
+/// the whole surface's per pose into `perPose`; false when they share no pose or the blocks do
+/// not split a surface.
 bool musclePoseRms(const RunMetrics& run, const RunMetrics& equilibrium,
                    std::span<const SurfaceBlock> blocks, std::vector<MuscleToEquilibrium>& muscles,
                    std::vector<double>& perPose) {
