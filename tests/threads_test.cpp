@@ -7,16 +7,24 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <memory>
 #include <thread>
+#include <utility>
 #include <vector>
+
+#if defined(__linux__)
+#include <pthread.h>
+#include <sched.h>
+#endif
 
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "solver/DutyCycle.h"
 #include "solver/ForceChunks.h"
 #include "solver/MuscleSystemAccess.h"
 #include "solver/VolumeForces.h"
@@ -45,6 +53,76 @@ TEST(TaskPool, ZeroMeansTheHardwareThreads) {
   EXPECT_EQ(TaskPool::resolve(0), std::max(1u, std::thread::hardware_concurrency()));
   EXPECT_EQ(TaskPool::resolve(3), 3u);
 }
+
+TEST(DutyCycle, StartsOnAPreemptionWhileHoldingTasks) {
+  DutyCycle duty;
+  EXPECT_FALSE(duty.cycling());
+  duty.afterTasks(0);
+  EXPECT_FALSE(duty.cycling());
+  duty.afterTasks(1);
+  EXPECT_TRUE(duty.cycling());
+}
+
+TEST(DutyCycle, EndsAfterCalmBurstsInARow) {
+  DutyCycle duty;
+  duty.afterTasks(2);
+  for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0.05, 0);
+  EXPECT_TRUE(duty.cycling());
+  duty.afterBurst(DutyCycle::kLateMs, 0);  // on time, just
+  EXPECT_FALSE(duty.cycling());
+}
+
+TEST(DutyCycle, ALateWakeOrAPreemptionRestartsTheCount) {
+  for (const auto& [lateMs, preemptions] : {std::pair{2.0, 0L}, std::pair{0.0, 1L}}) {
+    DutyCycle duty;
+    duty.afterTasks(1);
+    for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0, 0);
+    duty.afterBurst(lateMs, preemptions);
+    for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0, 0);
+    EXPECT_TRUE(duty.cycling()) << lateMs << " ms late, " << preemptions << " preemptions";
+    duty.afterBurst(0, 0);
+    EXPECT_FALSE(duty.cycling());
+  }
+}
+
+#if defined(__linux__)
+// The pool's threads and a busy loop all on one core: the worker is preempted while it holds
+// tasks (a tick every 1–10 ms against tasks of 0.2 ms), so it starts cycling and leaves jobs
+// half done to the caller; every task still runs once. Nothing about time is asserted.
+TEST(TaskPool, AWorkerSharingItsCoreWithABusyThreadStillRunsEveryTaskOnce) {
+  cpu_set_t before;
+  ASSERT_EQ(pthread_getaffinity_np(pthread_self(), sizeof(before), &before), 0);
+  cpu_set_t one;
+  CPU_ZERO(&one);
+  CPU_SET(sched_getcpu(), &one);
+  ASSERT_EQ(pthread_setaffinity_np(pthread_self(), sizeof(one), &one), 0);
+  std::atomic<bool> stop{false};
+  std::thread busy([&] {  // inherits the one core
+    while (!stop.load(std::memory_order_relaxed)) {
+    }
+  });
+  {
+    TaskPool pool(2);  // its worker inherits the one core too
+    constexpr size_t kTasks = 24;
+    const auto spin = [] {
+      const auto end = std::chrono::steady_clock::now() + std::chrono::microseconds(200);
+      while (std::chrono::steady_clock::now() < end) {
+      }
+    };
+    for (int job = 0; job < 100; ++job) {
+      std::vector<std::atomic<int>> runs(kTasks);
+      pool.run(kTasks, [&](size_t index, unsigned) {
+        spin();
+        runs[index].fetch_add(1);
+      });
+      for (size_t i = 0; i < kTasks; ++i) ASSERT_EQ(runs[i].load(), 1) << "job " << job;
+    }
+  }
+  stop = true;
+  busy.join();
+  pthread_setaffinity_np(pthread_self(), sizeof(before), &before);
+}
+#endif
 
 namespace {
 

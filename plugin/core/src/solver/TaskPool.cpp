@@ -3,6 +3,12 @@
 #include <ctime>
 #include <span>
 
+#if defined(__linux__)
+#include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#endif
+
 #if defined(__SSE2__)
 #include <immintrin.h>
 #endif
@@ -40,6 +46,91 @@ T awaitChange(const std::atomic<T>& value, T old) {
   value.wait(old, std::memory_order_acquire);
   return value.load(std::memory_order_acquire);
 }
+
+/// The steady clock [ms].
+double steadyMs() {
+  timespec now{};
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
+}
+
+/// Waits until `value` differs from `old` or the steady clock passes `endMs`, spinning; the
+/// value last read.
+template <typename T>
+T awaitChangeUntil(const std::atomic<T>& value, T old, double endMs) {
+  constexpr int kRoundsPerClockRead = 64;
+  for (int round = 1;; ++round) {
+    const T now = value.load(std::memory_order_acquire);
+    if (now != old || (round % kRoundsPerClockRead == 0 && steadyMs() >= endMs)) return now;
+    relax();
+  }
+}
+
+/// The calling thread's involuntary context switches so far (0 where that is not known: the
+/// pool then never cycles).
+long involuntarySwitches() {
+#if defined(__linux__) && defined(RUSAGE_THREAD)
+  rusage usage{};
+  getrusage(RUSAGE_THREAD, &usage);
+  return usage.ru_nivcsw;
+#else
+  return 0;
+#endif
+}
+
+/// Sleeps for `ms` [ms].
+void sleepMs(double ms) {
+  const timespec span{0, static_cast<long>(ms * 1e6)};
+  nanosleep(&span, nullptr);
+}
+
+/// The core the calling thread runs on (-1 where that is not known).
+int currentCore() {
+#if defined(__linux__)
+  return sched_getcpu();
+#else
+  return -1;
+#endif
+}
+
+/// Where a worker may run: a cycling worker is kept off the caller's core, so that its bursts
+/// do not take the caller's core away (the two would share one core while another is free of
+/// them); a worker that stops cycling gets its cores back.
+class WorkerCores {
+ public:
+  WorkerCores() {
+#if defined(__linux__)
+    known_ = pthread_getaffinity_np(pthread_self(), sizeof(allowed_), &allowed_) == 0;
+#endif
+  }
+  /// Keeps the worker off `core` (the caller's) if it runs there and another core is allowed.
+  void avoid(int core) {
+#if defined(__linux__)
+    if (!known_ || core < 0 || core == avoided_ || currentCore() != core ||
+        !CPU_ISSET(core, &allowed_) || CPU_COUNT(&allowed_) < 2)
+      return;
+    cpu_set_t others = allowed_;
+    CPU_CLR(core, &others);
+    if (pthread_setaffinity_np(pthread_self(), sizeof(others), &others) == 0) avoided_ = core;
+#else
+    (void)core;
+#endif
+  }
+  /// Gives the worker every core it was started with.
+  void release() {
+#if defined(__linux__)
+    if (avoided_ >= 0 && pthread_setaffinity_np(pthread_self(), sizeof(allowed_), &allowed_) == 0)
+      avoided_ = -1;
+#endif
+  }
+
+ private:
+#if defined(__linux__)
+  cpu_set_t allowed_{};  ///< the cores the worker was started with
+  bool known_ = false;   ///< allowed_ was read
+#endif
+  int avoided_ = -1;  ///< the core the worker is kept off (-1: none)
+};
 
 /// When `threads` equally fast threads finish tasks of `ms` handed out in order, each to the
 /// first thread free (TaskPool::work) [ms].
@@ -113,9 +204,10 @@ void TaskPool::runErased(size_t count, Call call, void* context) {
   context_ = context;
   next_.store(0);
   done_.store(0);
+  callerCore_.store(currentCore(), std::memory_order_relaxed);
   generation_.store(closed + 1);
   generation_.notify_all();
-  work(0);
+  work(0, kNoEnd);
   for (size_t finished = done_.load(); finished != count; finished = done_.load())
     awaitChange(done_, finished);
 }
@@ -176,23 +268,64 @@ void TaskPool::runProfiled(size_t count, Call call, void* context, const char* p
   lastEndMs_ = threadCpuMs();
 }
 
-void TaskPool::work(unsigned thread) {
-  for (size_t index = next_.fetch_add(1); index < count_; index = next_.fetch_add(1)) {
+bool TaskPool::work(unsigned thread, double endMs) {
+  bool ran = false;
+  while (endMs == kNoEnd || steadyMs() < endMs) {
+    const size_t index = next_.fetch_add(1);
+    if (index >= count_) break;
     call_(context_, index, thread);
+    ran = true;
     if (done_.fetch_add(1) + 1 == count_) done_.notify_one();
   }
+  return ran;
+}
+
+bool TaskPool::join(uint64_t generation, unsigned thread, double endMs) {
+  inside_.fetch_add(1);
+  // Else it closed before we got in.
+  const bool ran = generation_.load() == generation && work(thread, endMs);
+  inside_.fetch_sub(1);
+  return ran;
 }
 
 void TaskPool::loop(unsigned thread) {
+  DutyCycle duty;
+  WorkerCores cores;
   uint64_t seen = 0;
-  while (true) {
+  while (!stopping_.load()) {
+    if (duty.cycling()) {
+      cores.avoid(callerCore_.load(std::memory_order_relaxed));
+      seen = cycle(thread, seen, duty);
+      continue;
+    }
+    cores.release();
     seen = awaitChange(generation_, seen);
     if (stopping_.load()) return;
     if (seen % 2 == 1) continue;  // being set up: wait for it to open
-    inside_.fetch_add(1);
-    if (generation_.load() == seen) work(thread);  // else it closed before we got in
-    inside_.fetch_sub(1);
+    const long switches = involuntarySwitches();
+    if (join(seen, thread, kNoEnd)) duty.afterTasks(involuntarySwitches() - switches);
   }
+}
+
+uint64_t TaskPool::cycle(unsigned thread, uint64_t open, DutyCycle& duty) {
+  const double asleepMs = steadyMs();
+  sleepMs(DutyCycle::kSleepMs);
+  const double awakeMs = steadyMs();
+  const long switches = involuntarySwitches();
+  const double endMs = awakeMs + DutyCycle::kBurstMs;
+  bool ran = false;
+  for (open = generation_.load();;) {
+    if (open % 2 == 0) ran = join(open, thread, endMs) || ran;
+    const double gapEndMs = std::min(endMs, steadyMs() + DutyCycle::kGapMs);
+    const uint64_t next = awaitChangeUntil(generation_, open, gapEndMs);
+    if (next == open) break;
+    open = next;
+  }
+  duty.afterBurst(awakeMs - asleepMs - DutyCycle::kSleepMs, involuntarySwitches() - switches);
+  // Stopping: `open` is the destructor's generation, and no job follows.
+  if (ran || stopping_.load()) return open;
+  generation_.wait(open, std::memory_order_acquire);  // idle: the next job wakes it
+  return generation_.load(std::memory_order_acquire);
 }
 
 }  // namespace fibremss

@@ -12,6 +12,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "DutyCycle.h"
 #include "fibremss/TaskScheduler.h"
 
 namespace fibremss {
@@ -99,16 +100,27 @@ class TaskPool {
 
  private:
   using Call = void (*)(void* context, size_t index, unsigned thread);
+  /// work()'s end for a thread that does not cycle: no clock is read.
+  static constexpr double kNoEnd = -1;
 
   void runErased(size_t count, Call call, void* context);
   /// runErased with each task's thread CPU time added to profile_.
   void runProfiled(size_t count, Call call, void* context, const char* phase);
   /// runErased on the host scheduler: one enqueued task, then its finish.
   void runOnHost(size_t count, Call call, void* context) const;
-  /// Runs tasks of the current job until the counter passes its end.
-  void work(unsigned thread);
-  /// A worker: waits for a new generation, works, reports done.
+  /// Runs tasks of the current job until the counter passes its end or, when `endMs` is not
+  /// kNoEnd, the steady clock passes it; whether it ran any.
+  bool work(unsigned thread, double endMs);
+  /// A worker enters job `generation` and works on it until `endMs` (see work) unless it has
+  /// closed; whether it ran any task.
+  bool join(uint64_t generation, unsigned thread, double endMs);
+  /// A worker: waits for a new generation, works, reports done; cycles (DutyCycle) while
+  /// another thread contends for its core.
   void loop(unsigned thread);
+  /// One duty cycle of a worker that last saw generation `open`: sleeps DutyCycle::kSleepMs,
+  /// joins jobs for up to DutyCycle::kBurstMs, then (if it found no task) waits for the next job;
+  /// returns the generation to join next.
+  uint64_t cycle(unsigned thread, uint64_t open, DutyCycle& duty);
 
   TaskScheduler host_;                   ///< the host's scheduler, or empty
   std::vector<std::thread> workers_;     ///< threads 1 … threads−1
@@ -117,6 +129,7 @@ class TaskPool {
   std::atomic<size_t> next_{0};          ///< next task index of the current job
   std::atomic<size_t> done_{0};          ///< tasks of the current job finished
   std::atomic<bool> stopping_{false};    ///< set by the destructor
+  std::atomic<int> callerCore_{-1};      ///< the caller's core at the last job (-1: unknown)
   size_t count_ = 0;                     ///< tasks of the current job
   Call call_ = nullptr;                  ///< the current job's trampoline
   void* context_ = nullptr;              ///< the current job's task object
