@@ -4,8 +4,6 @@
 #include <span>
 
 #if defined(__linux__)
-#include <pthread.h>
-#include <sched.h>
 #include <sys/resource.h>
 #endif
 
@@ -84,54 +82,6 @@ void sleepMs(double ms) {
   nanosleep(&span, nullptr);
 }
 
-/// The core the calling thread runs on (-1 where that is not known).
-int currentCore() {
-#if defined(__linux__)
-  return sched_getcpu();
-#else
-  return -1;
-#endif
-}
-
-/// Where a worker may run: a cycling worker is kept off the caller's core, so that its bursts
-/// do not take the caller's core away (the two would share one core while another is free of
-/// them); a worker that stops cycling gets its cores back.
-class WorkerCores {
- public:
-  WorkerCores() {
-#if defined(__linux__)
-    known_ = pthread_getaffinity_np(pthread_self(), sizeof(allowed_), &allowed_) == 0;
-#endif
-  }
-  /// Keeps the worker off `core` (the caller's) if it runs there and another core is allowed.
-  void avoid(int core) {
-#if defined(__linux__)
-    if (!known_ || core < 0 || core == avoided_ || currentCore() != core ||
-        !CPU_ISSET(core, &allowed_) || CPU_COUNT(&allowed_) < 2)
-      return;
-    cpu_set_t others = allowed_;
-    CPU_CLR(core, &others);
-    if (pthread_setaffinity_np(pthread_self(), sizeof(others), &others) == 0) avoided_ = core;
-#else
-    (void)core;
-#endif
-  }
-  /// Gives the worker every core it was started with.
-  void release() {
-#if defined(__linux__)
-    if (avoided_ >= 0 && pthread_setaffinity_np(pthread_self(), sizeof(allowed_), &allowed_) == 0)
-      avoided_ = -1;
-#endif
-  }
-
- private:
-#if defined(__linux__)
-  cpu_set_t allowed_{};  ///< the cores the worker was started with
-  bool known_ = false;   ///< allowed_ was read
-#endif
-  int avoided_ = -1;  ///< the core the worker is kept off (-1: none)
-};
-
 /// When `threads` equally fast threads finish tasks of `ms` handed out in order, each to the
 /// first thread free (TaskPool::work) [ms].
 double scheduleEnd(std::span<const double> ms, unsigned threads) {
@@ -204,7 +154,6 @@ void TaskPool::runErased(size_t count, Call call, void* context) {
   context_ = context;
   next_.store(0);
   done_.store(0);
-  callerCore_.store(currentCore(), std::memory_order_relaxed);
   generation_.store(closed + 1);
   generation_.notify_all();
   work(0, kNoEnd);
@@ -290,15 +239,12 @@ bool TaskPool::join(uint64_t generation, unsigned thread, double endMs) {
 
 void TaskPool::loop(unsigned thread) {
   DutyCycle duty;
-  WorkerCores cores;
   uint64_t seen = 0;
   while (!stopping_.load()) {
     if (duty.cycling()) {
-      cores.avoid(callerCore_.load(std::memory_order_relaxed));
       seen = cycle(thread, seen, duty);
       continue;
     }
-    cores.release();
     seen = awaitChange(generation_, seen);
     if (stopping_.load()) return;
     if (seen % 2 == 1) continue;  // being set up: wait for it to open

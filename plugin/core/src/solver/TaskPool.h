@@ -129,7 +129,6 @@ class TaskPool {
   std::atomic<size_t> next_{0};          ///< next task index of the current job
   std::atomic<size_t> done_{0};          ///< tasks of the current job finished
   std::atomic<bool> stopping_{false};    ///< set by the destructor
-  std::atomic<int> callerCore_{-1};      ///< the caller's core at the last job (-1: unknown)
   size_t count_ = 0;                     ///< tasks of the current job
   Call call_ = nullptr;                  ///< the current job's trampoline
   void* context_ = nullptr;              ///< the current job's task object
