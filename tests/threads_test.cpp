@@ -13,7 +13,6 @@
 #include <cstring>
 #include <memory>
 #include <thread>
-#include <utility>
 #include <vector>
 
 #if defined(__linux__)
@@ -66,23 +65,21 @@ TEST(DutyCycle, StartsOnAPreemptionWhileHoldingTasks) {
 TEST(DutyCycle, EndsAfterCalmBurstsInARow) {
   DutyCycle duty;
   duty.afterTasks(2);
-  for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0.05, 0);
+  for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0);
   EXPECT_TRUE(duty.cycling());
-  duty.afterBurst(DutyCycle::kLateMs, 0);  // on time, just
+  duty.afterBurst(0);
   EXPECT_FALSE(duty.cycling());
 }
 
-TEST(DutyCycle, ALateWakeOrAPreemptionRestartsTheCount) {
-  for (const auto& [lateMs, preemptions] : {std::pair{2.0, 0L}, std::pair{0.0, 1L}}) {
-    DutyCycle duty;
-    duty.afterTasks(1);
-    for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0, 0);
-    duty.afterBurst(lateMs, preemptions);
-    for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0, 0);
-    EXPECT_TRUE(duty.cycling()) << lateMs << " ms late, " << preemptions << " preemptions";
-    duty.afterBurst(0, 0);
-    EXPECT_FALSE(duty.cycling());
-  }
+TEST(DutyCycle, APreemptionRestartsTheCount) {
+  DutyCycle duty;
+  duty.afterTasks(1);
+  for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0);
+  duty.afterBurst(1);
+  for (int burst = 1; burst < DutyCycle::kCalmBursts; ++burst) duty.afterBurst(0);
+  EXPECT_TRUE(duty.cycling());
+  duty.afterBurst(0);
+  EXPECT_FALSE(duty.cycling());
 }
 
 #if defined(__linux__)

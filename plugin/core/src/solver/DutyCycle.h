@@ -6,8 +6,8 @@
 // *cycles*: after it gets the core it claims tasks for at most kBurstMs, shorter than the slice
 // the scheduler grants a thread that has just woken, then sleeps for kSleepMs without holding a
 // task, so the other thread gets its share while the caller works on alone. This is the policy
-// alone: TaskPool::loop feeds it the worker's involuntary context switches and how late it
-// woke, so it can be tested on synthetic figures.
+// alone: TaskPool::loop feeds it the worker's involuntary context switches, so it can be tested on
+// synthetic figures.
 
 namespace fibremss {
 
@@ -23,9 +23,7 @@ class DutyCycle {
   static constexpr double kGapMs = 0.05;
   /// A cycling worker's voluntary sleep between bursts [ms].
   static constexpr double kSleepMs = 0.1;
-  /// A wake later than this past the sleep's end means another thread had the core [ms].
-  static constexpr double kLateMs = 0.25;
-  /// Calm bursts in a row (woken on time, not switched out) that end the cycling.
+  /// Calm bursts in a row (never switched out) that end the cycling.
   static constexpr int kCalmBursts = 16;
 
   /// Whether the worker runs tasks only in bursts.
@@ -40,11 +38,11 @@ class DutyCycle {
     }
   }
 
-  /// After a burst that began `lateMs` past the end of the sleep before it and in which the
-  /// worker was switched out involuntarily `preemptions` times; kCalmBursts calm ones (on time,
-  /// never switched out) in a row end the cycling.
-  void afterBurst(double lateMs, long preemptions) {
-    calm_ = lateMs <= kLateMs && preemptions == 0 ? calm_ + 1 : 0;
+  /// After a burst in which the worker was switched out involuntarily `preemptions` times;
+  /// kCalmBursts calm ones (never switched out) in a row end the cycling. How late it woke does
+  /// not count: a worker that shares the caller's core always wakes late, and would cycle on.
+  void afterBurst(long preemptions) {
+    calm_ = preemptions == 0 ? calm_ + 1 : 0;
     if (calm_ >= kCalmBursts) cycling_ = false;
   }
 

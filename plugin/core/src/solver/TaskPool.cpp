@@ -254,11 +254,9 @@ void TaskPool::loop(unsigned thread) {
 }
 
 uint64_t TaskPool::cycle(unsigned thread, uint64_t open, DutyCycle& duty) {
-  const double asleepMs = steadyMs();
   sleepMs(DutyCycle::kSleepMs);
-  const double awakeMs = steadyMs();
   const long switches = involuntarySwitches();
-  const double endMs = awakeMs + DutyCycle::kBurstMs;
+  const double endMs = steadyMs() + DutyCycle::kBurstMs;
   bool ran = false;
   for (open = generation_.load();;) {
     if (open % 2 == 0) ran = join(open, thread, endMs) || ran;
@@ -267,7 +265,7 @@ uint64_t TaskPool::cycle(unsigned thread, uint64_t open, DutyCycle& duty) {
     if (next == open) break;
     open = next;
   }
-  duty.afterBurst(awakeMs - asleepMs - DutyCycle::kSleepMs, involuntarySwitches() - switches);
+  duty.afterBurst(involuntarySwitches() - switches);
   // Stopping: `open` is the destructor's generation, and no job follows.
   if (ran || stopping_.load()) return open;
   generation_.wait(open, std::memory_order_acquire);  // idle: the next job wakes it
