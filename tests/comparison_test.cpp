@@ -28,9 +28,10 @@ std::string readFile(const fs::path& path) {
   return text.str();
 }
 
-/// A fresh directory under the test's working directory.
+/// A fresh directory in the tests' build directory, wherever the test is run from (kept after the
+/// test for a person to look at; run from the source root, the test once left them in the tree).
 fs::path scratch(const std::string& name) {
-  const fs::path dir = fs::current_path() / ("comparison_test_" + name);
+  const fs::path dir = fs::path(FIBREMSS_TEST_BINARY_DIR) / ("comparison_test_" + name);
   fs::remove_all(dir);
   return dir;
 }
