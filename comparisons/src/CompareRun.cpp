@@ -392,8 +392,8 @@ std::vector<SurfaceBlock> surfaceBlocks(const PreparedScene& prepared) {
 namespace {
 
 /// Each muscle's vertex RMS per shared pose of `run` against `equilibrium` into `muscles`, and
-/// the whole surface's per pose into `perPose`; false when they share no pose or the blocks do
-/// not split a surface.
+/// the whole surface's per pose into `perPose` (as rmsBetweenRuns takes it, so the worst pose
+/// indexes its worst value); false when they share no pose or the blocks do not split a surface.
 bool musclePoseRms(const RunMetrics& run, const RunMetrics& equilibrium,
                    std::span<const SurfaceBlock> blocks, std::vector<MuscleToEquilibrium>& muscles,
                    std::vector<double>& perPose) {
@@ -403,17 +403,14 @@ bool musclePoseRms(const RunMetrics& run, const RunMetrics& equilibrium,
   for (size_t p = 0; p < poses; ++p) {
     const std::span<const btVector3> a = run.poseSurfaces[p], b = equilibrium.poseSurfaces[p];
     if (total == 0 || a.size() != total || b.size() != total) return false;
-    double squares = 0;
     size_t offset = 0;
     for (size_t m = 0; m < blocks.size(); ++m) {
       const size_t count = blocks[m].vertices;
-      const double rms =
-          count ? rmsDistanceMm(a.subspan(offset, count), b.subspan(offset, count)) : 0.0;
-      muscles[m].perPoseMm.push_back(rms);
-      squares += rms * rms * static_cast<double>(count);
+      muscles[m].perPoseMm.push_back(
+          count ? rmsDistanceMm(a.subspan(offset, count), b.subspan(offset, count)) : 0.0);
       offset += count;
     }
-    perPose.push_back(std::sqrt(squares / static_cast<double>(total)));
+    perPose.push_back(rmsDistanceMm(a, b));
   }
   return poses > 0;
 }
