@@ -13,6 +13,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "solver/MuscleSystemAccess.h"
 #include "support/GridMuscle.h"
+#include "support/SolverFixtures.h"
 #include "support/ThighSteps.h"
 
 namespace fibremss {
@@ -56,6 +57,7 @@ class ThighRun {
   explicit ThighRun(int threads) {
     const PreparedScene& prepared = testing::preparedThigh(scene_);
     SimulationParameters parameters = scene_.simulation;
+    parameters.integrator = Integrator::Verlet;  // particles that move every iteration
     parameters.threads = threads;
     parameters.iterations = 1;
     parameters.stopRule = StopRule::Iterations;
@@ -238,7 +240,7 @@ struct TwoGrids {
     for (int k = 0; k < 5; ++k) system.step();
   }
   static SimulationParameters parameters() {
-    SimulationParameters p;
+    SimulationParameters p = testing::verletParameters();
     p.iterations = 1;
     p.stopRule = StopRule::Iterations;
     p.threads = 1;

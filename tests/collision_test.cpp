@@ -26,7 +26,7 @@ using testing::makeSpheres;
 
 /// One iteration per step: every test below looks at a single response.
 SimulationParameters oneIteration() {
-  SimulationParameters parameters;
+  SimulationParameters parameters = testing::verletParameters();
   parameters.iterations = 1;
   return parameters;
 }
@@ -373,7 +373,7 @@ TEST(SurfaceContact, TheSystemsSurfaceStaysOutOfTheBoneOnlyWhenSwitchedOn) {
   bone->sphereCentres = {btVector3(0, 0.017f, 0)};
   bone->sphereRadii = {btScalar(0.012)};
   for (const bool on : {false, true}) {
-    SimulationParameters parameters;
+    SimulationParameters parameters = testing::verletParameters();
     parameters.surfaceContact = on;
     parameters.muscleBone = false;
     MuscleSystem system(parameters);

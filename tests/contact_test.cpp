@@ -82,7 +82,7 @@ TEST(DistanceField, GivesTheKnownDistancesNextToTheFacesOfABox) {
 /// but clear; the second step carries the plate past the particle's centre (0.5 mm beyond its
 /// middle). Returns the particle's height above the plate's middle after every step.
 std::vector<btScalar> plateSweep(bool recovery) {
-  SimulationParameters parameters;
+  SimulationParameters parameters = testing::verletParameters();
   parameters.iterations = 1;
   parameters.adaptiveTimeStep = false;
   parameters.boneCollision = BoneCollision::DistanceField;

@@ -19,6 +19,7 @@
 #include "solver/MuscleSystemPretransform.h"
 #include "solver/TimeStep.h"
 #include "support/GridMuscle.h"
+#include "support/SolverFixtures.h"
 
 namespace fibremss {
 namespace {
@@ -52,7 +53,7 @@ const std::shared_ptr<const MuscleSettings>& stiffMuscle() {
 /// Fixed dt (no adaptive bound) `ofStiffLimit` times the stiff muscle's stable dt, 10
 /// iterations, light noise so that an unstable step has something to amplify.
 SimulationParameters fixedStep(btScalar ofStiffLimit, FailurePolicy policy) {
-  SimulationParameters parameters;
+  SimulationParameters parameters = testing::verletParameters();
   parameters.adaptiveTimeStep = false;
   parameters.timeStep = ofStiffLimit * stableTimeStep(*stiffMuscle());
   parameters.iterations = 10;

@@ -728,7 +728,7 @@ TEST(Projective, ComesWithinTheEquilibriumToleranceInTenIterations) {
 
 /// The projective step's residual |(A + W)·Δ − F| at its largest over the free particles [N]:
 /// A the springs' matrix (a spring to a fixed particle adds to its free end's diagonal), W
-/// projectiveContactWeight·A_ii on the `held` particles (its default: 10).
+/// 10·A_ii on the `held` particles (projectiveContactWeight 10).
 double projectiveResidual(const MuscleState& state, const std::vector<btVector3>& step,
                           const std::vector<bool>& held) {
   const MuscleSettings& settings = *state.settings;
@@ -771,6 +771,8 @@ TEST(Projective, TheStepSolvesWithTheContactsHeldAfterUpdatesAndNewRows) {
   }
   Bench bench(settings, Integrator::Projective);
   bench.parameters.projectiveRho = 0;
+  bench.parameters.projectiveHistory = 0;  // the plain step Δ = (A + W)⁻¹·F
+  bench.parameters.projectiveContactWeight = 10;
   bench.state.pushedLast.assign(points.size(), 0);
   // A configuration off rest (a shear growing with height), the same before every step.
   std::vector<btVector3> displaced = points;
@@ -856,6 +858,7 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
   // the fixed point, and the residual stalls at 5.9e-3 mm at the cap.
   SimulationParameters parameters;
   parameters.integrator = Integrator::Projective;
+  parameters.projectiveHistory = 0;  // the fixed point of the projective step
   parameters.persistentContacts = true;
   parameters.stopRule = StopRule::Residual;
   parameters.tolerance = 1e-8;
@@ -882,6 +885,7 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
 double pressedBlocksResidual(bool pairReactions, int& iterations) {
   SimulationParameters parameters;
   parameters.integrator = Integrator::Projective;
+  parameters.projectiveHistory = 0;  // the fixed point of the projective step
   parameters.persistentContacts = true;
   parameters.pairReactions = pairReactions;
   parameters.projectiveContactWeight = 1;

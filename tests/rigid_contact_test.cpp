@@ -25,6 +25,7 @@
 #include "fibremss/MuscleWorld.h"
 #include "support/AllocationCounter.h"
 #include "support/SlabMuscle.h"
+#include "support/SolverFixtures.h"
 
 namespace fibremss {
 namespace {
@@ -40,7 +41,7 @@ constexpr btScalar kTop = (kLayers - 1) * kSpacing + kSpacing / 2;  // slab's up
 constexpr btScalar kBulletStep = btScalar(1.0 / 480);               // fixed Bullet step [s]
 
 SimulationParameters slabParameters(int threads = 1) {
-  SimulationParameters parameters;
+  SimulationParameters parameters = testing::verletParameters();
   parameters.timeStep = btScalar(5e-5);  // below the slab's stable dt (about 1e-4 s)
   parameters.iterations = 20;
   parameters.threads = threads;

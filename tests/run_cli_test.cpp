@@ -238,7 +238,8 @@ TEST(RunCli, UnknownSceneIsAnErrorNamingIt) {
 }
 
 // Verlet at a fixed dt far beyond its stability bound (ω·dt ≫ 2 for these springs) must blow up.
-const char* const kUnstable = " --set resolution=10 --set time_step=fixed --set dt=0.05";
+const char* const kUnstable =
+    " --set integrator=verlet --set resolution=10 --set time_step=fixed --set dt=0.05";
 
 TEST(RunCli, AnUnstableRunFailsWithExitCode3AndSaysWhere) {
   TemporaryDirectory out("fibremss_run_cli_unstable");

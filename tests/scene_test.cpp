@@ -114,7 +114,7 @@ TEST(Scene, DefaultsFilledIn) {
   EXPECT_EQ(complete["units"], "m");
   EXPECT_EQ(complete["model"]["damping"], "auto");
   EXPECT_EQ(complete["muscles"][0]["resolution"], muscleDefaults.resolution);
-  EXPECT_EQ(complete["simulation"]["integrator"], "verlet");
+  EXPECT_EQ(complete["simulation"]["integrator"], "projective");
   EXPECT_EQ(complete["muscles"][0]["fibres"]["generator"]["inset"], 0.8);
 }
 

@@ -31,9 +31,10 @@ const char* partName(Part part) {
   return "?";
 }
 
-BenchScene::BenchScene(int resolution, int threads)
+BenchScene::BenchScene(int resolution, int threads, Integrator integrator)
     : scene_(loadScene("thigh13", {"resolution=" + std::to_string(resolution),
-                                   "threads=" + std::to_string(threads)})) {
+                                   "threads=" + std::to_string(threads),
+                                   std::string("integrator=") + toString(integrator)})) {
   const PreparedScene prepared = prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed);
   system_ = std::make_unique<MuscleSystem>(scene_.simulation);
   for (const auto& bone : prepared.bones) bones_.push_back(system_->addBone(bone));

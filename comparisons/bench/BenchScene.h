@@ -28,11 +28,12 @@ constexpr Part kParts[] = {Part::SpringForces,    Part::VolumeForces, Part::Adap
 /// Name of a part as benchmarks and the callgrind reference print it.
 const char* partName(Part part);
 
-/// thigh13 at `resolution` with `threads` solver threads, stepped to its second pose so that
-/// the muscles touch each other and the bones.
+/// thigh13 at `resolution` with `threads` solver threads and `integrator` (the kernels' reference
+/// counts are Verlet's), stepped to its second pose so that the muscles touch each other and the
+/// bones.
 class BenchScene {
  public:
-  BenchScene(int resolution, int threads);
+  BenchScene(int resolution, int threads, Integrator integrator = Integrator::Verlet);
 
   MuscleSystem& system() { return *system_; }
   /// Particles of all muscles.

@@ -1,6 +1,7 @@
 // fibremss_bench: Google Benchmark suite of the step's kernels on thigh13 (R = 20, 40), each
 // timed alone on one thread while the other parts of the iteration run untimed, plus whole
-// iterations with 1 and 2 threads, and the haptic query MuscleWorld/MuscleSystem::contactWrench
+// iterations with 1 and 2 threads of Verlet and of the default solver (projective: its cost per
+// iteration against Verlet's), and the haptic query MuscleWorld/MuscleSystem::contactWrench
 // of a probe pressed into a muscle. `fibremss_bench --callgrind-kernels R` instead runs each
 // kernel once under callgrind's client requests (comparisons/bench/callgrind.sh);
 // `fibremss_bench --thread-scaling R [ROUNDS]` alternates 1 and 2 threads in one run, alone and
@@ -24,6 +25,7 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -35,11 +37,12 @@ namespace {
 /// Iterations per step in the whole-iteration benchmarks.
 constexpr int kIterationsPerStep = 10;
 
-/// One scene per (resolution, threads), prepared on first use and kept for later benchmarks.
-BenchScene& sceneFor(int resolution, int threads) {
-  static std::map<std::pair<int, int>, std::unique_ptr<BenchScene>> scenes;
-  auto& scene = scenes[{resolution, threads}];
-  if (!scene) scene = std::make_unique<BenchScene>(resolution, threads);
+/// One scene per (resolution, threads, integrator), prepared on first use and kept for later
+/// benchmarks.
+BenchScene& sceneFor(int resolution, int threads, Integrator integrator = Integrator::Verlet) {
+  static std::map<std::tuple<int, int, Integrator>, std::unique_ptr<BenchScene>> scenes;
+  auto& scene = scenes[{resolution, threads, integrator}];
+  if (!scene) scene = std::make_unique<BenchScene>(resolution, threads, integrator);
   return *scene;
 }
 
@@ -66,9 +69,13 @@ void benchPart(benchmark::State& state, Part part) {
   state.counters["particles"] = static_cast<double>(scene.particles());
 }
 
-/// Whole steps of kIterationsPerStep iterations, bones moving; reports time per iteration.
+/// Whole steps of kIterationsPerStep iterations, bones moving; reports time per iteration. The
+/// third argument: 0 Verlet, 1 the default solver (SimulationParameters::integrator).
 void benchIteration(benchmark::State& state) {
-  BenchScene& scene = sceneFor(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  const Integrator integrator =
+      state.range(2) ? SimulationParameters{}.integrator : Integrator::Verlet;
+  BenchScene& scene =
+      sceneFor(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), integrator);
   scene.system().parameters().iterations = kIterationsPerStep;
   scene.system().parameters().stopRule = StopRule::Iterations;
   for (auto _ : state) scene.stepPose();
@@ -138,8 +145,8 @@ void registerAll() {
         ->Arg(40)
         ->Unit(benchmark::kMicrosecond);
   benchmark::RegisterBenchmark("iteration", benchIteration)
-      ->ArgsProduct({{20, 40}, {1, 2}})
-      ->ArgNames({"R", "threads"})
+      ->ArgsProduct({{20, 40}, {1, 2}, {0, 1}})
+      ->ArgNames({"R", "threads", "default_solver"})
       ->Unit(benchmark::kMillisecond)
       ->UseRealTime();
   benchmark::RegisterBenchmark("contact-wrench", benchContactWrench)
@@ -167,6 +174,19 @@ int callgrindKernels(int resolution) {
   CALLGRIND_ZERO_STATS;
   scene.stepPose();
   CALLGRIND_DUMP_STATS_AT("step-10-iterations");
+  CALLGRIND_STOP_INSTRUMENTATION;
+  // The default solver's advance and step: its cost per iteration against Verlet's above.
+  BenchScene solver(resolution, 1, SimulationParameters{}.integrator);
+  for (int warm = 0; warm < 2; ++warm)
+    for (Part part : kParts) solver.run(part);
+  solver.system().parameters().iterations = kIterationsPerStep;
+  CALLGRIND_START_INSTRUMENTATION;
+  CALLGRIND_ZERO_STATS;
+  solver.run(Part::Integration);
+  CALLGRIND_DUMP_STATS_AT("default-solver-integration");
+  CALLGRIND_ZERO_STATS;
+  solver.stepPose();
+  CALLGRIND_DUMP_STATS_AT("default-solver-step-10-iterations");
   CALLGRIND_STOP_INSTRUMENTATION;
   return 0;
 }

@@ -346,6 +346,8 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation,
   converged.tolerance = static_cast<btScalar>(kEquilibriumResidual);
   converged.iterations = std::max(cap, motion);
   converged.projectiveRho = static_cast<btScalar>(kEquilibriumRho);
+  // The over-relaxed fixed point: the L-BFGS step's pairs stall on float noise near 1e-5 mm.
+  converged.projectiveHistory = 0;
   converged.motionFraction = static_cast<btScalar>(double(motion) / converged.iterations);
   // Persistent contacts, their particles held lighter (they slide to rest sooner): thigh13 R=20's
   // median pose left a residual about 7x below weight 10's at the cap (1.1e-4 against 7.2e-4 mm;

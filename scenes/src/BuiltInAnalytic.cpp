@@ -30,9 +30,10 @@ Json cylinderScene(const std::string& name, const std::string& description) {
   Json muscle = tubeMuscle("cylinder", tube);
   muscle["attachment_distance"] = kAttachment;
   scene["muscles"] = Json::array({muscle});
-  // Poses held to equilibrium: the exact answers are static.
-  scene["simulation"] = {
-      {"stop", "converged"}, {"epsilon", 1e-4}, {"iterations", 4000}, {"motion_fraction", 0.025}};
+  // The exact answers are static: the default solver reaches each pose's equilibrium in 30
+  // iterations with the ends turned or pulled over the first 3 (a time integrator needs
+  // `stop=converged`, `epsilon=1e-4`, `iterations=4000`, `motion_fraction=0.025`).
+  scene["simulation"] = {{"iterations", 30}, {"motion_fraction", 0.1}};
   return scene;
 }
 

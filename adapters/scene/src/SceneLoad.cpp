@@ -342,7 +342,8 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
     simulation.fail("min_dt", "must not exceed dt (" + std::to_string(parameters.timeStep) + " s)");
   fromString(simulation.choice("stop", toString(defaults.stopRule), namesOf<StopRule>()),
              parameters.stopRule);
-  parameters.iterations = simulation.integer("iterations", defaults.iterations, 1, 100000000);
+  parameters.iterations =
+      simulation.integer("iterations", defaultIterations(parameters.integrator), 1, 100000000);
   parameters.epsilon =
       btScalar(simulation.number("epsilon", defaults.epsilon / scale, 0, kInf, true) * scale);
   parameters.budgetMs = btScalar(simulation.number("budget_ms", defaults.budgetMs, 0, kInf, true));
@@ -381,6 +382,8 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
       simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
   parameters.projectiveRho =
       btScalar(simulation.number("projective_rho", defaults.projectiveRho, 0, 0.999));
+  parameters.projectiveHistory = simulation.integer(
+      "projective_history", defaults.projectiveHistory, 0, kMaxProjectiveHistory);
   parameters.projectiveContactWeight = btScalar(
       simulation.number("projective_contact_weight", defaults.projectiveContactWeight, 0.01, 1e4));
   parameters.persistentContacts =

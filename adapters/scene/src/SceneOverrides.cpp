@@ -56,6 +56,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"solver_iterations", {Target::Section, "simulation"}},
       {"constraint_iterations", {Target::Section, "simulation"}},
       {"projective_rho", {Target::Section, "simulation"}},
+      {"projective_history", {Target::Section, "simulation"}},
       {"projective_contact_weight", {Target::Section, "simulation"}},
       {"persistent_contacts", {Target::Section, "simulation"}},
       {"pair_reactions", {Target::Section, "simulation"}},

@@ -80,7 +80,7 @@ struct MuscleParameters {
 
 /// Time integrator by name (seed 002 §4.8.3 compares them).
 enum class Integrator : uint8_t {
-  Verlet,             ///< damped position Verlet, time-corrected for a varying dt (default)
+  Verlet,             ///< damped position Verlet, time-corrected for a varying dt (dynamics)
   SemiImplicitEuler,  ///< symplectic Euler: v += dt·a(x, v); x += dt·v
   ExplicitEuler,      ///< x += dt·v; v += dt·a(x, v)
   Rk2,                ///< midpoint Runge–Kutta, spring forces evaluated twice per iteration
@@ -90,10 +90,10 @@ enum class Integrator : uint8_t {
   Bdf2,               ///< second-order backward differentiation, one Newton step, CG
   Pbd,                ///< position-based dynamics: distance constraints per spring
   Xpbd,               ///< extended PBD: compliant distance constraints (compliance from κ)
-  /// projective dynamics' local/global step for springs as an equilibrium solver: x += A⁻¹·F
-  /// with A the springs' Laplacian over the free particles plus the contacts' weights, its
-  /// pattern analysed once per muscle, its factor updated (rank-one) or partly refactored when
-  /// the contact set changes
+  /// projective dynamics' local/global step for springs as an equilibrium solver: x += H·F
+  /// with H L-BFGS's inverse Hessian started from A⁻¹, A the springs' Laplacian over the free
+  /// particles plus the contacts' weights, its pattern analysed once per muscle, its factor
+  /// updated (rank-one) or partly refactored when the contact set changes (default: posed scenes)
   Projective,
 };
 
@@ -139,16 +139,22 @@ enum class StopRule : uint8_t {
   Residual,
 };
 
+/// The most pairs SimulationParameters::projectiveHistory may keep [iterations].
+constexpr int kMaxProjectiveHistory = 16;
+
 /// How the solver steps (method.md §4–§5).
 struct SimulationParameters {
-  Integrator integrator = Integrator::Verlet;  ///< time integrator
-  bool adaptiveTimeStep = true;                ///< eq 5.1 bound per iteration; else fixed timeStep
-  btScalar timeStep = 1e-3;     ///< fixed dt, or the upper clamp of the adaptive dt [s]
-  btScalar minTimeStep = 1e-5;  ///< lower clamp of the adaptive dt [s]
+  /// The solver: the projective equilibrium solver for posed scenes (each step reaches the
+  /// pose's static equilibrium), Verlet or another time integrator for dynamics.
+  Integrator integrator = Integrator::Projective;
+  bool adaptiveTimeStep = true;  ///< eq 5.1 bound per iteration; else fixed timeStep
+  btScalar timeStep = 1e-3;      ///< fixed dt, or the upper clamp of the adaptive dt [s]
+  btScalar minTimeStep = 1e-5;   ///< lower clamp of the adaptive dt [s]
   StopRule stopRule = StopRule::Iterations;  ///< when a step's iterations end
-  int iterations = 70;                       ///< iterations per step (the cap for the other rules)
-  btScalar epsilon = 1e-6;                   ///< convergence threshold: mean displacement [m]
-  btScalar budgetMs = 10;                    ///< time budget per step [ms]
+  /// Iterations per step (the cap for the other rules): defaultIterations(integrator).
+  int iterations = 20;
+  btScalar epsilon = 1e-6;           ///< convergence threshold: mean displacement [m]
+  btScalar budgetMs = 10;            ///< time budget per step [ms]
   btScalar deviationEpsilon = 1e-3;  ///< threshold of the spring-deviation stop rule (ratio)
   /// Equilibrium stop rule: estimated distance to it; Residual: RMS equivalent displacement [m]
   btScalar tolerance = 5e-4;
@@ -196,11 +202,16 @@ struct SimulationParameters {
   /// step is over-relaxed by ω = 2/(1 + √(1 − ρ²)) with momentum ω − 1 (the limit of Wang 2015's
   /// Chebyshev weights); 0: the plain iteration.
   btScalar projectiveRho = 0.9;
+  /// Projective: how many of the last iterations' steps and force changes shape the next step
+  /// (L-BFGS with (A + W)⁻¹ as its initial inverse Hessian, Liu et al. 2017) [iterations]; 0: the
+  /// over-relaxed step of projectiveRho instead. The history starts anew while bones move, when a
+  /// pair shows no positive curvature and when a step does not point down the forces.
+  int projectiveHistory = 5;
   /// Projective: a particle a contact pushed is held in the global step's matrix with this
-  /// weight times its diagonal entry [1]. 10 passes the hard-case matrix's hip-extension cells
-  /// (100 failed pinch); 1 lets a contact particle slide sooner, which the `equilibrium` method
-  /// uses (docs/performance.md, "Persistent contacts").
-  btScalar projectiveContactWeight = 10;
+  /// weight times its diagonal entry [1]. 1 lets a contact particle slide to rest sooner: with
+  /// the L-BFGS step thigh13 R=40 at 5–10 iterations per pose had no rollback with 1 and 0.1 and
+  /// one to four with 10 (docs/performance.md, "The default solver").
+  btScalar projectiveContactWeight = 1;
   /// Projective: persistent contacts (TimeIntegrator::holdsContacts): a pushed particle's force
   /// into its push is held by the contact in the solve, and each contact is left a slop deep so
   /// that it persists; the step's fixed point is then the equilibrium with contacts. Off by
@@ -219,6 +230,13 @@ struct SimulationParameters {
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap
 };
+
+/// The iterations per step a solver needs by default: 20 for the projective solver (thigh13
+/// R=40 with no rollback and a force residual of 0.035 mm RMS; docs/performance.md, "The default
+/// solver"), 70 for the time integrators (the thesis' count).
+constexpr int defaultIterations(Integrator integrator) {
+  return integrator == Integrator::Projective ? 20 : 70;
+}
 
 const char* toString(SpringLayout layout);
 const char* toString(SpringStiffness rule);

@@ -46,14 +46,45 @@ constexpr double kVolumeWeight = 1.5;
 /// muscle-iterations, a hold of 10 in 634, at the same distance to Verlet's equilibrium run.
 constexpr uint16_t kContactHold = 1000;
 
-/// The factor of A + W, the contact weights' hold and the solve's buffer. A rollback of the guard
-/// keeps W: it shapes the iteration's path, not its fixed point.
+/// The last iterations' steps s = x⁺ − x and force changes y = F − F⁺ by row, newest last in a
+/// ring (SimulationParameters::projectiveHistory): L-BFGS's pairs.
+struct StepHistory {
+  explicit StepHistory(size_t rows)
+      : steps(kMaxProjectiveHistory, std::vector<btVector3>(rows)),
+        changes(kMaxProjectiveHistory, std::vector<btVector3>(rows)),
+        lastPositions(rows),
+        lastForces(rows) {}
+  std::vector<std::vector<btVector3>> steps;     ///< s of each pair [m]
+  std::vector<std::vector<btVector3>> changes;   ///< y of each pair [N]
+  double curvature[kMaxProjectiveHistory] = {};  ///< y·s of each pair [N·m]
+  double alpha[kMaxProjectiveHistory] = {};      ///< the two-loop recursion's coefficients [1/m]
+  int size = 0;                                  ///< the ring's length (projectiveHistory)
+  int count = 0;                                 ///< pairs held
+  int newest = -1;                               ///< ring index of the newest pair
+  std::vector<btVector3> lastPositions;          ///< x at the last iteration's forces [m]
+  std::vector<btVector3> lastForces;             ///< the forces F there [N]
+  bool hasLast = false;                          ///< lastPositions/lastForces hold an iteration
+
+  /// Forgets every pair (the next iteration is the plain projective step).
+  void restart() { count = 0; }
+};
+
+/// The factor of A + W, the contact weights' hold, the solve's buffer and the L-BFGS history. A
+/// rollback of the guard keeps W: it shapes the iteration's path, not its fixed point.
 struct ProjectiveWorkspace final : IntegratorWorkspace {
   explicit ProjectiveWorkspace(const Matrix& lowerA)
-      : factor(lowerA), solution(factor.size(), btVector3(0, 0, 0)), idle(factor.size(), 0) {}
+      : factor(lowerA),
+        solution(factor.size(), btVector3(0, 0, 0)),
+        forces(factor.size(), btVector3(0, 0, 0)),
+        idle(factor.size(), 0),
+        pushed(factor.size(), 0),
+        history(factor.size()) {}
   ProjectiveFactor factor;          ///< L of P·(A + W)·Pᵀ
   std::vector<btVector3> solution;  ///< per row: the forces [N], then the step A⁻¹·F [m]
+  std::vector<btVector3> forces;    ///< per row: the forces F of this iteration [N]
   std::vector<uint16_t> idle;       ///< per row: iterations since its particle's last push
+  std::vector<uint8_t> pushed;      ///< per row: 1 if the last response pushed its particle
+  StepHistory history;              ///< L-BFGS's pairs
 };
 
 /// The scalar matrix A over the free particles (the 3n × 3n one is A ⊗ I₃) [N/m].
@@ -84,8 +115,10 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<uint32_t>& fre
   double trace = 0;
   for (const auto& entry : entries)
     if (entry.row() == entry.col()) trace += entry.value();
-  // A tiny shift keeps A definite for particles no spring ties to a fixed one.
-  const double shift = 1e-9 * trace / static_cast<double>(std::max<size_t>(1, free.size()));
+  // A tiny shift keeps A definite for particles no spring ties to a fixed one; 1 N/m where no
+  // particle has a spring (a muscle of one sphere: it moves by its forces in newtons, as metres).
+  const double shift =
+      trace > 0 ? 1e-9 * trace / static_cast<double>(std::max<size_t>(1, free.size())) : 1.0;
   for (size_t k = 0; k < free.size(); ++k)
     entries.emplace_back(static_cast<int>(k), static_cast<int>(k), shift);
   Matrix matrix(static_cast<Eigen::Index>(free.size()), static_cast<Eigen::Index>(free.size()));
@@ -103,6 +136,7 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWei
     const int row = factor.row(k);
     uint8_t& pushed = muscle.pushedLast[muscle.freeParticles[k]];
     const bool held = factor.weight(row) > 0;
+    w.pushed[row] = pushed;
     if (pushed) {
       pushed = 0;
       w.idle[row] = 0;
@@ -118,7 +152,86 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWei
   return changed;
 }
 
-/// x⁺ = x + ω·(A + W)⁻¹·F(x) + (ω − 1)·(x − x⁻): the projective step over-relaxed with momentum.
+double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
+  double sum = 0;
+  for (size_t k = 0; k < a.size(); ++k) sum += double(a[k].dot(b[k]));
+  return sum;
+}
+
+/// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
+/// curvature, and keeps x and F for the next. Rows the last response pushed are left out of the
+/// pair: a projection's move is not the forces' answer to the step (with them in, the hard-case
+/// matrix's hip-extension and pinch cells tore).
+void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uint32_t>& free,
+                const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+                const std::vector<uint8_t>& pushedRows, int size) {
+  if (h.hasLast && size > 0) {
+    const int slot = (h.newest + 1) % size;
+    std::vector<btVector3>& s = h.steps[slot];
+    std::vector<btVector3>& y = h.changes[slot];
+    for (size_t k = 0; k < free.size(); ++k) {
+      const int row = factor.row(k);
+      const bool pushed = pushedRows[row] != 0;
+      s[row] = pushed ? btVector3(0, 0, 0) : muscle.positions[free[k]] - h.lastPositions[row];
+      y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
+    }
+    const double curvature = dot(s, y);
+    if (curvature > 1e-12 * std::sqrt(dot(s, s) * dot(y, y))) {
+      h.curvature[slot] = curvature;
+      h.newest = slot;
+      h.count = std::min(h.count + 1, size);
+    } else {
+      h.restart();
+    }
+  }
+  for (size_t k = 0; k < free.size(); ++k)
+    h.lastPositions[factor.row(k)] = muscle.positions[free[k]];
+  h.lastForces = forces;
+  h.hasLast = true;
+}
+
+/// L-BFGS's two-loop recursion: `solution` (holding F) becomes H·F, H the inverse Hessian its pairs
+/// and (A + W)⁻¹ estimate.
+void twoLoop(StepHistory& h, const ProjectiveFactor& factor, std::vector<btVector3>& q, int size) {
+  for (int n = 0, j = h.newest; n < h.count; ++n, j = (j + size - 1) % size) {
+    h.alpha[j] = dot(h.steps[j], q) / h.curvature[j];
+    const auto a = static_cast<btScalar>(h.alpha[j]);
+    for (size_t k = 0; k < q.size(); ++k) q[k] -= h.changes[j][k] * a;
+  }
+  factor.solveInPlace(q.data());
+  for (int n = 0, j = (h.newest + size - h.count + 1) % size; n < h.count;
+       ++n, j = (j + 1) % size) {
+    const auto b = static_cast<btScalar>(h.alpha[j] - dot(h.changes[j], q) / h.curvature[j]);
+    for (size_t k = 0; k < q.size(); ++k) q[k] += h.steps[j][k] * b;
+  }
+}
+
+/// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
+/// is replaced by the plain projective one and the history restarts.
+IntegrationResult quasiNewtonStep(MuscleState& muscle, const SimulationParameters& parameters,
+                                  ProjectiveWorkspace& w) {
+  const std::vector<uint32_t>& free = muscle.freeParticles;
+  const int size = parameters.projectiveHistory;
+  StepHistory& h = w.history;
+  if (muscle.bonesMoving || h.size != size) h.restart();
+  h.size = size;
+  recordPair(h, muscle, free, w.factor, w.forces, w.pushed, muscle.bonesMoving ? 0 : size);
+  w.solution = w.forces;
+  twoLoop(h, w.factor, w.solution, size);
+  if (h.count > 0 && !(dot(w.solution, w.forces) > 0)) {
+    h.restart();
+    w.solution = w.forces;
+    w.factor.solveInPlace(w.solution.data());
+  }
+  IntegrationResult result;
+  for (size_t k = 0; k < free.size(); ++k)
+    result.displacement += heavyBallStep(muscle, free[k], w.solution[w.factor.row(k)], 0, 1);
+  result.finite = std::isfinite(result.displacement);
+  return result;
+}
+
+/// x⁺ = x + ω·(A + W)⁻¹·F(x) + (ω − 1)·(x − x⁻): the projective step over-relaxed with momentum;
+/// or, with a history, x⁺ = x + H·F(x), H L-BFGS's inverse Hessian from (A + W)⁻¹.
 class ProjectiveIntegrator final : public TimeIntegrator {
  public:
   IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters, btScalar,
@@ -130,9 +243,10 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     const bool held = holdsContacts(parameters) && !parameters.pairReactions;
     for (size_t k = 0; k < free.size(); ++k) {
       const btVector3& force = muscle.forces[free[k]];
-      w.solution[w.factor.row(k)] =
-          held ? withoutInto(force, contactNormal(muscle, free[k])) : force;
+      w.forces[w.factor.row(k)] = held ? withoutInto(force, contactNormal(muscle, free[k])) : force;
     }
+    if (parameters.projectiveHistory > 0) return quasiNewtonStep(muscle, parameters, w);
+    w.solution = w.forces;
     w.factor.solveInPlace(w.solution.data());
     const double rho = parameters.projectiveRho;
     const auto omega = static_cast<btScalar>(2 / (1 + std::sqrt(1 - rho * rho)));
@@ -147,6 +261,7 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   bool holdsContacts(const SimulationParameters& parameters) const override {
     return parameters.persistentContacts;
   }
+
   Integrator kind() const override { return Integrator::Projective; }
 
  protected:

@@ -397,7 +397,10 @@ void MuscleSystem::Impl::moveMuscle(MuscleState& state, MuscleIterationResult& r
   const Clock::time_point start = Clock::now();
   respond(state, false);
   const Clock::time_point followStart = Clock::now();
-  if (bonesMove) followBones(state);
+  if (bonesMove)
+    followBones(state);
+  else
+    state.bonesMoving = false;
   result.forcesMs += millisecondsSince(followStart);
   result.responseMs = millisecondsSince(start) - millisecondsSince(followStart);
 }
