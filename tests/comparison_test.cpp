@@ -801,8 +801,10 @@ TEST(Verdict, RanksNothingByTheDistanceToFibreMSSsOwnRunWithoutAReference) {
   // run at dt/8, which is FibreMSS's convergence and ranks no method.
   nlohmann::json summary = {
       {"scene", "thigh13"}, {"machine", machineJson()}, {"runs", nlohmann::json::array()}};
-  const std::pair<const char*, double> distances[] = {
-      {"fibremss", 1.13}, {"btsoftbody", 5.42}, {"fem", 9.58}};
+  const std::pair<const char*, double> distances[] = {{"fibremss", 1.13},
+                                                      {"fibremss:integrator=rk4+iterations=9", 2},
+                                                      {"btsoftbody", 5.42},
+                                                      {"fem", 9.58}};
   for (const auto& [method, rms] : distances) {
     nlohmann::json run = madeRun(method, 100, NAN);
     run["rms_to_self_reference_mm"] = rms;
@@ -821,6 +823,7 @@ TEST(Verdict, RanksNothingByTheDistanceToFibreMSSsOwnRunWithoutAReference) {
   EXPECT_NE(report.find("RMS to self-ref. [mm] (FibreMSS's convergence)"), std::string::npos);
   const std::string script = readFile(out / "speed_vs_error.gp");
   EXPECT_NE(script.find("FibreMSS's convergence, not accuracy"), std::string::npos) << script;
+  EXPECT_NE(script.find("integrator=rk4+iterations=9"), std::string::npos) << "FibreMSS's variant";
   EXPECT_EQ(script.find("btsoftbody"), std::string::npos) << "drawn against FibreMSS's own run";
   EXPECT_EQ(script.find("\"fem"), std::string::npos) << script;
 }

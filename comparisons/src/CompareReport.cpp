@@ -399,8 +399,10 @@ double gateSpreadMm(const nlohmann::json& gates) {
 /// distance to FibreMSS's self-reference, its convergence, which ranks no other method.
 nlohmann::json fibreRunsOnly(const nlohmann::json& runs) {
   nlohmann::json fibre = nlohmann::json::array();
-  for (const auto& run : runs)
-    if (frontOf(text(run, "method")).first == "fibremss") fibre.push_back(run);
+  for (const auto& run : runs) {
+    const std::string method = text(run, "method");
+    if (method.substr(0, method.find(':')) == "fibremss") fibre.push_back(run);
+  }
   return fibre;
 }
 

@@ -326,7 +326,7 @@ std::string verdictSection(const nlohmann::json& summary) {
            ". Nothing is ranked; the distances to FibreMSS's own runs (self-reference, "
            "equilibrium) measure FibreMSS's convergence, not its accuracy.\n";
   else
-    out += "- By the CalculiX reference: no ranking (" + why + ").\n";
+    out += "- By the CalculiX reference: no ranking, " + why + ".\n";
   return out;
 }
 
