@@ -197,28 +197,13 @@ std::string measureNames(const std::vector<Measure>& measures) {
 /// The FibreMSS settings a `fibremss:` variant may change and still solve the scene's own model
 /// (the equilibrium run's): how the iterations run and stop, not what they solve.
 bool solverSetting(const std::string& key) {
-  static const char* const kKeys[] = {"integrator",
-                                      "time_step",
-                                      "dt",
-                                      "min_dt",
-                                      "stop",
-                                      "iterations",
-                                      "epsilon",
-                                      "tolerance",
-                                      "budget_ms",
-                                      "deviation_epsilon",
-                                      "motion_fraction",
-                                      "threads",
-                                      "damping",
-                                      "damping_scale",
-                                      "diagonal_jacobian",
-                                      "solver_tolerance",
-                                      "solver_iterations",
-                                      "constraint_iterations",
-                                      "projective_rho",
-                                      "projective_contact_weight"};
+  static const std::string kKeys =
+      " integrator time_step dt min_dt stop iterations epsilon tolerance budget_ms "
+      "deviation_epsilon motion_fraction threads damping damping_scale diagonal_jacobian "
+      "solver_tolerance solver_iterations constraint_iterations projective_rho "
+      "projective_contact_weight ";
   const std::string bare = key.rfind("simulation.", 0) == 0 ? key.substr(11) : key;
-  return std::find(std::begin(kKeys), std::end(kKeys), bare) != std::end(kKeys);
+  return kKeys.find(" " + bare + " ") != std::string::npos;
 }
 
 /// Whether the run solves the model the `equilibrium` run converged: FibreMSS with the scene's
@@ -250,11 +235,13 @@ std::string decompositionRow(const nlohmann::json& run, const nlohmann::json* eq
   const bool ours = equilibriumModel(run), fibre = familyOf(run) == "fibremss";
   const std::string other = fibre ? "(another model: its variant changes what is solved)"
                                   : "(no converged run of this method's model)";
-  std::string model = !noReference.empty() ? "(" + noReference + ")"
-                      : !ours              ? other
-                      : !equilibrium       ? "(no `equilibrium` run)"
+  const std::string model = !noReference.empty() ? "(" + noReference + ")"
+                            : !ours              ? other
+                            : !equilibrium       ? "(no `equilibrium` run)"
                                            : "(the equilibrium run has no RMS to the reference)";
-  std::string solver = !ours ? other : !equilibrium ? "(no `equilibrium` run)" : "(no shared pose)";
+  const std::string solver = !ours          ? other
+                             : !equilibrium ? "(no `equilibrium` run)"
+                                            : "(no shared pose)";
   const double modelMm = ours && equilibrium && noReference.empty()
                              ? number(*equilibrium, "rms_to_reference_mm")
                              : NAN;
