@@ -934,6 +934,16 @@ TEST(ErrorDecomposition, SplitsEachRunsErrorIntoModelSolverAndDiscretisation) {
   EXPECT_NE(report.find("| btsoftbody | 95.6 | 1.09 | — (no converged run of this method's model)"),
             std::string::npos)
       << report;
+  // Without the equilibrium run, the dt/8 self-reference's figures stand beside the dash.
+  nlohmann::json withoutEquilibrium = summary;
+  withoutEquilibrium["runs"].erase(withoutEquilibrium["runs"].size() - 1);
+  withoutEquilibrium["runs"][2]["rms_to_self_reference_mm"] = 1.2;
+  EXPECT_NE(reportMarkdown(withoutEquilibrium, {})
+                .find("| fibremss | 11.7 | 2.5 | — (no `equilibrium` run; the dt/8 "
+                      "self-reference's 1.97) | — (no `equilibrium` run; to the dt/8 "
+                      "self-reference 1.2) | 0.21 |"),
+            std::string::npos)
+      << reportMarkdown(withoutEquilibrium, {});
   summary.erase("reference");
   for (auto& run : summary["runs"]) run["rms_to_reference_mm"] = nullptr;
   EXPECT_NE(reportMarkdown(summary, {})

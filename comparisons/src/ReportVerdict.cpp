@@ -229,26 +229,45 @@ std::string termCell(double value, const std::string& why) {
   return std::isfinite(value) ? cell(value) : "— " + why;
 }
 
+/// What the decomposition's rows share: the converged run of FibreMSS's model, its run at dt/8
+/// (either may be missing) and why there is no reference ("" when there is one).
+struct Basis {
+  const nlohmann::json* equilibrium = nullptr;
+  const nlohmann::json* selfReference = nullptr;
+  std::string noReference;
+};
+
+/// Why a term needs the `equilibrium` run, with the dt/8 self-reference's figure where it has one.
+std::string noEquilibrium(double selfReferenceMm, const std::string& what) {
+  return "(no `equilibrium` run" +
+         (std::isfinite(selfReferenceMm) ? "; " + what + " " + cell(selfReferenceMm) : "") + ")";
+}
+
 /// One row of the decomposition: total, model, solver and discretisation terms of `run`.
-std::string decompositionRow(const nlohmann::json& run, const nlohmann::json* equilibrium,
-                             const std::string& noReference) {
+std::string decompositionRow(const nlohmann::json& run, const Basis& basis) {
   const bool ours = equilibriumModel(run), fibre = familyOf(run) == "fibremss";
   const std::string other = fibre ? "(another model: its variant changes what is solved)"
                                   : "(no converged run of this method's model)";
-  const std::string model = !noReference.empty() ? "(" + noReference + ")"
-                            : !ours              ? other
-                            : !equilibrium       ? "(no `equilibrium` run)"
-                                           : "(the equilibrium run has no RMS to the reference)";
-  const std::string solver = !ours          ? other
-                             : !equilibrium ? "(no `equilibrium` run)"
-                                            : "(no shared pose)";
-  const double modelMm = ours && equilibrium && noReference.empty()
-                             ? number(*equilibrium, "rms_to_reference_mm")
+  const std::string noReference = "(" + basis.noReference + ")";
+  const double selfMm =
+      basis.selfReference ? number(*basis.selfReference, "rms_to_reference_mm") : NAN;
+  const std::string model = !basis.noReference.empty() ? noReference
+                            : !ours                    ? other
+                            : !basis.equilibrium
+                                ? noEquilibrium(selfMm, "the dt/8 self-reference's")
+                                : "(the equilibrium run has no RMS to the reference)";
+  const std::string solver =
+      !ours ? other
+      : !basis.equilibrium
+          ? noEquilibrium(number(run, "rms_to_self_reference_mm"), "to the dt/8 self-reference")
+          : "(no shared pose)";
+  const double modelMm = ours && basis.equilibrium && basis.noReference.empty()
+                             ? number(*basis.equilibrium, "rms_to_reference_mm")
                              : NAN;
-  const double solverMm = ours ? number(run, "rms_to_equilibrium_mm") : NAN;
+  const double solverMm = ours && basis.equilibrium ? number(run, "rms_to_equilibrium_mm") : NAN;
   return "| " + text(run, "method") + " | " + cell(number(run, "ms_per_step")) + " | " +
          termCell(number(run, "rms_to_reference_mm"),
-                  noReference.empty() ? "(no shared pose)" : "(" + noReference + ")") +
+                  basis.noReference.empty() ? "(no shared pose)" : noReference) +
          " | " + termCell(modelMm, model) + " | " + termCell(solverMm, solver) + " | " +
          termCell(number(run, "rms_to_finer_resolution_mm"),
                   fibre ? "(no run at twice its resolution)" : "(its resolution is not swept)") +
@@ -319,13 +338,13 @@ std::string verdictSection(const nlohmann::json& summary) {
 
 std::string errorDecomposition(const nlohmann::json& summary) {
   const nlohmann::json& runs = summary["runs"];
-  const nlohmann::json* equilibrium = runNamed(runs, "equilibrium");
   const bool reference =
       summary.contains("reference") && !summary["reference"].value("missing", false);
-  const std::string noReference = reference ? "" : "no reference";
+  const Basis basis{runNamed(runs, "equilibrium"), runNamed(runs, "self-reference"),
+                    reference ? "" : "no reference"};
   std::string rows;
   for (const auto& run : runs)
-    if (text(run, "method") != "calculix") rows += decompositionRow(run, equilibrium, noReference);
+    if (text(run, "method") != "calculix") rows += decompositionRow(run, basis);
   if (rows.empty()) return "";
   return "\n## Where each run's error comes from\n\nPer run [mm]: its surface's RMS distance to "
          "the CalculiX reference (the whole error); its model's converged state's (the "
