@@ -206,18 +206,6 @@ bool solverSetting(const std::string& key) {
   return kKeys.find(" " + bare + " ") != std::string::npos;
 }
 
-/// Whether the run solves the model the `equilibrium` run converged: FibreMSS with the scene's
-/// model, whatever its solver settings.
-bool equilibriumModel(const nlohmann::json& run) {
-  const std::string method = text(run, "method"), family = familyOf(run);
-  if (family == "self-reference" || family == "equilibrium") return true;
-  if (family != "fibremss") return false;
-  std::istringstream parts(method.size() > family.size() ? method.substr(family.size() + 1) : "");
-  for (std::string part; std::getline(parts, part, '+');)
-    if (!solverSetting(part.substr(0, part.find('=')))) return false;
-  return true;
-}
-
 const nlohmann::json* runNamed(const nlohmann::json& runs, const std::string& method) {
   for (const auto& run : runs)
     if (text(run, "method") == method) return &run;
@@ -245,7 +233,7 @@ std::string noEquilibrium(double selfReferenceMm, const std::string& what) {
 
 /// One row of the decomposition: total, model, solver and discretisation terms of `run`.
 std::string decompositionRow(const nlohmann::json& run, const Basis& basis) {
-  const bool ours = equilibriumModel(run), fibre = familyOf(run) == "fibremss";
+  const bool ours = solvesEquilibriumModel(run), fibre = familyOf(run) == "fibremss";
   const std::string other = fibre ? "(another model: its variant changes what is solved)"
                                   : "(no converged run of this method's model)";
   const std::string noReference = "(" + basis.noReference + ")";
@@ -313,6 +301,16 @@ std::string whyNoReferenceRanking(const nlohmann::json& summary) {
            "are not shown to exceed its own uncertainty";
   return "the CalculiX reference's gates were not computed (`--no-gates`, or a gate's solve did "
          "not finish): its own uncertainty is unknown";
+}
+
+bool solvesEquilibriumModel(const nlohmann::json& run) {
+  const std::string method = text(run, "method"), family = familyOf(run);
+  if (family == "self-reference" || family == "equilibrium") return true;
+  if (family != "fibremss") return false;
+  std::istringstream parts(method.size() > family.size() ? method.substr(family.size() + 1) : "");
+  for (std::string part; std::getline(parts, part, '+');)
+    if (!solverSetting(part.substr(0, part.find('=')))) return false;
+  return true;
 }
 
 std::string verdictSection(const nlohmann::json& summary) {

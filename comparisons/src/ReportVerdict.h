@@ -17,6 +17,10 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates);
 /// its gates were not computed.
 std::string whyNoReferenceRanking(const nlohmann::json& summary);
 
+/// Whether the run solves the model the `equilibrium` run converged: the self-reference, the
+/// equilibrium run, `fibremss` and its variants that change solver settings only.
+bool solvesEquilibriumModel(const nlohmann::json& run);
+
 /// The section report.md opens with: which run is the most accurate and which runs are the most
 /// accurate per millisecond (no other run both faster and at least as accurate), against the
 /// exact answer of an analytic case and against the CalculiX reference where every gate passed;
