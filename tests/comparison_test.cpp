@@ -1,6 +1,7 @@
 // The comparison runner, its report and the `compare` / `merge` commands.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -769,6 +770,243 @@ TEST(MergeAndReport, RanksOnlyWhenTheIncrementGateIsComputedAndPasses) {
   report = reportMarkdown(summary, {});
   EXPECT_NE(report.find("spread 0.347 mm: FAILS"), std::string::npos) << report;
   EXPECT_NE(report.find("**No ranking**"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace fibremss
+
+namespace fibremss {
+namespace {
+
+/// A run for a synthetic summary: its method, ms per pose and RMS to the reference (NaN: none).
+nlohmann::json madeRun(const std::string& method, double ms, double rmsToReference) {
+  RunMetrics run;
+  run.scene = "fusiform";
+  run.method = method;
+  run.msPerStep = ms;
+  run.rmsToReferenceMm = rmsToReference;
+  run.threads = 1;
+  return toJson(run);
+}
+
+/// The report's verdict: from its heading to the next one.
+std::string verdictOf(const std::string& report) {
+  const size_t start = report.find("## Verdict");
+  return start == std::string::npos ? ""
+                                    : report.substr(start, report.find("\n## ", start + 1) - start);
+}
+
+TEST(Verdict, RanksNothingByTheDistanceToFibreMSSsOwnRunWithoutAReference) {
+  // No reference: FibreMSS, btSoftBody and the FEM only have their distance to FibreMSS's own
+  // run at dt/8, which is FibreMSS's convergence and ranks no method.
+  nlohmann::json summary = {
+      {"scene", "thigh13"}, {"machine", machineJson()}, {"runs", nlohmann::json::array()}};
+  const std::pair<const char*, double> distances[] = {{"fibremss", 1.13},
+                                                      {"fibremss:integrator=rk4+iterations=9", 2},
+                                                      {"btsoftbody", 5.42},
+                                                      {"fem", 9.58}};
+  for (const auto& [method, rms] : distances) {
+    nlohmann::json run = madeRun(method, 100, NAN);
+    run["rms_to_self_reference_mm"] = rms;
+    summary["runs"].push_back(run);
+  }
+  const fs::path out = scratch("no_reference_verdict");
+  writeComparison(summary, out.string());
+  const std::string report = readFile(out / "report.md");
+  const std::string verdict = verdictOf(report);
+  EXPECT_EQ(report.find("## Verdict"), report.find("\n## ") + 1) << "the report opens with it";
+  EXPECT_NE(verdict.find("**No accuracy ranking on this scene**: no CalculiX reference"),
+            std::string::npos)
+      << verdict;
+  EXPECT_EQ(verdict.find("most accurate"), std::string::npos) << verdict;
+  EXPECT_EQ(report.find("**Ranking**"), std::string::npos) << report;
+  EXPECT_NE(report.find("RMS to self-ref. [mm] (FibreMSS's convergence)"), std::string::npos);
+  const std::string script = readFile(out / "speed_vs_error.gp");
+  EXPECT_NE(script.find("FibreMSS's convergence, not accuracy"), std::string::npos) << script;
+  EXPECT_NE(script.find("integrator=rk4+iterations=9"), std::string::npos) << "FibreMSS's variant";
+  EXPECT_EQ(script.find("btsoftbody"), std::string::npos) << "drawn against FibreMSS's own run";
+  EXPECT_EQ(script.find("\"fem"), std::string::npos) << script;
+}
+
+TEST(Verdict, NamesTheMostAccurateRunAndThoseMostAccuratePerMillisecondWhenTheGatesPass) {
+  nlohmann::json summary = pinchLikeSummary();
+  summary["reference"]["gates"] = {
+      {"return_mm", 0},    {"refinement_mm", 0.289}, {"increments_mm", 0.1}, {"spread_mm", 1.3},
+      {"solved_poses", 2}, {"refinement_poses", 2},  {"increments_poses", 2}};
+  const std::string verdict = verdictOf(reportMarkdown(summary, {}));
+  EXPECT_NE(verdict.find("Against the CalculiX reference (every gate passes)**: most accurate "
+                         "**btsoftbody:iterations=32** (RMS to the reference 0.927 mm, 127 ms "
+                         "per pose)"),
+            std::string::npos)
+      << verdict;
+  // The front, fastest first: resolution 20 (6.8 ms), then each run more accurate than every
+  // faster one; the FEM runs and iterations=280 are slower and farther than some other run.
+  const size_t front = verdict.find("Most accurate per millisecond");
+  ASSERT_NE(front, std::string::npos) << verdict;
+  const std::string line = verdict.substr(front);
+  EXPECT_LT(line.find("fibremss:resolution=20 (6.8 ms"), line.find("fibremss (11.7 ms"));
+  EXPECT_LT(line.find("fibremss (11.7 ms"), line.find("btsoftbody:iterations=8 (80.1 ms"));
+  EXPECT_EQ(line.find("fem"), std::string::npos) << "every FEM run is beaten: " << line;
+  EXPECT_EQ(line.find("iterations=280"), std::string::npos) << line;
+}
+
+TEST(Verdict, SaysTheGatesWereNotComputedRatherThanThatTheyFail) {
+  // `--no-gates`: the return step is solved with the reference, the other gates are not.
+  nlohmann::json summary = pinchLikeSummary();
+  summary["reference"]["gates"] = {{"return_mm", 1e-6}, {"spread_mm", 1.3}, {"solved_poses", 2}};
+  const fs::path out = scratch("no_gates");
+  writeComparison(summary, out.string());
+  std::string report = readFile(out / "report.md");
+  EXPECT_NE(verdictOf(report).find("gates were not computed"), std::string::npos) << report;
+  EXPECT_EQ(report.find("fails a gate"), std::string::npos) << report;
+  std::string script = readFile(out / "speed_vs_error.gp");
+  EXPECT_EQ(script.find("FAILS"), std::string::npos) << script;
+  EXPECT_NE(script.find("gates were not computed"), std::string::npos) << script;
+
+  summary["reference"]["gates"]["refinement_mm"] = 0.5;  // above a third of the spread
+  summary["reference"]["gates"]["refinement_poses"] = 2;
+  writeComparison(summary, out.string());
+  report = readFile(out / "report.md");
+  EXPECT_NE(verdictOf(report).find("fails a gate"), std::string::npos) << report;
+  script = readFile(out / "speed_vs_error.gp");
+  EXPECT_NE(script.find("the reference FAILS a gate"), std::string::npos) << script;
+}
+
+/// A cylinder-stretch run: effective ν and volume change [%] at its last pose.
+nlohmann::json stretchRun(const std::string& method, double ms, double nu, double volumePct) {
+  RunMetrics run;
+  run.scene = run.analytic.type = "cylinder-stretch";
+  run.method = method;
+  run.msPerStep = ms;
+  run.analytic.poissonRatio = nu;
+  run.analytic.exactPoissonRatio = 0.49;
+  run.analytic.volumeChangePct = volumePct;
+  run.analytic.exactVolumeChangePct = 0.19;
+  return toJson(run);
+}
+
+TEST(Verdict, RanksAnAnalyticCaseByTheEffectivePoissonRatioAsWellAsTheVolume) {
+  // A run stopped short of its state keeps the volume nearest the exact answer (0.06 points)
+  // but its sides have barely contracted (ν 0.2): by volume alone it would rank first.
+  const nlohmann::json summary = {
+      {"scene", "cylinder-stretch"},
+      {"machine", machineJson()},
+      {"runs",
+       {stretchRun("fibremss:iterations=5", 10, 0.2, 0.25),
+        stretchRun("fibremss", 275, 0.489, 0.61), stretchRun("btsoftbody", 98, 0.268, 4.6)}}};
+  const std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("1. fibremss: effective ν off exact 0.001, volume off exact 0.42 points"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("2. btsoftbody:"), std::string::npos) << report;
+  EXPECT_NE(verdictOf(report).find("most accurate **fibremss** (effective ν off exact 0.001"),
+            std::string::npos)
+      << verdictOf(report);
+  EXPECT_NE(verdictOf(report).find("By the CalculiX reference: no ranking"), std::string::npos);
+}
+
+TEST(ErrorDecomposition, SplitsEachRunsErrorIntoModelSolverAndDiscretisation) {
+  nlohmann::json summary = pinchLikeSummary();
+  summary["reference"]["gates"] = {
+      {"return_mm", 0},    {"refinement_mm", 0.1},  {"increments_mm", 0.1}, {"spread_mm", 1.3},
+      {"solved_poses", 2}, {"refinement_poses", 2}, {"increments_poses", 2}};
+  nlohmann::json equilibrium = madeRun("equilibrium", 900, 0.39);
+  equilibrium["rms_to_equilibrium_mm"] = 0;
+  summary["runs"].push_back(equilibrium);
+  for (auto& run : summary["runs"]) {
+    if (run["method"] == "fibremss") {
+      run["rms_to_reference_mm"] = 2.5;
+      run["rms_to_equilibrium_mm"] = 1.9;
+      run["rms_to_finer_resolution_mm"] = 0.21;
+    }
+    if (run["method"] == "fibremss:resolution=80") run["rms_to_equilibrium_mm"] = 1.7;
+  }
+  const std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("| fibremss | 11.7 | 2.5 | 0.39 | 1.9 | 0.21 |"), std::string::npos)
+      << report;
+  EXPECT_NE(report.find("| fibremss:iterations=140 | 25.8 | 1.94 | 0.39 | — (no shared pose) | — "
+                        "(no run at twice its resolution) |"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("| fibremss:resolution=80 | 24.9 | 1.85 | — (another model"),
+            std::string::npos)
+      << "its converged state is not the equilibrium run's: " << report;
+  EXPECT_NE(report.find("| btsoftbody | 95.6 | 1.09 | — (no converged run of this method's model)"),
+            std::string::npos)
+      << report;
+  // Without the equilibrium run, the dt/8 self-reference's figures stand beside the dash.
+  nlohmann::json withoutEquilibrium = summary;
+  withoutEquilibrium["runs"].erase(withoutEquilibrium["runs"].size() - 1);
+  withoutEquilibrium["runs"][2]["rms_to_self_reference_mm"] = 1.2;
+  EXPECT_NE(reportMarkdown(withoutEquilibrium, {})
+                .find("| fibremss | 11.7 | 2.5 | — (no `equilibrium` run; the dt/8 "
+                      "self-reference's 1.97) | — (no `equilibrium` run; to the dt/8 "
+                      "self-reference 1.2) | 0.21 |"),
+            std::string::npos)
+      << reportMarkdown(withoutEquilibrium, {});
+  summary.erase("reference");
+  for (auto& run : summary["runs"]) run["rms_to_reference_mm"] = nullptr;
+  EXPECT_NE(reportMarkdown(summary, {})
+                .find("| fibremss | 11.7 | — (no reference) | — (no "
+                      "reference) | 1.9 | 0.21 |"),
+            std::string::npos);
+}
+
+TEST(ErrorDecomposition, MeasuresEachResolutionAgainstTheRunAtTwiceIt) {
+  std::vector<RunMetrics> runs(3);
+  const std::vector<btVector3> surface = {{0, 0, 0}, {0.01f, 0, 0}};
+  for (size_t r = 0; r < runs.size(); ++r) {
+    runs[r].method =
+        std::vector<std::string>{"fibremss:resolution=20", "fibremss", "fibremss:resolution=80"}[r];
+    std::vector<btVector3> moved;
+    for (const btVector3& p : surface) moved.push_back(p + btVector3(0, 0, 0.001f * btScalar(r)));
+    runs[r].poseSurfaces.push_back(moved);
+  }
+  fillFinerResolution(runs, 40);
+  EXPECT_NEAR(runs[0].rmsToFinerResolutionMm, 1.0, 1e-4) << "resolution 20 against the default 40";
+  EXPECT_NEAR(runs[1].rmsToFinerResolutionMm, 1.0, 1e-4) << "40 against 80";
+  EXPECT_TRUE(std::isnan(runs[2].rmsToFinerResolutionMm)) << "no run at 160";
+}
+
+TEST(Verdict, TimeToAccuracyIsFibreMSSsOwnConvergenceNotAnotherModelsDistanceToIt) {
+  // btSoftBody lies 0.3 mm from FibreMSS's converged state and is faster than FibreMSS's run
+  // 0.4 mm from it; only the latter converges to that state.
+  nlohmann::json summary = {{"scene", "fusiform"}, {"runs", nlohmann::json::array()}};
+  summary["runs"].push_back(madeRun("equilibrium", 500, NAN));
+  const std::tuple<const char*, double, double> runs[] = {{"btsoftbody", 50, 0.3},
+                                                          {"fibremss:iterations=140", 80, 0.4}};
+  for (const auto& [method, ms, worst] : runs) {
+    nlohmann::json run = madeRun(method, ms, NAN);
+    run["rms_to_equilibrium_mm"] = run["worst_pose_rms_to_equilibrium_mm"] = worst;
+    summary["runs"].push_back(run);
+  }
+  const std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("of it): **80 ms per pose** (fibremss:iterations=140)"), std::string::npos)
+      << report;
+  EXPECT_NE(report.find("FibreMSS's own convergence, not its accuracy"), std::string::npos);
+}
+
+TEST(FrontMethods, SweepTheKnobThatEndsTheDefaultSolversIterations) {
+  const SimulationParameters defaults{};
+  const std::vector<std::string> front = frontMethods({"fibremss"}, defaults);
+  EXPECT_NE(
+      std::find(front.begin(), front.end(), "fibremss:" + fibreCostKnob(defaults).key + "=x2"),
+      front.end());
+  SimulationParameters counted;
+  counted.stopRule = StopRule::Iterations;
+  EXPECT_EQ(frontMethods({"fibremss"}, counted),
+            (std::vector<std::string>{"fibremss:iterations=x0.5", "fibremss",
+                                      "fibremss:iterations=x2", "fibremss:iterations=x4",
+                                      "fibremss:resolution=x0.5", "fibremss:resolution=x2"}));
+  SimulationParameters residual;
+  residual.integrator = Integrator::Projective;
+  residual.stopRule = StopRule::Residual;
+  EXPECT_EQ(frontMethods({"fibremss", "fem"}, residual),
+            (std::vector<std::string>{"fibremss:tolerance=x2", "fibremss",
+                                      "fibremss:tolerance=x0.5", "fibremss:tolerance=x0.25",
+                                      "fibremss:resolution=x0.5", "fibremss:resolution=x2",
+                                      "fem:substeps=x0.5", "fem", "fem:substeps=x2"}))
+      << "a tolerance costs more the smaller it is; the iterations are only its cap";
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 
 #include "FrameWriter.h"
 #include "ReportScaling.h"
+#include "ReportVerdict.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleMetrics.h"
@@ -177,7 +178,8 @@ std::pair<std::string, std::string> frontOf(const std::string& method) {
   if (colon == std::string::npos) return {family, ""};
   const std::string variant = method.substr(colon + 1);
   if (variant.find('+') == std::string::npos)
-    for (const char* knob : {"iterations", "resolution", "substeps", "cells"})
+    for (const char* knob : {"iterations", "resolution", "substeps", "cells", "tolerance",
+                             "epsilon", "budget_ms", "deviation_epsilon"})
       if (variant.rfind(std::string(knob) + "=", 0) == 0) return {family, knob};
   return {method, ""};
 }
@@ -393,27 +395,51 @@ double gateSpreadMm(const nlohmann::json& gates) {
   return std::isnan(increments) ? finer : std::max(finer, increments);
 }
 
+/// FibreMSS's own runs (`fibremss` and its variants): without a reference the error axis is the
+/// distance to FibreMSS's self-reference, its convergence, which ranks no other method.
+nlohmann::json fibreRunsOnly(const nlohmann::json& runs) {
+  nlohmann::json fibre = nlohmann::json::array();
+  for (const auto& run : runs) {
+    const std::string method = text(run, "method");
+    if (method.substr(0, method.find(':')) == "fibremss") fibre.push_back(run);
+  }
+  return fibre;
+}
+
+/// The notes on the reference along the top of the speed–error plot: a gate that fails (red),
+/// gates not computed, poses excluded.
+std::vector<std::pair<std::string, std::string>> referenceNotes(const nlohmann::json& summary) {
+  std::vector<std::pair<std::string, std::string>> notes;
+  if (!summary.contains("reference")) return notes;
+  const nlohmann::json gates = summary["reference"].value("gates", nlohmann::json::object());
+  const ReferenceGates judged = gatesFromJson(gates);
+  if (judged.failed())
+    notes.emplace_back("the reference FAILS a gate: no ranking (report.md, Reference)", "#b00000");
+  else if (!judged.passed())
+    notes.emplace_back("the reference's gates were not computed: no ranking (report.md, Reference)",
+                       "#606060");
+  if (!gates.value("excluded", std::string()).empty())
+    notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");
+  return notes;
+}
+
 std::string speedVsErrorScript(const nlohmann::json& summary, const std::string& stem) {
   const nlohmann::json& runs = summary["runs"];
   const char* key = errorKey(runs);
   const bool reference = std::string(key) == "rms_to_reference_mm";
   FigureText figure;
   figure.title = reference ? "Speed against error: one line per method (its cost knob swept)"
-                           : "Speed against error to the self-reference (no CalculiX reference)";
+                           : "FibreMSS's convergence, not accuracy: no CalculiX reference";
   figure.ylabel = reference ? "RMS surface distance to the CalculiX reference [mm] (log)"
-                            : "RMS surface distance to the self-reference [mm] (log)";
+                            : "RMS distance to FibreMSS's self-reference [mm] (log)";
   const nlohmann::json gates =
       summary.value("reference", nlohmann::json::object()).value("gates", nlohmann::json::object());
-  if (reference && summary.contains("reference") && !gates.value("passed", false))
-    figure.notes.emplace_back("the reference FAILS a gate: no ranking (report.md, Reference)",
-                              "#b00000");
-  if (reference && !gates.value("excluded", std::string()).empty())
-    figure.notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");
+  if (reference) figure.notes = referenceNotes(summary);
   if (reference && gateSpreadMm(gates) > 0) {
     figure.band = gateSpreadMm(gates);
     figure.bandLabel = "reference's gate spread (one level finer, increments halved)";
   }
-  const auto [data, body] = frontFigure(runs, key, figure);
+  const auto [data, body] = frontFigure(reference ? runs : fibreRunsOnly(runs), key, figure);
   return data + bothTerminals(stem, body);
 }
 
@@ -593,28 +619,6 @@ std::string table1(const nlohmann::json& runs) {
   return out.str();
 }
 
-ReferenceGates gatesFromJson(const nlohmann::json& gates) {
-  ReferenceGates g;
-  g.returnMm = number(gates, "return_mm");
-  g.returnNotApplicable = gates.value("return_not_applicable", std::string());
-  g.refinementMm = number(gates, "refinement_mm");
-  g.refinedBy = gates.value("refined_by", std::string());
-  g.incrementsMm = number(gates, "increments_mm");
-  g.incrementsScale = number(gates, "increments_scale");
-  g.incrementsPoses = gates.value("increments_poses", 0);
-  g.attachmentLowMm = number(gates, "attachment_low_mm");
-  g.attachmentHighMm = number(gates, "attachment_high_mm");
-  g.spreadMm = number(gates, "spread_mm");
-  g.poses = gates.value("poses", 0);
-  g.refinementPoses = gates.value("refinement_poses", 0);
-  g.solvedPoses = gates.value("solved_poses", 0);
-  g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
-  g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
-  g.failures = gates.value("failures", std::string());
-  g.excluded = gates.value("excluded", std::string());
-  return g;
-}
-
 /// Each method family's best run by `key` (ascending), for the ranking.
 std::vector<std::pair<double, const nlohmann::json*>> bestPerFamily(const nlohmann::json& runs,
                                                                     const char* key) {
@@ -682,9 +686,7 @@ std::string referenceSection(const nlohmann::json& summary) {
   for (const std::string& line : gateLines(gates)) out << "- " << line << "\n";
   const char* key = "rms_to_reference_mm";
   if (!gates.passed()) {
-    out << "\n**No ranking** by RMS: the reference does not pass its gates, so differences "
-           "between the methods are not shown to be larger than the reference's own "
-           "uncertainty."
+    out << "\n**No ranking** by RMS: " << whyNoReferenceRanking(summary) << "."
         << (bestPerFamily(summary["runs"], kExactErrorKey).empty()
                 ? ""
                 : " This is an analytic case: the methods are ranked by the exact answer below.")
@@ -697,42 +699,6 @@ std::string referenceSection(const nlohmann::json& summary) {
   for (const auto& [error, run] : bestPerFamily(summary["runs"], key))
     out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " mm at "
         << cell(number(*run, "ms_per_step")) << " ms per pose (" << threadsText(*run) << ")\n";
-  return out.str();
-}
-
-/// On an analytic case, the ranking by the exact answer, which needs no reference and so no
-/// gate: each method family's best run by |volume change − exact|, the reference's own error
-/// beside it. Empty for other scenes.
-std::string exactRanking(const nlohmann::json& runs) {
-  const auto ranked = bestPerFamily(runs, kExactErrorKey);
-  if (ranked.empty()) return "";
-  const auto measure = [](const nlohmann::json& run) {
-    const nlohmann::json a = run.value("analytic", nlohmann::json::object());
-    char text[96];
-    if (a.value("type", std::string()) == "cylinder-stretch")
-      std::snprintf(text, sizeof text, "effective ν %.3g, exact %.3g", number(a, "poisson_ratio"),
-                    number(a, "exact_poisson_ratio"));
-    else
-      std::snprintf(text, sizeof text, "mid radius %.3g r0, exact %.3g",
-                    number(a, "mid_radius_ratio"), number(a, "exact_mid_radius_ratio"));
-    return std::string(text);
-  };
-  std::ostringstream out;
-  out << "\n## Ranking by the exact answer\n\nAn analytic case has an exact answer, so its "
-         "methods are ranked against it, not against the CalculiX reference (no gate applies): "
-         "each method family's best run by |volume change − exact| in percentage points (the "
-         "volume follows the effective Poisson ratio under stretch and the radius under twist; "
-         "surface RMS cannot separate methods that all lie within the reference's own "
-         "uncertainty of it). `exact_error_vs_ms.png` draws each front.\n\n";
-  int rank = 0;
-  for (const auto& [error, run] : ranked)
-    out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " points off ("
-        << measure(*run) << ") at " << cell(number(*run, "ms_per_step")) << " ms per pose ("
-        << threadsText(*run) << ")\n";
-  for (const auto& run : runs)
-    if (text(run, "method") == "calculix" && std::isfinite(number(run, kExactErrorKey)))
-      out << "\nThe CalculiX reference itself: " << cell(number(run, kExactErrorKey))
-          << " points off (" << measure(run) << "; its discretisation and ν).\n";
   return out.str();
 }
 
@@ -777,7 +743,8 @@ std::string equilibriumReport(const nlohmann::json& runs) {
             field(run, "iterations") + " | " + cell(ms) + " | " +
             field(run, "rms_to_equilibrium_mm") + " | " + cell(worst) + poseOf(run) + " | " +
             worstMuscleCell(run) + " | " + residualCell(run) + " |\n";
-    if (worst <= kEquilibriumAccuracyMm && ms < fastestMs) fastestMs = ms, fastest = method;
+    if (worst <= kEquilibriumAccuracyMm && ms < fastestMs && solvesEquilibriumModel(run))
+      fastestMs = ms, fastest = method;
   }
   if (rows.empty()) return "";
   std::string unconverged;
@@ -801,7 +768,11 @@ std::string equilibriumReport(const nlohmann::json& runs) {
          "the run's own residual.\n\n| method | threads | iterations | ms/pose | RMS to "
          "equilibrium [mm] | worst pose [mm] | worst muscle [mm] | residual RMS / max [mm] (N), "
          "worst pose |\n|---|---|---|---|---|---|---|---|\n" +
-         rows + "\nTime to accuracy (every pose within " + bound + " RMS of its equilibrium): " +
+         rows +
+         "\nA btSoftBody or FEM row is the distance between its model and FibreMSS's converged "
+         "one, an error of neither. Time to accuracy (FibreMSS's own convergence, not its "
+         "accuracy: a run of the equilibrium run's model with every pose within " +
+         bound + " RMS of it): " +
          (fastest.empty() ? std::string("no run reached it")
                           : "**" + cell(fastestMs) + " ms per pose** (" + fastest + ")") +
          ". Sweep the iterations (`--methods equilibrium,fibremss:iterations=20,"
@@ -1049,7 +1020,8 @@ std::string perMuscleReport(const nlohmann::json& runs) {
 std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std::string>& plots) {
   std::ostringstream out;
   const nlohmann::json& runs = summary["runs"];
-  out << "# FibreMSS comparison: " << summary.value("scene", std::string("?")) << "\n\n";
+  out << "# FibreMSS comparison: " << summary.value("scene", std::string("?")) << "\n\n"
+      << verdictSection(summary) << "\n";
   const nlohmann::json& machine = summary.value("machine", nlohmann::json::object());
   out << "- Machine: " << (machine.is_object() ? machine.value("cpu", std::string("?")) : "?")
       << ", " << (machine.is_object() ? machine.value("cores", 0) : 0) << " logical cores, "
@@ -1065,7 +1037,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
   out << "\n## Runs\n\n"
       << "| method | threads | scene | overrides | particles/nodes | springs/links/tets | steps | "
          "ms/step | ms/iteration | max pen. [mm] | mean pen. [mm] | volume [%] | RMS to ref. [mm] "
-         "| shape RMS to ref. [mm] | worst muscle [mm] | RMS to self-ref. [mm] | spring dev. | "
+         "| shape RMS to ref. [mm] | worst muscle [mm] | RMS to self-ref. [mm] (FibreMSS's "
+         "convergence) | spring dev. | "
          "residual RMS / max [mm] (N), worst pose | failed | peak MB | wall [s] |\n"
       << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& run : runs) {
@@ -1096,9 +1069,10 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
   }
   out << "\n— : does not apply or was not measured (e.g. no reference to compare with). The "
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
-         "iterations: Newton iterations).\n"
-      << perMuscleReport(runs) << softBodyRatioReport(runs) << analyticReport(runs)
-      << equilibriumReport(runs);
+         "iterations: Newton iterations). RMS to self-ref. is the distance to FibreMSS's own run "
+         "at dt/8: FibreMSS's convergence, not any method's accuracy.\n"
+      << errorDecomposition(summary) << perMuscleReport(runs) << softBodyRatioReport(runs)
+      << analyticReport(runs) << equilibriumReport(runs);
   const std::string coverageNote = referenceCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {

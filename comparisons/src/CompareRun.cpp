@@ -1,6 +1,7 @@
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -578,13 +579,36 @@ int knobValue(const std::string& value, int defaultValue) {
   return std::max(1, static_cast<int>(std::lround(factor ? number * defaultValue : number)));
 }
 
-std::vector<std::string> frontMethods(const std::vector<std::string>& methods) {
+FibreKnob fibreCostKnob(const SimulationParameters& simulation) {
+  switch (simulation.stopRule) {
+    case StopRule::Iterations:
+      return {"iterations", true};
+    case StopRule::TimeBudget:
+      return {"budget_ms", true};
+    case StopRule::Converged:
+      return {"epsilon", false};
+    case StopRule::SpringDeviation:
+      return {"deviation_epsilon", false};
+    case StopRule::Equilibrium:
+    case StopRule::Residual:
+      break;
+  }
+  return {"tolerance", false};
+}
+
+std::vector<std::string> frontMethods(const std::vector<std::string>& methods,
+                                      const SimulationParameters& simulation) {
+  const FibreKnob knob = fibreCostKnob(simulation);
+  // Cheapest first: fewer iterations (a smaller budget), or a looser threshold.
+  const std::array<const char*, 3> factors =
+      knob.costGrows ? std::array{"x0.5", "x2", "x4"} : std::array{"x2", "x0.5", "x0.25"};
+  const std::string at = "fibremss:" + knob.key + "=";
   std::vector<std::string> expanded;
   for (const std::string& method : methods) {
     if (method == "fibremss") {
-      expanded.insert(expanded.end(), {"fibremss:iterations=x0.5", "fibremss",
-                                       "fibremss:iterations=x2", "fibremss:iterations=x4",
-                                       "fibremss:resolution=x0.5", "fibremss:resolution=x2"});
+      expanded.insert(expanded.end(),
+                      {at + factors[0], "fibremss", at + factors[1], at + factors[2],
+                       "fibremss:resolution=x0.5", "fibremss:resolution=x2"});
     } else if (method == "btsoftbody") {
       expanded.insert(expanded.end(),
                       {"btsoftbody:iterations=x0.5", "btsoftbody", "btsoftbody:iterations=x2"});
@@ -597,7 +621,46 @@ std::vector<std::string> frontMethods(const std::vector<std::string>& methods) {
   return expanded;
 }
 
+void fillFinerResolution(std::vector<RunMetrics>& runs, int resolution) {
+  const auto named = [&](const std::string& method) -> const RunMetrics* {
+    for (const RunMetrics& run : runs)
+      if (run.method == method) return &run;
+    return nullptr;
+  };
+  const auto finerOf = [&](const std::string& method) -> const RunMetrics* {
+    const std::string prefix = "fibremss:resolution=";
+    const int r = method == "fibremss" ? resolution
+                  : method.rfind(prefix, 0) == 0 && method.find('+') == std::string::npos
+                      ? knobValue(method.substr(prefix.size()), 0)
+                      : 0;
+    if (r <= 0) return nullptr;
+    const RunMetrics* finer = named(prefix + std::to_string(2 * r));
+    return finer ? finer : 2 * r == resolution ? named("fibremss") : nullptr;
+  };
+  for (RunMetrics& run : runs)
+    if (const RunMetrics* finer = finerOf(run.method))
+      run.rmsToFinerResolutionMm = rmsBetweenRuns(run, *finer);
+}
+
 namespace {
+
+/// The scene's value of a FibreMSS knob that takes any positive number (a stop rule's threshold,
+/// lengths in the scene's units), as `--set` reads it; NaN for the other keys.
+double realKnobBase(const std::string& key, const LoadedScene& scene) {
+  const SimulationParameters& simulation = scene.simulation;
+  if (key == "tolerance") return simulation.tolerance / scene.unitScale;
+  if (key == "epsilon") return simulation.epsilon / scene.unitScale;
+  if (key == "budget_ms") return simulation.budgetMs;
+  if (key == "deviation_epsilon") return simulation.deviationEpsilon;
+  return NAN;
+}
+
+/// A number as `--set` takes it, with 6 significant digits.
+std::string shortNumber(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", value);
+  return text;
+}
 
 /// The spec with "xF" knob values made absolute from the scene's and the baselines' defaults;
 /// its name states the values used.
@@ -609,7 +672,11 @@ MethodSpec resolvedSpec(const MethodSpec& spec, const LoadedScene& scene,
   for (std::string& part : resolved.overrides) {
     const size_t equals = part.find('=');
     const std::string key = part.substr(0, equals), value = part.substr(equals + 1);
-    if (!value.empty() && value[0] == 'x') {
+    if (!value.empty() && value[0] == 'x' && spec.family == "fibremss" &&
+        std::isfinite(realKnobBase(key, scene))) {
+      part = key + "=" +
+             shortNumber(std::strtod(value.c_str() + 1, nullptr) * realKnobBase(key, scene));
+    } else if (!value.empty() && value[0] == 'x') {
       int base = 0;
       if (spec.family == "fibremss" && key == "iterations") base = scene.simulation.iterations;
       if (spec.family == "fibremss" && key == "resolution" && !scene.muscles.empty())
@@ -713,13 +780,14 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
 
 Comparison runComparison(const std::string& sceneNameOrPath,
                          const std::vector<std::string>& overrides, const CompareOptions& options) {
-  std::vector<MethodSpec> specs;
-  for (const std::string& method : options.fronts ? frontMethods(options.methods) : options.methods)
-    specs.push_back(parseMethod(method));
   auto log = [&](const std::string& line) {
     if (options.log) options.log(line);
   };
   const LoadedScene scene = loadScene(sceneNameOrPath, overrides);
+  std::vector<MethodSpec> specs;
+  for (const std::string& method :
+       options.fronts ? frontMethods(options.methods, scene.simulation) : options.methods)
+    specs.push_back(parseMethod(method));
   for (const std::string& warning : scene.warnings) log(warningLine(warning));
   for (const std::string& note : scene.notes) log(noteLine(note));
   log("preparing " + scene.name);
@@ -755,6 +823,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     runs.back().poses = std::max(scene.poseCount, 1);
   }
   fillRms(runs);
+  fillFinerResolution(runs, comparison.resolution);
   fillMusclesToEquilibrium(runs, surfaceBlocks(prepared));
   fillReferenceShapes(runs, prepared);
   if (comparison.reference && !comparison.reference->missing)

@@ -157,6 +157,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"worst_muscle_rms_to_equilibrium_mm", number(m.worstMuscleRmsToEquilibriumMm)},
       {"worst_muscle_pose_to_equilibrium", toJson(m.worstMusclePoseToEquilibrium)},
       {"muscles_to_equilibrium", toJson(m.musclesToEquilibrium)},
+      {"rms_to_finer_resolution_mm", number(m.rmsToFinerResolutionMm)},
       {"unconverged_poses", m.unconvergedPoses},
       {"residual_rms_mm", number(m.residualRmsMm)},
       {"residual_max_mm", number(m.residualMaxMm)},
@@ -233,6 +234,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
       numberOr(o, "worst_muscle_rms_to_equilibrium_mm", m.worstMuscleRmsToEquilibriumMm);
   m.worstMusclePoseToEquilibrium = musclePoseRmsFromJson(o);
   m.musclesToEquilibrium = musclesToEquilibriumFromJson(o);
+  m.rmsToFinerResolutionMm = numberOr(o, "rms_to_finer_resolution_mm", m.rmsToFinerResolutionMm);
   m.unconvergedPoses = o.value("unconverged_poses", m.unconvergedPoses);
   m.residualRmsMm = numberOr(o, "residual_rms_mm", m.residualRmsMm);
   m.residualMaxMm = numberOr(o, "residual_max_mm", m.residualMaxMm);

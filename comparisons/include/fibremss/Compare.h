@@ -149,10 +149,27 @@ MethodSpec parseMethod(const std::string& name);
 /// 0 when it is neither.
 int knobValue(const std::string& value, int defaultValue);
 
-/// Each method with a cost knob swept over it, cheapest first: fibremss over its iterations per
-/// pose (×0.5, 1, 2, 4) and its resolution (×0.5, 2), btsoftbody over its link iterations
-/// (×0.5, 1, 2), fem over its substeps (×0.5, 1, 2); other methods as they are.
-std::vector<std::string> frontMethods(const std::vector<std::string>& methods);
+/// The setting that ends a FibreMSS step's iterations under `simulation`'s stop rule, and so its
+/// cost: `iterations` for a fixed count, `budget_ms` for the time budget, the threshold of the
+/// others (`tolerance` of the residual and equilibrium rules, `epsilon`, `deviation_epsilon`),
+/// where the iterations are only a cap.
+struct FibreKnob {
+  std::string key;         ///< the scene key (`--set`)
+  bool costGrows = false;  ///< a larger value costs more (a count, a budget; not a threshold)
+};
+FibreKnob fibreCostKnob(const SimulationParameters& simulation);
+
+/// Each method with a cost knob swept over it, cheapest first: fibremss over the knob of
+/// `simulation`'s stop rule (fibreCostKnob: a count or budget ×0.5, 1, 2, 4, a threshold ×2, 1,
+/// 0.5, 0.25) and its resolution (×0.5, 2), btsoftbody over its link iterations (×0.5, 1, 2),
+/// fem over its substeps (×0.5, 1, 2); other methods as they are.
+std::vector<std::string> frontMethods(const std::vector<std::string>& methods,
+                                      const SimulationParameters& simulation);
+
+/// Each FibreMSS run of the resolution front (`fibremss`, at `resolution`, and
+/// `fibremss:resolution=N`) gets rmsToFinerResolutionMm against the run at twice its resolution,
+/// where there is one.
+void fillFinerResolution(std::vector<RunMetrics>& runs, int resolution);
 
 /// What one comparison ran: the scene as loaded and every method's metrics.
 struct Comparison {

@@ -3,6 +3,7 @@
 // (return to rest, mesh refinement, increments halved, attachment distance ±50 %) and its
 // metrics as a run.
 #include <atomic>
+#include <cmath>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -112,6 +113,16 @@ struct ReferenceGates {
   bool passed() const {
     return (returnPasses() || !returnNotApplicable.empty()) && refinementPasses() &&
            incrementsPass() && failures.empty();
+  }
+  /// A gate computed and judged that does not pass, or a pose ccx did not solve. Neither this
+  /// nor passed(): some gate was not computed (`--no-gates`, a stopped solve) or not judged.
+  bool failed() const {
+    const auto judgedAndFails = [&](double mm, bool passes) {
+      return !std::isnan(mm) && !std::isnan(spreadMm) && !passes;
+    };
+    return (!std::isnan(returnMm) && returnNotApplicable.empty() && !returnPasses()) ||
+           judgedAndFails(refinementMm, refinementPasses()) ||
+           judgedAndFails(incrementsMm, incrementsPass()) || !failures.empty();
   }
 };
 

@@ -118,6 +118,9 @@ struct RunMetrics {
   std::string worstMuscleToEquilibrium;          ///< the muscle with the largest RMS over poses
   double worstMuscleRmsToEquilibriumMm = kNone;  ///< its RMS over the poses [mm]
   MusclePoseRms worstMusclePoseToEquilibrium;    ///< the farthest muscle at any single pose
+  /// Against the same method's run at twice the resolution (fillFinerResolution): how much one
+  /// level finer moves it, its discretisation's share of the error [mm].
+  double rmsToFinerResolutionMm = kNone;
   int unconvergedPoses = 0;  ///< "equilibrium" run: poses that hit the iteration cap unconverged
   /// The force residual after each step measured (FibreMSS; MuscleSystem::forceResidual, all
   /// muscles): RMS and largest over the free particles of the equivalent displacement |r_i|/k_i
