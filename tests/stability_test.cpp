@@ -263,8 +263,8 @@ TEST(StabilityMatrix, TheStableStepIsTheSmallestOfTheCalibrationCases) {
 
 // Ctrl-C (options.cancel) set when the first case starts: the calibration is complete, no cell
 // runs, both files say interrupted; set before anything runs, the calibration stops too; a run
-// cancelled stops after its first step and says interrupted, not timeout.
-TEST(StabilityMatrix, InterruptStopsAfterTheRunningStep) {
+// cancelled stops within its first step (which is not counted) and says interrupted, not timeout.
+TEST(StabilityMatrix, InterruptStopsWithinTheRunningStep) {
   StabilityOptions options = smallOptions();
   options.integrators = {"verlet", "rk4"};
   std::atomic<bool> cancel{false};
@@ -290,7 +290,8 @@ TEST(StabilityMatrix, InterruptStopsAfterTheRunningStep) {
   const auto cell = fibremss::runStabilityCell(options.calibration[0], "verlet",
                                                matrix.stableSteps[0].dt, options);
   EXPECT_EQ(cell.outcome, CellOutcome::Interrupted) << cell.message;
-  EXPECT_EQ(cell.steps, 1);
+  EXPECT_EQ(cell.steps, 0);
+  EXPECT_EQ(cell.iterations, 0);
   EXPECT_EQ(cell.failedStep, -1);
 }
 

@@ -1,9 +1,9 @@
 #pragma once
 // Ctrl-C (or SIGTERM: `kill`, `timeout`, a job scheduler) for long commands (run, compare,
-// stability, reference): the first signal asks the work to stop — `run` within its current step,
-// at the end of the running iteration (MuscleSystem::setCancelFlag), the others after their
-// current step — so every file written stays complete, the summary says "interrupted" and no ccx
-// is left running; a second one ends the process at once.
+// stability, reference): the first signal asks the work to stop — a FibreMSS run within its
+// current step, at the end of the running iteration (MuscleSystem::setCancelFlag), the baselines
+// after their current step, ccx at once — so every file written stays complete, the summary says
+// "interrupted" and no ccx is left running; a second one ends the process at once.
 #include <signal.h>
 #include <unistd.h>
 

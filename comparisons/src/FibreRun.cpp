@@ -290,7 +290,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   metrics.integrator = toString(scene.simulation.integrator);
 
   MuscleSystem system(scene.simulation);
-  system.setCancelFlag(options.cancel);
+  system.setCancelFlag(options.interrupt ? options.interrupt : options.cancel);
   metrics.threads = static_cast<int>(system.threads());
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) {
