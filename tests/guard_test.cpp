@@ -7,6 +7,7 @@
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <memory>
 #include <vector>
@@ -255,6 +256,71 @@ TEST(Guard, RetryFreezesTheMuscleOnceItsRetriesAreSpent) {
   EXPECT_FALSE(rig.system.frozen(rig.muscles[0]));
   EXPECT_TRUE(identical(rig.positions(1), carried(*stiffMuscle(), start, rig.steps)));
   EXPECT_TRUE(allFinite(rig.positions(0)));
+}
+
+/// A host scheduler that runs every task at once on the caller's thread and sets `cancel` when
+/// it is handed its `cancelAt`-th task: a cancel that arrives inside a step, at a point that is
+/// the same in every run.
+struct CancellingScheduler {
+  std::atomic<bool> cancel{false};
+  int tasks = 0;
+  int cancelAt = 0;
+
+  static void* enqueue(TaskCallback task, uint32_t items, uint32_t, void* context, void* self) {
+    auto& scheduler = *static_cast<CancellingScheduler*>(self);
+    if (++scheduler.tasks == scheduler.cancelAt) scheduler.cancel.store(true);
+    task(0, items, 0, context);
+    return nullptr;
+  }
+  static void finish(void*, void*) {}
+  TaskScheduler handle() { return {enqueue, finish, this, 1}; }
+};
+
+// A cancel flag (MuscleSystem::setCancelFlag) ends the running step at the end of an iteration:
+// StepStats::interrupted. Here the step's dt bursts the muscle within its first iterations and
+// the cancel comes after a few: the step goes back to its start with no retry, nothing blamed
+// and nothing frozen; cleared, the same step is retried (so that rollback was the cancel's). Set
+// before a step, the flag ends it after one iteration.
+TEST(Guard, ACancelledStepStopsWithinItsIterationsAndIsNeitherRetriedNorFrozen) {
+  CancellingScheduler scheduler;
+  scheduler.cancelAt = 12;
+  SimulationParameters parameters = fixedStep(1000, FailurePolicy::Retry);
+  parameters.scheduler = scheduler.handle();
+  Rig rig(parameters, {stiffMuscle()});
+  rig.system.setCancelFlag(&scheduler.cancel);
+  const std::vector<btVector3> start = rig.positions(0);
+  rig.step();
+  const StepStats& stats = rig.system.lastStep();
+  EXPECT_TRUE(stats.interrupted);
+  EXPECT_GT(stats.iterations, 1);
+  EXPECT_LT(stats.iterations, parameters.iterations);
+  EXPECT_TRUE(stats.rolledBack);
+  EXPECT_EQ(stats.retries, 0);
+  EXPECT_FALSE(stats.failed);
+  EXPECT_FALSE(stats.nan || stats.exploded);
+  EXPECT_EQ(stats.newlyFrozen, 0u);
+  EXPECT_FALSE(rig.system.frozen(rig.muscles[0]));
+  EXPECT_EQ(rig.system.failures(rig.muscles[0]).attempts, 0);
+  EXPECT_TRUE(identical(rig.positions(0), start));
+
+  scheduler.cancel = false;
+  rig.step();
+  EXPECT_FALSE(rig.system.lastStep().interrupted);
+  EXPECT_TRUE(rig.system.lastStep().rolledBack);
+  EXPECT_GE(rig.system.lastStep().retries, 1);
+
+  // At a stable dt: set before the step, one iteration; cleared, the step's ten.
+  std::atomic<bool> cancel{true};
+  Rig stable(fixedStep(btScalar(0.5), FailurePolicy::Retry), {stiffMuscle()});
+  stable.system.setCancelFlag(&cancel);
+  stable.step();
+  EXPECT_TRUE(stable.system.lastStep().interrupted);
+  EXPECT_EQ(stable.system.lastStep().iterations, 1);
+  EXPECT_FALSE(stable.system.lastStep().rolledBack);
+  cancel = false;
+  stable.step();
+  EXPECT_FALSE(stable.system.lastStep().interrupted);
+  EXPECT_EQ(stable.system.lastStep().iterations, 10);
 }
 
 /// Deepest overlap of the free boundary particles of `muscle` at `x` with the spheres of `plate`

@@ -323,7 +323,7 @@ TEST(RunCli, AnOutputDirectoryThatCannotBeMadeIsAnError) {
   EXPECT_NE(result.output.find("error"), std::string::npos) << result.output;
 }
 
-TEST(RunCli, InterruptStopsAfterTheCurrentStepWithValidFiles) {
+TEST(RunCli, InterruptKeepsTheFinishedStepsWithValidFiles) {
   TemporaryDirectory out("fibremss_run_cli_interrupt");
   const std::string outDir = out.path().string();
   const std::string program = cli();
@@ -354,6 +354,58 @@ TEST(RunCli, InterruptStopsAfterTheCurrentStepWithValidFiles) {
   for (const auto& [time, file] : pvdDataSets(pvd)) expectWellFormedVtp(out.path() / file);
   for (const auto& entry : fs::recursive_directory_iterator(out.path()))
     EXPECT_EQ(entry.path().string().find(".tmp."), std::string::npos) << entry.path();
+}
+
+/// Whether process `pid` catches `signal` (its /proc status' SigCgt mask): `run` does while its
+/// steps run (the interrupt guard), so a signal sent then reaches the step, not preparation.
+bool catches(pid_t pid, int signal) {
+  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.starts_with("SigCgt:"))
+      return (std::stoull(line.substr(7), nullptr, 16) >> (signal - 1) & 1) != 0;
+  return false;
+}
+
+// SIGTERM while the first step runs its 100 million iterations: the step stops at the end of its
+// running iteration, exit code 143, a summary saying interrupted with no step done, no frame.
+TEST(RunCli, TerminationStopsWithinTheRunningStep) {
+  TemporaryDirectory out("fibremss_run_cli_terminate");
+  const std::string outDir = out.path().string();
+  const std::string program = cli();
+  const pid_t child = fork();
+  ASSERT_NE(child, -1);
+  if (child == 0) {
+    std::freopen("/dev/null", "w", stdout);
+    std::freopen("/dev/null", "w", stderr);
+    execl(program.c_str(), program.c_str(), "run", "fusiform", "--steps", "1", "--set",
+          "resolution=10", "--set", "stop=iterations", "--set", "iterations=100000000", "--out",
+          outDir.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  bool started = false;
+  int status = 0;
+  pid_t ended = 0;
+  for (int i = 0; i < 1200 && !(started = catches(child, SIGTERM)) && ended == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    ended = waitpid(child, &status, WNOHANG);
+  }
+  if (ended == 0) kill(child, SIGTERM);
+  // A step that does not stop would run for hours: two minutes, then it is killed and fails.
+  for (int i = 0; i < 1200 && ended == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    ended = waitpid(child, &status, WNOHANG);
+  }
+  if (ended == 0) {
+    kill(child, SIGKILL);
+    waitpid(child, &status, 0);
+  }
+  ASSERT_TRUE(started) << "the run did not start its steps within two minutes";
+  ASSERT_TRUE(WIFEXITED(status)) << "the run did not exit by itself after SIGTERM";
+  EXPECT_EQ(WEXITSTATUS(status), 143);
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  EXPECT_EQ(summary.at("interrupted"), true);
+  EXPECT_EQ(summary.at("steps"), 0);
+  EXPECT_FALSE(fs::exists(out.path() / "run.pvd"));
 }
 
 TEST(Progress, LineShowsBarStepsRateAndTimeLeft) {

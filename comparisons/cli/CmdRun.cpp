@@ -1,5 +1,5 @@
 // `fibremss run SCENE`: prepare a scene, simulate every pose of its motion with FibreMSS,
-// report progress, write frames and summary.json. Ctrl-C stops after the current step.
+// report progress, write frames and summary.json. Ctrl-C or SIGTERM stops within the current step.
 #include <unistd.h>
 
 #include <algorithm>
@@ -279,8 +279,9 @@ void addRunCommand(CLI::App& app) {
       "penetration per bone, fixed particles, fibre length, worst spring). Exit code 3 when "
       "the simulation failed (a muscle frozen, or NaN/explosion with on_failure=report), 4 when "
       "with on_failure=stop-body every step ran but a muscle was frozen on the way, 130 "
-      "when interrupted: Ctrl-C stops after the current step and every file written stays "
-      "valid. Soak run: --loop --steps N --sample-every 1000.");
+      "when interrupted by Ctrl-C and 143 by SIGTERM: the running step stops at the end of its "
+      "current iteration (it is not written), the steps before it are kept and every file "
+      "written stays valid. Soak run: --loop --steps N --sample-every 1000.");
   addSceneArgs(*command, args->scene);
   command->add_option("--out", args->out,
                       "Directory for frames/*.vtp, run.pvd, scene.json and summary.json");

@@ -1,7 +1,7 @@
 // `fibremss stability [CASE...]`: the hard-case stability matrix (issue 5): each integrator's
 // stable step measured, then every case × integrator × multiple of it, each run judged and
-// time-boxed; writes stability.json and stability.md. Ctrl-C stops after the running step and
-// writes both files marked interrupted (exit 130).
+// time-boxed; writes stability.json and stability.md. Ctrl-C (SIGTERM) stops within the running
+// step and writes both files marked interrupted (exit 130, 143).
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -92,8 +92,8 @@ void addStabilityCommand(CLI::App& app) {
       "hip-extension:step_deg=4, hip-extension:step_deg=10*kappa=100. Without CASE: "
       "hip-extension at step_deg 2, 4, 5, 10, pinch, hip-extension with kappa x100, "
       "tension-spike. Failing runs are reported (nan/exploded/energy/timeout with the step), "
-      "never fatal. Ctrl-C stops after the current step and writes both files marked "
-      "interrupted (exit code 130).");
+      "never fatal. Ctrl-C stops within the running step and writes both files marked "
+      "interrupted (exit code 130; 143 for SIGTERM).");
   command->add_option("case", args->cases, "Cases (default: the hard cases)");
   command
       ->add_option("--set", args->overrides,

@@ -1,8 +1,9 @@
 #pragma once
 // Ctrl-C (or SIGTERM: `kill`, `timeout`, a job scheduler) for long commands (run, compare,
-// stability, reference): the first signal asks the work to stop after its current step, so
-// every file written stays complete, the summary says "interrupted" and no ccx is left
-// running; a second one ends the process at once.
+// stability, reference): the first signal asks the work to stop — a FibreMSS run within its
+// current step, at the end of the running iteration (MuscleSystem::setCancelFlag), the baselines
+// after their current step, ccx at once — so every file written stays complete, the summary says
+// "interrupted" and no ccx is left running; a second one ends the process at once.
 #include <signal.h>
 #include <unistd.h>
 
@@ -26,7 +27,7 @@ inline void onInterrupt(int signal) {
   interruptSignal.store(signal);
   interruptRequested.store(true);
   // write() is async-signal-safe; SA_RESETHAND made a second Ctrl-C end the process at once.
-  const char message[] = "\nfibremss: interrupted, stopping after the current step\n";
+  const char message[] = "\nfibremss: interrupted, stopping\n";
   [[maybe_unused]] ssize_t written = write(STDERR_FILENO, message, sizeof message - 1);
 }
 

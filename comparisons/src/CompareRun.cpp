@@ -708,7 +708,8 @@ int knob(const MethodSpec& spec, const std::string& key, int fallback) {
   return fallback;
 }
 
-/// One method's run, stopped by the user's cancel or the time budget after the current step.
+/// One method's run, stopped by the time budget after the current step, by the user's cancel
+/// within it (FibreMSS) or after it (the baselines).
 RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
                      const std::vector<std::string>& overrides, const LoadedScene& scene,
                      const PreparedScene& prepared, const CompareOptions& options) {
@@ -724,6 +725,7 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
   FibreRunOptions fibreOptions;
   fibreOptions.method = spec.name;
   fibreOptions.cancel = &stop;
+  fibreOptions.interrupt = options.cancel;
   fibreOptions.frameEvery = 0;
   fibreOptions.progress = [&](const RunProgress& p) {
     report({spec.name, p.step, p.steps, p.iterations, p.seconds});

@@ -290,6 +290,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   metrics.integrator = toString(scene.simulation.integrator);
 
   MuscleSystem system(scene.simulation);
+  system.setCancelFlag(options.interrupt ? options.interrupt : options.cancel);
   metrics.threads = static_cast<int>(system.threads());
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) {
@@ -341,6 +342,11 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     system.step();
     const double stepMs = millisecondsSince(stepStart);
     const StepStats& stats = system.lastStep();
+    // Cancelled within the step: it is neither measured nor written.
+    if (stats.interrupted) {
+      metrics.interrupted = true;
+      break;
+    }
     simulatedTime += stats.simulatedTime;
     metrics.steps = s + 1;
     metrics.iterations += stats.iterations;

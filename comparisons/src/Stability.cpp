@@ -91,6 +91,7 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
   run.frameEvery = 0;
   run.keepPoseSurfaces = false;
   run.cancel = &stop;
+  run.interrupt = options.cancel;
   run.progress = [&](const RunProgress& progress) {
     const StepStats& last = *progress.lastStep;
     const double speed =

@@ -60,7 +60,8 @@ struct CompareOptions {
   int selfReferenceFactor = 8;  ///< self-reference: dt / f and f × iterations
   std::function<void(const MethodProgress&)> progress;  ///< after every step (may be empty)
   std::function<void(const std::string&)> log;          ///< one line of news (may be empty)
-  const std::atomic<bool>* cancel = nullptr;            ///< stop after the current step when true
+  /// Stop when true: a FibreMSS run within its current step, a baseline after it.
+  const std::atomic<bool>* cancel = nullptr;
   double methodBudgetSeconds = 0;  ///< > 0: a method stops after the step that passes this wall
                                    ///< time (its metrics cover the steps done, interrupted set)
   /// The "equilibrium" method's iteration cap per pose (--equilibrium-cap).

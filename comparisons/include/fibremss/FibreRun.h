@@ -35,8 +35,13 @@ struct FibreRunOptions {
   std::string method = "fibremss";  ///< method name written to the metrics
   bool keepPoseSurfaces = true;     ///< fill RunMetrics::poseSurfaces (for RMS between methods)
   std::function<void(const RunProgress&)> progress;  ///< called after every step (may be empty)
-  const std::atomic<bool>* cancel = nullptr;  ///< when it becomes true the run stops after the
-                                              ///< current step, metrics.interrupted set
+  /// When it becomes true the run stops within the current step, at the end of its running
+  /// iteration (MuscleSystem::setCancelFlag; unless `interrupt` is set, then after the step):
+  /// that step is neither measured nor written, the steps before it are; metrics.interrupted set.
+  const std::atomic<bool>* cancel = nullptr;
+  /// The user's Ctrl-C flag when `cancel` is a flag of the caller's own (a time budget that its
+  /// progress callback sets between steps): this one is polled within the steps instead.
+  const std::atomic<bool>* interrupt = nullptr;
   bool loopMotion = false;  ///< steps past the last pose sweep the motion back and forth (a soak
                             ///< run) instead of holding the last pose
   long sampleEvery = 0;     ///< iterations between soak samples (FibreRunDetails::samples; 0: none)

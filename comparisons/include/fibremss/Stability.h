@@ -75,7 +75,7 @@ struct StabilityOptions {
   double energyGrowth = 10;        ///< EnergyCheck growthFactor
   double energyFloorSpeed = 1e-3;  ///< floor: ½·M·v² at this mean speed [m/s]
   std::function<void(const std::string&)> log;  ///< one progress line (may be empty)
-  const std::atomic<bool>* cancel = nullptr;    ///< stop after the current step when true
+  const std::atomic<bool>* cancel = nullptr;    ///< stop within the current step when true
 };
 
 /// One run of one case with one integrator at one dt.
@@ -144,7 +144,8 @@ struct StabilityMatrix {
 
 /// Loads every case's scene first (InputError before any work), then calibrates every
 /// integrator and runs every case × integrator × factor. When
-/// options.cancel turns true it stops after the running step: that cell is `interrupted`, no
+/// options.cancel turns true it stops within the running step, at the end of its iteration: that
+/// cell is `interrupted`, no
 /// later probe or cell runs (integrators not calibrated yet get no stable step) and the matrix
 /// says `interrupted`.
 StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,

@@ -6,6 +6,7 @@
 #include <LinearMath/btTransform.h>
 #include <LinearMath/btVector3.h>
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -80,6 +81,11 @@ struct StepStats {
   /// has NaN or grew beyond twice its rest size): the bones tore it and no smaller dt opens the
   /// gap, so the guard keeps that state.
   size_t trappedMuscles = 0;
+
+  /// The step stopped early at an iteration's end because the cancel flag was set
+  /// (MuscleSystem::setCancelFlag): the bones jumped to their targets, the muscles stay where that
+  /// iteration left them (at the step's start when the attempt had failed), with no retry.
+  bool interrupted = false;
 };
 
 /// How often the numerical guard found one muscle failing, over the system's life: each count is
@@ -169,6 +175,12 @@ class MuscleSystem {
   /// rule and adaptiveTimeStep say), bones moving over all of them (MuscleTime::Dynamic).
   /// InputError for a duration that is not finite and > 0.
   void step(btScalar duration);
+  /// A flag the steps poll after every iteration (null: none, the default): once it reads true,
+  /// the running step ends there and reports StepStats::interrupted, so a long step (a large
+  /// iteration cap, the guard's retries) stops within an iteration. Meant to be set from a signal
+  /// handler (Ctrl-C, SIGTERM) or another thread; the system keeps the pointer until the next
+  /// call, and never writes the flag.
+  void setCancelFlag(const std::atomic<bool>* flag);
 
   /// The rigid bodies the muscles collide with from the next step on (fibremss/RigidContact.h):
   /// shapes convex, compound or static planes (others never touch); pose, velocities and mass

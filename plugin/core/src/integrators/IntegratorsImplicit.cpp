@@ -1,18 +1,22 @@
 // Implicit integrators (docs/integrators.md): backward Euler, the implicit midpoint rule and
-// BDF2, each one Newton step on the spring forces linearized at x(t): the linear system
+// BDF2, each one Newton step on the forces linearized at x(t): the linear system
 // (d·I + s·K)·v′ = b over the free particles' velocities (fixed particles are Dirichlet: they
-// only add to the diagonal blocks of their neighbours), K the 3×3-block spring Jacobian
-// −∂F/∂x, solved by Jacobi-preconditioned conjugate gradients. The sparsity pattern is built
-// once per muscle from the spring list; each iteration refills the values in place.
+// only add to the diagonal blocks of their neighbours), K = −∂F/∂x the 3×3-block spring Jacobian
+// plus the volume terms' rank-one products (VolumeForces.h, localVolumeJacobian and
+// enclosedVolumeJacobian), solved by Jacobi-preconditioned conjugate gradients. The springs'
+// sparsity pattern is built once per muscle from the spring list; each iteration refills the
+// values in place and the volume terms' gradients, which multiply without a matrix.
 #include <Eigen/SparseCore>
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <span>
 #include <vector>
 
 #include "IntegratorsInternal.h"
 #include "solver/MuscleSystemPretransform.h"
 #include "solver/TimeStep.h"
+#include "solver/VolumeForces.h"
 
 namespace fibremss {
 namespace {
@@ -24,22 +28,30 @@ constexpr uint32_t kFixedRow = UINT32_MAX;
 
 /// The linear system of one muscle and the conjugate-gradient vectors (3 rows per free particle).
 struct ImplicitWorkspace final : IntegratorWorkspace {
-  Matrix matrix;               ///< d·I + s·K; pattern fixed at prepare, values refilled
+  Matrix matrix;               ///< d·I + s·K of the springs; pattern fixed at prepare, refilled
   std::vector<uint32_t> rows;  ///< particle → first row of its block (kFixedRow: fixed)
   /// Per free particle: index in the values of its diagonal block's column j, row 3r.
   std::vector<std::array<int32_t, 3>> diagonalBlocks;
   /// Per spring: value indices of blocks (a, b) then (b, a), column j row 0; −1: an end fixed.
   std::vector<std::array<int32_t, 6>> springBlocks;
-  Vector rhs;                                 ///< b
-  Vector solution;                            ///< v′ (starts at the guess)
-  Vector residual;                            ///< r = b − A·v′
-  Vector direction;                           ///< CG search direction p
-  Vector preconditioned;                      ///< z = D⁻¹·r
-  Vector product;                             ///< A·p (and A·w when forming b)
-  Vector inverseDiagonal;                     ///< D⁻¹, the Jacobi preconditioner
-  Vector known;                               ///< e of G(v′) (see ImplicitIntegrator)
-  Vector guess;                               ///< CG's start: v (midpoint) or v̂
-  double explicitLimit = 0;                   ///< Verlet's stable dt of the muscle [s]
+  /// The volume terms' part of s·K (VolumeForces.h), multiplied as s·Σ w·g·(gᵀ·p): per fan
+  /// particle its ∂(6V)/∂x_i (settings.fanParticles' layout), per fan its weight, per particle
+  /// the enclosed volume's ∂V/∂x_i (empty without that term) and its weight.
+  std::vector<btVector3> fanGradients;
+  std::vector<double> fanWeights;
+  std::vector<btVector3> enclosedGradient;
+  double enclosedWeight = 0;
+  double volumeScale = 0;    ///< s on the volume products; 0 when `diagonalJacobian` put them in A
+  Vector rhs;                ///< b
+  Vector solution;           ///< v′ (starts at the guess)
+  Vector residual;           ///< r = b − A·v′
+  Vector direction;          ///< CG search direction p
+  Vector preconditioned;     ///< z = D⁻¹·r
+  Vector product;            ///< A·p (and A·w when forming b)
+  Vector inverseDiagonal;    ///< D⁻¹, the Jacobi preconditioner
+  Vector known;              ///< e of G(v′) (see ImplicitIntegrator)
+  Vector guess;              ///< CG's start: v (midpoint) or v̂
+  double explicitLimit = 0;  ///< Verlet's stable dt of the muscle [s]
   std::vector<btVector3> previousVelocities;  ///< BDF2: v(t−dt′) of the free particles
   std::vector<btVector3> writtenVelocities;   ///< the v′ advance() last wrote (BDF2)
   bool history = false;                       ///< BDF2: previousVelocities hold a step
@@ -69,11 +81,53 @@ void addBlock(double* values, const int32_t* columns, const double (&block)[3][3
     for (int i = 0; i < 3; ++i) values[columns[j] + i] += scale * block[i][j];
 }
 
+/// Adds s·w·g·(gᵀ·in) over the free rows of one rank-one volume term into `out`: g(v) the
+/// gradient of particle particles[v].
+template <class Gradient>
+void addRankOne(const ImplicitWorkspace& w, std::span<const uint32_t> particles, Gradient g,
+                double weight, const Vector& in, Vector& out) {
+  double dot = 0;
+  for (size_t v = 0; v < particles.size(); ++v) {
+    const uint32_t row = w.rows[particles[v]];
+    if (row == kFixedRow) continue;
+    const btVector3& gradient = g(v);
+    for (uint32_t j = 0; j < 3; ++j) dot += double(gradient[j]) * in[row + j];
+  }
+  const double scale = w.volumeScale * weight * dot;
+  for (size_t v = 0; v < particles.size(); ++v) {
+    const uint32_t row = w.rows[particles[v]];
+    if (row == kFixedRow) continue;
+    const btVector3& gradient = g(v);
+    for (uint32_t j = 0; j < 3; ++j) out[row + j] += scale * double(gradient[j]);
+  }
+}
+
+/// out = A·in, A the springs' matrix plus the volume terms' products; allocates nothing.
+void multiply(const ImplicitWorkspace& w, const MuscleState& muscle, const Vector& in,
+              Vector& out) {
+  out.noalias() = w.matrix * in;
+  if (w.volumeScale == 0) return;
+  const MuscleSettings& settings = *muscle.settings;
+  for (size_t k = 0; k < w.fanWeights.size(); ++k) {
+    const btVector3* g = w.fanGradients.data() + settings.fanOffsets[k];
+    addRankOne(
+        w, fanParticles(settings, k), [g](size_t v) -> const btVector3& { return g[v]; },
+        w.fanWeights[k], in, out);
+  }
+  if (w.enclosedWeight > 0) {
+    const std::vector<uint32_t>& free = muscle.freeParticles;
+    addRankOne(
+        w, free, [&](size_t v) -> const btVector3& { return w.enclosedGradient[free[v]]; },
+        w.enclosedWeight, in, out);
+  }
+}
+
 /// Jacobi-preconditioned conjugate gradients on A·x = b from the guess in `solution`: stops
 /// at |r| ≤ tolerance·|b| or after `cap` iterations; allocates nothing.
-void conjugateGradient(ImplicitWorkspace& w, double tolerance, int cap, IntegrationResult& result) {
+void conjugateGradient(ImplicitWorkspace& w, const MuscleState& muscle, double tolerance, int cap,
+                       IntegrationResult& result) {
   const double bound = tolerance * w.rhs.norm();
-  w.product.noalias() = w.matrix * w.solution;
+  multiply(w, muscle, w.solution, w.product);
   w.residual = w.rhs - w.product;
   w.preconditioned = w.residual.cwiseProduct(w.inverseDiagonal);
   w.direction = w.preconditioned;
@@ -81,7 +135,7 @@ void conjugateGradient(ImplicitWorkspace& w, double tolerance, int cap, Integrat
   int iteration = 0;
   double norm = w.residual.norm();
   while (norm > bound && iteration < cap) {
-    w.product.noalias() = w.matrix * w.direction;
+    multiply(w, muscle, w.direction, w.product);
     const double curvature = w.direction.dot(w.product);
     if (!(curvature > 0)) break;  // A not positive along p (or NaN): keep what we have
     const double alpha = rz / curvature;
@@ -224,6 +278,10 @@ class ImplicitIntegrator final : public TimeIntegrator {
     for (Vector* v : {&w->rhs, &w->solution, &w->residual, &w->direction, &w->preconditioned,
                       &w->product, &w->inverseDiagonal, &w->known, &w->guess})
       v->setZero(size);
+    w->fanGradients.assign(settings.fanParticles.size(), btVector3(0, 0, 0));
+    w->fanWeights.assign(settings.fanInverseVolume.size(), 0);
+    if (!settings.enclosedFaces.empty())
+      w->enclosedGradient.assign(settings.particleCount(), btVector3(0, 0, 0));
     w->explicitLimit = stableTimeStep(settings, Integrator::Verlet);
     w->previousVelocities.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
     w->writtenVelocities.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
@@ -236,9 +294,8 @@ class ImplicitIntegrator final : public TimeIntegrator {
   /// w.solution from w.guess.
   static void newtonStep(ImplicitWorkspace& w, const MuscleState& muscle, const Newton& newton,
                          const SimulationParameters& parameters, IntegrationResult& result) {
-    fill(w, *muscle.settings, muscle.positions, newton.diagonal, newton.phi * newton.sigma,
-         parameters.diagonalJacobian);
-    w.product.noalias() = w.matrix * w.solution;
+    fill(w, muscle, newton.diagonal, newton.phi * newton.sigma, parameters.diagonalJacobian);
+    multiply(w, muscle, w.solution, w.product);
     const std::vector<uint32_t>& free = muscle.freeParticles;
     for (size_t k = 0; k < free.size(); ++k)
       for (int j = 0; j < 3; ++j) {
@@ -247,8 +304,8 @@ class ImplicitIntegrator final : public TimeIntegrator {
                    newton.diagonal * w.solution[r];
       }
     w.solution = w.guess;
-    conjugateGradient(w, parameters.solverTolerance, std::max(1, parameters.solverIterations),
-                      result);
+    conjugateGradient(w, muscle, parameters.solverTolerance,
+                      std::max(1, parameters.solverIterations), result);
   }
 
   /// BDF2's v(t−dt′) follows what happened to the velocity advance() last wrote: unchanged, it
@@ -272,11 +329,13 @@ class ImplicitIntegrator final : public TimeIntegrator {
     }
   }
 
-  /// Refills A = diagonal·I + stiffnessScale·K at `positions` (only K's diagonal entries when
-  /// `diagonalOnly`, seed 002's approximation) and the preconditioner D⁻¹.
-  static void fill(ImplicitWorkspace& w, const MuscleSettings& settings,
-                   const std::vector<btVector3>& positions, double diagonal, double stiffnessScale,
-                   bool diagonalOnly) {
+  /// Refills A = diagonal·I + stiffnessScale·K at the muscle's positions (only K's diagonal
+  /// entries when `diagonalOnly`, seed 002's approximation: the volume terms' then go into the
+  /// matrix, else they multiply as rank-one products) and the preconditioner D⁻¹.
+  static void fill(ImplicitWorkspace& w, const MuscleState& muscle, double diagonal,
+                   double stiffnessScale, bool diagonalOnly) {
+    const MuscleSettings& settings = *muscle.settings;
+    const std::vector<btVector3>& positions = muscle.positions;
     double* values = w.matrix.valuePtr();
     std::fill(values, values + w.matrix.nonZeros(), 0.0);
     for (const auto& block : w.diagonalBlocks)
@@ -313,7 +372,30 @@ class ImplicitIntegrator final : public TimeIntegrator {
     for (size_t k = 0; k < w.diagonalBlocks.size(); ++k)
       for (int j = 0; j < 3; ++j)
         w.inverseDiagonal[static_cast<Eigen::Index>(3 * k + j)] =
-            1 / values[w.diagonalBlocks[k][j] + j];
+            values[w.diagonalBlocks[k][j] + j];
+    // The volume terms' diagonal: into the matrix when it keeps only its diagonal, else into D
+    // alone (their products add the rest in multiply()).
+    localVolumeJacobian(settings, positions, w.fanGradients, w.fanWeights);
+    w.enclosedWeight = enclosedVolumeJacobian(settings, positions, w.enclosedGradient);
+    w.volumeScale = diagonalOnly ? 0 : stiffnessScale;
+    const auto addDiagonal = [&](uint32_t particle, const btVector3& g, double weight) {
+      const uint32_t row = w.rows[particle];
+      if (row == kFixedRow) return;
+      for (uint32_t j = 0; j < 3; ++j) {
+        const double entry = stiffnessScale * weight * double(g[j]) * double(g[j]);
+        w.inverseDiagonal[row + j] += entry;
+        if (diagonalOnly) values[w.diagonalBlocks[row / 3][j] + j] += entry;
+      }
+    };
+    for (size_t k = 0; k < w.fanWeights.size(); ++k) {
+      const std::span<const uint32_t> p = fanParticles(settings, k);
+      for (size_t v = 0; v < p.size(); ++v)
+        addDiagonal(p[v], w.fanGradients[settings.fanOffsets[k] + v], w.fanWeights[k]);
+    }
+    if (w.enclosedWeight > 0)
+      for (uint32_t i : muscle.freeParticles)
+        addDiagonal(i, w.enclosedGradient[i], w.enclosedWeight);
+    w.inverseDiagonal = w.inverseDiagonal.cwiseInverse();
   }
 
   Integrator kind_;  ///< ImplicitEuler, ImplicitMidpoint or Bdf2

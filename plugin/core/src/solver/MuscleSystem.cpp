@@ -308,6 +308,10 @@ void MuscleSystem::step() {
   impl_->guardedStep();
 }
 
+void MuscleSystem::setCancelFlag(const std::atomic<bool>* flag) {
+  impl_->cancel = flag;
+}
+
 const StepStats& MuscleSystem::lastStep() const {
   return impl_->stats;
 }

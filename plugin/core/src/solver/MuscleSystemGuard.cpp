@@ -4,12 +4,14 @@
 // and unless the policy is Report it is rolled back and repeated: with half the dt cap and twice
 // the iterations (Retry, up to maxRetries times), or with the failing muscles frozen at their last
 // good state (StopBody, and Retry once its retries are spent). The other muscles always finish the
-// step; nothing throws, so a host's Bullet world keeps running. A muscle whose springs burst
-// while two bones still press some of its particles from opposite sides (trapped: pinched in the
-// last iteration, CollisionPairs.cpp), not NaN nor spread far beyond its size, was torn by the
-// bones, not by the numerics: its state is kept, and later steps fail it only for more burst
-// springs than the trap left. A frozen muscle rides with its bones (their motion over the step)
-// and is pushed out of them, so it never ends inside one.
+// step; nothing throws, so a host's Bullet world keeps running. A step the cancel flag ended
+// (MuscleSystem::setCancelFlag) is not retried: a failed attempt is rolled back (unless Report)
+// and nothing is blamed or frozen. A muscle whose springs burst while two bones still press some of
+// its particles from opposite sides (trapped: pinched in the last iteration, CollisionPairs.cpp),
+// not NaN nor spread far beyond its size, was torn by the bones, not by the numerics: its state is
+// kept, and later steps fail it only for more burst springs than the trap left. A frozen muscle
+// rides with its bones (their motion over the step) and is pushed out of them, so it never ends
+// inside one.
 #include "MuscleSystemGuard.h"
 
 #include <algorithm>
@@ -147,11 +149,29 @@ void MuscleSystem::Impl::guardedStep() {
   size_t newlyFrozen = 0;
   MuscleHandle failedMuscle;
   bool failedNan = false, rolledBack = false, failed = false;
+  // Back to the start of the step; every muscle, frozen ones included (theirs is unchanged).
+  const auto rollBack = [&] {
+    for (uint32_t slot : muscles.order) restoreGoodState(*muscles.states[slot]);
+    for (uint32_t slot : bones.order) {
+      BoneState& bone = *bones.states[slot];
+      bone.last = bone.goodLast;
+      bone.current = bone.goodCurrent;
+      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+    }
+    previousDt = goodPreviousDt;
+    rolledBack = true;
+  };
   while (true) {
     step(size);
     add(spent, stats.timing);
     iterations += stats.iterations;
     if (!stats.nan && !stats.exploded) break;
+    if (stats.interrupted && rollback) {
+      rollBack();
+      for (uint32_t slot : muscles.order) deform(*muscles.states[slot]);  // surfaces as restored
+      stats.nan = stats.exploded = false;
+      break;
+    }
 
     // Attribution: which muscles failed (frozen ones are out of the step and of the blame).
     const bool retry =
@@ -189,16 +209,7 @@ void MuscleSystem::Impl::guardedStep() {
       break;
     }
 
-    // Back to the start of the step; every muscle, frozen ones included (theirs is unchanged).
-    for (uint32_t slot : muscles.order) restoreGoodState(*muscles.states[slot]);
-    for (uint32_t slot : bones.order) {
-      BoneState& bone = *bones.states[slot];
-      bone.last = bone.goodLast;
-      bone.current = bone.goodCurrent;
-      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
-    }
-    previousDt = goodPreviousDt;
-    rolledBack = true;
+    rollBack();
     size = stepSize(retry ? ++retries : 0);
   }
 

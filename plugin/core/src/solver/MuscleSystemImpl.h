@@ -155,6 +155,7 @@ struct MuscleSystem::Impl {
   std::array<double, 2 * kEquilibriumWindow + 1> recentDisplacements{};
   /// Simulated time the running step must advance (MuscleSystem::step(duration)); 0: a pose step.
   btScalar duration = 0;
+  const std::atomic<bool>* cancel = nullptr;  ///< MuscleSystem::setCancelFlag's flag (null: none)
   std::vector<const btCollisionObject*> contactSources;  ///< setContactBodies' bodies
   std::vector<ContactBodyState> contactBodies;  ///< those bodies as the running step sees them
   std::vector<BodyContact> bodyResults;         ///< what each received in the last step

@@ -666,7 +666,8 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     const bool arrived = iteration >= motionIterations;
     // A duration step runs all its iterations.
     const bool ruled = !size.exact && stopRuleMet(arrived, iteration - motionIterations, stepStart);
-    if (iteration >= cap || ruled) {
+    stats.interrupted = cancel && cancel->load();
+    if (iteration >= cap || ruled || stats.interrupted) {
       const Clock::time_point start = Clock::now();
       // A spent budget ends the step where it is: the bones jump the rest of the way.
       if (!arrived) moveBones(1, true);

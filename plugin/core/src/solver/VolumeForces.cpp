@@ -480,6 +480,32 @@ void addEnclosedVolumeForces(const MuscleSettings& settings, std::span<const btV
   }
 }
 
+void localVolumeJacobian(const MuscleSettings& settings, std::span<const btVector3> positions,
+                         std::span<btVector3> gradients, std::span<double> weights) {
+  const double modulus = double(settings.volumeModulus) / 6;
+  for (size_t k = 0; k < settings.fanInverseVolume.size(); ++k) {
+    const std::span<const uint32_t> p = fanParticles(settings, k);
+    const FanGradients g = fanGradients(positions.data(), p);
+    const btScalar rest = settings.fanRestGradient[k];
+    std::copy_n(g.gradients, p.size(), gradients.begin() + settings.fanOffsets[k]);
+    weights[k] = modulus * double(settings.fanInverseVolume[k]) * double(rest) /
+                 double(std::max(g.squared, rest * kMinGradientShare));
+  }
+}
+
+double enclosedVolumeJacobian(const MuscleSettings& settings, std::span<const btVector3> positions,
+                              std::span<btVector3> gradient) {
+  const std::span<const uint32_t> faces = settings.enclosedFaces;
+  if (faces.empty()) return 0;
+  std::fill(gradient.begin(), gradient.end(), btVector3(0, 0, 0));
+  for (size_t k = 0; k < faces.size(); k += 3) {
+    const btVector3 a = positions[faces[k]];
+    const btVector3 normal = (positions[faces[k + 1]] - a).cross(positions[faces[k + 2]] - a) / 6;
+    for (size_t v = 0; v < 3; ++v) gradient[faces[k + v]] += normal;
+  }
+  return double(settings.enclosedModulus) / settings.enclosedRestVolume;
+}
+
 std::vector<btVector3> enclosedRestGradients(const MuscleSettings& settings) {
   const std::span<const uint32_t> faces = settings.enclosedFaces;
   const std::span<const btVector3> x = settings.restPositions;

@@ -99,6 +99,16 @@ RestGradients restTetrahedronGradients(const MuscleSettings& settings, size_t k)
 /// stableTimeStep doubles spring rows the same way.
 void addLocalVolumeStiffness(const MuscleSettings& settings, std::span<btScalar> stiffness);
 
+/// The local volume terms' stiffness −∂F/∂x at `positions` for an implicit step's linear system:
+/// fan k's is w_k·g gᵀ over its particles, g the stacked ∂(6V)/∂x_i written to `gradients` (in
+/// settings.fanParticles' layout) and w_k = K/6·(1/(6·V0))·G0/G (G at least G0/100) to
+/// `weights[k]`: the derivative of addLocalVolumeForces' force through its strain, with G0/G held.
+/// Positive semidefinite: the strain's product with the second derivative of V (indefinite, zero
+/// at rest) is left out, as the springs' compressive geometric stiffness is. The clamp of the
+/// strain is not: a fan beyond it keeps its stiffness in the system. No allocation.
+void localVolumeJacobian(const MuscleSettings& settings, std::span<const btVector3> positions,
+                         std::span<btVector3> gradients, std::span<double> weights);
+
 /// The volume settings.enclosedFaces enclose at `positions` [m³]: the cones of the faces from the
 /// first face's first particle, each in float, summed in double.
 double enclosedParticleVolume(const MuscleSettings& settings, std::span<const btVector3> positions);
@@ -112,6 +122,13 @@ double enclosedParticleVolume(const MuscleSettings& settings, std::span<const bt
 /// fixed order, the same sums for any thread count.
 void addEnclosedVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                              std::span<btVector3> forces);
+
+/// The enclosed-volume term's stiffness −∂F/∂x at `positions` for an implicit step's linear
+/// system, w·g gᵀ: g = ∂V/∂x_i per particle written to `gradient` (zero for a particle on no face)
+/// and w = K/V0 returned (0 without the term); the strain's product with the second derivative of
+/// V left out as in localVolumeJacobian. No allocation.
+double enclosedVolumeJacobian(const MuscleSettings& settings, std::span<const btVector3> positions,
+                              std::span<btVector3> gradient);
 
 /// ∂V/∂x_i of the volume settings.enclosedFaces enclose, at rest, per particle (zero for a
 /// particle on no face) [m²]. Allocates (start-up only).
