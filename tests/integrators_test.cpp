@@ -859,6 +859,7 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
   SimulationParameters parameters;
   parameters.integrator = Integrator::Projective;
   parameters.projectiveHistory = 0;  // the fixed point of the projective step
+  parameters.projectiveContactWeight = 10;
   parameters.persistentContacts = true;
   parameters.stopRule = StopRule::Residual;
   parameters.tolerance = 1e-8;

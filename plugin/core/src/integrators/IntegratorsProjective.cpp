@@ -206,8 +206,21 @@ void twoLoop(StepHistory& h, const ProjectiveFactor& factor, std::vector<btVecto
   }
 }
 
+/// Whether `step` moves some particle farther than the muscle's mean spring rest length: more
+/// than an L-BFGS step may (the pairs learnt from float noise near the equilibrium, or from a
+/// state the contacts keep changing). real-hip-gait tore without the bound (three muscles frozen
+/// at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
+bool movesTooFar(const MuscleState& muscle, const std::vector<btVector3>& step) {
+  const size_t springs = muscle.settings->springs.size();
+  if (springs == 0) return false;
+  const auto limit = static_cast<btScalar>(muscle.restLengthSum / static_cast<double>(springs));
+  return std::any_of(step.begin(), step.end(),
+                     [&](const btVector3& d) { return d.length2() > limit * limit; });
+}
+
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
-/// is replaced by the plain projective one and the history restarts.
+/// or moves a particle too far (movesTooFar) is replaced by the plain projective one and the
+/// history restarts.
 IntegrationResult quasiNewtonStep(MuscleState& muscle, const SimulationParameters& parameters,
                                   ProjectiveWorkspace& w) {
   const std::vector<uint32_t>& free = muscle.freeParticles;
@@ -218,7 +231,7 @@ IntegrationResult quasiNewtonStep(MuscleState& muscle, const SimulationParameter
   recordPair(h, muscle, free, w.factor, w.forces, w.pushed, muscle.bonesMoving ? 0 : size);
   w.solution = w.forces;
   twoLoop(h, w.factor, w.solution, size);
-  if (h.count > 0 && !(dot(w.solution, w.forces) > 0)) {
+  if (h.count > 0 && (!(dot(w.solution, w.forces) > 0) || movesTooFar(muscle, w.solution))) {
     h.restart();
     w.solution = w.forces;
     w.factor.solveInPlace(w.solution.data());
