@@ -550,6 +550,21 @@ TEST(Reliability2, AFixedTimeStepOfZeroOrBelowIsAnInputError) {
   }
 }
 
+TEST(Reliability2, AnL_BfgsHistoryBeyondItsBuffersIsAnInputError) {
+  for (const int pairs : {-1, kMaxProjectiveHistory + 1}) {
+    SimulationParameters parameters;
+    parameters.projectiveHistory = pairs;
+    EXPECT_THROW(MuscleSystem{parameters}, InputError) << pairs;
+    MuscleSystem system;
+    system.addMuscle(testing::makeSpheres({{0, 0, 0}}, {0.001f}), {});
+    system.parameters().projectiveHistory = pairs;
+    EXPECT_THROW(system.step(), InputError) << pairs;
+    system.parameters().projectiveHistory = kMaxProjectiveHistory;
+    system.step();  // usable again once the parameters are
+    EXPECT_EQ(system.lastStep().step, 0u);
+  }
+}
+
 TEST(Reliability2, JunkAndStaleHandlesAreInputErrors) {
   MuscleSystem system;
   const BoneHandle bone = system.addBone(testing::makeBone());

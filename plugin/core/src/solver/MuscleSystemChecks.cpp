@@ -36,6 +36,10 @@ void checkStepParameters(const SimulationParameters& parameters, const char* cal
     throw InputError(
         call, "SimulationParameters::iterations",
         "expected at least 1 iteration per step, got " + std::to_string(parameters.iterations));
+  if (parameters.projectiveHistory < 0 || parameters.projectiveHistory > kMaxProjectiveHistory)
+    throw InputError(call, "SimulationParameters::projectiveHistory",
+                     "expected 0 to " + std::to_string(kMaxProjectiveHistory) + " pairs, got " +
+                         std::to_string(parameters.projectiveHistory));
   if (!(parameters.initialNoise >= 0) || !(parameters.initialNoise <= kMaxCoordinate))
     throw InputError(
         call, "SimulationParameters::initialNoise",
