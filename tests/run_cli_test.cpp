@@ -19,6 +19,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "fibremss/FibreRun.h"
 #include "fibremss/Progress.h"
@@ -323,18 +324,26 @@ TEST(RunCli, AnOutputDirectoryThatCannotBeMadeIsAnError) {
   EXPECT_NE(result.output.find("error"), std::string::npos) << result.output;
 }
 
+/// Starts the CLI with `args` in a child process, its output to /dev/null (its errors too with
+/// `quietErrors`); returns the child's pid, or -1 when fork failed.
+pid_t startCli(const std::vector<std::string>& args, bool quietErrors = false) {
+  const std::string program = cli();
+  std::vector<char*> argv{const_cast<char*>(program.c_str())};
+  for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
+  argv.push_back(nullptr);
+  const pid_t child = fork();
+  if (child != 0) return child;
+  std::freopen("/dev/null", "w", stdout);
+  if (quietErrors) std::freopen("/dev/null", "w", stderr);
+  execv(program.c_str(), argv.data());
+  _exit(127);
+}
+
 TEST(RunCli, InterruptKeepsTheFinishedStepsWithValidFiles) {
   TemporaryDirectory out("fibremss_run_cli_interrupt");
-  const std::string outDir = out.path().string();
-  const std::string program = cli();
-  const pid_t child = fork();
+  const pid_t child = startCli(
+      {"run", "fusiform", "--steps", "100000", "--frame-every", "1", "--out", out.path().string()});
   ASSERT_NE(child, -1);
-  if (child == 0) {
-    std::freopen("/dev/null", "w", stdout);
-    execl(program.c_str(), program.c_str(), "run", "fusiform", "--steps", "100000", "--frame-every",
-          "1", "--out", outDir.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
   // Wait for the first frame, so the signal arrives while steps run (not during preparation).
   const fs::path pvd = out.path() / "run.pvd";
   for (int i = 0; i < 1200 && !fs::exists(pvd); ++i)
@@ -370,18 +379,11 @@ bool catches(pid_t pid, int signal) {
 // running iteration, exit code 143, a summary saying interrupted with no step done, no frame.
 TEST(RunCli, TerminationStopsWithinTheRunningStep) {
   TemporaryDirectory out("fibremss_run_cli_terminate");
-  const std::string outDir = out.path().string();
-  const std::string program = cli();
-  const pid_t child = fork();
+  const pid_t child =
+      startCli({"run", "fusiform", "--steps", "1", "--set", "resolution=10", "--set",
+                "stop=iterations", "--set", "iterations=100000000", "--out", out.path().string()},
+               true);
   ASSERT_NE(child, -1);
-  if (child == 0) {
-    std::freopen("/dev/null", "w", stdout);
-    std::freopen("/dev/null", "w", stderr);
-    execl(program.c_str(), program.c_str(), "run", "fusiform", "--steps", "1", "--set",
-          "resolution=10", "--set", "stop=iterations", "--set", "iterations=100000000", "--out",
-          outDir.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
   bool started = false;
   int status = 0;
   pid_t ended = 0;

@@ -17,6 +17,7 @@
 #include "FrameWriter.h"
 #include "ReportScaling.h"
 #include "ReportVerdict.h"
+#include "SummaryFields.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleMetrics.h"
@@ -40,11 +41,6 @@ std::string field(const nlohmann::json& run, const char* key) {
   return it == run.end() ? "—" : cell(*it);
 }
 
-std::string text(const nlohmann::json& run, const char* key) {
-  auto it = run.find(key);
-  return it != run.end() && it->is_string() ? it->get<std::string>() : "";
-}
-
 std::string joined(const nlohmann::json& list, const char* separator) {
   std::string out;
   if (!list.is_array()) return out;
@@ -53,11 +49,6 @@ std::string joined(const nlohmann::json& list, const char* separator) {
     out += item.is_string() ? item.get<std::string>() : item.dump();
   }
   return out;
-}
-
-double number(const nlohmann::json& run, const char* key) {
-  auto it = run.find(key);
-  return it != run.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
 /// " (k/N poses)" when the run's RMS `rms` ("rms_to_reference", "rms_to_self_reference")

@@ -7,6 +7,7 @@
 #include <map>
 #include <sstream>
 
+#include "SummaryFields.h"
 #include "fibremss/Compare.h"
 #include "fibremss/Scene.h"
 #include "fibremss/Stability.h"
@@ -47,16 +48,6 @@ std::string format(const char* pattern, double value) {
   char text[32];
   std::snprintf(text, sizeof text, pattern, value);
   return text;
-}
-
-double number(const nlohmann::json& run, const char* key) {
-  auto it = run.find(key);
-  return it != run.end() && it->is_number() ? it->get<double>() : NAN;
-}
-
-std::string text(const nlohmann::json& run, const char* key) {
-  auto it = run.find(key);
-  return it != run.end() && it->is_string() ? it->get<std::string>() : "";
 }
 
 bool failed(const nlohmann::json& run) {

@@ -10,17 +10,10 @@
 #include <tuple>
 #include <vector>
 
+#include "SummaryFields.h"
+
 namespace fibremss {
 namespace {
-
-double number(const nlohmann::json& object, const char* key) {
-  const auto it = object.find(key);
-  return it != object.end() && it->is_number() ? it->get<double>() : NAN;
-}
-
-std::string text(const nlohmann::json& run, const char* key) {
-  return run.value(key, std::string());
-}
 
 /// The N of a "threads=N" item, or -1.
 int threadsItem(const std::string& item) {

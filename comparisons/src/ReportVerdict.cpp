@@ -8,18 +8,10 @@
 #include <tuple>
 #include <vector>
 
+#include "SummaryFields.h"
+
 namespace fibremss {
 namespace {
-
-double number(const nlohmann::json& object, const char* key) {
-  const auto it = object.find(key);
-  return it != object.end() && it->is_number() ? it->get<double>() : NAN;
-}
-
-std::string text(const nlohmann::json& run, const char* key) {
-  const auto it = run.find(key);
-  return it != run.end() && it->is_string() ? it->get<std::string>() : "";
-}
 
 /// 3 significant digits, "—" where not finite.
 std::string cell(double value) {

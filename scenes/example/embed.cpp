@@ -68,6 +68,8 @@ int main(int argc, char** argv) try {
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
   fibremss::SimulationParameters parameters = scene.simulation;
+  // Dynamic: a time integrator (the default, projective, solves each step's equilibrium).
+  if (dynamic) parameters.integrator = fibremss::Integrator::Verlet;
   parameters.iterations = 20;  // per world step; enough for a small muscle
   fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
   world.setGravity(btVector3(0, btScalar(-9.81), 0));

@@ -30,6 +30,8 @@ enum class MuscleTime : uint8_t {
   /// every muscle's springs and volume term; fixed, whatever the stop rule and adaptiveTimeStep
   /// say; bones move over all k): muscles and rigid bodies share one
   /// clock, and contact bodies receive exactly the impulses of the step (momentum conserved).
+  /// Needs a time integrator (SimulationParameters::integrator = Verlet, say): the default,
+  /// projective, solves each step's equilibrium and has no inertia.
   Dynamic,
 };
 

@@ -1,0 +1,22 @@
+#pragma once
+// A summary.json's fields as the reports read them (internal to comparisons/src): a missing or
+// mistyped field reads as NaN or "", so that summaries of older versions still read.
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace fibremss {
+
+/// The number at `key` of `object`, or NaN.
+inline double number(const nlohmann::json& object, const char* key) {
+  const auto it = object.find(key);
+  return it != object.end() && it->is_number() ? it->get<double>() : NAN;
+}
+
+/// The string at `key` of `object`, or "".
+inline std::string text(const nlohmann::json& object, const char* key) {
+  const auto it = object.find(key);
+  return it != object.end() && it->is_string() ? it->get<std::string>() : "";
+}
+
+}  // namespace fibremss
