@@ -57,7 +57,7 @@ struct StepHistory {
   std::vector<std::vector<btVector3>> steps;     ///< s of each pair [m]
   std::vector<std::vector<btVector3>> changes;   ///< y of each pair [N]
   double curvature[kMaxProjectiveHistory] = {};  ///< y·s of each pair [N·m]
-  double alpha[kMaxProjectiveHistory] = {};      ///< the two-loop recursion's coefficients [1/m]
+  double alpha[kMaxProjectiveHistory] = {};      ///< the two-loop recursion's coefficients [1]
   int size = 0;                                  ///< the ring's length (projectiveHistory)
   int count = 0;                                 ///< pairs held
   int newest = -1;                               ///< ring index of the newest pair
