@@ -156,37 +156,42 @@ void registerAll() {
       ->Unit(benchmark::kMicrosecond);
 }
 
-/// Each kernel once (after two warm-up iterations), then one whole step of kIterationsPerStep
-/// iterations (its output included), each between a zeroing and a named dump of callgrind's
-/// counters.
-int callgrindKernels(int resolution) {
-  BenchScene scene(resolution, 1);
+/// Two iterations of every kernel, before any is counted.
+void warmUp(BenchScene& scene) {
   for (int warm = 0; warm < 2; ++warm)
     for (Part part : kParts) scene.run(part);
+}
+
+/// One whole step of kIterationsPerStep iterations (its output included), counted as `name`.
+void countStep(BenchScene& scene, const char* name) {
+  scene.system().parameters().iterations = kIterationsPerStep;
+  scene.system().parameters().stopRule = StopRule::Iterations;
+  CALLGRIND_ZERO_STATS;
+  scene.stepPose();
+  CALLGRIND_DUMP_STATS_AT(name);
+}
+
+/// Each kernel once (after two warm-up iterations), then one whole step of kIterationsPerStep
+/// iterations, each between a zeroing and a named dump of callgrind's counters; then the default
+/// solver's advance and step, its cost per iteration against Verlet's.
+int callgrindKernels(int resolution) {
+  BenchScene scene(resolution, 1);
+  warmUp(scene);
   CALLGRIND_START_INSTRUMENTATION;
   for (Part part : kParts) {
     CALLGRIND_ZERO_STATS;
     scene.run(part);
     CALLGRIND_DUMP_STATS_AT(partName(part));
   }
-  scene.system().parameters().iterations = kIterationsPerStep;
-  scene.system().parameters().stopRule = StopRule::Iterations;
-  CALLGRIND_ZERO_STATS;
-  scene.stepPose();
-  CALLGRIND_DUMP_STATS_AT("step-10-iterations");
+  countStep(scene, "step-10-iterations");
   CALLGRIND_STOP_INSTRUMENTATION;
-  // The default solver's advance and step: its cost per iteration against Verlet's above.
   BenchScene solver(resolution, 1, SimulationParameters{}.integrator);
-  for (int warm = 0; warm < 2; ++warm)
-    for (Part part : kParts) solver.run(part);
-  solver.system().parameters().iterations = kIterationsPerStep;
+  warmUp(solver);
   CALLGRIND_START_INSTRUMENTATION;
   CALLGRIND_ZERO_STATS;
   solver.run(Part::Integration);
   CALLGRIND_DUMP_STATS_AT("default-solver-integration");
-  CALLGRIND_ZERO_STATS;
-  solver.stepPose();
-  CALLGRIND_DUMP_STATS_AT("default-solver-step-10-iterations");
+  countStep(solver, "default-solver-step-10-iterations");
   CALLGRIND_STOP_INSTRUMENTATION;
   return 0;
 }

@@ -139,6 +139,13 @@ enum class StopRule : uint8_t {
   Residual,
 };
 
+/// The iterations per step a solver needs by default: 20 for the projective solver (thigh13
+/// R=40 with no rollback and a force residual of 0.035 mm RMS; docs/performance.md, "The default
+/// solver"), 70 for the time integrators (the thesis' count).
+constexpr int defaultIterations(Integrator integrator) {
+  return integrator == Integrator::Projective ? 20 : 70;
+}
+
 /// The most pairs SimulationParameters::projectiveHistory may keep [iterations].
 constexpr int kMaxProjectiveHistory = 16;
 
@@ -151,8 +158,8 @@ struct SimulationParameters {
   btScalar timeStep = 1e-3;      ///< fixed dt, or the upper clamp of the adaptive dt [s]
   btScalar minTimeStep = 1e-5;   ///< lower clamp of the adaptive dt [s]
   StopRule stopRule = StopRule::Iterations;  ///< when a step's iterations end
-  /// Iterations per step (the cap for the other rules): defaultIterations(integrator).
-  int iterations = 20;
+  /// Iterations per step (the cap for the other rules): the default solver's default count.
+  int iterations = defaultIterations(Integrator::Projective);
   btScalar epsilon = 1e-6;           ///< convergence threshold: mean displacement [m]
   btScalar budgetMs = 10;            ///< time budget per step [ms]
   btScalar deviationEpsilon = 1e-3;  ///< threshold of the spring-deviation stop rule (ratio)
@@ -230,13 +237,6 @@ struct SimulationParameters {
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap
 };
-
-/// The iterations per step a solver needs by default: 20 for the projective solver (thigh13
-/// R=40 with no rollback and a force residual of 0.035 mm RMS; docs/performance.md, "The default
-/// solver"), 70 for the time integrators (the thesis' count).
-constexpr int defaultIterations(Integrator integrator) {
-  return integrator == Integrator::Projective ? 20 : 70;
-}
 
 const char* toString(SpringLayout layout);
 const char* toString(SpringStiffness rule);
