@@ -292,6 +292,24 @@ TEST(DefaultSolver, TurnsTheTwistedCylindersSectionsInItsIterations) {
   EXPECT_LE(std::abs(lbfgs.analytic.volumeChangePct), 1);
 }
 
+// Springs in series: a tendon 20 times as stiff as the belly takes a twentieth of its strain, so
+// the belly of a stretched cylinder with tendons stretches more than the whole one without.
+TEST(Tendons, TakeLittleOfTheStretchAndLeaveItToTheBelly) {
+  const RunMetrics plain = cylinderRun("cylinder-stretch", {});
+  const RunMetrics tendons =
+      cylinderRun("cylinder-stretch", {"tendon_fraction=0.1", "tendon_stiffness=20"});
+  ASSERT_FALSE(plain.nan || plain.exploded || tendons.nan || tendons.exploded);
+  ASSERT_EQ(plain.muscles.size(), 1u);
+  ASSERT_EQ(tendons.muscles.size(), 1u);
+  EXPECT_TRUE(std::isnan(plain.muscles[0].worstTendonStretch));  // the scene declares none
+  const double belly = tendons.muscles[0].worstBellyStretch - 1;
+  const double tendon = tendons.muscles[0].worstTendonStretch - 1;
+  RecordProperty("belly_strain", std::to_string(belly));
+  RecordProperty("tendon_strain", std::to_string(tendon));
+  EXPECT_LT(tendon, 0.25 * belly);
+  EXPECT_GT(belly, plain.muscles[0].worstBellyStretch - 1);
+}
+
 // With the default integrator and with the implicit ones, whose linear systems multiply the
 // volume terms' stiffness: every step after the first (which builds an implicit workspace).
 TEST(VolumeTerm, StepAllocatesNothing) {

@@ -105,7 +105,7 @@ TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
   const std::vector<MuscleResults> both = {results, other};
   EXPECT_EQ(worstVolumeMuscle(both)->name, "other");
   const std::string table = muscleTable(both);
-  EXPECT_NE(table.find("| other | -3.00 | -4.00 (1) | left 0.90, right 0.10 | left 9, right 9"),
+  EXPECT_NE(table.find("| other | -3.00 | -4.00 (1) | left 0.90, right 0.10 | – | left 9, right 9"),
             std::string::npos)
       << table;
 }
@@ -125,16 +125,21 @@ TEST(MuscleMetrics, SeriesCsvAndJsonCarryEveryRow) {
   a.solverContacts = 41;
   a.measures.residualRmsMm = 0.015;
   a.measures.residualMaxMm = 0.25;
+  a.measures.maxBellyStretch = 1.0625;
+  a.measures.maxTendonStretch = 1.015;
+  a.measures.sphereDepthMm = 0.5;
   SeriesRow b = a;
   b.muscle = "vastus";
   b.measures = MuscleStep{};  // a step not measured (NaN): its fields left empty
   b.measures.finite = false;
-  EXPECT_EQ(seriesCsv({a, b}),
-            "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
-            "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
-            "residual_max_mm\n"
-            "3,2,22.5,0.125,\"rectus, femoris\",-1.25,101.5,1.0625,2.25,7,41,0.015,0.25\n"
-            "3,2,22.5,0.125,vastus,,,,,0,41,,\n");
+  EXPECT_EQ(
+      seriesCsv({a, b}),
+      "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
+      "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
+      "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm\n"
+      "3,2,22.5,0.125,\"rectus, femoris\",-1.25,101.5,1.0625,2.25,7,41,0.015,0.25,1.0625,1.015,"
+      "0.5\n"
+      "3,2,22.5,0.125,vastus,,,,,0,41,,,,,\n");
   const nlohmann::json json = seriesJson({a, b});
   ASSERT_EQ(json.size(), 2u);
   EXPECT_EQ(json[0].at("max_penetration_mm"), 2.25);

@@ -496,12 +496,19 @@ TEST(PushOut, PointsDeeperThanTheMinimumLeaveAlongTheNormal) {
                                    {0.5f, 0.5f, 0.96f},   // 0.04 deep: shallower than 0.05
                                    {0.5f, 0.5f, 1.5f},    // outside
                                    {0.08f, 0.5f, 0.3f}};  // 0.08 from the face x = 0: moves
-  const size_t moved = detail::pushOutOf(points, box, 0.05f, 0.01f);
-  EXPECT_EQ(moved, 2u);
+  const std::vector<btVector3> before = points;
+  const detail::PushedOut moved = detail::pushOutOf(points, box, 0.05f, 0.01f);
+  EXPECT_EQ(moved.count, 2u);
+  EXPECT_NEAR(moved.deepest, 0.1f, 1e-5f);
   EXPECT_LT(points[0].distance(btVector3(0.5f, 0.5f, 1.01f)), 1e-5f);
   EXPECT_EQ(points[1], btVector3(0.5f, 0.5f, 0.96f));
   EXPECT_EQ(points[2], btVector3(0.5f, 0.5f, 1.5f));
   EXPECT_LT(points[3].distance(btVector3(-0.01f, 0.5f, 0.3f)), 1e-5f);
+  // A shallow point may stay only when the caller lets it: here none may.
+  points = before;
+  const auto none = [](const btVector3&) { return false; };
+  EXPECT_EQ(detail::pushOutOf(points, box, 0.05f, 0.01f, none).count, 3u);
+  EXPECT_LT(points[1].distance(btVector3(0.5f, 0.5f, 1.01f)), 1e-5f);
 }
 
 TEST(Preparation, MassAndDamping) {
@@ -613,6 +620,88 @@ TEST(Preparation, FreeParticlesInsideABoneArePushedOutAndFixed) {
     reported |= repair.find(std::to_string(deep) + " free particles inside bone 'cyst'") !=
                 std::string::npos;
   EXPECT_TRUE(reported);
+}
+
+TEST(Preparation, FreeParticlesInsideTheBoneOfADeclaredAreaButOutsideItArePushedOut) {
+  // The cyst is the bone of the origin area, but the area lies at the muscle's other end, far
+  // from it (the box's corners at x = 0; the cyst is nearer those at x = 0.1): particles inside
+  // the cyst are not in the area, so nothing may keep them inside, however shallow.
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 20);
+  const BoneInput cyst = sphereBone("cyst", {0.075f, 0, 0}, 0.009f);
+  DeclaredAttachment origin{"origin", {}, {0}};
+  for (uint32_t v = 0; v < input.surface.vertices.size(); ++v)
+    if (input.surface.vertices[v].x() < 0.001f) origin.surfaceVertices.push_back(v);
+  ASSERT_FALSE(origin.surfaceVertices.empty());
+  const MeshDistance distance(cyst.mesh);
+  const PreparedScene alone = prepareOne(input);
+  input.attachments = {origin};
+  size_t inside = 0, shallow = 0;  // shallow: within the attachment distance of its surface
+  for (const btVector3& p : alone.muscles[0]->restPositions) {
+    const btScalar d = distance.signedDistance(p);
+    inside += d < 0;
+    shallow += d < 0 && d >= -input.parameters.attachmentDistance;
+  }
+  ASSERT_GT(shallow, 0u);
+  ASSERT_GT(inside, shallow);
+
+  const PreparedScene scene = prepareScene({cyst}, {input}, 1);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  size_t freeInside = 0;
+  for (uint32_t i = 0; i < muscle.particleCount(); ++i)
+    freeInside += !muscle.isFixed(i) && distance.signedDistance(muscle.restPositions[i]) < 0;
+  EXPECT_EQ(freeInside, 0u);
+  EXPECT_EQ(scene.report.muscles[0].pushedOutOfBones[0], inside);
+  EXPECT_GT(scene.report.muscles[0].pushedOutOfBonesDepth[0], 0.004f);  // deeper than fixing
+  EXPECT_EQ(warnedCount(scene, "particles lie inside bone 'cyst'"), 0u);
+}
+
+/// Arc length of each particle of fibre f from its first particle [m].
+std::vector<btScalar> arcAlong(const MuscleSettings& muscle, size_t f) {
+  std::vector<btScalar> arc{0};
+  for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k)
+    arc.push_back(arc.back() + muscle.restPositions[muscle.fibreParticles[k]].distance(
+                                   muscle.restPositions[muscle.fibreParticles[k - 1]]));
+  return arc;
+}
+
+TEST(Preparation, TendonsAreTheFreeParticlesWithinTheirFractionBeyondTheAttachments) {
+  MuscleInput input = gridMuscle("m", 0, 0.1f, 0, 0.01f, 3, 3, 43);
+  const PreparedScene plain = prepareScene(endBones(), {input}, 1);
+  input.parameters.tendonFraction = 0.1f;
+  input.parameters.tendonStiffness = 20;
+  const PreparedScene scene = prepareScene(endBones(), {input}, 1);
+  const MuscleSettings& muscle = *scene.muscles[0];
+  size_t tendon = 0;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+    const std::vector<btScalar> arc = arcAlong(muscle, f);
+    // The fibre's attached runs at its two ends, then 10 % of its length beyond each.
+    size_t first = 0, last = arc.size() - 1;
+    const uint32_t* p = muscle.fibreParticles.data() + muscle.fibreOffsets[f];
+    while (muscle.isFixed(p[first])) ++first;
+    while (muscle.isFixed(p[last])) --last;
+    ASSERT_GT(first, 0u);
+    ASSERT_LT(last, arc.size() - 1);
+    const btScalar length = 0.1f * arc.back();
+    for (size_t k = first; k <= last; ++k) {
+      const bool expected = arc[k] - arc[first - 1] <= length || arc[last + 1] - arc[k] <= length;
+      EXPECT_EQ(muscle.isTendon(p[k]), expected) << "fibre " << f << " particle " << k;
+      tendon += expected;
+    }
+  }
+  EXPECT_EQ(scene.report.muscles[0].tendonParticles, tendon);
+  EXPECT_GT(tendon, 0u);
+  // Springs between tendon or fixed particles are 20 times as stiff; the others unchanged.
+  ASSERT_EQ(muscle.springs.size(), plain.muscles[0]->springs.size());
+  size_t stiffened = 0;
+  for (size_t s = 0; s < muscle.springs.size(); ++s) {
+    const Spring& spring = muscle.springs[s];
+    const bool inTendon = (muscle.isTendon(spring.a) || muscle.isFixed(spring.a)) &&
+                          (muscle.isTendon(spring.b) || muscle.isFixed(spring.b));
+    EXPECT_NEAR(spring.stiffness, plain.muscles[0]->springs[s].stiffness * (inTendon ? 20 : 1),
+                1e-4f * spring.stiffness);
+    stiffened += inTendon;
+  }
+  EXPECT_EQ(scene.report.muscles[0].tendonSprings, stiffened);
 }
 
 TEST(Preparation, BoundaryParticlesAndRadiiFromSurfaceVertices) {

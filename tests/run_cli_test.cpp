@@ -158,7 +158,7 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   EXPECT_EQ(line,
             "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
             "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
-            "residual_max_mm");
+            "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm");
   const nlohmann::json& series = summary.at("series");
   ASSERT_EQ(series.size(), 2 * summary.at("muscles").size());
   for (size_t row = 0; row < series.size(); ++row) {
@@ -166,7 +166,7 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     std::vector<std::string> fields;
     std::stringstream split(line);
     for (std::string field; std::getline(split, field, ',');) fields.push_back(field);
-    ASSERT_EQ(fields.size(), 13u) << line;
+    ASSERT_EQ(fields.size(), 16u) << line;
     const nlohmann::json& json = series[row];
     EXPECT_EQ(std::stoi(fields[0]), json.at("step").get<int>());
     EXPECT_NEAR(std::stod(fields[3]), times[size_t(json.at("step").get<int>())], 1e-9);

@@ -69,13 +69,17 @@ void writeRestState(const std::string& directory, const PreparedScene& prepared,
     PolyData particles;
     particles.points = muscle->restPositions;
     particles.pointsAsVertices = true;
-    std::vector<float> radius, fixed, boundary;
+    std::vector<float> radius, fixed, boundary, tendon;
     for (size_t i = 0; i < muscle->particleCount(); ++i) {
       radius.push_back(float(muscle->radii[i] * scale));
       fixed.push_back(muscle->isFixed(uint32_t(i)) ? 1.f : 0.f);
       boundary.push_back(muscle->isBoundary(uint32_t(i)) ? 1.f : 0.f);
+      tendon.push_back(muscle->isTendon(uint32_t(i)) ? 1.f : 0.f);
     }
-    particles.pointData = {{"radius", 1, radius}, {"fixed", 1, fixed}, {"boundary", 1, boundary}};
+    particles.pointData = {{"radius", 1, radius},
+                           {"fixed", 1, fixed},
+                           {"boundary", 1, boundary},
+                           {"tendon", 1, tendon}};
     add(stem + "-particles.vtp", particles);
   }
   for (size_t b = 0; b < prepared.bones.size(); ++b) {
@@ -111,6 +115,15 @@ std::string describeFixed(const nlohmann::ordered_json& byBone) {
   return text.empty() ? "none" : text;
 }
 
+/// Per bone that particles were pushed out of, by name: how deep the deepest lay [mm].
+template <typename Name>
+nlohmann::ordered_json deepestByName(const MusclePreparationReport& report, Name name) {
+  nlohmann::ordered_json object = nlohmann::ordered_json::object();
+  for (size_t b = 0; b < report.pushedOutOfBones.size(); ++b)
+    if (report.pushedOutOfBones[b] > 0) object[name(b)] = report.pushedOutOfBonesDepth[b] * 1000;
+  return object;
+}
+
 /// What preparation found and repaired, per muscle, by name (the JSON "preparation" object).
 nlohmann::ordered_json preparationReport(const PreparationReport& report,
                                          const LoadedScene& scene) {
@@ -131,8 +144,11 @@ nlohmann::ordered_json preparationReport(const PreparationReport& report,
          {"merged_particles", r.mergedParticles},
          {"merge_distance_mm", r.mergeDistance * 1000},
          {"shortest_spring_mm", r.shortestSpring * 1000},
+         {"tendon_particles", r.tendonParticles},
+         {"tendon_springs", r.tendonSprings},
          {"pushed_out_of_muscles", byName(r.pushedOutOfMuscles, muscleName)},
          {"pushed_out_of_bones", byName(r.pushedOutOfBones, boneName)},
+         {"pushed_out_of_bones_deepest_mm", deepestByName(r, boneName)},
          {"surface_vertices_pushed_out", byName(r.surfaceVerticesPushedOut, boneName)}});
   }
   return {{"repairs", report.repairs}, {"muscles", muscles}};

@@ -226,6 +226,7 @@ class MuscleLedger {
     if (step.finite) {
       const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
       step.boneContacts = spheres.penetrating;
+      step.sphereDepthMm = spheres.maxMm;
       spherePenetration = combine(spherePenetration, spheres);
     }
     return step;

@@ -38,17 +38,37 @@ std::string perBone(const std::vector<std::string>& bones, const std::vector<Val
   return text.empty() ? "none" : text;
 }
 
-/// Largest current / rest length of the muscle's fibre segments (NaN without fibres).
-double maxFibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions) {
-  double stretch = MuscleStep::kNone;
+/// Largest current / rest length of the muscle's fibre segments in its belly and in its tendons
+/// (NaN where it has none).
+void maxFibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                     MuscleStep& step) {
+  const auto inTendon = [&](uint32_t p) { return muscle.flags[p] & (kTendon | kFixed); };
   for (size_t f = 0; f < muscle.fibreCount(); ++f)
     for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k) {
       const uint32_t a = muscle.fibreParticles[k - 1], b = muscle.fibreParticles[k];
       const double rest = muscle.restPositions[a].distance(muscle.restPositions[b]);
       const double ratio = rest > 0 ? positions[a].distance(positions[b]) / rest : 1.0;
+      double& stretch = inTendon(a) && inTendon(b) && !(muscle.isFixed(a) && muscle.isFixed(b))
+                            ? step.maxTendonStretch
+                            : step.maxBellyStretch;
       if (!(ratio <= stretch)) stretch = ratio;
     }
-  return stretch;
+  step.maxFibreStretch = std::isnan(step.maxTendonStretch)
+                             ? step.maxBellyStretch
+                             : std::max(step.maxBellyStretch, step.maxTendonStretch);
+}
+
+/// "1.25", or "–" for NaN (not measured, or nothing to measure).
+std::string twoDecimals(double value) {
+  if (std::isnan(value)) return "–";
+  char text[32];
+  std::snprintf(text, sizeof text, "%.2f", value);
+  return text;
+}
+
+/// The larger of two values where NaN means none.
+double largest(double a, double b) {
+  return !(b <= a) ? b : a;
 }
 
 /// A CSV field: the number, or empty when not finite.
@@ -80,7 +100,7 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
   std::string csv =
       "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
       "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
-      "residual_max_mm\n";
+      "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm\n";
   for (const SeriesRow& row : rows) {
     const MuscleStep& m = row.measures;
     csv += std::to_string(row.step) + "," + std::to_string(row.pose) + "," +
@@ -89,7 +109,9 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
            csvNumber(m.meanFibreLengthMm, "%.6g") + "," + csvNumber(m.maxFibreStretch, "%.6g") +
            "," + csvNumber(m.maxPenetrationMm(), "%.6g") + "," + std::to_string(m.boneContacts) +
            "," + std::to_string(row.solverContacts) + "," + csvNumber(m.residualRmsMm, "%.6g") +
-           "," + csvNumber(m.residualMaxMm, "%.6g") + "\n";
+           "," + csvNumber(m.residualMaxMm, "%.6g") + "," + csvNumber(m.maxBellyStretch, "%.6g") +
+           "," + csvNumber(m.maxTendonStretch, "%.6g") + "," + csvNumber(m.sphereDepthMm, "%.6g") +
+           "\n";
   }
   return csv;
 }
@@ -110,7 +132,10 @@ nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
                      {"bone_contacts", m.boneContacts},
                      {"solver_contacts", row.solverContacts},
                      {"residual_rms_mm", number(m.residualRmsMm)},
-                     {"residual_max_mm", number(m.residualMaxMm)}});
+                     {"residual_max_mm", number(m.residualMaxMm)},
+                     {"max_belly_stretch", number(m.maxBellyStretch)},
+                     {"max_tendon_stretch", number(m.maxTendonStretch)},
+                     {"max_sphere_depth_mm", number(m.sphereDepthMm)}});
   }
   return array;
 }
@@ -136,6 +161,9 @@ std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
     row.solverContacts = o.value("solver_contacts", row.solverContacts);
     m.residualRmsMm = numberAt(o, "residual_rms_mm", m.residualRmsMm);
     m.residualMaxMm = numberAt(o, "residual_max_mm", m.residualMaxMm);
+    m.maxBellyStretch = numberAt(o, "max_belly_stretch", m.maxBellyStretch);
+    m.maxTendonStretch = numberAt(o, "max_tendon_stretch", m.maxTendonStretch);
+    m.sphereDepthMm = numberAt(o, "max_sphere_depth_mm", m.sphereDepthMm);
     rows.push_back(std::move(row));
   }
   return rows;
@@ -155,7 +183,7 @@ MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3
           measurePenetration(surface, bones.subspan(b, 1), boneTransforms.subspan(b, 1)).maxMm);
   }
   step.meanFibreLengthMm = 1000.0 * meanFibreLength(muscle, positions);
-  step.maxFibreStretch = maxFibreStretch(muscle, positions);
+  maxFibreStretch(muscle, positions, step);
   if (!muscle.springs.empty()) {
     step.worstSpringRatio = worstSpringRatio(muscle.springs, positions);
     step.springDeviationRatio = springDeviationRatio(muscle.springs, positions);
@@ -182,11 +210,13 @@ void MuscleResults::add(int step, const MuscleStep& measures) {
   }
   for (size_t b = 0; b < measures.penetrationMm.size() && b < maxPenetrationMm.size(); ++b)
     maxPenetrationMm[b] = std::max(maxPenetrationMm[b], measures.penetrationMm[b]);
+  maxSphereDepthMm = largest(maxSphereDepthMm, measures.sphereDepthMm);
   fibreLengthLastMm = measures.meanFibreLengthMm;
   fibreLengthMinMm = first ? fibreLengthLastMm : std::min(fibreLengthMinMm, fibreLengthLastMm);
   fibreLengthMaxMm = first ? fibreLengthLastMm : std::max(fibreLengthMaxMm, fibreLengthLastMm);
-  if (!(measures.worstSpringRatio <= worstSpringRatio))
-    worstSpringRatio = measures.worstSpringRatio;
+  worstSpringRatio = largest(worstSpringRatio, measures.worstSpringRatio);
+  worstBellyStretch = largest(worstBellyStretch, measures.maxBellyStretch);
+  worstTendonStretch = largest(worstTendonStretch, measures.maxTendonStretch);
   springDeviationRatio = measures.springDeviationRatio;
 }
 
@@ -202,6 +232,7 @@ nlohmann::json toJson(const MuscleResults& r) {
             {"worst", number(r.worstVolumeChangePct)},
             {"worst_step", r.worstVolumeStep}}},
           {"max_penetration_mm", penetration},
+          {"max_sphere_depth_mm", number(r.maxSphereDepthMm)},
           {"fixed_particles", fixed},
           {"frozen", r.frozen},
           {"frozen_step", r.frozenStep},
@@ -213,6 +244,8 @@ nlohmann::json toJson(const MuscleResults& r) {
             {"min", number(r.fibreLengthMinMm)},
             {"max", number(r.fibreLengthMaxMm)}}},
           {"worst_spring_ratio", number(r.worstSpringRatio)},
+          {"worst_fibre_stretch",
+           {{"belly", number(r.worstBellyStretch)}, {"tendon", number(r.worstTendonStretch)}}},
           {"spring_deviation_ratio", number(r.springDeviationRatio)},
           {"last_step", r.lastStep}};
 }
@@ -230,6 +263,7 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
       r.bones.push_back(it.key());
       r.maxPenetrationMm.push_back(it->is_number() ? it->get<double>() : MuscleResults::kNone);
     }
+  r.maxSphereDepthMm = numberAt(o, "max_sphere_depth_mm", r.maxSphereDepthMm);
   if (auto f = o.find("fixed_particles"); f != o.end() && f->is_object())
     for (const std::string& bone : r.bones) r.fixedParticles.push_back(f->value(bone, size_t(0)));
   r.frozen = o.value("frozen", r.frozen);
@@ -244,26 +278,35 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
   }
   r.worstSpringRatio = numberAt(o, "worst_spring_ratio", r.worstSpringRatio);
   r.springDeviationRatio = numberAt(o, "spring_deviation_ratio", r.springDeviationRatio);
+  if (auto s = o.find("worst_fibre_stretch"); s != o.end() && s->is_object()) {
+    r.worstBellyStretch = numberAt(*s, "belly", r.worstBellyStretch);
+    r.worstTendonStretch = numberAt(*s, "tendon", r.worstTendonStretch);
+  }
   r.lastStep = o.value("last_step", r.lastStep);
   return r;
 }
 
 std::string muscleTable(const std::vector<MuscleResults>& muscles) {
   std::string table =
-      "| muscle | volume last % | volume worst % (step) | max penetration mm | fixed particles | "
-      "mean fibre mm rest / last / min / max | worst spring l/L0 | rollbacks | frozen |\n"
-      "|---|---|---|---|---|---|---|---|---|\n";
+      "| muscle | volume last % | volume worst % (step) | max penetration mm | max sphere depth mm "
+      "| fixed particles | "
+      "mean fibre mm rest / last / min / max | worst spring l/L0 | worst fibre stretch belly / "
+      "tendon | rollbacks | frozen |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|\n";
   char line[512];
   for (const MuscleResults& m : muscles) {
     const std::string frozen =
         m.frozen ? "at step " + std::to_string(m.frozenStep) + " (" + m.frozenCause + ")" : "no";
     std::snprintf(
         line, sizeof line,
-        "| %s | %.2f | %.2f (%d) | %s | %s | %.1f / %.1f / %.1f / %.1f | %.2f | %d | %s |\n",
+        "| %s | %.2f | %.2f (%d) | %s | %s | %s | %.1f / %.1f / %.1f / %.1f | %.2f | %s / %s | %d "
+        "| %s |\n",
         m.name.c_str(), m.volumeChangePct, m.worstVolumeChangePct, m.worstVolumeStep,
         perBone(m.bones, m.maxPenetrationMm, "%.2f", -1.0).c_str(),
+        twoDecimals(m.maxSphereDepthMm).c_str(),
         perBone(m.bones, m.fixedParticles, "%zu", size_t(0)).c_str(), m.fibreLengthRestMm,
         m.fibreLengthLastMm, m.fibreLengthMinMm, m.fibreLengthMaxMm, m.worstSpringRatio,
+        twoDecimals(m.worstBellyStretch).c_str(), twoDecimals(m.worstTendonStretch).c_str(),
         m.rollbacks, frozen.c_str());
     table += line;
   }

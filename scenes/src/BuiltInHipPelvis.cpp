@@ -95,6 +95,7 @@ Json hipPelvisScene() {
   for (Json& muscle : scene["muscles"]) {
     muscle["fibre_count"] = 64;
     muscle["resolution"] = 18;
+    muscle.erase("tendon_fraction");  // anatomy: the default tendons
   }
   return scene;
 }

@@ -26,6 +26,9 @@ namespace fs = std::filesystem;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kDegrees = M_PI / 180;
+/// A scene's muscles have tendons unless they say otherwise: 10 % of each fibre at each
+/// attached end (MuscleParameters::tendonFraction).
+constexpr double kTendonFraction = 0.1;
 
 /// Every name an enum's toString() knows, in enum order (follows additions to Parameters.h).
 template <typename Enum>
@@ -237,6 +240,10 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
   input.parameters.attachmentDistance =
       btScalar(muscle.number("attachment_distance", 0.004 / reader.scale, 0, kInf) * reader.scale);
   input.parameters.skinNeighbours = muscle.integer("skin_neighbours", 3, 1, 64);
+  input.parameters.tendonFraction =
+      btScalar(muscle.number("tendon_fraction", kTendonFraction, 0, 0.5));
+  input.parameters.tendonStiffness =
+      btScalar(muscle.number("tendon_stiffness", MuscleParameters{}.tendonStiffness, 1, 1e4));
   const std::optional<scene::DeclaredAreas> declared = scene::readDeclaredAttachments(
       muscle, input.name, input.surface, reader.scale, *reader.result, input.attachments);
   input.parameters.springs = springs;

@@ -23,6 +23,8 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"fibre_count", {Target::Muscles, ""}},
       {"attachment_distance", {Target::Muscles, ""}},
       {"skin_neighbours", {Target::Muscles, ""}},
+      {"tendon_fraction", {Target::Muscles, ""}},
+      {"tendon_stiffness", {Target::Muscles, ""}},
       {"layout", {Target::Section, "model"}},
       {"neighbours", {Target::Section, "model"}},
       {"kappa", {Target::Section, "model"}},

@@ -25,9 +25,15 @@ struct MuscleStep {
   double worstSpringRatio = kNone;      ///< largest l / L0 of its springs
   double springDeviationRatio = kNone;  ///< Σ|l − L0| / ΣL0 of its springs
   double maxFibreStretch = kNone;       ///< largest l / L0 of its fibre segments
+  /// largest l / L0 of its other fibre segments (the belly)
+  double maxBellyStretch = kNone;
+  /// largest l / L0 of its fibre segments in a tendon (both ends tendon or fixed; NaN: none)
+  double maxTendonStretch = kNone;
   /// Its free boundary particles whose collision sphere reaches into a bone's true mesh (filled
   /// by runFibreMSS from its sphere test; measureMuscle leaves 0).
   size_t boneContacts = 0;
+  /// The deepest of those spheres inside a bone's true mesh (filled with boneContacts) [mm].
+  double sphereDepthMm = kNone;
   /// Its force residual (MuscleSystem::forceResidual; filled by runFibreMSS): RMS and largest
   /// equivalent displacement over its free particles [mm].
   double residualRmsMm = kNone;
@@ -75,6 +81,7 @@ struct MuscleResults {
   double worstVolumeChangePct = kNone;   ///< of largest magnitude over the finite steps [%]
   int worstVolumeStep = -1;              ///< the step of worstVolumeChangePct
   std::vector<double> maxPenetrationMm;  ///< per bone: deepest surface vertex, all steps [mm]
+  double maxSphereDepthMm = kNone;       ///< deepest free particle sphere in a bone, all steps [mm]
   std::vector<size_t> fixedParticles;    ///< per bone: particles fixed to it
   bool frozen = false;                   ///< the numerical guard froze it
   int frozenStep = -1;                   ///< the step that froze it
@@ -85,6 +92,8 @@ struct MuscleResults {
   double fibreLengthMinMm = kNone;       ///< smallest over the finite steps [mm]
   double fibreLengthMaxMm = kNone;       ///< largest over the finite steps [mm]
   double worstSpringRatio = kNone;       ///< largest l / L0 over the finite steps
+  double worstBellyStretch = kNone;      ///< largest MuscleStep::maxBellyStretch over them
+  double worstTendonStretch = kNone;     ///< largest MuscleStep::maxTendonStretch over them
   double springDeviationRatio = kNone;   ///< Σ|l − L0| / ΣL0 at the last finite step
   int lastStep = -1;                     ///< the last finite step measured (-1: none)
 
@@ -100,7 +109,8 @@ nlohmann::json toJson(const MuscleResults& results);
 MuscleResults muscleResultsFromJson(const nlohmann::json& object);
 
 /// The muscles as a Markdown table: volume change (last and worst), penetration and fixed
-/// particles per bone, mean fibre length, worst spring, rollbacks, frozen.
+/// particles per bone, mean fibre length, worst spring, worst belly and tendon stretch,
+/// rollbacks, frozen.
 std::string muscleTable(const std::vector<MuscleResults>& muscles);
 
 /// The muscle whose last volume change is largest in magnitude (null when none was measured).

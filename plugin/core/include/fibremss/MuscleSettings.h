@@ -43,6 +43,7 @@ struct SpringBlocks {
 enum ParticleFlag : uint8_t {
   kBoundary = 1,  ///< closest particle of at least one surface vertex: collides
   kFixed = 2,     ///< attached to a bone: moves rigidly with it, never integrated
+  kTendon = 4,    ///< free, in a tendon: between the attachment and the belly along a fibre
 };
 
 /// A prepared muscle in its rest pose (world coordinates of the rest pose).
@@ -111,6 +112,7 @@ struct MuscleSettings {
   size_t fibreCount() const { return fibreOffsets.size() - 1; }
   bool isFixed(uint32_t i) const { return flags[i] & kFixed; }
   bool isBoundary(uint32_t i) const { return flags[i] & kBoundary; }
+  bool isTendon(uint32_t i) const { return flags[i] & kTendon; }
 };
 
 /// A prepared rigid bone; coordinates are those of the rest pose, which is the bone frame:

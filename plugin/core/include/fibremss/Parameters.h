@@ -75,7 +75,15 @@ struct MuscleParameters {
   int resolution = 40;                  ///< particles per fibre
   btScalar attachmentDistance = 0.004;  ///< particles closer than this to a bone are fixed [m]
   int skinNeighbours = 3;               ///< N closest particles that move each surface vertex
-  SpringParameters springs;             ///< spring layout and material
+  /// Length of the tendon at each attached end of a fibre, as a fraction of the fibre's rest
+  /// length, measured from its last fixed particle into the free part [1] (0: no tendons, one
+  /// material; a scene file's muscles default to tendons, scenes/README.md).
+  btScalar tendonFraction = 0;
+  /// Stiffness of a tendon spring over that of the belly spring it replaces [1] (1: none).
+  /// A muscle of one material puts its strain where its section is thinnest, the converging
+  /// ends; a stiffer tendon there leaves it to the belly, as in real muscle.
+  btScalar tendonStiffness = 20;
+  SpringParameters springs;  ///< spring layout and material
 };
 
 /// Time integrator by name (seed 002 §4.8.3 compares them).

@@ -52,12 +52,18 @@ struct MusclePreparationReport {
   size_t mergedParticles = 0;   ///< particles merged into a near-coincident one of another fibre
   btScalar mergeDistance = 0;   ///< particles of different fibres closer than this merge [m]
   btScalar shortestSpring = 0;  ///< shortest spring rest length after preparation [m]
+  size_t tendonParticles = 0;   ///< free particles in a tendon (MuscleParameters::tendonFraction)
+  size_t tendonSprings = 0;     ///< springs stiffened as tendon (tendonStiffness times)
   /// Per earlier muscle: particles that lay inside its surface at rest, moved out along its
   /// normal (the earlier muscle keeps the overlap; seed 001 §4.1).
   std::vector<size_t> pushedOutOfMuscles;
-  /// Per bone: free particles (deeper than the attachment distance) inside it at rest, moved
-  /// out along its normal (they end within the attachment distance, so they are fixed to it).
+  /// Per bone: free particles inside it at rest, moved out along its normal to a quarter of the
+  /// sample spacing beyond its surface: all of them, except those within the attachment
+  /// distance of a bone that fixes them (the nearest bone, or the bone of a declared area the
+  /// particle lies in).
   std::vector<size_t> pushedOutOfBones;
+  std::vector<btScalar>
+      pushedOutOfBonesDepth;  ///< per bone: the deepest of those lay this deep [m]
   /// Per bone: surface vertices inside it at rest, moved out along its normal.
   std::vector<size_t> surfaceVerticesPushedOut;
 };

@@ -169,7 +169,8 @@ void describeRepairs(const MuscleInput& muscle, const MusclePreparationReport& r
     if (report.pushedOutOfBones[b] > 0)
       repairs.push_back(source + ": " + std::to_string(report.pushedOutOfBones[b]) +
                         " free particles inside bone '" + bones[b].name +
-                        "' at rest moved out along its normal" +
+                        "' at rest (the deepest " + mm(report.pushedOutOfBonesDepth[b]) +
+                        ") moved out along its normal" +
                         (muscle.attachments.empty() ? " (now fixed to it)"
                          : mayFix(muscle, b)        ? " (fixed to it when in an attachment area)"
                                                     : " (free: they meet it through collision)"));
@@ -292,7 +293,8 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
     if (insideCount[b] > 0)
       warnings.push_back(detail::muscleSource(input) + ": " + std::to_string(insideCount[b]) +
                          " free (not fixed) particles lie inside bone '" + boneInputs[b].name +
-                         "' at rest; collisions will push them out");
+                         "' at rest that preparation could not move out (they lie inside "
+                         "another body too); collisions push them when they can");
   if (declared) declared->warnEmpty(boneInputs, warnings);
   if (muscle.fixedParticles.empty())
     warnings.push_back(detail::muscleSource(input) +
@@ -371,16 +373,28 @@ void separateMuscle(const MuscleInput& input, size_t index, const std::vector<Bo
   report.pushedOutOfMuscles.assign(surfaces.size(), 0);
   for (size_t other = 0; other < index; ++other)
     report.pushedOutOfMuscles[other] =
-        detail::pushOutOf(muscle.restPositions, *surfaces[other], 0, margin);
+        detail::pushOutOf(muscle.restPositions, *surfaces[other], 0, margin).count;
   report.pushedOutOfBones.assign(bones.size(), 0);
+  report.pushedOutOfBonesDepth.assign(bones.size(), 0);
   report.surfaceVerticesPushedOut.assign(bones.size(), 0);
+  for (size_t b = 0; b < bones.size(); ++b)
+    report.surfaceVerticesPushedOut[b] =
+        detail::pushOutOf(muscle.restSurface.vertices, *bones[b].distance, 0,
+                          kSurfaceMarginFraction * spacing)
+            .count;
+  // Declared areas as attachToBones will see them (on the surface as moved out).
+  std::optional<DeclaredAreas> declared;
+  if (!input.attachments.empty()) declared.emplace(input, muscle, bones);
   for (size_t b = 0; b < bones.size(); ++b) {
-    // Particles within the attachment distance may be fixed to the bone: they may stay inside.
+    // Particles within the attachment distance that the bone fixes may stay inside it.
     const btScalar depth = mayFix(input, b) ? input.parameters.attachmentDistance : btScalar(0);
-    report.pushedOutOfBones[b] =
-        detail::pushOutOf(muscle.restPositions, *bones[b].distance, depth, margin);
-    report.surfaceVerticesPushedOut[b] = detail::pushOutOf(
-        muscle.restSurface.vertices, *bones[b].distance, 0, kSurfaceMarginFraction * spacing);
+    const auto fixedHere = [&](const btVector3& p) {
+      return !declared || declared->boneFor(p) == static_cast<int32_t>(b);
+    };
+    const detail::PushedOut pushed =
+        detail::pushOutOf(muscle.restPositions, *bones[b].distance, depth, margin, fixedHere);
+    report.pushedOutOfBones[b] = pushed.count;
+    report.pushedOutOfBonesDepth[b] = pushed.deepest;
   }
   const SpringLayout layout = input.parameters.springs.layout;
   if (input.mergeConverging && layout != SpringLayout::Lattice6 &&
@@ -390,7 +404,15 @@ void separateMuscle(const MuscleInput& input, size_t index, const std::vector<Bo
   }
 }
 
-/// The last stage: springs, attachments, damping, blend weights, skinning.
+/// Σ k·L0² over the springs [N·m]: the network's modulus times 3V.
+double springNetworkModulus(std::span<const Spring> springs) {
+  double network = 0;
+  for (const Spring& spring : springs)
+    network += double(spring.stiffness) * spring.restLength * spring.restLength;
+  return network;
+}
+
+/// The last stage: springs, attachments, tendons, damping, blend weights, skinning.
 void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
                   const std::vector<BoneInput>& boneInputs, std::vector<std::string>& warnings,
                   MuscleSettings& muscle, MusclePreparationReport& report) {
@@ -433,6 +455,12 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
                        ? parameters.springs.damping
                        : parameters.springs.dampingScale *
                              detail::zelenyDamping(muscle.springs, muscle.particleMass);
+  // The belly's material sets the damping and the volume terms' modulus; tendons are stiffer.
+  const double network = springNetworkModulus(muscle.springs);
+  report.tendonSprings =
+      detail::stiffenTendons(muscle, parameters.tendonFraction, parameters.tendonStiffness);
+  report.tendonParticles = size_t(std::count_if(muscle.flags.begin(), muscle.flags.end(),
+                                                [](uint8_t f) { return f & kTendon; }));
   detail::blendAttachments(
       muscle, bones.size(), [&](const btVector3& p, int32_t bone, btScalar limit) {
         return bones[static_cast<size_t>(bone)].distance->closest(p, limit).distance;
@@ -443,9 +471,6 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   detail::renumberTetrahedra(interior, order);
   detail::renumberTetrahedra(coarse, order);
   muscle.restVolume = meshVolume(muscle.restSurface);
-  double network = 0;  // Σ k·L0²
-  for (const Spring& spring : muscle.springs)
-    network += double(spring.stiffness) * spring.restLength * spring.restLength;
   // The bulk modulus as a multiple of the network's Young's modulus E = Σk·L0² / 3V.
   const double youngs = muscle.restVolume != 0 ? network / (3 * std::abs(muscle.restVolume)) : 0;
   muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * youngs);

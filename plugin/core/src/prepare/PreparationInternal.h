@@ -38,10 +38,17 @@ btScalar medianSampleSpacing(const MuscleSettings& muscle);
 /// how many particles were removed.
 size_t mergeCloseParticles(MuscleSettings& muscle, btScalar distance);
 
-/// Moves every point deeper than `minDepth` inside `body` out along its normal to `margin`
-/// beyond its surface (PreparationOverlap.cpp, seed 001 §4.1). Returns how many moved.
-size_t pushOutOf(std::span<btVector3> points, const MeshDistance& body, btScalar minDepth,
-                 btScalar margin);
+/// What pushOutOf moved.
+struct PushedOut {
+  size_t count = 0;      ///< points moved
+  btScalar deepest = 0;  ///< the deepest of them lay this far inside [m]
+};
+
+/// Moves every point inside `body` out along its normal to `margin` beyond its surface
+/// (PreparationOverlap.cpp, seed 001 §4.1), except those no deeper than `minDepth` that
+/// `mayStay` (when given) lets stay.
+PushedOut pushOutOf(std::span<btVector3> points, const MeshDistance& body, btScalar minDepth,
+                    btScalar margin, const std::function<bool(const btVector3&)>& mayStay = {});
 
 /// Springs of the muscle's layout (Springs.cpp), sorted by (a, b), a < b, no duplicates;
 /// rest length = distance, k = κ / L0. Throws InputError for unusable layouts or coincident
@@ -115,6 +122,12 @@ btScalar zelenyDamping(std::span<const Spring> springs, btScalar particleMass);
 /// Removes the springs whose two ends are fixed (PreparationBlend.cpp): they move nothing, and
 /// across two bones their length follows the joint. Returns how many were removed.
 size_t dropFixedSprings(MuscleSettings& muscle);
+
+/// Tendons (Tendons.cpp): marks kTendon on the free particles of each fibre within `fraction` of
+/// its rest length beyond its last fixed particle at either end (an end without a fixed particle
+/// has none), and multiplies by `stiffness` the k of every spring whose ends are both tendon or
+/// fixed. Needs the fixed flags; returns how many springs it stiffened.
+size_t stiffenTendons(MuscleSettings& muscle, btScalar fraction, btScalar stiffness);
 
 /// Distance from a point to bone `bone`'s mesh, or infinity when farther than `limit` [m].
 using BoneDistance = std::function<btScalar(const btVector3&, int32_t bone, btScalar limit)>;

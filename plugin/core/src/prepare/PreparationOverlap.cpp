@@ -3,28 +3,31 @@
 // iterations, violently and against their springs; moving them out along the other body's
 // normal before springs are built lets the muscle start at rest, as seed 001 does with its
 // surface vertices.
+#include <algorithm>
 #include <cmath>
 
 #include "PreparationInternal.h"
 
 namespace fibremss::detail {
 
-size_t pushOutOf(std::span<btVector3> points, const MeshDistance& body, btScalar minDepth,
-                 btScalar margin) {
+PushedOut pushOutOf(std::span<btVector3> points, const MeshDistance& body, btScalar minDepth,
+                    btScalar margin, const std::function<bool(const btVector3&)>& mayStay) {
   btVector3 lower, upper;
   pointBounds(body.mesh().vertices, lower, upper);
-  size_t moved = 0;
+  PushedOut pushed;
   for (btVector3& p : points) {
     if (p.x() < lower.x() || p.y() < lower.y() || p.z() < lower.z() || p.x() > upper.x() ||
         p.y() > upper.y() || p.z() > upper.z())
       continue;
     const MeshDistance::Closest closest = body.closest(p);
-    if (!closest.inside || !(closest.distance > minDepth)) continue;
+    if (!closest.inside || !(closest.distance > 0)) continue;
+    if (closest.distance <= minDepth && (!mayStay || mayStay(p))) continue;
     // p is inside, so the closest surface point lies outward of it.
     p = closest.point + (closest.point - p) / closest.distance * margin;
-    ++moved;
+    ++pushed.count;
+    pushed.deepest = std::max(pushed.deepest, closest.distance);
   }
-  return moved;
+  return pushed;
 }
 
 }  // namespace fibremss::detail
