@@ -18,7 +18,8 @@ std::vector<btVector3> points(const ScalarArray& array, const char* name) {
     throw py::value_error(std::string(name) + ": expected an (N, 3) array");
   auto at = array.unchecked<2>();
   std::vector<btVector3> result(size_t(array.shape(0)));
-  for (py::ssize_t i = 0; i < array.shape(0); ++i) result[size_t(i)] = {at(i, 0), at(i, 1), at(i, 2)};
+  for (py::ssize_t i = 0; i < array.shape(0); ++i)
+    result[size_t(i)] = {at(i, 0), at(i, 1), at(i, 2)};
   return result;
 }
 

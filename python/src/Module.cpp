@@ -8,8 +8,8 @@ namespace fibremss::python {
 void bindErrors(pybind11::module_& module) {
   namespace py = pybind11;
   // Held for the interpreter's life (a static py::object would be released after it ends).
-  static const py::handle type = py::exception<InputError>(module, "InputError", PyExc_ValueError)
-                                     .release();
+  static const py::handle type =
+      py::exception<InputError>(module, "InputError", PyExc_ValueError).release();
   type.attr("__doc__") =
       "Bad input (a file, a scene field or a parameter): the message names the file or field, "
       "where in it and what was expected; also as .source, .where and .problem.";

@@ -27,8 +27,8 @@ struct RunSettings {
 /// Prepares and runs the scene (runFibreMSS); the summary's keys as `fibremss run` writes them.
 nlohmann::json runScene(LoadedScene scene, const RunSettings& settings) {
   if (settings.threads) scene.simulation.threads = *settings.threads;
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed,
-                                              scene.simulation.threads);
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
   FibreRunOptions options;
   options.outDir = settings.outDir;
   options.steps = settings.steps;
@@ -86,9 +86,8 @@ void bindRuns(py::module_& module) {
         }
         return pythonObject(summary);
       },
-      py::arg("scene"), py::arg("steps") = -1, py::arg("out_dir") = "",
-      py::arg("frame_every") = -1, py::arg("formats") = std::vector<std::string>{"vtk"},
-      py::arg("threads") = py::none(),
+      py::arg("scene"), py::arg("steps") = -1, py::arg("out_dir") = "", py::arg("frame_every") = -1,
+      py::arg("formats") = std::vector<std::string>{"vtk"}, py::arg("threads") = py::none(),
       "Runs the scene as `fibremss run` (one step per pose): its summary.json as a dict, "
       "'muscles' and the per-step 'series' included; frames into out_dir when given.");
   module.def(

@@ -46,8 +46,7 @@ MuscleInput muscleInput(const py::dict& muscle) {
                        muscle["triangles"].cast<IndexArray>(), "muscle vertices");
   for (const py::handle fibre : muscle["fibres"])
     input.fibres.addFibre(points(fibre.cast<ScalarArray>(), "fibre"));
-  if (muscle.contains("resolution"))
-    input.parameters.resolution = muscle["resolution"].cast<int>();
+  if (muscle.contains("resolution")) input.parameters.resolution = muscle["resolution"].cast<int>();
   return input;
 }
 
@@ -135,7 +134,8 @@ void bindScene(py::module_& module) {
       .def_property_readonly("bone_names", &boneNames, "Bone names, in scene order")
       .def_property_readonly("muscle_names", &muscleNames, "Muscle names, in scene order")
       .def(
-          "bone_pose", [](const LoadedScene& s, size_t b, int p) { return matrix(s.bonePose(b, p)); },
+          "bone_pose",
+          [](const LoadedScene& s, size_t b, int p) { return matrix(s.bonePose(b, p)); },
           py::arg("bone"), py::arg("pose"), "Bone's 4x4 transform (rest to posed) at a pose [m]");
   bindSettings(scene);
 

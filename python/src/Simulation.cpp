@@ -25,7 +25,8 @@ Simulation::Simulation(LoadedScene scene, std::optional<int> threads)
     bones_.push_back(system_.addBone(bone));
     boneMeshes_.emplace_back(bone->mesh);
   }
-  for (const auto& muscle : prepared_.muscles) muscles_.push_back(system_.addMuscle(muscle, bones_));
+  for (const auto& muscle : prepared_.muscles)
+    muscles_.push_back(system_.addMuscle(muscle, bones_));
 }
 
 void Simulation::setPose(int pose) {
@@ -60,8 +61,8 @@ std::vector<SeriesRow> Simulation::measure() {
     SeriesRow& row = rows.emplace_back();
     row.step = steps_ - 1;
     row.pose = pose_;
-    row.poseLabel = size_t(pose_) < scene_.poseLabels.size() ? scene_.poseLabels[size_t(pose_)]
-                                                             : double(pose_);
+    row.poseLabel =
+        size_t(pose_) < scene_.poseLabels.size() ? scene_.poseLabels[size_t(pose_)] : double(pose_);
     row.timeS = time_;
     row.muscle = system_.settings(muscle).name;
     row.solverContacts = system_.lastStep().contacts;

@@ -153,7 +153,9 @@ void bindMuscleArrays(py::class_<Simulation>& c) {
 void bindQueries(py::class_<Simulation>& c) {
   c.def(
        "bone_transform",
-       [](const Simulation& s, py::handle b) { return matrix(s.system().boneTransform(bone(s, b))); },
+       [](const Simulation& s, py::handle b) {
+         return matrix(s.system().boneTransform(bone(s, b)));
+       },
        py::arg("bone"), "Bone's current 4x4 transform (rest to current) [m]")
       .def(
           "set_bone_transform",
@@ -178,8 +180,7 @@ void bindQueries(py::class_<Simulation>& c) {
           [](Simulation& s, py::handle m) { s.system().clearExternalForces(muscle(s, m)); },
           py::arg("muscle"), "Removes every external force of the muscle")
       .def(
-          "force_residual",
-          [](Simulation& s) { return residualDict(s.system().forceResidual()); },
+          "force_residual", [](Simulation& s) { return residualDict(s.system().forceResidual()); },
           "Distance from static equilibrium, all muscles: RMS/max force [N], displacement [m]")
       .def(
           "measures",
@@ -207,23 +208,25 @@ void bindSimulation(py::module_& module) {
       .def_property_readonly("scene", &Simulation::scene, "The scene it was prepared from")
       .def_property_readonly("time", &Simulation::time, "Simulated time of all steps [s]")
       .def_property_readonly("steps", &Simulation::steps, "Steps so far")
-      .def("particle_count",
-           [](const Simulation& s, py::handle m) {
-             return s.system().settings(muscle(s, m)).particleCount();
-           },
-           py::arg("muscle"), "Particles of a muscle")
+      .def(
+          "particle_count",
+          [](const Simulation& s, py::handle m) {
+            return s.system().settings(muscle(s, m)).particleCount();
+          },
+          py::arg("muscle"), "Particles of a muscle")
       .def("set_pose", &Simulation::setPose, py::arg("pose"),
            "Every bone's target for the next step: the scene's transform at this pose")
-      .def("step",
-           [](Simulation& s, std::optional<double> duration) {
-             {
-               py::gil_scoped_release release;
-               s.step(duration);
-             }
-             return stepDict(s.system().lastStep());
-           },
-           py::arg("duration") = py::none(),
-           "One step (a pose; with duration [s], exactly that much simulated time); its stats")
+      .def(
+          "step",
+          [](Simulation& s, std::optional<double> duration) {
+            {
+              py::gil_scoped_release release;
+              s.step(duration);
+            }
+            return stepDict(s.system().lastStep());
+          },
+          py::arg("duration") = py::none(),
+          "One step (a pose; with duration [s], exactly that much simulated time); its stats")
       .def_property_readonly(
           "last_step", [](const Simulation& s) { return stepDict(s.system().lastStep()); },
           "Statistics of the last step: iterations, contacts, timing [ms], failures");
