@@ -88,65 +88,66 @@ py::dict measureDict(const SeriesRow& row) {
   return d;
 }
 
-/// Views of one muscle's particle data (no copy).
-void bindMuscleArrays(py::class_<Simulation>& c) {
+/// Defines `name(muscle)`: `view(system, handle, owner)`, a numpy view that keeps the Python
+/// Simulation (`owner`) alive.
+template <typename View>
+void defineView(py::class_<Simulation>& c, const char* name, View view, const char* doc) {
   c.def(
-       "positions",
-       [](py::object self, py::handle m) {
-         const Simulation& s = self.cast<const Simulation&>();
-         return pointView(s.system().positions(muscle(s, m)), self);
-       },
-       py::arg("muscle"), "Particles (N,3) [m]: a read-only view of the solver's, no copy")
-      .def(
-          "set_positions",
-          [](Simulation& s, py::handle m, const ScalarArray& x) {
-            s.system().setPositions(muscle(s, m), points(x, "positions"));
-          },
-          py::arg("muscle"), py::arg("positions"),
-          "Moves the particles to (N,3) positions [m], at rest there")
-      .def(
-          "rest_positions",
-          [](py::object self, py::handle m) {
-            const Simulation& s = self.cast<const Simulation&>();
-            return pointView(s.system().settings(muscle(s, m)).restPositions, self);
-          },
-          py::arg("muscle"), "Rest particles (N,3) [m], a view")
-      .def(
-          "radii",
-          [](py::object self, py::handle m) {
-            const Simulation& s = self.cast<const Simulation&>();
-            return arrayView<btScalar>(s.system().settings(muscle(s, m)).radii, self);
-          },
-          py::arg("muscle"), "Collision sphere radius per particle (N,) [m] (0: inner), a view")
-      .def(
-          "fixed_particles",
-          [](py::object self, py::handle m) {
-            const Simulation& s = self.cast<const Simulation&>();
-            return arrayView<uint32_t>(s.system().settings(muscle(s, m)).fixedParticles, self);
-          },
-          py::arg("muscle"), "Indices of the particles attached to bones, a view")
-      .def(
-          "surface",
-          [](py::object self, py::handle m) {
-            const Simulation& s = self.cast<const Simulation&>();
-            return pointView(s.system().surface(muscle(s, m)), self);
-          },
-          py::arg("muscle"), "Deformed surface vertices (V,3) [m] as of the last step, a view")
-      .def(
-          "surface_triangles",
-          [](py::object self, py::handle m) {
-            const Simulation& s = self.cast<const Simulation&>();
-            const auto& triangles = s.system().settings(muscle(s, m)).restSurface.triangles;
-            return arrayView<uint32_t>({triangles.data()->data(), 3 * triangles.size()}, self, 3);
-          },
-          py::arg("muscle"), "Surface triangles (T,3), vertex indices, a view")
-      .def(
-          "residual_forces",
-          [](py::object self, py::handle m) {
-            const Simulation& s = self.cast<const Simulation&>();
-            return pointView(s.system().residualForces(muscle(s, m)), self);
-          },
-          py::arg("muscle"), "Per-particle force residual (N,3) [N] of the last force_residual");
+      name,
+      [view](py::object self, py::handle m) {
+        const Simulation& s = self.cast<const Simulation&>();
+        return view(s.system(), muscle(s, m), self);
+      },
+      py::arg("muscle"), doc);
+}
+
+/// Views of one muscle's particle data (no copy), and set_positions.
+void bindMuscleArrays(py::class_<Simulation>& c) {
+  using System = const MuscleSystem&;
+  defineView(
+      c, "positions",
+      [](System s, MuscleHandle m, py::handle owner) { return pointView(s.positions(m), owner); },
+      "Particles (N,3) [m]: a read-only view of the solver's, no copy");
+  defineView(
+      c, "rest_positions",
+      [](System s, MuscleHandle m, py::handle o) {
+        return pointView(s.settings(m).restPositions, o);
+      },
+      "Rest particles (N,3) [m], a view");
+  defineView(
+      c, "radii",
+      [](System s, MuscleHandle m, py::handle o) {
+        return arrayView<btScalar>(s.settings(m).radii, o);
+      },
+      "Collision sphere radius per particle (N,) [m] (0: inner), a view");
+  defineView(
+      c, "fixed_particles",
+      [](System s, MuscleHandle m, py::handle o) {
+        return arrayView<uint32_t>(s.settings(m).fixedParticles, o);
+      },
+      "Indices of the particles attached to bones, a view");
+  defineView(
+      c, "surface",
+      [](System s, MuscleHandle m, py::handle o) { return pointView(s.surface(m), o); },
+      "Deformed surface vertices (V,3) [m] as of the last step, a view");
+  defineView(
+      c, "surface_triangles",
+      [](System s, MuscleHandle m, py::handle o) {
+        const auto& triangles = s.settings(m).restSurface.triangles;
+        return arrayView<uint32_t>({triangles.data()->data(), 3 * triangles.size()}, o, 3);
+      },
+      "Surface triangles (T,3), vertex indices, a view");
+  defineView(
+      c, "residual_forces",
+      [](System s, MuscleHandle m, py::handle o) { return pointView(s.residualForces(m), o); },
+      "Per-particle force residual (N,3) [N] of the last force_residual, a view");
+  c.def(
+      "set_positions",
+      [](Simulation& s, py::handle m, const ScalarArray& x) {
+        s.system().setPositions(muscle(s, m), points(x, "positions"));
+      },
+      py::arg("muscle"), py::arg("positions"),
+      "Moves the particles to (N,3) positions [m], at rest there");
 }
 
 /// Bones, forces, residuals and measures.
