@@ -125,8 +125,8 @@ void bindScene(py::module_& module) {
                                 "A scene: bones with their motion over poses, muscles, solver "
                                 "settings (SI units).");
   scene.def_readonly("name", &LoadedScene::name, "Scene name (built-in name or file stem)")
-      .def_readonly("source", &LoadedScene::source, "The file it came from, or 'built-in'")
-      .def_readonly("json", &LoadedScene::json, "The complete scene JSON, every default filled")
+      .def_readonly("source", &LoadedScene::source, "The file it came from, 'built-in' or 'python'")
+      .def_readonly("json", &LoadedScene::json, "The whole scene JSON, defaults filled ('': built)")
       .def_readonly("description", &LoadedScene::description, "What the scene shows")
       .def_readonly("pose_count", &LoadedScene::poseCount, "Poses of the motion (steps of a run)")
       .def_readonly("pose_labels", &LoadedScene::poseLabels, "Label per pose (e.g. angle [deg])")

@@ -93,6 +93,8 @@ class Scenes(unittest.TestCase):
         self.assertTrue(pulled["finite"])
         self.assertGreater(pulled["max_fibre_stretch"], rest["max_fibre_stretch"])
         self.assertEqual(len(pulled["penetration_mm"]), 2)
+        summary = fibremss.run(bar_scene(4), threads=1)
+        self.assertEqual((summary["steps"], summary["muscles"][0]["name"]), (3, "bar"))
 
     def test_settings_are_read_and_set(self):
         scene = fibremss.load_scene("fusiform", SMALL)
