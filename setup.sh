@@ -11,7 +11,9 @@ run_packages=(cmake make g++ pkg-config ccache libbullet-dev libeigen3-dev libas
   # `fibremss view`: window, OpenGL (Mesa's drivers, llvmpipe where there is no GPU), panel, PNG
   libglfw3-dev libgl-dev libgl1-mesa-dri libimgui-dev libstb-dev
   # the CalculiX reference: tetgen meshes, ccx solves (run as processes)
-  calculix-ccx tetgen)
+  calculix-ccx tetgen
+  # the Python module (`import fibremss`) and the README's Python example's plot
+  python3-dev pybind11-dev python3-numpy python3-matplotlib)
 # (xvfb, xauth: a virtual X server for the viewer's screenshot tests. python3-paraview: the
 # frames read back by VTK 9 and ParaView 5.11 in Debian's /usr/bin/python3; it brings its own
 # VTK and replaces python3-vtk9.)
@@ -43,9 +45,9 @@ build() {  # build DIR [cmake options...]
 case "${1:-}" in
   run)
     install_missing "${run_packages[@]}"
-    # Only the fibremss tool and its libraries: no tests, no benchmarks.
+    # Only the fibremss tool, the Python module and their libraries: no tests, no benchmarks.
     cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DFIBREMSS_BUILD_TESTS=OFF
-    cmake --build build -j"$jobs" --target fibremss_cli
+    cmake --build build -j"$jobs" --target fibremss_cli fibremss_python
     # The CalculiX reference of thigh13 takes far longer than this job (comparisons/README.md,
     # "The main job"): it is used when the cache has it (`fibremss reference thigh13 --set
     # resolution=20` computes it once), else the report says there is none and ranks nothing.

@@ -381,6 +381,32 @@ TEST(Output, SurfaceFollowsParticleDisplacement) {
   EXPECT_LT((system.surface(ha)[0] - (btVector3(0.003, 0, 0) + moved)).length(), 1e-9);
 }
 
+TEST(Output, SetPositionsPlacesParticlesAtRestWithTheirSurface) {
+  // Two particles on a spring with a vertex on the first, moved rigidly: at rest there (Verlet
+  // carries no velocity from the jump), the vertex with them.
+  auto a = makeMuscle({{0, 0, 0}, {0.01, 0, 0}}, 1e-5, 0, 0.002);
+  addSpring(*a, 0, 1, 10);
+  a->restSurface.vertices = {{0, 0.001, 0}};
+  a->skinNeighbours = 1;
+  a->skinParticles = {0};
+  a->skinWeights = {1};
+  SimulationParameters parameters;
+  parameters.integrator = Integrator::Verlet;
+  MuscleSystem system(parameters);
+  const BoneHandle bone = system.addBone(makeBone());
+  const MuscleHandle handle = system.addMuscle(a, std::span(&bone, 1));
+  const btVector3 shift(0.05, 0.02, 0);
+  const std::vector<btVector3> moved{a->restPositions[0] + shift, a->restPositions[1] + shift};
+  system.setPositions(handle, moved);
+  EXPECT_LT((system.surface(handle)[0] - (a->restSurface.vertices[0] + shift)).length(), 1e-9);
+  system.step();
+  for (size_t i = 0; i < moved.size(); ++i)
+    EXPECT_LT((system.positions(handle)[i] - moved[i]).length(), 1e-9);
+  EXPECT_THROW(system.setPositions(handle, std::span(moved).first(1)), InputError);
+  const std::vector<btVector3> nan{moved[0], btVector3(NAN, 0, 0)};
+  EXPECT_THROW(system.setPositions(handle, nan), InputError);
+}
+
 /// Two overlapping noisy boxes and a bone sphere, run for some steps; all positions.
 std::vector<btVector3> noisyRun(Integrator integrator) {
   SimulationParameters parameters = testing::verletParameters();

@@ -1,7 +1,8 @@
 # Installs the build in BUILD_DIR into WORK_DIR/prefix (not the configured prefix), then, by
 # MODE: `cmake` configures, builds and runs the consumer in SOURCE_DIR with find_package;
 # `pkg-config` compiles and runs it with CXX and `pkg-config fibremss` alone (no -std of its
-# own); `cli` runs the installed fibremss tool from the prefix with no LD_LIBRARY_PATH.
+# own); `cli` runs the installed fibremss tool from the prefix with no LD_LIBRARY_PATH; `python`
+# imports the installed module with PYTHON, its directory PYTHON_DIR under the prefix.
 file(REMOVE_RECURSE ${WORK_DIR})
 function(run)
   execute_process(COMMAND ${ARGN} RESULT_VARIABLE result OUTPUT_VARIABLE out ERROR_VARIABLE err)
@@ -38,7 +39,13 @@ elseif(MODE STREQUAL "cli")
     message(FATAL_ERROR "the installed fibremss lists no fusiform scene: ${last_output}")
   endif()
   run(${prefix}/bin/fibremss run fusiform --steps 1 --out ${WORK_DIR}/run)
+elseif(MODE STREQUAL "python")
+  set(ENV{PYTHONPATH} ${prefix}/${PYTHON_DIR})
+  run(${PYTHON} -c "import fibremss\nprint(fibremss.__file__, fibremss.load_scene('fusiform').name)")
+  if(NOT last_output MATCHES "^${prefix}/${PYTHON_DIR}/fibremss.* fusiform")
+    message(FATAL_ERROR "the installed module was not the one imported: ${last_output}")
+  endif()
 else()
-  message(FATAL_ERROR "MODE must be cmake, pkg-config or cli, not '${MODE}'")
+  message(FATAL_ERROR "MODE must be cmake, pkg-config, cli or python, not '${MODE}'")
 endif()
 message(STATUS "${MODE}: ${last_output}")

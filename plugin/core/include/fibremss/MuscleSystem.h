@@ -228,6 +228,11 @@ class MuscleSystem {
   unsigned threads() const;
 
   std::span<const btVector3> positions(MuscleHandle muscle) const;  ///< current particles
+  /// Moves a muscle's particles to `positions` [m], one per particle, at rest there (x(t−dt) = x,
+  /// velocities zero), and its surface with them; fixed particles return to their bones at the
+  /// next step. InputError for a stale handle, another count, or a point not finite or beyond
+  /// kMaxCoordinate. Not concurrently with step().
+  void setPositions(MuscleHandle muscle, std::span<const btVector3> positions);
   const MuscleSettings& settings(MuscleHandle muscle) const;
   /// The deformed surface vertices (method.md §7), as of the last step.
   std::span<const btVector3> surface(MuscleHandle muscle) const;

@@ -350,6 +350,22 @@ std::span<const btVector3> MuscleSystem::positions(MuscleHandle muscle) const {
   return impl_->muscle(muscle).positions;
 }
 
+void MuscleSystem::setPositions(MuscleHandle muscle, std::span<const btVector3> positions) {
+  MuscleState& state = impl_->muscle(muscle);
+  const std::string call = "MuscleSystem::setPositions: muscle '" + state.settings->name + "'";
+  if (positions.size() != state.positions.size())
+    throw InputError(call, "positions",
+                     "expected " + std::to_string(state.positions.size()) + " points, got " +
+                         std::to_string(positions.size()));
+  checkPoints(positions, call, "position");
+  std::copy(positions.begin(), positions.end(), state.positions.begin());
+  std::copy(positions.begin(), positions.end(), state.previous.begin());
+  std::fill(state.velocities.begin(), state.velocities.end(), btVector3(0, 0, 0));
+  forgetBoneSides(state);
+  rebuildTree(state);
+  impl_->deform(state);
+}
+
 const MuscleSettings& MuscleSystem::settings(MuscleHandle muscle) const {
   return *impl_->muscle(muscle).settings;
 }
