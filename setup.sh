@@ -20,13 +20,30 @@ run_packages=(cmake make g++ pkg-config ccache libbullet-dev libeigen3-dev libas
 test_packages=(valgrind libgtest-dev libgmock-dev libbenchmark-dev clang-format xvfb xauth
   python3-paraview)
 
+# Each stage prints one line; its output goes to a log under build/setup-logs/, shown in full
+# only when the stage fails.
+logs=build/setup-logs
+stage() {  # stage NAME COMMAND...
+  local name=$1 log="$logs/$1.log"
+  shift
+  mkdir -p "$logs"
+  printf 'setup: %-24s' "$name"
+  if "$@" >"$log" 2>&1; then
+    echo "ok (log: $log)"
+  else
+    echo "FAILED; its log, $log:"
+    cat "$log"
+    exit 1
+  fi
+}
+
 install_missing() {  # install_missing PACKAGE...
   local missing=()
   for p in "$@"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
-  echo "setup: installing ${missing[*]}"
+  echo "installing ${missing[*]}"
   local sudo=""
   [ "$(id -u)" -eq 0 ] || sudo="sudo"
   $sudo apt-get update -qq
@@ -44,18 +61,19 @@ build() {  # build DIR [cmake options...]
 
 case "${1:-}" in
   run)
-    install_missing "${run_packages[@]}"
+    stage packages install_missing "${run_packages[@]}"
     # Only the fibremss tool, the Python module and their libraries: no tests, no benchmarks.
-    cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DFIBREMSS_BUILD_TESTS=OFF
-    cmake --build build -j"$jobs" --target fibremss_cli fibremss_python
+    stage configure cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DFIBREMSS_BUILD_TESTS=OFF
+    stage build cmake --build build -j"$jobs" --target fibremss_cli fibremss_python
     # The CalculiX reference of thigh13 takes far longer than this job (comparisons/README.md,
     # "The main job"): it is used when the cache has it (`fibremss reference thigh13 --set
     # resolution=20` computes it once), else the report says there is none and ranks nothing.
+    echo "setup: main job: fibremss compare thigh13 --set resolution=20"
     build/bin/fibremss compare thigh13 --set resolution=20 --reference-cached-only --out results/thigh13
     echo "setup: report in results/thigh13/report.md (plot: results/thigh13/speed_vs_error.png)"
     ;;
   test)
-    install_missing "${run_packages[@]}" "${test_packages[@]}"
+    stage packages install_missing "${run_packages[@]}" "${test_packages[@]}"
     build build -DFIBREMSS_WERROR=ON -DFIBREMSS_BUILD_TESTS=ON
     ctest --test-dir build -j"$jobs" --output-on-failure --timeout 900
     # The same suite against Bullet's double-precision variant.

@@ -43,3 +43,12 @@ file(RELATIVE_PATH FIBREMSS_PC_TO_PREFIX ${CMAKE_INSTALL_FULL_LIBDIR}/pkgconfig
 string(REGEX REPLACE "/$" "" FIBREMSS_PC_TO_PREFIX "${FIBREMSS_PC_TO_PREFIX}")
 configure_file(${PROJECT_SOURCE_DIR}/cmake/fibremss.pc.in ${PROJECT_BINARY_DIR}/fibremss.pc @ONLY)
 install(FILES ${PROJECT_BINARY_DIR}/fibremss.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)
+
+# For a user of the installed tree: the README, the docs, the embedding examples' sources and the
+# scene files (share/doc/FibreMSS, share/fibremss/scenes).
+install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION ${CMAKE_INSTALL_DOCDIR})
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs)
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/scenes/example/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples)
+if(NOT FIBREMSS_CORE_ONLY)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/scenes/json/ DESTINATION ${CMAKE_INSTALL_DATADIR}/fibremss/scenes)
+endif()

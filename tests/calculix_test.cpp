@@ -1160,8 +1160,9 @@ TEST(ReferenceCommand, TwoProcessesSolvingOneKeyAtOnceBothGetTheWholeReference) 
   std::atomic<bool> done{false};
   testing::ProcessResult both;
   std::thread runner([&] {
-    both = testing::runProcess("(" + command("a") + ") & (" + command("b") +
-                               "); status=$?; wait $! && exit $status");
+    std::string script = "(";
+    script += command("a") + ") & (" + command("b") + "); status=$?; wait $! && exit $status";
+    both = testing::runProcess(script);
     done = true;
   });
   bool sawOwnDirectory = false, sawPartialEntry = false;

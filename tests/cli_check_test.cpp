@@ -5,8 +5,11 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 
 #include "fibremss/Scene.h"
 
@@ -140,4 +143,54 @@ TEST(CliScenes, ExportAppliesOverrides) {
   const Json scene = Json::parse(result.out);
   for (const auto& muscle : scene["muscles"]) EXPECT_EQ(muscle["resolution"], 80);
   EXPECT_EQ(scene["model"]["kappa"], 3.0);
+}
+
+TEST(CliConventions, BareFibremssPrintsTheHelp) {
+  const Result result = run("");
+  EXPECT_EQ(result.status, 0);
+  for (const char* command : {"run", "compare", "check", "Exit codes"})
+    EXPECT_NE(result.out.find(command), std::string::npos) << command << "\n" << result.out;
+}
+
+TEST(CliConventions, MistypedNamesAreNamedWithTheClosestValidOneRepeatsAreRefused) {
+  const std::pair<const char*, const char*> cases[] = {
+      {"frobnicate", "unknown subcommand 'frobnicate' Subcommands: scenes, check, run"},
+      {"rnu fusiform", "unknown subcommand 'rnu'; did you mean 'run'?"},
+      {"check thigh14", "did you mean 'thigh13'?"},
+      {"scenes --export fusifrom", "did you mean 'fusiform'?"},
+      {"check fusiform --set resolutoin=10", "unknown key; did you mean 'resolution'?"},
+      {"check fusiform --set model.kapa=1", "unknown field; did you mean 'kappa'?"},
+      {"run fusiform --frame-every 1 --frame-every 2",
+       "--frame-every: given more than once; give it once"}};
+  for (const auto& [arguments, expected] : cases) {
+    const Result result = run(std::string(arguments) + " 2>&1");
+    EXPECT_EQ(result.status, 2) << arguments << "\n" << result.out;
+    EXPECT_NE(result.out.find(expected), std::string::npos) << arguments << "\n" << result.out;
+  }
+}
+
+TEST(CliConventions, EnumOptionsListTheirChoices) {
+  const Result help = run("reference --help");
+  EXPECT_NE(help.out.find("--ccx-element C3D4|C3D10"), std::string::npos) << help.out;
+  EXPECT_NE(help.out.find("--ccx-sliding finite|small"), std::string::npos) << help.out;
+  EXPECT_EQ(help.out.find("->"), std::string::npos) << help.out;
+  const Result bad = run("reference fusiform --ccx-element C3D8 2>&1");
+  EXPECT_EQ(bad.status, 2);
+  EXPECT_NE(bad.out.find("expected one of C3D10, C3D4, got C3D8"), std::string::npos) << bad.out;
+}
+
+TEST(CliConventions, OneTableOfExitCodesInTheHelpTheReadmeAndTheDocs) {
+  const std::string help = run("--help").out;
+  auto read = [](const char* relative) {
+    std::ifstream in(fs::path(FIBREMSS_SOURCE_DIR) / relative);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string readme = read("README.md"), docs = read("docs/bad-inputs.md");
+  for (const char* code : {"0 done", "1 an internal error", "2 bad input", "3 a run", "4 a run",
+                           "130 interrupted", "143 by SIGTERM"}) {
+    EXPECT_NE(help.find(code), std::string::npos) << code;
+    EXPECT_NE(readme.find(code), std::string::npos) << code;
+  }
+  for (const char* row : {"| 0 |", "| 1 |", "| 2 |", "| 3 |", "| 4 |", "| 130, 143 |"})
+    EXPECT_NE(docs.find(row), std::string::npos) << row;
 }

@@ -150,6 +150,24 @@ TEST(ParseMethod, KnowsTheFamiliesAndVariants) {
   EXPECT_THROW(parseMethod("fibremss:iterations"), InputError);
 }
 
+TEST(SummaryJson, EachRunStatesTheOverridesItRanWith) {
+  Comparison comparison;
+  comparison.overrides = {"resolution=20", "seed=3"};
+  comparison.resolution = 20;
+  for (const char* method : {"fibremss", "fibremss:resolution=10+iterations=5", "btsoftbody"}) {
+    comparison.runs.emplace_back();
+    comparison.runs.back().method = method;
+  }
+  const nlohmann::json runs = summaryJson(comparison, "compare").at("runs");
+  using Strings = std::vector<std::string>;
+  EXPECT_EQ(runs[0].at("scene_overrides").get<Strings>(), comparison.overrides);
+  EXPECT_EQ(runs[1].at("scene_overrides").get<Strings>(),
+            (Strings{"seed=3", "resolution=10", "iterations=5"}));
+  EXPECT_EQ(runs[2].at("scene_overrides").get<Strings>(), comparison.overrides);
+  EXPECT_EQ(runs[0].at("resolution"), 20);
+  EXPECT_EQ(runs[1].at("resolution"), 10);
+}
+
 TEST(RmsBetweenRuns, CombinesPosesAsTheRootMeanSquare) {
   // Pose 0 shifted by 1 mm, pose 1 by 3 mm: sqrt((1 + 9) / 2) mm.
   RunMetrics a, b;

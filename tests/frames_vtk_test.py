@@ -126,6 +126,11 @@ def main():
         reader.UpdatePipeline(time)
         blocks = servermanager.Fetch(reader)
         check(blocks.GetNumberOfBlocks() == 4, f"{blocks.GetNumberOfBlocks()} parts at t={time}")
+        # ParaView lists each part by the name run.pvd gives it.
+        block_names = [blocks.GetMetaData(b).Get(blocks.NAME())
+                       for b in range(blocks.GetNumberOfBlocks())]
+        check(block_names == ["flexor surface", "flexor particles", "upper-arm", "forearm"],
+              f"block names {block_names}")
         for b in range(blocks.GetNumberOfBlocks()):
             block = blocks.GetBlock(b)
             check(block is not None and block.GetNumberOfPoints() > 0, f"part {b} at t={time}")

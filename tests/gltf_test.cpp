@@ -1,6 +1,7 @@
-// glTF 2.0 output (issue 21): a .glb written through assimp's exporter is read back by assimp's
-// glTF importer with every mesh, its vertex count and positions; `fibremss run --format gltf`
-// writes one per frame with every muscle surface and bone.
+// glTF 2.0 output: a .glb is read back by assimp's glTF importer with every mesh, its vertex
+// count and positions, and keeps the rules of the glTF 2.0 specification a validator checks
+// (GlbRules); `fibremss run --format gltf` writes one per frame with every muscle surface and
+// bone, and run.glb animating them.
 #include "fibremss/Gltf.h"
 
 #include <assimp/postprocess.h>
@@ -8,7 +9,11 @@
 #include <gtest/gtest.h>
 
 #include <assimp/Importer.hpp>
+#include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -31,6 +36,137 @@ std::map<std::string, const aiMesh*> meshesByName(const aiScene& scene) {
   return meshes;
 }
 
+/// A .glb's JSON and binary chunks.
+struct Glb {
+  nlohmann::json gltf;
+  std::string binary;
+};
+
+Glb readGlb(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  const std::string file((std::istreambuf_iterator<char>(in)), {});
+  const auto word = [&](size_t at) {
+    uint32_t value = 0;
+    if (at + 4 <= file.size()) std::memcpy(&value, file.data() + at, 4);
+    return value;
+  };
+  Glb glb;
+  EXPECT_EQ(word(0), 0x46546C67u);  // "glTF"
+  EXPECT_EQ(word(4), 2u);
+  EXPECT_EQ(word(8), file.size());
+  const uint32_t jsonLength = word(12);
+  EXPECT_EQ(word(16), 0x4E4F534Au);  // "JSON"
+  EXPECT_EQ(jsonLength % 4, 0u);
+  if (20 + jsonLength + 8 > file.size()) return glb;
+  glb.gltf = nlohmann::json::parse(file.substr(20, jsonLength));
+  const size_t bin = 20 + jsonLength;
+  EXPECT_EQ(word(bin + 4), 0x004E4942u);  // "BIN"
+  EXPECT_EQ(word(bin) % 4, 0u);
+  glb.binary = file.substr(bin + 8, word(bin));
+  return glb;
+}
+
+size_t componentBytes(int type) {
+  return type == 5126 || type == 5125 ? 4 : type == 5123 || type == 5122 ? 2 : 1;
+}
+
+size_t componentCount(const std::string& type) {
+  const std::map<std::string, size_t> counts{
+      {"SCALAR", 1}, {"VEC2", 2}, {"VEC3", 3}, {"VEC4", 4}, {"MAT4", 16}};
+  return counts.count(type) ? counts.at(type) : 0;
+}
+
+/// An accessor's float values (the tests' files hold floats and unsigned ints only).
+std::vector<double> accessorValues(const Glb& glb, size_t index) {
+  const auto& accessor = glb.gltf["accessors"][index];
+  const auto& view = glb.gltf["bufferViews"][accessor["bufferView"].get<size_t>()];
+  const size_t start =
+      view.value("byteOffset", size_t(0)) + accessor.value("byteOffset", size_t(0));
+  const size_t n = accessor["count"].get<size_t>() * componentCount(accessor["type"]);
+  std::vector<double> values(n);
+  for (size_t i = 0; i < n && start + 4 * i + 4 <= glb.binary.size(); ++i) {
+    if (accessor["componentType"] == 5126) {
+      float value;
+      std::memcpy(&value, glb.binary.data() + start + 4 * i, 4);
+      values[i] = value;
+    } else {
+      uint32_t value;
+      std::memcpy(&value, glb.binary.data() + start + 4 * i, 4);
+      values[i] = value;
+    }
+  }
+  return values;
+}
+
+/// The rules of the glTF 2.0 specification that a validator reports as errors or warnings and
+/// that these files could break: buffers, views and accessors in range and aligned; every
+/// POSITION accessor (morph targets included) and every animation input with exact bounds;
+/// animation inputs strictly increasing; outputs as long as inputs times the targets; every
+/// declared extension used; indices within the vertices; normals of unit length.
+void expectGlbRules(const Glb& glb) {
+  const nlohmann::json& gltf = glb.gltf;
+  EXPECT_EQ(gltf["asset"]["version"], "2.0");
+  ASSERT_EQ(gltf["buffers"].size(), 1u);
+  EXPECT_EQ(gltf["buffers"][0]["byteLength"].get<size_t>(), glb.binary.size());
+  for (const auto& view : gltf["bufferViews"]) {
+    EXPECT_GT(view["byteLength"].get<size_t>(), 0u);
+    EXPECT_LE(view.value("byteOffset", size_t(0)) + view["byteLength"].get<size_t>(),
+              glb.binary.size());
+  }
+  for (const auto& accessor : gltf["accessors"]) {
+    const auto& view = gltf["bufferViews"][accessor["bufferView"].get<size_t>()];
+    const size_t bytes = componentBytes(accessor["componentType"]);
+    const size_t offset =
+        view.value("byteOffset", size_t(0)) + accessor.value("byteOffset", size_t(0));
+    EXPECT_EQ(offset % bytes, 0u) << accessor;
+    EXPECT_LE(accessor.value("byteOffset", size_t(0)) +
+                  accessor["count"].get<size_t>() * componentCount(accessor["type"]) * bytes,
+              view["byteLength"].get<size_t>());
+  }
+  const auto expectBounds = [&](size_t index) {
+    const auto& accessor = gltf["accessors"][index];
+    ASSERT_TRUE(accessor.contains("min") && accessor.contains("max")) << index;
+    const std::vector<double> values = accessorValues(glb, index);
+    const size_t components = componentCount(accessor["type"]);
+    for (size_t c = 0; c < components; ++c) {
+      double low = INFINITY, high = -INFINITY;
+      for (size_t i = c; i < values.size(); i += components)
+        low = std::min(low, values[i]), high = std::max(high, values[i]);
+      EXPECT_EQ(float(accessor["min"][c].get<double>()), float(low)) << index;
+      EXPECT_EQ(float(accessor["max"][c].get<double>()), float(high)) << index;
+    }
+  };
+  for (const auto& mesh : gltf["meshes"])
+    for (const auto& primitive : mesh["primitives"]) {
+      const size_t position = primitive["attributes"]["POSITION"];
+      const size_t vertices = gltf["accessors"][position]["count"];
+      expectBounds(position);
+      for (const auto& target : primitive.value("targets", nlohmann::json::array()))
+        expectBounds(target["POSITION"]);
+      EXPECT_EQ(mesh.value("weights", nlohmann::json::array()).size(),
+                primitive.value("targets", nlohmann::json::array()).size());
+      for (double index : accessorValues(glb, primitive["indices"])) EXPECT_LT(index, vertices);
+      const std::vector<double> normals = accessorValues(glb, primitive["attributes"]["NORMAL"]);
+      for (size_t i = 0; i + 2 < normals.size(); i += 3)
+        EXPECT_NEAR(std::hypot(normals[i], normals[i + 1], normals[i + 2]), 1.0, 5e-4) << i;
+    }
+  for (const auto& animation : gltf.value("animations", nlohmann::json::array()))
+    for (const auto& channel : animation["channels"]) {
+      const auto& sampler = animation["samplers"][channel["sampler"].get<size_t>()];
+      expectBounds(sampler["input"]);
+      const std::vector<double> times = accessorValues(glb, sampler["input"]);
+      for (size_t i = 1; i < times.size(); ++i) EXPECT_GT(times[i], times[i - 1]) << i;
+      const auto& node = gltf["nodes"][channel["target"]["node"].get<size_t>()];
+      const size_t targets = gltf["meshes"][node["mesh"].get<size_t>()]["weights"].size();
+      EXPECT_EQ(channel["target"]["path"], "weights");
+      EXPECT_EQ(gltf["accessors"][sampler["output"].get<size_t>()]["count"].get<size_t>(),
+                times.size() * targets);
+    }
+  // Declared extensions: each must be used by some object (these files use none).
+  EXPECT_FALSE(gltf.contains("extensionsUsed")) << gltf["extensionsUsed"];
+  EXPECT_FALSE(gltf.contains("extensionsRequired"));
+}
+
 TEST(Gltf, AGlbRoundTripsThroughAssimpsImporter) {
   testing::TemporaryDirectory dir("fibremss_gltf");
   // A tetrahedron and a bent quad, at positions that are not round in float.
@@ -49,6 +185,7 @@ TEST(Gltf, AGlbRoundTripsThroughAssimpsImporter) {
   Assimp::Importer importer;
   const aiScene* scene = importer.ReadFile(path, 0);
   ASSERT_NE(scene, nullptr) << importer.GetErrorString();
+  expectGlbRules(readGlb(path));
   const auto read = meshesByName(*scene);
   ASSERT_EQ(read.size(), 2u);
   for (const GltfMesh& written : meshes) {
@@ -98,6 +235,42 @@ TEST(Gltf, RunWritesAGlbPerFrameWithTheDeformedSurfaces) {
     for (int k = 0; k < 3; ++k)
       EXPECT_NEAR(1000.0 * muscle.mVertices[i][k], frame.vertices[i][k], 1e-3) << i;
   EXPECT_EQ(meshes.size(), 1 + loadScene("fusiform").bones.size());  // the muscle, every bone
+  expectGlbRules(readGlb(glb));
+}
+
+TEST(Gltf, RunWritesOneAnimatedGlbWhoseFramesAreThePerFrameFiles) {
+  testing::TemporaryDirectory out("fibremss_gltf_animated");
+  const auto result = testing::runProcess(std::string(FIBREMSS_CLI) +
+                                          " run fusiform --steps 3 --frame-every 1 --format gltf "
+                                          "--out " +
+                                          out.path().string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  const Glb animated = readGlb(out.path() / "gltf" / "run.glb");
+  expectGlbRules(animated);
+  ASSERT_EQ(animated.gltf["animations"].size(), 1u);
+  const auto& gltf = animated.gltf;
+  // Frame k is the first frame's positions plus morph target k-1 (weight 1 at frame k's time).
+  for (int k = 1; k < 3; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05d.glb", k);
+    const Glb frame = readGlb(out.path() / "gltf" / name);
+    ASSERT_EQ(frame.gltf["meshes"].size(), gltf["meshes"].size());
+    for (size_t m = 0; m < gltf["meshes"].size(); ++m) {
+      const auto& primitive = gltf["meshes"][m]["primitives"][0];
+      const std::vector<double> base =
+          accessorValues(animated, primitive["attributes"]["POSITION"]);
+      const std::vector<double> moved =
+          accessorValues(animated, primitive["targets"][k - 1]["POSITION"]);
+      const std::vector<double> expected =
+          accessorValues(frame, frame.gltf["meshes"][m]["primitives"][0]["attributes"]["POSITION"]);
+      ASSERT_EQ(base.size(), expected.size());
+      for (size_t i = 0; i < base.size(); ++i)
+        EXPECT_NEAR(base[i] + moved[i], expected[i], 1e-6) << "frame " << k << " mesh " << m;
+    }
+  }
+  const auto& sampler = gltf["animations"][0]["samplers"][0];
+  EXPECT_EQ(gltf["accessors"][sampler["input"].get<size_t>()]["count"], 3);
+  EXPECT_EQ(sampler["interpolation"], "LINEAR");
 }
 
 }  // namespace

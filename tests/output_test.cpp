@@ -222,7 +222,7 @@ TEST_F(OutputTest, AtomicWriteFailsWithThePathWhenTheDirectoryIsAFile) {
 
 TEST_F(OutputTest, PvdListsEveryEntry) {
   PvdCollection collection;
-  collection.add(0.0, "frame_0000/muscles.vtp", 0);
+  collection.add(0.0, "frame_0000/muscles.vtp", 0, "muscles & <tendons>");
   collection.add(0.0, "frame_0000/bones.vtp", 1);
   collection.add(0.25, "frame_0001/muscles.vtp", 0);
   const fs::path path = directory_ / "run.pvd";
@@ -242,6 +242,8 @@ TEST_F(OutputTest, PvdListsEveryEntry) {
   EXPECT_DOUBLE_EQ(std::stod(attribute(xml, "timestep", last)), 0.25);
   EXPECT_EQ(attribute(xml, "part", last), "1");
   EXPECT_EQ(attribute(xml, "group", last), "");
+  EXPECT_EQ(attribute(xml, "name", xml.find("<DataSet")), "muscles &amp; &lt;tendons&gt;");
+  EXPECT_EQ(xml.find("name=", last), std::string::npos);  // no name given, none written
 }
 
 }  // namespace

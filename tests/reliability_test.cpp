@@ -364,6 +364,7 @@ TEST(Reliability2, ASecondWriterIntoALockedOutputDirectoryIsRefused) {
       cli("run fusiform --steps 1 --frame-every 0 --set resolution=6 --out " + out.string());
   EXPECT_EQ(after.exitCode, 0) << after.output;
   EXPECT_TRUE(fs::exists(out / "summary.json"));
+  EXPECT_FALSE(fs::exists(out / ".fibremss.lock"));  // a clean exit leaves no lock file
 }
 
 TEST(Reliability2, EverySubcommandThatWritesADirectoryTakesItsLock) {
@@ -424,8 +425,7 @@ TEST(Reliability2, AHugeSetIndexIsARangeError) {
 // --- Row 14 and the exit-code table: every usage error exits 2 with a readable range ----------
 
 TEST(Reliability2, EveryUsageErrorExitsWithCode2) {
-  const std::vector<std::string> usage = {"",
-                                          "no-such-command",
+  const std::vector<std::string> usage = {"no-such-command",
                                           "run fusiform --steps -1",
                                           "run fusiform --threads abc",
                                           "run fusiform extra-argument",

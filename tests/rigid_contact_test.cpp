@@ -173,6 +173,40 @@ TEST(RigidContact, ABallDroppedOnAMuscleStopsOnItAndTheMuscleDentsAndRecovers) {
   EXPECT_EQ(f.world.bodyContact(&ball.body).contacts, 0u);
 }
 
+TEST(RigidContact, InADefaultWorldABallDroppedOnAMuscleComesToRestOnIt) {
+  // Default parameters (the projective solver), default coupling (QuasiStaticPose), Bullet at
+  // 60 Hz: a 20 g ball dropped 20 mm. The muscle may stop it and carry it, never throw it.
+  btSoftBodyRigidBodyCollisionConfiguration configuration;
+  btCollisionDispatcher dispatcher(&configuration);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, SimulationParameters{});
+  world.setGravity(btVector3(0, btScalar(-9.81), 0));
+  BoneBody bone(slabBone(kWidth, kWidth, kSpacing));
+  const BoneHandle boneHandle = world.addBone(bone.settings(), bone.body());
+  const MuscleHandle slab =
+      world.addMuscle(slabMuscle(kSide, kLayers, kSide, kSpacing, 5, btScalar(0.3), true),
+                      std::span(&boneHandle, 1));
+  const btScalar step = btScalar(1.0 / 60), radius = 0.008f, centre = kWidth / 2;
+  Ball ball(radius, 0.02f, btVector3(centre, kTop + radius + 0.02f, centre));
+  world.addRigidBody(&ball.body);
+  btScalar impact = 0, fastestAfter = 0;
+  for (int s = 0; s < 120; ++s) {  // two seconds
+    const btScalar before = ball.body.getLinearVelocity().length();
+    world.stepSimulation(step, 1, step);
+    if (world.bodyContact(&ball.body).contacts > 0 && impact == 0) impact = before;
+    if (impact > 0) fastestAfter = std::max(fastestAfter, ball.body.getLinearVelocity().length());
+    ASSERT_FALSE(world.muscleSystem().lastStep().nan) << "step " << s;
+  }
+  ASSERT_GT(impact, 0.3f) << "the ball never touched the muscle";
+  EXPECT_LE(fastestAfter, impact) << "thrown faster than it landed";
+  EXPECT_LT(ball.body.getLinearVelocity().length(), 0.2f);  // at rest, up to gravity's g·dt
+  EXPECT_NEAR(ball.bottom(), kTop, 2 * kSpacing) << "not resting on the muscle";
+  world.removeRigidBody(&ball.body);
+  world.removeMuscle(slab);
+  world.removeBone(boneHandle);
+}
+
 TEST(RigidContact, MomentumIsConservedBetweenABallAndAFreeMuscle) {
   btSoftBodyRigidBodyCollisionConfiguration configuration;
   btCollisionDispatcher dispatcher(&configuration);

@@ -264,6 +264,14 @@ TEST(Viewer, PlaysARunsFramesAndDrawsTheMuscleWhereTheFrameSaysWithoutItsScene) 
             2);
 }
 
+TEST(ViewerColourBar, EveryArrayStatesWhatItMeasures) {
+  for (const std::string& array : viewer::colourArrays())
+    EXPECT_EQ(viewer::unitOf(array, "mm").empty(), array == "muscle_id") << array;
+  EXPECT_EQ(viewer::unitOf("displacement", "mm"), "mm");
+  EXPECT_EQ(viewer::unitOf("penetration", "m"), "m");
+  EXPECT_EQ(viewer::unitOf("fibre_stretch", "mm"), "current / rest length along the fibres");
+}
+
 TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   const std::string cli = std::string(FIBREMSS_CLI) + " view ";
   EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);

@@ -4,6 +4,14 @@
 
 namespace fibremss::cli {
 
+/// The exit codes of every subcommand, as `fibremss --help`, README.md and docs/bad-inputs.md
+/// state them.
+inline constexpr const char* kExitCodes =
+    "Exit codes (every subcommand): 0 done, 2 bad input or usage, 3 a run that failed "
+    "numerically, 4 a run with on_failure=stop-body that ran every step but froze a muscle on "
+    "the way, 130 interrupted by Ctrl-C, 143 by SIGTERM, 1 an internal error "
+    "(docs/bad-inputs.md).";
+
 void addScenesCommand(CLI::App& app);     ///< `fibremss scenes`: list and export built-in scenes
 void addCheckCommand(CLI::App& app);      ///< `fibremss check`: prepare a scene, print statistics
 void addRunCommand(CLI::App& app);        ///< `fibremss run`: simulate a scene, write frames

@@ -8,6 +8,24 @@
 
 namespace fibremss::cli {
 
+/// An enum option given by name (case ignored): "expected one of C3D10, C3D4, got C3D8"; the
+/// help names the choices in the option's type.
+template <typename Enum>
+CLI::Validator choices(const std::map<std::string, Enum>& names) {
+  std::string list;
+  for (const auto& entry : names) list += (list.empty() ? "" : ", ") + entry.first;
+  return CLI::Validator(
+      [names, list](std::string& text) -> std::string {
+        for (const auto& [name, value] : names)
+          if (CLI::detail::to_lower(name) == CLI::detail::to_lower(text)) {
+            text = std::to_string(static_cast<int>(value));  // CLI11 reads enums as numbers
+            return {};
+          }
+        return "expected one of " + list + ", got " + text;
+      },
+      "");
+}
+
 inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
   command.add_option("--cache", options.cacheDir,
                      "Reference cache directory (default $FIBREMSS_CACHE/reference, else "
@@ -17,10 +35,9 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
                   "Reference element: C3D4 (linear tetrahedra; the refinement gate solves C3D10) "
                   "or C3D10 (quadratic; the gate solves the next mesh level); sphere-planes "
                   "defaults to C3D10")
-      ->transform(CLI::CheckedTransformer(
-          std::map<std::string, CalculixElement>{{"C3D10", CalculixElement::C3D10},
-                                                 {"C3D4", CalculixElement::C3D4}},
-          CLI::ignore_case))
+      ->transform(choices(std::map<std::string, CalculixElement>{{"C3D10", CalculixElement::C3D10},
+                                                                 {"C3D4", CalculixElement::C3D4}}))
+      ->type_name("C3D4|C3D10")
       ->each([&options](const std::string&) { options.elementGiven = true; })
       ->default_str("C3D4");
   command
@@ -48,10 +65,9 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
                   "(SMALL SLIDING: each node keeps its bone face through an increment's "
                   "iterations); "
                   "default: the scene's reference.contact_sliding")
-      ->transform(CLI::CheckedTransformer(
-          std::map<std::string, ContactSliding>{{"finite", ContactSliding::Finite},
-                                                {"small", ContactSliding::Small}},
-          CLI::ignore_case))
+      ->transform(choices(std::map<std::string, ContactSliding>{{"finite", ContactSliding::Finite},
+                                                                {"small", ContactSliding::Small}}))
+      ->type_name("finite|small")
       ->each([&options](const std::string&) { options.contactSlidingGiven = true; })
       ->default_str("the scene's");
   command

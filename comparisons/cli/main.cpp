@@ -1,15 +1,16 @@
-// The fibremss command-line tool. Exit codes (docs/bad-inputs.md): 0 done, 2 bad input or usage,
-// 3 a run that failed numerically, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); 1 only for
-// an internal error.
+// The fibremss command-line tool. Exit codes: kExitCodes (Commands.h).
 #include <LinearMath/btScalar.h>
 
+#include <algorithm>
 #include <exception>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "Commands.h"
 #include "fibremss/Error.h"
 #include "fibremss/Kernel.h"
+#include "fibremss/Suggest.h"
 
 namespace {
 
@@ -20,9 +21,27 @@ constexpr int kExitBadInput = 2;
 /// as CLI::RuntimeError; every other parse error is a usage error.
 int exitFor(const CLI::App& app, const CLI::ParseError& e) {
   if (e.get_exit_code() == 0 || dynamic_cast<const CLI::RuntimeError*>(&e)) return app.exit(e);
-  std::cerr << "fibremss: error: " << e.what() << "\n"
+  std::string message = e.what();
+  // CLI11 says "--frame-every: At Most 1 required but received 2" of an option given twice.
+  const size_t twice = message.find(": At Most 1 required but received");
+  if (dynamic_cast<const CLI::ArgumentMismatch*>(&e) && twice != std::string::npos)
+    message = message.substr(0, twice) + ": given more than once; give it once";
+  std::cerr << "fibremss: error: " << message << "\n"
             << "Run with --help for more information.\n";
   return kExitBadInput;
+}
+
+/// The error for a first argument that is no option and no subcommand's name (empty when it is
+/// one): the names there are, and the closest.
+std::string unknownSubcommand(const CLI::App& app, const std::string& word) {
+  if (word.starts_with("-")) return {};
+  std::vector<std::string> names;
+  for (const CLI::App* command : app.get_subcommands({})) names.push_back(command->get_name());
+  if (std::find(names.begin(), names.end(), word) != names.end()) return {};
+  std::string list;
+  for (const std::string& name : names) list += (list.empty() ? "" : ", ") + name;
+  return "unknown subcommand '" + word + "'" + fibremss::didYouMean(word, names) +
+         " Subcommands: " + list + ".";
 }
 
 /// What --version prints: FibreMSS's version, Bullet's version and btScalar precision, the
@@ -57,9 +76,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", versionText,
                        "Print the version, Bullet's version and precision, the SIMD kernel and the "
                        "compiler, and exit");
-  app.footer(
-      "Exit codes (every subcommand): 0 done, 2 bad input or usage, 3 a run that failed "
-      "numerically, 130 interrupted by Ctrl-C, 143 by SIGTERM (docs/bad-inputs.md).");
+  app.footer(fibremss::cli::kExitCodes);
   fibremss::cli::addScenesCommand(app);
   fibremss::cli::addCheckCommand(app);
   fibremss::cli::addRunCommand(app);
@@ -69,6 +86,14 @@ int main(int argc, char** argv) {
   fibremss::cli::addStabilityCommand(app);
   fibremss::cli::addReferenceCommand(app);
   fibremss::cli::addViewCommand(app);
+  if (argc < 2) {  // no subcommand: what there is to run
+    std::cout << app.help();
+    return 0;
+  }
+  if (const std::string error = unknownSubcommand(app, argv[1]); !error.empty()) {
+    std::cerr << "fibremss: error: " << error << "\nRun with --help for more information.\n";
+    return kExitBadInput;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -795,12 +796,38 @@ nlohmann::json machineJson() {
   return {{"cpu", model}, {"cores", cores}, {"os", os}};
 }
 
+namespace {
+
+/// The scene overrides a run ran with: the comparison's, then a FibreMSS variant's own
+/// (`fibremss:resolution=10`), each replacing an earlier one of its key.
+std::vector<std::string> runOverrides(const Comparison& comparison, const std::string& method) {
+  std::vector<std::string> overrides = comparison.overrides;
+  if (!method.starts_with("fibremss:")) return overrides;
+  for (const std::string& part : parseMethod(method).overrides) {
+    const std::string key = part.substr(0, part.find('=') + 1);
+    std::erase_if(overrides, [&](const std::string& given) { return given.starts_with(key); });
+    overrides.push_back(part);
+  }
+  return overrides;
+}
+
+/// The resolution the run's overrides set last, else the comparison's.
+int runResolution(const Comparison& comparison, const std::vector<std::string>& overrides) {
+  int resolution = comparison.resolution;
+  for (const std::string& part : overrides)
+    if (part.starts_with("resolution=")) resolution = std::atoi(part.c_str() + 11);
+  return resolution;
+}
+
+}  // namespace
+
 nlohmann::json summaryJson(const Comparison& comparison, const std::string& command) {
   nlohmann::json runs = nlohmann::json::array();
   for (const RunMetrics& run : comparison.runs) {
     nlohmann::json object = toJson(run);
-    object["scene_overrides"] = comparison.overrides;
-    object["resolution"] = comparison.resolution;
+    const std::vector<std::string> overrides = runOverrides(comparison, run.method);
+    object["scene_overrides"] = overrides;
+    object["resolution"] = runResolution(comparison, overrides);
     object["step_deg"] = std::isfinite(comparison.stepDeg) ? nlohmann::json(comparison.stepDeg)
                                                            : nlohmann::json(nullptr);
     runs.push_back(std::move(object));

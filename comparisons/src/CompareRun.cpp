@@ -714,7 +714,8 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
                      const std::vector<std::string>& overrides, const LoadedScene& scene,
                      const PreparedScene& prepared, const CompareOptions& options) {
   std::atomic<bool> stop{false};
-  auto report = [&](const MethodProgress& p) {
+  auto report = [&](MethodProgress p) {
+    p.method = spec.name;  // the variant's name, not its family's
     if (options.progress) options.progress(p);
     if ((options.cancel && options.cancel->load()) ||
         (options.methodBudgetSeconds > 0 && p.seconds > options.methodBudgetSeconds)) {
@@ -819,7 +820,6 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   for (const MethodSpec& given : specs) {
     if (options.cancel && options.cancel->load()) break;
     const MethodSpec spec = resolvedSpec(given, scene, prepared, options);
-    log("running " + spec.name);
     runs.push_back(runMethod(spec, sceneNameOrPath, overrides, scene, prepared, options));
     runs.back().method = spec.name;
     runs.back().poses = std::max(scene.poseCount, 1);

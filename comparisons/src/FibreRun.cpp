@@ -439,6 +439,7 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
       frames->write({s, pose, where.poseLabel, simulatedTime}, system, muscles, prepared,
                     boneTransforms, surfaceDepthsMm);
   }
+  if (frames) frames->finish();
   if (candidateOverflows > 0)
     printNote("collision candidate lists overflowed " + std::to_string(candidateOverflows) +
               " time(s): those pairs were traversed directly (same contacts, slower)");

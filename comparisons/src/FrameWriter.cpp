@@ -105,7 +105,7 @@ void FrameWriter::write(const FrameInfo& info, const MuscleSystem& system,
 
 void FrameWriter::writeGltf(const FrameInfo& info, const MuscleSystem& system,
                             std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
-                            std::span<const btTransform> boneTransforms) const {
+                            std::span<const btTransform> boneTransforms) {
   constexpr std::array<float, 4> kMuscle{0.75f, 0.25f, 0.22f, 1}, kBone{0.86f, 0.84f, 0.76f, 1};
   std::vector<GltfMesh> meshes;
   for (size_t m = 0; m < muscles.size(); ++m) {
@@ -123,6 +123,11 @@ void FrameWriter::writeGltf(const FrameInfo& info, const MuscleSystem& system,
   char name[32];
   std::snprintf(name, sizeof name, "/gltf/frame_%05d.glb", info.step);
   writeGlb(outDir_ + name, meshes);
+  animation_.addFrame(info.time, meshes);
+}
+
+void FrameWriter::finish() const {
+  if (animation_.frames() > 0) animation_.write(outDir_ + "/gltf/run.glb");
 }
 
 void FrameWriter::writeMuscle(const FrameInfo& info, size_t m, const MuscleSystem& system,
@@ -153,7 +158,7 @@ void FrameWriter::writeMuscle(const FrameInfo& info, size_t m, const MuscleSyste
                          {"penetration", 1, std::move(penetration)},
                          {"fixed", 1, onSurface(muscle, fixed)}};
     surface.fieldData = frameFields(info);
-    add(info.time, stem + "_surface_" + number + ".vtp", surface, part);
+    add(info.time, stem + "_surface_" + number + ".vtp", surface, part, muscle.name + " surface");
   }
   ++part;
   if (settings_.writeParticles || settings_.writeFibres) {
@@ -178,7 +183,8 @@ void FrameWriter::writeMuscle(const FrameInfo& info, size_t m, const MuscleSyste
                            {"radius", 1, std::move(radius)},
                            {"boundary", 1, std::move(boundary)}};
     particles.fieldData = frameFields(info);
-    add(info.time, stem + "_particles_" + number + ".vtp", particles, part);
+    add(info.time, stem + "_particles_" + number + ".vtp", particles, part,
+        muscle.name + " particles");
   }
   ++part;
 }
@@ -210,7 +216,7 @@ void FrameWriter::writeBones(const FrameInfo& info, const PreparedScene& prepare
       boneWrittenAt_[b] = boneTransforms[b];
       writeVtp(outDir_ + "/" + boneFiles_[b], mesh);
     }
-    pvd_.add(info.time, boneFiles_[b], part);
+    pvd_.add(info.time, boneFiles_[b], part, bone.name);
   }
 }
 
@@ -221,9 +227,10 @@ std::vector<DataArray> FrameWriter::frameFields(const FrameInfo& info) const {
           {"pose_label", 1, std::vector<double>{info.poseLabel}}};
 }
 
-void FrameWriter::add(double time, const std::string& file, const PolyData& data, int part) {
+void FrameWriter::add(double time, const std::string& file, const PolyData& data, int part,
+                      const std::string& name) {
   writeVtp(outDir_ + "/" + file, data);
-  pvd_.add(time, file, part);
+  pvd_.add(time, file, part, name);
 }
 
 }  // namespace fibremss

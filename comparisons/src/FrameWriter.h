@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/Gltf.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Output.h"
 #include "fibremss/Preparation.h"
@@ -43,7 +44,7 @@ struct FrameFormats {
 /// Writes the frames of a run. VTK in the scene's units: per muscle its deformed surface and its
 /// particles (fibres as lines), per bone its mesh where it is, again only once it moved, and
 /// run.pvd listing them all at their simulated times. glTF: one .glb per frame with every
-/// muscle's deformed surface and every bone where it is.
+/// muscle's deformed surface and every bone where it is, and run.glb animating them all.
 class FrameWriter {
  public:
   FrameWriter(const std::string& outDir, const OutputSettings& settings, double unitScale,
@@ -55,6 +56,9 @@ class FrameWriter {
              std::span<const btTransform> boneTransforms,
              std::span<const std::vector<float>> surfaceDepthsMm);
 
+  /// After the last frame: writes gltf/run.glb, every glTF frame in one animated file.
+  void finish() const;
+
   int frames() const { return frames_; }
 
  private:
@@ -64,15 +68,17 @@ class FrameWriter {
                   std::span<const btTransform> boneTransforms, int& part);
   void writeGltf(const FrameInfo& info, const MuscleSystem& system,
                  std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
-                 std::span<const btTransform> boneTransforms) const;
+                 std::span<const btTransform> boneTransforms);
   std::vector<DataArray> frameFields(const FrameInfo& info) const;
-  void add(double time, const std::string& file, const PolyData& data, int part);
+  void add(double time, const std::string& file, const PolyData& data, int part,
+           const std::string& name);
 
   std::string outDir_;
   const OutputSettings& settings_;
   FrameFormats formats_;
   btScalar sceneUnitsPerMetre_;
   PvdCollection pvd_;
+  GltfAnimation animation_;                 ///< the glTF frames so far
   std::vector<std::string> boneFiles_;      ///< per bone, the file of its latest placement
   std::vector<btTransform> boneWrittenAt_;  ///< per bone, the transform that file shows
   std::vector<float> stretch_, strain_;     ///< per particle (scratch)

@@ -33,7 +33,11 @@ ProgressBar::ProgressBar(std::string label, int total, std::FILE* stream)
     : ProgressBar(std::move(label), total, stream, isTerminal(stream)) {}
 
 ProgressBar::ProgressBar(std::string label, int total, std::FILE* stream, bool interactive)
-    : label_(std::move(label)), total_(total), stream_(stream), interactive_(interactive) {}
+    : label_(std::move(label)),
+      total_(total),
+      stream_(stream),
+      interactive_(interactive),
+      lastDraw_(std::chrono::steady_clock::now()) {}
 
 std::string ProgressBar::format(const std::string& label, int done, int total, long iterations,
                                 double seconds, int barWidth) {
@@ -62,12 +66,15 @@ std::string ProgressBar::format(const std::string& label, int done, int total, l
 
 void ProgressBar::update(int done, long iterations, double seconds) {
   if (!stream_) return;
+  const auto now = std::chrono::steady_clock::now();
   if (!interactive_) {
+    // A log gets the job's last line, and one a minute while it runs.
+    if (done < total_ && now - lastDraw_ < std::chrono::minutes(1)) return;
+    lastDraw_ = now;
     std::fprintf(stream_, "%s\n", format(label_, done, total_, iterations, seconds, 0).c_str());
     std::fflush(stream_);
     return;
   }
-  const auto now = std::chrono::steady_clock::now();
   if (drawn_ && done < total_ && now - lastDraw_ < std::chrono::milliseconds(100)) return;
   lastDraw_ = now;
   // Carriage return, the line, then erase whatever a longer previous line left behind.

@@ -24,7 +24,8 @@ nlohmann::json finiteOrNull(double value) {
 std::string cellText(const StabilityCell& cell) {
   std::string text = toString(cell.outcome);
   if (cell.failedStep >= 0 && cell.outcome != CellOutcome::Ok) {
-    text += "@" + std::to_string(cell.failedStep);
+    text += '@';
+    text += std::to_string(cell.failedStep);
   }
   return text;
 }

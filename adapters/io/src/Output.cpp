@@ -4,6 +4,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
@@ -240,15 +241,10 @@ OutputDirectory::OutputDirectory(const std::string& path) {
   std::error_code error;
   fs::create_directories(path, error);
   if (error) throw InputError(path, "", "cannot create the directory: " + error.message());
-  const std::string lockPath = (fs::path(path) / ".fibremss.lock").string();
-  lock_ = ::open(lockPath.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (lock_ < 0)
-    throw InputError(lockPath, "", std::string("cannot open: ") + std::strerror(errno));
-  if (::flock(lock_, LOCK_EX | LOCK_NB) != 0) {
-    ::close(lock_);
-    throw InputError(path, "",
-                     "another fibremss process is writing into this directory; wait for it or "
-                     "choose another --out");
+  lockPath_ = (fs::path(path) / ".fibremss.lock").string();
+  // A writer removes the lock file when it ends: a lock taken on a file already removed is
+  // taken again on the file now there.
+  while (!lockHeld()) {
   }
   // Only a writer holding the lock makes temporaries here: any left are a killed writer's.
   static const std::regex kTemporary(R"(.*\.tmp\.[0-9]+\.[0-9]+)");
@@ -260,8 +256,28 @@ OutputDirectory::OutputDirectory(const std::string& path) {
       ++removed_;
 }
 
+bool OutputDirectory::lockHeld() {
+  lock_ = ::open(lockPath_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_ < 0)
+    throw InputError(lockPath_, "", std::string("cannot open: ") + std::strerror(errno));
+  if (::flock(lock_, LOCK_EX | LOCK_NB) != 0) {
+    ::close(lock_);
+    throw InputError(fs::path(lockPath_).parent_path().string(), "",
+                     "another fibremss process is writing into this directory; wait for it or "
+                     "choose another --out");
+  }
+  struct stat held {
+  }, named{};
+  if (::fstat(lock_, &held) == 0 && ::stat(lockPath_.c_str(), &named) == 0 &&
+      held.st_ino == named.st_ino && held.st_dev == named.st_dev)
+    return true;
+  ::close(lock_);
+  return false;
+}
+
 OutputDirectory::~OutputDirectory() {
-  ::close(lock_);  // releases the flock
+  ::unlink(lockPath_.c_str());  // while still held: no writer takes the file being removed
+  ::close(lock_);               // releases the flock
 }
 
 void writeVtp(const std::string& path, const PolyData& data) {
@@ -302,8 +318,8 @@ void writeVtp(const std::string& path, const PolyData& data) {
   writeFileAtomically(path, out.xml);
 }
 
-void PvdCollection::add(double time, const std::string& file, int part) {
-  entries_.push_back({time, file, part});
+void PvdCollection::add(double time, const std::string& file, int part, const std::string& name) {
+  entries_.push_back({time, file, part, name});
 }
 
 void PvdCollection::write(const std::string& path) const {
@@ -314,7 +330,8 @@ void PvdCollection::write(const std::string& path) const {
     char time[32];
     const auto end = std::to_chars(time, time + sizeof time, entry.time).ptr;
     out += "    <DataSet timestep=\"" + std::string(time, end) + "\" group=\"\" part=\"" +
-           std::to_string(entry.part) + "\" file=\"" + escapeXml(entry.file) + "\"/>\n";
+           std::to_string(entry.part) + "\" file=\"" + escapeXml(entry.file) + '"' +
+           (entry.name.empty() ? "" : " name=\"" + escapeXml(entry.name) + '"') + "/>\n";
   }
   out += "  </Collection>\n</VTKFile>\n";
   writeFileAtomically(path, out);

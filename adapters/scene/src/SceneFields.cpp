@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "fibremss/Error.h"
+#include "fibremss/Suggest.h"
 
 namespace fibremss::scene {
 namespace {
@@ -265,8 +266,11 @@ Json Fields::finish() {
       valid.erase(std::unique(valid.begin(), valid.end()), valid.end());
       std::string list;
       for (const auto& name : valid) list += (list.empty() ? "" : ", ") + name;
-      fail(it.key(),
-           "unknown field" + (list.empty() ? std::string() : "; valid fields here: " + list));
+      const std::string suggestion = didYouMean(it.key(), valid);
+      std::string message = "unknown field" + suggestion;
+      if (!list.empty())
+        message += (suggestion.empty() ? "; valid fields here: " : " Valid fields here: ") + list;
+      fail(it.key(), message);
     }
   return std::move(complete_);
 }

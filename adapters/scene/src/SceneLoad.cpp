@@ -16,6 +16,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Scene.h"
+#include "fibremss/Suggest.h"
 
 namespace fibremss {
 namespace {
@@ -532,6 +533,12 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   return result;
 }
 
+std::vector<std::string> builtInSceneNames() {
+  std::vector<std::string> names;
+  for (const auto& scene : builtInScenes()) names.push_back(scene.name);
+  return names;
+}
+
 }  // namespace
 
 btTransform LoadedScene::bonePose(size_t bone, int pose) const {
@@ -542,7 +549,9 @@ btTransform LoadedScene::bonePose(size_t bone, int pose) const {
 
 std::string exportBuiltInScene(const std::string& name) {
   if (builtInSceneDefinition(name).empty())
-    throw InputError(name, "", "not a built-in scene (see `fibremss scenes`)");
+    throw InputError(
+        name, "",
+        "not a built-in scene (see `fibremss scenes`)" + didYouMean(name, builtInSceneNames()));
   return loadScene(name).json;
 }
 
@@ -554,10 +563,12 @@ LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::stri
   if (text.empty()) {
     const fs::path path(nameOrPath);
     if (!fs::is_regular_file(path)) {
+      const std::vector<std::string> names = builtInSceneNames();
       std::string list;
-      for (const auto& scene : builtInScenes()) list += (list.empty() ? "" : ", ") + scene.name;
+      for (const auto& name : names) list += (list.empty() ? "" : ", ") + name;
       throw InputError(nameOrPath, "",
-                       "neither a built-in scene (" + list + ") nor a readable scene file");
+                       "neither a built-in scene (" + list + ") nor a readable scene file" +
+                           didYouMean(nameOrPath, names));
     }
     std::ifstream in(path, std::ios::binary);
     std::ostringstream content;

@@ -5,6 +5,7 @@
 
 #include "SceneFields.h"
 #include "fibremss/Error.h"
+#include "fibremss/Suggest.h"
 
 namespace fibremss::scene {
 namespace {
@@ -170,8 +171,9 @@ void applyOverrides(Json& scene, const std::vector<std::string>& overrides) {
       std::string list;
       for (const auto& name : shorthandKeys()) list += (list.empty() ? "" : ", ") + name;
       throw InputError("--set", key,
-                       "unknown key; use a dotted path into the scene (e.g. model.kappa, "
-                       "muscles.0.resolution) or one of: " +
+                       "unknown key" + didYouMean(key, shorthandKeys()) +
+                           " Use a dotted path into the scene (e.g. model.kappa, "
+                           "muscles.0.resolution) or one of: " +
                            list);
     }
     const Shorthand& shorthand = found->second;

@@ -1,6 +1,7 @@
 #pragma once
 // Progress of long jobs for the command line: on a terminal one line redrawn in place (a bar,
-// steps, iterations per second, time left); otherwise (logs, pipes) one plain line per update.
+// steps, iterations per second, time left); otherwise (logs, pipes) a plain line when the job
+// ends and one a minute while it runs.
 #include <chrono>
 #include <cstdio>
 #include <string>
@@ -22,7 +23,7 @@ class ProgressBar {
 
   /// `done` of the total steps are finished, `iterations` solver iterations so far (0: no
   /// rate shown), `seconds` since the job started. On a terminal the line is redrawn at most ten
-  /// times a second (always for the last step).
+  /// times a second, in a log written at most once a minute (always for the last step).
   void update(int done, long iterations, double seconds);
   /// Ends the redrawn line so that later output starts on a fresh one.
   void finish();
@@ -38,7 +39,7 @@ class ProgressBar {
   std::FILE* stream_;                                 ///< where lines go
   bool interactive_;                                  ///< redraw in place
   bool drawn_ = false;                                ///< a redrawn line is open on the terminal
-  std::chrono::steady_clock::time_point lastDraw_{};  ///< for throttling redraws
+  std::chrono::steady_clock::time_point lastDraw_{};  ///< for throttling redraws and log lines
 };
 
 }  // namespace fibremss

@@ -159,6 +159,7 @@ void FramePlayer::load() {
   for (size_t m = 0; m < frame.surfaces.size(); ++m)
     next.frame.muscles.push_back(surface(frame.surfaces[m], m));
   for (const std::string& file : frame.bones) next.frame.bones.push_back(bone(file));
+  next.frame.lengthUnit = scale_ == 0.001 ? "mm" : "m";
   // A still bone keeps its file from frame to frame; a moving one's earlier files go.
   std::erase_if(bones_, [&](const auto& entry) {
     return std::find(frame.bones.begin(), frame.bones.end(), entry.first) == frame.bones.end();
@@ -192,8 +193,8 @@ void FramePlayer::controls(const Snapshot& shown) {
   if (ImGui::Button("Reset (R)")) reset();
   ImGui::SameLine();
   ImGui::Checkbox("loop", &loop);
-  int index = index_;
-  if (ImGui::SliderInt("frame", &index, 0, int(frames_.size()) - 1)) show(index);
+  int number = index_ + 1;  // as the line above counts: 1 to the number of frames
+  if (ImGui::SliderInt("frame", &number, 1, int(frames_.size()))) show(number - 1);
 }
 
 void FramePlayer::timings(const Snapshot& shown) {
@@ -201,10 +202,10 @@ void FramePlayer::timings(const Snapshot& shown) {
   if (!summary_.is_object() || !summary_.contains("timing")) return;
   const nlohmann::json& t = summary_["timing"];
   auto ms = [&](const char* key) { return t.value(key, NAN); };
-  ImGui::Text("run, median ms per iteration: mss %.3g | muscle CD %.3g", ms("mss"),
-              ms("muscle_cd"));
-  ImGui::Text("    bone CD %.3g | response %.3g | output %.3g", ms("bone_cd"), ms("response"),
-              ms("output"));
+  ImGui::TextWrapped(
+      "run, median ms per iteration: mss %.3g | muscle CD %.3g | bone CD %.3g | "
+      "response %.3g | output %.3g",
+      ms("mss"), ms("muscle_cd"), ms("bone_cd"), ms("response"), ms("output"));
 }
 
 }  // namespace fibremss::viewer

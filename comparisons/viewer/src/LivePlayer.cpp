@@ -91,7 +91,7 @@ void LivePlayer::timings(const Snapshot& shown) {
   ImGui::Text("    response %.3g | output %.3g", t.response, t.output);
   ImGui::Text("ms: step total %.3g (%.3g per iteration)", t.total,
               t.total / std::max(stats.iterations, 1));
-  if (!stepMs_.empty())
+  if (stepMs_.size() >= 2)  // a line needs two points
     ImGui::PlotLines("step ms", stepMs_.data(), int(stepMs_.size()), 0, nullptr, 0, FLT_MAX,
                      ImVec2(0, 40));
   if (stats.failed || stats.frozenMuscles > 0)

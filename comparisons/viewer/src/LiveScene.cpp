@@ -91,6 +91,7 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
                    {"displacement", std::vector<float>(vertices, 0.0f)}};
     frame_.muscles.push_back(std::move(mesh));
   }
+  frame_.lengthUnit = scene_.unitScale == 0.001 ? "mm" : "m";
   updateFrame();
 }
 

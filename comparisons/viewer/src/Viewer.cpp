@@ -129,9 +129,10 @@ void handleKeys(Session& session, Source& source) {
     session.quit = true;
 }
 
-/// A horizontal colour bar from range.low to range.high.
-void drawLegend(const std::string& array, const Range& range) {
+/// A horizontal colour bar from range.low to range.high, under what the values measure.
+void drawLegend(const std::string& array, const Range& range, const std::string& lengthUnit) {
   if (array == "muscle_id") return;
+  ImGui::TextWrapped("%s [%s]", array.c_str(), unitOf(array, lengthUnit).c_str());
   ImDrawList* list = ImGui::GetWindowDrawList();
   const ImVec2 origin = ImGui::GetCursorScreenPos();
   const float width = ImGui::GetContentRegionAvail().x, height = 14;
@@ -147,9 +148,11 @@ void drawLegend(const std::string& array, const Range& range) {
                                   colour(t1), colour(t1), colour(t0));
   }
   ImGui::Dummy(ImVec2(width, height));
+  char high[32];
+  std::snprintf(high, sizeof high, "%.4g", range.high);
   ImGui::Text("%.4g", range.low);
-  ImGui::SameLine(width - 50);
-  ImGui::Text("%.4g", range.high);
+  ImGui::SameLine(std::max(0.0f, width - ImGui::CalcTextSize(high).x));  // right-aligned
+  ImGui::TextUnformatted(high);
 }
 
 void appearanceControls(Session& session) {
@@ -164,7 +167,7 @@ void appearanceControls(Session& session) {
   }
   ImGui::Checkbox("auto range (98 % of the values)", &session.autoRange);
   if (!session.autoRange) ImGui::DragFloat2("range", &render.range.low, 0.01f);
-  drawLegend(render.colourBy, render.range);
+  drawLegend(render.colourBy, render.range, session.shown.frame.lengthUnit);
   if (render.colourBy != "muscle_id")
     ImGui::Text("%s now: min %.4g, max %.4g", render.colourBy.c_str(), session.extremes.low,
                 session.extremes.high);
@@ -254,6 +257,14 @@ const std::vector<std::string>& colourArrays() {
   static const std::vector<std::string> arrays{"fibre_stretch", "displacement", "muscle_id",
                                                "spring_strain", "penetration",  "fixed"};
   return arrays;
+}
+
+std::string unitOf(const std::string& array, const std::string& lengthUnit) {
+  if (array == "fibre_stretch") return "current / rest length along the fibres";
+  if (array == "spring_strain") return "(l - L0) / L0 of the springs";
+  if (array == "fixed") return "1 fixed, 0 free";
+  if (array == "muscle_id") return "";
+  return lengthUnit;  // displacement, penetration
 }
 
 ViewerResult runViewer(const ViewerOptions& options) {

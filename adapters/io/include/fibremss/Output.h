@@ -23,7 +23,8 @@ void writeFileAtomically(const std::string& path, std::string_view content);
 void requireWritableDirectory(const std::string& path);
 
 /// An output directory one process writes at a time: created, locked (DIR/.fibremss.lock held
-/// with flock while this lives; a second writer gets InputError naming the directory), and
+/// with flock while this lives and removed when it ends; a second writer gets InputError naming
+/// the directory), and
 /// cleared of the temporary files (NAME.tmp.PID.N) that a killed writer left in it or its
 /// subfolders.
 class OutputDirectory {
@@ -36,7 +37,11 @@ class OutputDirectory {
   size_t removedTemporaries() const { return removed_; }
 
  private:
-  int lock_ = -1;  ///< the lock file's descriptor
+  /// Opens and locks the lock file; false when the file was removed meanwhile (try again).
+  bool lockHeld();
+
+  std::string lockPath_;  ///< DIR/.fibremss.lock
+  int lock_ = -1;         ///< the lock file's descriptor
   size_t removed_ = 0;
 };
 
@@ -70,8 +75,9 @@ void writeVtp(const std::string& path, const PolyData& data);
 /// A ParaView .pvd collection of time steps and parts.
 class PvdCollection {
  public:
-  /// Adds a dataset file (path relative to the .pvd) at `time` as part `part`.
-  void add(double time, const std::string& file, int part = 0);
+  /// Adds a dataset file (path relative to the .pvd) at `time` as part `part`, its block named
+  /// `name` in ParaView (none when empty).
+  void add(double time, const std::string& file, int part = 0, const std::string& name = "");
   /// Writes the collection atomically; may be called repeatedly as frames are added.
   void write(const std::string& path) const;
 
@@ -80,6 +86,7 @@ class PvdCollection {
     double time;
     std::string file;
     int part;
+    std::string name;
   };
   std::vector<Entry> entries_;
 };

@@ -61,6 +61,35 @@ struct ProxyCollector : btDbvt::ICollide {
   }
 };
 
+/// How fast, along `n`, the bones' motion over the last step moved the point `p` at most [m/s]:
+/// the speed at which the pose change can carry the muscles between them and a body (0 when no
+/// bone moved towards n).
+btScalar poseSpeed(const MuscleSystemAccess::Impl& impl, const btVector3& p, const btVector3& n,
+                   btScalar timeStep) {
+  btScalar fastest = 0;
+  for (uint32_t slot : impl.bones.order) {
+    const BoneState& bone = *impl.bones.states[slot];
+    const btVector3 moved = bone.target * (bone.goodLast.inverse() * p) - p;
+    fastest = std::max(fastest, moved.dot(n) / timeStep);
+  }
+  return fastest;
+}
+
+/// The share of `impulse` a pose step of Bullet's `timeStep` hands `body`: at most what brings
+/// the body's velocity along the impulse to `speed` (the pose change's), plus the gravity it
+/// gains against the impulse over the next step (so that it can rest on a muscle). The muscles'
+/// own time is not Bullet's: their mean force times Bullet's dt can be any impulse, and a pose
+/// step may stop and carry a body but not throw it.
+btScalar suppliedShare(const btRigidBody& body, const btVector3& impulse, btScalar speed,
+                       btScalar timeStep) {
+  const btScalar length = impulse.length();
+  if (!(length > 0)) return 1;
+  const btVector3 n = impulse / length;
+  const btScalar sinking = std::max<btScalar>(0, -body.getGravity().dot(n)) * timeStep;
+  const btScalar reach = speed + sinking - body.getLinearVelocity().dot(n);
+  return std::clamp(reach / (body.getInvMass() * length), btScalar(0), btScalar(1));
+}
+
 }  // namespace
 
 void checkCoupling(const WorldCoupling& coupling, const char* call) {
@@ -96,14 +125,20 @@ void RigidCoupling::gather(btCollisionWorld& world, MuscleSystem& muscles,
   muscles.setContactBodies(bodies_);
 }
 
-void RigidCoupling::apply(const MuscleSystem& muscles, btScalar scale, bool moved) const {
+void RigidCoupling::apply(const MuscleSystem& muscles, btScalar scale, btScalar poseStep) const {
   for (const btCollisionObject* object : bodies_) {
     auto* body = const_cast<btRigidBody*>(btRigidBody::upcast(object));
     if (!body || body->isStaticOrKinematicObject()) continue;
     const BodyContact contact = muscles.bodyContact(object);
     if (contact.impulse.isZero() && contact.angularImpulse.isZero()) continue;
     body->activate();
-    if (moved) {
+    if (poseStep > 0) {
+      const btVector3 impulse = contact.impulse * scale;
+      const btVector3 n = impulse.length2() > 0 ? impulse.normalized() : impulse;
+      const btScalar speed = poseSpeed(MuscleSystemAccess::impl(muscles),
+                                       body->getCenterOfMassPosition(), n, poseStep);
+      scale *= suppliedShare(*body, impulse, speed, poseStep);
+    } else {
       body->setWorldTransform(contact.transform);
       body->setInterpolationWorldTransform(contact.transform);
     }
@@ -117,13 +152,14 @@ void RigidCoupling::step(btCollisionWorld& world, MuscleSystem& muscles,
   gather(world, muscles, coupling);
   if (coupling.time == MuscleTime::Dynamic) {
     muscles.step(timeStep);
-    apply(muscles, 1, true);
+    apply(muscles, 1, 0);
     return;
   }
   muscles.step();
-  // The pose step ran the muscles' own time: the body takes its mean force over Bullet's dt.
+  // The pose step ran the muscles' own time: the body takes its mean force over Bullet's dt, up
+  // to what the pose change can supply.
   const double time = muscles.lastStep().simulatedTime;
-  apply(muscles, time > 0 ? static_cast<btScalar>(timeStep / time) : btScalar(0), false);
+  apply(muscles, time > 0 ? static_cast<btScalar>(timeStep / time) : btScalar(0), timeStep);
 }
 
 void RigidCoupling::forget(const btCollisionObject* object, MuscleSystem& muscles) {

@@ -28,9 +28,11 @@ class RigidCoupling {
   /// (btDbvtBroadphase: its trees; other broadphases: every object's bounds), in the world's
   /// order. No allocation once the list has grown to the bodies in reach.
   void gather(btCollisionWorld& world, MuscleSystem& muscles, const WorldCoupling& coupling);
-  /// Applies what every dynamic contact body received, scaled by `scale`; with `moved` (a
-  /// duration step) it also takes the pose the step's iterations moved it to.
-  void apply(const MuscleSystem& muscles, btScalar scale, bool moved) const;
+  /// Applies what every dynamic contact body received, scaled by `scale`. After a pose step of
+  /// Bullet's `poseStep` > 0 [s] (MuscleTime::QuasiStaticPose) at most what the pose change can
+  /// supply (a body is stopped and carried, never thrown); after a duration step (poseStep 0)
+  /// all of it, and the body takes the pose the step's iterations moved it to.
+  void apply(const MuscleSystem& muscles, btScalar scale, btScalar poseStep) const;
 
   std::vector<const btCollisionObject*> bodies_;  ///< contact bodies of the running step
   btNodeStack stack_;                             ///< traversal stack of the broadphase query

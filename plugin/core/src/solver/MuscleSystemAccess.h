@@ -9,6 +9,7 @@ struct MuscleSystemAccess {
   using Impl = MuscleSystem::Impl;  ///< the private state's type, nameable through this friend
   /// The system's private state.
   static Impl& impl(MuscleSystem& system) { return *system.impl_; }
+  static const Impl& impl(const MuscleSystem& system) { return *system.impl_; }
 };
 
 }  // namespace fibremss

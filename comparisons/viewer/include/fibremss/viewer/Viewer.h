@@ -53,4 +53,8 @@ ViewerResult runViewer(const ViewerOptions& options);
 /// and muscle_id; a run's frames all of them).
 const std::vector<std::string>& colourArrays();
 
+/// What `array`'s values measure, written beside the colour bar: a ratio's definition, or for a
+/// distance (displacement, penetration) `lengthUnit`, the scene's unit; empty for muscle_id.
+std::string unitOf(const std::string& array, const std::string& lengthUnit);
+
 }  // namespace fibremss::viewer
