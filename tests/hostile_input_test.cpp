@@ -188,6 +188,14 @@ TEST(HostileInputs, NamesThatAreNotUtf8OrHugeAreRefusedNamingTheFieldWritingNoth
       << result.output.substr(0, 500);
   EXPECT_LT(result.output.size(), 2000u);
   EXPECT_FALSE(fs::exists(out));
+  // Any other huge text the messages quote is cut short.
+  const fs::path integrator = writeScene(
+      dir.path(), 1, R"(, "simulation": {"integrator": ")" + std::string(200000, 'i') + "\"}");
+  result = cli("check " + integrator.string());
+  EXPECT_EQ(result.exitCode, 2) << result.output.substr(0, 500);
+  EXPECT_NE(result.output.find("simulation.integrator: expected one of"), std::string::npos)
+      << result.output.substr(0, 500);
+  EXPECT_LT(result.output.size(), 2000u);
 }
 
 // --- preparation: particles packed along few lines ----------------------------------------------

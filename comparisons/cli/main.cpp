@@ -1,6 +1,6 @@
 // The fibremss command-line tool. Exit codes (docs/bad-inputs.md): 0 done, 2 bad input or usage,
-// 3 a run that failed numerically, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM); 1 only for
-// an internal error.
+// 3 a run that failed numerically, 4 a run whose guard froze a muscle on the way (stop-body), 130
+// interrupted (Ctrl-C), 143 terminated (SIGTERM); 1 only for an internal error.
 #include <LinearMath/btScalar.h>
 
 #include <exception>
@@ -15,6 +15,14 @@ namespace {
 
 /// Exit code of bad input and of every usage error (CLI11's own codes are 100 and up).
 constexpr int kExitBadInput = 2;
+
+/// An error message as printed: at most 2000 characters, however much of the input it quotes.
+std::string capped(const std::string& message) {
+  constexpr size_t kLimit = 2000;
+  if (message.size() <= kLimit) return message;
+  return message.substr(0, kLimit) + "... (" + std::to_string(message.size() - kLimit) +
+         " more characters)";
+}
 
 /// --help and --version print and exit 0; the commands' own exit codes (3, 130) pass through
 /// as CLI::RuntimeError; every other parse error is a usage error.
@@ -58,8 +66,9 @@ int main(int argc, char** argv) {
                        "Print the version, Bullet's version and precision, the SIMD kernel and the "
                        "compiler, and exit");
   app.footer(
-      "Exit codes (every subcommand): 0 done, 2 bad input or usage, 3 a run that failed "
-      "numerically, 130 interrupted by Ctrl-C, 143 by SIGTERM (docs/bad-inputs.md).");
+      "Exit codes (every subcommand): 0 done, 1 an internal error (a bug), 2 bad input or usage, "
+      "3 a run that failed numerically, 4 a run whose guard froze a muscle on the way "
+      "(on_failure=stop-body), 130 interrupted by Ctrl-C, 143 by SIGTERM (docs/bad-inputs.md).");
   fibremss::cli::addScenesCommand(app);
   fibremss::cli::addCheckCommand(app);
   fibremss::cli::addRunCommand(app);
@@ -74,10 +83,10 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return exitFor(app, e);
   } catch (const fibremss::InputError& e) {
-    std::cerr << "fibremss: error: " << e.what() << "\n";
+    std::cerr << "fibremss: error: " << capped(e.what()) << "\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
-    std::cerr << "fibremss: error: " << e.what() << "\n";
+    std::cerr << "fibremss: error: " << capped(e.what()) << "\n";
     return 1;
   }
   return 0;

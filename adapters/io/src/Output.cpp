@@ -195,12 +195,11 @@ std::string recordedWriter(int lock) {
   return digits ? pid : "";
 }
 
-/// Records this process as the directory's writer: its temporaries carry this id.
-void recordWriter(int lock) {
+/// Records this process as the directory's writer (its temporaries carry this id); false, with
+/// errno set, when the lock file cannot be written.
+bool recordWriter(int lock) {
   const std::string pid = std::to_string(::getpid()) + "\n";
-  if (::ftruncate(lock, 0) != 0 || ::pwrite(lock, pid.data(), pid.size(), 0) < 0)
-    throw std::runtime_error(std::string("cannot record the writer in the lock file: ") +
-                             std::strerror(errno));
+  return ::ftruncate(lock, 0) == 0 && ::pwrite(lock, pid.data(), pid.size(), 0) >= 0;
 }
 
 /// Whether `name` is NAME.tmp.PID.N for the given writer's `pid`.
@@ -303,7 +302,12 @@ OutputDirectory::OutputDirectory(const std::string& path) {
                      "choose another --out");
   }
   removed_ = removeTemporariesOf(path, recordedWriter(lock_));
-  recordWriter(lock_);
+  if (!recordWriter(lock_)) {
+    const int cause = errno;
+    ::close(lock_);
+    throw InputError(lockPath, "",
+                     std::string("cannot record this writer: ") + std::strerror(cause));
+  }
 }
 
 OutputDirectory::~OutputDirectory() {

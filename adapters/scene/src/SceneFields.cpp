@@ -246,7 +246,7 @@ std::string Fields::choice(const std::string& key, const std::string& fallback,
     fail(key, "expected one of " + list + ", got " + describe(*value));
   const std::string result = value ? value->get<std::string>() : fallback;
   if (std::find(allowed.begin(), allowed.end(), result) == allowed.end())
-    fail(key, "expected one of " + list + ", got \"" + result + "\"");
+    fail(key, "expected one of " + list + ", got " + describe(Json(result)));
   set(key, result);
   return result;
 }
