@@ -412,5 +412,22 @@ TEST(FibreGeneration, BoneAreasKeepThePatchAtTheMusclesEnd) {
   EXPECT_LT(result.quality.worstEndGap, result.quality.voxelSize * 2);
 }
 
+TEST(FibreGeneration, OverlappingAreasAreNamedAsAnOverlap) {
+  const TriangleMesh surface = spindle();
+  const AttachmentArea everywhere = AttachmentArea::fromLandmarks({kCentre}, btScalar(1e30));
+  const AttachmentArea tip =
+      AttachmentArea::fromLandmarks({kCentre - btVector3(0, 0, kRadii.z())}, btScalar(0.005));
+  std::vector<uint32_t> origin, insertion;
+  std::vector<std::string> warnings;
+  for (const AttachmentArea& other : {everywhere, tip}) {
+    try {
+      resolveAttachmentAreas(surface, other, everywhere, "muscle", origin, insertion, warnings);
+      ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+      EXPECT_NE(e.problem().find("areas overlap"), std::string::npos) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fibremss

@@ -13,6 +13,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Scene.h"
+#include "fibremss/VtkFiles.h"
 #include "fuzz/FuzzInputs.h"
 #include "support/Process.h"
 
@@ -130,6 +131,22 @@ TEST(FuzzRegression, SceneStructured) {
     } catch (const InputError&) {
     }
     loadScene("fusiform", {"model=" + json, "muscles.0=" + json});
+  });
+}
+
+TEST(FuzzRegression, Motion) {
+  replay("fuzz_motion", [](const fs::path& scratch, const std::string& bytes) {
+    write(scratch / "motion.mot", bytes);
+    write(scratch / "motion-scene.json", fuzz::motionSceneJson((scratch / "motion.mot").string()));
+    loadScene((scratch / "motion-scene.json").string());
+  });
+}
+
+TEST(FuzzRegression, Pvd) {
+  replay("fuzz_pvd", [](const fs::path& scratch, const std::string& bytes) {
+    write(scratch / "run.pvd", bytes);
+    for (const PvdDataSet& set : readPvd((scratch / "run.pvd").string()))
+      EXPECT_FALSE(set.file.empty());
   });
 }
 

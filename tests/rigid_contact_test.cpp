@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <random>
 #include <vector>
@@ -303,6 +304,24 @@ TEST(RigidContact, DynamicTimeAdvancesExactlyBulletsStep) {
   WorldCoupling bad;
   bad.reach = -1;
   EXPECT_THROW(f.world.setCoupling(bad), InputError);
+}
+
+TEST(RigidContact, AHugeDynamicStepIsCutShortAndANanQueryPoseIsAnError) {
+  SlabWorld f;
+  f.world.stepSimulation(btScalar(1e30), 0);  // a variable step: one internal step of 1e30 s
+  const StepStats& stats = f.world.muscleSystem().lastStep();
+  EXPECT_TRUE(stats.shortened);
+  EXPECT_EQ(stats.iterations, 16384);
+  EXPECT_LT(stats.simulatedTime, 1.0);  // 16384 iterations of the stable dt (5e-5 s)
+  EXPECT_FALSE(stats.nan);
+  f.step();
+  EXPECT_FALSE(f.world.muscleSystem().lastStep().shortened);
+  btSphereShape shape(0.005f);
+  btRigidBody probe(0, nullptr, &shape);
+  const btScalar nan = std::numeric_limits<btScalar>::quiet_NaN();
+  EXPECT_THROW(
+      f.world.contactWrench(probe, btTransform(btQuaternion::getIdentity(), btVector3(nan, 0, 0))),
+      InputError);
 }
 
 /// Positions after `steps` steps of a grid muscle between two moving bones: in a MuscleWorld

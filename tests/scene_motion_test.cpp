@@ -1,10 +1,14 @@
 // Bone motions from OpenSim motion files (.mot / .sto) and the splitting of large jumps between
 // poses into sub-poses (issue 16).
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "fibremss/Error.h"
 #include "fibremss/Scene.h"
@@ -172,7 +176,8 @@ TEST(OpenSimMotion, TimeWindowEveryAndMissingColumn) {
   } catch (const InputError& error) {
     EXPECT_EQ(error.where(), "bones[0].motion.coordinates[0].column");
     EXPECT_NE(error.problem().find("walk.mot"), std::string::npos) << error.what();
-    EXPECT_NE(error.problem().find("its columns are: time, q"), std::string::npos) << error.what();
+    EXPECT_NE(error.problem().find("its columns are: 'time', 'q'"), std::string::npos)
+        << error.what();
   }
   try {
     loadScene(files.write("empty.json", boneScene(motion(R"(, "time": [5, 6])"))));
@@ -245,4 +250,72 @@ TEST(OpenSimMotion, SharedGaitFile) {
     largest = std::max(largest, turnDegrees(scene.bonePose(0, p)));
   // The README's range, computed from the file by another tool: -22.32 ... +21.91 degrees.
   EXPECT_NEAR(largest, 22.32, 0.01);
+}
+
+TEST(MotFile, ADeviceAFifoADirectoryOrALinkLoopIsRefusedBeforeReading) {
+  const SceneFiles files;
+  const fs::path dir = files.directory.path();
+  ASSERT_EQ(::mkfifo((dir / "fifo.mot").c_str(), 0644), 0);
+  fs::create_directory(dir / "folder.mot");
+  fs::create_symlink(dir / "loop.mot", dir / "loop.mot");
+  for (const std::string& path : {std::string("/dev/zero"), (dir / "fifo.mot").string(),
+                                  (dir / "folder.mot").string(), (dir / "loop.mot").string()}) {
+    const std::string scene = files.write(
+        "scene.json", boneScene(R"({"type": "opensim", "file": ")" + path +
+                                R"(", "coordinates": [{"column": "q", "axis": [1, 0, 0]}]})"));
+    try {
+      loadScene(scene);
+      ADD_FAILURE() << path << " accepted";
+    } catch (const InputError& error) {
+      EXPECT_NE(std::string(error.what()).find(path), std::string::npos) << error.what();
+      EXPECT_NE(error.problem().find("cannot open"), std::string::npos) << error.what();
+    }
+  }
+}
+
+TEST(OpenSimMotion, AbsurdAnglesAndPositionsAreRefusedAtLoadNamingTheField) {
+  const InputError angle = errorOf(motText("inDegrees=yes", kNames, "0 1e300 0\n0.1 10 0\n"));
+  EXPECT_EQ(angle.where(), "row 1, column hip_flexion_r") << angle.what();
+  EXPECT_NE(angle.problem().find("within ±3600°"), std::string::npos) << angle.what();
+  const SceneFiles files;
+  const std::vector<std::pair<std::string, std::string>> far = {
+      {R"({"type": "keyframes", "keyframes": [{}, {"translation": [1e38, 0, 0]}]})",
+       "bones[0].motion.keyframes[1]"},
+      {R"({"type": "sweep", "pivot": [0, 1e38, 0], "end_deg": 10})", "bones[0].motion.pivot"}};
+  for (const auto& [motion, field] : far) {
+    try {
+      loadScene(files.write("far.json", boneScene(motion)));
+      ADD_FAILURE() << motion << " accepted";
+    } catch (const InputError& error) {
+      EXPECT_EQ(error.where(), field) << error.what();
+      EXPECT_NE(error.problem().find("beyond the world"), std::string::npos) << error.what();
+    }
+  }
+}
+
+TEST(SubPoses, SplittingIsCappedLikeThePoseCountAndColumnsAreLookedUpByName) {
+  const SceneFiles files;
+  // Two rows 180° apart split into turns of 0.001°: 180 000 poses, over the cap.
+  const std::string mot =
+      files.write("turn.mot", "inDegrees=yes\nendheader\ntime\tq\n0 0\n1 180\n");
+  const std::string scene = files.write(
+      "turn.json", boneScene(R"({"type": "opensim", "file": ")" + mot +
+                                 R"(", "coordinates": [{"column": "q", "axis": [1, 0, 0]}]})",
+                             R"({"max_step_deg": 0.001})"));
+  try {
+    loadScene(scene);
+    ADD_FAILURE() << "180 000 poses accepted";
+  } catch (const InputError& error) {
+    EXPECT_EQ(error.where(), "simulation.max_step_deg") << error.what();
+    EXPECT_NE(error.problem().find("at most 100000"), std::string::npos) << error.what();
+  }
+  // 100 000 columns, the last one used: found by name without comparing every pair.
+  std::string names = "time", row = "0";
+  for (int c = 0; c < 99999; ++c) names += "\tc" + std::to_string(c), row += " 0";
+  const std::string wide = files.write("wide.mot", "inDegrees=yes\nendheader\n" + names + "\n" +
+                                                       row + "\n0.1" + row.substr(1) + "\n");
+  const LoadedScene loaded = loadScene(files.write(
+      "wide.json", boneScene(R"({"type": "opensim", "file": ")" + wide +
+                             R"(", "coordinates": [{"column": "c99998", "axis": [1, 0, 0]}]})")));
+  EXPECT_EQ(loaded.poseCount, 2);
 }

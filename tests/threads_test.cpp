@@ -4,16 +4,22 @@
 // independent and every sum runs in a fixed order (a muscle's force chunks too: ForceChunks.h);
 // frozen muscles only ride with their bones.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <fstream>
 #include <memory>
+#include <string>
 #include <thread>
 #include <vector>
 
+#include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
@@ -39,6 +45,30 @@ TEST(TaskPool, RunsEveryTaskOnceOnAThreadItOwns) {
       EXPECT_TRUE(threadInRange.load());
     }
   }
+}
+
+TEST(TaskPool, ASystemThatStartsFewerThreadsIsAnInputErrorNotAnAbort) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer maps terabytes of shadow memory: no address-space limit fits";
+#endif
+  const pid_t child = ::fork();
+  if (child == 0) {  // room for a few thread stacks above what the process maps now
+    long pages = 0;
+    std::ifstream("/proc/self/statm") >> pages;
+    const rlim_t bytes = rlim_t(pages) * rlim_t(::sysconf(_SC_PAGESIZE)) + (rlim_t{48} << 20);
+    const rlimit limit{bytes, bytes};
+    int code = ::setrlimit(RLIMIT_AS, &limit) == 0 ? 3 : 4;
+    try {
+      TaskPool pool(64);
+    } catch (const InputError& e) {
+      code = std::string(e.what()).find("simulation.threads") != std::string::npos ? 0 : 2;
+    }
+    ::_exit(code);  // 3: every thread started, no limit reached
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status)) << "ended by signal " << WTERMSIG(status);
+  EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
 TEST(TaskPool, ZeroMeansTheHardwareThreads) {

@@ -277,6 +277,56 @@ TEST_F(VtpFiles, HostileFilesEndInInputErrorNamingWhatWasExpected) {
   expectProblem(ascii.substr(0, ascii.find("</Polys>")), "expected </Polys>");
 }
 
+namespace {
+
+/// A .vtp of `pieces` pieces of `points` points each, all zeros, every piece's Points pointing at
+/// one appended zlib stream (UInt64 headers, VTK's 32 KiB blocks): about 1000:1.
+std::string zeroPointsVtp(uint64_t points, int pieces) {
+  const uint64_t bytes = 12 * points, blockSize = 32768,
+                 blocks = (bytes + blockSize - 1) / blockSize;
+  const auto compressed = [](uint64_t size) {
+    const std::string zeros(size, '\0');
+    uLongf length = compressBound(uLong(size));
+    std::string out(length, '\0');
+    compress2(reinterpret_cast<Bytef*>(out.data()), &length,
+              reinterpret_cast<const Bytef*>(zeros.data()), uLong(size), 9);
+    out.resize(length);
+    return out;
+  };
+  const std::string full = compressed(blockSize),
+                    last = compressed(bytes - (blocks - 1) * blockSize);
+  std::string header = word(blocks, 8, false) + word(blockSize, 8, false) +
+                       word(bytes % blockSize, 8, false),
+              data;
+  for (uint64_t b = 0; b < blocks; ++b) {
+    const std::string& block = b + 1 == blocks ? last : full;
+    header += word(block.size(), 8, false);
+    data += block;
+  }
+  std::string xml =
+      "<VTKFile type=\"PolyData\" header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\">\n"
+      "<PolyData>\n";
+  for (int p = 0; p < pieces; ++p)
+    xml += "<Piece NumberOfPoints=\"" + std::to_string(points) +
+           "\"><Points><DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"appended\" "
+           "offset=\"0\"/></Points></Piece>\n";
+  return xml + "</PolyData>\n<AppendedData encoding=\"raw\">_" + header + data +
+         "</AppendedData>\n</VTKFile>\n";
+}
+
+}  // namespace
+
+TEST_F(VtpFiles, DeclaredSizesBeyondTheBudgetAreRefusedBeforeInflating) {
+  // A zip bomb: 30 million points, 360 MB of zeros in about half a megabyte.
+  InputError e = errorOf(zeroPointsVtp(30000000, 1));
+  EXPECT_NE(e.problem().find("one file may hold in all"), std::string::npos) << e.what();
+  // Pieces that all point at one appended block, to read it again and again.
+  e = errorOf(zeroPointsVtp(1000, 2));
+  EXPECT_EQ(e.where(), "line 4") << e.what();
+  EXPECT_NE(e.problem().find("offset 0 is also that of the DataArray on line 3"), std::string::npos)
+      << e.what();
+}
+
 TEST_F(VtpFiles, SharedOpenSimGeometryLoadsInMetres) {
   const fs::path folder = fs::path(FIBREMSS_SHARED_DATA_DIR) / "opensim-motions";
   if (!fs::exists(folder / "femur_r.vtp")) GTEST_SKIP() << "shared data not found: " << folder;

@@ -228,6 +228,20 @@ TEST(MuscleWorld, RemovingABonesBodyFromTheWorldRemovesTheBone) {
   for (BoneHandle bone : f.bones) EXPECT_NO_THROW(f.world.muscleSystem().boneTransform(bone));
 }
 
+TEST(MuscleWorld, RemovingTheBodyOfABoneAMuscleIsAttachedToReleasesTheBone) {
+  WorldFixture f;
+  const MuscleHandle muscle = f.world.addMuscle(gridMuscle(), f.bones);
+  f.step(1);
+  // Bullet's removal cannot fail: a throw from it would end a host in its destructor.
+  EXPECT_NO_THROW(f.world.removeRigidBody(f.movingBone.body()));
+  EXPECT_THROW(f.world.muscleSystem().boneTransform(f.bones[1]), InputError);
+  EXPECT_FALSE(f.world.removeBone(f.bones[1]));
+  EXPECT_TRUE(f.world.containsMuscle(muscle));
+  f.world.stepSimulation(btScalar(1.0 / 60), 0);
+  EXPECT_FALSE(f.world.muscleSystem().lastStep().nan);
+  EXPECT_NO_THROW(f.world.muscleSystem().boneTransform(f.bones[0]));
+}
+
 /// Counts what a Bullet renderer would be asked to draw.
 class CountingDrawer : public btIDebugDraw {
  public:

@@ -108,7 +108,7 @@ void compare(CompareArgs& args) {
   const std::string out = args.out.empty() ? "compare-" + comparison.scene : args.out;
   if (!locked) locked.emplace(out);
   const nlohmann::json summary = summaryJson(comparison, commandLine());
-  const std::vector<std::string> files = writeComparison(summary, out);
+  const std::vector<std::string> files = writeComparisonUnlessInterrupted(summary, out);
 
   printTable(comparison);
   for (const RunMetrics& run : comparison.runs)

@@ -12,6 +12,7 @@
 #include "Validators.h"
 #include "fibremss/Error.h"
 #include "fibremss/FibreGeneration.h"
+#include "fibremss/InputFiles.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Messages.h"
 
@@ -61,11 +62,9 @@ bool parseLandmarks(const std::string& text, double scale, double defaultRadiusM
 /// Landmarks from a JSON file: [[x, y, z], ...] or {"landmarks": [[x, y, z], ...], "radius": r}
 /// (file units).
 AttachmentArea landmarksFromFile(const std::string& path, const FibresArgs& args) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path, "", "cannot open the landmark file");
   nlohmann::json json;
   try {
-    json = nlohmann::json::parse(in);
+    json = nlohmann::json::parse(readJsonText(path));
   } catch (const nlohmann::json::exception& e) {
     throw InputError(path, "", std::string("not valid JSON: ") + e.what());
   }

@@ -191,11 +191,10 @@ void run(const RunArgs& args) {
     if (outDir->removedTemporaries() > 0)
       std::fprintf(stderr, "removed %zu temporary file(s) an interrupted run left in %s\n",
                    outDir->removedTemporaries(), args.out.c_str());
-    writeFileAtomically(args.out + "/scene.json", scene.json);
     // A previous run's would mislead.
-    std::filesystem::remove(args.out + "/summary.json");
-    std::filesystem::remove(args.out + "/soak.csv");
-    std::filesystem::remove(args.out + "/series.csv");
+    for (const char* file : {"/summary.json", "/soak.csv", "/series.csv"})
+      removeOutputFile(args.out + file);
+    writeFileAtomically(args.out + "/scene.json", scene.json);
   }
 
   FibreRunOptions options;

@@ -17,6 +17,14 @@ namespace {
 /// Exit code of bad input and of every usage error (CLI11's own codes are 100 and up).
 constexpr int kExitBadInput = 2;
 
+/// An error message as printed: at most 2000 characters, however much of the input it quotes.
+std::string capped(const std::string& message) {
+  constexpr size_t kLimit = 2000;
+  if (message.size() <= kLimit) return message;
+  return message.substr(0, kLimit) + "... (" + std::to_string(message.size() - kLimit) +
+         " more characters)";
+}
+
 /// --help and --version print and exit 0; the commands' own exit codes (3, 130) pass through
 /// as CLI::RuntimeError; every other parse error is a usage error.
 int exitFor(const CLI::App& app, const CLI::ParseError& e) {
@@ -99,10 +107,10 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return exitFor(app, e);
   } catch (const fibremss::InputError& e) {
-    std::cerr << "fibremss: error: " << e.what() << "\n";
+    std::cerr << "fibremss: error: " << capped(e.what()) << "\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
-    std::cerr << "fibremss: error: " << e.what() << "\n";
+    std::cerr << "fibremss: error: " << capped(e.what()) << "\n";
     return 1;
   }
   return 0;

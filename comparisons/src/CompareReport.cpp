@@ -21,6 +21,7 @@
 #include "SummaryFields.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
+#include "fibremss/InputFiles.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/PlotLayout.h"
@@ -990,9 +991,7 @@ nlohmann::json mergeSummaries(const std::vector<nlohmann::json>& summaries,
 nlohmann::json readSummary(const std::string& path) {
   std::filesystem::path file(path);
   if (std::filesystem::is_directory(file)) file /= "summary.json";
-  std::ifstream in(file);
-  if (!in) throw InputError(file.string(), "", "cannot open (expected a summary.json)");
-  nlohmann::json summary = nlohmann::json::parse(in, nullptr, false);
+  nlohmann::json summary = nlohmann::json::parse(readJsonText(file.string()), nullptr, false);
   if (summary.is_discarded()) throw InputError(file.string(), "", "not valid JSON");
   return summary;
 }

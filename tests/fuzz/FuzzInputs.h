@@ -227,4 +227,13 @@ inline std::filesystem::path writeScratchScene(std::string_view json, const char
   return scene;
 }
 
+/// A scene whose one bone, a generated box, follows the OpenSim motion `motionFile`: columns
+/// "q1" and "q2" turned about x and y, its jumps split into sub-poses (the motion targets).
+inline std::string motionSceneJson(const std::string& motionFile) {
+  return R"({"units": "mm", "bones": [{"name": "femur", "mesh": {"generator": {"type": "box",
+    "centre": [0, 0, -60], "size": [10, 10, 80]}}, "motion": {"type": "opensim", "file": ")" +
+         motionFile + R"(", "coordinates": [{"column": "q1", "axis": [1, 0, 0]},
+    {"column": "q2", "axis": [0, 1, 0]}]}}], "simulation": {"max_step_deg": 5}})";
+}
+
 }  // namespace fibremss::fuzz

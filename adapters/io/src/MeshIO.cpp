@@ -14,33 +14,10 @@
 
 #include "MeshIOInternal.h"
 #include "fibremss/Error.h"
+#include "fibremss/InputFiles.h"
 
 namespace fibremss {
 namespace meshio {
-
-void requireNonEmptyFile(const std::string& path) {
-  std::error_code error;
-  const auto status = std::filesystem::status(path, error);
-  if (error || !std::filesystem::exists(status)) {
-    throw InputError(path, "", "cannot open: the file does not exist");
-  }
-  if (!std::filesystem::is_regular_file(status)) {
-    throw InputError(path, "", "cannot open: expected a regular file");
-  }
-  if (std::filesystem::file_size(path, error) == 0 && !error) {
-    throw InputError(path, "", "the file is empty; expected a mesh");
-  }
-}
-
-std::string readWholeFile(const std::string& path) {
-  requireNonEmptyFile(path);
-  std::ifstream file(path, std::ios::binary);
-  if (!file) throw InputError(path, "", std::string("cannot open: ") + std::strerror(errno));
-  std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-  if (file.bad()) throw InputError(path, "", "cannot read the file");
-  if (bytes.empty()) throw InputError(path, "", "the file is empty; expected a mesh");
-  return bytes;
-}
 
 void requireScale(const std::string& path, double scale) {
   if (!(scale > 0) || !std::isfinite(scale)) {
@@ -161,9 +138,9 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
   meshio::requireScale(path, scale);
   TriangleMesh mesh;
   std::vector<std::string> readerWarnings;
-  meshio::requireNonEmptyFile(path);  // before vtkKind opens it: a FIFO would block
+  requireInputFile(path, "a mesh");  // before vtkKind opens it: a FIFO would block
   if (const VtkKind kind = vtkKind(path, lowerExtension(path)); kind != VtkKind::None) {
-    const std::string bytes = meshio::readWholeFile(path);
+    const std::string bytes = readInputFile(path, "a mesh");
     meshio::VtkPolyData data = readVtk(kind, path, bytes, scale);
     if (data.triangles.empty()) {
       throw InputError(path, "",
@@ -201,7 +178,7 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
 FibreSet loadFibres(const std::string& path, double scale) {
   meshio::requireScale(path, scale);
   const std::string extension = lowerExtension(path);
-  const std::string bytes = meshio::readWholeFile(path);
+  const std::string bytes = readInputFile(path, "a mesh");
   FibreSet fibres;
   if (const VtkKind kind = vtkKind(path, extension); kind != VtkKind::None) {
     const meshio::VtkPolyData data = readVtk(kind, path, bytes, scale);

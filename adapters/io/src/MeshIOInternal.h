@@ -39,12 +39,6 @@ struct ObjPolylines {
   IndexPolylines lines;           ///< `l` elements, unchained
 };
 
-/// Throws InputError when the file is missing, not a regular file or empty.
-void requireNonEmptyFile(const std::string& path);
-
-/// The whole file; throws InputError as requireNonEmptyFile() does, or when unreadable.
-std::string readWholeFile(const std::string& path);
-
 /// True when the bytes start like a legacy VTK file ("# vtk DataFile Version").
 bool looksLikeLegacyVtk(std::string_view bytes);
 

@@ -15,9 +15,7 @@
 #include <charconv>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <limits>
-#include <regex>
 #include <span>
 #include <stdexcept>
 #include <system_error>
@@ -187,6 +185,47 @@ void writeCells(VtpBuilder& out, const PolyData& data) {
   out.cells("Polys", triangles, sequence(data.triangles.size(), 3, 3));
 }
 
+/// The process id the directory's previous writer recorded in its lock file ("" if none).
+std::string recordedWriter(int lock) {
+  char text[24] = {};
+  const ssize_t size = ::pread(lock, text, sizeof text - 1, 0);
+  std::string pid(text, size > 0 ? size_t(size) : 0);
+  while (!pid.empty() && pid.back() == '\n') pid.pop_back();
+  const bool digits = !pid.empty() && std::all_of(pid.begin(), pid.end(),
+                                                  [](char c) { return c >= '0' && c <= '9'; });
+  return digits ? pid : "";
+}
+
+/// Records this process as the directory's writer (its temporaries carry this id); false, with
+/// errno set, when the lock file cannot be written.
+bool recordWriter(int lock) {
+  const std::string pid = std::to_string(::getpid()) + "\n";
+  return ::ftruncate(lock, 0) == 0 && ::pwrite(lock, pid.data(), pid.size(), 0) >= 0;
+}
+
+/// Whether `name` is NAME.tmp.PID.N for the given writer's `pid`.
+bool isTemporaryOf(const std::string& name, const std::string& pid) {
+  const std::string marker = ".tmp." + pid + ".";
+  const size_t at = name.rfind(marker);
+  if (at == std::string::npos || at == 0 || at + marker.size() == name.size()) return false;
+  return std::all_of(name.begin() + std::ptrdiff_t(at + marker.size()), name.end(),
+                     [](char c) { return c >= '0' && c <= '9'; });
+}
+
+/// Removes the temporaries (NAME.tmp.PID.N) the writer `pid` left below `path`: a killed writer's.
+/// Nothing else, whatever its name: another process's files are not this one's to remove.
+size_t removeTemporariesOf(const std::string& path, const std::string& pid) {
+  size_t removed = 0;
+  if (pid.empty()) return removed;
+  std::error_code error;
+  for (auto it = fs::recursive_directory_iterator(path, error);
+       !error && it != fs::recursive_directory_iterator(); it.increment(error))
+    if (it->is_regular_file(error) && isTemporaryOf(it->path().filename().string(), pid) &&
+        fs::remove(it->path(), error))
+      ++removed;
+  return removed;
+}
+
 }  // namespace
 
 size_t DataArray::size() const {
@@ -199,29 +238,36 @@ void writeFileAtomically(const std::string& path, std::string_view content) {
   if (target.has_parent_path()) {
     fs::create_directories(target.parent_path(), error);
     if (error)
-      throw std::runtime_error(path + ": cannot create directory " + target.parent_path().string() +
-                               ": " + error.message());
+      throw InputError(
+          path, "",
+          "cannot create the directory " + target.parent_path().string() + ": " + error.message());
   }
+  if (fs::is_directory(target, error))
+    throw InputError(path, "", "cannot write: a directory has this name; expected a file or none");
   const fs::path temporary = temporaryPathFor(target);
-  {
-    std::ofstream file(temporary, std::ios::binary | std::ios::trunc);
-    if (!file)
-      throw std::runtime_error(path + ": cannot open " + temporary.string() + " for writing");
-    file.write(content.data(), static_cast<std::streamsize>(content.size()));
-    file.flush();
-    if (!file) {
-      file.close();
-      fs::remove(temporary, error);
-      throw std::runtime_error(path + ": write failed (disk full?)");
-    }
+  const int file = ::open(temporary.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (file < 0) throw InputError(path, "", std::string("cannot write: ") + std::strerror(errno));
+  int cause = 0;
+  for (size_t written = 0; written < content.size() && cause == 0;) {
+    const ssize_t n = ::write(file, content.data() + written, content.size() - written);
+    if (n > 0) written += size_t(n);
+    if (n < 0 && errno != EINTR) cause = errno;
   }
-  fs::rename(temporary, target, error);
-  if (error) {
-    std::error_code ignored;
-    fs::remove(temporary, ignored);
-    throw std::runtime_error(path +
-                             ": cannot rename the temporary file into place: " + error.message());
+  if (::close(file) != 0 && cause == 0) cause = errno;
+  if (cause == 0 && ::rename(temporary.c_str(), target.c_str()) != 0) cause = errno;
+  if (cause != 0) {
+    ::unlink(temporary.c_str());  // nothing half-written stays
+    throw InputError(path, "", std::string("cannot write: ") + std::strerror(cause));
   }
+}
+
+void removeOutputFile(const std::string& path) {
+  std::error_code error;
+  if (fs::is_directory(path, error))
+    throw InputError(path, "",
+                     "a directory has the name of an output file; expected a file or none");
+  fs::remove(path, error);
+  if (error) throw InputError(path, "", "cannot remove the previous output: " + error.message());
 }
 
 void requireWritableDirectory(const std::string& path) {
@@ -246,20 +292,24 @@ OutputDirectory::OutputDirectory(const std::string& path) {
   // taken again on the file now there.
   while (!lockHeld()) {
   }
-  // Only a writer holding the lock makes temporaries here: any left are a killed writer's.
-  static const std::regex kTemporary(R"(.*\.tmp\.[0-9]+\.[0-9]+)");
-  for (auto it = fs::recursive_directory_iterator(path, error);
-       !error && it != fs::recursive_directory_iterator(); it.increment(error))
-    if (it->is_regular_file(error) &&
-        std::regex_match(it->path().filename().string(), kTemporary) &&
-        fs::remove(it->path(), error))
-      ++removed_;
+  removed_ = removeTemporariesOf(path, recordedWriter(lock_));
+  if (!recordWriter(lock_)) {
+    const int cause = errno;
+    ::close(lock_);
+    throw InputError(lockPath_, "",
+                     std::string("cannot record this writer: ") + std::strerror(cause));
+  }
 }
 
 bool OutputDirectory::lockHeld() {
-  lock_ = ::open(lockPath_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (lock_ < 0)
-    throw InputError(lockPath_, "", std::string("cannot open: ") + std::strerror(errno));
+  // Not followed when it is a symbolic link: the lock is created in this directory or nowhere.
+  lock_ = ::open(lockPath_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
+  if (lock_ < 0) {
+    const int cause = errno;
+    throw InputError(lockPath_, "",
+                     std::string("cannot open the lock file: ") + std::strerror(cause) +
+                         (cause == ELOOP ? " (a symbolic link; expected a regular file)" : ""));
+  }
   if (::flock(lock_, LOCK_EX | LOCK_NB) != 0) {
     ::close(lock_);
     throw InputError(fs::path(lockPath_).parent_path().string(), "",

@@ -1,10 +1,11 @@
 #include "fibremss/VtkFiles.h"
 
 #include <cstdlib>
-#include <regex>
 
 #include "MeshIOInternal.h"
+#include "XmlTags.h"
 #include "fibremss/Error.h"
+#include "fibremss/InputFiles.h"
 
 namespace fibremss {
 
@@ -16,7 +17,7 @@ const PointArray* PolyDataFile::array(const std::string& name) const {
 
 PolyDataFile readVtp(const std::string& path, double scale) {
   meshio::requireScale(path, scale);
-  const std::string bytes = meshio::readWholeFile(path);
+  const std::string bytes = readInputFile(path, "a mesh");
   if (!meshio::looksLikeVtkXml(bytes))
     throw InputError(path, "", "expected a VTK XML file (<?xml ... <VTKFile type=\"PolyData\">)");
   meshio::VtkPolyData data = meshio::readVtkXmlPolyData(path, bytes, scale);
@@ -30,30 +31,27 @@ PolyDataFile readVtp(const std::string& path, double scale) {
 }
 
 std::vector<PvdDataSet> readPvd(const std::string& path) {
-  const std::string text = meshio::readWholeFile(path);
+  const std::string text = readInputFile(path, "a ParaView collection (.pvd)", kMaxTextFileBytes);
   if (text.find("<VTKFile") == std::string::npos ||
       text.find("type=\"Collection\"") == std::string::npos)
     throw InputError(path, "", "expected a ParaView collection (<VTKFile type=\"Collection\">)");
   std::vector<PvdDataSet> sets;
-  const std::regex tag("<DataSet\\b[^>]*>");
-  const std::regex attribute("(\\w+)=\"([^\"]*)\"");
-  for (auto it = std::sregex_iterator(text.begin(), text.end(), tag); it != std::sregex_iterator();
-       ++it) {
-    const std::string element = it->str();
-    const std::string where = "DataSet " + std::to_string(sets.size() + 1);
+  meshio::TagScanner tags(path, text);
+  auto open = [&](const std::string& name, const meshio::Attributes& attributes, size_t start,
+                  size_t, bool) {
+    if (name != "DataSet") return;
+    const std::string where = "line " + std::to_string(tags.lineAt(start)) + ", DataSet " +
+                              std::to_string(sets.size() + 1);
     PvdDataSet set;
-    bool timed = false;
-    for (auto a = std::sregex_iterator(element.begin(), element.end(), attribute);
-         a != std::sregex_iterator(); ++a) {
-      const std::string key = (*a)[1], value = (*a)[2];
-      if (key == "file") set.file = value;
-      if (key == "part") set.part = std::atoi(value.c_str());
-      if (key == "timestep") timed = meshio::parseReal(value, set.time);
-    }
+    set.file = attributes.get("file");
+    set.part = std::atoi(attributes.get("part", "0").c_str());
     if (set.file.empty()) throw InputError(path, where, "expected a file=\"...\" attribute");
-    if (!timed) throw InputError(path, where, "expected a number as timestep=\"...\"");
+    if (!meshio::parseReal(attributes.get("timestep"), set.time))
+      throw InputError(path, where, "expected a number as timestep=\"...\"");
     sets.push_back(std::move(set));
-  }
+  };
+  tags.scan(
+      open, [](const std::string&, size_t) {}, false);
   return sets;
 }
 

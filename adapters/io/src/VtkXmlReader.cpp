@@ -10,9 +10,11 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <map>
+#include <span>
+#include <unordered_map>
 
 #include "MeshIOInternal.h"
+#include "XmlTags.h"
 #include "fibremss/Error.h"
 
 namespace fibremss::meshio {
@@ -20,14 +22,6 @@ namespace {
 
 /// deflate expands at most about 1032:1; a header announcing more is not a zlib stream.
 constexpr uint64_t kMaxInflation = 1032;
-
-struct Attributes {
-  std::map<std::string, std::string> values;
-  std::string get(const std::string& key, const std::string& fallback = "") const {
-    const auto found = values.find(key);
-    return found == values.end() ? fallback : found->second;
-  }
-};
 
 /// A DataArray element: the section it sits in (Points, Polys, ...) and where its text is.
 struct ArrayElement {
@@ -41,108 +35,13 @@ struct ArrayElement {
 struct Piece {
   Attributes attributes;
   size_t line = 0;
+  size_t firstArray = 0, endArray = 0;  ///< its DataArrays lie in arrays_[firstArray, endArray)
 };
 
-bool isBlank(char c) {
-  return c == ' ' || c == '\t' || c == '\r' || c == '\n';
-}
-
-/// The tags of the XML part of the file (everything before AppendedData's raw bytes).
-class TagScanner {
- public:
-  TagScanner(const std::string& path, std::string_view xml) : path_(path), xml_(xml) {}
-
-  [[noreturn]] void fail(size_t at, const std::string& what) const {
-    throw InputError(path_, "line " + std::to_string(lineAt(at)), what);
-  }
-
-  size_t lineAt(size_t at) const {
-    return 1 + size_t(std::count(xml_.begin(), xml_.begin() + std::min(at, xml_.size()), '\n'));
-  }
-
-  /// Calls open(name, attributes, start, contentBegin, selfClosing) and close(name, start) for
-  /// every element in order; checks that they nest.
-  template <typename Open, typename Close>
-  void scan(Open&& open, Close&& close, bool truncated) {
-    std::vector<std::string> stack;
-    size_t pos = 0;
-    while ((pos = xml_.find('<', pos)) != std::string_view::npos) {
-      const size_t start = pos;
-      if (xml_.substr(pos, 4) == "<!--") {
-        pos = skipPast(pos, "-->");
-      } else if (xml_.substr(pos, 2) == "<?" || xml_.substr(pos, 2) == "<!") {
-        pos = skipPast(pos, ">");
-      } else if (xml_.substr(pos, 2) == "</") {
-        const std::string name = readName(pos + 2);
-        pos = skipPast(pos, ">");
-        if (stack.empty() || stack.back() != name)
-          fail(start, "expected </" + (stack.empty() ? std::string("nothing") : stack.back()) +
-                          ">, found </" + name + ">");
-        stack.pop_back();
-        close(name, start);
-      } else {
-        const std::string name = readName(pos + 1);
-        pos += 1 + name.size();
-        Attributes attributes;
-        bool selfClosing = false;
-        readAttributes(pos, attributes, selfClosing);
-        if (stack.size() > 64) fail(start, "expected elements nested at most 64 deep");
-        open(name, attributes, start, pos, selfClosing);
-        if (!selfClosing) stack.push_back(name);
-      }
-    }
-    if (!stack.empty() && !truncated)  // AppendedData's bytes and the closing tags follow
-      fail(xml_.size(), "expected </" + stack.back() + ">, found the end of the XML");
-  }
-
- private:
-  size_t skipPast(size_t from, std::string_view end) const {
-    const size_t at = xml_.find(end, from);
-    if (at == std::string_view::npos) fail(from, "expected '" + std::string(end) + "'");
-    return at + end.size();
-  }
-
-  std::string readName(size_t at) const {
-    size_t end = at;
-    while (end < xml_.size() && !isBlank(xml_[end]) && xml_[end] != '>' && xml_[end] != '/' &&
-           xml_[end] != '=')
-      ++end;
-    if (end == at) fail(at, "expected an element name after '<'");
-    return std::string(xml_.substr(at, end - at));
-  }
-
-  /// name="value" pairs up to '>' or '/>'; `pos` ends after the '>'.
-  void readAttributes(size_t& pos, Attributes& attributes, bool& selfClosing) const {
-    while (true) {
-      while (pos < xml_.size() && isBlank(xml_[pos])) ++pos;
-      if (pos >= xml_.size()) fail(pos, "expected '>' to end the tag, found the end of the XML");
-      if (xml_[pos] == '>') {
-        ++pos;
-        return;
-      }
-      if (xml_.substr(pos, 2) == "/>") {
-        pos += 2;
-        selfClosing = true;
-        return;
-      }
-      const std::string key = readName(pos);
-      pos += key.size();
-      while (pos < xml_.size() && isBlank(xml_[pos])) ++pos;
-      if (pos >= xml_.size() || xml_[pos] != '=') fail(pos, "expected '=' after " + key);
-      ++pos;
-      while (pos < xml_.size() && isBlank(xml_[pos])) ++pos;
-      if (pos >= xml_.size() || (xml_[pos] != '"' && xml_[pos] != '\''))
-        fail(pos, "expected a quoted value for " + key);
-      const size_t close = xml_.find(xml_[pos], pos + 1);
-      if (close == std::string_view::npos) fail(pos, "expected the closing quote of " + key);
-      attributes.values[key] = std::string(xml_.substr(pos + 1, close - pos - 1));
-      pos = close + 1;
-    }
-  }
-
-  const std::string& path_;
-  std::string_view xml_;
-};
+/// Values one file may declare in all: 64 Mi (about 20 million points with their triangles;
+/// 768 MiB while decoded). Counted before an array is inflated or decoded, so a small file
+/// declaring more (a zip bomb) is refused at once.
+constexpr uint64_t kMaxValues = uint64_t(1) << 26;
 
 /// Where the encoded bytes of one array come from: base64 text (inline, or appended with
 /// encoding="base64") or raw bytes (appended). Base64 is decoded quartet by quartet, so that
@@ -257,7 +156,7 @@ class XmlPolyDataReader {
         sawFile = true;
         readFileAttributes(attributes, start);
       } else if (name == "Piece") {
-        pieces_.push_back({attributes, tags_.lineAt(start)});
+        pieces_.push_back({attributes, tags_.lineAt(start), arrays_.size(), arrays_.size()});
       } else if (name == "DataArray") {
         // Outside a Piece (FieldData of the whole data set): kept for nesting, never used.
         const size_t piece = pieces_.empty() ? SIZE_MAX : pieces_.size() - 1;
@@ -267,7 +166,9 @@ class XmlPolyDataReader {
                            contentBegin,
                            contentBegin,
                            tags_.lineAt(start)};
+        requireOwnOffset(array, start);
         arrays_.push_back(std::move(array));
+        if (piece != SIZE_MAX) pieces_[piece].endArray = arrays_.size();
         if (selfClosing) return;
       }
       if (!selfClosing) sections.push_back(name);
@@ -279,6 +180,17 @@ class XmlPolyDataReader {
     tags_.scan(open, close, bytes_.find("<AppendedData") != std::string_view::npos);
     if (!sawFile) tags_.fail(0, "expected a <VTKFile type=\"PolyData\"> element");
     findAppendedData();
+  }
+
+  /// Refuses an appended DataArray at the offset of an earlier one: VTK writes each array's data
+  /// once, and a file whose arrays share it would be read again and again.
+  void requireOwnOffset(const ArrayElement& array, size_t start) {
+    if (array.attributes.get("format") != "appended") return;
+    const auto [earlier, added] = offsets_.emplace(array.attributes.get("offset"), array.line);
+    if (!added)
+      tags_.fail(start, "expected each appended DataArray at its own offset; offset " +
+                            earlier->first + " is also that of the DataArray on line " +
+                            std::to_string(earlier->second));
   }
 
   void readFileAttributes(const Attributes& attributes, size_t start) {
@@ -327,12 +239,27 @@ class XmlPolyDataReader {
     return value;
   }
 
+  /// The DataArrays of piece `p`.
+  std::span<const ArrayElement> arraysOf(size_t p) const {
+    return std::span(arrays_).subspan(pieces_[p].firstArray,
+                                      pieces_[p].endArray - pieces_[p].firstArray);
+  }
+
   const ArrayElement* find(size_t piece, const std::string& section, const std::string& name) {
-    for (const ArrayElement& array : arrays_)
+    for (const ArrayElement& array : arraysOf(piece))
       if (array.piece == piece && array.section == section &&
           (name.empty() || array.attributes.get("Name") == name))
         return &array;
     return nullptr;
+  }
+
+  /// Counts `count` values of `array` against kMaxValues before they are read.
+  void spend(const ArrayElement& array, uint64_t count) {
+    if (count > kMaxValues - valuesRead_)
+      failArray(array, "declares " + std::to_string(count) + " values, beyond the " +
+                           std::to_string(kMaxValues) + " one file may hold in all (" +
+                           std::to_string(valuesRead_) + " read before it)");
+    valuesRead_ += count;
   }
 
   void readPiece(size_t p) {
@@ -369,7 +296,7 @@ class XmlPolyDataReader {
   /// piece lacks is dropped.
   void readPointData(size_t p, uint64_t points) {
     std::vector<PointArray> arrays;
-    for (const ArrayElement& array : arrays_) {
+    for (const ArrayElement& array : arraysOf(p)) {
       if (array.piece != p || array.section != "PointData") continue;
       const std::string components = array.attributes.get("NumberOfComponents", "1");
       int n = 0;
@@ -385,12 +312,13 @@ class XmlPolyDataReader {
       data_.pointData = std::move(arrays);
       return;
     }
+    std::unordered_map<std::string, const PointArray*> byName;
+    for (const PointArray& array : arrays) byName.emplace(array.name, &array);
     std::erase_if(data_.pointData, [&](PointArray& kept) {
-      auto same = std::find_if(arrays.begin(), arrays.end(), [&](const PointArray& a) {
-        return a.name == kept.name && a.components == kept.components;
-      });
-      if (same == arrays.end()) return true;
-      kept.values.insert(kept.values.end(), same->values.begin(), same->values.end());
+      const auto same = byName.find(kept.name);
+      if (same == byName.end() || same->second->components != kept.components) return true;
+      kept.values.insert(kept.values.end(), same->second->values.begin(),
+                         same->second->values.end());
       return false;
     });
   }
@@ -499,6 +427,7 @@ class XmlPolyDataReader {
     if (count > (text.size() + 1) / 2)
       failArray(array, "expected " + std::to_string(count) + " values, but its text holds only " +
                            std::to_string(text.size()) + " bytes");
+    spend(array, count);
     uint64_t found = 0;
     for (size_t at = 0; at < text.size();) {
       while (at < text.size() && isBlank(text[at])) ++at;
@@ -526,6 +455,7 @@ class XmlPolyDataReader {
       failArray(array, "expected " + std::to_string(count) +
                            " values, but the data left can hold " +
                            std::to_string(possible / uint64_t(type.bytes)) + " at most");
+    spend(array, count);
     const uint64_t expected = count * uint64_t(type.bytes);
     std::string out;
     if (!compressed_) {
@@ -653,6 +583,8 @@ class XmlPolyDataReader {
   std::string_view appended_;
   VtkPolyData data_;
   std::vector<uint32_t> cell_;
+  uint64_t valuesRead_ = 0;                          ///< values of the arrays read so far (spend())
+  std::unordered_map<std::string, size_t> offsets_;  ///< appended offsets seen, with their line
 };
 
 }  // namespace

@@ -30,6 +30,17 @@ std::string range(double lowest, double highest, bool lowestExcluded) {
   return "a number";
 }
 
+/// Why `text` is no valid UTF-8 ("" when it is), as the JSON writer finds it.
+std::string utf8Problem(const std::string& text) {
+  try {
+    (void)Json(text).dump();
+    return "";
+  } catch (const Json::type_error& e) {  // "[json.exception.type_error.316] invalid UTF-8 ..."
+    const std::string what = e.what();
+    return what.substr(std::min(what.find("] ") + 2, what.size()));
+  }
+}
+
 }  // namespace
 
 std::string joinPath(const std::string& path, const std::string& key) {
@@ -43,14 +54,16 @@ namespace {
 void describeInto(const Json& value, std::string& out, size_t limit) {
   if (out.size() > limit) return;
   if (!value.is_structured()) {
-    out += value.dump().substr(0, limit + 1 - out.size());
+    out += value.dump(-1, ' ', false, Json::error_handler_t::replace)
+               .substr(0, limit + 1 - out.size());
     return;
   }
   out += value.is_object() ? '{' : '[';
   bool first = true;
   for (auto it = value.begin(); it != value.end() && out.size() <= limit; ++it, first = false) {
     if (!first) out += ',';
-    if (value.is_object()) out += Json(it.key()).dump() + ':';
+    if (value.is_object())
+      out += Json(it.key()).dump(-1, ' ', false, Json::error_handler_t::replace) + ':';
     describeInto(it.value(), out, limit);
   }
   out += value.is_object() ? '}' : ']';
@@ -208,13 +221,18 @@ bool Fields::boolean(const std::string& key, bool fallback) {
   return result;
 }
 
-std::string Fields::text(const std::string& key, const std::string& fallback) {
+std::string Fields::text(const std::string& key, const std::string& fallback, size_t maxBytes) {
   const Json* value = raw(key);
   std::string result = fallback;
   if (value) {
     if (!value->is_string()) fail(key, "expected a string, got " + describe(*value));
     result = value->get<std::string>();
   }
+  if (result.size() > maxBytes)
+    fail(key, "expected text of at most " + std::to_string(maxBytes) + " bytes, got " +
+                  std::to_string(result.size()));
+  if (const std::string problem = utf8Problem(result); !problem.empty())
+    fail(key, "expected UTF-8 text, found an " + problem);
   set(key, result);
   return result;
 }
@@ -229,7 +247,7 @@ std::string Fields::choice(const std::string& key, const std::string& fallback,
     fail(key, "expected one of " + list + ", got " + describe(*value));
   const std::string result = value ? value->get<std::string>() : fallback;
   if (std::find(allowed.begin(), allowed.end(), result) == allowed.end())
-    fail(key, "expected one of " + list + ", got \"" + result + "\"");
+    fail(key, "expected one of " + list + ", got " + describe(Json(result)));
   set(key, result);
   return result;
 }

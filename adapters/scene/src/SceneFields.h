@@ -7,9 +7,15 @@
 #include <string>
 #include <vector>
 
+#include "fibremss/InputFiles.h"
+
 namespace fibremss::scene {
 
 using Json = nlohmann::ordered_json;
+
+/// The longest text field (a path's length, PATH_MAX) and the longest name [bytes].
+constexpr size_t kMaxTextBytes = 4096;
+constexpr size_t kMaxNameBytes = 256;
 
 /// "muscles[2]" + "resolution" -> "muscles[2].resolution".
 std::string joinPath(const std::string& path, const std::string& key);
@@ -25,7 +31,9 @@ class Fields {
                 bool lowestExcluded = false);
   int integer(const std::string& key, int fallback, int lowest, int highest);
   bool boolean(const std::string& key, bool fallback);
-  std::string text(const std::string& key, const std::string& fallback);
+  /// A string of valid UTF-8 of at most `maxBytes` (a path's length by default).
+  std::string text(const std::string& key, const std::string& fallback,
+                   size_t maxBytes = kMaxTextBytes);
   std::string choice(const std::string& key, const std::string& fallback,
                      const std::vector<std::string>& allowed);
   btVector3 vector3(const std::string& key, const btVector3& fallback);
@@ -58,9 +66,6 @@ class Fields {
 /// A JSON value as a user reads it in an error message (at most 60 characters, however large
 /// or deep the value).
 std::string describe(const Json& value);
-
-/// Objects and arrays nested deeper than this are refused (a scene needs about eight).
-constexpr size_t kMaxJsonDepth = 100;
 
 /// Parses scene JSON from `source`; InputError for invalid JSON, nesting beyond kMaxJsonDepth and
 /// duplicate keys, naming where.

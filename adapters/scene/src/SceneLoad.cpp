@@ -14,6 +14,7 @@
 #include "SceneValidation.h"
 #include "fibremss/BuiltInScenes.h"
 #include "fibremss/Error.h"
+#include "fibremss/Geometry.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Scene.h"
 #include "fibremss/Suggest.h"
@@ -95,7 +96,10 @@ struct Reader {
     }
     fs::path file(resolved);
     if (file.is_relative()) file = baseDir / file;
-    if (!fs::exists(file)) fields.fail(key, "no such file: " + file.string());
+    std::error_code error;
+    if (!fs::exists(file, error))
+      fields.fail(key, (error ? "cannot open: " + error.message() + ": " : "no such file: ") +
+                           file.string());
     return file.lexically_normal().string();
   }
 };
@@ -142,6 +146,22 @@ std::vector<double> sweepAngles(double start, double end, double step) {
   return angles;
 }
 
+/// Refuses a pose that turns by a non-finite angle or moves the bone beyond kMaxCoordinate.
+void requirePosesWithinWorld(const Fields& motion, const std::string& type,
+                             const std::vector<btTransform>& poses) {
+  const bool keyframes = type == "keyframes";
+  for (size_t p = 0; p < poses.size(); ++p) {
+    const btQuaternion q = poses[p].getRotation();
+    const bool finite = std::isfinite(double(q.x())) && std::isfinite(double(q.y())) &&
+                        std::isfinite(double(q.z())) && std::isfinite(double(q.w()));
+    if (!finite || !withinWorld(poses[p].getOrigin()))
+      motion.fail(keyframes ? "keyframes[" + std::to_string(p) + "]" : "pivot",
+                  "pose " + std::to_string(p) +
+                      " moves the bone beyond the world: expected finite angles and "
+                      "translations within ±1e6 m");
+  }
+}
+
 void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, BoneMotion& result,
                 std::vector<double>& labels) {
   const std::string type = motion.choice("type", "none", {"none", "keyframes", "sweep", "opensim"});
@@ -157,8 +177,8 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
     const double start = motion.number("start_deg", 0, -3600, 3600);
     const double end = motion.number("end_deg", 90, -3600, 3600);
     const double step = motion.number("step_deg", 10, 0, 3600, true);
-    if (std::abs(end - start) / step > 100000)
-      motion.fail("step_deg", "gives more than 100000 poses");
+    if (std::abs(end - start) / step > double(scene::kMaxPoses))
+      motion.fail("step_deg", "gives more than " + std::to_string(scene::kMaxPoses) + " poses");
     labels = sweepAngles(start, end, step);
     for (double angle : labels) {
       const btTransform rotation(btQuaternion(axis.normalized(), btScalar(angle * kDegrees)));
@@ -179,6 +199,7 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
     }
     motion.set("keyframes", std::move(complete));
   }
+  requirePosesWithinWorld(motion, type, result.poses);
 }
 
 TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& reader,
@@ -213,7 +234,7 @@ FibreSet selectFibres(const FibreSet& all, size_t count) {
 BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion& motion,
                    std::vector<double>& labels) {
   BoneInput input;
-  input.name = bone.text("name", "bone" + std::to_string(index));
+  input.name = bone.text("name", "bone" + std::to_string(index), scene::kMaxNameBytes);
   std::optional<scene::Shape> shape;
   TriangleMesh mesh = readSurface(bone, "mesh", reader, shape);
   Fields transform = bone.object("transform");
@@ -233,7 +254,7 @@ BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion&
 MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
                        const SpringParameters& springs) {
   MuscleInput input;
-  input.name = muscle.text("name", "muscle" + std::to_string(index));
+  input.name = muscle.text("name", "muscle" + std::to_string(index), scene::kMaxNameBytes);
   std::optional<scene::Shape> shape;
   input.surface = readSurface(muscle, "surface", reader, shape);
   const int fibreCount = muscle.integer("fibre_count", 64, 1, 1000000);
@@ -452,7 +473,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   result.source = source;
 
   Fields root(raw, "", source);
-  result.name = root.text("name", defaultName);
+  result.name = root.text("name", defaultName, scene::kMaxNameBytes);
   result.description = root.text("description", "");
   const std::string units = root.choice("units", "m", {"m", "mm"});
   reader.scale = result.unitScale = units == "mm" ? 1e-3 : 1.0;

@@ -5,6 +5,7 @@
 
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include "SceneFields.h"
@@ -13,13 +14,17 @@
 
 namespace fibremss::scene {
 
+/// The most poses a motion may give, after large jumps are split (simulation steps).
+constexpr size_t kMaxPoses = 100000;
+
 /// The table of an OpenSim storage file: a header ending with `endheader`, a line of column
 /// names (tab-separated), then one row of numbers per line.
 struct MotionTable {
-  std::string path;                  ///< the file, for messages
-  std::vector<std::string> columns;  ///< column names, as in the file ("time" first)
-  std::vector<double> values;        ///< row after row, columns.size() values each
-  bool inDegrees = true;             ///< the header's inDegrees: angles in degrees, else radians
+  std::string path;                               ///< the file, for messages
+  std::vector<std::string> columns;               ///< column names, as in the file ("time" first)
+  std::unordered_map<std::string, size_t> index;  ///< column of each name
+  std::vector<double> values;                     ///< row after row, columns.size() values each
+  bool inDegrees = true;  ///< the header's inDegrees: angles in degrees, else radians
 
   size_t rows() const { return columns.empty() ? 0 : values.size() / columns.size(); }
   double at(size_t row, size_t column) const { return values[row * columns.size() + column]; }

@@ -9,13 +9,15 @@
 
 #include "SceneMotion.h"
 #include "fibremss/Error.h"
+#include "fibremss/InputFiles.h"
 
 namespace fibremss::scene {
 namespace {
 
 constexpr double kDegrees = M_PI / 180;
 constexpr size_t kMaxColumns = 100000;
-constexpr size_t kMaxPoses = 100000;
+/// The largest angle a coordinate may take [°], as a sweep's start_deg and end_deg.
+constexpr double kMaxTurnDeg = 3600;
 
 std::string_view trim(std::string_view text) {
   while (!text.empty() && std::isspace(static_cast<unsigned char>(text.front())))
@@ -135,14 +137,30 @@ Header readHeader(const std::string& path, LineReader& lines) {
                    "found the end of the file");
 }
 
+/// The angle in `row` of `column`, refused beyond ±kMaxTurnDeg (in the table's unit).
+double checkedAngle(const MotionTable& table, size_t row, size_t column) {
+  const double angle = table.at(row, column);
+  const double limit = table.inDegrees ? kMaxTurnDeg : kMaxTurnDeg * kDegrees;
+  if (!(std::abs(angle) <= limit))
+    throw InputError(
+        table.path, "row " + std::to_string(row + 1) + ", column " + table.columns[column],
+        "expected an angle within ±" + std::to_string(int(kMaxTurnDeg)) + "° (ten turns), found " +
+            std::to_string(angle) + (table.inDegrees ? "°" : " rad"));
+  return angle;
+}
+
 }  // namespace
 
 size_t MotionTable::column(const std::string& name) const {
-  const auto found = std::find(columns.begin(), columns.end(), name);
-  if (found != columns.end()) return size_t(found - columns.begin());
+  const auto found = index.find(name);
+  if (found != index.end()) return found->second;
+  constexpr size_t kListed = 20;
   std::string list;
-  for (const auto& c : columns) list += (list.empty() ? "" : ", ") + c;
-  throw InputError(path, "", "has no column \"" + name + "\"; its columns are: " + list);
+  for (size_t c = 0; c < std::min(columns.size(), kListed); ++c)
+    list += (list.empty() ? "" : ", ") + quote(columns[c]);
+  if (columns.size() > kListed)
+    list += " and " + std::to_string(columns.size() - kListed) + " more";
+  throw InputError(path, "", "has no column " + quote(name) + "; its columns are: " + list);
 }
 
 MotionTable parseMotionTable(const std::string& path, std::string_view text) {
@@ -178,8 +196,7 @@ MotionTable parseMotionTable(const std::string& path, std::string_view text) {
         "expected column names starting with 'time', found " + quote(table.columns.front()));
   const std::string namesLine = lines.where();
   for (size_t c = 0; c < width; ++c)
-    if (table.columns[c].empty() ||
-        std::count(table.columns.begin(), table.columns.end(), table.columns[c]) > 1)
+    if (table.columns[c].empty() || !table.index.emplace(table.columns[c], c).second)
       throw InputError(path, namesLine,
                        "expected distinct, non-empty column names; column " +
                            std::to_string(c + 1) + " is " + quote(table.columns[c]));
@@ -214,11 +231,8 @@ MotionTable parseMotionTable(const std::string& path, std::string_view text) {
 }
 
 MotionTable readMotionTable(const std::string& path) {
-  std::ifstream file(path, std::ios::binary);
-  if (!file) throw InputError(path, "", std::string("cannot open: ") + std::strerror(errno));
-  const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-  if (file.bad()) throw InputError(path, "", "cannot read the file");
-  return parseMotionTable(path, text);
+  return parseMotionTable(
+      path, readInputFile(path, "an OpenSim motion table (.mot, .sto)", kMaxTextFileBytes));
 }
 
 void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3& pivot,
@@ -271,7 +285,7 @@ void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3&
     if (t < window[0] - slack || t > window[1] + slack || inWindow++ % size_t(every) != 0) continue;
     btQuaternion rotation = btQuaternion::getIdentity();
     for (const Coordinate& c : coordinates)
-      rotation *= btQuaternion(c.axis, btScalar(table.at(row, c.column) * toRadians));
+      rotation *= btQuaternion(c.axis, btScalar(checkedAngle(table, row, c.column) * toRadians));
     // About the pivot: translate it to the origin, rotate, translate back.
     poses.push_back(btTransform(btQuaternion::getIdentity(), pivot) * btTransform(rotation) *
                     btTransform(btQuaternion::getIdentity(), -pivot));

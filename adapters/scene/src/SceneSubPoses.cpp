@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "SceneMotion.h"
+#include "fibremss/Error.h"
 
 namespace fibremss::scene {
 namespace {
@@ -22,6 +23,29 @@ std::string formatNumber(double value) {
   char text[32];
   std::snprintf(text, sizeof text, "%.4g", value);
   return text;
+}
+
+/// The largest turn of any moving bone into pose `p` (from rest for the first), the bone, and
+/// the sub-poses it is split into.
+struct Jump {
+  double largest = 0;
+  size_t turning = 0;
+  size_t parts = 1;
+};
+
+Jump largestJump(const LoadedScene& scene, const std::vector<size_t>& moving, int p,
+                 double maxStepDeg) {
+  Jump jump{0, moving.front(), 1};
+  for (size_t b : moving) {
+    const double turn = turnDegrees(p == 0 ? btTransform::getIdentity() : scene.bonePose(b, p - 1),
+                                    scene.bonePose(b, p));
+    if (turn > jump.largest) jump.largest = turn, jump.turning = b;
+  }
+  // 0.001° of slack: a float rotation of exactly 40° reads back as 40.0001°. Beyond
+  // kMaxPoses parts the count only needs to say "too many".
+  const double parts = std::ceil((jump.largest - 1e-3) / maxStepDeg);
+  jump.parts = size_t(std::clamp(parts, 1.0, double(kMaxPoses + 1)));
+  return jump;
 }
 
 }  // namespace
@@ -54,20 +78,25 @@ void splitLargeJumps(LoadedScene& scene, double maxStepDeg) {
     if (!scene.motions[b].poses.empty()) moving.push_back(b);
   if (moving.empty()) return;
   const int poses = std::max(scene.poseCount, 1);
+  std::vector<Jump> jumpsTo(static_cast<size_t>(poses));
+  size_t total = 0;
+  for (int p = 0; p < poses; ++p) {
+    jumpsTo[size_t(p)] = largestJump(scene, moving, p, maxStepDeg);
+    total += jumpsTo[size_t(p)].parts;
+  }
+  if (total > kMaxPoses)
+    throw InputError(scene.source, "simulation.max_step_deg",
+                     "splitting the motion's jumps into turns of at most " +
+                         formatNumber(maxStepDeg) + "° gives " + std::to_string(total) +
+                         " poses; expected at most " + std::to_string(kMaxPoses) +
+                         " (raise max_step_deg, or give fewer poses)");
   std::vector<std::vector<btTransform>> split(scene.motions.size());
   std::vector<double> labels;
   std::vector<std::string> described;
   size_t jumps = 0, added = 0;
   for (int p = 0; p < poses; ++p) {
-    double largest = 0;
-    size_t turning = moving.front();
-    for (size_t b : moving) {
-      const double turn = turnDegrees(
-          p == 0 ? btTransform::getIdentity() : scene.bonePose(b, p - 1), scene.bonePose(b, p));
-      if (turn > largest) largest = turn, turning = b;
-    }
-    // 0.001° of slack: a float rotation of exactly 40° reads back as 40.0001°.
-    const int parts = std::max(1, int(std::ceil((largest - 1e-3) / maxStepDeg)));
+    const auto [largest, turning, partCount] = jumpsTo[size_t(p)];
+    const int parts = int(partCount);
     const double label = scene.poseLabels[size_t(p)];
     const double previousLabel = scene.poseLabels[size_t(std::max(p - 1, 0))];
     for (int j = 1; j <= parts; ++j) {

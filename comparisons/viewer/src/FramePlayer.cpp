@@ -11,6 +11,7 @@
 #include <memory>
 
 #include "fibremss/Error.h"
+#include "fibremss/InputFiles.h"
 #include "fibremss/MuscleSystem.h"
 
 namespace fibremss::viewer {
@@ -22,10 +23,11 @@ using Clock = std::chrono::steady_clock;
 /// Frames a second while playing.
 constexpr double kFramesPerSecond = 8;
 
-/// The JSON file at `path`, or null when it is absent or unreadable.
+/// The JSON file at `path`, or null when it is absent; InputError when it is no regular file or
+/// nests too deep.
 nlohmann::json readJson(const fs::path& path) {
-  std::ifstream file(path);
-  return file ? nlohmann::json::parse(file, nullptr, false) : nlohmann::json();
+  return fs::exists(path) ? nlohmann::json::parse(readJsonText(path.string()), nullptr, false)
+                          : nlohmann::json();
 }
 
 /// The array's values as one scalar per point: itself, or the length of a vector.

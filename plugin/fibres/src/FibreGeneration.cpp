@@ -439,6 +439,19 @@ double segmentDistance2(const btVector3& p1, const btVector3& q1, const btVector
   return (c1 - c2).length2();
 }
 
+/// Takes the vertices in both areas out of both (the field would be ill-posed there); returns
+/// how many there were.
+size_t removeSharedVertices(size_t vertexCount, std::vector<uint32_t>& originIds,
+                            std::vector<uint32_t>& insertionIds) {
+  std::vector<char> inOrigin(vertexCount, 0), inInsertion(vertexCount, 0);
+  for (uint32_t i : originIds) inOrigin[i] = 1;
+  for (uint32_t i : insertionIds) inInsertion[i] = 1;
+  const size_t before = originIds.size();
+  std::erase_if(originIds, [&](uint32_t i) { return inInsertion[i] != 0; });
+  std::erase_if(insertionIds, [&](uint32_t i) { return inOrigin[i] != 0; });
+  return before - originIds.size();
+}
+
 /// The surface vertices of both attachment areas (result.originArea, result.insertionArea).
 void resolveAreas(const TriangleMesh& surface, const AttachmentArea& origin,
                   const AttachmentArea& insertion, const std::string& source,
@@ -464,29 +477,20 @@ void resolveAreas(const TriangleMesh& surface, const AttachmentArea& origin,
     const btVector3 c = centroidOf(V, originIds);
     insertionIds = farEnd(surface, &c, false, insertion.endFraction, insertion.endDepth);
   }
-  // A vertex in both areas belongs to neither (the field would be ill-posed there).
-  {
-    std::vector<char> inOrigin(V.size(), 0), inInsertion(V.size(), 0);
-    for (uint32_t i : originIds) inOrigin[i] = 1;
-    for (uint32_t i : insertionIds) inInsertion[i] = 1;
-    size_t shared = 0;
-    std::vector<uint32_t> a, b;
-    for (uint32_t i : originIds)
-      if (!inInsertion[i])
-        a.push_back(i);
-      else
-        ++shared;
-    for (uint32_t i : insertionIds)
-      if (!inOrigin[i]) b.push_back(i);
-    if (shared)
-      result.warnings.push_back(source + ": " + std::to_string(shared) +
-                                " surface vertices are in both attachment areas; left out of both");
-    originIds.swap(a);
-    insertionIds.swap(b);
+  const size_t shared = removeSharedVertices(V.size(), originIds, insertionIds);
+  if (shared)
+    result.warnings.push_back(source + ": " + std::to_string(shared) +
+                              " surface vertices are in both attachment areas; left out of both");
+  if (originIds.empty() || insertionIds.empty()) {
+    const std::string empty = originIds.empty() ? "origin" : "insertion";
+    const std::string other = originIds.empty() ? "insertion" : "origin";
+    throw InputError(source, empty,
+                     shared == 0 ? "the attachment area holds no surface vertex"
+                                 : "the origin and insertion areas overlap: each of this area's "
+                                   "surface vertices is also in the " +
+                                       other + " area (" + std::to_string(shared) +
+                                       " vertices in both); expected areas apart");
   }
-  if (originIds.empty() || insertionIds.empty())
-    throw InputError(source, originIds.empty() ? "origin" : "insertion",
-                     "the attachment area holds no surface vertex");
   result.quality.originVertices = originIds.size();
   result.quality.insertionVertices = insertionIds.size();
   result.originArea = std::move(originIds);

@@ -13,9 +13,15 @@
 
 namespace fibremss {
 
-/// Writes `content` to `path` through a temporary file and a rename; throws std::runtime_error
-/// (with the path) when it cannot. Creates missing parent directories.
+/// Writes `content` to `path` through a temporary file and a rename; creates missing parent
+/// directories. When it cannot (a full disk, a file where a directory belongs, a directory with
+/// the file's name) it throws InputError naming the path and the system's reason, and leaves
+/// neither the temporary nor a half-written file.
 void writeFileAtomically(const std::string& path, std::string_view content);
+
+/// Removes the file at `path` a previous writer left (nothing when there is none); InputError
+/// naming the path when a directory has its name or it cannot be removed.
+void removeOutputFile(const std::string& path);
 
 /// Throws InputError when directory `path` could not be created or written: it exists and is
 /// no directory or not writable, or its nearest existing ancestor is not writable. Checked
@@ -24,9 +30,10 @@ void requireWritableDirectory(const std::string& path);
 
 /// An output directory one process writes at a time: created, locked (DIR/.fibremss.lock held
 /// with flock while this lives and removed when it ends; a second writer gets InputError naming
-/// the directory), and
-/// cleared of the temporary files (NAME.tmp.PID.N) that a killed writer left in it or its
-/// subfolders.
+/// the directory; a lock file that is a symbolic link is not followed but refused), and cleared
+/// of the temporary files (NAME.tmp.PID.N) that the previous writer, a killed one, left in it or
+/// its subfolders: the lock file records each writer's process id, and only temporaries
+/// carrying that id are removed.
 class OutputDirectory {
  public:
   explicit OutputDirectory(const std::string& path);

@@ -86,6 +86,10 @@ struct StepStats {
   /// (MuscleSystem::setCancelFlag): the bones jumped to their targets, the muscles stay where that
   /// iteration left them (at the step's start when the attempt had failed), with no retry.
   bool interrupted = false;
+  /// step(duration) advanced less than its duration: that needed more than 16384 iterations of
+  /// the muscles' stable dt, which the step runs instead (a bounded step; simulatedTime says how
+  /// far it got).
+  bool shortened = false;
 };
 
 /// How often the numerical guard found one muscle failing, over the system's life: each count is
@@ -172,8 +176,9 @@ class MuscleSystem {
   /// A step that advances the muscles by exactly `duration` of simulated time [s]: k =
   /// max(iterations, ⌈duration / dt⌉) iterations of duration/k, dt the smaller of timeStep and
   /// every muscle's stable dt (springs and volume term) (fixed, whatever the stop
-  /// rule and adaptiveTimeStep say), bones moving over all of them (MuscleTime::Dynamic).
-  /// InputError for a duration that is not finite and > 0.
+  /// rule and adaptiveTimeStep say), bones moving over all of them (MuscleTime::Dynamic). A
+  /// duration beyond 16384 such dt is cut short to that (StepStats::shortened). InputError for a
+  /// duration that is not finite and > 0.
   void step(btScalar duration);
   /// A flag the steps poll after every iteration (null: none, the default): once it reads true,
   /// the running step ends there and reports StepStats::interrupted, so a long step (a large
@@ -197,7 +202,7 @@ class MuscleSystem {
   /// there, Hooke's law with the particle's local stiffness (Σ k/3 of its springs) along the
   /// contact normal. At the pose the last step ended with that term is about 0; as a tool moves
   /// in between steps it follows at once. Reads the particles as of the last step; no allocation;
-  /// not concurrently with step().
+  /// not concurrently with step(). InputError for a transform with NaN or inf.
   ContactWrench contactWrench(const btCollisionObject& body, const btTransform& transform) const;
   /// An external force [N] held on one particle of a muscle (added to its spring forces every
   /// iteration, until changed or cleared; fixed particles ignore it; Pbd and Xpbd too, which

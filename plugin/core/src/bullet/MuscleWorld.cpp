@@ -7,6 +7,7 @@
 
 #include "RigidCoupling.h"
 #include "fibremss/Error.h"
+#include "solver/MuscleSystemAccess.h"
 
 namespace fibremss {
 
@@ -50,7 +51,8 @@ void MuscleWorld::forgetBoneBody(const btCollisionObject* body) {
   auto it =
       std::find_if(bones_.begin(), bones_.end(), [&](const Bone& b) { return b.body == body; });
   if (it == bones_.end()) return;
-  muscles_.removeBone(it->handle);
+  // Released even with muscles attached (Bullet's removal cannot fail): they treat it as gone.
+  MuscleSystemAccess::impl(muscles_).bones.remove(it->handle);
   bones_.erase(it);
 }
 

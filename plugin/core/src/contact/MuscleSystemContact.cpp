@@ -110,6 +110,9 @@ BodyContact MuscleSystem::bodyContact(const btCollisionObject* body) const {
 
 ContactWrench MuscleSystem::contactWrench(const btCollisionObject& body,
                                           const btTransform& transform) const {
+  if (!finiteTransform(transform))
+    throw InputError("MuscleSystem::contactWrench", "transform",
+                     "expected a finite transform (the body's pose has NaN or inf)");
   const Impl& impl = *impl_;
   ContactWrench wrench;
   const BodyContact last = bodyContact(&body);

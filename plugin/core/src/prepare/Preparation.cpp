@@ -12,6 +12,7 @@
 #include <exception>
 #include <limits>
 #include <optional>
+#include <system_error>
 #include <thread>
 
 #include "PreparationInternal.h"
@@ -59,7 +60,11 @@ void parallelFor(size_t count, const Workers& workers, Task task) {
     };
     const size_t used = std::min<size_t>(count, TaskPool::resolve(workers.threads));
     std::vector<std::thread> pool;
-    for (size_t t = 1; t < used; ++t) pool.emplace_back(worker);
+    try {
+      for (size_t t = 1; t < used; ++t) pool.emplace_back(worker);
+    } catch (const std::system_error&) {
+      // The system allows no more threads: those started do the work (the same results).
+    }
     worker();
     for (auto& thread : pool) thread.join();
   }

@@ -1,9 +1,12 @@
 #include "SpringsDelaunay.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
 #include "PreparationInternal.h"
+#include "PreparationKdTree.h"
 #include "fibremss/Error.h"
 
 extern "C" {
@@ -16,6 +19,39 @@ namespace {
 
 constexpr uint32_t kNone = UINT32_MAX;
 
+/// Particles from which on their spread is checked (fewer tetrahedralize in well under a second).
+constexpr size_t kSpreadCheckedFrom = 2000;
+/// How much closer than an even spread the particles' nearest neighbours may lie: particles
+/// packed along few lines (straight or curved fibres sampled far more densely along than across)
+/// have a Delaunay tetrahedralization quadratic in their number (10⁶ tetrahedra from 4000
+/// particles), which qhull needs minutes for.
+constexpr double kMaxPacking = 16;
+
+/// Refuses particles packed along lines (kMaxPacking): the mean distance to the nearest
+/// neighbour against the spacing N particles spread evenly through their bounding box would have.
+void requireSpreadParticles(const MuscleInput& muscle, std::span<const btVector3> positions) {
+  if (positions.size() < kSpreadCheckedFrom) return;
+  btVector3 lower = positions.front(), upper = positions.front();
+  for (const btVector3& p : positions) lower.setMin(p), upper.setMax(p);
+  const btVector3 size = upper - lower;
+  const double even = std::cbrt(double(size.x()) * size.y() * size.z() / double(positions.size()));
+  const KdTree tree(positions);
+  double sum = 0;
+  for (const btVector3& p : positions) {
+    uint32_t nearest[2];
+    btScalar distance2[2];
+    if (tree.nearest(p, 2, nearest, distance2) == 2) sum += std::sqrt(double(distance2[1]));
+  }
+  const double mean = sum / double(positions.size());
+  if (mean * kMaxPacking < even)
+    throw InputError(muscleSource(muscle), "springs.layout",
+                     "the " + std::to_string(positions.size()) +
+                         " particles lie packed along few lines (nearest neighbours " +
+                         std::to_string(even / std::max(mean, 1e-300)) +
+                         "x closer than an even spread): their tetrahedralization would be "
+                         "quadratic in their number; expected more fibres or a lower resolution");
+}
+
 /// The lower Delaunay facets' particles, four per facet, kNone where a facet has fewer (a
 /// vertex at infinity from Qz).
 std::vector<std::array<uint32_t, 4>> delaunayFacets(const MuscleInput& muscle,
@@ -24,6 +60,7 @@ std::vector<std::array<uint32_t, 4>> delaunayFacets(const MuscleInput& muscle,
     throw InputError(
         muscleSource(muscle), "springs.layout",
         "delaunay needs at least 5 particles, got " + std::to_string(positions.size()));
+  requireSpreadParticles(muscle, positions);
   std::vector<coordT> coordinates;
   coordinates.reserve(3 * positions.size());
   for (const btVector3& p : positions) coordinates.insert(coordinates.end(), {p.x(), p.y(), p.z()});

@@ -66,8 +66,8 @@ StepSize smallerSteps(const SimulationParameters& requested, int halvings) {
   return smaller;
 }
 
-/// Most iterations a duration step splits into before its dt grows past timeStep.
-constexpr double kMaxExactIterations = 1 << 20;
+/// Most iterations a duration step runs: a longer duration is cut short (StepStats::shortened).
+constexpr double kMaxExactIterations = 1 << 14;
 
 void add(StepTiming& sum, const StepTiming& part) {
   sum.mss += part.mss;
@@ -120,10 +120,13 @@ StepSize MuscleSystem::Impl::stepSize(int halvings) const {
     if (!muscles.states[slot]->frozen)
       bound = std::min(bound, muscles.states[slot]->stableTimeStep);
   const double split = std::ceil(double(duration) / double(bound));
+  const bool shortened = split > kMaxExactIterations;
   exact.iterations = std::max(parameters.iterations, int(std::min(split, kMaxExactIterations)));
-  exact.timeStep = exact.minTimeStep = duration / static_cast<btScalar>(exact.iterations);
+  exact.timeStep = exact.minTimeStep =
+      shortened ? bound : duration / static_cast<btScalar>(exact.iterations);
   StepSize size = smallerSteps(exact, halvings);
   size.exact = true;
+  size.shortened = shortened;
   return size;
 }
 
@@ -261,6 +264,7 @@ void MuscleSystem::Impl::guardedStep() {
   stats.frozenMuscles = frozen;
   stats.trappedParticles = trappedParticles;
   stats.trappedMuscles = trappedMuscles;
+  stats.shortened = size.shortened;
 }
 
 }  // namespace fibremss

@@ -114,6 +114,8 @@ struct StepSize {
   /// MuscleTime::Dynamic: exactly `iterations` iterations of the fixed dt `timeStep`, bones
   /// moving over all of them, whatever the stop rule and adaptiveTimeStep say.
   bool exact = false;
+  /// The duration needed more iterations than a step runs: cut short (StepStats::shortened).
+  bool shortened = false;
 };
 
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.

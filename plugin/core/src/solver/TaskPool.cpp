@@ -2,6 +2,10 @@
 
 #include <ctime>
 #include <span>
+#include <string>
+#include <system_error>
+
+#include "fibremss/Error.h"
 
 #if defined(__SSE2__)
 #include <immintrin.h>
@@ -75,10 +79,25 @@ TaskPool::TaskPool(unsigned threads, const TaskScheduler& host) : host_(host) {
   const unsigned total = host_.present() ? 1 : threads == 0 ? resolve(0) : threads;
   workers_.reserve(total - 1);
   times_.resize(host_.present() ? resolve(1, host_) : total);
-  for (unsigned t = 1; t < total; ++t) workers_.emplace_back([this, t] { loop(t); });
+  for (unsigned t = 1; t < total; ++t) {
+    try {
+      workers_.emplace_back([this, t] { loop(t); });
+    } catch (const std::system_error& e) {
+      stop();  // the threads started end before the pool does
+      throw InputError("simulation.threads", "",
+                       "cannot start thread " + std::to_string(t + 1) + " of " +
+                           std::to_string(total) + " (" + e.what() +
+                           "): the system's limit on threads or memory (ulimit -u, ulimit -v) "
+                           "allows fewer; expected fewer threads");
+    }
+  }
 }
 
 TaskPool::~TaskPool() {
+  stop();
+}
+
+void TaskPool::stop() {
   stopping_.store(true);
   generation_.fetch_add(2);
   generation_.notify_all();

@@ -60,7 +60,9 @@ double threadCpuMs();
 class TaskPool {
  public:
   /// `threads` counts the caller; 0 means the machine's hardware threads. With a `host`
-  /// scheduler the pool starts no threads and hands every run() to the host instead.
+  /// scheduler the pool starts no threads and hands every run() to the host instead. Throws
+  /// InputError (naming simulation.threads), the threads it started joined, when the system
+  /// cannot start as many.
   explicit TaskPool(unsigned threads = 1, const TaskScheduler& host = {});
   ~TaskPool();
   TaskPool(const TaskPool&) = delete;
@@ -109,6 +111,8 @@ class TaskPool {
   void work(unsigned thread);
   /// A worker: waits for a new generation, works, reports done.
   void loop(unsigned thread);
+  /// Ends the workers and joins them.
+  void stop();
 
   TaskScheduler host_;                   ///< the host's scheduler, or empty
   std::vector<std::thread> workers_;     ///< threads 1 … threads−1
