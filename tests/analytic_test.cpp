@@ -234,7 +234,8 @@ RunMetrics cylinderRun(const char* name, std::vector<std::string> overrides) {
   return runFibreMSS(scene, prepared, options);
 }
 
-// Issue 18's targets: muscle is nearly incompressible, and exact torsion keeps radius and volume.
+// The material's targets: muscle is nearly incompressible, and exact torsion keeps radius and
+// volume.
 TEST(VolumeTerm, WithDefaultsTheCylindersKeepVolumeAndRadius) {
   const RunMetrics stretch = cylinderRun("cylinder-stretch", {});
   ASSERT_FALSE(stretch.nan || stretch.exploded);

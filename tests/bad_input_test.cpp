@@ -1,4 +1,4 @@
-// The bad-input catalogue (issue 7; docs/bad-inputs.md): one row per class of bad input. Each
+// The bad-input catalogue (docs/bad-inputs.md): one row per class of bad input. Each
 // row writes a small scene (a cube bone, a box muscle, four fibres, in millimetres) into a
 // temporary directory, spoils one thing, and checks the outcome class twice: through the
 // public API (loadSurface / loadFibres / loadScene + prepareScene) and through
@@ -274,7 +274,7 @@ const std::vector<BadInput>& catalogue() {
       {"FibresOutsideMuscle", Api::Scene, "",
        [](Input& in) { in.files["fibres.obj"] = fibresObj(4, -60, 19); }, Outcome::Warning,
        "fibres.obj", "outside"},
-      // Fibres from files merge near-coincident particles of different fibres (issue 16), except
+      // Fibres from files merge near-coincident particles of different fibres, except
       // in the lattice layouts, whose grid a merge would break: fibre 3 repeated next to it.
       {"CoincidentParticles", Api::Scene, "",
        [](Input& in) {

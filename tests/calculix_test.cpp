@@ -541,7 +541,7 @@ TEST(ReferenceGates, IncrementsHalvedIsJudgedAsRefinementIsAndBlocksTheRanking) 
   gates.poses = gates.solvedPoses = gates.refinementPoses = 2;
   EXPECT_FALSE(gates.passed()) << "not computed: no ranking";
   EXPECT_NE(gateLines(gates)[2].find(": not computed"), std::string::npos) << gateLines(gates)[2];
-  gates.incrementsMm = 0.277;  // pinch's pose 1, 0.25x against 0.0625x (session 12)
+  gates.incrementsMm = 0.277;  // pinch's pose 1, 0.25x against 0.0625x (measured)
   gates.incrementsScale = 0.125;
   gates.incrementsPoses = 2;
   EXPECT_TRUE(gates.incrementsPass());

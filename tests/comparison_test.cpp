@@ -666,7 +666,7 @@ TEST(MergeAndReport, RejectsSomethingThatIsNotASummary) {
   EXPECT_THROW(readSummary((dir / "missing").string()), InputError);
 }
 
-/// pinch's fronts (2026-11-27, session 12: ms per pose, RMS to the reference [mm]): fourteen
+/// pinch's fronts as measured (ms per pose, RMS to the reference [mm]): fourteen
 /// points within 7–600 ms and 0.9–2.3 mm, seven of them within a factor 2 in time.
 nlohmann::json pinchLikeSummary() {
   const std::tuple<const char*, double, double, int> runs[] = {

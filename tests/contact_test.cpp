@@ -1,5 +1,5 @@
-// Penetration-free contact (issue 5): the bone distance field against exact distances, penetration
-// recovery (seed 001 eq 1) catching a particle a thin bone sweeps through, the issue's goal (hip
+// Penetration-free contact: the bone distance field against exact distances, penetration
+// recovery (seed 001 eq 1) catching a particle a thin bone sweeps through, the contact goal (hip
 // extension in 10° steps with the default method keeps the muscle surfaces out of the bones), and
 // bones closing on a muscle (pinch): squeezed out, or reported trapped, finite, never frozen.
 #include <gtest/gtest.h>
@@ -187,9 +187,9 @@ PinchRun runPinch() {
 TEST(Pinch, TheMuscleTheBladesShearIsReportedTrappedStaysFiniteAndEndsOutsideThem) {
   // Blades A and B shear past each other with a 2 mm gap through the muscle, whose boundary
   // particles (radii up to 4.5 mm here) cannot pass through the gap: the muscle is caught
-  // between them and torn, so the scene produces the "trapped" variant of issue 5. With the
-  // default guard (retry) it must be reported trapped rather than frozen, stay finite, and be out
-  // of the blades (≤ 1 mm, the goal's bound) once they have passed each other.
+  // between them and torn, so the scene produces the "trapped" variant of the contact goal. With
+  // the default guard (retry) it must be reported trapped rather than frozen, stay finite, and be
+  // out of the blades (≤ 1 mm, the goal's bound) once they have passed each other.
   const PinchRun run = runPinch();
   EXPECT_TRUE(run.finite);
   EXPECT_TRUE(run.burst);            // torn ...

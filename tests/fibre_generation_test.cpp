@@ -145,7 +145,7 @@ TEST(FibreGeneration, FarLandmarksWidenTheAreaWithAWarning) {
   EXPECT_NE(result.warnings.front().find("landmark"), std::string::npos);
 }
 
-// The scene format's two ways to attach an origin without a bone (issue 8: the shared data
+// The scene format's two ways to attach an origin without a bone (the shared data
 // has no pelvis): landmark points in the scene, anchored to a static plate that preparation
 // fixes the origin's particles to. A spindle (mm) from a landmark at its top to a plate below.
 TEST(FibreGeneration, SceneWithALandmarkOriginOnAnAnchor) {

@@ -1,6 +1,6 @@
-// Hostile inputs at the newer surfaces: the motion reader, the .vtp reader, `merge`, `view`,
-// `--out`, signals, a full disk and the library API. Each test tries one input a hostile user
-// tried and checks what FibreMSS does with it; docs/bad-inputs.md lists them with the exit codes.
+// Hostile inputs at the motion reader, the .vtp reader, `merge`, `view`, `--out`, signals, a full
+// disk and the library API. Each test gives one hostile input and checks what FibreMSS does with
+// it; docs/bad-inputs.md lists them with the exit codes.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <unistd.h>

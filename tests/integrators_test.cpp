@@ -711,7 +711,7 @@ TEST(Projective, ComesWithinTheEquilibriumToleranceInTenIterations) {
   // until its mean step is below 10 nm is the reference (about 650 iterations; a step
   // (A + W)⁻¹·F that small leaves forces F ≈ 0 whatever the matrix). Its 20 000-iteration state
   // lies 0.041 mm from Verlet run to 1 nm, the reference before, which took 50 times as long.
-  // Issue 18 asks for a pose within 0.5 mm of it; the projective step must come within half
+  // The target is a pose within 0.5 mm of it; the projective step must come within half
   // that in 10 iterations (the bones jump in the first), where Verlet with ten times as many
   // (the bones over 10) must not: the whole-muscle modes that a local step needs thousands of
   // iterations for are what the global step solves.

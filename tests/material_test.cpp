@@ -1,4 +1,4 @@
-// The muscle material of issue 18 at preparation: the volume terms' tetrahedra and the springs'
+// The muscle material at preparation: the volume terms' tetrahedra and the springs'
 // anisotropy along the fibres, and what the anisotropy does to a stretched cylinder.
 #include <gtest/gtest.h>
 

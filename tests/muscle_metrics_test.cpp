@@ -1,4 +1,4 @@
-// Per-muscle results (issue 16): one muscle's measures on a deformation whose answers are known,
+// Per-muscle results: one muscle's measures on a deformation whose answers are known,
 // the run-long summary keeping the worst and the last finite step, the JSON round trip, and on
 // hip-pelvis: declared attachments run the flexion where the nearest-bone rule freezes the
 // iliacus, and under stop-body the other muscles go on past a frozen one.
@@ -166,7 +166,7 @@ const MuscleResults& muscleNamed(const RunMetrics& run, const std::string& name)
   throw std::runtime_error("no muscle " + name);
 }
 
-/// Issue 16's targets for a run with declared attachments: no muscle frozen or rolled back, no
+/// The per-muscle targets for a run with declared attachments: no muscle frozen or rolled back, no
 /// spring burst, every muscle's surface at most 1 mm into each bone's true mesh and its volume
 /// within ±5 % at every step.
 void expectIssueTargets(const RunMetrics& run) {
@@ -218,8 +218,8 @@ TEST(HipPelvis, DeclaredAttachmentsRunTheFlexionWhereTheNearestBoneRuleFails) {
     EXPECT_DOUBLE_EQ(longest, muscle.fibreLengthMaxMm);
   }
   EXPECT_EQ(contacts, details.spherePenetration.penetrating);
-  // Issue 18: every muscle within ±3 % of its volume over the whole flexion (the iliacus lost
-  // 3.54 % while a sphere shrunk to a point held the adaptive dt on min_dt).
+  // Every muscle within ±3 % of its volume over the whole flexion (the iliacus loses 3.54 %
+  // when a sphere shrunk to a point held the adaptive dt on min_dt).
   for (const MuscleResults& muscle : run.muscles)
     EXPECT_LE(std::abs(muscle.worstVolumeChangePct), 3.0) << muscle.name;
   // The nearest-bone rule fixes the iliacus' belly to the femoral head: it bursts.

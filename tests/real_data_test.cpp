@@ -29,7 +29,7 @@ const std::string kSource = FIBREMSS_SOURCE_DIR;
                << " (FIBREMSS_SHARED_DATA_DIR/muscle-deformation-pbd); the real-data tests need " \
                   "../shared/data next to the repository"
 
-// The quality bounds (issue 8) on the four real muscles, with the real-hip scene's areas:
+// The quality bounds on the four real muscles, with the real-hip scene's areas:
 // insertion within 3 mm of the femur, origin the far end 3 mm deep.
 // - inside: no point outside the surface (checked here, a quarter voxel's tolerance);
 // - right ends: >= 90 % start at the origin and end at the femur (checked here, within the
@@ -39,9 +39,9 @@ const std::string kSource = FIBREMSS_SOURCE_DIR;
 //   bunch the fibres and gave 43 % for muscle 0, which this bound rejects;
 // - crossings: streamlines of a gradient field do not cross; pairs closer than 0.5 mm are
 //   fibres converging into a tendon: at most 6 % of the 2016 pairs (origin seeding: 215 and
-//   107 pairs for muscles 2 and 3; since issue 16 a bone area keeps only its patch at the
-//   muscle's end, so all of muscle 2's fibres run on into its insertion and converge there:
-//   102 pairs, coverage 99 %, where they stopped at a contact mid-muscle before: 64, 83 %);
+//   107 pairs for muscles 2 and 3; a bone area keeps only its patch at the muscle's end, so all
+//   of muscle 2's fibres run on into its insertion and converge there: 102 pairs, coverage
+//   99 %, where an area that kept the whole bone stops them at a contact mid-muscle: 64, 83 %);
 // - length spread: no fibre shorter than the straight line between the two areas.
 TEST(RealData, FibresOfTheRealMusclesMeetTheQualityBounds) {
   REQUIRE_SHARED_DATA();
@@ -212,7 +212,7 @@ void shortRun(const std::string& name, double penetrationBoundMm) {
   EXPECT_LT(penetration, penetrationBoundMm);
 }
 
-// Bound: the integrator issue's (5) 1 mm for the muscle surfaces' penetration into the true
+// Bound: the contact target's 1 mm for the muscle surfaces' penetration into the true
 // bone meshes. Measured over the whole runs with the scenes' 70 iterations: 0.072 mm (hip,
 // 19 poses), 0.105 mm (block, 5 poses).
 TEST(RealData, HipShortRunHasNoNaN) {

@@ -1,5 +1,5 @@
-// Issue 20, reliability second round: the inputs a hostile new user tried that the bad-input
-// catalogue missed. One test (or two: CLI and API) per row of the issue's table; docs/bad-inputs.md
+// Reliability, second part: hostile inputs beyond the bad-input catalogue's classes. One test
+// (or two: CLI and API) per row of the table; docs/bad-inputs.md
 // lists them with the exit codes.
 #include <gtest/gtest.h>
 #include <sys/stat.h>

@@ -1,4 +1,4 @@
-// Two-way contact with rigid bodies (issue 19 step 4, fibremss/RigidContact.h) in real Bullet
+// Two-way contact with rigid bodies (fibremss/RigidContact.h) in real Bullet
 // worlds: a ball dropped on a muscle lying on a bone stops on it (never through), the muscle
 // dents and recovers; momentum is conserved between a ball and a free muscle; a probe pressed
 // deeper feels more force; the dynamic time mode advances exactly Bullet's dt; without contact

@@ -1,5 +1,5 @@
 // Bone motions from OpenSim motion files (.mot / .sto) and the splitting of large jumps between
-// poses into sub-poses (issue 16).
+// poses into sub-poses.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 

@@ -829,7 +829,7 @@ TEST(Allocation, StepAllocatesNothing) {
   {
     SimulationParameters parameters = testing::verletParameters();
     parameters.iterations = 20;
-    // A box pressed into the side of the first muscle: the contact body path (issue 19 step 4).
+    // A box pressed into the side of the first muscle: the contact body path.
     btBoxShape boxShape(btVector3(0.004f, 0.01f, 0.005f));
     btRigidBody box(0.05f, nullptr, &boxShape, btVector3(1e-5f, 1e-5f, 1e-5f));
     box.setWorldTransform(

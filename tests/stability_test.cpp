@@ -1,4 +1,4 @@
-// The hard-case stability matrix (issue 5): the energy criterion on constructed series, case
+// The hard-case stability matrix: the energy criterion on constructed series, case
 // parsing, and the matrix at a small resolution over every integrator the solver has.
 #include "fibremss/Stability.h"
 
@@ -185,13 +185,13 @@ TEST(StabilityMatrix, HardCasesAtSmallResolution) {
   EXPECT_EQ(markdown.find("unavailable |") != std::string::npos, unavailable > 0);
 }
 
-// Issue 18: with the volume term on (the default), Verlet at its measured stable step survives a
-// hip sweep, pinch and the tension spike. Before the term's stiffness was held at its rest value
-// (G0/G) and poorly shaped tetrahedra softened, sliver tetrahedra of gluteus medius flipped
-// between inverted and torn already at rest at the calibrated step (their force switched off
-// outside [0, 2·V0], so the calibration did not see it) and this sweep exploded at step 14. With
-// the fans of tetrahedra, a step calibrated on hip-extension alone (5.42e-5 s) was beyond what
-// pinch's and the tension spike's stiffer networks stand: both exploded at step 0.
+// With the volume term on (the default), Verlet at its measured stable step survives a hip
+// sweep, pinch and the tension spike. The term's stiffness is held at its rest value (G0/G) and
+// poorly shaped tetrahedra are softened: without that, sliver tetrahedra of gluteus medius flip
+// between inverted and torn already at rest at the calibrated step (a force switched off outside
+// [0, 2·V0] hides it from the calibration) and this sweep explodes at step 14. With the fans of
+// tetrahedra, a step calibrated on hip-extension alone (5.42e-5 s) is beyond what pinch's and
+// the tension spike's stiffer networks stand: both explode at step 0.
 TEST(StabilityMatrix, VerletHardCasesWithTheVolumeTermAtTheirStableStep) {
   StabilityOptions options;
   options.integrators = {"verlet"};

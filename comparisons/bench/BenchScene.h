@@ -13,7 +13,7 @@ namespace fibremss::bench {
 /// The parts of one iteration, in order (method.md §5).
 enum class Part {
   SpringForces,       ///< spring forces of every muscle
-  VolumeForces,       ///< the volume terms' forces of every muscle (issue 18)
+  VolumeForces,       ///< the volume terms' forces of every muscle
   AdaptiveTimeStep,   ///< the adaptive dt bound of every muscle (eq 5.1), and the dt
   Integration,        ///< the integrator's advance of every muscle
   TreeRefit,          ///< refitTree of every muscle (a refit only past the skin)

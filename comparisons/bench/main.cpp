@@ -245,7 +245,7 @@ class BusyCore {
   std::thread thread_;
 };
 
-/// The balance of an iteration's tasks at 1 thread (issue 18), from thread CPU time (which
+/// The balance of an iteration's tasks at 1 thread, from thread CPU time (which
 /// other processes' load does not inflate): per phase its share of the iteration, its largest
 /// task's share of the phase and its speed-up on 2 threads under the pool's schedule of the
 /// measured tasks; then two bounds of the whole iteration's speed-up on 2–4 threads, the work
@@ -310,7 +310,7 @@ void busyReport(BenchScene& scene, int steps) {
       wall.count() * perIteration);
 }
 
-/// Thread scaling in one run (issue 18) on whole poses of thigh13 at `resolution` (the scene's
+/// Thread scaling in one run on whole poses of thigh13 at `resolution` (the scene's
 /// iterations per pose): the balance of the tasks (balanceReport, with the forces phase in one
 /// task per muscle and in chunks) and the busy time of 2 threads, then 1 and 2 solver threads
 /// alternated `rounds` times, alone and with a busy loop on one core; medians per configuration

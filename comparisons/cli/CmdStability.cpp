@@ -1,4 +1,4 @@
-// `fibremss stability [CASE...]`: the hard-case stability matrix (issue 5): each integrator's
+// `fibremss stability [CASE...]`: the hard-case stability matrix: each integrator's
 // stable step measured, then every case × integrator × multiple of it, each run judged and
 // time-boxed; writes stability.json and stability.md. Ctrl-C (SIGTERM) stops within the running
 // step and writes both files marked interrupted (exit 130, 143).

@@ -341,7 +341,8 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation,
   const int motion = std::max(1, static_cast<int>(std::lround(simulation.motionFraction *
                                                               std::max(1, simulation.iterations))));
   // The projective step reaches a residual Verlet does not: fusiform 1e-5 mm in about 270
-  // iterations per pose; Verlet stalled near 2e-5 mm after 60 000 (docs/performance.md).
+  // iterations per pose; Verlet stalled near 2e-5 mm after 60 000 (docs/performance.md,
+  // "Distance to equilibrium").
   converged.integrator = Integrator::Projective;
   converged.stopRule = StopRule::Residual;
   converged.tolerance = static_cast<btScalar>(kEquilibriumResidual);
@@ -352,7 +353,7 @@ SimulationParameters equilibriumSettings(const SimulationParameters& simulation,
   converged.motionFraction = static_cast<btScalar>(double(motion) / converged.iterations);
   // Persistent contacts, their particles held lighter (they slide to rest sooner): thigh13 R=20's
   // median pose left a residual about 7x below weight 10's at the cap (1.1e-4 against 7.2e-4 mm;
-  // docs/performance.md, "Persistent contacts").
+  // docs/decisions.md, "Solver").
   converged.projectiveContactWeight = 1;
   converged.persistentContacts = true;
   return converged;

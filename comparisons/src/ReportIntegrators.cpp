@@ -1,4 +1,4 @@
-// The integrators' section of report.md (issue 5): on sphere-denoise, seed 002 Table 4.27's
+// The integrators' section of report.md: on sphere-denoise, seed 002 Table 4.27's
 // form with 002's figures beside ours; on any scene with several integrators, which runs lie on
 // the speed–error Pareto front.
 #include <algorithm>

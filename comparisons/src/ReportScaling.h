@@ -1,5 +1,5 @@
 #pragma once
-// The scaling table of report.md (issue 6) and FibreMSS's speed against the btSoftBody
+// The scaling table of report.md and FibreMSS's speed against the btSoftBody
 // baseline, internal to the comparisons library.
 #include <cmath>
 #include <nlohmann/json.hpp>

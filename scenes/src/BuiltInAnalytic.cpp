@@ -1,5 +1,6 @@
-// The analytic built-in scenes (issue 17's analytic tier): a straight cylindrical muscle between
-// two plates, stretched or twisted by them, whose exact answers `run` and `compare` print.
+// The analytic built-in scenes (the analytic tier of the comparisons): a straight cylindrical
+// muscle between two plates, stretched or twisted by them, whose exact answers `run` and `compare`
+// print.
 #include <cmath>
 
 #include "BuiltInParts.h"

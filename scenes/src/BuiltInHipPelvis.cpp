@@ -1,4 +1,4 @@
-// The hip-pelvis scene (issue 16): a pelvis-like bone with a brim, a femur with a head and a
+// The hip-pelvis scene: a pelvis-like bone with a brim, a femur with a head and a
 // lesser trochanter, and three muscles that bring out what the nearest-bone attachment rule gets
 // wrong: an iliacus whose belly passes just in front of the femoral head, a psoas that slides
 // over the brim to the lesser trochanter, a gluteal muscle over the back of the joint. Each

@@ -22,7 +22,7 @@ Json fusiformScene() {
 }
 
 Json tensionSpikeScene() {
-  // A stability hard case (issue 5): a short spindle between two bars that jump 20 mm apart
+  // A stability hard case: a short spindle between two bars that jump 20 mm apart
   // each in one pose (the muscle from 103 to 143 mm, a sudden 1.4x stretch), then hold for six
   // poses so that a stable integrator's kinetic energy decays and an unstable one's grows.
   Json scene = header("tension-spike", "a short muscle whose attachments jump apart, then hold");

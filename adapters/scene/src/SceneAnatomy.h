@@ -1,5 +1,5 @@
 #pragma once
-// Internal to the scene loader: real-anatomy extensions (issue 8) — fibres generated from a
+// Internal to the scene loader: real-anatomy extensions — fibres generated from a
 // muscle surface and its attachment areas ({"generator": {"type": "surface", ...}}), static
 // anchor plates for origins without a bone, and a sweep pivot fitted to a femoral head.
 #include <memory>

@@ -1,5 +1,5 @@
 // attachmentWarnings(): muscles whose fibres end next to a bone that moves relative to the bones
-// they are fixed to, with no particle fixed to that bone (they do not follow it; issue 16).
+// they are fixed to, with no particle fixed to that bone (they do not follow it).
 #include <algorithm>
 #include <set>
 

@@ -296,7 +296,7 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
                                      std::max<double>(input.parameters.attachmentDistance, 1e-3)))
       reader.result->warnings.push_back(std::move(warning));
     input.fibreGridColumns = gridColumns;
-    // Measured fibres converge into tendons as generated ones do (issue 16: 632-1026 pairs
+    // Measured fibres converge into tendons as generated ones do (632-1026 pairs
     // closer than 0.5 mm in a real set): near-coincident particles merge whatever the source.
     input.mergeConverging = true;
   } else {

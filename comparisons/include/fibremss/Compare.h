@@ -22,7 +22,8 @@ namespace fibremss {
 /// residual's RMS equivalent displacement (MuscleSystem::forceResidual, StopRule::Residual) is
 /// below this [m] (1e-5 mm), from the previous pose's equilibrium. The equivalent displacement is
 /// a local measure: on fusiform a state 1e-3 mm from zero by it lay 1.6 mm from the equilibrium
-/// (docs/performance.md), so the bound sits near the float floor (about 1e-5 mm there).
+/// (docs/performance.md, "Distance to equilibrium"), so the bound sits near the float floor (about
+/// 1e-5 mm there).
 inline constexpr double kEquilibriumResidual = 1e-8;
 /// Its iteration cap per pose (a pose that reaches it is counted in RunMetrics::unconvergedPoses).
 inline constexpr int kEquilibriumIterations = 3000;
@@ -30,7 +31,7 @@ inline constexpr int kEquilibriumIterations = 3000;
 /// of thousands of iterations is left with the slowest modes, whose rate is closer to 1 than the
 /// 0.9 a 10-iteration pose is tuned for. fusiform R=12 with the fans, pose 2, iterations to a
 /// 1e-5 mm residual: ρ 0.9 none within 3 000 (1.2e-5 mm plateau), 0.98 2 544, 0.99 1 632, 0.995
-/// 1 088; with per-tetrahedron terms 496, 208, 144, 96 (docs/performance.md).
+/// 1 088; with per-tetrahedron terms 496, 208, 144, 96 (docs/decisions.md, "Solver").
 inline constexpr double kEquilibriumRho = 0.99;
 /// The time-to-accuracy figure's bound: a pose within this RMS of its equilibrium [mm].
 inline constexpr double kEquilibriumAccuracyMm = 0.5;

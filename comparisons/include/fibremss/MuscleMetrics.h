@@ -1,5 +1,5 @@
 #pragma once
-// Per-muscle results of a run (issue 16): each muscle measured at a step (MuscleStep, what a
+// Per-muscle results of a run: each muscle measured at a step (MuscleStep, what a
 // per-step series is made of) and summed up over the run (MuscleResults, summary.json
 // "muscles"), so that the worst muscle shows instead of an average over all of them.
 #include <LinearMath/btTransform.h>

@@ -67,7 +67,8 @@ inline constexpr double kRefinementShareOfSpread = 1.0 / 3.0;
 /// shows as a change near ccx's tolerance (fusiform, the cylinders: 10⁻⁷–3·10⁻⁴ mm; pinch 0.14
 /// mm). A quarter would cost twice as much again (cylinder-twist's halved solve: 147
 /// increments, 19 min wall) for the same verdict where the error is first order
-/// (comparisons/README.md, "Gates and fronts of the four scenes").
+/// (comparisons/README.md, "Measured: the references, their gates and the
+/// fronts").
 inline constexpr double kIncrementGateFactor = 0.5;
 
 /// The reference's gates. NaN where not computed.

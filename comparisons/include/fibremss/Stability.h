@@ -1,5 +1,5 @@
 #pragma once
-// The hard-case stability matrix (issue 5): every integrator on hard cases (fast hip sweeps,
+// The hard-case stability matrix: every integrator on hard cases (fast hip sweeps,
 // pinch, stiff muscles, a tension spike) at multiples of its stable time step, each run judged
 // by the same criteria and time-boxed. Used by `fibremss stability`.
 #include <atomic>
@@ -21,7 +21,7 @@ struct StabilityCase {
   double kappaFactor = 1;              ///< every muscle's κ multiplied by this (κ ×100 case)
 };
 
-/// The issue's hard cases: hip-extension at step_deg 2, 4, 5 and 10, pinch, hip-extension
+/// The default hard cases: hip-extension at step_deg 2, 4, 5 and 10, pinch, hip-extension
 /// (step_deg 10) with κ ×100, tension-spike.
 std::vector<StabilityCase> defaultHardCases();
 

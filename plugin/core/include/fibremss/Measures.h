@@ -1,6 +1,6 @@
 #pragma once
 // Accuracy measures shared by every method (FibreMSS, btSoftBody, FEM), so that all are
-// measured the same way (method.md §7; comparisons issue).
+// measured the same way (method.md §7).
 #include <LinearMath/btTransform.h>
 #include <LinearMath/btVector3.h>
 

@@ -178,8 +178,8 @@ struct SimulationParameters {
   /// (MuscleSettings::blendBoneA/B/Weight); false: by the nearest bone only, as the thesis did
   /// (which tears such muscles apart at the boundary between the bones' regions).
   bool blendedPretransform = true;
-  /// How the blended pre-transform combines the two bones' motions (docs/performance.md,
-  /// "A dual-quaternion pre-transform").
+  /// How the blended pre-transform combines the two bones' motions (docs/decisions.md,
+  /// "Bone motion").
   PretransformBlend pretransformBlend = PretransformBlend::Linear;
   btScalar motionFraction = 0.5;  ///< bones reach their target after this share of `iterations`
   bool muscleMuscle = true;       ///< collide muscles with each other
@@ -225,13 +225,13 @@ struct SimulationParameters {
   /// Projective: a particle a contact pushed is held in the global step's matrix with this
   /// weight times its diagonal entry [1]. 1 lets a contact particle slide to rest sooner: with
   /// the L-BFGS step thigh13 R=40 at 5–10 iterations per pose had no rollback with 1 and 0.1 and
-  /// one to four with 10 (docs/performance.md, "The default solver").
+  /// one to four with 10 (docs/decisions.md, "Solver").
   btScalar projectiveContactWeight = 1;
   /// Projective: persistent contacts (TimeIntegrator::holdsContacts): a pushed particle's force
   /// into its push is held by the contact in the solve, and each contact is left a slop deep so
   /// that it persists; the step's fixed point is then the equilibrium with contacts. Off by
   /// default: on thigh13 R=20 it left the worst pose's residual after 10–40 iterations 1.2–1.4×
-  /// higher; the `equilibrium` method turns it on (docs/performance.md, "Persistent contacts").
+  /// higher; the `equilibrium` method turns it on (docs/decisions.md, "Solver").
   bool persistentContacts = false;
   /// Projective with persistentContacts: what a contact holds in the solve is its reaction
   /// (MuscleSystem::forceResidual's rule): equal and opposite along the pair's normal for two
@@ -239,7 +239,7 @@ struct SimulationParameters {
   /// smallest residual; else each pushed particle's own force into its push (two muscles may
   /// then press into each other with unequal forces). Off: two blocks pressed together reach
   /// their equilibrium with it (test Projective.ProvesAnEquilibriumOfTwoMusclesPressedTogether),
-  /// but thigh13 R=20 diverged with it at every ρ tried (docs/performance.md, "Contact pairs").
+  /// but thigh13 R=20 diverged with it at every ρ tried (docs/decisions.md, "Solver").
   bool pairReactions = false;
 
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy

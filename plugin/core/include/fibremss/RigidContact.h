@@ -1,5 +1,5 @@
 #pragma once
-// Two-way contact between muscles and rigid bodies (issue 19; seed 003 ch. 5, the local
+// Two-way contact between muscles and rigid bodies (seed 003 ch. 5, the local
 // interaction model): a rigid body (a ball, a probe, a hand) collides with the muscles' boundary
 // particle spheres, the muscles deform, and the body receives the reaction as impulses, equal and
 // opposite to the momentum the particles gain (docs/contact.md).

@@ -13,8 +13,8 @@ namespace fibremss {
 namespace {
 
 /// Sweeps over every contact [1]. An isolated pair or bone contact is exact after one; a particle
-/// several contacts press needs more (measured on thigh13 R=20: docs/performance.md, "Contact
-/// pairs").
+/// several contacts press needs more (measured on thigh13 R=20: docs/performance.md,
+/// "Distance to equilibrium").
 constexpr int kReactionSweeps = 16;
 
 /// 1/k_i² of the residual's equivalent displacement [m²/N²]; 0 for a particle in no term.

@@ -37,7 +37,7 @@ namespace {
 using Matrix = Eigen::SparseMatrix<double>;
 
 /// c, the weight of the volume terms' stand-in in A [1]. Measured on fusiform at 10 iterations
-/// per pose (docs/performance.md, "Projective solver"): 1.5, 2 and 3 ended 0.108, 0.136 and 0.334
+/// per pose (docs/decisions.md, "Solver"): 1.5, 2 and 3 ended 0.108, 0.136 and 0.334
 /// mm from the equilibrium; 1 let the volume terms overshoot (+59 % volume).
 constexpr double kVolumeWeight = 1.5;
 

@@ -221,7 +221,7 @@ void ProjectiveFactor::update() {
 // and even entries apart (two chains of dependent subtractions instead of one: CPU samples on
 // thigh13 R=40, 358 -> 283 in the integrator). Measured against a supernodal solve (runs of
 // columns with one pattern, their rows below gathered once, four rows in the lanes): 14 % fewer
-// instructions, 12 % more CPU time (docs/performance.md, "Projective solver").
+// instructions, 12 % more CPU time (docs/decisions.md, "Solver").
 void ProjectiveFactor::solveInPlace(btVector3* x) const {
   const int* start = columnStart_.data();
   const int* rows = rows_.data();

@@ -3,7 +3,7 @@
 // L·Lᵀ = P·(A + W)·Pᵀ over a muscle's free particles, A fixed (springs and volume terms), W a
 // diagonal that changes as contacts come and go. P is AMD's fill-reducing ordering: on thigh13
 // R=40 METIS' nested dissection gives 1.61 M entries of L against AMD's 1.19 M, more on every
-// muscle, and SuiteSparse's AMD 1.19 M too (docs/performance.md, "Projective solver"). The pattern
+// muscle, and SuiteSparse's AMD 1.19 M too (docs/decisions.md, "Solver"). The pattern
 // is found once by walking the elimination tree (as Eigen's SimplicialLLT analyses it, without
 // its numeric factor: one factorisation at start-up, not two); the values are computed in double,
 // and again only in the rows a changed W reaches, or by rank-one updates up the tree. The solve

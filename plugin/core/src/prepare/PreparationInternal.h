@@ -70,7 +70,7 @@ constexpr double kMinTetrahedronQuality = 0.1;
 /// A tetrahedron's G0 (MuscleSettings::tetRestGradient) is at most this times (6·V0)^(4/3): a
 /// regular one has 3·2^(2/3) ≈ 4.76, a sliver of quality 0.1 about 100. Capping softens the
 /// poorly shaped ones (quality below about 0.5), whose stiffness K·G0/(36·V0) would otherwise
-/// set the largest stable step (issue 18: the Verlet hard-case matrix).
+/// set the largest stable step (as the Verlet hard-case matrix showed).
 constexpr double kMaxRestGradient = 12;
 
 /// Four particle indices.

@@ -1,6 +1,6 @@
 // The interior tetrahedra of a muscle's particles (the Delaunay tetrahedra inside its surface) and
 // what preparation makes of them: the springs' share of the network's stiffness by the volume
-// around them, and the local volume terms (issue 18: those that are not slivers, with their rest
+// around them, and the local volume terms (those that are not slivers, with their rest
 // volumes, for VolumeForces.h).
 #include <algorithm>
 #include <cmath>

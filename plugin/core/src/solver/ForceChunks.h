@@ -1,5 +1,5 @@
 #pragma once
-// A muscle's spring and volume forces in chunks (issue 18), internal: tasks finer than one per
+// A muscle's spring and volume forces in chunks, internal: tasks finer than one per
 // muscle, so that muscles of very different sizes balance on the threads. The chunks are fixed
 // ranges of the spring layout and of the tetrahedra, chosen from the muscle alone (never from the
 // thread count); each chunk but the first sums into a buffer of its own, and the buffers are

@@ -21,9 +21,9 @@ namespace fibremss {
 namespace {
 /// The smallest r of eq 5.1, as a share of the muscle's mean boundary radius. Shrinking at rest
 /// leaves a sphere that touches a bone or another muscle as small as 3e-8 m (hip-pelvis' iliacus
-/// over the femoral head); bounding the step by it held every muscle's dt on `min_dt` and the
-/// iliacus 3.5 % short of its volume (docs/performance.md, "The step radius"). Any share from
-/// 0.05 to 1 gave hip-pelvis the same bits; 0.01 did not lift every iteration.
+/// over the femoral head); bounding the step by it holds every muscle's dt on `min_dt` and the
+/// iliacus 3.5 % short of its volume (docs/performance.md, "What the step does for speed"). Any
+/// share from 0.05 to 1 gives hip-pelvis the same bits; 0.01 does not lift every iteration.
 constexpr btScalar kLeastStepRadiusShare = btScalar(0.1);
 }  // namespace
 

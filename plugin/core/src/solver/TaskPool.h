@@ -17,7 +17,7 @@
 namespace fibremss {
 
 /// The thread CPU time of the tasks of every run() while attached to a pool (TaskPool::attach),
-/// per phase name: fibremss_bench's balance report (issue 18). Thread CPU time does not count
+/// per phase name: fibremss_bench's balance report. Thread CPU time does not count
 /// the time another process holds the core, so the shares hold on a loaded machine. A profiled
 /// run reads the thread clock twice per task.
 struct TaskProfile {

@@ -1,5 +1,5 @@
 #pragma once
-// The volume-preservation terms of a muscle (issue 18), internal: local ones on fans of the
+// The volume-preservation terms of a muscle, internal: local ones on fans of the
 // tetrahedra of the particles (MuscleSettings::fanParticles), each against the change of its
 // volume, and one for the whole muscle (MuscleSettings::enclosedFaces), against the change of the
 // volume its particles enclose.

@@ -1,5 +1,5 @@
 #pragma once
-// Fibres from a closed muscle surface and its attachment areas (issue 8): a harmonic field
+// Fibres from a closed muscle surface and its attachment areas: a harmonic field
 // inside the muscle (Laplace on a voxel grid, 0 at the origin area, 1 at the insertion area),
 // streamlines of its gradient traced from seeds spread over the origin area, resampled.
 #include <cstdint>
