@@ -16,6 +16,8 @@
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
+#include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -960,6 +962,120 @@ TEST(CalculixRun, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibriu
   EXPECT_LT(rmsBetweenSolutions(coarse, fine), 1e-3) << "mm";
 }
 
+/// The coarse fusiform with both bars carried 20 mm sideways in its one pose, the lower one 2 mm
+/// farther down as well; `twice` adds a second muscle beside the first (half its radii).
+std::string carriedFusiform(const std::filesystem::path& dir, bool twice) {
+  nlohmann::json json = nlohmann::json::parse(readText(coarseFusiform(dir)));
+  for (int b = 0; b < 2; ++b) {
+    nlohmann::json keys = nlohmann::json::array();
+    for (int pose = 0; pose < 2; ++pose)
+      keys.push_back({{"label", pose},
+                      {"translation", {0, b == 1 ? -2 * pose : 0, 20 * pose}},
+                      {"quaternion", {0, 0, 0, 1}}});
+    json["bones"][b]["motion"] = {{"type", "keyframes"}, {"keyframes", keys}};
+  }
+  if (twice) {
+    nlohmann::json beside = json["muscles"][0];
+    beside["name"] = "beside";
+    for (nlohmann::json& point : beside["surface"]["generator"]["points"]) point[0] = 40;
+    for (nlohmann::json& radius : beside["surface"]["generator"]["radii"])
+      radius = radius.get<double>() / 2;
+    json["muscles"].push_back(beside);
+  }
+  const std::filesystem::path path = dir / (twice ? "carried-twice.json" : "carried.json");
+  std::ofstream(path) << json.dump(2);
+  return path.string();
+}
+
+/// Each step's largest increment (the last value of its *STATIC line) in a .inp.
+std::vector<double> largestIncrements(const std::filesystem::path& inp) {
+  std::istringstream input(readText(inp));
+  std::vector<double> largest;
+  for (std::string line; std::getline(input, line);) {
+    if (line != "*STATIC") continue;
+    std::getline(input, line);
+    double initial = 0, period = 0, minimum = 0, bound = 0;
+    if (std::sscanf(line.c_str(), "%lf, %lf, %lf, %lf", &initial, &period, &minimum, &bound) == 4)
+      largest.push_back(bound);
+  }
+  return largest;
+}
+
+TEST(IncrementRule, BoundsOnlyTheMoveBeyondTheFrameTheAttachmentsMoveLeastIn) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("ccx_increment_rule_test");
+  const LoadedScene scene = loadScene(carriedFusiform(dir.path(), false), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const std::atomic<bool> cancel{true};  // the input is written, ccx stopped at once
+  std::map<IncrementRule, std::vector<double>> largest;
+  std::set<std::string> keys;
+  for (const IncrementRule rule : {IncrementRule::World, IncrementRule::BoneFrame}) {
+    CalculixDefinition definition;
+    definition.returnToRest = false;
+    definition.incrementRule = rule;
+    const std::filesystem::path work = dir.path() / toString(rule);
+    solveCalculixReference(scene, prepared, definition, {}, work.string(), {}, &cancel);
+    largest[rule] = largestIncrements(work / "muscle0.inp");
+    keys.insert(referenceCacheKey(scene, prepared, definition, {}));
+  }
+  EXPECT_EQ(keys.size(), 2u) << "the rule is in the key";
+  ASSERT_EQ(largest[IncrementRule::World].size(), 2u);
+  ASSERT_EQ(largest[IncrementRule::BoneFrame].size(), 2u);
+  // Pose 1: the lower bar's nodes move sqrt(2² + 20²) mm, 2 mm of it beyond the upper bar's
+  // rigid carry (in either bar's frame the other's nodes move 2 mm).
+  EXPECT_NEAR(largest[IncrementRule::World][1], 1 / std::sqrt(404.0), 1e-4);
+  EXPECT_NEAR(largest[IncrementRule::BoneFrame][1], 0.5, 1e-4);
+}
+
+TEST(ReferenceCells, InParallelOrAsCellsTheCacheHoldsWhatTheSerialSolveStores) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("ccx_cells_test");
+  const LoadedScene scene = loadScene(carriedFusiform(dir.path(), true), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  const CalculixDefinition definition;
+  const std::string key = referenceCacheKey(scene, prepared, definition, {});
+  const auto cache = [&](const char* name) { return (dir.path() / name).string(); };
+  const CalculixSolution serial =
+      cachedCalculixReference(scene, prepared, definition, {}, cache("serial"), {}, {}, nullptr);
+  const CalculixSolution parallel = cachedCalculixReference(scene, prepared, definition, {},
+                                                            cache("parallel"), {}, {}, nullptr, 2);
+  // As a batch engine runs them: one cell at a time, in any order, then merged.
+  for (const size_t m : {1, 0}) {
+    EXPECT_FALSE(mergeCalculixParts(scene, prepared, definition, {}, cache("cells"),
+                                    *std::make_unique<CalculixSolution>()))
+        << "a part is missing";
+    EXPECT_TRUE(cachedCalculixMuscle(scene, prepared, definition, {}, cache("cells"), m, {}, {}));
+    EXPECT_TRUE(referencePartStored(cache("cells"), key, m));
+  }
+  CalculixSolution cells;
+  ASSERT_TRUE(mergeCalculixParts(scene, prepared, definition, {}, cache("cells"), cells));
+  ASSERT_EQ(serial.solvedPoses(), 2) << serial.poseFailures[1];
+  EXPECT_FALSE(serial.returnSurface.empty()) << serial.returnFailure;
+  const auto files = [&](const char* name) {
+    std::set<std::string> names;
+    for (const auto& file : std::filesystem::directory_iterator(cache(name) + "/" + key))
+      names.insert(file.path().filename().string());
+    return names;
+  };
+  for (const auto& [name, solution] : std::vector<std::pair<const char*, CalculixSolution>>{
+           {"parallel", parallel}, {"cells", cells}}) {
+    SCOPED_TRACE(name);
+    EXPECT_EQ(solution.poseSurfaces, serial.poseSurfaces);
+    EXPECT_EQ(solution.poseFailures, serial.poseFailures);
+    EXPECT_EQ(solution.returnSurface, serial.returnSurface);
+    EXPECT_EQ(solution.increments, serial.increments);
+    EXPECT_EQ(solution.newtonIterations, serial.newtonIterations);
+    EXPECT_EQ(solution.nodes, serial.nodes);
+    EXPECT_EQ(solution.prescribedNodes, serial.prescribedNodes);
+    EXPECT_EQ(solution.inputFiles.size(), 2u);
+    EXPECT_EQ(files(name), files("serial")) << "the same entry";
+    EXPECT_FALSE(std::filesystem::exists(cache(name) + "/" + key + ".parts"));
+  }
+}
+
 TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");
@@ -1030,6 +1146,31 @@ TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
   EXPECT_NE(second.output.find("(from the cache)"), std::string::npos) << second.output;
   const nlohmann::json again = nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
   EXPECT_EQ(again["gates"], gates) << "the cache gives the same reference";
+}
+
+TEST(ReferenceCommand, ListsItsCellsAndRefusesACellItDoesNotHave) {
+  REQUIRE_PROGRAM("ccx");
+  TemporaryDirectory dir("reference_cells_command_test");
+  const std::string command = std::string(FIBREMSS_CLI) + " reference " +
+                              coarseFusiform(dir.path()) + " --set resolution=8 --cache " +
+                              (dir.path() / "cache").string();
+  const auto list = testing::runProcess(command + " --cells 2>/dev/null");
+  ASSERT_EQ(list.exitCode, 0) << list.output;
+  std::istringstream lines(list.output);
+  std::vector<std::string> solves;
+  for (std::string line; std::getline(lines, line);) {
+    EXPECT_NE(line.find("\tfusiform\t"), std::string::npos) << line;
+    EXPECT_NE(line.find("\tto solve"), std::string::npos) << line;
+    solves.push_back(line.substr(0, line.find("\tfusiform")));
+  }
+  EXPECT_EQ(solves, (std::vector<std::string>{"0\treference", "1\tattachment distance x0.5",
+                                              "2\tattachment distance x1.5", "3\tincrements halved",
+                                              "4\tone level finer"}));
+  const auto beyond = testing::runProcess(command + " --cell 5 2>&1");
+  EXPECT_EQ(beyond.exitCode, 2) << beyond.output;
+  EXPECT_NE(beyond.output.find("expected a cell number below 5"), std::string::npos)
+      << beyond.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "cache")) << "nothing solved";
 }
 
 /// A built-in scene with a coarser tube surface (slices × sections vertices).

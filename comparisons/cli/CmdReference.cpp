@@ -10,6 +10,7 @@
 #include "ProgressLog.h"
 #include "ReferenceArgs.h"
 #include "SceneArgs.h"
+#include "fibremss/Error.h"
 #include "fibremss/Messages.h"
 #include "fibremss/Output.h"
 
@@ -20,7 +21,38 @@ struct ReferenceArgs {
   SceneArgs scene;
   std::string out;  ///< --out DIR (default: reference-<scene>)
   ReferenceOptions options;
+  bool listCells = false;  ///< --cells: print the cells and stop
+  int cell = -1;           ///< --cell I: solve that cell alone (-1: the whole reference)
 };
+
+/// One line per cell: its number, solve, muscle, cache key and whether it is stored.
+void printCells(const std::vector<NamedReferenceCell>& cells) {
+  for (size_t c = 0; c < cells.size(); ++c)
+    std::printf("%zu\t%s\t%s\t%s\t%s\n", c, cells[c].solve.c_str(), cells[c].muscle.c_str(),
+                cells[c].key.c_str(), cells[c].stored ? "stored" : "to solve");
+}
+
+/// Solves cell `index` of referenceCells into the cache (a batch engine's task).
+void solveCell(const LoadedScene& scene, const PreparedScene& prepared, const ReferenceArgs& args,
+               const std::vector<NamedReferenceCell>& cells) {
+  if (args.cell >= static_cast<int>(cells.size()))
+    throw InputError(
+        "--cell", std::to_string(args.cell),
+        "expected a cell number below " + std::to_string(cells.size()) + " (--cells lists them)");
+  const NamedReferenceCell& cell = cells[static_cast<size_t>(args.cell)];
+  const std::string cacheDir =
+      args.options.cacheDir.empty() ? defaultReferenceCacheDir() : args.options.cacheDir;
+  const bool done =
+      cachedCalculixMuscle(scene, prepared, cell.cell.definition, cell.cell.cut, cacheDir,
+                           cell.cell.muscle, args.options.progress, args.options.cancel);
+  if (!done) {
+    std::fprintf(stderr, "interrupted: cell %d not stored\n", args.cell);
+    throw CLI::RuntimeError(interruptExitCode());
+  }
+  std::printf("cell %d (%s, %s, %s): %s in %s\n", args.cell, cell.solve.c_str(),
+              cell.muscle.c_str(), cell.key.c_str(), cell.stored ? "was stored" : "solved",
+              cacheDir.c_str());
+}
 
 void writeOut(const Reference& reference, const std::string& out) {
   std::filesystem::create_directories(out + "/inp");
@@ -55,6 +87,13 @@ void reference(ReferenceArgs& args) {
   };
   InterruptGuard interrupt;
   args.options.cancel = &interruptRequested;
+  if (args.listCells || args.cell >= 0) {
+    const std::vector<NamedReferenceCell> cells = referenceCells(scene, prepared, args.options);
+    if (args.listCells) return printCells(cells);
+    solveCell(scene, prepared, args, cells);
+    progress.finish();
+    return;
+  }
   const std::string out = args.out.empty() ? "reference-" + scene.name : args.out;
   const OutputDirectory locked(out);  // a second writer into it is refused
   const Reference result = computeReference(scene, prepared, args.options);
@@ -87,6 +126,15 @@ void addReferenceCommand(CLI::App& app) {
   addSceneArgs(*command, args->scene);
   command->add_option("--out", args->out, "Output directory (default: reference-<scene>)");
   addReferenceArgs(*command, args->options);
+  command->add_flag("--cells", args->listCells,
+                    "Print the reference's cells (number, solve, muscle, cache key, stored or to "
+                    "solve; one muscle of the reference's or a gate's solve each) and stop");
+  command
+      ->add_option("--cell", args->cell,
+                   "Solve this cell alone into the cache (one task of a batch engine) and stop; "
+                   "a later `fibremss reference` merges the cells")
+      ->check(nonNegativeInteger())
+      ->excludes("--cells");
   command->callback([args] { reference(*args); });
 }
 

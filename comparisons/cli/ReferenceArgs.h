@@ -4,6 +4,7 @@
 #include <map>
 #include <string>
 
+#include "Validators.h"
 #include "fibremss/Reference.h"
 
 namespace fibremss::cli {
@@ -71,12 +72,29 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
       ->each([&options](const std::string&) { options.contactSlidingGiven = true; })
       ->default_str("the scene's");
   command
+      .add_option("--ccx-increments", options.definition.incrementRule,
+                  "What the 1 mm bound on an attached node's move per increment applies to: "
+                  "bone-frame (its move beyond the rigid motion of the bone, or the world, in "
+                  "whose frame the muscle's attachments move least) or world (its whole move, "
+                  "the rule before; its cache entries keep their keys)")
+      ->transform(choices(std::map<std::string, IncrementRule>{
+          {"bone-frame", IncrementRule::BoneFrame}, {"world", IncrementRule::World}}))
+      ->type_name("bone-frame|world")
+      ->default_str("bone-frame");
+  command
       .add_option("--ccx-memory", options.definition.memoryLimitGiB,
                   "Memory limit of each ccx run [GiB] (its address space); a run that exceeds "
                   "it fails with a message per pose instead of taking the machine's memory; 0: "
                   "no limit")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e6));
+  command
+      .add_option("--jobs", options.jobs,
+                  "Reference cells (one muscle of the reference's or a gate's solve) solved at "
+                  "once, each a ccx process of its own; the cache ends with the same entries as "
+                  "one at a time")
+      ->capture_default_str()
+      ->check(positiveInteger());
   command.add_flag("--reference-cached-only", options.cachedOnly,
                    "Use the reference (and each gate's solve) only if it is in the cache; what is "
                    "not there is reported missing, not computed");

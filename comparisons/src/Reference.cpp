@@ -51,8 +51,11 @@ bool solveOnce(const LoadedScene& scene, const PreparedScene& prepared, SceneCut
   const ContinuumCut& cut = cuts.at(solve.definition.attachmentScale);
   solve.key = referenceCacheKey(scene, prepared, solve.definition, cut);
   if (options.cachedOnly) {
+    // Parts of it solved as cells (`reference --cell`) are merged: that computes nothing.
     solve.fromCache =
-        loadSolution(options.cacheDir + "/" + solve.key + "/surfaces.bin", solve.solution);
+        loadSolution(options.cacheDir + "/" + solve.key + "/surfaces.bin", solve.solution) ||
+        mergeCalculixParts(scene, prepared, solve.definition, cut, options.cacheDir,
+                           solve.solution);
     if (!solve.fromCache) {
       if (options.log)
         options.log("reference (" + what + "): " + solve.key + " not in the cache, not computed");
@@ -62,7 +65,7 @@ bool solveOnce(const LoadedScene& scene, const PreparedScene& prepared, SceneCut
     if (options.log) options.log("reference (" + what + "): " + solve.key);
     solve.solution =
         cachedCalculixReference(scene, prepared, solve.definition, cut, options.cacheDir,
-                                options.progress, options.cancel, &solve.fromCache);
+                                options.progress, options.cancel, &solve.fromCache, options.jobs);
   }
   if (options.log) {
     std::ostringstream line;
@@ -184,6 +187,29 @@ RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepa
   return metrics;
 }
 
+/// The gates' solves by name, cheapest first (GateDefinitions' order).
+std::vector<std::pair<std::string, CalculixDefinition>> gateSolves(const GateDefinitions& gates) {
+  return {{"attachment distance x0.5", gates.attachmentLow},
+          {"attachment distance x1.5", gates.attachmentHigh},
+          {"increments halved", gates.increments},
+          {"one level finer", gates.finer}};
+}
+
+/// With options.jobs > 1, every gate's cells solved at once before solveGates takes (merges)
+/// them in its order: the costliest solves first (one level finer), so that the last cells
+/// running are short ones.
+void solveGateCells(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
+                    const ReferenceOptions& options, const CalculixDefinition& reference) {
+  if (options.jobs <= 1 || options.cachedOnly) return;
+  const auto solves = gateSolves(gateDefinitions(reference));
+  std::vector<ReferenceCell> cells;
+  for (auto solve = solves.rbegin(); solve != solves.rend(); ++solve)
+    for (size_t m = 0; m < prepared.muscles.size(); ++m)
+      cells.push_back({solve->second, cuts.at(solve->second.attachmentScale), m});
+  solveCalculixCells(scene, prepared, cells, options.cacheDir, options.progress, options.cancel,
+                     options.jobs);
+}
+
 /// The gate solves (gateDefinitions) against `base`, cheapest first.
 void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
                 const ReferenceOptions& options, const Solve& base, ReferenceGates& gates) {
@@ -196,14 +222,16 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
     int* poses;
     double* scale;  ///< where to keep the increments it was solved at (nullptr: nowhere)
   };
-  const Gate variants[] = {{&definitions.attachmentLow, "attachment distance x0.5",
-                            &gates.attachmentLowMm, &gates.attachmentLowPoses, nullptr},
-                           {&definitions.attachmentHigh, "attachment distance x1.5",
-                            &gates.attachmentHighMm, &gates.attachmentHighPoses, nullptr},
-                           {&definitions.increments, "increments halved", &gates.incrementsMm,
+  const auto solves = gateSolves(definitions);
+  const Gate variants[] = {{&solves[0].second, solves[0].first.c_str(), &gates.attachmentLowMm,
+                            &gates.attachmentLowPoses, nullptr},
+                           {&solves[1].second, solves[1].first.c_str(), &gates.attachmentHighMm,
+                            &gates.attachmentHighPoses, nullptr},
+                           {&solves[2].second, solves[2].first.c_str(), &gates.incrementsMm,
                             &gates.incrementsPoses, &gates.incrementsScale},
-                           {&definitions.finer, "one level finer", &gates.refinementMm,
+                           {&solves[3].second, solves[3].first.c_str(), &gates.refinementMm,
                             &gates.refinementPoses, nullptr}};
+  solveGateCells(scene, prepared, cuts, options, base.definition);
   for (const Gate& gate : variants) {
     Solve solve;
     if (options.cancel && options.cancel->load()) return;
@@ -222,7 +250,49 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
   }
 }
 
+/// `definition`, or its retry at kFinerIncrements where it is stored (whole or as every
+/// muscle's part) with a pose ccx failed: what computeReference solves next.
+CalculixDefinition storedRetry(const LoadedScene& scene, const PreparedScene& prepared,
+                               SceneCuts& cuts, const CalculixDefinition& definition,
+                               const std::string& cacheDir) {
+  const ContinuumCut& cut = cuts.at(definition.attachmentScale);
+  const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+  CalculixSolution solution;
+  const bool stored = loadSolution(cacheDir + "/" + key + "/surfaces.bin", solution) ||
+                      mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution);
+  if (!stored || ccxFailureToRetry(solution).empty()) return definition;
+  CalculixDefinition finer = definition;
+  finer.incrementScale *= kFinerIncrements;
+  return finer;
+}
+
 }  // namespace
+
+std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
+                                               const PreparedScene& prepared,
+                                               const ReferenceOptions& options) {
+  const std::string cacheDir =
+      options.cacheDir.empty() ? defaultReferenceCacheDir() : options.cacheDir;
+  SceneCuts cuts(scene, prepared);
+  const CalculixDefinition reference =
+      storedRetry(scene, prepared, cuts, sceneDefinition(scene, options), cacheDir);
+  std::vector<std::pair<std::string, CalculixDefinition>> solves{{"reference", reference}};
+  if (options.gates)
+    for (const auto& [name, gate] : gateSolves(gateDefinitions(reference)))
+      solves.emplace_back(name, storedRetry(scene, prepared, cuts, gate, cacheDir));
+  std::vector<NamedReferenceCell> cells;
+  for (const auto& [name, definition] : solves) {
+    const ContinuumCut& cut = cuts.at(definition.attachmentScale);
+    const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+    for (size_t m = 0; m < prepared.muscles.size(); ++m)
+      cells.push_back({name,
+                       key,
+                       prepared.muscles[m]->name,
+                       {definition, cut, m},
+                       referencePartStored(cacheDir, key, m)});
+  }
+  return cells;
+}
 
 std::string ccxFailureToRetry(const CalculixSolution& solution) {
   if (solution.interrupted || solution.hitMemoryLimit()) return "";
@@ -337,7 +407,11 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
               << solution.nodes << " nodes, " << solution.elements
               << " tetrahedra), material within " << definition.attachmentScale
               << "x the attachment distance of a bone moves with it (" << solution.prescribedNodes
-              << " nodes); ";
+              << " nodes); increments of at most 2.5 deg and 1 mm of attached move ("
+              << (definition.incrementRule == IncrementRule::BoneFrame
+                      ? "beyond the rigid motion of the bone frame it is least in"
+                      : "in the world")
+              << "); ";
   if (definition.incrementScale != 1)
     description << "increments x" << definition.incrementScale
                 << " (ccx failed a pose at the default 2.5 deg / 1 mm); ";

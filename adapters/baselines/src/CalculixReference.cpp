@@ -117,26 +117,48 @@ double largestTurnDeg(const LoadedScene& scene, size_t bones, int from, int to) 
   return largest;
 }
 
+/// The largest move of an attached node within step s against the rigid motion `frame` [m].
+double largestMove(const CalculixJob& job, size_t s, const btTransform& frame) {
+  double move = 0;
+  for (size_t i = 0; i < job.prescribed.size(); ++i) {
+    const btVector3& x = job.nodes[job.prescribed[i]];
+    const btVector3 from = x + (s == 0 ? btVector3(0, 0, 0) : job.steps[s - 1][i]);
+    move = std::max(move, double((x + job.steps[s][i] - frame * from).length()));
+  }
+  return move;
+}
+
+/// The largest move of an attached node within step s [m] by the rule (IncrementRule): in the
+/// world, or against the rigid step of the bone (or the world) in whose frame it is smallest.
+double stepMove(const LoadedScene& scene, size_t bones, const std::vector<int>& steps,
+                const CalculixJob& job, size_t s, IncrementRule rule) {
+  double move = largestMove(job, s, btTransform::getIdentity());
+  const int from = s == 0 ? -1 : steps[s - 1];
+  for (size_t b = 0; rule == IncrementRule::BoneFrame && b < bones; ++b)
+    move = std::min(move, largestMove(job, s,
+                                      stepTransform(scene, b, steps[s]) *
+                                          stepTransform(scene, b, from).inverse()));
+  return move;
+}
+
 /// The largest increment of each of the job's steps (share of it): no bone turns more than
-/// 2.5° and no attached node moves more than 1 mm within one, both × `scale`
+/// 2.5° and no attached node moves more than 1 mm (stepMove: with the bone-frame rule, beyond
+/// the rigid motion of the frame it moves least in) within one, both × `scale`
 /// (CalculixDefinition::incrementScale). ccx's Newton on a twisted
 /// cylinder (C3D4, ν 0.49) diverged on 5° increments from 25° of twist on, converged in 2
 /// iterations on 1.25° ones, and ended on a NaN within a 45° step whose increments it let grow
 /// to 11°; pinch's step back from pose 1 (7 mm) ended on a NaN at its second try, 1.75 mm.
 std::vector<double> maximumIncrements(const LoadedScene& scene, size_t bones,
                                       const std::vector<int>& steps, const CalculixJob& job,
-                                      double scale) {
-  const double turnDeg = 2.5 * scale, largestMove = 1e-3 * scale;
+                                      const CalculixDefinition& definition) {
+  const double turnDeg = 2.5 * definition.incrementScale;
+  const double moveBound = 1e-3 * definition.incrementScale;
   std::vector<double> largest;
   for (size_t s = 0; s < steps.size(); ++s) {
     const double turn = largestTurnDeg(scene, bones, s == 0 ? -1 : steps[s - 1], steps[s]);
-    double move = 0;
-    for (size_t i = 0; i < job.prescribed.size(); ++i)
-      move = std::max(
-          move,
-          double((job.steps[s][i] - (s == 0 ? btVector3(0, 0, 0) : job.steps[s - 1][i])).length()));
+    const double move = stepMove(scene, bones, steps, job, s, definition.incrementRule);
     largest.push_back(
-        std::min({1.0, turnDeg / std::max(turn, 1e-9), largestMove / std::max(move, 1e-12)}));
+        std::min({1.0, turnDeg / std::max(turn, 1e-9), moveBound / std::max(move, 1e-12)}));
   }
   return largest;
 }
@@ -234,8 +256,7 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
       u.push_back(stepTransform(scene, static_cast<size_t>(boneOf[i]), pose) * x - x);
     }
   }
-  job.maximumIncrements =
-      maximumIncrements(scene, prepared.bones.size(), steps, job, definition.incrementScale);
+  job.maximumIncrements = maximumIncrements(scene, prepared.bones.size(), steps, job, definition);
   // Prescribed nodes are ascending: the surface vertices among them come first.
   result.movedPositions.resize(steps.size());
   for (size_t i = 0; i < job.prescribed.size() && job.prescribed[i] < loaded.vertices.size(); ++i) {
@@ -340,7 +361,16 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
                 : ccxFailure(base + ".log", status, definition.memoryLimitGiB);
 }
 
+/// The poses given to ccx: those before the continuum cut, else all of them.
+int solvedPoseCount(const LoadedScene& scene, const ContinuumCut& cut) {
+  return cut.pose >= 0 ? cut.pose : std::max(scene.poseCount, 1);
+}
+
 }  // namespace
+
+const char* toString(IncrementRule rule) {
+  return rule == IncrementRule::BoneFrame ? "bone frame" : "world";
+}
 
 int CalculixSolution::solvedPoses() const {
   int solved = 0;
@@ -350,6 +380,10 @@ int CalculixSolution::solvedPoses() const {
   return solved;
 }
 
+bool MuscleSolution::hitMemoryLimit() const {
+  return failure.find(kMemoryLimitNote) != std::string::npos;
+}
+
 bool CalculixSolution::hitMemoryLimit() const {
   const auto named = [](const std::string& failure) {
     return failure.find(kMemoryLimitNote) != std::string::npos;
@@ -357,54 +391,75 @@ bool CalculixSolution::hitMemoryLimit() const {
   return named(returnFailure) || std::any_of(poseFailures.begin(), poseFailures.end(), named);
 }
 
-CalculixSolution solveCalculixReference(
-    const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
-    const ContinuumCut& cut, const std::string& workDir,
-    const std::function<void(const ReferenceProgress&)>& progress,
-    const std::atomic<bool>* cancel) {
+MuscleSolution solveCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
+                                   const CalculixDefinition& definition, const ContinuumCut& cut,
+                                   size_t m, const std::string& workDir,
+                                   const std::function<void(const ReferenceProgress&)>& progress,
+                                   const std::atomic<bool>* cancel) {
   const auto start = Clock::now();
   std::filesystem::create_directories(workDir);
   std::vector<MeshDistance> bones;
   for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
+  const std::vector<int> steps =
+      stepPoses(scene, prepared.bones.size(), solvedPoseCount(scene, cut), definition.returnToRest);
+  const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir, steps);
+  MuscleSolution result;
+  result.nodes = muscle.job.nodes.size();
+  result.tetrahedra = muscle.tetrahedra;
+  result.prescribedNodes = muscle.attachedNodes;
+  result.inputFile = workDir + "/" + muscle.stem + ".inp";
+  const int stepCount = static_cast<int>(steps.size());
+  int reported = -1;
+  const auto poll = [&](int done) {
+    if (progress && done != reported) {
+      reported = done;
+      progress({prepared.muscles[m]->name, static_cast<int>(m),
+                static_cast<int>(prepared.muscles.size()), done, stepCount, secondsSince(start)});
+    }
+    if (cancel && cancel->load()) result.interrupted = true;
+    return !result.interrupted;
+  };
+  poll(0);
+  StaSummary sta;
+  solveMuscle(muscle, definition, workDir, poll, result.stepSurfaces, result.failure, sta);
+  poll(sta.stepsDone);
+  result.increments = sta.increments;
+  result.newtonIterations = sta.iterations;
+  if (result.interrupted) result.failure = "interrupted";
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const PreparedScene& prepared,
+                                          const CalculixDefinition& definition,
+                                          const ContinuumCut& cut,
+                                          const std::vector<MuscleSolution>& muscles) {
   CalculixSolution solution;
   solution.cut = cut;
-  const int poses = solution.cut.pose >= 0 ? solution.cut.pose : std::max(scene.poseCount, 1);
-  const std::vector<int> steps =
-      stepPoses(scene, prepared.bones.size(), poses, definition.returnToRest);
+  const int poses = solvedPoseCount(scene, cut);
+  const int stepCount = static_cast<int>(
+      stepPoses(scene, prepared.bones.size(), poses, definition.returnToRest).size());
   solution.poseSurfaces.assign(static_cast<size_t>(std::max(scene.poseCount, 1)), {});
   solution.poseFailures.assign(solution.poseSurfaces.size(), "");
-  const size_t muscles = prepared.muscles.size();
-  for (size_t m = 0; m < muscles && !solution.interrupted; ++m) {
-    const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir, steps);
-    solution.nodes += muscle.job.nodes.size();
+  solution.interrupted = muscles.size() < prepared.muscles.size();
+  const std::vector<btVector3> none;  // a step a stored part lacks
+  for (size_t m = 0; m < muscles.size(); ++m) {
+    const MuscleSolution& muscle = muscles[m];
+    solution.nodes += muscle.nodes;
     solution.elements += muscle.tetrahedra;
-    solution.prescribedNodes += muscle.attachedNodes;
-    solution.inputFiles.push_back(workDir + "/" + muscle.stem + ".inp");
-    const int stepCount = static_cast<int>(steps.size());
-    int reported = -1;
-    const auto poll = [&](int done) {
-      if (progress && done != reported) {
-        reported = done;
-        progress({prepared.muscles[m]->name, static_cast<int>(m), static_cast<int>(muscles), done,
-                  stepCount, secondsSince(start)});
-      }
-      if (cancel && cancel->load()) solution.interrupted = true;
-      return !solution.interrupted;
-    };
-    poll(0);
-    std::vector<std::vector<btVector3>> stepSurfaces;
-    std::string failure;
-    StaSummary sta;
-    solveMuscle(muscle, definition, workDir, poll, stepSurfaces, failure, sta);
-    poll(sta.stepsDone);
-    solution.increments += sta.increments;
-    solution.newtonIterations += sta.iterations;
-    if (solution.interrupted) failure = "interrupted";
-    const std::string blame = "muscle " + prepared.muscles[m]->name + ": " + failure;
+    solution.prescribedNodes += muscle.prescribedNodes;
+    solution.inputFiles.push_back(muscle.inputFile);
+    solution.increments += muscle.increments;
+    solution.newtonIterations += muscle.newtonIterations;
+    solution.seconds += muscle.seconds;
+    solution.interrupted = solution.interrupted || muscle.interrupted;
+    const std::string blame = "muscle " + prepared.muscles[m]->name + ": " + muscle.failure;
     for (int s = 0; s < stepCount; ++s) {
       const bool pose = s < poses;
       if (!pose && s + 1 < stepCount) continue;  // on the way back to rest: only its end counts
-      std::vector<btVector3>& surface = stepSurfaces[static_cast<size_t>(s)];
+      const std::vector<btVector3>& surface = static_cast<size_t>(s) < muscle.stepSurfaces.size()
+                                                  ? muscle.stepSurfaces[static_cast<size_t>(s)]
+                                                  : none;
       std::vector<btVector3>& into =
           pose ? solution.poseSurfaces[static_cast<size_t>(s)] : solution.returnSurface;
       std::string& why =
@@ -423,8 +478,21 @@ CalculixSolution solveCalculixReference(
     if (why.empty() && !excluded && returns) why = "interrupted";
     (pose ? solution.poseSurfaces[p] : solution.returnSurface).clear();
   }
-  solution.seconds = secondsSince(start);
   return solution;
+}
+
+CalculixSolution solveCalculixReference(
+    const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
+    const ContinuumCut& cut, const std::string& workDir,
+    const std::function<void(const ReferenceProgress&)>& progress,
+    const std::atomic<bool>* cancel) {
+  std::vector<MuscleSolution> muscles;
+  for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    muscles.push_back(
+        solveCalculixMuscle(scene, prepared, definition, cut, m, workDir, progress, cancel));
+    if (muscles.back().interrupted) break;
+  }
+  return assembleCalculixSolution(scene, prepared, definition, cut, muscles);
 }
 
 }  // namespace fibremss

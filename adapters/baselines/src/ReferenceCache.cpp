@@ -8,8 +8,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
+#include <thread>
 #include <type_traits>
 
 #include "fibremss/Error.h"
@@ -18,6 +21,7 @@ namespace fibremss {
 namespace {
 
 constexpr char kMagic[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '1'};
+constexpr char kPartMagic[8] = {'F', 'M', 'S', 'S', 'P', 'R', 'T', '1'};
 
 /// FNV-1a over everything fed to it.
 class Hasher {
@@ -109,6 +113,81 @@ class Reader {
   const std::string& path_;
 };
 
+/// Writes a muscle's part (its input file by name alone) to `path` atomically.
+void savePart(const std::string& path, const MuscleSolution& part) {
+  const std::string temporary = path + ".partial";
+  {
+    std::ofstream out(temporary, std::ios::binary);
+    out.write(kPartMagic, sizeof kPartMagic);
+    const uint64_t steps = part.stepSurfaces.size();
+    out.write(reinterpret_cast<const char*>(&steps), sizeof steps);
+    for (const std::vector<btVector3>& surface : part.stepSurfaces) writePoints(out, surface);
+    writeText(out, part.failure);
+    const uint64_t counts[5] = {part.nodes, part.tetrahedra, part.prescribedNodes,
+                                static_cast<uint64_t>(part.newtonIterations),
+                                static_cast<uint64_t>(part.increments)};
+    out.write(reinterpret_cast<const char*>(counts), sizeof counts);
+    out.write(reinterpret_cast<const char*>(&part.seconds), sizeof part.seconds);
+    writeText(out, std::filesystem::path(part.inputFile).filename().string());
+    if (!out) throw std::runtime_error("cannot write " + temporary);
+  }
+  std::filesystem::rename(temporary, path);
+}
+
+/// Reads what savePart wrote; false when `path` does not exist.
+bool loadPart(const std::string& path, MuscleSolution& part) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  Reader read(in, path);
+  char magic[sizeof kPartMagic];
+  in.read(magic, sizeof magic);
+  if (!in || std::memcmp(magic, kPartMagic, sizeof kPartMagic) != 0)
+    throw InputError(path, "", "not a FibreMSS reference part file");
+  part = {};
+  const auto steps = read.value<uint64_t>();
+  if (steps > 1000000) throw InputError(path, "", "not a FibreMSS reference part file");
+  for (uint64_t s = 0; s < steps; ++s) part.stepSurfaces.push_back(read.points());
+  part.failure = read.text();
+  const auto counts = read.value<std::array<uint64_t, 5>>();
+  part.nodes = counts[0];
+  part.tetrahedra = counts[1];
+  part.prescribedNodes = counts[2];
+  part.newtonIterations = static_cast<long>(counts[3]);
+  part.increments = static_cast<long>(counts[4]);
+  part.seconds = read.value<double>();
+  part.inputFile = read.text();
+  return true;
+}
+
+std::string entryDir(const std::string& cacheDir, const std::string& key) {
+  return cacheDir + "/" + key;
+}
+
+/// Moves the solve's work directory into place as `dir` holding `stored`; when another
+/// process stored it first (the rename fails on a directory that is not empty), its is kept.
+void storeWork(const std::string& work, const std::string& dir, const std::string& stored) {
+  std::error_code error;
+  std::filesystem::rename(work, dir, error);
+  if (error && !std::filesystem::exists(stored)) {
+    std::filesystem::remove_all(dir);  // a solve stopped before it stored anything
+    std::filesystem::rename(work, dir);
+  }
+  std::filesystem::remove_all(work, error);
+}
+
+/// Copies every file of the parts (but their part.bin) into `work`, as a whole solve leaves them.
+void copyPartFiles(const std::string& cacheDir, const std::string& key, size_t muscles,
+                   const std::string& work) {
+  namespace fs = std::filesystem;
+  fs::create_directories(work);
+  for (size_t m = 0; m < muscles; ++m)
+    for (const fs::directory_entry& file :
+         fs::directory_iterator(referencePartDir(cacheDir, key, m)))
+      if (file.path().filename() != "part.bin")
+        fs::copy_file(file.path(), work / file.path().filename(),
+                      fs::copy_options::overwrite_existing);
+}
+
 }  // namespace
 
 std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& prepared,
@@ -148,6 +227,11 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
   if (definition.incrementScale != 1) {  // finer increments (no other key changes)
     h.text("increment scale");
     h.value(definition.incrementScale);
+  }
+  // Increments bounded in the bone's frame (the world rule's entries keep their keys).
+  if (definition.incrementRule != IncrementRule::World) {
+    h.text("increment rule");
+    h.value(definition.incrementRule);
   }
   // Small sliding (where a scene chooses it; no other key changes).
   if (definition.contactPenalty > 0 && definition.contactSliding != ContactSliding::Finite) {
@@ -237,18 +321,124 @@ bool loadSolution(const std::string& path, CalculixSolution& solution) {
   return true;
 }
 
+std::string referencePartDir(const std::string& cacheDir, const std::string& key, size_t m) {
+  return entryDir(cacheDir, key) + ".parts/muscle" + std::to_string(m);
+}
+
+bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m) {
+  return std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin") ||
+         std::filesystem::exists(referencePartDir(cacheDir, key, m) + "/part.bin");
+}
+
+bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
+                          const CalculixDefinition& definition, const ContinuumCut& cut,
+                          const std::string& cacheDir, size_t m,
+                          const std::function<void(const ReferenceProgress&)>& progress,
+                          const std::atomic<bool>* cancel) {
+  const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+  const std::string dir = referencePartDir(cacheDir, key, m);
+  MuscleSolution part;
+  if (std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin")) return true;
+  if (loadPart(dir + "/part.bin", part) && !part.hitMemoryLimit()) return true;
+  std::filesystem::remove_all(dir);  // none, or one that hit the memory limit: solved again
+  const std::string work = dir + ".solving-" + std::to_string(getpid());
+  std::filesystem::remove_all(work);
+  try {
+    part = solveCalculixMuscle(scene, prepared, definition, cut, m, work, progress, cancel);
+  } catch (...) {  // tetgen or ccx not found, a surface tetgen refuses
+    std::error_code ignored;
+    std::filesystem::remove_all(work, ignored);
+    throw;
+  }
+  if (part.interrupted) {
+    std::filesystem::remove_all(work);
+    return false;
+  }
+  savePart(work + "/part.bin", part);
+  storeWork(work, dir, dir + "/part.bin");
+  return true;
+}
+
+bool mergeCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
+                        const CalculixDefinition& definition, const ContinuumCut& cut,
+                        const std::string& cacheDir, CalculixSolution& solution) {
+  const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+  const std::string entry = entryDir(cacheDir, key);
+  std::vector<MuscleSolution> parts(prepared.muscles.size());
+  for (size_t m = 0; m < parts.size(); ++m) {
+    if (!loadPart(referencePartDir(cacheDir, key, m) + "/part.bin", parts[m])) return false;
+    parts[m].inputFile = entry + "/" + parts[m].inputFile;
+  }
+  const std::string work = entry + ".solving-" + std::to_string(getpid());
+  std::filesystem::remove_all(work);
+  try {
+    copyPartFiles(cacheDir, key, parts.size(), work);
+  } catch (const std::filesystem::filesystem_error&) {  // another process merged them first
+    std::error_code ignored;
+    std::filesystem::remove_all(work, ignored);
+    if (loadSolution(entry + "/surfaces.bin", solution)) return true;
+    throw;
+  }
+  solution = assembleCalculixSolution(scene, prepared, definition, cut, parts);
+  saveSolution(work + "/surfaces.bin", solution);
+  storeWork(work, entry, entry + "/surfaces.bin");
+  std::error_code ignored;
+  std::filesystem::remove_all(entry + ".parts", ignored);
+  loadSolution(entry + "/surfaces.bin", solution);  // the one kept, ours or another's
+  return true;
+}
+
+void solveCalculixCells(const LoadedScene& scene, const PreparedScene& prepared,
+                        const std::vector<ReferenceCell>& cells, const std::string& cacheDir,
+                        const std::function<void(const ReferenceProgress&)>& progress,
+                        const std::atomic<bool>* cancel, int jobs) {
+  std::atomic<size_t> next{0};
+  std::mutex mutex;
+  std::exception_ptr failure;
+  const auto report = [&](const ReferenceProgress& p) {
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (progress) progress(p);
+  };
+  const auto work = [&] {
+    for (size_t c; (c = next++) < cells.size() && !(cancel && cancel->load());) {
+      const ReferenceCell& cell = cells[c];
+      try {
+        cachedCalculixMuscle(scene, prepared, cell.definition, cell.cut, cacheDir, cell.muscle,
+                             report, cancel);
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        if (!failure) failure = std::current_exception();
+        next = cells.size();
+      }
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int j = 0; j < std::max(1, std::min(jobs, static_cast<int>(cells.size()))); ++j)
+    threads.emplace_back(work);
+  for (std::thread& thread : threads) thread.join();
+  if (failure) std::rethrow_exception(failure);
+}
+
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const ContinuumCut& cut, const std::string& cacheDir,
     const std::function<void(const ReferenceProgress&)>& progress, const std::atomic<bool>* cancel,
-    bool* fromCache) {
-  const std::string entry = cacheDir + "/" + referenceCacheKey(scene, prepared, definition, cut);
+    bool* fromCache, int jobs) {
+  const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+  const std::string entry = entryDir(cacheDir, key);
   const std::string stored = entry + "/surfaces.bin";
   CalculixSolution solution;
   const bool found = loadSolution(stored, solution) && !solution.hitMemoryLimit();
   if (fromCache) *fromCache = found;
   if (found) return solution;
   if (solution.hitMemoryLimit()) std::filesystem::remove_all(entry);  // solved again
+  if (jobs > 1 || std::filesystem::exists(entry + ".parts")) {
+    std::vector<ReferenceCell> cells;
+    for (size_t m = 0; m < prepared.muscles.size(); ++m) cells.push_back({definition, cut, m});
+    solveCalculixCells(scene, prepared, cells, cacheDir, progress, cancel, jobs);
+    if (mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution)) return solution;
+    return assembleCalculixSolution(scene, prepared, definition, cut, {});  // interrupted
+  }
   // Solved in a directory of this process's own, moved into place whole: two processes
   // solving the same key at once (two comparisons of one scene) must not share ccx's files.
   const std::string work = entry + ".solving-" + std::to_string(getpid());
@@ -267,13 +457,8 @@ CalculixSolution cachedCalculixReference(
   }
   for (std::string& file : solution.inputFiles) file = entry + file.substr(work.size());
   saveSolution(work + "/surfaces.bin", solution);
-  std::error_code error;
-  std::filesystem::rename(work, entry, error);  // fails when the entry is not empty
-  if (error && !loadSolution(stored, solution)) {
-    std::filesystem::remove_all(entry);  // a solve stopped before it stored anything
-    std::filesystem::rename(work, entry);
-  }
-  std::filesystem::remove_all(work);  // another process stored the entry first: its is kept
+  storeWork(work, entry, stored);
+  if (!loadSolution(stored, solution)) throw std::runtime_error("cannot read " + stored);
   return solution;
 }
 

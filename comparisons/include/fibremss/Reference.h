@@ -23,6 +23,9 @@ struct ReferenceOptions {
   /// Take the reference (and each gate's solve) only from the cache; what is not there is not
   /// computed (Reference::missing, gates left out). For jobs that must stay short.
   bool cachedOnly = false;
+  /// Cells (one muscle of one solve: the reference's or a gate's) solved at once, each a ccx
+  /// process of its own; the cache then holds the same entries as a serial run (1).
+  int jobs = 1;
   std::function<void(const std::string&)> log;             ///< one line of news (may be empty)
   std::function<void(const ReferenceProgress&)> progress;  ///< while ccx runs (may be empty)
   const std::atomic<bool>* cancel = nullptr;               ///< stop when true
@@ -157,6 +160,23 @@ GateDefinitions gateDefinitions(const CalculixDefinition& reference);
 /// variants (gateDefinitions); fills the metrics as runPoses does for the simulated methods.
 Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
                            const ReferenceOptions& options);
+
+/// A reference's cells for a batch engine, in the order `fibremss reference --cell I` numbers
+/// them: the reference's muscles, then each gate's (attachment x0.5, x1.5, increments halved,
+/// one level finer). Each solve's definition is the one computeReference would solve given the
+/// cache: a solve stored with a pose ccx failed is replaced by its retry at kFinerIncrements,
+/// and the gates start from the reference's; where the reference is not stored yet, from its
+/// default increments (its retry, where needed, is left to the run that merges the cells).
+struct NamedReferenceCell {
+  std::string solve;    ///< "reference" or the gate's name
+  std::string key;      ///< the solve's cache key
+  std::string muscle;   ///< the muscle's name
+  ReferenceCell cell;   ///< what cachedCalculixMuscle solves
+  bool stored = false;  ///< the solve or this muscle's part of it is in the cache
+};
+std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
+                                               const PreparedScene& prepared,
+                                               const ReferenceOptions& options);
 
 /// What a solve is retried at kFinerIncrements for: the first pose ccx failed ("pose k: why"),
 /// else its failed return step ("return to rest: why"); "" when none failed, or when it was

@@ -11,6 +11,7 @@
 // `contactPenalty`; every free surface node a slave, C3D10's midside nodes included).
 // Not modelled: muscle–muscle contact, gravity, activation; each muscle is solved on its own.
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -20,6 +21,17 @@
 #include "fibremss/Scene.h"
 
 namespace fibremss {
+
+/// What bounds an attached node's move within one increment (CalculixDefinition::incrementRule).
+enum class IncrementRule : uint8_t {
+  World,  ///< its whole move: a tibia attachment carried 70 mm by the hip takes 70 increments
+  /// Its move relative to the rigid motion of the frame in which the muscle's attached nodes
+  /// move least: a bone's (any of the scene's) or the world's. A rigid motion carries the
+  /// muscle's rest state to an equilibrium of its own (a translation exactly, a turn bounded by
+  /// the 2.5° rule), so only the deformation part needs small increments.
+  BoneFrame,
+};
+const char* toString(IncrementRule rule);
 
 /// What the reference solves and how.
 struct CalculixDefinition {
@@ -54,6 +66,9 @@ struct CalculixDefinition {
   /// first (pinch with the attachment distance x0.5: a 10.9 m correction at 86 % of pose 1,
   /// then "matrix found to be singular"). In the cache key only where it is not 1.
   double incrementScale = 1;
+  /// Which move the 1 mm bound applies to. In the cache key only where it is BoneFrame (the
+  /// world rule's entries keep their keys).
+  IncrementRule incrementRule = IncrementRule::BoneFrame;
   std::string program = "ccx";  ///< the CalculiX executable (PATH is searched)
   /// Address-space limit of each ccx run [GiB] (0: none). A run that exceeds it fails its
   /// allocation and its poses are reported failed, naming the limit. Not in the cache key: it
@@ -126,14 +141,50 @@ struct CalculixSolution {
   bool hitMemoryLimit() const;
 };
 
-/// Meshes every muscle and solves its poses with ccx in `workDir` (created; the .inp, .dat,
-/// .sta and logs of each muscle are kept there). A pose ccx does not finish is reported in
-/// poseFailures (with ccx's last error line), never dropped. Poses from `cut.pose` on
-/// (findContinuumCut at the definition's attachment scale) are not given to ccx; the
-/// solution's `cut` is it. Throws InputError for a
-/// muscle that tetgen cannot mesh or that has no material near any bone, unless the scene is a
+/// One muscle's share of a reference solve: its own ccx job (muscles have no contact with each
+/// other in the reference, so each is solved on its own and the muscles of a solve can run at
+/// once, as separate ccx processes).
+struct MuscleSolution {
+  /// Per step of its job (the poses before the cut, then the steps back to rest): its surface
+  /// vertices [m] (prepared restSurface order), empty where ccx gave none.
+  std::vector<std::vector<btVector3>> stepSurfaces;
+  std::string failure;         ///< "" or why ccx stopped (its last error line)
+  size_t nodes = 0;            ///< nodes of its job (midside and bone obstacle nodes included)
+  size_t tetrahedra = 0;       ///< tetrahedra of its mesh
+  size_t prescribedNodes = 0;  ///< its nodes moved with a bone
+  long newtonIterations = 0;   ///< summed over its increments (ccx's .sta)
+  long increments = 0;         ///< increments ccx took over its steps
+  double seconds = 0;          ///< wall time of its tetgen and ccx runs [s]
+  std::string inputFile;       ///< its .inp
+  bool interrupted = false;    ///< cancelled before the end
+
+  /// Whether its ccx run failed an allocation under its memory limit (solved again).
+  bool hitMemoryLimit() const;
+};
+
+/// Meshes muscle `m` and solves its poses with ccx in `workDir` (created; its .inp, .dat, .sta
+/// and logs are kept there, named muscle<m>.*). Poses from `cut.pose` on (findContinuumCut at
+/// the definition's attachment scale) are not given to ccx. Throws InputError for a muscle that
+/// tetgen cannot mesh or that has no material near any bone, unless the scene is a
 /// sphere-planes case: then the sphere is held by its symmetry (the node nearest its centre
 /// fixed, three nodes' equations against rigid rotation; no effect on the exact answer).
+MuscleSolution solveCalculixMuscle(
+    const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
+    const ContinuumCut& cut, size_t m, const std::string& workDir,
+    const std::function<void(const ReferenceProgress&)>& progress = {},
+    const std::atomic<bool>* cancel = nullptr);
+
+/// The solution of the muscles' parts, in muscle order (fewer than the scene's muscles: a solve
+/// interrupted after them). A pose ccx does not finish for a muscle is reported in poseFailures
+/// (with ccx's last error line), never dropped; the solution's `cut` is `cut`; its seconds are
+/// the parts' summed.
+CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const PreparedScene& prepared,
+                                          const CalculixDefinition& definition,
+                                          const ContinuumCut& cut,
+                                          const std::vector<MuscleSolution>& muscles);
+
+/// Every muscle solved in turn (solveCalculixMuscle) in `workDir`, assembled
+/// (assembleCalculixSolution); stops after a muscle that was interrupted.
 CalculixSolution solveCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const ContinuumCut& cut, const std::string& workDir,

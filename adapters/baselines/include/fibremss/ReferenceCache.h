@@ -31,15 +31,58 @@ void saveSolution(const std::string& path, const CalculixSolution& solution);
 /// is not such a file (truncated, other format).
 bool loadSolution(const std::string& path, CalculixSolution& solution);
 
-/// The solution stored under the key in `cacheDir/<key>/` or, when absent, solved
+/// The solution stored under the key in `cacheDir/<key>/`; else, where muscles of it were
+/// solved as parts (cachedCalculixMuscle) or `jobs` > 1, its parts, the missing ones solved
+/// `jobs` at a time, merged into `<key>/` (mergeCalculixParts); else solved
 /// (solveCalculixReference) in `cacheDir/<key>.solving-<pid>/`, which becomes `<key>/` once
 /// stored (removed when interrupted), so that processes solving the same key at once never
-/// share ccx's files; when another one stored it first, its solution is returned. `fromCache`
-/// (may be null) tells whether it came from the cache.
+/// share ccx's files; when another one stored it first, its solution is returned. Either way
+/// the entry holds the same files and solution. `fromCache` (may be null) tells whether it came
+/// from the cache.
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const ContinuumCut& cut, const std::string& cacheDir,
     const std::function<void(const ReferenceProgress&)>& progress, const std::atomic<bool>* cancel,
-    bool* fromCache);
+    bool* fromCache, int jobs = 1);
+
+/// Where muscle `m`'s part of the solve `key` is kept: `cacheDir/<key>.parts/muscle<m>/`.
+std::string referencePartDir(const std::string& cacheDir, const std::string& key, size_t m);
+
+/// Whether the solve `key` is stored whole (`<key>/surfaces.bin`) or muscle `m`'s part of it.
+bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m);
+
+/// Solves muscle `m` of the solve (solveCalculixMuscle) into its part directory (through
+/// `<part>.solving-<pid>/`, as a whole solve), unless the solve or that part is stored already
+/// (true: nothing to do) or it was interrupted (false; nothing kept). A part that hit the
+/// memory limit is solved again. One cell of a reference for a batch engine.
+bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
+                          const CalculixDefinition& definition, const ContinuumCut& cut,
+                          const std::string& cacheDir, size_t m,
+                          const std::function<void(const ReferenceProgress&)>& progress,
+                          const std::atomic<bool>* cancel);
+
+/// A cell of a reference: one muscle of one solve (the reference's or a gate's).
+struct ReferenceCell {
+  CalculixDefinition definition;  ///< the solve's
+  ContinuumCut cut;               ///< its continuum cut (findContinuumCut at its attachment scale)
+  size_t muscle = 0;              ///< index into the prepared muscles
+};
+
+/// Solves the cells not stored yet (cachedCalculixMuscle) `jobs` at a time, each a ccx process
+/// of its own, in the order given; after the first one that cannot be started, no further cell
+/// starts, and its error is rethrown once the running ones end. `progress` is called from one
+/// thread at a time.
+void solveCalculixCells(const LoadedScene& scene, const PreparedScene& prepared,
+                        const std::vector<ReferenceCell>& cells, const std::string& cacheDir,
+                        const std::function<void(const ReferenceProgress&)>& progress,
+                        const std::atomic<bool>* cancel, int jobs);
+
+/// Merges the solve's parts into its entry `cacheDir/<key>/` (their files and one
+/// surfaces.bin, as a whole solve stores them) once every muscle's part is stored, and removes
+/// the parts; false (nothing changed) while one is missing. The solution is the serial
+/// solve's (its seconds, the parts' summed, are measured times).
+bool mergeCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
+                        const CalculixDefinition& definition, const ContinuumCut& cut,
+                        const std::string& cacheDir, CalculixSolution& solution);
 
 }  // namespace fibremss
