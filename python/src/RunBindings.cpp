@@ -9,6 +9,7 @@
 
 #include "Bindings.h"
 #include "Convert.h"
+#include "Interruptible.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/FibreRun.h"
 #include "fibremss/Stability.h"
@@ -22,6 +23,7 @@ struct RunSettings {
   int frameEvery = -1;
   std::vector<std::string> formats;
   std::optional<int> threads;
+  const std::atomic<bool>* cancel = nullptr;  ///< stop within the running step when true
 };
 
 /// Prepares and runs the scene (runFibreMSS); the summary's keys as `fibremss run` writes them.
@@ -36,6 +38,7 @@ nlohmann::json runScene(LoadedScene scene, const RunSettings& settings) {
   options.vtkFrames = std::ranges::count(settings.formats, "vtk") > 0;
   options.gltfFrames = std::ranges::count(settings.formats, "gltf") > 0;
   options.keepPoseSurfaces = false;
+  options.cancel = settings.cancel;
   nlohmann::json summary = toJson(runFibreMSS(scene, prepared, options));
   summary["scene_source"] = scene.source;
   summary["poses"] = scene.poseCount;
@@ -79,17 +82,15 @@ void bindRuns(py::module_& module) {
       "run",
       [](const LoadedScene& scene, int steps, const std::string& outDir, int frameEvery,
          const std::vector<std::string>& formats, std::optional<int> threads) {
-        nlohmann::json summary;
-        {
-          py::gil_scoped_release release;
-          summary = runScene(scene, {steps, outDir, frameEvery, formats, threads});
-        }
-        return pythonObject(summary);
+        return pythonObject(interruptible([&](const std::atomic<bool>* cancel) {
+          return runScene(scene, {steps, outDir, frameEvery, formats, threads, cancel});
+        }));
       },
       py::arg("scene"), py::arg("steps") = -1, py::arg("out_dir") = "", py::arg("frame_every") = -1,
       py::arg("formats") = std::vector<std::string>{"vtk"}, py::arg("threads") = py::none(),
       "Runs the scene as `fibremss run` (one step per pose): its summary.json as a dict, "
-      "'muscles' and the per-step 'series' included; frames into out_dir when given.");
+      "'muscles' and the per-step 'series' included; frames into out_dir when given. Ctrl-C "
+      "stops it within its running step (KeyboardInterrupt).");
   module.def(
       "compare",
       [](const std::string& scene, const py::object& given, std::vector<std::string> methods,
@@ -101,12 +102,10 @@ void bindRuns(py::module_& module) {
         options.reference.cachedOnly = true;
         options.methodBudgetSeconds = methodBudget;
         const std::vector<std::string> keys = overrides(given);
-        nlohmann::json summary;
-        {
-          py::gil_scoped_release release;
-          summary = compareScene(scene, keys, options, outDir);
-        }
-        return pythonObject(summary);
+        return pythonObject(interruptible([&](const std::atomic<bool>* cancel) {
+          options.cancel = cancel;
+          return compareScene(scene, keys, options, outDir);
+        }));
       },
       py::arg("scene"), py::arg("overrides") = py::none(),
       py::arg("methods") = std::vector<std::string>{"fibremss", "btsoftbody"},
@@ -114,7 +113,8 @@ void bindRuns(py::module_& module) {
       py::arg("out_dir") = "",
       "Runs a scene (name or .json) through several methods as `fibremss compare` does "
       "(reference: the cached CalculiX reference only); summary.json as a dict, and with "
-      "out_dir summary.json, report.md and the plots there. method_budget: seconds per method.");
+      "out_dir summary.json, report.md and the plots there. method_budget: seconds per method. "
+      "Ctrl-C stops it within its running step (KeyboardInterrupt).");
   module.def("columns", &columns, py::arg("rows"),
              "Rows of dicts (a summary's 'series', measures()) as {key: numpy array or list}.");
 }

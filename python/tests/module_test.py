@@ -6,9 +6,12 @@ FIBREMSS_CLI names the fibremss tool for the comparisons with it (skipped withou
 import gc
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 import unittest
 
 try:
@@ -95,6 +98,18 @@ class Scenes(unittest.TestCase):
         self.assertEqual(len(pulled["penetration_mm"]), 2)
         summary = fibremss.run(bar_scene(4), threads=1)
         self.assertEqual((summary["steps"], summary["muscles"][0]["name"]), (3, "bar"))
+
+    def test_ctrl_c_stops_a_run_within_its_step(self):
+        # Poses that never converge: without Ctrl-C the run would take hours.
+        scene = fibremss.load_scene(
+            "fusiform", {"stop": "iterations", "iterations": 1000000})
+        timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+        start = time.monotonic()
+        timer.start()
+        with self.assertRaises(KeyboardInterrupt):
+            fibremss.run(scene, threads=1)
+        timer.join()
+        self.assertLess(time.monotonic() - start, 30)
 
     def test_settings_are_read_and_set(self):
         scene = fibremss.load_scene("fusiform", SMALL)
