@@ -1111,5 +1111,27 @@ TEST(Attachments, DeclaredAreasMustNameVerticesAndBonesThatExist) {
   EXPECT_THROW(prepareScene(bones, {input}, 1), InputError);
 }
 
+TEST(Blend, TheSecondBonesShareIsContinuousWhereEitherBoneChanges) {
+  // Two bones: the plain inverse-square weights, to the bit.
+  for (const double d1 : {1e-6, 0.003, 0.01})
+    for (const double d2 : {0.01, 0.02, 0.5})
+      EXPECT_EQ(detail::blendWeight(d1, d2, HUGE_VAL), d1 * d1 / (d1 * d1 + d2 * d2));
+  // Where the nearest bone changes both shares are ½, whatever the third bone.
+  EXPECT_DOUBLE_EQ(detail::blendWeight(0.01, 0.01, 0.03), 0.5);
+  EXPECT_DOUBLE_EQ(detail::blendWeight(0.01, 0.01, HUGE_VAL), 0.5);
+  // Where the second-nearest bone changes (d2 = d3) its share fades to 0, so the particles on
+  // either side (second bone B or C) move alike.
+  EXPECT_NEAR(detail::blendWeight(0.01, 0.02, 0.02), 0.0, 1e-12);
+  const double before = detail::blendWeight(0.01, 0.02, 0.02 * (1 + 1e-6));
+  EXPECT_GT(before, 0.0);
+  EXPECT_LT(before, 1e-5);
+  // In between: below the two-bone share, never negative.
+  const double between = detail::blendWeight(0.01, 0.02, 0.04);
+  EXPECT_GT(between, 0.0);
+  EXPECT_LT(between, detail::blendWeight(0.01, 0.02, HUGE_VAL));
+  // (1/d2² − 1/d3²) / (1/d1² + 1/d2² − 2/d3²) at 1, 2, 4: (1/4 − 1/16) / (1 + 1/4 − 2/16) = 1/6.
+  EXPECT_NEAR(detail::blendWeight(1, 2, 4), 1.0 / 6, 1e-15);
+}
+
 }  // namespace
 }  // namespace fibremss

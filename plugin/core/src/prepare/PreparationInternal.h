@@ -132,9 +132,14 @@ size_t stiffenTendons(MuscleSettings& muscle, btScalar fraction, btScalar stiffn
 /// Distance from a point to bone `bone`'s mesh, or infinity when farther than `limit` [m].
 using BoneDistance = std::function<btScalar(const btVector3&, int32_t bone, btScalar limit)>;
 
+/// The share [1] of the second-nearest bone's motion for a particle d1 ≤ d2 ≤ d3 from its three
+/// nearest bones [m] (d3 = ∞ with two bones): ½ at d1 = d2, 0 at d2 = d3 (PreparationBlend.cpp).
+double blendWeight(double d1, double d2, double d3);
+
 /// The blended pre-transform (PreparationBlend.cpp): per particle, its nearest bone (A) and
-/// second-nearest bone (B) at rest and w = d_A² / (d_A² + d_B²), the share of B's motion.
-/// Needs nearestBone. With fewer than two bones: the nearest bone twice, w = 0.
+/// second-nearest bone (B) at rest and w = blendWeight(d_A, d_B, d_C), the share of B's motion
+/// (C the third-nearest bone; with two bones w = d_A² / (d_A² + d_B²)). Needs nearestBone. With
+/// fewer than two bones: the nearest bone twice, w = 0.
 void blendAttachments(MuscleSettings& muscle, size_t boneCount, const BoneDistance& distance);
 
 /// Boundary particles, initial radii and skinning from the surface vertices (Radii.cpp):
