@@ -130,7 +130,8 @@ struct Input {
                    {"surface", {{"file", "muscle.obj"}}},
                    {"fibres", {{"file", "fibres.obj"}}},
                    {"fibre_count", 4},
-                   {"resolution", 10}}}}};
+                   {"resolution", 10},
+                   {"free_end", "origin"}}}}};  // it hangs from the cube
   Json& bone() { return scene["bones"][0]; }
   Json& muscle() { return scene["muscles"][0]; }
 };
@@ -289,7 +290,7 @@ const std::vector<BadInput>& catalogue() {
        [](Input& in) {
          in.bone()["transform"] = {{"translation", {0, 100, 0}}};
        },
-       Outcome::Warning, "box", "attached to nothing"},
+       Outcome::Error, "box", "no particle is fixed at its insertion"},
       {"MissingFile", Api::Scene, "",
        [](Input& in) { in.muscle()["fibres"]["file"] = "nowhere.obj"; }, Outcome::Error,
        "muscles[0].fibres.file", "no such file"},

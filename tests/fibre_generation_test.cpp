@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 
 #include "fibremss/Error.h"
 #include "fibremss/FibreGeneration.h"
@@ -73,6 +74,37 @@ TEST(FibreGeneration, SpindleFromLandmarkToFarEnd) {
   EXPECT_LE(q.minLength, q.medianLength);
   EXPECT_LE(q.medianLength, q.maxLength);
   EXPECT_GT(q.interiorVoxels, 1000u);
+}
+
+TEST(FibreGeneration, StripAlongTheSideToTheFarTip) {
+  // The origin a strip 4 mm wide along the spindle's +x side over its upper 110 mm (as a psoas'
+  // origin runs along the vertebrae), the insertion the lower tip.
+  const TriangleMesh surface = spindle();
+  std::vector<btVector3> strip;
+  for (int k = -2; k <= 9; ++k) {
+    const btScalar z = btScalar(0.01 * k);
+    const btScalar r = kRadii.x() * std::sqrt(1 - (z / kRadii.z()) * (z / kRadii.z()));
+    strip.push_back(kCentre + btVector3(r, 0, z));
+  }
+  const btVector3 tip = kCentre - btVector3(0, 0, kRadii.z());
+  FibreGenerationOptions options;  // 64 fibres
+  const FibreGenerationResult result =
+      generateFibres(surface, AttachmentArea::fromLandmarks(strip, btScalar(0.004)),
+                     AttachmentArea::fromLandmarks({tip}, btScalar(0.012)), options);
+  const FibreQuality& q = result.quality;
+  EXPECT_EQ(q.generated, 64);
+  EXPECT_EQ(q.pointsOutside, 0);
+  EXPECT_GE(q.rightEnds, 0.9);
+  int onStrip = 0;
+  for (size_t f = 0; f < result.fibres.fibreCount(); ++f) {
+    const auto fibre = result.fibres.fibre(f);
+    btScalar nearest = std::numeric_limits<btScalar>::infinity();
+    for (const btVector3& p : strip) nearest = std::min(nearest, fibre.front().distance(p));
+    // Landmarks 10 mm apart: a start on the strip lies within half that and the radius.
+    onStrip += nearest < 0.005 + 0.004 + q.voxelSize;
+    EXPECT_LT(fibre.back().distance(tip), 0.012 + 2 * q.voxelSize);  // in the tip's area
+  }
+  EXPECT_GE(onStrip, int(0.9 * 64));
 }
 
 TEST(FibreGeneration, SpindleBetweenTwoBones) {

@@ -279,9 +279,9 @@ TEST(Reliability2, MuscleNamesThatMapToOneFileNameGetDistinctFiles) {
   writeFile(dir.path() / "two.json", R"({"units": "mm",
     "bones": [{"name": "cube", "mesh": {"file": "bone.obj"}}],
     "muscles": [{"name": "a b", "surface": {"file": "muscle.obj"},
-                 "fibres": {"file": "fibres.obj"}, "resolution": 5},
+                 "fibres": {"file": "fibres.obj"}, "resolution": 5, "free_end": "insertion"},
                 {"name": "a_b", "surface": {"file": "other.obj"},
-                 "fibres": {"file": "other_fibres.obj"}, "resolution": 5}]})");
+                 "fibres": {"file": "other_fibres.obj"}, "resolution": 5, "free_end": "both"}]})");
   const fs::path out = dir.path() / "out";
   const ProcessResult result =
       cli("check " + (dir.path() / "two.json").string() + " --out " + out.string());

@@ -233,6 +233,33 @@ TEST(SubPoses, JumpsFromRestAndBetweenPosesAreSplitAlongTheScrew) {
   EXPECT_EQ(loadScene(files.write("keys.json", boneScene(text)), {"max_step_deg=20"}).poseCount, 4);
 }
 
+TEST(OpenSimMotion, PosesAreNamedByTheirCoordinatesAndTheSubPoseRuleIsStated) {
+  const SceneFiles files;
+  // Flexion 0 -> 18° in 9° rows, adduction 0 -> -4°: each jump (9.2°) split into two sub-poses.
+  const std::string mot = files.write(
+      "flex.mot",
+      motText("inDegrees=yes", kNames, "0.0\t0.0\t0.0\n0.1\t9.0\t-2.0\n0.2\t18.0\t-4.0\n"));
+  const LoadedScene scene = loadScene(files.write(
+      "flex.json", boneScene(R"({"type": "opensim", "file": ")" + mot + R"(", "coordinates": [
+          {"column": "hip_flexion_r", "axis": [1, 0, 0]},
+          {"column": "hip_adduction_r", "axis": [0, 0, 1]}]})")));
+  ASSERT_EQ(scene.poseCount, 5);  // 0°, then 4.5° and 9°, then 13.5° and 18°
+  EXPECT_EQ(fibremss::poseName(scene, 0), "hip_flexion_r=0°, hip_adduction_r=0°");
+  EXPECT_EQ(fibremss::poseName(scene, 1), "hip_flexion_r=4.5°, hip_adduction_r=-1°");
+  EXPECT_EQ(fibremss::poseName(scene, 4), "hip_flexion_r=18°, hip_adduction_r=-4°");
+  EXPECT_DOUBLE_EQ(scene.poseLabels[4], 0.2);  // the labels stay the rows' times [s]
+  ASSERT_FALSE(scene.notes.empty());
+  EXPECT_NE(scene.notes[0].find("pose 1 (hip_flexion_r=9°, hip_adduction_r=-2°)"),
+            std::string::npos)
+      << scene.notes[0];
+  EXPECT_NE(scene.notes.back().find("no bone turns more than 5° per step"), std::string::npos)
+      << scene.notes.back();
+  // A sweep's poses are named by their labels.
+  const LoadedScene sweep =
+      loadScene(files.write("sweep.json", boneScene(R"({"type": "sweep", "end_deg": 20})")));
+  EXPECT_EQ(fibremss::poseName(sweep, 1), "label 5");
+}
+
 TEST(OpenSimMotion, SharedGaitFile) {
   const fs::path mot = kMotions / "subject01_walk1_ik_gait2392.mot";
   if (!fs::exists(mot)) GTEST_SKIP() << "shared data not found: " << mot;

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -472,12 +473,60 @@ TEST(Attachments, BadDeclarationsNameTheField) {
             "muscles[0].fibres.generator.insertion");
 }
 
+TEST(Attachments, DeclaredAreasReachOneAndAHalfSampleSteps) {
+  const LoadedScene scene = loadScene(writeScene(
+      "declared-reach.json",
+      declaredScene(R"("origin": {"landmarks": [[0, 5, 7]], "radius": 5, "bones": ["fixed"]},
+                       "insertion": {"bone": "moving", "distance": 2})")));
+  const fibremss::MuscleInput& muscle = scene.muscles[0];
+  std::vector<double> steps;
+  for (size_t f = 0; f < muscle.fibres.fibreCount(); ++f) {
+    const auto fibre = muscle.fibres.fibre(f);
+    double length = 0;
+    for (size_t i = 1; i < fibre.size(); ++i) length += fibre[i].distance(fibre[i - 1]);
+    steps.push_back(length / (muscle.parameters.resolution - 1));
+  }
+  std::sort(steps.begin(), steps.end());
+  EXPECT_NEAR(muscle.parameters.attachmentDistance, 1.5 * steps[steps.size() / 2], 1e-6);
+  // Given, it is kept; without declared areas the default is 4 mm (MillimetresBecomeMetres).
+  EXPECT_FLOAT_EQ(
+      loadScene(writeScene("declared-reach.json", declaredScene(R"("origin": {"landmarks":
+          [[0, 5, 7]], "radius": 5, "bones": ["fixed"]}, "insertion": {"bone": "moving",
+          "distance": 2}, "attachment_distance": 3)")))
+          .muscles[0]
+          .parameters.attachmentDistance,
+      0.003f);
+}
+
+TEST(Attachments, AnEndWithNoFixedParticleIsAnErrorUnlessDeclaredFree) {
+  const auto prepare = [](const std::vector<std::string>& overrides) {
+    const LoadedScene scene = loadScene("fusiform", overrides);
+    fibremss::prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  };
+  // Nothing within 0 mm of the bars: the origin is named first, then the insertion.
+  const InputError origin = errorOf([&] { prepare({"attachment_distance=0"}); });
+  EXPECT_EQ(origin.where(), "free_end");
+  EXPECT_NE(origin.source().find("'fusiform'"), std::string::npos) << origin.what();
+  EXPECT_NE(origin.problem().find("fixed at its origin"), std::string::npos) << origin.what();
+  const InputError insertion = errorOf([&] {
+    prepare({"attachment_distance=0", "free_end=origin"});
+  });
+  EXPECT_NE(insertion.problem().find("fixed at its insertion"), std::string::npos)
+      << insertion.what();
+  EXPECT_NO_THROW(prepare({"attachment_distance=0", "free_end=both"}));
+  EXPECT_NO_THROW(prepare({}));
+  EXPECT_EQ(errorOf([&] { loadScene("fusiform", {"free_end=top"}); }).where(),
+            "muscles[0].free_end");
+}
+
 TEST(Attachments, CheckWarnsWhenNothingIsFixedToABoneThatMovesAway) {
-  // The insertion names the fixed bone: nothing is fixed to the moving one the fibres end at.
+  // The insertion names the fixed bone: nothing is fixed to the moving one the fibres end at
+  // (nor, the insertion declared free, anything at the insertion).
   const LoadedScene scene = loadScene(writeScene(
       "declared-wrong.json",
       declaredScene(R"("origin": {"landmarks": [[0, 5, 7]], "radius": 5, "bones": ["fixed"]},
-                       "insertion": {"landmarks": [[0, -60, 7]], "radius": 5, "bones": ["fixed"]})")));
+                       "insertion": {"landmarks": [[0, -60, 7]], "radius": 5, "bones": ["fixed"]},
+                       "free_end": "insertion")")));
   const fibremss::PreparedScene prepared =
       fibremss::prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   const std::vector<std::string> warnings = fibremss::attachmentWarnings(scene, prepared);

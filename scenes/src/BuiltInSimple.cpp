@@ -94,7 +94,8 @@ Json sphereMuscle(int subdivisions) {
               {"fibres", {{"generator", {{"type", "chords"}, {"axis", vec({0, 0, 1})}}}}},
               {"fibre_count", 64},
               {"resolution", 60},
-              {"attachment_distance", 0}};
+              {"attachment_distance", 0},
+              {"free_end", "both"}};  // held by the plates' contact alone, or by nothing
 }
 
 }  // namespace

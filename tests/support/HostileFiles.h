@@ -35,8 +35,9 @@ inline std::string cubeObj(double size, double x = 0) {
 }
 
 /// A scene in mm in `dir`: a cube bone at x < 0 (in `boneFile`; bone.obj is written) touching a
-/// 20 mm box muscle with four straight fibres, every coordinate multiplied by `scale`, `extra`
-/// top-level fields after them. Returns the scene path.
+/// 20 mm box muscle with four straight fibres (hanging from the cube: its insertion is free),
+/// every coordinate multiplied by `scale`, `extra` top-level fields after them. Returns the scene
+/// path.
 inline fs::path writeScene(const fs::path& dir, double scale = 1, const std::string& extra = "",
                            const std::string& boneFile = "bone.obj") {
   writeFile(dir / "bone.obj", cubeObj(10 * scale, -10 * scale));
@@ -54,7 +55,8 @@ inline fs::path writeScene(const fs::path& dir, double scale = 1, const std::str
   writeFile(scene, R"({"units": "mm", "bones": [{"name": "cube", "mesh": {"file": ")" + boneFile +
                        R"("}}],
     "muscles": [{"name": "box", "surface": {"file": "muscle.obj"},
-                 "fibres": {"file": "fibres.obj"}, "resolution": 5, "fibre_count": 4}])" +
+                 "fibres": {"file": "fibres.obj"}, "resolution": 5, "fibre_count": 4,
+                 "free_end": "insertion"}])" +
                        extra + "}");
   return scene;
 }

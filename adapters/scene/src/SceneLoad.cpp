@@ -31,6 +31,16 @@ constexpr double kDegrees = M_PI / 180;
 /// A scene's muscles have tendons unless they say otherwise: 10 % of each fibre at each
 /// attached end (MuscleParameters::tendonFraction).
 constexpr double kTendonFraction = 0.1;
+/// The attachment distance of a muscle that declares its areas and gives none, in sample steps
+/// ΔL (fibre length over resolution − 1) [1]: a fibre's last particle lies up to one step
+/// before the fibre's end, and the half step beyond reaches fibres that end a little short of
+/// their bone (real-hip at resolution 30, steps 4.4-6.7 mm: 4 mm left the last particle free in
+/// 33-50 of each muscle's 64 fibres ending on the femur, 8 mm in 1-19, 1.5 ΔL in 0-4).
+constexpr double kAttachmentSteps = 1.5;
+/// The attachment distance of a muscle without declared areas that gives none [m]: every
+/// particle this near any bone is fixed, so a reach of steps would fix a belly lying along a
+/// bone (example-elbow's flexor: 998 of 1920 particles at 1.5 ΔL = 16 mm, 254 at 4 mm).
+constexpr double kAttachmentDistance = 0.004;
 
 /// Every name an enum's toString() knows, in enum order (follows additions to Parameters.h).
 template <typename Enum>
@@ -169,7 +179,7 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
     if (!motion.has("file")) motion.fail("file", "missing: the OpenSim motion (.mot / .sto)");
     const std::string file = reader.resolve(motion, "file", motion.text("file", ""));
     const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
-    scene::readOpenSimMotion(motion, file, pivot, result.poses, labels);
+    scene::readOpenSimMotion(motion, file, pivot, result, labels);
   } else if (type == "sweep") {
     const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
     const btVector3 axis = motion.vector3("axis", btVector3(1, 0, 0));
@@ -224,6 +234,28 @@ TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& re
   return mesh;
 }
 
+/// A muscle's `free_end`: the ends that may hold no fixed particle (default: neither).
+FreeEnds readFreeEnds(Fields& muscle) {
+  static const std::vector<std::string> names{"none", "origin", "insertion", "both"};
+  const std::string name = muscle.choice("free_end", names.front(), names);
+  return static_cast<FreeEnds>(std::find(names.begin(), names.end(), name) - names.begin());
+}
+
+/// The median over the fibres of their length over `resolution` − 1: the step between a
+/// fibre's sampled particles [m].
+double medianSampleStep(const FibreSet& fibres, int resolution) {
+  std::vector<double> steps;
+  for (size_t f = 0; f < fibres.fibreCount(); ++f) {
+    const auto points = fibres.fibre(f);
+    double length = 0;
+    for (size_t i = 1; i < points.size(); ++i) length += points[i].distance(points[i - 1]);
+    steps.push_back(length / (resolution - 1));
+  }
+  if (steps.empty()) return 0;
+  std::nth_element(steps.begin(), steps.begin() + ptrdiff_t(steps.size() / 2), steps.end());
+  return steps[steps.size() / 2];
+}
+
 /// Evenly spaced subset of `count` fibres.
 FibreSet selectFibres(const FibreSet& all, size_t count) {
   FibreSet subset;
@@ -251,34 +283,19 @@ BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion&
   return input;
 }
 
-MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
-                       const SpringParameters& springs) {
-  MuscleInput input;
-  input.name = muscle.text("name", "muscle" + std::to_string(index), scene::kMaxNameBytes);
-  std::optional<scene::Shape> shape;
-  input.surface = readSurface(muscle, "surface", reader, shape);
-  const int fibreCount = muscle.integer("fibre_count", 64, 1, 1000000);
-  input.parameters.resolution = muscle.integer("resolution", 40, 2, 100000);
-  input.parameters.attachmentDistance =
-      btScalar(muscle.number("attachment_distance", 0.004 / reader.scale, 0, kInf) * reader.scale);
-  input.parameters.skinNeighbours = muscle.integer("skin_neighbours", 3, 1, 64);
-  input.parameters.tendonFraction =
-      btScalar(muscle.number("tendon_fraction", kTendonFraction, 0, 0.5));
-  input.parameters.tendonStiffness =
-      btScalar(muscle.number("tendon_stiffness", MuscleParameters{}.tendonStiffness, 1, 1e4));
-  const std::optional<scene::DeclaredAreas> declared = scene::readDeclaredAttachments(
-      muscle, input.name, input.surface, reader.scale, *reader.result, input.attachments);
-  input.parameters.springs = springs;
-  const int gridColumns = muscle.integer("fibre_grid_columns", 0, 0, 1000000);
-  const bool lattice =
-      springs.layout == SpringLayout::Lattice6 || springs.layout == SpringLayout::Lattice26;
-
+/// A muscle's `fibres` (a file or a generator) into input.fibres, fibreGridColumns and
+/// mergeConverging; returns the fibre file's path (empty when generated).
+std::string readFibres(Fields& muscle, const Reader& reader, int fibreCount, bool lattice,
+                       const std::optional<scene::DeclaredAreas>& declared,
+                       const std::optional<scene::Shape>& shape, int gridColumns,
+                       MuscleInput& input) {
   Fields fibres = muscle.object("fibres");
   const bool hasFile = fibres.has("file"), hasGenerator = fibres.has("generator");
   if (hasFile == hasGenerator)
     muscle.fail("fibres", "expected exactly one of {\"file\": PATH} or {\"generator\": {...}}");
+  std::string path;  // empty: generated
   if (hasFile) {
-    const std::string path = reader.resolve(fibres, "file", fibres.text("file", ""));
+    path = reader.resolve(fibres, "file", fibres.text("file", ""));
     FibreSet all = loadFibres(path, reader.scale);
     if (all.fibreCount() > size_t(fibreCount)) {
       reader.result->warnings.push_back(path + ": using " + std::to_string(fibreCount) + " of " +
@@ -292,9 +309,6 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
                                           std::to_string(fibreCount) + "; using all");
       input.fibres = std::move(all);
     }
-    for (auto& warning : checkFibres(input.fibres, input.surface, path,
-                                     std::max<double>(input.parameters.attachmentDistance, 1e-3)))
-      reader.result->warnings.push_back(std::move(warning));
     input.fibreGridColumns = gridColumns;
     // Measured fibres converge into tendons as generated ones do (632-1026 pairs
     // closer than 0.5 mm in a real set): near-coincident particles merge whatever the source.
@@ -312,6 +326,41 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
     fibres.set("generator", generator.finish());
   }
   muscle.set("fibres", fibres.finish());
+  return path;
+}
+
+MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
+                       const SpringParameters& springs) {
+  MuscleInput input;
+  input.name = muscle.text("name", "muscle" + std::to_string(index), scene::kMaxNameBytes);
+  std::optional<scene::Shape> shape;
+  input.surface = readSurface(muscle, "surface", reader, shape);
+  const int fibreCount = muscle.integer("fibre_count", 64, 1, 1000000);
+  input.parameters.resolution = muscle.integer("resolution", 40, 2, 100000);
+  input.parameters.skinNeighbours = muscle.integer("skin_neighbours", 3, 1, 64);
+  input.parameters.tendonFraction =
+      btScalar(muscle.number("tendon_fraction", kTendonFraction, 0, 0.5));
+  input.parameters.tendonStiffness =
+      btScalar(muscle.number("tendon_stiffness", MuscleParameters{}.tendonStiffness, 1, 1e4));
+  input.parameters.freeEnds = readFreeEnds(muscle);
+  const std::optional<scene::DeclaredAreas> declared = scene::readDeclaredAttachments(
+      muscle, input.name, input.surface, reader.scale, *reader.result, input.attachments);
+  input.parameters.springs = springs;
+  const int gridColumns = muscle.integer("fibre_grid_columns", 0, 0, 1000000);
+  const bool lattice =
+      springs.layout == SpringLayout::Lattice6 || springs.layout == SpringLayout::Lattice26;
+
+  const std::string path =
+      readFibres(muscle, reader, fibreCount, lattice, declared, shape, gridColumns, input);
+  const double fallback =
+      declared ? kAttachmentSteps * medianSampleStep(input.fibres, input.parameters.resolution)
+               : kAttachmentDistance;
+  input.parameters.attachmentDistance = btScalar(
+      muscle.number("attachment_distance", fallback / reader.scale, 0, kInf) * reader.scale);
+  if (!path.empty())
+    for (auto& warning : checkFibres(input.fibres, input.surface, path,
+                                     std::max<double>(input.parameters.attachmentDistance, 1e-3)))
+      reader.result->warnings.push_back(std::move(warning));
   if (lattice && input.fibreGridColumns <= 0)
     muscle.fail("fibre_grid_columns",
                 "the lattice spring layouts need fibres on a grid: set fibre_grid_columns for "

@@ -45,9 +45,9 @@ MotionTable readMotionTable(const std::string& path);
 /// "time": [t0, t1], "every": k}: one pose per row (in the time window, every k-th), the
 /// coordinates applied in the listed order about their axes as carried by the rotations before
 /// them (body-fixed, as OpenSim's CustomJoint), about the pivot. `file` is already resolved;
-/// `labels` receives the rows' times [s].
+/// `result` receives the poses and the coordinates' values [°], `labels` the rows' times [s].
 void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3& pivot,
-                       std::vector<btTransform>& poses, std::vector<double>& labels);
+                       BoneMotion& result, std::vector<double>& labels);
 
 /// The rigid motion `fraction` (in [0, 1]) of the way from `from` to `to` along the screw that
 /// joins them: rotation about a fixed axis in space while translating along it, so a rotation

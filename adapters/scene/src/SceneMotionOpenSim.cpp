@@ -236,8 +236,9 @@ MotionTable readMotionTable(const std::string& path) {
 }
 
 void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3& pivot,
-                       std::vector<btTransform>& poses, std::vector<double>& labels) {
+                       BoneMotion& result, std::vector<double>& labels) {
   const MotionTable table = readMotionTable(file);
+  std::vector<btTransform>& poses = result.poses;
   struct Coordinate {
     size_t column;
     btVector3 axis;
@@ -257,6 +258,7 @@ void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3&
     const std::string name = coordinate.text("column", "");
     const btVector3 axis = coordinate.vector3("axis", btVector3(1, 0, 0));
     if (!(axis.length() > 0)) coordinate.fail("axis", "expected a non-zero rotation axis");
+    result.coordinateNames.push_back(name);
     try {
       coordinates.push_back({table.column(name), axis.normalized()});
     } catch (const InputError& e) {
@@ -284,8 +286,12 @@ void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3&
     const double t = table.at(row, 0);
     if (t < window[0] - slack || t > window[1] + slack || inWindow++ % size_t(every) != 0) continue;
     btQuaternion rotation = btQuaternion::getIdentity();
-    for (const Coordinate& c : coordinates)
-      rotation *= btQuaternion(c.axis, btScalar(checkedAngle(table, row, c.column) * toRadians));
+    std::vector<double>& values = result.coordinates.emplace_back();
+    for (const Coordinate& c : coordinates) {
+      const double angle = checkedAngle(table, row, c.column) * toRadians;
+      rotation *= btQuaternion(c.axis, btScalar(angle));
+      values.push_back(angle / kDegrees);
+    }
     // About the pivot: translate it to the origin, rotate, translate back.
     poses.push_back(btTransform(btQuaternion::getIdentity(), pivot) * btTransform(rotation) *
                     btTransform(btQuaternion::getIdentity(), -pivot));

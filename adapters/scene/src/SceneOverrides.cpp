@@ -26,6 +26,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"skin_neighbours", {Target::Muscles, ""}},
       {"tendon_fraction", {Target::Muscles, ""}},
       {"tendon_stiffness", {Target::Muscles, ""}},
+      {"free_end", {Target::Muscles, ""}},
       {"layout", {Target::Section, "model"}},
       {"neighbours", {Target::Section, "model"}},
       {"kappa", {Target::Section, "model"}},

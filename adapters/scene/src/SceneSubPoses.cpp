@@ -25,6 +25,17 @@ std::string formatNumber(double value) {
   return text;
 }
 
+/// Coordinates `fraction` of the way from `from` (empty: rest, all 0) to `to`.
+std::vector<double> interpolateCoordinates(const std::vector<double>* from,
+                                           const std::vector<double>& to, double fraction) {
+  std::vector<double> values(to.size());
+  for (size_t c = 0; c < to.size(); ++c) {
+    const double start = from ? (*from)[c] : 0.0;
+    values[c] = start + (to[c] - start) * fraction;
+  }
+  return values;
+}
+
 /// The largest turn of any moving bone into pose `p` (from rest for the first), the bone, and
 /// the sub-poses it is split into.
 struct Jump {
@@ -91,6 +102,7 @@ void splitLargeJumps(LoadedScene& scene, double maxStepDeg) {
                          " poses; expected at most " + std::to_string(kMaxPoses) +
                          " (raise max_step_deg, or give fewer poses)");
   std::vector<std::vector<btTransform>> split(scene.motions.size());
+  std::vector<std::vector<std::vector<double>>> coordinates(scene.motions.size());
   std::vector<double> labels;
   std::vector<std::string> described;
   size_t jumps = 0, added = 0;
@@ -105,6 +117,10 @@ void splitLargeJumps(LoadedScene& scene, double maxStepDeg) {
         const btTransform from = p == 0 ? btTransform::getIdentity() : scene.bonePose(b, p - 1);
         split[b].push_back(j == parts ? scene.bonePose(b, p)
                                       : screwInterpolate(from, scene.bonePose(b, p), fraction));
+        const auto& values = scene.motions[b].coordinates;
+        if (!values.empty())
+          coordinates[b].push_back(interpolateCoordinates(p == 0 ? nullptr : &values[size_t(p - 1)],
+                                                          values[size_t(p)], fraction));
       }
       labels.push_back(previousLabel + (label - previousLabel) * fraction);
     }
@@ -112,23 +128,46 @@ void splitLargeJumps(LoadedScene& scene, double maxStepDeg) {
     ++jumps;
     added += size_t(parts - 1);
     if (described.size() < kNotedJumps)
-      described.push_back("pose " + std::to_string(p) + " (label " + formatNumber(label) +
-                          "): bone \"" + scene.bones[turning].name + "\" turns " +
-                          formatNumber(largest) + "° from " +
-                          (p == 0 ? std::string("rest") : "the previous pose") + ", split into " +
-                          std::to_string(parts) + " sub-poses of at most " +
+      described.push_back("pose " + std::to_string(p) + " (" + poseName(scene, p) + "): bone \"" +
+                          scene.bones[turning].name + "\" turns " + formatNumber(largest) +
+                          "° from " + (p == 0 ? std::string("rest") : "the previous pose") +
+                          ", split into " + std::to_string(parts) + " sub-poses of at most " +
                           formatNumber(maxStepDeg) + "° (simulation.max_step_deg)");
   }
   if (jumps == 0) return;
-  for (size_t b : moving) scene.motions[b].poses = std::move(split[b]);
+  for (size_t b : moving) {
+    scene.motions[b].poses = std::move(split[b]);
+    if (!scene.motions[b].coordinates.empty())
+      scene.motions[b].coordinates = std::move(coordinates[b]);
+  }
   scene.poseCount = int(labels.size());
   scene.poseLabels = std::move(labels);
   for (auto& note : described) scene.notes.push_back(std::move(note));
   if (jumps > described.size())
     scene.notes.push_back(std::to_string(jumps - described.size()) +
                           " more jumps split the same way");
-  scene.notes.push_back(std::to_string(added) + " sub-poses added: " +
-                        std::to_string(scene.poseCount) + " poses (simulation steps) in all");
+  scene.notes.push_back(std::to_string(added) +
+                        " sub-poses added: " + std::to_string(scene.poseCount) +
+                        " poses (simulation steps) in all, so that no bone turns more than " +
+                        formatNumber(maxStepDeg) +
+                        "° per step (simulation.max_step_deg; 0 keeps the poses as given)");
 }
 
 }  // namespace fibremss::scene
+
+namespace fibremss {
+
+std::string poseName(const LoadedScene& scene, int pose) {
+  for (const BoneMotion& motion : scene.motions) {
+    if (motion.coordinates.size() <= size_t(pose)) continue;
+    std::string name;
+    for (size_t c = 0; c < motion.coordinateNames.size(); ++c)
+      name += (c ? ", " : "") + motion.coordinateNames[c] + "=" +
+              scene::formatNumber(motion.coordinates[size_t(pose)][c]) + "°";
+    return name;
+  }
+  const bool labelled = pose >= 0 && size_t(pose) < scene.poseLabels.size();
+  return "label " + scene::formatNumber(labelled ? scene.poseLabels[size_t(pose)] : pose);
+}
+
+}  // namespace fibremss

@@ -948,16 +948,18 @@ FibreGenerationResult generateFibres(const TriangleMesh& surface, const Attachme
                          "areas are not on its two ends; raise the grid cap or move the areas");
   const FibreQuality& q = best.quality;
   if (q.generated < needed)
-    throw InputError(source, "",
-                     "made " + std::to_string(q.generated) + " of " +
-                         std::to_string(options.count) + " fibres, fewer than the " +
-                         std::to_string(needed) + " (" +
-                         std::to_string(int(std::lround(options.minShare * 100))) +
-                         " %) required (grid " + grids + "; " + std::to_string(q.droppedOutside) +
-                         " streamlines left the surface, " + std::to_string(q.droppedEarly) +
-                         " stopped before the insertion area); change: widen the attachment "
-                         "areas or put them on the muscle's two ends, ask for fewer fibres (" +
-                         std::to_string(q.generated) + "), or accept a smaller minimum share");
+    throw InputError(
+        source, "",
+        "made " + std::to_string(q.generated) + " of " + std::to_string(options.count) +
+            " fibres, fewer than the " + std::to_string(needed) + " (" +
+            std::to_string(int(std::lround(options.minShare * 100))) + " %) required (grid " +
+            grids + "; " + std::to_string(q.droppedOutside) + " streamlines left the surface, " +
+            std::to_string(q.droppedEarly) +
+            " stopped before the insertion area); change: widen the attachment "
+            "areas or put them on the muscle's two ends" +
+            (q.generated > 0 ? ", ask for fewer fibres (" + std::to_string(q.generated) +
+                                   "), or accept a smaller minimum share"
+                             : std::string(" (no streamline joined them)")));
   if (tried.size() > 1)
     best.warnings.push_back(source + ": grid raised from " + std::to_string(options.grid) +
                             " (tried " + grids + ")");

@@ -14,6 +14,11 @@ namespace fibremss {
 /// Rigid motion of one bone over the scene's poses, relative to its rest pose.
 struct BoneMotion {
   std::vector<btTransform> poses;  ///< one transform per pose (empty: the bone stays at rest)
+  /// The joint coordinates the poses are given in (an OpenSim motion's columns; empty for the
+  /// other motions).
+  std::vector<std::string> coordinateNames;
+  /// Per pose, the coordinates' values [°] (sub-poses: interpolated linearly).
+  std::vector<std::vector<double>> coordinates;
 };
 
 /// What a run writes (paths relative to the run's --out directory).
@@ -78,6 +83,10 @@ struct LoadedScene {
   /// Transform of bone b at pose p (identity where the bone has no motion).
   btTransform bonePose(size_t bone, int pose) const;
 };
+
+/// What pose `pose` is: its coordinates' values where a bone's motion gives them
+/// ("hip_flexion_r=30°, hip_adduction_r=-5°"), else its label.
+std::string poseName(const LoadedScene& scene, int pose);
 
 /// Warnings about a prepared scene's attachments: a muscle whose fibres end next to a bone that
 /// moves relative to a bone the muscle is fixed to, with no particle fixed to the moving bone

@@ -70,6 +70,15 @@ struct BoneSphereParameters {
   btScalar maxRadius = 0;  ///< spheres larger than this are dropped (0: no limit) [m]
 };
 
+/// The ends of a muscle that may hold no fixed particle: the origin is where its fibres start,
+/// the insertion where they end.
+enum class FreeEnds : uint8_t {
+  None,       ///< both ends must hold a particle fixed to a bone
+  Origin,     ///< the origin may be free
+  Insertion,  ///< the insertion may be free
+  Both,       ///< either may be free (a muscle held by contact alone, or by nothing)
+};
+
 /// Preparation of one muscle (method.md §2).
 struct MuscleParameters {
   int resolution = 40;                  ///< particles per fibre
@@ -83,6 +92,10 @@ struct MuscleParameters {
   /// A muscle of one material puts its strain where its section is thinnest, the converging
   /// ends; a stiffer tendon there leaves it to the belly, as in real muscle.
   btScalar tendonStiffness = 20;
+  /// Ends that may hold no fixed particle; an end that holds none and is not named here is an
+  /// InputError at preparation when the scene has bones (a scene file's muscles default to
+  /// None).
+  FreeEnds freeEnds = FreeEnds::Both;
   SpringParameters springs;  ///< spring layout and material
 };
 

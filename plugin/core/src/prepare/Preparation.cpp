@@ -149,16 +149,18 @@ bool mayFix(const MuscleInput& input, size_t b) {
       });
 }
 
+/// A length for messages, "1.23 mm".
+std::string mm(btScalar metres) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g mm", double(metres) * 1000);
+  return std::string(text);
+}
+
 /// One sentence per repair preparation made to a muscle (empty counts are left out).
 void describeRepairs(const MuscleInput& muscle, const MusclePreparationReport& report,
                      const std::vector<BoneInput>& bones, const std::vector<MuscleInput>& muscles,
                      std::vector<std::string>& repairs) {
   const std::string source = detail::muscleSource(muscle);
-  auto mm = [](btScalar metres) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%.3g mm", double(metres) * 1000);
-    return std::string(text);
-  };
   if (report.mergedParticles > 0)
     repairs.push_back(source + ": " + std::to_string(report.mergedParticles) + " of " +
                       std::to_string(report.sampledParticles) +
@@ -264,6 +266,39 @@ class DeclaredAreas {
   std::vector<size_t> fixedCount_;  ///< per area, particles it fixed
 };
 
+/// Whether some fibre holds a fixed particle in its first half (the origin) and in its last half
+/// (the insertion).
+std::pair<bool, bool> fixedEnds(const MuscleSettings& muscle) {
+  bool origin = false, insertion = false;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f) {
+    const uint32_t first = muscle.fibreOffsets[f], count = muscle.fibreOffsets[f + 1] - first;
+    for (uint32_t k = 0; k < count; ++k)
+      if (muscle.isFixed(muscle.fibreParticles[first + k]))
+        (2 * k < count ? origin : insertion) = true;
+  }
+  return {origin, insertion};
+}
+
+/// An end that holds no fixed particle and is not declared free is an InputError naming it.
+void requireFixedEnds(const MuscleInput& input, const MuscleSettings& muscle) {
+  const FreeEnds free = input.parameters.freeEnds;
+  if (free == FreeEnds::Both) return;
+  const auto [origin, insertion] = fixedEnds(muscle);
+  const bool originMissing = !origin && free != FreeEnds::Origin;
+  if (!originMissing && (insertion || free == FreeEnds::Insertion)) return;
+  const std::string end = originMissing ? "origin" : "insertion";
+  const std::string where = input.attachments.empty()
+                                ? "within the attachment distance of a bone"
+                                : "in the declared " + end + " area within the attachment distance";
+  throw InputError(detail::muscleSource(input), "free_end",
+                   "no particle is fixed at its " + end + " (the fibres' " +
+                       (originMissing ? "first" : "last") + " half): none lies " + where + " (" +
+                       mm(input.parameters.attachmentDistance) +
+                       "); raise attachment_distance, move the area, or declare the end free "
+                       "(\"free_end\": \"" +
+                       end + "\")");
+}
+
 /// Fixed particles, nearest bones and the warnings about attachments.
 void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones,
                    const std::vector<BoneInput>& boneInputs, MuscleSettings& muscle,
@@ -300,6 +335,7 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
                          " free (not fixed) particles lie inside bone '" + boneInputs[b].name +
                          "' at rest that preparation could not move out (they lie inside "
                          "another body too); collisions push them when they can");
+  requireFixedEnds(input, muscle);
   if (declared) declared->warnEmpty(boneInputs, warnings);
   if (muscle.fixedParticles.empty())
     warnings.push_back(detail::muscleSource(input) +
