@@ -175,6 +175,27 @@ void storeWork(const std::string& work, const std::string& dir, const std::strin
   std::filesystem::remove_all(work, error);
 }
 
+/// A work directory of this process's own beside `dir`, emptied: solved there and moved into
+/// place whole, so that two processes solving one key at once do not share ccx's files.
+std::string freshWorkDir(const std::string& dir) {
+  const std::string work = dir + ".solving-" + std::to_string(getpid());
+  std::filesystem::remove_all(work);
+  return work;
+}
+
+/// solve(), with `work` removed when it throws (tetgen or ccx not found, a surface tetgen
+/// refuses).
+template <typename Solve>
+auto solveIn(const std::string& work, Solve&& solve) {
+  try {
+    return solve();
+  } catch (...) {
+    std::error_code ignored;
+    std::filesystem::remove_all(work, ignored);
+    throw;
+  }
+}
+
 /// Copies every file of the parts (but their part.bin) into `work`, as a whole solve leaves them.
 void copyPartFiles(const std::string& cacheDir, const std::string& key, size_t muscles,
                    const std::string& work) {
@@ -341,15 +362,10 @@ bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepare
   if (std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin")) return true;
   if (loadPart(dir + "/part.bin", part) && !part.hitMemoryLimit()) return true;
   std::filesystem::remove_all(dir);  // none, or one that hit the memory limit: solved again
-  const std::string work = dir + ".solving-" + std::to_string(getpid());
-  std::filesystem::remove_all(work);
-  try {
-    part = solveCalculixMuscle(scene, prepared, definition, cut, m, work, progress, cancel);
-  } catch (...) {  // tetgen or ccx not found, a surface tetgen refuses
-    std::error_code ignored;
-    std::filesystem::remove_all(work, ignored);
-    throw;
-  }
+  const std::string work = freshWorkDir(dir);
+  part = solveIn(work, [&] {
+    return solveCalculixMuscle(scene, prepared, definition, cut, m, work, progress, cancel);
+  });
   if (part.interrupted) {
     std::filesystem::remove_all(work);
     return false;
@@ -369,8 +385,7 @@ bool mergeCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
     if (!loadPart(referencePartDir(cacheDir, key, m) + "/part.bin", parts[m])) return false;
     parts[m].inputFile = entry + "/" + parts[m].inputFile;
   }
-  const std::string work = entry + ".solving-" + std::to_string(getpid());
-  std::filesystem::remove_all(work);
+  const std::string work = freshWorkDir(entry);
   try {
     copyPartFiles(cacheDir, key, parts.size(), work);
   } catch (const std::filesystem::filesystem_error&) {  // another process merged them first
@@ -439,17 +454,10 @@ CalculixSolution cachedCalculixReference(
     if (mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution)) return solution;
     return assembleCalculixSolution(scene, prepared, definition, cut, {});  // interrupted
   }
-  // Solved in a directory of this process's own, moved into place whole: two processes
-  // solving the same key at once (two comparisons of one scene) must not share ccx's files.
-  const std::string work = entry + ".solving-" + std::to_string(getpid());
-  std::filesystem::remove_all(work);
-  try {
-    solution = solveCalculixReference(scene, prepared, definition, cut, work, progress, cancel);
-  } catch (...) {  // a failed solve (tetgen or ccx not found, a surface tetgen refuses)
-    std::error_code ignored;
-    std::filesystem::remove_all(work, ignored);
-    throw;
-  }
+  const std::string work = freshWorkDir(entry);
+  solution = solveIn(work, [&] {
+    return solveCalculixReference(scene, prepared, definition, cut, work, progress, cancel);
+  });
   if (solution.interrupted) {
     std::filesystem::remove_all(work);
     solution.inputFiles.clear();  // they were in the work directory
