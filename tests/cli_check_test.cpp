@@ -148,6 +148,8 @@ TEST(CliScenes, ExportAppliesOverrides) {
 TEST(CliConventions, BareFibremssPrintsTheHelp) {
   const Result result = run("");
   EXPECT_EQ(result.status, 0);
+  EXPECT_NE(result.out.find("Usage: fibremss [OPTIONS] SUBCOMMAND"), std::string::npos)
+      << result.out;
   for (const char* command : {"run", "compare", "check", "Exit codes"})
     EXPECT_NE(result.out.find(command), std::string::npos) << command << "\n" << result.out;
 }
@@ -177,10 +179,31 @@ TEST(CliConventions, EnumOptionsListTheirChoices) {
   const Result bad = run("reference fusiform --ccx-element C3D8 2>&1");
   EXPECT_EQ(bad.status, 2);
   EXPECT_NE(bad.out.find("expected one of C3D10, C3D4, got C3D8"), std::string::npos) << bad.out;
+  const Result format = run("run --help");
+  EXPECT_NE(format.out.find("--format vtk|gltf"), std::string::npos) << format.out;
+  const Result badFormat = run("run fusiform --format obj 2>&1");
+  EXPECT_EQ(badFormat.status, 2);
+  EXPECT_NE(badFormat.out.find("expected one of vtk, gltf, got obj"), std::string::npos)
+      << badFormat.out;
+}
+
+TEST(CliConventions, FlagsThatTurnSomethingOffReadAsTheyAreTyped) {
+  const Result help = run("compare --help");
+  for (const char* flag : {"--no-fronts ", "--no-reference ", "--no-gates "})
+    EXPECT_NE(help.out.find(flag), std::string::npos) << flag << "\n" << help.out;
+  EXPECT_EQ(help.out.find("{false}"), std::string::npos) << help.out;
 }
 
 TEST(CliConventions, OneTableOfExitCodesInTheHelpTheReadmeAndTheDocs) {
   const std::string help = run("--help").out;
+  // Every subcommand's help ends with the same table, after its own footer.
+  for (const char* command :
+       {"scenes", "check", "run", "compare", "merge", "fibres", "stability", "reference", "view"}) {
+    const std::string own = run(std::string(command) + " --help").out;
+    EXPECT_NE(own.find("Exit codes (every subcommand): 0 done"), std::string::npos)
+        << command << "\n"
+        << own;
+  }
   auto read = [](const char* relative) {
     std::ifstream in(fs::path(FIBREMSS_SOURCE_DIR) / relative);
     return std::string(std::istreambuf_iterator<char>(in), {});

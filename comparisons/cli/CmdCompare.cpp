@@ -162,13 +162,13 @@ void addCompareCommand(CLI::App& app) {
           "times the default); default fibremss, self-reference, btsoftbody, fem")
       ->delimiter(',');
   command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
-  command->add_flag("!--no-fronts", args->options.fronts,
-                    "One run per method instead of sweeping each over its cost knob "
-                    "(fibremss: what ends its iterations, iterations x0.5-x4 or the stop rule's "
-                    "tolerance x2-x0.25, and resolution x0.5/x2; btsoftbody iterations and fem "
-                    "substeps x0.5-x2)");
-  command->add_flag("!--no-reference", args->options.withReference,
-                    "Skip the CalculiX reference (no RMS to it, no gates, no ranking)");
+  addOffFlag(*command, "--no-fronts", args->options.fronts,
+             "One run per method instead of sweeping each over its cost knob "
+             "(fibremss: what ends its iterations, iterations x0.5-x4 or the stop rule's "
+             "tolerance x2-x0.25, and resolution x0.5/x2; btsoftbody iterations and fem "
+             "substeps x0.5-x2)");
+  addOffFlag(*command, "--no-reference", args->options.withReference,
+             "Skip the CalculiX reference (no RMS to it, no gates, no ranking)");
   addReferenceArgs(*command, args->options.reference);
   command
       ->add_option("--fem-cells", args->options.fem.mesher.targetCells,

@@ -227,7 +227,8 @@ void addFibresCommand(CLI::App& app) {
       ->add_option("--seeds", args->seeds,
                    "section: seeds over the widest cross-section, traced both ways; origin: "
                    "seeds over the origin area")
-      ->check(CLI::IsMember({"section", "origin"}))
+      ->check(oneOf({"section", "origin"}))
+      ->type_name("section|origin")
       ->capture_default_str();
   command->add_option("--out", args->out, "output legacy VTK LINES file")->required();
   command->callback([args] { run(*args); });

@@ -275,12 +275,10 @@ void addRunCommand(CLI::App& app) {
       "contacts; the same as summary.json 'series') and DIR/summary.json (with what "
       "the numerical guard did: rolled-back steps, retries, frozen muscles; and per muscle: "
       "volume, "
-      "penetration per bone, fixed particles, fibre length, worst spring). Exit code 3 when "
-      "the simulation failed (a muscle frozen, or NaN/explosion with on_failure=report), 4 when "
-      "with on_failure=stop-body every step ran but a muscle was frozen on the way, 130 "
-      "when interrupted by Ctrl-C and 143 by SIGTERM: the running step stops at the end of its "
-      "current iteration (it is not written), the steps before it are kept and every file "
-      "written stays valid. Soak run: --loop --steps N --sample-every 1000.");
+      "penetration per bone, fixed particles, fibre length, worst spring). Ctrl-C or SIGTERM "
+      "stops the running step at the end of its current iteration (it is not written); the "
+      "steps before it are kept and every file written stays valid. Soak run: --loop --steps N "
+      "--sample-every 1000.");
   addSceneArgs(*command, args->scene);
   command->add_option("--out", args->out,
                       "Directory for frames/*.vtp, run.pvd, scene.json and summary.json");
@@ -299,7 +297,8 @@ void addRunCommand(CLI::App& app) {
                    "scene units) and/or gltf (gltf/frame_NNNNN.glb, glTF 2.0 binary in metres: "
                    "muscle surfaces and bones, for game engines, three.js, glTF viewers)")
       ->delimiter(',')
-      ->check(CLI::IsMember({"vtk", "gltf"}))
+      ->check(oneOf({"vtk", "gltf"}))
+      ->type_name("vtk|gltf")
       ->capture_default_str();
   command->add_flag("--json", args->json, "Print the summary as JSON instead of text");
   command->add_flag("--loop", args->loop,

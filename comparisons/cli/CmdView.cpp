@@ -11,6 +11,7 @@
 
 #include "Commands.h"
 #include "SceneArgs.h"
+#include "Validators.h"
 #include "fibremss/Error.h"
 #include "fibremss/Messages.h"
 #include "fibremss/MuscleSystem.h"
@@ -117,7 +118,7 @@ void addViewCommand(CLI::App& app) {
           "--frames", args->options.steps,
           "Steps to take (frames to advance, for a run) before the first picture (default 0: the "
           "scene at rest, the run's first frame)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(nonNegativeInteger());
   command
       ->add_option("--colour-by,--color-by", args->options.colourBy,
                    "Colour muscles by fibre_stretch (current/rest length along the fibres), "

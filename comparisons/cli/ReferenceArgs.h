@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "Validators.h"
 #include "fibremss/Reference.h"
@@ -13,18 +14,15 @@ namespace fibremss::cli {
 /// help names the choices in the option's type.
 template <typename Enum>
 CLI::Validator choices(const std::map<std::string, Enum>& names) {
-  std::string list;
-  for (const auto& entry : names) list += (list.empty() ? "" : ", ") + entry.first;
-  return CLI::Validator(
-      [names, list](std::string& text) -> std::string {
-        for (const auto& [name, value] : names)
-          if (CLI::detail::to_lower(name) == CLI::detail::to_lower(text)) {
-            text = std::to_string(static_cast<int>(value));  // CLI11 reads enums as numbers
-            return {};
-          }
-        return "expected one of " + list + ", got " + text;
-      },
-      "");
+  std::vector<std::string> list;
+  std::vector<Enum> values;
+  for (const auto& [name, value] : names) {
+    list.push_back(name);
+    values.push_back(value);
+  }
+  return namedChoice(list, [values](size_t i) {
+    return std::to_string(static_cast<int>(values[i]));  // CLI11 reads enums as numbers
+  });
 }
 
 inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
@@ -98,10 +96,10 @@ inline void addReferenceArgs(CLI::App& command, ReferenceOptions& options) {
   command.add_flag("--reference-cached-only", options.cachedOnly,
                    "Use the reference (and each gate's solve) only if it is in the cache; what is "
                    "not there is reported missing, not computed");
-  command.add_flag("!--no-gates", options.gates,
-                   "Skip the reference's gate solves (attachment distance x0.5 and x1.5, "
-                   "increments halved, one level finer); the comparison then reports no "
-                   "ranking");
+  addOffFlag(command, "--no-gates", options.gates,
+             "Skip the reference's gate solves (attachment distance x0.5 and x1.5, "
+             "increments halved, one level finer); the comparison then reports no "
+             "ranking");
 }
 
 }  // namespace fibremss::cli

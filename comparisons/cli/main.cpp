@@ -52,6 +52,17 @@ std::string unknownSubcommand(const CLI::App& app, const std::string& word) {
          " Subcommands: " + list + ".";
 }
 
+/// The table of exit codes ends the help of the tool and of every subcommand, after its own
+/// footer.
+void addExitCodes(CLI::App& app) {
+  app.footer(fibremss::cli::kExitCodes);
+  for (CLI::App* command : app.get_subcommands({})) {
+    const std::string own = command->get_footer();
+    command->footer(own.empty() ? fibremss::cli::kExitCodes
+                                : own + "\n\n" + fibremss::cli::kExitCodes);
+  }
+}
+
 /// What --version prints: FibreMSS's version, Bullet's version and btScalar precision, the
 /// spring-force kernel chosen at runtime, the compiler.
 std::string versionText() {
@@ -79,12 +90,12 @@ std::string versionText() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"FibreMSS: fibre-sampled mass-spring muscles with sphere collision for Bullet"};
+  CLI::App app{"FibreMSS: fibre-sampled mass-spring muscles with sphere collision for Bullet",
+               "fibremss"};
   app.require_subcommand(1);
   app.set_version_flag("--version", versionText,
                        "Print the version, Bullet's version and precision, the SIMD kernel and the "
                        "compiler, and exit");
-  app.footer(fibremss::cli::kExitCodes);
   fibremss::cli::addScenesCommand(app);
   fibremss::cli::addCheckCommand(app);
   fibremss::cli::addRunCommand(app);
@@ -94,6 +105,7 @@ int main(int argc, char** argv) {
   fibremss::cli::addStabilityCommand(app);
   fibremss::cli::addReferenceCommand(app);
   fibremss::cli::addViewCommand(app);
+  addExitCodes(app);
   if (argc < 2) {  // no subcommand: what there is to run
     std::cout << app.help();
     return 0;
