@@ -137,6 +137,19 @@ TEST(CliCheck, EveryBuiltInScenePrepares) {
   }
 }
 
+TEST(CliCheck, ThinBonePartsAndMusclesDeclaredFreeAreNoWarnings) {
+  // hip-flexion's pelvis has a thin part whose sphere centres are pulled back (a repair);
+  // sphere-planes' sphere is declared free at both ends and its plates are thin throughout.
+  for (const char* scene : {"hip-flexion", "sphere-planes"}) {
+    const Result result = run(std::string("check ") + scene + " 2>&1");
+    ASSERT_EQ(result.status, 0) << scene << "\n" << result.out;
+    EXPECT_EQ(result.out.find("warning"), std::string::npos) << scene << "\n" << result.out;
+    EXPECT_NE(result.out.find("sphere centres pulled back inside a thin part"), std::string::npos)
+        << scene << "\n"
+        << result.out;
+  }
+}
+
 TEST(CliScenes, ExportAppliesOverrides) {
   const Result result = run("scenes --export thigh13 --set resolution=80 --set kappa=3");
   ASSERT_EQ(result.status, 0);

@@ -574,7 +574,7 @@ TEST(MergeAndReport, FourResolutionsGiveTable1ColumnsInOrder) {
   std::vector<std::string> sources;
   for (int resolution : {80, 40, 20, 60}) {  // cells finish in any order
     cells.push_back(madeSummary(2, 10, resolution));
-    sources.push_back("r" + std::to_string(resolution));
+    sources.push_back(std::string("r").append(std::to_string(resolution)));
   }
   writeComparison(mergeSummaries(cells, sources), out.string());
   const std::string report = readFile(out / "report.md");

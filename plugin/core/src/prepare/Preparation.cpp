@@ -337,12 +337,7 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
                          "another body too); collisions push them when they can");
   requireFixedEnds(input, muscle);
   if (declared) declared->warnEmpty(boneInputs, warnings);
-  if (muscle.fixedParticles.empty())
-    warnings.push_back(detail::muscleSource(input) +
-                       (declared ? ": no particle lies in a declared attachment area, so the "
-                                   "muscle is attached to nothing"
-                                 : ": no particle is within the attachment distance of a bone, "
-                                   "so the muscle is attached to nothing"));
+  // A muscle with no fixed particle got past requireFixedEnds only by declaring both ends free.
   // Fibre ends touching a bone whose last particle (ΔL − δ short of the end) stays free.
   size_t looseEnds = 0;
   for (size_t f = 0; !declared && f < muscle.fibreCount(); ++f) {
@@ -578,9 +573,11 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
     if (r.capped)
       notes.push_back(std::to_string(r.capped) +
                       " spheres capped (longest edge over 3 mean edge lengths)");
+    // Thin parts (a plate, a coarse box, a pelvic wing) are no fault of the mesh: a repair.
     if (r.pulledBack)
-      notes.push_back(std::to_string(r.pulledBack) +
-                      " sphere centres pulled back inside a thin part");
+      scene.report.repairs.push_back("bone '" + bones[b].name +
+                                     "': " + std::to_string(r.pulledBack) +
+                                     " sphere centres pulled back inside a thin part");
     if (r.dropped) notes.push_back(std::to_string(r.dropped) + " spheres dropped");
     if (boneSettings[b].sphereCentres.empty()) notes.push_back("no collision spheres at all");
     if (!notes.empty()) warnings.push_back("bone '" + bones[b].name + "': " + join(notes));
