@@ -45,10 +45,13 @@ configure_file(${PROJECT_SOURCE_DIR}/cmake/fibremss.pc.in ${PROJECT_BINARY_DIR}/
 install(FILES ${PROJECT_BINARY_DIR}/fibremss.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)
 
 # For a user of the installed tree: the README, the docs, the embedding examples' sources and the
-# scene files (share/doc/FibreMSS, share/fibremss/scenes).
+# scene files and the shipped references (share/doc/FibreMSS, share/fibremss/scenes,
+# share/fibremss/references).
 install(FILES ${PROJECT_SOURCE_DIR}/README.md DESTINATION ${CMAKE_INSTALL_DOCDIR})
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/scenes/example/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples)
 if(NOT FIBREMSS_CORE_ONLY)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/scenes/json/ DESTINATION ${CMAKE_INSTALL_DATADIR}/fibremss/scenes)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/scenes/references/
+          DESTINATION ${CMAKE_INSTALL_DATADIR}/fibremss/references)
 endif()

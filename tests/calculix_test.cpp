@@ -25,7 +25,9 @@
 
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
+#include "fibremss/Measures.h"
 #include "fibremss/Reference.h"
+#include "fibremss/ReferenceCache.h"
 #include "support/PrepFixtures.h"
 #include "support/Process.h"
 
@@ -1460,6 +1462,125 @@ TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
             std::string::npos)
       << report;
   EXPECT_EQ(report.find("nan |"), std::string::npos) << "tables print — for what does not apply";
+}
+
+TEST(ShippedReference, IsCompressedFloatsAndReadsBackWithinTheirPrecision) {
+  TemporaryDirectory dir("shipped_reference_test");
+  CalculixSolution solution;
+  solution.poseSurfaces.resize(3);
+  for (int p = 0; p < 3; ++p)
+    for (int i = 0; i < 2000; ++i)  // a smooth surface, as a muscle's
+      solution.poseSurfaces[size_t(p)].emplace_back(
+          0.01f * std::cos(0.01f * i), 0.01f * std::sin(0.01f * i), 1e-5f * i + 0.01f * p);
+  solution.poseFailures = {"", "", ""};
+  solution.returnSurface = solution.poseSurfaces[0];
+  solution.nodes = 11;
+  solution.increments = 9;
+  solution.seconds = 2.5;
+  solution.inputFiles = {"/another/machine/muscle0.inp"};
+  solution.cut = {2, 1.5, "no continuum equilibrium"};
+  const std::string shipped = (dir.path() / "k.ref.gz").string();
+  const std::string cached = (dir.path() / "k.bin").string();
+  shipSolution(shipped, solution);
+  saveSolution(cached, solution);
+  EXPECT_LT(std::filesystem::file_size(shipped), std::filesystem::file_size(cached) / 2)
+      << "floats, compressed";
+  CalculixSolution back;
+  ASSERT_TRUE(loadShippedSolution(shipped, back));
+  ASSERT_EQ(back.poseSurfaces.size(), 3u);
+  for (size_t p = 0; p < 3; ++p)
+    EXPECT_LT(rmsDistanceMm(back.poseSurfaces[p], solution.poseSurfaces[p]), 1e-4);
+  EXPECT_LT(rmsDistanceMm(back.returnSurface, solution.returnSurface), 1e-4);
+  EXPECT_EQ(back.poseFailures, solution.poseFailures);
+  EXPECT_EQ(back.nodes, 11u);
+  EXPECT_EQ(back.increments, 9);
+  EXPECT_EQ(back.seconds, 2.5);
+  EXPECT_EQ(back.cut.pose, 2);
+  EXPECT_EQ(back.cut.reason, solution.cut.reason);
+  EXPECT_TRUE(back.inputFiles.empty()) << "another machine's files are not shipped";
+  EXPECT_FALSE(loadShippedSolution((dir.path() / "absent.ref.gz").string(), back));
+  EXPECT_THROW(loadShippedSolution(cached, back), InputError) << "not a shipped reference";
+  std::filesystem::resize_file(shipped, std::filesystem::file_size(shipped) / 2);
+  EXPECT_THROW(loadShippedSolution(shipped, back), InputError) << "truncated";
+}
+
+TEST(ReferenceCommand, ShipsItsSolvesAndAnEmptyCacheFindsThemThere) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_ship_test");
+  const std::string scene = coarseFusiform(dir.path());
+  const std::string shipped = (dir.path() / "shipped").string();
+  const auto reference = [&](const std::string& cache, const std::string& out,
+                             const std::string& extra) {
+    return testing::runProcess("FIBREMSS_REFERENCES=" + shipped + " " + FIBREMSS_CLI +
+                               " reference " + scene + " --set resolution=8 --no-gates --cache " +
+                               (dir.path() / cache).string() + " --out " +
+                               (dir.path() / out).string() + " " + extra + " 2>&1");
+  };
+  const auto solved = reference("cache", "solved", "--ship " + shipped);
+  ASSERT_EQ(solved.exitCode, 0) << solved.output;
+  const nlohmann::json manifest =
+      nlohmann::json::parse(readText(dir.path() / "shipped/manifest.json"));
+  ASSERT_EQ(manifest.size(), 1u);
+  EXPECT_EQ(manifest[0]["set"], nlohmann::json::array({"resolution=8"}));
+  ASSERT_EQ(manifest[0]["solves"].size(), 1u) << "the reference, its gates not computed";
+  for (const nlohmann::json& solve : manifest[0]["solves"])
+    EXPECT_TRUE(std::filesystem::exists(dir.path() / "shipped" /
+                                        (solve["key"].get<std::string>() + ".ref.gz")));
+
+  const auto found = reference("empty", "found", "--reference-cached-only");
+  ASSERT_EQ(found.exitCode, 0) << found.output;
+  EXPECT_NE(found.output.find("reference (reference): shipped (" + shipped), std::string::npos)
+      << found.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "empty")) << "nothing solved or stored";
+  const nlohmann::json before =
+      nlohmann::json::parse(readText(dir.path() / "solved/reference.json"));
+  const nlohmann::json after = nlohmann::json::parse(readText(dir.path() / "found/reference.json"));
+  EXPECT_EQ(after["key"], before["key"]);
+  EXPECT_NEAR(after["gates"]["return_mm"].get<double>(), before["gates"]["return_mm"].get<double>(),
+              1e-4)
+      << "the same return gate from the shipped floats";
+
+  const auto again = reference("cache", "again", "--ship " + shipped);
+  ASSERT_EQ(again.exitCode, 0) << again.output;
+  EXPECT_EQ(nlohmann::json::parse(readText(dir.path() / "shipped/manifest.json")), manifest)
+      << "shipped again: the scene's entry replaced, not added";
+}
+
+TEST(ShippedReference, EveryShippedSolveStillHasTheKeyItsSceneGivesToday) {
+  REQUIRE_PROGRAM("ccx");
+#ifdef BT_USE_DOUBLE_PRECISION
+  GTEST_SKIP() << "the shipped keys hash the float build's prepared surfaces (the main job's)";
+#endif
+  const std::filesystem::path dir =
+      std::filesystem::path(FIBREMSS_SOURCE_DIR) / "scenes/references";
+  const nlohmann::json manifest = nlohmann::json::parse(readText(dir / "manifest.json"));
+  std::set<std::string> listed;
+  for (const nlohmann::json& entry : manifest) {
+    const std::string name = entry["scene"].get<std::string>();
+    SCOPED_TRACE(name);
+    const LoadedScene scene = loadScene(name, entry["set"].get<std::vector<std::string>>());
+    const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+    ReferenceOptions options;
+    options.cacheDir = "/nonexistent";
+    std::vector<std::string> keys;
+    for (const NamedReferenceCell& cell : referenceCells(scene, prepared, options))
+      if (cell.cell.muscle == 0) keys.push_back(cell.key);
+    std::vector<std::string> shipped;
+    for (const nlohmann::json& solve : entry["solves"]) shipped.push_back(solve["key"]);
+    EXPECT_EQ(keys, shipped) << "the scene or the reference changed: recompute it as "
+                                "scenes/references/README.md says";
+    for (const std::string& key : shipped) {
+      listed.insert(key + ".ref.gz");
+      CalculixSolution solution;
+      ASSERT_TRUE(loadShippedSolution((dir / (key + ".ref.gz")).string(), solution)) << key;
+      EXPECT_EQ(solution.poseSurfaces.size(), size_t(std::max(scene.poseCount, 1))) << key;
+    }
+  }
+  for (const auto& file : std::filesystem::directory_iterator(dir))
+    if (file.path().extension() == ".gz") {
+      EXPECT_TRUE(listed.count(file.path().filename().string())) << file.path() << " is unlisted";
+    }
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <set>
 
 #include "Commands.h"
 #include "Interrupt.h"
@@ -13,6 +15,7 @@
 #include "fibremss/Error.h"
 #include "fibremss/Messages.h"
 #include "fibremss/Output.h"
+#include "fibremss/ReferenceCache.h"
 
 namespace fibremss::cli {
 namespace {
@@ -23,6 +26,7 @@ struct ReferenceArgs {
   ReferenceOptions options;
   bool listCells = false;  ///< --cells: print the cells and stop
   int cell = -1;           ///< --cell I: solve that cell alone (-1: the whole reference)
+  std::string shipDir;     ///< --ship DIR: write its solves there as shipped references
 };
 
 /// One line per cell: its number, solve, muscle, cache key and whether it is stored.
@@ -69,6 +73,63 @@ void writeOut(const Reference& reference, const std::string& out) {
   std::filesystem::rename(path + ".partial", path);
 }
 
+/// `dir/manifest.json` with `entry` in place of the one of the same scene and overrides; the
+/// files only that one named are removed.
+void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry) {
+  const std::string path = dir + "/manifest.json";
+  nlohmann::ordered_json manifest = nlohmann::ordered_json::array();
+  if (std::ifstream in(path); in) {
+    manifest = nlohmann::ordered_json::parse(in, nullptr, false);
+    if (!manifest.is_array()) throw InputError(path, "", "expected a JSON array of shipped scenes");
+  }
+  const auto keys = [](const nlohmann::ordered_json& shipped) {
+    std::set<std::string> found;
+    if (shipped.contains("solves"))
+      for (const auto& solve : shipped.at("solves")) found.insert(solve.value("key", ""));
+    return found;
+  };
+  std::set<std::string> kept;  // the keys of the entry replaced, then those only it named
+  nlohmann::ordered_json updated = nlohmann::ordered_json::array();
+  for (const auto& other : manifest) {
+    if (other.value("scene", std::string()) == entry.at("scene") && other.contains("set") &&
+        other.at("set") == entry.at("set"))
+      kept.merge(keys(other));
+    else
+      updated.push_back(other);
+  }
+  updated.push_back(entry);
+  for (const auto& other : updated)
+    for (const std::string& key : keys(other)) kept.erase(key);
+  for (const std::string& stale : kept) std::filesystem::remove(dir + "/" + stale + ".ref.gz");
+  std::ofstream out(path + ".partial");
+  out << updated.dump(2) << "\n";
+  if (!out) throw std::runtime_error("cannot write " + path);
+  out.close();
+  std::filesystem::rename(path + ".partial", path);
+}
+
+/// Writes every solve of the reference (its own and its gates', as computed) to args.shipDir as
+/// shipped references (`<key>.ref.gz`) and records them in its manifest.json.
+void ship(const LoadedScene& scene, const PreparedScene& prepared, const ReferenceArgs& args) {
+  const std::string cacheDir =
+      args.options.cacheDir.empty() ? defaultReferenceCacheDir() : args.options.cacheDir;
+  std::filesystem::create_directories(args.shipDir);
+  nlohmann::ordered_json solves = nlohmann::ordered_json::array();
+  for (const NamedReferenceCell& cell : referenceCells(scene, prepared, args.options)) {
+    if (cell.cell.muscle != 0) continue;  // a cell per muscle, a file per solve
+    CalculixSolution solution;
+    if (!loadStoredSolution(cacheDir, cell.key, solution))
+      throw std::runtime_error("the " + cell.solve + " solve " + cell.key + " is not stored");
+    const std::string path = args.shipDir + "/" + cell.key + ".ref.gz";
+    shipSolution(path, solution);
+    solves.push_back({{"solve", cell.solve}, {"key", cell.key}});
+    std::printf("shipped %s (%s): %ju bytes\n", path.c_str(), cell.solve.c_str(),
+                static_cast<uintmax_t>(std::filesystem::file_size(path)));
+  }
+  updateManifest(args.shipDir,
+                 {{"scene", scene.name}, {"set", args.scene.overrides}, {"solves", solves}});
+}
+
 void reference(ReferenceArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   printWarnings(scene.warnings);
@@ -104,6 +165,7 @@ void reference(ReferenceArgs& args) {
     throw CLI::RuntimeError(interruptExitCode());
   }
   writeOut(result, out);
+  if (!args.shipDir.empty()) ship(scene, prepared, args);
   std::printf("%s\n", result.description.c_str());
   std::printf("poses solved: %d/%d%s\n", result.solution.solvedPoses(),
               static_cast<int>(result.solution.poseSurfaces.size()),
@@ -135,6 +197,14 @@ void addReferenceCommand(CLI::App& app) {
                    "a later `fibremss reference` merges the cells")
       ->check(nonNegativeInteger())
       ->excludes("--cells");
+  command
+      ->add_option("--ship", args->shipDir,
+                   "Also write the reference's solves (its own and its gates') to this "
+                   "directory as shipped references, `<key>.ref.gz`, listed in its "
+                   "manifest.json (scenes/references: found by every later run with an "
+                   "empty cache)")
+      ->excludes("--cells")
+      ->excludes("--cell");
   command->callback([args] { reference(*args); });
 }
 

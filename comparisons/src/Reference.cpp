@@ -42,6 +42,7 @@ struct Solve {
   std::string key;
   CalculixSolution solution;
   bool fromCache = false;
+  std::string shippedFrom;  ///< the shipped reference it was read from ("" : not shipped)
 };
 
 /// One solve of `solve.definition` through the cache, with a line of news saying which; false
@@ -50,26 +51,32 @@ bool solveOnce(const LoadedScene& scene, const PreparedScene& prepared, SceneCut
                const ReferenceOptions& options, const std::string& what, Solve& solve) {
   const ContinuumCut& cut = cuts.at(solve.definition.attachmentScale);
   solve.key = referenceCacheKey(scene, prepared, solve.definition, cut);
-  if (options.cachedOnly) {
+  const bool stored =
+      loadStoredSolution(options.cacheDir, solve.key, solve.solution, &solve.shippedFrom);
+  if (options.log && !options.cachedOnly) options.log("reference (" + what + "): " + solve.key);
+  if (stored && (options.cachedOnly || !solve.solution.hitMemoryLimit())) {
+    solve.fromCache = true;
+  } else if (options.cachedOnly) {
     // Parts of it solved as cells (`reference --cell`) are merged: that computes nothing.
-    solve.fromCache =
-        loadSolution(options.cacheDir + "/" + solve.key + "/surfaces.bin", solve.solution) ||
-        mergeCalculixParts(scene, prepared, solve.definition, cut, options.cacheDir,
-                           solve.solution);
+    solve.fromCache = mergeCalculixParts(scene, prepared, solve.definition, cut, options.cacheDir,
+                                         solve.solution);
     if (!solve.fromCache) {
       if (options.log)
         options.log("reference (" + what + "): " + solve.key + " not in the cache, not computed");
       return false;
     }
   } else {
-    if (options.log) options.log("reference (" + what + "): " + solve.key);
+    solve.shippedFrom.clear();  // one that hit the memory limit: solved again
     solve.solution =
         cachedCalculixReference(scene, prepared, solve.definition, cut, options.cacheDir,
                                 options.progress, options.cancel, &solve.fromCache, options.jobs);
   }
   if (options.log) {
     std::ostringstream line;
-    line << "reference (" << what << "): " << (solve.fromCache ? "from the cache" : "solved")
+    line << "reference (" << what << "): "
+         << (!solve.shippedFrom.empty() ? "shipped (" + solve.shippedFrom + ")"
+             : solve.fromCache          ? "from the cache"
+                                        : "solved")
          << ", " << solve.solution.solvedPoses() << "/" << solve.solution.poseSurfaces.size()
          << " poses, " << solve.solution.nodes << " nodes, " << solve.solution.elements
          << " tetrahedra";
@@ -258,7 +265,7 @@ CalculixDefinition storedRetry(const LoadedScene& scene, const PreparedScene& pr
   const ContinuumCut& cut = cuts.at(definition.attachmentScale);
   const std::string key = referenceCacheKey(scene, prepared, definition, cut);
   CalculixSolution solution;
-  const bool stored = loadSolution(cacheDir + "/" + key + "/surfaces.bin", solution) ||
+  const bool stored = loadStoredSolution(cacheDir, key, solution) ||
                       mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution);
   if (!stored || ccxFailureToRetry(solution).empty()) return definition;
   CalculixDefinition finer = definition;
@@ -370,7 +377,8 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   const bool found =
       solveVariant(scene, prepared, cuts, resolved.definition, resolved, "reference", base);
   reference.key = base.key;
-  reference.cacheEntry = resolved.cacheDir + "/" + reference.key;
+  reference.cacheEntry =
+      base.shippedFrom.empty() ? resolved.cacheDir + "/" + reference.key : base.shippedFrom;
   if (!found) {
     reference.missing = true;
     return reference;

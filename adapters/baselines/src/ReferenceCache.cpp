@@ -1,7 +1,9 @@
 // The reference cache: key, binary store of a solution, and the cached solve.
 #include "fibremss/ReferenceCache.h"
 
+#include <dlfcn.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <array>
 #include <cstdint>
@@ -12,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <sstream>
 #include <thread>
 #include <type_traits>
 
@@ -22,6 +25,7 @@ namespace {
 
 constexpr char kMagic[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '1'};
 constexpr char kPartMagic[8] = {'F', 'M', 'S', 'S', 'P', 'R', 'T', '1'};
+constexpr char kShippedMagic[8] = {'F', 'M', 'S', 'S', 'S', 'H', 'P', '1'};
 
 /// FNV-1a over everything fed to it.
 class Hasher {
@@ -63,16 +67,26 @@ class Hasher {
   uint64_t hash_ = 0xcbf29ce484222325ull;
 };
 
-void writePoints(std::ofstream& out, const std::vector<btVector3>& points) {
+/// How a store holds positions: doubles in the cache, floats in a shipped reference (about
+/// 10⁻⁵ mm on a muscle of 0.5 m, far below the gates' 0.1 mm).
+enum class Precision { Double, Float };
+
+void writePoints(std::ostream& out, const std::vector<btVector3>& points,
+                 Precision precision = Precision::Double) {
   const uint64_t count = points.size();
   out.write(reinterpret_cast<const char*>(&count), sizeof count);
   for (const btVector3& p : points) {
-    const double xyz[3] = {p.x(), p.y(), p.z()};
-    out.write(reinterpret_cast<const char*>(xyz), sizeof xyz);
+    if (precision == Precision::Float) {
+      const float xyz[3] = {float(p.x()), float(p.y()), float(p.z())};
+      out.write(reinterpret_cast<const char*>(xyz), sizeof xyz);
+    } else {
+      const double xyz[3] = {p.x(), p.y(), p.z()};
+      out.write(reinterpret_cast<const char*>(xyz), sizeof xyz);
+    }
   }
 }
 
-void writeText(std::ofstream& out, const std::string& text) {
+void writeText(std::ostream& out, const std::string& text) {
   const uint64_t size = text.size();
   out.write(reinterpret_cast<const char*>(&size), sizeof size);
   out.write(text.data(), static_cast<std::streamsize>(size));
@@ -81,7 +95,8 @@ void writeText(std::ofstream& out, const std::string& text) {
 /// Reads from the stream or throws InputError naming the file.
 class Reader {
  public:
-  Reader(std::ifstream& in, const std::string& path) : in_(in), path_(path) {}
+  Reader(std::istream& in, const std::string& path, Precision precision = Precision::Double)
+      : in_(in), path_(path), precision_(precision) {}
   template <typename T>
   T value() {
     T v{};
@@ -102,36 +117,85 @@ class Reader {
     if (count > (1ull << 32)) throw InputError(path_, "", "not a reference cache file");
     std::vector<btVector3> points(count);
     for (btVector3& p : points) {
-      const auto xyz = value<std::array<double, 3>>();
-      p.setValue(btScalar(xyz[0]), btScalar(xyz[1]), btScalar(xyz[2]));
+      if (precision_ == Precision::Float) {
+        const auto xyz = value<std::array<float, 3>>();
+        p.setValue(btScalar(xyz[0]), btScalar(xyz[1]), btScalar(xyz[2]));
+      } else {
+        const auto xyz = value<std::array<double, 3>>();
+        p.setValue(btScalar(xyz[0]), btScalar(xyz[1]), btScalar(xyz[2]));
+      }
     }
     return points;
   }
+  /// Whether the stream has nothing left.
+  bool atEnd() { return in_.peek() == std::char_traits<char>::eof(); }
 
  private:
-  std::ifstream& in_;
+  std::istream& in_;
   const std::string& path_;
+  Precision precision_;
 };
 
-/// Writes a muscle's part (its input file by name alone) to `path` atomically.
-void savePart(const std::string& path, const MuscleSolution& part) {
+/// Writes what `write(out)` puts in a stream to `path` atomically (a temporary file renamed).
+template <typename Write>
+void writeAtomically(const std::string& path, Write&& write) {
   const std::string temporary = path + ".partial";
   {
     std::ofstream out(temporary, std::ios::binary);
+    write(out);
+    if (!out) throw std::runtime_error("cannot write " + temporary);
+  }
+  std::filesystem::rename(temporary, path);
+}
+
+/// The counts and time a solve and a muscle's part both end with.
+struct SolveCounts {
+  uint64_t nodes = 0, elements = 0, prescribedNodes = 0;
+  long newtonIterations = 0, increments = 0;
+  double seconds = 0;
+};
+
+void writeCounts(std::ostream& out, const SolveCounts& c) {
+  const uint64_t counts[5] = {c.nodes, c.elements, c.prescribedNodes,
+                              static_cast<uint64_t>(c.newtonIterations),
+                              static_cast<uint64_t>(c.increments)};
+  out.write(reinterpret_cast<const char*>(counts), sizeof counts);
+  out.write(reinterpret_cast<const char*>(&c.seconds), sizeof c.seconds);
+}
+
+SolveCounts readCounts(Reader& read) {
+  const auto counts = read.value<std::array<uint64_t, 5>>();
+  SolveCounts c;
+  c.nodes = counts[0];
+  c.elements = counts[1];
+  c.prescribedNodes = counts[2];
+  c.newtonIterations = static_cast<long>(counts[3]);
+  c.increments = static_cast<long>(counts[4]);
+  c.seconds = read.value<double>();
+  return c;
+}
+
+/// Reads the magic `expected` from `in`, else throws InputError naming what `path` is not.
+void expectMagic(std::istream& in, const std::string& path, const char (&expected)[8],
+                 const char* what) {
+  char magic[8];
+  in.read(magic, sizeof magic);
+  if (!in || std::memcmp(magic, expected, sizeof magic) != 0)
+    throw InputError(path, "", std::string("not a ") + what);
+}
+
+/// Writes a muscle's part (its input file by name alone) to `path` atomically.
+void savePart(const std::string& path, const MuscleSolution& part) {
+  writeAtomically(path, [&](std::ostream& out) {
     out.write(kPartMagic, sizeof kPartMagic);
     const uint64_t steps = part.stepSurfaces.size();
     out.write(reinterpret_cast<const char*>(&steps), sizeof steps);
     for (const std::vector<btVector3>& surface : part.stepSurfaces) writePoints(out, surface);
     writeText(out, part.failure);
-    const uint64_t counts[5] = {part.nodes, part.tetrahedra, part.prescribedNodes,
-                                static_cast<uint64_t>(part.newtonIterations),
-                                static_cast<uint64_t>(part.increments)};
-    out.write(reinterpret_cast<const char*>(counts), sizeof counts);
-    out.write(reinterpret_cast<const char*>(&part.seconds), sizeof part.seconds);
+    writeCounts(out, {part.nodes, part.tetrahedra, part.prescribedNodes, part.newtonIterations,
+                      part.increments, part.seconds});
     writeText(out, std::filesystem::path(part.inputFile).filename().string());
-    if (!out) throw std::runtime_error("cannot write " + temporary);
-  }
-  std::filesystem::rename(temporary, path);
+  });
 }
 
 /// Reads what savePart wrote; false when `path` does not exist.
@@ -139,24 +203,68 @@ bool loadPart(const std::string& path, MuscleSolution& part) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return false;
   Reader read(in, path);
-  char magic[sizeof kPartMagic];
-  in.read(magic, sizeof magic);
-  if (!in || std::memcmp(magic, kPartMagic, sizeof kPartMagic) != 0)
-    throw InputError(path, "", "not a FibreMSS reference part file");
+  expectMagic(in, path, kPartMagic, "FibreMSS reference part file");
   part = {};
   const auto steps = read.value<uint64_t>();
   if (steps > 1000000) throw InputError(path, "", "not a FibreMSS reference part file");
   for (uint64_t s = 0; s < steps; ++s) part.stepSurfaces.push_back(read.points());
   part.failure = read.text();
-  const auto counts = read.value<std::array<uint64_t, 5>>();
-  part.nodes = counts[0];
-  part.tetrahedra = counts[1];
-  part.prescribedNodes = counts[2];
-  part.newtonIterations = static_cast<long>(counts[3]);
-  part.increments = static_cast<long>(counts[4]);
-  part.seconds = read.value<double>();
+  const SolveCounts counts = readCounts(read);
+  part.nodes = counts.nodes;
+  part.tetrahedra = counts.elements;
+  part.prescribedNodes = counts.prescribedNodes;
+  part.newtonIterations = counts.newtonIterations;
+  part.increments = counts.increments;
+  part.seconds = counts.seconds;
   part.inputFile = read.text();
   return true;
+}
+
+/// Writes a solution (after its magic) in `precision`.
+void writeSolution(std::ostream& out, const CalculixSolution& solution, Precision precision) {
+  const uint64_t poses = solution.poseSurfaces.size();
+  out.write(reinterpret_cast<const char*>(&poses), sizeof poses);
+  for (size_t p = 0; p < poses; ++p) {
+    writeText(out, solution.poseFailures[p]);
+    writePoints(out, solution.poseSurfaces[p], precision);
+  }
+  writeText(out, solution.returnFailure);
+  writePoints(out, solution.returnSurface, precision);
+  writeCounts(out, {solution.nodes, solution.elements, solution.prescribedNodes,
+                    solution.newtonIterations, solution.increments, solution.seconds});
+  writeText(out, std::to_string(solution.inputFiles.size()));
+  for (const std::string& file : solution.inputFiles) writeText(out, file);
+  // The continuum cut after what older entries hold (they are read as having none).
+  const int64_t cut = solution.cut.pose;
+  out.write(reinterpret_cast<const char*>(&cut), sizeof cut);
+  out.write(reinterpret_cast<const char*>(&solution.cut.gapMm), sizeof solution.cut.gapMm);
+  writeText(out, solution.cut.reason);
+}
+
+/// Reads what writeSolution wrote.
+void readSolution(Reader& read, const std::string& path, CalculixSolution& solution) {
+  solution = {};
+  const auto poses = read.value<uint64_t>();
+  if (poses > 1000000) throw InputError(path, "", "not a FibreMSS reference cache file");
+  for (uint64_t p = 0; p < poses; ++p) {
+    solution.poseFailures.push_back(read.text());
+    solution.poseSurfaces.push_back(read.points());
+  }
+  solution.returnFailure = read.text();
+  solution.returnSurface = read.points();
+  const SolveCounts counts = readCounts(read);
+  solution.nodes = counts.nodes;
+  solution.elements = counts.elements;
+  solution.prescribedNodes = counts.prescribedNodes;
+  solution.newtonIterations = counts.newtonIterations;
+  solution.increments = counts.increments;
+  solution.seconds = counts.seconds;
+  const size_t files = std::stoul(read.text());
+  for (size_t f = 0; f < files; ++f) solution.inputFiles.push_back(read.text());
+  if (read.atEnd()) return;  // stored before the cut was
+  solution.cut.pose = static_cast<int>(read.value<int64_t>());
+  solution.cut.gapMm = read.value<double>();
+  solution.cut.reason = read.text();
 }
 
 std::string entryDir(const std::string& cacheDir, const std::string& key) {
@@ -280,74 +388,101 @@ std::string defaultReferenceCacheDir() {
 }
 
 void saveSolution(const std::string& path, const CalculixSolution& solution) {
-  const std::string temporary = path + ".partial";
-  {
-    std::ofstream out(temporary, std::ios::binary);
+  writeAtomically(path, [&](std::ostream& out) {
     out.write(kMagic, sizeof kMagic);
-    const uint64_t poses = solution.poseSurfaces.size();
-    out.write(reinterpret_cast<const char*>(&poses), sizeof poses);
-    for (size_t p = 0; p < poses; ++p) {
-      writeText(out, solution.poseFailures[p]);
-      writePoints(out, solution.poseSurfaces[p]);
-    }
-    writeText(out, solution.returnFailure);
-    writePoints(out, solution.returnSurface);
-    const uint64_t counts[5] = {solution.nodes, solution.elements, solution.prescribedNodes,
-                                static_cast<uint64_t>(solution.newtonIterations),
-                                static_cast<uint64_t>(solution.increments)};
-    out.write(reinterpret_cast<const char*>(counts), sizeof counts);
-    out.write(reinterpret_cast<const char*>(&solution.seconds), sizeof solution.seconds);
-    writeText(out, std::to_string(solution.inputFiles.size()));
-    for (const std::string& file : solution.inputFiles) writeText(out, file);
-    // The continuum cut after what older entries hold (they are read as having none).
-    const int64_t cut = solution.cut.pose;
-    out.write(reinterpret_cast<const char*>(&cut), sizeof cut);
-    out.write(reinterpret_cast<const char*>(&solution.cut.gapMm), sizeof solution.cut.gapMm);
-    writeText(out, solution.cut.reason);
-    if (!out) throw std::runtime_error("cannot write " + temporary);
-  }
-  std::filesystem::rename(temporary, path);
+    writeSolution(out, solution, Precision::Double);
+  });
 }
 
 bool loadSolution(const std::string& path, CalculixSolution& solution) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return false;
   Reader read(in, path);
-  char magic[sizeof kMagic];
-  in.read(magic, sizeof magic);
-  if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
-    throw InputError(path, "", "not a FibreMSS reference cache file");
-  solution = {};
-  const auto poses = read.value<uint64_t>();
-  if (poses > 1000000) throw InputError(path, "", "not a FibreMSS reference cache file");
-  for (uint64_t p = 0; p < poses; ++p) {
-    solution.poseFailures.push_back(read.text());
-    solution.poseSurfaces.push_back(read.points());
-  }
-  solution.returnFailure = read.text();
-  solution.returnSurface = read.points();
-  const auto counts = read.value<std::array<uint64_t, 5>>();
-  solution.nodes = counts[0];
-  solution.elements = counts[1];
-  solution.prescribedNodes = counts[2];
-  solution.newtonIterations = static_cast<long>(counts[3]);
-  solution.increments = static_cast<long>(counts[4]);
-  solution.seconds = read.value<double>();
-  const size_t files = std::stoul(read.text());
-  for (size_t f = 0; f < files; ++f) solution.inputFiles.push_back(read.text());
-  if (in.peek() == std::char_traits<char>::eof()) return true;  // stored before the cut was
-  solution.cut.pose = static_cast<int>(read.value<int64_t>());
-  solution.cut.gapMm = read.value<double>();
-  solution.cut.reason = read.text();
+  expectMagic(in, path, kMagic, "FibreMSS reference cache file");
+  readSolution(read, path, solution);
   return true;
 }
+
+void shipSolution(const std::string& path, const CalculixSolution& solution) {
+  std::ostringstream bytes;
+  bytes.write(kShippedMagic, sizeof kShippedMagic);
+  CalculixSolution shipped = solution;
+  shipped.inputFiles.clear();  // they name another machine's cache
+  writeSolution(bytes, shipped, Precision::Float);
+  const std::string data = bytes.str(), temporary = path + ".partial";
+  gzFile out = gzopen(temporary.c_str(), "wb9");
+  const bool written = out && gzwrite(out, data.data(), static_cast<unsigned>(data.size())) ==
+                                  static_cast<int>(data.size());
+  if (!(out && gzclose(out) == Z_OK && written))
+    throw std::runtime_error("cannot write " + temporary);
+  std::filesystem::rename(temporary, path);
+}
+
+bool loadShippedSolution(const std::string& path, CalculixSolution& solution) {
+  if (!std::filesystem::exists(path)) return false;
+  gzFile in = gzopen(path.c_str(), "rb");
+  if (!in) throw InputError(path, "", "cannot be opened");
+  std::string data;
+  char buffer[1 << 16];
+  int got;
+  while ((got = gzread(in, buffer, sizeof buffer)) > 0) data.append(buffer, size_t(got));
+  int error = Z_OK;
+  if (got < 0) gzerror(in, &error);
+  gzclose(in);
+  if (got < 0)
+    throw InputError(path, "",
+                     "not a gzip file or truncated (zlib error " + std::to_string(error) + ")");
+  std::istringstream bytes(data);
+  Reader read(bytes, path, Precision::Float);
+  expectMagic(bytes, path, kShippedMagic, "FibreMSS shipped reference");
+  readSolution(read, path, solution);
+  return true;
+}
+
+std::vector<std::string> shippedReferenceDirs() {
+  std::vector<std::string> dirs;
+  if (const char* dir = std::getenv("FIBREMSS_REFERENCES"); dir && *dir) dirs.push_back(dir);
+  dirs.push_back(FIBREMSS_SOURCE_REFERENCES);
+  Dl_info library;
+  if (dladdr(reinterpret_cast<const void*>(&shippedReferenceDirs), &library) && library.dli_fname)
+    dirs.push_back(
+        (std::filesystem::path(library.dli_fname).parent_path() / FIBREMSS_LIBRARY_TO_REFERENCES)
+            .lexically_normal()
+            .string());
+  return dirs;
+}
+
+std::string shippedReferencePath(const std::string& key) {
+  for (const std::string& dir : shippedReferenceDirs())
+    if (const std::string path = dir + "/" + key + ".ref.gz"; std::filesystem::exists(path))
+      return path;
+  return "";
+}
+
+bool loadStoredSolution(const std::string& cacheDir, const std::string& key,
+                        CalculixSolution& solution, std::string* shippedFrom) {
+  if (shippedFrom) shippedFrom->clear();
+  if (loadSolution(entryDir(cacheDir, key) + "/surfaces.bin", solution)) return true;
+  const std::string shipped = shippedReferencePath(key);
+  if (shipped.empty() || !loadShippedSolution(shipped, solution)) return false;
+  if (shippedFrom) *shippedFrom = shipped;
+  return true;
+}
+
+namespace {
+/// Whether the solve `key` is stored whole: in the cache or shipped.
+bool storedWhole(const std::string& cacheDir, const std::string& key) {
+  return std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin") ||
+         !shippedReferencePath(key).empty();
+}
+}  // namespace
 
 std::string referencePartDir(const std::string& cacheDir, const std::string& key, size_t m) {
   return entryDir(cacheDir, key) + ".parts/muscle" + std::to_string(m);
 }
 
 bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m) {
-  return std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin") ||
+  return storedWhole(cacheDir, key) ||
          std::filesystem::exists(referencePartDir(cacheDir, key, m) + "/part.bin");
 }
 
@@ -359,7 +494,7 @@ bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepare
   const std::string key = referenceCacheKey(scene, prepared, definition, cut);
   const std::string dir = referencePartDir(cacheDir, key, m);
   MuscleSolution part;
-  if (std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin")) return true;
+  if (storedWhole(cacheDir, key)) return true;
   if (loadPart(dir + "/part.bin", part) && !part.hitMemoryLimit()) return true;
   std::filesystem::remove_all(dir);  // none, or one that hit the memory limit: solved again
   const std::string work = freshWorkDir(dir);
@@ -443,7 +578,7 @@ CalculixSolution cachedCalculixReference(
   const std::string entry = entryDir(cacheDir, key);
   const std::string stored = entry + "/surfaces.bin";
   CalculixSolution solution;
-  const bool found = loadSolution(stored, solution) && !solution.hitMemoryLimit();
+  const bool found = loadStoredSolution(cacheDir, key, solution) && !solution.hitMemoryLimit();
   if (fromCache) *fromCache = found;
   if (found) return solution;
   if (solution.hitMemoryLimit()) std::filesystem::remove_all(entry);  // solved again

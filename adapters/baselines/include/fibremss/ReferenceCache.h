@@ -6,6 +6,7 @@
 #include <atomic>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "fibremss/CalculixReference.h"
 
@@ -31,9 +32,33 @@ void saveSolution(const std::string& path, const CalculixSolution& solution);
 /// is not such a file (truncated, other format).
 bool loadSolution(const std::string& path, CalculixSolution& solution);
 
-/// The solution stored under the key in `cacheDir/<key>/`; else, where muscles of it were
-/// solved as parts (cachedCalculixMuscle) or `jobs` > 1, its parts, the missing ones solved
-/// `jobs` at a time, merged into `<key>/` (mergeCalculixParts); else solved
+/// Writes `solution` as a shipped reference to `path` (`<key>.ref.gz` in a directory of
+/// shippedReferenceDirs): gzip-compressed, positions as floats (about 10⁻⁵ mm on a muscle of
+/// 0.5 m), without the names of its .inp files; atomically. Throws std::runtime_error when it
+/// cannot be written.
+void shipSolution(const std::string& path, const CalculixSolution& solution);
+
+/// Reads what shipSolution wrote; false when `path` does not exist. Throws InputError when it
+/// is not such a file (not gzip, truncated, other format).
+bool loadShippedSolution(const std::string& path, CalculixSolution& solution);
+
+/// Where shipped references (solves computed once and kept with FibreMSS, scenes/references)
+/// are looked for, in this order: $FIBREMSS_REFERENCES, the source tree's scenes/references,
+/// share/fibremss/references of the install the library was loaded from.
+std::vector<std::string> shippedReferenceDirs();
+
+/// `<dir>/<key>.ref.gz` in the first of shippedReferenceDirs that holds it; "" when none does.
+std::string shippedReferencePath(const std::string& key);
+
+/// The solution stored under `key`: the cache's `cacheDir/<key>/surfaces.bin`, else a shipped
+/// reference (shippedReferencePath); false when neither exists. `shippedFrom` (may be null): the
+/// shipped file it was read from, "" when it came from the cache.
+bool loadStoredSolution(const std::string& cacheDir, const std::string& key,
+                        CalculixSolution& solution, std::string* shippedFrom = nullptr);
+
+/// The solution stored under the key in `cacheDir/<key>/` or shipped (loadStoredSolution); else,
+/// where muscles of it were solved as parts (cachedCalculixMuscle) or `jobs` > 1, its parts, the
+/// missing ones solved `jobs` at a time, merged into `<key>/` (mergeCalculixParts); else solved
 /// (solveCalculixReference) in `cacheDir/<key>.solving-<pid>/`, which becomes `<key>/` once
 /// stored (removed when interrupted), so that processes solving the same key at once never
 /// share ccx's files; when another one stored it first, its solution is returned. Either way
@@ -48,7 +73,8 @@ CalculixSolution cachedCalculixReference(
 /// Where muscle `m`'s part of the solve `key` is kept: `cacheDir/<key>.parts/muscle<m>/`.
 std::string referencePartDir(const std::string& cacheDir, const std::string& key, size_t m);
 
-/// Whether the solve `key` is stored whole (`<key>/surfaces.bin`) or muscle `m`'s part of it.
+/// Whether the solve `key` is stored whole (`<key>/surfaces.bin`, or shipped) or muscle `m`'s part
+/// of it.
 bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m);
 
 /// Solves muscle `m` of the solve (solveCalculixMuscle) into its part directory (through
