@@ -576,3 +576,15 @@ TEST(SceneSystem, PutsTheBonesOfAWorldAtTheScenesFirstPose) {
   for (fibremss::MuscleHandle muscle : added.handles.muscles) world.removeMuscle(muscle);
   for (fibremss::BoneHandle bone : added.handles.bones) world.removeBone(bone);
 }
+
+TEST(SetShorthands, EveryKeyOfASettingsSectionIsSetWithoutItsSection) {
+  const nlohmann::json complete = nlohmann::json::parse(loadScene("fusiform").json);
+  for (const char* section : {"model", "simulation", "collision", "outputs"}) {
+    ASSERT_TRUE(complete.contains(section)) << section;
+    for (const auto& item : complete[section].items()) {
+      const LoadedScene scene = loadScene("fusiform", {item.key() + "=" + item.value().dump()});
+      EXPECT_EQ(nlohmann::json::parse(scene.json)[section][item.key()], item.value())
+          << section << "." << item.key();
+    }
+  }
+}
