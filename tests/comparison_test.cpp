@@ -14,6 +14,7 @@
 #include "fibremss/Compare.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/Error.h"
+#include "fibremss/Methods.h"
 #include "fibremss/PlotLayout.h"
 #include "support/Process.h"
 
@@ -1028,4 +1029,39 @@ TEST(FrontMethods, SweepTheKnobThatEndsTheDefaultSolversIterations) {
 }
 
 }  // namespace
+TEST(Methods, EachMethodParsesWithItsOwnKnobsOnly) {
+  for (const Method& method : methods()) {
+    const std::string name = method.name;
+    EXPECT_EQ(parseMethod(name).family, name);
+    EXPECT_EQ(methodOf(name + ":iterations=2"), &method);
+    EXPECT_NE(methodsHelp().find(name), std::string::npos) << name;
+    if (method.sceneVariants) continue;
+    for (const std::string& knob : method.knobs)
+      EXPECT_EQ(parseMethod(name + ":" + knob + "=x2").overrides,
+                std::vector<std::string>{knob + "=x2"});
+    EXPECT_THROW(parseMethod(name + ":no_such_knob=2"), InputError) << name;
+  }
+  EXPECT_THROW(parseMethod("equilibrium:iterations=2"), InputError);
+  EXPECT_EQ(defaultMethods(),
+            (std::vector<std::string>{"fibremss", "self-reference", "btsoftbody", "fem"}));
+}
+
+TEST(Methods, EachFrontHoldsItsMethodAndVariantsOfItsOwnKnobs) {
+  const SimulationParameters defaults{};
+  for (const Method& method : methods()) {
+    if (!method.front) continue;
+    const std::vector<std::string> front = method.front(defaults);
+    EXPECT_NE(std::find(front.begin(), front.end(), method.name), front.end()) << method.name;
+    for (const std::string& point : front) {
+      if (point == method.name) continue;
+      const MethodSpec spec = parseMethod(point);
+      EXPECT_EQ(spec.family, method.name);
+      ASSERT_EQ(spec.overrides.size(), 1u) << point;
+      const std::string key = spec.overrides[0].substr(0, spec.overrides[0].find('='));
+      EXPECT_NE(std::find(method.knobs.begin(), method.knobs.end(), key), method.knobs.end())
+          << point << ": the plot draws no line for its knob";
+    }
+  }
+}
+
 }  // namespace fibremss

@@ -339,7 +339,7 @@ TEST(SoftBodyScene, StaysAtRestWithoutMotion) {
   const btTransform rest = btTransform::getIdentity();
   SoftBodyScene soft(scene, {&rest, 1});
   EXPECT_EQ(soft.nodeCount(), scene.muscles[0]->particleCount());
-  EXPECT_EQ(soft.linkCount(), scene.muscles[0]->springs.size());
+  EXPECT_EQ(soft.elementCount(), scene.muscles[0]->springs.size());
   for (int pose = 0; pose < 3; ++pose) soft.stepPose({&rest, 1});
   std::vector<btVector3> surface;
   soft.surface(0, surface);
@@ -353,7 +353,7 @@ TEST(SoftBodyScene, PinnedNodesMoveWithTheirBoneAndTheRestFollows) {
   const btTransform moved(btQuaternion::getIdentity(), btVector3(0, 0.01f, 0));
   SoftBodyScene soft(scene, {&rest, 1});
   for (int pose = 0; pose < 6; ++pose) soft.stepPose({&moved, 1});
-  const auto positions = soft.positions(0);
+  const auto positions = soft.nodePositions(0);
   ASSERT_TRUE(finite(positions));
   for (uint32_t i : m.fixedParticles) {
     EXPECT_LT(positions[i].distance(moved * m.restPositions[i]), 1e-6f);
@@ -374,7 +374,7 @@ TEST(SoftBodyScene, MusclesTouchingAtRestStayAtRest) {
   for (size_t m = 0; m < scene.muscles.size(); ++m) ASSERT_GT(soft.body(m).m_clusters.size(), 1);
   for (int pose = 0; pose < 3; ++pose) soft.stepPose({&rest, 1});
   for (size_t m = 0; m < scene.muscles.size(); ++m) {
-    const auto positions = soft.positions(m);
+    const auto positions = soft.nodePositions(m);
     ASSERT_TRUE(finite(positions)) << "muscle " << m;
     double worst = 0;  // largest relative change of a link's length
     for (const Spring& spring : scene.muscles[m]->springs) {
@@ -476,7 +476,7 @@ TEST(SoftBodyScene, AShortLinkTakesNoMoreThanItsShareOfAStretch) {
     const btTransform pulled(btQuaternion::getIdentity(),
                              btVector3(0.003f * static_cast<btScalar>(pose), 0, 0));
     soft.stepPose(std::array<btTransform, 2>{rest, pulled});
-    const auto positions = soft.positions(0);
+    const auto positions = soft.nodePositions(0);
     ASSERT_TRUE(finite(positions)) << "pose " << pose;
     const double stretch = 1 + 0.003 * pose / 0.06;  // the whole fibre's
     for (const Spring& spring : m.springs) {

@@ -2,6 +2,9 @@
 // and export -> load round trips.
 #include "fibremss/Scene.h"
 
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "fibremss/Error.h"
+#include "fibremss/SceneSystem.h"
 
 namespace fs = std::filesystem;
 using fibremss::InputError;
@@ -540,4 +544,47 @@ TEST(Attachments, CheckWarnsWhenNothingIsFixedToABoneThatMovesAway) {
   EXPECT_TRUE(fibremss::attachmentWarnings(
                   right, fibremss::prepareScene(right.bones, right.muscles, right.simulation.seed))
                   .empty());
+}
+
+TEST(SceneSystem, AddsEveryBoneAndThenEveryMuscleInSceneOrder) {
+  const LoadedScene scene = loadScene("fusiform", {"resolution=8"});
+  const fibremss::PreparedScene prepared = fibremss::prepareScene(scene);
+  ASSERT_FALSE(prepared.muscles.empty());
+  fibremss::MuscleSystem system(scene.simulation);
+  const fibremss::SceneHandles handles = fibremss::addScene(system, prepared);
+  ASSERT_EQ(handles.bones.size(), prepared.bones.size());
+  ASSERT_EQ(handles.muscles.size(), prepared.muscles.size());
+  for (size_t m = 0; m < prepared.muscles.size(); ++m)
+    EXPECT_EQ(&system.settings(handles.muscles[m]), prepared.muscles[m].get());
+}
+
+TEST(SceneSystem, PutsTheBonesOfAWorldAtTheScenesFirstPose) {
+  const LoadedScene scene = loadScene("fusiform", {"resolution=8"});
+  const fibremss::PreparedScene prepared = fibremss::prepareScene(scene);
+  btSoftBodyRigidBodyCollisionConfiguration configuration;
+  btCollisionDispatcher dispatcher(&configuration);
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, scene.simulation);
+  fibremss::WorldScene added = fibremss::addScene(world, scene, prepared);
+  ASSERT_EQ(added.bodies.size(), prepared.bones.size());
+  ASSERT_EQ(added.handles.muscles.size(), prepared.muscles.size());
+  for (size_t b = 0; b < added.bodies.size(); ++b) {
+    const btTransform expected = scene.bonePose(b, 0);
+    EXPECT_EQ(added.bodies[b]->transform().getOrigin(), expected.getOrigin()) << "bone " << b;
+  }
+  for (fibremss::MuscleHandle muscle : added.handles.muscles) world.removeMuscle(muscle);
+  for (fibremss::BoneHandle bone : added.handles.bones) world.removeBone(bone);
+}
+
+TEST(SetShorthands, EveryKeyOfASettingsSectionIsSetWithoutItsSection) {
+  const nlohmann::json complete = nlohmann::json::parse(loadScene("fusiform").json);
+  for (const char* section : {"model", "simulation", "collision", "outputs"}) {
+    ASSERT_TRUE(complete.contains(section)) << section;
+    for (const auto& item : complete[section].items()) {
+      const LoadedScene scene = loadScene("fusiform", {item.key() + "=" + item.value().dump()});
+      EXPECT_EQ(nlohmann::json::parse(scene.json)[section][item.key()], item.value())
+          << section << "." << item.key();
+    }
+  }
 }

@@ -3,6 +3,7 @@
 #include <string>
 
 #include "fibremss/Preparation.h"
+#include "fibremss/SceneSystem.h"
 #include "integrators/Integrators.h"
 #include "solver/TimeStep.h"
 #include "solver/VolumeForces.h"
@@ -35,13 +36,10 @@ BenchScene::BenchScene(int resolution, int threads, Integrator integrator)
     : scene_(loadScene("thigh13", {"resolution=" + std::to_string(resolution),
                                    "threads=" + std::to_string(threads),
                                    std::string("integrator=") + toString(integrator)})) {
-  const PreparedScene prepared = prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed);
+  const PreparedScene prepared = prepareScene(scene_);
   system_ = std::make_unique<MuscleSystem>(scene_.simulation);
-  for (const auto& bone : prepared.bones) bones_.push_back(system_->addBone(bone));
-  for (const auto& muscle : prepared.muscles) {
-    system_->addMuscle(muscle, bones_);
-    particles_ += muscle->particleCount();
-  }
+  bones_ = addScene(*system_, prepared).bones;
+  for (const auto& muscle : prepared.muscles) particles_ += muscle->particleCount();
   impl_ = &MuscleSystemAccess::impl(*system_);
   stepPose();
   dt_ = impl_->parameters.timeStep;

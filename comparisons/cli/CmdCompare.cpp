@@ -18,6 +18,7 @@
 #include "Validators.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/CompareReport.h"
+#include "fibremss/Methods.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
 #include "fibremss/Stability.h"
@@ -27,7 +28,7 @@ namespace {
 
 struct CompareArgs {
   SceneArgs scene;                   ///< SCENE and --set overrides
-  std::vector<std::string> methods;  ///< --methods (default: all four)
+  std::vector<std::string> methods;  ///< --methods (default: defaultMethods())
   std::string out;                   ///< --out DIR (default: compare-<scene>)
   CompareOptions options;            ///< baseline and reference settings
 };
@@ -151,16 +152,7 @@ void addCompareCommand(CLI::App& app) {
       "(cached, with its gates); write summary.json, "
       "report.md and speed_vs_error.png/.svg (plus penetration_vs_step for sweeps) to --out.");
   addSceneArgs(*command, args->scene);
-  command
-      ->add_option(
-          "--methods", args->methods,
-          "Comma-separated methods: fibremss, self-reference, equilibrium (the projective solver "
-          "until the force residual is below 1e-5 mm), "
-          "btsoftbody, fem, "
-          "fibremss:<key>=<value>[+<key>=<value>] (a FibreMSS variant), integrators "
-          "(one variant per integrator), btsoftbody:iterations=N, fem:substeps=N (N or xF: F "
-          "times the default); default fibremss, self-reference, btsoftbody, fem")
-      ->delimiter(',');
+  command->add_option("--methods", args->methods, methodsHelp())->delimiter(',');
   command->add_option("--out", args->out, "Output directory (default: compare-<scene>)");
   addOffFlag(*command, "--no-fronts", args->options.fronts,
              "One run per method instead of sweeping each over its cost knob "

@@ -22,6 +22,7 @@
 #include "fibremss/Analytic.h"
 #include "fibremss/Error.h"
 #include "fibremss/InputFiles.h"
+#include "fibremss/Methods.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/PlotLayout.h"
@@ -170,10 +171,9 @@ std::pair<std::string, std::string> frontOf(const std::string& method) {
   const std::string family = method.substr(0, colon);
   if (colon == std::string::npos) return {family, ""};
   const std::string variant = method.substr(colon + 1);
-  if (variant.find('+') == std::string::npos)
-    for (const char* knob : {"iterations", "resolution", "substeps", "cells", "tolerance",
-                             "epsilon", "budget_ms", "deviation_epsilon"})
-      if (variant.rfind(std::string(knob) + "=", 0) == 0) return {family, knob};
+  if (const Method* own = findMethod(family); own && variant.find('+') == std::string::npos)
+    for (const std::string& knob : own->knobs)
+      if (variant.rfind(knob + "=", 0) == 0) return {family, knob};
   return {method, ""};
 }
 
@@ -486,9 +486,9 @@ std::string runSettings(const nlohmann::json& runs) {
   out << "\nSettings of these runs (from the runs themselves):\n\n";
   for (const auto& run : runs) {
     out << "- " << text(run, "method") << ": " << text(run, "integrator");
-    const std::string method = text(run, "method");
+    const Method* method = methodOf(text(run, "method"));
     const double steps = number(run, "steps");
-    if ((method.rfind("fibremss", 0) == 0 || method == "self-reference") && steps > 0)
+    if (method && method->iterationsPerPose && steps > 0)
       out << ", " << cell(number(run, "iterations") / steps) << " iterations per pose";
     out << "\n";
   }
@@ -496,7 +496,7 @@ std::string runSettings(const nlohmann::json& runs) {
 }
 
 std::string describeMethods() {
-  return R"(## How each method was measured
+  std::string out = R"(## How each method was measured
 
 Every method runs the same prepared scene (the same particles, springs, fixed particles and
 surfaces) over every pose of the scene's motion, one step per pose, and is measured by the
@@ -523,41 +523,18 @@ same code (`Measures.h`):
   than it by more than its muscle's mean rest length (FibreMSS's guard rule, `springExploded`).
   **peak_memory_mb**: peak resident set of the process after the run (getrusage; it includes
   every run before it in the same process).
-
-Methods:
-
-- **fibremss**: the scene's own settings (integrator, iterations, adaptive dt).
-  **fibremss:k=v**: a variant with those scene overrides.
-- **self-reference**: FibreMSS with dt/8 (and min dt/8) and 8× the iterations, the same
-  simulated time per step.
-- **equilibrium**: FibreMSS's projective solver run at every pose until its force residual's RMS
-  equivalent displacement is below 1e-5 mm (checked every 16 iterations, at most 3 000
-  iterations; the bones move over as many iterations as in the scene): the model's own converged
-  state, the floor of its error. `rms_to_equilibrium_mm` of every run is measured against it.
 - **residual** (every FibreMSS run, after each pose): the net force of the springs, volume terms
   and loads on each free particle (a particle the last collision response pushed keeps only the
   part a frictionless contact cannot hold), as RMS and largest over the particles in N and as
   the equivalent displacement |r|/k (k: Σ k/3 of its springs plus its volume terms'), the
   worst pose's; 0 at an equilibrium whatever the iteration's speed.
-- **btsoftbody**: `btSoftBody` in a `btSoftRigidDynamicsWorld`: the same particles as nodes
-  (same masses), the springs as links (stiffness mapped to `m_kLST` per link from k = κ/L0,
-  the substep and the iteration count; solved softest first), fixed particles pinned (mass 0)
-  and moved with their bones every substep, bones as kinematic bodies with
-  `btBvhTriangleMeshShape` (SDF_RS), soft–soft collision by clusters (CL_SS); run in
-  centimetres because Bullet extrudes mesh triangles by a fixed 0.06 units. Substeps and link
-  iterations grow with the particles per fibre, n: ⌈n/4⌉ × ⌈2n/5⌉ per pose (the run's
-  integrator says which), the cheapest counts that kept thigh13's links within [1/3, 3]× at
-  resolutions 20 and 40 (comparisons/README.md). One thread (Debian's Bullet has no task
-  scheduler). The simulated time of a pose is FibreMSS's iterations × dt.
-- **fem**: Bullet's own continuum (a speed peer): each muscle's surface voxelized and split
-  into positively oriented tetrahedra, `btDeformableNeoHookeanForce` (E matched to the spring
-  network, E ≈ Σκ·L0 / 3V; ν = 0.45) in a `btDeformableMultiBodyDynamicsWorld` (elastic forces
-  explicit, damping implicit; nodes too stiff for the substep get extra mass), nodes near fixed
-  particles pinned and moved with their bones, free nodes moved with their bones by FibreMSS's
-  blended pre-transform each substep, node contact with the bones' exact meshes (own
-  projection after every substep), surface vertices embedded in the tetrahedra. Its substeps
-  per pose and added mass are in the settings below.
-- **calculix** (the reference, not a method): each muscle's static equilibrium per pose by
+
+Methods:
+
+)";
+  for (const Method& method : methods()) out += method.description;
+  return out +
+         R"(- **calculix** (the reference, not a method): each muscle's static equilibrium per pose by
   CalculiX on a tetgen mesh of its prepared surface (report section "Reference").
 - **name:knob=N**: a point of that method's front (its cost knob set to N).
 )";

@@ -1,14 +1,10 @@
 #include <sys/resource.h>
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstdlib>
 #include <functional>
-#include <map>
-#include <tuple>
 
 #include "fibremss/Analytic.h"
 #include "fibremss/Compare.h"
@@ -16,6 +12,8 @@
 #include "fibremss/FibreRun.h"
 #include "fibremss/Measures.h"
 #include "fibremss/Messages.h"
+#include "fibremss/Methods.h"
+#include "fibremss/SceneSystem.h"
 
 namespace fibremss {
 namespace {
@@ -52,35 +50,20 @@ std::vector<btTransform> posesAt(const LoadedScene& scene, int pose) {
   return transforms;
 }
 
-/// Point pairs (a, b, rest length) of one muscle, checked against 3× their rest length.
-using PairList = std::vector<std::tuple<uint32_t, uint32_t, btScalar>>;
-
-/// What the pose loop needs from a simulated method.
-struct Simulated {
-  std::function<bool(std::span<const btTransform>)> step;        ///< one pose; false: stopped
-  std::function<void(size_t, std::vector<btVector3>&)> surface;  ///< muscle's surface
-  std::function<std::span<const btVector3>(size_t)> points;      ///< muscle's simulated points
-  std::vector<PairList> pairs;              ///< per muscle, indices into points(muscle)
-  std::function<double()> springDeviation;  ///< at the end
-  long iterationsPerStep = 1;               ///< for ms/iteration
-  long timeStepsPerStep = 1;                ///< world substeps per pose, for ms/time step
-};
-
 /// A run of `method` on the scene, named and not yet measured.
-RunMetrics namedRun(const LoadedScene& scene, const char* method, const char* integrator) {
+RunMetrics namedRun(const LoadedScene& scene, const std::string& method) {
   RunMetrics metrics;
   metrics.scene = scene.name;
   metrics.method = method;
-  metrics.integrator = integrator;
   return metrics;
 }
 
 /// Mean rest length of each muscle's pairs (0 for a muscle without pairs).
-std::vector<double> meanRestLengths(const Simulated& sim) {
+std::vector<double> meanRestLengths(std::span<const std::vector<NodePair>> muscles) {
   std::vector<double> means;
-  for (const PairList& pairs : sim.pairs) {
+  for (const std::vector<NodePair>& pairs : muscles) {
     double restSum = 0;
-    for (const auto& pair : pairs) restSum += std::get<2>(pair);
+    for (const NodePair& pair : pairs) restSum += pair.restLength;
     means.push_back(pairs.empty() ? 0 : restSum / static_cast<double>(pairs.size()));
   }
   return means;
@@ -88,11 +71,14 @@ std::vector<double> meanRestLengths(const Simulated& sim) {
 
 /// True when some pair counts as exploded by FibreMSS's guard rule (springExploded: past 3× its
 /// rest length and longer than it by more than its muscle's mean rest length, `meanRest`).
-bool exploded(const Simulated& sim, std::span<const double> meanRest) {
-  for (size_t m = 0; m < sim.pairs.size(); ++m) {
-    const std::span<const btVector3> positions = sim.points(m);
-    for (const auto& [a, b, rest] : sim.pairs[m])
-      if (springExploded((positions[a] - positions[b]).length(), rest, meanRest[m])) return true;
+bool exploded(const BaselineScene& sim, std::span<const std::vector<NodePair>> pairs,
+              std::span<const double> meanRest) {
+  for (size_t m = 0; m < pairs.size(); ++m) {
+    const std::span<const btVector3> positions = sim.nodePositions(m);
+    for (const NodePair& pair : pairs[m])
+      if (springExploded((positions[pair.a] - positions[pair.b]).length(), pair.restLength,
+                         meanRest[m]))
+        return true;
   }
   return false;
 }
@@ -100,7 +86,7 @@ bool exploded(const Simulated& sim, std::span<const double> meanRest) {
 /// Runs every pose and measures it the way runFibreMSS does: surface penetration into the
 /// bones' true meshes over all steps, volume change at the last intact step and spring
 /// deviation at the last step.
-void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Simulated& sim,
+void runPoses(const LoadedScene& scene, const PreparedScene& prepared, BaselineScene& sim,
               const MethodRunOptions& options, Clock::time_point start, RunMetrics& metrics) {
   std::vector<MeshDistance> boneDistances;
   for (const auto& bone : prepared.bones) boneDistances.emplace_back(bone->mesh);
@@ -108,7 +94,14 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   for (const MeshDistance& d : boneDistances) bones.push_back(&d);
 
   const int steps = std::max(scene.poseCount, 1);
-  const std::vector<double> meanRest = meanRestLengths(sim);
+  std::vector<std::vector<NodePair>> pairs;
+  for (size_t m = 0; m < sim.muscleCount(); ++m) pairs.push_back(sim.nodePairs(m));
+  const std::vector<double> meanRest = meanRestLengths(pairs);
+  // The budget is checked between substeps too: one FEM pose can outlast a whole budget.
+  const auto outOfTime = [&] {
+    return (options.cancel && options.cancel->load()) ||
+           (options.budgetSeconds > 0 && secondsSince(start) > options.budgetSeconds);
+  };
   std::vector<double> msPerStep;
   Penetration penetration;
   std::vector<btVector3> poseSurface, muscleSurface;
@@ -119,13 +112,13 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
     }
     const std::vector<btTransform> transforms = posesAt(scene, s);
     const auto stepStart = Clock::now();
-    if (!sim.step(transforms)) {
+    if (!sim.stepPose(transforms, outOfTime)) {
       metrics.interrupted = true;
       break;
     }
     msPerStep.push_back(secondsSince(stepStart) * 1000);
     metrics.steps = s + 1;
-    metrics.iterations += sim.iterationsPerStep;
+    metrics.iterations += sim.iterationsPerPose();
 
     poseSurface.clear();
     for (size_t m = 0; m < prepared.muscles.size(); ++m) {
@@ -133,7 +126,7 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
       poseSurface.insert(poseSurface.end(), muscleSurface.begin(), muscleSurface.end());
     }
     metrics.nan = !allFinite(poseSurface);
-    metrics.exploded = !metrics.nan && exploded(sim, meanRest);
+    metrics.exploded = !metrics.nan && exploded(sim, pairs, meanRest);
     // A failed pose's surface says nothing about the method: it enters no penetration or RMS.
     if (!metrics.nan && !metrics.exploded) {
       penetration = combine(penetration, measurePenetration(poseSurface, bones, transforms));
@@ -148,8 +141,8 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
     }
   }
   metrics.msPerStep = median(msPerStep);
-  metrics.msPerIteration = metrics.msPerStep / static_cast<double>(sim.iterationsPerStep);
-  metrics.msPerTimeStep = metrics.msPerStep / static_cast<double>(sim.timeStepsPerStep);
+  metrics.msPerIteration = metrics.msPerStep / static_cast<double>(sim.iterationsPerPose());
+  metrics.msPerTimeStep = metrics.msPerStep / static_cast<double>(sim.substepsPerPose());
   if (metrics.steps > 0 && !metrics.nan) {
     metrics.maxPenetrationMm = penetration.maxMm;
     metrics.meanPenetrationMm = penetration.meanMm;
@@ -162,16 +155,6 @@ void runPoses(const LoadedScene& scene, const PreparedScene& prepared, const Sim
   }
   metrics.peakMemoryMb = peakMemoryMb();
   metrics.wallSeconds = secondsSince(start);
-}
-
-std::vector<std::string> split(const std::string& text, char separator) {
-  std::vector<std::string> parts;
-  size_t start = 0;
-  for (size_t end; (end = text.find(separator, start)) != std::string::npos; start = end + 1) {
-    parts.push_back(text.substr(start, end - start));
-  }
-  parts.push_back(text.substr(start));
-  return parts;
 }
 
 /// The first "step_deg" of a sweep motion anywhere in the scene JSON (NaN if none).
@@ -215,105 +198,19 @@ double poseDuration(const SimulationParameters& simulation) {
   return static_cast<double>(simulation.timeStep) * iterations;
 }
 
-RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
-                       const SoftBodyDefinition& definition, const MethodRunOptions& options) {
+RunMetrics runBaseline(
+    const LoadedScene& scene, const std::string& method, const PreparedScene& prepared,
+    const MethodRunOptions& options,
+    const std::function<std::unique_ptr<BaselineScene>(std::span<const btTransform>)>& build) {
   const auto start = Clock::now();
-  SoftBodyScene sim(prepared, posesAt(scene, 0), definition);
-  const SoftBodyDefinition& used = sim.definition();
-  char integrator[200];
-  std::snprintf(integrator, sizeof integrator,
-                "btSoftBody position solver (%d substeps × %d link iterations per pose, links "
-                "softest first, %d clusters per muscle × %d iterations)",
-                used.substepsPerPose, used.positionIterations, used.clustersPerMuscle,
-                used.clusterIterations);
-  RunMetrics metrics = namedRun(scene, "btsoftbody", integrator);
+  const std::unique_ptr<BaselineScene> sim = build(posesAt(scene, 0));
+  RunMetrics metrics = namedRun(scene, method);
   metrics.threads = 1;  // Debian's Bullet steps soft bodies on the calling thread only
-  metrics.particles = sim.nodeCount();
-  metrics.springs = sim.linkCount();
-  for (const auto& muscle : prepared.muscles)
-    metrics.boundaryParticles += muscle->boundaryParticles.size();
-
-  Simulated simulated;
-  double restLengths = 0;
-  for (const auto& muscle : prepared.muscles) {
-    simulated.pairs.emplace_back();
-    for (const Spring& s : muscle->springs) {
-      simulated.pairs.back().emplace_back(s.a, s.b, s.restLength);
-      restLengths += s.restLength;
-    }
-  }
-  simulated.step = [&](std::span<const btTransform> t) {
-    sim.stepPose(t);
-    return true;
-  };
-  simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
-  simulated.points = [&](size_t m) { return sim.positions(m); };
-  simulated.springDeviation = [&] {
-    double deviation = 0;
-    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
-      double lengths = 0;
-      for (const Spring& s : prepared.muscles[m]->springs) lengths += s.restLength;
-      if (lengths > 0) {
-        deviation += lengths * springDeviationRatio(prepared.muscles[m]->springs, sim.positions(m));
-      }
-    }
-    return restLengths > 0 ? deviation / restLengths : RunMetrics::kNone;
-  };
-  simulated.iterationsPerStep = static_cast<long>(used.substepsPerPose) * used.positionIterations;
-  simulated.timeStepsPerStep = used.substepsPerPose;
-  runPoses(scene, prepared, simulated, options, start, metrics);
-  return metrics;
-}
-
-RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
-                  const FemDefinition& definition, const MethodRunOptions& options) {
-  const auto start = Clock::now();
-  FemScene sim(prepared, posesAt(scene, 0), definition);
-  char integrator[320];
-  std::snprintf(integrator, sizeof integrator,
-                "Neo-Hookean FEM, btDeformableBodySolver (explicit elasticity, implicit damping, "
-                "%d substeps per pose, then settling until no node is faster than %.3g mm/s (at "
-                "most %d substeps), mass scaling +%.0f %%, at least %d pins per bone (fewest: "
-                "%zu))",
-                definition.substepsPerPose, 1e3 * double(definition.settleSpeed),
-                definition.settleSubsteps, 100 * sim.addedMassShare(), definition.minPinsPerBone,
-                sim.fewestPinsPerBone());
-  RunMetrics metrics = namedRun(scene, "fem", integrator);
-  metrics.threads = 1;
-  metrics.particles = sim.nodeCount();
-  metrics.springs = sim.tetrahedronCount();
-
-  // Tetrahedron edges with their rest lengths, for the explosion criterion.
-  Simulated simulated;
-  simulated.pairs.resize(sim.muscleCount());
-  for (size_t m = 0; m < sim.muscleCount(); ++m) {
-    const TetMesh& mesh = sim.tetMesh(m);
-    for (const auto& t : mesh.tetrahedra) {
-      for (int a = 0; a < 4; ++a) {
-        for (int b = a + 1; b < 4; ++b) {
-          simulated.pairs[m].emplace_back(t[a], t[b], mesh.nodes[t[a]].distance(mesh.nodes[t[b]]));
-        }
-      }
-    }
-  }
-  // The budget is checked between substeps too: one FEM pose can outlast a whole budget.
-  const auto outOfTime = [&] {
-    return (options.cancel && options.cancel->load()) ||
-           (options.budgetSeconds > 0 && secondsSince(start) > options.budgetSeconds);
-  };
-  int unsettled = 0;  // poses that did not settle within settleSubsteps
-  simulated.step = [&](std::span<const btTransform> t) {
-    const bool done = sim.stepPose(t, outOfTime);
-    unsettled += done && sim.lastSettleSubsteps() > definition.settleSubsteps;
-    return done;
-  };
-  simulated.surface = [&](size_t m, std::vector<btVector3>& out) { sim.surface(m, out); };
-  simulated.points = [&](size_t m) { return sim.nodePositions(m); };
-  simulated.springDeviation = [] { return RunMetrics::kNone; };  // not a spring model
-  simulated.iterationsPerStep = simulated.timeStepsPerStep = definition.substepsPerPose;
-  runPoses(scene, prepared, simulated, options, start, metrics);
-  if (unsettled > 0)
-    metrics.integrator += "; " + std::to_string(unsettled) + " pose(s) did not settle";
+  metrics.particles = sim->nodeCount();
+  metrics.springs = sim->elementCount();
+  metrics.boundaryParticles = sim->boundaryNodeCount();
+  runPoses(scene, prepared, *sim, options, start, metrics);
+  metrics.integrator = sim->settings();
   return metrics;
 }
 
@@ -533,45 +430,6 @@ void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& pre
   }
 }
 
-MethodSpec parseMethod(const std::string& name) {
-  MethodSpec spec;
-  spec.name = name;
-  const size_t colon = name.find(':');
-  spec.family = name.substr(0, colon);
-  if (spec.family != "fibremss" && spec.family != "self-reference" &&
-      spec.family != "equilibrium" && spec.family != "btsoftbody" && spec.family != "fem") {
-    throw InputError("--methods", name,
-                     "unknown method; expected fibremss, self-reference, equilibrium, btsoftbody, "
-                     "fem, fibremss:<key>=<value>[+<key>=<value>...], "
-                     "btsoftbody:iterations|substeps=N or fem:substeps|cells=N (N or xF, F times "
-                     "the default)");
-  }
-  if (colon == std::string::npos) return spec;
-  if (spec.family == "self-reference" || spec.family == "equilibrium") {
-    throw InputError("--methods", name, spec.family + " takes no variants");
-  }
-  for (const std::string& part : split(name.substr(colon + 1), '+')) {
-    const size_t equals = part.find('=');
-    if (equals == std::string::npos || equals == 0) {
-      throw InputError("--methods", name,
-                       "variant part '" + part + "' is not <key>=<value> (parts joined by '+')");
-    }
-    if (spec.family != "fibremss") {
-      const std::string key = part.substr(0, equals);
-      const bool known = spec.family == "btsoftbody" ? key == "iterations" || key == "substeps"
-                                                     : key == "substeps" || key == "cells";
-      if (!known || !(knobValue(part.substr(equals + 1), 1) > 0)) {
-        throw InputError("--methods", name,
-                         spec.family == "btsoftbody"
-                             ? "btsoftbody takes iterations=N or substeps=N (N > 0, or xF)"
-                             : "fem takes substeps=N or cells=N (N > 0, or xF)");
-      }
-    }
-    spec.overrides.push_back(part);
-  }
-  return spec;
-}
-
 int knobValue(const std::string& value, int defaultValue) {
   char* end = nullptr;
   const bool factor = !value.empty() && value[0] == 'x';
@@ -597,31 +455,6 @@ FibreKnob fibreCostKnob(const SimulationParameters& simulation) {
   return {"tolerance", false};
 }
 
-std::vector<std::string> frontMethods(const std::vector<std::string>& methods,
-                                      const SimulationParameters& simulation) {
-  const FibreKnob knob = fibreCostKnob(simulation);
-  // Cheapest first: fewer iterations (a smaller budget), or a looser threshold.
-  const std::array<const char*, 3> factors =
-      knob.costGrows ? std::array{"x0.5", "x2", "x4"} : std::array{"x2", "x0.5", "x0.25"};
-  const std::string at = "fibremss:" + knob.key + "=";
-  std::vector<std::string> expanded;
-  for (const std::string& method : methods) {
-    if (method == "fibremss") {
-      expanded.insert(expanded.end(),
-                      {at + factors[0], "fibremss", at + factors[1], at + factors[2],
-                       "fibremss:resolution=x0.5", "fibremss:resolution=x2"});
-    } else if (method == "btsoftbody") {
-      expanded.insert(expanded.end(),
-                      {"btsoftbody:iterations=x0.5", "btsoftbody", "btsoftbody:iterations=x2"});
-    } else if (method == "fem") {
-      expanded.insert(expanded.end(), {"fem:substeps=x0.5", "fem", "fem:substeps=x2"});
-    } else {
-      expanded.push_back(method);
-    }
-  }
-  return expanded;
-}
-
 void fillFinerResolution(std::vector<RunMetrics>& runs, int resolution) {
   const auto named = [&](const std::string& method) -> const RunMetrics* {
     for (const RunMetrics& run : runs)
@@ -645,24 +478,6 @@ void fillFinerResolution(std::vector<RunMetrics>& runs, int resolution) {
 
 namespace {
 
-/// The scene's value of a FibreMSS knob that takes any positive number (a stop rule's threshold,
-/// lengths in the scene's units), as `--set` reads it; NaN for the other keys.
-double realKnobBase(const std::string& key, const LoadedScene& scene) {
-  const SimulationParameters& simulation = scene.simulation;
-  if (key == "tolerance") return simulation.tolerance / scene.unitScale;
-  if (key == "epsilon") return simulation.epsilon / scene.unitScale;
-  if (key == "budget_ms") return simulation.budgetMs;
-  if (key == "deviation_epsilon") return simulation.deviationEpsilon;
-  return NAN;
-}
-
-/// A number as `--set` takes it, with 6 significant digits.
-std::string shortNumber(double value) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%.6g", value);
-  return text;
-}
-
 /// The spec with "xF" knob values made absolute from the scene's and the baselines' defaults;
 /// its name states the values used.
 MethodSpec resolvedSpec(const MethodSpec& spec, const LoadedScene& scene,
@@ -670,43 +485,23 @@ MethodSpec resolvedSpec(const MethodSpec& spec, const LoadedScene& scene,
   MethodSpec resolved = spec;
   if (spec.overrides.empty()) return resolved;
   resolved.name = spec.family;
+  const Method& method = *findMethod(spec.family);
+  const KnobBase base{scene, prepared, options};
   for (std::string& part : resolved.overrides) {
     const size_t equals = part.find('=');
     const std::string key = part.substr(0, equals), value = part.substr(equals + 1);
-    if (!value.empty() && value[0] == 'x' && spec.family == "fibremss" &&
-        std::isfinite(realKnobBase(key, scene))) {
-      part = key + "=" +
-             shortNumber(std::strtod(value.c_str() + 1, nullptr) * realKnobBase(key, scene));
-    } else if (!value.empty() && value[0] == 'x') {
-      int base = 0;
-      if (spec.family == "fibremss" && key == "iterations") base = scene.simulation.iterations;
-      if (spec.family == "fibremss" && key == "resolution" && !scene.muscles.empty())
-        base = scene.muscles.front().parameters.resolution;
-      if (spec.family == "btsoftbody")
-        base = key == "iterations"
-                   ? (options.softBody.positionIterations > 0 ? options.softBody.positionIterations
-                                                              : iterationsFor(prepared))
-                   : (options.softBody.substepsPerPose > 0 ? options.softBody.substepsPerPose
-                                                           : substepsFor(prepared));
-      if (spec.family == "fem")
-        base = key == "substeps" ? options.fem.substepsPerPose : options.fem.mesher.targetCells;
-      if (base == 0) {
-        throw InputError("--methods", spec.name,
-                         "xF (a factor on the default) is for fibremss iterations/resolution, "
-                         "btsoftbody iterations/substeps and fem substeps/cells");
+    if (!value.empty() && value[0] == 'x') {
+      const std::string absolute = method.factorValue ? method.factorValue(key, value, base) : "";
+      if (absolute.empty()) {
+        throw InputError(
+            "--methods", spec.name,
+            "xF (a factor on the default) is not defined for " + key + " of " + spec.family);
       }
-      part = key + "=" + std::to_string(knobValue(value, base));
+      part = key + "=" + absolute;
     }
     resolved.name += (resolved.name == spec.family ? ":" : "+") + part;
   }
   return resolved;
-}
-
-/// The integer value of a resolved "key=N" knob of a baseline spec, or `fallback`.
-int knob(const MethodSpec& spec, const std::string& key, int fallback) {
-  for (const std::string& part : spec.overrides)
-    if (part.rfind(key + "=", 0) == 0) return knobValue(part.substr(key.size() + 1), fallback);
-  return fallback;
 }
 
 /// One method's run, stopped by the time budget after the current step, by the user's cancel
@@ -732,52 +527,9 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
   fibreOptions.progress = [&](const RunProgress& p) {
     report({spec.name, p.step, p.steps, p.iterations, p.seconds});
   };
-  const double duration = poseDuration(scene.simulation);
-  if (spec.family == "fibremss" && spec.overrides.empty()) {
-    return runFibreMSS(scene, prepared, fibreOptions);
-  } else if (spec.family == "fibremss") {
-    std::vector<std::string> all = overrides;
-    all.insert(all.end(), spec.overrides.begin(), spec.overrides.end());
-    const LoadedScene variant = loadScene(sceneNameOrPath, all);
-    const PreparedScene variantPrepared = prepareScene(
-        variant.bones, variant.muscles, variant.simulation.seed, variant.simulation.threads);
-    return runFibreMSS(variant, variantPrepared, fibreOptions);
-  } else if (spec.family == "self-reference") {
-    LoadedScene reference = scene;
-    const int f = std::max(1, options.selfReferenceFactor);
-    reference.simulation.timeStep /= static_cast<btScalar>(f);
-    reference.simulation.minTimeStep /= static_cast<btScalar>(f);
-    reference.simulation.iterations *= f;
-    return runFibreMSS(reference, prepared, fibreOptions);
-  } else if (spec.family == "equilibrium") {
-    LoadedScene converged = scene;
-    converged.simulation = equilibriumSettings(scene.simulation, options.equilibriumIterations);
-    FibreRunOptions equilibriumOptions = fibreOptions;
-    int unconverged = 0;
-    equilibriumOptions.progress = [&](const RunProgress& p) {
-      unconverged += p.lastStep->iterations >= converged.simulation.iterations ? 1 : 0;
-      fibreOptions.progress(p);
-    };
-    RunMetrics metrics = runFibreMSS(converged, prepared, equilibriumOptions);
-    metrics.unconvergedPoses = unconverged;
-    if (unconverged > 0 && options.log)
-      options.log("equilibrium: " + std::to_string(unconverged) +
-                  " pose(s) reached the iteration cap before converging");
-    return metrics;
-  } else if (spec.family == "btsoftbody") {
-    SoftBodyDefinition definition = options.softBody;
-    definition.poseDuration = static_cast<btScalar>(duration);
-    definition.pretransformBlend = scene.simulation.pretransformBlend;
-    definition.positionIterations = knob(spec, "iterations", definition.positionIterations);
-    definition.substepsPerPose = knob(spec, "substeps", definition.substepsPerPose);
-    return runSoftBody(scene, prepared, definition, methodOptions);
-  }
-  FemDefinition definition = options.fem;
-  definition.poseDuration = static_cast<btScalar>(duration);
-  definition.pretransformBlend = scene.simulation.pretransformBlend;
-  definition.substepsPerPose = knob(spec, "substeps", definition.substepsPerPose);
-  definition.mesher.targetCells = knob(spec, "cells", definition.mesher.targetCells);
-  return runFem(scene, prepared, definition, methodOptions);
+  return findMethod(spec.family)
+      ->run({spec, sceneNameOrPath, overrides, scene, prepared, options, fibreOptions,
+             methodOptions});
 }
 
 }  // namespace
@@ -795,8 +547,7 @@ Comparison runComparison(const std::string& sceneNameOrPath,
   for (const std::string& warning : scene.warnings) log(warningLine(warning));
   for (const std::string& note : scene.notes) log(noteLine(note));
   log("preparing " + scene.name);
-  const PreparedScene prepared =
-      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  const PreparedScene prepared = prepareScene(scene);
   for (const std::string& warning : prepared.report.warnings) log(warningLine(warning));
   for (const std::string& warning : attachmentWarnings(scene, prepared)) log(warningLine(warning));
 

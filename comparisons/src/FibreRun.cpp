@@ -17,6 +17,7 @@
 #include "fibremss/Messages.h"
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
+#include "fibremss/SceneSystem.h"
 
 namespace fibremss {
 namespace {
@@ -293,15 +294,12 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
   MuscleSystem system(scene.simulation);
   system.setCancelFlag(options.interrupt ? options.interrupt : options.cancel);
   metrics.threads = static_cast<int>(system.threads());
-  std::vector<BoneHandle> bones;
-  for (const auto& bone : prepared.bones) {
-    bones.push_back(system.addBone(bone));
-    metrics.boneSpheres += bone->sphereCentres.size();
-  }
+  const SceneHandles handles = addScene(system, prepared);
+  const std::vector<BoneHandle>& bones = handles.bones;
+  const std::vector<MuscleHandle>& muscles = handles.muscles;
+  for (const auto& bone : prepared.bones) metrics.boneSpheres += bone->sphereCentres.size();
   BoneMeshes boneMeshes(prepared);
-  std::vector<MuscleHandle> muscles;
   for (const auto& muscle : prepared.muscles) {
-    muscles.push_back(system.addMuscle(muscle, bones));
     metrics.particles += muscle->particleCount();
     metrics.springs += muscle->springs.size();
     metrics.boundaryParticles += muscle->boundaryParticles.size();

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "SummaryFields.h"
+#include "fibremss/Methods.h"
 
 namespace fibremss {
 namespace {
@@ -297,8 +298,9 @@ std::string whyNoReferenceRanking(const nlohmann::json& summary) {
 
 bool solvesEquilibriumModel(const nlohmann::json& run) {
   const std::string method = text(run, "method"), family = familyOf(run);
-  if (family == "self-reference" || family == "equilibrium") return true;
-  if (family != "fibremss") return false;
+  const Method* own = findMethod(family);
+  if (!own || !own->solvesFibreModel) return false;
+  if (!own->sceneVariants) return true;
   std::istringstream parts(method.size() > family.size() ? method.substr(family.size() + 1) : "");
   for (std::string part; std::getline(parts, part, '+');)
     if (!solverSetting(part.substr(0, part.find('=')))) return false;

@@ -13,6 +13,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "fibremss/SceneSystem.h"
 
 namespace fibremss {
 namespace {
@@ -45,8 +46,7 @@ PreparedCase prepareCase(const StabilityCase& stabilityCase, const StabilityOpti
   }
   for (MuscleInput& muscle : result.scene.muscles)
     muscle.parameters.springs.kappa *= static_cast<btScalar>(stabilityCase.kappaFactor);
-  result.prepared = prepareScene(result.scene.bones, result.scene.muscles,
-                                 result.scene.simulation.seed, result.scene.simulation.threads);
+  result.prepared = prepareScene(result.scene);
   for (const auto& muscle : result.prepared.muscles)
     result.freeMass += static_cast<double>(muscle->particleMass) *
                        static_cast<double>(muscle->particleCount() - muscle->fixedParticles.size());

@@ -12,6 +12,7 @@
 #include "Interruptible.h"
 #include "fibremss/CompareReport.h"
 #include "fibremss/FibreRun.h"
+#include "fibremss/SceneSystem.h"
 #include "fibremss/Stability.h"
 
 namespace fibremss::python {
@@ -29,8 +30,7 @@ struct RunSettings {
 /// Prepares and runs the scene (runFibreMSS); the summary's keys as `fibremss run` writes them.
 nlohmann::json runScene(LoadedScene scene, const RunSettings& settings) {
   if (settings.threads) scene.simulation.threads = *settings.threads;
-  const PreparedScene prepared =
-      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  const PreparedScene prepared = prepareScene(scene);
   FibreRunOptions options;
   options.outDir = settings.outDir;
   options.steps = settings.steps;

@@ -5,6 +5,8 @@
 #include <string>
 #include <utility>
 
+#include "fibremss/SceneSystem.h"
+
 namespace fibremss::python {
 namespace {
 
@@ -18,15 +20,12 @@ LoadedScene withThreads(LoadedScene scene, std::optional<int> threads) {
 
 Simulation::Simulation(LoadedScene scene, std::optional<int> threads)
     : scene_(withThreads(std::move(scene), threads)),
-      prepared_(prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed,
-                             scene_.simulation.threads)),
+      prepared_(prepareScene(scene_)),
       system_(scene_.simulation) {
-  for (const auto& bone : prepared_.bones) {
-    bones_.push_back(system_.addBone(bone));
-    boneMeshes_.emplace_back(bone->mesh);
-  }
-  for (const auto& muscle : prepared_.muscles)
-    muscles_.push_back(system_.addMuscle(muscle, bones_));
+  SceneHandles handles = addScene(system_, prepared_);
+  bones_ = std::move(handles.bones);
+  muscles_ = std::move(handles.muscles);
+  for (const auto& bone : prepared_.bones) boneMeshes_.emplace_back(bone->mesh);
 }
 
 void Simulation::setPose(int pose) {

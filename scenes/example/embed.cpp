@@ -83,7 +83,8 @@ int main(int argc, char** argv) try {
   std::printf("timeStep: %s\n", dynamic ? "dynamic (Bullet's dt is the muscles' simulated time)"
                                         : "quasi-static pose (one muscle step per Bullet step)");
 
-  // 3. Bones: kinematic bodies with the bones' meshes. 4. The muscle, attached to them.
+  // 3. Bones: kinematic bodies with the bones' meshes. 4. The muscle, attached to them. (For a
+  //    whole loaded scene, addScene in fibremss/SceneSystem.h does both.)
   std::vector<std::unique_ptr<fibremss::BoneBody>> boneBodies;
   std::vector<fibremss::BoneHandle> bones;
   for (const auto& bone : prepared.bones) {

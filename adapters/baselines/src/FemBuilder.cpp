@@ -7,6 +7,8 @@
 #include <BulletSoftBody/btSoftBodyHelpers.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 #include <span>
@@ -74,6 +76,7 @@ struct FemScene::Impl {
   double addedMassShare = 0;  ///< mass added by scaleMasses / free nodes' mass before it
   size_t fewestPins = std::numeric_limits<size_t>::max();  ///< per bone of a muscle (pinAtLeast)
   int lastSettleSubsteps = 0;                              ///< of the last pose
+  int unsettledPoses = 0;  ///< poses that did not settle within settleSubsteps
 
   /// Every free node's velocity scaled by `kept` (settling's drag).
   void dragNodes(btScalar kept) {
@@ -471,6 +474,7 @@ bool FemScene::stepPose(std::span<const btTransform> targets, const std::functio
     m.dragNodes(m.definition.settleDrag);
     ++m.lastSettleSubsteps;
   }
+  m.unsettledPoses += m.lastSettleSubsteps > m.definition.settleSubsteps;
   for (Impl::Muscle& muscle : m.muscles) m.readPositions(muscle);
   return true;
 }
@@ -479,8 +483,8 @@ size_t FemScene::fewestPinsPerBone() const {
   return impl_->fewestPins;
 }
 
-int FemScene::lastSettleSubsteps() const {
-  return impl_->lastSettleSubsteps;
+int FemScene::unsettledPoses() const {
+  return impl_->unsettledPoses;
 }
 
 size_t FemScene::muscleCount() const {
@@ -493,10 +497,14 @@ size_t FemScene::nodeCount() const {
   return n;
 }
 
-size_t FemScene::tetrahedronCount() const {
+size_t FemScene::elementCount() const {
   size_t n = 0;
   for (const auto& muscle : impl_->muscles) n += muscle.mesh.tetrahedra.size();
   return n;
+}
+
+size_t FemScene::boundaryNodeCount() const {
+  return 0;
 }
 
 size_t FemScene::pinnedCount() const {
@@ -516,6 +524,43 @@ std::span<const btVector3> FemScene::nodePositions(size_t muscle) const {
 void FemScene::surface(size_t muscle, std::vector<btVector3>& out) const {
   const auto& m = impl_->muscles.at(muscle);
   embeddedPositions(m.mesh, m.surface, m.positions, out);
+}
+
+std::vector<NodePair> FemScene::nodePairs(size_t muscle) const {
+  const TetMesh& mesh = impl_->muscles.at(muscle).mesh;
+  std::vector<NodePair> pairs;
+  for (const auto& t : mesh.tetrahedra)
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b)
+        pairs.push_back({t[a], t[b], mesh.nodes[t[a]].distance(mesh.nodes[t[b]])});
+  return pairs;
+}
+
+double FemScene::springDeviation() const {
+  return std::nan("");
+}
+
+long FemScene::iterationsPerPose() const {
+  return impl_->definition.substepsPerPose;
+}
+
+long FemScene::substepsPerPose() const {
+  return impl_->definition.substepsPerPose;
+}
+
+std::string FemScene::settings() const {
+  const FemDefinition& used = impl_->definition;
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "Neo-Hookean FEM, btDeformableBodySolver (explicit elasticity, implicit damping, "
+                "%d substeps per pose, then settling until no node is faster than %.3g mm/s (at "
+                "most %d substeps), mass scaling +%.0f %%, at least %d pins per bone (fewest: "
+                "%zu))",
+                used.substepsPerPose, 1e3 * double(used.settleSpeed), used.settleSubsteps,
+                100 * addedMassShare(), used.minPinsPerBone, fewestPinsPerBone());
+  const int unsettled = impl_->unsettledPoses;
+  return unsettled > 0 ? text + ("; " + std::to_string(unsettled) + " pose(s) did not settle")
+                       : text;
 }
 
 btSoftBody& FemScene::body(size_t muscle) {

@@ -6,11 +6,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <numeric>
 #include <stdexcept>
 
 #include "SoftBodyBones.h"
 #include "fibremss/BoneBody.h"
+#include "fibremss/Measures.h"
 
 namespace fibremss {
 namespace {
@@ -366,7 +368,7 @@ SoftBodyScene::SoftBodyScene(const PreparedScene& scene,
 
 SoftBodyScene::~SoftBodyScene() = default;
 
-void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
+bool SoftBodyScene::stepPose(std::span<const btTransform> targets, const std::function<bool()>&) {
   Impl& m = *impl_;
   if (targets.size() != m.bones.size()) {
     throw std::invalid_argument("SoftBodyScene::stepPose: bone transforms do not match the bones");
@@ -393,6 +395,7 @@ void SoftBodyScene::stepPose(std::span<const btTransform> targets) {
     }
   }
   m.world->getWorldInfo().m_sparsesdf.GarbageCollect();
+  return true;
 }
 
 size_t SoftBodyScene::muscleCount() const {
@@ -405,17 +408,64 @@ size_t SoftBodyScene::nodeCount() const {
   return n;
 }
 
-size_t SoftBodyScene::linkCount() const {
+size_t SoftBodyScene::elementCount() const {
   return impl_->links;
 }
 
-std::span<const btVector3> SoftBodyScene::positions(size_t muscle) const {
+size_t SoftBodyScene::boundaryNodeCount() const {
+  size_t n = 0;
+  for (const auto& muscle : impl_->muscles) n += muscle.settings->boundaryParticles.size();
+  return n;
+}
+
+std::span<const btVector3> SoftBodyScene::nodePositions(size_t muscle) const {
   return impl_->muscles.at(muscle).positions;
 }
 
 void SoftBodyScene::surface(size_t muscle, std::vector<btVector3>& out) const {
   const auto& m = impl_->muscles.at(muscle);
   skinSurface(*m.settings, m.positions, impl_->boneTransforms, out);
+}
+
+std::vector<NodePair> SoftBodyScene::nodePairs(size_t muscle) const {
+  std::vector<NodePair> pairs;
+  for (const Spring& s : impl_->muscles.at(muscle).settings->springs)
+    pairs.push_back({s.a, s.b, s.restLength});
+  return pairs;
+}
+
+double SoftBodyScene::springDeviation() const {
+  double deviation = 0, restLengths = 0;
+  for (const auto& muscle : impl_->muscles) {
+    double lengths = 0;
+    for (const Spring& s : muscle.settings->springs) {
+      lengths += s.restLength;
+      restLengths += s.restLength;
+    }
+    if (lengths > 0)
+      deviation += lengths * springDeviationRatio(muscle.settings->springs, muscle.positions);
+  }
+  return restLengths > 0 ? deviation / restLengths : std::nan("");
+}
+
+long SoftBodyScene::iterationsPerPose() const {
+  return static_cast<long>(impl_->definition.substepsPerPose) *
+         impl_->definition.positionIterations;
+}
+
+long SoftBodyScene::substepsPerPose() const {
+  return impl_->definition.substepsPerPose;
+}
+
+std::string SoftBodyScene::settings() const {
+  const SoftBodyDefinition& used = impl_->definition;
+  char text[200];
+  std::snprintf(text, sizeof text,
+                "btSoftBody position solver (%d substeps × %d link iterations per pose, links "
+                "softest first, %d clusters per muscle × %d iterations)",
+                used.substepsPerPose, used.positionIterations, used.clustersPerMuscle,
+                used.clusterIterations);
+  return text;
 }
 
 std::span<const btTransform> SoftBodyScene::boneTransforms() const {

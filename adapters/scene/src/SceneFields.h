@@ -80,6 +80,16 @@ btVector3 readVector3(const Json& value, const std::string& path, const std::str
 /// parsed as JSON when they parse, else taken as strings. Throws InputError for unknown keys.
 void applyOverrides(Json& scene, const std::vector<std::string>& overrides);
 
+/// A settings section of a scene and the keys its reader takes.
+struct SectionKeys {
+  std::string section;            ///< "model", "simulation", "collision" or "outputs"
+  std::vector<std::string> keys;  ///< in the order the reader reads them
+};
+
+/// Every key the scene reader takes in the settings sections, each of which `--set` also takes
+/// without its section (SceneLoad.cpp).
+std::vector<SectionKeys> settingsSectionKeys();
+
 /// The shorthand keys `--set` accepts and what each applies to (for help and error messages).
 std::vector<std::string> shorthandKeys();
 

@@ -406,7 +406,8 @@ SpringParameters readModel(Fields& model) {
   return springs;
 }
 
-void readSimulation(Fields& simulation, double scale, SimulationParameters& parameters) {
+/// The "simulation" section; returns its max_step_deg (the largest bone turn of one step).
+double readSimulation(Fields& simulation, double scale, SimulationParameters& parameters) {
   const SimulationParameters defaults;
   fromString(simulation.choice("integrator", toString(defaults.integrator), namesOf<Integrator>()),
              parameters.integrator);
@@ -471,6 +472,15 @@ void readSimulation(Fields& simulation, double scale, SimulationParameters& para
       simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
       parameters.onFailure);
   parameters.maxRetries = simulation.integer("max_retries", defaults.maxRetries, 0, 30);
+  return simulation.number("max_step_deg", 5, 0, 180);
+}
+
+/// The "outputs" section.
+void readOutputs(Fields& outputs, OutputSettings& settings) {
+  settings.frameEvery = outputs.integer("frame_every", 1, 0, 1000000000);
+  settings.writeSurfaces = outputs.boolean("surfaces", true);
+  settings.writeParticles = outputs.boolean("particles", true);
+  settings.writeFibres = outputs.boolean("fibres", true);
 }
 
 void readCollision(Fields& collision, double scale, SimulationParameters& parameters) {
@@ -570,20 +580,17 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   }
 
   Fields simulation = root.object("simulation");
-  readSimulation(simulation, reader.scale, result.simulation);
+  const double maxStepDeg = readSimulation(simulation, reader.scale, result.simulation);
   if (result.simulation.stopRule == StopRule::TimeBudget)
     result.warnings.push_back(
         "simulation.stop = budget: each step iterates until its wall-clock budget is spent, so "
         "the results depend on the machine's load and the thread count and are not "
         "bit-identical between runs (the one exception; see docs/reliability.md)");
-  scene::splitLargeJumps(result, simulation.number("max_step_deg", 5, 0, 180));
+  scene::splitLargeJumps(result, maxStepDeg);
   Fields collision = root.object("collision");
   readCollision(collision, reader.scale, result.simulation);
   Fields outputs = root.object("outputs");
-  result.outputs.frameEvery = outputs.integer("frame_every", 1, 0, 1000000000);
-  result.outputs.writeSurfaces = outputs.boolean("surfaces", true);
-  result.outputs.writeParticles = outputs.boolean("particles", true);
-  result.outputs.writeFibres = outputs.boolean("fibres", true);
+  readOutputs(outputs, result.outputs);
   Fields analytic = root.object("analytic");
   result.analytic = readAnalytic(analytic, reader.scale, result.bones);
   Fields reference = root.object("reference");
@@ -656,5 +663,31 @@ LoadedScene loadScene(const std::string& nameOrPath, const std::vector<std::stri
   if (source.rfind("built-in", 0) == 0) result.source = "built-in";
   return result;
 }
+
+namespace scene {
+
+/// The keys a section reader reads, from an empty section (every key at its default).
+template <class Read>
+std::vector<std::string> keysRead(const char* section, Read read) {
+  const Json empty = Json::object();
+  Fields fields(empty, section, "the scene reader");
+  read(fields);
+  std::vector<std::string> keys;
+  const Json complete = fields.finish();
+  for (const auto& item : complete.items()) keys.push_back(item.key());
+  return keys;
+}
+
+std::vector<SectionKeys> settingsSectionKeys() {
+  SimulationParameters parameters;
+  OutputSettings outputs;
+  return {
+      {"model", keysRead("model", [](Fields& f) { readModel(f); })},
+      {"simulation", keysRead("simulation", [&](Fields& f) { readSimulation(f, 1, parameters); })},
+      {"collision", keysRead("collision", [&](Fields& f) { readCollision(f, 1, parameters); })},
+      {"outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); })}};
+}
+
+}  // namespace scene
 
 }  // namespace fibremss

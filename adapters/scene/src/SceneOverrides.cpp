@@ -15,11 +15,12 @@ enum class Target { Muscles, BoneSpheres, Sweeps, Section, TopLevel };
 
 struct Shorthand {
   Target target;
-  const char* section;  // for Target::Section
+  std::string section;  // for Target::Section
 };
 
-const std::map<std::string, Shorthand>& shorthands() {
-  static const std::map<std::string, Shorthand> table = {
+/// The shorthands: every key of the settings sections (the scene reader's own list) and these.
+std::map<std::string, Shorthand> makeShorthands() {
+  std::map<std::string, Shorthand> table = {
       {"resolution", {Target::Muscles, ""}},
       {"fibre_count", {Target::Muscles, ""}},
       {"attachment_distance", {Target::Muscles, ""}},
@@ -27,57 +28,6 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"tendon_fraction", {Target::Muscles, ""}},
       {"tendon_stiffness", {Target::Muscles, ""}},
       {"free_end", {Target::Muscles, ""}},
-      {"layout", {Target::Section, "model"}},
-      {"neighbours", {Target::Section, "model"}},
-      {"kappa", {Target::Section, "model"}},
-      {"spring_stiffness", {Target::Section, "model"}},
-      {"damping", {Target::Section, "model"}},
-      {"density", {Target::Section, "model"}},
-      {"volume_stiffness", {Target::Section, "model"}},
-      {"enclosed_volume_stiffness", {Target::Section, "model"}},
-      {"volume_coarsening", {Target::Section, "model"}},
-      {"fibre_stiffness_ratio", {Target::Section, "model"}},
-      {"damping_scale", {Target::Section, "model"}},
-      {"integrator", {Target::Section, "simulation"}},
-      {"time_step", {Target::Section, "simulation"}},
-      {"dt", {Target::Section, "simulation"}},
-      {"min_dt", {Target::Section, "simulation"}},
-      {"stop", {Target::Section, "simulation"}},
-      {"iterations", {Target::Section, "simulation"}},
-      {"epsilon", {Target::Section, "simulation"}},
-      {"tolerance", {Target::Section, "simulation"}},
-      {"budget_ms", {Target::Section, "simulation"}},
-      {"rebuild_every_step", {Target::Section, "simulation"}},
-      {"deviation_epsilon", {Target::Section, "simulation"}},
-      {"blended_pretransform", {Target::Section, "simulation"}},
-      {"pretransform_blend", {Target::Section, "simulation"}},
-      {"motion_fraction", {Target::Section, "simulation"}},
-      {"seed", {Target::Section, "simulation"}},
-      {"initial_noise", {Target::Section, "simulation"}},
-      {"threads", {Target::Section, "simulation"}},
-      {"diagonal_jacobian", {Target::Section, "simulation"}},
-      {"solver_tolerance", {Target::Section, "simulation"}},
-      {"solver_iterations", {Target::Section, "simulation"}},
-      {"constraint_iterations", {Target::Section, "simulation"}},
-      {"projective_rho", {Target::Section, "simulation"}},
-      {"projective_history", {Target::Section, "simulation"}},
-      {"projective_contact_weight", {Target::Section, "simulation"}},
-      {"persistent_contacts", {Target::Section, "simulation"}},
-      {"pair_reactions", {Target::Section, "simulation"}},
-      {"on_failure", {Target::Section, "simulation"}},
-      {"max_retries", {Target::Section, "simulation"}},
-      {"max_step_deg", {Target::Section, "simulation"}},
-      {"muscle_muscle", {Target::Section, "collision"}},
-      {"bone_collision", {Target::Section, "collision"}},
-      {"distance_field_cell", {Target::Section, "collision"}},
-      {"penetration_recovery", {Target::Section, "collision"}},
-      {"sliding_contacts", {Target::Section, "collision"}},
-      {"surface_contact", {Target::Section, "collision"}},
-      {"muscle_bone", {Target::Section, "collision"}},
-      {"frame_every", {Target::Section, "outputs"}},
-      {"surfaces", {Target::Section, "outputs"}},
-      {"particles", {Target::Section, "outputs"}},
-      {"fibres", {Target::Section, "outputs"}},
       {"thinning", {Target::BoneSpheres, ""}},
       {"max_radius", {Target::BoneSpheres, ""}},
       {"step_deg", {Target::Sweeps, ""}},
@@ -89,6 +39,14 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"units", {Target::TopLevel, ""}},
       {"data_dir", {Target::TopLevel, ""}},
   };
+  for (const SectionKeys& section : settingsSectionKeys())
+    for (const std::string& key : section.keys)
+      table.emplace(key, Shorthand{Target::Section, section.section});
+  return table;
+}
+
+const std::map<std::string, Shorthand>& shorthands() {
+  static const std::map<std::string, Shorthand> table = makeShorthands();
   return table;
 }
 
@@ -195,7 +153,7 @@ void applyOverrides(Json& scene, const std::vector<std::string>& overrides) {
         if (!scene.contains(shorthand.section) || scene[shorthand.section].is_null())
           scene[shorthand.section] = Json::object();
         if (!scene[shorthand.section].is_object())
-          throw InputError("--set", key, std::string(shorthand.section) + " is not an object");
+          throw InputError("--set", key, shorthand.section + " is not an object");
         scene[shorthand.section][key] = value;
         break;
       case Target::Muscles:

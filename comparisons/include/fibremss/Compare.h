@@ -5,11 +5,13 @@
 // self-reference runs, pose by pose.
 #include <atomic>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "fibremss/BaselineScene.h"
 #include "fibremss/FemBuilder.h"
 #include "fibremss/Reference.h"
 #include "fibremss/RunMetrics.h"
@@ -36,10 +38,8 @@ inline constexpr double kEquilibriumRho = 0.99;
 /// The time-to-accuracy figure's bound: a pose within this RMS of its equilibrium [mm].
 inline constexpr double kEquilibriumAccuracyMm = 0.5;
 
-/// Method names `compare` knows; "fibremss:<key>=<value>[+<key>=<value>...]" adds a FibreMSS
-/// variant with those scene overrides (e.g. "fibremss:integrator=semi-implicit-euler").
-inline constexpr const char* kDefaultMethods[] = {"fibremss", "self-reference", "btsoftbody",
-                                                  "fem"};
+/// The methods `compare` runs by default (Methods.h: those marked byDefault).
+std::vector<std::string> defaultMethods();
 
 /// Where a method run is, passed to the progress callback after every step.
 struct MethodProgress {
@@ -52,7 +52,7 @@ struct MethodProgress {
 
 /// How `compare` runs.
 struct CompareOptions {
-  std::vector<std::string> methods{std::begin(kDefaultMethods), std::end(kDefaultMethods)};
+  std::vector<std::string> methods = defaultMethods();  ///< Methods.h names, or their variants
   SoftBodyDefinition softBody;  ///< the baseline (poseDuration set from the scene, see below)
   FemDefinition fem;            ///< Bullet's FEM method (poseDuration set from the scene)
   bool fronts = true;           ///< each method swept over its cost knob (frontMethods)
@@ -84,12 +84,14 @@ struct MethodRunOptions {
   double budgetSeconds = 0;  ///< > 0: wall time after which the FEM stops inside its pose
 };
 
-/// The btSoftBody baseline on every pose of the scene.
-RunMetrics runSoftBody(const LoadedScene& scene, const PreparedScene& prepared,
-                       const SoftBodyDefinition& definition, const MethodRunOptions& options = {});
-/// The FEM reference on every pose of the scene.
-RunMetrics runFem(const LoadedScene& scene, const PreparedScene& prepared,
-                  const FemDefinition& definition, const MethodRunOptions& options = {});
+/// A baseline simulator (`build` makes it at the scene's first pose) on every pose of the scene,
+/// measured the way runFibreMSS measures: penetration into the bones' true meshes over all
+/// steps, volume change at the last intact step, spring deviation at the last step, and a run
+/// that NaNs or explodes by FibreMSS's guard rule failed at that step.
+RunMetrics runBaseline(
+    const LoadedScene& scene, const std::string& method, const PreparedScene& prepared,
+    const MethodRunOptions& options,
+    const std::function<std::unique_ptr<BaselineScene>(std::span<const btTransform>)>& build);
 
 /// Volume change of all muscles together (rest-volume weighted) [%] for their surfaces
 /// concatenated in muscle order (NaN when no muscle has a rest surface).
@@ -140,8 +142,8 @@ double shapeRmsMm(const TriangleMesh& a, const TriangleMesh& b);
 /// A method and its scene overrides, parsed from "name" or "fibremss:k=v+k=v".
 struct MethodSpec {
   std::string name;    ///< the full name as given
-  std::string family;  ///< "fibremss", "self-reference", "equilibrium", "btsoftbody", "fem"
-  std::vector<std::string> overrides;  ///< FibreMSS: extra --set overrides; btsoftbody / fem:
+  std::string family;  ///< the method's name (Methods.h): "fibremss", "btsoftbody", ...
+  std::vector<std::string> overrides;  ///< FibreMSS: extra --set overrides; other methods:
                                        ///< their knobs ("iterations=N", "substeps=xF", ...)
 };
 /// Throws InputError for an unknown method or a malformed variant.
@@ -161,10 +163,10 @@ struct FibreKnob {
 };
 FibreKnob fibreCostKnob(const SimulationParameters& simulation);
 
-/// Each method with a cost knob swept over it, cheapest first: fibremss over the knob of
-/// `simulation`'s stop rule (fibreCostKnob: a count or budget ×0.5, 1, 2, 4, a threshold ×2, 1,
-/// 0.5, 0.25) and its resolution (×0.5, 2), btsoftbody over its link iterations (×0.5, 1, 2),
-/// fem over its substeps (×0.5, 1, 2); other methods as they are.
+/// Each method with a front (Methods.h) swept over its cost knob, cheapest first: fibremss over
+/// the knob of `simulation`'s stop rule (fibreCostKnob: a count or budget ×0.5, 1, 2, 4, a
+/// threshold ×2, 1, 0.5, 0.25) and its resolution (×0.5, 2), btsoftbody over its link iterations
+/// (×0.5, 1, 2), fem over its substeps (×0.5, 1, 2); other methods and variants as they are.
 std::vector<std::string> frontMethods(const std::vector<std::string>& methods,
                                       const SimulationParameters& simulation);
 

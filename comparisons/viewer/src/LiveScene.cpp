@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "fibremss/Messages.h"
+#include "fibremss/SceneSystem.h"
 
 namespace fibremss::viewer {
 namespace {
@@ -60,8 +61,7 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
   printWarnings(scene_.warnings);
   printNotes(scene_.notes);
   std::fprintf(stderr, "preparing %s ...\n", scene_.name.c_str());
-  prepared_ =
-      prepareScene(scene_.bones, scene_.muscles, scene_.simulation.seed, scene_.simulation.threads);
+  prepared_ = prepareScene(scene_);
   printWarnings(prepared_.report.warnings);
   printWarnings(attachmentWarnings(scene_, prepared_));
 
@@ -69,9 +69,11 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
   world_ = std::make_unique<MuscleWorld>(dispatcher_.get(), &broadphase_, &solver_, &configuration_,
                                          scene_.simulation);
   world_->setGravity(btVector3(0, 0, 0));
+  WorldScene added = addScene(*world_, scene_, prepared_);
+  boneBodies_ = std::move(added.bodies);
+  bones_ = std::move(added.handles.bones);
+  muscles_ = std::move(added.handles.muscles);
   for (size_t b = 0; b < prepared_.bones.size(); ++b) {
-    boneBodies_.push_back(std::make_unique<BoneBody>(prepared_.bones[b], scene_.bonePose(b, 0)));
-    bones_.push_back(world_->addBone(prepared_.bones[b], boneBodies_.back()->body()));
     ViewMesh mesh;
     mesh.name = prepared_.bones[b]->name;
     mesh.vertices = prepared_.bones[b]->mesh.vertices;
@@ -79,7 +81,6 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
     frame_.bones.push_back(std::move(mesh));
   }
   for (const auto& muscle : prepared_.muscles) {
-    muscles_.push_back(world_->addMuscle(muscle, bones_));
     fibreSegments_.push_back(fibreSegmentCounts(*muscle));
     particleStretch_.emplace_back(muscle->particleCount());
     ViewMesh mesh;
@@ -106,8 +107,7 @@ void LiveScene::reset() {
   for (size_t b = 0; b < boneBodies_.size(); ++b)
     boneBodies_[b]->setTransform(scene_.bonePose(b, 0));
   world_->stepSimulation(kTimeStep, 0);  // no muscles: only the bones go back to the first pose
-  for (const auto& muscle : prepared_.muscles)
-    muscles_.push_back(world_->addMuscle(muscle, bones_));
+  muscles_ = addMuscles(*world_, prepared_, bones_);
   pose_ = shownPose_ = steps_ = 0;
   direction_ = 1;
   updateFrame();

@@ -10,8 +10,10 @@
 #include <functional>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
+#include "fibremss/BaselineScene.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/TetMesher.h"
 
@@ -85,33 +87,43 @@ struct FemDefinition {
 /// The reference world: one deformable btSoftBody per muscle in a
 /// btDeformableMultiBodyDynamicsWorld without gravity; the bones are their exact meshes
 /// (MeshDistance) moved by their transforms, outside Bullet's world.
-class FemScene {
+class FemScene : public BaselineScene {
  public:
   /// Bodies start at the poses `boneTransforms` (one per bone; rest pose when empty).
   FemScene(const PreparedScene& scene, std::span<const btTransform> boneTransforms,
            const FemDefinition& definition = {});
-  ~FemScene();
+  ~FemScene() override;
   FemScene(const FemScene&) = delete;
   FemScene& operator=(const FemScene&) = delete;
 
   /// One pose: bones move to `targets` over the substeps, pinned nodes follow them.
   /// Returns false when `stop` (checked between substeps; may be empty) ended the pose early:
   /// one substep of Bullet's deformable contact can take seconds on large bones.
-  bool stepPose(std::span<const btTransform> targets, const std::function<bool()>& stop = {});
+  bool stepPose(std::span<const btTransform> targets,
+                const std::function<bool()>& stop = {}) override;
 
-  size_t muscleCount() const;
-  size_t nodeCount() const;         ///< nodes of all muscles
-  size_t tetrahedronCount() const;  ///< tetrahedra of all muscles
-  size_t pinnedCount() const;       ///< pinned nodes of all muscles
+  size_t muscleCount() const override;
+  size_t nodeCount() const override;          ///< nodes of all muscles
+  size_t elementCount() const override;       ///< tetrahedra of all muscles
+  size_t boundaryNodeCount() const override;  ///< 0: its nodes are its own mesh's
+  size_t pinnedCount() const;                 ///< pinned nodes of all muscles
   /// Fewest nodes pinned to one bone of one muscle (over the bones fixing its particles).
   size_t fewestPinsPerBone() const;
-  /// Settling substeps the last pose took; settleSubsteps + 1 when it did not settle.
-  int lastSettleSubsteps() const;
-  const TetMesh& tetMesh(size_t muscle) const;  ///< rest mesh
+  /// Poses stepped so far that did not settle within settleSubsteps.
+  int unsettledPoses() const;
   /// Node positions of one muscle, as of the last step.
-  std::span<const btVector3> nodePositions(size_t muscle) const;
+  std::span<const btVector3> nodePositions(size_t muscle) const override;
   /// The muscle's surface vertices, embedded in the tetrahedra (barycentric).
-  void surface(size_t muscle, std::vector<btVector3>& out) const;
+  void surface(size_t muscle, std::vector<btVector3>& out) const override;
+  /// The muscle's tetrahedron edges and their rest lengths.
+  std::vector<NodePair> nodePairs(size_t muscle) const override;
+  double springDeviation() const override;  ///< NaN: not a spring model
+  long iterationsPerPose() const override;  ///< world substeps per pose
+  long substepsPerPose() const override;    ///< world substeps per pose
+  /// "Neo-Hookean FEM, btDeformableBodySolver (…)" with its substeps, settling, added mass and
+  /// pins, and the poses that did not settle.
+  std::string settings() const override;
+  const TetMesh& tetMesh(size_t muscle) const;  ///< rest mesh
   btSoftBody& body(size_t muscle);
   btDeformableMultiBodyDynamicsWorld& world();
   const FemDefinition& definition() const;

@@ -5,10 +5,13 @@
 #include <BulletSoftBody/btSoftBody.h>
 #include <LinearMath/btTransform.h>
 
+#include <functional>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
+#include "fibremss/BaselineScene.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/Preparation.h"
 
@@ -86,26 +89,37 @@ std::vector<btVector3> posedParticles(const MuscleSettings& muscle,
 
 /// The baseline world: one btSoftBody per muscle, one kinematic btRigidBody per bone, in a
 /// btSoftRigidDynamicsWorld (btSoftBodyRigidBodyCollisionConfiguration, no gravity).
-class SoftBodyScene {
+class SoftBodyScene : public BaselineScene {
  public:
   /// Bodies start at the poses `boneTransforms` (one per bone; rest pose when empty).
   SoftBodyScene(const PreparedScene& scene, std::span<const btTransform> boneTransforms,
                 const SoftBodyDefinition& definition = {});
-  ~SoftBodyScene();
+  ~SoftBodyScene() override;
   SoftBodyScene(const SoftBodyScene&) = delete;
   SoftBodyScene& operator=(const SoftBodyScene&) = delete;
 
   /// One pose: bones move from their current transforms to `targets` over the substeps,
-  /// pinned nodes follow them, the world steps definition().substepsPerPose times.
-  void stepPose(std::span<const btTransform> targets);
+  /// pinned nodes follow them, the world steps definition().substepsPerPose times (`stop` is
+  /// not checked: a pose always completes).
+  bool stepPose(std::span<const btTransform> targets,
+                const std::function<bool()>& stop = {}) override;
 
-  size_t muscleCount() const;
-  size_t nodeCount() const;  ///< nodes of all muscles
-  size_t linkCount() const;  ///< links of all muscles
+  size_t muscleCount() const override;
+  size_t nodeCount() const override;          ///< nodes of all muscles
+  size_t elementCount() const override;       ///< links of all muscles
+  size_t boundaryNodeCount() const override;  ///< the muscles' boundary particles
   /// Node positions of one muscle (particle order, metres), as of the last step.
-  std::span<const btVector3> positions(size_t muscle) const;
+  std::span<const btVector3> nodePositions(size_t muscle) const override;
   /// The muscle's deformed surface (skinSurface of the node positions).
-  void surface(size_t muscle, std::vector<btVector3>& out) const;
+  void surface(size_t muscle, std::vector<btVector3>& out) const override;
+  /// The muscle's springs (its links' node pairs and rest lengths).
+  std::vector<NodePair> nodePairs(size_t muscle) const override;
+  /// Σ|l − L0| / Σ L0 over the springs of all muscles.
+  double springDeviation() const override;
+  long iterationsPerPose() const override;  ///< substeps × link iterations
+  long substepsPerPose() const override;    ///< world steps per pose
+  /// "btSoftBody position solver (…)" with the substeps, iterations and clusters used.
+  std::string settings() const override;
   std::span<const btTransform> boneTransforms() const;
   btSoftBody& body(size_t muscle);    ///< in Bullet units (definition().lengthScale per metre)
   btSoftRigidDynamicsWorld& world();  ///< in Bullet units
