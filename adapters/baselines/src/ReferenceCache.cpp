@@ -16,6 +16,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <tuple>
 #include <type_traits>
 
 #include "fibremss/Error.h"
@@ -148,31 +149,27 @@ void writeAtomically(const std::string& path, Write&& write) {
   std::filesystem::rename(temporary, path);
 }
 
-/// The counts and time a solve and a muscle's part both end with.
-struct SolveCounts {
-  uint64_t nodes = 0, elements = 0, prescribedNodes = 0;
-  long newtonIterations = 0, increments = 0;
-  double seconds = 0;
-};
+/// The counts and time a solve and a muscle's part both end with: nodes, elements, prescribed
+/// nodes, Newton iterations, increments, seconds.
+using SolveCounts = std::tuple<size_t, size_t, size_t, long, long, double>;
 
 void writeCounts(std::ostream& out, const SolveCounts& c) {
-  const uint64_t counts[5] = {c.nodes, c.elements, c.prescribedNodes,
-                              static_cast<uint64_t>(c.newtonIterations),
-                              static_cast<uint64_t>(c.increments)};
+  const uint64_t counts[5] = {std::get<0>(c), std::get<1>(c), std::get<2>(c),
+                              static_cast<uint64_t>(std::get<3>(c)),
+                              static_cast<uint64_t>(std::get<4>(c))};
   out.write(reinterpret_cast<const char*>(counts), sizeof counts);
-  out.write(reinterpret_cast<const char*>(&c.seconds), sizeof c.seconds);
+  const double seconds = std::get<5>(c);
+  out.write(reinterpret_cast<const char*>(&seconds), sizeof seconds);
 }
 
 SolveCounts readCounts(Reader& read) {
   const auto counts = read.value<std::array<uint64_t, 5>>();
-  SolveCounts c;
-  c.nodes = counts[0];
-  c.elements = counts[1];
-  c.prescribedNodes = counts[2];
-  c.newtonIterations = static_cast<long>(counts[3]);
-  c.increments = static_cast<long>(counts[4]);
-  c.seconds = read.value<double>();
-  return c;
+  return {counts[0],
+          counts[1],
+          counts[2],
+          static_cast<long>(counts[3]),
+          static_cast<long>(counts[4]),
+          read.value<double>()};
 }
 
 /// Reads the magic `expected` from `in`, else throws InputError naming what `path` is not.
@@ -192,8 +189,8 @@ void savePart(const std::string& path, const MuscleSolution& part) {
     out.write(reinterpret_cast<const char*>(&steps), sizeof steps);
     for (const std::vector<btVector3>& surface : part.stepSurfaces) writePoints(out, surface);
     writeText(out, part.failure);
-    writeCounts(out, {part.nodes, part.tetrahedra, part.prescribedNodes, part.newtonIterations,
-                      part.increments, part.seconds});
+    writeCounts(out, std::tie(part.nodes, part.tetrahedra, part.prescribedNodes,
+                              part.newtonIterations, part.increments, part.seconds));
     writeText(out, std::filesystem::path(part.inputFile).filename().string());
   });
 }
@@ -209,13 +206,8 @@ bool loadPart(const std::string& path, MuscleSolution& part) {
   if (steps > 1000000) throw InputError(path, "", "not a FibreMSS reference part file");
   for (uint64_t s = 0; s < steps; ++s) part.stepSurfaces.push_back(read.points());
   part.failure = read.text();
-  const SolveCounts counts = readCounts(read);
-  part.nodes = counts.nodes;
-  part.tetrahedra = counts.elements;
-  part.prescribedNodes = counts.prescribedNodes;
-  part.newtonIterations = counts.newtonIterations;
-  part.increments = counts.increments;
-  part.seconds = counts.seconds;
+  std::tie(part.nodes, part.tetrahedra, part.prescribedNodes, part.newtonIterations,
+           part.increments, part.seconds) = readCounts(read);
   part.inputFile = read.text();
   return true;
 }
@@ -230,8 +222,8 @@ void writeSolution(std::ostream& out, const CalculixSolution& solution, Precisio
   }
   writeText(out, solution.returnFailure);
   writePoints(out, solution.returnSurface, precision);
-  writeCounts(out, {solution.nodes, solution.elements, solution.prescribedNodes,
-                    solution.newtonIterations, solution.increments, solution.seconds});
+  writeCounts(out, std::tie(solution.nodes, solution.elements, solution.prescribedNodes,
+                            solution.newtonIterations, solution.increments, solution.seconds));
   writeText(out, std::to_string(solution.inputFiles.size()));
   for (const std::string& file : solution.inputFiles) writeText(out, file);
   // The continuum cut after what older entries hold (they are read as having none).
@@ -252,13 +244,8 @@ void readSolution(Reader& read, const std::string& path, CalculixSolution& solut
   }
   solution.returnFailure = read.text();
   solution.returnSurface = read.points();
-  const SolveCounts counts = readCounts(read);
-  solution.nodes = counts.nodes;
-  solution.elements = counts.elements;
-  solution.prescribedNodes = counts.prescribedNodes;
-  solution.newtonIterations = counts.newtonIterations;
-  solution.increments = counts.increments;
-  solution.seconds = counts.seconds;
+  std::tie(solution.nodes, solution.elements, solution.prescribedNodes, solution.newtonIterations,
+           solution.increments, solution.seconds) = readCounts(read);
   const size_t files = std::stoul(read.text());
   for (size_t f = 0; f < files; ++f) solution.inputFiles.push_back(read.text());
   if (read.atEnd()) return;  // stored before the cut was
