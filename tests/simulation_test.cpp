@@ -558,6 +558,31 @@ TEST(TwoBoneMuscles, ThighInOneIterationPerPoseIsNeverRolledBack) {
   }
 }
 
+TEST(TwoBoneMuscles, HipPelvisInOneIterationPerPoseIsNeverRolledBack) {
+  // The femur turns 5° per sub-pose while the muscles press on both bones: one iteration per
+  // pose froze a muscle (4 steps rolled back). The default solver takes one iteration per 2° of
+  // the largest turn instead, 3 per sub-pose; at 20 the count stays 20.
+  for (const int iterations : {1, 20}) {
+    const LoadedScene loaded =
+        loadScene("hip-pelvis", {"iterations=" + std::to_string(iterations)});
+    const PreparedScene prepared =
+        prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
+    MuscleSystem system(loaded.simulation);
+    std::vector<BoneHandle> bones;
+    for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+    for (const auto& muscle : prepared.muscles) system.addMuscle(muscle, bones);
+    const int poses = iterations == 1 ? loaded.poseCount : 3;
+    for (int pose = 1; pose < poses; ++pose) {
+      for (size_t b = 0; b < bones.size(); ++b)
+        system.setBoneTransform(bones[b], loaded.bonePose(b, pose));
+      system.step();
+      EXPECT_FALSE(system.lastStep().rolledBack) << "pose " << pose;
+      EXPECT_EQ(system.lastStep().frozenMuscles, 0u) << "pose " << pose;
+      EXPECT_EQ(system.lastStep().iterations, std::max(iterations, 3)) << "pose " << pose;
+    }
+  }
+}
+
 TEST(TwoBoneMuscles, HipExtensionInTenDegreeStepsStaysWhole) {
   // Verlet's 70 iterations leave each pose near where the pre-transform put it, so the blend's
   // effect shows; the default solver carries both to the pose's equilibrium.

@@ -23,6 +23,7 @@
 #include <Eigen/SparseCore>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "IntegratorsInternal.h"
@@ -152,6 +153,24 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWei
   return changed;
 }
 
+/// The mean spring rest length of `muscle` [m], 0 without springs.
+double meanRestLength(const MuscleState& muscle) {
+  const size_t springs = muscle.settings->springs.size();
+  return springs == 0 ? 0 : muscle.restLengthSum / static_cast<double>(springs);
+}
+
+/// The square of the rounding a particle's force may carry at `x` [N²], `stiffness` its diagonal
+/// entry of A [N/m]: each spring force k·(|x_b − x_a| − L0) rounds by about k·ε·(|x| + L0), ε
+/// btScalar's epsilon. A curvature pair whose s·y this rounding can reach (|s|·|y's rounding|)
+/// measures nothing: with such pairs at rest (the double build, a box carried rigidly by its bone)
+/// the L-BFGS step moved particles 1.5 mm off their bone while every spring was exact. Forces at
+/// the rounding level move a particle by about its |s| at most through a pair that passes.
+double forceNoise(double stiffness, const btVector3& x, double restLength) {
+  constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
+  return kEpsilon * kEpsilon * stiffness * stiffness *
+         (double(x.length2()) + restLength * restLength);
+}
+
 double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
   double sum = 0;
   for (size_t k = 0; k < a.size(); ++k) sum += double(a[k].dot(b[k]));
@@ -159,9 +178,10 @@ double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
 }
 
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
-/// curvature, and keeps x and F for the next. Rows the last response pushed are left out of the
-/// pair: a projection's move is not the forces' answer to the step (with them in, the hard-case
-/// matrix's hip-extension and pinch cells tore).
+/// curvature or no more than the forces' rounding can (forceNoise), and keeps x and F for the
+/// next. Rows the last response pushed are left out of the pair: a projection's move is not the
+/// forces' answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells
+/// tore).
 void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uint32_t>& free,
                 const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
                 const std::vector<uint8_t>& pushedRows, int size) {
@@ -169,14 +189,20 @@ void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uin
     const int slot = (h.newest + 1) % size;
     std::vector<btVector3>& s = h.steps[slot];
     std::vector<btVector3>& y = h.changes[slot];
+    const double restLength = meanRestLength(muscle);
+    double noise = 0;
     for (size_t k = 0; k < free.size(); ++k) {
       const int row = factor.row(k);
       const bool pushed = pushedRows[row] != 0;
-      s[row] = pushed ? btVector3(0, 0, 0) : muscle.positions[free[k]] - h.lastPositions[row];
+      const btVector3& x = muscle.positions[free[k]];
+      s[row] = pushed ? btVector3(0, 0, 0) : x - h.lastPositions[row];
       y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
+      if (!pushed) noise += forceNoise(factor.matrixDiagonal(row), x, restLength);
     }
-    const double curvature = dot(s, y);
-    if (curvature > 1e-12 * std::sqrt(dot(s, s) * dot(y, y))) {
+    // y's rounding is both forces': √2·the noise of one.
+    const double curvature = dot(s, y), steps = dot(s, s);
+    if (curvature > 1e-12 * std::sqrt(steps * dot(y, y)) &&
+        curvature > std::sqrt(2 * steps * noise)) {
       h.curvature[slot] = curvature;
       h.newest = slot;
       h.count = std::min(h.count + 1, size);
@@ -211,9 +237,8 @@ void twoLoop(StepHistory& h, const ProjectiveFactor& factor, std::vector<btVecto
 /// state the contacts keep changing). real-hip-gait tore without the bound (three muscles frozen
 /// at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
 bool movesTooFar(const MuscleState& muscle, const std::vector<btVector3>& step) {
-  const size_t springs = muscle.settings->springs.size();
-  if (springs == 0) return false;
-  const auto limit = static_cast<btScalar>(muscle.restLengthSum / static_cast<double>(springs));
+  if (muscle.settings->springs.empty()) return false;
+  const auto limit = static_cast<btScalar>(meanRestLength(muscle));
   return std::any_of(step.begin(), step.end(),
                      [&](const btVector3& d) { return d.length2() > limit * limit; });
 }

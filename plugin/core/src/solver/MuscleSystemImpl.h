@@ -243,6 +243,9 @@ struct MuscleSystem::Impl {
   void forcesPhase(bool bonesMove);
   void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
   void step(const StepSize& size);
+  /// The iterations of a step in which bones move: `requested`, or with the default solver
+  /// (projective) one per kMaxTurnPerIteration of the largest bone turn when that is more.
+  int iterationsFor(int requested) const;
   /// The sizes of a step attempt after `halvings` retries (smaller dt, more iterations): the
   /// parameters', or those of a `duration` step (StepSize::exact).
   StepSize stepSize(int halvings) const;
