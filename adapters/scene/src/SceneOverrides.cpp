@@ -37,6 +37,7 @@ const std::map<std::string, Shorthand>& shorthands() {
       {"enclosed_volume_stiffness", {Target::Section, "model"}},
       {"volume_coarsening", {Target::Section, "model"}},
       {"fibre_stiffness_ratio", {Target::Section, "model"}},
+      {"strain_limit", {Target::Section, "model"}},
       {"damping_scale", {Target::Section, "model"}},
       {"integrator", {Target::Section, "simulation"}},
       {"time_step", {Target::Section, "simulation"}},
