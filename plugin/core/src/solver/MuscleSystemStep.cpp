@@ -509,8 +509,8 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
     // The iteration's displacement is the projection's end's when it moved particles: at a
     // limited equilibrium the two cancel, as the stop rules expect.
-    result.displacement =
-        limitStrain(state) > 0 ? freeDisplacement(state) : integration.displacement;
+    result.displacement = limitStrain(state, kIterationStrainPasses) > 0 ? freeDisplacement(state)
+                                                                         : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
     if (refit) refitTree(state);
@@ -680,7 +680,8 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       stats.timing.response += millisecondsSince(start);
       forEachMuscle("end", [this, arrived](MuscleState& state, uint32_t, unsigned) {
         if (!arrived) followBones(state);
-        limitStrain(state);  // the response's pushes may have stretched springs held at it
+        // The response's pushes may have stretched springs held at the limit.
+        limitStrain(state, kEndStrainPasses);
       });
       break;
     }

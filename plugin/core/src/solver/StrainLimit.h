@@ -11,14 +11,18 @@ struct MuscleState;
 /// Shortens every spring of `muscle` longer than strainLimit·L0 to just inside that length (a
 /// relative 1e-5, beyond float rounding), mass-weighted (the particles weigh the same: two free
 /// ends move alike, a fixed end never), in passes over the springs in order (Gauss–Seidel) until
-/// one finds none beyond or kStrainLimitPasses have run. Sequential in one muscle, allocation-free:
-/// the same positions for every thread count. Returns the springs shortened (0: no spring was
-/// beyond, the positions are untouched; a limit of 0 checks nothing).
-size_t limitStrain(MuscleState& muscle);
+/// one finds none beyond or `passes` have run. Sequential in one muscle, allocation-free: the same
+/// positions for every thread count. Returns the springs shortened (0: no spring was beyond, the
+/// positions are untouched; a limit of 0 checks nothing).
+size_t limitStrain(MuscleState& muscle, int passes);
 
-/// Most passes limitStrain makes in one call [passes]. A spring it leaves beyond (a chain that
-/// cannot reach between its fixed ends within the limit) is shortened again in the next call.
-constexpr int kStrainLimitPasses = 8;
+/// Passes of limitStrain after each integration [passes]: one. A spring a pass leaves beyond (its
+/// neighbours' projections stretched it again) is shortened in the next iteration; more passes
+/// cost a pass over the springs each (8 per iteration: 1.5× real-hip's time per iteration).
+constexpr int kIterationStrainPasses = 1;
+/// Passes of limitStrain after a step's last response [passes]: until none is beyond, but for
+/// chains that cannot reach between their fixed ends within the limit.
+constexpr int kEndStrainPasses = 64;
 
 /// Σ |x − x(t−dt)| over the free particles of `muscle` [m]: an iteration's displacement after
 /// the projection moved some of them.
