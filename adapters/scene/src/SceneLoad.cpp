@@ -403,6 +403,9 @@ SpringParameters readModel(Fields& model) {
       btScalar(model.number("volume_coarsening", springs.volumeCoarsening, 1, 100));
   springs.fibreStiffnessRatio =
       btScalar(model.number("fibre_stiffness_ratio", springs.fibreStiffnessRatio, 0, 1e3, true));
+  springs.strainLimit = btScalar(model.number("strain_limit", springs.strainLimit, 0, 1e3));
+  if (springs.strainLimit > 0 && springs.strainLimit <= 1)
+    model.fail("strain_limit", "expected 0 (no limit) or a ratio > 1 of current to rest length");
   return springs;
 }
 

@@ -69,6 +69,9 @@ struct MuscleSettings {
   btScalar particleMass = 0;  ///< the same for every particle [kg]
   btScalar damping = 0;       ///< spring damping coefficient c [N·s/m]
   double restVolume = 0;      ///< volume enclosed by restSurface [m³]
+  /// Largest current / rest length of a spring after an iteration (SpringParameters::strainLimit)
+  /// [1]; 0: none.
+  btScalar strainLimit = 0;
   // Local volume terms (VolumeForces.h): the Delaunay tetrahedra of the particles whose centroid
   // lies inside restSurface, without slivers; empty when volumeModulus is 0.
   btScalar volumeModulus = 0;              ///< bulk modulus K of the volume terms [Pa]; 0: none

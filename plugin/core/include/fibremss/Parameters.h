@@ -62,6 +62,12 @@ struct SpringParameters {
   /// Stiffness of a spring along the local fibre direction over one across it [1]: a spring at
   /// angle θ to the fibres gets k = κ/L0 · (ratio·cos²θ + sin²θ) (1: isotropic).
   btScalar fibreStiffnessRatio = 1;
+  /// Largest current / rest length a spring may end a solver iteration or a step at [1] (0: no
+  /// limit): a position projection after each integration (StrainLimit.h). Passive skeletal
+  /// muscle tears beyond about 1.6 times its resting length and tendon at a tenth of that strain,
+  /// but a spring of the network is no fibre: it also shears between fibres that slide past each
+  /// other, and the tendon springs are stiffer (MuscleParameters::tendonStiffness) and stay short.
+  btScalar strainLimit = 2;
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).

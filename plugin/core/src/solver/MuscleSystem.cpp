@@ -137,6 +137,8 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       s.nearestBone.size() != n)
     throw InputError(source, where, "particle arrays differ in size");
   if (!(s.particleMass > 0)) throw InputError(source, where, "particle mass must be > 0");
+  if (!(s.strainLimit == 0 || s.strainLimit > 1))
+    throw InputError(source, where, "strain limit must be 0 (none) or > 1");
   for (size_t i = 0; i < n; ++i) {
     const int32_t limit = static_cast<int32_t>(bones.size());
     if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)

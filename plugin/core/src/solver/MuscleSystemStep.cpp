@@ -4,8 +4,9 @@
 // pre-transform: a blend of the two bones of a muscle spanning a joint, or the nearest bone's
 // as in the thesis; x and x(t−dt) alike, split like the bones so that muscles and bones stay in
 // step) and fixed particles are set to T·rest. Then per iteration: spring forces → dt (eq 5.1 or
-// fixed) → integration → tree refit (only past the skin) → muscle–muscle and muscle–bone pairs →
-// response. The thesis mode (rebuildEveryStep) instead jumps the bones, restarts particles from
+// fixed) → integration → strain limit (StrainLimit.h) → tree refit (only past the skin) →
+// muscle–muscle and muscle–bone pairs → response; after the last response the strain limit
+// again. The thesis mode (rebuildEveryStep) instead jumps the bones, restarts particles from
 // rest moved by their pre-transform, and rebuilds the trees. Output: deformed surfaces (the skin,
 // then surface contact).
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
@@ -19,6 +20,7 @@
 #include "MuscleSystemImpl.h"
 #include "MuscleSystemPretransform.h"
 #include "SpringForces.h"
+#include "StrainLimit.h"
 #include "TimeStep.h"
 #include "VolumeForces.h"
 #include "integrators/Integrators.h"
@@ -511,7 +513,10 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
     const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
-    result.displacement = integration.displacement;
+    // The iteration's displacement is the projection's end's when it moved particles: at a
+    // limited equilibrium the two cancel, as the stop rules expect.
+    result.displacement = limitStrain(state, kIterationStrainPasses) > 0 ? freeDisplacement(state)
+                                                                         : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
     if (refit) refitTree(state);
@@ -691,9 +696,11 @@ void MuscleSystem::Impl::step(const StepSize& size) {
       if (!arrived) moveBones(1, true);
       applyResponse();
       stats.timing.response += millisecondsSince(start);
-      if (!arrived)
-        forEachMuscle("follow bones",
-                      [this](MuscleState& state, uint32_t, unsigned) { followBones(state); });
+      forEachMuscle("end", [this, arrived](MuscleState& state, uint32_t, unsigned) {
+        if (!arrived) followBones(state);
+        // The response's pushes may have stretched springs held at the limit.
+        limitStrain(state, kEndStrainPasses);
+      });
       break;
     }
   }

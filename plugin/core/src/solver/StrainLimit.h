@@ -1,0 +1,31 @@
+#pragma once
+// The strain limit (SpringParameters::strainLimit, internal): a position projection after each
+// iteration's integration and after a step's last response, so that no spring of a muscle ends
+// an iteration or a step longer than MuscleSettings::strainLimit times its rest length.
+#include <cstddef>
+
+namespace fibremss {
+
+struct MuscleState;
+
+/// Shortens every spring of `muscle` longer than strainLimit·L0 to just inside that length (a
+/// relative 1e-5, beyond float rounding), mass-weighted (the particles weigh the same: two free
+/// ends move alike, a fixed end never), in passes over the springs in order (Gauss–Seidel) until
+/// one finds none beyond or `passes` have run. Sequential in one muscle, allocation-free: the same
+/// positions for every thread count. Returns the springs shortened (0: no spring was beyond, the
+/// positions are untouched; a limit of 0 checks nothing).
+size_t limitStrain(MuscleState& muscle, int passes);
+
+/// Passes of limitStrain after each integration [passes]: one. A spring a pass leaves beyond (its
+/// neighbours' projections stretched it again) is shortened in the next iteration; more passes
+/// cost a pass over the springs each (8 per iteration: 1.5× real-hip's time per iteration).
+constexpr int kIterationStrainPasses = 1;
+/// Passes of limitStrain after a step's last response [passes]: until none is beyond, but for
+/// chains that cannot reach between their fixed ends within the limit.
+constexpr int kEndStrainPasses = 64;
+
+/// Σ |x − x(t−dt)| over the free particles of `muscle` [m]: an iteration's displacement after
+/// the projection moved some of them.
+double freeDisplacement(const MuscleState& muscle);
+
+}  // namespace fibremss
