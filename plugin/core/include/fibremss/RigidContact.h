@@ -24,7 +24,9 @@ namespace fibremss {
 enum class MuscleTime : uint8_t {
   /// Each internal Bullet step is one FibreMSS step to the bones' current poses in iterations of
   /// SimulationParameters::timeStep (the muscles' own simulated time): the thesis' pose mode.
-  /// Contact bodies receive the step's mean contact force times Bullet's dt.
+  /// A dynamic contact body receives the muscles' static reaction (BodyContact::support),
+  /// implicit over Bullet's next step, at most what the pose change can supply, and is held back
+  /// when Bullet's step moved it more than half a particle radius into the muscles.
   QuasiStaticPose,
   /// Each internal Bullet step of dt advances the muscles by exactly dt of simulated time in
   /// k = max(iterations, ⌈dt / min(timeStep, stable dt)⌉) iterations of dt/k (the stable dt of

@@ -67,8 +67,16 @@ btVector3 respond(MuscleState& muscle, uint32_t i, const ContactBodyState& body,
   return impulse;
 }
 
+/// Adds what touching particle i of `muscle` holds of a body to `sum`: the part of its net force
+/// that presses into the body along the contact normal `n` (none pulls), and k/3·n·nᵀ.
+void addSupport(const MuscleState& muscle, uint32_t i, const btVector3& n, BodyImpulse& sum) {
+  sum.support -= n * std::max<btScalar>(-muscle.forces[i].dot(n), 0);
+  const btVector3 kn = n * muscle.contactStiffness[i];
+  sum.stiffness += btMatrix3x3(kn * n.x(), kn * n.y(), kn * n.z());
+}
+
 /// Calls onContact(i, contact) for every free boundary particle of `muscle` whose sphere
-/// overlaps `shape` (one ShapeContact handles or none) placed at `transform`.
+/// overlaps `shape` placed at `transform` (none for a shape ShapeContact does not handle).
 template <typename OnContact>
 void forShapeContacts(const MuscleState& muscle, const btCollisionShape& shape,
                       const btTransform& transform, TreeTraversalStack& stack,
@@ -156,11 +164,7 @@ void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies
       sum.linear -= impulse;
       sum.angular -= (contact.point - body.centre).cross(impulse);
       ++sum.contacts;
-      const btScalar press = -muscle.forces[i].dot(contact.normal);
-      sum.support -= contact.normal * std::max<btScalar>(press, 0);
-      const btVector3 n = contact.normal * muscle.contactStiffness[i];
-      sum.stiffness +=
-          btMatrix3x3(n * contact.normal.x(), n * contact.normal.y(), n * contact.normal.z());
+      addSupport(muscle, i, contact.normal, sum);
     });
   }
 }
