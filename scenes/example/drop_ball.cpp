@@ -6,9 +6,10 @@
 // than it fell and comes to rest on it. Bullet steps at 240 Hz (four substeps a frame), so that
 // the ball moves less than a particle's radius a step.
 // Usage: fibremss_drop_ball [STEPS] [pose]. `pose` keeps the library's default coupling,
-// MuscleTime::QuasiStaticPose with the projective solver: it stops a body and never throws it,
-// but holds no weight (each pose step treats the body as an obstacle), so the ball sinks in.
-// Exits 1 if the ball leaves faster than it landed, or (Dynamic) is not at rest on the muscle.
+// MuscleTime::QuasiStaticPose with the projective solver: it stops a body, holds its weight by
+// the muscle's static reaction and never throws it, but without friction a ball balanced on the
+// crest of this narrow muscle may roll off. Exits 1 if the ball leaves faster than it landed, or
+// (Dynamic) is not at rest on the muscle.
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>

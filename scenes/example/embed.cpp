@@ -5,7 +5,7 @@
 // The world runs in MuscleTime::Dynamic: Bullet's dt is the muscles' simulated time, so the ball
 // and the muscle share one clock and exchange momentum. `pose` runs the library's default
 // instead, the quasi-static pose mode (one muscle pose per Bullet step; see MuscleWorld.h), which
-// suits kinematic tools and slow bodies: it stops a thrown ball but holds none of its weight.
+// suits kinematic tools and slow bodies: it stops a thrown ball and holds it, never throws it.
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>

@@ -19,8 +19,8 @@
 // collision objects that are not bones (a ball, a probe, a hand; dynamic, kinematic or static),
 // found through the world's broadphase near the muscles, collide with the muscles' particle
 // spheres; the muscles deform and dynamic bodies receive the reaction impulses after the
-// muscles' step (Dynamic: exactly the momentum the particles lost; QuasiStaticPose: the step's
-// mean contact force times Bullet's dt). contactWrench answers the haptic query.
+// muscles' step (Dynamic: exactly the momentum the particles lost; QuasiStaticPose: the muscles'
+// static reaction, implicit, never throwing; docs/contact.md). contactWrench: the haptic query.
 #include <BulletCollision/CollisionDispatch/btCollisionObject.h>
 #include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
 

@@ -10,6 +10,7 @@
 // frictionless); the momentum it loses, m·Δv, is the impulse the body receives, and a dynamic
 // body's velocity takes it at once (so it slows within the step). Fixed particles do not touch
 // bodies (the bone they sit on collides with them in Bullet).
+#include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btScalar.h>
 #include <LinearMath/btTransform.h>
 #include <LinearMath/btVector3.h>
@@ -23,7 +24,9 @@ namespace fibremss {
 enum class MuscleTime : uint8_t {
   /// Each internal Bullet step is one FibreMSS step to the bones' current poses in iterations of
   /// SimulationParameters::timeStep (the muscles' own simulated time): the thesis' pose mode.
-  /// Contact bodies receive the step's mean contact force times Bullet's dt.
+  /// A dynamic contact body receives the muscles' static reaction (BodyContact::support),
+  /// implicit over Bullet's next step, at most what the pose change can supply, and is held back
+  /// when Bullet's step moved it more than half a particle radius into the muscles.
   QuasiStaticPose,
   /// Each internal Bullet step of dt advances the muscles by exactly dt of simulated time in
   /// k = max(iterations, ⌈dt / min(timeStep, stable dt)⌉) iterations of dt/k (the stable dt of
@@ -54,6 +57,12 @@ struct BodyContact {
   btVector3 force{0, 0, 0};           ///< impulse / the step's simulated time [N]
   btVector3 torque{0, 0, 0};          ///< angularImpulse / the step's simulated time [N·m]
   size_t contacts = 0;                ///< particle contacts in the step's last iteration
+  /// The muscles' static reaction in the step's last iteration: the part of the touching
+  /// particles' net forces (springs, volume, gravity) that presses into the body [N].
+  btVector3 support{0, 0, 0};
+  /// Σ k/3·n·nᵀ over the touching particles (k their springs' stiffness, n the contact normal):
+  /// how the support grows as the body moves into them [N/m].
+  btMatrix3x3 supportStiffness{0, 0, 0, 0, 0, 0, 0, 0, 0};
   /// Where the step's iterations moved the body: in a duration step (MuscleTime::Dynamic) a body
   /// sweeps through the muscles at its velocity, which each iteration's impulses change, from
   /// `duration` before its pose at the step's start; Bullet's body takes this pose with the

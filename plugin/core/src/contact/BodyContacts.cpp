@@ -5,6 +5,8 @@
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <LinearMath/btTransformUtil.h>
 
+#include <algorithm>
+
 #include "ShapeContact.h"
 
 namespace fibremss {
@@ -63,6 +65,34 @@ btVector3 respond(MuscleState& muscle, uint32_t i, const ContactBodyState& body,
   muscle.positions[i] += n * contact.depth;
   muscle.previous[i] = muscle.positions[i] - moved;
   return impulse;
+}
+
+/// Adds what touching particle i of `muscle` holds of a body to `sum`: the part of its net force
+/// that presses into the body along the contact normal `n` (none pulls), and k/3·n·nᵀ.
+void addSupport(const MuscleState& muscle, uint32_t i, const btVector3& n, BodyImpulse& sum) {
+  sum.support -= n * std::max<btScalar>(-muscle.forces[i].dot(n), 0);
+  const btVector3 kn = n * muscle.contactStiffness[i];
+  sum.stiffness += btMatrix3x3(kn * n.x(), kn * n.y(), kn * n.z());
+}
+
+/// Calls onContact(i, contact) for every free boundary particle of `muscle` whose sphere
+/// overlaps `shape` placed at `transform` (none for a shape ShapeContact does not handle).
+template <typename OnContact>
+void forShapeContacts(const MuscleState& muscle, const btCollisionShape& shape,
+                      const btTransform& transform, TreeTraversalStack& stack,
+                      OnContact&& onContact) {
+  if (!touchableShape(shape) || muscle.tree.empty()) return;
+  btVector3 lower, upper;
+  shape.getAabb(transform, lower, upper);
+  const btDbvtVolume box = grown(btDbvtVolume::FromMM(lower, upper), leafSlack(muscle));
+  if (!boundsOverlap(muscle.tree.bounds(0), box)) return;
+  const MuscleSettings& settings = *muscle.settings;
+  forLeavesIn(muscle.tree, box, stack, [&](uint32_t i) {
+    ShapeContact contact;
+    if (!settings.isFixed(i) &&
+        sphereShapeContact(shape, transform, muscle.positions[i], settings.radii[i], contact))
+      onContact(i, contact);
+  });
 }
 
 /// Places the body at `transform`: its centre of mass and bounds follow.
@@ -134,6 +164,7 @@ void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies
       sum.linear -= impulse;
       sum.angular -= (contact.point - body.centre).cross(impulse);
       ++sum.contacts;
+      addSupport(muscle, i, contact.normal, sum);
     });
   }
 }
@@ -142,23 +173,22 @@ void addHookeWrench(const MuscleState& muscle, const btCollisionObject& body,
                     const btTransform& transform, const btVector3& centre,
                     TreeTraversalStack& stack, ContactWrench& wrench) {
   const btCollisionShape* shape = body.getCollisionShape();
-  if (!shape || !touchableShape(*shape) || muscle.tree.empty() || muscle.contactStiffness.empty())
-    return;
-  btVector3 lower, upper;
-  shape->getAabb(transform, lower, upper);
-  const btDbvtVolume box = grown(btDbvtVolume::FromMM(lower, upper), leafSlack(muscle));
-  if (!boundsOverlap(muscle.tree.bounds(0), box)) return;
-  const MuscleSettings& settings = *muscle.settings;
-  forLeavesIn(muscle.tree, box, stack, [&](uint32_t i) {
-    ShapeContact contact;
-    if (settings.isFixed(i) ||
-        !sphereShapeContact(*shape, transform, muscle.positions[i], settings.radii[i], contact))
-      return;
+  if (!shape || muscle.contactStiffness.empty()) return;
+  forShapeContacts(muscle, *shape, transform, stack, [&](uint32_t i, const ShapeContact& contact) {
     const btVector3 force = contact.normal * (-muscle.contactStiffness[i] * contact.depth);
     wrench.force += force;
     wrench.torque += (contact.point - centre).cross(force);
     ++wrench.contacts;
   });
+}
+
+btScalar deepestOverlap(const MuscleState& muscle, const btCollisionShape& shape,
+                        const btTransform& transform, TreeTraversalStack& stack) {
+  btScalar deepest = 0;
+  forShapeContacts(muscle, shape, transform, stack, [&](uint32_t i, const ShapeContact& contact) {
+    deepest = std::max(deepest, contact.depth / muscle.settings->radii[i]);
+  });
+  return deepest;
 }
 
 void addExternalForces(const MuscleState& muscle, const btVector3& gravity,

@@ -12,6 +12,7 @@
 #include "solver/MuscleState.h"
 
 class btCollisionObject;
+class btCollisionShape;
 
 namespace fibremss {
 
@@ -28,7 +29,8 @@ struct ContactBodyState {
   btScalar inverseMass = 0;                                 ///< 0: kinematic or static [1/kg]
   btMatrix3x3 inverseInertia = btMatrix3x3::getIdentity();  ///< world frame [1/(kg·m²)]
   bool touchable = false;  ///< its shape is one ShapeContact handles
-  BodyImpulse total;       ///< Σ of the step's impulses so far (contacts: last iteration's)
+  /// Σ of the step's impulses so far (contacts, support, stiffness: the last iteration's)
+  BodyImpulse total;
 };
 
 /// The body's state at the start of a step (`body` must outlive the step), at its current pose.
@@ -56,6 +58,11 @@ void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies
 void addHookeWrench(const MuscleState& muscle, const btCollisionObject& body,
                     const btTransform& transform, const btVector3& centre,
                     TreeTraversalStack& stack, ContactWrench& wrench);
+
+/// The deepest overlap of `shape` placed at `transform` with a free boundary particle sphere of
+/// the muscle, a share of that particle's radius [1] (0: none).
+btScalar deepestOverlap(const MuscleState& muscle, const btCollisionShape& shape,
+                        const btTransform& transform, TreeTraversalStack& stack);
 
 /// Adds m·gravity and the muscle's external forces to `forces` of its free particles.
 void addExternalForces(const MuscleState& muscle, const btVector3& gravity,

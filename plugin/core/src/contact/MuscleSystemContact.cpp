@@ -52,6 +52,8 @@ void MuscleSystem::Impl::collideBodies(btScalar dt) {
       sum.linear += state.bodyImpulses[k].linear;
       sum.angular += state.bodyImpulses[k].angular;
       sum.contacts += state.bodyImpulses[k].contacts;
+      sum.support += state.bodyImpulses[k].support;
+      sum.stiffness += state.bodyImpulses[k].stiffness;
     }
     ContactBodyState& body = contactBodies[k];
     body.linear += sum.linear * body.inverseMass;
@@ -59,6 +61,8 @@ void MuscleSystem::Impl::collideBodies(btScalar dt) {
     body.total.linear += sum.linear;
     body.total.angular += sum.angular;
     body.total.contacts = sum.contacts;
+    body.total.support = sum.support;
+    body.total.stiffness = sum.stiffness;
   }
 }
 
@@ -73,6 +77,8 @@ void MuscleSystem::Impl::endBodyContacts() {
     result.force = time > 0 ? total.linear / time : btVector3(0, 0, 0);
     result.torque = time > 0 ? total.angular / time : btVector3(0, 0, 0);
     result.contacts = total.contacts;
+    result.support = total.support;
+    result.supportStiffness = total.stiffness;
     result.transform = contactBodies[k].transform;
   }
 }
