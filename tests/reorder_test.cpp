@@ -206,9 +206,11 @@ TEST(Reorder, RenumberedMusclesStepToTheSamePlaces) {
       lower.setMin(p);
       upper.setMax(p);
     }
-    // Float rounding of sums in another order, grown over 40 iterations (measured ≤ 1.5e-7 m,
-    // 0.5e-6 of the muscle's size): far below a particle spacing (1/20 of the muscle here).
-    const btScalar tolerance = btScalar(1e-5) * (upper - lower).length();
+    // Float rounding of sums in another order, grown over 40 iterations, and where it decides
+    // whether an L-BFGS pair lies above the forces' rounding (its sums run in the new order too),
+    // another history from there: measured ≤ 6.9e-6 m (2.8e-6 of the muscle's size, biceps
+    // femoris short), far below a particle spacing (1/20 of the muscle here).
+    const btScalar tolerance = btScalar(1e-4) * (upper - lower).length();
     EXPECT_LE(maxDifference(x, back), tolerance);
     EXPECT_LE(maxDifference(reference.surfaces[m], outcome.surfaces[m]), tolerance);
   }

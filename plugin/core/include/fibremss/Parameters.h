@@ -67,7 +67,9 @@ struct SpringParameters {
   /// muscle tears beyond about 1.6 times its resting length and tendon at a tenth of that strain,
   /// but a spring of the network is no fibre: it also shears between fibres that slide past each
   /// other, and the tendon springs are stiffer (MuscleParameters::tendonStiffness) and stay short.
-  btScalar strainLimit = 2;
+  /// Off by default (its check costs 1.1-1.26x a step's time, docs/decisions.md); the real
+  /// anatomy scenes (scenes/json/real-hip*.json) set 2.
+  btScalar strainLimit = 0;
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).
