@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <stb_image.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <filesystem>
@@ -71,28 +72,77 @@ void expectFirstMuscleAround(const Image& image, const Camera& camera, const Vec
     }
 }
 
-TEST(ViewerCamera, ProjectsTheFramedBoxIntoTheImageAndItsCentreToTheMiddle) {
+/// The eight corners of the box [lower, upper].
+std::vector<Vec3> corners(const Vec3& lower, const Vec3& upper) {
+  std::vector<Vec3> points;
+  for (int corner = 0; corner < 8; ++corner)
+    points.push_back({corner & 1 ? upper[0] : lower[0], corner & 2 ? upper[1] : lower[1],
+                      corner & 4 ? upper[2] : lower[2]});
+  return points;
+}
+
+TEST(ViewerCamera, FramesPointsCentredAndFillingNineTenthsOfTheBindingSide) {
   Camera camera;
-  const Vec3 lower{-1, 0, 2}, upper{3, 1, 4};
-  camera.frame(lower, upper);
-  for (float azimuth : {0.0f, 70.0f, 200.0f}) {
-    camera.setView(azimuth, 25, 1);
-    const viewer::Pixel centre = camera.project({1, 0.5f, 3}, 640, 480);
-    ASSERT_TRUE(centre.visible);
-    EXPECT_NEAR(centre.x, 320, 1e-2);
-    EXPECT_NEAR(centre.y, 240, 1e-2);
-    for (int corner = 0; corner < 8; ++corner) {
-      const Vec3 p{corner & 1 ? upper[0] : lower[0], corner & 2 ? upper[1] : lower[1],
-                   corner & 4 ? upper[2] : lower[2]};
-      EXPECT_TRUE(camera.project(p, 640, 480).visible) << "corner " << corner;
+  const std::vector<Vec3> box = corners({-1, 0, 2}, {3, 1, 4});
+  // A wide image, a square one and a narrow one (the view beside a wide panel).
+  for (const auto& [width, height] :
+       std::vector<std::pair<int, int>>{{640, 480}, {300, 300}, {200, 600}})
+    for (float azimuth : {0.0f, 70.0f, 200.0f}) {
+      camera.setAngles(azimuth, 25);
+      camera.frame(box, float(width) / float(height));
+      float left = 1e9f, right = -1e9f, top = 1e9f, bottom = -1e9f;
+      for (const Vec3& p : box) {
+        const viewer::Pixel pixel = camera.project(p, width, height);
+        ASSERT_TRUE(pixel.visible) << width << "x" << height << " azimuth " << azimuth;
+        left = std::min(left, pixel.x);
+        right = std::max(right, pixel.x);
+        top = std::min(top, pixel.y);
+        bottom = std::max(bottom, pixel.y);
+      }
+      EXPECT_NEAR(left + right, float(width), 0.5f) << width << "x" << height << " " << azimuth;
+      EXPECT_NEAR(top + bottom, float(height), 0.5f) << width << "x" << height << " " << azimuth;
+      EXPECT_NEAR(std::max((right - left) / float(width), (bottom - top) / float(height)), 0.9f,
+                  1e-3f)
+          << width << "x" << height << " azimuth " << azimuth;
     }
-  }
   // Up in the world is up in the image; behind the eye is not visible.
-  camera.setView(0, 0, 1);
-  EXPECT_LT(camera.project({1, 1, 3}, 640, 480).y, 240);
+  camera.setAngles(0, 0);
+  camera.frame(box, 640.0f / 480);
+  EXPECT_LT(camera.project({1, 1, 3}, 640, 480).y, camera.project({1, 0, 3}, 640, 480).y);
   const Vec3 eye = camera.eye();
   EXPECT_FALSE(
       camera.project({2 * eye[0] - 1, 2 * eye[1] - 0.5f, 2 * eye[2] - 3}, 640, 480).visible);
+}
+
+/// The box around the pixels of `image` that are not background, in columns [fromX, width).
+struct Drawn {
+  int left = 1 << 30, right = -1, top = 1 << 30, bottom = -1;
+};
+Drawn drawnBox(const Image& image, int fromX) {
+  Drawn box;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = fromX; x < image.width; ++x)
+      if (!isBackground(image.at(x, y))) {
+        box.left = std::min(box.left, x);
+        box.right = std::max(box.right, x);
+        box.top = std::min(box.top, y);
+        box.bottom = std::max(box.bottom, y);
+      }
+  return box;
+}
+
+/// The scene drawn in the view (columns viewX to the image's width) is centred in it and spans
+/// 85 to 95 % of its binding side (framed at 90 %, the pixels' edges blurred).
+void expectFramed(const Image& image, int viewX) {
+  const Drawn box = drawnBox(image, viewX);
+  const float width = float(image.width - viewX), height = float(image.height);
+  ASSERT_GE(box.right, box.left);
+  EXPECT_NEAR(0.5f * float(box.left + box.right + 1) - float(viewX), width / 2, 0.03f * width);
+  EXPECT_NEAR(0.5f * float(box.top + box.bottom + 1), height / 2, 0.03f * height);
+  const float fill =
+      std::max(float(box.right - box.left + 1) / width, float(box.bottom - box.top + 1) / height);
+  EXPECT_GT(fill, 0.85f);
+  EXPECT_LT(fill, 0.95f);
 }
 
 /// Each muscle's surface centroid after `steps` steps of `scene`, simulated here the way
@@ -163,6 +213,35 @@ TEST(Viewer, ScreenshotDrawsTheMuscleWhereTheSimulationPutsItAndBackgroundElsewh
     for (int x = 0; x < image.width; ++x) muscle += isFirstMuscleColour(image.at(x, y)) ? 1 : 0;
   EXPECT_GT(muscle, 200u);
   EXPECT_LT(muscle, size_t(image.width) * image.height / 2);
+  expectFramed(image, 0);
+}
+
+/// Dear ImGui's dark style draws histograms in this orange (ImGuiCol_PlotHistogram).
+bool isHistogramColour(const std::array<int, 3>& c) {
+  return std::abs(c[0] - 230) < 12 && std::abs(c[1] - 179) < 12 && c[2] < 20;
+}
+
+TEST(Viewer, ThePanelGraphsEveryStepFitsItsTextAndTheSceneIsFramedBesideIt) {
+  TemporaryDirectory directory("fibremss_viewer_panel_test");
+  viewer::ViewerOptions options = screenshotOptions((directory.path() / "panel.png").string(), 3);
+  options.scene = "fusiform";
+  options.hideUi = false;
+  options.width = 560;  // a panel of 280 px: long lines must wrap
+  options.height = 720;
+  options.azimuthDeg = 90;  // the bars across: a wide scene in a narrow view
+  options.elevationDeg = 30;
+  const viewer::ViewerResult result = viewer::runViewer(options);
+  EXPECT_EQ(result.stepSamples, 3u);
+  EXPECT_EQ(result.panelOverflow, 0.0f);
+  EXPECT_EQ(result.counter, 2);  // the third step moved the bones to pose 2
+  const Image image(options.screenshot);
+  ASSERT_EQ(image.width, 560);
+  ASSERT_EQ(result.viewX, 280);
+  size_t bars = 0;
+  for (int y = 0; y < image.height; ++y)
+    for (int x = 0; x < result.viewX; ++x) bars += isHistogramColour(image.at(x, y)) ? 1 : 0;
+  EXPECT_GT(bars, 300u);  // three bars of the step-time graph
+  expectFramed(image, result.viewX);
 }
 
 TEST(Viewer, CommandWritesAScreenshotColouredByFibreStretchWithThePanel) {
@@ -256,7 +335,18 @@ TEST(Viewer, PlaysARunsFramesAndDrawsTheMuscleWhereTheFrameSaysWithoutItsScene) 
       runProcess(std::string(FIBREMSS_CLI) + " view " + out.string() +
                  " --frames 9 --colour-by penetration --size 200x150 --screenshot " + png);
   ASSERT_EQ(view.exitCode, 0) << view.output;
-  EXPECT_NE(view.output.find("(200x150, after 2 frames)"), std::string::npos) << view.output;
+  EXPECT_NE(view.output.find("(200x150, frame 2)"), std::string::npos) << view.output;
+  // Played from the first frame to the end, the panel's counter and slider both say the last,
+  // counted from 0 as --frames counts; the run's long path wraps inside the panel.
+  options.steps = 0;
+  options.play = true;
+  options.hideUi = false;
+  options.width = 520;
+  const viewer::ViewerResult played = viewer::runViewer(options);
+  EXPECT_EQ(played.steps, 2);
+  EXPECT_EQ(played.counter, 2);
+  EXPECT_EQ(played.slider, 2);
+  EXPECT_EQ(played.panelOverflow, 0.0f);
   std::ofstream(out / "run.pvd") << "<VTKFile type=\"Collection\"><Collection/></VTKFile>";
   EXPECT_EQ(runProcess(std::string(FIBREMSS_CLI) + " view " + out.string() + " --screenshot " +
                        png + " 2>/dev/null")
@@ -282,6 +372,8 @@ TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   EXPECT_EQ(runProcess(cli + "fusiform --draw sparks --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --size 12 --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --camera 1 --screenshot /tmp/x.png").exitCode, 2);
+  // A scene stepped live plays without end: no picture to take after it.
+  EXPECT_EQ(runProcess(cli + "fusiform --play --screenshot /tmp/x.png").exitCode, 2);
 }
 
 }  // namespace

@@ -2,7 +2,6 @@
 // --screenshot a PNG after some steps.
 #include <algorithm>
 #include <cstdio>
-#include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -13,7 +12,6 @@
 #include "SceneArgs.h"
 #include "Validators.h"
 #include "fibremss/Error.h"
-#include "fibremss/Messages.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/viewer/Viewer.h"
 
@@ -51,29 +49,9 @@ struct ViewArgs {
   std::string size = "1280x800";  ///< --size WxH
 };
 
-/// What `fibremss view SCENE` shows: a run's directory with frames (DIR/run.pvd) is played;
-/// one without (--frame-every 0) steps the scene it ran (DIR/scene.json) live; anything else is
-/// a scene to step live.
-void chooseSource(const std::string& scene, viewer::ViewerOptions& options) {
-  options.scene = scene;
-  if (!std::filesystem::is_directory(scene)) return;
-  const std::filesystem::path dir(scene);
-  if (std::filesystem::is_regular_file(dir / "run.pvd")) {
-    options.runDir = scene;
-    return;
-  }
-  if (!std::filesystem::is_regular_file(dir / "scene.json"))
-    throw InputError(scene, "",
-                     "expected a built-in scene, a scene file or a run's directory (fibremss run "
-                     "--out DIR) with run.pvd or scene.json");
-  printNote("no frames in " + scene + " (run.pvd); stepping its scene (" +
-            (dir / "scene.json").string() + ") live instead");
-  options.scene = (dir / "scene.json").string();
-}
-
 void view(ViewArgs& args) {
   viewer::ViewerOptions& options = args.options;
-  chooseSource(args.scene.scene, options);
+  viewer::chooseSource(args.scene.scene, options);
   options.overrides = args.scene.overrides;
   options.muscleDebugFlags = drawFlags(args.draw);
   if (args.camera.size() < 2 || args.camera.size() > 3)
@@ -88,9 +66,12 @@ void view(ViewArgs& args) {
     throw InputError("--size", "",
                      "expected WIDTHxHEIGHT in pixels (16 to 8192), got '" + args.size + "'");
   const viewer::ViewerResult result = viewer::runViewer(options);
-  if (!options.screenshot.empty())
-    std::printf("wrote %s (%dx%d, after %d %s)\n", options.screenshot.c_str(), result.width,
-                result.height, result.steps, options.runDir.empty() ? "steps" : "frames");
+  if (options.screenshot.empty()) return;
+  const std::string what = options.runDir.empty()
+                               ? "after " + std::to_string(result.steps) + " steps"
+                               : "frame " + std::to_string(result.steps);  // from 0, as --frames
+  std::printf("wrote %s (%dx%d, %s)\n", options.screenshot.c_str(), result.width, result.height,
+              what.c_str());
 }
 
 }  // namespace
@@ -104,7 +85,8 @@ void addViewCommand(CLI::App& app) {
       "particles, fibres, contacts, the per-part timings");
   command->footer(
       "In the window: space plays or pauses, S or the right arrow steps (a frame of a run), R "
-      "resets, the slider scrubs a run's frames, F frames the scene, H hides the panel, Q quits; "
+      "resets, the slider scrubs a run's frames (counted from 0, as --frames), the field at the "
+      "top opens another scene or run, F frames the scene, H hides the panel, Q quits; "
       "drag to orbit, right or middle drag (or shift+drag) "
       "to pan, the wheel zooms. Without a display, --screenshot works under `xvfb-run -a`.");
   addSceneArgs(*command, args->scene);
@@ -146,6 +128,9 @@ void addViewCommand(CLI::App& app) {
   command->add_flag(
       "--no-bones", [args](int64_t) { args->options.bones = false; },
       "Do not draw the bone meshes");
+  command->add_flag("--play", args->options.play,
+                    "Start playing; with --screenshot (a run's frames) the PNG shows the last "
+                    "frame, where playing stopped");
   command->add_flag("--loop", args->options.loop,
                     "Past the last pose, sweep the motion back to the first and forth again");
   command->callback([args] { view(*args); });

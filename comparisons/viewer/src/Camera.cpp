@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <vector>
 
 namespace fibremss::viewer {
 namespace {
@@ -43,13 +45,70 @@ void basis(float azimuthDeg, float elevationDeg, Vec3& right, Vec3& up) {
   up = cross(back, right);
 }
 
+/// A point in the view's frame: along its right and up axes and towards the eye.
+using ViewPoint = std::array<float, 3>;
+
+/// The least distance at which the points fit within ±tanHalf of the view axis along image axis
+/// `axis` (0 right, 1 up), the target moved along it as it needs: a point at x, z (towards the
+/// eye) fits when |x - t| <= tanHalf * (d - z), so d * tanHalf is at least the mean of the two
+/// sides' largest z * tanHalf ± x.
+float fitDistance(const std::vector<ViewPoint>& points, int axis, float tanHalf) {
+  float positive = std::numeric_limits<float>::lowest(), negative = positive;
+  for (const ViewPoint& p : points) {
+    positive = std::max(positive, p[2] * tanHalf + p[axis]);
+    negative = std::max(negative, p[2] * tanHalf - p[axis]);
+  }
+  return (positive + negative) / (2 * tanHalf);
+}
+
+/// The target's offset along image axis `axis` that puts the points' projections, seen from
+/// `distance`, as far past the centre on one side as on the other (by bisection: the sum of
+/// the two extremes falls as the offset grows).
+float centring(const std::vector<ViewPoint>& points, int axis, float distance) {
+  float low = std::numeric_limits<float>::max(), high = std::numeric_limits<float>::lowest();
+  for (const ViewPoint& p : points) {
+    low = std::min(low, p[axis]);
+    high = std::max(high, p[axis]);
+  }
+  for (int i = 0; i < 40; ++i) {
+    const float t = 0.5f * (low + high);
+    float first = std::numeric_limits<float>::max(), last = std::numeric_limits<float>::lowest();
+    for (const ViewPoint& p : points) {
+      const float projected = (p[axis] - t) / (distance - p[2]);
+      first = std::min(first, projected);
+      last = std::max(last, projected);
+    }
+    (first + last > 0 ? low : high) = t;
+  }
+  return 0.5f * (low + high);
+}
+
 }  // namespace
 
-void Camera::frame(const Vec3& lower, const Vec3& upper) {
-  target_ = scale(add(lower, upper), 0.5f);
-  const Vec3 diagonal = sub(upper, lower);
+void Camera::frame(std::span<const Vec3> points, float aspect, float fill) {
+  if (points.empty()) return;
+  Vec3 lower = points.front(), upper = points.front();
+  for (const Vec3& p : points)
+    for (int k = 0; k < 3; ++k) {
+      lower[k] = std::min(lower[k], p[k]);
+      upper[k] = std::max(upper[k], p[k]);
+    }
+  const Vec3 centre = scale(add(lower, upper), 0.5f), diagonal = sub(upper, lower);
   extent_ = std::max(0.5f * std::sqrt(dot(diagonal, diagonal)), 1e-6f);
-  framedDistance_ = distance_ = extent_ / std::sin(radians(fovYDeg / 2));
+  Vec3 right, up;
+  basis(azimuth_, elevation_, right, up);
+  const Vec3 back = backward(azimuth_, elevation_);
+  std::vector<ViewPoint> view;  // from the centre: along right, up, towards the eye
+  view.reserve(points.size());
+  for (const Vec3& p : points) {
+    const Vec3 q = sub(p, centre);
+    view.push_back({dot(q, right), dot(q, up), dot(q, back)});
+  }
+  const float tanY = fill * std::tan(radians(fovYDeg / 2)), tanX = tanY * aspect;
+  framedDistance_ = distance_ =
+      std::max({fitDistance(view, 0, tanX), fitDistance(view, 1, tanY), 2 * extent_});
+  target_ = add(centre, add(scale(right, centring(view, 0, distance_)),
+                            scale(up, centring(view, 1, distance_))));
 }
 
 void Camera::orbit(float azimuthDeg, float elevationDeg) {
@@ -68,12 +127,10 @@ void Camera::zoom(float factor) {
   distance_ = std::clamp(distance_ / factor, 1e-3f * extent_, 100 * framedDistance_);
 }
 
-void Camera::setView(float azimuthDeg, float elevationDeg, float zoomFactor) {
+void Camera::setAngles(float azimuthDeg, float elevationDeg) {
   azimuth_ = 0;
   elevation_ = 0;
   orbit(azimuthDeg, elevationDeg);
-  distance_ = framedDistance_;
-  zoom(zoomFactor);
 }
 
 Vec3 Camera::eye() const {

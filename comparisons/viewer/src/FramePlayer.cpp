@@ -10,6 +10,7 @@
 #include <fstream>
 #include <memory>
 
+#include "Panel.h"
 #include "fibremss/Error.h"
 #include "fibremss/InputFiles.h"
 #include "fibremss/MuscleSystem.h"
@@ -177,34 +178,30 @@ void FramePlayer::load() {
   loaded_ = true;
 }
 
-void FramePlayer::controls(const Snapshot& shown) {
-  const Frame& frame = frames_[size_t(std::clamp(shown.steps, 0, int(frames_.size()) - 1))];
+Playback FramePlayer::controls(const Snapshot& shown) {
+  const int last = int(frames_.size()) - 1;
+  const Frame& frame = frames_[size_t(std::clamp(shown.steps, 0, last))];
   const double label = seriesAt(summary_, frame.time, "pose_label");
   const double solverStep = seriesAt(summary_, frame.time, "step");
-  ImGui::Text("%s: frame %d of %zu", dir_.c_str(), shown.steps + 1, frames_.size());
   char where[96] = "";
   if (std::isfinite(solverStep)) std::snprintf(where, sizeof where, ", step %d", int(solverStep));
   if (std::isfinite(label))
     std::snprintf(where + std::strlen(where), sizeof where - std::strlen(where),
                   ", pose label %.4g", label);
-  ImGui::Text("t = %.6g s%s", frame.time, where);
-  if (ImGui::Button(playing_ ? "Pause (space)" : "Play (space)")) togglePlaying();
-  ImGui::SameLine();
-  if (ImGui::Button("Step (S)")) step();
-  ImGui::SameLine();
-  if (ImGui::Button("Reset (R)")) reset();
-  ImGui::SameLine();
-  ImGui::Checkbox("loop", &loop);
-  int number = index_ + 1;  // as the line above counts: 1 to the number of frames
-  if (ImGui::SliderInt("frame", &number, 1, int(frames_.size()))) show(number - 1);
+  ImGui::Text("%s", dir_.c_str());
+  ImGui::Text("frame %d (0 to %d), t = %.6g s%s", shown.steps, last, frame.time, where);
+  playbackButtons(*this, loop);
+  int index = index_;  // counted from 0, as the line above
+  if (ImGui::SliderInt("frame", &index, 0, last)) show(index);
+  return {shown.steps, index};
 }
 
 void FramePlayer::timings(const Snapshot& shown) {
-  ImGui::Text("frame %d read in %.3g ms", shown.steps + 1, readMs_);
+  ImGui::Text("frame %d read in %.3g ms", shown.steps, readMs_);
   if (!summary_.is_object() || !summary_.contains("timing")) return;
   const nlohmann::json& t = summary_["timing"];
   auto ms = [&](const char* key) { return t.value(key, NAN); };
-  ImGui::TextWrapped(
+  ImGui::Text(
       "run, median ms per iteration: mss %.3g | muscle CD %.3g | bone CD %.3g | "
       "response %.3g | output %.3g",
       ms("mss"), ms("muscle_cd"), ms("bone_cd"), ms("response"), ms("output"));

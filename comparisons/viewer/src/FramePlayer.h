@@ -21,9 +21,10 @@ class FramePlayer : public Source {
   FramePlayer(const std::string& runDir, const DebugRequest& debug);
 
   bool fetch(Snapshot& into) override;
-  void controls(const Snapshot& shown) override;
+  Playback controls(const Snapshot& shown) override;
   void timings(const Snapshot& shown) override;
   void togglePlaying() override { playing_ = !playing_; }
+  bool playing() const override { return playing_; }
   void step() override { show(index_ + 1); }
   void reset() override { show(0); }
   void setDebug(const DebugRequest& debug) override;

@@ -8,6 +8,8 @@
 #include <string>
 #include <utility>
 
+#include "Panel.h"
+
 namespace fibremss::viewer {
 namespace {
 
@@ -39,47 +41,34 @@ bool LivePlayer::fetch(Snapshot& into) {
     if (newest_.snapshot.version <= into.version) return false;
     shown_ = newest_;
   }
-  if (shown_.snapshot.steps > into.steps) {
-    stepMs_.push_back(float(shown_.stats.timing.total));
-    if (stepMs_.size() > 200) stepMs_.erase(stepMs_.begin());
-  }
   into = shown_.snapshot;
   return true;
 }
 
-void LivePlayer::controls(const Snapshot& shown) {
+Playback LivePlayer::controls(const Snapshot& shown) {
   const LoadedScene& scene = scene_->scene();
-  ImGui::Text("%s: step %d, pose %d of %d (%s)", scene.name.c_str(), shown.steps, shown_.shownPose,
-              std::max(scene.poseCount, 1), poseLabel(scene, shown_.shownPose).c_str());
-  bool playing = false;
-  {
-    std::lock_guard lock(mutex_);
-    playing = playing_;
-  }
-  if (ImGui::Button(playing ? "Pause (space)" : "Play (space)")) togglePlaying();
-  ImGui::SameLine();
-  if (ImGui::Button("Step (S)")) step();
-  ImGui::SameLine();
-  if (ImGui::Button("Reset (R)")) reset();
-  ImGui::SameLine();
+  const int last = std::max(scene.poseCount, 1) - 1;
+  ImGui::Text("%s: step %d, pose %d (0 to %d), label %s", scene.name.c_str(), shown.steps,
+              shown_.shownPose, last, poseLabel(scene, shown_.shownPose).c_str());
   bool loop = false;
   {
     std::lock_guard lock(mutex_);
     loop = loop_;
   }
-  if (ImGui::Checkbox("loop", &loop)) {
+  if (playbackButtons(*this, loop)) {
     std::lock_guard lock(mutex_);
     loop_ = loop;
   }
   int pose = shown_.nextPose;
   const std::string format = "%d (" + poseLabel(scene, pose) + ")";
-  if (ImGui::SliderInt("next pose", &pose, 0, std::max(scene.poseCount, 1) - 1, format.c_str())) {
+  if (ImGui::SliderInt("next pose", &pose, 0, last, format.c_str())) {
     {
       std::lock_guard lock(mutex_);
       pose_ = pose;
     }
     wake_.notify_one();
   }
+  return {shown_.shownPose, pose};
 }
 
 void LivePlayer::timings(const Snapshot& shown) {
@@ -87,16 +76,25 @@ void LivePlayer::timings(const Snapshot& shown) {
   ImGui::Text("last step: %d iterations, %zu contacts, %zu candidates", stats.iterations,
               stats.contacts, stats.candidates);
   const StepTiming& t = stats.timing;
-  ImGui::Text("ms: mss %.3g | muscle CD %.3g | bone CD %.3g", t.mss, t.muscleCd, t.boneCd);
-  ImGui::Text("    response %.3g | output %.3g", t.response, t.output);
+  ImGui::Text("ms: mss %.3g | muscle CD %.3g | bone CD %.3g | response %.3g | output %.3g", t.mss,
+              t.muscleCd, t.boneCd, t.response, t.output);
   ImGui::Text("ms: step total %.3g (%.3g per iteration)", t.total,
               t.total / std::max(stats.iterations, 1));
-  if (stepMs_.size() >= 2)  // a line needs two points
-    ImGui::PlotLines("step ms", stepMs_.data(), int(stepMs_.size()), 0, nullptr, 0, FLT_MAX,
-                     ImVec2(0, 40));
+  if (!shown.stepMs.empty()) {
+    char overlay[48];
+    std::snprintf(overlay, sizeof overlay, "step ms, %zu steps", shown.stepMs.size());
+    ImGui::PlotHistogram(
+        "##step ms", shown.stepMs.data(), int(shown.stepMs.size()), 0, overlay, 0, FLT_MAX,
+        ImVec2(ImGui::GetContentRegionAvail().x, 40));  // a negative width hides it
+  }
   if (stats.failed || stats.frozenMuscles > 0)
     ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "numerical guard: %zu muscle(s) frozen%s",
                        stats.frozenMuscles, stats.failed ? ", step failed" : "");
+}
+
+bool LivePlayer::playing() const {
+  std::lock_guard lock(mutex_);
+  return playing_;
 }
 
 void LivePlayer::togglePlaying() {
@@ -163,12 +161,22 @@ void LivePlayer::work() {
     scene_->loop = loop_;
     const DebugRequest debug = debug_;
     lock.unlock();  // the step runs while the window draws and takes requests
-    if (reset) scene_->reset();
+    if (reset) {
+      scene_->reset();
+      stepMs_.clear();
+    }
     if (pose >= 0) scene_->setPose(pose);
-    if (step) scene_->step();
+    if (step) stepScene();
     publish(debug);
     lock.lock();
   }
+}
+
+void LivePlayer::stepScene() {
+  scene_->step();
+  stepMs_.push_back(float(scene_->lastStep().timing.total));
+  constexpr size_t kGraphSteps = 200;  // the steps the graph shows
+  if (stepMs_.size() > kGraphSteps) stepMs_.erase(stepMs_.begin());
 }
 
 void LivePlayer::publish(const DebugRequest& debug) {
@@ -184,6 +192,7 @@ void LivePlayer::publish(const DebugRequest& debug) {
   next.snapshot.frame = scene_->frame();
   next.snapshot.debug = drawer_.geometry();
   next.snapshot.steps = scene_->steps();
+  next.snapshot.stepMs = stepMs_;
   next.stats = scene_->lastStep();
   next.shownPose = scene_->shownPose();
   next.nextPose = scene_->pose();

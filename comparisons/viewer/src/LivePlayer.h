@@ -25,9 +25,10 @@ class LivePlayer : public Source {
   LivePlayer& operator=(const LivePlayer&) = delete;
 
   bool fetch(Snapshot& into) override;
-  void controls(const Snapshot& shown) override;
+  Playback controls(const Snapshot& shown) override;
   void timings(const Snapshot& shown) override;
   void togglePlaying() override;
+  bool playing() const override;
   void step() override { requestSteps(1); }
   void reset() override;
   void setDebug(const DebugRequest& debug) override;
@@ -44,6 +45,7 @@ class LivePlayer : public Source {
 
   void requestSteps(int steps);
   void work();
+  void stepScene();      ///< the worker: one step, its time into stepMs_
   bool hasWork() const;  ///< under mutex_
   void publish(const DebugRequest& debug);
 
@@ -61,11 +63,11 @@ class LivePlayer : public Source {
   bool loop_ = false;
   bool redraw_ = true;
   DebugRequest debug_;
-  Published newest_;  ///< the newest publication, under mutex_
+  Published newest_;           ///< the newest publication, under mutex_
+  std::vector<float> stepMs_;  ///< the worker's: wall time of the recent steps [ms]
   // The window's, outside the mutex.
-  Published shown_;            ///< what the window shows
-  std::vector<float> stepMs_;  ///< wall time of the recent steps [ms]
-  std::thread worker_;         ///< last: starts when everything above is ready
+  Published shown_;     ///< what the window shows
+  std::thread worker_;  ///< last: starts when everything above is ready
 };
 
 }  // namespace fibremss::viewer

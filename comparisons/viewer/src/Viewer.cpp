@@ -4,12 +4,15 @@
 #include <imgui.h>
 #include <imgui_impl_glfw.h>
 #include <imgui_impl_opengl2.h>
+#include <imgui_internal.h>
+#include <imgui_stdlib.h>
 #include <stb_image_write.h>
 
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -18,9 +21,11 @@
 #include "DebugDrawer.h"
 #include "FramePlayer.h"
 #include "LivePlayer.h"
+#include "Panel.h"
 #include "Renderer.h"
 #include "Source.h"
 #include "fibremss/Error.h"
+#include "fibremss/Messages.h"
 #include "fibremss/Output.h"
 
 namespace fibremss::viewer {
@@ -72,34 +77,51 @@ class Window {
 
 /// The viewer's state between frames.
 struct Session {
+  ViewerOptions options;           ///< what the window opened with
+  std::unique_ptr<Source> source;  ///< what it shows
   Camera camera;
   RenderSettings render;
   Renderer renderer;
-  Snapshot shown;         ///< what the window shows
-  Vec3 lower{}, upper{};  ///< the scene's bounds in its first snapshot
+  Snapshot shown;  ///< what the window shows
   bool showUi = true;
   bool autoRange = true;  ///< colour range from the current frame
   Range extremes;         ///< the coloured array's smallest and largest value now
   DebugRequest debug;     ///< what the world's btIDebugDraw draws
+  std::string openPath;   ///< the picker's text: a scene name, a .json file or a run's directory
+  bool openRequested = false;  ///< the picker asked to open openPath this frame
+  std::string openError;       ///< why the last pick did not open ("" when it did)
+  Playback playback;           ///< what the panel's playback part showed last
+  float panelOverflow = 0;     ///< how far the panel's widest line ran past its edge [px]
   bool quit = false;
 };
 
-/// The box around every bone and muscle vertex of the frame [m].
-void frameBounds(const ViewFrame& frame, Vec3& lower, Vec3& upper) {
-  lower.fill(std::numeric_limits<float>::max());
-  upper.fill(std::numeric_limits<float>::lowest());
-  auto grow = [&](const ViewMesh& mesh) {
+/// Every bone and muscle vertex of the frame where it is drawn [m].
+std::vector<Vec3> sceneVertices(const ViewFrame& frame) {
+  std::vector<Vec3> points;
+  auto add = [&](const ViewMesh& mesh) {
     for (const btVector3& vertex : mesh.vertices) {
       const btVector3 p = mesh.transform * vertex;
-      for (int k = 0; k < 3; ++k) {
-        lower[k] = std::min(lower[k], float(p[k]));
-        upper[k] = std::max(upper[k], float(p[k]));
-      }
+      points.push_back({float(p.x()), float(p.y()), float(p.z())});
     }
   };
-  for (const ViewMesh& mesh : frame.bones) grow(mesh);
-  for (const ViewMesh& mesh : frame.muscles) grow(mesh);
-  if (lower[0] > upper[0]) lower = upper = Vec3{0, 0, 0};
+  for (const ViewMesh& mesh : frame.bones) add(mesh);
+  for (const ViewMesh& mesh : frame.muscles) add(mesh);
+  return points;
+}
+
+/// Frames what the window shows in a view of `aspect` (width / height).
+void frameScene(Session& session, float aspect) {
+  session.camera.frame(sceneVertices(session.shown.frame), aspect);
+}
+
+/// The panel's width beside the scene [px] (0 when hidden).
+int panelWidth(const Session& session, int windowWidth) {
+  return session.showUi ? std::min(400, windowWidth / 2) : 0;
+}
+
+/// The scene's part of a width × height window: width / height.
+float viewAspect(const Session& session, int width, int height) {
+  return float(width - panelWidth(session, width)) / float(std::max(height, 1));
 }
 
 /// Left drag orbits, right or middle drag (or shift + left) pans, the wheel
@@ -118,12 +140,13 @@ void moveCamera(Camera& camera, int height) {
 
 /// Space plays or pauses, S or → steps, R resets, F frames the scene, H hides
 /// the panel, Q quits.
-void handleKeys(Session& session, Source& source) {
+void handleKeys(Session& session, float aspect) {
   if (ImGui::GetIO().WantCaptureKeyboard) return;
+  Source& source = *session.source;
   if (ImGui::IsKeyPressed(GLFW_KEY_SPACE, false)) source.togglePlaying();
   if (ImGui::IsKeyPressed(GLFW_KEY_S) || ImGui::IsKeyPressed(GLFW_KEY_RIGHT)) source.step();
   if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) source.reset();
-  if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) session.camera.frame(session.lower, session.upper);
+  if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) frameScene(session, aspect);
   if (ImGui::IsKeyPressed(GLFW_KEY_H, false)) session.showUi = !session.showUi;
   if (ImGui::IsKeyPressed(GLFW_KEY_Q, false) || ImGui::IsKeyPressed(GLFW_KEY_ESCAPE, false))
     session.quit = true;
@@ -165,7 +188,7 @@ void appearanceControls(Session& session) {
     }
     ImGui::EndCombo();
   }
-  ImGui::Checkbox("auto range (98 % of the values)", &session.autoRange);
+  ImGui::Checkbox("auto range (98 %)", &session.autoRange);
   if (!session.autoRange) ImGui::DragFloat2("range", &render.range.low, 0.01f);
   drawLegend(render.colourBy, render.range, session.shown.frame.lengthUnit);
   if (render.colourBy != "muscle_id")
@@ -183,31 +206,51 @@ void appearanceControls(Session& session) {
                              {"bone spheres", kDrawBoneSpheres},
                              {"contacts", kDrawContacts}};
   for (const Flag& flag : kFlags) {
-    if (flag.bit != kDrawSprings) ImGui::SameLine();  // two rows
+    sameLineIfFits(checkboxWidth(flag.label));
     ImGui::CheckboxFlags(flag.label, &session.debug.muscleFlags, flag.bit);
   }
+  sameLineIfFits(checkboxWidth("Bullet wireframe"));
   ImGui::CheckboxFlags("Bullet wireframe", &session.debug.bulletMode,
                        btIDebugDraw::DBG_DrawWireframe);
 }
 
-/// The panel's width beside the scene [px] (0 when hidden).
-int panelWidth(const Session& session, int windowWidth) {
-  return session.showUi ? std::min(400, windowWidth / 2) : 0;
+/// A text field and an Open button: a built-in scene, a scene .json file or a run's directory.
+void drawPicker(Session& session) {
+  const ImGuiStyle& style = ImGui::GetStyle();
+  ImGui::PushItemWidth(
+      -(ImGui::CalcTextSize("Open").x + 2 * style.FramePadding.x + style.ItemSpacing.x));
+  const bool enter =
+      ImGui::InputTextWithHint("##open", "scene name, .json file or run directory",
+                               &session.openPath, ImGuiInputTextFlags_EnterReturnsTrue);
+  ImGui::PopItemWidth();
+  ImGui::SameLine();
+  session.openRequested = (ImGui::Button("Open") || enter) && !session.openPath.empty();
+  if (!session.openError.empty())
+    ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "%s", session.openError.c_str());
 }
 
-void drawPanel(Session& session, Source& source, int width, int height) {
+void drawPanel(Session& session, int width, int height) {
   ImGui::SetNextWindowPos(ImVec2(0, 0));
   ImGui::SetNextWindowSize(ImVec2(float(width), float(height)));
   ImGui::Begin("FibreMSS", nullptr,
                ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
-  source.controls(session.shown);
+  ImGui::PushTextWrapPos(0);  // every line wraps at the panel's edge
+  ImGui::PushItemWidth(-ImGui::CalcTextSize("surface opacity ").x);  // the longest label fits
+  drawPicker(session);
+  ImGui::Separator();
+  session.playback = session.source->controls(session.shown);
   ImGui::Separator();
   appearanceControls(session);
   ImGui::Separator();
-  source.timings(session.shown);
+  session.source->timings(session.shown);
   ImGui::Separator();
-  ImGui::TextDisabled("drag: orbit | right/middle drag: pan | wheel: zoom");
-  ImGui::TextDisabled("F: frame the scene | H: hide this panel | Q: quit");
+  ImGui::TextDisabled(
+      "space: play/pause | S: step | R: reset | F: frame the scene | H: hide "
+      "this panel | Q: quit | drag: orbit | right/middle drag: pan | wheel: zoom");
+  ImGui::PopItemWidth();
+  ImGui::PopTextWrapPos();
+  const ImGuiWindow* panel = ImGui::GetCurrentWindow();
+  session.panelOverflow = std::max(0.0f, panel->DC.CursorMaxPos.x - panel->WorkRect.Max.x);
   ImGui::End();
 }
 
@@ -230,7 +273,7 @@ void writeScreenshot(const std::string& path, int width, int height) {
 
 /// One frame: input, steps, panel, drawing; returns the window's and the
 /// scene's size.
-void renderFrame(Window& window, Session& session, Source& source, ViewerResult& size) {
+void renderFrame(Window& window, Session& session, ViewerResult& size) {
   ImGui_ImplOpenGL2_NewFrame();
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
@@ -238,16 +281,110 @@ void renderFrame(Window& window, Session& session, Source& source, ViewerResult&
   size.viewX = panelWidth(session, size.width);
   size.viewWidth = size.width - size.viewX;
   moveCamera(session.camera, std::max(size.height, 1));
-  handleKeys(session, source);
-  source.fetch(session.shown);
+  handleKeys(session, viewAspect(session, size.width, size.height));
+  session.source->fetch(session.shown);
   const Range range = arrayRange(session.shown.frame, session.render.colourBy, session.extremes);
   if (session.autoRange) session.render.range = range;
-  if (session.showUi) drawPanel(session, source, size.viewX, size.height);
-  source.setDebug(session.debug);
+  if (session.showUi) drawPanel(session, size.viewX, size.height);
+  session.source->setDebug(session.debug);
   ImGui::Render();
   session.renderer.draw(session.shown.frame, session.shown.debug, session.camera,
                         {size.viewX, 0, size.viewWidth, size.height}, session.render);
   ImGui_ImplOpenGL2_RenderDrawData(ImGui::GetDrawData());
+}
+
+/// Whether a scene stepped live has `array` (the first three of colourArrays()).
+bool liveArray(const std::string& array) {
+  const auto end = colourArrays().begin() + 3;
+  return std::find(colourArrays().begin(), end, array) != end;
+}
+
+/// Throws InputError when `options` ask for an array their source lacks, or for a screenshot
+/// after playing without end.
+void checkOptions(const ViewerOptions& options) {
+  const auto& arrays = colourArrays();
+  if (options.runDir.empty()
+          ? !liveArray(options.colourBy)
+          : std::find(arrays.begin(), arrays.end(), options.colourBy) == arrays.end())
+    throw InputError("--colour-by", "",
+                     options.runDir.empty()
+                         ? "expected fibre_stretch, displacement or muscle_id for a scene stepped "
+                           "live (spring_strain, penetration and fixed: a run's frames), got '" +
+                               options.colourBy + "'"
+                         : "expected fibre_stretch, displacement, muscle_id, spring_strain, "
+                           "penetration or fixed, got '" +
+                               options.colourBy + "'");
+  if (options.play && !options.screenshot.empty() && (options.runDir.empty() || options.loop))
+    throw InputError("--play", "",
+                     "with --screenshot only for a run's frames without --loop (the picture shows "
+                     "the last frame; a scene stepped live or a loop plays without end)");
+}
+
+/// The source `options` name (a run's frames or a scene stepped live) and the window's title.
+std::unique_ptr<Source> makeSource(const ViewerOptions& options, const DebugRequest& debug,
+                                   std::string& title) {
+  if (!options.runDir.empty()) {
+    auto frames = std::make_unique<FramePlayer>(options.runDir, debug);
+    frames->loop = options.loop;
+    title = "FibreMSS - " + options.runDir;
+    return frames;
+  }
+  auto scene = std::make_unique<LiveScene>(options.scene, options.overrides);
+  scene->loop = options.loop;
+  title = "FibreMSS - " + scene->scene().name;
+  return std::make_unique<LivePlayer>(std::move(scene), debug);
+}
+
+/// Replaces the source by what the picker names, framed in a view of `aspect`; on bad input
+/// keeps the current one and says why in the panel.
+void openPicked(Session& session, GLFWwindow* window, float aspect) {
+  ViewerOptions options = session.options;
+  options.runDir.clear();
+  options.overrides.clear();  // the command line's overrides were for its scene
+  std::string title;
+  try {
+    chooseSource(session.openPath, options);
+    // An array only a run's frames have falls back to fibre stretch for a scene stepped live.
+    options.colourBy = options.runDir.empty() && !liveArray(session.render.colourBy)
+                           ? colourArrays().front()
+                           : session.render.colourBy;
+    session.source = makeSource(options, session.debug, title);
+    session.render.colourBy = options.colourBy;
+  } catch (const std::exception& error) {
+    session.openError = error.what();
+    return;
+  }
+  session.openError.clear();
+  session.shown = Snapshot();
+  session.source->fetch(session.shown);
+  frameScene(session, aspect);
+  glfwSetWindowTitle(window, title.c_str());
+}
+
+/// Draws frames until the window closes (or, with a screenshot path, until the PNG is written).
+ViewerResult runWindow(Window& window, Session& session) {
+  const ViewerOptions& options = session.options;
+  ViewerResult result;
+  // A screenshot takes a few frames (Dear ImGui sizes its windows in the first ones), more while
+  // a run's frames play to the last.
+  for (int frame = 0; !glfwWindowShouldClose(window.get()) && !session.quit; ++frame) {
+    glfwPollEvents();
+    renderFrame(window, session, result);
+    if (!options.screenshot.empty() && frame >= 2 && !session.source->playing()) {
+      writeScreenshot(options.screenshot, result.width, result.height);
+      break;
+    }
+    glfwSwapBuffers(window.get());
+    if (session.openRequested)
+      openPicked(session, window.get(), viewAspect(session, result.width, result.height));
+  }
+  result.camera = session.camera;
+  result.steps = session.shown.steps;
+  result.counter = session.playback.counter;
+  result.slider = session.playback.slider;
+  result.stepSamples = session.shown.stepMs.size();
+  result.panelOverflow = session.panelOverflow;
+  return result;
 }
 
 }  // namespace
@@ -267,63 +404,46 @@ std::string unitOf(const std::string& array, const std::string& lengthUnit) {
   return lengthUnit;  // displacement, penetration
 }
 
+void chooseSource(const std::string& sceneOrRun, ViewerOptions& options) {
+  options.scene = sceneOrRun;
+  if (!std::filesystem::is_directory(sceneOrRun)) return;
+  const std::filesystem::path dir(sceneOrRun);
+  if (std::filesystem::is_regular_file(dir / "run.pvd")) {
+    options.runDir = sceneOrRun;
+    return;
+  }
+  if (!std::filesystem::is_regular_file(dir / "scene.json"))
+    throw InputError(sceneOrRun, "",
+                     "expected a built-in scene, a scene file or a run's directory (fibremss run "
+                     "--out DIR) with run.pvd or scene.json");
+  printNote("no frames in " + sceneOrRun + " (run.pvd); stepping its scene (" +
+            (dir / "scene.json").string() + ") live instead");
+  options.scene = (dir / "scene.json").string();
+}
+
 ViewerResult runViewer(const ViewerOptions& options) {
-  const auto& arrays = colourArrays();
-  // A scene stepped live has the first three; a run's frames all of them.
-  const auto end = options.runDir.empty() ? arrays.begin() + 3 : arrays.end();
-  if (std::find(arrays.begin(), end, options.colourBy) == end)
-    throw InputError("--colour-by", "",
-                     options.runDir.empty()
-                         ? "expected fibre_stretch, displacement or muscle_id for a scene stepped "
-                           "live (spring_strain, penetration and fixed: a run's frames), got '" +
-                               options.colourBy + "'"
-                         : "expected fibre_stretch, displacement, muscle_id, spring_strain, "
-                           "penetration or fixed, got '" +
-                               options.colourBy + "'");
+  checkOptions(options);
   Session session;
+  session.options = options;
   session.debug.muscleFlags = options.muscleDebugFlags;
   std::string title;
-  std::unique_ptr<Source> source;
-  if (!options.runDir.empty()) {
-    auto frames = std::make_unique<FramePlayer>(options.runDir, session.debug);
-    frames->loop = options.loop;
-    source = std::move(frames);
-    title = "FibreMSS - " + options.runDir;
-  } else {
-    auto scene = std::make_unique<LiveScene>(options.scene, options.overrides);
-    scene->loop = options.loop;
-    title = "FibreMSS - " + scene->scene().name;
-    source = std::make_unique<LivePlayer>(std::move(scene), session.debug);
-  }
+  session.source = makeSource(options, session.debug, title);
   const bool screenshot = !options.screenshot.empty();
-  source->advance(screenshot ? options.steps : 0);  // a screenshot shows the scene after them
-  source->fetch(session.shown);
-  for (int s = 0; !screenshot && s < options.steps; ++s) source->step();
+  session.source->advance(screenshot ? options.steps : 0);  // a screenshot shows them taken
+  session.source->fetch(session.shown);
+  for (int s = 0; !screenshot && s < options.steps; ++s) session.source->step();
+  if (options.play) session.source->togglePlaying();
 
-  frameBounds(session.shown.frame, session.lower, session.upper);
-  session.camera.frame(session.lower, session.upper);
-  session.camera.setView(options.azimuthDeg, options.elevationDeg, options.zoom);
   session.render.colourBy = options.colourBy;
   session.render.bones = options.bones;
   session.render.surfaceOpacity = options.surfaceOpacity;
   session.showUi = !options.hideUi;
+  session.openPath = options.runDir.empty() ? options.scene : options.runDir;
+  session.camera.setAngles(options.azimuthDeg, options.elevationDeg);
+  frameScene(session, viewAspect(session, options.width, options.height));
+  session.camera.zoom(options.zoom);
   Window window(options.width, options.height, !screenshot, title);
-
-  ViewerResult result;
-  // A screenshot takes a few frames: Dear ImGui sizes its windows in the first
-  // ones.
-  for (int frame = 0; !glfwWindowShouldClose(window.get()) && !session.quit; ++frame) {
-    glfwPollEvents();
-    renderFrame(window, session, *source, result);
-    if (screenshot && frame == 2) {
-      writeScreenshot(options.screenshot, result.width, result.height);
-      break;
-    }
-    glfwSwapBuffers(window.get());
-  }
-  result.camera = session.camera;
-  result.steps = session.shown.steps;
-  return result;
+  return runWindow(window, session);
 }
 
 }  // namespace fibremss::viewer

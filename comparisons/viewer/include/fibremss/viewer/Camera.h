@@ -3,6 +3,7 @@
 // above its horizontal plane), pans the target in the view plane, zooms by distance; a
 // perspective projection. Matrices are column-major as OpenGL takes them.
 #include <array>
+#include <span>
 
 namespace fibremss::viewer {
 
@@ -18,16 +19,17 @@ struct Pixel {
 
 class Camera {
  public:
-  /// Looks at the box [lower, upper] from the current angles, the whole box in view.
-  void frame(const Vec3& lower, const Vec3& upper);
+  /// Looks at `points` from the current angles in an image of `aspect` (width / height): their
+  /// projection centred, spanning `fill` of the image's width or height, whichever binds.
+  void frame(std::span<const Vec3> points, float aspect, float fill = 0.9f);
   /// Turns about the target [deg]; elevation stays within ±89°.
   void orbit(float azimuthDeg, float elevationDeg);
   /// Moves the target in the view plane by fractions of the view's height (right, up).
   void pan(float right, float up);
   /// Divides the distance by `factor` (> 1 comes closer).
   void zoom(float factor);
-  /// Sets the angles [deg] and the distance as a multiple of the framed one.
-  void setView(float azimuthDeg, float elevationDeg, float zoomFactor);
+  /// Sets the angles [deg] (frame() after it to look at the scene from there).
+  void setAngles(float azimuthDeg, float elevationDeg);
 
   Mat4 view() const;                    ///< world to eye
   Mat4 projection(float aspect) const;  ///< eye to clip (aspect = width / height)
@@ -46,7 +48,7 @@ class Camera {
   float framedDistance_ = 1;  ///< the distance frame() chose [world units]
   float azimuth_ = 30;        ///< angle about the up axis (y) [deg]
   float elevation_ = 15;      ///< angle above the horizontal plane [deg]
-  float extent_ = 1;          ///< half the framed box's diagonal [world units]
+  float extent_ = 1;          ///< half the framed points' bounding-box diagonal [world units]
 };
 
 }  // namespace fibremss::viewer

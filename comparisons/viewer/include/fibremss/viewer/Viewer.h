@@ -32,22 +32,33 @@ struct ViewerOptions {
   float zoom = 1;                          ///< > 1 closer than the framed view
   bool hideUi = false;                     ///< no panel (H toggles it in the window)
   bool loop = false;                       ///< sweep the motion back and forth past its last pose
+  /// Start playing; with a screenshot (a run's frames only) the picture shows where it stopped.
+  bool play = false;
 };
 
 /// What a viewer session ended with, to check a screenshot against.
 struct ViewerResult {
-  Camera camera;      ///< the camera of the last picture
-  int width = 0;      ///< its size [px]
-  int height = 0;     ///< [px]
-  int viewX = 0;      ///< the scene is drawn right of this column (left of it: the panel) [px]
-  int viewWidth = 0;  ///< in this many columns, the full height [px]
-  int steps = 0;      ///< steps taken
+  Camera camera;           ///< the camera of the last picture
+  int width = 0;           ///< its size [px]
+  int height = 0;          ///< [px]
+  int viewX = 0;           ///< the scene is drawn right of this column (left of it: the panel) [px]
+  int viewWidth = 0;       ///< in this many columns, the full height [px]
+  int steps = 0;           ///< steps taken (live) or the frame shown, from 0 (a run's frames)
+  int counter = 0;         ///< the frame (a run's) or pose the panel's text named, from 0
+  int slider = 0;          ///< the panel's slider: that frame (a run's) or the next pose, from 0
+  size_t stepSamples = 0;  ///< steps in the panel's step-time graph
+  float panelOverflow = 0;  ///< how far the panel's widest line ran past its edge [px] (0: fits)
 };
 
 /// Opens the window and runs until it is closed (or, with a screenshot path, until the PNG is
 /// written). Throws InputError for a bad scene, std::runtime_error when no window can be
 /// opened or the PNG not written.
 ViewerResult runViewer(const ViewerOptions& options);
+
+/// Sets what `sceneOrRun` opens in `options`: a run's directory with frames (DIR/run.pvd) is
+/// played; one without (--frame-every 0) steps the scene it ran (DIR/scene.json) live; anything
+/// else is a scene to step live. InputError for a directory with neither.
+void chooseSource(const std::string& sceneOrRun, ViewerOptions& options);
 
 /// The arrays muscles can be coloured by (a scene stepped live has fibre_stretch, displacement
 /// and muscle_id; a run's frames all of them).
