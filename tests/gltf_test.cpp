@@ -238,6 +238,43 @@ TEST(Gltf, RunWritesAGlbPerFrameWithTheDeformedSurfaces) {
   expectGlbRules(readGlb(glb));
 }
 
+/// assimp's glTF importer reads DIR/run.glb as `frames` frames: every mesh with a morph target
+/// per frame after the first, at that frame's positions (as DIR/frame_*.glb read by assimp), and
+/// one animation that weights the targets in, a key per frame.
+void expectAssimpReadsTheAnimation(const fs::path& dir, unsigned frames) {
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFile((dir / "run.glb").string(), 0);
+  ASSERT_NE(scene, nullptr) << importer.GetErrorString();
+  const auto meshes = meshesByName(*scene);
+  for (unsigned k = 1; k < frames; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05u.glb", k);
+    Assimp::Importer frameImporter;
+    const aiScene* frame = frameImporter.ReadFile((dir / name).string(), 0);
+    ASSERT_NE(frame, nullptr) << frameImporter.GetErrorString();
+    for (const auto& [meshName, expected] : meshesByName(*frame)) {
+      ASSERT_EQ(meshes.count(meshName), 1u) << meshName;
+      const aiMesh& mesh = *meshes.at(meshName);
+      ASSERT_EQ(mesh.mNumAnimMeshes, frames - 1) << meshName;
+      const aiAnimMesh& target = *mesh.mAnimMeshes[k - 1];
+      ASSERT_EQ(target.mNumVertices, expected->mNumVertices) << meshName;
+      for (unsigned i = 0; i < target.mNumVertices; ++i)
+        for (int c = 0; c < 3; ++c)
+          EXPECT_NEAR(target.mVertices[i][c], expected->mVertices[i][c], 1e-6)
+              << meshName << " frame " << k << " vertex " << i;
+    }
+  }
+  ASSERT_EQ(scene->mNumAnimations, 1u);
+  const aiAnimation& animation = *scene->mAnimations[0];
+  EXPECT_EQ(animation.mNumMorphMeshChannels, meshes.size());
+  for (unsigned c = 0; c < animation.mNumMorphMeshChannels; ++c) {
+    const aiMeshMorphAnim& channel = *animation.mMorphMeshChannels[c];
+    ASSERT_EQ(channel.mNumKeys, frames) << channel.mName.C_Str();
+    for (unsigned k = 1; k < frames; ++k)
+      EXPECT_GT(channel.mKeys[k].mTime, channel.mKeys[k - 1].mTime) << channel.mName.C_Str();
+  }
+}
+
 TEST(Gltf, RunWritesOneAnimatedGlbWhoseFramesAreThePerFrameFiles) {
   testing::TemporaryDirectory out("fibremss_gltf_animated");
   const auto result = testing::runProcess(std::string(FIBREMSS_CLI) +
@@ -271,6 +308,7 @@ TEST(Gltf, RunWritesOneAnimatedGlbWhoseFramesAreThePerFrameFiles) {
   const auto& sampler = gltf["animations"][0]["samplers"][0];
   EXPECT_EQ(gltf["accessors"][sampler["input"].get<size_t>()]["count"], 3);
   EXPECT_EQ(sampler["interpolation"], "LINEAR");
+  expectAssimpReadsTheAnimation(out.path() / "gltf", 3);
 }
 
 }  // namespace
