@@ -346,6 +346,7 @@ TEST(Viewer, PlaysARunsFramesAndDrawsTheMuscleWhereTheFrameSaysWithoutItsScene) 
   EXPECT_EQ(played.steps, 2);
   EXPECT_EQ(played.counter, 2);
   EXPECT_EQ(played.slider, 2);
+  EXPECT_EQ(played.step, 2);  // the run's summary names the frame's step (at its exact time)
   EXPECT_EQ(played.panelOverflow, 0.0f);
   std::ofstream(out / "run.pvd") << "<VTKFile type=\"Collection\"><Collection/></VTKFile>";
   EXPECT_EQ(runProcess(std::string(FIBREMSS_CLI) + " view " + out.string() + " --screenshot " +

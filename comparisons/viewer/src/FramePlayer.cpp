@@ -52,7 +52,7 @@ std::vector<float> scalars(const PointArray& array) {
 double seriesAt(const nlohmann::json& summary, double time, const char* key) {
   if (!summary.is_object() || !summary.contains("series")) return NAN;
   for (const nlohmann::json& row : summary["series"])
-    if (std::abs(row.value("time_s", NAN) - time) <= 1e-9 * std::max(1.0, std::abs(time)) &&
+    if (std::abs(row.value("time_s", double(NAN)) - time) <= 1e-9 * std::max(1.0, std::abs(time)) &&
         row.contains(key) && row[key].is_number())
       return row[key].get<double>();
   return NAN;
@@ -193,18 +193,16 @@ Playback FramePlayer::controls(const Snapshot& shown) {
   playbackButtons(*this, loop);
   int index = index_;  // counted from 0, as the line above
   if (ImGui::SliderInt("frame", &index, 0, last)) show(index);
-  return {shown.steps, index};
+  return {shown.steps, index, std::isfinite(solverStep) ? int(solverStep) : -1};
 }
 
 void FramePlayer::timings(const Snapshot& shown) {
   ImGui::Text("frame %d read in %.3g ms", shown.steps, readMs_);
   if (!summary_.is_object() || !summary_.contains("timing")) return;
   const nlohmann::json& t = summary_["timing"];
-  auto ms = [&](const char* key) { return t.value(key, NAN); };
-  ImGui::Text(
-      "run, median ms per iteration: mss %.3g | muscle CD %.3g | bone CD %.3g | "
-      "response %.3g | output %.3g",
-      ms("mss"), ms("muscle_cd"), ms("bone_cd"), ms("response"), ms("output"));
+  auto ms = [&](const char* key) { return t.value(key, double(NAN)); };
+  partTimes("run, median ms per iteration:",
+            {ms("mss"), ms("muscle_cd"), ms("bone_cd"), ms("response"), ms("output")});
 }
 
 }  // namespace fibremss::viewer

@@ -68,7 +68,7 @@ Playback LivePlayer::controls(const Snapshot& shown) {
     }
     wake_.notify_one();
   }
-  return {shown_.shownPose, pose};
+  return {shown_.shownPose, pose, shown.steps};
 }
 
 void LivePlayer::timings(const Snapshot& shown) {
@@ -76,9 +76,8 @@ void LivePlayer::timings(const Snapshot& shown) {
   ImGui::Text("last step: %d iterations, %zu contacts, %zu candidates", stats.iterations,
               stats.contacts, stats.candidates);
   const StepTiming& t = stats.timing;
-  ImGui::Text("ms: mss %.3g | muscle CD %.3g | bone CD %.3g | response %.3g | output %.3g", t.mss,
-              t.muscleCd, t.boneCd, t.response, t.output);
-  ImGui::Text("ms: step total %.3g (%.3g per iteration)", t.total,
+  partTimes("last step, ms:", {t.mss, t.muscleCd, t.boneCd, t.response, t.output});
+  ImGui::Text("  total %.3g (%.3g per iteration)", t.total,
               t.total / std::max(stats.iterations, 1));
   if (!shown.stepMs.empty()) {
     char overlay[48];

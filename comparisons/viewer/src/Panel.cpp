@@ -37,4 +37,10 @@ bool playbackButtons(Source& source, bool& loop) {
   return ImGui::Checkbox("loop", &loop);
 }
 
+void partTimes(const char* heading, const std::array<double, 5>& ms) {
+  ImGui::TextUnformatted(heading);
+  const char* parts[] = {"mss", "muscle CD", "bone CD", "response", "output"};
+  for (size_t i = 0; i < ms.size(); ++i) ImGui::Text("  %s %.3g", parts[i], ms[i]);
+}
+
 }  // namespace fibremss::viewer

@@ -24,6 +24,7 @@ struct Snapshot {
 struct Playback {
   int counter = 0;  ///< the frame (a run) or pose (live) its text names
   int slider = 0;   ///< its slider: the frame to show (a run) or the next pose (live)
+  int step = -1;    ///< the step its text names (-1: a run's frame not in its summary)
 };
 
 /// What to draw besides the surfaces (through the world's btIDebugDraw when

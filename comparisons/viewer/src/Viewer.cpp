@@ -219,9 +219,9 @@ void drawPicker(Session& session) {
   const ImGuiStyle& style = ImGui::GetStyle();
   ImGui::PushItemWidth(
       -(ImGui::CalcTextSize("Open").x + 2 * style.FramePadding.x + style.ItemSpacing.x));
-  const bool enter =
-      ImGui::InputTextWithHint("##open", "scene name, .json file or run directory",
-                               &session.openPath, ImGuiInputTextFlags_EnterReturnsTrue);
+  const bool enter = ImGui::InputTextWithHint(
+      "##open", "scene name, .json file or run directory", &session.openPath,
+      ImGuiInputTextFlags_EnterReturnsTrue | ImGuiInputTextFlags_AutoSelectAll);
   ImGui::PopItemWidth();
   ImGui::SameLine();
   session.openRequested = (ImGui::Button("Open") || enter) && !session.openPath.empty();
@@ -382,6 +382,7 @@ ViewerResult runWindow(Window& window, Session& session) {
   result.steps = session.shown.steps;
   result.counter = session.playback.counter;
   result.slider = session.playback.slider;
+  result.step = session.playback.step;
   result.stepSamples = session.shown.stepMs.size();
   result.panelOverflow = session.panelOverflow;
   return result;

@@ -38,15 +38,16 @@ struct ViewerOptions {
 
 /// What a viewer session ended with, to check a screenshot against.
 struct ViewerResult {
-  Camera camera;           ///< the camera of the last picture
-  int width = 0;           ///< its size [px]
-  int height = 0;          ///< [px]
-  int viewX = 0;           ///< the scene is drawn right of this column (left of it: the panel) [px]
-  int viewWidth = 0;       ///< in this many columns, the full height [px]
-  int steps = 0;           ///< steps taken (live) or the frame shown, from 0 (a run's frames)
-  int counter = 0;         ///< the frame (a run's) or pose the panel's text named, from 0
-  int slider = 0;          ///< the panel's slider: that frame (a run's) or the next pose, from 0
-  size_t stepSamples = 0;  ///< steps in the panel's step-time graph
+  Camera camera;      ///< the camera of the last picture
+  int width = 0;      ///< its size [px]
+  int height = 0;     ///< [px]
+  int viewX = 0;      ///< the scene is drawn right of this column (left of it: the panel) [px]
+  int viewWidth = 0;  ///< in this many columns, the full height [px]
+  int steps = 0;      ///< steps taken (live) or the frame shown, from 0 (a run's frames)
+  int counter = 0;    ///< the frame (a run's) or pose the panel's text named, from 0
+  int slider = 0;     ///< the panel's slider: that frame (a run's) or the next pose, from 0
+  int step = -1;      ///< the step the panel's text named (-1: a run's frame not in its summary)
+  size_t stepSamples = 0;   ///< steps in the panel's step-time graph
   float panelOverflow = 0;  ///< how far the panel's widest line ran past its edge [px] (0: fits)
 };
 
