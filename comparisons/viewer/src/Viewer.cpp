@@ -9,13 +9,13 @@
 #include <stb_image_write.h>
 
 #include <algorithm>
-#include <cfloat>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "Colours.h"
 #include "DebugDrawer.h"
