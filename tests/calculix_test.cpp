@@ -7,6 +7,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -24,6 +25,7 @@
 #include <thread>
 
 #include "fibremss/Analytic.h"
+#include "fibremss/Compare.h"
 #include "fibremss/Error.h"
 #include "fibremss/Measures.h"
 #include "fibremss/Reference.h"
@@ -1545,6 +1547,39 @@ TEST(ReferenceCommand, ShipsItsSolvesAndAnEmptyCacheFindsThemThere) {
   ASSERT_EQ(again.exitCode, 0) << again.output;
   EXPECT_EQ(nlohmann::json::parse(readText(dir.path() / "shipped/manifest.json")), manifest)
       << "shipped again: the scene's entry replaced, not added";
+}
+
+TEST(ReferenceCommand, TheMethodsAReferenceRanksGoWithoutTheMuscleContactItLacks) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("compare_contact_test");
+  const std::string scene = carriedFusiform(dir.path(), true);  // two muscles that collide
+  const auto compare = [&](const std::string& out, const std::string& extra) {
+    const auto result = testing::runProcess(
+        std::string(FIBREMSS_CLI) + " compare " + scene +
+        " --set resolution=6 --methods fibremss --no-fronts --no-gates --cache " +
+        (dir.path() / "cache").string() + " --out " + (dir.path() / out).string() + " " + extra +
+        " 2>&1");
+    EXPECT_EQ(result.exitCode, 0) << result.output;
+    return nlohmann::json::parse(readText(dir.path() / out / "summary.json"));
+  };
+  const auto withoutContact = [](const nlohmann::json& run) {
+    const nlohmann::json& overrides = run["scene_overrides"];
+    return std::find(overrides.begin(), overrides.end(), kNoMuscleContact) != overrides.end();
+  };
+  const nlohmann::json ranked = compare("ranked", "");
+  ASSERT_EQ(ranked["runs"].size(), 2u);
+  for (const nlohmann::json& run : ranked["runs"]) EXPECT_TRUE(withoutContact(run)) << run;
+  EXPECT_EQ(ranked["reference"]["methods_without_muscle_contact"], true);
+  EXPECT_NE(readText(dir.path() / "ranked/report.md").find("**One problem for all:**"),
+            std::string::npos);
+
+  const nlohmann::json alone = compare("alone", "--no-reference");
+  ASSERT_EQ(alone["runs"].size(), 1u);
+  for (const nlohmann::json& run : alone["runs"])
+    EXPECT_FALSE(withoutContact(run)) << "no reference: the scene's own contact";
+  EXPECT_EQ(readText(dir.path() / "alone/report.md").find("One problem for all"),
+            std::string::npos);
 }
 
 TEST(ShippedReference, EveryShippedSolveStillHasTheKeyItsSceneGivesToday) {

@@ -632,6 +632,10 @@ std::string referenceSection(const nlohmann::json& summary) {
     return out.str();
   }
   out << reference.value("description", std::string()) << ".\n\n";
+  if (reference.value("methods_without_muscle_contact", false))
+    out << "**One problem for all:** the scene collides its muscles with each other and the "
+           "reference does not, so every method below ran without muscle–muscle contact (`"
+        << kNoMuscleContact << "`; btSoftBody without soft–soft collision).\n\n";
   int solved = 0, poses = 0, excluded = 0;
   for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
     ++poses;
@@ -817,6 +821,7 @@ nlohmann::json summaryJson(const Comparison& comparison, const std::string& comm
                             {"btsoftbody_ratio", std::move(ratios)},
                             {"runs", std::move(runs)}};
   if (comparison.reference) summary["reference"] = referenceJson(*comparison.reference);
+  if (comparison.muscleContactOff) summary["reference"]["methods_without_muscle_contact"] = true;
   return summary;
 }
 

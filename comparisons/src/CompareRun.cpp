@@ -532,6 +532,27 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
              methodOptions});
 }
 
+/// The scene and options the methods run with: the scene's own, except that muscle–muscle
+/// contact is switched off in every method when a reference ranks them, since the reference
+/// solves each muscle on its own (one problem for all).
+struct MethodScene {
+  LoadedScene scene;       ///< the scene as the methods run it
+  CompareOptions options;  ///< the baselines' definitions as the methods run them
+};
+
+MethodScene sceneOfTheMethods(const LoadedScene& scene, Comparison& comparison,
+                              const CompareOptions& options) {
+  MethodScene methods{scene, options};
+  const bool ranked = comparison.reference && !comparison.reference->missing;
+  if (!ranked || scene.muscles.size() < 2 || !scene.simulation.muscleMuscle) return methods;
+  methods.scene.simulation.muscleMuscle = false;
+  methods.options.softBody.softSoftCollision = false;
+  methods.options.fem.muscleContact = false;
+  comparison.overrides.push_back(std::string(kNoMuscleContact));
+  comparison.muscleContactOff = true;
+  return methods;
+}
+
 }  // namespace
 
 Comparison runComparison(const std::string& sceneNameOrPath,
@@ -569,10 +590,12 @@ Comparison runComparison(const std::string& sceneNameOrPath,
     comparison.reference = computeReference(scene, prepared, referenceOptions);
     if (!comparison.reference->missing) runs.push_back(comparison.reference->metrics);
   }
+  const MethodScene methodScene = sceneOfTheMethods(scene, comparison, options);
   for (const MethodSpec& given : specs) {
     if (options.cancel && options.cancel->load()) break;
     const MethodSpec spec = resolvedSpec(given, scene, prepared, options);
-    runs.push_back(runMethod(spec, sceneNameOrPath, overrides, scene, prepared, options));
+    runs.push_back(runMethod(spec, sceneNameOrPath, comparison.overrides, methodScene.scene,
+                             prepared, methodScene.options));
     runs.back().method = spec.name;
     runs.back().poses = std::max(scene.poseCount, 1);
   }

@@ -176,13 +176,21 @@ std::vector<std::string> frontMethods(const std::vector<std::string>& methods,
 void fillFinerResolution(std::vector<RunMetrics>& runs, int resolution);
 
 /// What one comparison ran: the scene as loaded and every method's metrics.
+/// The override that switches muscle–muscle contact off, as the methods a reference ranks run.
+inline constexpr const char* kNoMuscleContact = "collision.muscle_muscle=false";
+
 struct Comparison {
-  std::string scene;                   ///< scene name
-  std::vector<std::string> overrides;  ///< the --set overrides it was loaded with
+  std::string scene;  ///< scene name
+  /// The --set overrides the methods ran with: those it was loaded with, and kNoMuscleContact
+  /// where muscleContactOff.
+  std::vector<std::string> overrides;
   int resolution = 0;                  ///< particles per fibre (first muscle), 0 if none
   double stepDeg = RunMetrics::kNone;  ///< sweep step of the motion (NaN if not a sweep)
   std::vector<RunMetrics> runs;        ///< the reference ("calculix") first, then the methods
   std::optional<Reference> reference;  ///< the CalculiX reference, its gates against the runs
+  /// The scene collides its muscles with each other, the reference does not, and so every
+  /// method ran without muscle–muscle contact to solve the reference's problem.
+  bool muscleContactOff = false;
 };
 
 /// Loads and prepares the scene once (again for variants with overrides), runs every method
