@@ -81,7 +81,9 @@ void ProjectiveFactor::analyse(const Matrix& upper) {
   }
   weights_.assign(n, 0);
   lower_.assign(rows_.size(), 0);
-  values_.assign(rows_.size(), 0);
+  solveEntries_.resize(rows_.size());
+  for (size_t p = 0; p < rows_.size(); ++p)
+    solveEntries_[p] = {0, static_cast<uint32_t>(rows_[p]) * uint32_t(sizeof(btVector3))};
   scatter_.assign(n, 0);
   pattern_.assign(n, 0);
   stale_.assign(n, 1);
@@ -147,14 +149,15 @@ void ProjectiveFactor::factorRow(int k) {
   rowWork_[k] = work;
 }
 
-/// values_ from lower_ in the stale columns (btScalar, each column's diagonal inverted); clears
-/// the marks and the changes.
+/// solveEntries_' values from lower_ in the stale columns (btScalar, each column's diagonal
+/// inverted); clears the marks and the changes.
 void ProjectiveFactor::storeStale() {
   for (size_t j = 0; j < stale_.size(); ++j) {
     if (!stale_[j]) continue;
     stale_[j] = 0;
     for (int p = columnStart_[j]; p < columnStart_[j + 1]; ++p)
-      values_[p] = static_cast<btScalar>(p == columnStart_[j] ? 1 / lower_[p] : lower_[p]);
+      solveEntries_[p].value =
+          static_cast<btScalar>(p == columnStart_[j] ? 1 / lower_[p] : lower_[p]);
   }
   changedRows_.clear();
   changedBy_.clear();
@@ -216,49 +219,78 @@ void ProjectiveFactor::update() {
     refactor();
 }
 
-// With SSE each entry is one vector product and difference over x, y, z (and w, which stays 0;
-// the scalar code's operations per lane, same bits), and the backward pass sums a column's odd
-// and even entries apart (two chains of dependent subtractions instead of one: CPU samples on
-// thigh13 R=40, 358 -> 283 in the integrator). Measured against a supernodal solve (runs of
-// columns with one pattern, their rows below gathered once, four rows in the lanes): 14 % fewer
-// instructions, 12 % more CPU time (docs/decisions.md, "Solver").
-void ProjectiveFactor::solveInPlace(btVector3* x) const {
-  const int* start = columnStart_.data();
-  const int* rows = rows_.data();
-  const btScalar* values = values_.data();
-  const auto n = static_cast<int>(size());
+namespace {
+
 #if FIBREMSS_SSE_PARTICLES
+/// L·Lᵀ·z = b in place with SSE (ProjectiveFactor::solveInPlace).
+template <class Entry>
+void solveLanes(const int* start, const Entry* entries, int n, btVector3* x) {
   for (int j = 0; j < n; ++j) {
-    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(values[start[j]]));
+    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(entries[start[j]].value));
     _mm_store_ps(x[j].m_floats, xj);
-    for (int p = start[j] + 1, end = start[j + 1]; p < end; ++p) {
-      float* target = x[rows[p]].m_floats;
-      _mm_store_ps(target, _mm_sub_ps(_mm_load_ps(target), _mm_mul_ps(xj, _mm_set1_ps(values[p]))));
+    int p = start[j] + 1;
+    const int end = start[j + 1];
+    for (; p + 1 < end; p += 2) {  // x(row) − xj·L(row, j)
+      float* a = at(x, entries[p].offset).m_floats;
+      float* b = at(x, entries[p + 1].offset).m_floats;
+      const __m128 newA = _mm_sub_ps(_mm_load_ps(a), _mm_mul_ps(xj, _mm_set1_ps(entries[p].value)));
+      const __m128 newB =
+          _mm_sub_ps(_mm_load_ps(b), _mm_mul_ps(xj, _mm_set1_ps(entries[p + 1].value)));
+      _mm_store_ps(a, newA);
+      _mm_store_ps(b, newB);
+    }
+    if (p < end) {
+      float* a = at(x, entries[p].offset).m_floats;
+      _mm_store_ps(a, _mm_sub_ps(_mm_load_ps(a), _mm_mul_ps(xj, _mm_set1_ps(entries[p].value))));
     }
   }
-  const auto term = [&](int p) {  // L(row, j)·z(row) for entry p of column j
-    return _mm_mul_ps(loadVector(x[rows[p]]), _mm_set1_ps(values[p]));
-  };
-  for (int j = n - 1; j >= 0; --j) {
+  for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
     __m128 sum = loadVector(x[j]), odd = _mm_setzero_ps();
     const int end = start[j + 1];
     int p = start[j] + 1;
     for (; p + 1 < end; p += 2) {
-      sum = _mm_sub_ps(sum, term(p));
-      odd = _mm_sub_ps(odd, term(p + 1));
+      const Entry& e = entries[p];
+      const Entry& f = entries[p + 1];
+      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, e.offset)), _mm_set1_ps(e.value)));
+      odd = _mm_sub_ps(odd, _mm_mul_ps(loadVector(at(x, f.offset)), _mm_set1_ps(f.value)));
     }
-    if (p < end) sum = _mm_sub_ps(sum, term(p));
-    _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, odd), _mm_set1_ps(values[start[j]])));
+    if (p < end)
+      sum = _mm_sub_ps(
+          sum, _mm_mul_ps(loadVector(at(x, entries[p].offset)), _mm_set1_ps(entries[p].value)));
+    _mm_store_ps(x[j].m_floats,
+                 _mm_mul_ps(_mm_add_ps(sum, odd), _mm_set1_ps(entries[start[j]].value)));
   }
+}
+#endif
+
+}  // namespace
+
+// With SSE each entry is one vector product and difference over x, y, z (and w, which stays 0;
+// the scalar code's operations per lane, same bits), and the backward pass sums a column's odd
+// and even entries apart (two chains of dependent subtractions instead of one: CPU samples on
+// thigh13 R=40, 358 -> 283 in the integrator). Each entry's value and its row's byte offset are
+// read together (SolveEntry), and the forward pass takes a column's entries two at a time (its
+// rows differ, so the order of their loads and stores does not matter).
+// Measured against a supernodal solve (runs of columns with one pattern, their rows below gathered
+// once, four rows in the lanes): 14 % fewer instructions, 12 % more CPU time (docs/decisions.md,
+// "Solver").
+void ProjectiveFactor::solveInPlace(btVector3* x) const {
+  const int* start = columnStart_.data();
+  const SolveEntry* entries = solveEntries_.data();
+  const auto n = static_cast<int>(size());
+#if FIBREMSS_SSE_PARTICLES
+  solveLanes(start, entries, n, x);
 #else
   for (int j = 0; j < n; ++j) {
-    const btVector3 xj = x[j] *= values[start[j]];
-    for (int p = start[j] + 1; p < start[j + 1]; ++p) x[rows[p]] -= xj * values[p];
+    const btVector3 xj = x[j] *= entries[start[j]].value;
+    for (int p = start[j] + 1; p < start[j + 1]; ++p)
+      at(x, entries[p].offset) -= xj * entries[p].value;
   }
   for (int j = n - 1; j >= 0; --j) {
     btVector3 sum = x[j];
-    for (int p = start[j] + 1; p < start[j + 1]; ++p) sum -= x[rows[p]] * values[p];
-    x[j] = sum * values[start[j]];
+    for (int p = start[j] + 1; p < start[j + 1]; ++p)
+      sum -= at(x, entries[p].offset) * entries[p].value;
+    x[j] = sum * entries[start[j]].value;
   }
 #endif
 }

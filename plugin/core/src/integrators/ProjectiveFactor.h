@@ -64,7 +64,12 @@ class ProjectiveFactor {
   std::vector<int> diagonalEntry_;   ///< index of column k's diagonal in upperValues_
   std::vector<double> weights_;      ///< W per row [N/m]
   std::vector<double> lower_;        ///< L's entries as the pattern orders them [√(N/m)]
-  std::vector<btScalar> values_;     ///< the same, the diagonal inverted [√(N/m), its inverse]
+  /// An entry of L as the solve reads it: value and row side by side, one stream.
+  struct SolveEntry {
+    btScalar value;   ///< L's entry, the diagonal inverted [√(N/m), on the diagonal its inverse]
+    uint32_t offset;  ///< its row's byte offset in the solved vector (row · sizeof(btVector3)) [B]
+  };
+  std::vector<SolveEntry> solveEntries_;  ///< lower_ in btScalar, as the pattern orders it
   // Scratch of a new factor or an update (sized once).
   std::vector<double> scatter_;  ///< row k of L being formed, or an update's vector (zero between)
   std::vector<int> tags_;        ///< the row that last visited each column
