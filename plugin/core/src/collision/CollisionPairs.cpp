@@ -411,6 +411,7 @@ void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {
     muscle.pushedLast[i] = 1;
   }
   muscle.pinched = pinched;
+  muscle.pinchedInStep = std::max(muscle.pinchedInStep, pinched);
 }
 
 void leaveContactSlop(MuscleState& muscle, btScalar slop) {

@@ -94,7 +94,11 @@ struct ContactState {
   std::vector<int32_t> pinchBones;
   std::vector<btVector3> firstBonePushes;  ///< Σ pushes of that bone this iteration [m]
   std::vector<btVector3> otherBonePushes;  ///< Σ pushes of every other bone this iteration [m]
-  size_t pinched = 0;      ///< particles caught between two bones in the last response
+  size_t pinched = 0;        ///< particles caught between two bones in the last response
+  size_t pinchedInStep = 0;  ///< most particles caught in one response of this step's attempt
+  /// Caught in some step since the bones last stood still: the bones that tore it may still be
+  /// carrying its torn halves apart (the guard's) [flag].
+  bool trapHeld = false;
   size_t tornSprings = 0;  ///< most springs found burst while it was trapped (the guard's)
 };
 

@@ -6,10 +6,11 @@
 // good state (StopBody, and Retry once its retries are spent). The other muscles always finish the
 // step; nothing throws, so a host's Bullet world keeps running. A step the cancel flag ended
 // (MuscleSystem::setCancelFlag) is not retried: a failed attempt is rolled back (unless Report)
-// and nothing is blamed or frozen. A muscle whose springs burst while two bones still press some of
-// its particles from opposite sides (trapped: pinched in the last iteration, CollisionPairs.cpp),
+// and nothing is blamed or frozen. A muscle whose springs burst while two bones press some of its
+// particles from opposite sides (trapped: pinched in an iteration of the step, CollisionPairs.cpp),
 // not NaN nor spread far beyond its size, was torn by the bones, not by the numerics: its state is
-// kept, and later steps fail it only for more burst springs than the trap left. A frozen muscle
+// kept; while the bones go on moving its tear may grow by kTearGrowth a step, and once they stand
+// still later steps fail it only for more burst springs than the trap left. A frozen muscle
 // rides with its bones (their motion over the step) and is pushed out of them, so it never ends
 // inside one.
 #include "MuscleSystemGuard.h"
@@ -32,6 +33,10 @@ using Clock = std::chrono::steady_clock;
 constexpr int kMaxHalvings = 10;
 /// Collision rounds that push a frozen muscle, carried with its bones, out of them.
 constexpr int kFrozenRounds = 8;
+/// How much a held trap's tear may grow in one step [burst springs / the most seen before]: on
+/// pinch (resolution 12; 1, 3, 5, 8, 10, 12 iterations per pose) it grew at most 1.20× a step
+/// once the blades had let go (1 457 → 1 748 springs); a numerical blow-up bursts it wholesale.
+constexpr double kTearGrowth = 1.5;
 
 bool finite(const btVector3& v) {
   return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
@@ -187,7 +192,11 @@ void MuscleSystem::Impl::guardedStep() {
       if (!health.failed()) continue;
       if (!health.nan && !health.spread) {
         // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
-        if (state.pinched > 0) {
+        // Caught in any response of the step, or held since: the bones that tore it carry its
+        // halves on apart after the trap opens, so its tear may grow until they stand still.
+        const bool held = state.trapHeld &&
+                          double(health.explodedSprings) <= kTearGrowth * double(state.tornSprings);
+        if (state.pinchedInStep > 0 || held) {
           state.tornSprings = std::max(state.tornSprings, health.explodedSprings);
           continue;
         }
@@ -224,7 +233,7 @@ void MuscleSystem::Impl::guardedStep() {
     followBones(state, BoneMotion::SinceStepStart);
     // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
     ThreadScratch& thread = scratch.front();
-    state.pinched = 0;
+    state.pinched = state.pinchedInStep = 0;
     if (parameters.muscleBone && state.bonesMoving)
       for (int round = 0; round < kFrozenRounds; ++round) {
         refitTree(state);
@@ -237,7 +246,12 @@ void MuscleSystem::Impl::guardedStep() {
     deform(state);
   };
   size_t heldBones = 0;
-  for (uint32_t slot : bones.order) heldBones += bones.states[slot]->heldNonFinite ? 1 : 0;
+  bool bonesMoved = false;
+  for (uint32_t slot : bones.order) {
+    const BoneState& bone = *bones.states[slot];
+    heldBones += bone.heldNonFinite ? 1 : 0;
+    bonesMoved = bonesMoved || !(bone.goodLast == bone.last);
+  }
   size_t frozen = 0, trappedParticles = 0, trappedMuscles = 0;
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
@@ -246,6 +260,7 @@ void MuscleSystem::Impl::guardedStep() {
       carryFrozen(state);
     }
     trappedParticles += state.pinched;
+    state.trapHeld = state.pinchedInStep > 0 || (state.trapHeld && bonesMoved);
     trappedMuscles += state.pinched > 0 ? 1 : 0;
   }
   stats.timing = spent;

@@ -663,6 +663,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, state);
     resolveBones(state);
+    state.pinchedInStep = 0;
   }
   if (rebuild)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
