@@ -337,6 +337,41 @@ std::string calibrationLabels(const StabilityOptions& options) {
   return labels;
 }
 
+namespace {
+
+/// Calibrates each integrator's stable step on options.calibration into matrix.stableSteps,
+/// logging each; stops at a cancel.
+void calibrateIntegrators(const std::vector<std::string>& integrators,
+                          const StabilityOptions& options, StabilityMatrix& matrix) {
+  log(options, "calibrating on " + calibrationLabels(options));
+  std::vector<PreparedCase> calibration = prepareCalibration(options);
+  for (const std::string& integrator : integrators) {
+    const StableStep step = calibrateAll(calibration, integrator, options);
+    if (cancelled(options)) break;  // its bisection was cut short
+    matrix.stableSteps.push_back(step);
+    if (!step.available)
+      log(options, "  " + integrator + ": unavailable");
+    else
+      log(options, "  " + integrator + ": stable step " + (step.capped ? ">= " : "") +
+                       seconds(step.dt) + " s" + (step.found ? "" : " (none found; lowest)") +
+                       " on " + step.limitedBy + " after " + std::to_string(step.probes) +
+                       " probes");
+  }
+}
+
+/// A cell's log line after its number: case, integrator, dt factor and dt, outcome, steps.
+std::string cellLine(const StabilityCell& cell, double factor) {
+  std::string line = cell.caseLabel + " " + cell.integrator + " x" + seconds(factor) + " (dt " +
+                     seconds(cell.dt) + " s): " + toString(cell.outcome);
+  if (cell.failedStep >= 0) line += " at step " + std::to_string(cell.failedStep);
+  if (cell.outcome != CellOutcome::Unavailable)
+    line += ", " + std::to_string(cell.steps) + " steps in " + seconds(cell.wallSeconds) + " s";
+  if (cell.outcome == CellOutcome::Error) line += ": " + cell.message;
+  return line;
+}
+
+}  // namespace
+
 StableStep findStableStep(const std::string& integrator, const StabilityOptions& options) {
   std::vector<PreparedCase> prepared = prepareCalibration(options);
   return calibrateAll(prepared, integrator, options);
@@ -366,22 +401,7 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
   const std::vector<std::string> integrators =
       options.integrators.empty() ? allIntegratorNames() : options.integrators;
 
-  {
-    log(options, "calibrating on " + calibrationLabels(options));
-    std::vector<PreparedCase> calibration = prepareCalibration(options);
-    for (const std::string& integrator : integrators) {
-      const StableStep step = calibrateAll(calibration, integrator, options);
-      if (cancelled(options)) break;  // its bisection was cut short
-      matrix.stableSteps.push_back(step);
-      if (!step.available)
-        log(options, "  " + integrator + ": unavailable");
-      else
-        log(options, "  " + integrator + ": stable step " + (step.capped ? ">= " : "") +
-                         seconds(step.dt) + " s" + (step.found ? "" : " (none found; lowest)") +
-                         " on " + step.limitedBy + " after " + std::to_string(step.probes) +
-                         " probes");
-    }
-  }
+  calibrateIntegrators(integrators, options, matrix);
 
   const size_t total = cases.size() * integrators.size() * options.dtFactors.size();
   size_t done = 0;
@@ -410,16 +430,8 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
           cell.message = failure;
         }
         cell.dtFactor = factor;
-        ++done;
-        std::string line = "[" + std::to_string(done) + "/" + std::to_string(total) + "] " +
-                           stabilityCase.label + " " + integrators[i] + " x" + seconds(factor) +
-                           " (dt " + seconds(dt) + " s): " + toString(cell.outcome);
-        if (cell.failedStep >= 0) line += " at step " + std::to_string(cell.failedStep);
-        if (cell.outcome != CellOutcome::Unavailable)
-          line +=
-              ", " + std::to_string(cell.steps) + " steps in " + seconds(cell.wallSeconds) + " s";
-        if (cell.outcome == CellOutcome::Error) line += ": " + cell.message;
-        log(options, line);
+        log(options, "[" + std::to_string(++done) + "/" + std::to_string(total) + "] " +
+                         cellLine(cell, factor));
         matrix.cells.push_back(std::move(cell));
       }
     }
