@@ -58,6 +58,39 @@ bool cancelled(const StabilityOptions& options) {
   return options.cancel && options.cancel->load();
 }
 
+/// A cell's figures and outcome from its run: NaN, exploded, out of its time box
+/// (`timedOut`), interrupted, or else its kinetic energy checked for growth (`freeMass` [kg]).
+void judgeCell(const RunMetrics& metrics, bool timedOut, double freeMass,
+               const StabilityOptions& options, StabilityCell& cell) {
+  cell.steps = metrics.steps;
+  cell.iterations = metrics.iterations;
+  cell.msPerIteration = metrics.msPerIteration;
+  cell.wallSeconds = metrics.wallSeconds;
+  cell.failedStep = metrics.failedStep;
+  if (metrics.nan) {
+    cell.outcome = CellOutcome::Nan;
+  } else if (metrics.exploded) {
+    cell.outcome = CellOutcome::Exploded;
+  } else if (metrics.interrupted && timedOut) {
+    cell.outcome = CellOutcome::Timeout;
+    cell.failedStep = metrics.steps;
+    cell.message = "stopped after " + std::to_string(metrics.steps) + " steps (" +
+                   std::to_string(options.cellSeconds) + " s box)";
+  } else if (metrics.interrupted) {
+    cell.outcome = CellOutcome::Interrupted;
+    cell.message = "interrupted after " + std::to_string(metrics.steps) + " steps";
+  } else {
+    const EnergyCheck energy =
+        checkEnergy(cell.kineticEnergy, options.energyGrowth,
+                    0.5 * freeMass * options.energyFloorSpeed * options.energyFloorSpeed);
+    cell.energyRatio = energy.ratio;
+    if (!energy.bounded) {
+      cell.outcome = CellOutcome::Energy;
+      cell.failedStep = energy.growthStep;
+    }
+  }
+}
+
 /// One run of a prepared case; `steps` < 0 runs every pose. Never throws.
 StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
                           const std::string& integrator, double dt, int steps,
@@ -105,34 +138,8 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
     }
   };
   try {
-    const RunMetrics metrics = runFibreMSS(prepared.scene, prepared.prepared, run);
-    cell.steps = metrics.steps;
-    cell.iterations = metrics.iterations;
-    cell.msPerIteration = metrics.msPerIteration;
-    cell.wallSeconds = metrics.wallSeconds;
-    cell.failedStep = metrics.failedStep;
-    if (metrics.nan) {
-      cell.outcome = CellOutcome::Nan;
-    } else if (metrics.exploded) {
-      cell.outcome = CellOutcome::Exploded;
-    } else if (metrics.interrupted && timedOut) {
-      cell.outcome = CellOutcome::Timeout;
-      cell.failedStep = metrics.steps;
-      cell.message = "stopped after " + std::to_string(metrics.steps) + " steps (" +
-                     std::to_string(options.cellSeconds) + " s box)";
-    } else if (metrics.interrupted) {
-      cell.outcome = CellOutcome::Interrupted;
-      cell.message = "interrupted after " + std::to_string(metrics.steps) + " steps";
-    } else {
-      const EnergyCheck energy = checkEnergy(
-          cell.kineticEnergy, options.energyGrowth,
-          0.5 * prepared.freeMass * options.energyFloorSpeed * options.energyFloorSpeed);
-      cell.energyRatio = energy.ratio;
-      if (!energy.bounded) {
-        cell.outcome = CellOutcome::Energy;
-        cell.failedStep = energy.growthStep;
-      }
-    }
+    judgeCell(runFibreMSS(prepared.scene, prepared.prepared, run), timedOut, prepared.freeMass,
+              options, cell);
   } catch (const std::exception& e) {
     cell.outcome = CellOutcome::Error;
     cell.message = e.what();
@@ -430,8 +437,10 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
           cell.message = failure;
         }
         cell.dtFactor = factor;
-        log(options, "[" + std::to_string(++done) + "/" + std::to_string(total) + "] " +
-                         cellLine(cell, factor));
+        std::string line = "[";
+        line +=
+            std::to_string(++done) + "/" + std::to_string(total) + "] " + cellLine(cell, factor);
+        log(options, line);
         matrix.cells.push_back(std::move(cell));
       }
     }
