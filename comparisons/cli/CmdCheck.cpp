@@ -154,28 +154,22 @@ nlohmann::ordered_json preparationReport(const PreparationReport& report,
   return {{"repairs", report.repairs}, {"muscles", muscles}};
 }
 
-void runCheck(const CheckArgs& args) {
-  using Clock = std::chrono::steady_clock;
-  const auto loadStart = Clock::now();
-  const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
-  const double loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
-  printWarnings(scene.warnings);
-  printNotes(scene.notes);
+/// What `check` reports of a prepared scene: its muscles and bones and their totals.
+struct CheckSummary {
+  nlohmann::ordered_json muscles = nlohmann::ordered_json::array();  ///< one entry per muscle
+  nlohmann::ordered_json bones = nlohmann::ordered_json::array();    ///< one entry per bone
+  nlohmann::ordered_json preparation;  ///< what preparation found and repaired
+  std::vector<std::string> warnings;   ///< preparation's and the attachments' warnings
+  size_t particles = 0;                ///< particles of all muscles
+  size_t boundary = 0;                 ///< boundary particles of all muscles
+  size_t fixed = 0;                    ///< fixed particles of all muscles
+  size_t springs = 0;                  ///< springs of all muscles
+  size_t spheres = 0;                  ///< spheres of all bones
+  double loadSeconds = 0;              ///< loading the scene [s]
+};
 
-  if (!args.out.empty()) requireWritableDirectory(args.out);  // fail before preparing
-  const PreparedScene prepared =
-      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
-  printWarnings(prepared.report.warnings);
-  const nlohmann::ordered_json preparation = preparationReport(prepared.report, scene);
-  std::vector<std::string> warnings = prepared.report.warnings;
-  for (auto& warning : attachmentWarnings(scene, prepared)) {
-    printWarning(warning);
-    warnings.push_back(std::move(warning));
-  }
-
-  nlohmann::ordered_json muscles = nlohmann::ordered_json::array();
-  nlohmann::ordered_json bones = nlohmann::ordered_json::array();
-  size_t particles = 0, boundary = 0, fixed = 0, springs = 0, spheres = 0;
+/// Each muscle's and bone's entry and the totals into `summary`.
+void summarise(const PreparedScene& prepared, CheckSummary& summary) {
   for (size_t m = 0; m < prepared.muscles.size(); ++m) {
     const MuscleSettings& muscle = *prepared.muscles[m];
     nlohmann::ordered_json entry{{"name", muscle.name},
@@ -187,45 +181,43 @@ void runCheck(const CheckArgs& args) {
                                  {"fibres", muscle.fibreCount()}};
     if (m < prepared.report.surfaceCoverage.size())
       entry["surface_coverage"] = prepared.report.surfaceCoverage[m];
-    muscles.push_back(entry);
-    particles += muscle.particleCount();
-    boundary += muscle.boundaryParticles.size();
-    fixed += muscle.fixedParticles.size();
-    springs += muscle.springs.size();
+    summary.muscles.push_back(entry);
+    summary.particles += muscle.particleCount();
+    summary.boundary += muscle.boundaryParticles.size();
+    summary.fixed += muscle.fixedParticles.size();
+    summary.springs += muscle.springs.size();
   }
   for (const auto& bone : prepared.bones) {
-    bones.push_back({{"name", bone->name},
-                     {"spheres", bone->sphereCentres.size()},
-                     {"triangles", bone->mesh.triangles.size()}});
-    spheres += bone->sphereCentres.size();
+    summary.bones.push_back({{"name", bone->name},
+                             {"spheres", bone->sphereCentres.size()},
+                             {"triangles", bone->mesh.triangles.size()}});
+    summary.spheres += bone->sphereCentres.size();
   }
+}
 
-  if (!args.out.empty()) {
-    const OutputDirectory locked(args.out);
-    writeRestState(args.out, prepared, scene.unitScale);
-  }
+/// The summary as JSON on stdout (--json).
+void printJson(const LoadedScene& scene, const PreparedScene& prepared,
+               const CheckSummary& summary) {
+  nlohmann::ordered_json result{{"scene", scene.name},
+                                {"particles", summary.particles},
+                                {"boundary_particles", summary.boundary},
+                                {"fixed_particles", summary.fixed},
+                                {"springs", summary.springs},
+                                {"bone_spheres", summary.spheres},
+                                {"poses", scene.poseCount},
+                                {"load_seconds", summary.loadSeconds},
+                                {"preparation_seconds", prepared.report.seconds},
+                                {"muscles", summary.muscles},
+                                {"bones", summary.bones},
+                                {"warnings", summary.warnings},
+                                {"notes", scene.notes},
+                                {"preparation", summary.preparation}};
+  for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
+  std::cout << result.dump(2) << "\n";
+}
 
-  if (args.json) {
-    nlohmann::ordered_json result{{"scene", scene.name},
-                                  {"particles", particles},
-                                  {"boundary_particles", boundary},
-                                  {"fixed_particles", fixed},
-                                  {"springs", springs},
-                                  {"bone_spheres", spheres},
-                                  {"poses", scene.poseCount},
-                                  {"load_seconds", loadSeconds},
-                                  {"preparation_seconds", prepared.report.seconds},
-                                  {"muscles", muscles},
-                                  {"bones", bones},
-                                  {"warnings", warnings},
-                                  {"notes", scene.notes},
-                                  {"preparation", preparation}};
-    for (const auto& warning : scene.warnings) result["warnings"].push_back(warning);
-    std::cout << result.dump(2) << "\n";
-    return;
-  }
-  std::cout << "scene " << scene.name << " (" << scene.source << "): " << scene.bones.size()
-            << " bones, " << scene.muscles.size() << " muscles, " << scene.poseCount << " poses\n";
+/// The muscles' table: particles, boundary, fixed, springs, coverage.
+void printMuscleTable(const nlohmann::ordered_json& muscles) {
   std::cout << std::left << std::setw(24) << "muscle" << std::right << std::setw(10) << "particles"
             << std::setw(10) << "boundary" << std::setw(8) << "fixed" << std::setw(10) << "springs"
             << std::setw(10) << "coverage"
@@ -240,20 +232,60 @@ void runCheck(const CheckArgs& args) {
                 << 100 * m["surface_coverage"].get<double>() << "%" << std::defaultfloat;
     std::cout << "\n";
   }
-  for (const auto& m : muscles)
+}
+
+/// The summary as text on stdout.
+void printText(const LoadedScene& scene, const PreparedScene& prepared, const CheckSummary& summary,
+               const std::string& out) {
+  std::cout << "scene " << scene.name << " (" << scene.source << "): " << scene.bones.size()
+            << " bones, " << scene.muscles.size() << " muscles, " << scene.poseCount << " poses\n";
+  printMuscleTable(summary.muscles);
+  for (const auto& m : summary.muscles)
     std::cout << "fixed particles of " << m["name"].get<std::string>() << ": "
               << describeFixed(m["fixed_to_bones"]) << "\n";
-  for (const auto& b : bones)
+  for (const auto& b : summary.bones)
     std::cout << std::left << std::setw(24) << ("bone " + b["name"].get<std::string>())
               << std::right << std::setw(10) << b["spheres"].get<size_t>() << " spheres\n";
-  std::cout << "total: " << particles << " particles, " << boundary << " boundary, " << fixed
-            << " fixed, " << springs << " springs, " << spheres << " bone spheres\n";
-  std::cout << std::setprecision(3) << "load " << loadSeconds << " s, preparation "
+  std::cout << "total: " << summary.particles << " particles, " << summary.boundary << " boundary, "
+            << summary.fixed << " fixed, " << summary.springs << " springs, " << summary.spheres
+            << " bone spheres\n";
+  std::cout << std::setprecision(3) << "load " << summary.loadSeconds << " s, preparation "
             << prepared.report.seconds << " s\n";
   std::cout << "preparation report:"
             << (prepared.report.repairs.empty() ? " nothing repaired\n" : "\n");
   for (const auto& repair : prepared.report.repairs) std::cout << "  repaired: " << repair << "\n";
-  if (!args.out.empty()) std::cout << "rest state written to " << args.out << "/rest.pvd\n";
+  if (!out.empty()) std::cout << "rest state written to " << out << "/rest.pvd\n";
+}
+
+void runCheck(const CheckArgs& args) {
+  using Clock = std::chrono::steady_clock;
+  const auto loadStart = Clock::now();
+  const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
+  CheckSummary summary;
+  summary.loadSeconds = std::chrono::duration<double>(Clock::now() - loadStart).count();
+  printWarnings(scene.warnings);
+  printNotes(scene.notes);
+
+  if (!args.out.empty()) requireWritableDirectory(args.out);  // fail before preparing
+  const PreparedScene prepared =
+      prepareScene(scene.bones, scene.muscles, scene.simulation.seed, scene.simulation.threads);
+  printWarnings(prepared.report.warnings);
+  summary.preparation = preparationReport(prepared.report, scene);
+  summary.warnings = prepared.report.warnings;
+  for (auto& warning : attachmentWarnings(scene, prepared)) {
+    printWarning(warning);
+    summary.warnings.push_back(std::move(warning));
+  }
+  summarise(prepared, summary);
+
+  if (!args.out.empty()) {
+    const OutputDirectory locked(args.out);
+    writeRestState(args.out, prepared, scene.unitScale);
+  }
+  if (args.json)
+    printJson(scene, prepared, summary);
+  else
+    printText(scene, prepared, summary, args.out);
 }
 
 }  // namespace

@@ -44,8 +44,7 @@ void solveCell(const LoadedScene& scene, const PreparedScene& prepared, const Re
         "--cell", std::to_string(args.cell),
         "expected a cell number below " + std::to_string(cells.size()) + " (--cells lists them)");
   const NamedReferenceCell& cell = cells[static_cast<size_t>(args.cell)];
-  const std::string cacheDir =
-      args.options.cacheDir.empty() ? defaultReferenceCacheDir() : args.options.cacheDir;
+  const std::string cacheDir = resolvedCacheDir(args.options);
   const bool done =
       cachedCalculixMuscle(scene, prepared, cell.cell.definition, cell.cell.cut, cacheDir,
                            cell.cell.muscle, args.options.progress, args.options.cancel);
@@ -111,8 +110,7 @@ void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry)
 /// Writes every solve of the reference (its own and its gates', as computed) to args.shipDir as
 /// shipped references (`<key>.ref.gz`) and records them in its manifest.json.
 void ship(const LoadedScene& scene, const PreparedScene& prepared, const ReferenceArgs& args) {
-  const std::string cacheDir =
-      args.options.cacheDir.empty() ? defaultReferenceCacheDir() : args.options.cacheDir;
+  const std::string cacheDir = resolvedCacheDir(args.options);
   std::filesystem::create_directories(args.shipDir);
   nlohmann::ordered_json solves = nlohmann::ordered_json::array();
   for (const NamedReferenceCell& cell : referenceCells(scene, prepared, args.options)) {

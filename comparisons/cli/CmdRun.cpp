@@ -173,6 +173,61 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
               frames.c_str());
 }
 
+/// Locks args.out against a second run into it, removes what an interrupted or earlier run left
+/// there (a previous run's files would mislead) and writes the scene.
+void openOutDir(const RunArgs& args, const LoadedScene& scene,
+                std::optional<OutputDirectory>& outDir) {
+  outDir.emplace(args.out);
+  if (outDir->removedTemporaries() > 0)
+    std::fprintf(stderr, "removed %zu temporary file(s) an interrupted run left in %s\n",
+                 outDir->removedTemporaries(), args.out.c_str());
+  for (const char* file : {"/summary.json", "/soak.csv", "/series.csv"})
+    removeOutputFile(args.out + file);
+  writeFileAtomically(args.out + "/scene.json", scene.json);
+}
+
+/// The runner's options from the command line (without progress).
+FibreRunOptions runOptions(const RunArgs& args) {
+  FibreRunOptions options;
+  options.outDir = args.out;
+  options.vtkFrames = std::ranges::count(args.formats, "vtk") > 0;
+  options.gltfFrames = std::ranges::count(args.formats, "gltf") > 0;
+  options.frameEvery = args.frameEvery;
+  options.steps = args.steps;
+  options.keepPoseSurfaces = false;
+  options.cancel = &interruptRequested;
+  options.loopMotion = args.loop;
+  options.sampleEvery = args.sampleEvery;
+  return options;
+}
+
+/// The run's summary.json: its metrics, the scene's figures and what the guard did.
+nlohmann::json runSummary(const LoadedScene& scene, const PreparedScene& prepared,
+                          const RunMetrics& metrics, const FibreRunDetails& details, bool loop) {
+  nlohmann::json summary = toJson(metrics);
+  summary["scene_source"] = scene.source;
+  summary["poses"] = scene.poseCount;
+  summary["preparation_seconds"] = prepared.report.seconds;
+  summary["max_sphere_penetration_mm"] = details.spherePenetration.maxMm;
+  summary["mean_sphere_penetration_mm"] = details.spherePenetration.meanMm;
+  summary["frames"] = details.frames;
+  if (std::isfinite(details.measureMsPerStep))
+    summary["measure_ms_per_step"] = details.measureMsPerStep;
+  summary["guard"] = guardJson(details, scene.simulation.onFailure);
+  summary["trapped"] = trappedJson(details);
+  summary["loop_motion"] = loop;
+  if (!details.samples.empty()) summary["soak"] = soakJson(details.samples);
+  return summary;
+}
+
+/// Writes soak.csv (when sampled), series.csv and summary.json into `out`.
+void writeRunFiles(const std::string& out, const RunMetrics& metrics,
+                   const FibreRunDetails& details, const nlohmann::json& summary) {
+  if (!details.samples.empty()) writeFileAtomically(out + "/soak.csv", soakCsv(details.samples));
+  writeFileAtomically(out + "/series.csv", seriesCsv(metrics.series));
+  writeFileAtomically(out + "/summary.json", summary.dump(2) + "\n");
+}
+
 void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   printWarnings(scene.warnings);
@@ -186,27 +241,9 @@ void run(const RunArgs& args) {
   printWarnings(attachmentWarnings(scene, prepared));
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
   std::optional<OutputDirectory> outDir;  // locked against a second run into it
-  if (!args.out.empty()) {
-    outDir.emplace(args.out);
-    if (outDir->removedTemporaries() > 0)
-      std::fprintf(stderr, "removed %zu temporary file(s) an interrupted run left in %s\n",
-                   outDir->removedTemporaries(), args.out.c_str());
-    // A previous run's would mislead.
-    for (const char* file : {"/summary.json", "/soak.csv", "/series.csv"})
-      removeOutputFile(args.out + file);
-    writeFileAtomically(args.out + "/scene.json", scene.json);
-  }
+  if (!args.out.empty()) openOutDir(args, scene, outDir);
 
-  FibreRunOptions options;
-  options.outDir = args.out;
-  options.vtkFrames = std::ranges::count(args.formats, "vtk") > 0;
-  options.gltfFrames = std::ranges::count(args.formats, "gltf") > 0;
-  options.frameEvery = args.frameEvery;
-  options.steps = args.steps;
-  options.keepPoseSurfaces = false;
-  options.cancel = &interruptRequested;
-  options.loopMotion = args.loop;
-  options.sampleEvery = args.sampleEvery;
+  FibreRunOptions options = runOptions(args);
   const int steps = args.steps >= 0 ? args.steps : std::max(scene.poseCount, 1);
   ProgressBar bar(scene.name, steps);
   options.progress = [&bar, interactive = isatty(fileno(stderr)) != 0](const RunProgress& p) {
@@ -226,26 +263,8 @@ void run(const RunArgs& args) {
     metrics = runFibreMSS(scene, prepared, options, &details);
   }
   bar.finish();
-
-  nlohmann::json summary = toJson(metrics);
-  summary["scene_source"] = scene.source;
-  summary["poses"] = scene.poseCount;
-  summary["preparation_seconds"] = prepared.report.seconds;
-  summary["max_sphere_penetration_mm"] = details.spherePenetration.maxMm;
-  summary["mean_sphere_penetration_mm"] = details.spherePenetration.meanMm;
-  summary["frames"] = details.frames;
-  if (std::isfinite(details.measureMsPerStep))
-    summary["measure_ms_per_step"] = details.measureMsPerStep;
-  summary["guard"] = guardJson(details, scene.simulation.onFailure);
-  summary["trapped"] = trappedJson(details);
-  summary["loop_motion"] = args.loop;
-  if (!details.samples.empty()) summary["soak"] = soakJson(details.samples);
-  if (!args.out.empty() && !details.samples.empty())
-    writeFileAtomically(args.out + "/soak.csv", soakCsv(details.samples));
-  if (!args.out.empty()) {
-    writeFileAtomically(args.out + "/series.csv", seriesCsv(metrics.series));
-    writeFileAtomically(args.out + "/summary.json", summary.dump(2) + "\n");
-  }
+  const nlohmann::json summary = runSummary(scene, prepared, metrics, details, args.loop);
+  if (!args.out.empty()) writeRunFiles(args.out, metrics, details, summary);
 
   if (args.json)
     std::cout << summary.dump(2) << "\n";

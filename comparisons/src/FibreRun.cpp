@@ -281,100 +281,20 @@ class MuscleLedger {
   std::vector<MuscleStep> measured_;  ///< each muscle's measures in the current afterStep
 };
 
-}  // namespace
+/// The per-step timings of a run [ms]: the step, per iteration its parts, the measures.
+struct StepTimings {
+  std::vector<double> msPerStep;         ///< the step's wall time [ms]
+  std::vector<double> msPerIteration;    ///< the step's wall time per iteration [ms]
+  std::vector<double> mss;               ///< mass-spring per iteration [ms]
+  std::vector<double> volumeTerm;        ///< volume terms per iteration [ms]
+  std::vector<double> muscleCd;          ///< muscle collision detection per iteration [ms]
+  std::vector<double> boneCd;            ///< bone collision detection per iteration [ms]
+  std::vector<double> response;          ///< collision response per iteration [ms]
+  std::vector<double> output;            ///< output per iteration [ms]
+  std::vector<double> measureMsPerStep;  ///< the step's measures [ms]
 
-RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
-                       const FibreRunOptions& options, FibreRunDetails* details) {
-  const auto runStart = Clock::now();
-  RunMetrics metrics;
-  metrics.scene = scene.name;
-  metrics.method = options.method;
-  metrics.integrator = toString(scene.simulation.integrator);
-
-  MuscleSystem system(scene.simulation);
-  system.setCancelFlag(options.interrupt ? options.interrupt : options.cancel);
-  metrics.threads = static_cast<int>(system.threads());
-  const SceneHandles handles = addScene(system, prepared);
-  const std::vector<BoneHandle>& bones = handles.bones;
-  const std::vector<MuscleHandle>& muscles = handles.muscles;
-  for (const auto& bone : prepared.bones) metrics.boneSpheres += bone->sphereCentres.size();
-  BoneMeshes boneMeshes(prepared);
-  for (const auto& muscle : prepared.muscles) {
-    metrics.particles += muscle->particleCount();
-    metrics.springs += muscle->springs.size();
-    metrics.boundaryParticles += muscle->boundaryParticles.size();
-  }
-  MuscleLedger ledger(system, muscles, prepared);
-  const bool stopBody = scene.simulation.onFailure == FailurePolicy::StopBody;
-
-  const int steps = options.steps >= 0 ? options.steps : std::max(scene.poseCount, 1);
-  const int frameEvery = options.frameEvery >= 0 ? options.frameEvery : scene.outputs.frameEvery;
-  std::unique_ptr<FrameWriter> frames;
-  if (!options.outDir.empty() && frameEvery > 0)
-    frames = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale,
-                                           FrameFormats{options.vtkFrames, options.gltfFrames});
-
-  std::vector<btTransform> boneTransforms(bones.size(), btTransform::getIdentity());
-  std::vector<double> msPerStep, msPerIteration, mss, volumeTerm, muscleCd, boneCd, response,
-      output, measureMsPerStep;
-  Penetration penetration;
-  std::vector<btVector3> poseSurface;
-  std::vector<ContactPose> contact;                                 // sphere-planes: per step
-  std::vector<std::vector<float>> surfaceDepthsMm(muscles.size());  // per muscle, this step
-  double simulatedTime = 0;                                         // [s]
-  FibreRunDetails guard;  // what the numerical guard did, and the soak samples
-  bool measured = false;  // some step's surfaces were finite
-  double sampleSolverMs = 0;
-  size_t candidateOverflows = 0;  // StepStats::candidateOverflows over the run
-  long sampleIterations = 0;
-  for (int s = 0; s < steps; ++s) {
-    if (options.cancel && options.cancel->load()) {
-      metrics.interrupted = true;
-      break;
-    }
-    const int pose = poseOfStep(s, scene.poseCount, options.loopMotion);
-    const auto stepStart = Clock::now();
-    for (size_t b = 0; b < bones.size(); ++b) {
-      boneTransforms[b] = scene.bonePose(b, pose);
-      system.setBoneTransform(bones[b], boneTransforms[b]);
-    }
-    system.step();
-    const double stepMs = millisecondsSince(stepStart);
-    const StepStats& stats = system.lastStep();
-    // Cancelled within the step: it is neither measured nor written.
-    if (stats.interrupted) {
-      metrics.interrupted = true;
-      break;
-    }
-    simulatedTime += stats.simulatedTime;
-    metrics.steps = s + 1;
-    metrics.iterations += stats.iterations;
-
-    // Measures of this step: each muscle's (and what the guard did to it), and the surface
-    // penetration into the bones of all muscles together.
-    const auto measureStart = Clock::now();
-    SeriesRow where;
-    where.step = s;
-    where.pose = pose;
-    where.poseLabel = poseLabel(scene, pose);
-    where.timeS = simulatedTime;
-    where.solverContacts = stats.contacts;
-    const bool finite = ledger.afterStep(where, stats, boneMeshes, boneTransforms, guard);
-    measured = measured || finite;
-    poseSurface.clear();
-    for (MuscleHandle muscle : muscles) {
-      std::span<const btVector3> surface = system.surface(muscle);
-      poseSurface.insert(poseSurface.end(), surface.begin(), surface.end());
-    }
-    if (finite)
-      for (size_t m = 0; m < muscles.size(); ++m) {
-        std::span<const btVector3> surface = system.surface(muscles[m]);
-        surfaceDepthsMm[m].resize(surface.size());
-        penetration =
-            combine(penetration, boneMeshes.points(surface, boneTransforms, surfaceDepthsMm[m]));
-      }
-    const double measureMs = millisecondsSince(measureStart);
-
+  /// A step's figures: its wall time, its measures' and its stats' parts.
+  void add(double stepMs, double measureMs, const StepStats& stats) {
     const double iterations = std::max(stats.iterations, 1);
     msPerStep.push_back(stepMs);
     msPerIteration.push_back(stepMs / iterations);
@@ -385,97 +305,261 @@ RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
     response.push_back(stats.timing.response / iterations);
     output.push_back(stats.timing.output / iterations);
     measureMsPerStep.push_back(measureMs);
+  }
+};
 
-    candidateOverflows += stats.candidateOverflows;
-    // The guard's verdict: a failure left in place (Report) ends the run, and so does a frozen
-    // muscle unless the policy is stop-body (then the others go on).
-    guard.rolledBackSteps += stats.rolledBack ? 1 : 0;
-    guard.retries += stats.retries;
+/// Sets the run's cancel flag on `system` and adds the prepared scene to it.
+SceneHandles addCancellableScene(MuscleSystem& system, const PreparedScene& prepared,
+                                 const FibreRunOptions& options) {
+  system.setCancelFlag(options.interrupt ? options.interrupt : options.cancel);
+  return addScene(system, prepared);
+}
+
+/// One run of a scene through FibreMSS: the system with the scene added, each step's measures
+/// and what the run collects into its metrics.
+class FibreRunner {
+ public:
+  FibreRunner(const LoadedScene& scene, const PreparedScene& prepared,
+              const FibreRunOptions& options, Clock::time_point runStart, RunMetrics& metrics)
+      : scene_(scene),
+        prepared_(prepared),
+        options_(options),
+        runStart_(runStart),
+        metrics_(metrics),
+        system_(scene.simulation),
+        handles_(addCancellableScene(system_, prepared, options)),
+        boneMeshes_(prepared),
+        ledger_(system_, handles_.muscles, prepared),
+        steps_(options.steps >= 0 ? options.steps : std::max(scene.poseCount, 1)),
+        frameEvery_(options.frameEvery >= 0 ? options.frameEvery : scene.outputs.frameEvery),
+        boneTransforms_(handles_.bones.size(), btTransform::getIdentity()),
+        surfaceDepthsMm_(handles_.muscles.size()) {
+    metrics_.threads = static_cast<int>(system_.threads());
+    for (const auto& bone : prepared.bones) metrics_.boneSpheres += bone->sphereCentres.size();
+    for (const auto& muscle : prepared.muscles) {
+      metrics_.particles += muscle->particleCount();
+      metrics_.springs += muscle->springs.size();
+      metrics_.boundaryParticles += muscle->boundaryParticles.size();
+    }
+    if (!options.outDir.empty() && frameEvery_ > 0)
+      frames_ = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale,
+                                              FrameFormats{options.vtkFrames, options.gltfFrames});
+  }
+
+  /// Runs the steps until the last, a failure the policy does not go on from, or a cancel.
+  void run() {
+    for (int s = 0; s < steps_; ++s) {
+      if (options_.cancel && options_.cancel->load()) {
+        metrics_.interrupted = true;
+        break;
+      }
+      if (!step(s)) break;
+    }
+    if (frames_) frames_->finish();
+    if (candidateOverflows_ > 0)
+      printNote("collision candidate lists overflowed " + std::to_string(candidateOverflows_) +
+                " time(s): those pairs were traversed directly (same contacts, slower)");
+  }
+
+  /// The run's figures into the metrics and, when given, `details`.
+  void finish(FibreRunDetails* details) {
+    if (measured_) headline();
+    const std::vector<MuscleHandle>& muscles = handles_.muscles;
+    if (!muscles.empty() && !metrics_.nan) {
+      metrics_.analytic = measureAnalytic(scene_.analytic, prepared_.muscles[0]->restSurface,
+                                          system_.surface(muscles[0]));
+      if (metrics_.analytic.type == "sphere-planes")
+        metrics_.analytic.contact = std::move(contact_);
+    }
+    metrics_.muscles = std::move(ledger_.results);
+    metrics_.series = std::move(ledger_.series);
+    metrics_.msPerStep = median(timings_.msPerStep);
+    metrics_.msPerIteration = metrics_.msPerTimeStep = median(timings_.msPerIteration);
+    metrics_.timing = {medianOrZero(timings_.mss),    medianOrZero(timings_.muscleCd),
+                       medianOrZero(timings_.boneCd), medianOrZero(timings_.response),
+                       medianOrZero(timings_.output), medianOrZero(timings_.volumeTerm)};
+    if (details) {
+      *details = std::move(guard_);
+      details->spherePenetration = ledger_.spherePenetration;
+      details->frames = frames_ ? frames_->frames() : 0;
+      details->measureMsPerStep = median(timings_.measureMsPerStep);
+    }
+  }
+
+ private:
+  /// Step s: the bones to its pose, the solver's step, its measures, the guard's verdict, a
+  /// soak sample, progress and a frame. Returns whether the run goes on.
+  bool step(int s) {
+    const int pose = poseOfStep(s, scene_.poseCount, options_.loopMotion);
+    const auto stepStart = Clock::now();
+    for (size_t b = 0; b < handles_.bones.size(); ++b) {
+      boneTransforms_[b] = scene_.bonePose(b, pose);
+      system_.setBoneTransform(handles_.bones[b], boneTransforms_[b]);
+    }
+    system_.step();
+    const double stepMs = millisecondsSince(stepStart);
+    const StepStats& stats = system_.lastStep();
+    // Cancelled within the step: it is neither measured nor written.
+    if (stats.interrupted) {
+      metrics_.interrupted = true;
+      return false;
+    }
+    simulatedTime_ += stats.simulatedTime;
+    metrics_.steps = s + 1;
+    metrics_.iterations += stats.iterations;
+    const auto measureStart = Clock::now();
+    SeriesRow where;
+    where.step = s;
+    where.pose = pose;
+    where.poseLabel = poseLabel(scene_, pose);
+    where.timeS = simulatedTime_;
+    where.solverContacts = stats.contacts;
+    const bool finite = measure(where, stats);
+    timings_.add(stepMs, millisecondsSince(measureStart), stats);
+    candidateOverflows_ += stats.candidateOverflows;
+    const bool failed = judge(s, stats, finite);
+    const bool goesOn =
+        failed && scene_.simulation.onFailure == FailurePolicy::StopBody && finite && !stats.failed;
+    sample(s, stepMs, stats, finite);
+    addPoseResidual(metrics_, ledger_.poseResidual, finite, s);
+    if (options_.keepPoseSurfaces) metrics_.poseSurfaces.push_back(poseSurface_);
+    if (finite && !handles_.muscles.empty() && scene_.analytic.type == "sphere-planes")
+      contact_.push_back(measureContact(scene_, prepared_.muscles[0]->restSurface,
+                                        system_.surface(handles_.muscles[0]), pose));
+    reportProgress(s, stats);
+    if (failed && !goesOn) return false;
+    if (frames_ && (s % frameEvery_ == 0 || s == steps_ - 1))
+      frames_->write({s, pose, where.poseLabel, simulatedTime_}, system_, handles_.muscles,
+                     prepared_, boneTransforms_, surfaceDepthsMm_);
+    return true;
+  }
+
+  /// Measures of a step: each muscle's (and what the guard did to it), and the surface
+  /// penetration into the bones of all muscles together. Returns whether all were finite.
+  bool measure(const SeriesRow& where, const StepStats& stats) {
+    const std::vector<MuscleHandle>& muscles = handles_.muscles;
+    const bool finite = ledger_.afterStep(where, stats, boneMeshes_, boneTransforms_, guard_);
+    measured_ = measured_ || finite;
+    poseSurface_.clear();
+    for (MuscleHandle muscle : muscles) {
+      std::span<const btVector3> surface = system_.surface(muscle);
+      poseSurface_.insert(poseSurface_.end(), surface.begin(), surface.end());
+    }
+    if (finite)
+      for (size_t m = 0; m < muscles.size(); ++m) {
+        std::span<const btVector3> surface = system_.surface(muscles[m]);
+        surfaceDepthsMm_[m].resize(surface.size());
+        penetration_ = combine(penetration_,
+                               boneMeshes_.points(surface, boneTransforms_, surfaceDepthsMm_[m]));
+      }
+    return finite;
+  }
+
+  /// The guard's verdict on step s: a failure left in place (Report) ends the run, and so does
+  /// a frozen muscle unless the policy is stop-body (then the others go on). Returns whether
+  /// the step failed.
+  bool judge(int s, const StepStats& stats, bool finite) {
+    guard_.rolledBackSteps += stats.rolledBack ? 1 : 0;
+    guard_.retries += stats.retries;
     if (stats.trappedMuscles > 0) {
-      if (guard.trappedSteps++ == 0) guard.firstTrappedStep = s;
-      guard.trappedParticlesMax = std::max(guard.trappedParticlesMax, stats.trappedParticles);
+      if (guard_.trappedSteps++ == 0) guard_.firstTrappedStep = s;
+      guard_.trappedParticlesMax = std::max(guard_.trappedParticlesMax, stats.trappedParticles);
     }
     const bool failed = stats.failed || stats.newlyFrozen > 0 || !finite;
-    const bool goesOn = failed && stopBody && finite && !stats.failed;
     if (failed) {
-      metrics.nan = metrics.nan || !finite || stats.failedNan;
-      metrics.exploded = !metrics.nan;
-      if (metrics.failedStep < 0) metrics.failedStep = s;
+      metrics_.nan = metrics_.nan || !finite || stats.failedNan;
+      metrics_.exploded = !metrics_.nan;
+      if (metrics_.failedStep < 0) metrics_.failedStep = s;
     }
-
-    sampleSolverMs += stepMs;
-    sampleIterations += stats.iterations;
-    if (options.sampleEvery > 0 && sampleIterations >= options.sampleEvery) {
-      SoakSample sample;
-      sample.step = s + 1;
-      sample.iterations = metrics.iterations;
-      sample.seconds = millisecondsSince(runStart) / 1000.0;
-      sample.msPerIteration = sampleSolverMs / static_cast<double>(sampleIterations);
-      sample.residentMb = statusMemoryMb("VmRSS:");
-      sample.fixedDriftMm = fixedDriftMm(system, muscles, bones);
-      sample.finite = finite;
-      guard.samples.push_back(sample);
-      sampleSolverMs = 0;
-      sampleIterations = 0;
-    }
-    addPoseResidual(metrics, ledger.poseResidual, finite, s);
-    if (options.keepPoseSurfaces) metrics.poseSurfaces.push_back(poseSurface);
-    if (finite && !muscles.empty() && scene.analytic.type == "sphere-planes")
-      contact.push_back(measureContact(scene, prepared.muscles[0]->restSurface,
-                                       system.surface(muscles[0]), pose));
-    if (options.progress) {
-      RunProgress progress;
-      progress.step = s + 1;
-      progress.steps = steps;
-      progress.iterations = metrics.iterations;
-      progress.seconds = millisecondsSince(runStart) / 1000.0;
-      progress.lastStep = &stats;
-      options.progress(progress);
-    }
-    if (failed && !goesOn) break;
-    if (frames && (s % frameEvery == 0 || s == steps - 1))
-      frames->write({s, pose, where.poseLabel, simulatedTime}, system, muscles, prepared,
-                    boneTransforms, surfaceDepthsMm);
+    return failed;
   }
-  if (frames) frames->finish();
-  if (candidateOverflows > 0)
-    printNote("collision candidate lists overflowed " + std::to_string(candidateOverflows) +
-              " time(s): those pairs were traversed directly (same contacts, slower)");
 
-  // The headline: the steps measured before any failure, the worst muscle's figures.
-  if (measured) {
-    metrics.maxPenetrationMm = penetration.maxMm;
-    metrics.meanPenetrationMm = penetration.meanMm;
-    if (const MuscleResults* worst = worstVolumeMuscle(ledger.results))
-      metrics.volumeChangePct = worst->volumeChangePct;
-    for (const MuscleResults& muscle : ledger.results) {
-      if (!(muscle.springDeviationRatio <= metrics.springDeviationRatio))
-        metrics.springDeviationRatio = muscle.springDeviationRatio;
+  /// A soak sample after step s when options.sampleEvery iterations have passed since the last.
+  void sample(int s, double stepMs, const StepStats& stats, bool finite) {
+    sampleSolverMs_ += stepMs;
+    sampleIterations_ += stats.iterations;
+    if (options_.sampleEvery <= 0 || sampleIterations_ < options_.sampleEvery) return;
+    SoakSample sample;
+    sample.step = s + 1;
+    sample.iterations = metrics_.iterations;
+    sample.seconds = millisecondsSince(runStart_) / 1000.0;
+    sample.msPerIteration = sampleSolverMs_ / static_cast<double>(sampleIterations_);
+    sample.residentMb = statusMemoryMb("VmRSS:");
+    sample.fixedDriftMm = fixedDriftMm(system_, handles_.muscles, handles_.bones);
+    sample.finite = finite;
+    guard_.samples.push_back(sample);
+    sampleSolverMs_ = 0;
+    sampleIterations_ = 0;
+  }
+
+  /// Step s's progress to the caller's callback, if any.
+  void reportProgress(int s, const StepStats& stats) const {
+    if (!options_.progress) return;
+    RunProgress progress;
+    progress.step = s + 1;
+    progress.steps = steps_;
+    progress.iterations = metrics_.iterations;
+    progress.seconds = millisecondsSince(runStart_) / 1000.0;
+    progress.lastStep = &stats;
+    options_.progress(progress);
+  }
+
+  /// The headline: the steps measured before any failure, the worst muscle's figures.
+  void headline() {
+    metrics_.maxPenetrationMm = penetration_.maxMm;
+    metrics_.meanPenetrationMm = penetration_.meanMm;
+    if (const MuscleResults* worst = worstVolumeMuscle(ledger_.results))
+      metrics_.volumeChangePct = worst->volumeChangePct;
+    for (const MuscleResults& muscle : ledger_.results) {
+      if (!(muscle.springDeviationRatio <= metrics_.springDeviationRatio))
+        metrics_.springDeviationRatio = muscle.springDeviationRatio;
       if (std::isfinite(muscle.worstVolumeChangePct) &&
           !(std::abs(muscle.worstVolumeChangePct) <=
-            std::abs(metrics.worstMuscleVolumeChangePct))) {
-        metrics.worstMuscleVolumeChangePct = muscle.worstVolumeChangePct;
-        metrics.worstVolumeMuscle = muscle.name;
+            std::abs(metrics_.worstMuscleVolumeChangePct))) {
+        metrics_.worstMuscleVolumeChangePct = muscle.worstVolumeChangePct;
+        metrics_.worstVolumeMuscle = muscle.name;
       }
     }
   }
-  if (!muscles.empty() && !metrics.nan) {
-    metrics.analytic = measureAnalytic(scene.analytic, prepared.muscles[0]->restSurface,
-                                       system.surface(muscles[0]));
-    if (metrics.analytic.type == "sphere-planes") metrics.analytic.contact = std::move(contact);
-  }
-  metrics.muscles = std::move(ledger.results);
-  metrics.series = std::move(ledger.series);
-  metrics.msPerStep = median(msPerStep);
-  metrics.msPerIteration = metrics.msPerTimeStep = median(msPerIteration);
-  metrics.timing = {medianOrZero(mss),      medianOrZero(muscleCd), medianOrZero(boneCd),
-                    medianOrZero(response), medianOrZero(output),   medianOrZero(volumeTerm)};
-  if (details) {
-    *details = std::move(guard);
-    details->spherePenetration = ledger.spherePenetration;
-    details->frames = frames ? frames->frames() : 0;
-    details->measureMsPerStep = median(measureMsPerStep);
-  }
+
+  const LoadedScene& scene_;
+  const PreparedScene& prepared_;
+  const FibreRunOptions& options_;
+  Clock::time_point runStart_;               ///< when the run started
+  RunMetrics& metrics_;                      ///< what the run reports
+  MuscleSystem system_;                      ///< the solver with the scene added
+  SceneHandles handles_;                     ///< the scene's bones and muscles in `system_`
+  BoneMeshes boneMeshes_;                    ///< the bones' true meshes, for penetration
+  MuscleLedger ledger_;                      ///< per-muscle results and series rows
+  int steps_;                                ///< steps to run
+  int frameEvery_;                           ///< a frame every this many steps (0: none)
+  std::unique_ptr<FrameWriter> frames_;      ///< the frames' writer, when frames are written
+  std::vector<btTransform> boneTransforms_;  ///< each bone's transform this step
+  std::vector<std::vector<float>> surfaceDepthsMm_;  ///< per muscle, this step [mm]
+  std::vector<btVector3> poseSurface_;  ///< all muscles' surface vertices this step [m]
+  std::vector<ContactPose> contact_;    ///< sphere-planes: per step
+  Penetration penetration_;             ///< muscle surfaces in the bones, finite steps
+  StepTimings timings_;                 ///< per step
+  FibreRunDetails guard_;               ///< what the numerical guard did, and the soak samples
+  double simulatedTime_ = 0;            ///< [s]
+  bool measured_ = false;               ///< some step's surfaces were finite
+  double sampleSolverMs_ = 0;           ///< solver time since the last soak sample [ms]
+  long sampleIterations_ = 0;           ///< iterations since the last soak sample
+  size_t candidateOverflows_ = 0;       ///< StepStats::candidateOverflows over the run
+};
+
+}  // namespace
+
+RunMetrics runFibreMSS(const LoadedScene& scene, const PreparedScene& prepared,
+                       const FibreRunOptions& options, FibreRunDetails* details) {
+  const auto runStart = Clock::now();
+  RunMetrics metrics;
+  metrics.scene = scene.name;
+  metrics.method = options.method;
+  metrics.integrator = toString(scene.simulation.integrator);
+  FibreRunner runner(scene, prepared, options, runStart, metrics);
+  runner.run();
+  runner.finish(details);
   metrics.peakMemoryMb = statusMemoryMb("VmHWM:");
   metrics.wallSeconds = millisecondsSince(runStart) / 1000.0;
   return metrics;

@@ -275,11 +275,14 @@ CalculixDefinition storedRetry(const LoadedScene& scene, const PreparedScene& pr
 
 }  // namespace
 
+std::string resolvedCacheDir(const ReferenceOptions& options) {
+  return options.cacheDir.empty() ? defaultReferenceCacheDir() : options.cacheDir;
+}
+
 std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
                                                const PreparedScene& prepared,
                                                const ReferenceOptions& options) {
-  const std::string cacheDir =
-      options.cacheDir.empty() ? defaultReferenceCacheDir() : options.cacheDir;
+  const std::string cacheDir = resolvedCacheDir(options);
   SceneCuts cuts(scene, prepared);
   const CalculixDefinition reference =
       storedRetry(scene, prepared, cuts, sceneDefinition(scene, options), cacheDir);
@@ -369,7 +372,7 @@ CalculixDefinition sceneDefinition(const LoadedScene& scene, const ReferenceOpti
 Reference computeReference(const LoadedScene& scene, const PreparedScene& prepared,
                            const ReferenceOptions& options) {
   ReferenceOptions resolved = options;
-  if (resolved.cacheDir.empty()) resolved.cacheDir = defaultReferenceCacheDir();
+  resolved.cacheDir = resolvedCacheDir(options);
   resolved.definition = sceneDefinition(scene, options);
   SceneCuts cuts(scene, prepared);
   Reference reference;

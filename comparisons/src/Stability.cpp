@@ -58,6 +58,39 @@ bool cancelled(const StabilityOptions& options) {
   return options.cancel && options.cancel->load();
 }
 
+/// A cell's figures and outcome from its run: NaN, exploded, out of its time box
+/// (`timedOut`), interrupted, or else its kinetic energy checked for growth (`freeMass` [kg]).
+void judgeCell(const RunMetrics& metrics, bool timedOut, double freeMass,
+               const StabilityOptions& options, StabilityCell& cell) {
+  cell.steps = metrics.steps;
+  cell.iterations = metrics.iterations;
+  cell.msPerIteration = metrics.msPerIteration;
+  cell.wallSeconds = metrics.wallSeconds;
+  cell.failedStep = metrics.failedStep;
+  if (metrics.nan) {
+    cell.outcome = CellOutcome::Nan;
+  } else if (metrics.exploded) {
+    cell.outcome = CellOutcome::Exploded;
+  } else if (metrics.interrupted && timedOut) {
+    cell.outcome = CellOutcome::Timeout;
+    cell.failedStep = metrics.steps;
+    cell.message = "stopped after " + std::to_string(metrics.steps) + " steps (" +
+                   std::to_string(options.cellSeconds) + " s box)";
+  } else if (metrics.interrupted) {
+    cell.outcome = CellOutcome::Interrupted;
+    cell.message = "interrupted after " + std::to_string(metrics.steps) + " steps";
+  } else {
+    const EnergyCheck energy =
+        checkEnergy(cell.kineticEnergy, options.energyGrowth,
+                    0.5 * freeMass * options.energyFloorSpeed * options.energyFloorSpeed);
+    cell.energyRatio = energy.ratio;
+    if (!energy.bounded) {
+      cell.outcome = CellOutcome::Energy;
+      cell.failedStep = energy.growthStep;
+    }
+  }
+}
+
 /// One run of a prepared case; `steps` < 0 runs every pose. Never throws.
 StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
                           const std::string& integrator, double dt, int steps,
@@ -105,34 +138,8 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
     }
   };
   try {
-    const RunMetrics metrics = runFibreMSS(prepared.scene, prepared.prepared, run);
-    cell.steps = metrics.steps;
-    cell.iterations = metrics.iterations;
-    cell.msPerIteration = metrics.msPerIteration;
-    cell.wallSeconds = metrics.wallSeconds;
-    cell.failedStep = metrics.failedStep;
-    if (metrics.nan) {
-      cell.outcome = CellOutcome::Nan;
-    } else if (metrics.exploded) {
-      cell.outcome = CellOutcome::Exploded;
-    } else if (metrics.interrupted && timedOut) {
-      cell.outcome = CellOutcome::Timeout;
-      cell.failedStep = metrics.steps;
-      cell.message = "stopped after " + std::to_string(metrics.steps) + " steps (" +
-                     std::to_string(options.cellSeconds) + " s box)";
-    } else if (metrics.interrupted) {
-      cell.outcome = CellOutcome::Interrupted;
-      cell.message = "interrupted after " + std::to_string(metrics.steps) + " steps";
-    } else {
-      const EnergyCheck energy = checkEnergy(
-          cell.kineticEnergy, options.energyGrowth,
-          0.5 * prepared.freeMass * options.energyFloorSpeed * options.energyFloorSpeed);
-      cell.energyRatio = energy.ratio;
-      if (!energy.bounded) {
-        cell.outcome = CellOutcome::Energy;
-        cell.failedStep = energy.growthStep;
-      }
-    }
+    judgeCell(runFibreMSS(prepared.scene, prepared.prepared, run), timedOut, prepared.freeMass,
+              options, cell);
   } catch (const std::exception& e) {
     cell.outcome = CellOutcome::Error;
     cell.message = e.what();
@@ -337,6 +344,41 @@ std::string calibrationLabels(const StabilityOptions& options) {
   return labels;
 }
 
+namespace {
+
+/// Calibrates each integrator's stable step on options.calibration into matrix.stableSteps,
+/// logging each; stops at a cancel.
+void calibrateIntegrators(const std::vector<std::string>& integrators,
+                          const StabilityOptions& options, StabilityMatrix& matrix) {
+  log(options, "calibrating on " + calibrationLabels(options));
+  std::vector<PreparedCase> calibration = prepareCalibration(options);
+  for (const std::string& integrator : integrators) {
+    const StableStep step = calibrateAll(calibration, integrator, options);
+    if (cancelled(options)) break;  // its bisection was cut short
+    matrix.stableSteps.push_back(step);
+    if (!step.available)
+      log(options, "  " + integrator + ": unavailable");
+    else
+      log(options, "  " + integrator + ": stable step " + (step.capped ? ">= " : "") +
+                       seconds(step.dt) + " s" + (step.found ? "" : " (none found; lowest)") +
+                       " on " + step.limitedBy + " after " + std::to_string(step.probes) +
+                       " probes");
+  }
+}
+
+/// A cell's log line after its number: case, integrator, dt factor and dt, outcome, steps.
+std::string cellLine(const StabilityCell& cell, double factor) {
+  std::string line = cell.caseLabel + " " + cell.integrator + " x" + seconds(factor) + " (dt " +
+                     seconds(cell.dt) + " s): " + toString(cell.outcome);
+  if (cell.failedStep >= 0) line += " at step " + std::to_string(cell.failedStep);
+  if (cell.outcome != CellOutcome::Unavailable)
+    line += ", " + std::to_string(cell.steps) + " steps in " + seconds(cell.wallSeconds) + " s";
+  if (cell.outcome == CellOutcome::Error) line += ": " + cell.message;
+  return line;
+}
+
+}  // namespace
+
 StableStep findStableStep(const std::string& integrator, const StabilityOptions& options) {
   std::vector<PreparedCase> prepared = prepareCalibration(options);
   return calibrateAll(prepared, integrator, options);
@@ -366,22 +408,7 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
   const std::vector<std::string> integrators =
       options.integrators.empty() ? allIntegratorNames() : options.integrators;
 
-  {
-    log(options, "calibrating on " + calibrationLabels(options));
-    std::vector<PreparedCase> calibration = prepareCalibration(options);
-    for (const std::string& integrator : integrators) {
-      const StableStep step = calibrateAll(calibration, integrator, options);
-      if (cancelled(options)) break;  // its bisection was cut short
-      matrix.stableSteps.push_back(step);
-      if (!step.available)
-        log(options, "  " + integrator + ": unavailable");
-      else
-        log(options, "  " + integrator + ": stable step " + (step.capped ? ">= " : "") +
-                         seconds(step.dt) + " s" + (step.found ? "" : " (none found; lowest)") +
-                         " on " + step.limitedBy + " after " + std::to_string(step.probes) +
-                         " probes");
-    }
-  }
+  calibrateIntegrators(integrators, options, matrix);
 
   const size_t total = cases.size() * integrators.size() * options.dtFactors.size();
   size_t done = 0;
@@ -410,15 +437,9 @@ StabilityMatrix runStabilityMatrix(const std::vector<StabilityCase>& cases,
           cell.message = failure;
         }
         cell.dtFactor = factor;
-        ++done;
-        std::string line = "[" + std::to_string(done) + "/" + std::to_string(total) + "] " +
-                           stabilityCase.label + " " + integrators[i] + " x" + seconds(factor) +
-                           " (dt " + seconds(dt) + " s): " + toString(cell.outcome);
-        if (cell.failedStep >= 0) line += " at step " + std::to_string(cell.failedStep);
-        if (cell.outcome != CellOutcome::Unavailable)
-          line +=
-              ", " + std::to_string(cell.steps) + " steps in " + seconds(cell.wallSeconds) + " s";
-        if (cell.outcome == CellOutcome::Error) line += ": " + cell.message;
+        std::string line = "[";
+        line +=
+            std::to_string(++done) + "/" + std::to_string(total) + "] " + cellLine(cell, factor);
         log(options, line);
         matrix.cells.push_back(std::move(cell));
       }

@@ -46,6 +46,64 @@ btVector3 centroid(const btSoftBody& body) {
   return sum / btScalar(body.m_nodes.size());
 }
 
+/// Gravity, the soft-body world info, and what Bullet's dt means to the muscles with two-way
+/// contact with the world's rigid bodies (on by default): fibremss/RigidContact.h.
+void setUpWorld(fibremss::MuscleWorld& world, bool dynamic) {
+  world.setGravity(btVector3(0, btScalar(-9.81), 0));
+  world.getWorldInfo().m_gravity = world.getGravity();
+  world.getWorldInfo().m_sparsesdf.Initialize();
+  fibremss::WorldCoupling coupling;
+  coupling.time = dynamic ? fibremss::MuscleTime::Dynamic : fibremss::MuscleTime::QuasiStaticPose;
+  world.setCoupling(coupling);
+  std::printf("timeStep: %s\n", dynamic ? "dynamic (Bullet's dt is the muscles' simulated time)"
+                                        : "quasi-static pose (one muscle step per Bullet step)");
+}
+
+/// A btSoftBody ball (1 cm radius, 50 g) at `centre`, added to the world.
+btSoftBody* addSoftBall(fibremss::MuscleWorld& world, const btVector3& centre) {
+  btSoftBody* ball = btSoftBodyHelpers::CreateEllipsoid(
+      world.getWorldInfo(), centre, btVector3(btScalar(0.01), btScalar(0.01), btScalar(0.01)), 64);
+  ball->setTotalMass(btScalar(0.05));
+  ball->getCollisionShape()->setMargin(btScalar(0.002));  // Bullet's default 0.25 m is huge here
+  world.addSoftBody(ball);
+  return ball;
+}
+
+/// The muscle's belly's half width along z: of the particles within 5 mm of the centre's height
+/// [m].
+btScalar bellyHalfWidth(std::span<const btVector3> positions, const btVector3& centre) {
+  btScalar halfWidth = 0;
+  for (const btVector3& p : positions)
+    if (std::abs(p.y() - centre.y()) < btScalar(0.005))
+      halfWidth = std::max(halfWidth, std::abs(p.z() - centre.z()));
+  return halfWidth;
+}
+
+/// What moved in a step: the muscle, the soft ball, the rigid ball with what it received in the
+/// muscles' step and the haptic query at its pose.
+void printStep(int step, fibremss::MuscleWorld& world, fibremss::MuscleHandle muscle,
+               const btSoftBody& ball, const btRigidBody& rigidBall) {
+  const fibremss::StepStats& stats = world.muscleSystem().lastStep();
+  const btVector3 m = centroid(world.muscleSystem().positions(muscle));
+  const btVector3 s = centroid(ball);
+  const fibremss::BodyContact contact = world.bodyContact(&rigidBall);
+  const fibremss::ContactWrench wrench = world.contactWrench(rigidBall);
+  std::printf(
+      "step %2d: muscle centre (%.4f %.4f %.4f) m, %d iterations, %zu contacts, %.2f ms; "
+      "soft ball centre y %.4f m; rigid ball z %.4f m, %zu muscle contacts, force %.4f N, "
+      "wrench %.4f N\n",
+      step, m.x(), m.y(), m.z(), stats.iterations, stats.contacts, stats.timing.total, s.y(),
+      rigidBall.getWorldTransform().getOrigin().z(), contact.contacts, contact.force.z(),
+      wrench.force.z());
+}
+
+/// Removes the muscle, then its bones, from the world.
+void removeMuscleAndBones(fibremss::MuscleWorld& world, fibremss::MuscleHandle muscle,
+                          const std::vector<fibremss::BoneHandle>& bones) {
+  world.removeMuscle(muscle);
+  for (fibremss::BoneHandle bone : bones) world.removeBone(bone);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -72,16 +130,7 @@ int main(int argc, char** argv) try {
   if (dynamic) parameters.integrator = fibremss::Integrator::Verlet;
   parameters.iterations = 20;  // per world step; enough for a small muscle
   fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
-  world.setGravity(btVector3(0, btScalar(-9.81), 0));
-  world.getWorldInfo().m_gravity = world.getGravity();
-  world.getWorldInfo().m_sparsesdf.Initialize();
-  // What Bullet's dt means to the muscles, and two-way contact with the world's rigid bodies
-  // (on by default): fibremss/RigidContact.h.
-  fibremss::WorldCoupling coupling;
-  coupling.time = dynamic ? fibremss::MuscleTime::Dynamic : fibremss::MuscleTime::QuasiStaticPose;
-  world.setCoupling(coupling);
-  std::printf("timeStep: %s\n", dynamic ? "dynamic (Bullet's dt is the muscles' simulated time)"
-                                        : "quasi-static pose (one muscle step per Bullet step)");
+  setUpWorld(world, dynamic);
 
   // 3. Bones: kinematic bodies with the bones' meshes. 4. The muscle, attached to them. (For a
   //    whole loaded scene, addScene in fibremss/SceneSystem.h does both.)
@@ -95,20 +144,12 @@ int main(int argc, char** argv) try {
 
   // 5. A btSoftBody baseline in the same world: a small ball 5 cm beside the muscle.
   const btVector3 muscleCentre = centroid(world.muscleSystem().positions(muscle));
-  btSoftBody* ball = btSoftBodyHelpers::CreateEllipsoid(
-      world.getWorldInfo(), muscleCentre + btVector3(0, 0, btScalar(0.05)),
-      btVector3(btScalar(0.01), btScalar(0.01), btScalar(0.01)), 64);
-  ball->setTotalMass(btScalar(0.05));
-  ball->getCollisionShape()->setMargin(btScalar(0.002));  // Bullet's default 0.25 m is huge here
-  world.addSoftBody(ball);
+  btSoftBody* ball = addSoftBall(world, muscleCentre + btVector3(0, 0, btScalar(0.05)));
 
   // 6. A rigid ball (8 mm, 20 g) thrown at the muscle's belly from 1 cm beside it: it hits the
   //    muscle's particle spheres, dents the muscle and takes the reaction. Any btRigidBody that
   //    is not a bone collides with the muscles: a probe, a hand, a floor.
-  btScalar halfWidth = 0;  // the belly's half width along z
-  for (const btVector3& p : world.muscleSystem().positions(muscle))
-    if (std::abs(p.y() - muscleCentre.y()) < btScalar(0.005))
-      halfWidth = std::max(halfWidth, std::abs(p.z() - muscleCentre.z()));
+  const btScalar halfWidth = bellyHalfWidth(world.muscleSystem().positions(muscle), muscleCentre);
   const btScalar ballRadius = btScalar(0.008), ballMass = btScalar(0.02);
   btSphereShape ballShape(ballRadius);
   btVector3 ballInertia(0, 0, 0);
@@ -130,19 +171,8 @@ int main(int argc, char** argv) try {
       boneBodies[b]->setTransform(between(scene.bonePose(b, 0), scene.bonePose(b, lastPose), t));
     world.stepSimulation(btScalar(1.0 / 60.0), 0);
 
+    printStep(step, world, muscle, *ball, rigidBall);
     const fibremss::StepStats& stats = world.muscleSystem().lastStep();
-    const btVector3 m = centroid(world.muscleSystem().positions(muscle));
-    const btVector3 s = centroid(*ball);
-    // What the rigid ball received in the muscles' step, and the haptic query at its pose.
-    const fibremss::BodyContact contact = world.bodyContact(&rigidBall);
-    const fibremss::ContactWrench wrench = world.contactWrench(rigidBall);
-    std::printf(
-        "step %2d: muscle centre (%.4f %.4f %.4f) m, %d iterations, %zu contacts, %.2f ms; "
-        "soft ball centre y %.4f m; rigid ball z %.4f m, %zu muscle contacts, force %.4f N, "
-        "wrench %.4f N\n",
-        step, m.x(), m.y(), m.z(), stats.iterations, stats.contacts, stats.timing.total, s.y(),
-        rigidBall.getWorldTransform().getOrigin().z(), contact.contacts, contact.force.z(),
-        wrench.force.z());
     if (stats.nan || stats.exploded) {
       std::fprintf(stderr, "the muscle became unstable at step %d\n", step);
       return 1;
@@ -151,8 +181,7 @@ int main(int argc, char** argv) try {
 
   // 8. Tear down in reverse: bodies, muscle and bones leave the world before they are freed.
   world.removeRigidBody(&rigidBall);
-  world.removeMuscle(muscle);
-  for (fibremss::BoneHandle bone : bones) world.removeBone(bone);
+  removeMuscleAndBones(world, muscle, bones);
   world.removeSoftBody(ball);
   delete ball;
   return 0;

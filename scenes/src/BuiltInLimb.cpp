@@ -106,20 +106,33 @@ Json hipScene(const std::string& kind) {
   return scene;
 }
 
-Json thigh13Scene() {
-  const Tube femur(femurTube());
-  const Tube pelvis(pelvisTube());
-  const Tube tibia(
-      boneTube({{25, -455, 0}, {24, -520, 0}, {22, -650, 0}, {20, -800, 0}}, {28, 20, 15, 20}));
-  const Tube fibula(boneTube({{68, -470, -12}, {66, -560, -10}, {60, -780, -8}}, {10, 7, 8}));
+namespace {
+
+/// thigh13's five bones.
+struct Thigh13Bones {
+  Tube pelvis;   ///< the pelvis, fixed
+  Tube femur;    ///< the femur, turning about the hip
+  Tube patella;  ///< the patella, following half the knee angle
+  Tube tibia;    ///< the tibia, with the shank
+  Tube fibula;   ///< the fibula, with the shank
+};
+
+Thigh13Bones thigh13Bones() {
   TubeDefinition patellaShape =
       boneTube({{25, -378, 37}, {25, -398, 38}, {25, -418, 36}}, {0, 0, 0});
   patellaShape.radii = {{15, 6}, {18, 8}, {13, 6}};
   patellaShape.up = {0, 0, 1};
-  const Tube patella(patellaShape);
+  return Thigh13Bones{
+      Tube(pelvisTube()), Tube(femurTube()), Tube(patellaShape),
+      Tube(
+          boneTube({{25, -455, 0}, {24, -520, 0}, {22, -650, 0}, {20, -800, 0}}, {28, 20, 15, 20})),
+      Tube(boneTube({{68, -470, -12}, {66, -560, -10}, {60, -780, -8}}, {10, 7, 8}))};
+}
 
-  // Walking-like: hip flexion-extension ±20 deg with knee flexion up to 60 deg, 13 poses
-  // from rest around one cycle back to rest; the patella follows half the knee angle.
+/// thigh13's bones with their motion: walking-like, hip flexion-extension ±20 deg with knee
+/// flexion up to 60 deg, 13 poses from rest around one cycle back to rest; the patella follows
+/// half the knee angle.
+Json thigh13BoneList(const Thigh13Bones& bones) {
   const btVector3 knee(25, -415, 0);
   std::vector<btTransform> femurPoses, shankPoses, patellaPoses;
   for (int k = 0; k <= 12; ++k) {
@@ -130,16 +143,21 @@ Json thigh13Scene() {
     shankPoses.push_back(femurPose * rotationAbout(knee, {1, 0, 0}, kneeAngle));
     patellaPoses.push_back(femurPose * rotationAbout(knee, {1, 0, 0}, kneeAngle / 2));
   }
-  Json scene = header("thigh13",
-                      "13 thigh muscles x 64 fibres around femur, pelvis, patella, tibia and "
-                      "fibula; a walking-like hip and knee motion over 13 poses");
-  scene["bones"] =
-      Json::array({bone("pelvis", tubeGenerator(pelvis.definition())),
-                   bone("femur", tubeGenerator(femur.definition()), keyframes(femurPoses)),
-                   bone("patella", tubeGenerator(patella.definition()), keyframes(patellaPoses)),
-                   bone("tibia", tubeGenerator(tibia.definition()), keyframes(shankPoses)),
-                   bone("fibula", tubeGenerator(fibula.definition()), keyframes(shankPoses))});
+  return Json::array(
+      {bone("pelvis", tubeGenerator(bones.pelvis.definition())),
+       bone("femur", tubeGenerator(bones.femur.definition()), keyframes(femurPoses)),
+       bone("patella", tubeGenerator(bones.patella.definition()), keyframes(patellaPoses)),
+       bone("tibia", tubeGenerator(bones.tibia.definition()), keyframes(shankPoses)),
+       bone("fibula", tubeGenerator(bones.fibula.definition()), keyframes(shankPoses))});
+}
 
+/// thigh13's 13 muscles around its bones.
+Json thigh13Muscles(const Thigh13Bones& bones) {
+  const Tube& pelvis = bones.pelvis;
+  const Tube& femur = bones.femur;
+  const Tube& patella = bones.patella;
+  const Tube& tibia = bones.tibia;
+  const Tube& fibula = bones.fibula;
   auto vias = [&femur](const std::vector<Via>& list) { return viaPoints(femur, list); };
   Json muscles = Json::array();
   auto add = [&muscles](const std::string& name, const TubeDefinition& tube) {
@@ -189,7 +207,18 @@ Json thigh13Scene() {
   add("semimembranosus", limbMuscle(pelvis, {-30, -75, -30},
                                     vias({{-130, -145, 38}, {-260, -145, 40}, {-385, -130, 40}}),
                                     tibia, {10, -470, -22}, 14, 10));
-  scene["muscles"] = std::move(muscles);
+  return muscles;
+}
+
+}  // namespace
+
+Json thigh13Scene() {
+  const Thigh13Bones bones = thigh13Bones();
+  Json scene = header("thigh13",
+                      "13 thigh muscles x 64 fibres around femur, pelvis, patella, tibia and "
+                      "fibula; a walking-like hip and knee motion over 13 poses");
+  scene["bones"] = thigh13BoneList(bones);
+  scene["muscles"] = thigh13Muscles(bones);
   // The thesis' workload: 13 poses as measured there (no sub-poses).
   scene["simulation"] = {{"max_step_deg", 0}};
   return scene;

@@ -246,21 +246,17 @@ struct FemScene::Impl {
     }
   }
 
-  void addMuscle(std::shared_ptr<const MuscleSettings> settings) {
-    const MuscleSettings& s = *settings;
-    Muscle muscle;
-    muscle.settings = std::move(settings);
-    muscle.mesh = tetrahedralize(s.restSurface, definition.mesher);
-    muscle.surface = embed(muscle.mesh, s.restSurface.vertices);
+  /// Each node follows its nearest particle: pinned (`pinBone`) to that particle's bone when
+  /// the particle is fixed and within the attachment distance, else posed (`poseBone`) with its
+  /// nearest bone; every fixed particle holds at least its nearest node.
+  void assignNodeBones(const MuscleSettings& s, Muscle& muscle, std::vector<int32_t>& poseBone,
+                       std::vector<int32_t>& pinBone) const {
     const TetMesh& mesh = muscle.mesh;
     const size_t nodes = mesh.nodes.size();
-
-    // Each node follows its nearest particle: pinned to that particle's bone when the
-    // particle is fixed and within the attachment distance, else posed with its nearest bone.
     const btScalar reach =
         definition.attachmentDistance > 0 ? definition.attachmentDistance : mesh.cellSize;
-    std::vector<int32_t> poseBone(nodes, -1);
-    std::vector<int32_t> pinBone(nodes, -1);
+    poseBone.assign(nodes, -1);
+    pinBone.assign(nodes, -1);
     muscle.nearestParticle.assign(nodes, 0);
     for (size_t n = 0; n < nodes; ++n) {
       btScalar nearest = std::numeric_limits<btScalar>::infinity();
@@ -278,7 +274,6 @@ struct FemScene::Impl {
         }
       }
     }
-    // Every fixed particle holds at least its nearest node.
     for (uint32_t p : s.fixedParticles) {
       size_t best = 0;
       for (size_t n = 1; n < nodes; ++n) {
@@ -289,11 +284,13 @@ struct FemScene::Impl {
       }
       if (pinBone[best] < 0) pinBone[best] = s.fixedBone[p];
     }
+  }
 
-    pinAtLeast(s, mesh, pinBone);
-
-    // Lumped masses: a quarter of every adjacent tetrahedron's mass.
-    std::vector<btScalar> masses(nodes, 0);
+  /// Lumped masses: a quarter of every adjacent tetrahedron's mass [kg]; a pinned node's is 0
+  /// and it is listed in muscle.pinned with its bone.
+  std::vector<btScalar> lumpedMasses(Muscle& muscle, const std::vector<int32_t>& pinBone) const {
+    const TetMesh& mesh = muscle.mesh;
+    std::vector<btScalar> masses(mesh.nodes.size(), 0);
     for (const auto& t : mesh.tetrahedra) {
       const double m = definition.density *
                        tetrahedronVolume(mesh.nodes[t[0]], mesh.nodes[t[1]], mesh.nodes[t[2]],
@@ -301,26 +298,19 @@ struct FemScene::Impl {
                        4;
       for (uint32_t v : t) masses[v] += static_cast<btScalar>(m);
     }
-    for (size_t n = 0; n < nodes; ++n) {
+    for (size_t n = 0; n < mesh.nodes.size(); ++n) {
       if (pinBone[n] >= 0) {
         masses[n] = 0;
         muscle.pinned.push_back(static_cast<uint32_t>(n));
         muscle.pinnedBone.push_back(pinBone[n]);
       }
     }
+    return masses;
+  }
 
-    const btScalar scale = definition.lengthScale;
-    std::vector<btVector3> scaled;
-    for (const btVector3& x : mesh.nodes) scaled.push_back(x * scale);
-    muscle.body = new btSoftBody(&world->getWorldInfo(), static_cast<int>(nodes), scaled.data(),
-                                 masses.data());
-    btSoftBody& body = *muscle.body;
-    for (const auto& t : mesh.tetrahedra) {
-      body.appendTetra(static_cast<int>(t[0]), static_cast<int>(t[1]), static_cast<int>(t[2]),
-                       static_cast<int>(t[3]));
-    }
-    // Links along the tetrahedra's edges: the deformable solver builds its node tree from
-    // link adjacency (without links it never finishes); they carry no force here.
+  /// Links along the tetrahedra's edges: the deformable solver builds its node tree from link
+  /// adjacency (without links it never finishes); they carry no force here.
+  static void appendEdgeLinks(const TetMesh& mesh, btSoftBody& body) {
     std::vector<std::pair<uint32_t, uint32_t>> edges;
     for (const auto& t : mesh.tetrahedra) {
       for (int a = 0; a < 4; ++a) {
@@ -330,6 +320,22 @@ struct FemScene::Impl {
     std::sort(edges.begin(), edges.end());
     edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
     for (const auto& [a, b] : edges) body.appendLink(static_cast<int>(a), static_cast<int>(b));
+  }
+
+  /// The muscle's soft body from its tetrahedral mesh (scaled) and node masses, at rest, with
+  /// its collision settings; not yet in the world.
+  btSoftBody* makeBody(const TetMesh& mesh, const std::vector<btScalar>& masses) const {
+    const btScalar scale = definition.lengthScale;
+    std::vector<btVector3> scaled;
+    for (const btVector3& x : mesh.nodes) scaled.push_back(x * scale);
+    auto* created = new btSoftBody(&world->getWorldInfo(), static_cast<int>(mesh.nodes.size()),
+                                   scaled.data(), masses.data());
+    btSoftBody& body = *created;
+    for (const auto& t : mesh.tetrahedra) {
+      body.appendTetra(static_cast<int>(t[0]), static_cast<int>(t[1]), static_cast<int>(t[2]),
+                       static_cast<int>(t[3]));
+    }
+    appendEdgeLinks(mesh, body);
     body.initializeDmInverse();         // rest shape: the nodes as given
     btSoftBody::TetraScratch identity;  // F = I at rest (the default leaves it uninitialized)
     identity.m_F.setIdentity();
@@ -348,11 +354,26 @@ struct FemScene::Impl {
     // Bullet collides deformable faces pairwise unless told not to: minutes per pose on thigh13.
     body.m_softSoftCollision = definition.muscleContact;
     body.m_useSelfCollision = false;
+    return created;
+  }
 
+  void addMuscle(std::shared_ptr<const MuscleSettings> settings) {
+    const MuscleSettings& s = *settings;
+    Muscle muscle;
+    muscle.settings = std::move(settings);
+    muscle.mesh = tetrahedralize(s.restSurface, definition.mesher);
+    muscle.surface = embed(muscle.mesh, s.restSurface.vertices);
+    const TetMesh& mesh = muscle.mesh;
+    std::vector<int32_t> poseBone, pinBone;
+    assignNodeBones(s, muscle, poseBone, pinBone);
+    pinAtLeast(s, mesh, pinBone);
+    const std::vector<btScalar> masses = lumpedMasses(muscle, pinBone);
+    muscle.body = makeBody(mesh, masses);
     // Start posed: every node moved by its nearest particle's bone.
-    for (size_t n = 0; n < nodes; ++n) {
+    const btScalar scale = definition.lengthScale;
+    for (size_t n = 0; n < mesh.nodes.size(); ++n) {
       if (poseBone[n] >= 0) {
-        btSoftBody::Node& node = body.m_nodes[static_cast<int>(n)];
+        btSoftBody::Node& node = muscle.body->m_nodes[static_cast<int>(n)];
         node.m_x = boneTransforms[poseBone[n]] * mesh.nodes[n] * scale;
         node.m_q = node.m_x;
       }
@@ -362,7 +383,7 @@ struct FemScene::Impl {
       muscle.networkStiffness +=
           static_cast<double>(spring.stiffness) * spring.restLength * spring.restLength;
     }
-    muscle.positions.resize(nodes);
+    muscle.positions.resize(mesh.nodes.size());
     readPositions(muscle);
     muscles.push_back(std::move(muscle));
   }

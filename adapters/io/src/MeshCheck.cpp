@@ -38,9 +38,16 @@ bool zeroArea(const btVector3& a, const btVector3& b, const btVector3& c) {
   return squared(cross) <= 1e-12 * longest * longest;
 }
 
-}  // namespace
+/// A counted warning into `report` when `count` > 0, naming the first case.
+void warn(MeshReport& report, const std::string& source, size_t count, const std::string& what,
+          const std::string& first) {
+  if (count == 0) return;
+  report.warnings.push_back(source + ": " + std::to_string(count) + " " + what + ", first " +
+                            first);
+}
 
-MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source) {
+/// The fatal defects: non-finite vertices, no triangle, indices beyond the vertices.
+void checkFatal(const TriangleMesh& mesh, const std::string& source) {
   const size_t vertexCount = mesh.vertices.size();
   for (size_t i = 0; i < vertexCount; ++i) {
     if (!finite(mesh.vertices[i])) {
@@ -60,17 +67,13 @@ MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source) {
       }
     }
   }
+}
 
-  MeshReport report;
-  const auto warn = [&](size_t count, const std::string& what, const std::string& first) {
-    if (count == 0) return;
-    report.warnings.push_back(source + ": " + std::to_string(count) + " " + what + ", first " +
-                              first);
-  };
-
+/// Degenerate and duplicate triangles into `report`; the vertices the triangles use into `used`.
+void checkTriangles(const TriangleMesh& mesh, const std::string& source, MeshReport& report,
+                    std::vector<bool>& used) {
   std::vector<std::array<uint32_t, 4>> sortedTriangles;  // sorted corners, then triangle index
   sortedTriangles.reserve(mesh.triangles.size());
-  std::vector<bool> used(vertexCount, false);
   std::string firstDegenerate;
   for (uint32_t t = 0; t < mesh.triangles.size(); ++t) {
     const auto& tri = mesh.triangles[t];
@@ -84,8 +87,8 @@ MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source) {
     std::sort(corners.begin(), corners.begin() + 3);
     sortedTriangles.push_back(corners);
   }
-  warn(report.degenerateTriangles, "degenerate triangles (zero area or a repeated vertex)",
-       firstDegenerate);
+  warn(report, source, report.degenerateTriangles,
+       "degenerate triangles (zero area or a repeated vertex)", firstDegenerate);
 
   std::sort(sortedTriangles.begin(), sortedTriangles.end());
   std::string firstDuplicate;
@@ -97,8 +100,12 @@ MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source) {
           "triangle " + std::to_string(b[3]) + " repeats triangle " + std::to_string(a[3]);
     }
   }
-  warn(report.duplicateTriangles, "duplicate triangles (the same three vertices)", firstDuplicate);
+  warn(report, source, report.duplicateTriangles, "duplicate triangles (the same three vertices)",
+       firstDuplicate);
+}
 
+/// Open, non-manifold and inconsistently oriented edges into `report`.
+void checkEdges(const TriangleMesh& mesh, const std::string& source, MeshReport& report) {
   const std::vector<meshio::EdgeUse> edges = meshio::sortedEdgeUses(mesh);
   std::string firstOpen, firstNonManifold, firstInconsistent;
   for (size_t begin = 0; begin < edges.size();) {
@@ -116,18 +123,29 @@ MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source) {
     }
     begin = end;
   }
-  warn(report.openEdges, "open edges (used by one triangle: the surface is not watertight)",
-       firstOpen);
-  warn(report.nonManifoldEdges, "non-manifold edges (shared by more than two triangles)",
-       firstNonManifold);
-  warn(report.inconsistentEdges,
+  warn(report, source, report.openEdges,
+       "open edges (used by one triangle: the surface is not watertight)", firstOpen);
+  warn(report, source, report.nonManifoldEdges,
+       "non-manifold edges (shared by more than two triangles)", firstNonManifold);
+  warn(report, source, report.inconsistentEdges,
        "edges whose two triangles are oriented inconsistently (normals flip across them)",
        firstInconsistent);
+}
+
+}  // namespace
+
+MeshReport checkSurface(const TriangleMesh& mesh, const std::string& source) {
+  checkFatal(mesh, source);
+  MeshReport report;
+  std::vector<bool> used(mesh.vertices.size(), false);
+  checkTriangles(mesh, source, report, used);
+  checkEdges(mesh, source, report);
 
   report.unusedVertices = static_cast<size_t>(std::count(used.begin(), used.end(), false));
   if (report.unusedVertices > 0) {
     const auto first = std::find(used.begin(), used.end(), false) - used.begin();
-    warn(report.unusedVertices, "vertices used by no triangle", "vertex " + std::to_string(first));
+    warn(report, source, report.unusedVertices, "vertices used by no triangle",
+         "vertex " + std::to_string(first));
   }
 
   if (report.closed() && report.inconsistentEdges == 0) {

@@ -525,6 +525,51 @@ AnalyticCase readAnalytic(Fields& analytic, double scale, const std::vector<Bone
   return result;
 }
 
+/// The scene's bones and their motions into `result` (its pose count and labels from the first
+/// multi-pose motion); returns each bone's completed JSON.
+Json readBones(Fields& root, Reader& reader, LoadedScene& result) {
+  const Json& bones = root.array("bones");
+  Json completeBones = Json::array();
+  std::set<std::string> names;
+  for (size_t i = 0; i < bones.size(); ++i) {
+    Fields bone(bones[i], "bones[" + std::to_string(i) + "]", reader.source);
+    BoneMotion motion;
+    std::vector<double> labels;
+    result.bones.push_back(readBone(bone, i, reader, motion, labels));
+    if (!names.insert(result.bones.back().name).second)
+      bone.fail("name", "\"" + result.bones.back().name + "\" is used by another bone");
+    if (motion.poses.size() > 1) {
+      if (result.poseCount > 1 && int(motion.poses.size()) != result.poseCount)
+        bone.fail("motion", "has " + std::to_string(motion.poses.size()) +
+                                " poses but an earlier bone's motion has " +
+                                std::to_string(result.poseCount));
+      if (result.poseCount <= 1) result.poseLabels = labels;
+      result.poseCount = int(motion.poses.size());
+    }
+    result.motions.push_back(std::move(motion));
+    completeBones.push_back(bone.finish());
+  }
+  // Scenes without a multi-pose motion have one pose, labelled 0.
+  if (result.poseLabels.empty()) result.poseLabels = {0};
+  return completeBones;
+}
+
+/// The scene's muscles into `result`; returns each muscle's completed JSON.
+Json readMuscles(Fields& root, Reader& reader, const SpringParameters& springs,
+                 LoadedScene& result) {
+  const Json& muscles = root.array("muscles");
+  Json completeMuscles = Json::array();
+  std::set<std::string> names;
+  for (size_t i = 0; i < muscles.size(); ++i) {
+    Fields muscle(muscles[i], "muscles[" + std::to_string(i) + "]", reader.source);
+    result.muscles.push_back(readMuscle(muscle, i, reader, springs));
+    if (!names.insert(result.muscles.back().name).second)
+      muscle.fail("name", "\"" + result.muscles.back().name + "\" is used by another muscle");
+    completeMuscles.push_back(muscle.finish());
+  }
+  return completeMuscles;
+}
+
 LoadedScene readScene(const Json& raw, const std::string& source, const fs::path& baseDir,
                       const std::string& defaultName) {
   LoadedScene result;
@@ -547,40 +592,8 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   Fields model = root.object("model");
   const SpringParameters springs = readModel(model);
 
-  const Json& bones = root.array("bones");
-  Json completeBones = Json::array();
-  std::set<std::string> names;
-  for (size_t i = 0; i < bones.size(); ++i) {
-    Fields bone(bones[i], "bones[" + std::to_string(i) + "]", source);
-    BoneMotion motion;
-    std::vector<double> labels;
-    result.bones.push_back(readBone(bone, i, reader, motion, labels));
-    if (!names.insert(result.bones.back().name).second)
-      bone.fail("name", "\"" + result.bones.back().name + "\" is used by another bone");
-    if (motion.poses.size() > 1) {
-      if (result.poseCount > 1 && int(motion.poses.size()) != result.poseCount)
-        bone.fail("motion", "has " + std::to_string(motion.poses.size()) +
-                                " poses but an earlier bone's motion has " +
-                                std::to_string(result.poseCount));
-      if (result.poseCount <= 1) result.poseLabels = labels;
-      result.poseCount = int(motion.poses.size());
-    }
-    result.motions.push_back(std::move(motion));
-    completeBones.push_back(bone.finish());
-  }
-  // Scenes without a multi-pose motion have one pose, labelled 0.
-  if (result.poseLabels.empty()) result.poseLabels = {0};
-
-  const Json& muscles = root.array("muscles");
-  Json completeMuscles = Json::array();
-  names.clear();
-  for (size_t i = 0; i < muscles.size(); ++i) {
-    Fields muscle(muscles[i], "muscles[" + std::to_string(i) + "]", source);
-    result.muscles.push_back(readMuscle(muscle, i, reader, springs));
-    if (!names.insert(result.muscles.back().name).second)
-      muscle.fail("name", "\"" + result.muscles.back().name + "\" is used by another muscle");
-    completeMuscles.push_back(muscle.finish());
-  }
+  Json completeBones = readBones(root, reader, result);
+  Json completeMuscles = readMuscles(root, reader, springs, result);
 
   Fields simulation = root.object("simulation");
   const double maxStepDeg = readSimulation(simulation, reader.scale, result.simulation);

@@ -37,6 +37,9 @@ struct ReferenceOptions {
   bool contactSlidingGiven = false;
 };
 
+/// The cache directory `options` name: its cacheDir, or defaultReferenceCacheDir() when empty.
+std::string resolvedCacheDir(const ReferenceOptions& options);
+
 /// The contact penalty of a sphere-planes reference (× E per metre): 100× the default, so that
 /// C3D10's surface nodes stay within 1.5 µm of the plates (with the default they go 0.1–0.28
 /// mm in; comparisons/README.md).

@@ -614,21 +614,12 @@ void countCrossings(const Grid& grid, const Lines& lines, const FibreGenerationO
     }
 }
 
-/// Voxelises the muscle at `gridSize` voxels along its longest side, solves the field and
-/// traces up to options.count fibres into `result`. False when no interior voxel connects the
-/// two areas at this grid.
-bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& options, int gridSize,
-                 const std::string& source, FibreGenerationResult& result) {
-  const auto& V = surface.vertices;
-  const std::vector<uint32_t>& originIds = result.originArea;
-  const std::vector<uint32_t>& insertionIds = result.insertionArea;
-  FibreQuality& q = result.quality;
-
-  // Voxel grid.
-  const MeshDistance distance(surface);
+/// The voxel grid around the muscle: `gridSize` voxels along its longest side (`extent`, the
+/// bounds' size [m]) and a voxel's margin on every side; its size into `q`.
+Grid voxelGrid(const std::vector<btVector3>& V, int gridSize, btVector3& extent, FibreQuality& q) {
   btVector3 lo, hi;
   pointBounds(V, lo, hi);
-  const btVector3 extent = hi - lo;
+  extent = hi - lo;
   const btScalar longest = std::max({extent.x(), extent.y(), extent.z()});
   Grid grid;
   grid.h = longest / btScalar(gridSize - 1);
@@ -636,228 +627,311 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
   grid.lower = lo - btVector3(grid.h, grid.h, grid.h);
   for (int a = 0; a < 3; ++a) q.gridCells[a] = grid.n[a];
   q.voxelSize = grid.h;
-  const btScalar h = grid.h;
-  const btScalar insideTolerance = options.insideTolerance > 0 ? options.insideTolerance : h / 4;
+  return grid;
+}
 
-  const size_t N = grid.size();
-  std::vector<int8_t> label = labelVoxels(surface, distance, grid, originIds, insertionIds);
-  keepConnectedVoxels(grid, label);
-  for (size_t id = 0; id < N; ++id) q.interiorVoxels += label[id] >= 0;
+/// The harmonic field on the voxel grid: its labels, values and gradient.
+struct Field {
+  std::vector<int8_t> label;     ///< per voxel: < 0 outside, else interior or an area
+  std::vector<double> u;         ///< per voxel: 0 at the origin area .. 1 at the insertion
+  std::vector<double> gradient;  ///< per voxel: du/dx, three components [1/m]
+};
+
+/// Labels the voxels, keeps the connected interior and solves the field; false (and no field)
+/// when no interior voxel is left.
+bool solveOnGrid(const TriangleMesh& surface, const MeshDistance& distance, const Grid& grid,
+                 const std::string& source, FibreGenerationResult& result, Field& field) {
+  FibreQuality& q = result.quality;
+  field.label = labelVoxels(surface, distance, grid, result.originArea, result.insertionArea);
+  keepConnectedVoxels(grid, field.label);
+  for (size_t id = 0; id < grid.size(); ++id) q.interiorVoxels += field.label[id] >= 0;
   if (q.interiorVoxels == 0) return false;
-  std::vector<double> u = solveField(grid, label, source, result.warnings);
-  extendField(grid, label, u);
-  const std::vector<double> gradient = fieldGradient(grid, u);
-  const auto neighbour = [&](size_t id, int d, size_t& out) {
-    return neighbourOf(grid, id, d, out);
-  };
+  field.u = solveField(grid, field.label, source, result.warnings);
+  extendField(grid, field.label, field.u);
+  field.gradient = fieldGradient(grid, field.u);
+  return true;
+}
 
-  // Vertex normals (area weighted) for moving seeds inside.
+/// Vertex normals of a surface, area weighted and not normalised.
+std::vector<btVector3> vertexNormals(const TriangleMesh& surface) {
+  const auto& V = surface.vertices;
   std::vector<btVector3> normals(V.size(), btVector3(0, 0, 0));
   for (const auto& t : surface.triangles) {
     const btVector3 n = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
     for (uint32_t v : t) normals[v] += n;
   }
-  // Distance from a point to the nearest insertion / origin vertex (brute force over the area).
-  auto nearestIn = [&](const std::vector<uint32_t>& ids, const btVector3& p) {
-    btScalar best = std::numeric_limits<btScalar>::infinity();
-    for (uint32_t i : ids) best = std::min(best, V[i].distance2(p));
-    return std::sqrt(best);
-  };
-  const btScalar endTolerance = btScalar(2.5) * h;
+  return normals;
+}
 
-  auto fieldAt = [&](const btVector3& p) { return grid.sample<1>(u, p)[0]; };
-  auto directionAt = [&](const btVector3& p, btVector3& dir) {
-    const auto g = grid.sample<3>(gradient, p);
-    const btVector3 v{btScalar(g[0]), btScalar(g[1]), btScalar(g[2])};
-    if (v.length2() < btScalar(1e-12)) return false;
-    dir = v.normalized();
-    return true;
-  };
-  const btScalar step = h / 2;
-  const btScalar maxLength = btScalar(6) * (extent.length() + h);
+/// Streamlines of the field's gradient inside the surface, from one seed at a time.
+class Streamlines {
+ public:
+  Streamlines(const TriangleMesh& surface, const MeshDistance& distance, const Grid& grid,
+              const Field& field, const FibreGenerationResult& result, btScalar insideTolerance,
+              const btVector3& extent)
+      : V_(surface.vertices),
+        distance_(distance),
+        grid_(grid),
+        field_(field),
+        originIds_(result.originArea),
+        insertionIds_(result.insertionArea),
+        insideTolerance_(insideTolerance),
+        h_(grid.h),
+        endTolerance_(btScalar(2.5) * h_),
+        step_(h_ / 2),
+        maxLength_(btScalar(6) * (extent.length() + h_)) {}
 
-  /// Follows the gradient (sign +1, towards the insertion) or against it (-1, towards the
-  /// origin) from line.back() until the field reaches that end's area; the end is moved onto
-  /// the surface, a little inside. 0 ok, 1 left the surface, 2 stopped early.
-  auto traceTo = [&](double sign, std::vector<btVector3>& line) {
-    const std::vector<uint32_t>& target = sign > 0 ? insertionIds : originIds;
-    btVector3 p = line.back();
-    btScalar travelled = 0;
-    while (travelled < maxLength) {
-      const double value = fieldAt(p);
-      if (sign > 0 ? value >= 0.995 : value <= 0.005) break;
-      btVector3 d1, d2;
-      if (!directionAt(p, d1)) return 2;
-      d1 *= btScalar(sign);
-      if (!directionAt(p + d1 * (step / 2), d2)) return 2;
-      const btVector3 next = p + d2 * (step * btScalar(sign));
-      const btScalar s = distance.signedDistance(next);
-      if (s > insideTolerance) {
-        // Slide along the surface: pull back inside along the closest-point direction.
-        const auto c = distance.closest(next);
-        const btVector3 pulled = c.point + (c.point - next).normalized() * (h / 4);
-        if (nearestIn(target, next) < endTolerance) break;
-        if (distance.signedDistance(pulled) > 0) return 1;
-        p = pulled;
-      } else {
-        p = next;
-      }
-      travelled += step;
-      line.push_back(p);
-    }
-    if (nearestIn(target, line.back()) >= endTolerance) return 2;
-    // End on the surface: the closest surface point, a little inside.
-    const auto c = distance.closest(line.back());
-    if (c.triangle != UINT32_MAX && c.distance > h / 8) {
-      const btVector3 last = c.point + (line.back() - c.point).normalized() * (h / 8);
-      if (distance.signedDistance(last) <= 0) line.push_back(last);
-    }
-    return 0;
-  };
   /// Traces one streamline from a seed on the origin area (normal: the surface's outward
-  /// normal there) or, for a seed inside (`inside`), both ways.
-  std::vector<btVector3> back;
-  auto trace = [&](const btVector3& seed, const btVector3& normal, bool inside,
-                   std::vector<btVector3>& line) {
+  /// normal there) or, for a seed inside (`inside`), both ways. 0 ok, 1 left the surface, 2
+  /// stopped early.
+  int trace(const btVector3& seed, const btVector3& normal, bool inside,
+            std::vector<btVector3>& line) {
     line.clear();
     if (inside) {
-      back.assign(1, seed);
-      if (const int status = traceTo(-1, back)) return status;
-      line.assign(back.rbegin(), back.rend());
+      back_.assign(1, seed);
+      if (const int status = traceTo(-1, back_)) return status;
+      line.assign(back_.rbegin(), back_.rend());
       return traceTo(1, line);
     }
-    btVector3 p = seed - normal * (h / 8);
-    if (distance.signedDistance(p) > 0) p = seed;
+    btVector3 p = seed - normal * (h_ / 8);
+    if (distance_.signedDistance(p) > 0) p = seed;
     line.push_back(p);
     // Leave the flat (Dirichlet) layer under the area inwards, so that the streamline starts
     // where the field rises rather than sliding along the surface.
     for (int k = 0; k < 8; ++k) {
       btVector3 d;
       if (directionAt(p, d) && fieldAt(p) > 1e-3) break;
-      const btVector3 next = p - normal * (h / 2);
-      if (distance.signedDistance(next) > -h / 8) break;
+      const btVector3 next = p - normal * (h_ / 2);
+      if (distance_.signedDistance(next) > -h_ / 8) break;
       p = next;
       line.push_back(p);
     }
     return traceTo(1, line);
-  };
+  }
 
-  // Seed pool: points on the widest cross-section (sectionSeeds), else the origin area's
-  // vertices and random points on its triangles (a tapered end has few vertices); seeds are
-  // taken in farthest-point order, the first `count` good streamlines kept.
-  std::vector<btVector3> pool, poolNormals;
-  if (options.sectionSeeds) {
-    // Where the field crosses a level between two interior voxels, linearly interpolated: a
-    // cross-section of the muscle. The widest of the levels 0.05, 0.1, ... 0.95 (most crossed
-    // voxel edges) holds the seeds, which farthest-point order then covers evenly.
-    auto crossings = [&](double level, std::vector<btVector3>* points) {
-      size_t count = 0;
-      for (size_t id = 0; id < N; ++id)
-        for (int d = 0; d < 6; d += 2) {
-          size_t w;
-          if (label[id] < 0 || !neighbour(id, d, w) || label[w] < 0) continue;
-          const double a = u[id] - level, b = u[w] - level;
-          if ((a < 0) == (b < 0)) continue;
-          ++count;
-          if (!points) continue;
-          const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
-                    k = int(id / (size_t(grid.n[0]) * grid.n[1]));
-          const btVector3 edge = btVector3(btScalar(kOffsets[d][0]), btScalar(kOffsets[d][1]),
-                                           btScalar(kOffsets[d][2])) *
-                                 h;
-          points->push_back(grid.centre(i, j, k) + edge * btScalar(a / (a - b)));
-        }
-      return count;
-    };
-    std::vector<std::pair<size_t, double>> levels;
-    for (int l = 1; l < 20; ++l) levels.emplace_back(crossings(l * 0.05, nullptr), l * 0.05);
-    std::sort(levels.rbegin(), levels.rend());
-    // A narrow muscle's widest section may hold too few seeds: the next widest ones add theirs.
-    for (size_t l = 0; l < levels.size() && pool.size() < size_t(options.count) * 2; ++l)
-      crossings(levels[l].second, &pool);
-    poolNormals.assign(pool.size(), btVector3(0, 0, 0));
+ private:
+  /// Distance from a point to the nearest vertex of an area (brute force over the area) [m].
+  btScalar nearestIn(const std::vector<uint32_t>& ids, const btVector3& p) const {
+    btScalar best = std::numeric_limits<btScalar>::infinity();
+    for (uint32_t i : ids) best = std::min(best, V_[i].distance2(p));
+    return std::sqrt(best);
   }
-  const bool sectionSeeds = !pool.empty();
-  if (!sectionSeeds) {
-    for (uint32_t v : originIds) {
-      pool.push_back(V[v]);
-      poolNormals.push_back(normals[v].length2() > 0 ? normals[v].normalized()
-                                                     : btVector3(0, 0, 0));
+  double fieldAt(const btVector3& p) const { return grid_.sample<1>(field_.u, p)[0]; }
+  /// The gradient's direction at p into `dir`; false where it vanishes.
+  bool directionAt(const btVector3& p, btVector3& dir) const {
+    const auto g = grid_.sample<3>(field_.gradient, p);
+    const btVector3 v{btScalar(g[0]), btScalar(g[1]), btScalar(g[2])};
+    if (v.length2() < btScalar(1e-12)) return false;
+    dir = v.normalized();
+    return true;
+  }
+
+  /// Follows the gradient (sign +1, towards the insertion) or against it (-1, towards the
+  /// origin) from line.back() until the field reaches that end's area; the end is moved onto
+  /// the surface, a little inside. 0 ok, 1 left the surface, 2 stopped early.
+  int traceTo(double sign, std::vector<btVector3>& line) const {
+    const std::vector<uint32_t>& target = sign > 0 ? insertionIds_ : originIds_;
+    btVector3 p = line.back();
+    btScalar travelled = 0;
+    while (travelled < maxLength_) {
+      const double value = fieldAt(p);
+      if (sign > 0 ? value >= 0.995 : value <= 0.005) break;
+      btVector3 d1, d2;
+      if (!directionAt(p, d1)) return 2;
+      d1 *= btScalar(sign);
+      if (!directionAt(p + d1 * (step_ / 2), d2)) return 2;
+      const btVector3 next = p + d2 * (step_ * btScalar(sign));
+      if (distance_.signedDistance(next) > insideTolerance_) {
+        // Slide along the surface: pull back inside along the closest-point direction.
+        const auto c = distance_.closest(next);
+        const btVector3 pulled = c.point + (c.point - next).normalized() * (h_ / 4);
+        if (nearestIn(target, next) < endTolerance_) break;
+        if (distance_.signedDistance(pulled) > 0) return 1;
+        p = pulled;
+      } else {
+        p = next;
+      }
+      travelled += step_;
+      line.push_back(p);
     }
-    std::vector<char> inOrigin(V.size(), 0);
-    for (uint32_t i : originIds) inOrigin[i] = 1;
-    std::vector<uint32_t> areaTriangles;
-    std::vector<double> cumulative;
-    double total = 0;
-    for (uint32_t t = 0; t < surface.triangles.size(); ++t) {
-      const auto& tri = surface.triangles[t];
-      if (!(inOrigin[tri[0]] && inOrigin[tri[1]] && inOrigin[tri[2]])) continue;
-      total += double((V[tri[1]] - V[tri[0]]).cross(V[tri[2]] - V[tri[0]]).length());
-      areaTriangles.push_back(t);
-      cumulative.push_back(total);
-    }
-    uint64_t state = 0x9e3779b97f4a7c15ull;
-    auto random = [&]() {  // splitmix64 -> [0, 1)
-      uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-      z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-      z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-      return double((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
-    };
-    const size_t extra = areaTriangles.empty() ? 0 : size_t(options.count) * 16;
-    for (size_t e = 0; e < extra; ++e) {
-      const size_t at =
-          size_t(std::lower_bound(cumulative.begin(), cumulative.end(), random() * total) -
-                 cumulative.begin());
-      const auto& tri = surface.triangles[areaTriangles[std::min(at, areaTriangles.size() - 1)]];
-      double a = random(), b = random();
-      if (a + b > 1) a = 1 - a, b = 1 - b;
-      pool.push_back(V[tri[0]] + (V[tri[1]] - V[tri[0]]) * btScalar(a) +
-                     (V[tri[2]] - V[tri[0]]) * btScalar(b));
-      poolNormals.push_back((V[tri[1]] - V[tri[0]]).cross(V[tri[2]] - V[tri[0]]).normalized());
+    if (nearestIn(target, line.back()) >= endTolerance_) return 2;
+    endOnSurface(line);
+    return 0;
+  }
+
+  /// Ends a line on the surface: the closest surface point, a little inside.
+  void endOnSurface(std::vector<btVector3>& line) const {
+    const auto c = distance_.closest(line.back());
+    if (c.triangle != UINT32_MAX && c.distance > h_ / 8) {
+      const btVector3 last = c.point + (line.back() - c.point).normalized() * (h_ / 8);
+      if (distance_.signedDistance(last) <= 0) line.push_back(last);
     }
   }
-  std::vector<uint32_t> poolIds(pool.size());
-  std::iota(poolIds.begin(), poolIds.end(), 0u);
-  // Fibres closer than minSeparation to an accepted one (streamlines converging into a narrow
-  // tendon) are set aside and used only when the seeds run out: near-coincident particles make
-  // springs of almost no rest length.
-  std::vector<std::vector<btVector3>> lines, crowded;
-  const btScalar separation = options.minSeparation;
-  std::unordered_map<uint64_t, std::vector<btVector3>> acceptedPoints;
-  auto cellKey = [&](const btVector3& p, int di, int dj, int dk) {
-    const btVector3 g = (p - grid.lower) / std::max(separation, btScalar(1e-9));
-    return (uint64_t(uint32_t(int(std::floor(g.x())) + di + 1048576)) << 42) ^
-           (uint64_t(uint32_t(int(std::floor(g.y())) + dj + 1048576)) << 21) ^
-           uint64_t(uint32_t(int(std::floor(g.z())) + dk + 1048576));
+
+  const std::vector<btVector3>& V_;            ///< the surface's vertices [m]
+  const MeshDistance& distance_;               ///< distance to the surface
+  const Grid& grid_;                           ///< the field's voxel grid
+  const Field& field_;                         ///< the field and its gradient
+  const std::vector<uint32_t>& originIds_;     ///< the origin area's vertices
+  const std::vector<uint32_t>& insertionIds_;  ///< the insertion area's vertices
+  btScalar insideTolerance_;                   ///< a point this far outside the surface is out [m]
+  btScalar h_;                                 ///< voxel size [m]
+  btScalar endTolerance_;        ///< a line ends this close to its area's vertices [m]
+  btScalar step_;                ///< streamline step [m]
+  btScalar maxLength_;           ///< a line stops after this length [m]
+  std::vector<btVector3> back_;  ///< scratch: a seed's line towards the origin
+};
+
+/// Seeds and their surface normals (zero inside the muscle).
+struct SeedPool {
+  std::vector<btVector3> points;   ///< seed positions [m]
+  std::vector<btVector3> normals;  ///< outward unit normal at each seed, or zero
+};
+
+/// Points where the field crosses `level` between two interior voxels, linearly interpolated
+/// (a cross-section of the muscle), into `points` when given; returns how many.
+size_t levelCrossings(const Grid& grid, const Field& field, double level,
+                      std::vector<btVector3>* points) {
+  size_t count = 0;
+  const std::vector<int8_t>& label = field.label;
+  const std::vector<double>& u = field.u;
+  for (size_t id = 0; id < grid.size(); ++id)
+    for (int d = 0; d < 6; d += 2) {
+      size_t w;
+      if (label[id] < 0 || !neighbourOf(grid, id, d, w) || label[w] < 0) continue;
+      const double a = u[id] - level, b = u[w] - level;
+      if ((a < 0) == (b < 0)) continue;
+      ++count;
+      if (!points) continue;
+      const int i = int(id % grid.n[0]), j = int((id / grid.n[0]) % grid.n[1]),
+                k = int(id / (size_t(grid.n[0]) * grid.n[1]));
+      const btVector3 edge =
+          btVector3(btScalar(kOffsets[d][0]), btScalar(kOffsets[d][1]), btScalar(kOffsets[d][2])) *
+          grid.h;
+      points->push_back(grid.centre(i, j, k) + edge * btScalar(a / (a - b)));
+    }
+  return count;
+}
+
+/// Seeds on the widest of the field's levels 0.05, 0.1, ... 0.95 (most crossed voxel edges),
+/// which farthest-point order then covers evenly; a narrow muscle's widest section may hold
+/// too few seeds, so the next widest ones add theirs up to twice `count`.
+void sectionSeeds(const Grid& grid, const Field& field, size_t count, SeedPool& pool) {
+  std::vector<std::pair<size_t, double>> levels;
+  for (int l = 1; l < 20; ++l)
+    levels.emplace_back(levelCrossings(grid, field, l * 0.05, nullptr), l * 0.05);
+  std::sort(levels.rbegin(), levels.rend());
+  for (size_t l = 0; l < levels.size() && pool.points.size() < count * 2; ++l)
+    levelCrossings(grid, field, levels[l].second, &pool.points);
+  pool.normals.assign(pool.points.size(), btVector3(0, 0, 0));
+}
+
+/// Seeds on the origin area: its vertices, then `count` × 16 random points on its triangles
+/// (a tapered end has few vertices), each with its normal.
+void originSeeds(const TriangleMesh& surface, const std::vector<uint32_t>& originIds, size_t count,
+                 SeedPool& pool) {
+  const auto& V = surface.vertices;
+  const std::vector<btVector3> normals = vertexNormals(surface);
+  for (uint32_t v : originIds) {
+    pool.points.push_back(V[v]);
+    pool.normals.push_back(normals[v].length2() > 0 ? normals[v].normalized() : btVector3(0, 0, 0));
+  }
+  std::vector<char> inOrigin(V.size(), 0);
+  for (uint32_t i : originIds) inOrigin[i] = 1;
+  std::vector<uint32_t> areaTriangles;
+  std::vector<double> cumulative;
+  double total = 0;
+  for (uint32_t t = 0; t < surface.triangles.size(); ++t) {
+    const auto& tri = surface.triangles[t];
+    if (!(inOrigin[tri[0]] && inOrigin[tri[1]] && inOrigin[tri[2]])) continue;
+    total += double((V[tri[1]] - V[tri[0]]).cross(V[tri[2]] - V[tri[0]]).length());
+    areaTriangles.push_back(t);
+    cumulative.push_back(total);
+  }
+  uint64_t state = 0x9e3779b97f4a7c15ull;
+  auto random = [&]() {  // splitmix64 -> [0, 1)
+    uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return double((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
   };
-  auto tooClose = [&](const std::vector<btVector3>& fibre) {
-    if (separation <= 0) return false;
+  const size_t extra = areaTriangles.empty() ? 0 : count * 16;
+  for (size_t e = 0; e < extra; ++e) {
+    const size_t at =
+        size_t(std::lower_bound(cumulative.begin(), cumulative.end(), random() * total) -
+               cumulative.begin());
+    const auto& tri = surface.triangles[areaTriangles[std::min(at, areaTriangles.size() - 1)]];
+    double a = random(), b = random();
+    if (a + b > 1) a = 1 - a, b = 1 - b;
+    pool.points.push_back(V[tri[0]] + (V[tri[1]] - V[tri[0]]) * btScalar(a) +
+                          (V[tri[2]] - V[tri[0]]) * btScalar(b));
+    pool.normals.push_back((V[tri[1]] - V[tri[0]]).cross(V[tri[2]] - V[tri[0]]).normalized());
+  }
+}
+
+/// The points of the accepted fibres in a hash grid of cells `separation` wide, to find a new
+/// fibre closer than `separation` to one of them.
+class SeparationIndex {
+ public:
+  SeparationIndex(const btVector3& lower, btScalar separation)
+      : lower_(lower), separation_(separation) {}
+
+  /// Whether a point of `fibre` lies closer than the separation to an accepted point.
+  bool tooClose(const std::vector<btVector3>& fibre) const {
+    if (separation_ <= 0) return false;
     for (const auto& p : fibre)
       for (int dk = -1; dk <= 1; ++dk)
         for (int dj = -1; dj <= 1; ++dj)
           for (int di = -1; di <= 1; ++di) {
-            const auto it = acceptedPoints.find(cellKey(p, di, dj, dk));
-            if (it == acceptedPoints.end()) continue;
+            const auto it = accepted_.find(cellKey(p, di, dj, dk));
+            if (it == accepted_.end()) continue;
             for (const auto& o : it->second)
-              if (o.distance2(p) < separation * separation) return true;
+              if (o.distance2(p) < separation_ * separation_) return true;
           }
     return false;
-  };
-  auto accept = [&](const std::vector<btVector3>& fibre) {
-    if (separation <= 0) return;
-    for (const auto& p : fibre) acceptedPoints[cellKey(p, 0, 0, 0)].push_back(p);
-  };
+  }
+  /// Adds an accepted fibre's points.
+  void accept(const std::vector<btVector3>& fibre) {
+    if (separation_ <= 0) return;
+    for (const auto& p : fibre) accepted_[cellKey(p, 0, 0, 0)].push_back(p);
+  }
+
+ private:
+  uint64_t cellKey(const btVector3& p, int di, int dj, int dk) const {
+    const btVector3 g = (p - lower_) / std::max(separation_, btScalar(1e-9));
+    return (uint64_t(uint32_t(int(std::floor(g.x())) + di + 1048576)) << 42) ^
+           (uint64_t(uint32_t(int(std::floor(g.y())) + dj + 1048576)) << 21) ^
+           uint64_t(uint32_t(int(std::floor(g.z())) + dk + 1048576));
+  }
+
+  btVector3 lower_;      ///< the hash grid's origin [m]
+  btScalar separation_;  ///< the least distance between fibres' points [m]; <= 0: none
+  std::unordered_map<uint64_t, std::vector<btVector3>> accepted_;  ///< points per cell
+};
+
+/// Traces seeds in farthest-point order until options.count good fibres are made (the
+/// candidates doubled while seeds remain), resampled to options.samples points. Fibres closer
+/// than minSeparation to an accepted one (streamlines converging into a narrow tendon) are set
+/// aside in `crowded`: near-coincident particles make springs of almost no rest length.
+Lines traceSeeds(Streamlines& streamlines, const MeshDistance& distance, const SeedPool& pool,
+                 bool inside, const FibreGenerationOptions& options, btScalar insideTolerance,
+                 const btVector3& lower, Lines& crowded, FibreQuality& q) {
+  Lines lines;
+  SeparationIndex separation(lower, options.minSeparation);
+  std::vector<uint32_t> poolIds(pool.points.size());
+  std::iota(poolIds.begin(), poolIds.end(), 0u);
   const size_t wanted = size_t(options.count);
   const size_t maxTraced = wanted * 8;  // bounds the time when many seeds fail or crowd
-  size_t candidates = std::min(pool.size(), wanted * 2);
+  size_t candidates = std::min(pool.points.size(), wanted * 2);
   std::vector<uint32_t> order;
   size_t tried = 0;
   std::vector<btVector3> line;
   while (lines.size() < wanted) {
-    order = farthestPointOrder(pool, poolIds, candidates);
+    order = farthestPointOrder(pool.points, poolIds, candidates);
     for (; tried < order.size() && lines.size() < wanted && size_t(q.traced) < maxTraced; ++tried) {
       ++q.traced;
-      const int status = trace(pool[order[tried]], poolNormals[order[tried]], sectionSeeds, line);
+      const uint32_t seed = order[tried];
+      const int status = streamlines.trace(pool.points[seed], pool.normals[seed], inside, line);
       if (status == 1) ++q.droppedOutside;
       if (status == 2) ++q.droppedEarly;
       if (status != 0) continue;
@@ -869,24 +943,54 @@ bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& opti
         ++q.droppedOutside;
         continue;
       }
-      if (tooClose(fibre)) {
+      if (separation.tooClose(fibre)) {
         crowded.push_back(std::move(fibre));
         continue;
       }
-      accept(fibre);
+      separation.accept(fibre);
       lines.push_back(std::move(fibre));
     }
-    if (candidates >= pool.size() || tried < order.size() || size_t(q.traced) >= maxTraced) break;
-    candidates = std::min(pool.size(), candidates * 2);
+    if (candidates >= pool.points.size() || tried < order.size() || size_t(q.traced) >= maxTraced)
+      break;
+    candidates = std::min(pool.points.size(), candidates * 2);
   }
+  return lines;
+}
+
+/// Voxelises the muscle at `gridSize` voxels along its longest side, solves the field and
+/// traces up to options.count fibres into `result`. False when no interior voxel connects the
+/// two areas at this grid.
+bool traceOnGrid(const TriangleMesh& surface, const FibreGenerationOptions& options, int gridSize,
+                 const std::string& source, FibreGenerationResult& result) {
+  FibreQuality& q = result.quality;
+  const MeshDistance distance(surface);
+  btVector3 extent;
+  const Grid grid = voxelGrid(surface.vertices, gridSize, extent, q);
+  const btScalar insideTolerance =
+      options.insideTolerance > 0 ? options.insideTolerance : grid.h / 4;
+  Field field;
+  if (!solveOnGrid(surface, distance, grid, source, result, field)) return false;
+
+  // Seed pool: points on the widest cross-section (sectionSeeds), else the origin area's
+  // vertices and random points on its triangles; seeds are taken in farthest-point order, the
+  // first `count` good streamlines kept.
+  SeedPool pool;
+  if (options.sectionSeeds) sectionSeeds(grid, field, size_t(options.count), pool);
+  const bool inside = !pool.points.empty();
+  if (!inside) originSeeds(surface, result.originArea, size_t(options.count), pool);
+  Streamlines streamlines(surface, distance, grid, field, result, insideTolerance, extent);
+  Lines crowded;
+  Lines lines = traceSeeds(streamlines, distance, pool, inside, options, insideTolerance,
+                           grid.lower, crowded, q);
   q.crowded = int(crowded.size());
-  for (size_t i = 0; i < crowded.size() && lines.size() < wanted; ++i)
+  for (size_t i = 0; i < crowded.size() && lines.size() < size_t(options.count); ++i)
     lines.push_back(std::move(crowded[i]));
   for (const auto& l : lines) result.fibres.addFibre(l);
   q.generated = int(lines.size());
 
-  measureFibres(surface, distance, originIds, insertionIds, lines, insideTolerance, h, q);
-  measureCoverage(grid, label, lines, options.coverageDistance, q);
+  measureFibres(surface, distance, result.originArea, result.insertionArea, lines, insideTolerance,
+                grid.h, q);
+  measureCoverage(grid, field.label, lines, options.coverageDistance, q);
   countCrossings(grid, lines, options, q);
   return true;
 }

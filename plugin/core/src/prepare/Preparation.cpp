@@ -520,6 +520,47 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
     report.shortestSpring = std::min(report.shortestSpring, spring.restLength);
 }
 
+/// Each bone's sphere generation in `report`: a warning naming what it ignored, capped or
+/// dropped, a repair for centres pulled back inside a thin part (no fault of the mesh).
+void reportBoneSpheres(const std::vector<BoneInput>& bones,
+                       const std::vector<BoneSettings>& boneSettings,
+                       const std::vector<detail::BoneSphereReport>& sphereReports,
+                       PreparationReport& report) {
+  for (size_t b = 0; b < bones.size(); ++b) {
+    const detail::BoneSphereReport& r = sphereReports[b];
+    std::vector<std::string> notes;
+    if (r.degenerateTriangles)
+      notes.push_back(std::to_string(r.degenerateTriangles) + " zero-area triangles ignored");
+    if (r.capped)
+      notes.push_back(std::to_string(r.capped) +
+                      " spheres capped (longest edge over 3 mean edge lengths)");
+    if (r.pulledBack)
+      report.repairs.push_back("bone '" + bones[b].name + "': " + std::to_string(r.pulledBack) +
+                               " sphere centres pulled back inside a thin part");
+    if (r.dropped) notes.push_back(std::to_string(r.dropped) + " spheres dropped");
+    if (boneSettings[b].sphereCentres.empty()) notes.push_back("no collision spheres at all");
+    if (!notes.empty()) report.warnings.push_back("bone '" + bones[b].name + "': " + join(notes));
+  }
+}
+
+/// Shrinks the spheres so that no two bodies overlap at rest, with a repair in `report` saying
+/// how many.
+void shrinkAndReport(std::vector<MuscleSettings>& muscleSettings,
+                     std::vector<BoneSettings>& boneSettings, PreparationReport& report) {
+  const detail::ShrinkReport shrink = detail::shrinkRadii(muscleSettings, boneSettings);
+  size_t sphereCount = 0;
+  for (const auto& muscle : muscleSettings) sphereCount += muscle.boundaryParticles.size();
+  if (shrink.muscleSpheresShrunk > 0 || shrink.boneSpheresShrunk > 0)
+    report.repairs.push_back("radii: " + std::to_string(shrink.muscleSpheresShrunk) + " of " +
+                             std::to_string(sphereCount) +
+                             " muscle spheres shrunk so that no two bodies overlap at rest (" +
+                             std::to_string(shrink.muscleSpheresZeroed) + " to radius 0, " +
+                             std::to_string(shrink.muscleSpheresCapped) +
+                             " capped at the sample spacing near another muscle); " +
+                             std::to_string(shrink.boneSpheresShrunk) +
+                             " bone spheres shrunk around muscle particles inside them");
+}
+
 }  // namespace
 
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
@@ -566,40 +607,12 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   });
 
   std::vector<std::string>& warnings = scene.report.warnings;
-  for (size_t b = 0; b < bones.size(); ++b) {
-    const detail::BoneSphereReport& r = sphereReports[b];
-    std::vector<std::string> notes;
-    if (r.degenerateTriangles)
-      notes.push_back(std::to_string(r.degenerateTriangles) + " zero-area triangles ignored");
-    if (r.capped)
-      notes.push_back(std::to_string(r.capped) +
-                      " spheres capped (longest edge over 3 mean edge lengths)");
-    // Thin parts (a plate, a coarse box, a pelvic wing) are no fault of the mesh: a repair.
-    if (r.pulledBack)
-      scene.report.repairs.push_back("bone '" + bones[b].name +
-                                     "': " + std::to_string(r.pulledBack) +
-                                     " sphere centres pulled back inside a thin part");
-    if (r.dropped) notes.push_back(std::to_string(r.dropped) + " spheres dropped");
-    if (boneSettings[b].sphereCentres.empty()) notes.push_back("no collision spheres at all");
-    if (!notes.empty()) warnings.push_back("bone '" + bones[b].name + "': " + join(notes));
-  }
+  reportBoneSpheres(bones, boneSettings, sphereReports, scene.report);
   for (const auto& list : muscleWarnings) warnings.insert(warnings.end(), list.begin(), list.end());
   for (size_t m = 0; m < muscles.size(); ++m)
     describeRepairs(muscles[m], muscleReports[m], bones, muscles, scene.report.repairs);
 
-  const detail::ShrinkReport shrink = detail::shrinkRadii(muscleSettings, boneSettings);
-  size_t sphereCount = 0;
-  for (const auto& muscle : muscleSettings) sphereCount += muscle.boundaryParticles.size();
-  if (shrink.muscleSpheresShrunk > 0 || shrink.boneSpheresShrunk > 0)
-    scene.report.repairs.push_back(
-        "radii: " + std::to_string(shrink.muscleSpheresShrunk) + " of " +
-        std::to_string(sphereCount) +
-        " muscle spheres shrunk so that no two bodies overlap at rest (" +
-        std::to_string(shrink.muscleSpheresZeroed) + " to radius 0, " +
-        std::to_string(shrink.muscleSpheresCapped) +
-        " capped at the sample spacing near another muscle); " +
-        std::to_string(shrink.boneSpheresShrunk) +
-        " bone spheres shrunk around muscle particles inside them");
+  shrinkAndReport(muscleSettings, boneSettings, scene.report);
 
   scene.report.surfaceCoverage.assign(muscles.size(), 0);
   parallelFor(muscles.size(), workers, [&](size_t m) {

@@ -93,91 +93,126 @@ void bindSurface(MuscleSettings& muscle, const KdTree& particles, int skinNeighb
   }
 }
 
+namespace {
+
+/// Every muscle's boundary spheres in one list, with their centres.
+struct MuscleSpheres {
+  std::vector<MuscleSettings>& muscles;  ///< their radii are shrunk in place
+  std::vector<SphereRef> spheres;        ///< (muscle, particle) of each sphere
+  std::vector<btVector3> centres;        ///< each sphere's rest centre [m]
+
+  btScalar& radius(size_t s) const { return muscles[spheres[s].muscle].radii[spheres[s].particle]; }
+  /// Whether sphere s is fixed to `bone` (and so may overlap it).
+  bool exempt(size_t s, uint32_t bone) const {
+    return muscles[spheres[s].muscle].fixedBone[spheres[s].particle] == int32_t(bone);
+  }
+};
+
+/// Every bone's spheres in one list, remembering their bone.
+struct BoneSpheres {
+  std::vector<BoneSettings>& bones;                ///< their radii are shrunk in place
+  std::vector<btVector3> centres;                  ///< each sphere's centre [m]
+  std::vector<std::pair<uint32_t, uint32_t>> ids;  ///< (bone, sphere) of each
+
+  btScalar& radius(uint32_t k) const { return bones[ids[k].first].sphereRadii[ids[k].second]; }
+  btScalar maxRadius() const {
+    btScalar largest = 0;
+    for (uint32_t k = 0; k < ids.size(); ++k) largest = std::max(largest, radius(k));
+    return largest;
+  }
+};
+
+/// 1. A muscle sphere whose centre lies inside a bone sphere cannot shrink out of it: the bone
+/// sphere shrinks instead. Returns how many bone spheres shrank.
+size_t shrinkBoneSpheres(const MuscleSpheres& muscle, const BoneSpheres& bone,
+                         const KdTree& boneTree,
+                         std::vector<std::pair<uint32_t, btScalar>>& found) {
+  const btScalar maxBone = bone.maxRadius();
+  std::vector<uint8_t> boneShrunk(bone.ids.size(), 0);
+  for (size_t s = 0; s < muscle.spheres.size(); ++s) {
+    boneTree.within(muscle.centres[s], maxBone, found);
+    for (const auto& [k, distance2] : found) {
+      if (muscle.exempt(s, bone.ids[k].first)) continue;
+      const btScalar distance = std::sqrt(distance2);
+      if (distance < bone.radius(k)) {
+        bone.radius(k) = distance * kClearance;
+        boneShrunk[k] = 1;
+      }
+    }
+  }
+  return static_cast<size_t>(std::count(boneShrunk.begin(), boneShrunk.end(), 1));
+}
+
+/// 2. Muscle spheres against bone spheres: bones do not give way.
+void clearBones(const MuscleSpheres& muscle, const BoneSpheres& bone, const KdTree& boneTree,
+                std::vector<std::pair<uint32_t, btScalar>>& found) {
+  const btScalar maxBone = bone.maxRadius();
+  for (size_t s = 0; s < muscle.spheres.size(); ++s) {
+    btScalar& radius = muscle.radius(s);
+    boneTree.within(muscle.centres[s], radius + maxBone, found);
+    for (const auto& [k, distance2] : found) {
+      if (muscle.exempt(s, bone.ids[k].first)) continue;
+      const btScalar distance = std::sqrt(distance2);
+      if (distance < radius + bone.radius(k))
+        radius = std::max(btScalar(0), (distance - bone.radius(k)) * kClearance);
+    }
+  }
+}
+
+/// 3. Muscle against muscle: both spheres of an overlapping pair shrink by the same factor
+/// d / (rA + rB), computed from the radii before this pass, so one pass clears all pairs.
+void clearMuscles(const MuscleSpheres& muscle, const KdTree& muscleTree,
+                  std::vector<std::pair<uint32_t, btScalar>>& found) {
+  const std::vector<SphereRef>& spheres = muscle.spheres;
+  std::vector<btScalar> before(spheres.size());
+  for (size_t s = 0; s < spheres.size(); ++s) before[s] = muscle.radius(s);
+  const btScalar maxMuscle = maxOf(before);
+  for (size_t s = 0; s < spheres.size(); ++s) {
+    if (before[s] <= 0) continue;
+    muscleTree.within(muscle.centres[s], before[s] + maxMuscle, found);
+    btScalar& radius = muscle.radius(s);
+    for (const auto& [t, distance2] : found) {
+      if (spheres[t].muscle == spheres[s].muscle) continue;
+      const btScalar sum = before[s] + before[t];
+      const btScalar distance = std::sqrt(distance2);
+      if (distance < sum) radius = std::min(radius, before[s] * (distance / sum) * kClearance);
+    }
+  }
+}
+
+}  // namespace
+
 ShrinkReport shrinkRadii(std::vector<MuscleSettings>& muscles, std::vector<BoneSettings>& bones) {
   ShrinkReport report;
-  std::vector<SphereRef> spheres;
-  std::vector<btVector3> centres;
+  MuscleSpheres muscle{muscles, {}, {}};
   for (uint32_t m = 0; m < muscles.size(); ++m)
     for (uint32_t i : muscles[m].boundaryParticles) {
-      spheres.push_back({m, i});
-      centres.push_back(muscles[m].restPositions[i]);
+      muscle.spheres.push_back({m, i});
+      muscle.centres.push_back(muscles[m].restPositions[i]);
     }
-  auto radiusOf = [&](const SphereRef& s) -> btScalar& {
-    return muscles[s.muscle].radii[s.particle];
-  };
-  auto exempt = [&](const SphereRef& s, uint32_t bone) {
-    return muscles[s.muscle].fixedBone[s.particle] == int32_t(bone);
-  };
-  std::vector<btScalar> original(spheres.size());
-  for (size_t s = 0; s < spheres.size(); ++s) original[s] = radiusOf(spheres[s]);
+  std::vector<btScalar> original(muscle.spheres.size());
+  for (size_t s = 0; s < muscle.spheres.size(); ++s) original[s] = muscle.radius(s);
 
-  // All bone spheres in one list, remembering their bone.
-  std::vector<btVector3> boneCentres;
-  std::vector<std::pair<uint32_t, uint32_t>> boneSpheres;  // (bone, sphere)
+  BoneSpheres bone{bones, {}, {}};
   for (uint32_t b = 0; b < bones.size(); ++b)
     for (uint32_t s = 0; s < bones[b].sphereCentres.size(); ++s) {
-      boneCentres.push_back(bones[b].sphereCentres[s]);
-      boneSpheres.emplace_back(b, s);
+      bone.centres.push_back(bones[b].sphereCentres[s]);
+      bone.ids.emplace_back(b, s);
     }
   std::vector<std::pair<uint32_t, btScalar>> found;
-  if (!boneCentres.empty()) {
-    const KdTree boneTree(boneCentres);
-    auto boneRadius = [&](uint32_t k) -> btScalar& {
-      return bones[boneSpheres[k].first].sphereRadii[boneSpheres[k].second];
-    };
-    // 1. A muscle sphere whose centre lies inside a bone sphere cannot shrink out of it: the
-    //    bone sphere shrinks instead.
-    btScalar maxBone = 0;
-    for (uint32_t k = 0; k < boneSpheres.size(); ++k) maxBone = std::max(maxBone, boneRadius(k));
-    std::vector<uint8_t> boneShrunk(boneSpheres.size(), 0);
-    for (size_t s = 0; s < spheres.size(); ++s) {
-      boneTree.within(centres[s], maxBone, found);
-      for (const auto& [k, distance2] : found) {
-        if (exempt(spheres[s], boneSpheres[k].first)) continue;
-        const btScalar distance = std::sqrt(distance2);
-        if (distance < boneRadius(k)) {
-          boneRadius(k) = distance * kClearance;
-          boneShrunk[k] = 1;
-        }
-      }
-    }
-    report.boneSpheresShrunk = std::count(boneShrunk.begin(), boneShrunk.end(), 1);
-    // 2. Muscle spheres against bone spheres: bones do not give way.
-    maxBone = 0;
-    for (uint32_t k = 0; k < boneSpheres.size(); ++k) maxBone = std::max(maxBone, boneRadius(k));
-    for (size_t s = 0; s < spheres.size(); ++s) {
-      btScalar& radius = radiusOf(spheres[s]);
-      boneTree.within(centres[s], radius + maxBone, found);
-      for (const auto& [k, distance2] : found) {
-        if (exempt(spheres[s], boneSpheres[k].first)) continue;
-        const btScalar distance = std::sqrt(distance2);
-        if (distance < radius + boneRadius(k))
-          radius = std::max(btScalar(0), (distance - boneRadius(k)) * kClearance);
-      }
-    }
+  if (!bone.centres.empty()) {
+    const KdTree boneTree(bone.centres);
+    report.boneSpheresShrunk = shrinkBoneSpheres(muscle, bone, boneTree, found);
+    clearBones(muscle, bone, boneTree, found);
   }
-  // 3. Muscle against muscle: both spheres of an overlapping pair shrink by the same factor
-  //    d / (rA + rB), computed from the radii before this pass, so one pass clears all pairs.
-  if (muscles.size() > 1 && !spheres.empty()) {
-    const KdTree muscleTree(centres);
-    report.muscleSpheresCapped = capNearOtherMuscles(muscles, spheres, centres, muscleTree);
-    std::vector<btScalar> before(spheres.size());
-    for (size_t s = 0; s < spheres.size(); ++s) before[s] = radiusOf(spheres[s]);
-    const btScalar maxMuscle = maxOf(before);
-    for (size_t s = 0; s < spheres.size(); ++s) {
-      if (before[s] <= 0) continue;
-      muscleTree.within(centres[s], before[s] + maxMuscle, found);
-      btScalar& radius = radiusOf(spheres[s]);
-      for (const auto& [t, distance2] : found) {
-        if (spheres[t].muscle == spheres[s].muscle) continue;
-        const btScalar sum = before[s] + before[t];
-        const btScalar distance = std::sqrt(distance2);
-        if (distance < sum) radius = std::min(radius, before[s] * (distance / sum) * kClearance);
-      }
-    }
+  if (muscles.size() > 1 && !muscle.spheres.empty()) {
+    const KdTree muscleTree(muscle.centres);
+    report.muscleSpheresCapped =
+        capNearOtherMuscles(muscles, muscle.spheres, muscle.centres, muscleTree);
+    clearMuscles(muscle, muscleTree, found);
   }
-  for (size_t s = 0; s < spheres.size(); ++s) {
-    const btScalar radius = radiusOf(spheres[s]);
+  for (size_t s = 0; s < muscle.spheres.size(); ++s) {
+    const btScalar radius = muscle.radius(s);
     if (radius < original[s]) ++report.muscleSpheresShrunk;
     if (radius <= 0 && original[s] > 0) ++report.muscleSpheresZeroed;
   }

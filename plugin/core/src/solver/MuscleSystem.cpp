@@ -25,6 +25,176 @@ namespace {
 /// iliacus 3.5 % short of its volume (docs/performance.md, "What the step does for speed"). Any
 /// share from 0.05 to 1 gives hip-pelvis the same bits; 0.01 does not lift every iteration.
 constexpr btScalar kLeastStepRadiusShare = btScalar(0.1);
+
+/// `settings`, or a laid-out copy where its spring blocks (the AVX2 spring kernel reads them,
+/// and only the count of springs is checked) or its fans' byte offsets (the volume kernels read
+/// them) are not those of its springs and fans: settings made or changed by hand.
+std::shared_ptr<const MuscleSettings> laidOut(std::shared_ptr<const MuscleSettings> settings) {
+  if (fastestSpringKernel() == SpringKernel::avx2) {
+    SpringBlocks blocks = springBlocksFor(*settings);
+    if (!(blocks == settings->springBlocks)) {
+      auto copy = std::make_shared<MuscleSettings>(*settings);
+      copy->springBlocks = std::move(blocks);
+      settings = std::move(copy);
+    }
+  }
+  checkFans(*settings, "MuscleSystem::addMuscle");
+  if (std::vector<uint32_t> bytes = fanBytes(settings->fanParticles); bytes != settings->fanBytes) {
+    auto copy = std::make_shared<MuscleSettings>(*settings);
+    copy->fanBytes = std::move(bytes);
+    settings = std::move(copy);
+  }
+  return settings;
+}
+
+/// Checks a muscle's particle arrays, mass, strain limit, bone and blend indices (against
+/// `boneCount` handles), springs and boundary particles; InputError on the first fault.
+void checkMuscleArrays(const MuscleSettings& s, size_t boneCount) {
+  const char* source = "MuscleSystem::addMuscle";
+  const std::string where = "muscle '" + s.name + "'";
+  const size_t n = s.particleCount();
+  if (s.radii.size() != n || s.flags.size() != n || s.fixedBone.size() != n ||
+      s.nearestBone.size() != n)
+    throw InputError(source, where, "particle arrays differ in size");
+  if (!(s.particleMass > 0)) throw InputError(source, where, "particle mass must be > 0");
+  if (!(s.strainLimit == 0 || s.strainLimit > 1))
+    throw InputError(source, where, "strain limit must be 0 (none) or > 1");
+  const int32_t limit = static_cast<int32_t>(boneCount);
+  for (size_t i = 0; i < n; ++i) {
+    if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)
+      throw InputError(source, where,
+                       "particle " + std::to_string(i) + " refers to bone " +
+                           std::to_string(std::max(s.fixedBone[i], s.nearestBone[i])) +
+                           " but only " + std::to_string(boneCount) + " bone handles were given");
+    if (s.isFixed(static_cast<uint32_t>(i)) && s.fixedBone[i] < 0)
+      throw InputError(source, where, "fixed particle " + std::to_string(i) + " has no bone");
+  }
+  const bool blend = !s.blendWeight.empty();
+  if (blend && (s.blendWeight.size() != n || s.blendBoneA.size() != n || s.blendBoneB.size() != n))
+    throw InputError(source, where, "blend arrays differ in size from the particles");
+  for (size_t i = 0; blend && i < n; ++i)
+    if (s.blendBoneA[i] >= limit || s.blendBoneB[i] >= limit || !(s.blendWeight[i] >= 0) ||
+        !(s.blendWeight[i] <= 1))
+      throw InputError(source, where,
+                       "particle " + std::to_string(i) +
+                           " has a blend bone beyond the bone handles or a weight outside "
+                           "[0, 1]");
+  for (const Spring& spring : s.springs)
+    if (spring.a >= n || spring.b >= n)
+      throw InputError(source, where, "a spring refers to a particle beyond " + std::to_string(n));
+  for (uint32_t p : s.boundaryParticles)
+    if (p >= n) throw InputError(source, where, "boundary particle beyond the particles");
+}
+
+/// Checks that every handle is of a bone in `slots` with finite transforms (`call` names the
+/// muscle in the error).
+void checkMuscleBones(const Slots<BoneState>& slots, std::span<const BoneHandle> bones,
+                      const std::string& call) {
+  for (size_t b = 0; b < bones.size(); ++b) {
+    const BoneState* bone = slots.find(bones[b]);
+    if (!bone)
+      throw InputError(call, "bones[" + std::to_string(b) + "]",
+                       "expected a handle of a bone in this system; the handle is unknown or "
+                       "its bone was removed");
+    if (!finiteTransform(bone->current) || !finiteTransform(bone->target))
+      throw InputError(call, "bones[" + std::to_string(b) + "]",
+                       "bone '" + bone->settings->name +
+                           "' has a non-finite transform; the muscle cannot be placed on it");
+  }
+}
+
+/// A new muscle's state for `s` on `bones`: its per-particle arrays sized and zeroed, its free
+/// particles listed; not yet placed.
+std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
+                                            std::span<const BoneHandle> bones,
+                                            const SimulationParameters& parameters) {
+  const size_t n = s.particleCount();
+  auto state = std::make_unique<MuscleState>();
+  state->bones.assign(bones.begin(), bones.end());
+  state->boneSlots.assign(bones.size(), -1);
+  state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
+  state->boneDeltas.assign(bones.size(), btTransform::getIdentity());
+  state->boneDualDeltas.assign(bones.size(), dualQuaternionOf(nullptr));
+  state->positions.resize(n);
+  state->previous.resize(n);
+  state->velocities.assign(n, btVector3(0, 0, 0));
+  state->goodPositions.resize(n);
+  state->goodPrevious.resize(n);
+  state->goodVelocities.resize(n);
+  state->forces.assign(n, btVector3(0, 0, 0));
+  state->pushes.assign(n, btVector3(0, 0, 0));
+  state->pushCounts.assign(n, 0);
+  state->pushedLast.assign(n, 0);
+  state->lastPushes.assign(n, btVector3(0, 0, 0));
+  state->pushRounds.assign(n, 0);
+  state->lastBonePushes.assign(n, btVector3(0, 0, 0));
+  state->residual.assign(n, btVector3(0, 0, 0));
+  state->residualStiffness = residualStiffness(s);
+  state->pinchBones.assign(n, -1);
+  state->firstBonePushes.assign(n, btVector3(0, 0, 0));
+  state->otherBonePushes.assign(n, btVector3(0, 0, 0));
+  // Recovery follows the bones' distance fields: without them it has nothing to remember.
+  if (parameters.penetrationRecovery && parameters.boneCollision == BoneCollision::DistanceField) {
+    state->sideBones.assign(n, -1);
+    state->boneSides.assign(n, btVector3(0, 0, 0));
+    state->sideStamps.assign(n, 0);
+  }
+  for (uint32_t i = 0; i < n; ++i)
+    if (!s.isFixed(i)) state->freeParticles.push_back(i);
+  return state;
+}
+
+/// A muscle's step bounds: the mean boundary radius, each particle's r of eq 5.1, the stable
+/// time step and the springs' rest length sum.
+void setStepBounds(const MuscleSettings& s, MuscleState& state) {
+  const size_t n = s.particleCount();
+  double radiusSum = 0;
+  for (uint32_t p : s.boundaryParticles) radiusSum += s.radii[p];
+  if (!s.boundaryParticles.empty()) radiusSum /= static_cast<double>(s.boundaryParticles.size());
+  if (!(radiusSum > 0)) {
+    // No collision spheres: half the mean spring length bounds the motion per iteration.
+    double lengthSum = 0;
+    for (const Spring& spring : s.springs) lengthSum += spring.restLength;
+    radiusSum = s.springs.empty() ? 1e-3 : 0.5 * lengthSum / static_cast<double>(s.springs.size());
+  }
+  state.meanRadius = static_cast<btScalar>(radiusSum);
+  state.stepRadius.resize(n);
+  const btScalar leastStepRadius = kLeastStepRadiusShare * state.meanRadius;
+  for (uint32_t i = 0; i < n; ++i)
+    state.stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? std::max(s.radii[i], leastStepRadius)
+                                                            : state.meanRadius;
+  state.stableTimeStep = stableTimeStep(s);
+  for (const Spring& spring : s.springs) state.restLengthSum += spring.restLength;
+}
+
+/// Moves a muscle's free particles by uniform noise in ±parameters.initialNoise, seeded by the
+/// system's seed and the count of muscles added (`added`).
+void addInitialNoise(const SimulationParameters& parameters, uint32_t added, MuscleState& state) {
+  std::seed_seq seed{parameters.seed, added};
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<btScalar> noise(-parameters.initialNoise, parameters.initialNoise);
+  for (uint32_t i : state.freeParticles) {
+    const btVector3 offset(noise(random), noise(random), noise(random));
+    state.positions[i] += offset;
+    state.previous[i] = state.positions[i];
+  }
+}
+
+/// Candidate lists of a muscle just added at slot added.slot, sized from the pairs at the
+/// placed positions: with every bone, and every earlier muscle with it (a reused slot's lists
+/// were another muscle's).
+void addCandidateLists(Slots<MuscleState>& muscles, const Slots<BoneState>& bones,
+                       MuscleState& added) {
+  added.boneLists.resize(bones.states.size());
+  for (uint32_t slot : bones.order) added.boneLists[slot] = boneList(added, *bones.states[slot]);
+  added.muscleLists.resize(muscles.states.size());
+  for (uint32_t slot : muscles.order) {
+    MuscleState& earlier = *muscles.states[slot];
+    if (&earlier == &added) continue;
+    earlier.muscleLists.resize(muscles.states.size());
+    earlier.muscleLists[added.slot] = muscleList(earlier, added);
+  }
+}
 }  // namespace
 
 MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
@@ -112,150 +282,29 @@ btTransform MuscleSystem::boneTransform(BoneHandle bone) const {
 MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> settings,
                                      std::span<const BoneHandle> bones) {
   if (!settings) throw InputError("MuscleSystem::addMuscle", "", "null settings");
-  // The AVX2 spring kernel reads springBlocks, which only checks the count of springs: settings
-  // made or changed by hand (blocks not those of their springs) run on a laid-out copy.
-  if (fastestSpringKernel() == SpringKernel::avx2) {
-    SpringBlocks blocks = springBlocksFor(*settings);
-    if (!(blocks == settings->springBlocks)) {
-      auto laidOut = std::make_shared<MuscleSettings>(*settings);
-      laidOut->springBlocks = std::move(blocks);
-      settings = std::move(laidOut);
-    }
-  }
-  checkFans(*settings, "MuscleSystem::addMuscle");
-  // The volume kernels read the fans' particles as byte offsets (fanBytes): the same for those.
-  if (std::vector<uint32_t> bytes = fanBytes(settings->fanParticles); bytes != settings->fanBytes) {
-    auto laidOut = std::make_shared<MuscleSettings>(*settings);
-    laidOut->fanBytes = std::move(bytes);
-    settings = std::move(laidOut);
-  }
+  settings = laidOut(std::move(settings));
   const MuscleSettings& s = *settings;
-  const char* source = "MuscleSystem::addMuscle";
-  const std::string where = "muscle '" + s.name + "'";
-  const size_t n = s.particleCount();
-  if (s.radii.size() != n || s.flags.size() != n || s.fixedBone.size() != n ||
-      s.nearestBone.size() != n)
-    throw InputError(source, where, "particle arrays differ in size");
-  if (!(s.particleMass > 0)) throw InputError(source, where, "particle mass must be > 0");
-  if (!(s.strainLimit == 0 || s.strainLimit > 1))
-    throw InputError(source, where, "strain limit must be 0 (none) or > 1");
-  for (size_t i = 0; i < n; ++i) {
-    const int32_t limit = static_cast<int32_t>(bones.size());
-    if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)
-      throw InputError(source, where,
-                       "particle " + std::to_string(i) + " refers to bone " +
-                           std::to_string(std::max(s.fixedBone[i], s.nearestBone[i])) +
-                           " but only " + std::to_string(bones.size()) +
-                           " bone handles were given");
-    if (s.isFixed(static_cast<uint32_t>(i)) && s.fixedBone[i] < 0)
-      throw InputError(source, where, "fixed particle " + std::to_string(i) + " has no bone");
-  }
-  const bool blend = !s.blendWeight.empty();
-  if (blend && (s.blendWeight.size() != n || s.blendBoneA.size() != n || s.blendBoneB.size() != n))
-    throw InputError(source, where, "blend arrays differ in size from the particles");
-  for (size_t i = 0; blend && i < n; ++i)
-    if (s.blendBoneA[i] >= static_cast<int32_t>(bones.size()) ||
-        s.blendBoneB[i] >= static_cast<int32_t>(bones.size()) || !(s.blendWeight[i] >= 0) ||
-        !(s.blendWeight[i] <= 1))
-      throw InputError(source, where,
-                       "particle " + std::to_string(i) +
-                           " has a blend bone beyond the bone handles or a weight outside "
-                           "[0, 1]");
-  for (const Spring& spring : s.springs)
-    if (spring.a >= n || spring.b >= n)
-      throw InputError(source, where, "a spring refers to a particle beyond " + std::to_string(n));
-  const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
-  const bool skinned = !s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
-                       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount;
-  for (uint32_t p : s.boundaryParticles)
-    if (p >= n) throw InputError(source, where, "boundary particle beyond the particles");
+  checkMuscleArrays(s, bones.size());
   const std::string call = "MuscleSystem::addMuscle: muscle '" + s.name + "'";
   checkPoints(s.restPositions, call, "rest position");
   checkRadii(s.radii, call);
-  for (size_t b = 0; b < bones.size(); ++b) {
-    const BoneState* bone = impl_->bones.find(bones[b]);
-    if (!bone)
-      throw InputError(call, "bones[" + std::to_string(b) + "]",
-                       "expected a handle of a bone in this system; the handle is unknown or "
-                       "its bone was removed");
-    if (!finiteTransform(bone->current) || !finiteTransform(bone->target))
-      throw InputError(call, "bones[" + std::to_string(b) + "]",
-                       "bone '" + bone->settings->name +
-                           "' has a non-finite transform; the muscle cannot be placed on it");
-  }
+  checkMuscleBones(impl_->bones, bones, call);
 
-  auto state = std::make_unique<MuscleState>();
-  state->bones.assign(bones.begin(), bones.end());
-  state->boneSlots.assign(bones.size(), -1);
-  state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
-  state->boneDeltas.assign(bones.size(), btTransform::getIdentity());
-  state->boneDualDeltas.assign(bones.size(), dualQuaternionOf(nullptr));
-  state->positions.resize(n);
-  state->previous.resize(n);
-  state->velocities.assign(n, btVector3(0, 0, 0));
-  state->goodPositions.resize(n);
-  state->goodPrevious.resize(n);
-  state->goodVelocities.resize(n);
-  state->forces.assign(n, btVector3(0, 0, 0));
-  state->pushes.assign(n, btVector3(0, 0, 0));
-  state->pushCounts.assign(n, 0);
-  state->pushedLast.assign(n, 0);
-  state->lastPushes.assign(n, btVector3(0, 0, 0));
-  state->pushRounds.assign(n, 0);
-  state->lastBonePushes.assign(n, btVector3(0, 0, 0));
-  state->residual.assign(n, btVector3(0, 0, 0));
-  state->residualStiffness = residualStiffness(s);
-  state->pinchBones.assign(n, -1);
-  state->firstBonePushes.assign(n, btVector3(0, 0, 0));
-  state->otherBonePushes.assign(n, btVector3(0, 0, 0));
-  // Recovery follows the bones' distance fields: without them it has nothing to remember.
-  if (impl_->parameters.penetrationRecovery &&
-      impl_->parameters.boneCollision == BoneCollision::DistanceField) {
-    state->sideBones.assign(n, -1);
-    state->boneSides.assign(n, btVector3(0, 0, 0));
-    state->sideStamps.assign(n, 0);
-  }
-  for (uint32_t i = 0; i < n; ++i)
-    if (!s.isFixed(i)) state->freeParticles.push_back(i);
-
-  double radiusSum = 0;
-  for (uint32_t p : s.boundaryParticles) radiusSum += s.radii[p];
-  if (!s.boundaryParticles.empty()) radiusSum /= static_cast<double>(s.boundaryParticles.size());
-  if (!(radiusSum > 0)) {
-    // No collision spheres: half the mean spring length bounds the motion per iteration.
-    double lengthSum = 0;
-    for (const Spring& spring : s.springs) lengthSum += spring.restLength;
-    radiusSum = s.springs.empty() ? 1e-3 : 0.5 * lengthSum / static_cast<double>(s.springs.size());
-  }
-  state->meanRadius = static_cast<btScalar>(radiusSum);
-  state->stepRadius.resize(n);
-  const btScalar leastStepRadius = kLeastStepRadiusShare * state->meanRadius;
-  for (uint32_t i = 0; i < n; ++i)
-    state->stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? std::max(s.radii[i], leastStepRadius)
-                                                             : state->meanRadius;
-  state->stableTimeStep = stableTimeStep(s);
-  for (const Spring& spring : s.springs) state->restLengthSum += spring.restLength;
-
+  std::unique_ptr<MuscleState> state = newMuscleState(s, bones, impl_->parameters);
+  setStepBounds(s, *state);
   state->settings = settings;
   impl_->resolveBones(*state);
   impl_->placeAtBones(*state);
   ++impl_->musclesAdded;
-  if (impl_->parameters.initialNoise > 0) {
-    std::seed_seq seed{impl_->parameters.seed, impl_->musclesAdded};
-    std::mt19937 random(seed);
-    std::uniform_real_distribution<btScalar> noise(-impl_->parameters.initialNoise,
-                                                   impl_->parameters.initialNoise);
-    for (uint32_t i : state->freeParticles) {
-      const btVector3 offset(noise(random), noise(random), noise(random));
-      state->positions[i] += offset;
-      state->previous[i] = state->positions[i];
-    }
-  }
+  if (impl_->parameters.initialNoise > 0)
+    addInitialNoise(impl_->parameters, impl_->musclesAdded, *state);
   // Before the tree: btDbvt's build breaks on non-finite or huge bounds.
   checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
   buildTree(*state, impl_->parameters.rebuildEveryStep);
   ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
-  if (skinned) {
+  const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
+  if (!s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
+      s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount) {
     state->surface.resize(s.restSurface.vertices.size());
     prepareSkinFrames(s, state->skin);
     impl_->deform(*state);
@@ -268,18 +317,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   MuscleState& added = *state;
   const MuscleHandle handle = impl_->muscles.add<MuscleHandle>(std::move(state));
   added.slot = handle.index;
-  // Candidate lists, sized from the pairs at the placed positions: with every bone, and every
-  // earlier muscle with this one (a reused slot's lists were another muscle's).
-  added.boneLists.resize(impl_->bones.states.size());
-  for (uint32_t slot : impl_->bones.order)
-    added.boneLists[slot] = boneList(added, *impl_->bones.states[slot]);
-  added.muscleLists.resize(impl_->muscles.states.size());
-  for (uint32_t slot : impl_->muscles.order) {
-    MuscleState& earlier = *impl_->muscles.states[slot];
-    if (&earlier == &added) continue;
-    earlier.muscleLists.resize(impl_->muscles.states.size());
-    earlier.muscleLists[added.slot] = muscleList(earlier, added);
-  }
+  addCandidateLists(impl_->muscles, impl_->bones, added);
   impl_->prepareWorkers();  // threads and their scratch start here, not in step()
   return handle;
 }

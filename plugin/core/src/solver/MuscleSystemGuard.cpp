@@ -114,6 +114,102 @@ void restoreGoodState(MuscleState& muscle) {
   forgetBoneSides(muscle);
 }
 
+namespace {
+
+/// What the guard did over the attempts of one step.
+struct GuardOutcome {
+  StepTiming spent;           ///< the attempts' timings summed [ms]
+  int iterations = 0;         ///< the attempts' iterations summed
+  int retries = 0;            ///< attempts repeated with a smaller dt
+  size_t newlyFrozen = 0;     ///< muscles frozen in this step
+  MuscleHandle failedMuscle;  ///< the first muscle blamed
+  bool failedNan = false;     ///< it had NaN/inf
+  bool rolledBack = false;    ///< some attempt was rolled back
+  bool failed = false;        ///< a failure left in place (Report)
+};
+
+/// Saves the state a step changes: every muscle's (frozen ones too, carried with their bones
+/// every step) when `muscleState`, and always the bones' transforms (their motion over the step
+/// carries the frozen muscles).
+void saveStepStart(Slots<MuscleState>& muscles, Slots<BoneState>& bones, bool muscleState) {
+  if (muscleState)
+    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot]);
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.goodLast = bone.last;
+    bone.goodCurrent = bone.current;
+  }
+}
+
+/// Back to the start of the step: every muscle, frozen ones included (theirs is unchanged),
+/// and the bones with their sphere trees.
+void rollBackStep(Slots<MuscleState>& muscles, Slots<BoneState>& bones) {
+  for (uint32_t slot : muscles.order) restoreGoodState(*muscles.states[slot]);
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.last = bone.goodLast;
+    bone.current = bone.goodCurrent;
+    bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
+  }
+}
+
+/// Attribution after a failed attempt: which muscles failed (frozen ones are out of the step and
+/// of the blame), each counted in its failures, the first in `outcome`, each frozen when
+/// `freeze`. A muscle torn by bones closing on it is kept. Returns how many were blamed.
+size_t blameMuscles(Slots<MuscleState>& muscles, bool freeze, GuardOutcome& outcome) {
+  size_t blamed = 0;
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    if (state.frozen) continue;
+    const MuscleHealth health = checkMuscle(state);
+    if (!health.failed()) continue;
+    if (!health.nan && !health.spread) {
+      // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
+      // Caught in any response of the step, or held since: the bones that tore it carry its
+      // halves on apart after the trap opens, so its tear may grow until they stand still.
+      const bool held = state.trapHeld &&
+                        double(health.explodedSprings) <= kTearGrowth * double(state.tornSprings);
+      if (state.pinchedInStep > 0 || held) {
+        state.tornSprings = std::max(state.tornSprings, health.explodedSprings);
+        continue;
+      }
+      // What a trap tore stays torn once the bones let go: only more burst springs fail.
+      if (health.explodedSprings <= state.tornSprings) continue;
+    }
+    ++state.failures.attempts;
+    state.failures.nan += health.nan ? 1 : 0;
+    if (blamed++ == 0) {
+      outcome.failedMuscle = {slot, muscles.generations[slot]};
+      outcome.failedNan = health.nan;
+    }
+    if (freeze) {
+      state.frozen = true;
+      ++outcome.newlyFrozen;
+    }
+  }
+  return blamed;
+}
+
+/// The step's stats from the guard's outcome: `heldBones` given a NaN/inf transform held their
+/// own (reported as NaN, the muscles stay finite), `frozen` muscles, the trapped ones.
+void guardStats(const GuardOutcome& outcome, size_t heldBones, size_t frozen,
+                size_t trappedParticles, size_t trappedMuscles, StepStats& stats) {
+  stats.iterations = outcome.iterations;
+  stats.heldBones = heldBones;
+  stats.nan = stats.nan || heldBones > 0;
+  stats.failedNan = outcome.failedNan || heldBones > 0;
+  stats.failed = outcome.failed || heldBones > 0;
+  stats.rolledBack = outcome.rolledBack;
+  stats.retries = outcome.retries;
+  stats.failedMuscle = outcome.failedMuscle;
+  stats.newlyFrozen = outcome.newlyFrozen;
+  stats.frozenMuscles = frozen;
+  stats.trappedParticles = trappedParticles;
+  stats.trappedMuscles = trappedMuscles;
+}
+
+}  // namespace
+
 StepSize MuscleSystem::Impl::stepSize(int halvings) const {
   if (!(duration > 0)) return smallerSteps(parameters, halvings);
   // k = max(iterations, ⌈duration / dt⌉) iterations of duration / k, dt the smaller of
@@ -140,39 +236,20 @@ void MuscleSystem::Impl::guardedStep() {
   const uint64_t number = stepCount++;
   const FailurePolicy policy = parameters.onFailure;
   const bool rollback = policy != FailurePolicy::Report;
-  // Frozen muscles too: carried with their bones every step, a rollback restores them as well.
-  if (rollback)
-    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot]);
-  // Always: the bones' motion over the step carries the frozen muscles.
-  for (uint32_t slot : bones.order) {
-    BoneState& bone = *bones.states[slot];
-    bone.goodLast = bone.last;
-    bone.goodCurrent = bone.current;
-  }
+  saveStepStart(muscles, bones, rollback);
   const btScalar goodPreviousDt = previousDt;
   StepSize size = stepSize(0);
 
-  StepTiming spent;
-  int iterations = 0, retries = 0;
-  size_t newlyFrozen = 0;
-  MuscleHandle failedMuscle;
-  bool failedNan = false, rolledBack = false, failed = false;
-  // Back to the start of the step; every muscle, frozen ones included (theirs is unchanged).
+  GuardOutcome outcome;
   const auto rollBack = [&] {
-    for (uint32_t slot : muscles.order) restoreGoodState(*muscles.states[slot]);
-    for (uint32_t slot : bones.order) {
-      BoneState& bone = *bones.states[slot];
-      bone.last = bone.goodLast;
-      bone.current = bone.goodCurrent;
-      bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
-    }
+    rollBackStep(muscles, bones);
     previousDt = goodPreviousDt;
-    rolledBack = true;
+    outcome.rolledBack = true;
   };
   while (true) {
     step(size);
-    add(spent, stats.timing);
-    iterations += stats.iterations;
+    add(outcome.spent, stats.timing);
+    outcome.iterations += stats.iterations;
     if (!stats.nan && !stats.exploded) break;
     if (stats.interrupted && rollback) {
       rollBack();
@@ -180,49 +257,16 @@ void MuscleSystem::Impl::guardedStep() {
       stats.nan = stats.exploded = false;
       break;
     }
-
-    // Attribution: which muscles failed (frozen ones are out of the step and of the blame).
-    const bool retry =
-        policy == FailurePolicy::Retry && retries < std::min(parameters.maxRetries, kMaxHalvings);
-    size_t blamed = 0;
-    for (uint32_t slot : muscles.order) {
-      MuscleState& state = *muscles.states[slot];
-      if (state.frozen) continue;
-      const MuscleHealth health = checkMuscle(state);
-      if (!health.failed()) continue;
-      if (!health.nan && !health.spread) {
-        // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
-        // Caught in any response of the step, or held since: the bones that tore it carry its
-        // halves on apart after the trap opens, so its tear may grow until they stand still.
-        const bool held = state.trapHeld &&
-                          double(health.explodedSprings) <= kTearGrowth * double(state.tornSprings);
-        if (state.pinchedInStep > 0 || held) {
-          state.tornSprings = std::max(state.tornSprings, health.explodedSprings);
-          continue;
-        }
-        // What a trap tore stays torn once the bones let go: only more burst springs fail.
-        if (health.explodedSprings <= state.tornSprings) continue;
-      }
-      ++state.failures.attempts;
-      state.failures.nan += health.nan ? 1 : 0;
-      if (blamed++ == 0) {
-        failedMuscle = {slot, muscles.generations[slot]};
-        failedNan = health.nan;
-      }
-      if (rollback && !retry) {
-        state.frozen = true;
-        ++newlyFrozen;
-      }
-    }
+    const bool retry = policy == FailurePolicy::Retry &&
+                       outcome.retries < std::min(parameters.maxRetries, kMaxHalvings);
     // Flagged, but no muscle fails the check (only tiny springs beyond 3×): the state is good.
-    if (blamed == 0) break;
+    if (blameMuscles(muscles, rollback && !retry, outcome) == 0) break;
     if (!rollback) {
-      failed = true;
+      outcome.failed = true;
       break;
     }
-
     rollBack();
-    size = stepSize(retry ? ++retries : 0);
+    size = stepSize(retry ? ++outcome.retries : 0);
   }
 
   // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
@@ -263,22 +307,10 @@ void MuscleSystem::Impl::guardedStep() {
     state.trapHeld = state.pinchedInStep > 0 || (state.trapHeld && bonesMoved);
     trappedMuscles += state.pinched > 0 ? 1 : 0;
   }
-  stats.timing = spent;
+  stats.timing = outcome.spent;
   stats.timing.total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-  stats.iterations = iterations;
   stats.step = number;
-  // A bone given a NaN/inf transform held its own: reported as NaN, the muscles stay finite.
-  stats.heldBones = heldBones;
-  stats.nan = stats.nan || heldBones > 0;
-  stats.failedNan = failedNan || heldBones > 0;
-  stats.failed = failed || heldBones > 0;
-  stats.rolledBack = rolledBack;
-  stats.retries = retries;
-  stats.failedMuscle = failedMuscle;
-  stats.newlyFrozen = newlyFrozen;
-  stats.frozenMuscles = frozen;
-  stats.trappedParticles = trappedParticles;
-  stats.trappedMuscles = trappedMuscles;
+  guardStats(outcome, heldBones, frozen, trappedParticles, trappedMuscles, stats);
   stats.shortened = size.shortened;
 }
 
