@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 
 #include "fibremss/FibreRun.h"
@@ -62,6 +63,35 @@ TEST(MuscleMetrics, MeasuresOfAKnownStretch) {
   std::vector<btVector3> broken = positions;
   broken[5].setY(std::nan(""));
   EXPECT_FALSE(measureMuscle(*muscle, broken, surface, bones, rest).finite);
+}
+
+// Tendon and belly strain apart, exact: the grid muscle with a tendon particle next to each fixed
+// layer (x = ±8 mm), so each fibre's end segments are tendon and its four middle ones belly.
+TEST(MuscleMetrics, TendonAndBellyStrainOfKnownStretches) {
+  auto muscle = std::make_shared<MuscleSettings>(*testing::gridMuscle());
+  for (uint32_t p = 0; p < muscle->particleCount(); ++p)
+    if (p % 7 == 1 || p % 7 == 5) muscle->flags[p] |= kTendon;
+  const auto measure = [&](auto move) {
+    std::vector<btVector3> x = muscle->restPositions;
+    for (btVector3& p : x) p.setX(move(p.x()));
+    return measureMuscle(*muscle, x, muscle->restSurface.vertices, {}, {});
+  };
+  // A uniform stretch: the tendons' strain is the belly's.
+  const MuscleStep uniform = measure([](btScalar x) { return x * btScalar(1.5); });
+  EXPECT_NEAR(uniform.bellyStrain, 0.5, 1e-5);
+  EXPECT_NEAR(uniform.tendonStrain, 0.5, 1e-5);
+  // The belly alone 1.25× (x = ±8 → ±10 mm), the tendons moved with their ends.
+  const MuscleStep belly = measure([](btScalar x) {
+    const btScalar end = btScalar(0.0081);
+    return std::abs(x) < end ? x * btScalar(1.25) : x + std::copysign(btScalar(0.002), x);
+  });
+  EXPECT_NEAR(belly.bellyStrain, 0.25, 1e-5);
+  EXPECT_NEAR(belly.tendonStrain, 0.0, 1e-5);
+  EXPECT_NEAR(belly.maxTendonStretch, 1.0, 1e-5);
+  // Without tendon particles every segment is the belly's.
+  EXPECT_TRUE(std::isnan(measureMuscle(*testing::gridMuscle(), muscle->restPositions,
+                                       muscle->restSurface.vertices, {}, {})
+                             .tendonStrain));
 }
 
 TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
@@ -128,6 +158,8 @@ TEST(MuscleMetrics, SeriesCsvAndJsonCarryEveryRow) {
   a.measures.maxBellyStretch = 1.0625;
   a.measures.maxTendonStretch = 1.015;
   a.measures.sphereDepthMm = 0.5;
+  a.measures.bellyStrain = 0.0625;
+  a.measures.tendonStrain = 0.005;
   SeriesRow b = a;
   b.muscle = "vastus";
   b.measures = MuscleStep{};  // a step not measured (NaN): its fields left empty
@@ -136,10 +168,11 @@ TEST(MuscleMetrics, SeriesCsvAndJsonCarryEveryRow) {
       seriesCsv({a, b}),
       "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
       "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
-      "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm\n"
+      "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm,belly_strain,"
+      "tendon_strain\n"
       "3,2,22.5,0.125,\"rectus, femoris\",-1.25,101.5,1.0625,2.25,7,41,0.015,0.25,1.0625,1.015,"
-      "0.5\n"
-      "3,2,22.5,0.125,vastus,,,,,0,41,,,,,\n");
+      "0.5,0.0625,0.005\n"
+      "3,2,22.5,0.125,vastus,,,,,0,41,,,,,,,\n");
   const nlohmann::json json = seriesJson({a, b});
   ASSERT_EQ(json.size(), 2u);
   EXPECT_EQ(json[0].at("max_penetration_mm"), 2.25);

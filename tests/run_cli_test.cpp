@@ -158,7 +158,8 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   EXPECT_EQ(line,
             "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
             "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
-            "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm");
+            "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm,"
+            "belly_strain,tendon_strain");
   const nlohmann::json& series = summary.at("series");
   ASSERT_EQ(series.size(), 2 * summary.at("muscles").size());
   for (size_t row = 0; row < series.size(); ++row) {
@@ -166,7 +167,8 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     std::vector<std::string> fields;
     std::stringstream split(line);
     for (std::string field; std::getline(split, field, ',');) fields.push_back(field);
-    ASSERT_EQ(fields.size(), 16u) << line;
+    if (line.back() == ',') fields.emplace_back();  // getline drops a last empty field
+    ASSERT_EQ(fields.size(), 18u) << line;
     const nlohmann::json& json = series[row];
     EXPECT_EQ(std::stoi(fields[0]), json.at("step").get<int>());
     EXPECT_NEAR(std::stod(fields[3]), times[size_t(json.at("step").get<int>())], 1e-9);
@@ -177,6 +179,10 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     // The force residual: measured at every step, the largest at least the RMS.
     EXPECT_NEAR(std::stod(fields[11]), json.at("residual_rms_mm").get<double>(), 1e-6);
     EXPECT_GE(std::stod(fields[12]), std::stod(fields[11]));
+    // fusiform declares no tendon: the belly is every fibre segment, the tendon's strain empty.
+    EXPECT_NEAR(std::stod(fields[16]), json.at("belly_strain").get<double>(), 1e-6);
+    EXPECT_EQ(fields[17], "");
+    EXPECT_TRUE(json.at("tendon_strain").is_null());
   }
   EXPECT_FALSE(std::getline(csv, line));
 }

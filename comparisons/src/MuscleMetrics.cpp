@@ -38,24 +38,39 @@ std::string perBone(const std::vector<std::string>& bones, const std::vector<Val
   return text.empty() ? "none" : text;
 }
 
-/// Largest current / rest length of the muscle's fibre segments in its belly and in its tendons
-/// (NaN where it has none).
-void maxFibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions,
-                     MuscleStep& step) {
+/// Σ current and Σ rest length of one region's fibre segments [m].
+struct RegionLength {
+  double current = 0;  ///< Σ l [m]
+  double rest = 0;     ///< Σ L0 [m]
+
+  /// Σl / ΣL0 − 1, NaN for a region without segments.
+  double strain() const { return rest > 0 ? current / rest - 1 : MuscleStep::kNone; }
+};
+
+/// Largest current / rest length of the muscle's fibre segments in its belly and in its tendons,
+/// and each region's strain (NaN where it has none).
+void fibreStretch(const MuscleSettings& muscle, std::span<const btVector3> positions,
+                  MuscleStep& step) {
   const auto inTendon = [&](uint32_t p) { return muscle.flags[p] & (kTendon | kFixed); };
+  RegionLength belly, tendon;
   for (size_t f = 0; f < muscle.fibreCount(); ++f)
     for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k) {
       const uint32_t a = muscle.fibreParticles[k - 1], b = muscle.fibreParticles[k];
       const double rest = muscle.restPositions[a].distance(muscle.restPositions[b]);
-      const double ratio = rest > 0 ? positions[a].distance(positions[b]) / rest : 1.0;
-      double& stretch = inTendon(a) && inTendon(b) && !(muscle.isFixed(a) && muscle.isFixed(b))
-                            ? step.maxTendonStretch
-                            : step.maxBellyStretch;
+      const double length = positions[a].distance(positions[b]);
+      const double ratio = rest > 0 ? length / rest : 1.0;
+      const bool isTendon = inTendon(a) && inTendon(b) && !(muscle.isFixed(a) && muscle.isFixed(b));
+      double& stretch = isTendon ? step.maxTendonStretch : step.maxBellyStretch;
       if (!(ratio <= stretch)) stretch = ratio;
+      RegionLength& region = isTendon ? tendon : belly;
+      region.current += length;
+      region.rest += rest;
     }
   step.maxFibreStretch = std::isnan(step.maxTendonStretch)
                              ? step.maxBellyStretch
                              : std::max(step.maxBellyStretch, step.maxTendonStretch);
+  step.bellyStrain = belly.strain();
+  step.tendonStrain = tendon.strain();
 }
 
 /// "1.25", or "–" for NaN (not measured, or nothing to measure).
@@ -100,7 +115,8 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
   std::string csv =
       "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
       "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
-      "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm\n";
+      "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm,belly_strain,"
+      "tendon_strain\n";
   for (const SeriesRow& row : rows) {
     const MuscleStep& m = row.measures;
     csv += std::to_string(row.step) + "," + std::to_string(row.pose) + "," +
@@ -111,7 +127,7 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
            "," + std::to_string(row.solverContacts) + "," + csvNumber(m.residualRmsMm, "%.6g") +
            "," + csvNumber(m.residualMaxMm, "%.6g") + "," + csvNumber(m.maxBellyStretch, "%.6g") +
            "," + csvNumber(m.maxTendonStretch, "%.6g") + "," + csvNumber(m.sphereDepthMm, "%.6g") +
-           "\n";
+           "," + csvNumber(m.bellyStrain, "%.6g") + "," + csvNumber(m.tendonStrain, "%.6g") + "\n";
   }
   return csv;
 }
@@ -135,7 +151,9 @@ nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
                      {"residual_max_mm", number(m.residualMaxMm)},
                      {"max_belly_stretch", number(m.maxBellyStretch)},
                      {"max_tendon_stretch", number(m.maxTendonStretch)},
-                     {"max_sphere_depth_mm", number(m.sphereDepthMm)}});
+                     {"max_sphere_depth_mm", number(m.sphereDepthMm)},
+                     {"belly_strain", number(m.bellyStrain)},
+                     {"tendon_strain", number(m.tendonStrain)}});
   }
   return array;
 }
@@ -164,6 +182,8 @@ std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
     m.maxBellyStretch = numberAt(o, "max_belly_stretch", m.maxBellyStretch);
     m.maxTendonStretch = numberAt(o, "max_tendon_stretch", m.maxTendonStretch);
     m.sphereDepthMm = numberAt(o, "max_sphere_depth_mm", m.sphereDepthMm);
+    m.bellyStrain = numberAt(o, "belly_strain", m.bellyStrain);
+    m.tendonStrain = numberAt(o, "tendon_strain", m.tendonStrain);
     rows.push_back(std::move(row));
   }
   return rows;
@@ -183,7 +203,7 @@ MuscleStep measureMuscle(const MuscleSettings& muscle, std::span<const btVector3
           measurePenetration(surface, bones.subspan(b, 1), boneTransforms.subspan(b, 1)).maxMm);
   }
   step.meanFibreLengthMm = 1000.0 * meanFibreLength(muscle, positions);
-  maxFibreStretch(muscle, positions, step);
+  fibreStretch(muscle, positions, step);
   if (!muscle.springs.empty()) {
     step.worstSpringRatio = worstSpringRatio(muscle.springs, positions);
     step.springDeviationRatio = springDeviationRatio(muscle.springs, positions);
@@ -217,6 +237,8 @@ void MuscleResults::add(int step, const MuscleStep& measures) {
   worstSpringRatio = largest(worstSpringRatio, measures.worstSpringRatio);
   worstBellyStretch = largest(worstBellyStretch, measures.maxBellyStretch);
   worstTendonStretch = largest(worstTendonStretch, measures.maxTendonStretch);
+  worstBellyStrain = largest(worstBellyStrain, measures.bellyStrain);
+  worstTendonStrain = largest(worstTendonStrain, measures.tendonStrain);
   springDeviationRatio = measures.springDeviationRatio;
 }
 
@@ -246,6 +268,8 @@ nlohmann::json toJson(const MuscleResults& r) {
           {"worst_spring_ratio", number(r.worstSpringRatio)},
           {"worst_fibre_stretch",
            {{"belly", number(r.worstBellyStretch)}, {"tendon", number(r.worstTendonStretch)}}},
+          {"worst_fibre_strain",
+           {{"belly", number(r.worstBellyStrain)}, {"tendon", number(r.worstTendonStrain)}}},
           {"spring_deviation_ratio", number(r.springDeviationRatio)},
           {"last_step", r.lastStep}};
 }
@@ -282,6 +306,10 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
     r.worstBellyStretch = numberAt(*s, "belly", r.worstBellyStretch);
     r.worstTendonStretch = numberAt(*s, "tendon", r.worstTendonStretch);
   }
+  if (auto s = o.find("worst_fibre_strain"); s != o.end() && s->is_object()) {
+    r.worstBellyStrain = numberAt(*s, "belly", r.worstBellyStrain);
+    r.worstTendonStrain = numberAt(*s, "tendon", r.worstTendonStrain);
+  }
   r.lastStep = o.value("last_step", r.lastStep);
   return r;
 }
@@ -291,23 +319,24 @@ std::string muscleTable(const std::vector<MuscleResults>& muscles) {
       "| muscle | volume last % | volume worst % (step) | max penetration mm | max sphere depth mm "
       "| fixed particles | "
       "mean fibre mm rest / last / min / max | worst spring l/L0 | worst fibre stretch belly / "
-      "tendon | rollbacks | frozen |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|\n";
+      "tendon | worst fibre strain % belly / tendon | rollbacks | frozen |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   char line[512];
   for (const MuscleResults& m : muscles) {
     const std::string frozen =
         m.frozen ? "at step " + std::to_string(m.frozenStep) + " (" + m.frozenCause + ")" : "no";
     std::snprintf(
         line, sizeof line,
-        "| %s | %.2f | %.2f (%d) | %s | %s | %s | %.1f / %.1f / %.1f / %.1f | %.2f | %s / %s | %d "
-        "| %s |\n",
+        "| %s | %.2f | %.2f (%d) | %s | %s | %s | %.1f / %.1f / %.1f / %.1f | %.2f | %s / %s | "
+        "%s / %s | %d | %s |\n",
         m.name.c_str(), m.volumeChangePct, m.worstVolumeChangePct, m.worstVolumeStep,
         perBone(m.bones, m.maxPenetrationMm, "%.2f", -1.0).c_str(),
         twoDecimals(m.maxSphereDepthMm).c_str(),
         perBone(m.bones, m.fixedParticles, "%zu", size_t(0)).c_str(), m.fibreLengthRestMm,
         m.fibreLengthLastMm, m.fibreLengthMinMm, m.fibreLengthMaxMm, m.worstSpringRatio,
         twoDecimals(m.worstBellyStretch).c_str(), twoDecimals(m.worstTendonStretch).c_str(),
-        m.rollbacks, frozen.c_str());
+        twoDecimals(100 * m.worstBellyStrain).c_str(),
+        twoDecimals(100 * m.worstTendonStrain).c_str(), m.rollbacks, frozen.c_str());
     table += line;
   }
   return table;

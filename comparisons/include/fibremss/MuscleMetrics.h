@@ -29,6 +29,10 @@ struct MuscleStep {
   double maxBellyStretch = kNone;
   /// largest l / L0 of its fibre segments in a tendon (both ends tendon or fixed; NaN: none)
   double maxTendonStretch = kNone;
+  /// strain of its belly's fibre segments: Σl / ΣL0 − 1 over them [1]
+  double bellyStrain = kNone;
+  /// strain of its tendons' fibre segments (as maxTendonStretch's; NaN: none) [1]
+  double tendonStrain = kNone;
   /// Its free boundary particles whose collision sphere reaches into a bone's true mesh (filled
   /// by runFibreMSS from its sphere test; measureMuscle leaves 0).
   size_t boneContacts = 0;
@@ -94,6 +98,8 @@ struct MuscleResults {
   double worstSpringRatio = kNone;       ///< largest l / L0 over the finite steps
   double worstBellyStretch = kNone;      ///< largest MuscleStep::maxBellyStretch over them
   double worstTendonStretch = kNone;     ///< largest MuscleStep::maxTendonStretch over them
+  double worstBellyStrain = kNone;       ///< largest MuscleStep::bellyStrain over them [1]
+  double worstTendonStrain = kNone;      ///< largest MuscleStep::tendonStrain over them [1]
   double springDeviationRatio = kNone;   ///< Σ|l − L0| / ΣL0 at the last finite step
   int lastStep = -1;                     ///< the last finite step measured (-1: none)
 
@@ -109,7 +115,7 @@ nlohmann::json toJson(const MuscleResults& results);
 MuscleResults muscleResultsFromJson(const nlohmann::json& object);
 
 /// The muscles as a Markdown table: volume change (last and worst), penetration and fixed
-/// particles per bone, mean fibre length, worst spring, worst belly and tendon stretch,
+/// particles per bone, mean fibre length, worst spring, worst belly and tendon stretch and strain,
 /// rollbacks, frozen.
 std::string muscleTable(const std::vector<MuscleResults>& muscles);
 

@@ -1,8 +1,10 @@
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "MuscleState.h"
@@ -28,13 +30,14 @@ struct RunSum {
 };
 
 /// One spring at a time, for every build (the tail of the SSE loop, and double precision).
-void addSpring(const Spring& spring, const btVector3* x, btVector3* f, RunSum& run,
-               double& deviation, size_t& overstretched) {
+void addSpring(const Spring& spring, const btVector3* x, btVector3* f, RunSum& run, btScalar watch,
+               SpringForceResult& result) {
   const btVector3 d = x[spring.b] - x[spring.a];
   const btScalar length = d.length();
   const btScalar stretch = length - spring.restLength;
-  deviation += std::fabs(stretch);
-  if (!(stretch <= 2 * spring.restLength)) ++overstretched;
+  result.deviation += std::fabs(stretch);
+  if (!(stretch <= 2 * spring.restLength)) ++result.overstretched;
+  if (length > watch * spring.restLength) ++result.nearLimit;
   const btVector3 force = d * (length > 0 ? spring.stiffness * stretch / length : 0);
   if (spring.a != run.particle) {
     f[run.particle] += run.sum;
@@ -65,9 +68,10 @@ void store(btVector3& v, __m128 value) {
 
 /// Springs [0, count), count a multiple of 4, four at a time: vectors transposed into x, y, z
 /// lanes for the lengths, square roots and divisions, the forces transposed back (w = 0) for
-/// the scatter. Returns Σ|l − L0| in float lanes.
+/// the scatter; springs longer than `watch` times their rest length counted in result.nearLimit.
+/// Returns Σ|l − L0| in float lanes.
 __m128 addSpringsSse(const Spring* springs, size_t count, const btVector3* x, btVector3* f,
-                     SseRunSum& run, size_t& overstretched) {
+                     SseRunSum& run, __m128 watch, SpringForceResult& result) {
   const __m128 absolute = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
   const __m128 zero = _mm_setzero_ps();
   __m128 deviation = zero;
@@ -93,9 +97,9 @@ __m128 addSpringsSse(const Spring* springs, size_t count, const btVector3* x, bt
     deviation = _mm_add_ps(deviation, _mm_and_ps(stretch, absolute));
     // Not (stretch ≤ 2·L0): beyond 3× the rest length, or NaN.
     const int beyond = _mm_movemask_ps(_mm_cmpnle_ps(stretch, _mm_add_ps(restLength, restLength)));
-    if (beyond)  // rare: count the four mask bits
-      overstretched += static_cast<size_t>((beyond & 1) + (beyond >> 1 & 1) + (beyond >> 2 & 1) +
-                                           (beyond >> 3 & 1));
+    if (beyond) result.overstretched += std::popcount(static_cast<unsigned>(beyond));  // rare
+    const int near = _mm_movemask_ps(_mm_cmpgt_ps(length, _mm_mul_ps(watch, restLength)));
+    if (near) result.nearLimit += std::popcount(static_cast<unsigned>(near));
     // k·(l − L0)/l, 0 for coincident ends (0/0 masked).
     const __m128 factor =
         _mm_and_ps(_mm_div_ps(_mm_mul_ps(stiffness, stretch), length), _mm_cmpgt_ps(length, zero));
@@ -135,12 +139,13 @@ double laneSum(__m128 lanes) {
 /// SSE2 groups of four springs from the start: returns how many springs it took; `tail` holds
 /// the run it leaves open.
 size_t sse2Springs(const Spring* springs, size_t count, const btVector3* x, btVector3* f,
-                   RunSum& tail, SpringForceResult& result) {
+                   RunSum& tail, btScalar watch, SpringForceResult& result) {
   SseRunSum run{springs[0].a, _mm_setzero_ps()};
   const size_t groups = count & ~size_t{3};
   for (size_t s = 0; s < groups; s += kDeviationBlock) {
     const size_t n = std::min(kDeviationBlock, groups - s);
-    result.deviation += laneSum(addSpringsSse(springs + s, n, x, f, run, result.overstretched));
+    result.deviation +=
+        laneSum(addSpringsSse(springs + s, n, x, f, run, _mm_set1_ps(watch), result));
   }
   btVector3 sum;
   store(sum, run.sum);
@@ -187,9 +192,11 @@ struct BlockArrays {
 /// and 2g + 1 in the low and high halves (lane r of block h in lane r of half h of every row). A
 /// block shares one a, so its x[a] is one load and the force on a one sum of four rows, added to
 /// f[a] after the group's scatter to f[b]: no transposes of spring records, no branch on where
-/// runs end. Returns Σ|l − L0| in float lanes.
+/// runs end. Springs longer than `watch` times their rest length are counted in result.nearLimit
+/// (padding lanes, of length and rest length 0, never). Returns Σ|l − L0| in float lanes.
 FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_t count,
-                                         const btVector3* x, btVector3* f, size_t& overstretched) {
+                                         const btVector3* x, btVector3* f, __m256 watch,
+                                         SpringForceResult& result) {
   const __m256 absolute = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
   const __m256 zero = _mm256_setzero_ps();
   __m256 deviation = zero;
@@ -212,7 +219,10 @@ FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_
     // Not (stretch ≤ 2·L0): beyond 3× the rest length, or NaN.
     const int beyond = _mm256_movemask_ps(
         _mm256_cmp_ps(stretch, _mm256_add_ps(restLength, restLength), _CMP_NLE_UQ));
-    if (beyond) overstretched += overstretchedSprings(beyond, blocks.a + s / 4, b);
+    if (beyond) result.overstretched += overstretchedSprings(beyond, blocks.a + s / 4, b);
+    const int near =
+        _mm256_movemask_ps(_mm256_cmp_ps(length, _mm256_mul_ps(watch, restLength), _CMP_GT_OQ));
+    if (near) result.nearLimit += std::popcount(static_cast<unsigned>(near));
     // −k·(l − L0)/l, 0 for coincident ends (0/0 masked) and padding lanes: the force on b, so
     // that its scatter is an add with the load folded in (x − y is x + (−y), bit for bit).
     const __m256 factor =
@@ -238,12 +248,13 @@ FIBREMSS_AVX2 __m256 addSpringBlocksAvx2(BlockArrays blocks, size_t first, size_
 /// The spring blocks' lanes [begin, end) on AVX2 (settings.springBlocks, laid out for these
 /// springs; begin and end multiples of 8).
 FIBREMSS_AVX2 void avx2Springs(const SpringBlocks& blocks, size_t begin, size_t end,
-                               const btVector3* x, btVector3* f, SpringForceResult& result) {
+                               const btVector3* x, btVector3* f, btScalar watch,
+                               SpringForceResult& result) {
   const BlockArrays arrays{blocks.a.data(), blocks.b.data(), blocks.restLength.data(),
                            blocks.stiffness.data()};
   for (size_t s = begin; s < end; s += kDeviationBlock) {
     const __m256 sums = addSpringBlocksAvx2(arrays, s, std::min(kDeviationBlock, end - s), x, f,
-                                            result.overstretched);
+                                            _mm256_set1_ps(watch), result);
     result.deviation +=
         laneSum(_mm256_castps256_ps128(sums)) + laneSum(_mm256_extractf128_ps(sums, 1));
   }
@@ -382,9 +393,11 @@ SpringForceResult addSpringForces(const MuscleSettings& settings,
   SpringForceResult result;
   if (begin >= end) return result;
   kernel = springLayoutKernel(settings, kernel);
+  const btScalar watch = settings.strainLimit > 0 ? kStrainWatch * settings.strainLimit
+                                                  : std::numeric_limits<btScalar>::infinity();
 #if FIBREMSS_AVX2_SPRINGS
   if (kernel == SpringKernel::avx2) {
-    avx2Springs(settings.springBlocks, begin, end, x, f, result);
+    avx2Springs(settings.springBlocks, begin, end, x, f, watch, result);
     result.exploded = result.overstretched > 0;
     return result;
   }
@@ -394,9 +407,9 @@ SpringForceResult addSpringForces(const MuscleSettings& settings,
   RunSum tail{springs[0].a, btVector3(0, 0, 0)};
   size_t s = 0;
 #if FIBREMSS_SSE_SPRINGS
-  if (kernel == SpringKernel::sse2) s = sse2Springs(springs, count, x, f, tail, result);
+  if (kernel == SpringKernel::sse2) s = sse2Springs(springs, count, x, f, tail, watch, result);
 #endif
-  for (; s < count; ++s) addSpring(springs[s], x, f, tail, result.deviation, result.overstretched);
+  for (; s < count; ++s) addSpring(springs[s], x, f, tail, watch, result);
   f[tail.particle] += tail.sum;
   result.exploded = result.overstretched > 0;
   return result;

@@ -449,6 +449,7 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
     }
     result.forces.deviation += state.chunkSprings[c].deviation;
     result.forces.overstretched += state.chunkSprings[c].overstretched;
+    result.forces.nearLimit += state.chunkSprings[c].nearLimit;
     result.forcesMs += state.chunkMs[c];
     result.volumeMs += state.chunkVolumeMs[c];
   }
@@ -513,10 +514,12 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
     const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
-    // The iteration's displacement is the projection's end's when it moved particles: at a
-    // limited equilibrium the two cancel, as the stop rules expect.
-    result.displacement = limitStrain(state, kIterationStrainPasses) > 0 ? freeDisplacement(state)
-                                                                         : integration.displacement;
+    // The projection runs where the forces found a spring near the limit. The iteration's
+    // displacement is the projection's end's when it moved particles: at a limited equilibrium
+    // the two cancel, as the stop rules expect.
+    const int passes = result.forces.nearLimit > 0 ? kIterationStrainPasses : 0;
+    result.displacement =
+        limitStrain(state, passes) > 0 ? freeDisplacement(state) : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
     if (refit) refitTree(state);

@@ -14,7 +14,15 @@ struct SpringForceResult {
   double deviation = 0;      ///< Σ |l − L0| [m]
   bool exploded = false;     ///< a spring beyond 3× its rest length, or not finite
   size_t overstretched = 0;  ///< springs beyond 3× their rest length, or not finite
+  /// springs longer than kStrainWatch·strainLimit times their rest length (0 without a limit):
+  /// the iteration's strain-limit pass runs only for a muscle that has one
+  size_t nearLimit = 0;
 };
+
+/// Share of MuscleSettings::strainLimit beyond which the force kernels count a spring as near the
+/// limit (SpringForceResult::nearLimit) [1]: below the limit, so that a spring that one
+/// integration carries across it was counted before it.
+constexpr btScalar kStrainWatch = btScalar(0.9);
 
 /// The instruction set a spring-force pass runs on.
 enum class SpringKernel {

@@ -16,9 +16,11 @@ struct MuscleState;
 /// positions are untouched; a limit of 0 checks nothing).
 size_t limitStrain(MuscleState& muscle, int passes);
 
-/// Passes of limitStrain after each integration [passes]: one. A spring a pass leaves beyond (its
-/// neighbours' projections stretched it again) is shortened in the next iteration; more passes
-/// cost a pass over the springs each (8 per iteration: 1.5× real-hip's time per iteration).
+/// Passes of limitStrain after each integration of a muscle whose forces found a spring near the
+/// limit (SpringForceResult::nearLimit; none otherwise) [passes]: one. A spring a pass leaves
+/// beyond (its neighbours' projections stretched it again) is shortened in the next iteration;
+/// more passes cost a pass over the springs each (8 per iteration: 1.5× real-hip's time per
+/// iteration).
 constexpr int kIterationStrainPasses = 1;
 /// Passes of limitStrain after a step's last response [passes]: until none is beyond, but for
 /// chains that cannot reach between their fixed ends within the limit.
