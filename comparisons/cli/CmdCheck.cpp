@@ -178,7 +178,8 @@ void summarise(const PreparedScene& prepared, CheckSummary& summary) {
                                  {"fixed_particles", muscle.fixedParticles.size()},
                                  {"fixed_to_bones", fixedByBone(muscle, prepared)},
                                  {"springs", muscle.springs.size()},
-                                 {"fibres", muscle.fibreCount()}};
+                                 {"fibres", muscle.fibreCount()},
+                                 {"loose_fibre_ends", prepared.report.muscles[m].looseFibreEnds}};
     if (m < prepared.report.surfaceCoverage.size())
       entry["surface_coverage"] = prepared.report.surfaceCoverage[m];
     summary.muscles.push_back(entry);
@@ -216,11 +217,11 @@ void printJson(const LoadedScene& scene, const PreparedScene& prepared,
   std::cout << result.dump(2) << "\n";
 }
 
-/// The muscles' table: particles, boundary, fixed, springs, coverage.
+/// The muscles' table: particles, boundary, fixed, springs, coverage, loose fibre ends.
 void printMuscleTable(const nlohmann::ordered_json& muscles) {
   std::cout << std::left << std::setw(24) << "muscle" << std::right << std::setw(10) << "particles"
             << std::setw(10) << "boundary" << std::setw(8) << "fixed" << std::setw(10) << "springs"
-            << std::setw(10) << "coverage"
+            << std::setw(10) << "coverage" << std::setw(13) << "loose ends"
             << "\n";
   for (const auto& m : muscles) {
     std::cout << std::left << std::setw(24) << m["name"].get<std::string>() << std::right
@@ -230,8 +231,11 @@ void printMuscleTable(const nlohmann::ordered_json& muscles) {
     if (m.contains("surface_coverage"))
       std::cout << std::setw(9) << std::fixed << std::setprecision(1)
                 << 100 * m["surface_coverage"].get<double>() << "%" << std::defaultfloat;
-    std::cout << "\n";
+    std::cout << std::setw(13) << m["loose_fibre_ends"].get<size_t>() << "\n";
   }
+  std::cout << "(loose ends: fibres that end on a bone with their last particle free; it lies up "
+               "to one sample spacing before the end, held by its neighbours; a larger "
+               "attachment_distance or resolution fixes it)\n";
 }
 
 /// The summary as text on stdout.

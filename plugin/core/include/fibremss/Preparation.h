@@ -54,6 +54,9 @@ struct MusclePreparationReport {
   btScalar shortestSpring = 0;  ///< shortest spring rest length after preparation [m]
   size_t tendonParticles = 0;   ///< free particles in a tendon (MuscleParameters::tendonFraction)
   size_t tendonSprings = 0;     ///< springs stiffened as tendon (tendonStiffness times)
+  /// Fibres that end within the attachment distance of a bone but whose last particle is free:
+  /// it lies up to one sample spacing before the fibre's end (method.md), held by neighbours.
+  size_t looseFibreEnds = 0;
   /// Per earlier muscle: particles that lay inside its surface at rest, moved out along its
   /// normal (the earlier muscle keeps the overlap; seed 001 §4.1).
   std::vector<size_t> pushedOutOfMuscles;
@@ -71,7 +74,7 @@ struct MusclePreparationReport {
 /// What preparation measured and decided; printed by `fibremss check`.
 struct PreparationReport {
   double seconds = 0;                 ///< wall time of the whole preparation
-  std::vector<std::string> warnings;  ///< things a user should know (loose fibre ends, ...)
+  std::vector<std::string> warnings;  ///< things a user should know (a bad mesh, ...)
   std::vector<std::string> repairs;   ///< what preparation changed, one sentence each
   /// Per muscle: fraction of surface vertices inside some particle sphere (0..1).
   std::vector<double> surfaceCoverage;

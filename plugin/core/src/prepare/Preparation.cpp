@@ -299,16 +299,33 @@ void requireFixedEnds(const MuscleInput& input, const MuscleSettings& muscle) {
                        end + "\")");
 }
 
-/// Fixed particles, nearest bones and the warnings about attachments.
-void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones,
-                   const std::vector<BoneInput>& boneInputs, MuscleSettings& muscle,
-                   std::vector<std::string>& warnings) {
+/// Fibres ending within `attachment` of a bone whose last particle (ΔL − δ short of the end)
+/// stays free; none where declared areas choose the fixed particles.
+size_t looseFibreEnds(const MuscleInput& input, const std::vector<BoneShape>& bones,
+                      const MuscleSettings& muscle,
+                      std::vector<std::pair<btScalar, uint32_t>>& order) {
+  const btScalar attachment = input.parameters.attachmentDistance;
+  size_t loose = 0;
+  for (size_t f = 0; input.attachments.empty() && f < muscle.fibreCount(); ++f) {
+    const auto fibre = input.fibres.fibre(f);
+    const uint32_t last = muscle.fibreParticles[muscle.fibreOffsets[f + 1] - 1];
+    if (!muscle.isFixed(last) && nearestBone(fibre.back(), bones, order).distance < attachment)
+      ++loose;
+  }
+  return loose;
+}
+
+/// Fixed particles, nearest bones and the warnings about attachments; returns the loose fibre
+/// ends (looseFibreEnds).
+size_t attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones,
+                     const std::vector<BoneInput>& boneInputs, MuscleSettings& muscle,
+                     std::vector<std::string>& warnings) {
   const size_t n = muscle.particleCount();
   const btScalar attachment = input.parameters.attachmentDistance;
   muscle.fixedBone.assign(n, -1);
   muscle.nearestBone.assign(n, -1);
   muscle.fixedParticles.clear();
-  if (bones.empty()) return;
+  if (bones.empty()) return 0;
   std::optional<DeclaredAreas> declared;
   if (!input.attachments.empty()) declared.emplace(input, muscle, bones);
   std::vector<std::pair<btScalar, uint32_t>> order;
@@ -337,21 +354,7 @@ void attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bones
                          "another body too); collisions push them when they can");
   requireFixedEnds(input, muscle);
   if (declared) declared->warnEmpty(boneInputs, warnings);
-  // A muscle with no fixed particle got past requireFixedEnds only by declaring both ends free.
-  // Fibre ends touching a bone whose last particle (ΔL − δ short of the end) stays free.
-  size_t looseEnds = 0;
-  for (size_t f = 0; !declared && f < muscle.fibreCount(); ++f) {
-    const auto fibre = input.fibres.fibre(f);
-    const uint32_t last = muscle.fibreParticles[muscle.fibreOffsets[f + 1] - 1];
-    if (!muscle.isFixed(last) && nearestBone(fibre.back(), bones, order).distance < attachment)
-      ++looseEnds;
-  }
-  if (looseEnds > 0)
-    warnings.push_back(detail::muscleSource(input) + ": " + std::to_string(looseEnds) + " of " +
-                       std::to_string(muscle.fibreCount()) +
-                       " fibres end on a bone but their last particle is not fixed (it lies "
-                       "up to one sample spacing before the end; raise the resolution or the "
-                       "attachment distance)");
+  return looseFibreEnds(input, bones, muscle, order);
 }
 
 /// Declared areas must name surface vertices and bones that exist.
@@ -484,7 +487,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   if (coarsened)
     coarse = detail::coarseTetrahedra(input, muscle.restPositions, particles, muscle.restSurface,
                                       parameters.springs.volumeCoarsening);
-  attachToBones(input, bones, boneInputs, muscle, warnings);
+  report.looseFibreEnds = attachToBones(input, bones, boneInputs, muscle, warnings);
   if (detail::dropFixedSprings(muscle) > 0 && muscle.springs.empty())
     warnings.push_back(source + ": every spring links two fixed particles, nothing moves");
   muscle.damping = parameters.springs.damping >= 0
@@ -531,9 +534,11 @@ void reportBoneSpheres(const std::vector<BoneInput>& bones,
     std::vector<std::string> notes;
     if (r.degenerateTriangles)
       notes.push_back(std::to_string(r.degenerateTriangles) + " zero-area triangles ignored");
+    // Long triangles and thin parts (a plate, a coarse box, a pelvic wing) are no fault of the
+    // mesh: repairs.
     if (r.capped)
-      notes.push_back(std::to_string(r.capped) +
-                      " spheres capped (longest edge over 3 mean edge lengths)");
+      report.repairs.push_back("bone '" + bones[b].name + "': " + std::to_string(r.capped) +
+                               " spheres capped (longest edge over 3 mean edge lengths)");
     if (r.pulledBack)
       report.repairs.push_back("bone '" + bones[b].name + "': " + std::to_string(r.pulledBack) +
                                " sphere centres pulled back inside a thin part");
