@@ -23,6 +23,7 @@
 
 #include "fibremss/FibreRun.h"
 #include "fibremss/Progress.h"
+#include "fibremss/VtkFiles.h"
 #include "solver/SpringForces.h"
 #include "support/Process.h"
 
@@ -185,6 +186,61 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     EXPECT_TRUE(json.at("tendon_strain").is_null());
   }
   EXPECT_FALSE(std::getline(csv, line));
+}
+
+/// Runs fusiform for two steps into `out` with the `--set` options `sets`; its frame files.
+std::vector<fs::path> fusiformFrames(const fs::path& out, const std::string& sets) {
+  const auto result =
+      runProcess(cli() + " run fusiform --steps 2 " + sets + " --out " + out.string());
+  EXPECT_EQ(result.exitCode, 0) << result.output;
+  std::vector<fs::path> files;
+  for (const auto& entry : fs::directory_iterator(out / "frames")) files.push_back(entry.path());
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+/// The largest difference between two files' values of array `name` ("Points": coordinates).
+double largestDifference(const PolyDataFile& a, const PolyDataFile& b, const std::string& name) {
+  double largest = 0;
+  if (name == "Points") {
+    for (size_t i = 0; i < a.points.size(); ++i)
+      for (int k = 0; k < 3; ++k)
+        largest = std::max(largest, double(std::abs(a.points[i][k] - b.points[i][k])));
+    return largest;
+  }
+  const std::vector<float>& x = a.array(name)->values;
+  const std::vector<float>& y = b.array(name)->values;
+  for (size_t i = 0; i < x.size(); ++i) largest = std::max(largest, double(std::abs(x[i] - y[i])));
+  return largest;
+}
+
+TEST(RunCli, QuantisedFramesStayWithinTheirBoundAndShrink) {
+  TemporaryDirectory out("fibremss_run_quantised");
+  const std::vector<fs::path> exact = fusiformFrames(out.path() / "exact", "");
+  const std::vector<fs::path> off =
+      fusiformFrames(out.path() / "off", "--set outputs.quantise_mm=0");
+  const std::vector<fs::path> rounded = fusiformFrames(
+      out.path() / "on", "--set outputs.quantise_mm=0.01 --set outputs.quantise_strain=0.001");
+  ASSERT_EQ(off.size(), exact.size());
+  ASSERT_EQ(rounded.size(), exact.size());
+  const nlohmann::json bounds =
+      nlohmann::json::parse(readFile(out.path() / "on/summary.json")).at("frame_quantisation");
+  const double lengthBound = bounds.at("length_error_bound_mm");  // fusiform is in mm
+  EXPECT_EQ(lengthBound, 0.00390625);  // half of 2^-7 mm, the power of two below 0.01 mm
+  size_t exactBytes = 0, roundedBytes = 0;
+  for (size_t f = 0; f < exact.size(); ++f) {
+    SCOPED_TRACE(exact[f].string());
+    EXPECT_EQ(readFile(off[f]), readFile(exact[f]));
+    exactBytes += fs::file_size(exact[f]);
+    roundedBytes += fs::file_size(rounded[f]);
+    const PolyDataFile a = readVtp(exact[f].string()), b = readVtp(rounded[f].string());
+    ASSERT_EQ(a.points.size(), b.points.size());
+    EXPECT_LE(largestDifference(a, b, "Points"), lengthBound);  // per coordinate
+    if (a.array("displacement") == nullptr) continue;           // a bone
+    EXPECT_LE(largestDifference(a, b, "displacement"), lengthBound);
+    EXPECT_LE(largestDifference(a, b, "fibre_stretch"), bounds.at("strain_error_bound"));
+  }
+  EXPECT_LT(roundedBytes, exactBytes);
 }
 
 TEST(Cli, VersionNamesBulletItsPrecisionTheKernelAndTheCompiler) {

@@ -201,6 +201,18 @@ FibreRunOptions runOptions(const RunArgs& args) {
   return options;
 }
 
+/// The frames' rounding steps as FrameWriter applies them and the error bounds they give (half a
+/// step per value, against the frames written exactly); null when frames are written exactly.
+nlohmann::json quantisationJson(const OutputSettings& outputs, double unitScale) {
+  if (outputs.quantiseMm == 0 && outputs.quantiseStrain == 0) return nullptr;
+  const double lengthMm = powerOfTwoStep(outputs.quantiseMm / 1000 / unitScale) * unitScale * 1000;
+  const double strain = powerOfTwoStep(outputs.quantiseStrain);
+  return {{"length_step_mm", lengthMm},
+          {"length_error_bound_mm", lengthMm / 2},
+          {"strain_step", strain},
+          {"strain_error_bound", strain / 2}};
+}
+
 /// The run's summary.json: its metrics, the scene's figures and what the guard did.
 nlohmann::json runSummary(const LoadedScene& scene, const PreparedScene& prepared,
                           const RunMetrics& metrics, const FibreRunDetails& details, bool loop) {
@@ -211,6 +223,8 @@ nlohmann::json runSummary(const LoadedScene& scene, const PreparedScene& prepare
   summary["max_sphere_penetration_mm"] = details.spherePenetration.maxMm;
   summary["mean_sphere_penetration_mm"] = details.spherePenetration.meanMm;
   summary["frames"] = details.frames;
+  if (auto quantisation = quantisationJson(scene.outputs, scene.unitScale); !quantisation.is_null())
+    summary["frame_quantisation"] = std::move(quantisation);
   if (std::isfinite(details.measureMsPerStep))
     summary["measure_ms_per_step"] = details.measureMsPerStep;
   summary["guard"] = guardJson(details, scene.simulation.onFailure);

@@ -3,6 +3,7 @@
 #include <array>
 #include <cctype>
 #include <cstdio>
+#include <variant>
 
 #include "fibremss/Geometry.h"
 #include "fibremss/Gltf.h"
@@ -86,7 +87,9 @@ FrameWriter::FrameWriter(const std::string& outDir, const OutputSettings& settin
     : outDir_(outDir),
       settings_(settings),
       formats_(formats),
-      sceneUnitsPerMetre_(btScalar(1.0 / unitScale)) {}
+      sceneUnitsPerMetre_(btScalar(1.0 / unitScale)),
+      lengthStep_(powerOfTwoStep(settings.quantiseMm / 1000 / unitScale)),
+      strainStep_(powerOfTwoStep(settings.quantiseStrain)) {}
 
 void FrameWriter::write(const FrameInfo& info, const MuscleSystem& system,
                         std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
@@ -214,6 +217,7 @@ void FrameWriter::writeBones(const FrameInfo& info, const PreparedScene& prepare
       boneFiles_[b] =
           "frames/bone" + std::to_string(b) + "_" + fileSafe(bone.name) + "_" + number + ".vtp";
       boneWrittenAt_[b] = boneTransforms[b];
+      quantise(mesh);
       writeVtp(outDir_ + "/" + boneFiles_[b], mesh);
     }
     pvd_.add(info.time, boneFiles_[b], part, bone.name);
@@ -227,8 +231,22 @@ std::vector<DataArray> FrameWriter::frameFields(const FrameInfo& info) const {
           {"pose_label", 1, std::vector<double>{info.poseLabel}}};
 }
 
-void FrameWriter::add(double time, const std::string& file, const PolyData& data, int part,
+void FrameWriter::quantise(PolyData& data) const {
+  if (lengthStep_ == 0 && strainStep_ == 0) return;
+  data.pointStep = lengthStep_;
+  for (DataArray& array : data.pointData) {
+    auto* values = std::get_if<std::vector<float>>(&array.values);
+    const bool length =
+        array.name == "displacement" || array.name == "penetration" || array.name == "radius";
+    if (values) roundToStep(*values, length ? lengthStep_ : strainStep_);
+  }
+  data.fieldData.push_back({"quantisation_length_step", 1, std::vector<double>{lengthStep_}});
+  data.fieldData.push_back({"quantisation_strain_step", 1, std::vector<double>{strainStep_}});
+}
+
+void FrameWriter::add(double time, const std::string& file, PolyData& data, int part,
                       const std::string& name) {
+  quantise(data);
   writeVtp(outDir_ + "/" + file, data);
   pvd_.add(time, file, part, name);
 }

@@ -70,13 +70,16 @@ class FrameWriter {
                  std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
                  std::span<const btTransform> boneTransforms);
   std::vector<DataArray> frameFields(const FrameInfo& info) const;
-  void add(double time, const std::string& file, const PolyData& data, int part,
-           const std::string& name);
+  /// Rounds `data`'s points and float arrays to the steps and records them in its field data.
+  void quantise(PolyData& data) const;
+  void add(double time, const std::string& file, PolyData& data, int part, const std::string& name);
 
   std::string outDir_;
   const OutputSettings& settings_;
   FrameFormats formats_;
   btScalar sceneUnitsPerMetre_;
+  double lengthStep_;  ///< positions and length arrays rounded to it [scene units] (0: exact)
+  double strainStep_;  ///< dimensionless arrays rounded to it [—] (0: exact)
   PvdCollection pvd_;
   GltfAnimation animation_;                 ///< the glTF frames so far
   std::vector<std::string> boneFiles_;      ///< per bone, the file of its latest placement

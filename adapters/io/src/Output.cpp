@@ -13,6 +13,7 @@
 #include <bit>
 #include <cerrno>
 #include <charconv>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -330,6 +331,15 @@ OutputDirectory::~OutputDirectory() {
   ::close(lock_);               // releases the flock
 }
 
+double powerOfTwoStep(double limit) {
+  return limit > 0 ? std::exp2(std::floor(std::log2(limit))) : 0;
+}
+
+void roundToStep(std::vector<float>& values, double step) {
+  if (step > 0)
+    for (float& value : values) value = float(std::nearbyint(double(value) / step) * step);
+}
+
 void writeVtp(const std::string& path, const PolyData& data) {
   checkPolyData(path, data);
   const size_t pointCount = data.points.size();
@@ -359,6 +369,7 @@ void writeVtp(const std::string& path, const PolyData& data) {
   std::vector<float> points(3 * pointCount);
   for (size_t i = 0; i < pointCount; ++i)
     for (int k = 0; k < 3; ++k) points[3 * i + k] = float(data.points[i][k] * data.pointScale);
+  roundToStep(points, data.pointStep);
   out.array<float>("Points", 3, points);
   out.xml += "      </Points>\n";
   writeCells(out, data);

@@ -484,6 +484,8 @@ void readOutputs(Fields& outputs, OutputSettings& settings) {
   settings.writeSurfaces = outputs.boolean("surfaces", true);
   settings.writeParticles = outputs.boolean("particles", true);
   settings.writeFibres = outputs.boolean("fibres", true);
+  settings.quantiseMm = outputs.number("quantise_mm", 0, 0, 1000);
+  settings.quantiseStrain = outputs.number("quantise_strain", 0, 0, 1);
 }
 
 void readCollision(Fields& collision, double scale, SimulationParameters& parameters) {

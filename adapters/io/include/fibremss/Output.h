@@ -66,6 +66,7 @@ struct DataArray {
 struct PolyData {
   std::vector<btVector3> points;                   ///< point coordinates [any length unit]
   btScalar pointScale = 1;                         ///< file units per point unit (1000: m → mm)
+  double pointStep = 0;                            ///< points rounded to it [file units] (0: no)
   bool pointsAsVertices = false;                   ///< emit every point as a vertex cell
   std::vector<uint32_t> lineIndices;               ///< polylines: point indices, CSR
   std::vector<uint32_t> lineOffsets{0};            ///< polyline i: [offsets[i], offsets[i+1])
@@ -73,6 +74,13 @@ struct PolyData {
   std::vector<DataArray> pointData;                ///< one tuple per point each
   std::vector<DataArray> fieldData;                ///< whole-dataset arrays (e.g. TimeValue)
 };
+
+/// The largest power of two not above `limit` (0 for a `limit` of 0): a rounding step whose
+/// multiples Float32 holds exactly, with zero low mantissa bits that zlib then compresses.
+double powerOfTwoStep(double limit);
+
+/// Rounds every value to the nearest multiple of `step` (nothing when `step` is 0).
+void roundToStep(std::vector<float>& values, double step);
 
 /// Writes a .vtp (VTK XML PolyData) file atomically: points as Float32, cells as Int32, every
 /// array appended raw and compressed in vtkZLibDataCompressor's blocks (UInt64 headers), as VTK

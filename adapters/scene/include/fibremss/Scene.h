@@ -27,6 +27,12 @@ struct OutputSettings {
   bool writeSurfaces = true;   ///< deformed muscle surfaces in frames
   bool writeParticles = true;  ///< particles with radii in frames
   bool writeFibres = true;     ///< deformed fibres in frames
+  /// Frame positions and length arrays rounded to multiples of the largest power of two (in
+  /// the frames' units) not above this [mm] (0: written exactly).
+  double quantiseMm = 0;
+  /// Dimensionless frame arrays (stretch, strain, fixed) rounded likewise to a power-of-two
+  /// step not above this [—] (0: written exactly).
+  double quantiseStrain = 0;
 };
 
 /// An exact case the scene reproduces (the analytic tier): a straight cylindrical muscle whose
