@@ -534,7 +534,8 @@ RunMetrics runMethod(const MethodSpec& spec, const std::string& sceneNameOrPath,
 
 /// The scene and options the methods run with: the scene's own, except that muscle–muscle
 /// contact is switched off in every method when a reference ranks them, since the reference
-/// solves each muscle on its own (one problem for all).
+/// solves each muscle on its own (one problem for all). sceneOfTheMethods records that change in
+/// the comparison (its overrides and muscleContactOff), where the report reads it.
 struct MethodScene {
   LoadedScene scene;       ///< the scene as the methods run it
   CompareOptions options;  ///< the baselines' definitions as the methods run them
