@@ -153,6 +153,23 @@ void rollBackStep(Slots<MuscleState>& muscles, Slots<BoneState>& bones) {
   }
 }
 
+/// The bones after a step: how many held their own against a NaN/inf transform, and whether any
+/// moved in it.
+struct BoneSummary {
+  size_t held = 0;     ///< bones that held their own against a NaN/inf transform
+  bool moved = false;  ///< a bone moved in the step
+};
+
+BoneSummary summariseBones(const Slots<BoneState>& bones) {
+  BoneSummary summary;
+  for (uint32_t slot : bones.order) {
+    const BoneState& bone = *bones.states[slot];
+    summary.held += bone.heldNonFinite ? 1 : 0;
+    summary.moved = summary.moved || !(bone.goodLast == bone.last);
+  }
+  return summary;
+}
+
 /// Attribution after a failed attempt: which muscles failed (frozen ones are out of the step and
 /// of the blame), each counted in its failures, the first in `outcome`, each frozen when
 /// `freeze`. A muscle torn by bones closing on it is kept. Returns how many were blamed.
@@ -289,13 +306,7 @@ void MuscleSystem::Impl::guardedStep() {
     thread.contacts.clear();
     deform(state);
   };
-  size_t heldBones = 0;
-  bool bonesMoved = false;
-  for (uint32_t slot : bones.order) {
-    const BoneState& bone = *bones.states[slot];
-    heldBones += bone.heldNonFinite ? 1 : 0;
-    bonesMoved = bonesMoved || !(bone.goodLast == bone.last);
-  }
+  const BoneSummary boneSummary = summariseBones(bones);
   size_t frozen = 0, trappedParticles = 0, trappedMuscles = 0;
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
@@ -304,13 +315,13 @@ void MuscleSystem::Impl::guardedStep() {
       carryFrozen(state);
     }
     trappedParticles += state.pinched;
-    state.trapHeld = state.pinchedInStep > 0 || (state.trapHeld && bonesMoved);
+    state.trapHeld = state.pinchedInStep > 0 || (state.trapHeld && boneSummary.moved);
     trappedMuscles += state.pinched > 0 ? 1 : 0;
   }
   stats.timing = outcome.spent;
   stats.timing.total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
   stats.step = number;
-  guardStats(outcome, heldBones, frozen, trappedParticles, trappedMuscles, stats);
+  guardStats(outcome, boneSummary.held, frozen, trappedParticles, trappedMuscles, stats);
   stats.shortened = size.shortened;
 }
 
