@@ -2,10 +2,11 @@
 # Instruction counts of the step's kernels on thigh13 under callgrind, compared with the
 # reference kept next to this script (callgrind-reference.txt: "kernel instructions" lines).
 #   callgrind.sh [--check | --update] [BENCH] [RESOLUTION]
-# prints each kernel's count, the reference's and the change; --check exits 1 when a kernel
-# moved by more than FIBREMSS_CALLGRIND_TOLERANCE percent (default 10), --update rewrites the
-# reference. Exits 77 (ctest: skipped) without valgrind. Counts hold for a plain Release
-# float build; sanitizers, the double build or another compiler give other counts.
+# prints the default solver's instructions per iteration against Verlet's, then each kernel's
+# count, the reference's and the change; --check exits 1 when a kernel moved by more than
+# FIBREMSS_CALLGRIND_TOLERANCE percent (default 10), --update rewrites the reference. Exits 77
+# (ctest: skipped) without valgrind. Counts hold for a plain Release float build; sanitizers,
+# the double build or another compiler give other counts.
 set -eu
 here=$(cd "$(dirname "$0")" && pwd)
 mode=report
@@ -36,6 +37,12 @@ for dump in "$work"/cg.*.*; do
        /^(totals|summary): / { count = $2 }
        END { if (name != "") print name, count }' "$dump"
 done | sort >"$work/now"
+# The two whole steps (10 iterations each): the default solver's cost per iteration against
+# Verlet's.
+awk '$1 == "step-10-iterations" { verlet = $2 } $1 == "default-solver-step-10-iterations" { solver = $2 }
+     END { if (verlet > 0 && solver > 0)
+             printf "per iteration: default solver %.1f M, Verlet %.1f M instructions, %.3fx\n",
+                    solver / 1e7, verlet / 1e7, solver / verlet }' "$work/now"
 
 if [ "$mode" = update ]; then
   { echo "# callgrind instructions per kernel, thigh13 resolution $resolution, one thread"
