@@ -113,6 +113,16 @@ TEST(CliCheck, TextOutputAndRestState) {
   EXPECT_TRUE(fs::exists(out / "bone-lower-spheres.vtp"));
 }
 
+// The loose-ends column is explained under the table only when a muscle has loose ends.
+TEST(CliCheck, LooseEndsAreExplainedOnlyWhereThereAreSome) {
+  const Result loose = run("check fusiform 2>&1");
+  ASSERT_EQ(loose.status, 0) << loose.out;
+  EXPECT_NE(loose.out.find("(loose ends:"), std::string::npos) << loose.out;
+  const Result none = run("check cylinder-stretch 2>&1");
+  ASSERT_EQ(none.status, 0) << none.out;
+  EXPECT_EQ(none.out.find("(loose ends:"), std::string::npos) << none.out;
+}
+
 TEST(CliCheck, BadInputFailsWithAMessage) {
   EXPECT_EQ(run("check no-such-scene 2>/dev/null").status, 2);
   EXPECT_EQ(run("check fusiform --set resolution=0 2>/dev/null").status, 2);

@@ -1,5 +1,6 @@
 // `fibremss check SCENE`: load and prepare a scene, print its statistics (text or --json),
 // optionally write the prepared rest state for ParaView (--out DIR).
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <iomanip>
@@ -233,6 +234,10 @@ void printMuscleTable(const nlohmann::ordered_json& muscles) {
                 << 100 * m["surface_coverage"].get<double>() << "%" << std::defaultfloat;
     std::cout << std::setw(13) << m["loose_fibre_ends"].get<size_t>() << "\n";
   }
+  const bool anyLoose = std::any_of(muscles.begin(), muscles.end(), [](const auto& m) {
+    return m["loose_fibre_ends"].template get<size_t>() > 0;
+  });
+  if (!anyLoose) return;
   std::cout << "(loose ends: fibres that end on a bone with their last particle free; it lies up "
                "to one sample spacing before the end, held by its neighbours; a larger "
                "attachment_distance or resolution fixes it)\n";
