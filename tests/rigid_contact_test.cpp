@@ -3,11 +3,9 @@
 // dents and recovers; momentum is conserved between a ball and a free muscle; a probe pressed
 // deeper feels more force; the dynamic time mode advances exactly Bullet's dt; without contact
 // bodies a step is bit-identical to the plain solver's; any thread count gives the same bits;
-// the contact path allocates nothing; exact sphere–shape contacts.
+// the contact path allocates nothing.
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletCollision/CollisionShapes/btBoxShape.h>
-#include <BulletCollision/CollisionShapes/btCapsuleShape.h>
-#include <BulletCollision/CollisionShapes/btConvexHullShape.h>
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
@@ -16,10 +14,8 @@
 #include <cstring>
 #include <limits>
 #include <memory>
-#include <random>
 #include <vector>
 
-#include "contact/ShapeContact.h"
 #include "fibremss/BoneBody.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleAction.h"
@@ -493,65 +489,6 @@ TEST(RigidContact, GravityAndExternalForcesMoveFreeParticles) {
   EXPECT_THROW(system.setExternalForce(muscle, 100000, btVector3(0, 1, 0)), InputError);
   EXPECT_THROW(system.setExternalForce(muscle, 0, btVector3(NAN, 0, 0)), InputError);
   system.clearExternalForces(muscle);
-}
-
-// ---- Exact contacts with shapes ------------------------------------------------------------
-
-TEST(ShapeContact, SpheresBoxesCapsulesAndConvexHullsGiveTheirSignedDistances) {
-  const btTransform pose(btQuaternion(btVector3(1, 2, 3).normalized(), 0.7f),
-                         btVector3(0.1f, -0.2f, 0.05f));
-  btBoxShape box(btVector3(0.02f, 0.01f, 0.015f));
-  btConvexHullShape hull;
-  for (int corner = 0; corner < 8; ++corner)
-    hull.addPoint(btVector3(corner & 1 ? 0.02f : -0.02f, corner & 2 ? 0.01f : -0.01f,
-                            corner & 4 ? 0.015f : -0.015f));
-  hull.setMargin(0);
-  btSphereShape sphere(0.01f);
-  btCapsuleShape capsule(0.005f, 0.02f);  // radius, height of the cylinder part (y)
-  std::mt19937 random(3);
-  std::uniform_real_distribution<btScalar> unit(-0.03f, 0.03f);
-  const btScalar r = 0.004f;
-  int boxHits = 0;
-  for (int k = 0; k < 2000; ++k) {
-    const btVector3 local(unit(random), unit(random), unit(random));
-    const btVector3 p = pose * local;
-    ShapeContact a, b;
-    const bool hitBox = sphereShapeContact(box, pose, p, r, a);
-    // Outside the box: the distance to the clamped point.
-    btVector3 clamped = local;
-    clamped.setMax(-box.getHalfExtentsWithMargin());
-    clamped.setMin(box.getHalfExtentsWithMargin());
-    const btScalar outside = (local - clamped).length();
-    if (outside > 1e-4f) {
-      ASSERT_EQ(hitBox, outside < r) << k;
-      if (hitBox) {
-        ++boxHits;
-        EXPECT_NEAR(a.depth, r - outside, 1e-5f);
-        EXPECT_NEAR(a.point.distance(pose * clamped), 0, 1e-5f);
-      }
-    }
-    // The hull of the same box agrees (GJK/EPA), inside too.
-    ASSERT_EQ(sphereShapeContact(hull, pose, p, r, b), hitBox) << k;
-    if (hitBox) {
-      EXPECT_NEAR(b.depth, a.depth, 2e-4f) << k;
-      EXPECT_GT(b.normal.dot(a.normal), 0.98f)
-          << k << " outside " << outside << " depth " << a.depth << " " << b.depth;
-    }
-    // The sphere and the capsule: distance to a centre point and to the axis segment.
-    const btScalar toCentre = local.length() - 0.01f;
-    ASSERT_EQ(sphereShapeContact(sphere, pose, p, r, a), toCentre < r);
-    if (toCentre < r) {
-      EXPECT_NEAR(a.depth, r - toCentre, 1e-5f);
-    }
-    const btVector3 axis(0, std::clamp(local.y(), btScalar(-0.01), btScalar(0.01)), 0);
-    const btScalar toAxis = (local - axis).length() - 0.005f;
-    ASSERT_EQ(sphereShapeContact(capsule, pose, p, r, a), toAxis < r);
-    if (toAxis < r) {
-      EXPECT_NEAR(a.depth, r - toAxis, 1e-5f);
-      EXPECT_NEAR(a.normal.dot(pose.getBasis() * (local - axis).normalized()), 1, 1e-4f);
-    }
-  }
-  EXPECT_GT(boxHits, 50);
 }
 
 }  // namespace

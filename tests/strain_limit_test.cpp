@@ -1,6 +1,6 @@
-// The strain limit (SpringParameters::strainLimit, solver/StrainLimit.h): a muscle pulled hard
-// ends every step with no spring beyond its limit, with the default solver and with Verlet, and
-// the same positions for one thread and two; the force kernels find the springs near it.
+// The strain limit (SpringParameters::strainLimit): a muscle pulled hard ends every step with no
+// spring beyond its limit, with the default solver and with Verlet, and the same positions for one
+// thread and two.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,7 +11,6 @@
 #include "fibremss/Error.h"
 #include "fibremss/Measures.h"
 #include "fibremss/MuscleSystem.h"
-#include "solver/SpringForces.h"
 #include "support/GridMuscle.h"
 #include "support/SolverFixtures.h"
 
@@ -84,32 +83,6 @@ TEST(StrainLimit, IsTheSameForOneThreadAndTwo) {
   EXPECT_EQ(std::memcmp(one.positions.data(), two.positions.data(),
                         one.positions.size() * sizeof(btVector3)),
             0);
-}
-
-// The iteration's projection runs only for a muscle whose forces found a spring beyond
-// kStrainWatch of the limit: every kernel counts them as a count over the springs does.
-TEST(StrainLimit, EveryKernelCountsTheSpringsNearIt) {
-  auto muscle = std::make_shared<MuscleSettings>(*testing::gridMuscle("near"));
-  muscle->strainLimit = btScalar(1.5);
-  layoutSprings(*muscle);  // AVX2 reads the blocks
-  // The layers from x = 4 mm on moved 2 mm along x: the 4 mm springs across reach 1.5×, the
-  // diagonal ones 1.27×, below the watch (1.35×).
-  std::vector<btVector3> x = muscle->restPositions;
-  for (btVector3& p : x)
-    if (p.x() > btScalar(0.001)) p.setX(p.x() + btScalar(0.002));
-  size_t near = 0;
-  for (const Spring& spring : muscle->springs)
-    near +=
-        x[spring.a].distance(x[spring.b]) > kStrainWatch * muscle->strainLimit * spring.restLength;
-  ASSERT_EQ(near, 9u);  // the 3 × 3 fibres' springs across
-  std::vector<btVector3> forces(x.size());
-  for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2}) {
-    if (!springKernelAvailable(kernel)) continue;
-    muscle->strainLimit = btScalar(1.5);
-    EXPECT_EQ(springForces(*muscle, x, forces, kernel).nearLimit, near) << springKernelName(kernel);
-    muscle->strainLimit = 0;
-    EXPECT_EQ(springForces(*muscle, x, forces, kernel).nearLimit, 0u) << springKernelName(kernel);
-  }
 }
 
 TEST(StrainLimit, AtOrBelowOneIsRejected) {

@@ -2,7 +2,8 @@
 // CPU can run gives the forces, the deviation and the overstretched count of a plain
 // double-precision computation, spring by spring, on prepared thigh muscles and on a hand-made
 // grid, with and without the AVX2 kernel's spring blocks (layoutSprings), including coincident
-// particles (zero force), overstretched springs, a non-finite position and runs of every length.
+// particles (zero force), overstretched springs, a non-finite position and runs of every length;
+// every kernel counts the springs near the strain limit.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -299,6 +300,32 @@ TEST(SpringBlocks, AddMuscleLaysOutSpringsChangedByHand) {
   if (fastestSpringKernel() != SpringKernel::avx2) GTEST_SKIP() << "no AVX2: blocks unused";
   EXPECT_TRUE(used.springBlocks == springBlocksFor(*changed)) << "stale blocks kept";
   EXPECT_FALSE(changed->springBlocks == springBlocksFor(*changed));  // the test's premise
+}
+
+// The iteration's projection runs only for a muscle whose forces found a spring beyond
+// kStrainWatch of the limit: every kernel counts them as a count over the springs does.
+TEST(StrainLimit, EveryKernelCountsTheSpringsNearIt) {
+  auto muscle = std::make_shared<MuscleSettings>(*testing::gridMuscle("near"));
+  muscle->strainLimit = btScalar(1.5);
+  layoutSprings(*muscle);  // AVX2 reads the blocks
+  // The layers from x = 4 mm on moved 2 mm along x: the 4 mm springs across reach 1.5×, the
+  // diagonal ones 1.27×, below the watch (1.35×).
+  std::vector<btVector3> x = muscle->restPositions;
+  for (btVector3& p : x)
+    if (p.x() > btScalar(0.001)) p.setX(p.x() + btScalar(0.002));
+  size_t near = 0;
+  for (const Spring& spring : muscle->springs)
+    near +=
+        x[spring.a].distance(x[spring.b]) > kStrainWatch * muscle->strainLimit * spring.restLength;
+  ASSERT_EQ(near, 9u);  // the 3 × 3 fibres' springs across
+  std::vector<btVector3> forces(x.size());
+  for (SpringKernel kernel : {SpringKernel::scalar, SpringKernel::sse2, SpringKernel::avx2}) {
+    if (!springKernelAvailable(kernel)) continue;
+    muscle->strainLimit = btScalar(1.5);
+    EXPECT_EQ(springForces(*muscle, x, forces, kernel).nearLimit, near) << springKernelName(kernel);
+    muscle->strainLimit = 0;
+    EXPECT_EQ(springForces(*muscle, x, forces, kernel).nearLimit, 0u) << springKernelName(kernel);
+  }
 }
 
 }  // namespace fibremss

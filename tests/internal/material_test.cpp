@@ -1,5 +1,6 @@
 // The muscle material at preparation: the volume terms' tetrahedra and the springs'
-// anisotropy along the fibres, and what the anisotropy does to a stretched cylinder.
+// anisotropy along the fibres, and what the anisotropy does to a stretched cylinder; the volume
+// terms' force kernels and the stiffness the implicit integrators take from them.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -7,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -469,6 +471,62 @@ TEST(SpringStiffness, ByVolumeTheSpindlesThinEndIsAsStiffPerVolumeAsItsBelly) {
   EXPECT_LT(byVolume, 1.5);
   // The network's modulus is shared, not changed: the same Σk·L0² (fixed springs dropped alike).
   EXPECT_NEAR(volume.volumeModulus, length.volumeModulus, 0.1 * length.volumeModulus);
+}
+
+// The volume terms' stiffness the implicit integrators' linear systems take (localVolumeJacobian,
+// enclosedVolumeJacobian) is the derivative of their forces at rest: central differences of the
+// forces along a random move d give −K·d, K = Σ w·g·gᵀ.
+TEST(VolumeTerm, TheImplicitJacobianIsTheForcesDerivativeAtRest) {
+  const LoadedScene scene = loadScene(
+      "cylinder-twist", {"resolution=10", "fibre_count=16", "enclosed_volume_stiffness=4"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const MuscleSettings& settings = *prepared.muscles[0];
+  ASSERT_FALSE(settings.fanInverseVolume.empty());
+  ASSERT_FALSE(settings.enclosedFaces.empty());
+  const size_t n = settings.particleCount();
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> unit(-1, 1);
+  std::vector<btVector3> direction(n);
+  for (btVector3& d : direction) d = btVector3(unit(random), unit(random), unit(random));
+  const btScalar step = btScalar(1e-6);  // [m], against particles about a millimetre apart
+  std::vector<btVector3> plus = settings.restPositions, minus = settings.restPositions;
+  for (size_t i = 0; i < n; ++i) {
+    plus[i] += direction[i] * step;
+    minus[i] -= direction[i] * step;
+  }
+  std::vector<btVector3> forcePlus(n, btVector3(0, 0, 0)), forceMinus(n, btVector3(0, 0, 0));
+  addLocalVolumeForces(settings, plus, forcePlus);
+  addEnclosedVolumeForces(settings, plus, forcePlus);
+  addLocalVolumeForces(settings, minus, forceMinus);
+  addEnclosedVolumeForces(settings, minus, forceMinus);
+
+  std::vector<btVector3> gradients(settings.fanParticles.size()), enclosed(n);
+  std::vector<double> weights(settings.fanInverseVolume.size());
+  localVolumeJacobian(settings, settings.restPositions, gradients, weights);
+  const double enclosedWeight = enclosedVolumeJacobian(settings, settings.restPositions, enclosed);
+  EXPECT_GT(enclosedWeight, 0);
+  std::vector<double> product(3 * n, 0.0);  // K·d
+  const auto addRankOne = [&](std::span<const uint32_t> particles, const btVector3* g, double w) {
+    double dot = 0;
+    for (size_t v = 0; v < particles.size(); ++v) dot += double(g[v].dot(direction[particles[v]]));
+    for (size_t v = 0; v < particles.size(); ++v)
+      for (int j = 0; j < 3; ++j) product[3 * particles[v] + j] += w * dot * double(g[v][j]);
+  };
+  for (size_t k = 0; k < weights.size(); ++k)
+    addRankOne(fanParticles(settings, k), gradients.data() + settings.fanOffsets[k], weights[k]);
+  std::vector<uint32_t> all(n);
+  for (uint32_t i = 0; i < n; ++i) all[i] = i;
+  addRankOne(all, enclosed.data(), enclosedWeight);
+
+  double error = 0, norm = 0;
+  for (size_t i = 0; i < n; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const double difference = double(forcePlus[i][j] - forceMinus[i][j]) / (2 * double(step));
+      error += (difference + product[3 * i + j]) * (difference + product[3 * i + j]);
+      norm += product[3 * i + j] * product[3 * i + j];
+    }
+  ASSERT_GT(norm, 0);
+  EXPECT_LT(std::sqrt(error / norm), 0.02);
 }
 
 }  // namespace

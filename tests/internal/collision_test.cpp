@@ -1,6 +1,11 @@
 // Sphere collision (method.md §6): the btDbvt broad phase against brute force, the response (half /
 // whole overlap, accumulated from the starting positions, order-independent), the collision
-// switches, and no tunnelling with the adaptive time step.
+// switches, and no tunnelling with the adaptive time step; the bone distance field against exact
+// distances; exact sphere–shape contacts (spheres, boxes, capsules, convex hulls).
+#include <BulletCollision/CollisionShapes/btBoxShape.h>
+#include <BulletCollision/CollisionShapes/btCapsuleShape.h>
+#include <BulletCollision/CollisionShapes/btConvexHullShape.h>
+#include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -11,9 +16,14 @@
 #include <utility>
 #include <vector>
 
+#include "collision/BoneDistanceField.h"
 #include "collision/CollisionTrees.h"
 #include "collision/SurfaceContact.h"
+#include "contact/ShapeContact.h"
+#include "fibremss/Error.h"
+#include "fibremss/Geometry.h"
 #include "fibremss/MuscleSystem.h"
+#include "fibremss/Procedural.h"
 #include "support/GridMuscle.h"
 #include "support/SolverFixtures.h"
 
@@ -391,6 +401,115 @@ TEST(SurfaceContact, TheSystemsSurfaceStaysOutOfTheBoneOnlyWhenSwitchedOn) {
     else
       EXPECT_LT(deepest, btScalar(-0.0004));
   }
+}
+
+// ---- Distance field ------------------------------------------------------------------------
+
+TEST(DistanceField, MatchesTheMeshDistanceOfASphere) {
+  const btScalar radius = 0.02, cell = 0.002;
+  const MeshDistance mesh(makeEllipsoid({0, 0, 0}, {radius, radius, radius}, 3));
+  const btScalar margin = 20 * cell;
+  const BoneDistanceField field(mesh, cell, margin);
+  EXPECT_LT(field.exactNodes(), field.nodeCount());  // far blocks were interpolated
+  std::mt19937 random(7);
+  std::uniform_real_distribution<btScalar> unit(-1, 1);
+  int nearSurface = 0;
+  for (int k = 0; k < 4000; ++k) {
+    // Every other point near the surface, the rest anywhere in the grid and a little beyond.
+    const btVector3 cube(unit(random), unit(random), unit(random));
+    const btVector3 p =
+        k % 2 ? cube * (radius + margin) : cube.normalized() * (radius + unit(random) * 2 * cell);
+    const MeshDistance::Closest exact = mesh.closest(p);
+    const btScalar expected = exact.inside ? -exact.distance : exact.distance;
+    const BoneDistanceField::Sample s = field.sample(p);
+    // Trilinear over exact nodes: close to the surface the distance is nearly linear per cell.
+    if (std::abs(expected) < 2 * cell) {
+      ++nearSurface;
+      ASSERT_NEAR(s.distance, expected, 0.1 * cell)
+          << "at " << p.x() << " " << p.y() << " " << p.z();
+      ASSERT_GT(s.gradient.dot((p - exact.point).normalized() * (exact.inside ? -1 : 1)), 0.95);
+    } else {
+      ASSERT_NEAR(s.distance, expected, cell);
+    }
+  }
+  EXPECT_GE(nearSurface, 2000);
+}
+
+TEST(DistanceField, GivesTheKnownDistancesNextToTheFacesOfABox) {
+  // A box 40 × 20 × 30 mm: over the middle of a face the distance is the height above it.
+  const btVector3 half(0.02, 0.01, 0.015);
+  const btScalar cell = 0.0015;
+  const MeshDistance mesh(makeBox({0, 0, 0}, half * 2, {8, 4, 6}));
+  const BoneDistanceField field(mesh, cell, 6 * cell);
+  for (btScalar h = -0.004f; h <= 0.008f; h += 0.0007f) {
+    EXPECT_NEAR(field.sample({0.001f, half.y() + h, -0.002f}).distance, h, 1e-5) << h;
+    EXPECT_NEAR(field.sample({half.x() + h, 0.002f, 0.001f}).distance, h, 1e-5) << h;
+    EXPECT_NEAR(field.sample({-0.003f, 0.001f, -half.z() - h}).distance, h, 1e-5) << h;
+    EXPECT_GT(field.sample({0.001f, half.y() + h, -0.002f}).gradient.y(), 0.99) << h;
+  }
+  // Beyond the grid the value grows with the distance to it.
+  const btScalar far = half.y() + 6 * cell + 0.05f;
+  EXPECT_NEAR(field.sample({0, far, 0}).distance, far - half.y(), 2e-4);
+  EXPECT_THROW(BoneDistanceField(mesh, 0, 0), InputError);
+}
+
+// ---- Exact contacts with shapes ------------------------------------------------------------
+
+TEST(ShapeContact, SpheresBoxesCapsulesAndConvexHullsGiveTheirSignedDistances) {
+  const btTransform pose(btQuaternion(btVector3(1, 2, 3).normalized(), 0.7f),
+                         btVector3(0.1f, -0.2f, 0.05f));
+  btBoxShape box(btVector3(0.02f, 0.01f, 0.015f));
+  btConvexHullShape hull;
+  for (int corner = 0; corner < 8; ++corner)
+    hull.addPoint(btVector3(corner & 1 ? 0.02f : -0.02f, corner & 2 ? 0.01f : -0.01f,
+                            corner & 4 ? 0.015f : -0.015f));
+  hull.setMargin(0);
+  btSphereShape sphere(0.01f);
+  btCapsuleShape capsule(0.005f, 0.02f);  // radius, height of the cylinder part (y)
+  std::mt19937 random(3);
+  std::uniform_real_distribution<btScalar> unit(-0.03f, 0.03f);
+  const btScalar r = 0.004f;
+  int boxHits = 0;
+  for (int k = 0; k < 2000; ++k) {
+    const btVector3 local(unit(random), unit(random), unit(random));
+    const btVector3 p = pose * local;
+    ShapeContact a, b;
+    const bool hitBox = sphereShapeContact(box, pose, p, r, a);
+    // Outside the box: the distance to the clamped point.
+    btVector3 clamped = local;
+    clamped.setMax(-box.getHalfExtentsWithMargin());
+    clamped.setMin(box.getHalfExtentsWithMargin());
+    const btScalar outside = (local - clamped).length();
+    if (outside > 1e-4f) {
+      ASSERT_EQ(hitBox, outside < r) << k;
+      if (hitBox) {
+        ++boxHits;
+        EXPECT_NEAR(a.depth, r - outside, 1e-5f);
+        EXPECT_NEAR(a.point.distance(pose * clamped), 0, 1e-5f);
+      }
+    }
+    // The hull of the same box agrees (GJK/EPA), inside too.
+    ASSERT_EQ(sphereShapeContact(hull, pose, p, r, b), hitBox) << k;
+    if (hitBox) {
+      EXPECT_NEAR(b.depth, a.depth, 2e-4f) << k;
+      EXPECT_GT(b.normal.dot(a.normal), 0.98f)
+          << k << " outside " << outside << " depth " << a.depth << " " << b.depth;
+    }
+    // The sphere and the capsule: distance to a centre point and to the axis segment.
+    const btScalar toCentre = local.length() - 0.01f;
+    ASSERT_EQ(sphereShapeContact(sphere, pose, p, r, a), toCentre < r);
+    if (toCentre < r) {
+      EXPECT_NEAR(a.depth, r - toCentre, 1e-5f);
+    }
+    const btVector3 axis(0, std::clamp(local.y(), btScalar(-0.01), btScalar(0.01)), 0);
+    const btScalar toAxis = (local - axis).length() - 0.005f;
+    ASSERT_EQ(sphereShapeContact(capsule, pose, p, r, a), toAxis < r);
+    if (toAxis < r) {
+      EXPECT_NEAR(a.depth, r - toAxis, 1e-5f);
+      EXPECT_NEAR(a.normal.dot(pose.getBasis() * (local - axis).normalized()), 1, 1e-4f);
+    }
+  }
+  EXPECT_GT(boxHits, 50);
 }
 
 }  // namespace

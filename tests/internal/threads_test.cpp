@@ -2,7 +2,10 @@
 // scheduler in their place (fibremss/TaskScheduler.h): every task runs once on a valid thread, and
 // a step gives bit-identical particles for any thread count, because each task's work is
 // independent and every sum runs in a fixed order (a muscle's force chunks too: ForceChunks.h);
-// frozen muscles only ride with their bones.
+// frozen muscles only ride with their bones; a step with force chunks allocates nothing.
+#include <BulletCollision/CollisionShapes/btBoxShape.h>
+#include <BulletDynamics/Dynamics/btRigidBody.h>
+#include <LinearMath/btAlignedAllocator.h>
 #include <gtest/gtest.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -12,6 +15,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <memory>
@@ -26,6 +30,8 @@
 #include "solver/ForceChunks.h"
 #include "solver/MuscleSystemAccess.h"
 #include "solver/VolumeForces.h"
+#include "support/AllocationCounter.h"
+#include "support/BoxMuscle.h"
 #include "support/ThighSteps.h"
 
 using namespace fibremss;
@@ -421,3 +427,67 @@ TEST(HostScheduler, RunsPreparationWithTheSameBits) {
     EXPECT_EQ(own.muscles[m]->springs.size(), hosted.muscles[m]->springs.size());
   }
 }
+
+namespace fibremss {
+namespace {
+
+using testing::makeBone;
+using testing::makeBox;
+using testing::zelenyDamping;
+
+// A step allocates nothing, with each muscle's forces in one task and in chunks (a chunk work
+// below the default splits these small boxes).
+TEST(Allocation, StepAllocatesNothing) {
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
+  {
+    SimulationParameters parameters = testing::verletParameters();
+    parameters.iterations = 20;
+    // A box pressed into the side of the first muscle: the contact body path.
+    btBoxShape boxShape(btVector3(0.004f, 0.01f, 0.005f));
+    btRigidBody box(0.05f, nullptr, &boxShape, btVector3(1e-5f, 1e-5f, 1e-5f));
+    box.setWorldTransform(
+        btTransform(btQuaternion::getIdentity(), btVector3(-0.0055f, 0.005f, 0.015f)));
+    box.setLinearVelocity(btVector3(0.05f, 0, 0));  // moving in: impulses in every step
+    const btCollisionObject* bodies[] = {&box};
+    // The forces of a box in one task, and in chunks (kForceChunkWork splits larger muscles).
+    for (size_t chunkWork : {kForceChunkWork, size_t{64}})
+      for (bool rebuild : {false, true})
+        for (bool contact : {false, true}) {
+          parameters.rebuildEveryStep = rebuild;
+          // The residual rule checks (never met at 0) run in the step too.
+          parameters.stopRule = StopRule::Residual;
+          parameters.tolerance = 0;
+          MuscleSystem system(parameters);
+          MuscleSystemAccess::impl(system).forceChunkWork = chunkWork;
+          const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
+          auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
+          auto b = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0, btVector3(0.012, 0.002, 0.001));
+          a->damping = b->damping = zelenyDamping(*a);
+          system.addMuscle(a, std::span(&bone, 1));
+          system.addMuscle(b, std::span(&bone, 1));
+          if (contact) system.setContactBodies(bodies);
+          size_t contacts = 0, touched = 0;
+          testing::allocationCount = 0;
+          testing::countingArmed = true;
+          for (int s = 0; s < 10; ++s) {
+            system.setBoneTransform(bone, btTransform(btQuaternion(btVector3(0, 0, 1), 0.05 * s)));
+            system.step();
+            contacts += system.lastStep().contacts;
+            touched += system.bodyContact(&box).impulse.isZero() ? 0 : 1;
+          }
+          testing::countingArmed = false;
+          EXPECT_GT(contacts, 0u);  // collision ran
+          if (contact) {
+            EXPECT_GT(touched, 0u) << "the box touched";
+          }
+          EXPECT_EQ(MuscleSystemAccess::impl(system).chunked, chunkWork < kForceChunkWork);
+          EXPECT_EQ(testing::allocationCount.load(), 0)
+              << (rebuild ? "rebuild" : "animation") << " mode" << (contact ? ", contact body" : "")
+              << ", chunks of " << chunkWork;
+        }
+  }
+  btAlignedAllocSetCustom(nullptr, nullptr);
+}
+
+}  // namespace
+}  // namespace fibremss
