@@ -359,6 +359,35 @@ TEST(LoadersCheckSurface, TrianglesTurnedOverAreReorientedByTheMajority) {
   EXPECT_NEAR(meshVolume(mesh), 1.0, 1e-6);
 }
 
+// A unit cube cracked as exported meshes are: its top face uses a copy of corner 7 that lies
+// 0.4 mm (at metre scale) away, and one triangle of its bottom face is missing.
+TEST(LoadersCheckSurface, RepairWeldsACrackAndClosesASmallHole) {
+  Scratch scratch;
+  const std::string path = scratch.write(
+      "cracked.vtk",
+      "# vtk DataFile Version 4.2\ncracked cube\nASCII\nDATASET POLYDATA\nPOINTS 9 float\n"
+      "0 0 0\n1 0 0\n0 1 0\n1 1 0\n0 0 1\n1 0 1\n0 1 1\n1 1 1\n1 1 1.0004\n"
+      "POLYGONS 11 44\n3 0 2 3\n3 4 5 8\n3 4 8 6\n3 0 1 5\n3 0 5 4\n3 2 6 7\n3 2 7 3\n"
+      "3 0 4 6\n3 0 6 2\n3 1 3 7\n3 1 7 5\n");
+  MeshReport asRead;
+  loadSurface(path, 1.0, &asRead);
+  EXPECT_EQ(asRead.openEdges, 7u);  // the crack's four edges and the hole's three
+  MeshReport report;
+  const TriangleMesh mesh = loadSurface(path, 1.0, &report, SurfaceRepair{0.001, 3});
+  EXPECT_EQ(report.weldedVertices, 1u);
+  EXPECT_EQ(report.filledHoles, 1u);
+  EXPECT_TRUE(report.closed());
+  EXPECT_TRUE(report.warnings.empty()) << report.warnings.front();
+  EXPECT_EQ(mesh.vertices.size(), 8u);
+  EXPECT_EQ(mesh.triangles.size(), 12u);
+  EXPECT_NEAR(meshVolume(mesh), 1.0, 1e-6);
+  // A weld shorter than the crack leaves it open (the hole of three edges is still closed).
+  MeshReport tooShort;
+  loadSurface(path, 1.0, &tooShort, SurfaceRepair{0.0001, 3});
+  EXPECT_EQ(tooShort.weldedVertices, 0u);
+  EXPECT_EQ(tooShort.openEdges, 4u);
+}
+
 TEST(LoadersCheckSurface, MoebiusStripCannotBeOrientedAndIsLeftAsRead) {
   // A strip of 8 quads around a ring with a half twist: non-orientable.
   TriangleMesh strip;

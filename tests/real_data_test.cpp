@@ -257,6 +257,39 @@ TEST(RealData, BlockSceneChecksAndCompares) {
   EXPECT_TRUE(fs::exists(directory.path() / "report.md"));
 }
 
+// The hip with gait2392's pelvis (../shared/data/opensim-motions, metres) in a mm scene: the
+// pelvis is read in metres, its cracks are welded and holes closed so that it loads without a
+// warning, gait2392's hip centre lies on the fitted femoral head, and the adduction keyframes
+// turn about that head. Loading only (the runs: scenes/json/REAL-ANATOMY.md).
+TEST(RealData, HipWithThePelvisLoadsClosedAndTurnsAboutTheHead) {
+  REQUIRE_SHARED_DATA();
+  const std::string data = FIBREMSS_SHARED_DATA_DIR;
+  if (!fs::exists(data + "/opensim-motions/pelvis.vtp"))
+    GTEST_SKIP() << "no " << data << "/opensim-motions/pelvis.vtp";
+  const LoadedScene scene =
+      loadScene(kSource + "/scenes/json/real-hip-adduction.json", {"data_dir=" + data});
+  for (const std::string& warning : scene.warnings)
+    EXPECT_EQ(warning.find(".vtp"), std::string::npos) << warning;
+  // femur, pelvis, sacrum, muscle 3's origin plate
+  ASSERT_EQ(scene.bones.size(), 4u);
+  ASSERT_EQ(scene.bones[1].name, "pelvis");
+  EXPECT_TRUE(checkSurface(scene.bones[1].mesh, "pelvis").closed());
+  EXPECT_TRUE(checkSurface(scene.bones[2].mesh, "sacrum").closed());
+  EXPECT_GT(meshVolume(scene.bones[1].mesh), 1e-4);  // a hemipelvis of ~0.3 L, read in metres
+  btVector3 head;
+  btScalar radius;
+  ASSERT_TRUE(
+      fitFemoralHead(scene.bones[0].mesh, btVector3(0, 0, 1), btScalar(0.03), head, radius));
+  // gait2392's hip centre (-0.0707, -0.0661, 0.0835) m in the pelvis frame: in the scene, the
+  // pelvis' rest transform maps OpenSim X, Y, Z to -y, +z, -x with the centre on the head.
+  const btVector3 translation(0.226894f, 0.172603f, -0.366297f);
+  const btVector3 hip = translation + btVector3(-0.0835f, 0.0707f, -0.0661f);
+  EXPECT_LT(hip.distance(head), 1e-4);
+  ASSERT_EQ(scene.poseCount, 32);  // 16 keyframes of 10 deg, each split into two sub-poses
+  for (int pose = 0; pose < scene.poseCount; ++pose)
+    EXPECT_LT((scene.bonePose(0, pose) * head).distance(head), 1e-5) << "pose " << pose;
+}
+
 TEST(RealData, FibresCommandOnARealMuscle) {
   REQUIRE_SHARED_DATA();
   testing::TemporaryDirectory directory("fibremss_real_fibres");

@@ -134,7 +134,8 @@ meshio::VtkPolyData readVtk(VtkKind kind, const std::string& path, const std::st
 
 }  // namespace
 
-TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* report) {
+TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* report,
+                         const SurfaceRepair& repair) {
   meshio::requireScale(path, scale);
   TriangleMesh mesh;
   std::vector<std::string> readerWarnings;
@@ -154,7 +155,12 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
   } else {
     mesh = meshio::readAssimpSurface(path, scale);
   }
+  MeshReport repaired;
+  meshio::repairSurface(mesh, repair, repaired);
   MeshReport checked = checkSurface(mesh, path);
+  checked.weldedVertices = repaired.weldedVertices;
+  checked.droppedTriangles = repaired.droppedTriangles;
+  checked.filledHoles = repaired.filledHoles;
   size_t nonOrientableParts = 0;
   checked.reorientedTriangles = meshio::orientConsistently(mesh, nonOrientableParts);
   if (checked.reorientedTriangles > 0) {

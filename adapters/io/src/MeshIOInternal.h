@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/MeshIO.h"
 #include "fibremss/VtkFiles.h"
 
 namespace fibremss::meshio {
@@ -88,6 +89,11 @@ std::vector<EdgeUse> sortedEdgeUses(const TriangleMesh& mesh);
 /// closed part is then turned outward. Parts that cannot be oriented (Moebius-like) are left
 /// as they are and counted in `nonOrientableParts`. Returns the number of triangles turned.
 size_t orientConsistently(TriangleMesh& mesh, size_t& nonOrientableParts);
+
+/// Welds vertices within repair.weld of an earlier one (dropping the triangles that leaves
+/// degenerate or repeated, and any repeated triangle), then closes each loop of at most
+/// repair.fillHoles open edges; the counts go into `report`.
+void repairSurface(TriangleMesh& mesh, const SurfaceRepair& repair, MeshReport& report);
 
 /// Throws InputError unless `scale` is a positive finite number.
 void requireScale(const std::string& path, double scale);

@@ -197,6 +197,7 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
                              btTransform(btQuaternion::getIdentity(), -pivot));
     }
   } else if (type == "keyframes") {
+    const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
     const Json& frames = motion.array("keyframes");
     if (frames.empty()) motion.fail("keyframes", "expected at least one keyframe");
     Json complete = Json::array();
@@ -204,7 +205,10 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
       Fields frame(frames[i], motion.pathOf("keyframes") + "[" + std::to_string(i) + "]",
                    motion.source());
       labels.push_back(frame.number("label", double(i), -kInf, kInf));
-      result.poses.push_back(readTransform(frame, reader.scale));
+      // About the pivot: translate it to the origin, turn, translate back and on.
+      result.poses.push_back(readTransform(frame, reader.scale) *
+                             btTransform(btQuaternion::getIdentity(), -pivot));
+      result.poses.back().getOrigin() += pivot;
       complete.push_back(frame.finish());
     }
     motion.set("keyframes", std::move(complete));
@@ -221,9 +225,19 @@ TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& re
   TriangleMesh mesh;
   if (hasFile) {
     const std::string path = reader.resolve(source, "file", source.text("file", ""));
+    const std::string units = source.choice("units", reader.scale == 1.0 ? "m" : "mm", {"m", "mm"});
+    SurfaceRepair repair;
+    repair.weld = source.number("weld", 0, 0, kInf) * reader.scale;
+    repair.fillHoles = source.integer("fill_holes", 0, 0, 1000);
     MeshReport report;
-    mesh = loadSurface(path, reader.scale, &report);
+    mesh = loadSurface(path, units == "mm" ? 1e-3 : 1.0, &report, repair);
     for (const auto& warning : report.warnings) reader.result->warnings.push_back(warning);
+    if (report.weldedVertices + report.droppedTriangles + report.filledHoles > 0)
+      reader.result->notes.push_back(path + ": repaired: " + std::to_string(report.weldedVertices) +
+                                     " vertices welded, " +
+                                     std::to_string(report.droppedTriangles) +
+                                     " triangles dropped (degenerate or repeated), " +
+                                     std::to_string(report.filledHoles) + " holes closed");
   } else {
     Fields generator = source.object("generator");
     shape = scene::generateShape(generator, reader.scale);

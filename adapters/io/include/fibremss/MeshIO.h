@@ -18,9 +18,18 @@ struct MeshReport {
   size_t unusedVertices = 0;          ///< vertices no triangle uses
   bool insideOut = false;  ///< closed, consistently oriented, negative volume (loadSurface flips)
   size_t reorientedTriangles = 0;  ///< triangles loadSurface turned over (consistent, outward)
+  size_t weldedVertices = 0;       ///< vertices the repair merged into a nearby one
+  size_t droppedTriangles = 0;     ///< triangles the repair dropped (degenerate or repeated)
+  size_t filledHoles = 0;          ///< loops of open edges the repair closed
 
   /// Every edge shared by exactly two triangles.
   bool closed() const { return openEdges == 0 && nonManifoldEdges == 0; }
+};
+
+/// Repairs loadSurface applies before its checks; both off by default.
+struct SurfaceRepair {
+  double weld = 0;    ///< merge each vertex within this distance of an earlier one into it [m]
+  int fillHoles = 0;  ///< close loops of at most this many open edges by a fan of triangles
 };
 
 /// Loads a triangle surface: legacy VTK (.vtk, ASCII or BINARY POLYDATA) by FibreMSS's own
@@ -28,8 +37,11 @@ struct MeshReport {
 /// metres). Throws InputError (file, element, expectation) for unreadable input or fatal
 /// defects (NaN/inf, out-of-range indices, no triangles); `report` gets the rest. Triangles
 /// turned over in the file are turned back so that each connected part is consistently
-/// oriented and closed parts face outward (counted in report->reorientedTriangles).
-TriangleMesh loadSurface(const std::string& path, double scale = 1.0, MeshReport* report = nullptr);
+/// oriented and closed parts face outward (counted in report->reorientedTriangles). `repair`
+/// welds vertices (then drops triangles left degenerate or repeated) and closes small holes
+/// before the checks.
+TriangleMesh loadSurface(const std::string& path, double scale = 1.0, MeshReport* report = nullptr,
+                         const SurfaceRepair& repair = {});
 
 /// Loads fibre polylines: legacy VTK LINES (two-point segments are chained into polylines)
 /// or OBJ `l` elements. Throws InputError for unreadable input, empty or single-point fibres.

@@ -67,9 +67,8 @@ struct SpringParameters {
   /// muscle tears beyond about 1.6 times its resting length and tendon at a tenth of that strain,
   /// but a spring of the network is no fibre: it also shears between fibres that slide past each
   /// other, and the tendon springs are stiffer (MuscleParameters::tendonStiffness) and stay short.
-  /// Off by default (on, it changes thigh13's and hip-pelvis' results; cost: docs/decisions.md);
-  /// the real anatomy scenes (scenes/json/real-hip*.json) set 2.
-  btScalar strainLimit = 0;
+  /// Cost and what it changes: docs/decisions.md, "Strain limit".
+  btScalar strainLimit = 2;
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).
