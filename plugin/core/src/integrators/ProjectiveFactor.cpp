@@ -48,14 +48,14 @@ void ProjectiveFactor::analyse(const Matrix& upper) {
   upperStart_.assign(upper.outerIndexPtr(), upper.outerIndexPtr() + n + 1);
   upperRows_.assign(upper.innerIndexPtr(), upper.innerIndexPtr() + upper.nonZeros());
   upperValues_.assign(upper.valuePtr(), upper.valuePtr() + upper.nonZeros());
-  diagonalEntry_.assign(n, -1);
+  diagonal_.assign(n, 0);
   parent_.assign(n, -1);
   tags_.assign(n, -1);
   std::vector<int> next(n, 1);  // first the column counts (the diagonal included)
   for (int k = 0; k < n; ++k) {
     tags_[k] = k;
     for (int p = upperStart_[k]; p < upperStart_[k + 1]; ++p) {
-      if (upperRows_[p] == k) diagonalEntry_[k] = p;
+      if (upperRows_[p] == k) diagonal_[k] = upperValues_[p];
       for (int i = upperRows_[p]; tags_[i] != k; i = parent_[i]) {
         if (parent_[i] == -1) parent_[i] = k;
         ++next[i];

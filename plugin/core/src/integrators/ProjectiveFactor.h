@@ -30,7 +30,7 @@ class ProjectiveFactor {
   /// The row P·k of L that free particle k is solved in.
   int row(size_t k) const { return order_[k]; }
   /// A's diagonal entry in `row` of P·A·Pᵀ [N/m].
-  double matrixDiagonal(int row) const { return upperValues_[diagonalEntry_[row]]; }
+  double matrixDiagonal(int row) const { return diagonal_[row]; }
   /// W's entry in `row` [N/m].
   double weight(int row) const { return weights_[row]; }
   /// Sets W's entry in `row` [N/m], at most once per row between updates (the change lists are
@@ -62,7 +62,7 @@ class ProjectiveFactor {
   std::vector<int> upperStart_;      ///< column k: entries [upperStart_[k], upperStart_[k+1])
   std::vector<int> upperRows_;       ///< row of each entry
   std::vector<double> upperValues_;  ///< value of each entry [N/m]
-  std::vector<int> diagonalEntry_;   ///< index of column k's diagonal in upperValues_
+  std::vector<double> diagonal_;     ///< column k's diagonal entry, one array read by row [N/m]
   std::vector<double> weights_;      ///< W per row [N/m]
   std::vector<double> lower_;        ///< L's entries as the pattern orders them [√(N/m)]
   /// lower_ in btScalar as the pattern orders it, each column's diagonal inverted [√(N/m), on the
