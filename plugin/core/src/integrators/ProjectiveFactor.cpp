@@ -7,6 +7,7 @@
 
 #include "fibremss/Error.h"
 #include "solver/ParticleSimd.h"
+#include "solver/SpringForces.h"
 
 namespace fibremss {
 namespace {
@@ -246,12 +247,28 @@ struct SolveColumn {
   int count;
 };
 
+/// L's arrays as the solve reads them (ProjectiveFactor's solveValues_, solveRows_ and
+/// solveRowStart_), passed by value so that the compiler keeps them in registers across the
+/// solve's stores.
+struct SolveFactor {
+  const int* start;
+  const btScalar* values;
+  const uint32_t* rows;
+  const int* rowStart;
+  int n;
+
+  SolveColumn column(int j) const {
+    return {values[start[j]], values + start[j] + 1, rows + rowStart[j],
+            start[j + 1] - start[j] - 1};
+  }
+};
+
 #if FIBREMSS_SSE_PARTICLES
-/// L·Lᵀ·z = b in place with SSE (ProjectiveFactor::solveInPlace); `column(j)` gives column j.
-template <class Column>
-void solveLanes(const Column& column, int n, btVector3* x) {
+/// L·Lᵀ·z = b in place with SSE (ProjectiveFactor::solveInPlace).
+void solveLanes(const SolveFactor factor, btVector3* x) {
+  const int n = factor.n;
   for (int j = 0; j < n; ++j) {
-    const SolveColumn c = column(j);
+    const SolveColumn c = factor.column(j);
     const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(c.inverse));
     _mm_store_ps(x[j].m_floats, xj);
     int p = 0;
@@ -269,7 +286,7 @@ void solveLanes(const Column& column, int n, btVector3* x) {
     }
   }
   for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
-    const SolveColumn c = column(j);
+    const SolveColumn c = factor.column(j);
     __m128 sum = loadVector(x[j]), odd = _mm_setzero_ps();
     int p = 0;
     for (; p + 1 < c.count; p += 2) {
@@ -280,6 +297,54 @@ void solveLanes(const Column& column, int n, btVector3* x) {
     if (p < c.count)
       sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
     _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, odd), _mm_set1_ps(c.inverse)));
+  }
+}
+#endif
+
+#if FIBREMSS_AVX2_PARTICLES
+/// Entries p and p + 1's values, each in all four lanes of its half: [v_p ×4, v_{p+1} ×4].
+FIBREMSS_AVX2_PASS inline __m256 valuePair(const btScalar* values) {
+  const __m128 both = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(values)));
+  return _mm256_permutevar8x32_ps(_mm256_castps128_ps256(both),
+                                  _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1));
+}
+
+/// solveLanes with AVX2, two entries of a column per instruction (low half entry p, high half
+/// p + 1): the same products and differences per lane in the same order, so the same bits (the
+/// backward pass's halves are solveLanes' even and odd sums).
+FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x) {
+  const int n = factor.n;
+  for (int j = 0; j < n; ++j) {
+    const SolveColumn c = factor.column(j);
+    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(c.inverse));
+    _mm_store_ps(x[j].m_floats, xj);
+    const __m256 both = _mm256_insertf128_ps(_mm256_castps128_ps256(xj), xj, 1);
+    int p = 0;
+    for (; p + 1 < c.count; p += 2) {  // x(row) − xj·L(row, j)
+      btVector3& a = at(x, c.rows[p]);
+      btVector3& b = at(x, c.rows[p + 1]);
+      const __m256 next =
+          _mm256_sub_ps(loadPair(a, b), _mm256_mul_ps(both, valuePair(c.values + p)));
+      _mm_store_ps(a.m_floats, _mm256_castps256_ps128(next));
+      _mm_store_ps(b.m_floats, _mm256_extractf128_ps(next, 1));
+    }
+    if (p < c.count) {
+      float* a = at(x, c.rows[p]).m_floats;
+      _mm_store_ps(a, _mm_sub_ps(_mm_load_ps(a), _mm_mul_ps(xj, _mm_set1_ps(c.values[p]))));
+    }
+  }
+  for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
+    const SolveColumn c = factor.column(j);
+    __m256 sums = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
+    int p = 0;
+    for (; p + 1 < c.count; p += 2)
+      sums = _mm256_sub_ps(sums, _mm256_mul_ps(loadPair(at(x, c.rows[p]), at(x, c.rows[p + 1])),
+                                               valuePair(c.values + p)));
+    __m128 sum = _mm256_castps256_ps128(sums);
+    if (p < c.count)
+      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
+    _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, _mm256_extractf128_ps(sums, 1)),
+                                           _mm_set1_ps(c.inverse)));
   }
 }
 #endif
@@ -298,25 +363,21 @@ void solveLanes(const Column& column, int n, btVector3* x) {
 // once, four rows in the lanes): 14 % fewer instructions, 12 % more CPU time (docs/decisions.md,
 // "Solver").
 void ProjectiveFactor::solveInPlace(btVector3* x) const {
-  const int* start = columnStart_.data();
-  const btScalar* values = solveValues_.data();
-  const uint32_t* rows = solveRows_.data();
-  const int* rowStart = solveRowStart_.data();
-  const auto column = [&](int j) {
-    return SolveColumn{values[start[j]], values + start[j] + 1, rows + rowStart[j],
-                       start[j + 1] - start[j] - 1};
-  };
-  const auto n = static_cast<int>(size());
+  const SolveFactor factor{columnStart_.data(), solveValues_.data(), solveRows_.data(),
+                           solveRowStart_.data(), static_cast<int>(size())};
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2) return solveLanesAvx2(factor, x);
+#endif
 #if FIBREMSS_SSE_PARTICLES
-  solveLanes(column, n, x);
+  solveLanes(factor, x);
 #else
-  for (int j = 0; j < n; ++j) {
-    const SolveColumn c = column(j);
+  for (int j = 0; j < factor.n; ++j) {
+    const SolveColumn c = factor.column(j);
     const btVector3 xj = x[j] *= c.inverse;
     for (int p = 0; p < c.count; ++p) at(x, c.rows[p]) -= xj * c.values[p];
   }
-  for (int j = n - 1; j >= 0; --j) {
-    const SolveColumn c = column(j);
+  for (int j = factor.n - 1; j >= 0; --j) {
+    const SolveColumn c = factor.column(j);
     btVector3 sum = x[j];
     for (int p = 0; p < c.count; ++p) sum -= at(x, c.rows[p]) * c.values[p];
     x[j] = sum * c.inverse;
