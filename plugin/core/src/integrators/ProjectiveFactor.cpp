@@ -320,6 +320,7 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x) {
     _mm_store_ps(x[j].m_floats, xj);
     const __m256 both = _mm256_insertf128_ps(_mm256_castps128_ps256(xj), xj, 1);
     int p = 0;
+#pragma GCC unroll 4
     for (; p + 1 < c.count; p += 2) {  // x(row) − xj·L(row, j)
       btVector3& a = at(x, c.rows[p]);
       btVector3& b = at(x, c.rows[p + 1]);
@@ -337,6 +338,7 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x) {
     const SolveColumn c = factor.column(j);
     __m256 sums = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
     int p = 0;
+#pragma GCC unroll 4
     for (; p + 1 < c.count; p += 2)
       sums = _mm256_sub_ps(sums, _mm256_mul_ps(loadPair(at(x, c.rows[p]), at(x, c.rows[p + 1])),
                                                valuePair(c.values + p)));
