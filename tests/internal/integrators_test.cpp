@@ -699,6 +699,38 @@ TEST(ProjectiveFactor, SolvesAsEigensFactorThroughWeightsThatComeAndGo) {
   EXPECT_GT(factorSolveError(factor, lower, b), 0.1);  // the check sees W
 }
 
+TEST(ProjectiveFactor, SolvesThroughColumnsThatShareTheirRows) {
+  // Two dense blocks joined by a chain: each block's columns form one run that reads one list of
+  // rows (each column from one further on), the chain's columns their own. A column reading
+  // another run's rows, or one off in its list, is off by order 1.
+  constexpr int kBlock = 12, kSize = 2 * kBlock + 6;
+  std::vector<Eigen::Triplet<double>> entries;
+  const auto couple = [&](int i, int j, double k) {
+    entries.emplace_back(i, i, k);
+    entries.emplace_back(j, j, k);
+    entries.emplace_back(std::max(i, j), std::min(i, j), -k);
+  };
+  for (int base : {0, kBlock + 6})
+    for (int i = base; i < base + kBlock; ++i)
+      for (int j = i + 1; j < base + kBlock; ++j) couple(i, j, 1 + 0.1 * ((i * 7 + j) % 5));
+  for (int i = kBlock - 1; i < kBlock + 6; ++i) couple(i, i + 1, 2);
+  for (int i = 0; i < kSize; ++i) entries.emplace_back(i, i, 0.05);
+  Eigen::SparseMatrix<double> lower(kSize, kSize);
+  lower.setFromTriplets(entries.begin(), entries.end());
+  Eigen::MatrixX3d b(kSize, 3);
+  for (int i = 0; i < kSize; ++i)
+    for (int c = 0; c < 3; ++c) b(i, c) = std::sin(1.0 + i + 7.0 * c);
+  ProjectiveFactor factor(lower);
+  EXPECT_LT(factorSolveError(factor, lower, b), 1e-4);
+  Eigen::SparseMatrix<double> withWeights = lower;
+  for (int i = 0; i < kSize; i += 3) {
+    withWeights.coeffRef(i, i) += 4;
+    factor.setWeight(factor.row(i), 4);
+  }
+  factor.update();
+  EXPECT_LT(factorSolveError(factor, withWeights, b), 1e-4);
+}
+
 TEST(ProjectiveFactor, RefusesAMatrixThatIsNotPositiveDefinite) {
   Eigen::SparseMatrix<double> lower(2, 2);
   const std::vector<Eigen::Triplet<double>> entries{{0, 0, 1}, {1, 1, 1}, {1, 0, 2}};
