@@ -103,6 +103,7 @@ TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
     MuscleStep s;
     s.volumeChangePct = volume;
     s.penetrationMm = {penetrationLeft, 0.1};
+    s.sphereDepthMm = {0.05, penetrationLeft / 2};
     s.meanFibreLengthMm = fibre;
     s.worstSpringRatio = spring;
     s.springDeviationRatio = spring - 1;
@@ -119,6 +120,7 @@ TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
   EXPECT_DOUBLE_EQ(results.worstVolumeChangePct, -4);
   EXPECT_EQ(results.worstVolumeStep, 1);
   EXPECT_EQ(results.maxPenetrationMm, (std::vector<double>{0.9, 0.1}));
+  EXPECT_EQ(results.maxSphereDepthMm, (std::vector<double>{0.05, 0.45}));
   EXPECT_DOUBLE_EQ(results.fibreLengthLastMm, 28);
   EXPECT_DOUBLE_EQ(results.fibreLengthMinMm, 20);
   EXPECT_DOUBLE_EQ(results.fibreLengthMaxMm, 28);
@@ -135,8 +137,11 @@ TEST(MuscleMetrics, ResultsKeepTheWorstAndTheLastFiniteStep) {
   const std::vector<MuscleResults> both = {results, other};
   EXPECT_EQ(worstVolumeMuscle(both)->name, "other");
   const std::string table = muscleTable(both);
-  EXPECT_NE(table.find("| other | -3.00 | -4.00 (1) | left 0.90, right 0.10 | – | left 9, right 9"),
-            std::string::npos)
+  EXPECT_NE(
+      table.find(
+          "| other | -3.00 | -4.00 (1) | left 0.90, right 0.10 | left 0.05, right 0.45 | left 9, "
+          "right 9"),
+      std::string::npos)
       << table;
 }
 
@@ -157,7 +162,7 @@ TEST(MuscleMetrics, SeriesCsvAndJsonCarryEveryRow) {
   a.measures.residualMaxMm = 0.25;
   a.measures.maxBellyStretch = 1.0625;
   a.measures.maxTendonStretch = 1.015;
-  a.measures.sphereDepthMm = 0.5;
+  a.measures.sphereDepthMm = {0.5, 0.25};  // the deepest bone's counts
   a.measures.bellyStrain = 0.0625;
   a.measures.tendonStrain = 0.005;
   SeriesRow b = a;

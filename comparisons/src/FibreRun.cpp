@@ -118,10 +118,12 @@ class BoneMeshes {
   }
 
   /// Free boundary particles' spheres in the bones: max(0, r − signed distance of the centre)
-  /// (fixed particles sit on their bones by design and are left out).
+  /// (fixed particles sit on their bones by design and are left out); `perBoneMm` receives the
+  /// deepest in each bone [mm].
   Penetration spheres(const MuscleSettings& muscle, std::span<const btVector3> positions,
-                      std::span<const btTransform> transforms) {
+                      std::span<const btTransform> transforms, std::vector<double>& perBoneMm) {
     for (size_t b = 0; b < transforms.size(); ++b) inverses_[b] = transforms[b].inverse();
+    perBoneMm.assign(distances_.size(), 0.0);
     Penetration result;
     double sum = 0;
     for (uint32_t p : muscle.boundaryParticles) {
@@ -133,7 +135,9 @@ class BoneMeshes {
       for (size_t b = 0; b < distances_.size(); ++b) {
         const btVector3 local = inverses_[b] * positions[p];
         if (!inside(local, lower_[b] - margin, upper_[b] + margin)) continue;
-        depth = std::max(depth, radius - distances_[b].signedDistance(local));
+        const btScalar inBone = radius - distances_[b].signedDistance(local);
+        perBoneMm[b] = std::max(perBoneMm[b], 1000.0 * inBone);
+        depth = std::max(depth, inBone);
       }
       if (depth > 0) {
         ++result.penetrating;
@@ -225,9 +229,9 @@ class MuscleLedger {
     MuscleStep step = measureMuscle(settings, system_.positions(muscle), system_.surface(muscle),
                                     bones.meshes(), transforms);
     if (step.finite) {
-      const Penetration spheres = bones.spheres(settings, system_.positions(muscle), transforms);
+      const Penetration spheres =
+          bones.spheres(settings, system_.positions(muscle), transforms, step.sphereDepthMm);
       step.boneContacts = spheres.penetrating;
-      step.sphereDepthMm = spheres.maxMm;
       spherePenetration = combine(spherePenetration, spheres);
     }
     return step;

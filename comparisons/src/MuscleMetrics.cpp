@@ -102,13 +102,22 @@ std::string csvText(const std::string& text) {
   return quoted + "\"";
 }
 
+/// The largest of `depths` (NaN when empty).
+double deepest(const std::vector<double>& depths) {
+  double result = MuscleStep::kNone;
+  for (double depth : depths)
+    if (!(depth <= result)) result = depth;
+  return result;
+}
+
 }  // namespace
 
 double MuscleStep::maxPenetrationMm() const {
-  double deepest = kNone;
-  for (double depth : penetrationMm)
-    if (!(depth <= deepest)) deepest = depth;
-  return deepest;
+  return deepest(penetrationMm);
+}
+
+double MuscleStep::maxSphereDepthMm() const {
+  return deepest(sphereDepthMm);
 }
 
 std::string seriesCsv(const std::vector<SeriesRow>& rows) {
@@ -126,8 +135,9 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
            "," + csvNumber(m.maxPenetrationMm(), "%.6g") + "," + std::to_string(m.boneContacts) +
            "," + std::to_string(row.solverContacts) + "," + csvNumber(m.residualRmsMm, "%.6g") +
            "," + csvNumber(m.residualMaxMm, "%.6g") + "," + csvNumber(m.maxBellyStretch, "%.6g") +
-           "," + csvNumber(m.maxTendonStretch, "%.6g") + "," + csvNumber(m.sphereDepthMm, "%.6g") +
-           "," + csvNumber(m.bellyStrain, "%.6g") + "," + csvNumber(m.tendonStrain, "%.6g") + "\n";
+           "," + csvNumber(m.maxTendonStretch, "%.6g") + "," +
+           csvNumber(m.maxSphereDepthMm(), "%.6g") + "," + csvNumber(m.bellyStrain, "%.6g") + "," +
+           csvNumber(m.tendonStrain, "%.6g") + "\n";
   }
   return csv;
 }
@@ -151,7 +161,7 @@ nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
                      {"residual_max_mm", number(m.residualMaxMm)},
                      {"max_belly_stretch", number(m.maxBellyStretch)},
                      {"max_tendon_stretch", number(m.maxTendonStretch)},
-                     {"max_sphere_depth_mm", number(m.sphereDepthMm)},
+                     {"max_sphere_depth_mm", number(m.maxSphereDepthMm())},
                      {"belly_strain", number(m.bellyStrain)},
                      {"tendon_strain", number(m.tendonStrain)}});
   }
@@ -181,7 +191,9 @@ std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
     m.residualMaxMm = numberAt(o, "residual_max_mm", m.residualMaxMm);
     m.maxBellyStretch = numberAt(o, "max_belly_stretch", m.maxBellyStretch);
     m.maxTendonStretch = numberAt(o, "max_tendon_stretch", m.maxTendonStretch);
-    m.sphereDepthMm = numberAt(o, "max_sphere_depth_mm", m.sphereDepthMm);
+    if (const double depth = numberAt(o, "max_sphere_depth_mm", MuscleStep::kNone);
+        std::isfinite(depth))
+      m.sphereDepthMm = {depth};
     m.bellyStrain = numberAt(o, "belly_strain", m.bellyStrain);
     m.tendonStrain = numberAt(o, "tendon_strain", m.tendonStrain);
     rows.push_back(std::move(row));
@@ -215,6 +227,7 @@ MuscleResults::MuscleResults(const MuscleSettings& muscle, std::vector<std::stri
     : name(muscle.name),
       bones(std::move(boneNames)),
       maxPenetrationMm(bones.size(), 0.0),
+      maxSphereDepthMm(bones.size(), 0.0),
       fixedParticles(fixedParticlesPerBone(muscle, bones.size())),
       fibreLengthRestMm(1000.0 * meanFibreLength(muscle, muscle.restPositions)) {}
 
@@ -230,7 +243,8 @@ void MuscleResults::add(int step, const MuscleStep& measures) {
   }
   for (size_t b = 0; b < measures.penetrationMm.size() && b < maxPenetrationMm.size(); ++b)
     maxPenetrationMm[b] = std::max(maxPenetrationMm[b], measures.penetrationMm[b]);
-  maxSphereDepthMm = largest(maxSphereDepthMm, measures.sphereDepthMm);
+  for (size_t b = 0; b < measures.sphereDepthMm.size() && b < maxSphereDepthMm.size(); ++b)
+    maxSphereDepthMm[b] = std::max(maxSphereDepthMm[b], measures.sphereDepthMm[b]);
   fibreLengthLastMm = measures.meanFibreLengthMm;
   fibreLengthMinMm = first ? fibreLengthLastMm : std::min(fibreLengthMinMm, fibreLengthLastMm);
   fibreLengthMaxMm = first ? fibreLengthLastMm : std::max(fibreLengthMaxMm, fibreLengthLastMm);
@@ -243,9 +257,11 @@ void MuscleResults::add(int step, const MuscleStep& measures) {
 }
 
 nlohmann::json toJson(const MuscleResults& r) {
-  nlohmann::json penetration = nlohmann::json::object(), fixed = nlohmann::json::object();
+  nlohmann::json penetration = nlohmann::json::object(), spheres = nlohmann::json::object(),
+                 fixed = nlohmann::json::object();
   for (size_t b = 0; b < r.bones.size(); ++b) {
     if (b < r.maxPenetrationMm.size()) penetration[r.bones[b]] = number(r.maxPenetrationMm[b]);
+    if (b < r.maxSphereDepthMm.size()) spheres[r.bones[b]] = number(r.maxSphereDepthMm[b]);
     if (b < r.fixedParticles.size()) fixed[r.bones[b]] = r.fixedParticles[b];
   }
   return {{"name", r.name},
@@ -254,7 +270,7 @@ nlohmann::json toJson(const MuscleResults& r) {
             {"worst", number(r.worstVolumeChangePct)},
             {"worst_step", r.worstVolumeStep}}},
           {"max_penetration_mm", penetration},
-          {"max_sphere_depth_mm", number(r.maxSphereDepthMm)},
+          {"max_sphere_depth_mm", spheres},
           {"fixed_particles", fixed},
           {"frozen", r.frozen},
           {"frozen_step", r.frozenStep},
@@ -287,7 +303,9 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
       r.bones.push_back(it.key());
       r.maxPenetrationMm.push_back(it->is_number() ? it->get<double>() : MuscleResults::kNone);
     }
-  r.maxSphereDepthMm = numberAt(o, "max_sphere_depth_mm", r.maxSphereDepthMm);
+  if (auto s = o.find("max_sphere_depth_mm"); s != o.end() && s->is_object())
+    for (const std::string& bone : r.bones)
+      r.maxSphereDepthMm.push_back(numberAt(*s, bone.c_str(), 0));
   if (auto f = o.find("fixed_particles"); f != o.end() && f->is_object())
     for (const std::string& bone : r.bones) r.fixedParticles.push_back(f->value(bone, size_t(0)));
   r.frozen = o.value("frozen", r.frozen);
@@ -331,7 +349,7 @@ std::string muscleTable(const std::vector<MuscleResults>& muscles) {
         "%s / %s | %d | %s |\n",
         m.name.c_str(), m.volumeChangePct, m.worstVolumeChangePct, m.worstVolumeStep,
         perBone(m.bones, m.maxPenetrationMm, "%.2f", -1.0).c_str(),
-        twoDecimals(m.maxSphereDepthMm).c_str(),
+        perBone(m.bones, m.maxSphereDepthMm, "%.2f", -1.0).c_str(),
         perBone(m.bones, m.fixedParticles, "%zu", size_t(0)).c_str(), m.fibreLengthRestMm,
         m.fibreLengthLastMm, m.fibreLengthMinMm, m.fibreLengthMaxMm, m.worstSpringRatio,
         twoDecimals(m.worstBellyStretch).c_str(), twoDecimals(m.worstTendonStretch).c_str(),

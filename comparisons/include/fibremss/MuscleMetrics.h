@@ -36,8 +36,8 @@ struct MuscleStep {
   /// Its free boundary particles whose collision sphere reaches into a bone's true mesh (filled
   /// by runFibreMSS from its sphere test; measureMuscle leaves 0).
   size_t boneContacts = 0;
-  /// The deepest of those spheres inside a bone's true mesh (filled with boneContacts) [mm].
-  double sphereDepthMm = kNone;
+  /// Per bone: the deepest of those spheres inside its true mesh (filled with boneContacts) [mm].
+  std::vector<double> sphereDepthMm;
   /// Its force residual (MuscleSystem::forceResidual; filled by runFibreMSS): RMS and largest
   /// equivalent displacement over its free particles [mm].
   double residualRmsMm = kNone;
@@ -45,6 +45,8 @@ struct MuscleStep {
 
   /// The deepest surface vertex inside any bone [mm] (NaN when not measured).
   double maxPenetrationMm() const;
+  /// The deepest free particle sphere inside any bone [mm] (NaN when not measured).
+  double maxSphereDepthMm() const;
 };
 
 /// Measures a muscle (its particles `positions`, deformed surface `surface`) against the bones'
@@ -73,7 +75,8 @@ struct SeriesRow {
 std::string seriesCsv(const std::vector<SeriesRow>& rows);
 /// The series as a JSON array of objects with the CSV's column names (null: not measured).
 nlohmann::json seriesJson(const std::vector<SeriesRow>& rows);
-/// Reads what seriesJson wrote (per-bone penetration comes back as the one deepest value).
+/// Reads what seriesJson wrote (per-bone penetration and sphere depth come back as the one
+/// deepest value).
 std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array);
 
 /// A muscle's results over a run, from the steps it was measured at.
@@ -85,7 +88,7 @@ struct MuscleResults {
   double worstVolumeChangePct = kNone;   ///< of largest magnitude over the finite steps [%]
   int worstVolumeStep = -1;              ///< the step of worstVolumeChangePct
   std::vector<double> maxPenetrationMm;  ///< per bone: deepest surface vertex, all steps [mm]
-  double maxSphereDepthMm = kNone;       ///< deepest free particle sphere in a bone, all steps [mm]
+  std::vector<double> maxSphereDepthMm;  ///< per bone: deepest free particle sphere, all steps [mm]
   std::vector<size_t> fixedParticles;    ///< per bone: particles fixed to it
   bool frozen = false;                   ///< the numerical guard froze it
   int frozenStep = -1;                   ///< the step that froze it
