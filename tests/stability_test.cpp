@@ -328,8 +328,8 @@ TEST(StabilityCli, WritesBothFilesAndRejectsUnknownIntegrators) {
   ASSERT_EQ(json["cells"].size(), 2u);
   EXPECT_EQ(json["cells"][0]["integrator"], "verlet");
   // The user's resolution replaces the default one (resolution=12), which the report would
-  // otherwise list too.
-  EXPECT_EQ(json["overrides"], nlohmann::json::array({"resolution=8"}));
+  // otherwise list too; the matrix's other default (no strain limit) stays.
+  EXPECT_EQ(json["overrides"], nlohmann::json::array({"strain_limit=0", "resolution=8"}));
   EXPECT_TRUE(std::filesystem::exists(out + "/stability.md"));
   EXPECT_EQ(fibremss::testing::runProcess(std::string(FIBREMSS_CLI) +
                                           " stability --integrators no-such 2>/dev/null")

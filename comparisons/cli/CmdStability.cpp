@@ -97,7 +97,8 @@ void addStabilityCommand(CLI::App& app) {
   command->add_option("case", args->cases, "Cases (default: the hard cases)");
   command
       ->add_option("--set", args->overrides,
-                   "Override for every case, after the default resolution=12 (repeatable)")
+                   "Override for every case, after the defaults resolution=12 and strain_limit=0 "
+                   "(repeatable)")
       ->allow_extra_args(false);
   command
       ->add_option("--integrators", args->options.integrators,
