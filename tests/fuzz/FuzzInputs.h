@@ -100,6 +100,8 @@ inline std::string sceneJsonFromBytes(std::string_view bytes) {
                                           "on_failure",
                                           "max_retries",
                                           "frame_every",
+                                          "weld",
+                                          "fill_holes",
                                           "analytic",
                                           "blended_pretransform",
                                           "deviation_epsilon",
