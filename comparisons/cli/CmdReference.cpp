@@ -84,7 +84,10 @@ void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry)
   const auto keys = [](const nlohmann::ordered_json& shipped) {
     std::set<std::string> found;
     if (shipped.contains("solves"))
-      for (const auto& solve : shipped.at("solves")) found.insert(solve.value("key", ""));
+      for (const auto& solve : shipped.at("solves")) {
+        found.insert(solve.value("key", ""));
+        if (solve.contains("retry_of")) found.insert(solve.at("retry_of").get<std::string>());
+      }
     return found;
   };
   std::set<std::string> kept;  // the keys of the entry replaced, then those only it named
@@ -107,22 +110,45 @@ void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry)
   std::filesystem::rename(path + ".partial", path);
 }
 
-/// Writes every solve of the reference (its own and its gates', as computed) to args.shipDir as
-/// shipped references (`<key>.ref.gz`) and records them in its manifest.json.
+/// Writes `solution` to `dir/<key>.ref.gz` and says so.
+void shipStored(const std::string& dir, const std::string& key, const CalculixSolution& solution,
+                const std::string& what) {
+  const std::string path = dir + "/" + key + ".ref.gz";
+  shipSolution(path, solution);
+  std::printf("shipped %s (%s): %ju bytes\n", path.c_str(), what.c_str(),
+              static_cast<uintmax_t>(std::filesystem::file_size(path)));
+}
+
+/// Writes every stored solve of the reference (its own and its gates') to args.shipDir as
+/// shipped references (`<key>.ref.gz`) and records them in its manifest.json. A gate not solved
+/// yet is listed with `"shipped": false`, so the manifest still names every key of the scene.
 void ship(const LoadedScene& scene, const PreparedScene& prepared, const ReferenceArgs& args) {
   const std::string cacheDir = resolvedCacheDir(args.options);
   std::filesystem::create_directories(args.shipDir);
+  ReferenceOptions withGates = args.options;
+  withGates.gates = true;
   nlohmann::ordered_json solves = nlohmann::ordered_json::array();
-  for (const NamedReferenceCell& cell : referenceCells(scene, prepared, args.options)) {
+  for (const NamedReferenceCell& cell : referenceCells(scene, prepared, withGates)) {
     if (cell.cell.muscle != 0) continue;  // a cell per muscle, a file per solve
     CalculixSolution solution;
-    if (!loadStoredSolution(cacheDir, cell.key, solution))
-      throw std::runtime_error("the " + cell.solve + " solve " + cell.key + " is not stored");
-    const std::string path = args.shipDir + "/" + cell.key + ".ref.gz";
-    shipSolution(path, solution);
-    solves.push_back({{"solve", cell.solve}, {"key", cell.key}});
-    std::printf("shipped %s (%s): %ju bytes\n", path.c_str(), cell.solve.c_str(),
-                static_cast<uintmax_t>(std::filesystem::file_size(path)));
+    if (!loadStoredSolution(cacheDir, cell.key, solution)) {
+      if (cell.solve == "reference")
+        throw std::runtime_error("the reference solve " + cell.key + " is not stored");
+      solves.push_back({{"solve", cell.solve}, {"key", cell.key}, {"shipped", false}});
+      std::printf("not shipped: %s (%s), not solved\n", cell.key.c_str(), cell.solve.c_str());
+      continue;
+    }
+    shipStored(args.shipDir, cell.key, solution, cell.solve);
+    nlohmann::ordered_json shipped = {{"solve", cell.solve}, {"key", cell.key}};
+    if (!cell.retryOf.empty()) {
+      // The failed solve at default increments: how a fresh machine reaches its retry.
+      if (!loadStoredSolution(cacheDir, cell.retryOf, solution))
+        throw std::runtime_error("the failed solve " + cell.retryOf + " is not stored");
+      shipStored(args.shipDir, cell.retryOf, solution,
+                 cell.solve + ", failed at default increments");
+      shipped["retry_of"] = cell.retryOf;
+    }
+    solves.push_back(shipped);
   }
   updateManifest(args.shipDir,
                  {{"scene", scene.name}, {"set", args.scene.overrides}, {"solves", solves}});

@@ -284,22 +284,31 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
                                                const ReferenceOptions& options) {
   const std::string cacheDir = resolvedCacheDir(options);
   SceneCuts cuts(scene, prepared);
-  const CalculixDefinition reference =
-      storedRetry(scene, prepared, cuts, sceneDefinition(scene, options), cacheDir);
-  std::vector<std::pair<std::string, CalculixDefinition>> solves{{"reference", reference}};
+  struct Solve {
+    std::string name;
+    CalculixDefinition first, solved;  // the definition, and its retry where it failed
+  };
+  const CalculixDefinition base = sceneDefinition(scene, options);
+  const CalculixDefinition reference = storedRetry(scene, prepared, cuts, base, cacheDir);
+  std::vector<Solve> solves{{"reference", base, reference}};
   if (options.gates)
     for (const auto& [name, gate] : gateSolves(gateDefinitions(reference)))
-      solves.emplace_back(name, storedRetry(scene, prepared, cuts, gate, cacheDir));
+      solves.push_back({name, gate, storedRetry(scene, prepared, cuts, gate, cacheDir)});
   std::vector<NamedReferenceCell> cells;
-  for (const auto& [name, definition] : solves) {
-    const ContinuumCut& cut = cuts.at(definition.attachmentScale);
-    const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+  for (const Solve& solve : solves) {
+    const ContinuumCut& cut = cuts.at(solve.solved.attachmentScale);
+    const std::string key = referenceCacheKey(scene, prepared, solve.solved, cut);
+    const std::string retryOf =
+        solve.solved.incrementScale == solve.first.incrementScale
+            ? ""
+            : referenceCacheKey(scene, prepared, solve.first, cuts.at(solve.first.attachmentScale));
     for (size_t m = 0; m < prepared.muscles.size(); ++m)
-      cells.push_back({name,
+      cells.push_back({solve.name,
                        key,
                        prepared.muscles[m]->name,
-                       {definition, cut, m},
-                       referencePartStored(cacheDir, key, m)});
+                       {solve.solved, cut, m},
+                       referencePartStored(cacheDir, key, m),
+                       retryOf});
   }
   return cells;
 }

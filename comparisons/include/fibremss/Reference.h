@@ -176,6 +176,9 @@ struct NamedReferenceCell {
   std::string muscle;   ///< the muscle's name
   ReferenceCell cell;   ///< what cachedCalculixMuscle solves
   bool stored = false;  ///< the solve or this muscle's part of it is in the cache
+  /// Where the solve is a retry at kFinerIncrements: the key of the stored solve whose failed
+  /// pose it retries (a fresh machine finds the retry through it); else "".
+  std::string retryOf;
 };
 std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
                                                const PreparedScene& prepared,
