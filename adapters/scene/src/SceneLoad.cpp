@@ -192,9 +192,7 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
     labels = sweepAngles(start, end, step);
     for (double angle : labels) {
       const btTransform rotation(btQuaternion(axis.normalized(), btScalar(angle * kDegrees)));
-      // About the pivot: translate it to the origin, rotate, translate back.
-      result.poses.push_back(btTransform(btQuaternion::getIdentity(), pivot) * rotation *
-                             btTransform(btQuaternion::getIdentity(), -pivot));
+      result.poses.push_back(scene::turnedAbout(rotation, pivot));
     }
   } else if (type == "keyframes") {
     const btVector3 pivot = scene::readSweepPivot(motion, mesh, reader.scale);
@@ -205,10 +203,7 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
       Fields frame(frames[i], motion.pathOf("keyframes") + "[" + std::to_string(i) + "]",
                    motion.source());
       labels.push_back(frame.number("label", double(i), -kInf, kInf));
-      // About the pivot: translate it to the origin, turn, translate back and on.
-      result.poses.push_back(readTransform(frame, reader.scale) *
-                             btTransform(btQuaternion::getIdentity(), -pivot));
-      result.poses.back().getOrigin() += pivot;
+      result.poses.push_back(scene::turnedAbout(readTransform(frame, reader.scale), pivot));
       complete.push_back(frame.finish());
     }
     motion.set("keyframes", std::move(complete));

@@ -49,6 +49,10 @@ MotionTable readMotionTable(const std::string& path);
 void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3& pivot,
                        BoneMotion& result, std::vector<double>& labels);
 
+/// `motion` about `pivot` instead of the origin: T(pivot) · motion · T(−pivot), so that it
+/// keeps `pivot` where its rotation alone would keep the origin.
+btTransform turnedAbout(const btTransform& motion, const btVector3& pivot);
+
 /// The rigid motion `fraction` (in [0, 1]) of the way from `from` to `to` along the screw that
 /// joins them: rotation about a fixed axis in space while translating along it, so a rotation
 /// about a pivot keeps the pivot fixed at every fraction.

@@ -292,9 +292,7 @@ void readOpenSimMotion(Fields& motion, const std::string& file, const btVector3&
       rotation *= btQuaternion(c.axis, btScalar(angle));
       values.push_back(angle / kDegrees);
     }
-    // About the pivot: translate it to the origin, rotate, translate back.
-    poses.push_back(btTransform(btQuaternion::getIdentity(), pivot) * btTransform(rotation) *
-                    btTransform(btQuaternion::getIdentity(), -pivot));
+    poses.push_back(turnedAbout(btTransform(rotation), pivot));
     labels.push_back(t);
     if (poses.size() > kMaxPoses)
       motion.fail("every", "gives more than " + std::to_string(kMaxPoses) + " poses");

@@ -61,6 +61,11 @@ Jump largestJump(const LoadedScene& scene, const std::vector<size_t>& moving, in
 
 }  // namespace
 
+btTransform turnedAbout(const btTransform& motion, const btVector3& pivot) {
+  return btTransform(btQuaternion::getIdentity(), pivot) * motion *
+         btTransform(btQuaternion::getIdentity(), -pivot);
+}
+
 btTransform screwInterpolate(const btTransform& from, const btTransform& to, double fraction) {
   const btTransform delta = to * from.inverse();
   btQuaternion q = delta.getRotation();
