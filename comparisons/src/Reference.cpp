@@ -257,20 +257,25 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
   }
 }
 
+/// What computeReference solves next for `definition`.
+struct NextSolve {
+  CalculixDefinition definition;  ///< `definition`, or its retry at kFinerIncrements
+  std::string retryOf;            ///< the key of the failed solve it retries; else ""
+};
+
 /// `definition`, or its retry at kFinerIncrements where it is stored (whole or as every
-/// muscle's part) with a pose ccx failed: what computeReference solves next.
-CalculixDefinition storedRetry(const LoadedScene& scene, const PreparedScene& prepared,
-                               SceneCuts& cuts, const CalculixDefinition& definition,
-                               const std::string& cacheDir) {
+/// muscle's part) with a pose ccx failed.
+NextSolve storedRetry(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
+                      const CalculixDefinition& definition, const std::string& cacheDir) {
   const ContinuumCut& cut = cuts.at(definition.attachmentScale);
   const std::string key = referenceCacheKey(scene, prepared, definition, cut);
   CalculixSolution solution;
   const bool stored = loadStoredSolution(cacheDir, key, solution) ||
                       mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution);
-  if (!stored || ccxFailureToRetry(solution).empty()) return definition;
+  if (!stored || ccxFailureToRetry(solution).empty()) return {definition, ""};
   CalculixDefinition finer = definition;
   finer.incrementScale *= kFinerIncrements;
-  return finer;
+  return {finer, key};
 }
 
 }  // namespace
@@ -284,31 +289,23 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
                                                const ReferenceOptions& options) {
   const std::string cacheDir = resolvedCacheDir(options);
   SceneCuts cuts(scene, prepared);
-  struct Solve {
-    std::string name;
-    CalculixDefinition first, solved;  // the definition, and its retry where it failed
-  };
-  const CalculixDefinition base = sceneDefinition(scene, options);
-  const CalculixDefinition reference = storedRetry(scene, prepared, cuts, base, cacheDir);
-  std::vector<Solve> solves{{"reference", base, reference}};
+  const NextSolve reference =
+      storedRetry(scene, prepared, cuts, sceneDefinition(scene, options), cacheDir);
+  std::vector<std::pair<std::string, NextSolve>> solves{{"reference", reference}};
   if (options.gates)
-    for (const auto& [name, gate] : gateSolves(gateDefinitions(reference)))
-      solves.push_back({name, gate, storedRetry(scene, prepared, cuts, gate, cacheDir)});
+    for (const auto& [name, gate] : gateSolves(gateDefinitions(reference.definition)))
+      solves.emplace_back(name, storedRetry(scene, prepared, cuts, gate, cacheDir));
   std::vector<NamedReferenceCell> cells;
-  for (const Solve& solve : solves) {
-    const ContinuumCut& cut = cuts.at(solve.solved.attachmentScale);
-    const std::string key = referenceCacheKey(scene, prepared, solve.solved, cut);
-    const std::string retryOf =
-        solve.solved.incrementScale == solve.first.incrementScale
-            ? ""
-            : referenceCacheKey(scene, prepared, solve.first, cuts.at(solve.first.attachmentScale));
+  for (const auto& [name, solve] : solves) {
+    const ContinuumCut& cut = cuts.at(solve.definition.attachmentScale);
+    const std::string key = referenceCacheKey(scene, prepared, solve.definition, cut);
     for (size_t m = 0; m < prepared.muscles.size(); ++m)
-      cells.push_back({solve.name,
+      cells.push_back({name,
                        key,
                        prepared.muscles[m]->name,
-                       {solve.solved, cut, m},
+                       {solve.definition, cut, m},
                        referencePartStored(cacheDir, key, m),
-                       retryOf});
+                       solve.retryOf});
   }
   return cells;
 }
