@@ -161,29 +161,15 @@ double meanRestLength(const MuscleState& muscle) {
 
 /// The square of the rounding a particle's force may carry at `x` [N²], `stiffness` its diagonal
 /// entry of A [N/m]: each spring force k·(|x_b − x_a| − L0) rounds by about k·ε·(|x| + L0), ε
-/// btScalar's epsilon (with `stiffness` 1: the square of the position's rounding [m²]). A curvature
-/// pair whose s·y this rounding likely reaches (kRoundingMargin), or whose step is the positions'
-/// rounding (kStepMargin), measures nothing: with such pairs at rest (the double build, a box
-/// carried rigidly by its bone) the L-BFGS step moved particles 1.5 mm off their bone while every
-/// spring was exact.
+/// btScalar's epsilon. A curvature pair whose s·y this rounding can reach (|s|·|y's rounding|)
+/// measures nothing: with such pairs at rest (the double build, a box carried rigidly by its bone)
+/// the L-BFGS step moved particles 1.5 mm off their bone while every spring was exact. Forces at
+/// the rounding level move a particle by about its |s| at most through a pair that passes.
 double forceNoise(double stiffness, const btVector3& x, double restLength) {
   constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
   return kEpsilon * kEpsilon * stiffness * stiffness *
          (double(x.length2()) + restLength * restLength);
 }
-
-/// How many times the rounding's likely share of s·y a pair's curvature must exceed [1]. Rounding
-/// independent from row to row adds to s·y about √(Σ |s_row|²·|δy_row|²), not |s|·|δy| (the
-/// bound taken before, about √n times larger over n rows alike): with that bound nearly every
-/// pair of pinch's muscle without bone contact (2 560 particles) was refused once its forces fell
-/// below about 0.5 N, and the step fell back to the plain projective one (docs/decisions.md,
-/// "Solver").
-constexpr double kRoundingMargin = 3;
-
-/// How many times the positions' rounding ε·√(|x|² + L̄0²) (summed in squares over the rows) a
-/// pair's step |s| must exceed [1]: a step at that level is the rounding's own, whatever its s·y
-/// (the double build's resting box, docs/decisions.md).
-constexpr double kStepMargin = 10;
 
 double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
   double sum = 0;
@@ -192,9 +178,10 @@ double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
 }
 
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
-/// curvature or lies at the rounding's level (forceNoise), and keeps x and F for the next. Rows the
-/// last response pushed are left out of the pair: a projection's move is not the forces' answer to
-/// the step (with them in, the hard-case matrix's hip-extension and pinch cells tore).
+/// curvature or no more than the forces' rounding can (forceNoise), and keeps x and F for the
+/// next. Rows the last response pushed are left out of the pair: a projection's move is not the
+/// forces' answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells
+/// tore).
 void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uint32_t>& free,
                 const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
                 const std::vector<uint8_t>& pushedRows, int size) {
@@ -203,24 +190,19 @@ void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uin
     std::vector<btVector3>& s = h.steps[slot];
     std::vector<btVector3>& y = h.changes[slot];
     const double restLength = meanRestLength(muscle);
-    double rounding = 0;   // Σ |s_row|²·(the square of the row's force rounding) [m²·N²]
-    double placement = 0;  // Σ (the square of the row's position rounding) [m²]
+    double noise = 0;
     for (size_t k = 0; k < free.size(); ++k) {
       const int row = factor.row(k);
       const bool pushed = pushedRows[row] != 0;
       const btVector3& x = muscle.positions[free[k]];
       s[row] = pushed ? btVector3(0, 0, 0) : x - h.lastPositions[row];
       y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
-      if (pushed) continue;
-      const double place = forceNoise(1, x, restLength), stiffness = factor.matrixDiagonal(row);
-      rounding += double(s[row].length2()) * stiffness * stiffness * place;
-      placement += place;
+      if (!pushed) noise += forceNoise(factor.matrixDiagonal(row), x, restLength);
     }
     // y's rounding is both forces': √2·the noise of one.
     const double curvature = dot(s, y), steps = dot(s, s);
     if (curvature > 1e-12 * std::sqrt(steps * dot(y, y)) &&
-        curvature > kRoundingMargin * std::sqrt(2 * rounding) &&
-        steps > kStepMargin * kStepMargin * placement) {
+        curvature > std::sqrt(2 * steps * noise)) {
       h.curvature[slot] = curvature;
       h.newest = slot;
       h.count = std::min(h.count + 1, size);
