@@ -228,6 +228,11 @@ class MuscleLedger {
     const MuscleSettings& settings = system_.settings(muscle);
     MuscleStep step = measureMuscle(settings, system_.positions(muscle), system_.surface(muscle),
                                     bones.meshes(), transforms);
+    if (settings.breakStretch > 0) {
+      const MuscleTear tear = system_.tear(muscle);
+      step.brokenSprings = long(tear.brokenSprings);
+      step.pieces = long(tear.pieces);
+    }
     if (step.finite) {
       const Penetration spheres =
           bones.spheres(settings, system_.positions(muscle), transforms, step.sphereDepthMm);

@@ -102,6 +102,11 @@ std::string csvText(const std::string& text) {
   return quoted + "\"";
 }
 
+/// A count tearing measured, or empty (−1: the muscle does not tear).
+std::string tearField(long count) {
+  return count >= 0 ? std::to_string(count) : "";
+}
+
 /// The largest of `depths` (NaN when empty).
 double deepest(const std::vector<double>& depths) {
   double result = MuscleStep::kNone;
@@ -125,7 +130,10 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
       "step,pose,pose_label,time_s,muscle,volume_change_pct,mean_fibre_length_mm,"
       "max_fibre_stretch,max_penetration_mm,bone_contacts,solver_contacts,residual_rms_mm,"
       "residual_max_mm,max_belly_stretch,max_tendon_stretch,max_sphere_depth_mm,belly_strain,"
-      "tendon_strain\n";
+      "tendon_strain";
+  const bool tears = std::any_of(rows.begin(), rows.end(),
+                                 [](const SeriesRow& row) { return row.measures.tears(); });
+  csv += tears ? ",broken_springs,pieces\n" : "\n";
   for (const SeriesRow& row : rows) {
     const MuscleStep& m = row.measures;
     csv += std::to_string(row.step) + "," + std::to_string(row.pose) + "," +
@@ -137,7 +145,8 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
            "," + csvNumber(m.residualMaxMm, "%.6g") + "," + csvNumber(m.maxBellyStretch, "%.6g") +
            "," + csvNumber(m.maxTendonStretch, "%.6g") + "," +
            csvNumber(m.maxSphereDepthMm(), "%.6g") + "," + csvNumber(m.bellyStrain, "%.6g") + "," +
-           csvNumber(m.tendonStrain, "%.6g") + "\n";
+           csvNumber(m.tendonStrain, "%.6g") +
+           (tears ? "," + tearField(m.brokenSprings) + "," + tearField(m.pieces) : "") + "\n";
   }
   return csv;
 }
@@ -164,6 +173,10 @@ nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
                      {"max_sphere_depth_mm", number(m.maxSphereDepthMm())},
                      {"belly_strain", number(m.bellyStrain)},
                      {"tendon_strain", number(m.tendonStrain)}});
+    if (m.tears()) {
+      array.back()["broken_springs"] = m.brokenSprings;
+      array.back()["pieces"] = m.pieces;
+    }
   }
   return array;
 }
@@ -196,6 +209,8 @@ std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
       m.sphereDepthMm = {depth};
     m.bellyStrain = numberAt(o, "belly_strain", m.bellyStrain);
     m.tendonStrain = numberAt(o, "tendon_strain", m.tendonStrain);
+    m.brokenSprings = o.value("broken_springs", m.brokenSprings);
+    m.pieces = o.value("pieces", m.pieces);
     rows.push_back(std::move(row));
   }
   return rows;
@@ -254,6 +269,8 @@ void MuscleResults::add(int step, const MuscleStep& measures) {
   worstBellyStrain = largest(worstBellyStrain, measures.bellyStrain);
   worstTendonStrain = largest(worstTendonStrain, measures.tendonStrain);
   springDeviationRatio = measures.springDeviationRatio;
+  brokenSprings = measures.brokenSprings;
+  pieces = measures.pieces;
 }
 
 nlohmann::json toJson(const MuscleResults& r) {
@@ -264,30 +281,36 @@ nlohmann::json toJson(const MuscleResults& r) {
     if (b < r.maxSphereDepthMm.size()) spheres[r.bones[b]] = number(r.maxSphereDepthMm[b]);
     if (b < r.fixedParticles.size()) fixed[r.bones[b]] = r.fixedParticles[b];
   }
-  return {{"name", r.name},
-          {"volume_change_pct",
-           {{"last", number(r.volumeChangePct)},
-            {"worst", number(r.worstVolumeChangePct)},
-            {"worst_step", r.worstVolumeStep}}},
-          {"max_penetration_mm", penetration},
-          {"max_sphere_depth_mm", spheres},
-          {"fixed_particles", fixed},
-          {"frozen", r.frozen},
-          {"frozen_step", r.frozenStep},
-          {"frozen_cause", r.frozenCause},
-          {"rollbacks", r.rollbacks},
-          {"fibre_length_mm",
-           {{"rest", number(r.fibreLengthRestMm)},
-            {"last", number(r.fibreLengthLastMm)},
-            {"min", number(r.fibreLengthMinMm)},
-            {"max", number(r.fibreLengthMaxMm)}}},
-          {"worst_spring_ratio", number(r.worstSpringRatio)},
-          {"worst_fibre_stretch",
-           {{"belly", number(r.worstBellyStretch)}, {"tendon", number(r.worstTendonStretch)}}},
-          {"worst_fibre_strain",
-           {{"belly", number(r.worstBellyStrain)}, {"tendon", number(r.worstTendonStrain)}}},
-          {"spring_deviation_ratio", number(r.springDeviationRatio)},
-          {"last_step", r.lastStep}};
+  nlohmann::json json = {
+      {"name", r.name},
+      {"volume_change_pct",
+       {{"last", number(r.volumeChangePct)},
+        {"worst", number(r.worstVolumeChangePct)},
+        {"worst_step", r.worstVolumeStep}}},
+      {"max_penetration_mm", penetration},
+      {"max_sphere_depth_mm", spheres},
+      {"fixed_particles", fixed},
+      {"frozen", r.frozen},
+      {"frozen_step", r.frozenStep},
+      {"frozen_cause", r.frozenCause},
+      {"rollbacks", r.rollbacks},
+      {"fibre_length_mm",
+       {{"rest", number(r.fibreLengthRestMm)},
+        {"last", number(r.fibreLengthLastMm)},
+        {"min", number(r.fibreLengthMinMm)},
+        {"max", number(r.fibreLengthMaxMm)}}},
+      {"worst_spring_ratio", number(r.worstSpringRatio)},
+      {"worst_fibre_stretch",
+       {{"belly", number(r.worstBellyStretch)}, {"tendon", number(r.worstTendonStretch)}}},
+      {"worst_fibre_strain",
+       {{"belly", number(r.worstBellyStrain)}, {"tendon", number(r.worstTendonStrain)}}},
+      {"spring_deviation_ratio", number(r.springDeviationRatio)},
+      {"last_step", r.lastStep}};
+  if (r.brokenSprings >= 0) {
+    json["broken_springs"] = r.brokenSprings;
+    json["pieces"] = r.pieces;
+  }
+  return json;
 }
 
 MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
@@ -329,6 +352,8 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
     r.worstTendonStrain = numberAt(*s, "tendon", r.worstTendonStrain);
   }
   r.lastStep = o.value("last_step", r.lastStep);
+  r.brokenSprings = o.value("broken_springs", r.brokenSprings);
+  r.pieces = o.value("pieces", r.pieces);
   return r;
 }
 
@@ -337,8 +362,12 @@ std::string muscleTable(const std::vector<MuscleResults>& muscles) {
       "| muscle | volume last % | volume worst % (step) | max penetration mm | max sphere depth mm "
       "| fixed particles | "
       "mean fibre mm rest / last / min / max | worst spring l/L0 | worst fibre stretch belly / "
-      "tendon | worst fibre strain % belly / tendon | rollbacks | frozen |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+      "tendon | worst fibre strain % belly / tendon | rollbacks | frozen |";
+  const bool tears = std::any_of(muscles.begin(), muscles.end(),
+                                 [](const MuscleResults& m) { return m.brokenSprings >= 0; });
+  table += tears ? " broken springs | pieces "
+                   "|\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+                 : "\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   char line[512];
   for (const MuscleResults& m : muscles) {
     const std::string frozen =
@@ -356,6 +385,9 @@ std::string muscleTable(const std::vector<MuscleResults>& muscles) {
         twoDecimals(100 * m.worstBellyStrain).c_str(),
         twoDecimals(100 * m.worstTendonStrain).c_str(), m.rollbacks, frozen.c_str());
     table += line;
+    if (tears)
+      table.insert(table.size() - 1,
+                   " " + tearField(m.brokenSprings) + " | " + tearField(m.pieces) + " |");
   }
   return table;
 }

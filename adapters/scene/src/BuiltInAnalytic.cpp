@@ -1,6 +1,6 @@
 // The analytic built-in scenes (the analytic tier of the comparisons): a straight cylindrical
 // muscle between two plates, stretched or twisted by them, whose exact answers `run` and `compare`
-// print.
+// print; and one with a waist that the plates stretch until it tears (no exact answer).
 #include <cmath>
 
 #include "BuiltInParts.h"
@@ -13,6 +13,11 @@ constexpr double kFreeHalf = 50;   // half the free length between the attachmen
 constexpr double kAttachment = 2;  // attachment distance [mm]
 constexpr double kPlateFace = kFreeHalf + kAttachment;  // plates' facing sides at y = ±52
 constexpr double kPlateThickness = 10;
+constexpr double kNotch = kRadius / 2;  // the tear scene's radius at its middle [mm]
+constexpr double kNotchHalf = 4;        // the tear scene's notch: its half length along y [mm]
+constexpr double kTearShift = 5;        // the tear scene's move of each plate per pose [mm]
+constexpr int kTearPoses = 14;          // the tear scene's poses after the rest pose
+constexpr double kTearStretch = 1.5;    // the tear scene's break_stretch [1]
 
 Json plate(double side) {
   return Json{{"type", "box"},
@@ -22,12 +27,22 @@ Json plate(double side) {
 }
 
 /// The cylinder scene without motions: plates at y = ±52 mm, a cylinder of radius 10 mm whose
-/// flat ends sit 1.5 mm inside them, attached within 2 mm (free length 100 mm, y in ±50).
-Json cylinderScene(const std::string& name, const std::string& description) {
+/// flat ends sit 1.5 mm inside them, attached within 2 mm (free length 100 mm, y in ±50); with a
+/// `notch` of that radius at its middle, the radius 10 mm from kNotchHalf on either side.
+Json cylinderScene(const std::string& name, const std::string& description,
+                   double notch = kRadius) {
   Json scene = header(name, description);
-  const double end = kPlateFace + 1.5;
-  TubeDefinition tube = muscleTube({{0, btScalar(-end), 0}, {0, 0, 0}, {0, btScalar(end), 0}},
-                                   {{kRadius, kRadius}, {kRadius, kRadius}, {kRadius, kRadius}});
+  const auto end = btScalar(kPlateFace + 1.5), side = btScalar(kNotchHalf);
+  TubeDefinition tube =
+      notch < kRadius
+          ? muscleTube({{0, -end, 0}, {0, -side, 0}, {0, 0, 0}, {0, side, 0}, {0, end, 0}},
+                       {{kRadius, kRadius},
+                        {kRadius, kRadius},
+                        {notch, notch},
+                        {kRadius, kRadius},
+                        {kRadius, kRadius}})
+          : muscleTube({{0, -end, 0}, {0, 0, 0}, {0, end, 0}},
+                       {{kRadius, kRadius}, {kRadius, kRadius}, {kRadius, kRadius}});
   Json muscle = tubeMuscle("cylinder", tube);
   muscle["attachment_distance"] = kAttachment;
   scene["muscles"] = Json::array({muscle});
@@ -88,6 +103,26 @@ Json cylinderTwistScene() {
   // the worst section 1.43° off the linear profile, against 0.264 mm and 0.96° at 30 and 0.290 mm
   // and 1.87° at 23.
   scene["simulation"]["iterations"] = 26;
+  return scene;
+}
+
+Json tearScene() {
+  // A short notch of half the radius (a quarter of the section) takes the stretch: its springs
+  // pass break_stretch there first while the rest of the cylinder stays below it, so it tears
+  // across the notch into two pieces, one on each plate. The plates move apart 5 mm each per pose.
+  Json scene = cylinderScene("tear",
+                             "a cylindrical muscle with a waist stretched by its attachments until "
+                             "it tears",
+                             kNotch);
+  std::vector<btTransform> up, down;
+  for (int i = 0; i <= kTearPoses; ++i) {
+    const btScalar shift = btScalar(kTearShift * i);
+    up.emplace_back(btQuaternion::getIdentity(), btVector3(0, shift, 0));
+    down.emplace_back(btQuaternion::getIdentity(), btVector3(0, -shift, 0));
+  }
+  scene["bones"] = Json::array({bone("plate-lower", plate(-1), keyframes(down)),
+                                bone("plate-upper", plate(1), keyframes(up))});
+  scene["model"]["break_stretch"] = kTearStretch;
   return scene;
 }
 

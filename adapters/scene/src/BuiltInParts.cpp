@@ -164,6 +164,7 @@ std::vector<BuiltInScene> builtInScenes() {
        "a straight cylindrical muscle stretched 10 % by its attachments (exact answer known)"},
       {"cylinder-twist",
        "a straight cylindrical muscle, one end twisted 180 deg (exact answer known)"},
+      {"tear", "a cylindrical muscle with a waist stretched until it tears (break_stretch 1.5)"},
   };
 }
 
@@ -196,6 +197,8 @@ std::string builtInSceneDefinition(const std::string& name) {
     scene = cylinderStretchScene();
   else if (name == "cylinder-twist")
     scene = cylinderTwistScene();
+  else if (name == "tear")
+    scene = tearScene();
   else
     return "";
   return scene.dump();

@@ -63,5 +63,6 @@ Json sphereDenoiseScene();
 Json spherePlanesScene();
 Json cylinderStretchScene();
 Json cylinderTwistScene();
+Json tearScene();
 
 }  // namespace fibremss::builtin

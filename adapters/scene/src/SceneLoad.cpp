@@ -415,6 +415,13 @@ SpringParameters readModel(Fields& model) {
   springs.strainLimit = btScalar(model.number("strain_limit", springs.strainLimit, 0, 1e3));
   if (springs.strainLimit > 0 && springs.strainLimit <= 1)
     model.fail("strain_limit", "expected 0 (no limit) or a ratio > 1 of current to rest length");
+  springs.breakStretch = btScalar(model.number("break_stretch", springs.breakStretch, 0, 1e3));
+  if (springs.breakStretch > 0 &&
+      (springs.breakStretch <= 1 ||
+       (springs.strainLimit > 0 && springs.breakStretch >= springs.strainLimit)))
+    model.fail("break_stretch",
+               "expected 0 (no tearing) or a ratio > 1 of current to rest length, below "
+               "strain_limit when that is set");
   return springs;
 }
 

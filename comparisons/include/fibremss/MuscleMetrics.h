@@ -42,6 +42,12 @@ struct MuscleStep {
   /// equivalent displacement over its free particles [mm].
   double residualRmsMm = kNone;
   double residualMaxMm = kNone;  ///< see residualRmsMm [mm]
+  /// Springs tearing broke so far (MuscleSystem::tear; filled by runFibreMSS for a muscle that
+  /// tears, else −1: no such column).
+  long brokenSprings = -1;
+  long pieces = -1;  ///< its pieces (MuscleTear::pieces), as brokenSprings; −1: it does not tear
+  /// Whether the muscle tears (its tear is measured).
+  bool tears() const { return brokenSprings >= 0; }
 
   /// The deepest surface vertex inside any bone [mm] (NaN when not measured).
   double maxPenetrationMm() const;
@@ -104,7 +110,9 @@ struct MuscleResults {
   double worstBellyStrain = kNone;       ///< largest MuscleStep::bellyStrain over them [1]
   double worstTendonStrain = kNone;      ///< largest MuscleStep::tendonStrain over them [1]
   double springDeviationRatio = kNone;   ///< Σ|l − L0| / ΣL0 at the last finite step
-  int lastStep = -1;                     ///< the last finite step measured (-1: none)
+  long brokenSprings = -1;  ///< springs broken at the last step measured (−1: it does not tear)
+  long pieces = -1;         ///< its pieces at the last step measured (−1: it does not tear)
+  int lastStep = -1;        ///< the last finite step measured (-1: none)
 
   /// Name, bones, fixed particles per bone and the rest fibre length of `muscle`.
   MuscleResults(const MuscleSettings& muscle, std::vector<std::string> boneNames);
@@ -119,7 +127,7 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& object);
 
 /// The muscles as a Markdown table: volume change (last and worst), penetration and fixed
 /// particles per bone, mean fibre length, worst spring, worst belly and tendon stretch and strain,
-/// rollbacks, frozen.
+/// rollbacks, frozen; broken springs and pieces when a muscle tears.
 std::string muscleTable(const std::vector<MuscleResults>& muscles);
 
 /// The muscle whose last volume change is largest in magnitude (null when none was measured).

@@ -72,6 +72,9 @@ struct MuscleSettings {
   /// Largest current / rest length of a spring after an iteration (SpringParameters::strainLimit)
   /// [1]; 0: none.
   btScalar strainLimit = 0;
+  /// Current / rest length beyond which a spring breaks after a step (SpringParameters::
+  /// breakStretch) [1]; 0: none.
+  btScalar breakStretch = 0;
   // Local volume terms (VolumeForces.h): the Delaunay tetrahedra of the particles whose centroid
   // lies inside restSurface, without slivers; empty when volumeModulus is 0.
   btScalar volumeModulus = 0;              ///< bulk modulus K of the volume terms [Pa]; 0: none

@@ -45,6 +45,15 @@ struct StepTiming {
   double total = 0;     ///< the whole step
 };
 
+/// What tearing (MuscleSettings::breakStretch) did to a muscle.
+struct MuscleTear {
+  size_t brokenSprings = 0;      ///< springs broken so far
+  size_t brokenVolumeTerms = 0;  ///< local volume terms broken so far
+  /// Pieces: components of its unbroken springs among the particles that had a spring at rest
+  /// (1 for a muscle that does not tear).
+  size_t pieces = 1;
+};
+
 /// What the last step did.
 struct StepStats {
   int iterations = 0;             ///< iterations run
@@ -165,6 +174,8 @@ class MuscleSystem {
   /// Step attempts the numerical guard found this muscle failing (a rollback, a retry or a
   /// freeze followed each, except with FailurePolicy::Report).
   MuscleFailures failures(MuscleHandle muscle) const;
+  /// What tearing (MuscleSettings::breakStretch) broke of this muscle so far and its pieces.
+  MuscleTear tear(MuscleHandle muscle) const;
 
   /// One simulation step: bones move from their last to their target transforms split over
   /// the iterations; pre-transform; iterations of forces, integration, collision detection and

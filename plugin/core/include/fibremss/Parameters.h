@@ -69,6 +69,10 @@ struct SpringParameters {
   /// other, and the tendon springs are stiffer (MuscleParameters::tendonStiffness) and stay short.
   /// Cost and what it changes: docs/decisions.md, "Strain limit".
   btScalar strainLimit = 2;
+  /// Current / rest length beyond which a spring breaks at the end of a step, for good [1] (0:
+  /// none; below strainLimit when both are set): the springs beyond it and the local volume terms
+  /// with an edge beyond it or particles in two pieces are taken out (Tearing.h).
+  btScalar breakStretch = 0;
 };
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).

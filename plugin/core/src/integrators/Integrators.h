@@ -45,6 +45,9 @@ class TimeIntegrator {
   /// push out, contactNormal): the response then records its pushes in every iteration and
   /// leaves each contact a slop deep so that it persists (leaveContactSlop).
   virtual bool holdsContacts(const SimulationParameters&) const { return false; }
+  /// Brings `muscle`'s workspace up to date, without allocating, after springs or volume terms of
+  /// its settings broke (Tearing.h); an integrator that reads them every iteration needs nothing.
+  virtual void springsChanged(MuscleState&) const {}
 
  protected:
   /// The workspace advance() needs for `muscle`, or null when it needs none.

@@ -73,13 +73,15 @@ struct StepHistory {
 /// The factor of A + W, the contact weights' hold, the solve's buffer and the L-BFGS history. A
 /// rollback of the guard keeps W: it shapes the iteration's path, not its fixed point.
 struct ProjectiveWorkspace final : IntegratorWorkspace {
-  explicit ProjectiveWorkspace(const Matrix& lowerA)
-      : factor(lowerA),
+  ProjectiveWorkspace(std::vector<int> freeRows, const Matrix& lowerA)
+      : rows(std::move(freeRows)),
+        factor(lowerA),
         solution(factor.size(), btVector3(0, 0, 0)),
         forces(factor.size(), btVector3(0, 0, 0)),
         idle(factor.size(), 0),
         pushed(factor.size(), 0),
         history(factor.size()) {}
+  std::vector<int> rows;            ///< each particle's free row (freeRows)
   ProjectiveFactor factor;          ///< L of P·(A + W)·Pᵀ
   std::vector<btVector3> solution;  ///< per row: the forces [N], then the step A⁻¹·F [m]
   std::vector<btVector3> forces;    ///< per row: the forces F of this iteration [N]
@@ -88,16 +90,29 @@ struct ProjectiveWorkspace final : IntegratorWorkspace {
   StepHistory history;              ///< L-BFGS's pairs
 };
 
-/// The scalar matrix A over the free particles (the 3n × 3n one is A ⊗ I₃) [N/m].
-Matrix assemble(const MuscleSettings& settings, const std::vector<uint32_t>& free) {
+/// Each particle's row among the free particles `free` (−1: fixed).
+std::vector<int> freeRows(const MuscleSettings& settings, const std::vector<uint32_t>& free) {
   std::vector<int> rows(settings.particleCount(), -1);
   for (size_t k = 0; k < free.size(); ++k) rows[free[k]] = static_cast<int>(k);
-  std::vector<Eigen::Triplet<double>> entries;
+  return rows;
+}
+
+/// The entries of the scalar matrix A over the free particles (the 3n × 3n one is A ⊗ I₃) [N/m],
+/// `rows` a particle's free row (freeRows), as entry(i, j, value) with i ≥ j; the entries of one
+/// place add up, in this order.
+template <class Entry>
+void matrixEntries(const MuscleSettings& settings, const std::vector<int>& rows, size_t freeCount,
+                   Entry&& entry) {
+  double trace = 0;
+  const auto add = [&](int i, int j, double value) {
+    if (i == j) trace += value;
+    entry(i, j, value);
+  };
   const auto couple = [&](uint32_t a, uint32_t b, double weight) {
     const int ra = rows[a], rb = rows[b];
-    if (ra >= 0) entries.emplace_back(ra, ra, weight);
-    if (rb >= 0) entries.emplace_back(rb, rb, weight);
-    if (ra >= 0 && rb >= 0) entries.emplace_back(std::max(ra, rb), std::min(ra, rb), -weight);
+    if (ra >= 0) add(ra, ra, weight);
+    if (rb >= 0) add(rb, rb, weight);
+    if (ra >= 0 && rb >= 0) add(std::max(ra, rb), std::min(ra, rb), -weight);
   };
   for (const Spring& spring : settings.springs) couple(spring.a, spring.b, spring.stiffness);
   const uint32_t* t = settings.tetParticles.data();
@@ -113,16 +128,19 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<uint32_t>& fre
       for (int j = i + 1; j < 4; ++j)
         couple(t[i], t[j], -scale * rest.gradients[i].dot(rest.gradients[j]));
   }
-  double trace = 0;
-  for (const auto& entry : entries)
-    if (entry.row() == entry.col()) trace += entry.value();
   // A tiny shift keeps A definite for particles no spring ties to a fixed one; 1 N/m where no
   // particle has a spring (a muscle of one sphere: it moves by its forces in newtons, as metres).
   const double shift =
-      trace > 0 ? 1e-9 * trace / static_cast<double>(std::max<size_t>(1, free.size())) : 1.0;
-  for (size_t k = 0; k < free.size(); ++k)
-    entries.emplace_back(static_cast<int>(k), static_cast<int>(k), shift);
-  Matrix matrix(static_cast<Eigen::Index>(free.size()), static_cast<Eigen::Index>(free.size()));
+      trace > 0 ? 1e-9 * trace / static_cast<double>(std::max<size_t>(1, freeCount)) : 1.0;
+  for (size_t k = 0; k < freeCount; ++k) entry(static_cast<int>(k), static_cast<int>(k), shift);
+}
+
+/// The lower triangle of A [N/m].
+Matrix assemble(const MuscleSettings& settings, const std::vector<int>& rows, size_t freeCount) {
+  std::vector<Eigen::Triplet<double>> entries;
+  matrixEntries(settings, rows, freeCount,
+                [&](int i, int j, double value) { entries.emplace_back(i, j, value); });
+  Matrix matrix(static_cast<Eigen::Index>(freeCount), static_cast<Eigen::Index>(freeCount));
   matrix.setFromTriplets(entries.begin(), entries.end());
   return matrix;
 }
@@ -301,12 +319,23 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   }
 
   Integrator kind() const override { return Integrator::Projective; }
+  /// A anew over its pattern (a broken spring or volume term adds zeros) and factored anew; the
+  /// L-BFGS pairs, learnt from the old forces, forgotten.
+  void springsChanged(MuscleState& muscle) const override {
+    auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
+    w.factor.clearMatrix();
+    matrixEntries(*muscle.settings, w.rows, muscle.freeParticles.size(),
+                  [&](int i, int j, double value) { w.factor.addToMatrix(i, j, value); });
+    w.factor.refactorAll();
+    w.history.restart();
+    w.history.hasLast = false;
+  }
 
  protected:
   std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const override {
-    auto w =
-        std::make_unique<ProjectiveWorkspace>(assemble(*muscle.settings, muscle.freeParticles));
-    return w;
+    std::vector<int> rows = freeRows(*muscle.settings, muscle.freeParticles);
+    const Matrix lowerA = assemble(*muscle.settings, rows, muscle.freeParticles.size());
+    return std::make_unique<ProjectiveWorkspace>(std::move(rows), lowerA);
   }
 };
 

@@ -230,6 +230,24 @@ void ProjectiveFactor::refactor() {
   storeStale();
 }
 
+void ProjectiveFactor::clearMatrix() {
+  std::fill(upperValues_.begin(), upperValues_.end(), 0.0);
+}
+
+void ProjectiveFactor::addToMatrix(int k, int l, double value) {
+  const int column = std::max(order_[k], order_[l]), row = std::min(order_[k], order_[l]);
+  for (int p = upperStart_[column]; p < upperStart_[column + 1]; ++p)
+    if (upperRows_[p] == row) upperValues_[p] += value;
+}
+
+void ProjectiveFactor::refactorAll() {
+  for (size_t k = 0; k < size(); ++k)
+    for (int p = upperStart_[k]; p < upperStart_[k + 1]; ++p)
+      if (upperRows_[p] == static_cast<int>(k)) diagonal_[k] = upperValues_[p];
+  std::fill(stale_.begin(), stale_.end(), 1);
+  refactor();
+}
+
 /// L·Lᵀ + δ·e_s·e_sᵀ in place (δ [N/m] the change of row s's weight): the rank-one update
 /// (δ > 0) or downdate of the Cholesky factor by rotations, column by column up s's path in the
 /// elimination tree (the only columns it changes). Returns false if a downdate met a pivot that

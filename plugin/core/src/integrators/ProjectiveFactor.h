@@ -40,6 +40,12 @@ class ProjectiveFactor {
   /// changed row where their paths up the elimination tree visit fewer entries than new values
   /// for the rows they reach would, else those rows anew.
   void update();
+  /// Sets A's entries to zero, its pattern kept, before they are added anew (addToMatrix).
+  void clearMatrix();
+  /// Adds `value` to A's entry of free particles k and l, which its pattern holds [N/m].
+  void addToMatrix(int k, int l, double value);
+  /// Factors P·(A + W)·Pᵀ anew from A's entries as added and W, without allocating.
+  void refactorAll();
   /// Solves L·Lᵀ·z = b in place for the three coordinates of `x` together (indexed by row).
   void solveInPlace(btVector3* x) const;
 

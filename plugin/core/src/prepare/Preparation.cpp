@@ -495,6 +495,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
                        : parameters.springs.dampingScale *
                              detail::zelenyDamping(muscle.springs, muscle.particleMass);
   muscle.strainLimit = parameters.springs.strainLimit;
+  muscle.breakStretch = parameters.springs.breakStretch;
   // The belly's material sets the damping and the volume terms' modulus; tendons are stiffer.
   const double network = springNetworkModulus(muscle.springs);
   report.tendonSprings =

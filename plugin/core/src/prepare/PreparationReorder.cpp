@@ -13,7 +13,7 @@ namespace {
 
 // A new field of MuscleSettings may hold particle indices or per-particle values: remap it in
 // reorderParticles, then update this size (libstdc++, x86-64).
-static_assert(sizeof(MuscleSettings) == (sizeof(btScalar) == 4 ? 808 : 824),
+static_assert(sizeof(MuscleSettings) == (sizeof(btScalar) == 4 ? 816 : 832),
               "MuscleSettings changed: remap its new fields in reorderParticles");
 
 /// Spreads the low 10 bits of v to every third bit (bit i to bit 3i).

@@ -17,6 +17,7 @@
 #include "fibremss/Pretransform.h"
 #include "solver/ForceChunks.h"
 #include "solver/Skin.h"
+#include "solver/Tearing.h"
 
 class btCollisionObject;
 
@@ -180,6 +181,7 @@ struct MuscleState : ParticleState,
   bool prepared = false;                           ///< workspace made for `preparedFor`
   bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
+  TearState tear;           ///< its own settings and pieces when it tears (Tearing.h)
 };
 
 }  // namespace fibremss

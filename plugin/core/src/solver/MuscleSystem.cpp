@@ -59,6 +59,12 @@ void checkMuscleArrays(const MuscleSettings& s, size_t boneCount) {
   if (!(s.particleMass > 0)) throw InputError(source, where, "particle mass must be > 0");
   if (!(s.strainLimit == 0 || s.strainLimit > 1))
     throw InputError(source, where, "strain limit must be 0 (none) or > 1");
+  if (!(s.breakStretch == 0 || s.breakStretch > 1) ||
+      (s.breakStretch > 0 && s.strainLimit > 0 && !(s.breakStretch < s.strainLimit)))
+    throw InputError(source, where,
+                     "break stretch must be 0 (none) or > 1 and below the strain limit");
+  if (s.breakStretch > 0 && s.enclosedModulus > 0)
+    throw InputError(source, where, "a muscle that tears cannot keep an enclosed-volume term");
   const int32_t limit = static_cast<int32_t>(boneCount);
   for (size_t i = 0; i < n; ++i) {
     if (s.fixedBone[i] >= limit || s.nearestBone[i] >= limit)
@@ -293,6 +299,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   std::unique_ptr<MuscleState> state = newMuscleState(s, bones, impl_->parameters);
   setStepBounds(s, *state);
   state->settings = settings;
+  prepareTearing(*state);
   impl_->resolveBones(*state);
   impl_->placeAtBones(*state);
   ++impl_->musclesAdded;
@@ -341,6 +348,11 @@ void MuscleSystem::unfreeze(MuscleHandle muscle) {
 
 MuscleFailures MuscleSystem::failures(MuscleHandle muscle) const {
   return impl_->muscle(muscle).failures;
+}
+
+MuscleTear MuscleSystem::tear(MuscleHandle muscle) const {
+  const TearState& tear = impl_->muscle(muscle).tear;
+  return {tear.brokenSprings, tear.brokenVolumeTerms, tear.pieces};
 }
 
 void MuscleSystem::step() {

@@ -85,13 +85,15 @@ void add(StepTiming& sum, const StepTiming& part) {
 
 }  // namespace
 
-MuscleHealth checkMuscle(const MuscleState& muscle) {
+MuscleHealth checkMuscle(MuscleState& muscle) {
   MuscleHealth health;
   health.nan =
       !allFinite(muscle.positions) || !allFinite(muscle.previous) || !allFinite(muscle.velocities);
   const MuscleSettings& settings = *muscle.settings;
   // Written so that a NaN extent counts as spread too.
-  health.spread = !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
+  health.spread = muscle.tear.pieces > 1
+                      ? piecesSpread(muscle, kTornSpread)
+                      : !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
   if (settings.springs.empty()) return health;
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
   for (const Spring& spring : settings.springs) {
@@ -248,6 +250,14 @@ StepSize MuscleSystem::Impl::stepSize(int halvings) const {
   return size;
 }
 
+void MuscleSystem::Impl::breakMuscles() {
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    if (!state.frozen && breakStretched(state) && state.prepared)
+      integratorFor(state.preparedFor).springsChanged(state);
+  }
+}
+
 void MuscleSystem::Impl::guardedStep() {
   const Clock::time_point start = Clock::now();
   const uint64_t number = stepCount++;
@@ -285,6 +295,8 @@ void MuscleSystem::Impl::guardedStep() {
     rollBack();
     size = stepSize(retry ? ++outcome.retries : 0);
   }
+
+  breakMuscles();
 
   // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
   // started) and is pushed out of them.

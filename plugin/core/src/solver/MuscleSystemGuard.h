@@ -26,7 +26,8 @@ constexpr double kTornSpread = 2;
 /// counts as exploded when it is longer than 3× its rest length and longer than its rest length
 /// by more than the muscle's mean rest length: the 3× rule alone trips on springs of a few µm
 /// (converging fibre ends, jittered neighbours) whose stretch is harmless.
-MuscleHealth checkMuscle(const MuscleState& muscle);
+/// A muscle torn into pieces (Tearing.h) is spread when one of its pieces is.
+MuscleHealth checkMuscle(MuscleState& muscle);
 
 /// Copies positions, previous and velocities of `muscle` into its good-state buffers.
 void saveGoodState(MuscleState& muscle);

@@ -254,6 +254,9 @@ struct MuscleSystem::Impl {
   void beginBodyContacts();
   void collideBodies(btScalar dt);
   void endBodyContacts();
+  /// Breaks what is stretched beyond its limit in every tearing muscle after a kept step
+  /// (Tearing.h), and brings their integrators' workspaces up to date.
+  void breakMuscles();
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
 };
 

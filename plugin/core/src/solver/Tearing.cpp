@@ -1,0 +1,199 @@
+#include "Tearing.h"
+
+#include <algorithm>
+#include <span>
+
+#include "MuscleState.h"
+#include "VolumeForces.h"
+
+namespace fibremss {
+namespace {
+
+/// The union-find root of particle i, halving the path on the way.
+uint32_t root(std::vector<uint32_t>& parent, uint32_t i) {
+  while (parent[i] != i) {
+    parent[i] = parent[parent[i]];
+    i = parent[i];
+  }
+  return i;
+}
+
+/// Joins the pieces of i and j under the smaller root (the same roots in every run).
+void join(std::vector<uint32_t>& parent, uint32_t i, uint32_t j) {
+  const uint32_t a = root(parent, i), b = root(parent, j);
+  if (a < b) parent[b] = a;
+  if (b < a) parent[a] = b;
+}
+
+/// Counts the components of the unbroken springs among the particles that had a spring at
+/// rest, leaving each particle's root (its piece's smallest particle) in pieceOf.
+size_t countPieces(const MuscleSettings& settings, TearState& tear) {
+  std::vector<uint32_t>& parent = tear.pieceOf;
+  for (uint32_t i = 0; i < parent.size(); ++i) parent[i] = i;
+  for (const Spring& spring : settings.springs) join(parent, spring.a, spring.b);
+  size_t pieces = 0;
+  for (uint32_t i = 0; i < parent.size(); ++i) {
+    parent[i] = root(parent, i);  // a root is smaller than its other particles: final already
+    pieces += parent[i] == i && tear.springCounts[i] > 0 ? 1 : 0;
+  }
+  return pieces;
+}
+
+/// Whether the distance of particles i and j is beyond `limit` times their rest distance.
+bool beyond(const MuscleSettings& settings, const btVector3* x, btScalar limit, uint32_t i,
+            uint32_t j) {
+  const btScalar rest = settings.restPositions[i].distance2(settings.restPositions[j]);
+  return x[i].distance2(x[j]) > limit * limit * rest;
+}
+
+/// Whether one of the tetrahedra (a, b, r_k, r_k+1) of a fan `p` (a, b, r_0 .. r_m) has an edge
+/// beyond `limit`.
+bool fanStretched(const MuscleSettings& settings, const btVector3* x, btScalar limit,
+                  std::span<const uint32_t> p) {
+  if (beyond(settings, x, limit, p[0], p[1])) return true;
+  for (size_t k = 2; k < p.size(); ++k)
+    if (beyond(settings, x, limit, p[0], p[k]) || beyond(settings, x, limit, p[1], p[k]) ||
+        (k + 1 < p.size() && beyond(settings, x, limit, p[k], p[k + 1])))
+      return true;
+  return false;
+}
+
+/// Whether the particles `p` lie in more than one piece.
+bool acrossPieces(const TearState& tear, std::span<const uint32_t> p) {
+  return std::any_of(p.begin(), p.end(),
+                     [&](uint32_t i) { return tear.pieceOf[i] != tear.pieceOf[p[0]]; });
+}
+
+/// Breaks the springs beyond the limit (a = b, no rest length, no stiffness: no force, no
+/// deviation, in the spring list and in its AVX2 lane), in their order, but for a particle's last
+/// spring: a particle whose springs all passed the limit at once stays with the piece of the one
+/// that comes last, not a loose fragment of its own. Returns how many broke.
+size_t breakSprings(MuscleState& muscle) {
+  TearState& tear = muscle.tear;
+  MuscleSettings& settings = *tear.torn;
+  const btVector3* x = muscle.positions.data();
+  size_t broken = 0;
+  for (size_t s = 0; s < settings.springs.size(); ++s) {
+    Spring& spring = settings.springs[s];
+    const btScalar longest = settings.breakStretch * spring.restLength;
+    if (spring.a == spring.b || !(x[spring.a].distance2(x[spring.b]) > longest * longest) ||
+        tear.springCounts[spring.a] == 1 || tear.springCounts[spring.b] == 1)
+      continue;
+    --tear.springCounts[spring.a];
+    --tear.springCounts[spring.b];
+    spring = {spring.a, spring.a, 0, 0};
+    if (!tear.springLanes.empty()) {
+      SpringBlocks& blocks = settings.springBlocks;
+      const uint32_t lane = tear.springLanes[s];
+      blocks.b[lane] = spring.a * uint32_t(sizeof(btVector3));
+      blocks.restLength[lane] = blocks.stiffness[lane] = 0;
+    }
+    ++broken;
+  }
+  return broken;
+}
+
+/// Breaks the volume terms (fans, and the tetrahedra of the projective solver's matrix) with an
+/// edge beyond the limit, or across pieces when `pieces`: no rest gradient, no force. Returns the
+/// fans broken.
+size_t breakVolumeTerms(MuscleState& muscle, bool pieces) {
+  TearState& tear = muscle.tear;
+  MuscleSettings& settings = *tear.torn;
+  const btVector3* x = muscle.positions.data();
+  const btScalar limit = settings.breakStretch;
+  const auto breaks = [&](std::span<const uint32_t> p) {
+    return pieces ? acrossPieces(tear, p) : fanStretched(settings, x, limit, p);
+  };
+  size_t broken = 0;
+  for (size_t k = 0; k < settings.fanRestGradient.size(); ++k) {
+    if (settings.fanRestGradient[k] == 0 || !breaks(fanParticles(settings, k))) continue;
+    settings.fanRestGradient[k] = 0;
+    ++broken;
+  }
+  for (size_t k = 0; k < settings.tetRestGradient.size(); ++k) {
+    const std::span<const uint32_t> p(settings.tetParticles.data() + 4 * k, 4);
+    // A tetrahedron is the fan (p0, p1, p2, p3) of one.
+    if (settings.tetRestGradient[k] != 0 && breaks(p)) settings.tetRestGradient[k] = 0;
+  }
+  return broken;
+}
+
+}  // namespace
+
+void prepareTearing(MuscleState& muscle) {
+  if (!(muscle.settings->breakStretch > 0)) return;
+  TearState& tear = muscle.tear;
+  tear.torn = std::make_shared<MuscleSettings>(*muscle.settings);
+  muscle.settings = tear.torn;
+  const MuscleSettings& settings = *tear.torn;
+  const size_t n = settings.particleCount();
+  tear.pieceOf.resize(n);
+  tear.springCounts.assign(n, 0);
+  for (const Spring& spring : settings.springs) {
+    ++tear.springCounts[spring.a];
+    ++tear.springCounts[spring.b];
+  }
+  tear.pieceLower.resize(n);
+  tear.pieceUpper.resize(n);
+  tear.restLower.resize(n);
+  tear.restUpper.resize(n);
+  if (settings.springBlocks.springCount == settings.springs.size()) {
+    // The lanes in block order hold the springs of each run in order: find each by (a, b).
+    const SpringBlocks& blocks = settings.springBlocks;
+    tear.springLanes.resize(settings.springs.size());
+    for (size_t lane = 0; lane < blocks.b.size(); ++lane) {
+      const uint32_t a = blocks.a[lane / SpringBlocks::kLanes] / sizeof(btVector3);
+      const uint32_t b = blocks.b[lane] / sizeof(btVector3);
+      if (a == b) continue;
+      const auto at =
+          std::lower_bound(settings.springs.begin(), settings.springs.end(), std::pair(a, b),
+                           [](const Spring& s, std::pair<uint32_t, uint32_t> key) {
+                             return std::pair(s.a, s.b) < key;
+                           });
+      tear.springLanes[size_t(at - settings.springs.begin())] = uint32_t(lane);
+    }
+  }
+  tear.pieces = countPieces(settings, tear);
+}
+
+bool breakStretched(MuscleState& muscle) {
+  TearState& tear = muscle.tear;
+  if (!tear.torn) return false;
+  const size_t springs = breakSprings(muscle);
+  const size_t volumeTerms = breakVolumeTerms(muscle, false);
+  if (springs + volumeTerms == 0) return false;
+  tear.brokenSprings += springs;
+  tear.pieces = countPieces(*tear.torn, tear);
+  tear.brokenVolumeTerms += volumeTerms + breakVolumeTerms(muscle, true);
+  return true;
+}
+
+bool piecesSpread(MuscleState& muscle, double factor) {
+  TearState& tear = muscle.tear;
+  const MuscleSettings& settings = *muscle.settings;
+  const size_t n = settings.particleCount();
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t r = tear.pieceOf[i];
+    if (r == i) {
+      tear.pieceLower[r] = tear.pieceUpper[r] = muscle.positions[i];
+      tear.restLower[r] = tear.restUpper[r] = settings.restPositions[i];
+    }
+  }
+  for (uint32_t i = 0; i < n; ++i) {
+    const uint32_t r = tear.pieceOf[i];
+    tear.pieceLower[r].setMin(muscle.positions[i]);
+    tear.pieceUpper[r].setMax(muscle.positions[i]);
+    tear.restLower[r].setMin(settings.restPositions[i]);
+    tear.restUpper[r].setMax(settings.restPositions[i]);
+  }
+  for (uint32_t i = 0; i < n; ++i) {
+    if (tear.pieceOf[i] != i) continue;
+    // Written so that a NaN extent counts as spread too.
+    if (!(double(tear.pieceLower[i].distance(tear.pieceUpper[i])) <=
+          factor * double(tear.restLower[i].distance(tear.restUpper[i]))))
+      return true;
+  }
+  return false;
+}
+
+}  // namespace fibremss

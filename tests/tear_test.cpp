@@ -1,0 +1,142 @@
+// Tearing (SpringParameters::breakStretch): the built-in `tear` scene's notch tears apart with no
+// spring a particle shares beyond the threshold after a step, without allocating in the steps that
+// break, with the same bits for one thread and two; a threshold that nothing reaches changes no
+// bit; thresholds outside (1, strain_limit) are input errors.
+#include <LinearMath/btAlignedAllocator.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "fibremss/Error.h"
+#include "fibremss/Measures.h"
+#include "fibremss/MuscleSystem.h"
+#include "fibremss/Preparation.h"
+#include "fibremss/Scene.h"
+#include "support/AllocationCounter.h"
+#include "support/GridMuscle.h"
+
+namespace fibremss {
+namespace {
+
+/// What a run of a scene's poses left.
+struct Torn {
+  std::vector<btVector3> positions;  ///< the muscle's particles after the last step [m]
+  MuscleTear tear;                   ///< what tearing did
+  double worstRatio = 0;             ///< worstSharedSpring after any step
+  long allocations = 0;              ///< allocations in the steps after the first
+  size_t brokenWhileCounting = 0;    ///< springs broken in those steps
+};
+
+/// The largest l / L0 of the unbroken springs of `settings` at `x` that are not the last of one
+/// of their particles (a particle's last spring does not break).
+double worstSharedSpring(const MuscleSettings& settings, std::span<const btVector3> x) {
+  std::vector<int> counts(settings.particleCount(), 0);
+  for (const Spring& spring : settings.springs)
+    if (spring.a != spring.b) ++counts[spring.a], ++counts[spring.b];
+  double worst = 0;
+  for (const Spring& spring : settings.springs)
+    if (spring.a != spring.b && counts[spring.a] > 1 && counts[spring.b] > 1)
+      worst = std::max(worst, double(x[spring.a].distance(x[spring.b]) / spring.restLength));
+  return worst;
+}
+
+/// Runs the first muscle of `name` with `overrides` through every pose of the scene.
+Torn run(const std::string& name, std::vector<std::string> overrides, int threads = 0) {
+  const LoadedScene scene = loadScene(name, overrides);
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  SimulationParameters parameters = scene.simulation;
+  parameters.threads = threads;
+  MuscleSystem system(parameters);
+  std::vector<BoneHandle> bones;
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);
+  Torn torn;
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
+  for (int pose = 0; pose < scene.poseCount; ++pose) {
+    for (size_t b = 0; b < bones.size(); ++b)
+      system.setBoneTransform(bones[b], scene.bonePose(b, pose));
+    const size_t before = system.tear(muscle).brokenSprings;
+    testing::allocationCount = 0;
+    testing::countingArmed = pose > 0;
+    system.step();
+    testing::countingArmed = false;
+    if (pose > 0) {
+      torn.allocations += testing::allocationCount.load();
+      torn.brokenWhileCounting += system.tear(muscle).brokenSprings - before;
+    }
+    torn.worstRatio = std::max(
+        torn.worstRatio, worstSharedSpring(system.settings(muscle), system.positions(muscle)));
+  }
+  btAlignedAllocSetCustom(nullptr, nullptr);
+  const std::span<const btVector3> positions = system.positions(muscle);
+  torn.positions.assign(positions.begin(), positions.end());
+  torn.tear = system.tear(muscle);
+  return torn;
+}
+
+const std::vector<std::string> kCoarse{"resolution=12", "fibre_count=48"};
+
+TEST(Tear, NoSharedSpringEndsAStepBeyondTheThresholdAndTheNotchTearsApart) {
+  const Torn torn = run("tear", kCoarse);
+  RecordProperty("broken_springs", std::to_string(torn.tear.brokenSprings));
+  RecordProperty("pieces", std::to_string(torn.tear.pieces));
+  EXPECT_GT(torn.tear.brokenSprings, 0u);
+  EXPECT_GT(torn.tear.brokenVolumeTerms, 0u);
+  EXPECT_LE(torn.worstRatio, 1.5);
+  EXPECT_GE(torn.tear.pieces, 2u);
+}
+
+TEST(Tear, AThresholdNothingReachesChangesNoBit) {
+  // cylinder-stretch's springs stay below 1.3 (10 % stretch): tearing on breaks nothing.
+  const Torn off = run("cylinder-stretch", kCoarse);
+  std::vector<std::string> on = kCoarse;
+  on.push_back("break_stretch=1.9");
+  const Torn unbroken = run("cylinder-stretch", on);
+  EXPECT_EQ(unbroken.tear.brokenSprings, 0u);
+  EXPECT_EQ(unbroken.tear.pieces, 1u);
+  EXPECT_EQ(off.tear.pieces, 1u);
+  ASSERT_EQ(off.positions.size(), unbroken.positions.size());
+  EXPECT_EQ(std::memcmp(off.positions.data(), unbroken.positions.data(),
+                        off.positions.size() * sizeof(btVector3)),
+            0);
+}
+
+TEST(Tear, StepsThatBreakAllocateNothing) {
+  const Torn torn = run("tear", kCoarse);
+  EXPECT_GT(torn.brokenWhileCounting, 0u);
+  EXPECT_EQ(torn.allocations, 0);
+}
+
+TEST(Tear, IsTheSameForOneThreadAndTwo) {
+  const Torn one = run("tear", kCoarse, 1);
+  const Torn two = run("tear", kCoarse, 2);
+  EXPECT_EQ(one.tear.brokenSprings, two.tear.brokenSprings);
+  EXPECT_EQ(one.tear.brokenVolumeTerms, two.tear.brokenVolumeTerms);
+  EXPECT_EQ(one.tear.pieces, two.tear.pieces);
+  ASSERT_EQ(one.positions.size(), two.positions.size());
+  EXPECT_EQ(std::memcmp(one.positions.data(), two.positions.data(),
+                        one.positions.size() * sizeof(btVector3)),
+            0);
+}
+
+TEST(Tear, ThresholdsOutsideOneToTheStrainLimitAreInputErrors) {
+  EXPECT_THROW(loadScene("tear", {"break_stretch=0.5"}), InputError);
+  EXPECT_THROW(loadScene("tear", {"break_stretch=1"}), InputError);
+  EXPECT_THROW(loadScene("tear", {"break_stretch=2.5"}), InputError);  // strain_limit 2
+  EXPECT_NO_THROW(loadScene("tear", {"break_stretch=2.5", "strain_limit=0"}));
+  auto settings = std::make_shared<MuscleSettings>(*testing::gridMuscle("grid"));
+  settings->strainLimit = 2;
+  settings->breakStretch = 3;
+  MuscleSystem system;
+  const BoneHandle bones[] = {system.addBone(testing::cubeBone("left", btVector3(-0.02f, 0, 0))),
+                              system.addBone(testing::cubeBone("right", btVector3(0.02f, 0, 0)))};
+  EXPECT_THROW(system.addMuscle(settings, bones), InputError);
+}
+
+}  // namespace
+}  // namespace fibremss
