@@ -8,6 +8,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "fibremss/FibreRun.h"
@@ -212,6 +213,8 @@ TEST(Pinch, TheMuscleLiesOnBladeAsFaceAtPoseOne) {
   // them; pushed against the true mesh, the muscle comes within its particles' layer of the face.
   const double mesh = gapUnderBladeA(BoneCollision::Mesh);
   const double spheres = gapUnderBladeA(BoneCollision::Spheres);
+  RecordProperty("gap_mesh_mm", std::to_string(mesh));
+  RecordProperty("gap_spheres_mm", std::to_string(spheres));
   EXPECT_LT(mesh, 2.5);
   EXPECT_GT(spheres, mesh + 1);
 }
