@@ -61,6 +61,9 @@ class ThighRun {
     parameters.threads = threads;
     parameters.iterations = 1;
     parameters.stopRule = StopRule::Iterations;
+    // A contact per overlapping sphere pair, as contactsOfEveryPair counts them (the lists are
+    // the same when the pairs push against the bones' meshes).
+    parameters.boneCollision = BoneCollision::Spheres;
     system_ = std::make_unique<MuscleSystem>(parameters);
     for (const auto& bone : prepared.bones) bones_.push_back(system_->addBone(bone));
     for (const auto& muscle : prepared.muscles)

@@ -133,6 +133,11 @@ enum class Integrator : uint8_t {
 enum class BoneCollision : uint8_t {
   Spheres,        ///< bone spheres in a static btDbvt per bone (the thesis)
   DistanceField,  ///< signed distance grid of the bone mesh in the bone frame
+  /// The bone spheres find the particles near a bone; each such particle is then pushed, once per
+  /// bone and iteration, until its sphere just touches the bone's true mesh (closest point +
+  /// radius along the outward normal; a particle that clears the mesh is not pushed, however deep
+  /// it lies in a bone sphere). A bone without a mesh pushes out of its spheres.
+  Mesh,
 };
 
 /// How the pre-transform of a particle between two bones (method.md §4) combines their rigid
@@ -219,8 +224,8 @@ struct SimulationParameters {
   /// adds nothing. MuscleWorld does not copy the world's gravity: set it here.
   btVector3 gravity{0, 0, 0};
 
-  BoneCollision boneCollision = BoneCollision::Spheres;  ///< muscle–bone detection
-  btScalar distanceFieldCell = 0.001;                    ///< cell size of bone distance fields [m]
+  BoneCollision boneCollision = BoneCollision::Mesh;  ///< muscle–bone detection and push
+  btScalar distanceFieldCell = 0.001;                 ///< cell size of bone distance fields [m]
   /// Seed 001 eq 1: a particle whose bone-distance direction flips (d·d′ < −0.75) between
   /// iterations has passed through the bone; push it back out on its previous side.
   bool penetrationRecovery = true;

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <utility>
 
+#include "SurfaceContact.h"
+
 namespace fibremss {
 namespace {
 
@@ -165,18 +167,68 @@ bool musclePairContact(const MuscleState& a, const MuscleState& b, uint32_t i, u
   return true;
 }
 
-/// Exact test of free particle i of the muscle against the bone's sphere, push and log.
+/// Unit normal of `triangle` of `mesh` (outward; zero for a zero-area triangle).
+btVector3 faceNormal(const TriangleMesh& mesh, uint32_t triangle) {
+  const auto& t = mesh.triangles[triangle];
+  const btVector3 normal =
+      (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+  const btScalar length = normal.length();
+  return length > 0 ? normal / length : btVector3(0, 0, 0);
+}
+
+/// The push (bone frame) that leaves a sphere at `p` (bone frame) with `radius` just touching
+/// `mesh`: to the closest mesh point plus the radius along the outward normal, from outside or
+/// inside alike; `point` is that closest point. The closest point is looked for within `reach`
+/// first (nothing there: anywhere). False when the sphere clears the mesh.
+bool meshPush(const MeshDistance& mesh, const btVector3& p, btScalar radius, btScalar reach,
+              btVector3& push, btVector3& point) {
+  MeshDistance::Closest closest = mesh.closest(p, reach);
+  if (closest.triangle == UINT32_MAX) closest = mesh.closest(p);
+  if (closest.triangle == UINT32_MAX || (!closest.inside && closest.distance >= radius))
+    return false;
+  btVector3 normal = faceNormal(mesh.mesh(), closest.triangle);
+  if (closest.distance > SIMD_EPSILON * radius)
+    normal = (p - closest.point) / (closest.inside ? -closest.distance : closest.distance);
+  point = closest.point;
+  push = point + normal * radius - p;
+  return true;
+}
+
+/// BoneCollision::Mesh: pushes free particle i, which a bone sphere found, until its sphere just
+/// touches the bone's true mesh; once per bone and iteration (MuscleState::meshVisits). `reach`:
+/// where the closest point is looked for first [m].
+void pushOutOfMesh(MuscleState& muscle, const BoneState& bone, uint32_t i, btScalar reach,
+                   ContactLog& log) {
+  if (std::exchange(muscle.meshVisits[i], muscle.boneVisit) == muscle.boneVisit) return;
+  const btVector3& position = muscle.positions[i];
+  btVector3 push, point;
+  if (!meshPush(bone.mesh->distance, bone.current.invXform(position), muscle.settings->radii[i],
+                reach, push, point))
+    return;
+  addBonePush(muscle, i, bone.slot, bone.current.getBasis() * push);
+  log.add(position, bone.current * point);
+}
+
+/// Exact test of free particle i of the muscle against the bone's sphere: a push out of the
+/// sphere, or with the bone's mesh contact, pushOutOfMesh.
 void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere,
                   ContactLog& log) {
   ++log.candidates;
   const btVector3& centre = bone.tree.centre(static_cast<int32_t>(sphere));
+  const btVector3& position = muscle.positions[i];
+  const btScalar radius = muscle.settings->radii[i];
   btVector3 direction;
   btScalar depth;
-  if (!sphereOverlap(muscle.positions[i], muscle.settings->radii[i], centre,
-                     bone.settings->sphereRadii[sphere], direction, depth))
+  if (!sphereOverlap(position, radius, centre, bone.settings->sphereRadii[sphere], direction,
+                     depth))
     return;
+  if (bone.meshContact) {
+    // A sphere's centre lies inside its bone: the mesh crosses the way to it.
+    pushOutOfMesh(muscle, bone, i, (position - centre).length() + radius, log);
+    return;
+  }
   addBonePush(muscle, i, bone.slot, direction * depth);
-  log.add(muscle.positions[i], centre);
+  log.add(position, centre);
 }
 
 /// Calls onPair(i, j) for the leaf pairs of two muscle trees (not both particles fixed; nothing
@@ -362,6 +414,7 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversal
     collideWithField(muscle, bone, stack, log);
     return;
   }
+  if (bone.meshContact) ++muscle.boneVisit;
   CandidateList* list =
       bone.slot < muscle.boneLists.size() ? &muscle.boneLists[bone.slot] : nullptr;
   const auto test = [&](uint32_t i, uint32_t sphere) {

@@ -42,6 +42,8 @@ struct BoneState {
   std::unique_ptr<const BoneDistanceField> field;
   /// The true mesh as the surface-contact stage queries it (liftOutOfBone), bone frame.
   std::unique_ptr<const ContactMesh> mesh;
+  /// The spheres' pairs push against `mesh` (BoneCollision::Mesh and a mesh to push against).
+  bool meshContact = false;
   btTransform goodLast = btTransform::getIdentity();     ///< `last` at the step's start (guard)
   btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
 };
@@ -88,6 +90,10 @@ struct ContactState {
   std::vector<btVector3> boneSides;  ///< see sideBones
   std::vector<uint32_t> sideStamps;  ///< contactRound when the side was last seen (else stale)
   uint32_t contactRound = 0;         ///< responses applied so far (applyPushes)
+  /// BoneCollision::Mesh: the boneVisit in which each particle was last pushed against a bone's
+  /// true mesh (one closest-point query per particle, bone and iteration), empty when off.
+  std::vector<uint32_t> meshVisits;
+  uint32_t boneVisit = 0;  ///< collideMuscleBone calls on the muscle so far (meshVisits)
 
   /// Pinch (CollisionPairs.cpp): this iteration's bone pushes of each particle split into the
   /// first bone's and the others', to tell a particle two bones push opposite ways. Slot of the

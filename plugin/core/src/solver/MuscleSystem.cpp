@@ -139,6 +139,7 @@ std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
   state->pinchBones.assign(n, -1);
   state->firstBonePushes.assign(n, btVector3(0, 0, 0));
   state->otherBonePushes.assign(n, btVector3(0, 0, 0));
+  if (parameters.boneCollision == BoneCollision::Mesh) state->meshVisits.assign(n, 0);
   // Recovery follows the bones' distance fields: without them it has nothing to remember.
   if (parameters.penetrationRecovery && parameters.boneCollision == BoneCollision::DistanceField) {
     state->sideBones.assign(n, -1);
@@ -247,6 +248,8 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   state->tree.build(settings->sphereCentres, settings->sphereRadii);
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
   state->mesh = std::make_unique<const ContactMesh>(settings->mesh);
+  state->meshContact =
+      impl_->parameters.boneCollision == BoneCollision::Mesh && !settings->mesh.empty();
   if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
     state->field = std::make_unique<const BoneDistanceField>(
         state->mesh->distance, impl_->parameters.distanceFieldCell,

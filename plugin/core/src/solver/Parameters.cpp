@@ -55,9 +55,10 @@ constexpr std::array<std::pair<StopRule, const char*>, 6> kStopRules{{
     {StopRule::Equilibrium, "equilibrium"},
     {StopRule::Residual, "residual"},
 }};
-constexpr std::array<std::pair<BoneCollision, const char*>, 2> kBoneCollisions{{
+constexpr std::array<std::pair<BoneCollision, const char*>, 3> kBoneCollisions{{
     {BoneCollision::Spheres, "spheres"},
     {BoneCollision::DistanceField, "distance-field"},
+    {BoneCollision::Mesh, "mesh"},
 }};
 constexpr std::array<std::pair<FailurePolicy, const char*>, 3> kFailurePolicies{{
     {FailurePolicy::Retry, "retry"},
