@@ -31,9 +31,9 @@ using testing::makeSpheres;
 /// but clear; the second step carries the plate past the particle's centre (0.5 mm beyond its
 /// middle). Returns the particle's height above the plate's middle after every step.
 std::vector<btScalar> plateSweep(bool recovery) {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.iterations = 1;
-  parameters.adaptiveTimeStep = false;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.iterations = 1;
+  parameters.stepSettings.adaptiveTimeStep = false;
   parameters.boneCollision = BoneCollision::DistanceField;
   parameters.distanceFieldCell = 0.0005;
   parameters.penetrationRecovery = recovery;
@@ -157,8 +157,8 @@ TEST(Pinch, TheDefaultSolverInOneToFiveIterationsPerPoseNeverRollsBack) {
   const LoadedScene scene = loadScene("pinch", {"resolution=12"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (int iterations = 1; iterations <= 5; ++iterations) {
-    SimulationParameters parameters = scene.simulation;
-    parameters.iterations = iterations;
+    MuscleSystemDef parameters = scene.simulation;
+    parameters.stepSettings.iterations = iterations;
     MuscleSystem system(parameters);
     const SceneHandles handles = addScene(system, prepared);
     size_t trapped = 0;
@@ -196,7 +196,7 @@ StepStats closeVice(btScalar gap, std::vector<btVector3>& positions, int topEnd 
     for (int k = -1; k <= 1; ++k)
       particles.emplace_back(spacing * btScalar(i) + btScalar(0.001), btScalar(0.0003),
                              spacing * btScalar(k));
-  MuscleSystem system(testing::verletParameters());  // Verlet: its iterations slide them out
+  MuscleSystem system(testing::verletDef());  // Verlet: its iterations slide them out
   const BoneHandle top =
       system.addBone(testing::makeBone(centres, std::vector<btScalar>(centres.size(), sphere)));
   const BoneHandle bottom =

@@ -56,11 +56,11 @@ class ThighRun {
  public:
   explicit ThighRun(int threads) {
     const PreparedScene& prepared = testing::preparedThigh(scene_);
-    SimulationParameters parameters = scene_.simulation;
+    MuscleSystemDef parameters = scene_.simulation;
     parameters.integrator = Integrator::Verlet;  // particles that move every iteration
     parameters.threads = threads;
-    parameters.iterations = 1;
-    parameters.stopRule = StopRule::Iterations;
+    parameters.stepSettings.iterations = 1;
+    parameters.stepSettings.stopRule = StopRule::Iterations;
     system_ = std::make_unique<MuscleSystem>(parameters);
     for (const auto& bone : prepared.bones) bones_.push_back(system_->addBone(bone));
     for (const auto& muscle : prepared.muscles)
@@ -230,7 +230,7 @@ TEST(CandidateLists, AnOverflowFallsBackToTheTreesWithTheSameContacts) {
 
 /// Two grid muscles 1 cm apart along y (not touching), stepped until their trees settle.
 struct TwoGrids {
-  TwoGrids() : system(parameters()) {
+  TwoGrids() : system(definition()) {
     const BoneHandle bones[] = {system.addBone(testing::cubeBone("left", btVector3(-0.02f, 0, 0))),
                                 system.addBone(testing::cubeBone("right", btVector3(0.02f, 0, 0)))};
     first = system.addMuscle(testing::gridMuscle("first", 0), bones);
@@ -239,10 +239,10 @@ struct TwoGrids {
     second = system.addMuscle(testing::gridMuscle("second", btScalar(0.012)), bones);
     for (int k = 0; k < 5; ++k) system.step();
   }
-  static SimulationParameters parameters() {
-    SimulationParameters p = testing::verletParameters();
-    p.iterations = 1;
-    p.stopRule = StopRule::Iterations;
+  static MuscleSystemDef definition() {
+    MuscleSystemDef p = testing::verletDef();
+    p.stepSettings.iterations = 1;
+    p.stepSettings.stopRule = StopRule::Iterations;
     p.threads = 1;
     return p;
   }
