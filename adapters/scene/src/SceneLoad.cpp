@@ -7,12 +7,12 @@
 #include <set>
 #include <sstream>
 
+#include "BuiltInScenes.h"
 #include "SceneAnatomy.h"
 #include "SceneFields.h"
 #include "SceneMotion.h"
 #include "SceneShapes.h"
 #include "SceneValidation.h"
-#include "fibremss/BuiltInScenes.h"
 #include "fibremss/Error.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/MeshIO.h"

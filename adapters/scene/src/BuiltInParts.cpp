@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "fibremss/BuiltInScenes.h"
+#include "BuiltInScenes.h"
 #include "fibremss/Scene.h"
 
 namespace fibremss::builtin {
