@@ -170,8 +170,8 @@ TEST(AnalyticMeasure, ContactAtAPoseTakesThePlatesApproachAndHertzsRadius) {
 
 TEST(AnalyticRun, ShortFibreMSSRunsMeasureEveryFigureAndRoundTripThroughJson) {
   for (const char* name : {"cylinder-stretch", "cylinder-twist"}) {
-    const LoadedScene scene = loadScene(
-        name, {"resolution=12", "fibre_count=24", "simulation.stepSettings.iterations=300"});
+    const LoadedScene scene =
+        loadScene(name, {"resolution=12", "fibre_count=24", "simulation.iterations=300"});
     const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
     FibreRunOptions options;
     options.keepPoseSurfaces = false;
@@ -196,8 +196,8 @@ TEST(AnalyticRun, ShortFibreMSSRunsMeasureEveryFigureAndRoundTripThroughJson) {
 }
 
 TEST(AnalyticRun, ASpherePlanesRunMeasuresTheContactAtEveryPose) {
-  const LoadedScene scene = loadScene("sphere-planes", {"resolution=20", "fibre_count=24",
-                                                        "simulation.stepSettings.iterations=300"});
+  const LoadedScene scene =
+      loadScene("sphere-planes", {"resolution=20", "fibre_count=24", "simulation.iterations=300"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   FibreRunOptions options;
   options.keepPoseSurfaces = false;
@@ -311,9 +311,9 @@ TEST(Tendons, TakeLittleOfTheStretchAndLeaveItToTheBelly) {
 // With the default integrator and with the implicit ones, whose linear systems multiply the
 // volume terms' stiffness: every step after the first (which builds an implicit workspace).
 TEST(VolumeTerm, StepAllocatesNothing) {
-  const LoadedScene scene = loadScene(
-      "cylinder-twist", {"resolution=10", "fibre_count=16", "stop=iterations",
-                         "simulation.stepSettings.iterations=20", "enclosed_volume_stiffness=4"});
+  const LoadedScene scene =
+      loadScene("cylinder-twist", {"resolution=10", "fibre_count=16", "stop=iterations",
+                                   "simulation.iterations=20", "enclosed_volume_stiffness=4"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   for (Integrator integrator : {scene.simulation.integrator, Integrator::ImplicitEuler,

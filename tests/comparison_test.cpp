@@ -207,8 +207,7 @@ TEST_P(EveryMethod, GivesFiniteMetrics) {
   // sphere-planes runs each of its 3 poses to convergence (up to 5000 iterations, the
   // self-reference 8× that): capped here, where finite metrics are the point.
   std::vector<std::string> overrides;
-  if (std::string(GetParam()) == "sphere-planes")
-    overrides = {"simulation.stepSettings.iterations=500"};
+  if (std::string(GetParam()) == "sphere-planes") overrides = {"simulation.iterations=500"};
   const LoadedScene scene = loadScene(GetParam(), overrides);
   CompareOptions options;         // all four methods
   options.withReference = false;  // the reference has its own tests (calculix_test)

@@ -152,10 +152,9 @@ TEST(Scene, OverrideForms) {
   EXPECT_FALSE(scene.simulation.muscleBone);
 
   // Dotted paths by index and by element name; later overrides win; values parse as JSON.
-  scene = loadScene(
-      path, {"model.kappa=2", "simulation.stepSettings.iterations=100", "muscles.0.resolution=20",
-             "muscles.b.resolution=30", "simulation.time_step=fixed", "simulation.dt=0.0005",
-             "resolution=7", "muscles.1.resolution=8"});
+  scene = loadScene(path, {"model.kappa=2", "simulation.iterations=100", "muscles.0.resolution=20",
+                           "muscles.b.resolution=30", "simulation.time_step=fixed",
+                           "simulation.dt=0.0005", "resolution=7", "muscles.1.resolution=8"});
   EXPECT_FLOAT_EQ(scene.muscles[0].parameters.springs.kappa, 2.f);
   EXPECT_EQ(scene.simulation.stepSettings.iterations, 100);
   EXPECT_EQ(scene.muscles[0].parameters.resolution, 7);
