@@ -319,7 +319,7 @@ TEST(VolumeTerm, StepAllocatesNothing) {
   for (Integrator integrator : {scene.simulation.integrator, Integrator::ImplicitEuler,
                                 Integrator::ImplicitMidpoint, Integrator::Bdf2}) {
     SCOPED_TRACE(toString(integrator));
-    SimulationParameters parameters = scene.simulation;
+    MuscleSystemDef parameters = scene.simulation;
     parameters.integrator = integrator;
     MuscleSystem system(parameters);
     std::vector<BoneHandle> bones;

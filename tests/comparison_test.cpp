@@ -269,16 +269,18 @@ TEST(EquilibriumMethod, StopsEveryPoseBelowTheResidualTolerance) {
 // --equilibrium-cap raises the cap without changing the path: the bones still move over the
 // scene's own motion iterations (70 × 0.5 = 35).
 TEST(EquilibriumMethod, ACapKeepsTheBonesMotionIterations) {
-  SimulationParameters scene;
-  scene.iterations = 70;
-  scene.motionFraction = 0.5f;
-  const SimulationParameters usual = equilibriumSettings(scene);
-  const SimulationParameters longer = equilibriumSettings(scene, 12000);
-  EXPECT_EQ(usual.iterations, kEquilibriumIterations);
-  EXPECT_EQ(longer.iterations, 12000);
-  EXPECT_NEAR(usual.motionFraction * btScalar(usual.iterations), 35, 1e-2);
-  EXPECT_NEAR(longer.motionFraction * btScalar(longer.iterations), 35, 1e-2);
-  EXPECT_EQ(longer.stopRule, StopRule::Residual);
+  MuscleSystemDef scene;
+  scene.stepSettings.iterations = 70;
+  scene.stepSettings.motionFraction = 0.5f;
+  const MuscleSystemDef usual = equilibriumSettings(scene);
+  const MuscleSystemDef longer = equilibriumSettings(scene, 12000);
+  EXPECT_EQ(usual.stepSettings.iterations, kEquilibriumIterations);
+  EXPECT_EQ(longer.stepSettings.iterations, 12000);
+  EXPECT_NEAR(usual.stepSettings.motionFraction * btScalar(usual.stepSettings.iterations), 35,
+              1e-2);
+  EXPECT_NEAR(longer.stepSettings.motionFraction * btScalar(longer.stepSettings.iterations), 35,
+              1e-2);
+  EXPECT_EQ(longer.stepSettings.stopRule, StopRule::Residual);
   EXPECT_EQ(longer.projectiveRho, usual.projectiveRho);
 }
 
@@ -1006,20 +1008,20 @@ TEST(Verdict, TimeToAccuracyIsFibreMSSsOwnConvergenceNotAnotherModelsDistanceToI
 }
 
 TEST(FrontMethods, SweepTheKnobThatEndsTheDefaultSolversIterations) {
-  const SimulationParameters defaults{};
+  const MuscleSystemDef defaults{};
   const std::vector<std::string> front = frontMethods({"fibremss"}, defaults);
-  EXPECT_NE(
-      std::find(front.begin(), front.end(), "fibremss:" + fibreCostKnob(defaults).key + "=x2"),
-      front.end());
-  SimulationParameters counted;
-  counted.stopRule = StopRule::Iterations;
+  EXPECT_NE(std::find(front.begin(), front.end(),
+                      "fibremss:" + fibreCostKnob(defaults.stepSettings).key + "=x2"),
+            front.end());
+  MuscleSystemDef counted;
+  counted.stepSettings.stopRule = StopRule::Iterations;
   EXPECT_EQ(frontMethods({"fibremss"}, counted),
             (std::vector<std::string>{"fibremss:iterations=x0.5", "fibremss",
                                       "fibremss:iterations=x2", "fibremss:iterations=x4",
                                       "fibremss:resolution=x0.5", "fibremss:resolution=x2"}));
-  SimulationParameters residual;
+  MuscleSystemDef residual;
   residual.integrator = Integrator::Projective;
-  residual.stopRule = StopRule::Residual;
+  residual.stepSettings.stopRule = StopRule::Residual;
   EXPECT_EQ(frontMethods({"fibremss", "fem"}, residual),
             (std::vector<std::string>{"fibremss:tolerance=x2", "fibremss",
                                       "fibremss:tolerance=x0.5", "fibremss:tolerance=x0.25",
@@ -1047,7 +1049,7 @@ TEST(Methods, EachMethodParsesWithItsOwnKnobsOnly) {
 }
 
 TEST(Methods, EachFrontHoldsItsMethodAndVariantsOfItsOwnKnobs) {
-  const SimulationParameters defaults{};
+  const MuscleSystemDef defaults{};
   for (const Method& method : methods()) {
     if (!method.front) continue;
     const std::vector<std::string> front = method.front(defaults);

@@ -32,13 +32,13 @@ using testing::makeSpheres;
 /// but clear; the second step carries the plate past the particle's centre (0.5 mm beyond its
 /// middle). Returns the particle's height above the plate's middle after every step.
 std::vector<btScalar> plateSweep(bool recovery) {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.iterations = 1;
-  parameters.adaptiveTimeStep = false;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.iterations = 1;
+  parameters.stepSettings.adaptiveTimeStep = false;
   parameters.boneCollision = BoneCollision::DistanceField;
   parameters.distanceFieldCell = 0.0005;
   parameters.penetrationRecovery = recovery;
-  MuscleSystem system(parameters);
+  MuscleSystem system(def);
   auto plate = testing::makeBone();
   plate->mesh = makeBox({0, 0, 0}, {0.03, 0.002, 0.03}, {6, 1, 6});
   const BoneHandle bone = system.addBone(plate);
@@ -158,9 +158,9 @@ TEST(Pinch, TheDefaultSolverInOneToFiveIterationsPerPoseNeverRollsBack) {
   const LoadedScene scene = loadScene("pinch", {"resolution=12"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (int iterations = 1; iterations <= 5; ++iterations) {
-    SimulationParameters parameters = scene.simulation;
-    parameters.iterations = iterations;
-    MuscleSystem system(parameters);
+    MuscleSystemDef def = scene.simulation;
+    parameters.stepSettings.iterations = iterations;
+    MuscleSystem system(def);
     const SceneHandles handles = addScene(system, prepared);
     size_t trapped = 0;
     for (int pose = 1; pose < scene.poseCount; ++pose) {
@@ -184,9 +184,9 @@ TEST(Pinch, TheDefaultSolverInOneToFiveIterationsPerPoseNeverRollsBack) {
 double gapUnderBladeA(BoneCollision detection) {
   const LoadedScene scene = loadScene("pinch", {});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  SimulationParameters parameters = scene.simulation;
-  parameters.boneCollision = detection;
-  MuscleSystem system(parameters);
+  MuscleSystemDef def = scene.simulation;
+  def.boneCollision = detection;
+  MuscleSystem system(def);
   const SceneHandles handles = addScene(system, prepared);
   for (int pose = 0; pose <= 1; ++pose) {
     for (size_t b = 0; b < handles.bones.size(); ++b)
@@ -239,7 +239,7 @@ StepStats closeVice(btScalar gap, std::vector<btVector3>& positions, int topEnd 
     for (int k = -1; k <= 1; ++k)
       particles.emplace_back(spacing * btScalar(i) + btScalar(0.001), btScalar(0.0003),
                              spacing * btScalar(k));
-  MuscleSystem system(testing::verletParameters());  // Verlet: its iterations slide them out
+  MuscleSystem system(testing::verletDef());  // Verlet: its iterations slide them out
   const BoneHandle top =
       system.addBone(testing::makeBone(centres, std::vector<btScalar>(centres.size(), sphere)));
   const BoneHandle bottom =

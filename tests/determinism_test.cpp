@@ -36,7 +36,7 @@ struct Simulation {
   explicit Simulation(int threads)
       : scene(loadScene(kScene, kOverrides)),
         prepared(prepareScene(scene.bones, scene.muscles, scene.simulation.seed)) {
-    SimulationParameters parameters = scene.simulation;
+    MuscleSystemDef parameters = scene.simulation;
     parameters.threads = threads;
     system = std::make_unique<MuscleSystem>(parameters);
     for (const auto& bone : prepared.bones) bones.push_back(system->addBone(bone));

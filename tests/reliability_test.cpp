@@ -54,7 +54,7 @@ TEST(Reliability2, ASceneScaledBy1e12IsRefusedBeforeAnyTree) {
 }
 
 TEST(Reliability2, MuscleSystemRefusesPointsBeyondTheWorldBeforeBuildingTrees) {
-  SimulationParameters noisy;
+  MuscleSystemDef noisy;
   noisy.initialNoise = btScalar(1e13);  // 1e16 mm
   EXPECT_THROW(MuscleSystem{noisy}, InputError);
   MuscleSystem system;
@@ -181,9 +181,9 @@ TEST(Reliability2, SkippedVtkCellsAreCountedNotListed) {
 class NanBonePose : public ::testing::TestWithParam<FailurePolicy> {};
 
 TEST_P(NanBonePose, MusclesStayFiniteTheStepReportsNanAndRecoversWithTheBone) {
-  SimulationParameters parameters;
+  MuscleSystemDef parameters;
   parameters.onFailure = GetParam();
-  parameters.iterations = 10;
+  parameters.stepSettings.iterations = 10;
   MuscleSystem system(parameters);
   const BoneHandle bones[] = {system.addBone(testing::cubeBone("left", btVector3(-0.02f, 0, 0))),
                               system.addBone(testing::cubeBone("right", btVector3(0.02f, 0, 0)))};
@@ -485,32 +485,32 @@ TEST(Reliability2, TheBudgetStopRuleSaysItIsNotBitIdentical) {
 TEST(Reliability2, AFixedTimeStepOfZeroOrBelowIsAnInputError) {
   for (const btScalar dt :
        {btScalar(-0.001), btScalar(0), std::numeric_limits<btScalar>::quiet_NaN()}) {
-    SimulationParameters parameters;
-    parameters.adaptiveTimeStep = false;
-    parameters.timeStep = dt;
+    MuscleSystemDef parameters;
+    parameters.stepSettings.adaptiveTimeStep = false;
+    parameters.stepSettings.timeStep = dt;
     EXPECT_THROW(MuscleSystem{parameters}, InputError) << dt;
     MuscleSystem system;
     system.addMuscle(testing::makeSpheres({{0, 0, 0}}, {0.001f}), {});
-    system.parameters().adaptiveTimeStep = false;
-    system.parameters().timeStep = dt;
-    EXPECT_THROW(system.step(), InputError) << dt;
-    system.parameters().timeStep = btScalar(1e-3);
-    system.step();  // usable again once the parameters are
+    StepSettings settings = system.stepSettings();
+    settings.adaptiveTimeStep = false;
+    settings.timeStep = dt;
+    EXPECT_THROW(system.setStepSettings(settings), InputError) << dt;
+    EXPECT_TRUE(system.stepSettings().adaptiveTimeStep);  // the previous settings kept
+    EXPECT_EQ(system.stepSettings().timeStep, StepSettings{}.timeStep);
+    system.step();
     EXPECT_EQ(system.lastStep().step, 0u);
   }
 }
 
 TEST(Reliability2, AnL_BfgsHistoryBeyondItsBuffersIsAnInputError) {
   for (const int pairs : {-1, kMaxProjectiveHistory + 1}) {
-    SimulationParameters parameters;
+    MuscleSystemDef parameters;
     parameters.projectiveHistory = pairs;
     EXPECT_THROW(MuscleSystem{parameters}, InputError) << pairs;
-    MuscleSystem system;
+    parameters.projectiveHistory = kMaxProjectiveHistory;
+    MuscleSystem system(parameters);
     system.addMuscle(testing::makeSpheres({{0, 0, 0}}, {0.001f}), {});
-    system.parameters().projectiveHistory = pairs;
-    EXPECT_THROW(system.step(), InputError) << pairs;
-    system.parameters().projectiveHistory = kMaxProjectiveHistory;
-    system.step();  // usable again once the parameters are
+    system.step();
     EXPECT_EQ(system.lastStep().step, 0u);
   }
 }

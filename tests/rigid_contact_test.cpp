@@ -37,10 +37,10 @@ constexpr btScalar kWidth = (kSide - 1) * kSpacing;
 constexpr btScalar kTop = (kLayers - 1) * kSpacing + kSpacing / 2;  // slab's upper surface [m]
 constexpr btScalar kBulletStep = btScalar(1.0 / 480);               // fixed Bullet step [s]
 
-SimulationParameters slabParameters(int threads = 1) {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.timeStep = btScalar(5e-5);  // below the slab's stable dt (about 1e-4 s)
-  parameters.iterations = 20;
+MuscleSystemDef slabParameters(int threads = 1) {
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.timeStep = btScalar(5e-5);  // below the slab's stable dt (about 1e-4 s)
+  parameters.stepSettings.iterations = 20;
   parameters.threads = threads;
   return parameters;
 }
@@ -187,7 +187,7 @@ Landing dropOnADefaultWorld(int substeps, btScalar fixed) {
   btCollisionDispatcher dispatcher(&configuration);
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
-  MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, SimulationParameters{});
+  MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, MuscleSystemDef{});
   world.setGravity(btVector3(0, btScalar(-9.81), 0));
   BoneBody bone(slabBone(kWidth, kWidth, kSpacing));
   const BoneHandle boneHandle = world.addBone(bone.settings(), bone.body());
@@ -354,8 +354,8 @@ TEST(RigidContact, AHugeDynamicStepIsCutShortAndANanQueryPoseIsAnError) {
 /// with `coupling` and, when `farBall`, a dynamic ball far out of reach; or (`plain`) in a bare
 /// MuscleSystem without any world, the path before contact existed.
 std::vector<btVector3> gridRun(bool plain, const WorldCoupling& coupling, bool farBall) {
-  SimulationParameters parameters = slabParameters();
-  parameters.iterations = 15;
+  MuscleSystemDef parameters = slabParameters();
+  parameters.stepSettings.iterations = 15;
   const auto settings = slabMuscle(5, 3, 4, kSpacing, 2, btScalar(0.2), true);
   const auto boneSettings = slabBone(4 * kSpacing, 3 * kSpacing, kSpacing);
   const auto moved = [](int s) {
@@ -473,7 +473,7 @@ TEST(RigidContact, TheContactPathAllocatesNothing) {
 // ---- Gravity and external forces -----------------------------------------------------------
 
 TEST(RigidContact, GravityAndExternalForcesMoveFreeParticles) {
-  SimulationParameters parameters = slabParameters();
+  MuscleSystemDef parameters = slabParameters();
   parameters.gravity = btVector3(0, -9.81f, 0);
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(slabBone(kWidth, kWidth, kSpacing));

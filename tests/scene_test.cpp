@@ -86,21 +86,24 @@ TEST(Scene, DefaultsFilledIn) {
   EXPECT_FLOAT_EQ(muscle.parameters.springs.kappa, muscleDefaults.springs.kappa);
   EXPECT_LT(muscle.parameters.springs.damping, 0);  // "auto": Zeleny's estimate
   EXPECT_EQ(muscle.fibres.fibreCount(), 64u);
-  const fibremss::SimulationParameters simulation;
+  const fibremss::MuscleSystemDef simulation;
   EXPECT_EQ(scene.simulation.integrator, simulation.integrator);
-  EXPECT_EQ(scene.simulation.adaptiveTimeStep, simulation.adaptiveTimeStep);
-  EXPECT_FLOAT_EQ(scene.simulation.timeStep, simulation.timeStep);
-  EXPECT_FLOAT_EQ(scene.simulation.minTimeStep, simulation.minTimeStep);
-  EXPECT_EQ(scene.simulation.stopRule, simulation.stopRule);
-  EXPECT_EQ(scene.simulation.iterations, simulation.iterations);
-  EXPECT_FLOAT_EQ(scene.simulation.epsilon, simulation.epsilon);
+  EXPECT_EQ(scene.simulation.stepSettings.adaptiveTimeStep,
+            simulation.stepSettings.adaptiveTimeStep);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.timeStep, simulation.stepSettings.timeStep);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.minTimeStep, simulation.stepSettings.minTimeStep);
+  EXPECT_EQ(scene.simulation.stepSettings.stopRule, simulation.stepSettings.stopRule);
+  EXPECT_EQ(scene.simulation.stepSettings.iterations, simulation.stepSettings.iterations);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.epsilon, simulation.stepSettings.epsilon);
   EXPECT_EQ(scene.simulation.seed, simulation.seed);
-  EXPECT_FLOAT_EQ(scene.simulation.budgetMs, simulation.budgetMs);
-  EXPECT_FLOAT_EQ(scene.simulation.deviationEpsilon, simulation.deviationEpsilon);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.budgetMs, simulation.stepSettings.budgetMs);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.deviationEpsilon,
+                  simulation.stepSettings.deviationEpsilon);
   EXPECT_EQ(scene.simulation.rebuildEveryStep, simulation.rebuildEveryStep);
   EXPECT_EQ(scene.simulation.blendedPretransform, simulation.blendedPretransform);
   EXPECT_EQ(scene.simulation.pretransformBlend, simulation.pretransformBlend);
-  EXPECT_FLOAT_EQ(scene.simulation.motionFraction, simulation.motionFraction);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.motionFraction,
+                  simulation.stepSettings.motionFraction);
   EXPECT_FLOAT_EQ(scene.simulation.initialNoise, simulation.initialNoise);
   EXPECT_FLOAT_EQ(muscle.parameters.springs.dampingScale, muscleDefaults.springs.dampingScale);
   EXPECT_FLOAT_EQ(muscle.parameters.springs.density, muscleDefaults.springs.density);
@@ -140,10 +143,11 @@ TEST(Scene, OverrideForms) {
     EXPECT_EQ(muscle.parameters.springs.layout, fibremss::SpringLayout::Delaunay);
     EXPECT_EQ(muscle.fibres.fibreCount(), 16u);
   }
-  EXPECT_EQ(scene.simulation.iterations, 33);
-  EXPECT_EQ(loadScene(path, {"stop=spring-deviation"}).simulation.stopRule,
+  EXPECT_EQ(scene.simulation.stepSettings.iterations, 33);
+  EXPECT_EQ(loadScene(path, {"stop=spring-deviation"}).simulation.stepSettings.stopRule,
             fibremss::StopRule::SpringDeviation);
-  EXPECT_FLOAT_EQ(loadScene(path, {"motion_fraction=0.25"}).simulation.motionFraction, 0.25f);
+  EXPECT_FLOAT_EQ(loadScene(path, {"motion_fraction=0.25"}).simulation.stepSettings.motionFraction,
+                  0.25f);
   EXPECT_EQ(scene.simulation.integrator, fibremss::Integrator::SemiImplicitEuler);
   EXPECT_FALSE(scene.simulation.muscleBone);
 
@@ -152,11 +156,11 @@ TEST(Scene, OverrideForms) {
                            "muscles.b.resolution=30", "simulation.time_step=fixed",
                            "simulation.dt=0.0005", "resolution=7", "muscles.1.resolution=8"});
   EXPECT_FLOAT_EQ(scene.muscles[0].parameters.springs.kappa, 2.f);
-  EXPECT_EQ(scene.simulation.iterations, 100);
+  EXPECT_EQ(scene.simulation.stepSettings.iterations, 100);
   EXPECT_EQ(scene.muscles[0].parameters.resolution, 7);
   EXPECT_EQ(scene.muscles[1].parameters.resolution, 8);
-  EXPECT_FALSE(scene.simulation.adaptiveTimeStep);
-  EXPECT_FLOAT_EQ(scene.simulation.timeStep, 0.0005f);
+  EXPECT_FALSE(scene.simulation.stepSettings.adaptiveTimeStep);
+  EXPECT_FLOAT_EQ(scene.simulation.stepSettings.timeStep, 0.0005f);
   // The overrides show in the complete JSON too.
   EXPECT_EQ(Json::parse(scene.json)["simulation"]["iterations"], 100);
 

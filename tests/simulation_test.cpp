@@ -29,11 +29,11 @@ using testing::zelenyDamping;
 
 constexpr double kPi = std::numbers::pi;
 
-SimulationParameters fixedStep(btScalar dt) {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.adaptiveTimeStep = false;
-  parameters.timeStep = dt;
-  parameters.iterations = 1;
+MuscleSystemDef fixedStep(btScalar dt) {
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.adaptiveTimeStep = false;
+  parameters.stepSettings.timeStep = dt;
+  parameters.stepSettings.iterations = 1;
   return parameters;
 }
 
@@ -45,7 +45,7 @@ std::vector<double> springTrajectory(btScalar stiffness, btScalar mass, btScalar
   auto muscle = makeMuscle({{0, 0, 0}, {restLength + amplitude, 0, 0}}, mass, damping);
   fix(*muscle, 0, 0);
   addSpring(*muscle, 0, 1, stiffness, restLength);
-  SimulationParameters parameters = fixedStep(dt);
+  MuscleSystemDef parameters = fixedStep(dt);
   parameters.integrator = integrator;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());
@@ -173,8 +173,8 @@ TEST(Relaxation, ATimedStepKeepsEveryIterationWithinTheStableTimeStep) {
   const LoadedScene scene = loadScene("fusiform", {"resolution=12", "integrator=verlet"});
   ASSERT_GT(scene.muscles.at(0).parameters.springs.volumeStiffness, 0) << "on by default";
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  SimulationParameters parameters = scene.simulation;
-  parameters.iterations = 20;
+  MuscleSystemDef parameters = scene.simulation;
+  parameters.stepSettings.iterations = 20;
   MuscleSystem system(parameters);
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
@@ -193,7 +193,7 @@ TEST(Relaxation, ATimedStepKeepsEveryIterationWithinTheStableTimeStep) {
 TEST(Relaxation, OneStepOfSeventyIterationsRelaxesMostOfTheStretch) {
   auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);
   box->damping = zelenyDamping(*box);
-  MuscleSystem system(testing::verletParameters());
+  MuscleSystem system(testing::verletDef());
   const BoneHandle bone = system.addBone(makeBone());
   system.addMuscle(box, std::span(&bone, 1));
   system.step();
@@ -217,7 +217,7 @@ TEST(Relaxation, ASphereShrunkToAPointDoesNotHoldTheStepOnItsFloor) {
     return system.lastStep().lastTimeStep;
   };
   const btScalar whole = relaxedDt(0.0025), point = relaxedDt(btScalar(3e-8));
-  const btScalar floor = SimulationParameters{}.minTimeStep;
+  const btScalar floor = StepSettings{}.minTimeStep;
   EXPECT_GT(whole, 2 * floor) << "the box relaxes above min_dt";
   EXPECT_GT(point, 2 * floor);
   EXPECT_GE(point, whole / 2);
@@ -227,8 +227,8 @@ TEST(BoneMotion, FixedParticlesSitExactlyOnTheirBoneAfterEveryStep) {
   auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
   box->damping = zelenyDamping(*box);
   for (int rule = 0; rule < 2; ++rule) {
-    SimulationParameters parameters = testing::verletParameters();
-    parameters.iterations = 20;
+    MuscleSystemDef parameters = testing::verletDef();
+    parameters.stepSettings.iterations = 20;
     parameters.rebuildEveryStep = rule == 1;
     MuscleSystem system(parameters);
     const BoneHandle bone = system.addBone(makeBone());
@@ -319,7 +319,7 @@ TEST(Output, SetPositionsPlacesParticlesAtRestWithTheirSurface) {
   a->skinNeighbours = 1;
   a->skinParticles = {0};
   a->skinWeights = {1};
-  SimulationParameters parameters;
+  MuscleSystemDef parameters;
   parameters.integrator = Integrator::Verlet;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());
@@ -338,11 +338,11 @@ TEST(Output, SetPositionsPlacesParticlesAtRestWithTheirSurface) {
 
 /// Two overlapping noisy boxes and a bone sphere, run for some steps; all positions.
 std::vector<btVector3> noisyRun(Integrator integrator) {
-  SimulationParameters parameters = testing::verletParameters();
+  MuscleSystemDef parameters = testing::verletDef();
   parameters.integrator = integrator;
   parameters.initialNoise = 0.0005;
   parameters.seed = 7;
-  parameters.iterations = 30;
+  parameters.stepSettings.iterations = 30;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));
   auto a = makeBox(3, 3, 8, 0.005, 1, 1.0, 3e-5, 0);
@@ -374,7 +374,7 @@ SweepResult sweep(const std::string& scene, const std::vector<std::string>& over
                   bool blended) {
   const LoadedScene loaded = loadScene(scene, overrides);
   const PreparedScene prepared = prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
-  SimulationParameters parameters = loaded.simulation;
+  MuscleSystemDef parameters = loaded.simulation;
   parameters.blendedPretransform = blended;
   parameters.onFailure = FailurePolicy::Report;  // the raw solver: no guard retries
   MuscleSystem system(parameters);
@@ -553,7 +553,9 @@ std::vector<double> fusiformRelaxation(btScalar dampingScale, int iterations) {
       system.setBoneTransform(bones[b], scene.bonePose(b, pose));
     system.step();
   }
-  system.parameters().iterations = 1;
+  StepSettings single = system.stepSettings();
+  single.iterations = 1;
+  system.setStepSettings(single);
   std::vector<double> ratios;
   for (int k = 0; k < iterations; ++k) {
     system.step();
@@ -583,22 +585,22 @@ TEST(StopRules, SpringDeviationStopsOnceTheRatioIsBelowEpsilon) {
   EXPECT_EQ(rule, StopRule::SpringDeviation);
   EXPECT_STREQ(toString(StopRule::SpringDeviation), "spring-deviation");
   // The scene loader maps stop rule names through fromString.
-  EXPECT_EQ(loadScene("fusiform", {"stop=spring-deviation"}).simulation.stopRule,
+  EXPECT_EQ(loadScene("fusiform", {"stop=spring-deviation"}).simulation.stepSettings.stopRule,
             StopRule::SpringDeviation);
 
   auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);  // stretched by 20 %
   box->damping = zelenyDamping(*box);
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.stopRule = StopRule::SpringDeviation;
-  parameters.iterations = 5000;
-  parameters.deviationEpsilon = 0.01;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.stopRule = StopRule::SpringDeviation;
+  parameters.stepSettings.iterations = 5000;
+  parameters.stepSettings.deviationEpsilon = 0.01;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());
   system.addMuscle(box, std::span(&bone, 1));
   system.step();
   EXPECT_GT(system.lastStep().iterations, 1);  // 20 % stretch: not below 1 % at once
   EXPECT_LT(system.lastStep().iterations, 5000);
-  EXPECT_LT(system.lastStep().springDeviationRatio, parameters.deviationEpsilon);
+  EXPECT_LT(system.lastStep().springDeviationRatio, parameters.stepSettings.deviationEpsilon);
 }
 
 // The equilibrium rule stops once its estimate of the distance left is below the tolerance:
@@ -609,16 +611,17 @@ TEST(StopRules, EquilibriumStopsNearTheConvergedState) {
   StopRule rule = StopRule::Iterations;
   ASSERT_TRUE(fromString("equilibrium", rule));
   EXPECT_EQ(rule, StopRule::Equilibrium);
-  EXPECT_NEAR(loadScene("fusiform", {"stop=equilibrium", "tolerance=0.2"}).simulation.tolerance,
+  EXPECT_NEAR(loadScene("fusiform", {"stop=equilibrium", "tolerance=0.2"})
+                  .simulation.stepSettings.tolerance,
               0.2e-3, 1e-9);  // scene units: millimetres
   const auto relax = [](StopRule stop, btScalar tolerance, int cap) {
     auto box = makeBox(3, 3, 10, 0.005, 1.2, 1.0, 3e-5, 0);  // stretched by 20 %
     box->damping = zelenyDamping(*box) / 4;
-    SimulationParameters parameters = testing::verletParameters();
-    parameters.stopRule = stop;
-    parameters.iterations = cap;
-    parameters.tolerance = tolerance;
-    parameters.epsilon = 1e-8;  // 10 nm per iteration: the float floor is near
+    MuscleSystemDef parameters = testing::verletDef();
+    parameters.stepSettings.stopRule = stop;
+    parameters.stepSettings.iterations = cap;
+    parameters.stepSettings.tolerance = tolerance;
+    parameters.stepSettings.epsilon = 1e-8;  // 10 nm per iteration: the float floor is near
     MuscleSystem system(parameters);
     const BoneHandle bone = system.addBone(makeBone());
     const MuscleHandle muscle = system.addMuscle(box, std::span(&bone, 1));
@@ -663,8 +666,12 @@ TEST(ForceResidual, OfAParticleOnThreeSpringsIsItsStretch) {
   EXPECT_NEAR(r[0].x(), -k * s, 1e-5 * k * s);                   // towards the anchor along x
   EXPECT_TRUE(r[1].isZero() && r[2].isZero() && r[3].isZero());  // attached: not counted
   // Gravity is part of the model's forces (an unbalanced weight is a residual too).
-  system.parameters().gravity = btVector3(0, 0, -9.81f);
-  EXPECT_NEAR(system.forceResidual(handle).rmsForce,
+  MuscleSystemDef weighed;
+  weighed.gravity = btVector3(0, 0, -9.81f);
+  MuscleSystem heavy(weighed);
+  const BoneHandle heavyBone = heavy.addBone(makeBone());
+  const MuscleHandle heavyHandle = heavy.addMuscle(muscle, std::span(&heavyBone, 1));
+  EXPECT_NEAR(heavy.forceResidual(heavyHandle).rmsForce,
               btVector3(-k * s, 0, btScalar(-9.81e-5)).length(), 1e-5 * k * s);
 }
 
@@ -709,7 +716,7 @@ TEST(ForceResidual, IsZeroAtTheRestStateOfAnUnloadedMuscle) {
   EXPECT_LT(rest.rmsDisplacement, 1e-8);  // 10 nm: rounding of float lengths and volumes
   EXPECT_LT(rest.maxDisplacement, 1e-7);
   // Noise of 0.1 mm on the free particles: a residual of that order.
-  SimulationParameters noisy = testing::verletParameters();
+  MuscleSystemDef noisy = testing::verletDef();
   noisy.initialNoise = 1e-4;
   MuscleSystem moved(noisy);
   std::vector<BoneHandle> movedBones;
@@ -744,10 +751,10 @@ TEST(ForceResidual, FallsAsTheIterationConvergesAndStopsTheResidualRule) {
     EXPECT_LT(residuals[s], residuals[s - 1]) << s;
   EXPECT_LT(residuals.back(), 1e-4 * residuals[0]);
 
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.stopRule = StopRule::Residual;
-  parameters.tolerance = 1e-6;  // 1 µm
-  parameters.iterations = 20000;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.stopRule = StopRule::Residual;
+  parameters.stepSettings.tolerance = 1e-6;  // 1 µm
+  parameters.stepSettings.iterations = 20000;
   MuscleSystem ruled(parameters);
   const BoneHandle ruledBone = ruled.addBone(makeBone());
   const MuscleHandle ruledHandle = ruled.addMuscle(box(), std::span(&ruledBone, 1));
@@ -756,7 +763,7 @@ TEST(ForceResidual, FallsAsTheIterationConvergesAndStopsTheResidualRule) {
   EXPECT_LT(iterations, 20000);
   // No bone moves: checked every 16 iterations from the first (StopRule::Residual).
   EXPECT_EQ(iterations % 16, 0);
-  EXPECT_LT(ruled.forceResidual(ruledHandle).rmsDisplacement, parameters.tolerance);
+  EXPECT_LT(ruled.forceResidual(ruledHandle).rmsDisplacement, parameters.stepSettings.tolerance);
 }
 
 // A free particle pulled by a spring into a bone sphere rests on it: the contact holds the pull,
@@ -767,8 +774,8 @@ TEST(ForceResidual, LeavesOutWhatAContactHolds) {
   auto muscle = makeMuscle({{0.01, 0, 0}, {0.04, 0, 0}}, 1e-5, 0.02, 0.001);
   fix(*muscle, 1, 0);
   addSpring(*muscle, 0, 1, k, rest);  // 0.03 long: pulls the particle towards +x
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.iterations = 2000;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.iterations = 2000;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone({{0.02, 0, 0}}, {0.005}));
   const MuscleHandle handle = system.addMuscle(muscle, std::span(&bone, 1));
@@ -778,13 +785,17 @@ TEST(ForceResidual, LeavesOutWhatAContactHolds) {
   const ForceResidual residual = system.forceResidual(handle);
   EXPECT_EQ(residual.contactParticles, 1u);
   EXPECT_LT(residual.rmsForce, 1e-4 * k * (0.026 - rest));  // the spring pulls with k·0.016
-  // A step with collision switched off: what the last response pushed no longer holds, so the
+  // A step at that position with collision switched off: nothing pushed holds it, so the
   // spring's pull counts again.
-  system.parameters().muscleMuscle = false;
-  system.parameters().muscleBone = false;
-  system.parameters().iterations = 1;
-  system.step();
-  const ForceResidual released = system.forceResidual(handle);
+  parameters.muscleMuscle = false;
+  parameters.muscleBone = false;
+  parameters.stepSettings.iterations = 1;
+  MuscleSystem free(parameters);
+  const BoneHandle freeBone = free.addBone(makeBone({{0.02, 0, 0}}, {0.005}));
+  const MuscleHandle freeHandle = free.addMuscle(muscle, std::span(&freeBone, 1));
+  free.setPositions(freeHandle, system.positions(handle));
+  free.step();
+  const ForceResidual released = free.forceResidual(freeHandle);
   EXPECT_EQ(released.contactParticles, 0u);
   EXPECT_GT(released.rmsForce, 0.5 * k * 0.016);
 }
@@ -801,24 +812,24 @@ TEST(Determinism, SameInputGivesBitwiseIdenticalPositions) {
 TEST(StopRules, ConvergedStopsEarlyOnceTheBonesArrived) {
   auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
   box->damping = zelenyDamping(*box);
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.stopRule = StopRule::Converged;
-  parameters.iterations = 500;
-  parameters.epsilon = 1e-7;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.stopRule = StopRule::Converged;
+  parameters.stepSettings.iterations = 500;
+  parameters.stepSettings.epsilon = 1e-7;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());
   system.addMuscle(box, std::span(&bone, 1));
   system.step();  // at rest: converges as soon as the bones arrived
   EXPECT_LT(system.lastStep().iterations, 500);
-  EXPECT_LT(system.lastStep().meanDisplacement, parameters.epsilon);
+  EXPECT_LT(system.lastStep().meanDisplacement, parameters.stepSettings.epsilon);
 }
 
 TEST(StopRules, ASpentBudgetEndsTheStepWithTheBonesAtTheirTarget) {
   auto box = makeBox(3, 3, 6, 0.005, 1, 1.0, 3e-5, 0);
   box->damping = zelenyDamping(*box);
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.stopRule = StopRule::TimeBudget;
-  parameters.budgetMs = 0;  // spent after the first iteration
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.stopRule = StopRule::TimeBudget;
+  parameters.stepSettings.budgetMs = 0;  // spent after the first iteration
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());
   const MuscleHandle handle = system.addMuscle(box, std::span(&bone, 1));
@@ -833,9 +844,9 @@ TEST(StopRules, ASpentBudgetEndsTheStepWithTheBonesAtTheirTarget) {
 /// A bone sphere (radius 5 mm) sweeping from x = −10 mm to +2 mm in one step over a free particle
 /// (radius 1 mm) at the origin; returns the particle's final x.
 double sweptParticle(bool rebuildEveryStep) {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.iterations = 20;
-  parameters.motionFraction = 1;
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.iterations = 20;
+  parameters.stepSettings.motionFraction = 1;
   parameters.rebuildEveryStep = rebuildEveryStep;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone({{0, 0, 0}}, {0.005}));
@@ -859,8 +870,8 @@ TEST(Explosion, FlagsNanAndExplodedSprings) {
   auto muscle = makeMuscle({{0, 0, 0}, {0.012, 0, 0}}, 1e-5, 0);
   fix(*muscle, 0, 0);
   addSpring(*muscle, 0, 1, 1000, 0.01);
-  SimulationParameters parameters = fixedStep(1e-3);
-  parameters.iterations = 100;
+  MuscleSystemDef parameters = fixedStep(1e-3);
+  parameters.stepSettings.iterations = 100;
   parameters.onFailure = FailurePolicy::Report;  // the raw solver: no guard retries
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone());

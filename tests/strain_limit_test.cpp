@@ -35,7 +35,7 @@ struct Pulled {
 };
 
 /// The muscle's bone 1 pulled 8 mm along the fibres in four steps.
-Pulled pull(const SimulationParameters& parameters, btScalar strainLimit) {
+Pulled pull(const MuscleSystemDef& parameters, btScalar strainLimit) {
   MuscleSystem system(parameters);
   const BoneHandle bones[] = {system.addBone(testing::cubeBone("left", btVector3(-0.02f, 0, 0))),
                               system.addBone(testing::cubeBone("right", btVector3(0.02f, 0, 0)))};
@@ -56,7 +56,7 @@ Pulled pull(const SimulationParameters& parameters, btScalar strainLimit) {
   return result;
 }
 
-SimulationParameters withThreads(SimulationParameters parameters, int threads) {
+MuscleSystemDef withThreads(MuscleSystemDef parameters, int threads) {
   parameters.threads = threads;
   return parameters;
 }
@@ -64,8 +64,7 @@ SimulationParameters withThreads(SimulationParameters parameters, int threads) {
 constexpr btScalar kLimit = btScalar(1.6);
 
 TEST(StrainLimit, NoSpringOfAPulledMuscleEndsAStepBeyondIt) {
-  for (const SimulationParameters& parameters :
-       {SimulationParameters{}, testing::verletParameters()}) {
+  for (const MuscleSystemDef& parameters : {MuscleSystemDef{}, testing::verletDef()}) {
     const char* solver = toString(parameters.integrator);
     const Pulled free = pull(parameters, 0);
     EXPECT_GT(free.worstRatio, 2.0) << solver << ": without the limit the soft end stretches";
@@ -77,8 +76,8 @@ TEST(StrainLimit, NoSpringOfAPulledMuscleEndsAStepBeyondIt) {
 }
 
 TEST(StrainLimit, IsTheSameForOneThreadAndTwo) {
-  const Pulled one = pull(withThreads(SimulationParameters{}, 1), kLimit);
-  const Pulled two = pull(withThreads(SimulationParameters{}, 2), kLimit);
+  const Pulled one = pull(withThreads(MuscleSystemDef{}, 1), kLimit);
+  const Pulled two = pull(withThreads(MuscleSystemDef{}, 2), kLimit);
   ASSERT_EQ(one.positions.size(), two.positions.size());
   EXPECT_EQ(std::memcmp(one.positions.data(), two.positions.data(),
                         one.positions.size() * sizeof(btVector3)),

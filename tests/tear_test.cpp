@@ -49,9 +49,9 @@ double worstSharedSpring(const MuscleSettings& settings, std::span<const btVecto
 Torn run(const std::string& name, std::vector<std::string> overrides, int threads = 0) {
   const LoadedScene scene = loadScene(name, overrides);
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  SimulationParameters parameters = scene.simulation;
-  parameters.threads = threads;
-  MuscleSystem system(parameters);
+  MuscleSystemDef def = scene.simulation;
+  def.threads = threads;
+  MuscleSystem system(def);
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
   const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);

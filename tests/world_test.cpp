@@ -23,9 +23,9 @@ namespace {
 using testing::cubeBone;
 using testing::gridMuscle;
 
-SimulationParameters fewIterations() {
-  SimulationParameters parameters;
-  parameters.iterations = 10;
+MuscleSystemDef fewIterations() {
+  MuscleSystemDef parameters;
+  parameters.stepSettings.iterations = 10;
   return parameters;
 }
 

@@ -42,7 +42,7 @@ BenchScene::BenchScene(int resolution, int threads, Integrator integrator)
   for (const auto& muscle : prepared.muscles) particles_ += muscle->particleCount();
   impl_ = &MuscleSystemAccess::impl(*system_);
   stepPose();
-  dt_ = impl_->parameters.timeStep;
+  dt_ = system_->stepSettings().timeStep;
 }
 
 void BenchScene::stepPose() {
@@ -52,10 +52,18 @@ void BenchScene::stepPose() {
   system_->step();
 }
 
+void BenchScene::countIterations(int iterations) {
+  StepSettings settings = system_->stepSettings();
+  settings.stopRule = StopRule::Iterations;
+  settings.iterations = iterations;
+  system_->setStepSettings(settings);
+}
+
 void BenchScene::run(Part part) {
   MuscleSystemAccess::Impl& impl = *impl_;
-  const SimulationParameters& parameters = impl.parameters;
-  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
+  const MuscleSystemDef& def = impl.definition;
+  const StepSettings& step = impl.stepSettings;
+  const TimeIntegrator& integrator = integratorFor(def.integrator);
   switch (part) {
     case Part::SpringForces:
       for (uint32_t slot : impl.muscles.order) springForces(*impl.muscles.states[slot]);
@@ -67,15 +75,15 @@ void BenchScene::run(Part part) {
       }
       break;
     case Part::AdaptiveTimeStep:
-      dt_ = parameters.timeStep;
+      dt_ = step.timeStep;
       for (uint32_t slot : impl.muscles.order)
-        if (parameters.adaptiveTimeStep)
+        if (step.adaptiveTimeStep)
           dt_ = std::min(dt_, adaptiveTimeStep(*impl.muscles.states[slot], impl.previousDt));
-      dt_ = std::max(dt_, parameters.minTimeStep);
+      dt_ = std::max(dt_, step.minTimeStep);
       break;
     case Part::Integration:
       for (uint32_t slot : impl.muscles.order)
-        integrator.advance(*impl.muscles.states[slot], impl.parameters, dt_, impl.previousDt);
+        integrator.advance(*impl.muscles.states[slot], def, dt_, impl.previousDt);
       impl.previousDt = dt_;
       break;
     case Part::TreeRefit:
@@ -95,8 +103,7 @@ void BenchScene::run(Part part) {
       break;
     case Part::Response:
       for (uint32_t slot : impl.muscles.order)
-        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities(),
-                    impl.parameters.slidingContacts);
+        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities(), def.slidingContacts);
       break;
   }
 }

@@ -38,6 +38,8 @@ class BenchScene {
   MuscleSystem& system() { return *system_; }
   /// Particles of all muscles.
   size_t particles() const { return particles_; }
+  /// Steps of exactly `iterations` iterations from the next on (StopRule::Iterations).
+  void countIterations(int iterations);
   /// One step towards the other of the first two poses (bones move in every step).
   void stepPose();
   /// One part of an iteration over every muscle, on the calling thread.

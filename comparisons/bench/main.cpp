@@ -71,14 +71,12 @@ void benchPart(benchmark::State& state, Part part) {
 
 /// Whole steps of kIterationsPerStep iterations, bones moving; reports time per iteration (the
 /// iterations counted: the default solver may run more per bone turn). The third argument: 0
-/// Verlet, 1 the default solver (SimulationParameters::integrator).
+/// Verlet, 1 the default solver (MuscleSystemDef::integrator).
 void benchIteration(benchmark::State& state) {
-  const Integrator integrator =
-      state.range(2) ? SimulationParameters{}.integrator : Integrator::Verlet;
+  const Integrator integrator = state.range(2) ? MuscleSystemDef{}.integrator : Integrator::Verlet;
   BenchScene& scene =
       sceneFor(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), integrator);
-  scene.system().parameters().iterations = kIterationsPerStep;
-  scene.system().parameters().stopRule = StopRule::Iterations;
+  scene.countIterations(kIterationsPerStep);
   int64_t iterations = 0;
   for (auto _ : state) {
     scene.stepPose();
@@ -170,8 +168,7 @@ void warmUp(BenchScene& scene) {
 /// Returns whether it ran exactly that many (the default solver's minimum per degree of a bone's
 /// turn may add some), so that callgrind.sh's ratio of two such steps is one per iteration.
 bool countStep(BenchScene& scene, const char* name) {
-  scene.system().parameters().iterations = kIterationsPerStep;
-  scene.system().parameters().stopRule = StopRule::Iterations;
+  scene.countIterations(kIterationsPerStep);
   CALLGRIND_ZERO_STATS;
   scene.stepPose();
   CALLGRIND_DUMP_STATS_AT(name);
@@ -195,7 +192,7 @@ int callgrindKernels(int resolution) {
   }
   const bool verletExact = countStep(scene, "step-10-iterations");
   CALLGRIND_STOP_INSTRUMENTATION;
-  BenchScene solver(resolution, 1, SimulationParameters{}.integrator);
+  BenchScene solver(resolution, 1, MuscleSystemDef{}.integrator);
   warmUp(solver);
   CALLGRIND_START_INSTRUMENTATION;
   CALLGRIND_ZERO_STATS;
@@ -216,10 +213,9 @@ int stepPoses(BenchScene& scene, int steps) {
   return iterations;
 }
 
-/// Milliseconds per iteration of `steps` steps with `threads` solver threads.
-double msPerIteration(BenchScene& scene, int threads, int steps) {
-  scene.system().parameters().threads = threads;
-  scene.stepPose();  // starts the pool for this thread count outside the timing
+/// Milliseconds per iteration of `steps` steps.
+double msPerIteration(BenchScene& scene, int steps) {
+  scene.stepPose();  // brings the scene back into the caches outside the timing
   const auto start = std::chrono::steady_clock::now();
   const int iterations = stepPoses(scene, steps);
   const std::chrono::duration<double, std::milli> elapsed =
@@ -264,7 +260,6 @@ class BusyCore {
 void balanceReport(BenchScene& scene, int steps, size_t chunkWork) {
   MuscleSystem& system = scene.system();
   MuscleSystemAccess::impl(system).forceChunkWork = chunkWork;
-  system.parameters().threads = 1;
   scene.stepPose();
   TaskProfile profile;
   TaskPool& pool = *MuscleSystemAccess::impl(system).pool;
@@ -299,11 +294,10 @@ void balanceReport(BenchScene& scene, int steps, size_t chunkWork) {
                 iterationMs / (serial + ms[3]));
 }
 
-/// Per-thread busy time (thread CPU time in tasks) of 2 threads over `steps` steps, against
-/// their wall time.
+/// Per-thread busy time (thread CPU time in tasks) of the scene's 2 threads over `steps` steps,
+/// against their wall time.
 void busyReport(BenchScene& scene, int steps) {
   MuscleSystem& system = scene.system();
-  system.parameters().threads = 2;
   scene.stepPose();
   TaskProfile profile;
   TaskPool& pool = *MuscleSystemAccess::impl(system).pool;
@@ -323,28 +317,30 @@ void busyReport(BenchScene& scene, int steps) {
 /// Thread scaling in one run on whole poses of thigh13 at `resolution` (the scene's
 /// iterations per pose): the balance of the tasks (balanceReport, with the forces phase in one
 /// task per muscle and in chunks) and the busy time of 2 threads, then 1 and 2 solver threads
-/// alternated `rounds` times, alone and with a busy loop on one core; medians per configuration
-/// in ms per iteration (the iterations counted, not assumed).
+/// (a system each) alternated `rounds` times, alone and with a busy loop on one core; medians per
+/// configuration in ms per iteration (the iterations counted, not assumed).
 int threadScaling(int resolution, int rounds) {
-  BenchScene scene(resolution, 1);
-  scene.system().parameters().stopRule = StopRule::Iterations;
+  BenchScene scene(resolution, 1), pair(resolution, 2);
+  const int iterations = scene.system().stepSettings().iterations;
+  scene.countIterations(iterations);
+  pair.countIterations(iterations);
   constexpr int kSteps = 2;
   std::printf(
       "thigh13 R=%d, %zu particles, poses of %d iterations, %d rounds of %d poses per "
       "configuration\n",
-      resolution, scene.particles(), scene.system().parameters().iterations, rounds, kSteps);
+      resolution, scene.particles(), iterations, rounds, kSteps);
   std::printf("-- forces phase in one task per muscle:\n");
   balanceReport(scene, kSteps, SIZE_MAX);
   std::printf("-- forces phase in chunks (the default):\n");
   balanceReport(scene, kSteps, kForceChunkWork);
-  busyReport(scene, kSteps);
+  busyReport(pair, kSteps);
   for (const bool busy : {false, true}) {
     std::optional<BusyCore> loop;
     if (busy) loop.emplace();
     std::vector<double> one, two;
     for (int round = 0; round < rounds; ++round) {
-      one.push_back(msPerIteration(scene, 1, kSteps));
-      two.push_back(msPerIteration(scene, 2, kSteps));
+      one.push_back(msPerIteration(scene, kSteps));
+      two.push_back(msPerIteration(pair, kSteps));
     }
     std::ifstream loadavg("/proc/loadavg");
     std::string load;

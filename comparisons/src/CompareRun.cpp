@@ -191,11 +191,11 @@ double volumeChangePct(const PreparedScene& prepared, std::span<const btVector3>
   return restVolume != 0 ? change / restVolume : RunMetrics::kNone;
 }
 
-double poseDuration(const SimulationParameters& simulation) {
-  const int iterations = simulation.stopRule == StopRule::Iterations
-                             ? simulation.iterations
-                             : std::min(simulation.iterations, kPoseIterationsCap);
-  return static_cast<double>(simulation.timeStep) * iterations;
+double poseDuration(const StepSettings& step) {
+  const int iterations = step.stopRule == StopRule::Iterations
+                             ? step.iterations
+                             : std::min(step.iterations, kPoseIterationsCap);
+  return static_cast<double>(step.timeStep) * iterations;
 }
 
 RunMetrics runBaseline(
@@ -233,21 +233,23 @@ double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPos
   return std::sqrt(sum / static_cast<double>(poses));
 }
 
-SimulationParameters equilibriumSettings(const SimulationParameters& simulation, int cap) {
-  SimulationParameters converged = simulation;
-  const int motion = std::max(1, static_cast<int>(std::lround(simulation.motionFraction *
-                                                              std::max(1, simulation.iterations))));
+MuscleSystemDef equilibriumSettings(const MuscleSystemDef& simulation, int cap) {
+  MuscleSystemDef converged = simulation;
+  const StepSettings& step = simulation.stepSettings;
+  const int motion = std::max(
+      1, static_cast<int>(std::lround(step.motionFraction * std::max(1, step.iterations))));
   // The projective step reaches a residual Verlet does not: fusiform 1e-5 mm in about 270
   // iterations per pose; Verlet stalled near 2e-5 mm after 60 000 (docs/performance.md,
   // "Distance to equilibrium").
   converged.integrator = Integrator::Projective;
-  converged.stopRule = StopRule::Residual;
-  converged.tolerance = static_cast<btScalar>(kEquilibriumResidual);
-  converged.iterations = std::max(cap, motion);
+  StepSettings& settled = converged.stepSettings;
+  settled.stopRule = StopRule::Residual;
+  settled.tolerance = static_cast<btScalar>(kEquilibriumResidual);
+  settled.iterations = std::max(cap, motion);
   converged.projectiveRho = static_cast<btScalar>(kEquilibriumRho);
   // The over-relaxed fixed point: the L-BFGS step's pairs stall on float noise near 1e-5 mm.
   converged.projectiveHistory = 0;
-  converged.motionFraction = static_cast<btScalar>(double(motion) / converged.iterations);
+  settled.motionFraction = static_cast<btScalar>(double(motion) / settled.iterations);
   // Persistent contacts, their particles held lighter (they slide to rest sooner): thigh13 R=20's
   // median pose left a residual about 7x below weight 10's at the cap (1.1e-4 against 7.2e-4 mm;
   // docs/decisions.md, "Solver").
@@ -438,8 +440,8 @@ int knobValue(const std::string& value, int defaultValue) {
   return std::max(1, static_cast<int>(std::lround(factor ? number * defaultValue : number)));
 }
 
-FibreKnob fibreCostKnob(const SimulationParameters& simulation) {
-  switch (simulation.stopRule) {
+FibreKnob fibreCostKnob(const StepSettings& step) {
+  switch (step.stopRule) {
     case StopRule::Iterations:
       return {"iterations", true};
     case StopRule::TimeBudget:

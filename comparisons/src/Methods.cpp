@@ -16,11 +16,11 @@ namespace {
 /// The scene's value of a FibreMSS knob that takes any positive number (a stop rule's threshold,
 /// lengths in the scene's units), as `--set` reads it; NaN for the other keys.
 double realKnobBase(const std::string& key, const LoadedScene& scene) {
-  const SimulationParameters& simulation = scene.simulation;
-  if (key == "tolerance") return simulation.tolerance / scene.unitScale;
-  if (key == "epsilon") return simulation.epsilon / scene.unitScale;
-  if (key == "budget_ms") return simulation.budgetMs;
-  if (key == "deviation_epsilon") return simulation.deviationEpsilon;
+  const StepSettings& step = scene.simulation.stepSettings;
+  if (key == "tolerance") return step.tolerance / scene.unitScale;
+  if (key == "epsilon") return step.epsilon / scene.unitScale;
+  if (key == "budget_ms") return step.budgetMs;
+  if (key == "deviation_epsilon") return step.deviationEpsilon;
   return NAN;
 }
 
@@ -48,8 +48,8 @@ std::vector<std::string> threePoints(const std::string& name, const std::string&
   return {name + ":" + key + "=x0.5", name, name + ":" + key + "=x2"};
 }
 
-std::vector<std::string> fibreFront(const SimulationParameters& simulation) {
-  const FibreKnob knob = fibreCostKnob(simulation);
+std::vector<std::string> fibreFront(const MuscleSystemDef& simulation) {
+  const FibreKnob knob = fibreCostKnob(simulation.stepSettings);
   // Cheapest first: fewer iterations (a smaller budget), or a looser threshold.
   const std::array<const char*, 3> factors =
       knob.costGrows ? std::array{"x0.5", "x2", "x4"} : std::array{"x2", "x0.5", "x0.25"};
@@ -65,7 +65,8 @@ std::vector<std::string> fibreFront(const SimulationParameters& simulation) {
 std::string fibreFactor(const std::string& key, const std::string& value, const KnobBase& base) {
   const double real = realKnobBase(key, base.scene);
   if (std::isfinite(real)) return shortNumber(std::strtod(value.c_str() + 1, nullptr) * real);
-  if (key == "iterations") return integerFactor(value, base.scene.simulation.iterations);
+  if (key == "iterations")
+    return integerFactor(value, base.scene.simulation.stepSettings.iterations);
   if (key == "resolution" && !base.scene.muscles.empty())
     return integerFactor(value, base.scene.muscles.front().parameters.resolution);
   return "";
@@ -82,9 +83,10 @@ RunMetrics runFibre(const MethodRun& run) {
 RunMetrics runSelfReference(const MethodRun& run) {
   LoadedScene reference = run.scene;
   const int f = std::max(1, run.options.selfReferenceFactor);
-  reference.simulation.timeStep /= static_cast<btScalar>(f);
-  reference.simulation.minTimeStep /= static_cast<btScalar>(f);
-  reference.simulation.iterations *= f;
+  StepSettings& step = reference.simulation.stepSettings;
+  step.timeStep /= static_cast<btScalar>(f);
+  step.minTimeStep /= static_cast<btScalar>(f);
+  step.iterations *= f;
   return runFibreMSS(reference, run.prepared, run.fibre);
 }
 
@@ -95,7 +97,7 @@ RunMetrics runEquilibrium(const MethodRun& run) {
   FibreRunOptions options = run.fibre;
   int unconverged = 0;
   options.progress = [&](const RunProgress& p) {
-    unconverged += p.lastStep->iterations >= converged.simulation.iterations ? 1 : 0;
+    unconverged += p.lastStep->iterations >= converged.simulation.stepSettings.iterations ? 1 : 0;
     run.fibre.progress(p);
   };
   RunMetrics metrics = runFibreMSS(converged, run.prepared, options);
@@ -117,7 +119,7 @@ std::string softBodyFactor(const std::string& key, const std::string& value, con
 
 RunMetrics runSoftBody(const MethodRun& run) {
   SoftBodyDefinition definition = run.options.softBody;
-  definition.poseDuration = static_cast<btScalar>(poseDuration(run.scene.simulation));
+  definition.poseDuration = static_cast<btScalar>(poseDuration(run.scene.simulation.stepSettings));
   definition.pretransformBlend = run.scene.simulation.pretransformBlend;
   definition.positionIterations = knob(run.spec, "iterations", definition.positionIterations);
   definition.substepsPerPose = knob(run.spec, "substeps", definition.substepsPerPose);
@@ -133,7 +135,7 @@ std::string femFactor(const std::string& key, const std::string& value, const Kn
 
 RunMetrics runFem(const MethodRun& run) {
   FemDefinition definition = run.options.fem;
-  definition.poseDuration = static_cast<btScalar>(poseDuration(run.scene.simulation));
+  definition.poseDuration = static_cast<btScalar>(poseDuration(run.scene.simulation.stepSettings));
   definition.pretransformBlend = run.scene.simulation.pretransformBlend;
   definition.substepsPerPose = knob(run.spec, "substeps", definition.substepsPerPose);
   definition.mesher.targetCells = knob(run.spec, "cells", definition.mesher.targetCells);
@@ -179,7 +181,7 @@ std::vector<Method> makeMethods() {
       {.name = "btsoftbody",
        .byDefault = true,
        .knobs = {"iterations", "substeps"},
-       .front = [](const SimulationParameters&) { return threePoints("btsoftbody", "iterations"); },
+       .front = [](const MuscleSystemDef&) { return threePoints("btsoftbody", "iterations"); },
        .factorValue = softBodyFactor,
        .run = runSoftBody,
        .description =
@@ -198,7 +200,7 @@ std::vector<Method> makeMethods() {
       {.name = "fem",
        .byDefault = true,
        .knobs = {"substeps", "cells"},
-       .front = [](const SimulationParameters&) { return threePoints("fem", "substeps"); },
+       .front = [](const MuscleSystemDef&) { return threePoints("fem", "substeps"); },
        .factorValue = femFactor,
        .run = runFem,
        .description =
@@ -323,7 +325,7 @@ MethodSpec parseMethod(const std::string& name) {
 }
 
 std::vector<std::string> frontMethods(const std::vector<std::string>& names,
-                                      const SimulationParameters& simulation) {
+                                      const MuscleSystemDef& simulation) {
   std::vector<std::string> expanded;
   for (const std::string& name : names) {
     const Method* method = findMethod(name);

@@ -64,7 +64,7 @@ double iterationCap(const nlohmann::json& run) {
   try {
     const MethodSpec spec = parseMethod(text(run, "method"));
     overrides.insert(overrides.end(), spec.overrides.begin(), spec.overrides.end());
-    return loadScene(text(run, "scene"), overrides).simulation.iterations;
+    return loadScene(text(run, "scene"), overrides).simulation.stepSettings.iterations;
   } catch (const std::exception&) {
     return NAN;
   }

@@ -110,10 +110,10 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
     cell.message = "the solver does not implement " + integrator + " yet";
     return cell;
   }
-  SimulationParameters& simulation = prepared.scene.simulation;
+  MuscleSystemDef& simulation = prepared.scene.simulation;
   simulation.integrator = kind;
-  simulation.adaptiveTimeStep = false;
-  simulation.timeStep = static_cast<btScalar>(dt);
+  simulation.stepSettings.adaptiveTimeStep = false;
+  simulation.stepSettings.timeStep = static_cast<btScalar>(dt);
   // Failures must be seen, not healed by a rollback.
   simulation.onFailure = FailurePolicy::Report;
 
@@ -239,9 +239,9 @@ std::vector<std::string> allIntegratorNames() {
 }
 
 bool integratorAvailable(Integrator integrator) {
-  SimulationParameters parameters;
-  parameters.integrator = integrator;
-  MuscleSystem system(parameters);
+  MuscleSystemDef def;
+  def.integrator = integrator;
+  MuscleSystem system(def);
   try {
     system.step();  // an empty system: only the integrator lookup can fail
   } catch (const InputError&) {

@@ -96,11 +96,12 @@ void bindSettings(py::class_<LoadedScene>& scene) {
           },
           "The solver: 'projective' (each pose to its equilibrium), 'verlet', ...")
       .def_property(
-          "iterations", [](const LoadedScene& s) { return s.simulation.iterations; },
-          [](LoadedScene& s, int n) { s.simulation.iterations = n; }, "Iterations per step")
+          "iterations", [](const LoadedScene& s) { return s.simulation.stepSettings.iterations; },
+          [](LoadedScene& s, int n) { s.simulation.stepSettings.iterations = n; },
+          "Iterations per step")
       .def_property(
-          "time_step", [](const LoadedScene& s) { return s.simulation.timeStep; },
-          [](LoadedScene& s, btScalar dt) { s.simulation.timeStep = dt; },
+          "time_step", [](const LoadedScene& s) { return s.simulation.stepSettings.timeStep; },
+          [](LoadedScene& s, btScalar dt) { s.simulation.stepSettings.timeStep = dt; },
           "Fixed dt, or the upper clamp of the adaptive dt [s]")
       .def_property(
           "threads", [](const LoadedScene& s) { return s.simulation.threads; },

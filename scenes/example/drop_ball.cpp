@@ -108,9 +108,9 @@ int main(int argc, char** argv) try {
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
   const bool dynamic = !(argc > 2 && std::strcmp(argv[2], "pose") == 0);
-  fibremss::SimulationParameters parameters;
-  if (dynamic) parameters.integrator = fibremss::Integrator::Verlet;
-  fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
+  fibremss::MuscleSystemDef def;
+  if (dynamic) def.integrator = fibremss::Integrator::Verlet;
+  fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, def);
   fibremss::WorldCoupling coupling;
   if (dynamic) coupling.time = fibremss::MuscleTime::Dynamic;
   world.setCoupling(coupling);

@@ -125,11 +125,11 @@ int main(int argc, char** argv) try {
   btCollisionDispatcher dispatcher(&configuration);
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
-  fibremss::SimulationParameters parameters = scene.simulation;
+  fibremss::MuscleSystemDef def = scene.simulation;
   // Dynamic: a time integrator (the default, projective, solves each step's equilibrium).
-  if (dynamic) parameters.integrator = fibremss::Integrator::Verlet;
-  parameters.iterations = 20;  // per world step; enough for a small muscle
-  fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
+  if (dynamic) def.integrator = fibremss::Integrator::Verlet;
+  def.stepSettings.iterations = 20;  // per world step; enough for a small muscle
+  fibremss::MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, def);
   setUpWorld(world, dynamic);
 
   // 3. Bones: kinematic bodies with the bones' meshes. 4. The muscle, attached to them. (For a

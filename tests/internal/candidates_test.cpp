@@ -56,11 +56,11 @@ class ThighRun {
  public:
   explicit ThighRun(int threads) {
     const PreparedScene& prepared = testing::preparedThigh(scene_);
-    SimulationParameters parameters = scene_.simulation;
+    MuscleSystemDef parameters = scene_.simulation;
     parameters.integrator = Integrator::Verlet;  // particles that move every iteration
     parameters.threads = threads;
-    parameters.iterations = 1;
-    parameters.stopRule = StopRule::Iterations;
+    parameters.stepSettings.iterations = 1;
+    parameters.stepSettings.stopRule = StopRule::Iterations;
     // A contact per overlapping sphere pair, as contactsOfEveryPair counts them (the lists are
     // the same when the pairs push against the bones' meshes).
     parameters.boneCollision = BoneCollision::Spheres;
@@ -233,7 +233,7 @@ TEST(CandidateLists, AnOverflowFallsBackToTheTreesWithTheSameContacts) {
 
 /// Two grid muscles 1 cm apart along y (not touching), stepped until their trees settle.
 struct TwoGrids {
-  TwoGrids() : system(parameters()) {
+  TwoGrids() : system(definition()) {
     const BoneHandle bones[] = {system.addBone(testing::cubeBone("left", btVector3(-0.02f, 0, 0))),
                                 system.addBone(testing::cubeBone("right", btVector3(0.02f, 0, 0)))};
     first = system.addMuscle(testing::gridMuscle("first", 0), bones);
@@ -242,10 +242,10 @@ struct TwoGrids {
     second = system.addMuscle(testing::gridMuscle("second", btScalar(0.012)), bones);
     for (int k = 0; k < 5; ++k) system.step();
   }
-  static SimulationParameters parameters() {
-    SimulationParameters p = testing::verletParameters();
-    p.iterations = 1;
-    p.stopRule = StopRule::Iterations;
+  static MuscleSystemDef definition() {
+    MuscleSystemDef p = testing::verletDef();
+    p.stepSettings.iterations = 1;
+    p.stepSettings.stopRule = StopRule::Iterations;
     p.threads = 1;
     return p;
   }

@@ -35,9 +35,9 @@ using testing::makeBone;
 using testing::makeSpheres;
 
 /// One iteration per step: every test below looks at a single response.
-SimulationParameters oneIteration() {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.iterations = 1;
+MuscleSystemDef oneIteration() {
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.iterations = 1;
   return parameters;
 }
 
@@ -86,7 +86,7 @@ TEST(Response, ASphereAgainstABoneSphereMovesTheWholeOverlap) {
   const btVector3 centre = boneToWorld * centreLocal;
   const btVector3 direction = btVector3(0.3, -0.5, 0.8).normalized();
   const btVector3 start = centre + direction * 0.011;  // overlap 1 mm
-  SimulationParameters parameters = oneIteration();
+  MuscleSystemDef parameters = oneIteration();
   parameters.muscleMuscle = false;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(makeBone({centreLocal}, {boneRadius}));
@@ -150,7 +150,7 @@ TEST(Switches, NoSelfCollisionAndCollisionTogglesAreRespected) {
   }
   for (bool muscleMuscle : {false, true})
     for (bool muscleBone : {false, true}) {
-      SimulationParameters parameters = oneIteration();
+      MuscleSystemDef parameters = oneIteration();
       parameters.muscleMuscle = muscleMuscle;
       parameters.muscleBone = muscleBone;
       MuscleSystem system(parameters);
@@ -299,7 +299,7 @@ TEST(BroadPhase, BoneTreeFindsExactlyTheBruteForcePairsWhileBothMove) {
 
 /// A particle pulled by a stiff spring from +30 mm towards an anchor at −30 mm, through a bone
 /// sphere of radius 10 mm at the origin; returns the particle's x after every iteration.
-std::vector<double> pulledThroughBone(SimulationParameters parameters, int iterations) {
+std::vector<double> pulledThroughBone(MuscleSystemDef parameters, int iterations) {
   // The spring starts 600× its rest length on purpose: the guard reports it, never freezes it.
   parameters.onFailure = FailurePolicy::Report;
   auto muscle = std::make_shared<MuscleSettings>();
@@ -325,8 +325,8 @@ std::vector<double> pulledThroughBone(SimulationParameters parameters, int itera
 }
 
 TEST(Tunnelling, AFastParticleNeverEndsInsideTheBoneWithTheAdaptiveStep) {
-  SimulationParameters parameters = oneIteration();
-  parameters.minTimeStep = 1e-9;
+  MuscleSystemDef parameters = oneIteration();
+  parameters.stepSettings.minTimeStep = 1e-9;
   const std::vector<double> x = pulledThroughBone(parameters, 3000);
   for (size_t i = 0; i < x.size(); ++i) ASSERT_GE(x[i], 0.012 - 1e-6) << "iteration " << i;
   EXPECT_NEAR(x.back(), 0.012, 1e-6);  // it arrived and rests on the bone
@@ -334,9 +334,9 @@ TEST(Tunnelling, AFastParticleNeverEndsInsideTheBoneWithTheAdaptiveStep) {
 
 TEST(Tunnelling, TheSameParticleTunnelsWithAFixedLargeStep) {
   // The check above can fail: with a fixed dt the particle jumps through the bone.
-  SimulationParameters parameters = oneIteration();
-  parameters.adaptiveTimeStep = false;
-  parameters.timeStep = 3e-4;
+  MuscleSystemDef parameters = oneIteration();
+  parameters.stepSettings.adaptiveTimeStep = false;
+  parameters.stepSettings.timeStep = 3e-4;
   const std::vector<double> x = pulledThroughBone(parameters, 200);
   EXPECT_LT(*std::min_element(x.begin(), x.end()), -0.012);
 }
@@ -383,7 +383,7 @@ TEST(SurfaceContact, TheSystemsSurfaceStaysOutOfTheBoneOnlyWhenSwitchedOn) {
   bone->sphereCentres = {btVector3(0, 0.017f, 0)};
   bone->sphereRadii = {btScalar(0.012)};
   for (const bool on : {false, true}) {
-    SimulationParameters parameters = testing::verletParameters();
+    MuscleSystemDef parameters = testing::verletDef();
     parameters.surfaceContact = on;
     parameters.muscleBone = false;
     MuscleSystem system(parameters);

@@ -1,4 +1,4 @@
-// The numerical guard (SimulationParameters::onFailure): a step that produces NaN/inf or bursts
+// The numerical guard (MuscleSystemDef::onFailure): a step that produces NaN/inf or bursts
 // springs is rolled back to the exact last good state, retried with a smaller dt, or the failing
 // muscle is frozen while the others (and a host's Bullet world) keep going; Report leaves it.
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
@@ -53,11 +53,11 @@ const std::shared_ptr<const MuscleSettings>& stiffMuscle() {
 
 /// Fixed dt (no adaptive bound) `ofStiffLimit` times the stiff muscle's stable dt, 10
 /// iterations, light noise so that an unstable step has something to amplify.
-SimulationParameters fixedStep(btScalar ofStiffLimit, FailurePolicy policy) {
-  SimulationParameters parameters = testing::verletParameters();
-  parameters.adaptiveTimeStep = false;
-  parameters.timeStep = ofStiffLimit * stableTimeStep(*stiffMuscle());
-  parameters.iterations = 10;
+MuscleSystemDef fixedStep(btScalar ofStiffLimit, FailurePolicy policy) {
+  MuscleSystemDef parameters = testing::verletDef();
+  parameters.stepSettings.adaptiveTimeStep = false;
+  parameters.stepSettings.timeStep = ofStiffLimit * stableTimeStep(*stiffMuscle());
+  parameters.stepSettings.iterations = 10;
   parameters.initialNoise = btScalar(1e-4);
   parameters.onFailure = policy;
   return parameters;
@@ -70,7 +70,7 @@ struct Rig {
   std::vector<MuscleHandle> muscles;
   int steps = 0;
 
-  Rig(const SimulationParameters& parameters,
+  Rig(const MuscleSystemDef& parameters,
       const std::vector<std::shared_ptr<const MuscleSettings>>& settings)
       : system(parameters) {
     bones = {system.addBone(leftBone()), system.addBone(rightBone())};
@@ -81,6 +81,12 @@ struct Rig {
     btTransform moved = btTransform::getIdentity();
     moved.setOrigin(btVector3(btScalar(0.0005) * static_cast<btScalar>(step), 0, 0));
     return moved;
+  }
+  /// Steps from the next on with `factor` times the dt.
+  void scaleTimeStep(btScalar factor) {
+    StepSettings settings = system.stepSettings();
+    settings.timeStep *= factor;
+    system.setStepSettings(settings);
   }
   void step() {
     ++steps;
@@ -171,7 +177,7 @@ TEST(Guard, StopBodyRestoresTheExactLastGoodStateAndFreezesOnlyTheFailingMuscle)
   ASSERT_FALSE(rig.system.lastStep().rolledBack);
   const std::vector<btVector3> stiffGood = rig.positions(1);
   const std::vector<btVector3> softGood = rig.positions(0);
-  rig.system.parameters().timeStep *= 2 * kBursting;
+  rig.scaleTimeStep(2 * kBursting);
   rig.step();
   const StepStats& stats = rig.system.lastStep();
   EXPECT_TRUE(stats.rolledBack);
@@ -222,19 +228,20 @@ TEST(Guard, RetrySucceedsWithASmallerTimeStepWhereTheFullOneBursts) {
   EXPECT_TRUE(stats.rolledBack);
   EXPECT_FALSE(stats.failed);
   ASSERT_GE(stats.retries, 1);
-  ASSERT_LE(stats.retries, retried.system.parameters().maxRetries);
+  ASSERT_LE(stats.retries, retried.system.definition().maxRetries);
   EXPECT_EQ(stats.frozenMuscles, 0u);
   EXPECT_TRUE(sameHandle(stats.failedMuscle, retried.muscles[0]));
   EXPECT_TRUE(allFinite(retried.positions(0)));
-  EXPECT_EQ(retried.system.parameters().timeStep, fixedStep(3, FailurePolicy::Retry).timeStep)
-      << "the requested parameters are back after the step";
+  EXPECT_EQ(retried.system.stepSettings().timeStep,
+            fixedStep(3, FailurePolicy::Retry).stepSettings.timeStep)
+      << "the requested settings are back after the step";
 
   // The same step run directly with the retry's dt and iterations gives the very same state:
   // the rollback left nothing of the failed attempts behind.
   const int factor = 1 << stats.retries;
-  SimulationParameters smaller = fixedStep(3, FailurePolicy::Report);
-  smaller.timeStep /= static_cast<btScalar>(factor);
-  smaller.iterations *= factor;
+  MuscleSystemDef smaller = fixedStep(3, FailurePolicy::Report);
+  smaller.stepSettings.timeStep /= static_cast<btScalar>(factor);
+  smaller.stepSettings.iterations *= factor;
   Rig direct(smaller, {stiffMuscle()});
   direct.step();
   EXPECT_FALSE(direct.system.lastStep().failed);
@@ -243,7 +250,7 @@ TEST(Guard, RetrySucceedsWithASmallerTimeStepWhereTheFullOneBursts) {
 }
 
 TEST(Guard, RetryFreezesTheMuscleOnceItsRetriesAreSpent) {
-  SimulationParameters parameters = fixedStep(kBursting, FailurePolicy::Retry);
+  MuscleSystemDef parameters = fixedStep(kBursting, FailurePolicy::Retry);
   parameters.maxRetries = 1;  // dt/2 is still unstable
   Rig rig(parameters, {softMuscle(), stiffMuscle()});
   const std::vector<btVector3> start = rig.positions(1);
@@ -284,7 +291,7 @@ struct CancellingScheduler {
 TEST(Guard, ACancelledStepStopsWithinItsIterationsAndIsNeitherRetriedNorFrozen) {
   CancellingScheduler scheduler;
   scheduler.cancelAt = 12;
-  SimulationParameters parameters = fixedStep(1000, FailurePolicy::Retry);
+  MuscleSystemDef parameters = fixedStep(1000, FailurePolicy::Retry);
   parameters.scheduler = scheduler.handle();
   Rig rig(parameters, {stiffMuscle()});
   rig.system.setCancelFlag(&scheduler.cancel);
@@ -293,7 +300,7 @@ TEST(Guard, ACancelledStepStopsWithinItsIterationsAndIsNeitherRetriedNorFrozen) 
   const StepStats& stats = rig.system.lastStep();
   EXPECT_TRUE(stats.interrupted);
   EXPECT_GT(stats.iterations, 1);
-  EXPECT_LT(stats.iterations, parameters.iterations);
+  EXPECT_LT(stats.iterations, parameters.stepSettings.iterations);
   EXPECT_TRUE(stats.rolledBack);
   EXPECT_EQ(stats.retries, 0);
   EXPECT_FALSE(stats.failed);
@@ -343,7 +350,7 @@ TEST(Guard, AFrozenMuscleIsPushedOutOfABoneThatMovesIntoIt) {
   // the muscle) comes down to y = 33 mm in one step, 2.5 mm into that layer.
   Rig rig(fixedStep(btScalar(0.5), FailurePolicy::StopBody), {stiffMuscle()});
   rig.step();
-  rig.system.parameters().timeStep *= 2 * kBursting;
+  rig.scaleTimeStep(2 * kBursting);
   rig.step();
   ASSERT_TRUE(rig.system.frozen(rig.muscles[0]));
   auto plate = std::make_shared<BoneSettings>();
@@ -387,7 +394,7 @@ TEST(Guard, TheHostsBulletWorldKeepsRunningBesideABurstingMuscle) {
   btCollisionDispatcher dispatcher(&configuration);
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
-  SimulationParameters parameters = fixedStep(kBursting, FailurePolicy::Retry);
+  MuscleSystemDef parameters = fixedStep(kBursting, FailurePolicy::Retry);
   parameters.maxRetries = 1;
   MuscleWorld world(&dispatcher, &broadphase, &solver, &configuration, parameters);
   world.setGravity(btVector3(0, btScalar(-9.81), 0));

@@ -112,8 +112,8 @@ class Bench {
     return total;
   }
 
-  MuscleState state;                ///< the muscle stepped
-  SimulationParameters parameters;  ///< solver settings (tight CG tolerance)
+  MuscleState state;           ///< the muscle stepped
+  MuscleSystemDef parameters;  ///< solver settings (tight CG tolerance)
 
  private:
   const TimeIntegrator& integrator_;
@@ -396,7 +396,7 @@ TEST(VerletStep, EveryParticleTakesTheFormulasStepBitForBit) {
       displacement += step.length();
     }
     const IntegrationResult result =
-        integratorFor(Integrator::Verlet).advance(muscle, SimulationParameters{}, dt, previousDt);
+        integratorFor(Integrator::Verlet).advance(muscle, MuscleSystemDef{}, dt, previousDt);
     EXPECT_TRUE(result.finite);
     // The vector path sums in four partial sums: equal up to the rounding of the sums.
     EXPECT_NEAR(result.displacement, displacement, 1e-14 * displacement) << count << " free";
@@ -531,9 +531,9 @@ TEST(AdaptiveStep, ThighStatesGiveTheReferencesBoundsBitForBit) {
   // a real run), at the system's last dt.
   LoadedScene scene;
   const PreparedScene& prepared = testing::preparedThigh(scene);
-  SimulationParameters parameters = scene.simulation;
+  MuscleSystemDef parameters = scene.simulation;
   parameters.threads = 1;
-  parameters.iterations = 20;
+  parameters.stepSettings.iterations = 20;
   MuscleSystem system(parameters);
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
@@ -605,13 +605,14 @@ const PreparedScene& preparedFusiform(LoadedScene& scene) {
 std::vector<btVector3> fusiformPose(Integrator kind, StopRule rule, int iterations, int motion) {
   LoadedScene scene;
   const PreparedScene& prepared = preparedFusiform(scene);
-  SimulationParameters parameters = scene.simulation;
+  MuscleSystemDef parameters = scene.simulation;
   parameters.threads = 1;
   parameters.integrator = kind;
-  parameters.stopRule = rule;
-  parameters.epsilon = 1e-8;
-  parameters.iterations = iterations;
-  parameters.motionFraction = static_cast<btScalar>(motion) / static_cast<btScalar>(iterations);
+  parameters.stepSettings.stopRule = rule;
+  parameters.stepSettings.epsilon = 1e-8;
+  parameters.stepSettings.iterations = iterations;
+  parameters.stepSettings.motionFraction =
+      static_cast<btScalar>(motion) / static_cast<btScalar>(iterations);
   MuscleSystem system(parameters);
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
@@ -888,14 +889,14 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
   // residual falls to its float floor (below 1e-5 mm here) within the cap. With contacts as
   // projections only (persistent_contacts off) the neighbours of a pushed particle keep a force at
   // the fixed point, and the residual stalls at 5.9e-3 mm at the cap.
-  SimulationParameters parameters;
+  MuscleSystemDef parameters;
   parameters.integrator = Integrator::Projective;
   parameters.projectiveHistory = 0;  // the fixed point of the projective step
   parameters.projectiveContactWeight = 10;
   parameters.persistentContacts = true;
-  parameters.stopRule = StopRule::Residual;
-  parameters.tolerance = 1e-8;
-  parameters.iterations = 3000;
+  parameters.stepSettings.stopRule = StopRule::Residual;
+  parameters.stepSettings.tolerance = 1e-8;
+  parameters.stepSettings.iterations = 3000;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(testing::makeBone({{0.005, -0.002, 0.012}}, {0.005}));
   const MuscleHandle muscle = system.addMuscle(block(), std::span(&bone, 1));
@@ -904,8 +905,8 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
   RecordProperty("iterations", system.lastStep().iterations);
   RecordProperty("residual_mm", std::to_string(1e3 * residual.rmsDisplacement));
   EXPECT_GT(residual.contactParticles, 0u);
-  EXPECT_LT(system.lastStep().iterations, parameters.iterations);
-  EXPECT_LT(residual.rmsDisplacement, parameters.tolerance);
+  EXPECT_LT(system.lastStep().iterations, parameters.stepSettings.iterations);
+  EXPECT_LT(residual.rmsDisplacement, parameters.stepSettings.tolerance);
   // No particle deeper in the bone than the slop (1 % of its 2.5 mm radius) and rounding.
   for (const btVector3& x : system.positions(muscle))
     EXPECT_GT((x - btVector3(0.005f, -0.002f, 0.012f)).length(), 0.0075f - 0.03f * 0.0025f);
@@ -916,15 +917,15 @@ TEST(Projective, ProvesAnEquilibriumAgainstABone) {
 /// block fixed at its bottom (z = 0) and one a quarter as stiff fixed at its top, whose bottom
 /// layer starts 3 mm into the first block's top layer.
 double pressedBlocksResidual(bool pairReactions, int& iterations) {
-  SimulationParameters parameters;
+  MuscleSystemDef parameters;
   parameters.integrator = Integrator::Projective;
   parameters.projectiveHistory = 0;  // the fixed point of the projective step
   parameters.persistentContacts = true;
   parameters.pairReactions = pairReactions;
   parameters.projectiveContactWeight = 1;
-  parameters.stopRule = StopRule::Residual;
-  parameters.tolerance = 1e-8;
-  parameters.iterations = 3000;
+  parameters.stepSettings.stopRule = StopRule::Residual;
+  parameters.stepSettings.tolerance = 1e-8;
+  parameters.stepSettings.iterations = 3000;
   MuscleSystem system(parameters);
   const BoneHandle bone = system.addBone(testing::makeBone({{0.1, 0.1, -0.1}}, {0.001}));
   system.addMuscle(block(), std::span(&bone, 1));
@@ -958,9 +959,9 @@ TEST(Projective, ProvesAnEquilibriumOfTwoMusclesPressedTogether) {
 class EveryIntegrator : public ::testing::TestWithParam<Integrator> {};
 
 TEST_P(EveryIntegrator, StepsWithCollisionFiniteAndWithoutAllocating) {
-  SimulationParameters parameters;
+  MuscleSystemDef parameters;
   parameters.integrator = GetParam();
-  parameters.iterations = 10;
+  parameters.stepSettings.iterations = 10;
   MuscleSystem system(parameters);
   // A bone sphere inside one side of the block, so its particles are pushed out.
   const BoneHandle bone = system.addBone(testing::makeBone({{0.005, -0.002, 0.012}}, {0.005}));

@@ -142,11 +142,8 @@ TEST(Threads, TheProjectiveSolversContactsGiveTheSameBits) {
   const auto run = [](int threads) {
     LoadedScene scene;
     const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
-    return fibremss::testing::stepThroughPoses(
-        scene, prepared, prepared.muscles, threads,
-        [](MuscleSystem& system, const std::vector<MuscleHandle>&) {
-          system.parameters().integrator = Integrator::Projective;
-        });
+    scene.simulation.integrator = Integrator::Projective;
+    return fibremss::testing::stepThroughPoses(scene, prepared, prepared.muscles, threads);
   };
   const Outcome one = run(1);
   EXPECT_GT(one.contacts, 0u);
@@ -176,10 +173,10 @@ TaskScheduler backwards() {
 Outcome simulateChunked(int threads, size_t chunkWork, bool chunked) {
   LoadedScene scene;
   const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+  if (threads == 0) scene.simulation.scheduler = backwards();
   return fibremss::testing::stepThroughPoses(
       scene, prepared, {prepared.muscles[0], prepared.muscles[1]}, std::max(threads, 1),
       [&](MuscleSystem& system, const std::vector<MuscleHandle>& handles) {
-        if (threads == 0) system.parameters().scheduler = backwards();
         MuscleSystemAccess::Impl& impl = MuscleSystemAccess::impl(system);
         impl.forceChunkWork = chunkWork;
         impl.prepareWorkers();  // plans the chunks
@@ -391,17 +388,17 @@ class HostScheduler {
 
 }  // namespace
 
-// SimulationParameters::scheduler: the host's task system runs every task of the step (none on
+// MuscleSystemDef::scheduler: the host's task system runs every task of the step (none on
 // the plugin's pool, which starts no thread) with the same bits as the plugin's own threads.
 TEST(HostScheduler, RunsTheStepWithTheSameBitsAsThePool) {
   const Outcome own = simulate(1);
   HostScheduler host(3);
   LoadedScene scene;
   const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
+  scene.simulation.scheduler = host.scheduler();
   const Outcome hosted = fibremss::testing::stepThroughPoses(
       scene, prepared, prepared.muscles, 2,
       [&](MuscleSystem& system, const std::vector<MuscleHandle>&) {
-        system.parameters().scheduler = host.scheduler();
         EXPECT_EQ(system.threads(), 3u);
       });
   EXPECT_GT(host.tasks(), 2u * 20u);  // several tasks per iteration, 20 iterations per step
@@ -440,8 +437,8 @@ using testing::zelenyDamping;
 TEST(Allocation, StepAllocatesNothing) {
   btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   {
-    SimulationParameters parameters = testing::verletParameters();
-    parameters.iterations = 20;
+    MuscleSystemDef parameters = testing::verletDef();
+    parameters.stepSettings.iterations = 20;
     // A box pressed into the side of the first muscle: the contact body path.
     btBoxShape boxShape(btVector3(0.004f, 0.01f, 0.005f));
     btRigidBody box(0.05f, nullptr, &boxShape, btVector3(1e-5f, 1e-5f, 1e-5f));
@@ -455,8 +452,8 @@ TEST(Allocation, StepAllocatesNothing) {
         for (bool contact : {false, true}) {
           parameters.rebuildEveryStep = rebuild;
           // The residual rule checks (never met at 0) run in the step too.
-          parameters.stopRule = StopRule::Residual;
-          parameters.tolerance = 0;
+          parameters.stepSettings.stopRule = StopRule::Residual;
+          parameters.stepSettings.tolerance = 0;
           MuscleSystem system(parameters);
           MuscleSystemAccess::impl(system).forceChunkWork = chunkWork;
           const BoneHandle bone = system.addBone(makeBone({{0.005, 0.005, 0.03}}, {0.006}));

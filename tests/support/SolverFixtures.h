@@ -9,14 +9,11 @@
 
 namespace fibremss::testing {
 
-/// Default parameters with Verlet, the default time integrator, at its iteration count: for the
+/// The default definition with Verlet, the default time integrator, at its iteration count: for the
 /// tests of time integration, the response's velocity rules and the guard's smaller steps (the
 /// default solver of posed scenes, projective, has no dt).
-inline SimulationParameters verletParameters() {
-  SimulationParameters parameters;
-  parameters.integrator = Integrator::Verlet;
-  parameters.iterations = defaultIterations(Integrator::Verlet);
-  return parameters;
+inline MuscleSystemDef verletDef() {
+  return defaultMuscleSystemDef(Integrator::Verlet);
 }
 
 /// A bone without spheres (attachments only) or with the given spheres (bone frame).

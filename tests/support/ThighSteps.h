@@ -36,9 +36,9 @@ inline StepOutcome stepThroughPoses(
     const LoadedScene& scene, const PreparedScene& prepared,
     const std::vector<std::shared_ptr<const MuscleSettings>>& muscles, int threads,
     const std::function<void(MuscleSystem&, const std::vector<MuscleHandle>&)>& before = {}) {
-  SimulationParameters parameters = scene.simulation;
+  MuscleSystemDef parameters = scene.simulation;
   parameters.threads = threads;
-  parameters.iterations = 20;
+  parameters.stepSettings.iterations = 20;
   MuscleSystem system(parameters);
   std::vector<BoneHandle> bones;
   for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));

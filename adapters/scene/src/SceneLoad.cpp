@@ -426,37 +426,38 @@ SpringParameters readModel(Fields& model) {
 }
 
 /// The "simulation" section; returns its max_step_deg (the largest bone turn of one step).
-double readSimulation(Fields& simulation, double scale, SimulationParameters& parameters) {
-  const SimulationParameters defaults;
+double readSimulation(Fields& simulation, double scale, MuscleSystemDef& def) {
+  const MuscleSystemDef defaults;
+  const StepSettings stepDefaults;
+  StepSettings& step = def.stepSettings;
   fromString(simulation.choice("integrator", toString(defaults.integrator), namesOf<Integrator>()),
-             parameters.integrator);
-  parameters.adaptiveTimeStep =
-      simulation.choice("time_step", defaults.adaptiveTimeStep ? "adaptive" : "fixed",
+             def.integrator);
+  step.adaptiveTimeStep =
+      simulation.choice("time_step", stepDefaults.adaptiveTimeStep ? "adaptive" : "fixed",
                         {"adaptive", "fixed"}) == "adaptive";
-  parameters.timeStep = btScalar(simulation.number("dt", defaults.timeStep, 0, kInf, true));
-  parameters.minTimeStep =
-      btScalar(simulation.number("min_dt", defaults.minTimeStep, 0, kInf, true));
-  if (parameters.minTimeStep > parameters.timeStep)
-    simulation.fail("min_dt", "must not exceed dt (" + std::to_string(parameters.timeStep) + " s)");
-  fromString(simulation.choice("stop", toString(defaults.stopRule), namesOf<StopRule>()),
-             parameters.stopRule);
-  parameters.iterations =
-      simulation.integer("iterations", defaultIterations(parameters.integrator), 1, 100000000);
-  parameters.epsilon =
-      btScalar(simulation.number("epsilon", defaults.epsilon / scale, 0, kInf, true) * scale);
-  parameters.budgetMs = btScalar(simulation.number("budget_ms", defaults.budgetMs, 0, kInf, true));
-  parameters.deviationEpsilon =
-      btScalar(simulation.number("deviation_epsilon", defaults.deviationEpsilon, 0, kInf, true));
-  parameters.tolerance =
-      btScalar(simulation.number("tolerance", defaults.tolerance / scale, 0, kInf, true) * scale);
-  parameters.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
-  parameters.blendedPretransform =
+  step.timeStep = btScalar(simulation.number("dt", stepDefaults.timeStep, 0, kInf, true));
+  step.minTimeStep = btScalar(simulation.number("min_dt", stepDefaults.minTimeStep, 0, kInf, true));
+  if (step.minTimeStep > step.timeStep)
+    simulation.fail("min_dt", "must not exceed dt (" + std::to_string(step.timeStep) + " s)");
+  fromString(simulation.choice("stop", toString(stepDefaults.stopRule), namesOf<StopRule>()),
+             step.stopRule);
+  step.iterations =
+      simulation.integer("iterations", defaultIterations(def.integrator), 1, 100000000);
+  step.epsilon =
+      btScalar(simulation.number("epsilon", stepDefaults.epsilon / scale, 0, kInf, true) * scale);
+  step.budgetMs = btScalar(simulation.number("budget_ms", stepDefaults.budgetMs, 0, kInf, true));
+  step.deviationEpsilon = btScalar(
+      simulation.number("deviation_epsilon", stepDefaults.deviationEpsilon, 0, kInf, true));
+  step.tolerance = btScalar(
+      simulation.number("tolerance", stepDefaults.tolerance / scale, 0, kInf, true) * scale);
+  def.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
+  def.blendedPretransform =
       simulation.boolean("blended_pretransform", defaults.blendedPretransform);
   fromString(simulation.choice("pretransform_blend", toString(defaults.pretransformBlend),
                                namesOf<PretransformBlend>()),
-             parameters.pretransformBlend);
-  parameters.motionFraction =
-      btScalar(simulation.number("motion_fraction", defaults.motionFraction, 0, 1, true));
+             def.pretransformBlend);
+  step.motionFraction =
+      btScalar(simulation.number("motion_fraction", stepDefaults.motionFraction, 0, 1, true));
   const Json* seed = simulation.raw("seed");
   if (seed &&
       !(seed->is_number_unsigned() || (seed->is_number_integer() && seed->get<long long>() >= 0)))
@@ -465,32 +466,31 @@ double readSimulation(Fields& simulation, double scale, SimulationParameters& pa
   if (seed && seed->get<unsigned long long>() > 0xffffffffull)
     simulation.fail("seed",
                     "expected an integer in [0, 4294967295], got " + scene::describe(*seed));
-  parameters.seed = seed ? uint32_t(seed->get<unsigned long long>()) : defaults.seed;
-  simulation.set("seed", parameters.seed);
-  parameters.initialNoise =
+  def.seed = seed ? uint32_t(seed->get<unsigned long long>()) : defaults.seed;
+  simulation.set("seed", def.seed);
+  def.initialNoise =
       btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, 1 / scale) *
                scale);  // at most 1 m: more throws particles beyond any muscle
-  parameters.threads = simulation.integer("threads", defaults.threads, 0, 1024);
-  parameters.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
-  parameters.solverTolerance =
+  def.threads = simulation.integer("threads", defaults.threads, 0, 1024);
+  def.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
+  def.solverTolerance =
       btScalar(simulation.number("solver_tolerance", defaults.solverTolerance, 0, 1, true));
-  parameters.solverIterations =
+  def.solverIterations =
       simulation.integer("solver_iterations", defaults.solverIterations, 1, 100000);
-  parameters.constraintIterations =
+  def.constraintIterations =
       simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
-  parameters.projectiveRho =
+  def.projectiveRho =
       btScalar(simulation.number("projective_rho", defaults.projectiveRho, 0, 0.999));
-  parameters.projectiveHistory = simulation.integer(
-      "projective_history", defaults.projectiveHistory, 0, kMaxProjectiveHistory);
-  parameters.projectiveContactWeight = btScalar(
+  def.projectiveHistory = simulation.integer("projective_history", defaults.projectiveHistory, 0,
+                                             kMaxProjectiveHistory);
+  def.projectiveContactWeight = btScalar(
       simulation.number("projective_contact_weight", defaults.projectiveContactWeight, 0.01, 1e4));
-  parameters.persistentContacts =
-      simulation.boolean("persistent_contacts", defaults.persistentContacts);
-  parameters.pairReactions = simulation.boolean("pair_reactions", defaults.pairReactions);
+  def.persistentContacts = simulation.boolean("persistent_contacts", defaults.persistentContacts);
+  def.pairReactions = simulation.boolean("pair_reactions", defaults.pairReactions);
   fromString(
       simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
-      parameters.onFailure);
-  parameters.maxRetries = simulation.integer("max_retries", defaults.maxRetries, 0, 30);
+      def.onFailure);
+  def.maxRetries = simulation.integer("max_retries", defaults.maxRetries, 0, 30);
   return simulation.number("max_step_deg", 5, 0, 180);
 }
 
@@ -504,20 +504,19 @@ void readOutputs(Fields& outputs, OutputSettings& settings) {
   settings.quantiseStrain = outputs.number("quantise_strain", 0, 0, 1);
 }
 
-void readCollision(Fields& collision, double scale, SimulationParameters& parameters) {
-  const SimulationParameters defaults;
-  parameters.muscleMuscle = collision.boolean("muscle_muscle", defaults.muscleMuscle);
-  parameters.muscleBone = collision.boolean("muscle_bone", defaults.muscleBone);
+void readCollision(Fields& collision, double scale, MuscleSystemDef& def) {
+  const MuscleSystemDef defaults;
+  def.muscleMuscle = collision.boolean("muscle_muscle", defaults.muscleMuscle);
+  def.muscleBone = collision.boolean("muscle_bone", defaults.muscleBone);
   fromString(collision.choice("bone_collision", toString(defaults.boneCollision),
                               namesOf<BoneCollision>()),
-             parameters.boneCollision);
-  parameters.distanceFieldCell = btScalar(
+             def.boneCollision);
+  def.distanceFieldCell = btScalar(
       collision.number("distance_field_cell", defaults.distanceFieldCell / scale, 0, kInf, true) *
       scale);
-  parameters.penetrationRecovery =
-      collision.boolean("penetration_recovery", defaults.penetrationRecovery);
-  parameters.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
-  parameters.surfaceContact = collision.boolean("surface_contact", defaults.surfaceContact);
+  def.penetrationRecovery = collision.boolean("penetration_recovery", defaults.penetrationRecovery);
+  def.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
+  def.surfaceContact = collision.boolean("surface_contact", defaults.surfaceContact);
 }
 
 /// The top-level "analytic" object: which exact case the scene is, and its geometry (a
@@ -615,7 +614,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
 
   Fields simulation = root.object("simulation");
   const double maxStepDeg = readSimulation(simulation, reader.scale, result.simulation);
-  if (result.simulation.stopRule == StopRule::TimeBudget)
+  if (result.simulation.stepSettings.stopRule == StopRule::TimeBudget)
     result.warnings.push_back(
         "simulation.stop = budget: each step iterates until its wall-clock budget is spent, so "
         "the results depend on the machine's load and the thread count and are not "
@@ -713,13 +712,12 @@ std::vector<std::string> keysRead(const char* section, Read read) {
 }
 
 std::vector<SectionKeys> settingsSectionKeys() {
-  SimulationParameters parameters;
+  MuscleSystemDef def;
   OutputSettings outputs;
-  return {
-      {"model", keysRead("model", [](Fields& f) { readModel(f); })},
-      {"simulation", keysRead("simulation", [&](Fields& f) { readSimulation(f, 1, parameters); })},
-      {"collision", keysRead("collision", [&](Fields& f) { readCollision(f, 1, parameters); })},
-      {"outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); })}};
+  return {{"model", keysRead("model", [](Fields& f) { readModel(f); })},
+          {"simulation", keysRead("simulation", [&](Fields& f) { readSimulation(f, 1, def); })},
+          {"collision", keysRead("collision", [&](Fields& f) { readCollision(f, 1, def); })},
+          {"outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); })}};
 }
 
 }  // namespace scene

@@ -29,7 +29,7 @@ namespace fibremss {
 inline constexpr double kEquilibriumResidual = 1e-8;
 /// Its iteration cap per pose (a pose that reaches it is counted in RunMetrics::unconvergedPoses).
 inline constexpr int kEquilibriumIterations = 3000;
-/// Its projective ρ (SimulationParameters::projectiveRho; momentum ω = 2/(1 + √(1 − ρ²))): a run
+/// Its projective ρ (MuscleSystemDef::projectiveRho; momentum ω = 2/(1 + √(1 − ρ²))): a run
 /// of thousands of iterations is left with the slowest modes, whose rate is closer to 1 than the
 /// 0.9 a 10-iteration pose is tuned for. fusiform R=12 with the fans, pose 2, iterations to a
 /// 1e-5 mm residual: ρ 0.9 none within 3 000 (1.2e-5 mm plateau), 0.98 2 544, 0.99 1 632, 0.995
@@ -75,7 +75,7 @@ inline constexpr int kPoseIterationsCap = 100;
 /// Simulated time of one pose for the baseline and the reference: what FibreMSS can at most
 /// simulate in one step (iterations × dt, the upper clamp of the adaptive dt; for the
 /// converged and time-budget stop rules at most kPoseIterationsCap iterations).
-double poseDuration(const SimulationParameters& simulation);
+double poseDuration(const StepSettings& step);
 
 /// One run's options shared by the baseline and reference runners.
 struct MethodRunOptions {
@@ -108,8 +108,8 @@ double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPos
 /// The scene's settings for the "equilibrium" method: the projective integrator and the residual
 /// stop rule at kEquilibriumResidual with `cap` iterations per pose at most, ρ kEquilibriumRho,
 /// the bones moving over as many iterations as in the scene's own settings.
-SimulationParameters equilibriumSettings(const SimulationParameters& simulation,
-                                         int cap = kEquilibriumIterations);
+MuscleSystemDef equilibriumSettings(const MuscleSystemDef& simulation,
+                                    int cap = kEquilibriumIterations);
 
 /// Fills rmsToReferenceMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the
 /// "calculix", "self-reference" and "equilibrium" runs among them (each gets 0 against itself).
@@ -153,7 +153,7 @@ MethodSpec parseMethod(const std::string& name);
 /// 0 when it is neither.
 int knobValue(const std::string& value, int defaultValue);
 
-/// The setting that ends a FibreMSS step's iterations under `simulation`'s stop rule, and so its
+/// The setting that ends a FibreMSS step's iterations under `step`'s stop rule, and so its
 /// cost: `iterations` for a fixed count, `budget_ms` for the time budget, the threshold of the
 /// others (`tolerance` of the residual and equilibrium rules, `epsilon`, `deviation_epsilon`),
 /// where the iterations are only a cap.
@@ -161,14 +161,14 @@ struct FibreKnob {
   std::string key;         ///< the scene key (`--set`)
   bool costGrows = false;  ///< a larger value costs more (a count, a budget; not a threshold)
 };
-FibreKnob fibreCostKnob(const SimulationParameters& simulation);
+FibreKnob fibreCostKnob(const StepSettings& step);
 
 /// Each method with a front (Methods.h) swept over its cost knob, cheapest first: fibremss over
 /// the knob of `simulation`'s stop rule (fibreCostKnob: a count or budget ×0.5, 1, 2, 4, a
 /// threshold ×2, 1, 0.5, 0.25) and its resolution (×0.5, 2), btsoftbody over its link iterations
 /// (×0.5, 1, 2), fem over its substeps (×0.5, 1, 2); other methods and variants as they are.
 std::vector<std::string> frontMethods(const std::vector<std::string>& methods,
-                                      const SimulationParameters& simulation);
+                                      const MuscleSystemDef& simulation);
 
 /// Each FibreMSS run of the resolution front (`fibremss`, at `resolution`, and
 /// `fibremss:resolution=N`) gets rmsToFinerResolutionMm against the run at twice its resolution,

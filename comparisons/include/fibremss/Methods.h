@@ -41,7 +41,7 @@ struct Method {
   /// for; with sceneVariants, the scene keys that set its cost. Empty: it takes no variants.
   std::vector<std::string> knobs = {};
   /// Its front, cheapest first, for a scene with these settings (nullptr: the method alone).
-  std::vector<std::string> (*front)(const SimulationParameters& simulation) = nullptr;
+  std::vector<std::string> (*front)(const MuscleSystemDef& simulation) = nullptr;
   /// The absolute value of knob `key` given as `value` ("xF": F times its default), "" where
   /// the knob takes no factor (nullptr: none does).
   std::string (*factorValue)(const std::string& key, const std::string& value,

@@ -78,7 +78,7 @@ struct LoadedScene {
   std::vector<BoneMotion> motions;    ///< one per bone
   int poseCount = 1;                  ///< number of poses (simulation steps) in the motion
   std::vector<double> poseLabels;     ///< per pose, e.g. the sweep angle in degrees
-  SimulationParameters simulation;    ///< solver settings
+  MuscleSystemDef simulation;         ///< the solver: its definition and first step settings
   OutputSettings outputs;             ///< output settings
   AnalyticCase analytic;              ///< the exact case it reproduces (type "none": none)
   ReferenceSettings reference;        ///< how its CalculiX reference is solved

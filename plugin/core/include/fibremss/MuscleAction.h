@@ -8,7 +8,7 @@
 // timeStep and contact: as in MuscleWorld (WorldCoupling, fibremss/RigidContact.h). In the
 // default quasi-static pose mode updateAction's timeStep (Bullet's internal step) is not
 // FibreMSS's dt: each call is one FibreMSS step that moves the muscles to the bones' current poses
-// in iterations of SimulationParameters::timeStep (simulated time); in MuscleTime::Dynamic each
+// in iterations of StepSettings::timeStep (simulated time); in MuscleTime::Dynamic each
 // call advances the muscles by exactly timeStep. The world's other rigid bodies collide with the
 // muscles and dynamic ones receive the reaction impulses.
 #include <BulletDynamics/Dynamics/btActionInterface.h>
@@ -24,7 +24,7 @@ class RigidCoupling;
 
 class MuscleAction : public btActionInterface {
  public:
-  explicit MuscleAction(const SimulationParameters& parameters = {});
+  explicit MuscleAction(const MuscleSystemDef& def = defaultMuscleSystemDef());
   ~MuscleAction() override;
 
   /// One FibreMSS step (Bullet calls it once per internal step, after rigid bodies moved), with

@@ -71,7 +71,7 @@ struct StepStats {
   bool exploded = false;              ///< a spring beyond 3× its rest length in the last iteration
   size_t overstretchedSprings = 0;    ///< springs beyond 3× their rest length, last iteration
 
-  // The numerical guard (SimulationParameters::onFailure): what it found and did in this step.
+  // The numerical guard (MuscleSystemDef::onFailure): what it found and did in this step.
   uint64_t step = 0;          ///< index of this step in the system (0: the first)
   bool failed = false;        ///< the state is left failed (Report: a muscle has NaN/inf or burst)
   bool rolledBack = false;    ///< an attempt failed and the state went back to the step's start
@@ -140,8 +140,8 @@ enum DebugDrawFlag : int {
 
 class MuscleSystem {
  public:
-  /// InputError for parameters no step can run with (dt not finite > 0, no iterations, ...).
-  explicit MuscleSystem(const SimulationParameters& parameters = {});
+  /// InputError for a definition no step can run with (dt not finite > 0, no iterations, ...).
+  explicit MuscleSystem(const MuscleSystemDef& def = defaultMuscleSystemDef());
   ~MuscleSystem();
   MuscleSystem(const MuscleSystem&) = delete;
   MuscleSystem& operator=(const MuscleSystem&) = delete;
@@ -180,9 +180,8 @@ class MuscleSystem {
   /// One simulation step: bones move from their last to their target transforms split over
   /// the iterations; pre-transform; iterations of forces, integration, collision detection and
   /// response until the stop rule says; then output (fibres, surfaces). A step that produces
-  /// NaN/inf or explodes is handled as parameters().onFailure says (StepStats reports it); it
-  /// never throws for numerical reasons, only InputError for parameters() that were changed to
-  /// values no step can run with (a dt of 0 or below, ...).
+  /// NaN/inf or explodes is handled as definition().onFailure says (StepStats reports it); it
+  /// never throws.
   void step();
   /// A step that advances the muscles by exactly `duration` of simulated time [s]: k =
   /// max(iterations, ⌈duration / dt⌉) iterations of duration/k, dt the smaller of timeStep and
@@ -220,7 +219,7 @@ class MuscleSystem {
   /// predict without forces). InputError for a particle index beyond the muscle or a non-finite
   /// force. Allocates on the muscle's first one.
   void setExternalForce(MuscleHandle muscle, uint32_t particle, const btVector3& force);
-  /// Removes every external force of the muscle (SimulationParameters::gravity stays).
+  /// Removes every external force of the muscle (MuscleSystemDef::gravity stays).
   void clearExternalForces(MuscleHandle muscle);
 
   /// The force residual of every muscle together at its current particles (ForceResidual), as
@@ -237,10 +236,15 @@ class MuscleSystem {
   std::span<const btVector3> residualForces(MuscleHandle muscle) const;
 
   const StepStats& lastStep() const;
-  SimulationParameters& parameters();
-  const SimulationParameters& parameters() const;
-  /// Threads a step computes with: parameters().threads, or the machine's hardware threads for 0;
-  /// with a host scheduler (SimulationParameters::scheduler) its workerCount.
+  /// What the system was built with (its stepSettings those it started with).
+  const MuscleSystemDef& definition() const;
+  /// The settings the next step runs with.
+  const StepSettings& stepSettings() const;
+  /// Settings for the steps from the next on. InputError for settings no step can run with (dt
+  /// not finite > 0, no iterations, ...); the previous settings are then kept.
+  void setStepSettings(const StepSettings& settings);
+  /// Threads a step computes with: definition().threads, or the machine's hardware threads for 0;
+  /// with a host scheduler (MuscleSystemDef::scheduler) its workerCount.
   unsigned threads() const;
 
   std::span<const btVector3> positions(MuscleHandle muscle) const;  ///< current particles

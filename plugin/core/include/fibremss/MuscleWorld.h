@@ -8,8 +8,8 @@
 // timeStep: what Bullet's internal step (stepSimulation's fixedTimeStep) means to the muscles is
 // WorldCoupling::time (fibremss/RigidContact.h). MuscleTime::QuasiStaticPose (the default, the
 // thesis' mode): each internal Bullet step is one FibreMSS step, which moves the muscles from the
-// bones' previous transforms to their current ones in up to SimulationParameters::iterations
-// iterations of SimulationParameters::timeStep each (its own, simulated-time dt; see
+// bones' previous transforms to their current ones in up to StepSettings::iterations
+// iterations of StepSettings::timeStep each (its own, simulated-time dt; see
 // docs/integrators.md), so the muscles follow the bones' poses whatever Bullet's dt and a pose's
 // cost does not depend on it; call stepSimulation(dt, 1, dt) to take exactly one FibreMSS step
 // per call. MuscleTime::Dynamic: each internal Bullet step of dt advances the muscles by exactly
@@ -38,11 +38,12 @@ class RigidCoupling;
 class MuscleWorld : public btSoftRigidDynamicsWorld {
  public:
   /// The Bullet arguments as for btSoftRigidDynamicsWorld (the configuration should be a
-  /// btSoftBodyRigidBodyCollisionConfiguration when soft bodies are added); `parameters`
-  /// configure the FibreMSS solver.
+  /// btSoftBodyRigidBodyCollisionConfiguration when soft bodies are added); `def` defines the
+  /// FibreMSS solver (its step settings: MuscleSystem::setStepSettings).
   MuscleWorld(btDispatcher* dispatcher, btBroadphaseInterface* broadphase,
               btConstraintSolver* solver, btCollisionConfiguration* configuration,
-              const SimulationParameters& parameters = {}, btSoftBodySolver* softSolver = nullptr);
+              const MuscleSystemDef& def = defaultMuscleSystemDef(),
+              btSoftBodySolver* softSolver = nullptr);
   ~MuscleWorld() override;
 
   /// Makes `body` a bone of the muscles (arguments in MuscleSystem::addBone's order): its world
@@ -62,7 +63,7 @@ class MuscleWorld : public btSoftRigidDynamicsWorld {
   bool removeMuscle(MuscleHandle muscle);
   bool containsMuscle(MuscleHandle muscle) const { return muscles_.contains(muscle); }
 
-  /// The solver: positions, surfaces, statistics of the last step, parameters.
+  /// The solver: positions, surfaces, statistics of the last step, definition and step settings.
   MuscleSystem& muscleSystem() { return muscles_; }
   const MuscleSystem& muscleSystem() const { return muscles_; }
 

@@ -183,14 +183,12 @@ constexpr int defaultIterations(Integrator integrator) {
   return integrator == Integrator::Projective ? 20 : 70;
 }
 
-/// The most pairs SimulationParameters::projectiveHistory may keep [iterations].
+/// The most pairs MuscleSystemDef::projectiveHistory may keep [iterations].
 constexpr int kMaxProjectiveHistory = 16;
 
-/// How the solver steps (method.md §4–§5).
-struct SimulationParameters {
-  /// The solver: the projective equilibrium solver for posed scenes (each step reaches the
-  /// pose's static equilibrium), Verlet or another time integrator for dynamics.
-  Integrator integrator = Integrator::Projective;
+/// What a step may change (method.md §4): its dt, when its iterations stop, how the bones move
+/// over them; MuscleSystem::setStepSettings sets them between steps.
+struct StepSettings {
   bool adaptiveTimeStep = true;  ///< eq 5.1 bound per iteration; else fixed timeStep
   btScalar timeStep = 1e-3;      ///< fixed dt, or the upper clamp of the adaptive dt [s]
   btScalar minTimeStep = 1e-5;   ///< lower clamp of the adaptive dt [s]
@@ -202,6 +200,17 @@ struct SimulationParameters {
   btScalar deviationEpsilon = 1e-3;  ///< threshold of the spring-deviation stop rule (ratio)
   /// Equilibrium stop rule: estimated distance to it; Residual: RMS equivalent displacement [m]
   btScalar tolerance = 5e-4;
+  btScalar motionFraction = 0.5;  ///< bones reach their target after this share of `iterations`
+};
+
+/// What a MuscleSystem is built with and keeps (method.md §4–§5): its threads, solver and contact
+/// rules; defaultMuscleSystemDef gives one for a solver.
+struct MuscleSystemDef {
+  /// The solver: the projective equilibrium solver for posed scenes (each step reaches the
+  /// pose's static equilibrium), Verlet or another time integrator for dynamics.
+  Integrator integrator = Integrator::Projective;
+  /// The settings of the steps until MuscleSystem::setStepSettings changes them.
+  StepSettings stepSettings;
   bool rebuildEveryStep = false;  ///< thesis behaviour: rebuild trees and state each step
   /// Pre-transform particles of muscles spanning two bones by a blend of both bones' motions
   /// (MuscleSettings::blendBoneA/B/Weight); false: by the nearest bone only, as the thesis did
@@ -210,11 +219,10 @@ struct SimulationParameters {
   /// How the blended pre-transform combines the two bones' motions (docs/decisions.md,
   /// "Bone motion").
   PretransformBlend pretransformBlend = PretransformBlend::Linear;
-  btScalar motionFraction = 0.5;  ///< bones reach their target after this share of `iterations`
-  bool muscleMuscle = true;       ///< collide muscles with each other
-  bool muscleBone = true;         ///< collide muscles with bones
-  uint32_t seed = 1;              ///< seed for every random choice (jitter, thinning, noise)
-  btScalar initialNoise = 0;      ///< random displacement of free particles at start [m]
+  bool muscleMuscle = true;   ///< collide muscles with each other
+  bool muscleBone = true;     ///< collide muscles with bones
+  uint32_t seed = 1;          ///< seed for every random choice (jitter, thinning, noise)
+  btScalar initialNoise = 0;  ///< random displacement of free particles at start [m]
 
   int threads = 0;  ///< worker threads of the solver (0: the machine's hardware threads)
   /// The host's task system (TaskScheduler.h); when set it runs every task of the step and
@@ -274,6 +282,15 @@ struct SimulationParameters {
   FailurePolicy onFailure = FailurePolicy::Retry;  ///< numerical guard policy
   int maxRetries = 3;  ///< Retry: attempts, each with half the previous dt cap
 };
+
+/// The definition of a system that steps with `integrator`, at its default iterations per step
+/// (defaultIterations); everything else at the members' defaults.
+inline MuscleSystemDef defaultMuscleSystemDef(Integrator integrator = Integrator::Projective) {
+  MuscleSystemDef def;
+  def.integrator = integrator;
+  def.stepSettings.iterations = defaultIterations(integrator);
+  return def;
+}
 
 const char* toString(SpringLayout layout);
 const char* toString(SpringStiffness rule);

@@ -103,13 +103,13 @@ void requirePreparationMemory(const std::vector<BoneInput>& bones,
 
 /// Prepares all bodies together (radii shrink needs all of them). `seed` makes the fibre
 /// jitter and sphere thinning reproducible. `threads` counts the caller, as
-/// SimulationParameters::threads (0: the machine's hardware threads); the result is the same
+/// MuscleSystemDef::threads (0: the machine's hardware threads); the result is the same
 /// for any count. Throws InputError for unusable input.
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
                            const std::vector<MuscleInput>& muscles, uint32_t seed, int threads = 0);
 
 /// prepareScene with its tasks run by the host's scheduler when `scheduler` is present (else on
-/// `threads` threads): SimulationParameters::scheduler for preparation. The same result.
+/// `threads` threads): MuscleSystemDef::scheduler for preparation. The same result.
 PreparedScene prepareScene(const std::vector<BoneInput>& bones,
                            const std::vector<MuscleInput>& muscles, uint32_t seed, int threads,
                            const TaskScheduler& scheduler);

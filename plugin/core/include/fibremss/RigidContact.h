@@ -23,7 +23,7 @@ namespace fibremss {
 /// What Bullet's time step means to the muscles (MuscleWorld, MuscleAction).
 enum class MuscleTime : uint8_t {
   /// Each internal Bullet step is one FibreMSS step to the bones' current poses in iterations of
-  /// SimulationParameters::timeStep (the muscles' own simulated time): the thesis' pose mode.
+  /// StepSettings::timeStep (the muscles' own simulated time): the thesis' pose mode.
   /// A dynamic contact body receives the muscles' static reaction (BodyContact::support),
   /// implicit over Bullet's next step, at most what the pose change can supply, and is held back
   /// when Bullet's step moved it more than half a particle radius into the muscles.
@@ -33,7 +33,7 @@ enum class MuscleTime : uint8_t {
   /// every muscle's springs and volume term; fixed, whatever the stop rule and adaptiveTimeStep
   /// say; bones move over all k): muscles and rigid bodies share one
   /// clock, and contact bodies receive exactly the impulses of the step (momentum conserved).
-  /// Needs a time integrator (SimulationParameters::integrator = Verlet, say): the default,
+  /// Needs a time integrator (MuscleSystemDef::integrator = Verlet, say): the default,
   /// projective, solves each step's equilibrium and has no inertia.
   Dynamic,
 };

@@ -6,8 +6,8 @@
 
 namespace fibremss {
 
-MuscleAction::MuscleAction(const SimulationParameters& parameters)
-    : muscles_(parameters), rigid_(std::make_unique<RigidCoupling>()) {}
+MuscleAction::MuscleAction(const MuscleSystemDef& def)
+    : muscles_(def), rigid_(std::make_unique<RigidCoupling>()) {}
 
 MuscleAction::~MuscleAction() = default;
 

@@ -13,9 +13,9 @@ namespace fibremss {
 
 MuscleWorld::MuscleWorld(btDispatcher* dispatcher, btBroadphaseInterface* broadphase,
                          btConstraintSolver* solver, btCollisionConfiguration* configuration,
-                         const SimulationParameters& parameters, btSoftBodySolver* softSolver)
+                         const MuscleSystemDef& def, btSoftBodySolver* softSolver)
     : btSoftRigidDynamicsWorld(dispatcher, broadphase, solver, configuration, softSolver),
-      muscles_(parameters),
+      muscles_(def),
       rigid_(std::make_unique<RigidCoupling>()) {}
 
 MuscleWorld::~MuscleWorld() = default;

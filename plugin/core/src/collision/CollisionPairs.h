@@ -62,7 +62,7 @@ constexpr btScalar kTreeSkin = btScalar(0.25);
 constexpr size_t kListSlack = 4;
 /// Builds a muscle's tree with its skin (MuscleState::treeSkin = kTreeSkin · meanRadius) and takes
 /// the snapshot; rebuildable when `rebuildEveryStep` (the thesis' mode,
-/// SimulationParameters::rebuildEveryStep). Allocates.
+/// MuscleSystemDef::rebuildEveryStep). Allocates.
 void buildTree(MuscleState& muscle, bool rebuildEveryStep);
 /// Refits a muscle's tree (same topology, a new snapshot and epoch) when some boundary particle
 /// moved farther than the tree's reach from its snapshot — whatever moved it (integration,
@@ -142,7 +142,7 @@ inline btVector3 withoutInto(const btVector3& v, const btVector3& normal) {
 }
 
 /// Moves every pushed particle by its accumulated push and removes its velocity into the push
-/// (when `sliding`, SimulationParameters::slidingContacts; else all of it: previous = position,
+/// (when `sliding`, MuscleSystemDef::slidingContacts; else all of it: previous = position,
 /// velocities zeroed when the integrator `hasVelocities`); clears the pushes. A particle two bones
 /// press from opposite sides (pinched: no room between them) is moved to equal overlaps and out
 /// sideways where the bones leave a way out; muscle.pinched counts such particles.

@@ -35,11 +35,11 @@ void MuscleSystem::Impl::beginBodyContacts() {
 void MuscleSystem::Impl::collideBodies(btScalar dt) {
   if (contactBodies.empty()) return;
   // Without muscle or bone collision, collide() refitted no tree.
-  if (!parameters.muscleMuscle && !parameters.muscleBone)
+  if (!definition.muscleMuscle && !definition.muscleBone)
     forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
   if (duration > 0)
     for (ContactBodyState& body : contactBodies) moveContactBody(body, dt);
-  const bool velocities = integratorFor(parameters.integrator).usesVelocities();
+  const bool velocities = integratorFor(definition.integrator).usesVelocities();
   forEachMuscle("contact bodies", [&](MuscleState& state, uint32_t, unsigned thread) {
     fibremss::collideBodies(state, contactBodies, dt, velocities, scratch[thread].stack);
   });
@@ -87,7 +87,6 @@ void MuscleSystem::step(btScalar duration) {
   if (!(duration > 0) || !std::isfinite(duration))
     throw InputError("MuscleSystem::step", "duration",
                      "expected a finite simulated time > 0 s, got " + std::to_string(duration));
-  checkStepParameters(impl_->parameters, "MuscleSystem::step");
   impl_->duration = duration;
   impl_->guardedStep();
   impl_->duration = 0;

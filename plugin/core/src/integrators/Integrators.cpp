@@ -25,7 +25,7 @@ const TimeIntegrator& integratorFor(Integrator kind) {
   if (const TimeIntegrator* integrator = implicitIntegratorFor(kind)) return *integrator;
   if (const TimeIntegrator* integrator = positionBasedIntegratorFor(kind)) return *integrator;
   if (const TimeIntegrator* integrator = projectiveIntegratorFor(kind)) return *integrator;
-  throw InputError("SimulationParameters::integrator", toString(kind), "unknown integrator");
+  throw InputError("MuscleSystemDef::integrator", toString(kind), "unknown integrator");
 }
 
 }  // namespace fibremss

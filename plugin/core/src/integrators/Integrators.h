@@ -27,10 +27,10 @@ class TimeIntegrator {
  public:
   virtual ~TimeIntegrator() = default;
   /// Advances the free particles of `muscle` by dt; `previousDt` is the step that led from
-  /// `previous` to `positions`. `parameters`: the step's solver settings (implicit solves,
+  /// `previous` to `positions`. `def`: the step's solver settings (implicit solves,
   /// constraint passes).
-  virtual IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
-                                    btScalar dt, btScalar previousDt) const = 0;
+  virtual IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+                                    btScalar previousDt) const = 0;
   /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs and sets the
   /// muscle's stability bound for it; called when the muscle is added and when the integrator
   /// changes, never inside the iterations.
@@ -40,11 +40,11 @@ class TimeIntegrator {
   /// Whether the integrator keeps explicit velocities (they are rotated by the pre-transform
   /// and zeroed on contact).
   virtual bool usesVelocities() const = 0;
-  /// Whether the integrator holds contacts as constraints with `parameters`
-  /// (SimulationParameters::persistentContacts; advance() takes a pushed particle's force into its
+  /// Whether the integrator holds contacts as constraints with `def`
+  /// (MuscleSystemDef::persistentContacts; advance() takes a pushed particle's force into its
   /// push out, contactNormal): the response then records its pushes in every iteration and
   /// leaves each contact a slop deep so that it persists (leaveContactSlop).
-  virtual bool holdsContacts(const SimulationParameters&) const { return false; }
+  virtual bool holdsContacts(const MuscleSystemDef&) const { return false; }
   /// Brings `muscle`'s workspace up to date, without allocating, after springs or volume terms of
   /// its settings broke (Tearing.h); an integrator that reads them every iteration needs nothing.
   virtual void springsChanged(MuscleState&) const {}

@@ -72,7 +72,7 @@ size_t advanceVerletVector(MuscleState& muscle, btScalar keep, btScalar forceSca
 /// adaptive dt would raise the velocity and pump energy in.
 class VerletIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters&, btScalar dt,
+  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef&, btScalar dt,
                             btScalar previousDt) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar gamma = settings.damping * dt / (2 * settings.particleMass);
@@ -94,7 +94,7 @@ class VerletIntegrator final : public TimeIntegrator {
 /// Semi-implicit (symplectic) Euler: v += dt/m·(F − c·v); x += dt·v.
 class SemiImplicitEulerIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters&, btScalar dt,
+  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef&, btScalar dt,
                             btScalar) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
@@ -133,8 +133,8 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
                        std::span<const btScalar> weights)
       : kind_(kind), offsets_(offsets), weights_(weights) {}
 
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
-                            btScalar dt, btScalar) const override {
+  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+                            btScalar) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     const btScalar damping = settings.damping;
@@ -166,7 +166,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
       springForces(settings, stage.positions, stage.forces);
       addLocalVolumeForces(settings, stage.positions, stage.forces);
       addEnclosedVolumeForces(settings, stage.positions, stage.forces);
-      addExternalForces(muscle, parameters.gravity, stage.forces);
+      addExternalForces(muscle, def.gravity, stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();
       const btScalar offset = last ? 0 : offsets_[s] * dt;

@@ -175,8 +175,8 @@ class ImplicitIntegrator final : public TimeIntegrator {
  public:
   explicit ImplicitIntegrator(Integrator kind) : kind_(kind) {}
 
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
-                            btScalar dt, btScalar previousDt) const override {
+  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+                            btScalar previousDt) const override {
     auto& w = static_cast<ImplicitWorkspace&>(*muscle.workspace);
     const MuscleSettings& settings = *muscle.settings;
     const double m = settings.particleMass;
@@ -192,7 +192,7 @@ class ImplicitIntegrator final : public TimeIntegrator {
     const Newton newton{midpoint ? m + c * theta * h : m + c * beta, midpoint ? h : beta,
                         midpoint ? theta * theta * h : beta};
     const std::vector<uint32_t>& free = muscle.freeParticles;
-    if (kind_ == Integrator::Bdf2) followVelocityHistory(w, muscle, parameters);
+    if (kind_ == Integrator::Bdf2) followVelocityHistory(w, muscle, def);
     for (size_t k = 0; k < free.size(); ++k) {
       const uint32_t i = free[k];
       const btVector3 x = muscle.positions[i];
@@ -210,7 +210,7 @@ class ImplicitIntegrator final : public TimeIntegrator {
       }
     }
     IntegrationResult result;
-    newtonStep(w, muscle, newton, parameters, result);
+    newtonStep(w, muscle, newton, def, result);
 
     for (size_t k = 0; k < free.size(); ++k) {
       const uint32_t i = free[k];
@@ -293,8 +293,8 @@ class ImplicitIntegrator final : public TimeIntegrator {
   /// with their forces: refills A, forms b = e + φ·F + (A − d·I)·v′₀, solves A·v′ = b into
   /// w.solution from w.guess.
   static void newtonStep(ImplicitWorkspace& w, const MuscleState& muscle, const Newton& newton,
-                         const SimulationParameters& parameters, IntegrationResult& result) {
-    fill(w, muscle, newton.diagonal, newton.phi * newton.sigma, parameters.diagonalJacobian);
+                         const MuscleSystemDef& def, IntegrationResult& result) {
+    fill(w, muscle, newton.diagonal, newton.phi * newton.sigma, def.diagonalJacobian);
     multiply(w, muscle, w.solution, w.product);
     const std::vector<uint32_t>& free = muscle.freeParticles;
     for (size_t k = 0; k < free.size(); ++k)
@@ -304,8 +304,7 @@ class ImplicitIntegrator final : public TimeIntegrator {
                    newton.diagonal * w.solution[r];
       }
     w.solution = w.guess;
-    conjugateGradient(w, muscle, parameters.solverTolerance,
-                      std::max(1, parameters.solverIterations), result);
+    conjugateGradient(w, muscle, def.solverTolerance, std::max(1, def.solverIterations), result);
   }
 
   /// BDF2's v(t−dt′) follows what happened to the velocity advance() last wrote: unchanged, it
@@ -313,17 +312,17 @@ class ImplicitIntegrator final : public TimeIntegrator {
   /// present one bit for bit), it turns alike; anything else (a contact zeroed it, a rollback
   /// or preparation restored another) drops the history: v(t−dt′) = v, so v̂ = v.
   static void followVelocityHistory(ImplicitWorkspace& w, const MuscleState& muscle,
-                                    const SimulationParameters& parameters) {
+                                    const MuscleSystemDef& def) {
     const MuscleSettings& settings = *muscle.settings;
     for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
       const uint32_t i = muscle.freeParticles[k];
       const btVector3& v = muscle.velocities[i];
       if (v == w.writtenVelocities[k]) continue;
       if (pretransformDirection(settings, muscle.boneDeltas, i, w.writtenVelocities[k],
-                                parameters.blendedPretransform, parameters.pretransformBlend) == v)
+                                def.blendedPretransform, def.pretransformBlend) == v)
         w.previousVelocities[k] =
             pretransformDirection(settings, muscle.boneDeltas, i, w.previousVelocities[k],
-                                  parameters.blendedPretransform, parameters.pretransformBlend);
+                                  def.blendedPretransform, def.pretransformBlend);
       else
         w.previousVelocities[k] = v;
     }

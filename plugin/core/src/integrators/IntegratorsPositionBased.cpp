@@ -38,8 +38,8 @@ class PositionBasedIntegrator final : public TimeIntegrator {
  public:
   explicit PositionBasedIntegrator(bool compliant) : compliant_(compliant) {}
 
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters,
-                            btScalar dt, btScalar previousDt) const override {
+  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+                            btScalar previousDt) const override {
     const MuscleSettings& settings = *muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     const btScalar keep =
@@ -53,7 +53,7 @@ class PositionBasedIntegrator final : public TimeIntegrator {
     std::fill(w.lambda.begin(), w.lambda.end(), btScalar(0));
     btScalar* lambda = compliant_ ? w.lambda.data() : nullptr;
     const btScalar inverseDt2 = 1 / (dt * dt);
-    const int passes = std::max(1, parameters.constraintIterations);
+    const int passes = std::max(1, def.constraintIterations);
     for (int pass = 0; pass < passes; ++pass) {
       std::fill(w.corrections.begin(), w.corrections.end(), btVector3(0, 0, 0));
       for (size_t s = 0; s < settings.springs.size(); ++s) {

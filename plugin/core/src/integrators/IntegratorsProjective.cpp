@@ -12,7 +12,7 @@
 // adds to the diagonal only and the right-hand side stays F. A particle in W is held nearly in
 // place by the global step while the rest of the muscle answers around it; without W the step moves
 // a pushed particle back where the springs alone want it, into the bone or the other muscle, every
-// iteration. With persistent contacts (SimulationParameters::persistentContacts) a particle the
+// iteration. With persistent contacts (MuscleSystemDef::persistentContacts) a particle the
 // last response pushed also gives up the part of its force into the push (what the contact holds,
 // contactNormal: the force residual's rule) before the solve, while the response leaves every
 // contact a slop deep (kContactSlop) so that it is found again: the step's fixed point is then the
@@ -48,7 +48,7 @@ constexpr double kVolumeWeight = 1.5;
 constexpr uint16_t kContactHold = 1000;
 
 /// The last iterations' steps s = x⁺ − x and force changes y = F − F⁺ by row, newest last in a
-/// ring (SimulationParameters::projectiveHistory): L-BFGS's pairs.
+/// ring (MuscleSystemDef::projectiveHistory): L-BFGS's pairs.
 struct StepHistory {
   explicit StepHistory(size_t rows)
       : steps(kMaxProjectiveHistory, std::vector<btVector3>(rows)),
@@ -146,7 +146,7 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<int>& rows, si
 }
 
 /// Puts the particles the last response pushed into W (with `contactWeight` times their diagonal
-/// entry, SimulationParameters::projectiveContactWeight) and takes out those kContactHold
+/// entry, MuscleSystemDef::projectiveContactWeight) and takes out those kContactHold
 /// iterations without a push (clearing the flags it reads). Returns whether W changed.
 bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWeight) {
   bool changed = false;
@@ -264,10 +264,10 @@ bool movesTooFar(const MuscleState& muscle, const std::vector<btVector3>& step) 
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
 /// or moves a particle too far (movesTooFar) is replaced by the plain projective one and the
 /// history restarts.
-IntegrationResult quasiNewtonStep(MuscleState& muscle, const SimulationParameters& parameters,
+IntegrationResult quasiNewtonStep(MuscleState& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
   const std::vector<uint32_t>& free = muscle.freeParticles;
-  const int size = parameters.projectiveHistory;
+  const int size = def.projectiveHistory;
   StepHistory& h = w.history;
   if (muscle.bonesMoving || h.size != size) h.restart();
   h.size = size;
@@ -290,21 +290,21 @@ IntegrationResult quasiNewtonStep(MuscleState& muscle, const SimulationParameter
 /// or, with a history, x⁺ = x + H·F(x), H L-BFGS's inverse Hessian from (A + W)⁻¹.
 class ProjectiveIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, const SimulationParameters& parameters, btScalar,
+  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar,
                             btScalar) const override {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
-    if (holdContacts(muscle, w, parameters.projectiveContactWeight)) w.factor.update();
+    if (holdContacts(muscle, w, def.projectiveContactWeight)) w.factor.update();
     const std::vector<uint32_t>& free = muscle.freeParticles;
     // With pair reactions the step added the contacts' reactions to the forces already.
-    const bool held = holdsContacts(parameters) && !parameters.pairReactions;
+    const bool held = holdsContacts(def) && !def.pairReactions;
     for (size_t k = 0; k < free.size(); ++k) {
       const btVector3& force = muscle.forces[free[k]];
       w.forces[w.factor.row(k)] = held ? withoutInto(force, contactNormal(muscle, free[k])) : force;
     }
-    if (parameters.projectiveHistory > 0) return quasiNewtonStep(muscle, parameters, w);
+    if (def.projectiveHistory > 0) return quasiNewtonStep(muscle, def, w);
     w.solution = w.forces;
     w.factor.solveInPlace(w.solution.data());
-    const double rho = parameters.projectiveRho;
+    const double rho = def.projectiveRho;
     const auto omega = static_cast<btScalar>(2 / (1 + std::sqrt(1 - rho * rho)));
     IntegrationResult result;
     for (size_t k = 0; k < free.size(); ++k)
@@ -314,9 +314,7 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     return result;
   }
   bool usesVelocities() const override { return false; }
-  bool holdsContacts(const SimulationParameters& parameters) const override {
-    return parameters.persistentContacts;
-  }
+  bool holdsContacts(const MuscleSystemDef& def) const override { return def.persistentContacts; }
 
   Integrator kind() const override { return Integrator::Projective; }
   /// A anew over its pattern (a broken spring or volume term adds zeros) and factored anew; the

@@ -36,8 +36,8 @@ constexpr btScalar kSurfaceMarginFraction = btScalar(0.01);
 /// Who runs preparation's tasks: the host's scheduler when present, else up to `threads`
 /// threads started for each batch (TaskPool::resolve: 0 is the hardware threads).
 struct Workers {
-  int threads = 0;            ///< SimulationParameters::threads
-  const TaskScheduler& host;  ///< SimulationParameters::scheduler
+  int threads = 0;            ///< MuscleSystemDef::threads
+  const TaskScheduler& host;  ///< MuscleSystemDef::scheduler
 };
 
 /// Runs task(i) for i in [0, count) on `workers`; rethrows the exception of the lowest failing i.

@@ -113,7 +113,7 @@ void checkMuscleBones(const Slots<BoneState>& slots, std::span<const BoneHandle>
 /// particles listed; not yet placed.
 std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
                                             std::span<const BoneHandle> bones,
-                                            const SimulationParameters& parameters) {
+                                            const MuscleSystemDef& def) {
   const size_t n = s.particleCount();
   auto state = std::make_unique<MuscleState>();
   state->bones.assign(bones.begin(), bones.end());
@@ -139,9 +139,9 @@ std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
   state->pinchBones.assign(n, -1);
   state->firstBonePushes.assign(n, btVector3(0, 0, 0));
   state->otherBonePushes.assign(n, btVector3(0, 0, 0));
-  if (parameters.boneCollision == BoneCollision::Mesh) state->meshVisits.assign(n, 0);
+  if (def.boneCollision == BoneCollision::Mesh) state->meshVisits.assign(n, 0);
   // Recovery follows the bones' distance fields: without them it has nothing to remember.
-  if (parameters.penetrationRecovery && parameters.boneCollision == BoneCollision::DistanceField) {
+  if (def.penetrationRecovery && def.boneCollision == BoneCollision::DistanceField) {
     state->sideBones.assign(n, -1);
     state->boneSides.assign(n, btVector3(0, 0, 0));
     state->sideStamps.assign(n, 0);
@@ -174,12 +174,12 @@ void setStepBounds(const MuscleSettings& s, MuscleState& state) {
   for (const Spring& spring : s.springs) state.restLengthSum += spring.restLength;
 }
 
-/// Moves a muscle's free particles by uniform noise in ±parameters.initialNoise, seeded by the
+/// Moves a muscle's free particles by uniform noise in ±def.initialNoise, seeded by the
 /// system's seed and the count of muscles added (`added`).
-void addInitialNoise(const SimulationParameters& parameters, uint32_t added, MuscleState& state) {
-  std::seed_seq seed{parameters.seed, added};
+void addInitialNoise(const MuscleSystemDef& def, uint32_t added, MuscleState& state) {
+  std::seed_seq seed{def.seed, added};
   std::mt19937 random(seed);
-  std::uniform_real_distribution<btScalar> noise(-parameters.initialNoise, parameters.initialNoise);
+  std::uniform_real_distribution<btScalar> noise(-def.initialNoise, def.initialNoise);
   for (uint32_t i : state.freeParticles) {
     const btVector3 offset(noise(random), noise(random), noise(random));
     state.positions[i] += offset;
@@ -204,10 +204,10 @@ void addCandidateLists(Slots<MuscleState>& muscles, const Slots<BoneState>& bone
 }
 }  // namespace
 
-MuscleSystem::MuscleSystem(const SimulationParameters& parameters)
-    : impl_(std::make_unique<Impl>()) {
-  checkStepParameters(parameters, "MuscleSystem");
-  impl_->parameters = parameters;
+MuscleSystem::MuscleSystem(const MuscleSystemDef& def) : impl_(std::make_unique<Impl>()) {
+  checkDefinition(def, "MuscleSystem");
+  impl_->definition = def;
+  impl_->stepSettings = def.stepSettings;
   impl_->prepareWorkers();
 }
 
@@ -216,9 +216,9 @@ MuscleSystem::~MuscleSystem() = default;
 void MuscleSystem::Impl::deform(MuscleState& state) const {
   if (state.surface.empty()) return;
   deformSurface(*state.settings, state.positions, state.boneTransforms,
-                parameters.blendedPretransform, parameters.pretransformBlend, state.skin,
+                definition.blendedPretransform, definition.pretransformBlend, state.skin,
                 state.surface);
-  if (!parameters.surfaceContact) return;
+  if (!definition.surfaceContact) return;
   measureLayer(*state.settings, state.positions, state.surface, state.skin);
   btVector3 lower, upper;
   pointBounds(state.surface, lower, upper);
@@ -249,11 +249,11 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
   state->mesh = std::make_unique<const ContactMesh>(settings->mesh);
   state->meshContact =
-      impl_->parameters.boneCollision == BoneCollision::Mesh && !settings->mesh.empty();
-  if (impl_->parameters.boneCollision == BoneCollision::DistanceField)
+      impl_->definition.boneCollision == BoneCollision::Mesh && !settings->mesh.empty();
+  if (impl_->definition.boneCollision == BoneCollision::DistanceField)
     state->field = std::make_unique<const BoneDistanceField>(
-        state->mesh->distance, impl_->parameters.distanceFieldCell,
-        kDistanceFieldMargin * impl_->parameters.distanceFieldCell);
+        state->mesh->distance, impl_->definition.distanceFieldCell,
+        kDistanceFieldMargin * impl_->definition.distanceFieldCell);
   state->settings = std::move(settings);
   const BoneHandle handle = impl_->bones.add<BoneHandle>(std::move(state));
   const BoneState& bone = *impl_->bones.states[handle.index];
@@ -299,19 +299,19 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   checkRadii(s.radii, call);
   checkMuscleBones(impl_->bones, bones, call);
 
-  std::unique_ptr<MuscleState> state = newMuscleState(s, bones, impl_->parameters);
+  std::unique_ptr<MuscleState> state = newMuscleState(s, bones, impl_->definition);
   setStepBounds(s, *state);
   state->settings = settings;
   prepareTearing(*state);
   impl_->resolveBones(*state);
   impl_->placeAtBones(*state);
   ++impl_->musclesAdded;
-  if (impl_->parameters.initialNoise > 0)
-    addInitialNoise(impl_->parameters, impl_->musclesAdded, *state);
+  if (impl_->definition.initialNoise > 0)
+    addInitialNoise(impl_->definition, impl_->musclesAdded, *state);
   // Before the tree: btDbvt's build breaks on non-finite or huge bounds.
   checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
-  buildTree(*state, impl_->parameters.rebuildEveryStep);
-  ensurePrepared(integratorFor(impl_->parameters.integrator), *state);
+  buildTree(*state, impl_->definition.rebuildEveryStep);
+  ensurePrepared(integratorFor(impl_->definition.integrator), *state);
   const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
   if (!s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount) {
@@ -359,7 +359,6 @@ MuscleTear MuscleSystem::tear(MuscleHandle muscle) const {
 }
 
 void MuscleSystem::step() {
-  checkStepParameters(impl_->parameters, "MuscleSystem::step");
   impl_->guardedStep();
 }
 
@@ -370,15 +369,19 @@ void MuscleSystem::setCancelFlag(const std::atomic<bool>* flag) {
 const StepStats& MuscleSystem::lastStep() const {
   return impl_->stats;
 }
-SimulationParameters& MuscleSystem::parameters() {
-  return impl_->parameters;
+const MuscleSystemDef& MuscleSystem::definition() const {
+  return impl_->definition;
 }
-const SimulationParameters& MuscleSystem::parameters() const {
-  return impl_->parameters;
+const StepSettings& MuscleSystem::stepSettings() const {
+  return impl_->stepSettings;
+}
+void MuscleSystem::setStepSettings(const StepSettings& settings) {
+  checkStepSettings(settings, "MuscleSystem::setStepSettings");
+  impl_->stepSettings = settings;
 }
 
 unsigned MuscleSystem::threads() const {
-  return TaskPool::resolve(impl_->parameters.threads, impl_->parameters.scheduler);
+  return TaskPool::resolve(impl_->definition.threads, impl_->definition.scheduler);
 }
 
 ForceResidual MuscleSystem::forceResidual() {

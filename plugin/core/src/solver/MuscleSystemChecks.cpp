@@ -23,27 +23,30 @@ std::string format(btScalar value) {
 
 }  // namespace
 
-void checkStepParameters(const SimulationParameters& parameters, const char* call) {
-  if (!(parameters.timeStep > 0) || !std::isfinite(parameters.timeStep))
-    throw InputError(call, "SimulationParameters::timeStep",
-                     "expected a finite dt > 0 [s], got " + format(parameters.timeStep));
-  if (parameters.adaptiveTimeStep &&
-      (!(parameters.minTimeStep > 0) || !std::isfinite(parameters.minTimeStep)))
-    throw InputError(call, "SimulationParameters::minTimeStep",
+void checkStepSettings(const StepSettings& settings, const char* call) {
+  if (!(settings.timeStep > 0) || !std::isfinite(settings.timeStep))
+    throw InputError(call, "StepSettings::timeStep",
+                     "expected a finite dt > 0 [s], got " + format(settings.timeStep));
+  if (settings.adaptiveTimeStep &&
+      (!(settings.minTimeStep > 0) || !std::isfinite(settings.minTimeStep)))
+    throw InputError(call, "StepSettings::minTimeStep",
                      "expected a finite lower clamp > 0 [s] with the adaptive dt, got " +
-                         format(parameters.minTimeStep));
-  if (parameters.iterations < 1)
+                         format(settings.minTimeStep));
+  if (settings.iterations < 1)
     throw InputError(
-        call, "SimulationParameters::iterations",
-        "expected at least 1 iteration per step, got " + std::to_string(parameters.iterations));
-  if (parameters.projectiveHistory < 0 || parameters.projectiveHistory > kMaxProjectiveHistory)
-    throw InputError(call, "SimulationParameters::projectiveHistory",
+        call, "StepSettings::iterations",
+        "expected at least 1 iteration per step, got " + std::to_string(settings.iterations));
+}
+
+void checkDefinition(const MuscleSystemDef& def, const char* call) {
+  checkStepSettings(def.stepSettings, call);
+  if (def.projectiveHistory < 0 || def.projectiveHistory > kMaxProjectiveHistory)
+    throw InputError(call, "MuscleSystemDef::projectiveHistory",
                      "expected 0 to " + std::to_string(kMaxProjectiveHistory) + " pairs, got " +
-                         std::to_string(parameters.projectiveHistory));
-  if (!(parameters.initialNoise >= 0) || !(parameters.initialNoise <= kMaxCoordinate))
-    throw InputError(
-        call, "SimulationParameters::initialNoise",
-        "expected a displacement in [0, 1e6] m, got " + format(parameters.initialNoise));
+                         std::to_string(def.projectiveHistory));
+  if (!(def.initialNoise >= 0) || !(def.initialNoise <= kMaxCoordinate))
+    throw InputError(call, "MuscleSystemDef::initialNoise",
+                     "expected a displacement in [0, 1e6] m, got " + format(def.initialNoise));
 }
 
 void checkPoints(std::span<const btVector3> points, const std::string& call,

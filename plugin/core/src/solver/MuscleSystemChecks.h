@@ -10,10 +10,13 @@
 
 namespace fibremss {
 
-/// Time step parameters a step can run with: dt finite > 0 (and the adaptive lower clamp
-/// too), at least one iteration, initial noise finite in [0, kMaxCoordinate]. Allocates only
-/// to throw (step() calls it).
-void checkStepParameters(const SimulationParameters& parameters, const char* call);
+/// Step settings a step can run with: dt finite > 0 (and the adaptive lower clamp too), at least
+/// one iteration.
+void checkStepSettings(const StepSettings& settings, const char* call);
+
+/// A definition a system can be built with: its step settings (checkStepSettings), a projective
+/// history of 0 to kMaxProjectiveHistory pairs, initial noise finite in [0, kMaxCoordinate].
+void checkDefinition(const MuscleSystemDef& def, const char* call);
 
 /// Every point finite and within ±kMaxCoordinate (`what`: "particle", "sphere centre", ...).
 void checkPoints(std::span<const btVector3> points, const std::string& call,

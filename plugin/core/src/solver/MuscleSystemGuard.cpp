@@ -1,4 +1,4 @@
-// The numerical guard around one MuscleSystem step (SimulationParameters::onFailure). Every
+// The numerical guard around one MuscleSystem step (MuscleSystemDef::onFailure). Every
 // step saves the state it changes (muscles' positions, previous, velocities; bones' transforms;
 // the last dt); a step whose stats report NaN/inf or an explosion is checked muscle by muscle,
 // and unless the policy is Report it is rolled back and repeated: with half the dt cap and twice
@@ -60,7 +60,7 @@ double extent(const std::vector<btVector3>& points) {
 /// The step size of `requested` with the dt cap (and the lower clamp) divided by 2^halvings and
 /// the iterations multiplied by it, so that the step still covers the same bone motion, in
 /// smaller iterations.
-StepSize smallerSteps(const SimulationParameters& requested, int halvings) {
+StepSize smallerSteps(const StepSettings& requested, int halvings) {
   const int factor = 1 << halvings;
   StepSize smaller;
   smaller.timeStep = requested.timeStep / static_cast<btScalar>(factor);
@@ -230,18 +230,18 @@ void guardStats(const GuardOutcome& outcome, size_t heldBones, size_t frozen,
 }  // namespace
 
 StepSize MuscleSystem::Impl::stepSize(int halvings) const {
-  if (!(duration > 0)) return smallerSteps(parameters, halvings);
+  if (!(duration > 0)) return smallerSteps(stepSettings, halvings);
   // k = max(iterations, ⌈duration / dt⌉) iterations of duration / k, dt the smaller of
   // timeStep and every muscle's stable dt (springs and volume term: an exact step has no
   // adaptive bound).
-  SimulationParameters exact = parameters;
-  btScalar bound = parameters.timeStep;
+  StepSettings exact = stepSettings;
+  btScalar bound = stepSettings.timeStep;
   for (uint32_t slot : muscles.order)
     if (!muscles.states[slot]->frozen)
       bound = std::min(bound, muscles.states[slot]->stableTimeStep);
   const double split = std::ceil(double(duration) / double(bound));
   const bool shortened = split > kMaxExactIterations;
-  exact.iterations = std::max(parameters.iterations, int(std::min(split, kMaxExactIterations)));
+  exact.iterations = std::max(stepSettings.iterations, int(std::min(split, kMaxExactIterations)));
   exact.timeStep = exact.minTimeStep =
       shortened ? bound : duration / static_cast<btScalar>(exact.iterations);
   StepSize size = smallerSteps(exact, halvings);
@@ -261,7 +261,7 @@ void MuscleSystem::Impl::breakMuscles() {
 void MuscleSystem::Impl::guardedStep() {
   const Clock::time_point start = Clock::now();
   const uint64_t number = stepCount++;
-  const FailurePolicy policy = parameters.onFailure;
+  const FailurePolicy policy = definition.onFailure;
   const bool rollback = policy != FailurePolicy::Report;
   saveStepStart(muscles, bones, rollback);
   const btScalar goodPreviousDt = previousDt;
@@ -285,7 +285,7 @@ void MuscleSystem::Impl::guardedStep() {
       break;
     }
     const bool retry = policy == FailurePolicy::Retry &&
-                       outcome.retries < std::min(parameters.maxRetries, kMaxHalvings);
+                       outcome.retries < std::min(definition.maxRetries, kMaxHalvings);
     // Flagged, but no muscle fails the check (only tiny springs beyond 3×): the state is good.
     if (blameMuscles(muscles, rollback && !retry, outcome) == 0) break;
     if (!rollback) {
@@ -300,20 +300,20 @@ void MuscleSystem::Impl::guardedStep() {
 
   // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
   // started) and is pushed out of them.
-  const bool velocities = integratorFor(parameters.integrator).usesVelocities();
+  const bool velocities = integratorFor(definition.integrator).usesVelocities();
   const auto carryFrozen = [&](MuscleState& state) {
     resolveBones(state);
     followBones(state, BoneMotion::SinceStepStart);
     // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
     ThreadScratch& thread = scratch.front();
     state.pinched = state.pinchedInStep = 0;
-    if (parameters.muscleBone && state.bonesMoving)
+    if (definition.muscleBone && state.bonesMoving)
       for (int round = 0; round < kFrozenRounds; ++round) {
         refitTree(state);
         for (uint32_t slot : bones.order)
           collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
         recordPushes(state);
-        applyPushes(state, velocities, parameters.slidingContacts);
+        applyPushes(state, velocities, definition.slidingContacts);
       }
     thread.contacts.clear();
     deform(state);

@@ -1,5 +1,5 @@
 #pragma once
-// The numerical guard of a MuscleSystem step (internal; SimulationParameters::onFailure): the
+// The numerical guard of a MuscleSystem step (internal; MuscleSystemDef::onFailure): the
 // last good state of a muscle (saved at the start of every step, restored after a failed one)
 // and the per-muscle check that attributes a failed step to the muscles that failed.
 #include <cstddef>

@@ -105,12 +105,12 @@ std::string handleText(const char* kind, const Handle& handle) {
          std::to_string(handle.generation) + "}";
 }
 
-/// The sizes of one step attempt: the parameters', or smaller while the guard retries a failed
-/// step (the parameters themselves are never changed by a step).
+/// The sizes of one step attempt: the step settings', or smaller while the guard retries a failed
+/// step (the settings themselves are never changed by a step).
 struct StepSize {
-  btScalar timeStep = 0;     ///< largest dt (SimulationParameters::timeStep) [s]
-  btScalar minTimeStep = 0;  ///< smallest adaptive dt (SimulationParameters::minTimeStep) [s]
-  int iterations = 1;        ///< iteration cap (SimulationParameters::iterations, at least 1)
+  btScalar timeStep = 0;     ///< largest dt (StepSettings::timeStep) [s]
+  btScalar minTimeStep = 0;  ///< smallest adaptive dt (StepSettings::minTimeStep) [s]
+  int iterations = 1;        ///< iteration cap (StepSettings::iterations, at least 1)
   /// MuscleTime::Dynamic: exactly `iterations` iterations of the fixed dt `timeStep`, bones
   /// moving over all of them, whatever the stop rule and adaptiveTimeStep say.
   bool exact = false;
@@ -120,12 +120,13 @@ struct StepSize {
 
 /// The private state of a MuscleSystem; the step pipeline lives in MuscleSystemStep.cpp.
 struct MuscleSystem::Impl {
-  SimulationParameters parameters;             ///< how to step
+  MuscleSystemDef definition;                  ///< what the system was built with
+  StepSettings stepSettings;                   ///< what the next step runs with
   StepStats stats;                             ///< what the last step did
   Slots<MuscleState> muscles;                  ///< muscle states by slot
   Slots<BoneState> bones;                      ///< bone states by slot
   ContactLog contacts;                         ///< contacts of the last iteration, for drawing
-  std::unique_ptr<TaskPool> pool;              ///< worker threads (SimulationParameters::threads)
+  std::unique_ptr<TaskPool> pool;              ///< worker threads (MuscleSystemDef::threads)
   std::vector<ThreadScratch> scratch;          ///< per thread of the pool
   std::vector<uint32_t> active;                ///< unfrozen muscle slots, largest first
   std::vector<MuscleIterationResult> results;  ///< per muscle slot, this iteration
@@ -174,7 +175,7 @@ struct MuscleSystem::Impl {
     return *state;
   }
 
-  /// Starts the pool for parameters.threads and sizes the per-thread and per-muscle scratch;
+  /// Starts the pool for definition.threads and sizes the per-thread and per-muscle scratch;
   /// allocates only when the thread count or the bodies changed (never in the iterations).
   void prepareWorkers();
   /// Runs task(state, thread) for every active muscle on the pool (`phase` names the run in
@@ -206,7 +207,7 @@ struct MuscleSystem::Impl {
   btScalar timeStep(const StepSize& size) const;
   using Clock = std::chrono::steady_clock;
   double distanceToEquilibrium(int settled);
-  /// Whether parameters.stopRule ends the step after this iteration (the cap aside).
+  /// Whether stepSettings.stopRule ends the step after this iteration (the cap aside).
   bool stopRuleMet(bool arrived, int settled, Clock::time_point stepStart);
   /// Iterations between two checks of the residual stop rule (each costs about a forces pass).
   static constexpr int kResidualCheckEvery = 16;
@@ -247,7 +248,7 @@ struct MuscleSystem::Impl {
   /// (projective) one per kMaxTurnPerIteration of the largest bone turn when that is more.
   int iterationsFor(int requested) const;
   /// The sizes of a step attempt after `halvings` retries (smaller dt, more iterations): the
-  /// parameters', or those of a `duration` step (StepSize::exact).
+  /// step settings', or those of a `duration` step (StepSize::exact).
   StepSize stepSize(int halvings) const;
   // Contact bodies (MuscleSystemContact.cpp): read at each attempt's start, collided after every
   // iteration's response, their totals made into bodyResults at the end.

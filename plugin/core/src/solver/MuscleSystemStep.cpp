@@ -68,7 +68,7 @@ void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
     state.positions[i] =
         fixed ? *fixed * settings.restPositions[i]
               : pretransformPoint(settings, state.boneTransforms, i, settings.restPositions[i],
-                                  parameters.blendedPretransform, parameters.pretransformBlend);
+                                  definition.blendedPretransform, definition.pretransformBlend);
     state.previous[i] = state.positions[i];
     state.velocities[i].setZero();
   }
@@ -79,8 +79,8 @@ void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
 void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities) const {
   if (!state.bonesMoving) return;
   const MuscleSettings& settings = *state.settings;
-  const bool blended = parameters.blendedPretransform;
-  const PretransformBlend blend = parameters.pretransformBlend;
+  const bool blended = definition.blendedPretransform;
+  const PretransformBlend blend = definition.pretransformBlend;
   if (blended && !settings.blendWeight.empty() && blend == PretransformBlend::DualQuaternion)
     return pretransformDualQuaternions(state, rotateVelocities);
 #if FIBREMSS_SSE_PRETRANSFORM
@@ -106,8 +106,8 @@ void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities)
 void MuscleSystem::Impl::movePretransformed(MuscleState& state, uint32_t i,
                                             bool rotateVelocities) const {
   const MuscleSettings& settings = *state.settings;
-  const bool blended = parameters.blendedPretransform;
-  const PretransformBlend blend = parameters.pretransformBlend;
+  const bool blended = definition.blendedPretransform;
+  const PretransformBlend blend = definition.pretransformBlend;
   state.positions[i] =
       pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended, blend);
   state.previous[i] =
@@ -156,8 +156,8 @@ void MuscleSystem::Impl::followFixed(MuscleState& state) const {
 }
 
 void MuscleSystem::Impl::prepareWorkers() {
-  const TaskScheduler& host = parameters.scheduler;
-  const unsigned threads = TaskPool::resolve(parameters.threads, host);
+  const TaskScheduler& host = definition.scheduler;
+  const unsigned threads = TaskPool::resolve(definition.threads, host);
   if (!pool || pool->threads() != threads || !(pool->host() == host))
     pool = std::make_unique<TaskPool>(threads, host);
   scratch.resize(threads);
@@ -268,7 +268,7 @@ void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) cons
     state.bonesMoving = true;
   }
   state.treeFollowed = state.bonesMoving && !arrived;
-  pretransform(state, integratorFor(parameters.integrator).usesVelocities());
+  pretransform(state, integratorFor(definition.integrator).usesVelocities());
   followFixed(state);
 }
 
@@ -288,7 +288,7 @@ double MuscleSystem::Impl::threadShare(
 
 // The dt of this iteration: fixed, or eq 5.1 over all muscles clamped to [min, max].
 btScalar MuscleSystem::Impl::timeStep(const StepSize& size) const {
-  if (size.exact || !parameters.adaptiveTimeStep) return size.timeStep;
+  if (size.exact || !stepSettings.adaptiveTimeStep) return size.timeStep;
   btScalar dt = size.timeStep;
   for (uint32_t slot : active) dt = std::min(dt, results[slot].safeTimeStep);
   return std::max(dt, size.minTimeStep);
@@ -348,21 +348,21 @@ void MuscleSystem::Impl::pushMusclePairs(MuscleState& state, uint32_t slot,
 // are applied by the next forces phase (or applyResponse after the last iteration).
 void MuscleSystem::Impl::collide() {
   contacts.clear();
-  if (!parameters.muscleMuscle && !parameters.muscleBone) {
+  if (!definition.muscleMuscle && !definition.muscleBone) {
     // A round without contacts: what the last response pushed holds no longer (contactNormal).
     for (uint32_t slot : active) ++muscles.states[slot]->contactRound;
     return;
   }
   Clock::time_point start = Clock::now();
-  if (parameters.muscleMuscle) collideMusclePairs();
+  if (definition.muscleMuscle) collideMusclePairs();
   stats.timing.muscleCd += millisecondsSince(start);
   start = Clock::now();
   forEachMuscle("pushes and bones", [&](MuscleState& state, uint32_t slot, unsigned thread) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point pushesStart = Clock::now();
-    if (parameters.muscleMuscle) pushMusclePairs(state, slot, scratch[thread].stack);
+    if (definition.muscleMuscle) pushMusclePairs(state, slot, scratch[thread].stack);
     const Clock::time_point boneStart = Clock::now();
-    if (parameters.muscleBone)
+    if (definition.muscleBone)
       for (uint32_t boneSlot : bones.order)
         collideMuscleBone(state, *bones.states[boneSlot], scratch[thread].stack,
                           scratch[thread].contacts);
@@ -386,10 +386,10 @@ void MuscleSystem::Impl::collide() {
 // The pushes of the last collide() on a muscle (response), once.
 void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   if (!pushesPending) return;
-  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
-  const bool holds = integrator.holdsContacts(parameters);
+  const TimeIntegrator& integrator = integratorFor(definition.integrator);
+  const bool holds = integrator.holdsContacts(definition);
   if (record || holds) recordPushes(state);
-  applyPushes(state, integrator.usesVelocities(), parameters.slidingContacts);
+  applyPushes(state, integrator.usesVelocities(), definition.slidingContacts);
   if (holds) leaveContactSlop(state, kContactSlop);
 }
 
@@ -456,8 +456,8 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
   result.forces.exploded = result.forces.overstretched > 0;
   if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
     result.volumeMs = 0;
-  addExternalForces(state, parameters.gravity, state.forces);
-  if (parameters.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+  addExternalForces(state, definition.gravity, state.forces);
+  if (stepSettings.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
   result.forcesMs += millisecondsSince(start);
 }
 
@@ -509,11 +509,11 @@ void MuscleSystem::Impl::forcesPhase(bool bonesMove) {
 void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btScalar dt) {
   const Clock::time_point start = Clock::now();
   const btScalar lastDt = previousDt > 0 ? previousDt : dt;
-  const bool refit = parameters.muscleMuscle || parameters.muscleBone;
+  const bool refit = definition.muscleMuscle || definition.muscleBone;
   forEachMuscle("integrate and refit", [&](MuscleState& state, uint32_t slot, unsigned) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
-    const IntegrationResult integration = integrator.advance(state, parameters, dt, lastDt);
+    const IntegrationResult integration = integrator.advance(state, definition, dt, lastDt);
     // The projection runs where the forces found a spring near the limit. The iteration's
     // displacement is the projection's end's when it moved particles: at a limited equilibrium
     // the two cancel, as the stop rules expect.
@@ -569,19 +569,19 @@ double MuscleSystem::Impl::distanceToEquilibrium(int settled) {
 }
 
 bool MuscleSystem::Impl::stopRuleMet(bool arrived, int settled, Clock::time_point stepStart) {
-  switch (parameters.stopRule) {
+  switch (stepSettings.stopRule) {
     case StopRule::Converged:
-      return arrived && stats.meanDisplacement < parameters.epsilon;
+      return arrived && stats.meanDisplacement < stepSettings.epsilon;
     case StopRule::TimeBudget:
-      return millisecondsSince(stepStart) >= parameters.budgetMs;
+      return millisecondsSince(stepStart) >= stepSettings.budgetMs;
     case StopRule::SpringDeviation:
-      return arrived && stats.springDeviationRatio < parameters.deviationEpsilon;
+      return arrived && stats.springDeviationRatio < stepSettings.deviationEpsilon;
     case StopRule::Equilibrium:
-      return arrived && distanceToEquilibrium(settled) < parameters.tolerance;
+      return arrived && distanceToEquilibrium(settled) < stepSettings.tolerance;
     case StopRule::Residual:
       if (!arrived || settled % kResidualCheckEvery != 0) return false;
       applyResponse();  // the residual of the state this iteration leaves (bit for bit as later)
-      return residualOf(active).summary().rmsDisplacement < parameters.tolerance;
+      return residualOf(active).summary().rmsDisplacement < stepSettings.tolerance;
     default:
       return false;
   }
@@ -592,7 +592,7 @@ ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
   // Every muscle's forces: a contact pair's reaction depends on both muscles'.
   const std::vector<uint32_t>& all = muscles.order;
   const auto task = [&](size_t k, unsigned) {
-    muscleForceResidual(*muscles.states[all[k]], parameters.gravity);
+    muscleForceResidual(*muscles.states[all[k]], definition.gravity);
   };
   if (pool) {
     pool->run(all.size(), task, "residual");
@@ -606,7 +606,7 @@ ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
 }
 
 int MuscleSystem::Impl::iterationsFor(int requested) const {
-  if (parameters.integrator != Integrator::Projective) return requested;
+  if (definition.integrator != Integrator::Projective) return requested;
   double turn = 0;
   for (uint32_t slot : bones.order) {
     const BoneState& bone = *bones.states[slot];
@@ -619,10 +619,10 @@ int MuscleSystem::Impl::iterationsFor(int requested) const {
 void MuscleSystem::Impl::step(const StepSize& size) {
   const Clock::time_point stepStart = Clock::now();
   stats = StepStats{};
-  const TimeIntegrator& integrator = integratorFor(parameters.integrator);
+  const TimeIntegrator& integrator = integratorFor(definition.integrator);
   int cap = size.iterations;
   // The solve holds what the contacts' reactions hold (ContactReactions.cpp).
-  const bool pairReactionsHeld = integrator.holdsContacts(parameters) && parameters.pairReactions;
+  const bool pairReactionsHeld = integrator.holdsContacts(definition) && definition.pairReactions;
   prepareWorkers();
   // Largest muscles first: handed out in this order, the threads finish close together.
   active.clear();
@@ -644,7 +644,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     if (bone.heldNonFinite) bone.target = bone.current;
   }
   // The thesis rebuilt everything each step: bones jump, particles restart from rest.
-  const bool rebuild = parameters.rebuildEveryStep;
+  const bool rebuild = definition.rebuildEveryStep;
   int motionIterations = 0;
   if (rebuild) {
     for (uint32_t slot : bones.order) {
@@ -660,7 +660,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     motionIterations =
         size.exact
             ? cap
-            : std::clamp(static_cast<int>(std::lround(parameters.motionFraction * cap)), 1, cap);
+            : std::clamp(static_cast<int>(std::lround(stepSettings.motionFraction * cap)), 1, cap);
   }  // else no bone moves in this step: the stop rules need not wait for an arrival
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
