@@ -32,12 +32,12 @@ using testing::makeSpheres;
 /// but clear; the second step carries the plate past the particle's centre (0.5 mm beyond its
 /// middle). Returns the particle's height above the plate's middle after every step.
 std::vector<btScalar> plateSweep(bool recovery) {
-  MuscleSystemDef parameters = testing::verletDef();
-  parameters.stepSettings.iterations = 1;
-  parameters.stepSettings.adaptiveTimeStep = false;
-  parameters.boneCollision = BoneCollision::DistanceField;
-  parameters.distanceFieldCell = 0.0005;
-  parameters.penetrationRecovery = recovery;
+  MuscleSystemDef def = testing::verletDef();
+  def.stepSettings.iterations = 1;
+  def.stepSettings.adaptiveTimeStep = false;
+  def.boneCollision = BoneCollision::DistanceField;
+  def.distanceFieldCell = 0.0005;
+  def.penetrationRecovery = recovery;
   MuscleSystem system(def);
   auto plate = testing::makeBone();
   plate->mesh = makeBox({0, 0, 0}, {0.03, 0.002, 0.03}, {6, 1, 6});
@@ -159,7 +159,7 @@ TEST(Pinch, TheDefaultSolverInOneToFiveIterationsPerPoseNeverRollsBack) {
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   for (int iterations = 1; iterations <= 5; ++iterations) {
     MuscleSystemDef def = scene.simulation;
-    parameters.stepSettings.iterations = iterations;
+    def.stepSettings.iterations = iterations;
     MuscleSystem system(def);
     const SceneHandles handles = addScene(system, prepared);
     size_t trapped = 0;
