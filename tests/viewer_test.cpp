@@ -363,6 +363,66 @@ TEST(ViewerColourBar, EveryArrayStatesWhatItMeasures) {
   EXPECT_EQ(viewer::unitOf("fibre_stretch", "mm"), "current / rest length along the fibres");
 }
 
+/// The probe's colour (RenderSettings::toolColour), lit: green above red and blue.
+bool isToolColour(const std::array<int, 3>& c) {
+  return c[1] > c[0] + 40 && c[1] > c[2] + 40;
+}
+
+/// The rightmost column of row `y` in the first muscle's colour (-1: none).
+int rightmostMuscleColumn(const Image& image, int y) {
+  for (int x = image.width - 1; x >= 0; --x)
+    if (isFirstMuscleColour(image.at(x, y))) return x;
+  return -1;
+}
+
+TEST(Viewer, AProbeDrivenByThePointerPressesTheMuscleAndThePanelShowsItsForce) {
+  TemporaryDirectory directory("fibremss_viewer_test");
+  // fusiform from the front at its last pose (the third step on), with the panel.
+  viewer::ViewerOptions options = screenshotOptions("", 3);
+  options.scene = "fusiform";
+  options.width = 720;
+  options.height = 480;
+  options.hideUi = false;
+  options.azimuthDeg = 0;
+  options.elevationDeg = 0;
+  // The pointer's path: from 40 mm right of the belly's axis to 12 mm (the 5 mm probe 13 mm into
+  // the 20 mm belly), in the view plane; first where the muscle lies undisturbed, as many steps on.
+  const viewer::ViewerResult framing = [&] {
+    viewer::ViewerOptions still = options;
+    still.screenshot = (directory.path() / "still.png").string();
+    return viewer::runViewer(still);
+  }();
+  auto pixel = [&](float xMm) {
+    return framing.camera.project({xMm * 1e-3f, -0.015f, 0}, framing.viewWidth, framing.height);
+  };
+  const viewer::Pixel from = pixel(40), to = pixel(12);
+  ASSERT_TRUE(from.visible && to.visible);
+  options.tool = viewer::ToolMode::Probe;
+  options.pointer = viewer::dragPath(from.x, from.y, to.x, to.y);
+  viewer::ViewerOptions still = options;
+  still.tool = viewer::ToolMode::Camera;
+  still.pointer.clear();
+  still.steps = 3 + int(options.pointer.size()) + 1;
+  still.screenshot = (directory.path() / "undisturbed.png").string();
+  const viewer::ViewerResult undisturbed = viewer::runViewer(still);
+  options.screenshot = (directory.path() / "probe.png").string();
+  const viewer::ViewerResult probed = viewer::runViewer(options);
+
+  EXPECT_GT(probed.toolForce, 0) << "the panel showed no force on the probe";
+  EXPECT_EQ(undisturbed.toolForce, 0);
+  const Image before(still.screenshot), after(options.screenshot);
+  ASSERT_EQ(before.width, after.width);
+  const int row = int(to.y), probeColumn = probed.viewX + int(to.x);
+  // The probe is drawn where the pointer left it.
+  EXPECT_TRUE(isToolColour(after.at(probeColumn, row)));
+  // The muscle's edge on the probe's row moved in, under the probe (by at least 3 px).
+  const int edgeBefore = rightmostMuscleColumn(before, row);
+  const int edgeAfter = rightmostMuscleColumn(after, row);
+  ASSERT_GT(edgeBefore, probed.viewX);
+  EXPECT_GT(edgeBefore, probeColumn);  // undisturbed, the belly reaches past the probe's centre
+  EXPECT_LT(edgeAfter, edgeBefore - 3);
+}
+
 TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   const std::string cli = std::string(FIBREMSS_CLI) + " view ";
   EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);
@@ -375,6 +435,8 @@ TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   EXPECT_EQ(runProcess(cli + "fusiform --camera 1 --screenshot /tmp/x.png").exitCode, 2);
   // A scene stepped live plays without end: no picture to take after it.
   EXPECT_EQ(runProcess(cli + "fusiform --play --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --tool blade --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --drag 1,2,3 --screenshot /tmp/x.png").exitCode, 2);
 }
 
 }  // namespace

@@ -23,6 +23,7 @@
 #include "fibremss/MuscleMetrics.h"
 #include "fibremss/Output.h"
 #include "fibremss/Progress.h"
+#include "fibremss/ToolRun.h"
 
 namespace fibremss::cli {
 namespace {
@@ -181,7 +182,7 @@ void openOutDir(const RunArgs& args, const LoadedScene& scene,
   if (outDir->removedTemporaries() > 0)
     std::fprintf(stderr, "removed %zu temporary file(s) an interrupted run left in %s\n",
                  outDir->removedTemporaries(), args.out.c_str());
-  for (const char* file : {"/summary.json", "/soak.csv", "/series.csv"})
+  for (const char* file : {"/summary.json", "/soak.csv", "/series.csv", "/ticks.csv"})
     removeOutputFile(args.out + file);
   writeFileAtomically(args.out + "/scene.json", scene.json);
 }
@@ -242,6 +243,49 @@ void writeRunFiles(const std::string& out, const RunMetrics& metrics,
   writeFileAtomically(out + "/summary.json", summary.dump(2) + "\n");
 }
 
+/// A scene with a tool: its script tick by tick (HapticTool), the force trace into ticks.csv, the
+/// figures into summary.json and on stdout.
+void runToolTicks(const RunArgs& args, const LoadedScene& scene, const PreparedScene& prepared) {
+  std::fprintf(stderr, "%d ticks of %.3g ms ...\n", scene.tool.ticks(), scene.tool.tickTime * 1e3);
+  const ToolRunResult result = runTool(scene, prepared);
+  const double peak = result.peakForce;
+  const nlohmann::json summary{{"scene_source", scene.source},
+                               {"tool",
+                                {{"ticks", result.ticks.size()},
+                                 {"tick_ms", scene.tool.tickTime * 1e3},
+                                 {"threads", result.threads},
+                                 {"wall_seconds", result.wallSeconds},
+                                 {"cpu_seconds", result.cpuSeconds},
+                                 {"ticks_per_second", result.ticksPerSecond},
+                                 {"peak_force_n", peak},
+                                 {"slide_max_jump_n", result.slideJump},
+                                 {"slide_max_jump_of_peak", peak > 0 ? result.slideJump / peak : 0},
+                                 {"first_contact_tick", result.firstContact},
+                                 {"failed", result.failed}}}};
+  if (!args.out.empty()) {
+    writeFileAtomically(args.out + "/ticks.csv", ticksCsv(scene, result));
+    writeFileAtomically(args.out + "/summary.json", summary.dump(2) + "\n");
+  }
+  if (args.json) {
+    std::cout << summary.dump(2) << "\n";
+  } else {
+    std::printf(
+        "%s: %zu ticks of %.3g ms in %.3f s wall (%.3f s CPU): %.0f ticks per second "
+        "(%d threads)\n",
+        scene.name.c_str(), result.ticks.size(), scene.tool.tickTime * 1e3, result.wallSeconds,
+        result.cpuSeconds, result.ticksPerSecond, result.threads);
+    std::printf(
+        "  peak force %.4g N; first contact at tick %d; largest tick-to-tick jump while "
+        "sliding %.4g N (%.2f %% of the peak)\n",
+        peak, result.firstContact + 1, result.slideJump,
+        peak > 0 ? 100 * result.slideJump / peak : 0.0);
+    if (!args.out.empty())
+      std::printf("  wrote %s/ticks.csv, %s/summary.json\n", args.out.c_str(), args.out.c_str());
+  }
+  std::fflush(stdout);
+  if (result.failed) throw CLI::RuntimeError(kExitSimulationFailed);
+}
+
 void run(const RunArgs& args) {
   const LoadedScene scene = loadScene(args.scene.scene, args.scene.overrides);
   printWarnings(scene.warnings);
@@ -256,6 +300,7 @@ void run(const RunArgs& args) {
   std::fprintf(stderr, "prepared in %s\n", formatDuration(prepared.report.seconds).c_str());
   std::optional<OutputDirectory> outDir;  // locked against a second run into it
   if (!args.out.empty()) openOutDir(args, scene, outDir);
+  if (scene.tool.present) return runToolTicks(args, scene, prepared);
 
   FibreRunOptions options = runOptions(args);
   const int steps = args.steps >= 0 ? args.steps : std::max(scene.poseCount, 1);

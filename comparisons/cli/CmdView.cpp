@@ -47,6 +47,8 @@ struct ViewArgs {
   std::string draw = "none";      ///< --draw list
   std::vector<float> camera;      ///< --camera AZIMUTH,ELEVATION[,ZOOM]
   std::string size = "1280x800";  ///< --size WxH
+  std::string tool = "camera";    ///< --tool
+  std::vector<float> drag;        ///< --drag X0,Y0,X1,Y1
 };
 
 void view(ViewArgs& args) {
@@ -56,6 +58,13 @@ void view(ViewArgs& args) {
   options.muscleDebugFlags = drawFlags(args.draw);
   if (args.camera.size() < 2 || args.camera.size() > 3)
     throw InputError("--camera", "", "expected AZIMUTH,ELEVATION[,ZOOM] (degrees)");
+  options.tool = args.tool == "grab"    ? viewer::ToolMode::Grab
+                 : args.tool == "probe" ? viewer::ToolMode::Probe
+                                        : viewer::ToolMode::Camera;
+  if (!args.drag.empty() && args.drag.size() != 4)
+    throw InputError("--drag", "", "expected X0,Y0,X1,Y1 (pixels of the scene's view)");
+  if (!args.drag.empty())
+    options.pointer = viewer::dragPath(args.drag[0], args.drag[1], args.drag[2], args.drag[3]);
   options.azimuthDeg = args.camera[0];
   options.elevationDeg = args.camera[1];
   if (args.camera.size() == 3) options.zoom = args.camera[2];
@@ -124,6 +133,18 @@ void addViewCommand(CLI::App& app) {
       ->delimiter(',')
       ->capture_default_str();
   command->add_option("--size", args->size, "Window size WIDTHxHEIGHT [px]")->capture_default_str();
+  command
+      ->add_option("--tool", args->tool,
+                   "What the left button does at the start (T switches): turn the camera, grab "
+                   "a particle or drive a probe along the view plane")
+      ->check(oneOf({"camera", "grab", "probe"}))
+      ->capture_default_str();
+  command
+      ->add_option("--drag", args->drag,
+                   "X0,Y0,X1,Y1: the pointer pressed at X0,Y0 of the scene's view and dragged "
+                   "to X1,Y1 with the --tool (a script, one pixel step per frame; with "
+                   "--screenshot the PNG follows it)")
+      ->delimiter(',');
   command->add_flag("--hide-ui", args->options.hideUi, "Start without the panel (H shows it)");
   command->add_flag(
       "--no-bones", [args](int64_t) { args->options.bones = false; },

@@ -64,5 +64,6 @@ Json spherePlanesScene();
 Json cylinderStretchScene();
 Json cylinderTwistScene();
 Json tearScene();
+Json probeScene();  ///< fusiform on a bed, a probe pressing and sliding (a tool)
 
 }  // namespace fibremss::builtin

@@ -12,6 +12,7 @@
 #include "SceneFields.h"
 #include "SceneMotion.h"
 #include "SceneShapes.h"
+#include "SceneTool.h"
 #include "SceneValidation.h"
 #include "fibremss/Error.h"
 #include "fibremss/Geometry.h"
@@ -638,6 +639,11 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   root.set("outputs", outputs.finish());
   root.set("analytic", analytic.finish());
   root.set("reference", reference.finish());
+  if (root.has("tool")) {  // only a scene with a tool says so: the others' JSON stays as it was
+    Fields tool = root.object("tool");
+    result.tool = scene::readTool(tool, reader.scale);
+    root.set("tool", tool.finish());
+  }
   result.json.clear();
   writePretty(root.finish(), 0, result.json);
   return result;

@@ -137,6 +137,16 @@ Vec3 Camera::eye() const {
   return add(target_, scale(backward(azimuth_, elevation_), distance_));
 }
 
+Ray Camera::ray(float x, float y, int width, int height) const {
+  const float tanY = std::tan(radians(fovYDeg / 2)), tanX = tanY * float(width) / float(height);
+  Vec3 r, u;
+  basis(azimuth_, elevation_, r, u);
+  const float right = (2 * x / float(width) - 1) * tanX, up = (1 - 2 * y / float(height)) * tanY;
+  const Vec3 direction =
+      add(scale(backward(azimuth_, elevation_), -1), add(scale(r, right), scale(u, up)));
+  return {eye(), normalised(direction)};
+}
+
 Mat4 Camera::view() const {
   const Vec3 back = backward(azimuth_, elevation_);
   Vec3 r, u;

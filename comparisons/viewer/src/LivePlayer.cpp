@@ -68,7 +68,14 @@ Playback LivePlayer::controls(const Snapshot& shown) {
     }
     wake_.notify_one();
   }
-  return {shown_.shownPose, pose, shown.steps};
+  const ToolReading& tool = shown_.tool;
+  const btVector3& f = tool.force;
+  ImGui::Text("pointer (T): %s", toolName(tool.mode));
+  if (tool.engaged)
+    ImGui::Text("  %s %.4g N (%.3g, %.3g, %.3g), %zu contacts",
+                tool.mode == ToolMode::Probe ? "force on the probe" : "pull", f.length(), f.x(),
+                f.y(), f.z(), tool.contacts);
+  return {shown_.shownPose, pose, shown.steps, float(f.length())};
 }
 
 void LivePlayer::timings(const Snapshot& shown) {
@@ -143,8 +150,25 @@ void LivePlayer::advance(int steps) {
       lock, [&] { return newest_.snapshot.version >= 0 && newest_.snapshot.steps >= target; });
 }
 
+void LivePlayer::setPointer(ToolMode mode, const PointerRay& ray) {
+  {
+    std::lock_guard lock(mutex_);
+    // A pointer that moves without the button changes nothing in the scene.
+    const bool wasHeld = pointer_.held;
+    pointer_ = ray;
+    if (mode == toolMode_ && !ray.held && !wasHeld) return;
+    // A tool held (or let go of) moves the muscles: a step shows it.
+    if (mode != ToolMode::Camera && mode == toolMode_)
+      stepsRequested_ = std::max(stepsRequested_, 1);
+    toolMode_ = mode;
+    pointerChanged_ = true;
+  }
+  wake_.notify_one();
+}
+
 bool LivePlayer::hasWork() const {
-  return quit_ || playing_ || stepsRequested_ > 0 || reset_ || pose_ >= 0 || redraw_;
+  return quit_ || playing_ || stepsRequested_ > 0 || reset_ || pose_ >= 0 || redraw_ ||
+         pointerChanged_;
 }
 
 void LivePlayer::work() {
@@ -159,12 +183,16 @@ void LivePlayer::work() {
     redraw_ = false;
     scene_->loop = loop_;
     const DebugRequest debug = debug_;
+    const bool pointer = std::exchange(pointerChanged_, false);
+    const ToolMode mode = toolMode_;
+    const PointerRay ray = pointer_;
     lock.unlock();  // the step runs while the window draws and takes requests
     if (reset) {
       scene_->reset();
       stepMs_.clear();
     }
     if (pose >= 0) scene_->setPose(pose);
+    if (pointer) scene_->applyPointer(mode, ray);
     if (step) stepScene();
     publish(debug);
     lock.lock();
@@ -195,6 +223,7 @@ void LivePlayer::publish(const DebugRequest& debug) {
   next.stats = scene_->lastStep();
   next.shownPose = scene_->shownPose();
   next.nextPose = scene_->pose();
+  next.tool = scene_->toolReading();
   {
     std::lock_guard lock(mutex_);
     next.snapshot.version = newest_.snapshot.version + 1;

@@ -33,6 +33,7 @@ class LivePlayer : public Source {
   void reset() override;
   void setDebug(const DebugRequest& debug) override;
   void advance(int steps) override;
+  void setPointer(ToolMode mode, const PointerRay& ray) override;
 
  private:
   /// What the worker publishes beyond the Snapshot.
@@ -41,6 +42,7 @@ class LivePlayer : public Source {
     StepStats stats;    ///< the last step's statistics and timings
     int shownPose = 0;  ///< the pose of the last step
     int nextPose = 0;   ///< the pose the next step moves the bones to
+    ToolReading tool;   ///< the pointer tool's force as of the last step
   };
 
   void requestSteps(int steps);
@@ -63,8 +65,11 @@ class LivePlayer : public Source {
   bool loop_ = false;
   bool redraw_ = true;
   DebugRequest debug_;
-  Published newest_;           ///< the newest publication, under mutex_
-  std::vector<float> stepMs_;  ///< the worker's: wall time of the recent steps [ms]
+  ToolMode toolMode_ = ToolMode::Camera;  ///< the pointer's mode
+  PointerRay pointer_;                    ///< the pointer
+  bool pointerChanged_ = false;           ///< the mode or the pointer changed since applied
+  Published newest_;                      ///< the newest publication, under mutex_
+  std::vector<float> stepMs_;             ///< the worker's: wall time of the recent steps [ms]
   // The window's, outside the mutex.
   Published shown_;     ///< what the window shows
   std::thread worker_;  ///< last: starts when everything above is ready

@@ -11,6 +11,8 @@ namespace {
 
 /// Bullet's time step per viewer step [s] (rigid bodies only: the muscles take their own dt).
 const btScalar kTimeStep = btScalar(1.0 / 60);
+/// The pointer's probe: a sphere of this radius [m].
+const btScalar kProbeRadius = btScalar(5e-3);
 
 /// Per particle: the mean over the fibre segments it ends of current / rest length.
 void fibreStretch(const MuscleSettings& muscle, std::span<const btVector3> x,
@@ -73,6 +75,8 @@ LiveScene::LiveScene(const std::string& scene, const std::vector<std::string>& o
   boneBodies_ = std::move(added.bodies);
   bones_ = std::move(added.handles.bones);
   muscles_ = std::move(added.handles.muscles);
+  tools_ = std::make_unique<PointerTools>(*world_, kProbeRadius);
+  tools_->setMuscles(muscles_);
   for (size_t b = 0; b < prepared_.bones.size(); ++b) {
     ViewMesh mesh;
     mesh.name = prepared_.bones[b]->name;
@@ -108,6 +112,7 @@ void LiveScene::reset() {
     boneBodies_[b]->setTransform(scene_.bonePose(b, 0));
   world_->stepSimulation(kTimeStep, 0);  // no muscles: only the bones go back to the first pose
   muscles_ = addMuscles(*world_, prepared_, bones_);
+  tools_->setMuscles(muscles_);
   pose_ = shownPose_ = steps_ = 0;
   direction_ = 1;
   updateFrame();
@@ -115,6 +120,12 @@ void LiveScene::reset() {
 
 void LiveScene::setPose(int pose) {
   pose_ = std::clamp(pose, 0, std::max(scene_.poseCount, 1) - 1);
+}
+
+void LiveScene::applyPointer(ToolMode mode, const PointerRay& ray) {
+  tools_->apply(mode, ray);
+  frame_.tools.clear();
+  if (const ViewMesh* probe = tools_->probeMesh()) frame_.tools.push_back(*probe);
 }
 
 void LiveScene::step() {

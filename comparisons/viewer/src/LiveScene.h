@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "PointerTools.h"
 #include "ViewFrame.h"
 #include "fibremss/BoneBody.h"
 #include "fibremss/MuscleWorld.h"
@@ -33,6 +34,10 @@ class LiveScene {
   void reset();
   /// Puts the bones' target at pose `pose` (clamped to the motion), for the next step.
   void setPose(int pose);
+  /// The pointer as a tool (grab, probe) before the next step; the frame shows the probe.
+  void applyPointer(ToolMode mode, const PointerRay& ray);
+  /// The pointer tool's force and contacts as of the last step.
+  ToolReading toolReading() const { return tools_->reading(); }
 
   const LoadedScene& scene() const { return scene_; }
   int pose() const { return pose_; }            ///< the pose the next step moves the bones to
@@ -59,6 +64,7 @@ class LiveScene {
   std::vector<std::unique_ptr<BoneBody>> boneBodies_;  ///< one per scene bone
   std::vector<BoneHandle> bones_;                      ///< the same, in the world
   std::vector<MuscleHandle> muscles_;                  ///< one per scene muscle
+  std::unique_ptr<PointerTools> tools_;                ///< the pointer's grab and probe
   std::vector<std::vector<float>> particleStretch_;    ///< per muscle, per particle (scratch)
   std::vector<std::vector<float>> fibreSegments_;      ///< per muscle: segments per particle
   ViewFrame frame_;

@@ -56,6 +56,8 @@ void Renderer::draw(const ViewFrame& frame, const DebugGeometry& debug, const Ca
     glColor3f(settings.boneColour[0], settings.boneColour[1], settings.boneColour[2]);
     for (const ViewMesh& bone : frame.bones) drawMesh(bone, false);
   }
+  glColor3f(settings.toolColour[0], settings.toolColour[1], settings.toolColour[2]);
+  for (const ViewMesh& tool : frame.tools) drawMesh(tool, false);
   glDisable(GL_LIGHTING);
   drawDebug(debug, settings.pointSize);
 

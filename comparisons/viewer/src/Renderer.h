@@ -31,6 +31,7 @@ struct RenderSettings {
   float pointSize = 3;                  ///< debug points (particles, bone spheres) [px]
   Rgb background{0.16f, 0.17f, 0.20f};  ///< clear colour
   Rgb boneColour{0.86f, 0.84f, 0.76f};  ///< bones' colour
+  Rgb toolColour{0.35f, 0.75f, 0.35f};  ///< the pointer's tools' colour (green)
 };
 
 class Renderer {

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "DebugDrawer.h"
+#include "PointerTools.h"
 #include "ViewFrame.h"
 
 namespace fibremss::viewer {
@@ -22,9 +23,10 @@ struct Snapshot {
 
 /// What the panel's playback part showed, counted from 0 as everywhere in the viewer.
 struct Playback {
-  int counter = 0;  ///< the frame (a run) or pose (live) its text names
-  int slider = 0;   ///< its slider: the frame to show (a run) or the next pose (live)
-  int step = -1;    ///< the step its text names (-1: a run's frame not in its summary)
+  int counter = 0;      ///< the frame (a run) or pose (live) its text names
+  int slider = 0;       ///< its slider: the frame to show (a run) or the next pose (live)
+  int step = -1;        ///< the step its text names (-1: a run's frame not in its summary)
+  float toolForce = 0;  ///< |force| of the pointer's tool its text names [N]
 };
 
 /// What to draw besides the surfaces (through the world's btIDebugDraw when
@@ -57,6 +59,9 @@ class Source {
   /// Goes `steps` steps (frames) forward and returns once that is what fetch()
   /// gives.
   virtual void advance(int steps) = 0;
+  /// The pointer as a tool in `mode` (a scene stepped live steps with it; a run's frames have
+  /// nothing to touch).
+  virtual void setPointer(ToolMode /*mode*/, const PointerRay& /*ray*/) {}
 };
 
 }  // namespace fibremss::viewer

@@ -36,6 +36,7 @@ struct ViewMesh {
 struct ViewFrame {
   std::vector<ViewMesh> muscles;  ///< deformed muscle surfaces
   std::vector<ViewMesh> bones;    ///< bone meshes at rest, placed by their transforms
+  std::vector<ViewMesh> tools;    ///< the pointer's tools (a probe), placed by their transforms
   std::string lengthUnit = "m";   ///< unit of the length arrays: the scene's ("mm" or "m")
 };
 

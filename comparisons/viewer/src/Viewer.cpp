@@ -88,10 +88,11 @@ struct Session {
   Range extremes;         ///< the coloured array's smallest and largest value now
   DebugRequest debug;     ///< what the world's btIDebugDraw draws
   std::string openPath;   ///< the picker's text: a scene name, a .json file or a run's directory
-  bool openRequested = false;  ///< the picker asked to open openPath this frame
-  std::string openError;       ///< why the last pick did not open ("" when it did)
-  Playback playback;           ///< what the panel's playback part showed last
-  float panelOverflow = 0;     ///< how far the panel's widest line ran past its edge [px]
+  bool openRequested = false;        ///< the picker asked to open openPath this frame
+  std::string openError;             ///< why the last pick did not open ("" when it did)
+  Playback playback;                 ///< what the panel's playback part showed last
+  ToolMode tool = ToolMode::Camera;  ///< what the pointer's left button does
+  float panelOverflow = 0;           ///< how far the panel's widest line ran past its edge [px]
   bool quit = false;
 };
 
@@ -124,22 +125,50 @@ float viewAspect(const Session& session, int width, int height) {
   return float(width - panelWidth(session, width)) / float(std::max(height, 1));
 }
 
-/// Left drag orbits, right or middle drag (or shift + left) pans, the wheel
-/// zooms.
-void moveCamera(Camera& camera, int height) {
+/// Left drag orbits (unless a tool has the left button), right or middle drag (or shift + left)
+/// pans, the wheel zooms.
+void moveCamera(Camera& camera, int height, ToolMode tool) {
   const ImGuiIO& io = ImGui::GetIO();
   if (io.WantCaptureMouse) return;
   const bool pan = ImGui::IsMouseDragging(1) || ImGui::IsMouseDragging(2) ||
                    (ImGui::IsMouseDragging(0) && io.KeyShift);
   if (pan)
     camera.pan(-io.MouseDelta.x / float(height), io.MouseDelta.y / float(height));
-  else if (ImGui::IsMouseDragging(0))
+  else if (ImGui::IsMouseDragging(0) && tool == ToolMode::Camera)
     camera.orbit(-0.3f * io.MouseDelta.x, 0.3f * io.MouseDelta.y);
   if (io.MouseWheel != 0) camera.zoom(std::pow(1.15f, io.MouseWheel));
 }
 
-/// Space plays or pauses, S or → steps, R resets, F frames the scene, H hides
-/// the panel, Q quits.
+/// The pointer at pixel (x, y) of the scene's view, its drag plane through the camera's target.
+PointerRay pointerRay(const Camera& camera, float x, float y, const ViewerResult& size, bool held) {
+  const Ray ray = camera.ray(x, y, size.viewWidth, std::max(size.height, 1));
+  auto bullet = [](const Vec3& v) { return btVector3(v[0], v[1], v[2]); };
+  return {bullet(ray.origin), bullet(ray.direction), bullet(camera.target()), held};
+}
+
+/// Hands the pointer to the source: the script's event for window frame `frame` (and waits for
+/// the step it asks for), else the mouse in the scene's view unless the panel has it.
+void drivePointer(Session& session, int frame, const ViewerResult& size) {
+  const std::vector<PointerEvent>& script = session.options.pointer;
+  if (!script.empty()) {
+    // One more step after the last event: the picture shows the muscles where it left them.
+    if (frame == int(script.size())) session.source->advance(1);
+    if (frame >= int(script.size())) return;
+    const PointerEvent& event = script[size_t(frame)];
+    session.source->setPointer(session.tool,
+                               pointerRay(session.camera, event.x, event.y, size, event.held));
+    session.source->advance(0);
+    return;
+  }
+  const ImGuiIO& io = ImGui::GetIO();
+  const bool held = !io.WantCaptureMouse && !io.KeyShift && ImGui::IsMouseDown(0);
+  session.source->setPointer(
+      session.tool,
+      pointerRay(session.camera, io.MousePos.x - float(size.viewX), io.MousePos.y, size, held));
+}
+
+/// Space plays or pauses, S or → steps, R resets, F frames the scene, T switches the pointer's
+/// tool, H hides the panel, Q quits.
 void handleKeys(Session& session, float aspect) {
   if (ImGui::GetIO().WantCaptureKeyboard) return;
   Source& source = *session.source;
@@ -147,6 +176,7 @@ void handleKeys(Session& session, float aspect) {
   if (ImGui::IsKeyPressed(GLFW_KEY_S) || ImGui::IsKeyPressed(GLFW_KEY_RIGHT)) source.step();
   if (ImGui::IsKeyPressed(GLFW_KEY_R, false)) source.reset();
   if (ImGui::IsKeyPressed(GLFW_KEY_F, false)) frameScene(session, aspect);
+  if (ImGui::IsKeyPressed(GLFW_KEY_T, false)) session.tool = nextTool(session.tool);
   if (ImGui::IsKeyPressed(GLFW_KEY_H, false)) session.showUi = !session.showUi;
   if (ImGui::IsKeyPressed(GLFW_KEY_Q, false) || ImGui::IsKeyPressed(GLFW_KEY_ESCAPE, false))
     session.quit = true;
@@ -245,8 +275,9 @@ void drawPanel(Session& session, int width, int height) {
   session.source->timings(session.shown);
   ImGui::Separator();
   ImGui::TextDisabled(
-      "space: play/pause | S: step | R: reset | F: frame the scene | H: hide "
-      "this panel | Q: quit | drag: orbit | right/middle drag: pan | wheel: zoom");
+      "space: play/pause | S: step | R: reset | F: frame the scene | T: pointer tool "
+      "(camera, grab, probe) | H: hide this panel | Q: quit | drag: orbit or the tool | "
+      "right/middle drag: pan | wheel: zoom");
   ImGui::PopItemWidth();
   ImGui::PopTextWrapPos();
   const ImGuiWindow* panel = ImGui::GetCurrentWindow();
@@ -271,17 +302,18 @@ void writeScreenshot(const std::string& path, int width, int height) {
   writeFileAtomically(path, png);
 }
 
-/// One frame: input, steps, panel, drawing; returns the window's and the
-/// scene's size.
-void renderFrame(Window& window, Session& session, ViewerResult& size) {
+/// One frame (the window's `frame`th): input, steps, panel, drawing; returns the window's and
+/// the scene's size.
+void renderFrame(Window& window, Session& session, int frame, ViewerResult& size) {
   ImGui_ImplOpenGL2_NewFrame();
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
   glfwGetFramebufferSize(window.get(), &size.width, &size.height);
   size.viewX = panelWidth(session, size.width);
   size.viewWidth = size.width - size.viewX;
-  moveCamera(session.camera, std::max(size.height, 1));
+  moveCamera(session.camera, std::max(size.height, 1), session.tool);
   handleKeys(session, viewAspect(session, size.width, size.height));
+  drivePointer(session, frame, size);
   session.source->fetch(session.shown);
   const Range range = arrayRange(session.shown.frame, session.render.colourBy, session.extremes);
   if (session.autoRange) session.render.range = range;
@@ -369,8 +401,10 @@ ViewerResult runWindow(Window& window, Session& session) {
   // a run's frames play to the last.
   for (int frame = 0; !glfwWindowShouldClose(window.get()) && !session.quit; ++frame) {
     glfwPollEvents();
-    renderFrame(window, session, result);
-    if (!options.screenshot.empty() && frame >= 2 && !session.source->playing()) {
+    renderFrame(window, session, frame, result);
+    const int lastEvent = int(options.pointer.size()) - 1;
+    if (!options.screenshot.empty() && frame >= std::max(2, lastEvent + 2) &&
+        !session.source->playing()) {
       writeScreenshot(options.screenshot, result.width, result.height);
       break;
     }
@@ -385,6 +419,7 @@ ViewerResult runWindow(Window& window, Session& session) {
   result.step = session.playback.step;
   result.stepSamples = session.shown.stepMs.size();
   result.panelOverflow = session.panelOverflow;
+  result.toolForce = session.playback.toolForce;
   return result;
 }
 
@@ -403,6 +438,17 @@ std::string unitOf(const std::string& array, const std::string& lengthUnit) {
   if (array == "fixed") return "1 fixed, 0 free";
   if (array == "muscle_id") return "";
   return lengthUnit;  // displacement, penetration
+}
+
+std::vector<PointerEvent> dragPath(float x0, float y0, float x1, float y1) {
+  constexpr int kHold = 10;  // frames held at the end
+  const int moves = int(std::ceil(std::max(std::abs(x1 - x0), std::abs(y1 - y0))));
+  std::vector<PointerEvent> path;
+  for (int k = 0; k <= moves + kHold; ++k) {
+    const float t = moves > 0 ? float(std::min(k, moves)) / float(moves) : 1;
+    path.push_back({x0 + t * (x1 - x0), y0 + t * (y1 - y0), true});
+  }
+  return path;
 }
 
 void chooseSource(const std::string& sceneOrRun, ViewerOptions& options) {
@@ -439,6 +485,7 @@ ViewerResult runViewer(const ViewerOptions& options) {
   session.render.bones = options.bones;
   session.render.surfaceOpacity = options.surfaceOpacity;
   session.showUi = !options.hideUi;
+  session.tool = options.tool;
   session.openPath = options.runDir.empty() ? options.scene : options.runDir;
   session.camera.setAngles(options.azimuthDeg, options.elevationDeg);
   frameScene(session, viewAspect(session, options.width, options.height));

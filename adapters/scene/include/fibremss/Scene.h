@@ -66,6 +66,26 @@ struct ReferenceSettings {
   std::string contactSliding = "finite";
 };
 
+/// A tool a script poses at haptic rate (HapticTool): a sphere whose centre moves along straight
+/// segments between waypoints, one pose per tick.
+struct ToolScript {
+  bool present = false;              ///< the scene has a tool
+  double radius = 0;                 ///< the sphere's radius [m]
+  double tickTime = 1e-3;            ///< simulated time per tick [s]
+  std::vector<double> times;         ///< waypoint times from the start, increasing [s]
+  std::vector<btVector3> positions;  ///< the sphere's centre at each waypoint [m]
+  /// Per waypoint: what the segment ending there does ("press", "slide", ...; the first's is
+  /// the start's).
+  std::vector<std::string> phases;
+
+  /// Ticks the script lasts: its last waypoint's time / tickTime, rounded.
+  int ticks() const;
+  /// Where the centre is after `tick` ticks (held at the ends) [m].
+  btVector3 position(int tick) const;
+  /// The phase of the segment tick `tick` lies in.
+  const std::string& phase(int tick) const;
+};
+
 /// A scene resolved into what preparation and simulation take; all SI.
 struct LoadedScene {
   std::string name;                   ///< scene name (built-in name or file stem)
@@ -82,6 +102,7 @@ struct LoadedScene {
   OutputSettings outputs;             ///< output settings
   AnalyticCase analytic;              ///< the exact case it reproduces (type "none": none)
   ReferenceSettings reference;        ///< how its CalculiX reference is solved
+  ToolScript tool;                    ///< a tool posed at haptic rate (present: `tool`)
   std::vector<std::string> warnings;  ///< things found while loading that a run can live with
   std::vector<std::string> notes;     ///< what loading changed that a user should know
                                       ///< (large jumps split into sub-poses, ...)

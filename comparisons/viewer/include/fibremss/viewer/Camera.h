@@ -17,6 +17,12 @@ struct Pixel {
   bool visible = false;  ///< in front of the camera and inside the image
 };
 
+/// A ray from the eye through a pixel [world units]; direction of unit length.
+struct Ray {
+  Vec3 origin{0, 0, 0};
+  Vec3 direction{0, 0, -1};
+};
+
 class Camera {
  public:
   /// Looks at `points` from the current angles in an image of `aspect` (width / height): their
@@ -36,7 +42,11 @@ class Camera {
   /// The pixel a world point lands on in a width × height image.
   Pixel project(const Vec3& point, int width, int height) const;
 
-  Vec3 eye() const;  ///< the camera's position [world units]
+  /// The ray from the eye through pixel (x, y) of a width × height image (the inverse of project).
+  Ray ray(float x, float y, int width, int height) const;
+
+  Vec3 eye() const;                        ///< the camera's position [world units]
+  Vec3 target() const { return target_; }  ///< the point looked at [world units]
   float azimuthDeg() const { return azimuth_; }
   float elevationDeg() const { return elevation_; }
 

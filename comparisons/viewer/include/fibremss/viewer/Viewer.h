@@ -12,6 +12,23 @@
 
 namespace fibremss::viewer {
 
+/// What the pointer's left button does in the scene (T cycles them in the window): turn the
+/// camera, grab a muscle particle and drag it along the view plane, or drive a probe (a sphere
+/// the muscles collide with) along the view plane. A scene stepped live only; a blade would be
+/// one more mode.
+enum class ToolMode { Camera, Grab, Probe };
+
+/// One window frame of a scripted pointer (played instead of the mouse, one event per frame).
+struct PointerEvent {
+  float x = 0;        ///< column from the scene view's left edge [px]
+  float y = 0;        ///< row from the top [px]
+  bool held = false;  ///< the left button is down
+};
+
+/// A pointer pressed at (x0, y0) and dragged to (x1, y1) at most a pixel per frame, held there
+/// for ten more frames [px of the scene's view].
+std::vector<PointerEvent> dragPath(float x0, float y0, float x1, float y1);
+
 /// What to show and how; the defaults open a window on the scene at rest.
 struct ViewerOptions {
   std::string scene;  ///< built-in scene name or .json path
@@ -34,6 +51,10 @@ struct ViewerOptions {
   bool loop = false;                       ///< sweep the motion back and forth past its last pose
   /// Start playing; with a screenshot (a run's frames only) the picture shows where it stopped.
   bool play = false;
+  ToolMode tool = ToolMode::Camera;  ///< what the pointer does at the start
+  /// Pointer events played one per window frame from the first instead of the mouse (each
+  /// waits for the step it asks for); with a screenshot, the picture follows the last.
+  std::vector<PointerEvent> pointer;
 };
 
 /// What a viewer session ended with, to check a screenshot against.
@@ -49,6 +70,7 @@ struct ViewerResult {
   int step = -1;      ///< the step the panel's text named (-1: a run's frame not in its summary)
   size_t stepSamples = 0;   ///< steps in the panel's step-time graph
   float panelOverflow = 0;  ///< how far the panel's widest line ran past its edge [px] (0: fits)
+  float toolForce = 0;      ///< |force| on the probe (or the grab's pull) the panel showed [N]
 };
 
 /// Opens the window and runs until it is closed (or, with a screenshot path, until the PNG is
