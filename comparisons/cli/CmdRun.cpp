@@ -249,19 +249,22 @@ void runToolTicks(const RunArgs& args, const LoadedScene& scene, const PreparedS
   std::fprintf(stderr, "%d ticks of %.3g ms ...\n", scene.tool.ticks(), scene.tool.tickTime * 1e3);
   const ToolRunResult result = runTool(scene, prepared);
   const double peak = result.peakForce;
-  const nlohmann::json summary{{"scene_source", scene.source},
-                               {"tool",
-                                {{"ticks", result.ticks.size()},
-                                 {"tick_ms", scene.tool.tickTime * 1e3},
-                                 {"threads", result.threads},
-                                 {"wall_seconds", result.wallSeconds},
-                                 {"cpu_seconds", result.cpuSeconds},
-                                 {"ticks_per_second", result.ticksPerSecond},
-                                 {"peak_force_n", peak},
-                                 {"slide_max_jump_n", result.slideJump},
-                                 {"slide_max_jump_of_peak", peak > 0 ? result.slideJump / peak : 0},
-                                 {"first_contact_tick", result.firstContact},
-                                 {"failed", result.failed}}}};
+  const nlohmann::json summary{
+      {"scene_source", scene.source},
+      {"tool",
+       {{"ticks", result.ticks.size()},
+        {"tick_ms", scene.tool.tickTime * 1e3},
+        {"threads", result.threads},
+        {"wall_seconds", result.wallSeconds},
+        {"cpu_seconds", result.cpuSeconds},
+        {"iterations_per_tick",
+         double(result.iterations) / double(std::max<size_t>(result.ticks.size(), 1))},
+        {"ticks_per_second", result.ticksPerSecond},
+        {"peak_force_n", peak},
+        {"slide_max_jump_n", result.slideJump},
+        {"slide_max_jump_of_peak", peak > 0 ? result.slideJump / peak : 0},
+        {"first_contact_tick", result.firstContact},
+        {"failed", result.failed}}}};
   if (!args.out.empty()) {
     writeFileAtomically(args.out + "/ticks.csv", ticksCsv(scene, result));
     writeFileAtomically(args.out + "/summary.json", summary.dump(2) + "\n");
@@ -277,7 +280,7 @@ void runToolTicks(const RunArgs& args, const LoadedScene& scene, const PreparedS
     std::printf(
         "  peak force %.4g N; first contact at tick %d; largest tick-to-tick jump while "
         "sliding %.4g N (%.2f %% of the peak)\n",
-        peak, result.firstContact + 1, result.slideJump,
+        peak, result.firstContact, result.slideJump,
         peak > 0 ? 100 * result.slideJump / peak : 0.0);
     if (!args.out.empty())
       std::printf("  wrote %s/ticks.csv, %s/summary.json\n", args.out.c_str(), args.out.c_str());

@@ -34,7 +34,7 @@ void measureTicks(const ToolScript& script, ToolRunResult& result) {
   for (size_t t = 0; t < result.ticks.size(); ++t) {
     const btScalar force = result.ticks[t].force.length();
     result.peakForce = std::max(result.peakForce, double(force));
-    if (force > 0 && result.firstContact < 0) result.firstContact = int(t);
+    if (force > 0 && result.firstContact < 0) result.firstContact = int(t) + 1;
     const int tick = int(t) + 1;
     if (t > 0 && script.phase(tick) == "slide" && script.phase(tick - 1) == "slide")
       result.slideJump = std::max(
@@ -64,6 +64,7 @@ ToolRunResult runTool(const LoadedScene& scene, const PreparedScene& prepared, i
     pose.setOrigin(script.position(tick));
     const ContactWrench wrench = tool.tick(pose);
     result.failed = result.failed || system.lastStep().failed;
+    result.iterations += system.lastStep().iterations;
     result.ticks[t] = {tick * script.tickTime, pose.getOrigin(), wrench.force, wrench.contacts};
   }
   result.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;

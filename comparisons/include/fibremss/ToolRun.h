@@ -25,10 +25,11 @@ struct ToolRunResult {
   double wallSeconds = 0;             ///< wall time of the ticks, force queries included [s]
   double ticksPerSecond = 0;          ///< ticks / wallSeconds
   double cpuSeconds = 0;  ///< processor time of the ticks, every thread of the process [s]
+  long iterations = 0;    ///< solver iterations over all ticks
   double peakForce = 0;   ///< largest |force| over the run [N]
   /// Largest |force(t) − force(t−1)| between two ticks of the script's "slide" phase [N].
   double slideJump = 0;
-  int firstContact = -1;  ///< the first tick with a non-zero force (-1: none)
+  int firstContact = -1;  ///< the first tick (from 1, as ticks.csv) with a force (-1: none)
   int threads = 0;        ///< threads the muscles stepped with
   bool failed = false;    ///< a tick's step failed numerically (NaN/inf, burst springs)
 };
