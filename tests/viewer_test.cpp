@@ -375,9 +375,16 @@ int rightmostMuscleColumn(const Image& image, int y) {
   return -1;
 }
 
-TEST(Viewer, AProbeDrivenByThePointerPressesTheMuscleAndThePanelShowsItsForce) {
-  TemporaryDirectory directory("fibremss_viewer_test");
-  // fusiform from the front at its last pose (the third step on), with the panel.
+/// fusiform from the front at its last pose, with the panel: undisturbed, and with the pointer's
+/// `tool` pressed at `fromMm` right of the belly's axis and dragged to `toMm` in the view plane
+/// (as many steps on each).
+struct PointerShots {
+  viewer::ViewerResult undisturbed, touched;  ///< the two sessions
+  std::string undisturbedPng, touchedPng;     ///< their screenshots
+  viewer::Pixel to;                           ///< where the pointer ended, in the scene's view
+};
+PointerShots pointerShots(const TemporaryDirectory& directory, viewer::ToolMode tool, float fromMm,
+                          float toMm) {
   viewer::ViewerOptions options = screenshotOptions("", 3);
   options.scene = "fusiform";
   options.width = 720;
@@ -385,42 +392,57 @@ TEST(Viewer, AProbeDrivenByThePointerPressesTheMuscleAndThePanelShowsItsForce) {
   options.hideUi = false;
   options.azimuthDeg = 0;
   options.elevationDeg = 0;
-  // The pointer's path: from 40 mm right of the belly's axis to 12 mm (the 5 mm probe 13 mm into
-  // the 20 mm belly), in the view plane; first where the muscle lies undisturbed, as many steps on.
-  const viewer::ViewerResult framing = [&] {
-    viewer::ViewerOptions still = options;
-    still.screenshot = (directory.path() / "still.png").string();
-    return viewer::runViewer(still);
-  }();
-  auto pixel = [&](float xMm) {
-    return framing.camera.project({xMm * 1e-3f, -0.015f, 0}, framing.viewWidth, framing.height);
+  viewer::ViewerOptions framing = options;
+  framing.screenshot = (directory.path() / "framing.png").string();
+  const viewer::ViewerResult framed = viewer::runViewer(framing);
+  auto pixel = [&](float xMm) {  // the belly's middle at the last pose: y = -15 mm
+    return framed.camera.project({xMm * 1e-3f, -0.015f, 0}, framed.viewWidth, framed.height);
   };
-  const viewer::Pixel from = pixel(40), to = pixel(12);
-  ASSERT_TRUE(from.visible && to.visible);
-  options.tool = viewer::ToolMode::Probe;
-  options.pointer = viewer::dragPath(from.x, from.y, to.x, to.y);
+  const viewer::Pixel from = pixel(fromMm);
+  PointerShots shots;
+  shots.to = pixel(toMm);
+  EXPECT_TRUE(from.visible && shots.to.visible);
+  options.tool = tool;
+  options.pointer = viewer::dragPath(from.x, from.y, shots.to.x, shots.to.y);
   viewer::ViewerOptions still = options;
   still.tool = viewer::ToolMode::Camera;
   still.pointer.clear();
   still.steps = 3 + int(options.pointer.size()) + 1;
-  still.screenshot = (directory.path() / "undisturbed.png").string();
-  const viewer::ViewerResult undisturbed = viewer::runViewer(still);
-  options.screenshot = (directory.path() / "probe.png").string();
-  const viewer::ViewerResult probed = viewer::runViewer(options);
+  shots.undisturbedPng = still.screenshot = (directory.path() / "undisturbed.png").string();
+  shots.undisturbed = viewer::runViewer(still);
+  shots.touchedPng = options.screenshot = (directory.path() / "touched.png").string();
+  shots.touched = viewer::runViewer(options);
+  return shots;
+}
 
-  EXPECT_GT(probed.toolForce, 0) << "the panel showed no force on the probe";
-  EXPECT_EQ(undisturbed.toolForce, 0);
-  const Image before(still.screenshot), after(options.screenshot);
+TEST(Viewer, AProbeDrivenByThePointerPressesTheMuscleAndThePanelShowsItsForce) {
+  TemporaryDirectory directory("fibremss_viewer_test");
+  // From 40 mm right of the axis to 12 mm: the 5 mm probe 13 mm into the 20 mm belly.
+  const PointerShots shots = pointerShots(directory, viewer::ToolMode::Probe, 40, 12);
+  EXPECT_GT(shots.touched.toolForce, 0) << "the panel showed no force on the probe";
+  EXPECT_EQ(shots.undisturbed.toolForce, 0);
+  const Image before(shots.undisturbedPng), after(shots.touchedPng);
   ASSERT_EQ(before.width, after.width);
-  const int row = int(to.y), probeColumn = probed.viewX + int(to.x);
+  const int row = int(shots.to.y), probeColumn = shots.touched.viewX + int(shots.to.x);
   // The probe is drawn where the pointer left it.
   EXPECT_TRUE(isToolColour(after.at(probeColumn, row)));
   // The muscle's edge on the probe's row moved in, under the probe (by at least 3 px).
   const int edgeBefore = rightmostMuscleColumn(before, row);
   const int edgeAfter = rightmostMuscleColumn(after, row);
-  ASSERT_GT(edgeBefore, probed.viewX);
+  ASSERT_GT(edgeBefore, shots.touched.viewX);
   EXPECT_GT(edgeBefore, probeColumn);  // undisturbed, the belly reaches past the probe's centre
   EXPECT_LT(edgeAfter, edgeBefore - 3);
+}
+
+TEST(Viewer, TheGrabPullsTheParticleUnderThePointerAlongTheViewPlane) {
+  TemporaryDirectory directory("fibremss_viewer_test");
+  // Pressed on the belly's axis, dragged 30 mm right.
+  const PointerShots shots = pointerShots(directory, viewer::ToolMode::Grab, 0, 30);
+  EXPECT_GT(shots.touched.toolForce, 0) << "the panel showed no pull";
+  const Image before(shots.undisturbedPng), after(shots.touchedPng);
+  const int row = int(shots.to.y);
+  // The belly follows the pointer: its edge on that row moved right (by at least 3 px).
+  EXPECT_GT(rightmostMuscleColumn(after, row), rightmostMuscleColumn(before, row) + 3);
 }
 
 TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {

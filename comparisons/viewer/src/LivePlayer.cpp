@@ -71,10 +71,12 @@ Playback LivePlayer::controls(const Snapshot& shown) {
   const ToolReading& tool = shown_.tool;
   const btVector3& f = tool.force;
   ImGui::Text("pointer (T): %s", toolName(tool.mode));
-  if (tool.engaged)
-    ImGui::Text("  %s %.4g N (%.3g, %.3g, %.3g), %zu contacts",
-                tool.mode == ToolMode::Probe ? "force on the probe" : "pull", f.length(), f.x(),
+  if (tool.engaged && tool.mode == ToolMode::Probe)
+    ImGui::Text("  force on the probe %.4g N (%.3g, %.3g, %.3g), %zu contacts", f.length(), f.x(),
                 f.y(), f.z(), tool.contacts);
+  else if (tool.engaged)
+    ImGui::Text("  pull on the particle %.4g N (%.3g, %.3g, %.3g)", f.length(), f.x(), f.y(),
+                f.z());
   return {shown_.shownPose, pose, shown.steps, float(f.length())};
 }
 
