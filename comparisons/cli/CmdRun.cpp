@@ -359,7 +359,9 @@ void addRunCommand(CLI::App& app) {
       "penetration per bone, fixed particles, fibre length, worst spring). Ctrl-C or SIGTERM "
       "stops the running step at the end of its current iteration (it is not written); the "
       "steps before it are kept and every file written stays valid. Soak run: --loop --steps N "
-      "--sample-every 1000.");
+      "--sample-every 1000. A scene with a tool (`tool`, the built-in probe) runs the tool's "
+      "ticks instead: DIR/ticks.csv (the force on the tool per tick) and DIR/summary.json "
+      "(ticks per second, the peak force, the largest tick-to-tick jump while sliding).");
   addSceneArgs(*command, args->scene);
   command->add_option("--out", args->out,
                       "Directory for frames/*.vtp, run.pvd, scene.json and summary.json");
