@@ -138,8 +138,9 @@ StabilityCell runPrepared(PreparedCase& prepared, const std::string& caseLabel,
     }
   };
   try {
-    judgeCell(runFibreMSS(prepared.scene, prepared.prepared, run), timedOut, prepared.freeMass,
-              options, cell);
+    // The run first: it is what sets timedOut (an argument's order of evaluation is unspecified).
+    const RunMetrics metrics = runFibreMSS(prepared.scene, prepared.prepared, run);
+    judgeCell(metrics, timedOut, prepared.freeMass, options, cell);
   } catch (const std::exception& e) {
     cell.outcome = CellOutcome::Error;
     cell.message = e.what();
