@@ -165,6 +165,7 @@ std::vector<BuiltInScene> builtInScenes() {
       {"cylinder-twist",
        "a straight cylindrical muscle, one end twisted 180 deg (exact answer known)"},
       {"tear", "a cylindrical muscle with a waist stretched until it tears (break_stretch 1.5)"},
+      {"cut", "fusiform under tension cut across by a blade sweeping through it"},
   };
 }
 
@@ -199,6 +200,8 @@ std::string builtInSceneDefinition(const std::string& name) {
     scene = cylinderTwistScene();
   else if (name == "tear")
     scene = tearScene();
+  else if (name == "cut")
+    scene = cutScene();
   else
     return "";
   return scene.dump();

@@ -64,5 +64,6 @@ Json spherePlanesScene();
 Json cylinderStretchScene();
 Json cylinderTwistScene();
 Json tearScene();
+Json cutScene();
 
 }  // namespace fibremss::builtin
