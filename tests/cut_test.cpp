@@ -6,7 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <cstring>
 #include <numeric>
 #include <span>
 #include <string>
@@ -17,6 +16,7 @@
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
 #include "support/AllocationCounter.h"
+#include "support/SameTear.h"
 
 namespace fibremss {
 namespace {
@@ -130,13 +130,7 @@ TEST(Cut, StepsThatCutAllocateNothing) {
 
 TEST(Cut, IsTheSameForOneThreadAndTwo) {
   const Cut one = run(1), two = run(2);
-  EXPECT_EQ(one.tear.cutSprings, two.tear.cutSprings);
-  EXPECT_EQ(one.tear.brokenVolumeTerms, two.tear.brokenVolumeTerms);
-  EXPECT_EQ(one.tear.pieces, two.tear.pieces);
-  ASSERT_EQ(one.positions.size(), two.positions.size());
-  EXPECT_EQ(std::memcmp(one.positions.data(), two.positions.data(),
-                        one.positions.size() * sizeof(btVector3)),
-            0);
+  testing::expectSameTear(one.tear, two.tear, one.positions, two.positions);
 }
 
 TEST(Cut, BladesWithoutAnEdgeAreInputErrors) {
