@@ -19,6 +19,7 @@
 #include "fibremss/Scene.h"
 #include "support/AllocationCounter.h"
 #include "support/GridMuscle.h"
+#include "support/SameTear.h"
 
 namespace fibremss {
 namespace {
@@ -115,13 +116,7 @@ TEST(Tear, StepsThatBreakAllocateNothing) {
 TEST(Tear, IsTheSameForOneThreadAndTwo) {
   const Torn one = run("tear", kCoarse, 1);
   const Torn two = run("tear", kCoarse, 2);
-  EXPECT_EQ(one.tear.brokenSprings, two.tear.brokenSprings);
-  EXPECT_EQ(one.tear.brokenVolumeTerms, two.tear.brokenVolumeTerms);
-  EXPECT_EQ(one.tear.pieces, two.tear.pieces);
-  ASSERT_EQ(one.positions.size(), two.positions.size());
-  EXPECT_EQ(std::memcmp(one.positions.data(), two.positions.data(),
-                        one.positions.size() * sizeof(btVector3)),
-            0);
+  testing::expectSameTear(one.tear, two.tear, one.positions, two.positions);
 }
 
 TEST(Tear, ThresholdsOutsideOneToTheStrainLimitAreInputErrors) {

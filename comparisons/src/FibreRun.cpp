@@ -188,9 +188,10 @@ void addPoseResidual(RunMetrics& metrics, const PoseResidual& pose, bool finite,
 /// muscle: rollbacks named by muscle and cause, freezes.
 class MuscleLedger {
  public:
+  /// `cuts`: the scene has blades (every muscle's cuts and pieces are measured).
   MuscleLedger(MuscleSystem& system, std::span<const MuscleHandle> muscles,
-               const PreparedScene& prepared)
-      : system_(system), muscles_(muscles), seen_(muscles.size()) {
+               const PreparedScene& prepared, bool cuts)
+      : system_(system), muscles_(muscles), seen_(muscles.size()), cuts_(cuts) {
     std::vector<std::string> boneNames;
     for (const auto& bone : prepared.bones) boneNames.push_back(bone->name);
     for (MuscleHandle muscle : muscles) results.emplace_back(system.settings(muscle), boneNames);
@@ -228,10 +229,11 @@ class MuscleLedger {
     const MuscleSettings& settings = system_.settings(muscle);
     MuscleStep step = measureMuscle(settings, system_.positions(muscle), system_.surface(muscle),
                                     bones.meshes(), transforms);
-    if (settings.breakStretch > 0) {
+    if (settings.breakStretch > 0 || cuts_) {
       const MuscleTear tear = system_.tear(muscle);
       step.brokenSprings = long(tear.brokenSprings);
       step.pieces = long(tear.pieces);
+      if (cuts_) step.cutSprings = long(tear.cutSprings);
     }
     if (step.finite) {
       const Penetration spheres =
@@ -288,6 +290,7 @@ class MuscleLedger {
   std::span<const MuscleHandle> muscles_;
   std::vector<MuscleFailures> seen_;  ///< each muscle's failures after the previous step
   std::vector<MuscleStep> measured_;  ///< each muscle's measures in the current afterStep
+  bool cuts_;                         ///< the scene has blades: cuts and pieces are measured
 };
 
 /// The per-step timings of a run [ms]: the step, per iteration its parts, the measures.
@@ -337,8 +340,9 @@ class FibreRunner {
         metrics_(metrics),
         system_(scene.simulation),
         handles_(addCancellableScene(system_, prepared, options)),
+        blades_(addBlades(system_, scene)),
         boneMeshes_(prepared),
-        ledger_(system_, handles_.muscles, prepared),
+        ledger_(system_, handles_.muscles, prepared, !scene.blades.empty()),
         steps_(options.steps >= 0 ? options.steps : std::max(scene.poseCount, 1)),
         frameEvery_(options.frameEvery >= 0 ? options.frameEvery : scene.outputs.frameEvery),
         boneTransforms_(handles_.bones.size(), btTransform::getIdentity()),
@@ -409,6 +413,8 @@ class FibreRunner {
       boneTransforms_[b] = scene_.bonePose(b, pose);
       system_.setBoneTransform(handles_.bones[b], boneTransforms_[b]);
     }
+    for (size_t b = 0; b < blades_.size(); ++b)
+      system_.setBladeTransform(blades_[b], scene_.bladePose(b, pose));
     system_.step();
     const double stepMs = millisecondsSince(stepStart);
     const StepStats& stats = system_.lastStep();
@@ -542,6 +548,7 @@ class FibreRunner {
   RunMetrics& metrics_;                      ///< what the run reports
   MuscleSystem system_;                      ///< the solver with the scene added
   SceneHandles handles_;                     ///< the scene's bones and muscles in `system_`
+  std::vector<BladeHandle> blades_;          ///< the scene's blades in `system_`
   BoneMeshes boneMeshes_;                    ///< the bones' true meshes, for penetration
   MuscleLedger ledger_;                      ///< per-muscle results and series rows
   int steps_;                                ///< steps to run

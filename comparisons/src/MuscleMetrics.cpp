@@ -133,7 +133,9 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
       "tendon_strain";
   const bool tears = std::any_of(rows.begin(), rows.end(),
                                  [](const SeriesRow& row) { return row.measures.tears(); });
-  csv += tears ? ",broken_springs,pieces\n" : "\n";
+  const bool cuts = std::any_of(rows.begin(), rows.end(),
+                                [](const SeriesRow& row) { return row.measures.cutSprings >= 0; });
+  csv += std::string(tears ? ",broken_springs,pieces" : "") + (cuts ? ",cut_springs\n" : "\n");
   for (const SeriesRow& row : rows) {
     const MuscleStep& m = row.measures;
     csv += std::to_string(row.step) + "," + std::to_string(row.pose) + "," +
@@ -146,7 +148,8 @@ std::string seriesCsv(const std::vector<SeriesRow>& rows) {
            "," + csvNumber(m.maxTendonStretch, "%.6g") + "," +
            csvNumber(m.maxSphereDepthMm(), "%.6g") + "," + csvNumber(m.bellyStrain, "%.6g") + "," +
            csvNumber(m.tendonStrain, "%.6g") +
-           (tears ? "," + tearField(m.brokenSprings) + "," + tearField(m.pieces) : "") + "\n";
+           (tears ? "," + tearField(m.brokenSprings) + "," + tearField(m.pieces) : "") +
+           (cuts ? "," + tearField(m.cutSprings) : "") + "\n";
   }
   return csv;
 }
@@ -177,6 +180,7 @@ nlohmann::json seriesJson(const std::vector<SeriesRow>& rows) {
       array.back()["broken_springs"] = m.brokenSprings;
       array.back()["pieces"] = m.pieces;
     }
+    if (m.cutSprings >= 0) array.back()["cut_springs"] = m.cutSprings;
   }
   return array;
 }
@@ -211,6 +215,7 @@ std::vector<SeriesRow> seriesFromJson(const nlohmann::json& array) {
     m.tendonStrain = numberAt(o, "tendon_strain", m.tendonStrain);
     m.brokenSprings = o.value("broken_springs", m.brokenSprings);
     m.pieces = o.value("pieces", m.pieces);
+    m.cutSprings = o.value("cut_springs", m.cutSprings);
     rows.push_back(std::move(row));
   }
   return rows;
@@ -271,6 +276,7 @@ void MuscleResults::add(int step, const MuscleStep& measures) {
   springDeviationRatio = measures.springDeviationRatio;
   brokenSprings = measures.brokenSprings;
   pieces = measures.pieces;
+  cutSprings = measures.cutSprings;
 }
 
 nlohmann::json toJson(const MuscleResults& r) {
@@ -310,6 +316,7 @@ nlohmann::json toJson(const MuscleResults& r) {
     json["broken_springs"] = r.brokenSprings;
     json["pieces"] = r.pieces;
   }
+  if (r.cutSprings >= 0) json["cut_springs"] = r.cutSprings;
   return json;
 }
 
@@ -354,6 +361,7 @@ MuscleResults muscleResultsFromJson(const nlohmann::json& o) {
   r.lastStep = o.value("last_step", r.lastStep);
   r.brokenSprings = o.value("broken_springs", r.brokenSprings);
   r.pieces = o.value("pieces", r.pieces);
+  r.cutSprings = o.value("cut_springs", r.cutSprings);
   return r;
 }
 

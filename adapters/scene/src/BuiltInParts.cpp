@@ -166,6 +166,7 @@ std::vector<BuiltInScene> builtInScenes() {
        "a straight cylindrical muscle, one end twisted 180 deg (exact answer known)"},
       {"tear", "a cylindrical muscle with a waist stretched until it tears (break_stretch 1.5)"},
       {"probe", "a probe pressing and sliding on a muscle lying on a bone, at 1 kHz (a tool)"},
+      {"cut", "fusiform under tension cut across by a blade sweeping through it"},
   };
 }
 
@@ -202,6 +203,8 @@ std::string builtInSceneDefinition(const std::string& name) {
     scene = tearScene();
   else if (name == "probe")
     scene = probeScene();
+  else if (name == "cut")
+    scene = cutScene();
   else
     return "";
   return scene.dump();

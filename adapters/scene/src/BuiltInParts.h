@@ -65,5 +65,6 @@ Json cylinderStretchScene();
 Json cylinderTwistScene();
 Json tearScene();
 Json probeScene();  ///< fusiform on a bed, a probe pressing and sliding (a tool)
+Json cutScene();
 
 }  // namespace fibremss::builtin

@@ -1,7 +1,11 @@
-// The small built-in scenes: fusiform, tension-spike, pinch, sphere-denoise, sphere-planes.
+// The small built-in scenes: fusiform, cut, tension-spike, pinch, sphere-denoise, sphere-planes.
+#include <algorithm>
+
 #include "BuiltInParts.h"
 
 namespace fibremss::builtin {
+
+constexpr int kCutPoses = 8;  ///< the cut scene's poses: rest, 4 of the sweep, 3 held
 
 Json fusiformScene() {
   // Two horizontal bars 320 mm apart, a 293 mm spindle between them whose ends sit 1.5 mm
@@ -18,6 +22,28 @@ Json fusiformScene() {
       muscleTube({{0, 146.5, 0}, {0, 75, 0}, {0, 0, 0}, {0, -75, 0}, {0, -146.5, 0}},
                  {{6, 6}, {14, 14}, {20, 20}, {14, 14}, {6, 6}});
   scene["muscles"] = Json::array({tubeMuscle("fusiform", muscle)});
+  return scene;
+}
+
+Json cutScene() {
+  // fusiform between its bars, the lower bar held 10 mm down (the spindle under tension); a
+  // blade whose 80 mm edge lies along x sweeps across the spindle along z at y = 60 mm (radius
+  // about 15 mm there), 20 mm per pose from z = -40 to +40 mm, then the bars hold two poses
+  // while the cut halves draw back to their bars.
+  Json scene = fusiformScene();
+  scene["name"] = "cut";
+  scene["description"] = "fusiform under tension cut across by a blade";
+  std::vector<btTransform> bar, blade;
+  for (int i = 0; i < kCutPoses; ++i) {
+    bar.emplace_back(btQuaternion::getIdentity(), btVector3(0, -10, 0));
+    const double z = std::min(-40.0 + 20.0 * std::max(i - 1, 0), 40.0);
+    blade.emplace_back(btQuaternion::getIdentity(), btVector3(0, 0, btScalar(z)));
+  }
+  scene["bones"][1]["motion"] = keyframes(bar);
+  scene["blades"] = Json::array({Json{{"name", "blade"},
+                                      {"from", Json::array({-40, 60, 0})},
+                                      {"to", Json::array({40, 60, 0})},
+                                      {"motion", keyframes(blade)}}});
   return scene;
 }
 

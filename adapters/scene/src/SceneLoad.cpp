@@ -574,6 +574,38 @@ Json readBones(Fields& root, Reader& reader, LoadedScene& result) {
   return completeBones;
 }
 
+/// The scene's blades and their motions into `result` (its pose count and labels from the first
+/// blade's when the bones have one pose); returns each blade's completed JSON.
+Json readBlades(Fields& root, Reader& reader, LoadedScene& result) {
+  const Json& blades = root.array("blades");
+  Json completeBlades = Json::array();
+  for (size_t i = 0; i < blades.size(); ++i) {
+    Fields blade(blades[i], "blades[" + std::to_string(i) + "]", reader.source);
+    BladeInput input;
+    input.name = blade.text("name", "blade" + std::to_string(i), scene::kMaxNameBytes);
+    input.from = blade.vector3("from", btVector3(0, 0, 0)) * btScalar(reader.scale);
+    input.to = blade.vector3("to", btVector3(0, 0, 0)) * btScalar(reader.scale);
+    if (input.from == input.to) blade.fail("to", "expected an edge of some length: from ≠ to");
+    TriangleMesh edge;
+    edge.vertices = {input.from, input.to};
+    Fields motion = blade.object("motion");
+    std::vector<double> labels;
+    readMotion(motion, reader, edge, input.motion, labels);
+    blade.set("motion", motion.finish());
+    const int poses = int(input.motion.poses.size());
+    if (poses > 1 && result.poseCount > 1 && poses != result.poseCount)
+      blade.fail("motion", "has " + std::to_string(poses) + " poses but the scene has " +
+                               std::to_string(result.poseCount));
+    if (poses > 1 && result.poseCount <= 1) {
+      result.poseCount = poses;
+      result.poseLabels = labels;
+    }
+    result.blades.push_back(std::move(input));
+    completeBlades.push_back(blade.finish());
+  }
+  return completeBlades;
+}
+
 /// The scene's muscles into `result`; returns each muscle's completed JSON.
 Json readMuscles(Fields& root, Reader& reader, const SpringParameters& springs,
                  LoadedScene& result) {
@@ -613,6 +645,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
   const SpringParameters springs = readModel(model);
 
   Json completeBones = readBones(root, reader, result);
+  Json completeBlades = readBlades(root, reader, result);
   Json completeMuscles = readMuscles(root, reader, springs, result);
 
   Fields simulation = root.object("simulation");
@@ -622,7 +655,12 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
         "simulation.stop = budget: each step iterates until its wall-clock budget is spent, so "
         "the results depend on the machine's load and the thread count and are not "
         "bit-identical between runs (the one exception; see docs/reliability.md)");
+  const int poses = result.poseCount;
   scene::splitLargeJumps(result, maxStepDeg);
+  if (!result.blades.empty() && result.poseCount != poses)
+    root.fail("blades",
+              "a bone's turn was split into sub-poses, which blades do not follow: "
+              "lower the bones' turn per pose below simulation.max_step_deg");
   Fields collision = root.object("collision");
   readCollision(collision, reader.scale, result.simulation);
   Fields outputs = root.object("outputs");
@@ -635,6 +673,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
 
   root.set("bones", std::move(completeBones));
   root.set("muscles", std::move(completeMuscles));
+  if (!completeBlades.empty()) root.set("blades", std::move(completeBlades));
   root.set("model", model.finish());
   root.set("simulation", simulation.finish());
   root.set("collision", collision.finish());
@@ -657,12 +696,20 @@ std::vector<std::string> builtInSceneNames() {
   return names;
 }
 
+/// The transform of `motion` at `pose` (its last beyond its end; identity without poses).
+btTransform poseOf(const BoneMotion& motion, int pose) {
+  if (motion.poses.empty()) return btTransform::getIdentity();
+  return motion.poses[size_t(std::clamp(pose, 0, int(motion.poses.size()) - 1))];
+}
+
 }  // namespace
 
 btTransform LoadedScene::bonePose(size_t bone, int pose) const {
-  if (bone >= motions.size() || motions[bone].poses.empty()) return btTransform::getIdentity();
-  const auto& poses = motions[bone].poses;
-  return poses[size_t(std::clamp(pose, 0, int(poses.size()) - 1))];
+  return bone < motions.size() ? poseOf(motions[bone], pose) : btTransform::getIdentity();
+}
+
+btTransform LoadedScene::bladePose(size_t blade, int pose) const {
+  return blade < blades.size() ? poseOf(blades[blade].motion, pose) : btTransform::getIdentity();
 }
 
 std::string exportBuiltInScene(const std::string& name) {

@@ -13,6 +13,14 @@ SceneHandles addScene(MuscleSystem& system, const PreparedScene& prepared) {
   return handles;
 }
 
+std::vector<BladeHandle> addBlades(MuscleSystem& system, const LoadedScene& scene) {
+  std::vector<BladeHandle> blades;
+  for (size_t b = 0; b < scene.blades.size(); ++b)
+    blades.push_back(
+        system.addBlade(scene.blades[b].from, scene.blades[b].to, scene.bladePose(b, 0)));
+  return blades;
+}
+
 WorldScene addScene(MuscleWorld& world, const LoadedScene& scene, const PreparedScene& prepared) {
   WorldScene added;
   for (size_t b = 0; b < prepared.bones.size(); ++b) {

@@ -46,6 +46,9 @@ struct MuscleStep {
   /// tears, else −1: no such column).
   long brokenSprings = -1;
   long pieces = -1;  ///< its pieces (MuscleTear::pieces), as brokenSprings; −1: it does not tear
+  /// Springs blades cut so far (MuscleTear::cutSprings; filled by runFibreMSS in a scene with
+  /// blades, else −1: no such column).
+  long cutSprings = -1;
   /// Whether the muscle tears (its tear is measured).
   bool tears() const { return brokenSprings >= 0; }
 
@@ -112,6 +115,7 @@ struct MuscleResults {
   double springDeviationRatio = kNone;   ///< Σ|l − L0| / ΣL0 at the last finite step
   long brokenSprings = -1;  ///< springs broken at the last step measured (−1: it does not tear)
   long pieces = -1;         ///< its pieces at the last step measured (−1: it does not tear)
+  long cutSprings = -1;     ///< springs cut at the last step measured (−1: no blade)
   int lastStep = -1;        ///< the last finite step measured (-1: none)
 
   /// Name, bones, fixed particles per bone and the rest fibre length of `muscle`.

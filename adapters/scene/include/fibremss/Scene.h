@@ -21,6 +21,15 @@ struct BoneMotion {
   std::vector<std::vector<double>> coordinates;
 };
 
+/// A blade (MuscleSystem::addBlade): a straight edge moved like a bone, which cuts the muscles
+/// where it sweeps through them.
+struct BladeInput {
+  std::string name;         ///< blade name from the scene
+  btVector3 from{0, 0, 0};  ///< one end of its edge at rest [m]
+  btVector3 to{0, 0, 0};    ///< the other end [m]
+  BoneMotion motion;        ///< its transforms over the scene's poses (none: it stays at rest)
+};
+
 /// What a run writes (paths relative to the run's --out directory).
 struct OutputSettings {
   int frameEvery = 1;          ///< write a frame every k-th step (0: none)
@@ -99,6 +108,7 @@ struct LoadedScene {
   std::vector<BoneInput> bones;       ///< bones, meshes loaded or generated
   std::vector<MuscleInput> muscles;   ///< muscles, surfaces and fibres loaded or generated
   std::vector<BoneMotion> motions;    ///< one per bone
+  std::vector<BladeInput> blades;     ///< blades with their motions (none: nothing cuts)
   int poseCount = 1;                  ///< number of poses (simulation steps) in the motion
   std::vector<double> poseLabels;     ///< per pose, e.g. the sweep angle in degrees
   MuscleSystemDef simulation;         ///< the solver: its definition and first step settings
@@ -112,6 +122,8 @@ struct LoadedScene {
 
   /// Transform of bone b at pose p (identity where the bone has no motion).
   btTransform bonePose(size_t bone, int pose) const;
+  /// Transform of blade b at pose p (identity where the blade has no motion).
+  btTransform bladePose(size_t blade, int pose) const;
 };
 
 /// What pose `pose` is: its coordinates' values where a bone's motion gives them

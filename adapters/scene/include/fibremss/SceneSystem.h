@@ -36,6 +36,10 @@ std::vector<MuscleHandle> addMuscles(Host& host, const PreparedScene& prepared,
 /// Adds the prepared scene's bones to `system` (moved by setBoneTransform), then its muscles.
 SceneHandles addScene(MuscleSystem& system, const PreparedScene& prepared);
 
+/// Adds the scene's blades to `system` at their first pose, in the scene's order (after its
+/// muscles: each blade gives them their own settings to cut).
+std::vector<BladeHandle> addBlades(MuscleSystem& system, const LoadedScene& scene);
+
 /// A prepared scene in a Bullet world: the bones' kinematic bodies and the handles.
 struct WorldScene {
   std::vector<std::unique_ptr<BoneBody>> bodies;  ///< bone b's body (move it to move the bone)

@@ -34,6 +34,12 @@ struct BoneHandle {
   bool valid() const { return index != UINT32_MAX; }
 };
 
+/// Identifies a blade in a MuscleSystem (blades stay for the system's life).
+struct BladeHandle {
+  uint32_t index = UINT32_MAX;  ///< its number, in the order added
+  bool valid() const { return index != UINT32_MAX; }
+};
+
 /// Milliseconds spent in each part of the last step, summed over its iterations.
 struct StepTiming {
   double mss = 0;       ///< spring forces + volume term + dt + integration
@@ -48,7 +54,8 @@ struct StepTiming {
 /// What tearing (MuscleSettings::breakStretch) did to a muscle.
 struct MuscleTear {
   size_t brokenSprings = 0;      ///< springs broken so far
-  size_t brokenVolumeTerms = 0;  ///< local volume terms broken so far
+  size_t brokenVolumeTerms = 0;  ///< local volume terms broken or cut so far
+  size_t cutSprings = 0;         ///< springs blades cut so far (MuscleSystem::addBlade)
   /// Pieces: components of its unbroken springs among the particles that had a spring at rest
   /// (1 for a muscle that does not tear).
   size_t pieces = 1;
@@ -174,8 +181,22 @@ class MuscleSystem {
   /// Step attempts the numerical guard found this muscle failing (a rollback, a retry or a
   /// freeze followed each, except with FailurePolicy::Report).
   MuscleFailures failures(MuscleHandle muscle) const;
-  /// What tearing (MuscleSettings::breakStretch) broke of this muscle so far and its pieces.
+  /// What tearing (MuscleSettings::breakStretch) and blades broke of this muscle so far and its
+  /// pieces.
   MuscleTear tear(MuscleHandle muscle) const;
+
+  /// Adds a blade: the straight edge `from`–`to` (blade frame [m]) at `transform`. After each
+  /// kept step, every spring and local volume term of every muscle whose segment crosses the
+  /// surface the edge swept in that step (from its transform at the last step's end to its
+  /// target, two triangles) is cut for good, as tearing breaks them (docs/decisions.md,
+  /// "Cutting"); particles are neither split nor removed, fixed ones stay fixed. Allocates (each
+  /// muscle its own settings). InputError for points or a transform that are not finite, an
+  /// edge of no length, and a muscle with an enclosed-volume term.
+  BladeHandle addBlade(const btVector3& from, const btVector3& to,
+                       const btTransform& transform = btTransform::getIdentity());
+  /// The transform the blade reaches at the end of the next step (its edge sweeps there from
+  /// where the last step left it). InputError for an unknown handle or a non-finite transform.
+  void setBladeTransform(BladeHandle blade, const btTransform& transform);
 
   /// One simulation step: bones move from their last to their target transforms split over
   /// the iterations; pre-transform; iterations of forces, integration, collision detection and

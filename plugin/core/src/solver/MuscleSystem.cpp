@@ -302,7 +302,9 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   std::unique_ptr<MuscleState> state = newMuscleState(s, bones, impl_->definition);
   setStepBounds(s, *state);
   state->settings = settings;
-  prepareTearing(*state);
+  if (!impl_->blades.empty() && s.enclosedModulus > 0)
+    throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
+  prepareTearing(*state, !impl_->blades.empty());
   impl_->resolveBones(*state);
   impl_->placeAtBones(*state);
   ++impl_->musclesAdded;
@@ -355,7 +357,32 @@ MuscleFailures MuscleSystem::failures(MuscleHandle muscle) const {
 
 MuscleTear MuscleSystem::tear(MuscleHandle muscle) const {
   const TearState& tear = impl_->muscle(muscle).tear;
-  return {tear.brokenSprings, tear.brokenVolumeTerms, tear.pieces};
+  return {tear.brokenSprings, tear.brokenVolumeTerms, tear.cutSprings, tear.pieces};
+}
+
+BladeHandle MuscleSystem::addBlade(const btVector3& from, const btVector3& to,
+                                   const btTransform& transform) {
+  const std::string call = "MuscleSystem::addBlade";
+  const btVector3 ends[] = {from, to};
+  checkPoints(ends, call, "edge end");
+  if (from == to) throw InputError(call, "", "the blade's edge has no length");
+  if (!finiteTransform(transform))
+    throw InputError(call, "transform", "expected a finite transform within 1e6 m");
+  for (uint32_t slot : impl_->muscles.order)
+    if (impl_->muscles.states[slot]->settings->enclosedModulus > 0)
+      throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
+  for (uint32_t slot : impl_->muscles.order) prepareTearing(*impl_->muscles.states[slot], true);
+  impl_->blades.push_back({from, to, transform, transform, transform});
+  return {uint32_t(impl_->blades.size() - 1)};
+}
+
+void MuscleSystem::setBladeTransform(BladeHandle blade, const btTransform& transform) {
+  if (blade.index >= impl_->blades.size())
+    throw InputError("MuscleSystem::setBladeTransform", "", "unknown blade handle");
+  if (!finiteTransform(transform))
+    throw InputError("MuscleSystem::setBladeTransform", "transform",
+                     "expected a finite transform within 1e6 m");
+  impl_->blades[blade.index].target = transform;
 }
 
 void MuscleSystem::step() {

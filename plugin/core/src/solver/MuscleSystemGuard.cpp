@@ -253,8 +253,14 @@ StepSize MuscleSystem::Impl::stepSize(int halvings) const {
 void MuscleSystem::Impl::breakMuscles() {
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
-    if (!state.frozen && breakStretched(state) && state.prepared)
-      integratorFor(state.preparedFor).springsChanged(state);
+    if (state.frozen) continue;
+    bool changed = breakStretched(state);
+    for (const BladeState& blade : blades) changed = cutBySweep(state, blade) || changed;
+    if (changed && state.prepared) integratorFor(state.preparedFor).springsChanged(state);
+  }
+  for (BladeState& blade : blades) {
+    blade.before = blade.last;
+    blade.last = blade.target;
   }
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "Cutting.h"
 #include "MuscleState.h"
 #include "Residual.h"
 #include "SpringForces.h"
@@ -125,6 +126,7 @@ struct MuscleSystem::Impl {
   StepStats stats;                             ///< what the last step did
   Slots<MuscleState> muscles;                  ///< muscle states by slot
   Slots<BoneState> bones;                      ///< bone states by slot
+  std::vector<BladeState> blades;              ///< blades, in the order added (Cutting.h)
   ContactLog contacts;                         ///< contacts of the last iteration, for drawing
   std::unique_ptr<TaskPool> pool;              ///< worker threads (MuscleSystemDef::threads)
   std::vector<ThreadScratch> scratch;          ///< per thread of the pool
@@ -256,7 +258,8 @@ struct MuscleSystem::Impl {
   void collideBodies(btScalar dt);
   void endBodyContacts();
   /// Breaks what is stretched beyond its limit in every tearing muscle after a kept step
-  /// (Tearing.h), and brings their integrators' workspaces up to date.
+  /// (Tearing.h), cuts what the blades swept through (Cutting.h), and brings the integrators'
+  /// workspaces up to date.
   void breakMuscles();
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
 };

@@ -46,82 +46,87 @@ bool beyond(const MuscleSettings& settings, const btVector3* x, btScalar limit, 
   return x[i].distance2(x[j]) > limit * limit * rest;
 }
 
-/// Whether one of the tetrahedra (a, b, r_k, r_k+1) of a fan `p` (a, b, r_0 .. r_m) has an edge
-/// beyond `limit`.
-bool fanStretched(const MuscleSettings& settings, const btVector3* x, btScalar limit,
-                  std::span<const uint32_t> p) {
-  if (beyond(settings, x, limit, p[0], p[1])) return true;
-  for (size_t k = 2; k < p.size(); ++k)
-    if (beyond(settings, x, limit, p[0], p[k]) || beyond(settings, x, limit, p[1], p[k]) ||
-        (k + 1 < p.size() && beyond(settings, x, limit, p[k], p[k + 1])))
-      return true;
-  return false;
-}
-
 /// Whether the particles `p` lie in more than one piece.
 bool acrossPieces(const TearState& tear, std::span<const uint32_t> p) {
   return std::any_of(p.begin(), p.end(),
                      [&](uint32_t i) { return tear.pieceOf[i] != tear.pieceOf[p[0]]; });
 }
 
-/// Breaks the springs beyond the limit (a = b, no rest length, no stiffness: no force, no
-/// deviation, in the spring list and in its AVX2 lane), in their order, but for a particle's last
-/// spring: a particle whose springs all passed the limit at once stays with the piece of the one
-/// that comes last, not a loose fragment of its own. Returns how many broke.
+/// Breaks the springs beyond the limit, in their order, but for a particle's last spring: a
+/// particle whose springs all passed the limit at once stays with the piece of the one that comes
+/// last, not a loose fragment of its own. Returns how many broke.
 size_t breakSprings(MuscleState& muscle) {
   TearState& tear = muscle.tear;
-  MuscleSettings& settings = *tear.torn;
+  const MuscleSettings& settings = *tear.torn;
   const btVector3* x = muscle.positions.data();
   size_t broken = 0;
   for (size_t s = 0; s < settings.springs.size(); ++s) {
-    Spring& spring = settings.springs[s];
+    const Spring& spring = settings.springs[s];
     const btScalar longest = settings.breakStretch * spring.restLength;
     if (spring.a == spring.b || !(x[spring.a].distance2(x[spring.b]) > longest * longest) ||
         tear.springCounts[spring.a] == 1 || tear.springCounts[spring.b] == 1)
       continue;
-    --tear.springCounts[spring.a];
-    --tear.springCounts[spring.b];
-    spring = {spring.a, spring.a, 0, 0};
-    if (!tear.springLanes.empty()) {
-      SpringBlocks& blocks = settings.springBlocks;
-      const uint32_t lane = tear.springLanes[s];
-      blocks.b[lane] = spring.a * uint32_t(sizeof(btVector3));
-      blocks.restLength[lane] = blocks.stiffness[lane] = 0;
-    }
+    breakSpring(muscle, s);
     ++broken;
   }
   return broken;
 }
 
-/// Breaks the volume terms (fans, and the tetrahedra of the projective solver's matrix) with an
-/// edge beyond the limit, or across pieces when `pieces`: no rest gradient, no force. Returns the
-/// fans broken.
-size_t breakVolumeTerms(MuscleState& muscle, bool pieces) {
+/// Whether a volume term's particles `p` have an edge beyond the muscle's breakStretch.
+bool stretchedTerm(const MuscleState& muscle, std::span<const uint32_t> p, const void*) {
+  const MuscleSettings& settings = *muscle.settings;
+  return anyTermEdge(p, [&](uint32_t i, uint32_t j) {
+    return beyond(settings, muscle.positions.data(), settings.breakStretch, i, j);
+  });
+}
+
+/// Whether a volume term's particles `p` lie in more than one piece.
+bool termAcrossPieces(const MuscleState& muscle, std::span<const uint32_t> p, const void*) {
+  return acrossPieces(muscle.tear, p);
+}
+
+}  // namespace
+
+void breakSpring(MuscleState& muscle, size_t s) {
   TearState& tear = muscle.tear;
   MuscleSettings& settings = *tear.torn;
-  const btVector3* x = muscle.positions.data();
-  const btScalar limit = settings.breakStretch;
-  const auto breaks = [&](std::span<const uint32_t> p) {
-    return pieces ? acrossPieces(tear, p) : fanStretched(settings, x, limit, p);
-  };
+  Spring& spring = settings.springs[s];
+  --tear.springCounts[spring.a];
+  --tear.springCounts[spring.b];
+  spring = {spring.a, spring.a, 0, 0};
+  if (tear.springLanes.empty()) return;
+  SpringBlocks& blocks = settings.springBlocks;
+  const uint32_t lane = tear.springLanes[s];
+  blocks.b[lane] = spring.a * uint32_t(sizeof(btVector3));
+  blocks.restLength[lane] = blocks.stiffness[lane] = 0;
+}
+
+size_t breakVolumeTerms(MuscleState& muscle, TermTest breaks, const void* context) {
+  MuscleSettings& settings = *muscle.tear.torn;
   size_t broken = 0;
   for (size_t k = 0; k < settings.fanRestGradient.size(); ++k) {
-    if (settings.fanRestGradient[k] == 0 || !breaks(fanParticles(settings, k))) continue;
+    if (settings.fanRestGradient[k] == 0 || !breaks(muscle, fanParticles(settings, k), context))
+      continue;
     settings.fanRestGradient[k] = 0;
     ++broken;
   }
   for (size_t k = 0; k < settings.tetRestGradient.size(); ++k) {
     const std::span<const uint32_t> p(settings.tetParticles.data() + 4 * k, 4);
     // A tetrahedron is the fan (p0, p1, p2, p3) of one.
-    if (settings.tetRestGradient[k] != 0 && breaks(p)) settings.tetRestGradient[k] = 0;
+    if (settings.tetRestGradient[k] != 0 && breaks(muscle, p, context))
+      settings.tetRestGradient[k] = 0;
   }
   return broken;
 }
 
-}  // namespace
+void separatePieces(MuscleState& muscle) {
+  TearState& tear = muscle.tear;
+  tear.pieces = countPieces(*tear.torn, tear);
+  tear.brokenVolumeTerms += breakVolumeTerms(muscle, termAcrossPieces, nullptr);
+}
 
-void prepareTearing(MuscleState& muscle) {
-  if (!(muscle.settings->breakStretch > 0)) return;
+void prepareTearing(MuscleState& muscle, bool cuttable) {
+  if (muscle.tear.torn || !(cuttable || muscle.settings->breakStretch > 0)) return;
   TearState& tear = muscle.tear;
   tear.torn = std::make_shared<MuscleSettings>(*muscle.settings);
   muscle.settings = tear.torn;
@@ -158,13 +163,13 @@ void prepareTearing(MuscleState& muscle) {
 
 bool breakStretched(MuscleState& muscle) {
   TearState& tear = muscle.tear;
-  if (!tear.torn) return false;
+  if (!tear.torn || !(tear.torn->breakStretch > 0)) return false;
   const size_t springs = breakSprings(muscle);
-  const size_t volumeTerms = breakVolumeTerms(muscle, false);
+  const size_t volumeTerms = breakVolumeTerms(muscle, stretchedTerm, nullptr);
   if (springs + volumeTerms == 0) return false;
   tear.brokenSprings += springs;
-  tear.pieces = countPieces(*tear.torn, tear);
-  tear.brokenVolumeTerms += volumeTerms + breakVolumeTerms(muscle, true);
+  tear.brokenVolumeTerms += volumeTerms;
+  separatePieces(muscle);
   return true;
 }
 

@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 namespace fibremss {
@@ -34,14 +35,42 @@ struct TearState {
   std::vector<btVector3> restUpper;   ///< per piece root: upper corner at rest [m]
   size_t brokenSprings = 0;           ///< springs broken so far
   size_t brokenVolumeTerms = 0;       ///< local volume terms (fans) broken so far
-                                 /// Pieces: components of the unbroken springs among the particles
-                                 /// that had a spring at rest.
+  size_t cutSprings = 0;              ///< springs blades cut so far (Cutting.h)
+                          /// Pieces: components of the unbroken springs among the particles
+                          /// that had a spring at rest.
   size_t pieces = 1;
 };
 
 /// Gives `muscle` its own copy of its settings and the scratch of its pieces when its settings
-/// tear (breakStretch > 0); counts its pieces at rest.
-void prepareTearing(MuscleState& muscle);
+/// tear (breakStretch > 0) or it is `cuttable` (a blade may cut it); counts its pieces at rest.
+/// Nothing when it has them already.
+void prepareTearing(MuscleState& muscle, bool cuttable = false);
+
+/// Breaks spring `s` of a muscle prepared for tearing for good (a = b, no rest length, no
+/// stiffness: no force, no deviation, in the spring list and in its AVX2 lane).
+void breakSpring(MuscleState& muscle, size_t s);
+
+/// Whether a volume term of `muscle` on the particles `p` breaks (`context`: the caller's).
+using TermTest = bool (*)(const MuscleState& muscle, std::span<const uint32_t> p,
+                          const void* context);
+/// Breaks the volume terms (fans, and the tetrahedra of the projective solver's matrix) of a
+/// muscle prepared for tearing that `breaks` says: no rest gradient, no force. Returns the fans
+/// broken.
+size_t breakVolumeTerms(MuscleState& muscle, TermTest breaks, const void* context);
+
+/// Whether `test(i, j)` holds for an edge i–j of one of the tetrahedra (a, b, r_k, r_k+1) of a
+/// volume term's fan `p` (a, b, r_0 .. r_m; a tetrahedron is the fan of one).
+template <typename Test>
+bool anyTermEdge(std::span<const uint32_t> p, Test&& test) {
+  if (test(p[0], p[1])) return true;
+  for (size_t k = 2; k < p.size(); ++k)
+    if (test(p[0], p[k]) || test(p[1], p[k]) || (k + 1 < p.size() && test(p[k], p[k + 1])))
+      return true;
+  return false;
+}
+
+/// After springs broke: recounts the muscle's pieces and breaks the volume terms across them.
+void separatePieces(MuscleState& muscle);
 
 /// Breaks the springs and volume terms of a tearing `muscle` beyond its breakStretch at its
 /// positions, then the volume terms across pieces; recounts its pieces when something broke.
