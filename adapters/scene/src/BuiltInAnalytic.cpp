@@ -77,9 +77,9 @@ Json cylinderStretchScene() {
   scene["bones"] = Json::array({bone("plate-lower", plate(-1), keyframes(down)),
                                 bone("plate-upper", plate(1), keyframes(up))});
   scene["analytic"] = analytic("cylinder-stretch", 1.1, 0);
-  // 20 iterations per pose: its ν and volume settle by 11 (effective ν 0.472 and +0.609 % at 20,
-  // 0.472 and +0.604 % at 30); at 8–10 ν is 0.458–0.467, so half the default stays within 0.023
-  // of the exact 0.49, nearer than Bullet's FEM at any substeps (0.517–0.520).
+  // 20 iterations per pose: its ν and volume settle by 11 (effective ν 0.469 and +0.585 % at 20,
+  // 0.469 and +0.584 % at 30, 0.470 and +0.584 % at 400: the model's own ν, docs/decisions.md,
+  // "Volume terms"); at 8–10 ν is 0.455–0.464.
   scene["simulation"]["iterations"] = 20;
   return scene;
 }
