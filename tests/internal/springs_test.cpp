@@ -14,7 +14,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
-#include "solver/SpringForces.h"
+#include "kernels/SpringForces.h"
 #include "support/GridMuscle.h"
 #include "support/ThighSteps.h"
 

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <utility>
 
-#include "SurfaceContact.h"
+#include "geometry/SurfaceContact.h"
 
 namespace fibremss {
 namespace {

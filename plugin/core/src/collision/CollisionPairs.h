@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "solver/MuscleState.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 

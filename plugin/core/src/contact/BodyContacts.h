@@ -9,7 +9,7 @@
 #include <span>
 
 #include "fibremss/RigidContact.h"
-#include "solver/MuscleState.h"
+#include "state/MuscleState.h"
 
 class btCollisionObject;
 class btCollisionShape;

@@ -9,13 +9,13 @@
 
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
-#include "Residual.h"
-#include "Skin.h"
-#include "SpringForces.h"
-#include "TimeStep.h"
-#include "VolumeForces.h"
+#include "dynamics/Residual.h"
+#include "dynamics/TimeStep.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
+#include "kernels/Skin.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

@@ -9,14 +9,14 @@
 #include <string>
 #include <vector>
 
-#include "MuscleState.h"
-#include "Residual.h"
-#include "SpringForces.h"
-#include "TaskPool.h"
 #include "collision/CollisionPairs.h"
 #include "contact/BodyContacts.h"
+#include "dynamics/Residual.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
+#include "kernels/SpringForces.h"
+#include "state/MuscleState.h"
+#include "tasks/TaskPool.h"
 
 namespace fibremss {
 

@@ -18,12 +18,12 @@
 
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
-#include "MuscleSystemPretransform.h"
-#include "SpringForces.h"
-#include "StrainLimit.h"
-#include "TimeStep.h"
-#include "VolumeForces.h"
+#include "dynamics/StrainLimit.h"
+#include "dynamics/TimeStep.h"
 #include "integrators/Integrators.h"
+#include "kernels/MuscleSystemPretransform.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

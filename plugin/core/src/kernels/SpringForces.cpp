@@ -1,3 +1,5 @@
+#include "SpringForces.h"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -7,9 +9,8 @@
 #include <limits>
 #include <stdexcept>
 
-#include "MuscleState.h"
 #include "ParticleSimd.h"
-#include "SpringForces.h"
+#include "state/MuscleState.h"
 
 #define FIBREMSS_SSE_SPRINGS FIBREMSS_SSE_PARTICLES
 // The AVX2 kernel is compiled for its own target and chosen at run time: the library still runs

@@ -8,16 +8,16 @@
 #include <memory>
 #include <vector>
 
-#include "collision/BoneDistanceField.h"
-#include "collision/CollisionTrees.h"
-#include "collision/SurfaceContact.h"
-#include "contact/InteractionState.h"
+#include "InteractionState.h"
+#include "dynamics/Tearing.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Pretransform.h"
-#include "solver/ForceChunks.h"
-#include "solver/Skin.h"
-#include "solver/Tearing.h"
+#include "geometry/BoneDistanceField.h"
+#include "geometry/CollisionTrees.h"
+#include "geometry/SurfaceContact.h"
+#include "kernels/ForceChunks.h"
+#include "kernels/Skin.h"
 
 class btCollisionObject;
 

@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
-#include "MuscleState.h"
-#include "SpringForces.h"
-#include "VolumeForces.h"
 #include "contact/BodyContacts.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "MuscleState.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {

@@ -5,11 +5,11 @@
 #include <cmath>
 #include <string>
 
-#include "BodyContacts.h"
+#include "MuscleSystemChecks.h"
+#include "MuscleSystemImpl.h"
+#include "contact/BodyContacts.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
-#include "solver/MuscleSystemChecks.h"
-#include "solver/MuscleSystemImpl.h"
 
 namespace fibremss {
 namespace {
