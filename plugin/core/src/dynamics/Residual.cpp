@@ -97,6 +97,10 @@ void muscleForceResidual(MuscleState& muscle, const btVector3& gravity) {
   for (uint32_t i : settings.fixedParticles) r[i].setZero();
 }
 
+SpringForceResult springForces(MuscleState& muscle) {
+  return springForces(*muscle.settings, muscle.positions, muscle.forces);
+}
+
 ResidualSums residualSums(const MuscleState& muscle) {
   ResidualSums sums;
   for (uint32_t i : muscle.freeParticles) {

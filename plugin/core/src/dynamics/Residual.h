@@ -10,6 +10,7 @@
 
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
+#include "kernels/SpringForces.h"
 
 namespace fibremss {
 
@@ -55,6 +56,9 @@ btVector3 contactNormal(const MuscleState& muscle, uint32_t i);
 /// on fastestSpringKernel in one pass, every volume term, m·gravity and external forces), before
 /// the contacts' reactions (addContactReactions); attached particles get 0. No allocation.
 void muscleForceResidual(MuscleState& muscle, const btVector3& gravity);
+
+/// The muscle's spring forces at its positions, into muscle.forces.
+SpringForceResult springForces(MuscleState& muscle);
 
 /// The sums of muscle.residual over the free particles (contactParticles: those with a
 /// contactNormal), in one fixed order.

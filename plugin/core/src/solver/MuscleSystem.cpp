@@ -10,6 +10,7 @@
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
 #include "dynamics/Residual.h"
+#include "dynamics/Tearing.h"
 #include "dynamics/TimeStep.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"

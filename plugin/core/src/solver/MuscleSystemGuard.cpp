@@ -21,6 +21,7 @@
 #include <cmath>
 
 #include "MuscleSystemImpl.h"
+#include "dynamics/Tearing.h"
 #include "fibremss/Measures.h"
 #include "integrators/Integrators.h"
 

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "InteractionState.h"
-#include "dynamics/Tearing.h"
+#include "TearState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Pretransform.h"
@@ -187,7 +187,7 @@ struct MuscleState : ParticleState,
   bool prepared = false;                           ///< workspace made for `preparedFor`
   bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
-  TearState tear;           ///< its own settings and pieces when it tears (Tearing.h)
+  TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
 };
 
 }  // namespace fibremss
