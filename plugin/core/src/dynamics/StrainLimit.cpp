@@ -59,10 +59,10 @@ size_t limitStrain(MuscleState& muscle, int passes) {
   return shortened;
 }
 
-double freeDisplacement(const MuscleState& muscle) {
+double freeDisplacement(const ParticleState& particles) {
   double sum = 0;
-  for (uint32_t i : muscle.freeParticles)
-    sum += (muscle.positions[i] - muscle.previous[i]).length();
+  for (uint32_t i : particles.freeParticles)
+    sum += (particles.positions[i] - particles.previous[i]).length();
   return sum;
 }
 

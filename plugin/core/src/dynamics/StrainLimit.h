@@ -7,6 +7,7 @@
 namespace fibremss {
 
 struct MuscleState;
+struct ParticleState;
 
 /// Shortens every spring of `muscle` longer than strainLimit·L0 to just inside that length (a
 /// relative 1e-5, beyond float rounding), mass-weighted (the particles weigh the same: two free
@@ -26,8 +27,8 @@ constexpr int kIterationStrainPasses = 1;
 /// chains that cannot reach between their fixed ends within the limit.
 constexpr int kEndStrainPasses = 64;
 
-/// Σ |x − x(t−dt)| over the free particles of `muscle` [m]: an iteration's displacement after
+/// Σ |x − x(t−dt)| over the free `particles` [m]: an iteration's displacement after
 /// the projection moved some of them.
-double freeDisplacement(const MuscleState& muscle);
+double freeDisplacement(const ParticleState& particles);
 
 }  // namespace fibremss

@@ -313,7 +313,7 @@ void MuscleSystem::Impl::guardedStep() {
         refitTree(state);
         for (uint32_t slot : bones.order)
           collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
-        recordPushes(state);
+        recordPushes(*state.settings, state, state);
         applyPushes(state, velocities, definition.slidingContacts);
       }
     thread.contacts.clear();

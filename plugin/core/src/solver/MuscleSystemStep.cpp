@@ -388,7 +388,7 @@ void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   if (!pushesPending) return;
   const TimeIntegrator& integrator = integratorFor(definition.integrator);
   const bool holds = integrator.holdsContacts(definition);
-  if (record || holds) recordPushes(state);
+  if (record || holds) recordPushes(*state.settings, state, state);
   applyPushes(state, integrator.usesVelocities(), definition.slidingContacts);
   if (holds) leaveContactSlop(state, kContactSlop);
 }
