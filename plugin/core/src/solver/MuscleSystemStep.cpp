@@ -518,8 +518,9 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     // displacement is the projection's end's when it moved particles: at a limited equilibrium
     // the two cancel, as the stop rules expect.
     const int passes = result.forces.nearLimit > 0 ? kIterationStrainPasses : 0;
-    result.displacement =
-        limitStrain(state, passes) > 0 ? freeDisplacement(state) : integration.displacement;
+    result.displacement = limitStrain(*state.settings, state, state, passes) > 0
+                              ? freeDisplacement(state)
+                              : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
     if (refit) refitTree(state);
@@ -681,7 +682,7 @@ void MuscleSystem::Impl::endIterations(bool arrived) {
   forEachMuscle("end", [this, arrived](MuscleState& state, uint32_t, unsigned) {
     if (!arrived) followBones(state);
     // The response's pushes may have stretched springs held at the limit.
-    limitStrain(state, kEndStrainPasses);
+    limitStrain(*state.settings, state, state, kEndStrainPasses);
   });
 }
 
