@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "fibremss/FibreRun.h"
+#include "fibremss/ImplicitSurface.h"
 #include "fibremss/Kernel.h"
 #include "fibremss/Progress.h"
 #include "fibremss/VtkFiles.h"
@@ -255,6 +256,44 @@ TEST(RunCli, QuantisedFramesStayWithinTheirBoundAndShrink) {
     EXPECT_LE(largestDifference(a, b, "fibre_stretch"), bounds.at("strain_error_bound"));
   }
   EXPECT_LT(roundedBytes, exactBytes);
+}
+
+/// The glTF JSON chunk of a .glb file.
+nlohmann::json glbJson(const fs::path& file) {
+  const std::string bytes = readFile(file);
+  uint32_t length = 0;
+  std::memcpy(&length, bytes.data() + 12, 4);
+  return nlohmann::json::parse(bytes.substr(20, length));
+}
+
+TEST(RunCli, ImplicitSurfaceFramesAreClosedInVtkAndGltf) {
+  TemporaryDirectory out("fibremss_run_implicit");
+  const auto result = runProcess(cli() +
+                                 " run fusiform --steps 2 --format vtk,gltf --set "
+                                 "outputs.surface=implicit --out " +
+                                 out.path().string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("implicit surface: "), std::string::npos) << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  EXPECT_GT(summary.at("implicit_surface_ms_per_frame").get<double>(), 0);
+  const fs::path frames = out.path() / "frames";
+  for (const char* step : {"00000", "00001"}) {
+    const PolyDataFile surface =
+        readVtp((frames / (std::string("muscle0_fusiform_surface_") + step + ".vtp")).string());
+    ASSERT_GT(surface.triangles.size(), 100u);
+    EXPECT_EQ(meshTopology({surface.points, surface.triangles}).openEdges, 0u);
+    ASSERT_NE(surface.array("fibre_stretch"), nullptr);
+    EXPECT_EQ(surface.array("fibre_stretch")->values.size(), surface.points.size());
+    // The glTF frame holds the same surface (its first mesh, positions as an accessor).
+    const nlohmann::json gltf =
+        glbJson(out.path() / "gltf" / (std::string("frame_") + step + ".glb"));
+    EXPECT_EQ(gltf.at("meshes").at(0).at("name"), "muscle0_fusiform");
+    const int position =
+        gltf.at("meshes").at(0).at("primitives").at(0).at("attributes").at("POSITION");
+    EXPECT_EQ(gltf.at("accessors").at(position).at("count"), surface.points.size());
+  }
+  // One topology per frame: no morph targets, so no animated run.glb.
+  EXPECT_FALSE(fs::exists(out.path() / "gltf" / "run.glb"));
 }
 
 TEST(Cli, VersionNamesBulletItsPrecisionTheKernelAndTheCompiler) {

@@ -5,7 +5,9 @@
 // of a probe pressed into a muscle. `fibremss_bench --callgrind-kernels R` instead runs each
 // kernel once under callgrind's client requests (comparisons/bench/callgrind.sh);
 // `fibremss_bench --thread-scaling R [ROUNDS]` alternates 1 and 2 threads in one run, alone and
-// with a busy loop of its own on one core, and prints the medians and their ratio.
+// with a busy loop of its own on one core, and prints the medians and their ratio;
+// `fibremss_bench --implicit-surface R [ROUNDS]` measures the implicit surface
+// (ImplicitSurfaceBench.cpp).
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <benchmark/benchmark.h>
@@ -30,6 +32,7 @@
 #include <vector>
 
 #include "BenchScene.h"
+#include "ImplicitSurfaceBench.h"
 
 namespace fibremss::bench {
 namespace {
@@ -360,6 +363,9 @@ int main(int argc, char** argv) {
     return fibremss::bench::callgrindKernels(std::atoi(argv[2]));
   if (argc >= 3 && std::strcmp(argv[1], "--thread-scaling") == 0)
     return fibremss::bench::threadScaling(std::atoi(argv[2]), argc > 3 ? std::atoi(argv[3]) : 15);
+  if (argc >= 3 && std::strcmp(argv[1], "--implicit-surface") == 0)
+    return fibremss::bench::implicitSurfaceReport(std::atoi(argv[2]),
+                                                  argc > 3 ? std::atoi(argv[3]) : 15);
   fibremss::bench::registerAll();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

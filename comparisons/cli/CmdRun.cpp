@@ -124,6 +124,9 @@ void printSummary(const RunMetrics& m, const FibreRunDetails& details, const Run
     std::printf("  worst muscle volume change at any pose: %+.3g %% (%s)\n",
                 m.worstMuscleVolumeChangePct, m.worstVolumeMuscle.c_str());
   if (!m.analytic.type.empty()) std::printf("  %s\n", analyticLine(m.analytic).c_str());
+  if (std::isfinite(details.implicitSurfaceMsPerFrame))
+    std::printf("  implicit surface: %.3g ms per frame (median, all muscles)\n",
+                details.implicitSurfaceMsPerFrame);
   std::printf("  particle spheres in bones: max %.3g mm, mean %.3g mm (%zu of %zu sphere tests)\n",
               details.spherePenetration.maxMm, details.spherePenetration.meanMm,
               details.spherePenetration.penetrating, details.spherePenetration.points);
@@ -227,6 +230,8 @@ nlohmann::json runSummary(const LoadedScene& scene, const PreparedScene& prepare
     summary["frame_quantisation"] = std::move(quantisation);
   if (std::isfinite(details.measureMsPerStep))
     summary["measure_ms_per_step"] = details.measureMsPerStep;
+  if (std::isfinite(details.implicitSurfaceMsPerFrame))
+    summary["implicit_surface_ms_per_frame"] = details.implicitSurfaceMsPerFrame;
   summary["guard"] = guardJson(details, scene.simulation.onFailure);
   summary["trapped"] = trappedJson(details);
   summary["loop_motion"] = loop;

@@ -352,7 +352,8 @@ class FibreRunner {
     }
     if (!options.outDir.empty() && frameEvery_ > 0)
       frames_ = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale,
-                                              FrameFormats{options.vtkFrames, options.gltfFrames});
+                                              FrameFormats{options.vtkFrames, options.gltfFrames},
+                                              system_.threads());
   }
 
   /// Runs the steps until the last, a failure the policy does not go on from, or a cancel.
@@ -392,6 +393,9 @@ class FibreRunner {
       details->spherePenetration = ledger_.spherePenetration;
       details->frames = frames_ ? frames_->frames() : 0;
       details->measureMsPerStep = median(timings_.measureMsPerStep);
+      if (frames_ && !frames_->implicitSurfaceMs().empty())
+        details->implicitSurfaceMsPerFrame = median(std::vector<double>(
+            frames_->implicitSurfaceMs().begin(), frames_->implicitSurfaceMs().end()));
     }
   }
 

@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cctype>
+#include <chrono>
 #include <cstdio>
 #include <variant>
 
@@ -83,18 +84,69 @@ void particleSpringStrain(const MuscleSettings& muscle, std::span<const btVector
 }
 
 FrameWriter::FrameWriter(const std::string& outDir, const OutputSettings& settings,
-                         double unitScale, FrameFormats formats)
+                         double unitScale, FrameFormats formats, unsigned threads)
     : outDir_(outDir),
       settings_(settings),
       formats_(formats),
       sceneUnitsPerMetre_(btScalar(1.0 / unitScale)),
       lengthStep_(powerOfTwoStep(settings.quantiseMm / 1000 / unitScale)),
-      strainStep_(powerOfTwoStep(settings.quantiseStrain)) {}
+      strainStep_(powerOfTwoStep(settings.quantiseStrain)),
+      threads_(threads) {}
+
+void FrameWriter::extractImplicit(const MuscleSystem& system, std::span<const MuscleHandle> muscles,
+                                  const PreparedScene& prepared) {
+  if (implicit_.empty())
+    for (size_t m = 0; m < muscles.size(); ++m) implicit_.emplace_back(prepared.muscles[m]);
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<ImplicitSurface*> surfaces;
+  std::vector<std::span<const btVector3>> positions;
+  std::vector<std::span<const Spring>> springs;
+  for (size_t m = 0; m < muscles.size(); ++m) {
+    surfaces.push_back(&implicit_[m]);
+    positions.push_back(system.positions(muscles[m]));
+    springs.push_back(system.settings(muscles[m]).springs);
+  }
+  extractSurfaces(surfaces, positions, springs, threads_);
+  implicitMs_.push_back(
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+}
+
+TriangleMesh FrameWriter::frameSurface(size_t m, const MuscleSystem& system,
+                                       MuscleHandle handle) const {
+  if (!implicit_.empty()) return implicit_[m].mesh();
+  const std::span<const btVector3> vertices = system.surface(handle);
+  return {{vertices.begin(), vertices.end()}, system.settings(handle).restSurface.triangles};
+}
+
+std::vector<DataArray> FrameWriter::implicitArrays(size_t m, const MuscleSystem& system,
+                                                   MuscleHandle handle,
+                                                   std::span<const float> fixed) const {
+  const std::vector<uint32_t> nearest = implicit_[m].nearestParticles();
+  auto carried = [&](std::span<const float> values) {
+    std::vector<float> out(nearest.size());
+    for (size_t v = 0; v < nearest.size(); ++v) out[v] = values[nearest[v]];
+    return out;
+  };
+  const std::span<const btVector3> positions = system.positions(handle);
+  const std::span<const btVector3> rest = system.settings(handle).restPositions;
+  std::vector<btVector3> current(nearest.size()), atRest(nearest.size());
+  for (size_t v = 0; v < nearest.size(); ++v) {
+    current[v] = positions[nearest[v]];
+    atRest[v] = rest[nearest[v]];
+  }
+  return {{"fibre_stretch", 1, carried(stretch_)},
+          {"spring_strain", 1, carried(strain_)},
+          displacement(current, atRest, sceneUnitsPerMetre_),
+          constant("muscle_id", nearest.size(), int32_t(m)),
+          {"fixed", 1, carried(fixed)}};
+}
 
 void FrameWriter::write(const FrameInfo& info, const MuscleSystem& system,
                         std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
                         std::span<const btTransform> boneTransforms,
                         std::span<const std::vector<float>> surfaceDepthsMm) {
+  if (settings_.implicitSurface && settings_.writeSurfaces)
+    extractImplicit(system, muscles, prepared);
   if (formats_.vtk) {
     int part = 0;
     for (size_t m = 0; m < muscles.size(); ++m)
@@ -111,11 +163,14 @@ void FrameWriter::writeGltf(const FrameInfo& info, const MuscleSystem& system,
                             std::span<const btTransform> boneTransforms) {
   constexpr std::array<float, 4> kMuscle{0.75f, 0.25f, 0.22f, 1}, kBone{0.86f, 0.84f, 0.76f, 1};
   std::vector<GltfMesh> meshes;
+  std::vector<TriangleMesh> surfaces;  // the meshes' muscle surfaces
+  surfaces.reserve(muscles.size());
   for (size_t m = 0; m < muscles.size(); ++m) {
     const MuscleSettings& muscle = system.settings(muscles[m]);
     if (muscle.restSurface.empty()) continue;
+    surfaces.push_back(frameSurface(m, system, muscles[m]));
     meshes.push_back({"muscle" + std::to_string(m) + "_" + fileSafe(muscle.name),
-                      system.surface(muscles[m]), muscle.restSurface.triangles, kMuscle});
+                      surfaces.back().vertices, surfaces.back().triangles, kMuscle});
   }
   std::vector<TriangleMesh> bones;  // placed where they are
   for (size_t b = 0; b < prepared.bones.size(); ++b)
@@ -126,7 +181,7 @@ void FrameWriter::writeGltf(const FrameInfo& info, const MuscleSystem& system,
   char name[32];
   std::snprintf(name, sizeof name, "/gltf/frame_%05d.glb", info.step);
   writeGlb(outDir_ + name, meshes);
-  animation_.addFrame(info.time, meshes);
+  if (implicit_.empty()) animation_.addFrame(info.time, meshes);
 }
 
 void FrameWriter::finish() const {
@@ -147,19 +202,24 @@ void FrameWriter::writeMuscle(const FrameInfo& info, size_t m, const MuscleSyste
   const auto id = int32_t(m);
 
   if (settings_.writeSurfaces && !muscle.restSurface.empty()) {
-    std::span<const btVector3> vertices = system.surface(handle);
+    TriangleMesh mesh = frameSurface(m, system, handle);
     PolyData surface;
-    surface.points.assign(vertices.begin(), vertices.end());
+    surface.points = std::move(mesh.vertices);
     surface.pointScale = sceneUnitsPerMetre_;
-    surface.triangles = muscle.restSurface.triangles;
-    std::vector<float> penetration(depthsMm.begin(), depthsMm.end());
-    for (float& depth : penetration) depth *= float(sceneUnitsPerMetre_ / 1000);
-    surface.pointData = {{"fibre_stretch", 1, onSurface(muscle, stretch_)},
-                         {"spring_strain", 1, onSurface(muscle, strain_)},
-                         displacement(vertices, muscle.restSurface.vertices, sceneUnitsPerMetre_),
-                         constant("muscle_id", vertices.size(), id),
-                         {"penetration", 1, std::move(penetration)},
-                         {"fixed", 1, onSurface(muscle, fixed)}};
+    surface.triangles = std::move(mesh.triangles);
+    if (implicit_.empty()) {
+      std::vector<float> penetration(depthsMm.begin(), depthsMm.end());
+      for (float& depth : penetration) depth *= float(sceneUnitsPerMetre_ / 1000);
+      surface.pointData = {
+          {"fibre_stretch", 1, onSurface(muscle, stretch_)},
+          {"spring_strain", 1, onSurface(muscle, strain_)},
+          displacement(surface.points, muscle.restSurface.vertices, sceneUnitsPerMetre_),
+          constant("muscle_id", surface.points.size(), id),
+          {"penetration", 1, std::move(penetration)},
+          {"fixed", 1, onSurface(muscle, fixed)}};
+    } else {
+      surface.pointData = implicitArrays(m, system, handle, fixed);
+    }
     surface.fieldData = frameFields(info);
     add(info.time, stem + "_surface_" + number + ".vtp", surface, part, muscle.name + " surface");
   }

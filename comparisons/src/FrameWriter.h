@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "fibremss/Gltf.h"
+#include "fibremss/ImplicitSurface.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Output.h"
 #include "fibremss/Preparation.h"
@@ -44,11 +45,13 @@ struct FrameFormats {
 /// Writes the frames of a run. VTK in the scene's units: per muscle its deformed surface and its
 /// particles (fibres as lines), per bone its mesh where it is, again only once it moved, and
 /// run.pvd listing them all at their simulated times. glTF: one .glb per frame with every
-/// muscle's deformed surface and every bone where it is, and run.glb animating them all.
+/// muscle's deformed surface and every bone where it is, and run.glb animating them all. With
+/// OutputSettings::implicitSurface the muscle surface is the implicit one, extracted at each
+/// frame on `threads` threads (its topology changes from frame to frame: no run.glb).
 class FrameWriter {
  public:
   FrameWriter(const std::string& outDir, const OutputSettings& settings, double unitScale,
-              FrameFormats formats = {});
+              FrameFormats formats = {}, unsigned threads = 1);
 
   /// One frame. `surfaceDepthsMm[m]`: depth of muscle m's surface vertices in the bones [mm].
   void write(const FrameInfo& info, const MuscleSystem& system,
@@ -60,6 +63,8 @@ class FrameWriter {
   void finish() const;
 
   int frames() const { return frames_; }
+  /// Wall time of extracting the implicit surfaces, per frame [ms] (empty without them).
+  std::span<const double> implicitSurfaceMs() const { return implicitMs_; }
 
  private:
   void writeMuscle(const FrameInfo& info, size_t m, const MuscleSystem& system, MuscleHandle handle,
@@ -70,6 +75,14 @@ class FrameWriter {
                  std::span<const MuscleHandle> muscles, const PreparedScene& prepared,
                  std::span<const btTransform> boneTransforms);
   std::vector<DataArray> frameFields(const FrameInfo& info) const;
+  /// Every muscle's implicit surface from its particles now (prepared at the first frame).
+  void extractImplicit(const MuscleSystem& system, std::span<const MuscleHandle> muscles,
+                       const PreparedScene& prepared);
+  /// The surface a frame shows of muscle m: its implicit surface or its skinned one.
+  TriangleMesh frameSurface(size_t m, const MuscleSystem& system, MuscleHandle handle) const;
+  /// Muscle m's arrays on the implicit surface's vertices: each its nearest particle's.
+  std::vector<DataArray> implicitArrays(size_t m, const MuscleSystem& system, MuscleHandle handle,
+                                        std::span<const float> fixed) const;
   /// Rounds `data`'s points and float arrays to the steps and records them in its field data.
   void quantise(PolyData& data) const;
   void add(double time, const std::string& file, PolyData& data, int part, const std::string& name);
@@ -85,6 +98,9 @@ class FrameWriter {
   std::vector<std::string> boneFiles_;      ///< per bone, the file of its latest placement
   std::vector<btTransform> boneWrittenAt_;  ///< per bone, the transform that file shows
   std::vector<float> stretch_, strain_;     ///< per particle (scratch)
+  unsigned threads_;                        ///< threads extracting the implicit surfaces
+  std::vector<ImplicitSurface> implicit_;   ///< per muscle, with implicitSurface
+  std::vector<double> implicitMs_;          ///< per frame: their extraction's wall time [ms]
   int frames_ = 0;
 };
 

@@ -502,6 +502,8 @@ void readOutputs(Fields& outputs, OutputSettings& settings) {
   settings.writeFibres = outputs.boolean("fibres", true);
   settings.quantiseMm = outputs.number("quantise_mm", 0, 0, 1000);
   settings.quantiseStrain = outputs.number("quantise_strain", 0, 0, 1);
+  settings.implicitSurface =
+      outputs.choice("surface", "skinned", {"skinned", "implicit"}) == "implicit";
 }
 
 void readCollision(Fields& collision, double scale, MuscleSystemDef& def) {

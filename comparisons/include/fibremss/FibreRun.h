@@ -82,6 +82,9 @@ struct FibreRunDetails {
   /// Median wall time of measuring one step [ms]; not part of RunMetrics::timing, which is the
   /// method's own cost (an application embedding FibreMSS does not measure).
   double measureMsPerStep = RunMetrics::kNone;
+  /// Median wall time of extracting every muscle's implicit surface for one frame [ms]
+  /// (OutputSettings::implicitSurface; kNone without).
+  double implicitSurfaceMsPerFrame = RunMetrics::kNone;
   int rolledBackSteps = 0;           ///< steps the numerical guard rolled back
   int retries = 0;                   ///< attempts it repeated with a smaller dt, all steps
   std::vector<FrozenMuscle> frozen;  ///< muscles it froze, in order

@@ -33,6 +33,9 @@ struct OutputSettings {
   /// Dimensionless frame arrays (stretch, strain, fixed) rounded likewise to a power-of-two
   /// step not above this [—] (0: written exactly).
   double quantiseStrain = 0;
+  /// Frames show each muscle's implicit surface (ImplicitSurface.h: the iso-surface of its
+  /// particles' field, which opens where it tears) instead of its skinned surface.
+  bool implicitSurface = false;
 };
 
 /// An exact case the scene reproduces (the analytic tier): a straight cylindrical muscle whose

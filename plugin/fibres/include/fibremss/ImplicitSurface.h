@@ -1,0 +1,90 @@
+#pragma once
+// A muscle's surface as the iso-surface of its particles' field: it follows tears and cuts
+// without a rebuild, where the skinned surface (each vertex bound to its nearest particles)
+// cannot open. Field at a point x, over the particles j within the kernel radius h:
+//   w_j = (1 − |x − p_j|² / h²)³,  X_j = P_j + F_j⁻¹ (x − p_j)   (x mapped back to rest by j)
+//   f(x) = min( D(X̄) − λ·σ,  h·(W / κ − 1) ) − dents
+// X̄ the w-weighted mean of the X_j and σ their spread, W = Σ w_j, D the signed distance to the
+// rest surface (positive inside), F_j the deformation of particle j's springs (as the skin's),
+// κ half the smallest W on the rest surface. At rest every X_j is x, so the surface is the rest
+// surface; where particles part (a tear, a cut) their rest positions disagree (σ) and the
+// particles' cover thins (W), and the surface opens. Extracted by marching tetrahedra on a
+// sparse grid, from seeds beside the boundary particles across every cell face the surface
+// crosses: a closed surface (every edge shared by two triangles).
+#include <LinearMath/btMatrix3x3.h>
+#include <LinearMath/btVector3.h>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "fibremss/Geometry.h"
+#include "fibremss/MuscleSettings.h"
+
+namespace fibremss {
+
+/// How an implicit surface is sampled.
+struct ImplicitSurfaceSettings {
+  /// Grid spacing [m]; 0: the muscle's median spring rest length times voxelFactor.
+  btScalar voxel = 0;
+  btScalar voxelFactor = btScalar(0.5);  ///< voxel per median spring rest length [1]
+  /// The rest distance grid's spacing per voxel [1]: finer than the extraction grid, as a
+  /// muscle thinner than a few of its cells loses its distance between them.
+  btScalar restVoxelRatio = btScalar(0.5);
+  btScalar kernelFactor = btScalar(2);  ///< h per median spring rest length [1]
+  btScalar spreadWeight = btScalar(2);  ///< λ: how much the X_j's spread opens the surface [1]
+};
+
+/// A local negative field, such as a tool pressing on the surface: the field drops by
+/// depth·(1 − |x − centre|² / radius²)³ within radius of the centre.
+struct SurfaceDent {
+  btVector3 centre{0, 0, 0};  ///< [m]
+  btScalar radius = 0;        ///< [m]
+  btScalar depth = 0;         ///< the drop at the centre [m]
+};
+
+/// One muscle's implicit surface: prepared once from its rest state, extracted from its
+/// particles on demand. Not thread-safe per object; different objects extract concurrently.
+class ImplicitSurface {
+ public:
+  explicit ImplicitSurface(std::shared_ptr<const MuscleSettings> muscle,
+                           const ImplicitSurfaceSettings& settings = {});
+  ~ImplicitSurface();
+  ImplicitSurface(ImplicitSurface&&) noexcept;
+  ImplicitSurface& operator=(ImplicitSurface&&) noexcept;
+
+  /// The surface of the particles at `positions` (one per particle of the muscle) [m], into
+  /// mesh(): triangles counter-clockwise seen from outside. `springs`: the muscle's springs as
+  /// they stand (MuscleSystem::settings, where a broken one has a = b); empty: the rest settings'.
+  void extract(std::span<const btVector3> positions, std::span<const Spring> springs = {});
+  /// The last extract()'s surface.
+  const TriangleMesh& mesh() const;
+  /// Per vertex of mesh(): the particle nearest to it among those within the kernel radius.
+  std::vector<uint32_t> nearestParticles() const;
+  /// The dents the next extract() applies (replacing earlier ones).
+  void setDents(std::span<const SurfaceDent> dents);
+  btScalar voxel() const;         ///< grid spacing [m]
+  btScalar kernelRadius() const;  ///< h [m]
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// extract() of every surface, surfaces[i] from positions[i] and springs[i], on `threads`
+/// threads of its own (0: the machine's hardware threads); each surface on one thread, so the
+/// result is the same for any count.
+void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
+                     std::span<const std::span<const btVector3>> positions,
+                     std::span<const std::span<const Spring>> springs, unsigned threads);
+
+/// The edges of `mesh` not shared by exactly two triangles, and its connected components
+/// (triangles joined by an edge).
+struct MeshTopology {
+  size_t openEdges = 0;   ///< edges with one triangle or more than two
+  size_t components = 0;  ///< connected pieces
+};
+MeshTopology meshTopology(const TriangleMesh& mesh);
+
+}  // namespace fibremss

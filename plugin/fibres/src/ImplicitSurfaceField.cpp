@@ -1,0 +1,262 @@
+// The implicit surface's field (ImplicitSurface.h): the rest distance grid, the particles'
+// cells, the deformation of each particle's springs and the field itself.
+#include <algorithm>
+#include <cmath>
+
+#include "ImplicitSurfaceInternal.h"
+
+namespace fibremss {
+namespace {
+
+constexpr int32_t kBlock = 4;  ///< rest distance block side [points]
+
+/// d·eᵀ.
+btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
+  return btMatrix3x3(d.x() * e.x(), d.x() * e.y(), d.x() * e.z(), d.y() * e.x(), d.y() * e.y(),
+                     d.y() * e.z(), d.z() * e.x(), d.z() * e.y(), d.z() * e.z());
+}
+
+/// Per particle, over its springs (those with a = b broken): Σ outer(x_b − x_a, X_b − X_a)
+/// into `current`, Σ outer(X_b − X_a, X_b − X_a) into `rest`.
+void springMoments(std::span<const Spring> springs, std::span<const btVector3> positions,
+                   std::span<const btVector3> restPositions, std::vector<btMatrix3x3>& current,
+                   std::vector<btMatrix3x3>& rest) {
+  const btMatrix3x3 zero(0, 0, 0, 0, 0, 0, 0, 0, 0);
+  current.assign(positions.size(), zero);
+  rest.assign(positions.size(), zero);
+  for (const Spring& spring : springs) {
+    const btVector3 restEdge = restPositions[spring.b] - restPositions[spring.a];
+    const btMatrix3x3 m = outer(positions[spring.b] - positions[spring.a], restEdge);
+    const btMatrix3x3 r = outer(restEdge, restEdge);
+    current[spring.a] += m;
+    current[spring.b] += m;
+    rest[spring.a] += r;
+    rest[spring.b] += r;
+  }
+}
+
+/// The median rest length of the muscle's springs [m] (1 mm without springs).
+btScalar medianSpringLength(const MuscleSettings& muscle) {
+  std::vector<btScalar> lengths;
+  for (const Spring& spring : muscle.springs) lengths.push_back(spring.restLength);
+  if (lengths.empty()) return btScalar(1e-3);
+  std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
+  return lengths[lengths.size() / 2];
+}
+
+/// The rest surface's and particles' bounds.
+void restBounds(const MuscleSettings& muscle, btVector3& lower, btVector3& upper) {
+  pointBounds(muscle.restPositions, lower, upper);
+  btVector3 surfaceLower, surfaceUpper;
+  pointBounds(muscle.restSurface.vertices, surfaceLower, surfaceUpper);
+  lower.setMin(surfaceLower);
+  upper.setMax(surfaceUpper);
+}
+
+btScalar lengthUnit(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings) {
+  return medianSpringLength(muscle) * (settings.voxel > 0 ? 1 : settings.voxelFactor);
+}
+
+GridFrame restFrame(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings) {
+  btVector3 lower, upper;
+  restBounds(muscle, lower, upper);
+  const btScalar voxel = settings.voxel > 0 ? settings.voxel : lengthUnit(muscle, settings);
+  const btScalar h = medianSpringLength(muscle) * settings.kernelFactor;
+  return GridFrame::covering(lower, upper, voxel * settings.restVoxelRatio, h + 2 * voxel);
+}
+
+}  // namespace
+
+GridFrame GridFrame::covering(const btVector3& lower, const btVector3& upper, btScalar spacing,
+                              btScalar pad) {
+  GridFrame frame;
+  frame.spacing = spacing;
+  frame.origin = lower - btVector3(pad, pad, pad);
+  const btVector3 extent = upper - lower + btVector3(2 * pad, 2 * pad, 2 * pad);
+  for (int a = 0; a < 3; ++a) frame.dims[a] = int32_t(std::ceil(extent[a] / spacing)) + 2;
+  return frame;
+}
+
+RayParity::RayParity(const TriangleMesh& surface) : surface_(surface) {
+  btVector3 upper;
+  pointBounds(surface.vertices, lower_, upper);
+  const auto count = btScalar(std::max<size_t>(surface.triangles.size(), 1));
+  cell_ = btMax((upper.y() - lower_.y()) * (upper.z() - lower_.z()) / count * 4, btScalar(1e-12));
+  cell_ = btSqrt(cell_);
+  for (int a = 0; a < 2; ++a) dims_[a] = int32_t((upper[a + 1] - lower_[a + 1]) / cell_) + 1;
+  // Two passes over the triangles' bucket ranges: count, then fill.
+  start_.assign(size_t(dims_[0]) * dims_[1] + 1, 0);
+  auto forBuckets = [&](const std::array<uint32_t, 3>& t, auto&& fn) {
+    btVector3 lo = surface.vertices[t[0]], hi = lo;
+    for (uint32_t v : t) lo.setMin(surface.vertices[v]), hi.setMax(surface.vertices[v]);
+    for (auto k = int32_t((lo.z() - lower_.z()) / cell_);
+         k <= int32_t((hi.z() - lower_.z()) / cell_); ++k)
+      for (auto j = int32_t((lo.y() - lower_.y()) / cell_);
+           j <= int32_t((hi.y() - lower_.y()) / cell_); ++j)
+        fn(size_t(j) + size_t(dims_[0]) * size_t(k));
+  };
+  for (const auto& t : surface.triangles) forBuckets(t, [&](size_t b) { ++start_[b + 1]; });
+  for (size_t b = 0; b + 1 < start_.size(); ++b) start_[b + 1] += start_[b];
+  triangles_.resize(start_.back());
+  std::vector<uint32_t> fill(start_.begin(), start_.end() - 1);
+  for (uint32_t t = 0; t < surface.triangles.size(); ++t)
+    forBuckets(surface.triangles[t], [&](size_t b) { triangles_[fill[b]++] = t; });
+}
+
+bool RayParity::inside(const btVector3& p) const {
+  const auto j = int32_t((p.y() - lower_.y()) / cell_), k = int32_t((p.z() - lower_.z()) / cell_);
+  if (p.y() < lower_.y() || p.z() < lower_.z() || j >= dims_[0] || k >= dims_[1]) return false;
+  const size_t b = size_t(j) + size_t(dims_[0]) * size_t(k);
+  bool odd = false;
+  for (uint32_t e = start_[b]; e < start_[b + 1]; ++e) {
+    const auto& t = surface_.triangles[triangles_[e]];
+    const btVector3 &a = surface_.vertices[t[0]], &u = surface_.vertices[t[1]],
+                    &v = surface_.vertices[t[2]];
+    // Barycentric coordinates of p in the triangle projected on yz, half-open at the edges.
+    const btScalar d = (u.y() - a.y()) * (v.z() - a.z()) - (v.y() - a.y()) * (u.z() - a.z());
+    if (d == 0) continue;
+    const btScalar s1 = ((p.y() - a.y()) * (v.z() - a.z()) - (v.y() - a.y()) * (p.z() - a.z())) / d;
+    const btScalar s2 = ((u.y() - a.y()) * (p.z() - a.z()) - (p.y() - a.y()) * (u.z() - a.z())) / d;
+    if (s1 < 0 || s2 < 0 || s1 + s2 >= 1) continue;
+    const btScalar x = a.x() + s1 * (u.x() - a.x()) + s2 * (v.x() - a.x());
+    if (x > p.x()) odd = !odd;
+  }
+  return odd;
+}
+
+RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame)
+    : distance_(surface), parity_(surface), frame_(frame) {
+  for (int a = 0; a < 3; ++a) blocks_[a] = (frame.dims[a] + kBlock - 1) / kBlock;
+  blockSlot_.assign(size_t(blocks_[0]) * blocks_[1] * blocks_[2], -1);
+}
+
+void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot) {
+  values_.resize(values_.size() + kBlock * kBlock * kBlock);
+  float* out = values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
+  for (int32_t k = 0; k < kBlock; ++k)
+    for (int32_t j = 0; j < kBlock; ++j)
+      for (int32_t i = 0; i < kBlock; ++i) {
+        const btVector3 p = frame_.point(bi * kBlock + i, bj * kBlock + j, bk * kBlock + k);
+        const btScalar distance = distance_.closest(p).distance;
+        *out++ = float(parity_.inside(p) ? distance : -distance);
+      }
+}
+
+btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
+  const int32_t bi = i / kBlock, bj = j / kBlock, bk = k / kBlock;
+  int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
+  if (slot < 0) {
+    slot = int32_t(values_.size() / (kBlock * kBlock * kBlock));
+    fillBlock(bi, bj, bk, slot);
+  }
+  const size_t inBlock = size_t(i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock)));
+  return values_[size_t(slot) * kBlock * kBlock * kBlock + inBlock];
+}
+
+btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
+  const btVector3 u = (x - frame_.origin) / frame_.spacing;
+  std::array<int32_t, 3> base;
+  btScalar t[3];
+  for (int a = 0; a < 3; ++a) {
+    if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
+    base[a] = int32_t(u[a]);
+    t[a] = u[a] - btScalar(base[a]);
+  }
+  btScalar sum = 0;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const btScalar w = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) * (dz ? t[2] : 1 - t[2]);
+    sum += w * value(base[0] + dx, base[1] + dy, base[2] + dz);
+  }
+  return sum;
+}
+
+void ParticleCells::build(std::span<const btVector3> positions, btScalar cellSize) {
+  btVector3 lower, upper;
+  pointBounds(positions, lower, upper);
+  frame = GridFrame::covering(lower, upper, cellSize, 0);
+  const size_t count = size_t(frame.dims[0]) * frame.dims[1] * frame.dims[2];
+  start.assign(count + 1, 0);
+  order.resize(positions.size());
+  auto cellOf = [&](const btVector3& p) {
+    const btVector3 u = (p - frame.origin) / cellSize;
+    return frame.index(int32_t(u.x()), int32_t(u.y()), int32_t(u.z()));
+  };
+  for (const btVector3& p : positions) ++start[cellOf(p) + 1];
+  for (size_t c = 0; c < count; ++c) start[c + 1] += start[c];
+  std::vector<uint32_t> fill(start.begin(), start.end() - 1);  // each cell's next entry
+  for (uint32_t i = 0; i < positions.size(); ++i) order[fill[cellOf(positions[i])]++] = i;
+}
+
+ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
+                            const ImplicitSurfaceSettings& settingsIn)
+    : muscle(std::move(muscleIn)),
+      settings(settingsIn),
+      voxel(settings.voxel > 0 ? settings.voxel : lengthUnit(*muscle, settings)),
+      h(medianSpringLength(*muscle) * settings.kernelFactor),
+      rest(muscle->restSurface, restFrame(*muscle, settings)) {
+  MeshDistance distance(muscle->restSurface);
+  outward.assign(muscle->particleCount(), btVector3(0, 0, 0));
+  for (uint32_t i : muscle->boundaryParticles) {
+    const MeshDistance::Closest closest = distance.closest(muscle->restPositions[i]);
+    const btVector3 d = closest.point - muscle->restPositions[i];
+    if (d.length2() > 0) outward[i] = (closest.inside ? d : -d).normalized();
+  }
+  measureRestCover();
+}
+
+void ImplicitSurface::Impl::measureRestCover() {
+  prepareFrames(muscle->restPositions, muscle->springs);
+  btScalar smallest = SIMD_INFINITY;
+  for (const btVector3& v : muscle->restSurface.vertices)
+    smallest = std::min(smallest, coverage(v, muscle->restPositions));
+  kappa = std::isfinite(smallest) && smallest > 0 ? smallest / 2 : btScalar(1e-3);
+}
+
+void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
+                                          std::span<const Spring> springs) {
+  positions = current;
+  springMoments(springs, current, muscle->restPositions, moments, restMoments);
+  toRest.resize(current.size());
+  for (size_t i = 0; i < current.size(); ++i) {
+    // F⁻¹ = R·M⁻¹ with M = Σ dx·dXᵀ, R = Σ dX·dXᵀ (F = M·R⁻¹).
+    const btMatrix3x3& m = moments[i];
+    const btScalar scale = (m[0][0] + m[1][1] + m[2][2]) / 3;
+    const bool spans = m.determinant() > btScalar(1e-3) * scale * scale * scale;
+    toRest[i] = spans ? restMoments[i] * m.inverse() : btMatrix3x3::getIdentity();
+  }
+  cells.build(current, h);
+}
+
+/// Σ w_j at x (the particles' cover), from `current` binned in `cells`.
+btScalar ImplicitSurface::Impl::coverage(const btVector3& x,
+                                         std::span<const btVector3> current) const {
+  btScalar sum = 0;
+  forNeighbours(x, current, [&](uint32_t, const btVector3&, btScalar w) { sum += w; });
+  return sum;
+}
+
+btScalar ImplicitSurface::Impl::field(const btVector3& x) {
+  double weight = 0, spread = 0;
+  btVector3 offset(0, 0, 0);  // Σ w·(X_j − x)
+  forNeighbours(x, positions, [&](uint32_t p, const btVector3& d, btScalar w) {
+    const btVector3 mapped = muscle->restPositions[p] + toRest[p] * d - x;
+    weight += w;
+    offset += w * mapped;
+    spread += w * mapped.length2();
+  });
+  btScalar value = -h;
+  if (weight > 0) {
+    const btVector3 mean = offset / btScalar(weight);
+    const btScalar sigma = btSqrt(btMax(btScalar(spread / weight) - mean.length2(), btScalar(0)));
+    const btScalar distance = rest.at(x + mean, h) - settings.spreadWeight * sigma;
+    value = std::min(distance, h * (btScalar(weight) / kappa - 1));
+  }
+  for (const SurfaceDent& dent : dents) {
+    const btScalar q = 1 - (x - dent.centre).length2() / (dent.radius * dent.radius);
+    if (q > 0) value -= dent.depth * q * q * q;
+  }
+  return value;
+}
+
+}  // namespace fibremss

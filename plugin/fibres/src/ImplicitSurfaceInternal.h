@@ -1,0 +1,172 @@
+#pragma once
+// ImplicitSurface's state (ImplicitSurface.h): the field's parts and the sparse grid it is
+// extracted on.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "fibremss/ImplicitSurface.h"
+
+namespace fibremss {
+
+/// A regular grid of points: point (i, j, k) at origin + (i, j, k)·spacing.
+struct GridFrame {
+  btVector3 origin{0, 0, 0};             ///< point (0, 0, 0) [m]
+  btScalar spacing = 1;                  ///< [m]
+  std::array<int32_t, 3> dims{0, 0, 0};  ///< points per axis
+
+  /// A frame covering [lower, upper] with `pad` [m] on every side.
+  static GridFrame covering(const btVector3& lower, const btVector3& upper, btScalar spacing,
+                            btScalar pad);
+  uint32_t index(int32_t i, int32_t j, int32_t k) const {
+    return uint32_t(i + dims[0] * (j + dims[1] * k));
+  }
+  btVector3 point(int32_t i, int32_t j, int32_t k) const {
+    return origin + btVector3(btScalar(i), btScalar(j), btScalar(k)) * spacing;
+  }
+};
+
+/// Whether points lie inside a closed triangle surface, by the parity of the surface's crossings
+/// of a ray along +x: the inside's boundary is the surface even where it folds through itself
+/// (where the sign of the nearest triangle's pseudo-normal jumps away from the surface).
+class RayParity {
+ public:
+  explicit RayParity(const TriangleMesh& surface);
+  bool inside(const btVector3& p) const;
+
+ private:
+  const TriangleMesh& surface_;
+  btVector3 lower_{0, 0, 0};           ///< the surface's lower corner [m]
+  btScalar cell_ = 1;                  ///< bucket side in y and z [m]
+  std::array<int32_t, 2> dims_{0, 0};  ///< buckets along y and z
+  std::vector<uint32_t> start_;        ///< per bucket + 1: first entry in triangles_
+  std::vector<uint32_t> triangles_;    ///< triangles whose yz bounds meet each bucket
+};
+
+/// The rest surface's signed distance (positive inside) on a grid, each block of 4³ points
+/// computed the first time a lookup reaches it.
+class RestDistanceGrid {
+ public:
+  RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame);
+  /// Trilinear in the grid; outside the grid −outsideValue.
+  btScalar at(const btVector3& x, btScalar outsideValue);
+
+ private:
+  btScalar value(int32_t i, int32_t j, int32_t k);
+  void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
+
+  MeshDistance distance_;
+  RayParity parity_;
+  GridFrame frame_;
+  std::array<int32_t, 3> blocks_{0, 0, 0};  ///< blocks per axis
+  std::vector<int32_t> blockSlot_;          ///< per block: its values' slot, −1 not yet
+  std::vector<float> values_;               ///< 64 per computed block [m]
+};
+
+/// The particles binned into cells of the kernel radius (counting sort).
+struct ParticleCells {
+  GridFrame frame;              ///< cells: frame points are their lower corners
+  std::vector<uint32_t> start;  ///< per cell + 1: first entry in `order`
+  std::vector<uint32_t> order;  ///< particle indices, cell after cell
+
+  void build(std::span<const btVector3> positions, btScalar cellSize);
+};
+
+/// Per grid point of the extraction: its field value and the vertices on its 7 edges that go
+/// to a point above it (+x, +y, +x+y, +z, +x+z, +y+z, +x+y+z; indexed by the offset's bits − 1),
+/// and whether the cell it is the lower corner of was queued. Valid in the frame `stamp` names.
+struct GridEntry {
+  uint32_t key = UINT32_MAX;            ///< point index
+  uint32_t stamp = 0;                   ///< extraction that wrote it
+  float value = 0;                      ///< field [m]
+  bool known = false;                   ///< value computed
+  bool queued = false;                  ///< its cell queued
+  std::array<int32_t, 7> edgeVertex{};  ///< vertex index per edge, −1 none
+};
+
+/// Open-addressing table of GridEntry, emptied by advancing the stamp (no clearing).
+class GridTable {
+ public:
+  void begin();                 ///< a new extraction: every entry stale
+  GridEntry& at(uint32_t key);  ///< the entry, fresh if it was stale or missing
+
+ private:
+  void grow();
+  std::vector<GridEntry> entries_;
+  uint32_t stamp_ = 0;
+  size_t used_ = 0;
+};
+
+struct ImplicitSurface::Impl {
+  Impl(std::shared_ptr<const MuscleSettings> muscle, const ImplicitSurfaceSettings& settings);
+
+  // The field (ImplicitSurfaceField.cpp).
+  void prepareFrames(std::span<const btVector3> positions, std::span<const Spring> springs);
+  btScalar field(const btVector3& x);
+  btScalar coverage(const btVector3& x, std::span<const btVector3> positions) const;
+  void measureRestCover();
+  /// fn(particle, x − p, w) for every particle of `current` (binned in `cells`) within h of x.
+  template <class Fn>
+  void forNeighbours(const btVector3& x, std::span<const btVector3> current, Fn&& fn) const {
+    const btVector3 u = (x - cells.frame.origin) / h;
+    const btScalar inverseH2 = 1 / (h * h);
+    std::array<int32_t, 3> lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      const auto c = int32_t(std::floor(u[a]));
+      lo[a] = std::max(c - 1, 0);
+      hi[a] = std::min(c + 1, cells.frame.dims[a] - 1);
+    }
+    for (int32_t k = lo[2]; k <= hi[2]; ++k)
+      for (int32_t j = lo[1]; j <= hi[1]; ++j)
+        for (int32_t i = lo[0]; i <= hi[0]; ++i) {
+          const uint32_t c = cells.frame.index(i, j, k);
+          for (uint32_t e = cells.start[c]; e < cells.start[c + 1]; ++e) {
+            const uint32_t p = cells.order[e];
+            const btVector3 d = x - current[p];
+            const btScalar q = 1 - d.length2() * inverseH2;
+            if (q > 0) fn(p, d, q * q * q);
+          }
+        }
+  }
+
+  // The extraction (ImplicitSurface.cpp).
+  float valueAt(int32_t i, int32_t j, int32_t k);  ///< the field at a grid point, cached
+  /// The cell's corner values, corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1).
+  std::array<float, 8> cornerValues(const std::array<int32_t, 3>& cell);
+  /// Queues `cell` once, when it lies inside the grid.
+  void enqueue(const std::array<int32_t, 3>& cell);
+  bool inGrid(const std::array<int32_t, 3>& cell) const {
+    for (int a = 0; a < 3; ++a)
+      if (cell[a] < 0 || cell[a] + 1 >= grid.dims[a]) return false;
+    return true;
+  }
+  void seed();
+  void march();
+  void polygonise(const std::array<int32_t, 3>& cell, const std::array<float, 8>& values);
+  int32_t edgeVertex(const std::array<int32_t, 3>& cell, int u, int v,
+                     const std::array<float, 8>& values);
+
+  std::shared_ptr<const MuscleSettings> muscle;
+  ImplicitSurfaceSettings settings;
+  btScalar voxel = 0;              ///< extraction grid spacing [m]
+  btScalar h = 0;                  ///< kernel radius [m]
+  btScalar kappa = 0;              ///< κ: half the smallest W on the rest surface [1]
+  RestDistanceGrid rest;           ///< D
+  std::vector<btVector3> outward;  ///< per boundary particle: towards the surface, rest
+  std::vector<SurfaceDent> dents;
+
+  // Per extraction.
+  std::span<const btVector3> positions;  ///< the particles
+  std::vector<btMatrix3x3> toRest;       ///< per particle F⁻¹ (identity when degenerate)
+  std::vector<btMatrix3x3> moments;      ///< scratch: Σ dx·dXᵀ over the unbroken springs [m²]
+  std::vector<btMatrix3x3> restMoments;  ///< scratch: Σ dX·dXᵀ over the unbroken springs [m²]
+  ParticleCells cells;
+  GridFrame grid;  ///< extraction grid
+  GridTable table;
+  std::vector<std::array<int32_t, 3>> queue;  ///< cells to polygonise
+  TriangleMesh mesh;
+};
+
+}  // namespace fibremss
