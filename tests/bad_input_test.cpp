@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "fibremss/Error.h"
@@ -155,9 +156,9 @@ std::ostream& operator<<(std::ostream& out, const BadInput& row) {
   return out << row.name;
 }
 
-const std::vector<BadInput>& catalogue() {
-  static const std::vector<BadInput> rows = {
-      // Files: surfaces.
+/// Surface files that do not read as a mesh.
+std::vector<BadInput> surfaceReadRows() {
+  return {
       {"EmptyFile", Api::Surface, "bone.vtk",
        [](Input& in) {
          in.files["bone.vtk"] = "";
@@ -215,6 +216,12 @@ const std::vector<BadInput>& catalogue() {
          in.bone()["mesh"]["file"] = "bone.stl";
        },
        Outcome::Error, "bone.stl", "expected a surface mesh"},
+  };
+}
+
+/// Surfaces that read but are no closed solid.
+std::vector<BadInput> surfaceShapeRows() {
+  return {
       {"ZeroAreaTriangle", Api::Surface, "bone.obj",
        [](Input& in) {
          auto triangles = Box::triangles();
@@ -259,7 +266,12 @@ const std::vector<BadInput>& catalogue() {
          in.files["muscle.obj"] = boxObj(flat);
        },
        Outcome::Error, "muscle", "no volume"},
-      // Files: fibres.
+  };
+}
+
+/// Fibre files that give no usable fibre.
+std::vector<BadInput> fibreRows() {
+  return {
       {"MuscleWithNoFibres", Api::Fibres, "fibres.obj",
        [](Input& in) { in.files["fibres.obj"] = "v 0 0 0\nv 0 1 0\n"; }, Outcome::Error,
        "fibres.obj", "found none"},
@@ -285,7 +297,12 @@ const std::vector<BadInput>& catalogue() {
          in.scene["model"] = {{"layout", "lattice6"}};
        },
        Outcome::Error, "particles", "coincide"},
-      // Scenes.
+  };
+}
+
+/// Scene fields that are missing, unknown or of the wrong kind.
+std::vector<BadInput> sceneFieldRows() {
+  return {
       {"MuscleTouchingNoBone", Api::Scene, "",
        [](Input& in) {
          in.bone()["transform"] = {{"translation", {0, 100, 0}}};
@@ -327,6 +344,12 @@ const std::vector<BadInput>& catalogue() {
          in.scene["model"] = {{"neighbours", 500}};
        },
        Outcome::Error, "springs.neighbours", "particle count"},
+  };
+}
+
+/// Scene values out of their range: sizes, transforms, names, seeds.
+std::vector<BadInput> sceneValueRows() {
+  return {
       {"AbsurdSize", Api::Scene, "",
        [](Input& in) {
          // 1000 fibres x 100000 particles = 10^8 particles.
@@ -368,6 +391,15 @@ const std::vector<BadInput>& catalogue() {
        },
        Outcome::Error, "simulation.seed", "expected an integer in [0, 4294967295]"},
   };
+}
+
+const std::vector<BadInput>& catalogue() {
+  static const std::vector<BadInput> rows = [] {
+    std::vector<BadInput> all;
+    for (auto part : {surfaceReadRows, surfaceShapeRows, fibreRows, sceneFieldRows, sceneValueRows})
+      for (BadInput& row : part()) all.push_back(std::move(row));
+    return all;
+  }();
   return rows;
 }
 

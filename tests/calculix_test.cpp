@@ -750,6 +750,43 @@ TEST(ReferenceCache, StoresAndReadsBackASolution) {
   EXPECT_THROW(loadSolution(path, back), InputError);
 }
 
+/// The solver definition changed in each of the ways the cache key must tell apart.
+std::vector<CalculixDefinition> changedDefinitions(const CalculixDefinition& definition) {
+  std::vector<CalculixDefinition> variants;
+  CalculixDefinition d = definition;
+  d.material.poissonRatio = 0.45;
+  variants.push_back(d);
+  d = definition;
+  d.material.youngsModulus *= 2;
+  variants.push_back(d);
+  d = definition;
+  d.element = CalculixElement::C3D10;
+  variants.push_back(d);
+  d.contactPenalty = 0;
+  variants.push_back(d);  // C3D10 without contact
+  d = definition;
+  d.mesher.refinement = 1;
+  variants.push_back(d);
+  d = definition;
+  d.mesher.radiusEdgeRatio = 1.5;
+  variants.push_back(d);
+  d = definition;
+  d.attachmentScale = 1.5;
+  variants.push_back(d);
+  d = definition;
+  d.contactPenalty = 0;
+  variants.push_back(d);
+  d = definition;
+  d.incrementScale = 0.25;
+  variants.push_back(d);
+  d = definition;
+  d.contactSliding = ContactSliding::Small;
+  variants.push_back(d);
+  d.element = CalculixElement::C3D10;
+  variants.push_back(d);  // the gate's C3D10 solve with small sliding
+  return variants;
+}
+
 TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
   REQUIRE_PROGRAM("ccx");
   const LoadedScene scene = loadScene("fusiform", {"resolution=6", "fibre_count=8"});
@@ -774,42 +811,12 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
     EXPECT_TRUE(keys.insert(referenceCacheKey(s, p, d, cut)).second) << "change " << change;
     ++change;
   };
-  CalculixDefinition d = definition;
-  d.material.poissonRatio = 0.45;
-  changed(scene, prepared, d);
-  d = definition;
-  d.material.youngsModulus *= 2;
-  changed(scene, prepared, d);
-  d = definition;
-  d.element = CalculixElement::C3D10;
-  changed(scene, prepared, d);
-  d.contactPenalty = 0;
-  changed(scene, prepared, d);  // C3D10 without contact
-  d = definition;
-  d.mesher.refinement = 1;
-  changed(scene, prepared, d);
-  d = definition;
-  d.mesher.radiusEdgeRatio = 1.5;
-  changed(scene, prepared, d);
-  d = definition;
-  d.attachmentScale = 1.5;
-  changed(scene, prepared, d);
-  d = definition;
-  d.contactPenalty = 0;
-  changed(scene, prepared, d);
-  d = definition;
-  d.incrementScale = 0.25;
-  changed(scene, prepared, d);
-  d = definition;
-  d.contactSliding = ContactSliding::Small;
-  changed(scene, prepared, d);
-  d.element = CalculixElement::C3D10;
-  changed(scene, prepared, d);  // the gate's C3D10 solve with small sliding
+  for (const CalculixDefinition& d : changedDefinitions(definition)) changed(scene, prepared, d);
   CalculixDefinition noContact = definition;
   noContact.contactPenalty = 0;
-  d = noContact;
-  d.contactSliding = ContactSliding::Small;
-  EXPECT_EQ(referenceCacheKey(scene, prepared, d, none),
+  CalculixDefinition sliding = noContact;
+  sliding.contactSliding = ContactSliding::Small;
+  EXPECT_EQ(referenceCacheKey(scene, prepared, sliding, none),
             referenceCacheKey(scene, prepared, noContact, none))
       << "without contact the sliding does not matter";
   ContinuumCut cut;

@@ -43,6 +43,48 @@ testing::ProcessResult runCli(const std::string& arguments) {
   return testing::runProcess(std::string(FIBREMSS_CLI) + " " + arguments + " 2>&1");
 }
 
+/// Skips the comment, CDATA section, declaration or doctype starting at `i`: whether one starts
+/// there; `problem` names it when it is unterminated (`i` then stays at its start).
+bool skipMarkup(const std::string& xml, size_t& i, std::string& problem) {
+  static const char* const kinds[][3] = {{"<!--", "-->", "comment"},
+                                         {"<![CDATA[", "]]>", "CDATA"},
+                                         {"<?", "?>", "declaration"},
+                                         {"<!", ">", "doctype"}};
+  for (const auto& [start, end, what] : kinds) {
+    if (xml.compare(i, std::char_traits<char>::length(start), start) != 0) continue;
+    const size_t found = xml.find(end, i);
+    if (found == std::string::npos) {
+      problem = std::string("unterminated ") + what;
+    } else {
+      i = found + std::char_traits<char>::length(end);
+    }
+    return true;
+  }
+  return false;
+}
+
+/// The '>' closing the tag that opens at `i`, outside quotes; npos with `problem` set when
+/// there is none or a '<' comes first.
+size_t tagEnd(const std::string& xml, size_t i, std::string& problem) {
+  size_t j = i + 1;
+  char quote = 0;
+  for (; j < xml.size() && (quote || xml[j] != '>'); ++j) {
+    if (quote && xml[j] == quote) {
+      quote = 0;
+    } else if (!quote && (xml[j] == '"' || xml[j] == '\'')) {
+      quote = xml[j];
+    } else if (!quote && xml[j] == '<') {
+      problem = "'<' inside a tag";
+      return std::string::npos;
+    }
+  }
+  if (j >= xml.size()) {
+    problem = "unterminated tag";
+    return std::string::npos;
+  }
+  return j;
+}
+
 /// XML well-formedness: one root, every tag closed in order, quoted attributes, valid
 /// references; declarations, comments, CDATA and doctype skipped.
 bool wellFormedXml(const std::string& xml, std::string& problem) {
@@ -72,41 +114,14 @@ bool wellFormedXml(const std::string& xml, std::string& problem) {
       ++i;
       continue;
     }
-    auto skipTo = [&](const char* end) {
-      const size_t found = xml.find(end, i);
-      if (found == std::string::npos) return false;
-      i = found + std::char_traits<char>::length(end);
-      return true;
-    };
-    if (xml.compare(i, 4, "<!--") == 0) {
-      if (!skipTo("-->")) return fail("unterminated comment");
+    std::string unterminated;
+    if (skipMarkup(xml, i, unterminated)) {
+      if (!unterminated.empty()) return fail(unterminated);
       continue;
     }
-    if (xml.compare(i, 9, "<![CDATA[") == 0) {
-      if (!skipTo("]]>")) return fail("unterminated CDATA");
-      continue;
-    }
-    if (xml.compare(i, 2, "<?") == 0) {
-      if (!skipTo("?>")) return fail("unterminated declaration");
-      continue;
-    }
-    if (xml.compare(i, 2, "<!") == 0) {
-      if (!skipTo(">")) return fail("unterminated doctype");
-      continue;
-    }
-    // A tag: scan to its '>' outside quotes.
-    size_t j = i + 1;
-    char quote = 0;
-    for (; j < xml.size() && (quote || xml[j] != '>'); ++j) {
-      if (quote && xml[j] == quote) {
-        quote = 0;
-      } else if (!quote && (xml[j] == '"' || xml[j] == '\'')) {
-        quote = xml[j];
-      } else if (!quote && xml[j] == '<') {
-        return fail("'<' inside a tag");
-      }
-    }
-    if (j >= xml.size()) return fail("unterminated tag");
+    std::string tagProblem;
+    const size_t j = tagEnd(xml, i, tagProblem);
+    if (j == std::string::npos) return fail(tagProblem);
     std::string tag = xml.substr(i + 1, j - i - 1);
     const bool closing = !tag.empty() && tag[0] == '/';
     const bool selfClosing = !tag.empty() && tag.back() == '/';

@@ -92,13 +92,8 @@ std::string cli() {
   return FIBREMSS_CLI;
 }
 
-TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
-  TemporaryDirectory out("fibremss_run_cli");
-  const auto result =
-      runProcess(cli() + " run fusiform --steps 2 --frame-every 1 --out " + out.path().string());
-  ASSERT_EQ(result.exitCode, 0) << result.output;
-
-  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+/// The summary of two steps of fusiform: its settings and every figure finite and in range.
+void expectTwoStepSummary(const nlohmann::json& summary) {
   EXPECT_EQ(summary.at("scene"), "fusiform");
   EXPECT_EQ(summary.at("method"), "fibremss");
   EXPECT_FALSE(summary.at("integrator").get<std::string>().empty());
@@ -129,11 +124,13 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   EXPECT_EQ(summary.at("nan"), false);
   EXPECT_EQ(summary.at("interrupted"), false);
   EXPECT_EQ(summary.at("failed_step"), -1);
+}
 
+/// The frames of run.pvd in `out`: two at increasing simulated times, their times into `times`.
+void expectTwoFrames(const fs::path& out, std::vector<double>& times) {
   // Two frames at increasing simulated times, each listing every part; the muscles' files new in
   // each, the still upper bar written once.
-  const auto sets = pvdDataSets(out.path() / "run.pvd");
-  std::vector<double> times;
+  const auto sets = pvdDataSets(out / "run.pvd");
   for (const auto& [time, file] : sets)
     if (times.empty() || times.back() != time) times.push_back(time);
   ASSERT_EQ(times.size(), 2u);
@@ -143,18 +140,22 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
   std::set<std::string> files;
   for (const auto& [time, file] : sets) {
     files.insert(file);
-    ASSERT_TRUE(fs::exists(out.path() / file)) << file;
-    expectWellFormedVtp(out.path() / file);
+    ASSERT_TRUE(fs::exists(out / file)) << file;
+    expectWellFormedVtp(out / file);
   }
   EXPECT_EQ(files.size(), sets.size() - 1);
   EXPECT_EQ(files.count("frames/bone0_upper_00000.vtp"), 1u);
-  EXPECT_FALSE(fs::exists(out.path() / "frames/bone0_upper_00001.vtp"));
+  EXPECT_FALSE(fs::exists(out / "frames/bone0_upper_00001.vtp"));
   // The complete scene is kept for reproducing the run.
-  EXPECT_NO_THROW(nlohmann::json::parse(readFile(out.path() / "scene.json")));
+  EXPECT_NO_THROW(nlohmann::json::parse(readFile(out / "scene.json")));
+}
 
+/// series.csv in `out`: the rows of the summary's "series", at the frames' `times`.
+void expectSeries(const fs::path& out, const nlohmann::json& summary,
+                  const std::vector<double>& times) {
   // series.csv: one row per step and muscle, the same values as summary.json's "series", the
   // times those of the frames.
-  std::istringstream csv(readFile(out.path() / "series.csv"));
+  std::istringstream csv(readFile(out / "series.csv"));
   std::string line;
   ASSERT_TRUE(std::getline(csv, line));
   EXPECT_EQ(line,
@@ -187,6 +188,19 @@ TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
     EXPECT_TRUE(json.at("tendon_strain").is_null());
   }
   EXPECT_FALSE(std::getline(csv, line));
+}
+
+TEST(RunCli, WritesSummaryAndFramesForTwoSteps) {
+  TemporaryDirectory out("fibremss_run_cli");
+  const auto result =
+      runProcess(cli() + " run fusiform --steps 2 --frame-every 1 --out " + out.path().string());
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+
+  const nlohmann::json summary = nlohmann::json::parse(readFile(out.path() / "summary.json"));
+  expectTwoStepSummary(summary);
+  std::vector<double> times;
+  ASSERT_NO_FATAL_FAILURE(expectTwoFrames(out.path(), times));
+  expectSeries(out.path(), summary, times);
 }
 
 /// Runs fusiform for two steps into `out` with the `--set` options `sets`; its frame files.

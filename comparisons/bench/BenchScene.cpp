@@ -2,11 +2,11 @@
 
 #include <string>
 
+#include "dynamics/TimeStep.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/SceneSystem.h"
 #include "integrators/Integrators.h"
-#include "solver/TimeStep.h"
-#include "solver/VolumeForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss::bench {
 

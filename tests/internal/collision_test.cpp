@@ -16,14 +16,14 @@
 #include <utility>
 #include <vector>
 
-#include "collision/BoneDistanceField.h"
-#include "collision/CollisionTrees.h"
-#include "collision/SurfaceContact.h"
 #include "contact/ShapeContact.h"
 #include "fibremss/Error.h"
 #include "fibremss/Geometry.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Procedural.h"
+#include "geometry/BoneDistanceField.h"
+#include "geometry/CollisionTrees.h"
+#include "geometry/SurfaceContact.h"
 #include "support/GridMuscle.h"
 #include "support/SolverFixtures.h"
 

@@ -12,13 +12,13 @@
 #include <memory>
 #include <vector>
 
+#include "dynamics/TimeStep.h"
 #include "fibremss/BoneBody.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/MuscleWorld.h"
+#include "kernels/MuscleSystemPretransform.h"
 #include "solver/MuscleSystemAccess.h"
 #include "solver/MuscleSystemGuard.h"
-#include "solver/MuscleSystemPretransform.h"
-#include "solver/TimeStep.h"
 #include "support/GridMuscle.h"
 #include "support/SolverFixtures.h"
 

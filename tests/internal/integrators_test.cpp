@@ -21,12 +21,12 @@
 #include <string>
 #include <vector>
 
+#include "dynamics/TimeStep.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
 #include "integrators/ProjectiveFactor.h"
+#include "kernels/SpringForces.h"
 #include "solver/MuscleSystemAccess.h"
-#include "solver/SpringForces.h"
-#include "solver/TimeStep.h"
 #include "support/AllocationCounter.h"
 #include "support/SolverFixtures.h"
 #include "support/ThighSteps.h"

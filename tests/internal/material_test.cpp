@@ -18,8 +18,8 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
-#include "solver/SpringForces.h"
-#include "solver/VolumeForces.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "fibremss/Pretransform.h"
-#include "solver/MuscleSystemPretransform.h"
-#include "solver/SpringForces.h"
+#include "kernels/MuscleSystemPretransform.h"
+#include "kernels/SpringForces.h"
 
 namespace fibremss {
 namespace {

@@ -14,8 +14,8 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "kernels/SpringForces.h"
 #include "prepare/PreparationReorder.h"
-#include "solver/SpringForces.h"
 #include "support/ThighSteps.h"
 
 namespace fibremss {

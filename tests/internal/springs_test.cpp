@@ -1,4 +1,4 @@
-// Spring-force kernels (plugin/core/src/solver/MuscleSystemForces.cpp): every kernel this build and
+// Spring-force kernels (plugin/core/src/kernels/SpringForces.cpp): every kernel this build and
 // CPU can run gives the forces, the deviation and the overstretched count of a plain
 // double-precision computation, spring by spring, on prepared thigh muscles and on a hand-made
 // grid, with and without the AVX2 kernel's spring blocks (layoutSprings), including coincident
@@ -14,7 +14,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
-#include "solver/SpringForces.h"
+#include "kernels/SpringForces.h"
 #include "support/GridMuscle.h"
 #include "support/ThighSteps.h"
 

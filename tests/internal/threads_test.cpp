@@ -1,4 +1,4 @@
-// The solver's threads (plugin/core/src/solver/TaskPool.h, MuscleSystemStep.cpp) and a host's
+// The solver's threads (plugin/core/src/tasks/TaskPool.h, MuscleSystemStep.cpp) and a host's
 // scheduler in their place (fibremss/TaskScheduler.h): every task runs once on a valid thread, and
 // a step gives bit-identical particles for any thread count, because each task's work is
 // independent and every sum runs in a fixed order (a muscle's force chunks too: ForceChunks.h);
@@ -27,9 +27,9 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
-#include "solver/ForceChunks.h"
+#include "kernels/ForceChunks.h"
+#include "kernels/VolumeForces.h"
 #include "solver/MuscleSystemAccess.h"
-#include "solver/VolumeForces.h"
 #include "support/AllocationCounter.h"
 #include "support/BoxMuscle.h"
 #include "support/ThighSteps.h"

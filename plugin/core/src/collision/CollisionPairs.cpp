@@ -6,7 +6,7 @@
 #include <cmath>
 #include <utility>
 
-#include "SurfaceContact.h"
+#include "geometry/SurfaceContact.h"
 
 namespace fibremss {
 namespace {
@@ -431,8 +431,8 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversal
     ++muscle.candidateOverflows;
 }
 
-void forgetBoneSides(MuscleState& muscle) {
-  std::fill(muscle.sideBones.begin(), muscle.sideBones.end(), -1);
+void forgetBoneSides(ContactState& contact) {
+  std::fill(contact.sideBones.begin(), contact.sideBones.end(), -1);
 }
 
 void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {

@@ -6,7 +6,7 @@
 
 #include <vector>
 
-#include "solver/MuscleState.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 
@@ -128,7 +128,7 @@ void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversal
 
 /// Forgets the bone sides penetration recovery remembers (after a rollback: the remembered
 /// sides belong to positions that no longer exist).
-void forgetBoneSides(MuscleState& muscle);
+void forgetBoneSides(ContactState& contact);
 
 /// The slop an integrator that holds contacts (TimeIntegrator::holdsContacts) leaves in every
 /// contact, as a share of the particle's radius [1] (leaveContactSlop).

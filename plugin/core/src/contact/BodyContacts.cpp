@@ -132,14 +132,14 @@ void moveContactBody(ContactBodyState& body, btScalar time) {
   placeContactBody(body, moved);
 }
 
-void prepareInteraction(MuscleState& muscle, size_t bodies) {
-  if (muscle.bodyImpulses.size() != bodies) muscle.bodyImpulses.resize(bodies);
-  const MuscleSettings& settings = *muscle.settings;
-  if (bodies == 0 || muscle.contactStiffness.size() == settings.particleCount()) return;
-  muscle.contactStiffness.assign(settings.particleCount(), 0);
+void prepareInteraction(const MuscleSettings& settings, InteractionState& interaction,
+                        size_t bodies) {
+  if (interaction.bodyImpulses.size() != bodies) interaction.bodyImpulses.resize(bodies);
+  if (bodies == 0 || interaction.contactStiffness.size() == settings.particleCount()) return;
+  interaction.contactStiffness.assign(settings.particleCount(), 0);
   for (const Spring& spring : settings.springs) {
-    muscle.contactStiffness[spring.a] += spring.stiffness / 3;
-    muscle.contactStiffness[spring.b] += spring.stiffness / 3;
+    interaction.contactStiffness[spring.a] += spring.stiffness / 3;
+    interaction.contactStiffness[spring.b] += spring.stiffness / 3;
   }
 }
 

@@ -9,7 +9,7 @@
 #include <span>
 
 #include "fibremss/RigidContact.h"
-#include "solver/MuscleState.h"
+#include "state/MuscleState.h"
 
 class btCollisionObject;
 class btCollisionShape;
@@ -43,7 +43,8 @@ void moveContactBody(ContactBodyState& body, btScalar time);
 
 /// Sizes the muscle's interaction state for `bodies` contact bodies (and its contact stiffness
 /// when it has none yet); allocates only when they change.
-void prepareInteraction(MuscleState& muscle, size_t bodies);
+void prepareInteraction(const MuscleSettings& settings, InteractionState& interaction,
+                        size_t bodies);
 
 /// The contact stage of one iteration of one muscle (after the collision response): every free
 /// boundary particle overlapping a body is moved out of it and loses its velocity into the body

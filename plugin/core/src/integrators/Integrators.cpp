@@ -4,8 +4,8 @@
 #include <string>
 
 #include "IntegratorsInternal.h"
+#include "dynamics/TimeStep.h"
 #include "fibremss/Error.h"
-#include "solver/TimeStep.h"
 
 namespace fibremss {
 

@@ -11,7 +11,7 @@
 #include <memory>
 
 #include "fibremss/Parameters.h"
-#include "solver/MuscleState.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 

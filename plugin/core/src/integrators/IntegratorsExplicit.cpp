@@ -8,9 +8,9 @@
 
 #include "IntegratorsInternal.h"
 #include "contact/BodyContacts.h"
-#include "solver/ParticleSimd.h"
-#include "solver/SpringForces.h"
-#include "solver/VolumeForces.h"
+#include "kernels/ParticleSimd.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

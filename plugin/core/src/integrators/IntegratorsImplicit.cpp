@@ -14,9 +14,9 @@
 #include <vector>
 
 #include "IntegratorsInternal.h"
-#include "solver/MuscleSystemPretransform.h"
-#include "solver/TimeStep.h"
-#include "solver/VolumeForces.h"
+#include "dynamics/TimeStep.h"
+#include "kernels/MuscleSystemPretransform.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

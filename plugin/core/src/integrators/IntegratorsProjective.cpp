@@ -29,8 +29,8 @@
 #include "IntegratorsInternal.h"
 #include "ProjectiveFactor.h"
 #include "collision/CollisionPairs.h"
-#include "solver/Residual.h"
-#include "solver/VolumeForces.h"
+#include "dynamics/Residual.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

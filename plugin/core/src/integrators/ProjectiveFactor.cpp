@@ -6,8 +6,8 @@
 #include <utility>
 
 #include "fibremss/Error.h"
-#include "solver/ParticleSimd.h"
-#include "solver/SpringForces.h"
+#include "kernels/ParticleSimd.h"
+#include "kernels/SpringForces.h"
 
 namespace fibremss {
 namespace {

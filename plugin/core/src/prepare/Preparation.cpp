@@ -18,7 +18,7 @@
 #include "PreparationInternal.h"
 #include "PreparationReorder.h"
 #include "fibremss/Error.h"
-#include "solver/TaskPool.h"
+#include "tasks/TaskPool.h"
 
 namespace fibremss {
 namespace {

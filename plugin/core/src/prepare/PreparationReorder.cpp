@@ -5,8 +5,8 @@
 #include <stdexcept>
 #include <utility>
 
-#include "solver/SpringForces.h"
-#include "solver/VolumeForces.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss::detail {
 namespace {

@@ -10,7 +10,7 @@
 #include "PreparationKdTree.h"
 #include "SpringsDelaunay.h"
 #include "fibremss/Error.h"
-#include "solver/VolumeForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss::detail {
 namespace {

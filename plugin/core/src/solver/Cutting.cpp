@@ -2,8 +2,8 @@
 
 #include <span>
 
-#include "MuscleState.h"
-#include "Tearing.h"
+#include "dynamics/Tearing.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {

@@ -9,13 +9,14 @@
 
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
-#include "Residual.h"
-#include "Skin.h"
-#include "SpringForces.h"
-#include "TimeStep.h"
-#include "VolumeForces.h"
+#include "dynamics/Residual.h"
+#include "dynamics/Tearing.h"
+#include "dynamics/TimeStep.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
+#include "kernels/Skin.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {
@@ -118,36 +119,13 @@ std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
   auto state = std::make_unique<MuscleState>();
   state->bones.assign(bones.begin(), bones.end());
   state->boneSlots.assign(bones.size(), -1);
-  state->boneTransforms.assign(bones.size(), btTransform::getIdentity());
-  state->boneDeltas.assign(bones.size(), btTransform::getIdentity());
-  state->boneDualDeltas.assign(bones.size(), dualQuaternionOf(nullptr));
-  state->positions.resize(n);
-  state->previous.resize(n);
-  state->velocities.assign(n, btVector3(0, 0, 0));
-  state->goodPositions.resize(n);
-  state->goodPrevious.resize(n);
-  state->goodVelocities.resize(n);
-  state->forces.assign(n, btVector3(0, 0, 0));
-  state->pushes.assign(n, btVector3(0, 0, 0));
-  state->pushCounts.assign(n, 0);
-  state->pushedLast.assign(n, 0);
-  state->lastPushes.assign(n, btVector3(0, 0, 0));
-  state->pushRounds.assign(n, 0);
-  state->lastBonePushes.assign(n, btVector3(0, 0, 0));
-  state->residual.assign(n, btVector3(0, 0, 0));
-  state->residualStiffness = residualStiffness(s);
-  state->pinchBones.assign(n, -1);
-  state->firstBonePushes.assign(n, btVector3(0, 0, 0));
-  state->otherBonePushes.assign(n, btVector3(0, 0, 0));
-  if (def.boneCollision == BoneCollision::Mesh) state->meshVisits.assign(n, 0);
+  state->ParticleState::init(s, bones.size());
+  state->GuardSnapshot::init(n);
   // Recovery follows the bones' distance fields: without them it has nothing to remember.
-  if (def.penetrationRecovery && def.boneCollision == BoneCollision::DistanceField) {
-    state->sideBones.assign(n, -1);
-    state->boneSides.assign(n, btVector3(0, 0, 0));
-    state->sideStamps.assign(n, 0);
-  }
-  for (uint32_t i = 0; i < n; ++i)
-    if (!s.isFixed(i)) state->freeParticles.push_back(i);
+  state->ContactState::init(
+      n, def.boneCollision == BoneCollision::Mesh,
+      def.penetrationRecovery && def.boneCollision == BoneCollision::DistanceField);
+  state->ResidualState::init(n, residualStiffness(s));
   return state;
 }
 

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <sstream>
 
-#include "VolumeForces.h"
 #include "fibremss/Error.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

@@ -21,6 +21,7 @@
 #include <cmath>
 
 #include "MuscleSystemImpl.h"
+#include "dynamics/Tearing.h"
 #include "fibremss/Measures.h"
 #include "integrators/Integrators.h"
 
@@ -318,7 +319,7 @@ void MuscleSystem::Impl::guardedStep() {
         refitTree(state);
         for (uint32_t slot : bones.order)
           collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
-        recordPushes(state);
+        recordPushes(*state.settings, state, state);
         applyPushes(state, velocities, definition.slidingContacts);
       }
     thread.contacts.clear();

@@ -4,7 +4,7 @@
 // and the per-muscle check that attributes a failed step to the muscles that failed.
 #include <cstddef>
 
-#include "MuscleState.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 

@@ -10,14 +10,14 @@
 #include <vector>
 
 #include "Cutting.h"
-#include "MuscleState.h"
-#include "Residual.h"
-#include "SpringForces.h"
-#include "TaskPool.h"
 #include "collision/CollisionPairs.h"
 #include "contact/BodyContacts.h"
+#include "dynamics/Residual.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
+#include "kernels/SpringForces.h"
+#include "state/MuscleState.h"
+#include "tasks/TaskPool.h"
 
 namespace fibremss {
 
@@ -246,6 +246,22 @@ struct MuscleSystem::Impl {
   void forcesPhase(bool bonesMove);
   void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
   void step(const StepSize& size);
+  /// The non-frozen muscles into `active`, largest first (springs + particles): handed out in
+  /// this order, the threads finish close together.
+  void sortActive();
+  /// Each bone's target transform read from its body (a non-finite one held at its current).
+  void readBoneTargets();
+  /// Places the bones at their targets for rebuildEveryStep, or, when a bone moves, the
+  /// iterations that move the bones (raising `cap` for a turning bone): 0 when none moves.
+  int planBoneMotion(const StepSize& size, int& cap);
+  /// Each active muscle prepared for `integrator` and its bones resolved; with
+  /// rebuildEveryStep placed at its bones from rest.
+  void beginMuscles(const TimeIntegrator& integrator);
+  /// After the last iteration: bones still in motion jump to their targets and the muscles
+  /// follow them, the last response is applied, the strain limited.
+  void endIterations(bool arrived);
+  /// The muscles' surfaces deformed and the bones at rest at their targets.
+  void outputSurfaces();
   /// The iterations of a step in which bones move: `requested`, or with the default solver
   /// (projective) one per kMaxTurnPerIteration of the largest bone turn when that is more.
   int iterationsFor(int requested) const;

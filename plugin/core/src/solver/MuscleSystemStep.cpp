@@ -18,12 +18,12 @@
 
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
-#include "MuscleSystemPretransform.h"
-#include "SpringForces.h"
-#include "StrainLimit.h"
-#include "TimeStep.h"
-#include "VolumeForces.h"
+#include "dynamics/StrainLimit.h"
+#include "dynamics/TimeStep.h"
 #include "integrators/Integrators.h"
+#include "kernels/MuscleSystemPretransform.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {
@@ -388,7 +388,7 @@ void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   if (!pushesPending) return;
   const TimeIntegrator& integrator = integratorFor(definition.integrator);
   const bool holds = integrator.holdsContacts(definition);
-  if (record || holds) recordPushes(state);
+  if (record || holds) recordPushes(*state.settings, state, state);
   applyPushes(state, integrator.usesVelocities(), definition.slidingContacts);
   if (holds) leaveContactSlop(state, kContactSlop);
 }
@@ -518,8 +518,9 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     // displacement is the projection's end's when it moved particles: at a limited equilibrium
     // the two cancel, as the stop rules expect.
     const int passes = result.forces.nearLimit > 0 ? kIterationStrainPasses : 0;
-    result.displacement =
-        limitStrain(state, passes) > 0 ? freeDisplacement(state) : integration.displacement;
+    result.displacement = limitStrain(*state.settings, state, state, passes) > 0
+                              ? freeDisplacement(state)
+                              : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
     if (refit) refitTree(state);
@@ -616,15 +617,7 @@ int MuscleSystem::Impl::iterationsFor(int requested) const {
   return std::max(requested, static_cast<int>(std::ceil(turn / kMaxTurnPerIteration)));
 }
 
-void MuscleSystem::Impl::step(const StepSize& size) {
-  const Clock::time_point stepStart = Clock::now();
-  stats = StepStats{};
-  const TimeIntegrator& integrator = integratorFor(definition.integrator);
-  int cap = size.iterations;
-  // The solve holds what the contacts' reactions hold (ContactReactions.cpp).
-  const bool pairReactionsHeld = integrator.holdsContacts(definition) && definition.pairReactions;
-  prepareWorkers();
-  // Largest muscles first: handed out in this order, the threads finish close together.
+void MuscleSystem::Impl::sortActive() {
   active.clear();
   for (uint32_t slot : muscles.order)
     if (!muscles.states[slot]->frozen) active.push_back(slot);
@@ -634,8 +627,9 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   };
   std::sort(active.begin(), active.end(),
             [&](uint32_t x, uint32_t y) { return cost(x) != cost(y) ? cost(x) > cost(y) : x < y; });
-  orderForceTasks();
+}
 
+void MuscleSystem::Impl::readBoneTargets() {
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     if (bone.body) bone.target = bone.body->getWorldTransform();
@@ -643,36 +637,79 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     bone.heldNonFinite = !finiteTransform(bone.target);
     if (bone.heldNonFinite) bone.target = bone.current;
   }
+}
+
+int MuscleSystem::Impl::planBoneMotion(const StepSize& size, int& cap) {
   // The thesis rebuilt everything each step: bones jump, particles restart from rest.
-  const bool rebuild = definition.rebuildEveryStep;
-  int motionIterations = 0;
-  if (rebuild) {
+  if (definition.rebuildEveryStep) {
     for (uint32_t slot : bones.order) {
       BoneState& bone = *bones.states[slot];
       bone.current = bone.last = bone.target;
       bone.moving = false;
       bone.tree.place(bone.current, bone.settings->sphereCentres, bone.settings->sphereRadii);
     }
-  } else if (std::any_of(bones.order.begin(), bones.order.end(), [&](uint32_t slot) {
-               return !(bones.states[slot]->last == bones.states[slot]->target);
-             })) {
-    if (!size.exact) cap = iterationsFor(cap);
-    motionIterations =
-        size.exact
-            ? cap
-            : std::clamp(static_cast<int>(std::lround(stepSettings.motionFraction * cap)), 1, cap);
-  }  // else no bone moves in this step: the stop rules need not wait for an arrival
+    return 0;
+  }
+  if (std::none_of(bones.order.begin(), bones.order.end(), [&](uint32_t slot) {
+        return !(bones.states[slot]->last == bones.states[slot]->target);
+      }))
+    return 0;  // no bone moves in this step: the stop rules need not wait for an arrival
+  if (size.exact) return cap;
+  cap = iterationsFor(cap);
+  return std::clamp(static_cast<int>(std::lround(stepSettings.motionFraction * cap)), 1, cap);
+}
+
+void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, state);
     resolveBones(state);
     state.pinchedInStep = 0;
   }
-  if (rebuild)
+  if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
       placeAtBones(state);
       rebuildTree(state);
     });
+}
+
+void MuscleSystem::Impl::endIterations(bool arrived) {
+  const Clock::time_point start = Clock::now();
+  // A spent budget ends the step where it is: the bones jump the rest of the way.
+  if (!arrived) moveBones(1, true);
+  applyResponse();
+  stats.timing.response += millisecondsSince(start);
+  forEachMuscle("end", [this, arrived](MuscleState& state, uint32_t, unsigned) {
+    if (!arrived) followBones(state);
+    // The response's pushes may have stretched springs held at the limit.
+    limitStrain(*state.settings, state, state, kEndStrainPasses);
+  });
+}
+
+void MuscleSystem::Impl::outputSurfaces() {
+  const Clock::time_point outputStart = Clock::now();
+  forEachMuscle("output", [this](MuscleState& state, uint32_t, unsigned) { deform(state); });
+  for (uint32_t slot : bones.order) {
+    BoneState& bone = *bones.states[slot];
+    bone.last = bone.current = bone.target;
+    bone.moving = false;
+  }
+  stats.timing.output = millisecondsSince(outputStart);
+}
+
+void MuscleSystem::Impl::step(const StepSize& size) {
+  const Clock::time_point stepStart = Clock::now();
+  stats = StepStats{};
+  const TimeIntegrator& integrator = integratorFor(definition.integrator);
+  // The solve holds what the contacts' reactions hold (ContactReactions.cpp).
+  const bool pairReactionsHeld = integrator.holdsContacts(definition) && definition.pairReactions;
+  prepareWorkers();
+  sortActive();
+  orderForceTasks();
+  readBoneTargets();
+  int cap = size.iterations;
+  const int motionIterations = planBoneMotion(size, cap);
+  beginMuscles(integrator);
   beginBodyContacts();
 
   int iteration = 0;
@@ -695,30 +732,13 @@ void MuscleSystem::Impl::step(const StepSize& size) {
     const bool ruled = !size.exact && stopRuleMet(arrived, iteration - motionIterations, stepStart);
     stats.interrupted = cancel && cancel->load();
     if (iteration >= cap || ruled || stats.interrupted) {
-      const Clock::time_point start = Clock::now();
-      // A spent budget ends the step where it is: the bones jump the rest of the way.
-      if (!arrived) moveBones(1, true);
-      applyResponse();
-      stats.timing.response += millisecondsSince(start);
-      forEachMuscle("end", [this, arrived](MuscleState& state, uint32_t, unsigned) {
-        if (!arrived) followBones(state);
-        // The response's pushes may have stretched springs held at the limit.
-        limitStrain(state, kEndStrainPasses);
-      });
+      endIterations(arrived);
       break;
     }
   }
   stats.iterations = iteration;
   endBodyContacts();
-
-  const Clock::time_point outputStart = Clock::now();
-  forEachMuscle("output", [this](MuscleState& state, uint32_t, unsigned) { deform(state); });
-  for (uint32_t slot : bones.order) {
-    BoneState& bone = *bones.states[slot];
-    bone.last = bone.current = bone.target;
-    bone.moving = false;
-  }
-  stats.timing.output = millisecondsSince(outputStart);
+  outputSurfaces();
   stats.timing.total = millisecondsSince(stepStart);
 }
 

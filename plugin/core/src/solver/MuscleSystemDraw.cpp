@@ -1,4 +1,4 @@
-#include "solver/MuscleSystemImpl.h"
+#include "MuscleSystemImpl.h"
 
 namespace fibremss {
 

@@ -1,3 +1,5 @@
+#include "SpringForces.h"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -7,9 +9,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "MuscleState.h"
 #include "ParticleSimd.h"
-#include "SpringForces.h"
 
 #define FIBREMSS_SSE_SPRINGS FIBREMSS_SSE_PARTICLES
 // The AVX2 kernel is compiled for its own target and chosen at run time: the library still runs
@@ -425,10 +425,6 @@ SpringForceResult springForces(const MuscleSettings& settings, std::span<const b
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces) {
   return springForces(settings, positions, forces, fastestSpringKernel());
-}
-
-SpringForceResult springForces(MuscleState& muscle) {
-  return springForces(*muscle.settings, muscle.positions, muscle.forces);
 }
 
 }  // namespace fibremss

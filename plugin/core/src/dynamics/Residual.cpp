@@ -3,10 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
-#include "MuscleState.h"
-#include "SpringForces.h"
-#include "VolumeForces.h"
 #include "contact/BodyContacts.h"
+#include "kernels/SpringForces.h"
+#include "kernels/VolumeForces.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {
@@ -69,15 +69,16 @@ ForceResidual ResidualSums::summary() const {
   return residual;
 }
 
-void recordPushes(MuscleState& muscle) {
-  const uint32_t round = muscle.contactRound + 1;  // applyPushes counts it first
-  for (uint32_t i : muscle.settings->boundaryParticles) {
-    if (muscle.pushCounts[i] == 0) continue;
-    muscle.lastPushes[i] = muscle.pushes[i];
-    muscle.pushRounds[i] = round;
-    muscle.lastBonePushes[i] = muscle.pinchBones[i] >= 0
-                                   ? muscle.firstBonePushes[i] + muscle.otherBonePushes[i]
-                                   : btVector3(0, 0, 0);
+void recordPushes(const MuscleSettings& settings, const ContactState& contact,
+                  ResidualState& residual) {
+  const uint32_t round = contact.contactRound + 1;  // applyPushes counts it first
+  for (uint32_t i : settings.boundaryParticles) {
+    if (contact.pushCounts[i] == 0) continue;
+    residual.lastPushes[i] = contact.pushes[i];
+    residual.pushRounds[i] = round;
+    residual.lastBonePushes[i] = contact.pinchBones[i] >= 0
+                                     ? contact.firstBonePushes[i] + contact.otherBonePushes[i]
+                                     : btVector3(0, 0, 0);
   }
 }
 
@@ -95,6 +96,10 @@ void muscleForceResidual(MuscleState& muscle, const btVector3& gravity) {
   addEnclosedVolumeForces(settings, muscle.positions, r);
   addExternalForces(muscle, gravity, r);
   for (uint32_t i : settings.fixedParticles) r[i].setZero();
+}
+
+SpringForceResult springForces(MuscleState& muscle) {
+  return springForces(*muscle.settings, muscle.positions, muscle.forces);
 }
 
 ResidualSums residualSums(const MuscleState& muscle) {

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <span>
 
-#include "MuscleState.h"
-#include "VolumeForces.h"
+#include "kernels/VolumeForces.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {

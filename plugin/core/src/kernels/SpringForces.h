@@ -7,8 +7,6 @@
 
 namespace fibremss {
 
-struct MuscleState;
-
 /// What one spring-force pass measured.
 struct SpringForceResult {
   double deviation = 0;      ///< Σ |l − L0| [m]
@@ -77,8 +75,5 @@ size_t springLayoutBoundary(const MuscleSettings& settings, SpringKernel kernel,
 SpringForceResult addSpringForces(const MuscleSettings& settings,
                                   std::span<const btVector3> positions, std::span<btVector3> forces,
                                   SpringKernel kernel, size_t begin, size_t end);
-
-/// The muscle's spring forces at its positions, into muscle.forces.
-SpringForceResult springForces(MuscleState& muscle);
 
 }  // namespace fibremss

@@ -8,16 +8,16 @@
 #include <memory>
 #include <vector>
 
-#include "collision/BoneDistanceField.h"
-#include "collision/CollisionTrees.h"
-#include "collision/SurfaceContact.h"
-#include "contact/InteractionState.h"
+#include "InteractionState.h"
+#include "TearState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Pretransform.h"
-#include "solver/ForceChunks.h"
-#include "solver/Skin.h"
-#include "solver/Tearing.h"
+#include "geometry/BoneDistanceField.h"
+#include "geometry/CollisionTrees.h"
+#include "geometry/SurfaceContact.h"
+#include "kernels/ForceChunks.h"
+#include "kernels/Skin.h"
 
 class btCollisionObject;
 
@@ -73,6 +73,10 @@ struct ParticleState {
   bool bonesMoving = false;        ///< some bone of the muscle moves in this iteration
   std::vector<btVector3> surface;  ///< deformed surface vertices (output)
   SkinFrames skin;                 ///< local frames of the surface (empty: no surface)
+
+  /// Sized for `settings`' particles on `bones` bones: velocities and forces zero, every bone at
+  /// the identity, the free particles listed; positions still to be placed.
+  void init(const MuscleSettings& settings, size_t bones);
 };
 
 /// A muscle's contact scratch: the pushes of this iteration's collision pairs and what the
@@ -107,6 +111,10 @@ struct ContactState {
   /// carrying its torn halves apart (the guard's) [flag].
   bool trapHeld = false;
   size_t tornSprings = 0;  ///< most springs found burst while it was trapped (the guard's)
+
+  /// Sized for `n` particles with nothing pushed; the true-mesh visits with `meshContact`, the
+  /// sides of penetration recovery with `recovery`.
+  void init(size_t n, bool meshContact, bool recovery);
 };
 
 /// A muscle's sphere tree and the candidate lists of its leaf pairs (CollisionPairs.h).
@@ -152,6 +160,9 @@ struct GuardSnapshot {
   std::vector<btVector3> goodPositions;   ///< positions at the start of the step [m]
   std::vector<btVector3> goodPrevious;    ///< previous at the start of the step [m]
   std::vector<btVector3> goodVelocities;  ///< velocities at the start of the step [m/s]
+
+  /// Sized for `n` particles (saved at each step's start).
+  void init(size_t n);
 };
 
 /// What the force residual keeps per particle (Residual.h), size particleCount().
@@ -166,6 +177,10 @@ struct ResidualState {
   /// The bones' share of lastPushes (the sum of every bone's push on the particle) [m], valid
   /// where lastPushes is; zero for a particle only muscles pushed.
   std::vector<btVector3> lastBonePushes;
+
+  /// Sized for `n` particles with no residual and no push recorded, with the particles' `stiffness`
+  /// (residualStiffness) [N/m].
+  void init(size_t n, std::vector<btScalar> stiffness);
 };
 
 /// A muscle: settings, its bones and slot, and the state a step changes in seven parts (stages
@@ -187,7 +202,7 @@ struct MuscleState : ParticleState,
   bool prepared = false;                           ///< workspace made for `preparedFor`
   bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
-  TearState tear;           ///< its own settings and pieces when it tears (Tearing.h)
+  TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
 };
 
 }  // namespace fibremss

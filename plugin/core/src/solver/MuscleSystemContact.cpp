@@ -5,11 +5,11 @@
 #include <cmath>
 #include <string>
 
-#include "BodyContacts.h"
+#include "MuscleSystemChecks.h"
+#include "MuscleSystemImpl.h"
+#include "contact/BodyContacts.h"
 #include "fibremss/Error.h"
 #include "integrators/Integrators.h"
-#include "solver/MuscleSystemChecks.h"
-#include "solver/MuscleSystemImpl.h"
 
 namespace fibremss {
 namespace {
@@ -29,7 +29,10 @@ void MuscleSystem::Impl::beginBodyContacts() {
     contactBodies.push_back(readContactBody(*body));
     if (duration > 0) moveContactBody(contactBodies.back(), -duration);
   }
-  for (uint32_t slot : active) prepareInteraction(*muscles.states[slot], contactBodies.size());
+  for (uint32_t slot : active) {
+    MuscleState& state = *muscles.states[slot];
+    prepareInteraction(*state.settings, state, contactBodies.size());
+  }
 }
 
 void MuscleSystem::Impl::collideBodies(btScalar dt) {
@@ -103,7 +106,8 @@ void MuscleSystem::setContactBodies(std::span<const btCollisionObject* const> bo
   impl.bodyResults.reserve(bodies.size());
   impl.queryStack.reserve(kQueryStack);
   for (uint32_t slot : impl.muscles.order)
-    prepareInteraction(*impl.muscles.states[slot], bodies.size());
+    prepareInteraction(*impl.muscles.states[slot]->settings, *impl.muscles.states[slot],
+                       bodies.size());
 }
 
 BodyContact MuscleSystem::bodyContact(const btCollisionObject* body) const {

@@ -10,10 +10,13 @@
 
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
+#include "kernels/SpringForces.h"
 
 namespace fibremss {
 
+struct ContactState;
 struct MuscleState;
+struct ResidualState;
 
 /// k_i of every particle [N/m]: a third of the trace of its 3×3 diagonal block of the energy's
 /// Hessian at rest, i.e. Σ k/3 of its springs plus K/(3·V0)·|∂V/∂x_i|² of each volume term it is
@@ -38,7 +41,8 @@ struct ResidualSums {
 /// with that response's contactRound in pushRounds; a pinched particle's as the pairs summed
 /// them; the bones' share of it in lastBonePushes). The step's last response calls it; the
 /// iterations' responses do not, unless the integrator holds contacts.
-void recordPushes(MuscleState& muscle);
+void recordPushes(const MuscleSettings& settings, const ContactState& contact,
+                  ResidualState& residual);
 
 /// v / |v|, or zero for a zero (or NaN) vector: the direction of a push, none when it is zero.
 inline btVector3 unitOrZero(const btVector3& v) {
@@ -55,6 +59,9 @@ btVector3 contactNormal(const MuscleState& muscle, uint32_t i);
 /// on fastestSpringKernel in one pass, every volume term, m·gravity and external forces), before
 /// the contacts' reactions (addContactReactions); attached particles get 0. No allocation.
 void muscleForceResidual(MuscleState& muscle, const btVector3& gravity);
+
+/// The muscle's spring forces at its positions, into muscle.forces.
+SpringForceResult springForces(MuscleState& muscle);
 
 /// The sums of muscle.residual over the free particles (contactParticles: those with a
 /// contactNormal), in one fixed order.

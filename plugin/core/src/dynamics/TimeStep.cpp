@@ -6,8 +6,8 @@
 #include <limits>
 #include <vector>
 
-#include "ParticleSimd.h"
-#include "VolumeForces.h"
+#include "kernels/ParticleSimd.h"
+#include "kernels/VolumeForces.h"
 
 namespace fibremss {
 namespace {

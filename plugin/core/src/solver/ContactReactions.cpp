@@ -7,7 +7,7 @@
 // contacts can supply, so the residual after them bounds the residual of the best set from above.
 #include <algorithm>
 
-#include "solver/MuscleSystemImpl.h"
+#include "MuscleSystemImpl.h"
 
 namespace fibremss {
 namespace {

@@ -6,15 +6,20 @@
 
 namespace fibremss {
 
-struct MuscleState;
+struct ContactState;
+struct MuscleSettings;
+struct ParticleState;
 
-/// Shortens every spring of `muscle` longer than strainLimit·L0 to just inside that length (a
-/// relative 1e-5, beyond float rounding), mass-weighted (the particles weigh the same: two free
-/// ends move alike, a fixed end never), in passes over the springs in order (Gauss–Seidel) until
-/// one finds none beyond or `passes` have run. Sequential in one muscle, allocation-free: the same
+/// Shortens every spring of a muscle (its `settings`, its `particles`' positions) longer than
+/// strainLimit·L0 to just inside that length (a relative 1e-5, beyond float rounding),
+/// mass-weighted (the particles weigh the same: two free ends move alike, a fixed end never), in
+/// passes over the springs in order (Gauss–Seidel) until one finds none beyond or `passes` have
+/// run. Sequential in one muscle, allocation-free: the same
 /// positions for every thread count. Returns the springs shortened (0: no spring was beyond, the
-/// positions are untouched; a limit of 0 checks nothing).
-size_t limitStrain(MuscleState& muscle, int passes);
+/// positions are untouched; a limit of 0 checks nothing). A particle it moves is marked in
+/// `contact`'s pushedLast.
+size_t limitStrain(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                   int passes);
 
 /// Passes of limitStrain after each integration of a muscle whose forces found a spring near the
 /// limit (SpringForceResult::nearLimit; none otherwise) [passes]: one. A spring a pass leaves
@@ -26,8 +31,8 @@ constexpr int kIterationStrainPasses = 1;
 /// chains that cannot reach between their fixed ends within the limit.
 constexpr int kEndStrainPasses = 64;
 
-/// Σ |x − x(t−dt)| over the free particles of `muscle` [m]: an iteration's displacement after
+/// Σ |x − x(t−dt)| over the free `particles` [m]: an iteration's displacement after
 /// the projection moved some of them.
-double freeDisplacement(const MuscleState& muscle);
+double freeDisplacement(const ParticleState& particles);
 
 }  // namespace fibremss

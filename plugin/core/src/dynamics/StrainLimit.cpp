@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "MuscleState.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {
@@ -15,12 +15,12 @@ constexpr btScalar kInside = btScalar(1e-5);
 /// marked pushed (pushedLast): the projective solver holds it as a contact's (W, its preconditioner
 /// only) and leaves it out of the L-BFGS pairs, as a projection's move is no answer of the forces
 /// (with it in, real-hip took 1.7× the time per iteration).
-size_t projectionPass(MuscleState& muscle, btScalar limit) {
-  const MuscleSettings& settings = *muscle.settings;
-  btVector3* x = muscle.positions.data();
+size_t projectionPass(const MuscleSettings& settings, ParticleState& particles,
+                      ContactState& contact, btScalar limit) {
+  btVector3* x = particles.positions.data();
   const auto move = [&](uint32_t i, const btVector3& by) {
     x[i] += by;
-    muscle.pushedLast[i] = 1;
+    contact.pushedLast[i] = 1;
   };
   size_t shortened = 0;
   for (const Spring& spring : settings.springs) {
@@ -47,22 +47,22 @@ size_t projectionPass(MuscleState& muscle, btScalar limit) {
 
 }  // namespace
 
-size_t limitStrain(MuscleState& muscle, int passes) {
-  const MuscleSettings& settings = *muscle.settings;
+size_t limitStrain(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                   int passes) {
   if (!(settings.strainLimit > 0)) return 0;
   size_t shortened = 0;
   for (int pass = 0; pass < passes; ++pass) {
-    const size_t count = projectionPass(muscle, settings.strainLimit);
+    const size_t count = projectionPass(settings, particles, contact, settings.strainLimit);
     if (count == 0) break;
     shortened += count;
   }
   return shortened;
 }
 
-double freeDisplacement(const MuscleState& muscle) {
+double freeDisplacement(const ParticleState& particles) {
   double sum = 0;
-  for (uint32_t i : muscle.freeParticles)
-    sum += (muscle.positions[i] - muscle.previous[i]).length();
+  for (uint32_t i : particles.freeParticles)
+    sum += (particles.positions[i] - particles.previous[i]).length();
   return sum;
 }
 

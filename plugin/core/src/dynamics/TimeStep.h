@@ -2,8 +2,8 @@
 // The adaptive time step (method.md §4, thesis eq 5.1), internal.
 #include <LinearMath/btScalar.h>
 
-#include "MuscleState.h"
-#include "SpringForces.h"
+#include "kernels/SpringForces.h"
+#include "state/MuscleState.h"
 
 namespace fibremss {
 
