@@ -15,6 +15,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "fibremss/SceneSystem.h"
 #include "support/AllocationCounter.h"
 #include "support/SameTear.h"
 
@@ -71,11 +72,10 @@ Cut run(int threads) {
   MuscleSystemDef def = scene.simulation;
   def.threads = threads;
   MuscleSystem system(def);
-  std::vector<BoneHandle> bones;
-  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
-  const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);
-  const BladeHandle blade =
-      system.addBlade(scene.blades[0].from, scene.blades[0].to, scene.bladePose(0, 0));
+  const SceneHandles handles = addScene(system, prepared);
+  const std::vector<BoneHandle>& bones = handles.bones;
+  const MuscleHandle muscle = handles.muscles[0];
+  const BladeHandle blade = addBlades(system, scene)[0];
   Cut cut;
   btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   for (int pose = 0; pose < scene.poseCount; ++pose) {

@@ -15,6 +15,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "fibremss/SceneSystem.h"
 
 namespace fibremss {
 namespace {
@@ -68,9 +69,9 @@ TEST(ImplicitSurface, TheTornTearSceneIsClosedInPieces) {
   const LoadedScene scene = loadScene("tear", {"resolution=12", "fibre_count=48"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   MuscleSystem system(scene.simulation);
-  std::vector<BoneHandle> bones;
-  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
-  const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);
+  const SceneHandles handles = addScene(system, prepared);
+  const std::vector<BoneHandle>& bones = handles.bones;
+  const MuscleHandle muscle = handles.muscles[0];
   for (int pose = 0; pose < scene.poseCount; ++pose) {
     for (size_t b = 0; b < bones.size(); ++b)
       system.setBoneTransform(bones[b], scene.bonePose(b, pose));

@@ -17,6 +17,7 @@
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
+#include "fibremss/SceneSystem.h"
 #include "support/AllocationCounter.h"
 #include "support/GridMuscle.h"
 #include "support/SameTear.h"
@@ -53,9 +54,9 @@ Torn run(const std::string& name, std::vector<std::string> overrides, int thread
   MuscleSystemDef def = scene.simulation;
   def.threads = threads;
   MuscleSystem system(def);
-  std::vector<BoneHandle> bones;
-  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
-  const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);
+  const SceneHandles handles = addScene(system, prepared);
+  const std::vector<BoneHandle>& bones = handles.bones;
+  const MuscleHandle muscle = handles.muscles[0];
   Torn torn;
   btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   for (int pose = 0; pose < scene.poseCount; ++pose) {
