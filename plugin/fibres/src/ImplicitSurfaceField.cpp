@@ -200,7 +200,7 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
   for (uint32_t i : muscle->boundaryParticles) {
     const MeshDistance::Closest closest = distance.closest(muscle->restPositions[i]);
     const btVector3 d = closest.point - muscle->restPositions[i];
-    if (d.length2() > 0) outward[i] = (closest.inside ? d : -d).normalized();
+    outward[i] = closest.inside ? d : -d;
   }
   measureRestCover();
 }
@@ -236,7 +236,7 @@ btScalar ImplicitSurface::Impl::coverage(const btVector3& x,
   return sum;
 }
 
-btScalar ImplicitSurface::Impl::field(const btVector3& x) {
+RestMap ImplicitSurface::Impl::restMap(const btVector3& x) const {
   double weight = 0, spread = 0;
   btVector3 offset(0, 0, 0);  // Σ w·(X_j − x)
   forNeighbours(x, positions, [&](uint32_t p, const btVector3& d, btScalar w) {
@@ -245,12 +245,60 @@ btScalar ImplicitSurface::Impl::field(const btVector3& x) {
     offset += w * mapped;
     spread += w * mapped.length2();
   });
+  RestMap map;
+  if (weight == 0) return map;
+  map.offset = offset / btScalar(weight);
+  map.spread = btSqrt(btMax(btScalar(spread / weight) - map.offset.length2(), btScalar(0)));
+  map.weight = btScalar(weight);
+  return map;
+}
+
+void ImplicitSurface::Impl::beginMaps() {
+  coarse.origin = grid.origin;
+  coarse.spacing = 2 * grid.spacing;
+  for (int a = 0; a < 3; ++a) coarse.dims[a] = grid.dims[a] / 2 + 2;
+  const size_t count = size_t(coarse.dims[0]) * coarse.dims[1] * coarse.dims[2];
+  if (maps.size() < count) maps.resize(count);
+  if (++mapStamp == 0) {  // wrapped: clear once
+    for (RestMap& map : maps) map.stamp = 0;
+    mapStamp = 1;
+  }
+}
+
+const RestMap& ImplicitSurface::Impl::coarseMap(int32_t i, int32_t j, int32_t k) {
+  RestMap& map = maps[coarse.index(i, j, k)];
+  if (map.stamp != mapStamp) {
+    map = restMap(coarse.point(i, j, k));
+    map.stamp = mapStamp;
+  }
+  return map;
+}
+
+btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
+  // Between coarse points the extraction point lies halfway or on them: weights ½ or 1.
+  const std::array<int32_t, 3> index{i, j, k};
+  btVector3 offset(0, 0, 0);
+  btScalar spread = 0, weight = 0;
+  for (int c = 0; c < 8; ++c) {
+    btScalar share = 1;
+    std::array<int32_t, 3> corner;
+    for (int a = 0; a < 3; ++a) {
+      const int32_t up = c >> a & 1, odd = index[size_t(a)] & 1;
+      if (up && !odd) share = 0;
+      share *= odd ? btScalar(0.5) : btScalar(1);
+      corner[size_t(a)] = index[size_t(a)] / 2 + up;
+    }
+    if (share == 0) continue;
+    const RestMap& map = coarseMap(corner[0], corner[1], corner[2]);
+    offset += share * map.offset;
+    spread += share * map.spread;
+    weight += share * map.weight;
+  }
+  const btVector3 x = grid.point(i, j, k);
   btScalar value = -h;
   if (weight > 0) {
-    const btVector3 mean = offset / btScalar(weight);
-    const btScalar sigma = btSqrt(btMax(btScalar(spread / weight) - mean.length2(), btScalar(0)));
-    const btScalar distance = rest.at(x + mean, h) - settings.spreadWeight * sigma;
-    value = std::min(distance, h * (btScalar(weight) / kappa - 1));
+    const btScalar distance = rest.at(x + offset, h) - settings.spreadWeight * spread;
+    value = std::min(distance, h * (weight / kappa - 1));
   }
   for (const SurfaceDent& dent : dents) {
     const btScalar q = 1 - (x - dent.centre).length2() / (dent.radius * dent.radius);

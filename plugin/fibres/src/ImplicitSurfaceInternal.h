@@ -86,6 +86,15 @@ struct GridEntry {
   std::array<int32_t, 7> edgeVertex{};  ///< vertex index per edge, −1 none
 };
 
+/// Where the particles map a point back to rest: the w-weighted mean of X_j − x, their spread
+/// σ and W = Σ w_j (ImplicitSurface.h). Valid in the extraction `stamp` names.
+struct RestMap {
+  uint32_t stamp = 0;         ///< extraction that wrote it
+  btVector3 offset{0, 0, 0};  ///< X̄ − x [m]
+  btScalar spread = 0;        ///< σ [m]
+  btScalar weight = 0;        ///< W [1]
+};
+
 /// Open-addressing table of GridEntry, emptied by advancing the stamp (no clearing).
 class GridTable {
  public:
@@ -104,7 +113,15 @@ struct ImplicitSurface::Impl {
 
   // The field (ImplicitSurfaceField.cpp).
   void prepareFrames(std::span<const btVector3> positions, std::span<const Spring> springs);
-  btScalar field(const btVector3& x);
+  /// The particles' map back to rest at x (weight 0 where no particle is within h).
+  RestMap restMap(const btVector3& x) const;
+  /// A new extraction's coarse grid over `grid`, every map stale.
+  void beginMaps();
+  /// The map at point (i, j, k) of the coarse grid (every second extraction grid point), cached.
+  const RestMap& coarseMap(int32_t i, int32_t j, int32_t k);
+  /// The field at extraction grid point (i, j, k): the map interpolated (trilinear) between the
+  /// coarse points around it, which is exact at rest (where X̄ − x = 0 everywhere), then D.
+  btScalar field(int32_t i, int32_t j, int32_t k);
   btScalar coverage(const btVector3& x, std::span<const btVector3> positions) const;
   void measureRestCover();
   /// fn(particle, x − p, w) for every particle of `current` (binned in `cells`) within h of x.
@@ -142,7 +159,13 @@ struct ImplicitSurface::Impl {
       if (cell[a] < 0 || cell[a] + 1 >= grid.dims[a]) return false;
     return true;
   }
-  void seed();
+  /// Seeds the surface beside boundary particle p: the first cell holding both signs on the ray
+  /// along its outward direction, searched from where its rest depth puts the surface. False
+  /// when none, or when the cell found was queued already.
+  bool seedFrom(uint32_t p);
+  /// Every boundary particle's seed, each marched before the next (its cells then queued).
+  void seedAndMarch();
+  /// Polygonises the queued cells from `marched` on, queueing the cells the surface goes on to.
   void march();
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<float, 8>& values);
   int32_t edgeVertex(const std::array<int32_t, 3>& cell, int u, int v,
@@ -150,11 +173,12 @@ struct ImplicitSurface::Impl {
 
   std::shared_ptr<const MuscleSettings> muscle;
   ImplicitSurfaceSettings settings;
-  btScalar voxel = 0;              ///< extraction grid spacing [m]
-  btScalar h = 0;                  ///< kernel radius [m]
-  btScalar kappa = 0;              ///< κ: half the smallest W on the rest surface [1]
-  RestDistanceGrid rest;           ///< D
-  std::vector<btVector3> outward;  ///< per boundary particle: towards the surface, rest
+  btScalar voxel = 0;     ///< extraction grid spacing [m]
+  btScalar h = 0;         ///< kernel radius [m]
+  btScalar kappa = 0;     ///< κ: half the smallest W on the rest surface [1]
+  RestDistanceGrid rest;  ///< D
+  /// Per boundary particle: from it to the nearest rest surface point, made to point outward [m].
+  std::vector<btVector3> outward;
   std::vector<SurfaceDent> dents;
 
   // Per extraction.
@@ -165,7 +189,11 @@ struct ImplicitSurface::Impl {
   ParticleCells cells;
   GridFrame grid;  ///< extraction grid
   GridTable table;
+  GridFrame coarse;                           ///< every second point of the extraction grid
+  std::vector<RestMap> maps;                  ///< per coarse point, valid when stamped mapStamp
+  uint32_t mapStamp = 0;                      ///< this extraction's stamp of `maps`
   std::vector<std::array<int32_t, 3>> queue;  ///< cells to polygonise
+  size_t marched = 0;                         ///< queue entries polygonised
   TriangleMesh mesh;
 };
 
