@@ -91,19 +91,23 @@ void GridTable::begin() {
 }
 
 GridEntry& GridTable::at(uint32_t key) {
-  if (2 * (used_ + 1) > entries_.size()) grow();
-  const size_t mask = entries_.size() - 1;
-  for (size_t s = hashKey(key) & mask;; s = (s + 1) & mask) {
-    GridEntry& e = entries_[s];
-    if (e.stamp == stamp_ && e.key == key) return e;
-    if (e.stamp != stamp_) {
-      e = GridEntry{};
-      e.key = key;
-      e.stamp = stamp_;
-      e.edgeVertex.fill(-1);
-      ++used_;
-      return e;
+  for (;;) {
+    const size_t mask = entries_.size() - 1;
+    size_t s = hashKey(key) & mask;
+    for (; entries_[s].stamp == stamp_; s = (s + 1) & mask)
+      if (entries_[s].key == key) return entries_[s];
+    // Missing: grow first when the table would pass half full (entries found never move it).
+    if (2 * (used_ + 1) > entries_.size()) {
+      grow();
+      continue;
     }
+    GridEntry& e = entries_[s];
+    e = GridEntry{};
+    e.key = key;
+    e.stamp = stamp_;
+    e.edgeVertex.fill(-1);
+    ++used_;
+    return e;
   }
 }
 
@@ -193,12 +197,11 @@ void ImplicitSurface::Impl::march() {
   }
 }
 
-int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell, int u, int v,
+int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
+                                          const std::array<GridEntry*, 8>& corners, int u, int v,
                                           const std::array<float, 8>& values) {
   if ((u & v) != u) std::swap(u, v);  // u ⊂ v: the edge goes up from corner u
-  GridEntry& e =
-      table.at(grid.index(cell[0] + (u & 1), cell[1] + (u >> 1 & 1), cell[2] + (u >> 2 & 1)));
-  int32_t& vertex = e.edgeVertex[size_t((u ^ v) - 1)];
+  int32_t& vertex = corners[size_t(u)]->edgeVertex[size_t((u ^ v) - 1)];
   if (vertex < 0) {
     auto corner = [&](int c) {
       return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
@@ -212,6 +215,12 @@ int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell, in
 
 void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
                                        const std::array<float, 8>& values) {
+  // The corners' entries exist (their values are known): looking them up adds none, so the
+  // pointers stay valid.
+  std::array<GridEntry*, 8> corners;
+  for (int c = 0; c < 8; ++c)
+    corners[size_t(c)] =
+        &table.at(grid.index(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1)));
   for (size_t t = 0; t < kTetrahedra.size(); ++t) {
     unsigned inside = 0;
     for (unsigned k = 0; k < 4; ++k) inside |= unsigned(values[size_t(kTetrahedra[t][k])] > 0) << k;
@@ -220,7 +229,7 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
       std::array<uint32_t, 3> triangle;
       for (size_t k = 0; k < 3; ++k) {
         const auto [u, v] = cut.edges[size_t(n)][k];
-        triangle[k] = uint32_t(edgeVertex(cell, u, v, values));
+        triangle[k] = uint32_t(edgeVertex(cell, corners, u, v, values));
       }
       mesh.triangles.push_back(triangle);
     }

@@ -142,31 +142,40 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
       }
 }
 
-btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
+const float* RestDistanceGrid::block(int32_t i, int32_t j, int32_t k) {
   const int32_t bi = i / kBlock, bj = j / kBlock, bk = k / kBlock;
   int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
   if (slot < 0) {
     slot = int32_t(values_.size() / (kBlock * kBlock * kBlock));
     fillBlock(bi, bj, bk, slot);
   }
-  const size_t inBlock = size_t(i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock)));
-  return values_[size_t(slot) * kBlock * kBlock * kBlock + inBlock];
+  return values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
+}
+
+btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
+  return block(i, j, k)[i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock))];
 }
 
 btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
   const btVector3 u = (x - frame_.origin) / frame_.spacing;
   std::array<int32_t, 3> base;
   btScalar t[3];
+  bool oneBlock = true;  // the cell's 8 points in one block
   for (int a = 0; a < 3; ++a) {
     if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
     base[a] = int32_t(u[a]);
     t[a] = u[a] - btScalar(base[a]);
+    oneBlock = oneBlock && base[a] % kBlock != kBlock - 1;
   }
+  const float* values = oneBlock ? block(base[0], base[1], base[2]) : nullptr;
+  const int32_t first =
+      base[0] % kBlock + kBlock * (base[1] % kBlock + kBlock * (base[2] % kBlock));
   btScalar sum = 0;
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     const btScalar w = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) * (dz ? t[2] : 1 - t[2]);
-    sum += w * value(base[0] + dx, base[1] + dy, base[2] + dz);
+    sum += w * (values ? values[first + dx + kBlock * (dy + kBlock * dz)]
+                       : value(base[0] + dx, base[1] + dy, base[2] + dz));
   }
   return sum;
 }
@@ -184,7 +193,7 @@ void ParticleCells::build(std::span<const btVector3> positions, btScalar cellSiz
   };
   for (const btVector3& p : positions) ++start[cellOf(p) + 1];
   for (size_t c = 0; c < count; ++c) start[c + 1] += start[c];
-  std::vector<uint32_t> fill(start.begin(), start.end() - 1);  // each cell's next entry
+  fill.assign(start.begin(), start.end() - 1);
   for (uint32_t i = 0; i < positions.size(); ++i) order[fill[cellOf(positions[i])]++] = i;
 }
 

@@ -54,6 +54,8 @@ class RestDistanceGrid {
   btScalar at(const btVector3& x, btScalar outsideValue);
 
  private:
+  /// The values of the block holding point (i, j, k), 4³ from its lower corner, x fastest.
+  const float* block(int32_t i, int32_t j, int32_t k);
   btScalar value(int32_t i, int32_t j, int32_t k);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
 
@@ -70,6 +72,7 @@ struct ParticleCells {
   GridFrame frame;              ///< cells: frame points are their lower corners
   std::vector<uint32_t> start;  ///< per cell + 1: first entry in `order`
   std::vector<uint32_t> order;  ///< particle indices, cell after cell
+  std::vector<uint32_t> fill;   ///< scratch: per cell, its next entry in `order`
 
   void build(std::span<const btVector3> positions, btScalar cellSize);
 };
@@ -168,8 +171,10 @@ struct ImplicitSurface::Impl {
   /// Polygonises the queued cells from `marched` on, queueing the cells the surface goes on to.
   void march();
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<float, 8>& values);
-  int32_t edgeVertex(const std::array<int32_t, 3>& cell, int u, int v,
-                     const std::array<float, 8>& values);
+  /// The vertex on the cell's edge from corner u to corner v (made once, kept in the entry of
+  /// the edge's lower corner among `corners`, the cell's).
+  int32_t edgeVertex(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
+                     int u, int v, const std::array<float, 8>& values);
 
   std::shared_ptr<const MuscleSettings> muscle;
   ImplicitSurfaceSettings settings;
