@@ -288,6 +288,7 @@ btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
   const std::array<int32_t, 3> index{i, j, k};
   btVector3 offset(0, 0, 0);
   btScalar spread = 0, weight = 0;
+  bool covered = true;  // every coarse point around has particles within h
   for (int c = 0; c < 8; ++c) {
     btScalar share = 1;
     std::array<int32_t, 3> corner;
@@ -299,11 +300,18 @@ btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
     }
     if (share == 0) continue;
     const RestMap& map = coarseMap(corner[0], corner[1], corner[2]);
+    covered = covered && map.weight > 0;
     offset += share * map.offset;
     spread += share * map.spread;
     weight += share * map.weight;
   }
   const btVector3 x = grid.point(i, j, k);
+  if (!covered) {  // the interpolation would mix in their empty maps: the map here instead
+    const RestMap map = restMap(x);
+    offset = map.offset;
+    spread = map.spread;
+    weight = map.weight;
+  }
   btScalar value = -h;
   if (weight > 0) {
     const btScalar distance = rest.at(x + offset, h) - settings.spreadWeight * spread;
