@@ -19,7 +19,8 @@ constexpr std::array<std::array<int, 4>, 6> kTetrahedra{
     {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
 
 /// The surface's triangles in one tetrahedron for one set of inside corners: each triangle's
-/// vertices as the cell corner pairs (u, v) of the edges they lie on.
+/// vertices as the cell corner pairs (u, v) of the edges they lie on, u ⊂ v (the edge goes up
+/// from u).
 struct TetrahedronCut {
   int count = 0;  ///< triangles (0 to 2)
   std::array<std::array<std::array<int, 2>, 3>, 2> edges{};
@@ -55,6 +56,8 @@ TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
     auto& e = cut.edges[size_t(n)];
     auto mid = [&](size_t k) { return (corner(e[k][0]) + corner(e[k][1])) / 2; };
     if ((mid(1) - mid(0)).cross(mid(2) - mid(0)).dot(inward) > 0) std::swap(e[1], e[2]);
+    for (std::array<int, 2>& edge : e)
+      if ((edge[0] & edge[1]) != edge[0]) std::swap(edge[0], edge[1]);
   }
   return cut;
 }
@@ -200,7 +203,6 @@ void ImplicitSurface::Impl::march() {
 int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
                                           const std::array<GridEntry*, 8>& corners, int u, int v,
                                           const std::array<float, 8>& values) {
-  if ((u & v) != u) std::swap(u, v);  // u ⊂ v: the edge goes up from corner u
   int32_t& vertex = corners[size_t(u)]->edgeVertex[size_t((u ^ v) - 1)];
   if (vertex < 0) {
     auto corner = [&](int c) {

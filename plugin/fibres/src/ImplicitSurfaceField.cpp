@@ -1,6 +1,7 @@
 // The implicit surface's field (ImplicitSurface.h): the rest distance grid, the particles'
 // cells, the deformation of each particle's springs and the field itself.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "ImplicitSurfaceInternal.h"
@@ -248,8 +249,10 @@ btScalar ImplicitSurface::Impl::coverage(const btVector3& x,
 RestMap ImplicitSurface::Impl::restMap(const btVector3& x) const {
   double weight = 0, spread = 0;
   btVector3 offset(0, 0, 0);  // Σ w·(X_j − x)
+  const btVector3* restPositions = muscle->restPositions.data();
+  const btMatrix3x3* inverses = toRest.data();
   forNeighbours(x, positions, [&](uint32_t p, const btVector3& d, btScalar w) {
-    const btVector3 mapped = muscle->restPositions[p] + toRest[p] * d - x;
+    const btVector3 mapped = restPositions[p] + inverses[p] * d - x;
     weight += w;
     offset += w * mapped;
     spread += w * mapped.length2();
@@ -284,27 +287,25 @@ const RestMap& ImplicitSurface::Impl::coarseMap(int32_t i, int32_t j, int32_t k)
 }
 
 btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
-  // Between coarse points the extraction point lies halfway or on them: weights ½ or 1.
-  const std::array<int32_t, 3> index{i, j, k};
+  // Along each axis where the index is odd the point lies halfway between two coarse points,
+  // else on one: 2^(odd axes) corners, each of an equal share.
+  const unsigned odd = unsigned(i & 1) | unsigned(j & 1) << 1 | unsigned(k & 1) << 2;
+  const btScalar share = btScalar(1) / btScalar(1 << std::popcount(odd));
   btVector3 offset(0, 0, 0);
   btScalar spread = 0, weight = 0;
   bool covered = true;  // every coarse point around has particles within h
-  for (int c = 0; c < 8; ++c) {
-    btScalar share = 1;
-    std::array<int32_t, 3> corner;
-    for (int a = 0; a < 3; ++a) {
-      const int32_t up = c >> a & 1, odd = index[size_t(a)] & 1;
-      if (up && !odd) share = 0;
-      share *= odd ? btScalar(0.5) : btScalar(1);
-      corner[size_t(a)] = index[size_t(a)] / 2 + up;
-    }
-    if (share == 0) continue;
-    const RestMap& map = coarseMap(corner[0], corner[1], corner[2]);
+  for (unsigned c = 0; c < 8; ++c) {
+    if ((c & odd) != c) continue;
+    const RestMap& map =
+        coarseMap(i / 2 + int32_t(c & 1), j / 2 + int32_t(c >> 1 & 1), k / 2 + int32_t(c >> 2 & 1));
     covered = covered && map.weight > 0;
-    offset += share * map.offset;
-    spread += share * map.spread;
-    weight += share * map.weight;
+    offset += map.offset;
+    spread += map.spread;
+    weight += map.weight;
   }
+  offset *= share;
+  spread *= share;
+  weight *= share;
   const btVector3 x = grid.point(i, j, k);
   if (!covered) {  // the interpolation would mix in their empty maps: the map here instead
     const RestMap map = restMap(x);

@@ -171,8 +171,8 @@ struct ImplicitSurface::Impl {
   /// Polygonises the queued cells from `marched` on, queueing the cells the surface goes on to.
   void march();
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<float, 8>& values);
-  /// The vertex on the cell's edge from corner u to corner v (made once, kept in the entry of
-  /// the edge's lower corner among `corners`, the cell's).
+  /// The vertex on the cell's edge from corner u up to corner v, u ⊂ v (made once, kept in the
+  /// entry of corner u among `corners`, the cell's).
   int32_t edgeVertex(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
                      int u, int v, const std::array<float, 8>& values);
 
