@@ -270,8 +270,8 @@ std::vector<uint32_t> ImplicitSurface::nearestParticles() const {
   std::vector<uint32_t> nearest(s.mesh.vertices.size(), 0);
   for (size_t v = 0; v < nearest.size(); ++v) {
     btScalar best = 0;
-    s.forNeighbours(s.mesh.vertices[v], s.positions, [&](uint32_t p, const btVector3&, btScalar w) {
-      if (w > best) best = w, nearest[v] = p;
+    s.forNeighbours(s.mesh.vertices[v], [&](uint32_t e, const btVector3&, btScalar w) {
+      if (w > best) best = w, nearest[v] = s.cells.order[e];
     });
   }
   return nearest;

@@ -196,6 +196,8 @@ void ParticleCells::build(std::span<const btVector3> positions, btScalar cellSiz
   for (size_t c = 0; c < count; ++c) start[c + 1] += start[c];
   fill.assign(start.begin(), start.end() - 1);
   for (uint32_t i = 0; i < positions.size(); ++i) order[fill[cellOf(positions[i])]++] = i;
+  sorted.resize(order.size());
+  for (size_t e = 0; e < order.size(); ++e) sorted[e] = positions[order[e]];
 }
 
 ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
@@ -219,7 +221,7 @@ void ImplicitSurface::Impl::measureRestCover() {
   prepareFrames(muscle->restPositions, muscle->springs);
   btScalar smallest = SIMD_INFINITY;
   for (const btVector3& v : muscle->restSurface.vertices)
-    smallest = std::min(smallest, coverage(v, muscle->restPositions));
+    smallest = std::min(smallest, coverage(v));
   kappa = std::isfinite(smallest) && smallest > 0 ? smallest / 2 : btScalar(1e-3);
 }
 
@@ -236,23 +238,28 @@ void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
     toRest[i] = spans ? restMoments[i] * m.inverse() : btMatrix3x3::getIdentity();
   }
   cells.build(current, h);
+  entryRest.resize(current.size());
+  entryToRest.resize(current.size());
+  for (size_t e = 0; e < cells.order.size(); ++e) {
+    entryRest[e] = muscle->restPositions[cells.order[e]];
+    entryToRest[e] = toRest[cells.order[e]];
+  }
 }
 
 /// Σ w_j at x (the particles' cover), from `current` binned in `cells`.
-btScalar ImplicitSurface::Impl::coverage(const btVector3& x,
-                                         std::span<const btVector3> current) const {
+btScalar ImplicitSurface::Impl::coverage(const btVector3& x) const {
   btScalar sum = 0;
-  forNeighbours(x, current, [&](uint32_t, const btVector3&, btScalar w) { sum += w; });
+  forNeighbours(x, [&](uint32_t, const btVector3&, btScalar w) { sum += w; });
   return sum;
 }
 
 RestMap ImplicitSurface::Impl::restMap(const btVector3& x) const {
   double weight = 0, spread = 0;
   btVector3 offset(0, 0, 0);  // Σ w·(X_j − x)
-  const btVector3* restPositions = muscle->restPositions.data();
-  const btMatrix3x3* inverses = toRest.data();
-  forNeighbours(x, positions, [&](uint32_t p, const btVector3& d, btScalar w) {
-    const btVector3 mapped = restPositions[p] + inverses[p] * d - x;
+  const btVector3* restPositions = entryRest.data();
+  const btMatrix3x3* inverses = entryToRest.data();
+  forNeighbours(x, [&](uint32_t e, const btVector3& d, btScalar w) {
+    const btVector3 mapped = restPositions[e] + inverses[e] * d - x;
     weight += w;
     offset += w * mapped;
     spread += w * mapped.length2();

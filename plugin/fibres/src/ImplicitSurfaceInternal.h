@@ -69,10 +69,11 @@ class RestDistanceGrid {
 
 /// The particles binned into cells of the kernel radius (counting sort).
 struct ParticleCells {
-  GridFrame frame;              ///< cells: frame points are their lower corners
-  std::vector<uint32_t> start;  ///< per cell + 1: first entry in `order`
-  std::vector<uint32_t> order;  ///< particle indices, cell after cell
-  std::vector<uint32_t> fill;   ///< scratch: per cell, its next entry in `order`
+  GridFrame frame;                ///< cells: frame points are their lower corners
+  std::vector<uint32_t> start;    ///< per cell + 1: first entry in `order`
+  std::vector<uint32_t> order;    ///< particle indices, cell after cell
+  std::vector<uint32_t> fill;     ///< scratch: per cell, its next entry in `order`
+  std::vector<btVector3> sorted;  ///< per entry of `order`: its particle's position [m]
 
   void build(std::span<const btVector3> positions, btScalar cellSize);
 };
@@ -125,11 +126,12 @@ struct ImplicitSurface::Impl {
   /// The field at extraction grid point (i, j, k): the map interpolated (trilinear) between the
   /// coarse points around it, which is exact at rest (where X̄ − x = 0 everywhere), then D.
   btScalar field(int32_t i, int32_t j, int32_t k);
-  btScalar coverage(const btVector3& x, std::span<const btVector3> positions) const;
+  btScalar coverage(const btVector3& x) const;
   void measureRestCover();
-  /// fn(particle, x − p, w) for every particle of `current` (binned in `cells`) within h of x.
+  /// fn(entry, x − p, w) for every particle binned in `cells` within h of x, by its entry in
+  /// cells.order.
   template <class Fn>
-  void forNeighbours(const btVector3& x, std::span<const btVector3> current, Fn&& fn) const {
+  void forNeighbours(const btVector3& x, Fn&& fn) const {
     const btVector3 u = (x - cells.frame.origin) / h;
     const btScalar inverseH2 = 1 / (h * h);
     std::array<int32_t, 3> lo, hi;
@@ -143,10 +145,9 @@ struct ImplicitSurface::Impl {
         for (int32_t i = lo[0]; i <= hi[0]; ++i) {
           const uint32_t c = cells.frame.index(i, j, k);
           for (uint32_t e = cells.start[c]; e < cells.start[c + 1]; ++e) {
-            const uint32_t p = cells.order[e];
-            const btVector3 d = x - current[p];
+            const btVector3 d = x - cells.sorted[e];
             const btScalar q = 1 - d.length2() * inverseH2;
-            if (q > 0) fn(p, d, q * q * q);
+            if (q > 0) fn(e, d, q * q * q);
           }
         }
   }
@@ -189,6 +190,8 @@ struct ImplicitSurface::Impl {
   // Per extraction.
   std::span<const btVector3> positions;  ///< the particles
   std::vector<btMatrix3x3> toRest;       ///< per particle F⁻¹ (identity when degenerate)
+  std::vector<btVector3> entryRest;      ///< per entry of cells.order: its rest position [m]
+  std::vector<btMatrix3x3> entryToRest;  ///< per entry of cells.order: its F⁻¹
   std::vector<btMatrix3x3> moments;      ///< scratch: Σ dx·dXᵀ over the unbroken springs [m²]
   std::vector<btMatrix3x3> restMoments;  ///< scratch: Σ dX·dXᵀ over the unbroken springs [m²]
   ParticleCells cells;
