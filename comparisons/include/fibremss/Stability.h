@@ -160,7 +160,7 @@ nlohmann::json stabilityJson(const StabilityMatrix& matrix, const StabilityOptio
 /// "exploded@S", "energy@S", "timeout", "n/a"; the stable steps; the criteria.
 std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOptions& options);
 
-/// Integrator names, all ten in Parameters.h order.
+/// The names of every integrator the core has, in the order of enum class Integrator.
 std::vector<std::string> allIntegratorNames();
 /// True when the solver can run `integrator` (a MuscleSystem with it steps without throwing).
 bool integratorAvailable(Integrator integrator);
