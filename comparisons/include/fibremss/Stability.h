@@ -57,7 +57,7 @@ EnergyCheck checkEnergy(std::span<const double> series, double growthFactor, dou
 
 /// How the matrix runs.
 struct StabilityOptions {
-  std::vector<std::string> integrators;             ///< names (empty: all ten)
+  std::vector<std::string> integrators;             ///< names (empty: every integrator)
   std::vector<double> dtFactors{1, 2, 5, 10, 100};  ///< multiples of the stable step
   /// Applied to every case (first). No strain limit: it holds every spring at its limit, so the
   /// matrix's 3x spring check would no longer see an integrator's blow-up (Verlet's stable step
