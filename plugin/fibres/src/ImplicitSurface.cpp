@@ -18,6 +18,59 @@ namespace {
 constexpr std::array<std::array<int, 4>, 6> kTetrahedra{
     {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}}};
 
+/// The surface's triangles in one tetrahedron for one set of inside corners: each triangle's
+/// vertices as the cell corner pairs (u, v) of the edges they lie on, u ⊂ v (the edge goes up
+/// from u).
+struct TetrahedronCut {
+  int count = 0;  ///< triangles (0 to 2)
+  std::array<std::array<std::array<int, 2>, 3>, 2> edges{};
+};
+
+/// The cut of tetrahedron `tet` with the corners in bit set `inside` (bit k: tet[k]) inside,
+/// counter-clockwise seen from outside. Within a tetrahedron the linear field's zero set is a
+/// plane, so the orientation does not depend on where the vertices lie along their edges: it is
+/// found here with them at the edges' midpoints.
+TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
+  std::array<int, 4> in{}, out{};
+  int ins = 0, outs = 0;
+  for (unsigned k = 0; k < 4; ++k)
+    (inside >> k & 1 ? in[size_t(ins++)] : out[size_t(outs++)]) = tet[k];
+  TetrahedronCut cut;
+  if (ins == 0 || outs == 0) return cut;
+  if (ins == 1 || outs == 1) {
+    const int lone = ins == 1 ? in[0] : out[0];
+    const std::array<int, 4>& others = ins == 1 ? out : in;
+    cut.count = 1;
+    for (size_t k = 0; k < 3; ++k) cut.edges[0][k] = {lone, others[k]};
+  } else {
+    const std::array<int, 2> a{in[0], out[0]}, b{in[0], out[1]}, c{in[1], out[1]}, d{in[1], out[0]};
+    cut.count = 2;
+    cut.edges = {{{a, b, c}, {a, c, d}}};
+  }
+  auto corner = [](int c) {
+    return btVector3(btScalar(c & 1), btScalar(c >> 1 & 1), btScalar(c >> 2 & 1));
+  };
+  btVector3 inward(0, 0, 0);
+  for (size_t k = 0; k < 4; ++k) inward += inside >> k & 1 ? corner(tet[k]) : -corner(tet[k]);
+  for (int n = 0; n < cut.count; ++n) {
+    auto& e = cut.edges[size_t(n)];
+    auto mid = [&](size_t k) { return (corner(e[k][0]) + corner(e[k][1])) / 2; };
+    if ((mid(1) - mid(0)).cross(mid(2) - mid(0)).dot(inward) > 0) std::swap(e[1], e[2]);
+    for (std::array<int, 2>& edge : e)
+      if ((edge[0] & edge[1]) != edge[0]) std::swap(edge[0], edge[1]);
+  }
+  return cut;
+}
+
+/// kCuts[t][inside]: cutOf(kTetrahedra[t], inside).
+const std::array<std::array<TetrahedronCut, 16>, 6> kCuts = [] {
+  std::array<std::array<TetrahedronCut, 16>, 6> cuts;
+  for (size_t t = 0; t < 6; ++t)
+    for (unsigned inside = 0; inside < 16; ++inside)
+      cuts[t][inside] = cutOf(kTetrahedra[t], inside);
+  return cuts;
+}();
+
 /// Whether the values hold both signs (inside: > 0).
 bool mixed(std::span<const float> values) {
   bool inside = false, outside = false;
@@ -41,19 +94,23 @@ void GridTable::begin() {
 }
 
 GridEntry& GridTable::at(uint32_t key) {
-  if (2 * (used_ + 1) > entries_.size()) grow();
-  const size_t mask = entries_.size() - 1;
-  for (size_t s = hashKey(key) & mask;; s = (s + 1) & mask) {
-    GridEntry& e = entries_[s];
-    if (e.stamp == stamp_ && e.key == key) return e;
-    if (e.stamp != stamp_) {
-      e = GridEntry{};
-      e.key = key;
-      e.stamp = stamp_;
-      e.edgeVertex.fill(-1);
-      ++used_;
-      return e;
+  for (;;) {
+    const size_t mask = entries_.size() - 1;
+    size_t s = hashKey(key) & mask;
+    for (; entries_[s].stamp == stamp_; s = (s + 1) & mask)
+      if (entries_[s].key == key) return entries_[s];
+    // Missing: grow first when the table would pass half full (entries found never move it).
+    if (2 * (used_ + 1) > entries_.size()) {
+      grow();
+      continue;
     }
+    GridEntry& e = entries_[s];
+    e = GridEntry{};
+    e.key = key;
+    e.stamp = stamp_;
+    e.edgeVertex.fill(-1);
+    ++used_;
+    return e;
   }
 }
 
@@ -72,7 +129,7 @@ void GridTable::grow() {
 float ImplicitSurface::Impl::valueAt(int32_t i, int32_t j, int32_t k) {
   GridEntry& e = table.at(grid.index(i, j, k));
   if (!e.known) {
-    e.value = float(field(grid.point(i, j, k)));
+    e.value = float(field(i, j, k));
     e.known = true;
   }
   return e.value;
@@ -93,30 +150,38 @@ void ImplicitSurface::Impl::enqueue(const std::array<int32_t, 3>& cell) {
   queue.push_back(cell);
 }
 
-void ImplicitSurface::Impl::seed() {
+bool ImplicitSurface::Impl::seedFrom(uint32_t p) {
+  const btVector3 direction = (toRest[p].transpose() * outward[p]).normalized();
   const btScalar step = voxel / 2;
   const int steps = int(2 * h / step) + 2;
-  for (uint32_t p : muscle->boundaryParticles) {
-    if (outward[p].length2() == 0) continue;
-    const btVector3 direction = (toRest[p].transpose() * outward[p]).normalized();
-    std::array<int32_t, 3> last{-1, -1, -1};
-    for (int s = 0; s < steps; ++s) {
-      const btVector3 u = (positions[p] + direction * (step * btScalar(s)) - grid.origin) / voxel;
-      const std::array<int32_t, 3> cell{int32_t(u.x()), int32_t(u.y()), int32_t(u.z())};
-      if (cell == last) continue;
-      last = cell;
-      if (!inGrid(cell)) break;
-      if (mixed(cornerValues(cell))) {
-        enqueue(cell);
-        break;
-      }
+  // The step where the rest surface is expected: the particle's rest depth, mapped to now.
+  const btScalar depth =
+      outward[p].length() / btMax((toRest[p] * direction).length(), SIMD_EPSILON);
+  const int expected = std::min(int(depth / step), steps - 1);
+  // From there alternately in and out: the first cell of a piece found, or one holding both signs.
+  for (int n = 0; n < 2 * steps; ++n) {
+    const int s = expected + (n % 2 ? (n + 1) / 2 : -(n / 2));
+    if (s < 0 || s >= steps) continue;
+    const btVector3 u = (positions[p] + direction * (step * btScalar(s)) - grid.origin) / voxel;
+    const std::array<int32_t, 3> cell{int32_t(u.x()), int32_t(u.y()), int32_t(u.z())};
+    if (!inGrid(cell)) continue;
+    if (table.at(grid.index(cell[0], cell[1], cell[2])).queued) return false;
+    if (mixed(cornerValues(cell))) {
+      enqueue(cell);
+      return true;
     }
   }
+  return false;
+}
+
+void ImplicitSurface::Impl::seedAndMarch() {
+  for (uint32_t p : muscle->boundaryParticles)
+    if (outward[p].length2() > 0 && seedFrom(p)) march();
 }
 
 void ImplicitSurface::Impl::march() {
-  for (size_t q = 0; q < queue.size(); ++q) {
-    const std::array<int32_t, 3> cell = queue[q];
+  for (; marched < queue.size(); ++marched) {
+    const std::array<int32_t, 3> cell = queue[marched];
     const std::array<float, 8> values = cornerValues(cell);
     if (!mixed(values)) continue;
     polygonise(cell, values);
@@ -135,12 +200,10 @@ void ImplicitSurface::Impl::march() {
   }
 }
 
-int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell, int u, int v,
+int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
+                                          const std::array<GridEntry*, 8>& corners, int u, int v,
                                           const std::array<float, 8>& values) {
-  if ((u & v) != u) std::swap(u, v);  // u ⊂ v: the edge goes up from corner u
-  GridEntry& e =
-      table.at(grid.index(cell[0] + (u & 1), cell[1] + (u >> 1 & 1), cell[2] + (u >> 2 & 1)));
-  int32_t& vertex = e.edgeVertex[size_t((u ^ v) - 1)];
+  int32_t& vertex = corners[size_t(u)]->edgeVertex[size_t((u ^ v) - 1)];
   if (vertex < 0) {
     auto corner = [&](int c) {
       return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
@@ -154,38 +217,23 @@ int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell, in
 
 void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
                                        const std::array<float, 8>& values) {
-  for (const std::array<int, 4>& tet : kTetrahedra) {
-    std::array<int, 4> in, out;
-    int ins = 0, outs = 0;
-    for (int c : tet) (values[c] > 0 ? in[ins++] : out[outs++]) = c;
-    if (ins == 0 || outs == 0) continue;
-    std::array<std::array<int32_t, 3>, 2> triangles;
-    int count = 1;
-    if (ins == 1 || outs == 1) {
-      const int lone = ins == 1 ? in[0] : out[0];
-      const std::array<int, 4>& others = ins == 1 ? out : in;
-      for (int k = 0; k < 3; ++k) triangles[0][k] = edgeVertex(cell, lone, others[k], values);
-    } else {
-      const int32_t a = edgeVertex(cell, in[0], out[0], values),
-                    b = edgeVertex(cell, in[0], out[1], values),
-                    c = edgeVertex(cell, in[1], out[1], values),
-                    d = edgeVertex(cell, in[1], out[0], values);
-      triangles = {{{a, b, c}, {a, c, d}}};
-      count = 2;
-    }
-    // Counter-clockwise seen from outside: the normal points from the inside corners out.
-    btVector3 inward(0, 0, 0);
-    for (int c = 0; c < 8; ++c) {
-      const btVector3 offset(btScalar(c & 1), btScalar(c >> 1 & 1), btScalar(c >> 2 & 1));
-      if (std::find(tet.begin(), tet.end(), c) != tet.end())
-        inward += values[c] > 0 ? offset : -offset;
-    }
-    for (int t = 0; t < count; ++t) {
-      std::array<int32_t, 3>& tri = triangles[size_t(t)];
-      const auto& v = mesh.vertices;
-      const btVector3 normal = (v[tri[1]] - v[tri[0]]).cross(v[tri[2]] - v[tri[0]]);
-      if (normal.dot(inward) > 0) std::swap(tri[1], tri[2]);
-      mesh.triangles.push_back({uint32_t(tri[0]), uint32_t(tri[1]), uint32_t(tri[2])});
+  // The corners' entries exist (their values are known): looking them up adds none, so the
+  // pointers stay valid.
+  std::array<GridEntry*, 8> corners;
+  for (int c = 0; c < 8; ++c)
+    corners[size_t(c)] =
+        &table.at(grid.index(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1)));
+  for (size_t t = 0; t < kTetrahedra.size(); ++t) {
+    unsigned inside = 0;
+    for (unsigned k = 0; k < 4; ++k) inside |= unsigned(values[size_t(kTetrahedra[t][k])] > 0) << k;
+    const TetrahedronCut& cut = kCuts[t][inside];
+    for (int n = 0; n < cut.count; ++n) {
+      std::array<uint32_t, 3> triangle;
+      for (size_t k = 0; k < 3; ++k) {
+        const auto [u, v] = cut.edges[size_t(n)][k];
+        triangle[k] = uint32_t(edgeVertex(cell, corners, u, v, values));
+      }
+      mesh.triangles.push_back(triangle);
     }
   }
 }
@@ -205,12 +253,13 @@ void ImplicitSurface::extract(std::span<const btVector3> positions,
   btVector3 lower, upper;
   pointBounds(positions, lower, upper);
   s.grid = GridFrame::covering(lower, upper, s.voxel, s.h + 2 * s.voxel);
+  s.beginMaps();
   s.table.begin();
   s.queue.clear();
+  s.marched = 0;
   s.mesh.vertices.clear();
   s.mesh.triangles.clear();
-  s.seed();
-  s.march();
+  s.seedAndMarch();
 }
 
 const TriangleMesh& ImplicitSurface::mesh() const {
@@ -221,8 +270,8 @@ std::vector<uint32_t> ImplicitSurface::nearestParticles() const {
   std::vector<uint32_t> nearest(s.mesh.vertices.size(), 0);
   for (size_t v = 0; v < nearest.size(); ++v) {
     btScalar best = 0;
-    s.forNeighbours(s.mesh.vertices[v], s.positions, [&](uint32_t p, const btVector3&, btScalar w) {
-      if (w > best) best = w, nearest[v] = p;
+    s.forNeighbours(s.mesh.vertices[v], [&](uint32_t e, const btVector3&, btScalar w) {
+      if (w > best) best = w, nearest[v] = s.cells.order[e];
     });
   }
   return nearest;

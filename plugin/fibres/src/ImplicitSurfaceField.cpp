@@ -1,6 +1,7 @@
 // The implicit surface's field (ImplicitSurface.h): the rest distance grid, the particles'
 // cells, the deformation of each particle's springs and the field itself.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "ImplicitSurfaceInternal.h"
@@ -142,31 +143,40 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
       }
 }
 
-btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
+const float* RestDistanceGrid::block(int32_t i, int32_t j, int32_t k) {
   const int32_t bi = i / kBlock, bj = j / kBlock, bk = k / kBlock;
   int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
   if (slot < 0) {
     slot = int32_t(values_.size() / (kBlock * kBlock * kBlock));
     fillBlock(bi, bj, bk, slot);
   }
-  const size_t inBlock = size_t(i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock)));
-  return values_[size_t(slot) * kBlock * kBlock * kBlock + inBlock];
+  return values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
+}
+
+btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
+  return block(i, j, k)[i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock))];
 }
 
 btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
   const btVector3 u = (x - frame_.origin) / frame_.spacing;
   std::array<int32_t, 3> base;
   btScalar t[3];
+  bool oneBlock = true;  // the cell's 8 points in one block
   for (int a = 0; a < 3; ++a) {
     if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
     base[a] = int32_t(u[a]);
     t[a] = u[a] - btScalar(base[a]);
+    oneBlock = oneBlock && base[a] % kBlock != kBlock - 1;
   }
+  const float* values = oneBlock ? block(base[0], base[1], base[2]) : nullptr;
+  const int32_t first =
+      base[0] % kBlock + kBlock * (base[1] % kBlock + kBlock * (base[2] % kBlock));
   btScalar sum = 0;
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     const btScalar w = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) * (dz ? t[2] : 1 - t[2]);
-    sum += w * value(base[0] + dx, base[1] + dy, base[2] + dz);
+    sum += w * (values ? values[first + dx + kBlock * (dy + kBlock * dz)]
+                       : value(base[0] + dx, base[1] + dy, base[2] + dz));
   }
   return sum;
 }
@@ -184,8 +194,10 @@ void ParticleCells::build(std::span<const btVector3> positions, btScalar cellSiz
   };
   for (const btVector3& p : positions) ++start[cellOf(p) + 1];
   for (size_t c = 0; c < count; ++c) start[c + 1] += start[c];
-  std::vector<uint32_t> fill(start.begin(), start.end() - 1);  // each cell's next entry
+  fill.assign(start.begin(), start.end() - 1);
   for (uint32_t i = 0; i < positions.size(); ++i) order[fill[cellOf(positions[i])]++] = i;
+  sorted.resize(order.size());
+  for (size_t e = 0; e < order.size(); ++e) sorted[e] = positions[order[e]];
 }
 
 ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
@@ -200,7 +212,7 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
   for (uint32_t i : muscle->boundaryParticles) {
     const MeshDistance::Closest closest = distance.closest(muscle->restPositions[i]);
     const btVector3 d = closest.point - muscle->restPositions[i];
-    if (d.length2() > 0) outward[i] = (closest.inside ? d : -d).normalized();
+    outward[i] = closest.inside ? d : -d;
   }
   measureRestCover();
 }
@@ -209,7 +221,7 @@ void ImplicitSurface::Impl::measureRestCover() {
   prepareFrames(muscle->restPositions, muscle->springs);
   btScalar smallest = SIMD_INFINITY;
   for (const btVector3& v : muscle->restSurface.vertices)
-    smallest = std::min(smallest, coverage(v, muscle->restPositions));
+    smallest = std::min(smallest, coverage(v));
   kappa = std::isfinite(smallest) && smallest > 0 ? smallest / 2 : btScalar(1e-3);
 }
 
@@ -226,31 +238,92 @@ void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
     toRest[i] = spans ? restMoments[i] * m.inverse() : btMatrix3x3::getIdentity();
   }
   cells.build(current, h);
+  entryRest.resize(current.size());
+  entryToRest.resize(current.size());
+  for (size_t e = 0; e < cells.order.size(); ++e) {
+    entryRest[e] = muscle->restPositions[cells.order[e]];
+    entryToRest[e] = toRest[cells.order[e]];
+  }
 }
 
 /// Σ w_j at x (the particles' cover), from `current` binned in `cells`.
-btScalar ImplicitSurface::Impl::coverage(const btVector3& x,
-                                         std::span<const btVector3> current) const {
+btScalar ImplicitSurface::Impl::coverage(const btVector3& x) const {
   btScalar sum = 0;
-  forNeighbours(x, current, [&](uint32_t, const btVector3&, btScalar w) { sum += w; });
+  forNeighbours(x, [&](uint32_t, const btVector3&, btScalar w) { sum += w; });
   return sum;
 }
 
-btScalar ImplicitSurface::Impl::field(const btVector3& x) {
+RestMap ImplicitSurface::Impl::restMap(const btVector3& x) const {
   double weight = 0, spread = 0;
   btVector3 offset(0, 0, 0);  // Σ w·(X_j − x)
-  forNeighbours(x, positions, [&](uint32_t p, const btVector3& d, btScalar w) {
-    const btVector3 mapped = muscle->restPositions[p] + toRest[p] * d - x;
+  const btVector3* restPositions = entryRest.data();
+  const btMatrix3x3* inverses = entryToRest.data();
+  forNeighbours(x, [&](uint32_t e, const btVector3& d, btScalar w) {
+    const btVector3 mapped = restPositions[e] + inverses[e] * d - x;
     weight += w;
     offset += w * mapped;
     spread += w * mapped.length2();
   });
+  RestMap map;
+  if (weight == 0) return map;
+  map.offset = offset / btScalar(weight);
+  map.spread = btSqrt(btMax(btScalar(spread / weight) - map.offset.length2(), btScalar(0)));
+  map.weight = btScalar(weight);
+  return map;
+}
+
+void ImplicitSurface::Impl::beginMaps() {
+  coarse.origin = grid.origin;
+  coarse.spacing = 2 * grid.spacing;
+  for (int a = 0; a < 3; ++a) coarse.dims[a] = grid.dims[a] / 2 + 2;
+  const size_t count = size_t(coarse.dims[0]) * coarse.dims[1] * coarse.dims[2];
+  if (maps.size() < count) maps.resize(count);
+  if (++mapStamp == 0) {  // wrapped: clear once
+    for (RestMap& map : maps) map.stamp = 0;
+    mapStamp = 1;
+  }
+}
+
+const RestMap& ImplicitSurface::Impl::coarseMap(int32_t i, int32_t j, int32_t k) {
+  RestMap& map = maps[coarse.index(i, j, k)];
+  if (map.stamp != mapStamp) {
+    map = restMap(coarse.point(i, j, k));
+    map.stamp = mapStamp;
+  }
+  return map;
+}
+
+btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
+  // Along each axis where the index is odd the point lies halfway between two coarse points,
+  // else on one: 2^(odd axes) corners, each of an equal share.
+  const unsigned odd = unsigned(i & 1) | unsigned(j & 1) << 1 | unsigned(k & 1) << 2;
+  const btScalar share = btScalar(1) / btScalar(1 << std::popcount(odd));
+  btVector3 offset(0, 0, 0);
+  btScalar spread = 0, weight = 0;
+  bool covered = true;  // every coarse point around has particles within h
+  for (unsigned c = 0; c < 8; ++c) {
+    if ((c & odd) != c) continue;
+    const RestMap& map =
+        coarseMap(i / 2 + int32_t(c & 1), j / 2 + int32_t(c >> 1 & 1), k / 2 + int32_t(c >> 2 & 1));
+    covered = covered && map.weight > 0;
+    offset += map.offset;
+    spread += map.spread;
+    weight += map.weight;
+  }
+  offset *= share;
+  spread *= share;
+  weight *= share;
+  const btVector3 x = grid.point(i, j, k);
+  if (!covered) {  // the interpolation would mix in their empty maps: the map here instead
+    const RestMap map = restMap(x);
+    offset = map.offset;
+    spread = map.spread;
+    weight = map.weight;
+  }
   btScalar value = -h;
   if (weight > 0) {
-    const btVector3 mean = offset / btScalar(weight);
-    const btScalar sigma = btSqrt(btMax(btScalar(spread / weight) - mean.length2(), btScalar(0)));
-    const btScalar distance = rest.at(x + mean, h) - settings.spreadWeight * sigma;
-    value = std::min(distance, h * (btScalar(weight) / kappa - 1));
+    const btScalar distance = rest.at(x + offset, h) - settings.spreadWeight * spread;
+    value = std::min(distance, h * (weight / kappa - 1));
   }
   for (const SurfaceDent& dent : dents) {
     const btScalar q = 1 - (x - dent.centre).length2() / (dent.radius * dent.radius);

@@ -54,6 +54,8 @@ class RestDistanceGrid {
   btScalar at(const btVector3& x, btScalar outsideValue);
 
  private:
+  /// The values of the block holding point (i, j, k), 4³ from its lower corner, x fastest.
+  const float* block(int32_t i, int32_t j, int32_t k);
   btScalar value(int32_t i, int32_t j, int32_t k);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
 
@@ -67,9 +69,11 @@ class RestDistanceGrid {
 
 /// The particles binned into cells of the kernel radius (counting sort).
 struct ParticleCells {
-  GridFrame frame;              ///< cells: frame points are their lower corners
-  std::vector<uint32_t> start;  ///< per cell + 1: first entry in `order`
-  std::vector<uint32_t> order;  ///< particle indices, cell after cell
+  GridFrame frame;                ///< cells: frame points are their lower corners
+  std::vector<uint32_t> start;    ///< per cell + 1: first entry in `order`
+  std::vector<uint32_t> order;    ///< particle indices, cell after cell
+  std::vector<uint32_t> fill;     ///< scratch: per cell, its next entry in `order`
+  std::vector<btVector3> sorted;  ///< per entry of `order`: its particle's position [m]
 
   void build(std::span<const btVector3> positions, btScalar cellSize);
 };
@@ -84,6 +88,15 @@ struct GridEntry {
   bool known = false;                   ///< value computed
   bool queued = false;                  ///< its cell queued
   std::array<int32_t, 7> edgeVertex{};  ///< vertex index per edge, −1 none
+};
+
+/// Where the particles map a point back to rest: the w-weighted mean of X_j − x, their spread
+/// σ and W = Σ w_j (ImplicitSurface.h). Valid in the extraction `stamp` names.
+struct RestMap {
+  uint32_t stamp = 0;         ///< extraction that wrote it
+  btVector3 offset{0, 0, 0};  ///< X̄ − x [m]
+  btScalar spread = 0;        ///< σ [m]
+  btScalar weight = 0;        ///< W [1]
 };
 
 /// Open-addressing table of GridEntry, emptied by advancing the stamp (no clearing).
@@ -104,12 +117,21 @@ struct ImplicitSurface::Impl {
 
   // The field (ImplicitSurfaceField.cpp).
   void prepareFrames(std::span<const btVector3> positions, std::span<const Spring> springs);
-  btScalar field(const btVector3& x);
-  btScalar coverage(const btVector3& x, std::span<const btVector3> positions) const;
+  /// The particles' map back to rest at x (weight 0 where no particle is within h).
+  RestMap restMap(const btVector3& x) const;
+  /// A new extraction's coarse grid over `grid`, every map stale.
+  void beginMaps();
+  /// The map at point (i, j, k) of the coarse grid (every second extraction grid point), cached.
+  const RestMap& coarseMap(int32_t i, int32_t j, int32_t k);
+  /// The field at extraction grid point (i, j, k): the map interpolated (trilinear) between the
+  /// coarse points around it, which is exact at rest (where X̄ − x = 0 everywhere), then D.
+  btScalar field(int32_t i, int32_t j, int32_t k);
+  btScalar coverage(const btVector3& x) const;
   void measureRestCover();
-  /// fn(particle, x − p, w) for every particle of `current` (binned in `cells`) within h of x.
+  /// fn(entry, x − p, w) for every particle binned in `cells` within h of x, by its entry in
+  /// cells.order.
   template <class Fn>
-  void forNeighbours(const btVector3& x, std::span<const btVector3> current, Fn&& fn) const {
+  void forNeighbours(const btVector3& x, Fn&& fn) const {
     const btVector3 u = (x - cells.frame.origin) / h;
     const btScalar inverseH2 = 1 / (h * h);
     std::array<int32_t, 3> lo, hi;
@@ -123,10 +145,9 @@ struct ImplicitSurface::Impl {
         for (int32_t i = lo[0]; i <= hi[0]; ++i) {
           const uint32_t c = cells.frame.index(i, j, k);
           for (uint32_t e = cells.start[c]; e < cells.start[c + 1]; ++e) {
-            const uint32_t p = cells.order[e];
-            const btVector3 d = x - current[p];
+            const btVector3 d = x - cells.sorted[e];
             const btScalar q = 1 - d.length2() * inverseH2;
-            if (q > 0) fn(p, d, q * q * q);
+            if (q > 0) fn(e, d, q * q * q);
           }
         }
   }
@@ -142,30 +163,45 @@ struct ImplicitSurface::Impl {
       if (cell[a] < 0 || cell[a] + 1 >= grid.dims[a]) return false;
     return true;
   }
-  void seed();
+  /// Seeds the surface beside boundary particle p: the first cell holding both signs on the ray
+  /// along its outward direction, searched from where its rest depth puts the surface. False
+  /// when none, or when the cell found was queued already.
+  bool seedFrom(uint32_t p);
+  /// Every boundary particle's seed, each marched before the next (its cells then queued).
+  void seedAndMarch();
+  /// Polygonises the queued cells from `marched` on, queueing the cells the surface goes on to.
   void march();
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<float, 8>& values);
-  int32_t edgeVertex(const std::array<int32_t, 3>& cell, int u, int v,
-                     const std::array<float, 8>& values);
+  /// The vertex on the cell's edge from corner u up to corner v, u ⊂ v (made once, kept in the
+  /// entry of corner u among `corners`, the cell's).
+  int32_t edgeVertex(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
+                     int u, int v, const std::array<float, 8>& values);
 
   std::shared_ptr<const MuscleSettings> muscle;
   ImplicitSurfaceSettings settings;
-  btScalar voxel = 0;              ///< extraction grid spacing [m]
-  btScalar h = 0;                  ///< kernel radius [m]
-  btScalar kappa = 0;              ///< κ: half the smallest W on the rest surface [1]
-  RestDistanceGrid rest;           ///< D
-  std::vector<btVector3> outward;  ///< per boundary particle: towards the surface, rest
+  btScalar voxel = 0;     ///< extraction grid spacing [m]
+  btScalar h = 0;         ///< kernel radius [m]
+  btScalar kappa = 0;     ///< κ: half the smallest W on the rest surface [1]
+  RestDistanceGrid rest;  ///< D
+  /// Per boundary particle: from it to the nearest rest surface point, made to point outward [m].
+  std::vector<btVector3> outward;
   std::vector<SurfaceDent> dents;
 
   // Per extraction.
   std::span<const btVector3> positions;  ///< the particles
   std::vector<btMatrix3x3> toRest;       ///< per particle F⁻¹ (identity when degenerate)
+  std::vector<btVector3> entryRest;      ///< per entry of cells.order: its rest position [m]
+  std::vector<btMatrix3x3> entryToRest;  ///< per entry of cells.order: its F⁻¹
   std::vector<btMatrix3x3> moments;      ///< scratch: Σ dx·dXᵀ over the unbroken springs [m²]
   std::vector<btMatrix3x3> restMoments;  ///< scratch: Σ dX·dXᵀ over the unbroken springs [m²]
   ParticleCells cells;
   GridFrame grid;  ///< extraction grid
   GridTable table;
+  GridFrame coarse;                           ///< every second point of the extraction grid
+  std::vector<RestMap> maps;                  ///< per coarse point, valid when stamped mapStamp
+  uint32_t mapStamp = 0;                      ///< this extraction's stamp of `maps`
   std::vector<std::array<int32_t, 3>> queue;  ///< cells to polygonise
+  size_t marched = 0;                         ///< queue entries polygonised
   TriangleMesh mesh;
 };
 

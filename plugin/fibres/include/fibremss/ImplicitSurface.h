@@ -10,7 +10,9 @@
 // surface; where particles part (a tear, a cut) their rest positions disagree (σ) and the
 // particles' cover thins (W), and the surface opens. Extracted by marching tetrahedra on a
 // sparse grid, from seeds beside the boundary particles across every cell face the surface
-// crosses: a closed surface (every edge shared by two triangles).
+// crosses: a closed surface (every edge shared by two triangles). The sums over the particles
+// (X̄, σ, W) are taken at every second grid point and interpolated between them (X̄ exactly
+// where the particles share one affine map back to rest, as at rest); D at every grid point.
 #include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btVector3.h>
 
