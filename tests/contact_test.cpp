@@ -154,12 +154,15 @@ TEST(Pinch, TheMuscleTheBladesShearIsReportedTrappedStaysFiniteAndEndsOutsideThe
 TEST(Pinch, TheDefaultSolverInOneToFiveIterationsPerPoseNeverRollsBack) {
   // The torn muscle's tear grows while the blades carry its halves apart after they let go of it
   // (pose 5 and 6): held by the bones, not burst by the numerics. Judged on the last response's
-  // trap alone, 1 to 5 iterations per pose each rolled back pose 5, 6 or both.
+  // trap alone, 1 to 5 iterations per pose each rolled back pose 5, 6 or both. The same with the
+  // blades' edges kept sharp.
   const LoadedScene scene = loadScene("pinch", {"resolution=12"});
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  for (int iterations = 1; iterations <= 5; ++iterations) {
+  for (int run = 0; run < 10; ++run) {
+    const int iterations = 1 + run % 5;
     MuscleSystemDef def = scene.simulation;
     def.stepSettings.iterations = iterations;
+    if (run >= 5) def.boneCollision = BoneCollision::SharpMesh;
     MuscleSystem system(def);
     const SceneHandles handles = addScene(system, prepared);
     size_t trapped = 0;
@@ -168,12 +171,16 @@ TEST(Pinch, TheDefaultSolverInOneToFiveIterationsPerPoseNeverRollsBack) {
         system.setBoneTransform(handles.bones[b], scene.bonePose(b, pose));
       system.step();
       const StepStats& stats = system.lastStep();
-      EXPECT_FALSE(stats.rolledBack) << iterations << " iterations, pose " << pose;
-      EXPECT_FALSE(stats.nan) << iterations << " iterations, pose " << pose;
-      EXPECT_EQ(stats.frozenMuscles, 0u) << iterations << " iterations, pose " << pose;
+      EXPECT_FALSE(stats.rolledBack)
+          << toString(def.boneCollision) << ", " << iterations << " iterations, pose " << pose;
+      EXPECT_FALSE(stats.nan) << toString(def.boneCollision) << ", " << iterations
+                              << " iterations, pose " << pose;
+      EXPECT_EQ(stats.frozenMuscles, 0u)
+          << toString(def.boneCollision) << ", " << iterations << " iterations, pose " << pose;
       trapped += stats.trappedMuscles;
     }
-    EXPECT_GT(trapped, 0u) << iterations << " iterations: the blades tear it";
+    EXPECT_GT(trapped, 0u) << toString(def.boneCollision) << ", " << iterations
+                           << " iterations: the blades tear it";
   }
 }
 
@@ -213,9 +220,12 @@ TEST(Pinch, TheMuscleLiesOnBladeAsFaceAtPoseOne) {
   // them; pushed against the true mesh, the muscle comes within its particles' layer of the face.
   const double mesh = gapUnderBladeA(BoneCollision::Mesh);
   const double spheres = gapUnderBladeA(BoneCollision::Spheres);
+  const double sharp = gapUnderBladeA(BoneCollision::SharpMesh);
   RecordProperty("gap_mesh_mm", std::to_string(mesh));
   RecordProperty("gap_spheres_mm", std::to_string(spheres));
+  RecordProperty("gap_sharp_mm", std::to_string(sharp));
   EXPECT_LT(mesh, 2.5);
+  EXPECT_LT(sharp, 2.5);
   EXPECT_GT(spheres, mesh + 1);
 }
 

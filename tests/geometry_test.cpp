@@ -142,6 +142,32 @@ TEST(MeshDistance, SignIsRightNearEdgesAndVerticesOfACube) {
   EXPECT_NEAR(distance.signedDistance({0.5f, 0.5f, 0.5f}), -0.5f, 1e-6);
 }
 
+TEST(MeshDistance, FrontFaceOfAPointOutsideACubeIsItsFarthestFacePlane) {
+  // Outside a convex mesh the face plane a point lies farthest in front of is the mesh inflated
+  // with sharp edges: for the unit cube, the largest of the six signed plane distances, which is
+  // shorter than the distance to the closest edge or corner.
+  const MeshDistance distance(boxMesh({0, 0, 0}, {1, 1, 1}));
+  std::mt19937 random(7);
+  std::uniform_real_distribution<float> coordinate(-0.6f, 1.6f);
+  int edges = 0;
+  for (int k = 0; k < 2000; ++k) {
+    const btVector3 p(coordinate(random), coordinate(random), coordinate(random));
+    const MeshDistance::Closest closest = distance.closest(p);
+    if (closest.inside) continue;
+    const btScalar planes = std::max({p.x() - 1, -p.x(), p.y() - 1, -p.y(), p.z() - 1, -p.z()});
+    const MeshDistance::Plane face = distance.frontFace(p, closest);
+    EXPECT_NEAR(face.distance, planes, 1e-5) << p.x() << " " << p.y() << " " << p.z();
+    EXPECT_NEAR(face.normal.length(), 1, 1e-5);
+    EXPECT_LE(face.distance, closest.distance + 1e-5f);
+    edges += closest.feature != 6 && face.distance < closest.distance - 0.01f ? 1 : 0;
+  }
+  EXPECT_GT(edges, 100);
+  const btVector3 beside(1.3f, 0.5f, 1.1f);  // off the edge x = z = 1, farther out along x
+  const MeshDistance::Plane face = distance.frontFace(beside, distance.closest(beside));
+  EXPECT_NEAR(face.normal.x(), 1, 1e-6);
+  EXPECT_NEAR(face.distance, 0.3f, 1e-6);
+}
+
 TEST(MeshDistance, MaxDistanceLimitsTheSearch) {
   const MeshDistance distance(boxMesh({0, 0, 0}, {1, 1, 1}));
   const MeshDistance::Closest far = distance.closest({3, 0.5f, 0.5f}, 1.5f);

@@ -70,6 +70,9 @@ class MeshDistance {
     btVector3 point{0, 0, 0};                                       ///< closest surface point
     uint32_t triangle = UINT32_MAX;  ///< triangle holding it, UINT32_MAX when none in range
     bool inside = false;  ///< p is inside the mesh (the sign signedDistance() would give)
+    /// Where on `triangle` the point lies: its corner k (k = 0–2), its edge from corner k to the
+    /// next (3 + k), or inside the face (6).
+    uint8_t feature = 6;
   };
   /// Closest surface point within maxDistance (none found: distance stays infinite).
   Closest closest(const btVector3& p,
@@ -77,6 +80,16 @@ class MeshDistance {
   /// Distance to the surface, negative inside (sign from angle-weighted pseudo-normals).
   btScalar signedDistance(const btVector3& p) const;
   bool inside(const btVector3& p) const { return signedDistance(p) < 0; }
+
+  struct Plane {
+    btVector3 normal{0, 0, 0};  ///< the face's unit outward normal
+    btScalar distance = 0;      ///< signed distance of the point from the face's plane [m]
+  };
+  /// Of the faces that meet at the closest point `c` of p (closest(p)'s answer: its face, an
+  /// edge's two faces or a corner's ring), the one whose plane p lies farthest in front of: the
+  /// face p lies beside when the mesh's edges are sharp (off a convex edge, the plane p is
+  /// outside of; never nearer p than c is).
+  Plane frontFace(const btVector3& p, const Closest& c) const;
 
   const TriangleMesh& mesh() const;
 

@@ -138,6 +138,11 @@ enum class BoneCollision : uint8_t {
   /// radius along the outward normal; a particle that clears the mesh is not pushed, however deep
   /// it lies in a bone sphere). A bone without a mesh pushes out of its spheres.
   Mesh,
+  /// Mesh with sharp edges: a particle outside the mesh whose closest point lies on an edge or
+  /// corner is pushed along the normal of the face around it whose plane it lies farthest in
+  /// front of, until its sphere just touches that plane (the mesh inflated by the radius with
+  /// flat faces, instead of rounded by it); from inside, or off a face, as Mesh.
+  SharpMesh,
 };
 
 /// How the pre-transform of a particle between two bones (method.md §4) combines their rigid

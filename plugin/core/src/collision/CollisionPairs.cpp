@@ -178,32 +178,42 @@ btVector3 faceNormal(const TriangleMesh& mesh, uint32_t triangle) {
 
 /// The push (bone frame) that leaves a sphere at `p` (bone frame) with `radius` just touching
 /// `mesh`: to the closest mesh point plus the radius along the outward normal, from outside or
-/// inside alike; `point` is that closest point. The closest point is looked for within `reach`
-/// first (nothing there: anywhere). False when the sphere clears the mesh.
+/// inside alike; `point` is that closest point. With `sharp` edges, from outside, to the radius in
+/// front of the plane of the face at that point that p lies farthest in front of
+/// (MeshDistance::frontFace). The closest point is looked for within `reach` first (nothing
+/// there: anywhere). False when the sphere clears the mesh.
 bool meshPush(const MeshDistance& mesh, const btVector3& p, btScalar radius, btScalar reach,
-              btVector3& push, btVector3& point) {
+              bool sharp, btVector3& push, btVector3& point) {
   MeshDistance::Closest closest = mesh.closest(p, reach);
   if (closest.triangle == UINT32_MAX) closest = mesh.closest(p);
   if (closest.triangle == UINT32_MAX || (!closest.inside && closest.distance >= radius))
     return false;
+  point = closest.point;
+  if (sharp && !closest.inside) {
+    const MeshDistance::Plane face = mesh.frontFace(p, closest);
+    if (!face.normal.isZero()) {
+      if (face.distance >= radius) return false;
+      push = face.normal * (radius - face.distance);
+      return true;
+    }
+  }
   btVector3 normal = faceNormal(mesh.mesh(), closest.triangle);
   if (closest.distance > SIMD_EPSILON * radius)
     normal = (p - closest.point) / (closest.inside ? -closest.distance : closest.distance);
-  point = closest.point;
   push = point + normal * radius - p;
   return true;
 }
 
-/// BoneCollision::Mesh: pushes free particle i, which a bone sphere found, until its sphere just
-/// touches the bone's true mesh; once per bone and iteration (MuscleState::meshVisits). `reach`:
-/// where the closest point is looked for first [m].
+/// BoneCollision::Mesh and SharpMesh: pushes free particle i, which a bone sphere found, until its
+/// sphere just touches the bone's true mesh; once per bone and iteration (MuscleState::meshVisits).
+/// `reach`: where the closest point is looked for first [m].
 void pushOutOfMesh(MuscleState& muscle, const BoneState& bone, uint32_t i, btScalar reach,
                    ContactLog& log) {
   if (std::exchange(muscle.meshVisits[i], muscle.boneVisit) == muscle.boneVisit) return;
   const btVector3& position = muscle.positions[i];
   btVector3 push, point;
   if (!meshPush(bone.mesh->distance, bone.current.invXform(position), muscle.settings->radii[i],
-                reach, push, point))
+                reach, bone.sharpEdges, push, point))
     return;
   addBonePush(muscle, i, bone.slot, bone.current.getBasis() * push);
   log.add(position, bone.current * point);

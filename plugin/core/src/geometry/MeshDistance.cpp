@@ -79,6 +79,9 @@ struct MeshDistance::Impl {
   std::vector<btVector3> corners;        // three corners per triangle, leaf order
   std::vector<btVector3> pseudoNormals;  // per triangle in leaf order: face, edge 0, 1, 2
   std::vector<btVector3> vertexNormals;  // angle-weighted, per vertex
+  std::vector<btVector3> faceNormals;    // unit, per triangle (zero for a zero-area one)
+  std::vector<uint32_t> ringStart;       // per vertex + 1: where its triangles start in `ring`
+  std::vector<uint32_t> ring;            // the triangles around each vertex, vertex by vertex
 
   explicit Impl(const TriangleMesh& input) : mesh(input) {
     const size_t count = mesh.triangles.size();
@@ -97,6 +100,18 @@ struct MeshDistance::Impl {
       for (int k = 0; k < 3; ++k)
         corners[3 * slot + k] = mesh.vertices[mesh.triangles[order[slot]][k]];
     computePseudoNormals();
+    buildRings();
+  }
+
+  void buildRings() {
+    ringStart.assign(mesh.vertices.size() + 1, 0);
+    for (const auto& t : mesh.triangles)
+      for (uint32_t v : t) ++ringStart[v + 1];
+    for (size_t v = 0; v < mesh.vertices.size(); ++v) ringStart[v + 1] += ringStart[v];
+    ring.resize(ringStart.back());
+    std::vector<uint32_t> next(ringStart.begin(), ringStart.end() - 1);
+    for (uint32_t i = 0; i < mesh.triangles.size(); ++i)
+      for (uint32_t v : mesh.triangles[i]) ring[next[v]++] = i;
   }
 
   uint32_t build(uint32_t begin, uint32_t end, const std::vector<btVector3>& centroids, int depth) {
@@ -132,7 +147,7 @@ struct MeshDistance::Impl {
 
   void computePseudoNormals() {
     const size_t count = mesh.triangles.size();
-    std::vector<btVector3> faceNormals(count, btVector3(0, 0, 0));
+    faceNormals.assign(count, btVector3(0, 0, 0));
     vertexNormals.assign(mesh.vertices.size(), btVector3(0, 0, 0));
     std::unordered_map<uint64_t, btVector3> edgeSums;
     edgeSums.reserve(2 * count);
@@ -240,7 +255,33 @@ MeshDistance::Closest MeshDistance::closest(const btVector3& p, btScalar maxDist
   result.point = hit.point;
   result.triangle = impl_->order[hit.slot];
   result.inside = (p - hit.point).dot(impl_->pseudoNormal(hit)) < 0;
+  result.feature = static_cast<uint8_t>(hit.feature);
   return result;
+}
+
+MeshDistance::Plane MeshDistance::frontFace(const btVector3& p, const Closest& c) const {
+  const Impl& m = *impl_;
+  Plane best{btVector3(0, 0, 0), -std::numeric_limits<btScalar>::infinity()};
+  const auto consider = [&](uint32_t triangle) {
+    const btVector3& normal = m.faceNormals[triangle];
+    const btScalar distance = (p - c.point).dot(normal);
+    if (!normal.isZero() && distance > best.distance) best = {normal, distance};
+  };
+  const auto& t = m.mesh.triangles[c.triangle];
+  const auto feature = static_cast<Feature>(c.feature);
+  if (feature == Feature::Face) {
+    consider(c.triangle);
+    return best;
+  }
+  // A corner: its ring; an edge: the triangles of its first corner's ring that hold both ends.
+  const bool edge = feature >= Feature::Edge0;
+  const int k = edge ? c.feature - 3 : c.feature;
+  const uint32_t from = t[k], to = t[(k + 1) % 3];
+  for (uint32_t r = m.ringStart[from]; r < m.ringStart[from + 1]; ++r) {
+    const auto& other = m.mesh.triangles[m.ring[r]];
+    if (!edge || std::find(other.begin(), other.end(), to) != other.end()) consider(m.ring[r]);
+  }
+  return best;
 }
 
 btScalar MeshDistance::signedDistance(const btVector3& p) const {

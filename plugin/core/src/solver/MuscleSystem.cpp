@@ -123,7 +123,7 @@ std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
   state->GuardSnapshot::init(n);
   // Recovery follows the bones' distance fields: without them it has nothing to remember.
   state->ContactState::init(
-      n, def.boneCollision == BoneCollision::Mesh,
+      n, def.boneCollision == BoneCollision::Mesh || def.boneCollision == BoneCollision::SharpMesh,
       def.penetrationRecovery && def.boneCollision == BoneCollision::DistanceField);
   state->ResidualState::init(n, residualStiffness(s));
   return state;
@@ -226,8 +226,11 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   state->tree.build(settings->sphereCentres, settings->sphereRadii);
   state->tree.place(state->current, settings->sphereCentres, settings->sphereRadii);
   state->mesh = std::make_unique<const ContactMesh>(settings->mesh);
+  const BoneCollision collision = impl_->definition.boneCollision;
   state->meshContact =
-      impl_->definition.boneCollision == BoneCollision::Mesh && !settings->mesh.empty();
+      (collision == BoneCollision::Mesh || collision == BoneCollision::SharpMesh) &&
+      !settings->mesh.empty();
+  state->sharpEdges = collision == BoneCollision::SharpMesh;
   if (impl_->definition.boneCollision == BoneCollision::DistanceField)
     state->field = std::make_unique<const BoneDistanceField>(
         state->mesh->distance, impl_->definition.distanceFieldCell,

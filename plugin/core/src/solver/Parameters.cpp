@@ -44,10 +44,11 @@ constexpr std::array<std::pair<StopRule, const char*>, 6> kStopRules{{
     {StopRule::Equilibrium, "equilibrium"},
     {StopRule::Residual, "residual"},
 }};
-constexpr std::array<std::pair<BoneCollision, const char*>, 3> kBoneCollisions{{
+constexpr std::array<std::pair<BoneCollision, const char*>, 4> kBoneCollisions{{
     {BoneCollision::Spheres, "spheres"},
     {BoneCollision::DistanceField, "distance-field"},
     {BoneCollision::Mesh, "mesh"},
+    {BoneCollision::SharpMesh, "sharp-mesh"},
 }};
 constexpr std::array<std::pair<FailurePolicy, const char*>, 3> kFailurePolicies{{
     {FailurePolicy::Retry, "retry"},

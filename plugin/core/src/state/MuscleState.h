@@ -42,8 +42,10 @@ struct BoneState {
   std::unique_ptr<const BoneDistanceField> field;
   /// The true mesh as the surface-contact stage queries it (liftOutOfBone), bone frame.
   std::unique_ptr<const ContactMesh> mesh;
-  /// The spheres' pairs push against `mesh` (BoneCollision::Mesh and a mesh to push against).
+  /// The spheres' pairs push against `mesh` (BoneCollision::Mesh or SharpMesh, and a mesh).
   bool meshContact = false;
+  /// The pushes against `mesh` keep its edges sharp (BoneCollision::SharpMesh).
+  bool sharpEdges = false;
   btTransform goodLast = btTransform::getIdentity();     ///< `last` at the step's start (guard)
   btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
 };
@@ -94,8 +96,9 @@ struct ContactState {
   std::vector<btVector3> boneSides;  ///< see sideBones
   std::vector<uint32_t> sideStamps;  ///< contactRound when the side was last seen (else stale)
   uint32_t contactRound = 0;         ///< responses applied so far (applyPushes)
-  /// BoneCollision::Mesh: the boneVisit in which each particle was last pushed against a bone's
-  /// true mesh (one closest-point query per particle, bone and iteration), empty when off.
+  /// BoneCollision::Mesh and SharpMesh: the boneVisit in which each particle was last pushed
+  /// against a bone's true mesh (one closest-point query per particle, bone and iteration), empty
+  /// when off.
   std::vector<uint32_t> meshVisits;
   uint32_t boneVisit = 0;  ///< collideMuscleBone calls on the muscle so far (meshVisits)
 
