@@ -281,7 +281,10 @@ void MuscleSystem::Impl::guardedStep() {
     outcome.rolledBack = true;
   };
   while (true) {
-    step(size);
+    if (localStepping)
+      localStep(size);
+    else
+      step(size);
     add(outcome.spent, stats.timing);
     outcome.iterations += stats.iterations;
     if (!stats.nan && !stats.exploded) break;
