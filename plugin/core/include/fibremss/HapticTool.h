@@ -8,8 +8,8 @@
 // reaction (the momentum the touching particles lost to the tool over the tick) plus the Hooke
 // term of what still overlaps. With HapticRegion::wholeEvery > 1 most ticks step only the
 // muscles' particles near the tool (MuscleSystem::stepLocal), the whole muscles every
-// wholeEvery-th tick, so that the force follows the tool as it presses and slides at a fraction
-// of the cost (docs/contact.md, "A tool at haptic rate").
+// wholeEvery-th tick: a fraction of the cost, the force continuous, but the far field advances
+// wholeEvery times slower than the tool (docs/contact.md, "Local ticks").
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <LinearMath/btTransform.h>
 

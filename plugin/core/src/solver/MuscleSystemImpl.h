@@ -294,6 +294,8 @@ struct MuscleSystem::Impl {
   void swapRegions(bool begin);
   /// A step of `size` (a duration's) in which only the regions move; as step() when it cannot.
   void localStep(const StepSize& size);
+  /// One attempt of the guarded step: localStep while stepLocal runs, else step.
+  void attempt(const StepSize& size) { localStepping ? localStep(size) : step(size); }
 };
 
 }  // namespace fibremss
