@@ -592,3 +592,21 @@ TEST(SetShorthands, EveryKeyOfASettingsSectionIsSetWithoutItsSection) {
     }
   }
 }
+
+TEST(SetShorthands, ReachTheTopLevelEveryMuscleEveryBonesSpheresAndEverySweep) {
+  const LoadedScene scene = loadScene(
+      "hip-extension", {"description=set", "tendon_stiffness=30", "thinning=0.25", "end_deg=40"});
+  EXPECT_EQ(scene.description, "set");
+  ASSERT_FALSE(scene.muscles.empty());
+  for (const auto& muscle : scene.muscles) EXPECT_FLOAT_EQ(muscle.parameters.tendonStiffness, 30);
+  ASSERT_FALSE(scene.bones.empty());
+  for (const auto& bone : scene.bones) EXPECT_FLOAT_EQ(bone.spheres.thinning, 0.25f);
+  const nlohmann::json complete = nlohmann::json::parse(scene.json);
+  int sweeps = 0;
+  for (const auto& bone : complete["bones"])
+    if (bone["motion"].value("type", "") == "sweep") {
+      EXPECT_EQ(bone["motion"]["end_deg"], 40);
+      ++sweeps;
+    }
+  EXPECT_GT(sweeps, 0);
+}

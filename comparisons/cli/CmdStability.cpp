@@ -102,7 +102,7 @@ void addStabilityCommand(CLI::App& app) {
       ->allow_extra_args(false);
   command
       ->add_option("--integrators", args->options.integrators,
-                   "Comma-separated integrators (default: all ten)")
+                   "Comma-separated integrators (default: every one)")
       ->delimiter(',');
   command
       ->add_option("--dt-factors", args->options.dtFactors,

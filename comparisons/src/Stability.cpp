@@ -7,6 +7,7 @@
 #include <exception>
 #include <limits>
 #include <memory>
+#include <type_traits>
 
 #include "fibremss/Error.h"
 #include "fibremss/FibreRun.h"
@@ -234,8 +235,10 @@ const char* toString(CellOutcome outcome) {
 
 std::vector<std::string> allIntegratorNames() {
   std::vector<std::string> names;
-  for (int i = 0; i <= static_cast<int>(Integrator::Projective); ++i)
-    names.emplace_back(toString(static_cast<Integrator>(i)));
+  for (int value = 0; value <= std::numeric_limits<std::underlying_type_t<Integrator>>::max();
+       ++value)
+    if (const std::string name = toString(static_cast<Integrator>(value)); name != "unknown")
+      names.push_back(name);
   return names;
 }
 

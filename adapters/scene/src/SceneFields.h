@@ -80,15 +80,21 @@ btVector3 readVector3(const Json& value, const std::string& path, const std::str
 /// parsed as JSON when they parse, else taken as strings. Throws InputError for unknown keys.
 void applyOverrides(Json& scene, const std::vector<std::string>& overrides);
 
-/// A settings section of a scene and the keys its reader takes.
+/// Where `--set KEY=VALUE` without a path puts the value.
+enum class ShorthandTarget { TopLevel, Muscles, BoneSpheres, Sweeps, Section };
+
+/// Keys `--set` takes without their path, and where they go.
 struct SectionKeys {
-  std::string section;            ///< "model", "simulation", "collision" or "outputs"
+  ShorthandTarget target;         ///< the scene's top level, every muscle, ... or a section
+  std::string section;            ///< ShorthandTarget::Section: "model", "simulation", ...
   std::vector<std::string> keys;  ///< in the order the reader reads them
 };
 
-/// Every key the scene reader takes in the settings sections, each of which `--set` also takes
-/// without its section (SceneLoad.cpp).
-std::vector<SectionKeys> settingsSectionKeys();
+/// Every key `--set` takes without its path, stated beside the scene's readers (SceneLoad.cpp):
+/// the top level's, every muscle's, every bone's spheres' and every joint sweep's listed there,
+/// then every key of the settings sections (model, simulation, collision, outputs) as their
+/// readers read them. A key listed twice goes where it is listed first.
+std::vector<SectionKeys> shorthandSections();
 
 /// The shorthand keys `--set` accepts and what each applies to (for help and error messages).
 std::vector<std::string> shorthandKeys();

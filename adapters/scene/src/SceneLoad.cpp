@@ -173,6 +173,9 @@ void requirePosesWithinWorld(const Fields& motion, const std::string& type,
   }
 }
 
+/// The fields of a joint sweep (motion type "sweep") that `--set KEY=VALUE` sets on every sweep.
+const std::vector<std::string> kSweepShorthands = {"step_deg", "start_deg", "end_deg", "pivot"};
+
 void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, BoneMotion& result,
                 std::vector<double>& labels) {
   const std::string type = motion.choice("type", "none", {"none", "keyframes", "sweep", "opensim"});
@@ -273,6 +276,14 @@ FibreSet selectFibres(const FibreSet& all, size_t count) {
   return subset;
 }
 
+/// A bone's `spheres` (every key of it is a `--set` shorthand for every bone's).
+BoneSphereParameters readSpheres(Fields& spheres, double scale) {
+  BoneSphereParameters parameters;
+  parameters.thinning = btScalar(spheres.number("thinning", 0, 0, 1));
+  parameters.maxRadius = btScalar(spheres.number("max_radius", 0, 0, kInf) * scale);
+  return parameters;
+}
+
 BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion& motion,
                    std::vector<double>& labels) {
   BoneInput input;
@@ -287,8 +298,7 @@ BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion&
   readMotion(motionFields, reader, input.mesh, motion, labels);
   bone.set("motion", motionFields.finish());
   Fields spheres = bone.object("spheres");
-  input.spheres.thinning = btScalar(spheres.number("thinning", 0, 0, 1));
-  input.spheres.maxRadius = btScalar(spheres.number("max_radius", 0, 0, kInf) * reader.scale);
+  input.spheres = readSpheres(spheres, reader.scale);
   bone.set("spheres", spheres.finish());
   return input;
 }
@@ -338,6 +348,12 @@ std::string readFibres(Fields& muscle, const Reader& reader, int fibreCount, boo
   muscle.set("fibres", fibres.finish());
   return path;
 }
+
+/// The fields of a muscle that `--set KEY=VALUE` sets on every muscle (the others take a path:
+/// muscles.NAME.KEY).
+const std::vector<std::string> kMuscleShorthands = {
+    "resolution",       "fibre_count", "attachment_distance", "skin_neighbours", "tendon_fraction",
+    "tendon_stiffness", "free_end"};
 
 MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
                        const SpringParameters& springs) {
@@ -622,6 +638,9 @@ Json readMuscles(Fields& root, Reader& reader, const SpringParameters& springs,
   return completeMuscles;
 }
 
+/// The top-level fields `--set KEY=VALUE` takes without a path.
+const std::vector<std::string> kTopLevelShorthands = {"name", "description", "units", "data_dir"};
+
 LoadedScene readScene(const Json& raw, const std::string& source, const fs::path& baseDir,
                       const std::string& defaultName) {
   LoadedScene result;
@@ -766,13 +785,21 @@ std::vector<std::string> keysRead(const char* section, Read read) {
   return keys;
 }
 
-std::vector<SectionKeys> settingsSectionKeys() {
+std::vector<SectionKeys> shorthandSections() {
   MuscleSystemDef def;
   OutputSettings outputs;
-  return {{"model", keysRead("model", [](Fields& f) { readModel(f); })},
-          {"simulation", keysRead("simulation", [&](Fields& f) { readSimulation(f, 1, def); })},
-          {"collision", keysRead("collision", [&](Fields& f) { readCollision(f, 1, def); })},
-          {"outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); })}};
+  const auto section = [](const char* name, std::vector<std::string> keys) {
+    return SectionKeys{ShorthandTarget::Section, name, std::move(keys)};
+  };
+  return {
+      {ShorthandTarget::TopLevel, "", kTopLevelShorthands},
+      {ShorthandTarget::Muscles, "", kMuscleShorthands},
+      {ShorthandTarget::BoneSpheres, "", keysRead("spheres", [](Fields& f) { readSpheres(f, 1); })},
+      {ShorthandTarget::Sweeps, "", kSweepShorthands},
+      section("model", keysRead("model", [](Fields& f) { readModel(f); })),
+      section("simulation", keysRead("simulation", [&](Fields& f) { readSimulation(f, 1, def); })),
+      section("collision", keysRead("collision", [&](Fields& f) { readCollision(f, 1, def); })),
+      section("outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); }))};
 }
 
 }  // namespace scene

@@ -10,38 +10,20 @@
 namespace fibremss::scene {
 namespace {
 
-/// Where a shorthand goes: every muscle, every bone's spheres, every sweep, or one section.
-enum class Target { Muscles, BoneSpheres, Sweeps, Section, TopLevel };
+using Target = ShorthandTarget;
 
+/// Where a shorthand goes: every muscle, every bone's spheres, every sweep, or one section.
 struct Shorthand {
   Target target;
-  std::string section;  // for Target::Section
+  std::string section;  ///< Target::Section: the section's name
 };
 
-/// The shorthands: every key of the settings sections (the scene reader's own list) and these.
+/// The shorthands, from the scene reader's list (shorthandSections).
 std::map<std::string, Shorthand> makeShorthands() {
-  std::map<std::string, Shorthand> table = {
-      {"resolution", {Target::Muscles, ""}},
-      {"fibre_count", {Target::Muscles, ""}},
-      {"attachment_distance", {Target::Muscles, ""}},
-      {"skin_neighbours", {Target::Muscles, ""}},
-      {"tendon_fraction", {Target::Muscles, ""}},
-      {"tendon_stiffness", {Target::Muscles, ""}},
-      {"free_end", {Target::Muscles, ""}},
-      {"thinning", {Target::BoneSpheres, ""}},
-      {"max_radius", {Target::BoneSpheres, ""}},
-      {"step_deg", {Target::Sweeps, ""}},
-      {"start_deg", {Target::Sweeps, ""}},
-      {"end_deg", {Target::Sweeps, ""}},
-      {"pivot", {Target::Sweeps, ""}},
-      {"name", {Target::TopLevel, ""}},
-      {"description", {Target::TopLevel, ""}},
-      {"units", {Target::TopLevel, ""}},
-      {"data_dir", {Target::TopLevel, ""}},
-  };
-  for (const SectionKeys& section : settingsSectionKeys())
+  std::map<std::string, Shorthand> table;
+  for (const SectionKeys& section : shorthandSections())
     for (const std::string& key : section.keys)
-      table.emplace(key, Shorthand{Target::Section, section.section});
+      table.emplace(key, Shorthand{section.target, section.section});
   return table;
 }
 

@@ -57,7 +57,7 @@ EnergyCheck checkEnergy(std::span<const double> series, double growthFactor, dou
 
 /// How the matrix runs.
 struct StabilityOptions {
-  std::vector<std::string> integrators;             ///< names (empty: all ten)
+  std::vector<std::string> integrators;             ///< names (empty: every integrator)
   std::vector<double> dtFactors{1, 2, 5, 10, 100};  ///< multiples of the stable step
   /// Applied to every case (first). No strain limit: it holds every spring at its limit, so the
   /// matrix's 3x spring check would no longer see an integrator's blow-up (Verlet's stable step
@@ -160,7 +160,7 @@ nlohmann::json stabilityJson(const StabilityMatrix& matrix, const StabilityOptio
 /// "exploded@S", "energy@S", "timeout", "n/a"; the stable steps; the criteria.
 std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOptions& options);
 
-/// Integrator names, all ten in Parameters.h order.
+/// The names of every integrator the core has, in the order of enum class Integrator.
 std::vector<std::string> allIntegratorNames();
 /// True when the solver can run `integrator` (a MuscleSystem with it steps without throwing).
 bool integratorAvailable(Integrator integrator);

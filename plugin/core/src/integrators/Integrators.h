@@ -9,6 +9,7 @@
 #include <LinearMath/btScalar.h>
 
 #include <memory>
+#include <string>
 
 #include "fibremss/Parameters.h"
 #include "state/MuscleState.h"
@@ -55,8 +56,24 @@ class TimeIntegrator {
 };
 
 /// The integrator for a kind (one shared stateless instance per kind; thread-safe: all
-/// per-muscle data lives in MuscleState).
+/// per-muscle data lives in MuscleState); InputError for a kind no source registered.
 const TimeIntegrator& integratorFor(Integrator kind);
+
+/// The name of a registered kind in scene files and on the command line, or null.
+const char* registeredIntegratorName(Integrator kind);
+
+/// The registered kind named `name`; false when none is.
+bool registeredIntegratorNamed(const std::string& name, Integrator& kind);
+
+/// Makes `integrator` the one integratorFor returns for its kind, under `name` (toString and
+/// fromString of Parameters.h read it). Each integrator's source registers its shared instances
+/// with namespace-scope registrations as the library loads, so that adding an integrator is its
+/// source and its value in `enum class Integrator`. A kind registered twice stops the program
+/// as it loads.
+class IntegratorRegistration {
+ public:
+  IntegratorRegistration(const TimeIntegrator& integrator, const char* name);
+};
 
 /// Prepares `muscle` for `integrator` unless it already is.
 inline void ensurePrepared(const TimeIntegrator& integrator, MuscleState& muscle) {

@@ -217,28 +217,17 @@ constexpr std::array<btScalar, 3> kClassicOffsets{btScalar(0.5), btScalar(0.5), 
 constexpr std::array<btScalar, 4> kClassicWeights{btScalar(1) / 6, btScalar(1) / 3, btScalar(1) / 3,
                                                   btScalar(1) / 6};
 
-}  // namespace
+const VerletIntegrator verlet;
+const SemiImplicitEulerIntegrator semiImplicitEuler;
+const RungeKuttaIntegrator explicitEuler(Integrator::ExplicitEuler, {}, kEulerWeights);
+const RungeKuttaIntegrator rk2(Integrator::Rk2, kMidpointOffsets, kMidpointWeights);
+const RungeKuttaIntegrator rk4(Integrator::Rk4, kClassicOffsets, kClassicWeights);
+const IntegratorRegistration registrations[] = {{verlet, "verlet"},
+                                                {semiImplicitEuler, "semi-implicit-euler"},
+                                                {explicitEuler, "explicit-euler"},
+                                                {rk2, "rk2"},
+                                                {rk4, "rk4"}};
 
-const TimeIntegrator* explicitIntegratorFor(Integrator kind) {
-  static const VerletIntegrator verlet;
-  static const SemiImplicitEulerIntegrator semiImplicitEuler;
-  static const RungeKuttaIntegrator explicitEuler(Integrator::ExplicitEuler, {}, kEulerWeights);
-  static const RungeKuttaIntegrator rk2(Integrator::Rk2, kMidpointOffsets, kMidpointWeights);
-  static const RungeKuttaIntegrator rk4(Integrator::Rk4, kClassicOffsets, kClassicWeights);
-  switch (kind) {
-    case Integrator::Verlet:
-      return &verlet;
-    case Integrator::SemiImplicitEuler:
-      return &semiImplicitEuler;
-    case Integrator::ExplicitEuler:
-      return &explicitEuler;
-    case Integrator::Rk2:
-      return &rk2;
-    case Integrator::Rk4:
-      return &rk4;
-    default:
-      return nullptr;
-  }
-}
+}  // namespace
 
 }  // namespace fibremss

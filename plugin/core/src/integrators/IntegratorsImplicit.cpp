@@ -400,22 +400,12 @@ class ImplicitIntegrator final : public TimeIntegrator {
   Integrator kind_;  ///< ImplicitEuler, ImplicitMidpoint or Bdf2
 };
 
-}  // namespace
+const ImplicitIntegrator implicitEuler(Integrator::ImplicitEuler);
+const ImplicitIntegrator implicitMidpoint(Integrator::ImplicitMidpoint);
+const ImplicitIntegrator bdf2(Integrator::Bdf2);
+const IntegratorRegistration registrations[] = {
+    {implicitEuler, "implicit-euler"}, {implicitMidpoint, "implicit-midpoint"}, {bdf2, "bdf2"}};
 
-const TimeIntegrator* implicitIntegratorFor(Integrator kind) {
-  static const ImplicitIntegrator implicitEuler(Integrator::ImplicitEuler);
-  static const ImplicitIntegrator implicitMidpoint(Integrator::ImplicitMidpoint);
-  static const ImplicitIntegrator bdf2(Integrator::Bdf2);
-  switch (kind) {
-    case Integrator::ImplicitEuler:
-      return &implicitEuler;
-    case Integrator::ImplicitMidpoint:
-      return &implicitMidpoint;
-    case Integrator::Bdf2:
-      return &bdf2;
-    default:
-      return nullptr;
-  }
-}
+}  // namespace
 
 }  // namespace fibremss

@@ -1,6 +1,5 @@
 #pragma once
-// The integrator families (internal to Integrators*.cpp): each returns its shared instance for a
-// kind it implements, or null.
+// What the integrator families share (internal to Integrators*.cpp).
 #include "Integrators.h"
 
 namespace fibremss {
@@ -15,14 +14,5 @@ inline btScalar heavyBallStep(MuscleState& muscle, uint32_t i, const btVector3& 
   muscle.positions[i] = x + step;
   return step.length();
 }
-
-/// Verlet, semi-implicit Euler, explicit Euler, RK2, RK4 (IntegratorsExplicit.cpp).
-const TimeIntegrator* explicitIntegratorFor(Integrator kind);
-/// Implicit Euler, implicit midpoint, BDF2 (IntegratorsImplicit.cpp).
-const TimeIntegrator* implicitIntegratorFor(Integrator kind);
-/// PBD, XPBD (IntegratorsPositionBased.cpp).
-const TimeIntegrator* positionBasedIntegratorFor(Integrator kind);
-/// Projective dynamics' local/global step (IntegratorsProjective.cpp).
-const TimeIntegrator* projectiveIntegratorFor(Integrator kind);
 
 }  // namespace fibremss

@@ -103,14 +103,10 @@ class PositionBasedIntegrator final : public TimeIntegrator {
   bool compliant_;  ///< XPBD (compliance 1/k) rather than PBD (rigid constraints)
 };
 
-}  // namespace
+const PositionBasedIntegrator pbd(false);
+const PositionBasedIntegrator xpbd(true);
+const IntegratorRegistration registrations[] = {{pbd, "pbd"}, {xpbd, "xpbd"}};
 
-const TimeIntegrator* positionBasedIntegratorFor(Integrator kind) {
-  static const PositionBasedIntegrator pbd(false);
-  static const PositionBasedIntegrator xpbd(true);
-  if (kind == Integrator::Pbd) return &pbd;
-  if (kind == Integrator::Xpbd) return &xpbd;
-  return nullptr;
-}
+}  // namespace
 
 }  // namespace fibremss

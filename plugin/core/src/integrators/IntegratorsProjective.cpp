@@ -337,11 +337,9 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   }
 };
 
-}  // namespace
+const ProjectiveIntegrator projective;
+const IntegratorRegistration registration(projective, "projective");
 
-const TimeIntegrator* projectiveIntegratorFor(Integrator kind) {
-  static const ProjectiveIntegrator projective;
-  return kind == Integrator::Projective ? &projective : nullptr;
-}
+}  // namespace
 
 }  // namespace fibremss

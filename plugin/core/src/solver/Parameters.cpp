@@ -3,6 +3,8 @@
 #include <array>
 #include <utility>
 
+#include "integrators/Integrators.h"
+
 namespace fibremss {
 namespace {
 
@@ -33,19 +35,6 @@ constexpr std::array<std::pair<SpringLayout, const char*>, 4> kLayouts{{
 constexpr std::array<std::pair<SpringStiffness, const char*>, 2> kStiffnessRules{{
     {SpringStiffness::Volume, "volume"},
     {SpringStiffness::Length, "length"},
-}};
-constexpr std::array<std::pair<Integrator, const char*>, 11> kIntegrators{{
-    {Integrator::Verlet, "verlet"},
-    {Integrator::SemiImplicitEuler, "semi-implicit-euler"},
-    {Integrator::ExplicitEuler, "explicit-euler"},
-    {Integrator::Rk2, "rk2"},
-    {Integrator::Rk4, "rk4"},
-    {Integrator::ImplicitEuler, "implicit-euler"},
-    {Integrator::ImplicitMidpoint, "implicit-midpoint"},
-    {Integrator::Bdf2, "bdf2"},
-    {Integrator::Pbd, "pbd"},
-    {Integrator::Xpbd, "xpbd"},
-    {Integrator::Projective, "projective"},
 }};
 constexpr std::array<std::pair<StopRule, const char*>, 6> kStopRules{{
     {StopRule::Iterations, "iterations"},
@@ -79,7 +68,8 @@ const char* toString(SpringStiffness rule) {
   return nameOf(kStiffnessRules, rule);
 }
 const char* toString(Integrator integrator) {
-  return nameOf(kIntegrators, integrator);
+  const char* name = registeredIntegratorName(integrator);  // each integrator's source names it
+  return name ? name : "unknown";
 }
 const char* toString(StopRule rule) {
   return nameOf(kStopRules, rule);
@@ -109,7 +99,7 @@ bool fromString(const std::string& name, SpringStiffness& rule) {
   return valueOf(kStiffnessRules, name, rule);
 }
 bool fromString(const std::string& name, Integrator& integrator) {
-  return valueOf(kIntegrators, name, integrator);
+  return registeredIntegratorNamed(name, integrator);
 }
 bool fromString(const std::string& name, StopRule& rule) {
   return valueOf(kStopRules, name, rule);
