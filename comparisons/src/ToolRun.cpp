@@ -51,7 +51,8 @@ ToolRunResult runTool(const LoadedScene& scene, const PreparedScene& prepared, i
   btSphereShape shape(btScalar(script.radius));
   btRigidBody body(kinematicInfo(shape, script.position(0)));
   body.setCollisionFlags(body.getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
-  HapticTool tool(system, body, btScalar(script.tickTime));
+  HapticTool tool(system, body, btScalar(script.tickTime),
+                  {script.wholeEvery, btScalar(script.regionMargin), btScalar(script.regionDrift)});
 
   ToolRunResult result;
   result.threads = static_cast<int>(system.threads());
@@ -68,6 +69,7 @@ ToolRunResult runTool(const LoadedScene& scene, const PreparedScene& prepared, i
     result.ticks[t] = {tick * script.tickTime, pose.getOrigin(), wrench.force, wrench.contacts};
   }
   result.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
+  result.wholeTicks = tool.wholeTicks();
   result.wallSeconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.ticksPerSecond =

@@ -40,6 +40,11 @@ ToolScript readTool(Fields& tool, double scale) {
   result.present = true;
   result.radius = tool.number("radius", 5e-3 / scale, 0, kInf, true) * scale;
   result.tickTime = tool.number("tick_ms", 1, 0, 1000, true) * 1e-3;
+  result.wholeEvery = tool.integer("whole_every", 1, 1, 1000000);
+  result.regionMargin = tool.number("region_margin_mm", 10, 0, kInf, true) * 1e-3;
+  result.regionDrift = tool.number("region_drift_mm", 2, 0, kInf) * 1e-3;
+  if (!(result.regionDrift < result.regionMargin))
+    tool.fail("region_drift_mm", "expected less than region_margin_mm");
   const Json& path = tool.array("path");
   Json complete = Json::array();
   for (size_t i = 0; i < path.size(); ++i) {

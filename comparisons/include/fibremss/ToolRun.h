@@ -26,6 +26,7 @@ struct ToolRunResult {
   double ticksPerSecond = 0;          ///< ticks / wallSeconds
   double cpuSeconds = 0;  ///< processor time of the ticks, every thread of the process [s]
   long iterations = 0;    ///< solver iterations over all ticks
+  long wholeTicks = 0;    ///< ticks that stepped the whole muscles (the rest their region)
   double peakForce = 0;   ///< largest |force| over the run [N]
   /// Largest |force(t) − force(t−1)| between two ticks of the script's "slide" phase [N].
   double slideJump = 0;

@@ -81,10 +81,15 @@ struct ReferenceSettings {
 /// A tool a script poses at haptic rate (HapticTool): a sphere whose centre moves along straight
 /// segments between waypoints, one pose per tick.
 struct ToolScript {
-  bool present = false;              ///< the scene has a tool
-  double radius = 0;                 ///< the sphere's radius [m]
-  double tickTime = 1e-3;            ///< simulated time per tick [s]
-  std::vector<double> times;         ///< waypoint times from the start, increasing [s]
+  bool present = false;    ///< the scene has a tool
+  double radius = 0;       ///< the sphere's radius [m]
+  double tickTime = 1e-3;  ///< simulated time per tick [s]
+  /// Every wholeEvery-th tick steps the whole muscles, the ticks between only the particles
+  /// near the tool (HapticRegion::wholeEvery) [ticks]
+  int wholeEvery = 1;
+  double regionMargin = 0.01;  ///< the region's reach beyond the sphere (HapticRegion) [m]
+  double regionDrift = 0.002;  ///< the tool's move that gathers the region again (HapticRegion) [m]
+  std::vector<double> times;   ///< waypoint times from the start, increasing [s]
   std::vector<btVector3> positions;  ///< the sphere's centre at each waypoint [m]
   /// Per waypoint: what the segment ending there does ("press", "slide", ...; the first's is
   /// the start's).

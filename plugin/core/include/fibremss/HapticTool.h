@@ -6,8 +6,10 @@
 // its last pose to the new one (MuscleSystem::step(duration), a time integrator such as Verlet),
 // and reads the tool's force with MuscleSystem::contactWrench at the new pose: the tick's mean
 // reaction (the momentum the touching particles lost to the tool over the tick) plus the Hooke
-// term of what still overlaps. The muscles move every tick, so the force follows the tool as
-// it presses and slides (docs/contact.md, "A tool at haptic rate").
+// term of what still overlaps. With HapticRegion::wholeEvery > 1 most ticks step only the
+// muscles' particles near the tool (MuscleSystem::stepLocal), the whole muscles every
+// wholeEvery-th tick: a fraction of the cost, the force continuous, but the far field advances
+// wholeEvery times slower than the tool (docs/contact.md, "Local ticks").
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <LinearMath/btTransform.h>
 
@@ -16,28 +18,52 @@
 
 namespace fibremss {
 
+/// Which particles a HapticTool's ticks move.
+struct HapticRegion {
+  /// Every wholeEvery-th tick (the first, then every wholeEvery) steps the whole muscles
+  /// (MuscleSystem::step(duration)); the ticks between step only the region around the tool
+  /// (MuscleSystem::stepLocal). 1: every tick whole [ticks].
+  int wholeEvery = 1;
+  /// The region holds the free particles within the tool's bounding sphere grown by this [m].
+  btScalar margin = btScalar(0.01);
+  /// The region is gathered again before a local tick once the tool's centre is farther than this
+  /// from where it was gathered [m]; less than margin by more than the particles' radii, so that
+  /// what the tool touches stays inside.
+  btScalar drift = btScalar(0.002);
+};
+
 class HapticTool {
  public:
   /// `tool`: a kinematic btRigidBody (mass 0, CF_KINEMATIC_OBJECT) whose shape touches the
   /// muscles (ShapeContact's convex shapes); `tickTime`: the simulated time of a tick [s]. Makes
   /// the tool the system's only contact body (allocates; a tick does not). Both must outlive
-  /// the tool. InputError for a body that is not kinematic or a tick time not finite > 0.
-  HapticTool(MuscleSystem& system, btRigidBody& tool, btScalar tickTime = btScalar(1e-3));
+  /// the tool; `region`: which particles the ticks move. InputError for a body that is not
+  /// kinematic, a tick time not finite > 0, wholeEvery < 1, or a drift not in [0, margin).
+  HapticTool(MuscleSystem& system, btRigidBody& tool, btScalar tickTime = btScalar(1e-3),
+             const HapticRegion& region = {});
 
   /// One tick: the tool moves to `pose` over the tick (its velocity the pose change / tickTime),
-  /// the muscles advance by tickTime with it, and the force and torque they exert on the tool at
-  /// `pose` are returned. No allocation. InputError for a pose with NaN or inf.
+  /// the muscles (the whole, or the region around the tool) advance by tickTime with it, and the
+  /// force and torque they exert on the tool at `pose` are returned. No allocation (but the first
+  /// local tick's gathering). InputError for a pose with NaN or inf.
   ContactWrench tick(const btTransform& pose);
 
   btScalar tickTime() const { return tickTime_; }  ///< simulated time per tick [s]
   long ticks() const { return ticks_; }            ///< ticks taken
+  long wholeTicks() const { return wholeTicks_; }  ///< ticks that stepped the whole muscles
   const btRigidBody& tool() const { return tool_; }
 
  private:
-  MuscleSystem& system_;  ///< the muscles the tool touches
-  btRigidBody& tool_;     ///< the kinematic tool body
-  btScalar tickTime_;     ///< simulated time per tick [s]
-  long ticks_ = 0;        ///< ticks taken
+  MuscleSystem& system_;             ///< the muscles the tool touches
+  btRigidBody& tool_;                ///< the kinematic tool body
+  btScalar tickTime_;                ///< simulated time per tick [s]
+  HapticRegion region_;              ///< which particles the ticks move
+  long ticks_ = 0;                   ///< ticks taken
+  long wholeTicks_ = 0;              ///< ticks that stepped the whole muscles
+  btVector3 regionCentre_{0, 0, 0};  ///< the tool's centre where the region was gathered [m]
+  bool gathered_ = false;            ///< a region was gathered
+  /// Steps the muscles by a tick: whole, or the region around the tool at `pose`.
+  void advance(const btTransform& pose);
 };
 
 }  // namespace fibremss

@@ -211,6 +211,22 @@ class MuscleSystem {
   /// duration beyond 16384 such dt is cut short to that (StepStats::shortened). InputError for a
   /// duration that is not finite and > 0.
   void step(btScalar duration);
+  /// Gathers the local region stepLocal advances: in every muscle the free particles within
+  /// `radius` [m] of `centre` [m], the springs and local volume terms that reach them, and the
+  /// ring, their other particles, held where they are. Gathered from the particles as they are
+  /// now, kept until the next call; allocates only the first time (index arrays as large as the
+  /// muscles). InputError for a centre or radius not finite, or a radius < 0.
+  void setLocalRegion(const btVector3& centre, btScalar radius);
+  /// step(duration) in which only the local region's particles move (setLocalRegion; none
+  /// gathered: none moves): per muscle (one task each) the region's springs and volume terms on
+  /// the scalar kernel, the muscle's enclosed volume, the integration, the pushes of the bones on
+  /// the region; then the contact bodies, which the caller keeps inside the region (HapticTool
+  /// does). Every other particle keeps its position, the muscles' surfaces stay as the last
+  /// step left them, and muscle pairs do not collide. A step in which a bone moves, with
+  /// rebuildEveryStep, or with an integrator other than Verlet runs as step(duration). The
+  /// numerical guard and the contact bodies' results as step(duration); no allocation (but a
+  /// muscle's first gathering). InputError for a duration that is not finite and > 0.
+  void stepLocal(btScalar duration);
   /// A flag the steps poll after every iteration (null: none, the default): once it reads true,
   /// the running step ends there and reports StepStats::interrupted, so a long step (a large
   /// iteration cap, the guard's retries) stops within an iteration. Meant to be set from a signal

@@ -1,5 +1,6 @@
 #include "fibremss/HapticTool.h"
 
+#include <BulletCollision/CollisionShapes/btCollisionShape.h>
 #include <LinearMath/btTransformUtil.h>
 
 #include <cmath>
@@ -9,8 +10,9 @@
 
 namespace fibremss {
 
-HapticTool::HapticTool(MuscleSystem& system, btRigidBody& tool, btScalar tickTime)
-    : system_(system), tool_(tool), tickTime_(tickTime) {
+HapticTool::HapticTool(MuscleSystem& system, btRigidBody& tool, btScalar tickTime,
+                       const HapticRegion& region)
+    : system_(system), tool_(tool), tickTime_(tickTime), region_(region) {
   if (!tool.isKinematicObject())
     throw InputError(
         "HapticTool", "tool",
@@ -18,6 +20,14 @@ HapticTool::HapticTool(MuscleSystem& system, btRigidBody& tool, btScalar tickTim
   if (!(tickTime > 0) || !std::isfinite(tickTime))
     throw InputError("HapticTool", "tickTime",
                      "expected a finite time > 0 s, got " + std::to_string(tickTime));
+  if (region.wholeEvery < 1)
+    throw InputError("HapticTool", "region.wholeEvery",
+                     "expected at least 1 tick, got " + std::to_string(region.wholeEvery));
+  if (!(region.drift >= 0) || !(region.drift < region.margin) || !std::isfinite(region.margin))
+    throw InputError("HapticTool", "region.drift",
+                     "expected a drift in [0, margin) and a finite margin [m], got drift " +
+                         std::to_string(region.drift) + ", margin " +
+                         std::to_string(region.margin));
   const btCollisionObject* bodies[] = {&tool};
   system_.setContactBodies(bodies);
 }
@@ -33,9 +43,27 @@ ContactWrench HapticTool::tick(const btTransform& pose) {
   tool_.setInterpolationWorldTransform(pose);
   tool_.setLinearVelocity(linear);
   tool_.setAngularVelocity(angular);
-  system_.step(tickTime_);
+  advance(pose);
   ++ticks_;
   return system_.contactWrench(tool_, pose);
+}
+
+void HapticTool::advance(const btTransform& pose) {
+  if (ticks_ % region_.wholeEvery == 0) {
+    system_.step(tickTime_);
+    ++wholeTicks_;
+    return;
+  }
+  btVector3 centre;
+  btScalar radius;
+  tool_.getCollisionShape()->getBoundingSphere(centre, radius);
+  centre = pose * centre;
+  if (!gathered_ || centre.distance(regionCentre_) > region_.drift) {
+    system_.setLocalRegion(centre, radius + region_.margin);
+    regionCentre_ = centre;
+    gathered_ = true;
+  }
+  system_.stepLocal(tickTime_);
 }
 
 }  // namespace fibremss

@@ -415,6 +415,22 @@ SpringForceResult addSpringForces(const MuscleSettings& settings,
   return result;
 }
 
+SpringForceResult addSpringForces(const MuscleSettings& settings,
+                                  std::span<const btVector3> positions, std::span<btVector3> forces,
+                                  std::span<const uint32_t> springs) {
+  SpringForceResult result;
+  if (springs.empty()) return result;
+  const btScalar watch = settings.strainLimit > 0 ? kStrainWatch * settings.strainLimit
+                                                  : std::numeric_limits<btScalar>::infinity();
+  const Spring* all = settings.springs.data();
+  RunSum tail{all[springs[0]].a, btVector3(0, 0, 0)};
+  for (uint32_t s : springs)
+    addSpring(all[s], positions.data(), forces.data(), tail, watch, result);
+  forces[tail.particle] += tail.sum;
+  result.exploded = result.overstretched > 0;
+  return result;
+}
+
 SpringForceResult springForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                                std::span<btVector3> forces, SpringKernel kernel) {
   std::fill(forces.begin(), forces.end(), btVector3(0, 0, 0));

@@ -1,6 +1,7 @@
 #pragma once
 // Spring forces of one muscle (method.md §3–§4), internal.
 #include <cstddef>
+#include <cstdint>
 #include <span>
 
 #include "fibremss/MuscleSettings.h"
@@ -75,5 +76,12 @@ size_t springLayoutBoundary(const MuscleSettings& settings, SpringKernel kernel,
 SpringForceResult addSpringForces(const MuscleSettings& settings,
                                   std::span<const btVector3> positions, std::span<btVector3> forces,
                                   SpringKernel kernel, size_t begin, size_t end);
+
+/// The forces of the springs `springs` (indices into settings.springs, ascending) added into
+/// `forces` (not zeroed), one at a time on the scalar kernel; what they measured. A local step's
+/// share of a muscle (MuscleSystem::stepLocal): the same order for any thread count.
+SpringForceResult addSpringForces(const MuscleSettings& settings,
+                                  std::span<const btVector3> positions, std::span<btVector3> forces,
+                                  std::span<const uint32_t> springs);
 
 }  // namespace fibremss

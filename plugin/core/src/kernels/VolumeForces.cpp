@@ -446,6 +446,12 @@ void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVect
 }
 
 void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, std::span<const uint32_t> fans) {
+  const btScalar modulus = settings.volumeModulus / 6;  // ∂V/∂x is a sixth of a cross product
+  for (uint32_t k : fans) scalarFan(settings, k, modulus, positions.data(), forces.data());
+}
+
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
                           std::span<btVector3> forces) {
   addLocalVolumeForces(settings, positions, forces, fastestSpringKernel());
 }

@@ -43,6 +43,11 @@ void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVect
                           std::span<btVector3> forces, SpringKernel kernel, size_t begin,
                           size_t end);
 
+/// The same for the fans `fans` (indices of settings.fanParticles' fans) one at a time on the
+/// scalar kernel, in that order (a local step's share of a muscle, MuscleSystem::stepLocal).
+void addLocalVolumeForces(const MuscleSettings& settings, std::span<const btVector3> positions,
+                          std::span<btVector3> forces, std::span<const uint32_t> fans);
+
 /// A range of fans cut by their count of particles (they are sorted by it): those with c + 4
 /// particles (c + 1 tetrahedra) are [at[c], at[c + 1]).
 struct FanClasses {

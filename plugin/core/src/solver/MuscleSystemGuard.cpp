@@ -281,7 +281,7 @@ void MuscleSystem::Impl::guardedStep() {
     outcome.rolledBack = true;
   };
   while (true) {
-    step(size);
+    attempt(size);
     add(outcome.spent, stats.timing);
     outcome.iterations += stats.iterations;
     if (!stats.nan && !stats.exploded) break;

@@ -165,6 +165,9 @@ struct MuscleSystem::Impl {
   std::vector<ContactBodyState> contactBodies;  ///< those bodies as the running step sees them
   std::vector<BodyContact> bodyResults;         ///< what each received in the last step
   mutable TreeTraversalStack queryStack;        ///< contactWrench's traversal stack
+  bool localStepping = false;                   ///< the running guardedStep is stepLocal's
+  btVector3 regionCentre{0, 0, 0};              ///< setLocalRegion's centre [m]
+  btScalar regionRadius = -1;                   ///< setLocalRegion's radius (< 0: none) [m]
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
@@ -245,6 +248,9 @@ struct MuscleSystem::Impl {
   void finishForces(MuscleState& state, MuscleIterationResult& result);
   void forcesPhase(bool bonesMove);
   void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
+  /// The iteration's per-muscle results reduced in insertion order: displacement, NaN, the
+  /// simulated time and dt.
+  void sumIteration(btScalar dt);
   void step(const StepSize& size);
   /// The non-frozen muscles into `active`, largest first (springs + particles): handed out in
   /// this order, the threads finish close together.
@@ -278,6 +284,18 @@ struct MuscleSystem::Impl {
   /// workspaces up to date.
   void breakMuscles();
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
+  /// Whether some bone's target differs from where it ended the last step.
+  bool bonesMove() const;
+  // Local steps (MuscleSystemLocal.cpp, MuscleSystem::stepLocal).
+  /// One iteration of the muscle's region on `thread`'s scratch, its bones' pushes applied.
+  void localIteration(MuscleState& state, const TimeIntegrator& integrator, btScalar dt,
+                      btScalar lastDt, unsigned thread);
+  /// The active muscles' regions made their free particles (`begin`), or given back.
+  void swapRegions(bool begin);
+  /// A step of `size` (a duration's) in which only the regions move; as step() when it cannot.
+  void localStep(const StepSize& size);
+  /// One attempt of the guarded step: localStep while stepLocal runs, else step.
+  void attempt(const StepSize& size) { localStepping ? localStep(size) : step(size); }
 };
 
 }  // namespace fibremss

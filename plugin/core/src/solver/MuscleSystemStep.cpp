@@ -527,6 +527,16 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     result.refitMs = millisecondsSince(refitStart);
     result.integrateMs = millisecondsSince(integrateStart) - result.refitMs;
   });
+  sumIteration(dt);
+  const double wall = millisecondsSince(start);
+  const double refitShare =
+      threadShare(&MuscleIterationResult::refitMs,
+                  {&MuscleIterationResult::integrateMs, &MuscleIterationResult::refitMs});
+  stats.timing.mss += (1 - refitShare) * wall;
+  stats.timing.muscleCd += refitShare * wall;
+}
+
+void MuscleSystem::Impl::sumIteration(btScalar dt) {
   double displacement = 0;
   size_t freeCount = 0;
   for (uint32_t slot : muscles.order) {
@@ -539,12 +549,6 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
   stats.simulatedTime += dt;
   stats.meanDisplacement =
       freeCount ? static_cast<btScalar>(displacement / static_cast<double>(freeCount)) : 0;
-  const double wall = millisecondsSince(start);
-  const double refitShare =
-      threadShare(&MuscleIterationResult::refitMs,
-                  {&MuscleIterationResult::integrateMs, &MuscleIterationResult::refitMs});
-  stats.timing.mss += (1 - refitShare) * wall;
-  stats.timing.muscleCd += refitShare * wall;
 }
 
 // The estimated distance to equilibrium after `settled` iterations since the bones arrived: the
@@ -650,10 +654,8 @@ int MuscleSystem::Impl::planBoneMotion(const StepSize& size, int& cap) {
     }
     return 0;
   }
-  if (std::none_of(bones.order.begin(), bones.order.end(), [&](uint32_t slot) {
-        return !(bones.states[slot]->last == bones.states[slot]->target);
-      }))
-    return 0;  // no bone moves in this step: the stop rules need not wait for an arrival
+  // No bone moves in this step: the stop rules need not wait for an arrival.
+  if (!bonesMove()) return 0;
   if (size.exact) return cap;
   cap = iterationsFor(cap);
   return std::clamp(static_cast<int>(std::lround(stepSettings.motionFraction * cap)), 1, cap);

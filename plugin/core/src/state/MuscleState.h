@@ -186,7 +186,27 @@ struct ResidualState {
   void init(size_t n, std::vector<btScalar> stiffness);
 };
 
-/// A muscle: settings, its bones and slot, and the state a step changes in seven parts (stages
+/// The local region of MuscleSystem::stepLocal in one muscle (MuscleSystem::setLocalRegion):
+/// the particles a local step moves and the springs and local volume terms whose forces it takes.
+/// Sized to the muscle's counts at its first gathering, so that gathering again does not allocate.
+struct RegionState {
+  std::vector<uint32_t> regionParticles;  ///< free particles within the region's radius
+  /// Particles a local step's forces reach: the region's, then the ring (the other ends of their
+  /// springs and volume terms, held where they are)
+  std::vector<uint32_t> regionReach;
+  std::vector<uint32_t> regionSprings;  ///< springs with an end in the region, ascending
+  std::vector<uint32_t> regionFans;     ///< local volume fans with a particle in the region
+  /// Per particle: kInRegion, kInRing or 0 (sized at the first gathering) [flag]
+  std::vector<uint8_t> regionMark;
+  const MuscleSettings* regionSettings = nullptr;  ///< the settings gathered from (null: none)
+};
+
+/// RegionState::regionMark of a particle a local step moves.
+constexpr uint8_t kInRegion = 1;
+/// RegionState::regionMark of a particle a local step holds whose forces it takes.
+constexpr uint8_t kInRing = 2;
+
+/// A muscle: settings, its bones and slot, and the state a step changes in eight parts (stages
 /// that need one part can take it alone). Solver settings are not here: the step passes them to
 /// the stages.
 struct MuscleState : ParticleState,
@@ -195,7 +215,8 @@ struct MuscleState : ParticleState,
                      TreeState,
                      GuardSnapshot,
                      InteractionState,
-                     ResidualState {
+                     ResidualState,
+                     RegionState {
   std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
   std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
   std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
