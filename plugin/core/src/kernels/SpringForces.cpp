@@ -327,6 +327,13 @@ void addBlock(SpringBlocks& blocks, const BlockSprings& block, const Spring* spr
   }
 }
 
+/// The stretch from which a spring is counted as near its limit [1]: kStrainWatch of the strain
+/// limit, or never without one.
+btScalar strainWatch(const MuscleSettings& settings) {
+  return settings.strainLimit > 0 ? kStrainWatch * settings.strainLimit
+                                  : std::numeric_limits<btScalar>::infinity();
+}
+
 }  // namespace
 
 SpringBlocks springBlocksFor(const MuscleSettings& settings) {
@@ -393,8 +400,7 @@ SpringForceResult addSpringForces(const MuscleSettings& settings,
   SpringForceResult result;
   if (begin >= end) return result;
   kernel = springLayoutKernel(settings, kernel);
-  const btScalar watch = settings.strainLimit > 0 ? kStrainWatch * settings.strainLimit
-                                                  : std::numeric_limits<btScalar>::infinity();
+  const btScalar watch = strainWatch(settings);
 #if FIBREMSS_AVX2_SPRINGS
   if (kernel == SpringKernel::avx2) {
     avx2Springs(settings.springBlocks, begin, end, x, f, watch, result);
@@ -420,8 +426,7 @@ SpringForceResult addSpringForces(const MuscleSettings& settings,
                                   std::span<const uint32_t> springs) {
   SpringForceResult result;
   if (springs.empty()) return result;
-  const btScalar watch = settings.strainLimit > 0 ? kStrainWatch * settings.strainLimit
-                                                  : std::numeric_limits<btScalar>::infinity();
+  const btScalar watch = strainWatch(settings);
   const Spring* all = settings.springs.data();
   RunSum tail{all[springs[0]].a, btVector3(0, 0, 0)};
   for (uint32_t s : springs)
