@@ -1,12 +1,12 @@
 # `cmake --install`: headers, the layer libraries, a CMake package (find_package(FibreMSS) gives
-# fibremss::core, fibremss::fibres, fibremss::io, fibremss::scene, fibremss::baselines), a
+# fibremss::tasks, fibremss::core, fibremss::fibres, fibremss::io, fibremss::scene, fibremss::baselines), a
 # pkg-config file for the core (pkg-config fibremss) and the fibremss tool. Everything is
 # relocatable: `cmake --install build --prefix DIR` works for any DIR.
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
-set(FIBREMSS_INSTALLED_LAYERS core fibres)
-set(FIBREMSS_INSTALLED_HEADERS plugin/core plugin/fibres)
+set(FIBREMSS_INSTALLED_LAYERS tasks core fibres)
+set(FIBREMSS_INSTALLED_HEADERS plugin/tasks plugin/core plugin/fibres)
 if(NOT FIBREMSS_CORE_ONLY)
   list(APPEND FIBREMSS_INSTALLED_LAYERS io scene baselines)
   list(APPEND FIBREMSS_INSTALLED_HEADERS adapters/io adapters/scene adapters/baselines)

@@ -1,16 +1,34 @@
 #!/usr/bin/env python3
-"""Checks that the core's folders form a one-way chain: a file in plugin/core/src/ includes only
-headers of its own folder or of a folder lower in the chain (docs/architecture.md)."""
+"""Checks that the plugin's layers and the core's folders form one-way chains
+(docs/architecture.md): a file of plugin/<layer>/ includes no public header of a layer above it
+(tasks, then core, then fibres), and a file in plugin/core/src/ includes only headers of its own
+folder or of a folder lower in the chain."""
 import os, re, sys
 
 root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-src = os.path.join(root, "plugin", "core", "src")
-# Lowest first; folders on one rank include none of each other.
-chain = [["tasks"], ["geometry"], ["kernels"], ["state", "prepare"], ["collision", "contact"],
-         ["dynamics"], ["integrators"], ["solver"], ["bullet"]]
-rank = {folder: level for level, folders in enumerate(chain) for folder in folders}
+plugin = os.path.join(root, "plugin")
+src = os.path.join(plugin, "core", "src")
 include = re.compile(r'^\s*#\s*include\s*"([^"]+)"', re.M)
 bad = count = 0
+
+# The plugin's layers, lowest first.
+layers = ["tasks", "core", "fibres"]
+for level, layer in enumerate(layers):
+    higher = [os.path.join(plugin, other, "include") for other in layers[level + 1:]]
+    for directory, _, files in os.walk(os.path.join(plugin, layer)):
+        for name in sorted(files):
+            path = os.path.join(directory, name)
+            if not name.endswith((".cpp", ".h")): continue
+            for target in include.findall(open(path, encoding="utf-8").read()):
+                count += 1
+                if any(os.path.isfile(os.path.join(h, target)) for h in higher):
+                    print(f"{os.path.relpath(path, root)}: includes {target}, of a higher layer")
+                    bad += 1
+
+# The core's folders, lowest first; folders on one rank include none of each other.
+chain = [["geometry"], ["kernels"], ["state", "prepare"], ["collision", "contact"],
+         ["dynamics"], ["integrators"], ["solver"], ["bullet"]]
+rank = {folder: level for level, folders in enumerate(chain) for folder in folders}
 for folder in sorted(os.listdir(src)):
     if folder not in rank:
         print(f"plugin/core/src/{folder}/: not in the chain"); bad += 1
@@ -25,5 +43,5 @@ for folder in sorted(os.listdir(src)):
             if other in rank and other != folder and rank[other] >= rank[folder]:
                 print(f"plugin/core/src/{folder}/{name}: includes {target}, not lower in the chain")
                 bad += 1
-print(f"{count} includes in plugin/core/src/, {bad} against the chain")
+print(f"{count} includes in plugin/, {bad} against the chains")
 sys.exit(1 if bad else 0)

@@ -1,4 +1,4 @@
-// The solver's threads (plugin/core/src/tasks/TaskPool.h, MuscleSystemStep.cpp) and a host's
+// The solver's threads (fibremss/TaskPool.h, MuscleSystemStep.cpp) and a host's
 // scheduler in their place (fibremss/TaskScheduler.h): every task runs once on a valid thread, and
 // a step gives bit-identical particles for any thread count, because each task's work is
 // independent and every sum runs in a fixed order (a muscle's force chunks too: ForceChunks.h);

@@ -18,7 +18,7 @@
 #include "PreparationInternal.h"
 #include "PreparationReorder.h"
 #include "fibremss/Error.h"
-#include "tasks/TaskPool.h"
+#include "fibremss/TaskPool.h"
 
 namespace fibremss {
 namespace {

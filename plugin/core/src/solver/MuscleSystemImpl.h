@@ -15,9 +15,9 @@
 #include "dynamics/Residual.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
+#include "fibremss/TaskPool.h"
 #include "kernels/SpringForces.h"
 #include "state/MuscleState.h"
-#include "tasks/TaskPool.h"
 
 namespace fibremss {
 

@@ -1,4 +1,4 @@
-#include "TaskPool.h"
+#include "fibremss/TaskPool.h"
 
 #include <ctime>
 #include <span>

@@ -1,9 +1,10 @@
 #pragma once
 // A small fixed pool of worker threads owned by the plugin (Debian's Bullet has no task
-// scheduler), internal. A step is a fork–join of a dozen to a few dozen tasks per phase (per
-// muscle, per chunk of a muscle's forces, per muscle pair), several phases per iteration: it wants
-// a cheap wake-up and no allocation more than work stealing, and a pool of its own adds no
-// dependency to the library.
+// scheduler): the core's step and preparation and the fibres' implicit surfaces run on it. A
+// step is a fork–join of a dozen to a few dozen tasks per phase (per muscle, per chunk of a
+// muscle's forces, per muscle pair), several phases per iteration: it wants a cheap wake-up and
+// no allocation more than work stealing, and a pool of its own adds no dependency to the
+// library.
 #include <algorithm>
 #include <atomic>
 #include <cstddef>
