@@ -270,6 +270,39 @@ TEST(VolumeTerm, ItsMultipleSetsThePoissonRatioTheAffineNetworkGives) {
   }
 }
 
+// A Poisson ratio gives the multiple whose affine reading is that ratio again: the springs alone
+// (0.25) need none, 21/44 is the multiple 4 and the continuum's 0.49 is 9.6.
+TEST(VolumeTerm, APoissonRatioGivesTheMultipleTheAffineNetworkReadsBack) {
+  for (const double ratio : {0.25, 21.0 / 44, 0.485, 0.49}) {
+    const double multiple = volumeMultipleFor(ratio);
+    EXPECT_NEAR((1 + 5 * multiple) / (2 * (2 + 5 * multiple)), ratio, 1e-12) << ratio;
+  }
+  EXPECT_NEAR(volumeMultipleFor(0.25), 0, 1e-12);
+  EXPECT_NEAR(volumeMultipleFor(21.0 / 44), 4, 1e-12);
+  EXPECT_NEAR(volumeMultipleFor(0.49), 9.6, 1e-12);
+  SpringParameters springs;
+  springs.volumeStiffness = -1;
+  springs.poissonRatio = btScalar(0.485);
+  EXPECT_DOUBLE_EQ(volumeMultiple(springs), volumeMultipleFor(springs.poissonRatio));
+  springs.volumeStiffness = 2;
+  EXPECT_EQ(volumeMultiple(springs), 2);
+}
+
+// The stretched cylinder's targets: ν within 0.02 of the continuum's and the volume change
+// within half a percentage point of the exact one; a Poisson ratio of 0.485 meets both, and its
+// cylinder thins more than with the multiple 4 (affinely ν 0.477).
+TEST(VolumeTerm, APoissonRatioOf0485KeepsTheStretchedCylindersVolumeAndRadius) {
+  const RunMetrics stretch = cylinderRun("cylinder-stretch", {"poisson_ratio=0.485"});
+  const RunMetrics four = cylinderRun("cylinder-stretch", {"volume_stiffness=4"});
+  ASSERT_FALSE(stretch.nan || stretch.exploded || four.nan || four.exploded);
+  EXPECT_GT(stretch.analytic.poissonRatio, four.analytic.poissonRatio);
+  RecordProperty("nu", std::to_string(stretch.analytic.poissonRatio));
+  RecordProperty("volume_error_points", std::to_string(stretch.analytic.volumeErrorPct()));
+  EXPECT_NEAR(stretch.analytic.poissonRatio, loadScene("cylinder-stretch").analytic.poissonRatio,
+              0.02);
+  EXPECT_LE(stretch.analytic.volumeErrorPct(), 0.5);
+}
+
 // The enclosed-volume term alone (a pressure on the particles' boundary, no local terms) keeps a
 // stretched cylinder's volume and a twisted one's radius, which the springs alone do not.
 TEST(VolumeTerm, TheEnclosedVolumeAloneKeepsTheCylindersVolume) {

@@ -398,6 +398,28 @@ MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
   return input;
 }
 
+/// `volume_stiffness` (a multiple, or "auto": the one of `poisson_ratio`) and `poisson_ratio`;
+/// a Poisson ratio given without a multiple sets it.
+void readVolumeStiffness(Fields& model, SpringParameters& springs) {
+  const bool ratioGiven = model.raw("poisson_ratio") != nullptr;
+  springs.poissonRatio = btScalar(model.number("poisson_ratio", springs.poissonRatio, 0.25, 0.499));
+  const Json* multiple = model.raw("volume_stiffness");
+  const bool automatic = multiple ? multiple->is_string() && multiple->get<std::string>() == "auto"
+                                  : ratioGiven || springs.volumeStiffness < 0;
+  if (automatic) {
+    springs.volumeStiffness = -1;
+    model.set("volume_stiffness", "auto");
+  } else if (!multiple || multiple->is_number()) {
+    springs.volumeStiffness =
+        btScalar(model.number("volume_stiffness", springs.volumeStiffness, 0, 1e6));
+  } else {
+    model.fail("volume_stiffness",
+               "expected \"auto\" (from poisson_ratio) or a number in [0, "
+               "1e6], got " +
+                   scene::describe(*multiple));
+  }
+}
+
 SpringParameters readModel(Fields& model) {
   SpringParameters springs;
   const std::string layout =
@@ -421,8 +443,7 @@ SpringParameters readModel(Fields& model) {
   }
   springs.dampingScale = btScalar(model.number("damping_scale", springs.dampingScale, 0, kInf));
   springs.density = btScalar(model.number("density", springs.density, 0, kInf, true));
-  springs.volumeStiffness =
-      btScalar(model.number("volume_stiffness", springs.volumeStiffness, 0, 1e6));
+  readVolumeStiffness(model, springs);
   springs.enclosedVolumeStiffness =
       btScalar(model.number("enclosed_volume_stiffness", springs.enclosedVolumeStiffness, 0, 1e6));
   springs.volumeCoarsening =

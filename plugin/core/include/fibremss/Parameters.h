@@ -49,8 +49,12 @@ struct SpringParameters {
   btScalar density = 1060;  ///< muscle density [kg/m³]; mass = density·volume / particles
   /// Local volume preservation: a bulk modulus K against each Delaunay tetrahedron's volume
   /// change (energy ½·K·(V − V0)²/V0 per tetrahedron), as a multiple of the spring network's
-  /// Young's modulus E = Σk·L0² / 3V [1] (K in Pa = this × E; 0: off).
+  /// Young's modulus E = Σk·L0² / 3V [1] (K in Pa = this × E; 0: off; < 0: the multiple
+  /// volumeMultipleFor(poissonRatio), volumeMultiple says which applies).
   btScalar volumeStiffness = 4;
+  /// Poisson ratio of the spring network with its local volume terms when volumeStiffness < 0
+  /// [1], in [0.25, 0.5): muscle is nearly incompressible (about 0.49).
+  btScalar poissonRatio = btScalar(0.485);
   /// Whole-muscle volume preservation: a bulk modulus K against the change of the volume the
   /// muscle's interior tetrahedra enclose (energy ½·K·(V − V0)²/V0 per muscle, a pressure on the
   /// boundary of the particles), as a multiple of E like volumeStiffness [1] (0: off).
@@ -74,6 +78,21 @@ struct SpringParameters {
   /// with an edge beyond it or particles in two pieces are taken out (Tearing.h).
   btScalar breakStretch = 0;
 };
+
+/// The local volume multiple (SpringParameters::volumeStiffness) that gives the affine spring
+/// network the Poisson ratio ν [1]: the springs alone have λ = μ (ν 0.25) and E = Σk·L0²/3V = 5μ,
+/// a multiple V adds λ = 5V·μ, so ν = (1 + 5V)/(2(2 + 5V)) and V = (4ν − 1)/(5(1 − 2ν))
+/// (docs/decisions.md, "Volume terms"); ν in [0.25, 0.5).
+constexpr double volumeMultipleFor(double poissonRatio) {
+  return (4 * poissonRatio - 1) / (5 * (1 - 2 * poissonRatio));
+}
+
+/// The local volume multiple `springs` ask for [1]: volumeStiffness, or when that is < 0 the one
+/// of their Poisson ratio.
+constexpr double volumeMultiple(const SpringParameters& springs) {
+  return springs.volumeStiffness >= 0 ? double(springs.volumeStiffness)
+                                      : volumeMultipleFor(springs.poissonRatio);
+}
 
 /// Bone sphere generation (method.md §6, two-ring heuristic).
 struct BoneSphereParameters {

@@ -390,6 +390,10 @@ MuscleSettings sampleMuscle(const MuscleInput& input, size_t index, size_t boneC
     throw InputError(source, "attachment_distance", "must not be negative");
   if (!(parameters.springs.density > 0))
     throw InputError(source, "springs.density", "must be positive");
+  if (parameters.springs.volumeStiffness < 0 &&
+      !(parameters.springs.poissonRatio >= btScalar(0.25) && parameters.springs.poissonRatio < 0.5))
+    throw InputError(source, "springs.poissonRatio",
+                     "must lie in [0.25, 0.5) to set the volume multiple");
   if (parameters.skinNeighbours < 1)
     throw InputError(source, "skin_neighbours", "must be at least 1");
   MuscleSettings muscle;
@@ -473,8 +477,8 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   const bool byVolume = parameters.springs.stiffness == SpringStiffness::Volume;
   // The Delaunay only where the springs or a volume term use it.
   std::vector<detail::Tetrahedron> interior;
-  if (byVolume || parameters.springs.volumeStiffness > 0 ||
-      parameters.springs.enclosedVolumeStiffness > 0)
+  const double multiple = volumeMultiple(parameters.springs);
+  if (byVolume || multiple > 0 || parameters.springs.enclosedVolumeStiffness > 0)
     interior = detail::interiorTetrahedra(input, muscle.restPositions, muscle.restSurface);
   if (byVolume && !detail::shareStiffnessByVolume(muscle.restPositions, interior, muscle.springs))
     warnings.push_back(source +
@@ -482,8 +486,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
                        "they keep k = κ/L0 (spring_stiffness \"length\")");
   // The local volume terms' tetrahedra: the interior ones, or a coarser set's.
   std::vector<detail::Tetrahedron> coarse;
-  const bool coarsened =
-      parameters.springs.volumeStiffness > 0 && parameters.springs.volumeCoarsening > 1;
+  const bool coarsened = multiple > 0 && parameters.springs.volumeCoarsening > 1;
   if (coarsened)
     coarse = detail::coarseTetrahedra(input, muscle.restPositions, particles, muscle.restSurface,
                                       parameters.springs.volumeCoarsening);
@@ -514,7 +517,7 @@ void finishMuscle(const MuscleInput& input, const std::vector<BoneShape>& bones,
   muscle.restVolume = meshVolume(muscle.restSurface);
   // The bulk modulus as a multiple of the network's Young's modulus E = Σk·L0² / 3V.
   const double youngs = muscle.restVolume != 0 ? network / (3 * std::abs(muscle.restVolume)) : 0;
-  muscle.volumeModulus = static_cast<btScalar>(parameters.springs.volumeStiffness * youngs);
+  muscle.volumeModulus = static_cast<btScalar>(multiple * youngs);
   detail::buildVolumeTetrahedra(muscle, coarsened ? coarse : interior);
   muscle.enclosedModulus =
       static_cast<btScalar>(parameters.springs.enclosedVolumeStiffness * youngs);
