@@ -1063,6 +1063,20 @@ TEST(Methods, EachMethodParsesWithItsOwnKnobsOnly) {
             (std::vector<std::string>{"fibremss", "self-reference", "btsoftbody", "fem"}));
 }
 
+TEST(Methods, EachRoleButComparedIsOneRunsAndTakesNoVariants) {
+  EXPECT_EQ(roleOf(kReferenceMethod), MethodRole::Reference);
+  EXPECT_EQ(findMethod(kReferenceMethod), nullptr) << "the reference is no method";
+  for (const MethodRole role : {MethodRole::SelfReference, MethodRole::Equilibrium})
+    EXPECT_EQ(std::ranges::count(methods(), role, &Method::role), 1);
+  for (const Method& method : methods()) {
+    const std::string name = method.name;
+    EXPECT_EQ(roleOf(name), method.role) << name;
+    EXPECT_EQ(roleOf(name + ":iterations=2"), MethodRole::Compared) << name;
+    if (method.role == MethodRole::Compared) continue;
+    EXPECT_TRUE(method.knobs.empty() && !method.sceneVariants) << name;
+  }
+}
+
 TEST(Methods, EachFrontHoldsItsMethodAndVariantsOfItsOwnKnobs) {
   const MuscleSystemDef defaults{};
   for (const Method& method : methods()) {

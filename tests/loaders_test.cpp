@@ -794,6 +794,24 @@ TEST(LoadersBadInput, SurfaceFromAFibreFileAndFibresFromASurfaceFile) {
   EXPECT_TRUE(contains(expectInputError([&] { loadFibres(objSurface); }, objSurface), "`l`"));
 }
 
+TEST(LoadersBadInput, AnUnknownFibreExtensionIsRefusedListingEveryFibreFormat) {
+  Scratch scratch;
+  const std::string path = scratch.write("fibres.xyz", "0 0 0\n1 0 0\n");
+  const std::string message = expectInputError([&] { loadFibres(path); }, path);
+  for (const char* named :
+       {"legacy VTK (.vtk, LINES)", "VTK XML (.vtp, Lines)", "OBJ (.obj, `l` polylines)", "'.xyz'"})
+    EXPECT_TRUE(contains(message, named)) << message;
+}
+
+TEST(LoadersFibres, VtkContentIsRecognisedUnderTheExtensionOfAFormatWithoutASignature) {
+  Scratch scratch;
+  std::ifstream in(fixture("fibre_segments.vtk"));
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const FibreSet read = loadFibres(scratch.write("fibres.obj", text), 0.01);
+  EXPECT_EQ(read.points, loadFibres(fixture("fibre_segments.vtk"), 0.01).points);
+  EXPECT_EQ(read.offsets, loadFibres(fixture("fibre_segments.vtk"), 0.01).offsets);
+}
+
 TEST(LoadersBadInput, BadFibres) {
   const std::string obj = fixture("single_point_fibre.obj");
   EXPECT_TRUE(contains(expectInputError([&] { loadFibres(obj); }, obj), "line 5"));

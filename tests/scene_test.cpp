@@ -15,6 +15,7 @@
 
 #include "fibremss/Error.h"
 #include "fibremss/SceneSystem.h"
+#include "fibremss/SolverSettings.h"
 
 namespace fs = std::filesystem;
 using fibremss::InputError;
@@ -124,6 +125,12 @@ TEST(Scene, DefaultsFilledIn) {
   EXPECT_EQ(complete["muscles"][0]["resolution"], muscleDefaults.resolution);
   EXPECT_EQ(complete["simulation"]["integrator"], "projective");
   EXPECT_EQ(complete["muscles"][0]["fibres"]["generator"]["inset"], 0.8);
+}
+
+TEST(Scene, EverySolverSettingIsAKeyTheSimulationOrModelSectionReads) {
+  const Json complete = Json::parse(loadScene("fusiform").json);
+  for (const std::string& key : fibremss::solverSettings())
+    EXPECT_TRUE(complete["simulation"].contains(key) || complete["model"].contains(key)) << key;
 }
 
 TEST(Scene, OverrideForms) {
@@ -582,7 +589,7 @@ TEST(SceneSystem, PutsTheBonesOfAWorldAtTheScenesFirstPose) {
 }
 
 TEST(SetShorthands, EveryKeyOfASettingsSectionIsSetWithoutItsSection) {
-  const nlohmann::json complete = nlohmann::json::parse(loadScene("fusiform").json);
+  const Json complete = Json::parse(loadScene("fusiform").json);
   for (const char* section : {"model", "simulation", "collision", "outputs"}) {
     ASSERT_TRUE(complete.contains(section)) << section;
     for (const auto& item : complete[section].items()) {

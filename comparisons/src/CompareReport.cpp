@@ -76,10 +76,10 @@ std::string referenceCoverageNote(const nlohmann::json& runs) {
   if (list.empty()) return "";
   std::string why;
   for (const auto& run : runs) {
-    if (text(run, "method") == "calculix" && run.value("failed_step", -1) >= 0) {
+    if (runRole(run) == MethodRole::Reference && run.value("failed_step", -1) >= 0) {
       why = " ccx did not solve the reference's pose " + cell(number(run, "failed_step")) +
             " (report.md, Reference); later poses have no reference.";
-    } else if (text(run, "method") == "calculix" && run.value("excluded_from", -1) >= 0) {
+    } else if (runRole(run) == MethodRole::Reference && run.value("excluded_from", -1) >= 0) {
       why = " The reference excludes the poses from " + cell(number(run, "excluded_from")) +
             " on (" + text(run, "exclusion") + "); they are no ccx failure and count in no RMS.";
     }
@@ -209,7 +209,7 @@ std::map<std::string, std::vector<FrontPoint>> frontLines(const nlohmann::json& 
   for (const auto& run : runs) {
     const double ms = number(run, "ms_per_step"), error = number(run, key);
     const std::string method = text(run, "method");
-    if (!(ms > 0) || !(error > 0) || method == "calculix") continue;
+    if (!(ms > 0) || !(error > 0) || roleOf(method) == MethodRole::Reference) continue;
     const auto [family, knob] = frontOf(method);
     const std::string rms(key);  // "rms_to_..._mm" has a pose count, other errors none
     const bool counted = rms.size() > 3 && rms.compare(rms.size() - 3, 3, "_mm") == 0;
@@ -598,7 +598,7 @@ std::vector<std::pair<double, const nlohmann::json*>> bestPerFamily(const nlohma
     const std::string method = text(run, "method");
     const bool whole = !run.value("nan", false) && !run.value("exploded", false) &&
                        !run.value("interrupted", false);
-    if (!std::isfinite(error) || method == "calculix" || !whole) continue;
+    if (!std::isfinite(error) || roleOf(method) == MethodRole::Reference || !whole) continue;
     const std::string family = method.substr(0, method.find(':'));
     auto [it, added] = best.try_emplace(family, error, &run);
     if (!added && error < it->second.first) it->second = {error, &run};
@@ -711,7 +711,7 @@ std::string equilibriumReport(const nlohmann::json& runs) {
   for (const auto& run : runs) {
     const double worst = number(run, "worst_pose_rms_to_equilibrium_mm");
     const std::string method = text(run, "method");
-    if (!std::isfinite(worst) || method == "equilibrium") continue;
+    if (!std::isfinite(worst) || roleOf(method) == MethodRole::Equilibrium) continue;
     const double ms = number(run, "ms_per_step");
     rows += "| " + method + " | " + cell(number(run, "threads")) + " | " +
             field(run, "iterations") + " | " + cell(ms) + " | " +
@@ -723,7 +723,7 @@ std::string equilibriumReport(const nlohmann::json& runs) {
   if (rows.empty()) return "";
   std::string unconverged;
   for (const auto& run : runs) {
-    if (text(run, "method") != "equilibrium") continue;
+    if (runRole(run) != MethodRole::Equilibrium) continue;
     unconverged = " Its residual (worst pose): " + residualCell(run) + ".";
     if (number(run, "unconverged_poses") > 0)
       unconverged += " **" + cell(number(run, "unconverged_poses")) +
@@ -1046,9 +1046,9 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
     if (run.value("exploded", false)) failed = "exploded";
     if (failed != "no") failed += " at step " + std::to_string(run.value("failed_step", -1));
     if (run.value("interrupted", false)) failed = "stopped (time budget)";
-    if (text(run, "method") == "calculix" && run.value("failed_step", -1) >= 0)
+    if (runRole(run) == MethodRole::Reference && run.value("failed_step", -1) >= 0)
       failed = "ccx did not solve pose " + std::to_string(run.value("failed_step", -1));
-    else if (text(run, "method") == "calculix" && run.value("excluded_from", -1) >= 0)
+    else if (runRole(run) == MethodRole::Reference && run.value("excluded_from", -1) >= 0)
       failed = "no (poses from " + std::to_string(run.value("excluded_from", -1)) +
                " excluded: no continuum equilibrium)";
     const std::string worst = text(run, "worst_muscle");

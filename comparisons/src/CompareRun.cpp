@@ -263,9 +263,10 @@ void fillRms(std::vector<RunMetrics>& runs) {
   const RunMetrics* self = nullptr;
   const RunMetrics* equilibrium = nullptr;
   for (const RunMetrics& run : runs) {
-    if (run.method == "calculix") reference = &run;
-    if (run.method == "self-reference") self = &run;
-    if (run.method == "equilibrium") equilibrium = &run;
+    const MethodRole role = roleOf(run.method);
+    if (role == MethodRole::Reference) reference = &run;
+    if (role == MethodRole::SelfReference) self = &run;
+    if (role == MethodRole::Equilibrium) equilibrium = &run;
   }
   for (RunMetrics& run : runs) {
     if (reference) {
@@ -354,8 +355,9 @@ void fillMuscles(RunMetrics& run, const RunMetrics& equilibrium,
 }  // namespace
 
 void fillMusclesToEquilibrium(std::vector<RunMetrics>& runs, std::span<const SurfaceBlock> blocks) {
-  const auto found = std::find_if(runs.begin(), runs.end(),
-                                  [](const RunMetrics& r) { return r.method == "equilibrium"; });
+  const auto found = std::find_if(runs.begin(), runs.end(), [](const RunMetrics& r) {
+    return roleOf(r.method) == MethodRole::Equilibrium;
+  });
   if (found == runs.end()) return;
   const RunMetrics& equilibrium = *found;  // its poseSurfaces are not written below
   for (RunMetrics& run : runs) fillMuscles(run, equilibrium, blocks);
@@ -393,8 +395,9 @@ void addMusclePose(const TriangleMesh& rest, std::span<const btVector3> run,
 }  // namespace
 
 void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& prepared) {
-  const auto found = std::find_if(runs.begin(), runs.end(),
-                                  [](const RunMetrics& r) { return r.method == "calculix"; });
+  const auto found = std::find_if(runs.begin(), runs.end(), [](const RunMetrics& r) {
+    return roleOf(r.method) == MethodRole::Reference;
+  });
   if (found == runs.end()) return;
   const RunMetrics reference = *found;
   for (RunMetrics& run : runs) {

@@ -165,7 +165,8 @@ std::vector<Method> makeMethods() {
                  .description = "- **self-reference**: FibreMSS with dt/8 (and min dt/8) and 8× "
                                 "the iterations, the same\n  simulated time per step.\n",
                  .solvesFibreModel = true,
-                 .iterationsPerPose = true});
+                 .iterationsPerPose = true,
+                 .role = MethodRole::SelfReference});
   all.push_back(
       {.name = "equilibrium",
        .help = "the projective solver until the force residual is below 1e-5 mm",
@@ -176,7 +177,8 @@ std::vector<Method> makeMethods() {
            "iterations, at most 3 000\n  iterations; the bones move over as many iterations as "
            "in the scene): the model's own converged\n  state, the floor of its error. "
            "`rms_to_equilibrium_mm` of every run is measured against it.\n",
-       .solvesFibreModel = true});
+       .solvesFibreModel = true,
+       .role = MethodRole::Equilibrium});
   all.push_back(
       {.name = "btsoftbody",
        .byDefault = true,
@@ -283,6 +285,12 @@ const Method* findMethod(const std::string& name) {
 
 const Method* methodOf(const std::string& runName) {
   return findMethod(runName.substr(0, runName.find(':')));
+}
+
+MethodRole roleOf(const std::string& runName) {
+  if (runName == kReferenceMethod) return MethodRole::Reference;
+  const Method* method = findMethod(runName);
+  return method ? method->role : MethodRole::Compared;
 }
 
 std::vector<std::string> defaultMethods() {

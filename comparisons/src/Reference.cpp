@@ -10,6 +10,7 @@
 #include "fibremss/Analytic.h"
 #include "fibremss/Compare.h"
 #include "fibremss/Measures.h"
+#include "fibremss/Methods.h"
 
 namespace fibremss {
 namespace {
@@ -156,7 +157,7 @@ RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepa
                             const CalculixDefinition& definition) {
   RunMetrics metrics;
   metrics.scene = scene.name;
-  metrics.method = "calculix";
+  metrics.method = kReferenceMethod;
   metrics.integrator = std::string("static Neo-Hookean equilibrium, ccx *STATIC NLGEOM, ") +
                        toString(definition.element);
   metrics.threads = 1;
@@ -333,7 +334,7 @@ double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b)
 double methodSpreadMm(const std::vector<RunMetrics>& runs) {
   std::map<std::string, double> best;
   for (const RunMetrics& run : runs) {
-    if (std::isnan(run.rmsToReferenceMm) || run.method == "calculix") continue;
+    if (std::isnan(run.rmsToReferenceMm) || roleOf(run.method) == MethodRole::Reference) continue;
     const std::string family = run.method.substr(0, run.method.find_first_of(":@"));
     auto [it, added] = best.try_emplace(family, run.rmsToReferenceMm);
     if (!added) it->second = std::min(it->second, run.rmsToReferenceMm);

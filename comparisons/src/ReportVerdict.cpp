@@ -10,6 +10,7 @@
 
 #include "SummaryFields.h"
 #include "fibremss/Methods.h"
+#include "fibremss/SolverSettings.h"
 
 namespace fibremss {
 namespace {
@@ -99,7 +100,7 @@ std::vector<Placed> placedRuns(const nlohmann::json& runs, const std::vector<Mea
     for (const Measure& m : measures) p.errors.push_back(m.error(run));
     const bool measured =
         std::all_of(p.errors.begin(), p.errors.end(), [](double e) { return std::isfinite(e); });
-    if (measured && whole(run) && text(run, "method") != "calculix") placed.push_back(p);
+    if (measured && whole(run) && runRole(run) != MethodRole::Reference) placed.push_back(p);
   }
   for (Placed& p : placed)
     for (size_t m = 0; m < measures.size(); ++m) {
@@ -187,21 +188,9 @@ std::string measureNames(const std::vector<Measure>& measures) {
   return out;
 }
 
-/// The FibreMSS settings a `fibremss:` variant may change and still solve the scene's own model
-/// (the equilibrium run's): how the iterations run and stop, not what they solve.
-bool solverSetting(const std::string& key) {
-  static const std::string kKeys =
-      " integrator time_step dt min_dt stop iterations epsilon tolerance budget_ms "
-      "deviation_epsilon motion_fraction threads damping damping_scale diagonal_jacobian "
-      "solver_tolerance solver_iterations constraint_iterations projective_rho "
-      "projective_contact_weight ";
-  const std::string bare = key.rfind("simulation.", 0) == 0 ? key.substr(11) : key;
-  return kKeys.find(" " + bare + " ") != std::string::npos;
-}
-
-const nlohmann::json* runNamed(const nlohmann::json& runs, const std::string& method) {
+const nlohmann::json* runWithRole(const nlohmann::json& runs, MethodRole role) {
   for (const auto& run : runs)
-    if (text(run, "method") == method) return &run;
+    if (runRole(run) == role) return &run;
   return nullptr;
 }
 
@@ -253,6 +242,12 @@ std::string decompositionRow(const nlohmann::json& run, const Basis& basis) {
          termCell(number(run, "rms_to_finer_resolution_mm"),
                   fibre ? "(no run at twice its resolution)" : "(its resolution is not swept)") +
          " |\n";
+}
+
+/// A `fibremss:` variant's key ("iterations", "simulation.iterations") is a solver setting.
+bool solverSetting(const std::string& key) {
+  const std::string bare = key.rfind("simulation.", 0) == 0 ? key.substr(11) : key;
+  return std::ranges::find(solverSettings(), bare) != solverSettings().end();
 }
 
 }  // namespace
@@ -332,11 +327,11 @@ std::string errorDecomposition(const nlohmann::json& summary) {
   const nlohmann::json& runs = summary["runs"];
   const bool reference =
       summary.contains("reference") && !summary["reference"].value("missing", false);
-  const Basis basis{runNamed(runs, "equilibrium"), runNamed(runs, "self-reference"),
-                    reference ? "" : "no reference"};
+  const Basis basis{runWithRole(runs, MethodRole::Equilibrium),
+                    runWithRole(runs, MethodRole::SelfReference), reference ? "" : "no reference"};
   std::string rows;
   for (const auto& run : runs)
-    if (text(run, "method") != "calculix") rows += decompositionRow(run, basis);
+    if (runRole(run) != MethodRole::Reference) rows += decompositionRow(run, basis);
   if (rows.empty()) return "";
   return "\n## Where each run's error comes from\n\nPer run [mm]: its surface's RMS distance to "
          "the CalculiX reference (the whole error); its model's converged state's (the "
@@ -370,7 +365,7 @@ std::string exactRanking(const nlohmann::json& runs) {
     out << ++rank << ". " << text(*p.run, "method") << ": " << errorsText(measures, p.errors)
         << " (worst place " << p.worst << ") at " << msText(*p.run) << "\n";
   for (const auto& run : runs)
-    if (text(run, "method") == "calculix") {
+    if (runRole(run) == MethodRole::Reference) {
       std::vector<double> errors;
       for (const Measure& m : measures) errors.push_back(m.error(run));
       out << "\nThe CalculiX reference itself: " << errorsText(measures, errors)

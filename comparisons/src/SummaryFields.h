@@ -5,6 +5,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "fibremss/Methods.h"
+
 namespace fibremss {
 
 /// The number at `key` of `object`, or NaN.
@@ -17,6 +19,11 @@ inline double number(const nlohmann::json& object, const char* key) {
 inline std::string text(const nlohmann::json& object, const char* key) {
   const auto it = object.find(key);
   return it != object.end() && it->is_string() ? it->get<std::string>() : "";
+}
+
+/// What a summary's run is to the others (roleOf its "method").
+inline MethodRole runRole(const nlohmann::json& run) {
+  return roleOf(text(run, "method"));
 }
 
 }  // namespace fibremss

@@ -1,14 +1,9 @@
-// loadSurface() and loadFibres(): pick the reader by extension and content, then check.
+// loadSurface() and loadFibres(): the registered format's reader (MeshFormats.cpp), then checks.
 #include "fibremss/MeshIO.h"
 
 #include <algorithm>
-#include <cctype>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
-#include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <limits>
 #include <utility>
 
@@ -101,60 +96,34 @@ FibreSet chainPolylines(const std::string& path, const std::vector<btVector3>& p
   return fibres;
 }
 
+SurfaceRead vtkSurface(const std::string& path, VtkPolyData&& data) {
+  if (data.triangles.empty()) {
+    throw InputError(path, "",
+                     "expected a surface (polygons or triangle strips), found no triangles" +
+                         std::string(data.lines.size() > 0 ? " (only lines: fibres?)" : ""));
+  }
+  return {{std::move(data.points), std::move(data.triangles)}, std::move(data.warnings)};
+}
+
+FibreSet vtkFibres(const std::string& path, const VtkPolyData& data) {
+  if (data.lines.size() == 0) {
+    throw InputError(path, "", "expected fibres as lines cells (LINES, <Lines>), found none");
+  }
+  return chainPolylines(path, data.points, data.lines);
+}
+
 }  // namespace meshio
-
-namespace {
-
-std::string lowerExtension(const std::string& path) {
-  std::string extension = std::filesystem::path(path).extension().string();
-  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return extension;
-}
-
-enum class VtkKind { None, Legacy, Xml };
-
-/// Legacy VTK (.vtk) or VTK XML PolyData (.vtp) by extension, or by content for files named
-/// otherwise.
-VtkKind vtkKind(const std::string& path, const std::string& extension) {
-  if (extension == ".vtk") return VtkKind::Legacy;
-  if (extension == ".vtp") return VtkKind::Xml;
-  std::ifstream file(path, std::ios::binary);
-  char head[512] = {};
-  file.read(head, sizeof head);
-  const std::string_view bytes(head, static_cast<size_t>(file.gcount()));
-  if (meshio::looksLikeLegacyVtk(bytes)) return VtkKind::Legacy;
-  return meshio::looksLikeVtkXml(bytes) ? VtkKind::Xml : VtkKind::None;
-}
-
-meshio::VtkPolyData readVtk(VtkKind kind, const std::string& path, const std::string& bytes,
-                            double scale) {
-  return kind == VtkKind::Legacy ? meshio::readLegacyVtk(path, bytes, scale)
-                                 : meshio::readVtkXmlPolyData(path, bytes, scale);
-}
-
-}  // namespace
 
 TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* report,
                          const SurfaceRepair& repair) {
   meshio::requireScale(path, scale);
-  TriangleMesh mesh;
+  requireInputFile(path, "a mesh");  // before the format is chosen by content: a FIFO would block
+  const meshio::MeshFormat* format = meshio::meshFormatFor(path, meshio::MeshUse::Surface);
+  if (!format) throw InputError(path, "", "expected a surface in " + meshio::surfaceFormatList());
+  meshio::SurfaceRead read = format->readSurface(path, scale);
+  TriangleMesh mesh = std::move(read.mesh);
   std::vector<std::string> readerWarnings;
-  requireInputFile(path, "a mesh");  // before vtkKind opens it: a FIFO would block
-  if (const VtkKind kind = vtkKind(path, lowerExtension(path)); kind != VtkKind::None) {
-    const std::string bytes = readInputFile(path, "a mesh");
-    meshio::VtkPolyData data = readVtk(kind, path, bytes, scale);
-    if (data.triangles.empty()) {
-      throw InputError(path, "",
-                       "expected a surface (polygons or triangle strips), found no triangles" +
-                           std::string(data.lines.size() > 0 ? " (only lines: fibres?)" : ""));
-    }
-    mesh.vertices = std::move(data.points);
-    mesh.triangles = std::move(data.triangles);
-    for (const std::string& warning : data.warnings)
-      readerWarnings.push_back(path + ": " + warning);
-  } else {
-    mesh = meshio::readAssimpSurface(path, scale);
-  }
+  for (const std::string& warning : read.warnings) readerWarnings.push_back(path + ": " + warning);
   MeshReport repaired;
   meshio::repairSurface(mesh, repair, repaired);
   MeshReport checked = checkSurface(mesh, path);
@@ -183,26 +152,14 @@ TriangleMesh loadSurface(const std::string& path, double scale, MeshReport* repo
 
 FibreSet loadFibres(const std::string& path, double scale) {
   meshio::requireScale(path, scale);
-  const std::string extension = lowerExtension(path);
-  const std::string bytes = readInputFile(path, "a mesh");
-  FibreSet fibres;
-  if (const VtkKind kind = vtkKind(path, extension); kind != VtkKind::None) {
-    const meshio::VtkPolyData data = readVtk(kind, path, bytes, scale);
-    if (data.lines.size() == 0) {
-      throw InputError(path, "", "expected fibres as lines cells (LINES, <Lines>), found none");
-    }
-    fibres = meshio::chainPolylines(path, data.points, data.lines);
-  } else if (extension == ".obj") {
-    const meshio::ObjPolylines data = meshio::readObjPolylines(path, bytes, scale);
-    fibres = meshio::chainPolylines(path, data.points, data.lines);
-  } else {
-    throw InputError(
-        path, "",
-        "expected fibres in legacy VTK (.vtk, LINES), VTK XML (.vtp, Lines) or OBJ (.obj, "
-        "`l` polylines), "
-        "found the extension " +
-            meshio::quoted(extension));
+  requireInputFile(path, "a mesh");
+  const meshio::MeshFormat* format = meshio::meshFormatFor(path, meshio::MeshUse::Fibres);
+  if (!format) {
+    throw InputError(path, "",
+                     "expected fibres in " + meshio::fibreFormatList() + ", found the extension " +
+                         meshio::quoted(meshio::lowerExtension(path)));
   }
+  const FibreSet fibres = format->readFibres(path, scale);
   meshio::validateFibres(fibres, path);
   return fibres;
 }

@@ -122,9 +122,8 @@ TriangleMesh readAssimpSurface(const std::string& path, double scale) {
   }
   if (!scene) {
     throw InputError(path, "",
-                     std::string("expected a surface mesh (legacy VTK, OBJ, STL, PLY, glTF, FBX, "
-                                 "...); assimp says: ") +
-                         importer.GetErrorString());
+                     "expected a surface mesh (" + surfaceFormatList() +
+                         "); assimp says: " + importer.GetErrorString());
   }
   TriangleMesh mesh;
   for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
@@ -162,5 +161,18 @@ TriangleMesh readAssimpSurface(const std::string& path, double scale) {
   }
   return mesh;
 }
+
+namespace {
+
+const MeshFormatRegistration registration({
+    .name = "OBJ, STL, PLY, glTF, FBX, ...",
+    .readSurface =
+        [](const std::string& path, double scale) {
+          return SurfaceRead{readAssimpSurface(path, scale), {}};
+        },
+    .fallback = true,
+});
+
+}  // namespace
 
 }  // namespace fibremss::meshio

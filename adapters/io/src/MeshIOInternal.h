@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/InputFiles.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/VtkFiles.h"
 
@@ -67,6 +68,82 @@ ObjPolylines readObjPolylines(const std::string& path, std::string_view bytes, d
 
 /// A surface through assimp: all meshes merged, triangulated, identical vertices joined.
 TriangleMesh readAssimpSurface(const std::string& path, double scale);
+
+/// A surface as a format's reader gives it.
+struct SurfaceRead {
+  TriangleMesh mesh;                  ///< points [m] and triangles as read
+  std::vector<std::string> warnings;  ///< what the reader skipped, each naming no file
+};
+
+/// One mesh file format loadSurface() and loadFibres() read. Each reader's source registers its
+/// formats with a namespace-scope MeshFormatRegistration as the library loads; the dispatch and
+/// the messages listing the accepted formats read the registrations, so that adding a format is
+/// its reader's source.
+struct MeshFormat {
+  const char* name = "";                     ///< its name in messages ("legacy VTK")
+  std::vector<std::string> extensions = {};  ///< the extensions naming it, lower case (".vtk")
+  const char* fibreElements = "";            ///< what holds its fibres, for messages ("LINES")
+  /// True when a file's first kSignatureBytes bytes are of this format; null: it is known by
+  /// its extension alone.
+  bool (*recognises)(std::string_view head) = nullptr;
+  /// Reads a surface in metres; null: the format holds no surfaces.
+  SurfaceRead (*readSurface)(const std::string& path, double scale) = nullptr;
+  /// Reads fibres in metres, chained (chainPolylines) but not validated; null: none.
+  FibreSet (*readFibres)(const std::string& path, double scale) = nullptr;
+  /// Reads the surfaces no other format claims (assimp's); at most one format is.
+  bool fallback = false;
+};
+
+/// The bytes MeshFormat::recognises is given: the file's first ones.
+constexpr size_t kSignatureBytes = 512;
+
+/// Adds `format` to the formats meshFormatFor() chooses from. An extension registered twice, or
+/// a second fallback, stops the program as it loads.
+class MeshFormatRegistration {
+ public:
+  explicit MeshFormatRegistration(MeshFormat format);
+};
+
+/// What a mesh file is read for.
+enum class MeshUse { Surface, Fibres };
+
+/// The format that reads `path` for `use`: a format with a signature named by the extension,
+/// else one whose signature the file's first bytes match, else one named by the extension, else
+/// the fallback; null for none. Throws InputError when the file cannot be opened.
+const MeshFormat* meshFormatFor(const std::string& path, MeshUse use);
+
+/// The formats fibres are read from, for a message: "legacy VTK (.vtk, LINES), ... or OBJ (...)".
+std::string fibreFormatList();
+
+/// The formats surfaces are read from, for a message: "legacy VTK, VTK XML, OBJ, STL, ...".
+std::string surfaceFormatList();
+
+/// The file's extension in lower case, with its dot ("" for none).
+std::string lowerExtension(const std::string& path);
+
+/// A VTK reader's surface: its triangles (InputError naming `path` for none) and warnings.
+SurfaceRead vtkSurface(const std::string& path, VtkPolyData&& data);
+
+/// A VTK reader's fibres: its lines cells chained (InputError naming `path` for none).
+FibreSet vtkFibres(const std::string& path, const VtkPolyData& data);
+
+/// The entry of a VTK format whose reader `read` parses a file's bytes.
+template <VtkPolyData (*read)(const std::string& path, std::string_view bytes, double scale)>
+MeshFormat vtkFormat(const char* name, const char* extension, const char* fibreElements,
+                     bool (*recognises)(std::string_view head)) {
+  return {.name = name,
+          .extensions = {extension},
+          .fibreElements = fibreElements,
+          .recognises = recognises,
+          .readSurface =
+              [](const std::string& path, double scale) {
+                return vtkSurface(path, read(path, readInputFile(path, "a mesh"), scale));
+              },
+          .readFibres =
+              [](const std::string& path, double scale) {
+                return vtkFibres(path, read(path, readInputFile(path, "a mesh"), scale));
+              }};
+}
 
 /// Fibres from polylines: a polyline that starts at the point where the previous one ended
 /// continues it (files that store fibres as two-point segments). Throws InputError for empty

@@ -7,6 +7,7 @@
 
 #include "MeshIOInternal.h"
 #include "fibremss/Error.h"
+#include "fibremss/InputFiles.h"
 
 namespace fibremss::meshio {
 namespace {
@@ -152,5 +153,20 @@ ObjPolylines readObjPolylines(const std::string& path, std::string_view bytes, d
   resolveReferences(read, path, result);
   return result;
 }
+
+namespace {
+
+const MeshFormatRegistration registration({
+    .name = "OBJ",
+    .extensions = {".obj"},
+    .fibreElements = "`l` polylines",
+    .readFibres =
+        [](const std::string& path, double scale) {
+          const ObjPolylines data = readObjPolylines(path, readInputFile(path, "a mesh"), scale);
+          return chainPolylines(path, data.points, data.lines);
+        },
+});
+
+}  // namespace
 
 }  // namespace fibremss::meshio

@@ -525,4 +525,7 @@ VtkPolyData readLegacyVtk(const std::string& path, std::string_view bytes, doubl
   return PolyDataReader(in, scale).read();
 }
 
+const MeshFormatRegistration registration(vtkFormat<readLegacyVtk>("legacy VTK", ".vtk", "LINES",
+                                                                   looksLikeLegacyVtk));
+
 }  // namespace fibremss::meshio

@@ -601,4 +601,7 @@ VtkPolyData readVtkXmlPolyData(const std::string& path, std::string_view bytes, 
   return XmlPolyDataReader(path, bytes, scale).read();
 }
 
+const MeshFormatRegistration registration(vtkFormat<readVtkXmlPolyData>("VTK XML", ".vtp", "Lines",
+                                                                        looksLikeVtkXml));
+
 }  // namespace fibremss::meshio

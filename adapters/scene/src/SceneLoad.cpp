@@ -18,6 +18,7 @@
 #include "fibremss/Geometry.h"
 #include "fibremss/MeshIO.h"
 #include "fibremss/Scene.h"
+#include "fibremss/SolverSettings.h"
 #include "fibremss/Suggest.h"
 
 namespace fibremss {
@@ -463,6 +464,30 @@ SpringParameters readModel(Fields& model) {
   return springs;
 }
 
+/// The keys that set how a step's iterations run and stop, not the model they solve
+/// (solverSettings): the "simulation" section's and the "model" section's damping, which slows the
+/// muscles' motion but not where they settle.
+const std::vector<std::string> kSolverSettings = {"integrator",
+                                                  "time_step",
+                                                  "dt",
+                                                  "min_dt",
+                                                  "stop",
+                                                  "iterations",
+                                                  "epsilon",
+                                                  "tolerance",
+                                                  "budget_ms",
+                                                  "deviation_epsilon",
+                                                  "motion_fraction",
+                                                  "threads",
+                                                  "damping",
+                                                  "damping_scale",
+                                                  "diagonal_jacobian",
+                                                  "solver_tolerance",
+                                                  "solver_iterations",
+                                                  "constraint_iterations",
+                                                  "projective_rho",
+                                                  "projective_contact_weight"};
+
 /// The "simulation" section; returns its max_step_deg (the largest bone turn of one step).
 double readSimulation(Fields& simulation, double scale, MuscleSystemDef& def) {
   const MuscleSystemDef defaults;
@@ -750,6 +775,10 @@ btTransform LoadedScene::bonePose(size_t bone, int pose) const {
 
 btTransform LoadedScene::bladePose(size_t blade, int pose) const {
   return blade < blades.size() ? poseOf(blades[blade].motion, pose) : btTransform::getIdentity();
+}
+
+const std::vector<std::string>& solverSettings() {
+  return kSolverSettings;
 }
 
 std::string exportBuiltInScene(const std::string& name) {

@@ -112,7 +112,8 @@ MuscleSystemDef equilibriumSettings(const MuscleSystemDef& simulation,
                                     int cap = kEquilibriumIterations);
 
 /// Fills rmsToReferenceMm / rmsToSelfReferenceMm / rmsToEquilibriumMm of every run from the
-/// "calculix", "self-reference" and "equilibrium" runs among them (each gets 0 against itself).
+/// runs among them whose roles (roleOf, Methods.h) are Reference, SelfReference and Equilibrium
+/// (each gets 0 against itself).
 void fillRms(std::vector<RunMetrics>& runs);
 
 /// One muscle's share of a run's concatenated pose surfaces (RunMetrics::poseSurfaces).
@@ -130,9 +131,9 @@ std::vector<SurfaceBlock> surfaceBlocks(const PreparedScene& prepared);
 /// without a shared pose, or whose surfaces the blocks do not split, keeps none.
 void fillMusclesToEquilibrium(std::vector<RunMetrics>& runs, std::span<const SurfaceBlock> blocks);
 
-/// Against the "calculix" run among `runs`: each run's vertex RMS per pose, shape RMS
-/// (symmetric nearest-surface distance, per muscle surface) and worst muscle (largest vertex
-/// RMS over the shared poses). Runs without a shared pose keep NaN.
+/// Against the reference's run (kReferenceMethod) among `runs`: each run's vertex RMS per pose,
+/// shape RMS (symmetric nearest-surface distance, per muscle surface) and worst muscle (largest
+/// vertex RMS over the shared poses). Runs without a shared pose keep NaN.
 void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& prepared);
 
 /// Symmetric nearest-surface RMS of two surfaces with the same triangles [mm]: the distance of

@@ -29,6 +29,17 @@ struct KnobBase {
   const CompareOptions& options;  ///< the baselines' definitions
 };
 
+/// What a method's runs are to the other runs of a comparison.
+enum class MethodRole {
+  Compared,       ///< measured against the runs of the roles below
+  Reference,      ///< the reference every run's accuracy is measured against
+  SelfReference,  ///< FibreMSS converged in time step and iterations: its own convergence's basis
+  Equilibrium,    ///< FibreMSS's model solved to equilibrium: the time-to-accuracy figure's basis
+};
+
+/// The method name of the reference's run (CalculiX's static equilibria; no entry of methods()).
+inline constexpr const char* kReferenceMethod = "calculix";
+
 /// One comparison method.
 struct Method {
   const char* name = "";   ///< its name, the family of its variants ("name:key=value")
@@ -55,6 +66,9 @@ struct Method {
   bool solvesFibreModel = false;
   /// The report states its runs' iterations per pose (their iterations vary by pose).
   bool iterationsPerPose = false;
+  /// What its runs are to the others (a method with a role other than Compared takes no
+  /// variants).
+  MethodRole role = MethodRole::Compared;
 };
 
 /// Every method, in the order the report describes them.
@@ -65,6 +79,10 @@ const Method* findMethod(const std::string& name);
 
 /// The method a run's name ("fem", "fibremss:iterations=20") is of, or nullptr.
 const Method* methodOf(const std::string& runName);
+
+/// What the run named `runName` is to the others: Reference for kReferenceMethod, its method's
+/// role for a method's own name, Compared for any other (a variant, "fibremss:iterations=20").
+MethodRole roleOf(const std::string& runName);
 
 /// The --methods help: every method, its variants and the default ones.
 std::string methodsHelp();
