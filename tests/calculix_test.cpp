@@ -849,13 +849,18 @@ TEST(ReferenceCache, KeyChangesWithEachInputAndOnlyThen) {
 namespace fibremss {
 namespace {
 
-/// fusiform with a coarse surface (8 slices × 12 sections): a reference of a few hundred
+/// fusiform with a coarse surface (8 slices × 12 sections) and coarse bars (12 × 12, not
+/// 48 × 32: ccx's rigid obstacles, most of its nodes otherwise): a reference of a few hundred
 /// tetrahedra, solved in seconds.
 std::string coarseFusiform(const std::filesystem::path& dir) {
   nlohmann::json scene = nlohmann::json::parse(exportBuiltInScene("fusiform"));
   nlohmann::json& generator = scene["muscles"][0]["surface"]["generator"];
   generator["slices"] = 8;
   generator["sections"] = 12;
+  for (nlohmann::json& bone : scene["bones"]) {
+    bone["mesh"]["generator"]["slices"] = 12;
+    bone["mesh"]["generator"]["sections"] = 12;
+  }
   const std::filesystem::path path = dir / "coarse-fusiform.json";
   std::ofstream(path) << scene.dump(2);
   return path.string();
@@ -1120,21 +1125,46 @@ TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {
   EXPECT_LT(top, 0.03f - 0.0009f) << "pushed in by the plate (1 mm)";
 }
 
-TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
+/// The coarse fusiform's reference at resolution 8 with its gates, solved once for the suite
+/// by `fibremss reference` into a cache its tests share (one process: tests/CMakeLists.txt).
+class CoarseReference : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TemporaryDirectory("coarse_reference_test");
+    scene_ = new std::string(coarseFusiform(dir_->path()));
+  }
+  static void TearDownTestSuite() {
+    delete scene_;
+    delete dir_;
+  }
+  /// `fibremss COMMAND` of the scene at resolution 8 with the suite's cache, into dir/`out`
+  /// (its stderr with its output).
+  static testing::ProcessResult run(const std::string& command, const std::string& out) {
+    return testing::runProcess(std::string(FIBREMSS_CLI) + " " + command + " " + *scene_ +
+                               " --set resolution=8 --cache " + (dir() / "cache").string() +
+                               " --out " + (dir() / out).string() + " 2>&1");
+  }
+  /// The first `fibremss reference` into dir/out: it solved the reference and its gates.
+  static const testing::ProcessResult& solved() {
+    static const testing::ProcessResult first = run("reference", "out");
+    return first;
+  }
+  /// The suite's own directory.
+  static const std::filesystem::path& dir() { return dir_->path(); }
+  static TemporaryDirectory* dir_;
+  static std::string* scene_;
+};
+TemporaryDirectory* CoarseReference::dir_ = nullptr;
+std::string* CoarseReference::scene_ = nullptr;
+
+TEST_F(CoarseReference, TheReferenceCommandSolvesCachesAndGatesIt) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("reference_command_test");
-  const std::string scene = coarseFusiform(dir.path());
-  const std::string cache = (dir.path() / "cache").string();
-  const std::string command = std::string(FIBREMSS_CLI) + " reference " + scene +
-                              " --set resolution=8 --cache " + cache + " --out " +
-                              (dir.path() / "out").string() + " 2>&1";
-  const auto first = testing::runProcess(command);
+  const testing::ProcessResult& first = solved();
   ASSERT_EQ(first.exitCode, 0) << first.output;
   EXPECT_NE(first.output.find("poses solved: 3/3\n"), std::string::npos) << first.output;
   EXPECT_NE(first.output.find("gate: return to rest"), std::string::npos) << first.output;
-  const nlohmann::json reference =
-      nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  const nlohmann::json reference = nlohmann::json::parse(readText(dir() / "out/reference.json"));
   EXPECT_FALSE(reference["from_cache"].get<bool>());
   const nlohmann::json& gates = reference["gates"];
   EXPECT_LT(gates["return_mm"].get<double>(), kReturnGateMm) << "no contact: back at rest";
@@ -1149,14 +1179,52 @@ TEST(ReferenceCommand, SolvesCachesAndGatesACoarseScene) {
   // The coarse mesh's nodes near the bars are the same within 2, 4 and 6 mm: 0 is possible.
   EXPECT_GE(gates["attachment_low_mm"].get<double>(), 0);
   EXPECT_GE(gates["attachment_high_mm"].get<double>(), 0);
-  EXPECT_TRUE(std::filesystem::exists(dir.path() / "out/inp/muscle0.inp"));
+  EXPECT_TRUE(std::filesystem::exists(dir() / "out/inp/muscle0.inp"));
   EXPECT_GT(reference["prescribed_nodes"].get<int>(), 0);
 
-  const auto second = testing::runProcess(command);
+  const auto second = run("reference", "out");
   ASSERT_EQ(second.exitCode, 0) << second.output;
   EXPECT_NE(second.output.find("(from the cache)"), std::string::npos) << second.output;
-  const nlohmann::json again = nlohmann::json::parse(readText(dir.path() / "out/reference.json"));
+  const nlohmann::json again = nlohmann::json::parse(readText(dir() / "out/reference.json"));
   EXPECT_EQ(again["gates"], gates) << "the cache gives the same reference";
+}
+
+TEST_F(CoarseReference, CompareReportsItsGatesAndRmsToIt) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  ASSERT_EQ(solved().exitCode, 0) << solved().output;
+  const auto result = run("compare --methods fibremss,btsoftbody --no-fronts", "compare");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  EXPECT_NE(result.output.find("reference gate: return to rest"), std::string::npos)
+      << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readText(dir() / "compare/summary.json"));
+  ASSERT_EQ(summary["runs"].size(), 3u);
+  EXPECT_EQ(summary["runs"][0]["method"], "calculix");
+  for (int r = 1; r < 3; ++r) {
+    const nlohmann::json& run = summary["runs"][r];
+    SCOPED_TRACE(run["method"].get<std::string>());
+    EXPECT_GT(run["rms_to_reference_mm"].get<double>(), 0);
+    EXPECT_GT(run["shape_rms_to_reference_mm"].get<double>(), 0);
+    EXPECT_LE(run["shape_rms_to_reference_mm"].get<double>(),
+              run["rms_to_reference_mm"].get<double>() + 1e-9)
+        << "the nearest surface point is never farther than the corresponding vertex";
+    EXPECT_EQ(run["worst_muscle"], "fusiform");
+    EXPECT_EQ(run["rms_to_reference_per_pose_mm"].size(), 3u);
+  }
+  const nlohmann::json& gates = summary["reference"]["gates"];
+  EXPECT_TRUE(gates["spread_mm"].is_number());
+  EXPECT_TRUE(gates["increments_mm"].is_number());
+  EXPECT_NE(result.output.find("reference gate: increments halved"), std::string::npos)
+      << result.output;
+  const std::string report = readText(dir() / "compare/report.md");
+  EXPECT_NE(report.find("## Reference"), std::string::npos);
+  EXPECT_NE(report.find("- increments halved (x0.5 of the default 2.5 deg / 1 mm): moves it"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find(gates["passed"].get<bool>() ? "**Ranking**" : "**No ranking**"),
+            std::string::npos)
+      << report;
+  EXPECT_EQ(report.find("nan |"), std::string::npos) << "tables print — for what does not apply";
 }
 
 TEST(ReferenceCommand, ListsItsCellsAndRefusesACellItDoesNotHave) {
@@ -1429,48 +1497,6 @@ TEST(ReferenceCommand, ASolveThatFailsLeavesNoWorkInTheCacheAndNoResult) {
   for (const auto& entry : std::filesystem::directory_iterator(cache))
     EXPECT_EQ(entry.path().filename().string().find(".solving-"), std::string::npos)
         << entry.path() << " left in the cache";
-}
-
-TEST(ReferenceCommand, CompareReportsTheReferenceGatesAndRmsToIt) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("compare_reference_test");
-  const std::string scene = coarseFusiform(dir.path());
-  const auto result = testing::runProcess(
-      std::string(FIBREMSS_CLI) + " compare " + scene +
-      " --set resolution=8 --methods fibremss,btsoftbody --no-fronts --cache " +
-      (dir.path() / "cache").string() + " --out " + (dir.path() / "out").string() + " 2>&1");
-  ASSERT_EQ(result.exitCode, 0) << result.output;
-  EXPECT_NE(result.output.find("reference gate: return to rest"), std::string::npos)
-      << result.output;
-  const nlohmann::json summary = nlohmann::json::parse(readText(dir.path() / "out/summary.json"));
-  ASSERT_EQ(summary["runs"].size(), 3u);
-  EXPECT_EQ(summary["runs"][0]["method"], "calculix");
-  for (int r = 1; r < 3; ++r) {
-    const nlohmann::json& run = summary["runs"][r];
-    SCOPED_TRACE(run["method"].get<std::string>());
-    EXPECT_GT(run["rms_to_reference_mm"].get<double>(), 0);
-    EXPECT_GT(run["shape_rms_to_reference_mm"].get<double>(), 0);
-    EXPECT_LE(run["shape_rms_to_reference_mm"].get<double>(),
-              run["rms_to_reference_mm"].get<double>() + 1e-9)
-        << "the nearest surface point is never farther than the corresponding vertex";
-    EXPECT_EQ(run["worst_muscle"], "fusiform");
-    EXPECT_EQ(run["rms_to_reference_per_pose_mm"].size(), 3u);
-  }
-  const nlohmann::json& gates = summary["reference"]["gates"];
-  EXPECT_TRUE(gates["spread_mm"].is_number());
-  EXPECT_TRUE(gates["increments_mm"].is_number());
-  EXPECT_NE(result.output.find("reference gate: increments halved"), std::string::npos)
-      << result.output;
-  const std::string report = readText(dir.path() / "out/report.md");
-  EXPECT_NE(report.find("## Reference"), std::string::npos);
-  EXPECT_NE(report.find("- increments halved (x0.5 of the default 2.5 deg / 1 mm): moves it"),
-            std::string::npos)
-      << report;
-  EXPECT_NE(report.find(gates["passed"].get<bool>() ? "**Ranking**" : "**No ranking**"),
-            std::string::npos)
-      << report;
-  EXPECT_EQ(report.find("nan |"), std::string::npos) << "tables print — for what does not apply";
 }
 
 TEST(ShippedReference, IsCompressedFloatsAndReadsBackWithinTheirPrecision) {
