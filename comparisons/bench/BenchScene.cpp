@@ -87,7 +87,10 @@ void BenchScene::run(Part part) {
       impl.previousDt = dt_;
       break;
     case Part::TreeRefit:
-      for (uint32_t slot : impl.muscles.order) refitTree(*impl.muscles.states[slot]);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        refitTree(*state.settings, state, state);
+      }
       break;
     case Part::MuscleMusclePairs:
       impl.collideMusclePairs();
@@ -96,14 +99,19 @@ void BenchScene::run(Part part) {
       for (ThreadScratch& thread : impl.scratch) thread.contacts.clear();
       break;
     case Part::MuscleBonePairs:
-      for (uint32_t muscle : impl.muscles.order)
+      for (uint32_t muscle : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[muscle];
         for (uint32_t bone : impl.bones.order)
-          collideMuscleBone(*impl.muscles.states[muscle], *impl.bones.states[bone],
+          collideMuscleBone(*state.settings, state, state, state, *impl.bones.states[bone],
                             impl.scratch[0].stack, impl.contacts);
+      }
       break;
     case Part::Response:
-      for (uint32_t slot : impl.muscles.order)
-        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities(), def.slidingContacts);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        applyPushes(*state.settings, state, state, integrator.usesVelocities(),
+                    def.slidingContacts);
+      }
       break;
   }
 }

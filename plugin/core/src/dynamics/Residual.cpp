@@ -94,7 +94,7 @@ void muscleForceResidual(MuscleState& muscle, const btVector3& gravity) {
   springForces(settings, muscle.positions, r);
   addLocalVolumeForces(settings, muscle.positions, r);
   addEnclosedVolumeForces(settings, muscle.positions, r);
-  addExternalForces(muscle, gravity, r);
+  addExternalForces(*muscle.settings, muscle, muscle, gravity, r);
   for (uint32_t i : settings.fixedParticles) r[i].setZero();
 }
 

@@ -166,7 +166,7 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
       springForces(settings, stage.positions, stage.forces);
       addLocalVolumeForces(settings, stage.positions, stage.forces);
       addEnclosedVolumeForces(settings, stage.positions, stage.forces);
-      addExternalForces(muscle, def.gravity, stage.forces);
+      addExternalForces(*muscle.settings, muscle, muscle, def.gravity, stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();
       const btScalar offset = last ? 0 : offsets_[s] * dt;

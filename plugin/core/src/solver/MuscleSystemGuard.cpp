@@ -316,11 +316,12 @@ void MuscleSystem::Impl::guardedStep() {
     state.pinched = state.pinchedInStep = 0;
     if (definition.muscleBone && state.bonesMoving)
       for (int round = 0; round < kFrozenRounds; ++round) {
-        refitTree(state);
+        refitTree(*state.settings, state, state);
         for (uint32_t slot : bones.order)
-          collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
+          collideMuscleBone(*state.settings, state, state, state, *bones.states[slot], thread.stack,
+                            thread.contacts);
         recordPushes(*state.settings, state, state);
-        applyPushes(state, velocities, definition.slidingContacts);
+        applyPushes(*state.settings, state, state, velocities, definition.slidingContacts);
       }
     thread.contacts.clear();
     deform(state);

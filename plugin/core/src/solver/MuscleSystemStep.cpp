@@ -327,7 +327,10 @@ void MuscleSystem::Impl::collideMusclePairs() {
       pairTasks.size(),
       [&](size_t k, unsigned thread) {
         MusclePairTask& pair = pairTasks[k];
-        collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
+        MuscleState& first = *muscles.states[pair.a];
+        const MuscleState& second = *muscles.states[pair.b];
+        collideMuscles(first.colliding(), second.colliding(),
+                       candidateList(first.muscleLists, pair.b), scratch[thread].stack,
                        scratch[thread].contacts, pair.contacts);
       },
       "muscle pairs");
@@ -338,8 +341,11 @@ void MuscleSystem::Impl::pushMusclePairs(MuscleState& state, uint32_t slot,
                                          TreeTraversalStack& stack) {
   for (uint32_t k : musclePairs[slot]) {
     const MusclePairTask& pair = pairTasks[k];
-    pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot, stack,
-                       pair.contacts);
+    const bool onFirst = pair.a == slot;
+    if (pushMuscleContacts(muscles.states[pair.a]->colliding(), muscles.states[pair.b]->colliding(),
+                           onFirst, state, stack, pair.contacts) &&
+        onFirst)
+      ++state.candidateOverflows;
   }
 }
 
@@ -364,8 +370,8 @@ void MuscleSystem::Impl::collide() {
     const Clock::time_point boneStart = Clock::now();
     if (definition.muscleBone)
       for (uint32_t boneSlot : bones.order)
-        collideMuscleBone(state, *bones.states[boneSlot], scratch[thread].stack,
-                          scratch[thread].contacts);
+        collideMuscleBone(*state.settings, state, state, state, *bones.states[boneSlot],
+                          scratch[thread].stack, scratch[thread].contacts);
     result.pushesMs =
         millisecondsSince(pushesStart) - (result.boneMs = millisecondsSince(boneStart));
   });
@@ -389,8 +395,9 @@ void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   const TimeIntegrator& integrator = integratorFor(definition.integrator);
   const bool holds = integrator.holdsContacts(definition);
   if (record || holds) recordPushes(*state.settings, state, state);
-  applyPushes(state, integrator.usesVelocities(), definition.slidingContacts);
-  if (holds) leaveContactSlop(state, kContactSlop);
+  applyPushes(*state.settings, state, state, integrator.usesVelocities(),
+              definition.slidingContacts);
+  if (holds) leaveContactSlop(*state.settings, state, state, state, kContactSlop);
 }
 
 void MuscleSystem::Impl::applyResponse() {
@@ -456,7 +463,7 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
   result.forces.exploded = result.forces.overstretched > 0;
   if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
     result.volumeMs = 0;
-  addExternalForces(state, definition.gravity, state.forces);
+  addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
   if (stepSettings.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
   result.forcesMs += millisecondsSince(start);
 }
@@ -523,7 +530,7 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
                               : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
-    if (refit) refitTree(state);
+    if (refit) refitTree(*state.settings, state, state);
     result.refitMs = millisecondsSince(refitStart);
     result.integrateMs = millisecondsSince(integrateStart) - result.refitMs;
   });
@@ -671,7 +678,7 @@ void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
       placeAtBones(state);
-      rebuildTree(state);
+      rebuildTree(*state.settings, state, state);
     });
 }
 

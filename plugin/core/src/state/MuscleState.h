@@ -141,6 +141,14 @@ struct TreeState {
   size_t candidateOverflows = 0;  ///< listings or pair contact records that overflowed, unsummed
 };
 
+/// A muscle as the stages that test its spheres against others read it (CollisionPairs.h,
+/// BodyContacts.h): its settings, positions and sphere tree (MuscleState::colliding).
+struct CollidingMuscle {
+  const MuscleSettings& settings;  ///< radii [m], fixed and boundary particles
+  const ParticleState& particles;  ///< positions [m], mean radius [m]
+  const TreeState& trees;          ///< sphere tree, snapshot [m] and reach [m]
+};
+
 /// A muscle's forces pass in chunks (ForceChunks.h): one task per chunk; the task that finishes
 /// the muscle's last chunk adds the chunks' buffers to `forces` in chunk order.
 struct ChunkState {
@@ -227,6 +235,9 @@ struct MuscleState : ParticleState,
   bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
   TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
+
+  /// The muscle as the sphere tests read it.
+  CollidingMuscle colliding() const { return {*settings, *this, *this}; }
 };
 
 }  // namespace fibremss
