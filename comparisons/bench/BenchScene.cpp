@@ -66,7 +66,10 @@ void BenchScene::run(Part part) {
   const TimeIntegrator& integrator = integratorFor(def.integrator);
   switch (part) {
     case Part::SpringForces:
-      for (uint32_t slot : impl.muscles.order) springForces(*impl.muscles.states[slot]);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        springForces(*state.settings, state);
+      }
       break;
     case Part::VolumeForces:
       for (uint32_t slot : impl.muscles.order) {
@@ -76,9 +79,12 @@ void BenchScene::run(Part part) {
       break;
     case Part::AdaptiveTimeStep:
       dt_ = step.timeStep;
-      for (uint32_t slot : impl.muscles.order)
+      for (uint32_t slot : impl.muscles.order) {
+        const MuscleState& state = *impl.muscles.states[slot];
         if (step.adaptiveTimeStep)
-          dt_ = std::min(dt_, adaptiveTimeStep(*impl.muscles.states[slot], impl.previousDt));
+          dt_ = std::min(dt_, adaptiveTimeStep(*state.settings, state, state.centredDamping(),
+                                               impl.previousDt));
+      }
       dt_ = std::max(dt_, step.minTimeStep);
       break;
     case Part::Integration:

@@ -299,7 +299,8 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     const bool held = holdsContacts(def) && !def.pairReactions;
     for (size_t k = 0; k < free.size(); ++k) {
       const btVector3& force = muscle.forces[free[k]];
-      w.forces[w.factor.row(k)] = held ? withoutInto(force, contactNormal(muscle, free[k])) : force;
+      w.forces[w.factor.row(k)] =
+          held ? withoutInto(force, contactNormal(muscle, muscle, free[k])) : force;
     }
     if (def.projectiveHistory > 0) return quasiNewtonStep(muscle, def, w);
     w.solution = w.forces;

@@ -286,7 +286,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->settings = settings;
   if (!impl_->blades.empty() && s.enclosedModulus > 0)
     throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
-  prepareTearing(*state, !impl_->blades.empty());
+  prepareTearing(state->settings, state->tear, !impl_->blades.empty());
   impl_->resolveBones(*state);
   impl_->placeAtBones(*state);
   ++impl_->musclesAdded;
@@ -353,7 +353,10 @@ BladeHandle MuscleSystem::addBlade(const btVector3& from, const btVector3& to,
   for (uint32_t slot : impl_->muscles.order)
     if (impl_->muscles.states[slot]->settings->enclosedModulus > 0)
       throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
-  for (uint32_t slot : impl_->muscles.order) prepareTearing(*impl_->muscles.states[slot], true);
+  for (uint32_t slot : impl_->muscles.order) {
+    MuscleState& state = *impl_->muscles.states[slot];
+    prepareTearing(state.settings, state.tear, true);
+  }
   impl_->blades.push_back({from, to, transform, transform, transform});
   return {uint32_t(impl_->blades.size() - 1)};
 }

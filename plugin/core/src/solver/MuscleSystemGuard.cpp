@@ -93,7 +93,7 @@ MuscleHealth checkMuscle(MuscleState& muscle) {
   const MuscleSettings& settings = *muscle.settings;
   // Written so that a NaN extent counts as spread too.
   health.spread = muscle.tear.pieces > 1
-                      ? piecesSpread(muscle, kTornSpread)
+                      ? piecesSpread(settings, muscle, muscle.tear, kTornSpread)
                       : !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
   if (settings.springs.empty()) return health;
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
@@ -255,7 +255,7 @@ void MuscleSystem::Impl::breakMuscles() {
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) continue;
-    bool changed = breakStretched(state);
+    bool changed = breakStretched(state, state.tear);
     for (const BladeState& blade : blades) changed = cutBySweep(state, blade) || changed;
     if (changed && state.prepared) integratorFor(state.preparedFor).springsChanged(state);
   }

@@ -464,7 +464,9 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
   if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
     result.volumeMs = 0;
   addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
-  if (stepSettings.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+  if (stepSettings.adaptiveTimeStep)
+    result.safeTimeStep =
+        adaptiveTimeStep(*state.settings, state, state.centredDamping(), previousDt);
   result.forcesMs += millisecondsSince(start);
 }
 
@@ -604,7 +606,8 @@ ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
   // Every muscle's forces: a contact pair's reaction depends on both muscles'.
   const std::vector<uint32_t>& all = muscles.order;
   const auto task = [&](size_t k, unsigned) {
-    muscleForceResidual(*muscles.states[all[k]], definition.gravity);
+    MuscleState& state = *muscles.states[all[k]];
+    muscleForceResidual(*state.settings, state, state, state, definition.gravity);
   };
   if (pool) {
     pool->run(all.size(), task, "residual");
@@ -613,7 +616,10 @@ ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
   }
   addContactReactions(&MuscleState::residual, all);
   ResidualSums total;
-  for (uint32_t slot : slots) total.add(residuals[slot] = residualSums(*muscles.states[slot]));
+  for (uint32_t slot : slots) {
+    const MuscleState& state = *muscles.states[slot];
+    total.add(residuals[slot] = residualSums(state, state, state));
+  }
   return total;
 }
 

@@ -236,6 +236,8 @@ struct MuscleState : ParticleState,
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
   TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
 
+  /// Whether its steps take Verlet's centred damping (prepared for Verlet; adaptiveTimeStep).
+  bool centredDamping() const { return preparedFor == Integrator::Verlet; }
   /// The muscle as the sphere tests read it.
   CollidingMuscle colliding() const { return {*settings, *this, *this}; }
 };
