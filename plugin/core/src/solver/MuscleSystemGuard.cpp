@@ -257,7 +257,9 @@ void MuscleSystem::Impl::breakMuscles() {
     if (state.frozen) continue;
     bool changed = breakStretched(state, state.tear);
     for (const BladeState& blade : blades) changed = cutBySweep(state, blade) || changed;
-    if (changed && state.prepared) integratorFor(state.preparedFor).springsChanged(state);
+    if (changed && state.prepared)
+      integratorFor(state.preparedFor)
+          .springsChanged(*state.settings, state, state.workspace.get());
   }
   for (BladeState& blade : blades) {
     blade.before = blade.last;

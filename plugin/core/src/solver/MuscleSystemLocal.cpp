@@ -118,7 +118,8 @@ void MuscleSystem::Impl::localIteration(MuscleState& state, const TimeIntegrator
   addLocalVolumeForces(settings, state.positions, state.forces, state.regionFans);
   addEnclosedVolumeForces(settings, state.positions, state.forces);
   addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
-  const IntegrationResult integration = integrator.advance(state, definition, dt, lastDt);
+  const IntegrationResult integration =
+      integrator.advance(state.integrated(), definition, dt, lastDt);
   const int passes = result.forces.nearLimit > 0 ? kIterationStrainPasses : 0;
   result.displacement = limitStrain(settings, state, state, passes) > 0 ? freeDisplacement(state)
                                                                         : integration.displacement;

@@ -522,7 +522,8 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
   forEachMuscle("integrate and refit", [&](MuscleState& state, uint32_t slot, unsigned) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
-    const IntegrationResult integration = integrator.advance(state, definition, dt, lastDt);
+    const IntegrationResult integration =
+        integrator.advance(state.integrated(), definition, dt, lastDt);
     // The projection runs where the forces found a spring near the limit. The iteration's
     // displacement is the projection's end's when it moved particles: at a limited equilibrium
     // the two cancel, as the stop rules expect.
