@@ -2,7 +2,8 @@
 """Checks that the plugin's layers and the core's folders form one-way chains
 (docs/architecture.md): a file of plugin/<layer>/ includes no public header of a layer above it
 (tasks, then core, then fibres), and a file in plugin/core/src/ includes only headers of its own
-folder or of a folder lower in the chain."""
+folder or of a folder lower in the chain; and that a stage below the solver takes the parts of a
+muscle's state it uses, not the whole MuscleState."""
 import os, re, sys
 
 root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -42,6 +43,21 @@ for folder in sorted(os.listdir(src)):
             other = target.split("/")[0]
             if other in rank and other != folder and rank[other] >= rank[folder]:
                 print(f"plugin/core/src/{folder}/{name}: includes {target}, not lower in the chain")
+                bad += 1
+# The stages below the solver take the parts of a muscle's state they use (MuscleState's bases,
+# the CollidingMuscle and IntegratedMuscle views), never the whole MuscleState; only the state's
+# own folder and the integrators' preparation (TimeIntegrator::prepare, ensurePrepared, which set
+# MuscleState's workspace) name it.
+whole = re.compile(r"\bMuscleState\s*[&*]")
+namesWhole = {"state", "integrators/Integrators.h", "integrators/Integrators.cpp"}
+for folder in sorted(os.listdir(src)):
+    if rank.get(folder, len(chain)) >= rank["solver"] or folder in namesWhole: continue
+    for name in sorted(os.listdir(os.path.join(src, folder))):
+        if f"{folder}/{name}" in namesWhole: continue
+        text = open(os.path.join(src, folder, name), encoding="utf-8").read()
+        for number, line in enumerate(text.splitlines(), 1):
+            if whole.search(line):
+                print(f"plugin/core/src/{folder}/{name}:{number}: takes the whole MuscleState")
                 bad += 1
 print(f"{count} includes in plugin/, {bad} against the chains")
 sys.exit(1 if bad else 0)

@@ -988,6 +988,28 @@ TEST(ErrorDecomposition, SplitsEachRunsErrorIntoModelSolverAndDiscretisation) {
             std::string::npos);
 }
 
+TEST(ErrorDecomposition, TakesAVariantOfTheModelSectionsDampingForASolverSetting) {
+  nlohmann::json summary = pinchLikeSummary();
+  nlohmann::json equilibrium = madeRun("equilibrium", 900, 0.39);
+  equilibrium["rms_to_equilibrium_mm"] = 0;
+  summary["runs"].push_back(equilibrium);
+  for (const char* method : {"fibremss:model.damping=5", "fibremss:simulation.iterations=70",
+                             "fibremss:model.density=2000"}) {
+    nlohmann::json run = madeRun(method, 30, 1.5);
+    run["rms_to_equilibrium_mm"] = 1.25;
+    summary["runs"].push_back(run);
+  }
+  const std::string report = reportMarkdown(summary, {});
+  EXPECT_NE(report.find("| fibremss:model.damping=5 | 30 | 1.5 | 0.39 | 1.25 |"), std::string::npos)
+      << "damping slows the muscles, not where they settle: " << report;
+  EXPECT_NE(report.find("| fibremss:simulation.iterations=70 | 30 | 1.5 | 0.39 | 1.25 |"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("| fibremss:model.density=2000 | 30 | 1.5 | — (another model"),
+            std::string::npos)
+      << report;
+}
+
 TEST(ErrorDecomposition, MeasuresEachResolutionAgainstTheRunAtTwiceIt) {
   std::vector<RunMetrics> runs(3);
   const std::vector<btVector3> surface = {{0, 0, 0}, {0.01f, 0, 0}};

@@ -66,7 +66,10 @@ void BenchScene::run(Part part) {
   const TimeIntegrator& integrator = integratorFor(def.integrator);
   switch (part) {
     case Part::SpringForces:
-      for (uint32_t slot : impl.muscles.order) springForces(*impl.muscles.states[slot]);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        springForces(*state.settings, state);
+      }
       break;
     case Part::VolumeForces:
       for (uint32_t slot : impl.muscles.order) {
@@ -76,18 +79,24 @@ void BenchScene::run(Part part) {
       break;
     case Part::AdaptiveTimeStep:
       dt_ = step.timeStep;
-      for (uint32_t slot : impl.muscles.order)
+      for (uint32_t slot : impl.muscles.order) {
+        const MuscleState& state = *impl.muscles.states[slot];
         if (step.adaptiveTimeStep)
-          dt_ = std::min(dt_, adaptiveTimeStep(*impl.muscles.states[slot], impl.previousDt));
+          dt_ = std::min(dt_, adaptiveTimeStep(*state.settings, state, state.centredDamping(),
+                                               impl.previousDt));
+      }
       dt_ = std::max(dt_, step.minTimeStep);
       break;
     case Part::Integration:
       for (uint32_t slot : impl.muscles.order)
-        integrator.advance(*impl.muscles.states[slot], def, dt_, impl.previousDt);
+        integrator.advance(impl.muscles.states[slot]->integrated(), def, dt_, impl.previousDt);
       impl.previousDt = dt_;
       break;
     case Part::TreeRefit:
-      for (uint32_t slot : impl.muscles.order) refitTree(*impl.muscles.states[slot]);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        refitTree(*state.settings, state, state);
+      }
       break;
     case Part::MuscleMusclePairs:
       impl.collideMusclePairs();
@@ -96,14 +105,19 @@ void BenchScene::run(Part part) {
       for (ThreadScratch& thread : impl.scratch) thread.contacts.clear();
       break;
     case Part::MuscleBonePairs:
-      for (uint32_t muscle : impl.muscles.order)
+      for (uint32_t muscle : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[muscle];
         for (uint32_t bone : impl.bones.order)
-          collideMuscleBone(*impl.muscles.states[muscle], *impl.bones.states[bone],
+          collideMuscleBone(*state.settings, state, state, state, *impl.bones.states[bone],
                             impl.scratch[0].stack, impl.contacts);
+      }
       break;
     case Part::Response:
-      for (uint32_t slot : impl.muscles.order)
-        applyPushes(*impl.muscles.states[slot], integrator.usesVelocities(), def.slidingContacts);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        applyPushes(*state.settings, state, state, integrator.usesVelocities(),
+                    def.slidingContacts);
+      }
       break;
   }
 }

@@ -244,9 +244,13 @@ std::string decompositionRow(const nlohmann::json& run, const Basis& basis) {
          " |\n";
 }
 
-/// A `fibremss:` variant's key ("iterations", "simulation.iterations") is a solver setting.
+/// A `fibremss:` variant's key ("iterations", "simulation.iterations", "model.damping") is a
+/// solver setting: solverSettings() names the keys of the "simulation" and "model" sections bare.
 bool solverSetting(const std::string& key) {
-  const std::string bare = key.rfind("simulation.", 0) == 0 ? key.substr(11) : key;
+  const size_t dot = key.find('.');
+  const std::string section = dot == std::string::npos ? "" : key.substr(0, dot);
+  const std::string bare =
+      section == "simulation" || section == "model" ? key.substr(dot + 1) : key;
   return std::ranges::find(solverSettings(), bare) != solverSettings().end();
 }
 

@@ -169,7 +169,9 @@ bool snapshotAt(const MuscleState& muscle, const std::vector<btVector3>& positio
 
 /// One iteration's collision as the step runs it: trees refitted, pairs, response.
 void collideOnce(MuscleSystemAccess::Impl& impl) {
-  impl.forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+  impl.forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) {
+    refitTree(*state.settings, state, state);
+  });
   impl.collide();
   impl.applyResponse();
 }
@@ -317,15 +319,18 @@ TEST(CandidateLists, ContactsBeyondTheirRecordsAreFoundAgainInOrder) {
       MuscleState& b = *impl.muscles.states[order[y]];
       std::vector<MuscleContact> room(a.muscleLists[b.slot].pairs.size() + 1);
       MuscleContacts full{room.data(), room.size()}, none{room.data(), 0};
-      collideMuscles(a, b, stack, log, full);
+      CandidateList* list = candidateList(a.muscleLists, b.slot);
+      collideMuscles(a.colliding(), b.colliding(), list, stack, log, full);
       ASSERT_LE(full.count, full.capacity);
-      for (bool onFirst : {true, false}) pushMuscleContacts(a, b, onFirst, stack, full);
+      for (bool onFirst : {true, false})
+        pushMuscleContacts(a.colliding(), b.colliding(), onFirst, onFirst ? a : b, stack, full);
       const std::vector<unsigned char> recorded = takePushes(a, b);
-      collideMuscles(a, b, stack, log, none);
+      collideMuscles(a.colliding(), b.colliding(), list, stack, log, none);
       ASSERT_EQ(none.count, full.count);
-      const size_t overflows = a.candidateOverflows;
-      for (bool onFirst : {true, false}) pushMuscleContacts(a, b, onFirst, stack, none);
-      EXPECT_EQ(a.candidateOverflows, overflows + (none.count > 0 ? 1 : 0));
+      for (bool onFirst : {true, false})
+        EXPECT_EQ(
+            pushMuscleContacts(a.colliding(), b.colliding(), onFirst, onFirst ? a : b, stack, none),
+            none.count > 0);
       EXPECT_TRUE(takePushes(a, b) == recorded) << x << " with " << y;
       pairsInContact += full.count > 0 ? 1 : 0;
     }

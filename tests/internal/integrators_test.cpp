@@ -92,8 +92,8 @@ class Bench {
   void place(uint32_t i, const btVector3& x) { state.positions[i] = state.previous[i] = x; }
   /// One iteration of fixed dt; returns the integrator's result.
   IntegrationResult step(btScalar dt) {
-    springForces(state);
-    return integrator_.advance(state, parameters, dt, dt);
+    springForces(*state.settings, state);
+    return integrator_.advance(state.integrated(), parameters, dt, dt);
   }
   /// Kinetic plus spring energy; the velocity is v or (x − x_prev)/dt.
   double energy(btScalar dt) const {
@@ -410,7 +410,8 @@ TEST(VerletStep, EveryParticleTakesTheFormulasStepBitForBit) {
       displacement += step.length();
     }
     const IntegrationResult result =
-        integratorFor(Integrator::Verlet).advance(muscle, MuscleSystemDef{}, dt, previousDt);
+        integratorFor(Integrator::Verlet)
+            .advance(muscle.integrated(), MuscleSystemDef{}, dt, previousDt);
     EXPECT_TRUE(result.finite);
     // The vector path sums in four partial sums: equal up to the rounding of the sums.
     EXPECT_NEAR(result.displacement, displacement, 1e-14 * displacement) << count << " free";
@@ -472,7 +473,7 @@ std::vector<SpringKernel> availableKernels() {
 /// times over, so that every lane of the AVX2 and SSE2 paths and the scalar tail compute it).
 /// Returns how many bounds were finite.
 size_t expectReferenceTimeSteps(MuscleState& muscle, btScalar previousDt) {
-  EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt)),
+  EXPECT_EQ(bits(adaptiveTimeStep(*muscle.settings, muscle, muscle.centredDamping(), previousDt)),
             bits(referenceTimeStep(muscle, previousDt)));
   const std::vector<uint32_t> free = muscle.freeParticles;
   const btScalar stable = muscle.stableTimeStep;
@@ -482,7 +483,9 @@ size_t expectReferenceTimeSteps(MuscleState& muscle, btScalar previousDt) {
     muscle.freeParticles.assign(8 + k % 8, free[k]);
     const btScalar own = referenceTimeStep(muscle, previousDt);
     for (SpringKernel kernel : availableKernels())
-      EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt, kernel)), bits(own))
+      EXPECT_EQ(bits(adaptiveTimeStep(*muscle.settings, muscle, muscle.centredDamping(), previousDt,
+                                      kernel)),
+                bits(own))
           << "particle " << free[k] << " kernel " << springKernelName(kernel);
     finite += std::isfinite(own);
   }
@@ -531,7 +534,8 @@ TEST(AdaptiveStep, EveryParticlesBoundIsTheReferencesBitForBit) {
     for (size_t count = 0; count < 18; ++count) {
       muscle.freeParticles.resize(count);
       for (SpringKernel kernel : availableKernels())
-        EXPECT_EQ(bits(adaptiveTimeStep(muscle, previousDt, kernel)),
+        EXPECT_EQ(bits(adaptiveTimeStep(*muscle.settings, muscle, muscle.centredDamping(),
+                                        previousDt, kernel)),
                   bits(referenceTimeStep(muscle, previousDt)))
             << count << " particles, kernel " << springKernelName(kernel);
     }

@@ -32,10 +32,11 @@ struct SurfaceRepair {
   int fillHoles = 0;  ///< close loops of at most this many open edges by a fan of triangles
 };
 
-/// Loads a triangle surface: legacy VTK (.vtk, ASCII or BINARY POLYDATA) by FibreMSS's own
-/// reader, any other format through assimp. Coordinates are scaled by `scale` (file units to
-/// metres). Throws InputError (file, element, expectation) for unreadable input or fatal
-/// defects (NaN/inf, out-of-range indices, no triangles); `report` gets the rest. Triangles
+/// Loads a triangle surface in a format of the mesh format registry (src/MeshFormats.cpp: each
+/// reader registers its formats, by extension and signature; assimp takes what none claims; an
+/// unreadable file's message lists the registered formats). Coordinates are scaled by `scale`
+/// (file units to metres). Throws InputError (file, element, expectation) for unreadable input or
+/// fatal defects (NaN/inf, out-of-range indices, no triangles); `report` gets the rest. Triangles
 /// turned over in the file are turned back so that each connected part is consistently
 /// oriented and closed parts face outward (counted in report->reorientedTriangles). `repair`
 /// welds vertices (then drops triangles left degenerate or repeated) and closes small holes
@@ -43,8 +44,10 @@ struct SurfaceRepair {
 TriangleMesh loadSurface(const std::string& path, double scale = 1.0, MeshReport* report = nullptr,
                          const SurfaceRepair& repair = {});
 
-/// Loads fibre polylines: legacy VTK LINES (two-point segments are chained into polylines)
-/// or OBJ `l` elements. Throws InputError for unreadable input, empty or single-point fibres.
+/// Loads fibre polylines from a format of the mesh format registry that holds them
+/// (src/MeshFormats.cpp; the message for a file none reads lists them, with the elements each
+/// holds its fibres in); two-point segments are chained into polylines. Throws InputError for
+/// unreadable input, empty or single-point fibres.
 FibreSet loadFibres(const std::string& path, double scale = 1.0);
 
 /// Writes fibre polylines as ASCII legacy VTK POLYDATA LINES (one polyline cell per fibre),

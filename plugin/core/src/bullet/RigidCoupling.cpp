@@ -130,8 +130,8 @@ btScalar overlapAt(const MuscleSystemAccess::Impl& impl, const btCollisionObject
   for (uint32_t slot : impl.muscles.order) {
     const MuscleState& muscle = *impl.muscles.states[slot];
     if (!muscle.frozen)
-      deepest = std::max(
-          deepest, deepestOverlap(muscle, *body.getCollisionShape(), transform, impl.queryStack));
+      deepest = std::max(deepest, deepestOverlap(muscle.colliding(), *body.getCollisionShape(),
+                                                 transform, impl.queryStack));
   }
   return deepest;
 }

@@ -20,17 +20,17 @@ constexpr btScalar kOpposed = btScalar(-0.5);
 /// least this share of their lengths (an edge or a rounded end of a bone next to it).
 constexpr btScalar kWayOut = btScalar(0.05);
 
-void addPush(MuscleState& muscle, uint32_t i, const btVector3& push) {
-  muscle.pushes[i] += push;
-  ++muscle.pushCounts[i];
+void addPush(ContactState& contact, uint32_t i, const btVector3& push) {
+  contact.pushes[i] += push;
+  ++contact.pushCounts[i];
 }
 
 /// addPush of bone `slot`, also summed per bone for the pinch test of applyPushes.
-void addBonePush(MuscleState& muscle, uint32_t i, uint32_t slot, const btVector3& push) {
-  addPush(muscle, i, push);
-  int32_t& first = muscle.pinchBones[i];
+void addBonePush(ContactState& contact, uint32_t i, uint32_t slot, const btVector3& push) {
+  addPush(contact, i, push);
+  int32_t& first = contact.pinchBones[i];
   if (first < 0) first = static_cast<int32_t>(slot);
-  (first == static_cast<int32_t>(slot) ? muscle.firstBonePushes[i] : muscle.otherBonePushes[i]) +=
+  (first == static_cast<int32_t>(slot) ? contact.firstBonePushes[i] : contact.otherBonePushes[i]) +=
       push;
 }
 
@@ -55,6 +55,15 @@ bool pinchPush(const btVector3& a, const btVector3& b, btVector3& push) {
   return true;
 }
 
+/// What the exact sphere tests read of one muscle, its positions looked up once per pass.
+struct PairSpheres {
+  const MuscleSettings& settings;  ///< radii [m], fixed particles
+  const btVector3* positions;      ///< the muscle's positions [m]
+
+  PairSpheres(const MuscleSettings& muscle, const ParticleState& particles)
+      : settings(muscle), positions(particles.positions.data()) {}
+};
+
 /// Walks from `local` (bone frame) along the remembered unit `side` until the field clears
 /// `radius` with its direction on that side; returns the point reached.
 btVector3 backOut(const BoneDistanceField& field, btVector3 local, const btVector3& side,
@@ -69,45 +78,45 @@ btVector3 backOut(const BoneDistanceField& field, btVector3 local, const btVecto
 
 /// Push (bone frame) of penetration recovery for particle i at `local` with field sample `s`:
 /// non-zero only when its side flipped; updates the particle's side memory.
-btVector3 recoveryPush(MuscleState& muscle, uint32_t i, int32_t bone,
+btVector3 recoveryPush(ContactState& contact, uint32_t i, int32_t bone,
                        const BoneDistanceField& field, const btVector3& local,
                        const BoneDistanceField::Sample& s, btScalar radius) {
-  int32_t& owner = muscle.sideBones[i];
-  btVector3& side = muscle.boneSides[i];
-  uint32_t& stamp = muscle.sideStamps[i];
+  int32_t& owner = contact.sideBones[i];
+  btVector3& side = contact.boneSides[i];
+  uint32_t& stamp = contact.sideStamps[i];
   // Remembered only while the particle stays near the bone from one iteration to the next:
   // away from it (unseen, stale), a particle may go round the bone legitimately.
   const btScalar band = 2 * radius + 2 * field.cell();
-  if (owner >= 0 && stamp + 1 < muscle.contactRound) owner = -1;
+  if (owner >= 0 && stamp + 1 < contact.contactRound) owner = -1;
   if (owner == bone) {
     if (s.distance > band) {
       owner = -1;
       return btVector3(0, 0, 0);
     }
-    stamp = muscle.contactRound;
+    stamp = contact.contactRound;
     if (s.gradient.dot(side) < kFlippedSide) return backOut(field, local, side, radius) - local;
     if (!s.gradient.isZero()) side = s.gradient;
   } else if (owner < 0 && s.distance <= band && !s.gradient.isZero()) {
     owner = bone;
     side = s.gradient;
-    stamp = muscle.contactRound;
+    stamp = contact.contactRound;
   }
   return btVector3(0, 0, 0);
 }
 
 /// collideMuscleBone against the bone's distance field.
-void collideWithField(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
-                      ContactLog& log) {
-  const SphereTree& tree = muscle.tree;
+void collideWithField(const PairSpheres& muscle, const SphereTree& tree, ContactState& contact,
+                      const BoneState& bone, TreeTraversalStack& stack, ContactLog& log) {
   if (tree.empty()) return;
-  const MuscleSettings& settings = *muscle.settings;
+  const MuscleSettings& settings = muscle.settings;
+  const btVector3* positions = muscle.positions;
   const BoneDistanceField& field = *bone.field;
   btVector3 lower, upper;
   btTransformAabb(field.lower(), field.upper(), 0, bone.current, lower, upper);
   const btDbvtVolume box = btDbvtVolume::FromMM(lower, upper);
   const btTransform toBone = bone.current.inverse();
   const btMatrix3x3& toWorld = bone.current.getBasis();
-  const bool recovery = !muscle.sideBones.empty();
+  const bool recovery = !contact.sideBones.empty();
   stack.clear();
   stack.push_back({0, -1});
   while (!stack.empty()) {
@@ -130,15 +139,15 @@ void collideWithField(MuscleState& muscle, const BoneState& bone, TreeTraversalS
     if (settings.isFixed(i)) continue;
     ++log.candidates;
     const btScalar radius = settings.radii[i];
-    const btVector3 local = toBone * muscle.positions[i];
+    const btVector3 local = toBone * positions[i];
     const BoneDistanceField::Sample s = field.sample(local);
-    btVector3 push =
-        recovery ? recoveryPush(muscle, i, static_cast<int32_t>(bone.slot), field, local, s, radius)
-                 : btVector3(0, 0, 0);
+    btVector3 push = recovery ? recoveryPush(contact, i, static_cast<int32_t>(bone.slot), field,
+                                             local, s, radius)
+                              : btVector3(0, 0, 0);
     if (push.isZero() && s.distance < radius) push = s.gradient * (radius - s.distance);
     if (push.isZero()) continue;
-    addBonePush(muscle, i, bone.slot, toWorld * push);
-    log.add(muscle.positions[i], muscle.positions[i] - toWorld * (s.gradient * s.distance));
+    addBonePush(contact, i, bone.slot, toWorld * push);
+    log.add(positions[i], positions[i] - toWorld * (s.gradient * s.distance));
   }
 }
 
@@ -152,10 +161,10 @@ bool mayMeet(const btVector3& a, const btVector3& b, btScalar reach) {
 
 /// Exact test of particle i of `a` against particle j of `b` (not both fixed): false when apart,
 /// else their contact.
-bool musclePairContact(const MuscleState& a, const MuscleState& b, uint32_t i, uint32_t j,
+bool musclePairContact(const PairSpheres& a, const PairSpheres& b, uint32_t i, uint32_t j,
                        MuscleContact& contact) {
-  const MuscleSettings& sa = *a.settings;
-  const MuscleSettings& sb = *b.settings;
+  const MuscleSettings& sa = a.settings;
+  const MuscleSettings& sb = b.settings;
   btVector3 direction;
   btScalar depth;
   if (!sphereOverlap(a.positions[i], sa.radii[i], b.positions[j], sb.radii[j], direction, depth))
@@ -205,28 +214,28 @@ bool meshPush(const MeshDistance& mesh, const btVector3& p, btScalar radius, btS
 }
 
 /// BoneCollision::Mesh and SharpMesh: pushes free particle i, which a bone sphere found, until its
-/// sphere just touches the bone's true mesh; once per bone and iteration (MuscleState::meshVisits).
-/// `reach`: where the closest point is looked for first [m].
-void pushOutOfMesh(MuscleState& muscle, const BoneState& bone, uint32_t i, btScalar reach,
-                   ContactLog& log) {
-  if (std::exchange(muscle.meshVisits[i], muscle.boneVisit) == muscle.boneVisit) return;
+/// sphere just touches the bone's true mesh; once per bone and iteration
+/// (ContactState::meshVisits). `reach`: where the closest point is looked for first [m].
+void pushOutOfMesh(const PairSpheres& muscle, ContactState& contact, const BoneState& bone,
+                   uint32_t i, btScalar reach, ContactLog& log) {
+  if (std::exchange(contact.meshVisits[i], contact.boneVisit) == contact.boneVisit) return;
   const btVector3& position = muscle.positions[i];
   btVector3 push, point;
-  if (!meshPush(bone.mesh->distance, bone.current.invXform(position), muscle.settings->radii[i],
+  if (!meshPush(bone.mesh->distance, bone.current.invXform(position), muscle.settings.radii[i],
                 reach, bone.sharpEdges, push, point))
     return;
-  addBonePush(muscle, i, bone.slot, bone.current.getBasis() * push);
+  addBonePush(contact, i, bone.slot, bone.current.getBasis() * push);
   log.add(position, bone.current * point);
 }
 
 /// Exact test of free particle i of the muscle against the bone's sphere: a push out of the
 /// sphere, or with the bone's mesh contact, pushOutOfMesh.
-void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere,
-                  ContactLog& log) {
+void testBonePair(const PairSpheres& muscle, ContactState& contact, const BoneState& bone,
+                  uint32_t i, uint32_t sphere, ContactLog& log) {
   ++log.candidates;
   const btVector3& centre = bone.tree.centre(static_cast<int32_t>(sphere));
   const btVector3& position = muscle.positions[i];
-  const btScalar radius = muscle.settings->radii[i];
+  const btScalar radius = muscle.settings.radii[i];
   btVector3 direction;
   btScalar depth;
   if (!sphereOverlap(position, radius, centre, bone.settings->sphereRadii[sphere], direction,
@@ -234,10 +243,10 @@ void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32
     return;
   if (bone.meshContact) {
     // A sphere's centre lies inside its bone: the mesh crosses the way to it.
-    pushOutOfMesh(muscle, bone, i, (position - centre).length() + radius, log);
+    pushOutOfMesh(muscle, contact, bone, i, (position - centre).length() + radius, log);
     return;
   }
-  addBonePush(muscle, i, bone.slot, direction * depth);
+  addBonePush(contact, i, bone.slot, direction * depth);
   log.add(position, centre);
 }
 
@@ -245,15 +254,18 @@ void testBonePair(MuscleState& muscle, const BoneState& bone, uint32_t i, uint32
 /// when their roots are apart), listing them into `list` if given; `stack` owns the traversal
 /// stack.
 template <typename OnPair>
-void traverseMuscles(const MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
+void traverseMuscles(const CollidingMuscle& a, const CollidingMuscle& b, TreeTraversalStack& stack,
                      CandidateList* list, OnPair&& onPair) {
-  const MuscleSettings& sa = *a.settings;
-  const MuscleSettings& sb = *b.settings;
-  collideTrees(stack, a.tree, b.tree, [&](int32_t sphereA, int32_t sphereB) {
+  const MuscleSettings& sa = a.settings;
+  const MuscleSettings& sb = b.settings;
+  const TreeState& ta = a.trees;
+  const TreeState& tb = b.trees;
+  collideTrees(stack, ta.tree, tb.tree, [&](int32_t sphereA, int32_t sphereB) {
     const auto i = static_cast<uint32_t>(sphereA), j = static_cast<uint32_t>(sphereB);
     if (sa.isFixed(i) && sb.isFixed(j)) return;
     const btScalar reach = sa.radii[i] + sb.radii[j];
-    if (list && mayMeet(a.treeSnapshot[i], b.treeSnapshot[j], reach + a.treeReach + b.treeReach))
+    if (list &&
+        mayMeet(ta.treeSnapshot[i], tb.treeSnapshot[j], reach + ta.treeReach + tb.treeReach))
       list->add(i, j);
     onPair(i, j);
   });
@@ -262,19 +274,19 @@ void traverseMuscles(const MuscleState& a, const MuscleState& b, TreeTraversalSt
 /// Calls onPair(particle, sphere) for every free boundary particle whose leaf bounds overlap a
 /// bone sphere's.
 template <typename OnPair>
-void forBonePairs(TreeTraversalStack& stack, const MuscleState& muscle, const BoneState& bone,
-                  OnPair&& onPair) {
-  const MuscleSettings& settings = *muscle.settings;
-  collideTrees(stack, muscle.tree, bone.tree, [&](int32_t particle, int32_t sphere) {
+void forBonePairs(TreeTraversalStack& stack, const MuscleSettings& settings, const TreeState& trees,
+                  const BoneState& bone, OnPair&& onPair) {
+  collideTrees(stack, trees.tree, bone.tree, [&](int32_t particle, int32_t sphere) {
     const auto i = static_cast<uint32_t>(particle);
     if (!settings.isFixed(i)) onPair(i, static_cast<uint32_t>(sphere));
   });
 }
 
 /// mayMeet for particle i of the muscle and a sphere of the bone (placed: it holds still).
-bool mayMeetBone(const MuscleState& muscle, const BoneState& bone, uint32_t i, uint32_t sphere) {
-  return mayMeet(muscle.treeSnapshot[i], bone.tree.centre(static_cast<int32_t>(sphere)),
-                 muscle.settings->radii[i] + bone.settings->sphereRadii[sphere] + muscle.treeReach);
+bool mayMeetBone(const MuscleSettings& settings, const TreeState& trees, const BoneState& bone,
+                 uint32_t i, uint32_t sphere) {
+  return mayMeet(trees.treeSnapshot[i], bone.tree.centre(static_cast<int32_t>(sphere)),
+                 settings.radii[i] + bone.settings->sphereRadii[sphere] + trees.treeReach);
 }
 
 /// The candidate-list protocol of one pair of bodies: test(i, j) over the pairs `list` holds for
@@ -304,189 +316,193 @@ CandidateList sizedList(size_t pairs, size_t particles) {
 
 }  // namespace
 
-void buildTree(MuscleState& muscle, bool rebuildEveryStep) {
-  const MuscleSettings& settings = *muscle.settings;
-  muscle.treeSkin = kTreeSkin * muscle.meanRadius;
-  muscle.treeReach = muscle.treeSkin / 2;
-  muscle.treeSnapshot = muscle.positions;
-  muscle.tree.build(settings.boundaryParticles, muscle.positions, settings.radii, muscle.treeReach,
-                    rebuildEveryStep);
+void buildTree(const MuscleSettings& settings, const ParticleState& particles, TreeState& trees,
+               bool rebuildEveryStep) {
+  trees.treeSkin = kTreeSkin * particles.meanRadius;
+  trees.treeReach = trees.treeSkin / 2;
+  trees.treeSnapshot = particles.positions;
+  trees.tree.build(settings.boundaryParticles, particles.positions, settings.radii, trees.treeReach,
+                   rebuildEveryStep);
 }
 
-bool refitTree(MuscleState& muscle) {
-  const MuscleSettings& settings = *muscle.settings;
+bool refitTree(const MuscleSettings& settings, const ParticleState& particles, TreeState& trees) {
   const std::vector<uint32_t>& boundary = settings.boundaryParticles;
-  const btScalar half = muscle.treeSkin / 2;
-  const bool followed = std::exchange(muscle.treeFollowed, false);
+  const std::vector<btVector3>& positions = particles.positions;
+  const btScalar half = trees.treeSkin / 2;
+  const bool followed = std::exchange(trees.treeFollowed, false);
   btScalar margin = half;
-  if (muscle.treeReach > 0) {
+  if (trees.treeReach > 0) {
     // One pass that stops at the first particle out of its skin (moved2: its squared move).
-    const btScalar reach2 = muscle.treeReach * muscle.treeReach;
+    const btScalar reach2 = trees.treeReach * trees.treeReach;
     btScalar moved2 = 0;
     size_t k = 0;
     for (; k < boundary.size(); ++k) {
-      moved2 = (muscle.positions[boundary[k]] - muscle.treeSnapshot[boundary[k]]).length2();
+      moved2 = (positions[boundary[k]] - trees.treeSnapshot[boundary[k]]).length2();
       if (!(moved2 <= reach2)) break;
     }
-    if (k == boundary.size()) return muscle.refitStreak = false;
+    if (k == boundary.size()) return trees.refitStreak = false;
     // Out in two iterations running, or the first one out already past the whole skin:
     // moving faster than a skin pays for (bones moving), so tight bounds, refit every
     // iteration, until it slows down.
-    if (muscle.refitStreak || moved2 > 4 * half * half) margin = 0;
-  } else if (followed && muscle.treeMotion > half * half) {
+    if (trees.refitStreak || moved2 > 4 * half * half) margin = 0;
+  } else if (followed && trees.treeMotion > half * half) {
     // Tight and carried on by its bones (faster than the skin when it went tight): bounds at the
     // particles, but no snapshot or move measured, which would only say "moving fast" again
     // until the bones arrive (that iteration takes the snapshot).
-    muscle.tree.refit(muscle.positions, settings.radii);
-    ++muscle.snapshotSkips;
-    return muscle.refitStreak = true;
-  } else if (muscle.treeMotion > half * half) {
+    trees.tree.refit(positions, settings.radii);
+    ++trees.snapshotSkips;
+    return trees.refitStreak = true;
+  } else if (trees.treeMotion > half * half) {
     margin = 0;  // still moving more than the skin holds in one iteration
   }
-  muscle.treeReach = margin;
-  const btScalar motion =
-      muscle.tree.refit(muscle.positions, settings.radii, margin, muscle.treeSnapshot);
+  trees.treeReach = margin;
+  const btScalar motion = trees.tree.refit(positions, settings.radii, margin, trees.treeSnapshot);
   // Per iteration: the bones move at a steady pace, so a move over skipped snapshots divides.
-  const auto span = static_cast<btScalar>(1 + std::exchange(muscle.snapshotSkips, 0));
-  muscle.treeMotion = motion / (span * span);
-  return muscle.refitStreak = true;
+  const auto span = static_cast<btScalar>(1 + std::exchange(trees.snapshotSkips, 0));
+  trees.treeMotion = motion / (span * span);
+  return trees.refitStreak = true;
 }
 
-void rebuildTree(MuscleState& muscle) {
-  const MuscleSettings& settings = *muscle.settings;
-  const std::vector<uint32_t>& boundary = settings.boundaryParticles;
-  for (uint32_t i : boundary) muscle.treeSnapshot[i] = muscle.positions[i];
-  muscle.treeReach = muscle.treeSkin / 2;
-  muscle.refitStreak = false;
-  muscle.snapshotSkips = 0;
-  muscle.tree.rebuild(muscle.positions, settings.radii, muscle.treeReach);
+void rebuildTree(const MuscleSettings& settings, const ParticleState& particles, TreeState& trees) {
+  for (uint32_t i : settings.boundaryParticles) trees.treeSnapshot[i] = particles.positions[i];
+  trees.treeReach = trees.treeSkin / 2;
+  trees.refitStreak = false;
+  trees.snapshotSkips = 0;
+  trees.tree.rebuild(particles.positions, settings.radii, trees.treeReach);
 }
 
-CandidateList muscleList(const MuscleState& a, const MuscleState& b) {
+CandidateList muscleList(const CollidingMuscle& a, const CollidingMuscle& b) {
   CandidateList counter;
   TreeTraversalStack stack;
   traverseMuscles(a, b, stack, &counter, [](uint32_t, uint32_t) {});
-  return sizedList(counter.count, std::min(a.settings->boundaryParticles.size(),
-                                           b.settings->boundaryParticles.size()));
+  return sizedList(counter.count, std::min(a.settings.boundaryParticles.size(),
+                                           b.settings.boundaryParticles.size()));
 }
 
-CandidateList boneList(const MuscleState& muscle, const BoneState& bone) {
+CandidateList boneList(const MuscleSettings& settings, const TreeState& trees,
+                       const BoneState& bone) {
   if (bone.field) return {};
   size_t count = 0;
   TreeTraversalStack stack;
-  forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
-    count += mayMeetBone(muscle, bone, i, sphere) ? 1 : 0;
+  forBonePairs(stack, settings, trees, bone, [&](uint32_t i, uint32_t sphere) {
+    count += mayMeetBone(settings, trees, bone, i, sphere) ? 1 : 0;
   });
-  return sizedList(count, muscle.settings->boundaryParticles.size());
+  return sizedList(count, settings.boundaryParticles.size());
 }
 
-void collideMuscles(MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
-                    ContactLog& log, MuscleContacts& out) {
+void collideMuscles(const CollidingMuscle& a, const CollidingMuscle& b, CandidateList* list,
+                    TreeTraversalStack& stack, ContactLog& log, MuscleContacts& out) {
   out.count = 0;
   out.listOverflowed = false;
+  const PairSpheres sa(a.settings, a.particles), sb(b.settings, b.particles);
   const auto test = [&](uint32_t i, uint32_t j) {
     ++log.candidates;
     MuscleContact contact;
-    if (!musclePairContact(a, b, i, j, contact)) return;
-    log.add(a.positions[i], b.positions[j]);
+    if (!musclePairContact(sa, sb, i, j, contact)) return;
+    log.add(sa.positions[i], sb.positions[j]);
     if (out.count < out.capacity) out.records[out.count] = contact;
     ++out.count;
   };
-  CandidateList* list = b.slot < a.muscleLists.size() ? &a.muscleLists[b.slot] : nullptr;
+  const TreeState& ta = a.trees;
+  const TreeState& tb = b.trees;
   out.listOverflowed = testCandidates(
-      list, a.tree.epoch(), b.tree.epoch(), a.treeReach == 0 || b.treeReach == 0, test,
+      list, ta.tree.epoch(), tb.tree.epoch(), ta.treeReach == 0 || tb.treeReach == 0, test,
       [&](CandidateList* listing) { traverseMuscles(a, b, stack, listing, test); });
 }
 
-void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraversalStack& stack,
+bool pushMuscleContacts(const CollidingMuscle& a, const CollidingMuscle& b, bool onFirst,
+                        ContactState& pushed, TreeTraversalStack& stack,
                         const MuscleContacts& contacts) {
-  MuscleState& muscle = onFirst ? a : b;
   const auto push = [&](const MuscleContact& contact) {
     const uint32_t i = onFirst ? contact.i : contact.j;
-    if (i != kUnpushed) addPush(muscle, i, onFirst ? contact.push : -contact.push);
+    if (i != kUnpushed) addPush(pushed, i, onFirst ? contact.push : -contact.push);
   };
   const bool overflowed = contacts.count > contacts.capacity;
-  if (onFirst && (overflowed || contacts.listOverflowed)) ++a.candidateOverflows;
   if (!overflowed) {
     for (size_t k = 0; k < contacts.count; ++k) push(contacts.records[k]);
-    return;
+    return contacts.listOverflowed;
   }
   // Only a traversal overflows (a list that held fits its records): the same one again.
+  const PairSpheres sa(a.settings, a.particles), sb(b.settings, b.particles);
   traverseMuscles(a, b, stack, nullptr, [&](uint32_t i, uint32_t j) {
     MuscleContact contact;
-    if (musclePairContact(a, b, i, j, contact)) push(contact);
+    if (musclePairContact(sa, sb, i, j, contact)) push(contact);
   });
+  return true;
 }
 
-void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
-                       ContactLog& log) {
+void collideMuscleBone(const MuscleSettings& settings, const ParticleState& particles,
+                       TreeState& trees, ContactState& contact, const BoneState& bone,
+                       TreeTraversalStack& stack, ContactLog& log) {
+  const PairSpheres muscle(settings, particles);
   if (bone.field) {
-    collideWithField(muscle, bone, stack, log);
+    collideWithField(muscle, trees.tree, contact, bone, stack, log);
     return;
   }
-  if (bone.meshContact) ++muscle.boneVisit;
-  CandidateList* list =
-      bone.slot < muscle.boneLists.size() ? &muscle.boneLists[bone.slot] : nullptr;
+  if (bone.meshContact) ++contact.boneVisit;
   const auto test = [&](uint32_t i, uint32_t sphere) {
-    testBonePair(muscle, bone, i, sphere, log);
+    testBonePair(muscle, contact, bone, i, sphere, log);
   };
   const auto traverse = [&](CandidateList* listing) {
-    forBonePairs(stack, muscle, bone, [&](uint32_t i, uint32_t sphere) {
-      if (listing && mayMeetBone(muscle, bone, i, sphere)) listing->add(i, sphere);
+    forBonePairs(stack, settings, trees, bone, [&](uint32_t i, uint32_t sphere) {
+      if (listing && mayMeetBone(settings, trees, bone, i, sphere)) listing->add(i, sphere);
       test(i, sphere);
     });
   };
-  if (testCandidates(list, muscle.tree.epoch(), bone.tree.placement(), muscle.treeReach == 0, test,
-                     traverse))
-    ++muscle.candidateOverflows;
+  if (testCandidates(candidateList(trees.boneLists, bone.slot), trees.tree.epoch(),
+                     bone.tree.placement(), trees.treeReach == 0, test, traverse))
+    ++trees.candidateOverflows;
 }
 
 void forgetBoneSides(ContactState& contact) {
   std::fill(contact.sideBones.begin(), contact.sideBones.end(), -1);
 }
 
-void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding) {
-  ++muscle.contactRound;
+void applyPushes(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                 bool hasVelocities, bool sliding) {
+  ++contact.contactRound;
   size_t pinched = 0;
-  for (uint32_t i : muscle.settings->boundaryParticles) {
-    if (muscle.pushCounts[i] == 0) continue;
-    btVector3 push = muscle.pushes[i];
-    if (muscle.pinchBones[i] >= 0) {
-      if (pinchPush(muscle.firstBonePushes[i], muscle.otherBonePushes[i], push)) ++pinched;
-      muscle.pinchBones[i] = -1;
-      muscle.firstBonePushes[i].setZero();
-      muscle.otherBonePushes[i].setZero();
+  for (uint32_t i : settings.boundaryParticles) {
+    if (contact.pushCounts[i] == 0) continue;
+    btVector3 push = contact.pushes[i];
+    if (contact.pinchBones[i] >= 0) {
+      if (pinchPush(contact.firstBonePushes[i], contact.otherBonePushes[i], push)) ++pinched;
+      contact.pinchBones[i] = -1;
+      contact.firstBonePushes[i].setZero();
+      contact.otherBonePushes[i].setZero();
     }
     const btScalar depth = push.length();
+    btVector3& position = particles.positions[i];
+    btVector3& previous = particles.previous[i];
     if (sliding && depth > 0) {
       const btVector3 normal = push / depth;
-      const btVector3 moved = withoutInto(muscle.positions[i] - muscle.previous[i], normal);
-      muscle.positions[i] += push;
-      muscle.previous[i] = muscle.positions[i] - moved;
-      if (hasVelocities) muscle.velocities[i] = withoutInto(muscle.velocities[i], normal);
+      const btVector3 moved = withoutInto(position - previous, normal);
+      position += push;
+      previous = position - moved;
+      if (hasVelocities) particles.velocities[i] = withoutInto(particles.velocities[i], normal);
     } else {
-      muscle.positions[i] += push;
-      muscle.previous[i] = muscle.positions[i];
-      if (hasVelocities) muscle.velocities[i].setZero();
+      position += push;
+      previous = position;
+      if (hasVelocities) particles.velocities[i].setZero();
     }
-    muscle.pushes[i].setZero();
-    muscle.pushCounts[i] = 0;
-    muscle.pushedLast[i] = 1;
+    contact.pushes[i].setZero();
+    contact.pushCounts[i] = 0;
+    contact.pushedLast[i] = 1;
   }
-  muscle.pinched = pinched;
-  muscle.pinchedInStep = std::max(muscle.pinchedInStep, pinched);
+  contact.pinched = pinched;
+  contact.pinchedInStep = std::max(contact.pinchedInStep, pinched);
 }
 
-void leaveContactSlop(MuscleState& muscle, btScalar slop) {
-  const MuscleSettings& settings = *muscle.settings;
+void leaveContactSlop(const MuscleSettings& settings, const ContactState& contact,
+                      const ResidualState& residual, ParticleState& particles, btScalar slop) {
   for (uint32_t i : settings.boundaryParticles) {
-    if (muscle.pushRounds[i] != muscle.contactRound) continue;
-    const btVector3& push = muscle.lastPushes[i];
+    if (residual.pushRounds[i] != contact.contactRound) continue;
+    const btVector3& push = residual.lastPushes[i];
     const btScalar depth = push.length();
     if (!(depth > 0)) continue;
     const btVector3 back = push * (std::min(depth, slop * settings.radii[i]) / depth);
-    muscle.positions[i] -= back;
-    muscle.previous[i] -= back;
+    particles.positions[i] -= back;
+    particles.previous[i] -= back;
   }
 }
 

@@ -60,10 +60,17 @@ constexpr btScalar kTreeSkin = btScalar(0.25);
 /// move (thigh13 at R=20 through its 13 poses: a pair with 9 at rest reached 102). None of
 /// thigh13 (R=20, 40), hip-extension and pinch overflows with this room.
 constexpr size_t kListSlack = 4;
-/// Builds a muscle's tree with its skin (MuscleState::treeSkin = kTreeSkin · meanRadius) and takes
-/// the snapshot; rebuildable when `rebuildEveryStep` (the thesis' mode,
+/// The list of `lists` (TreeState::muscleLists or boneLists) for the body in `slot`, or null when
+/// that body is unlisted.
+inline CandidateList* candidateList(std::vector<CandidateList>& lists, uint32_t slot) {
+  return slot < lists.size() ? &lists[slot] : nullptr;
+}
+
+/// Builds a muscle's tree with its skin (TreeState::treeSkin = kTreeSkin · meanRadius) around
+/// its positions and takes the snapshot; rebuildable when `rebuildEveryStep` (the thesis' mode,
 /// MuscleSystemDef::rebuildEveryStep). Allocates.
-void buildTree(MuscleState& muscle, bool rebuildEveryStep);
+void buildTree(const MuscleSettings& settings, const ParticleState& particles, TreeState& trees,
+               bool rebuildEveryStep);
 /// Refits a muscle's tree (same topology, a new snapshot and epoch) when some boundary particle
 /// moved farther than the tree's reach from its snapshot — whatever moved it (integration,
 /// bones, rollback, the guard, a user); returns whether it refitted. Until then every sphere
@@ -72,15 +79,16 @@ void buildTree(MuscleState& muscle, bool rebuildEveryStep);
 /// running, or more than the skin in one (bones moving). While tight and carried by its bones
 /// (followBones), it refits without updating the snapshot (a pass less) until the iteration in
 /// which they arrive.
-bool refitTree(MuscleState& muscle);
+bool refitTree(const MuscleSettings& settings, const ParticleState& particles, TreeState& trees);
 /// Re-inserts every leaf (the thesis' rebuild each step), with the skin; a new snapshot and epoch.
-void rebuildTree(MuscleState& muscle);
-/// A list for the leaf pairs of `a` and a later-added `b` (MuscleState::muscleLists), sized from
+void rebuildTree(const MuscleSettings& settings, const ParticleState& particles, TreeState& trees);
+/// A list for the leaf pairs of `a` and a later-added `b` (TreeState::muscleLists), sized from
 /// their pairs at the current positions (kListSlack). Allocates.
-CandidateList muscleList(const MuscleState& a, const MuscleState& b);
-/// A list for the leaf pairs of a muscle and a sphere bone (MuscleState::boneLists), sized like
+CandidateList muscleList(const CollidingMuscle& a, const CollidingMuscle& b);
+/// A list for the leaf pairs of a muscle and a sphere bone (TreeState::boneLists), sized like
 /// muscleList; empty (never listed) for a bone with a distance field. Allocates.
-CandidateList boneList(const MuscleState& muscle, const BoneState& bone);
+CandidateList boneList(const MuscleSettings& settings, const TreeState& trees,
+                       const BoneState& bone);
 
 /// MuscleContact::i or j of a fixed particle: the contact does not move it.
 constexpr uint32_t kUnpushed = UINT32_MAX;
@@ -104,27 +112,32 @@ struct MuscleContacts {
 };
 
 /// Muscle–muscle contacts of two different muscles (`b` added after `a`) recorded into `out`,
-/// pushing neither: tests the pairs a.muscleLists[b.slot] holds for both trees' epochs, else
-/// traverses the trees (`stack` owns the traversal stack) and lists them. Writes only the pair's
-/// list, `out` and `log` (log.candidates counts the pairs tested exactly: listed or traversed;
-/// both-fixed pairs skipped), so pairs sharing a muscle may run concurrently.
-void collideMuscles(MuscleState& a, const MuscleState& b, TreeTraversalStack& stack,
-                    ContactLog& log, MuscleContacts& out);
-/// Adds the pushes collideMuscles recorded for `a` and `b` to a (`onFirst`) or b, in record
-/// order; when they overflowed, traverses the trees again (`stack` owns the traversal stack) for
-/// the same contacts in the same order (counted like a listing overflow in a.candidateOverflows).
-/// Writes only that muscle's pushes (and a.candidateOverflows when `onFirst`).
-void pushMuscleContacts(MuscleState& a, MuscleState& b, bool onFirst, TreeTraversalStack& stack,
+/// pushing neither: tests the pairs `list` (a's list for b, candidateList; null: unlisted) holds
+/// for both trees' epochs, else traverses the trees (`stack` owns the traversal stack) and lists
+/// them. Writes only `list`, `out` and `log` (log.candidates counts the pairs tested exactly:
+/// listed or traversed; both-fixed pairs skipped), so pairs sharing a muscle may run
+/// concurrently.
+void collideMuscles(const CollidingMuscle& a, const CollidingMuscle& b, CandidateList* list,
+                    TreeTraversalStack& stack, ContactLog& log, MuscleContacts& out);
+/// Adds the pushes collideMuscles recorded for `a` and `b` to `pushed`, the contact state of a
+/// (`onFirst`) or b, in record order; when they overflowed, traverses the trees again (`stack`
+/// owns the traversal stack) for the same contacts in the same order. Writes only `pushed`.
+/// Returns whether the records or the pair's listing overflowed (a's candidateOverflows counts
+/// it once per pair).
+bool pushMuscleContacts(const CollidingMuscle& a, const CollidingMuscle& b, bool onFirst,
+                        ContactState& pushed, TreeTraversalStack& stack,
                         const MuscleContacts& contacts);
 /// Muscle–bone contacts, the whole overlap to the free particle: against the bone's spheres
 /// (its tree placed at its current transform), or, when the bone has a distance field, every
 /// boundary particle in the field's box is pushed out along the field's gradient to clear its
 /// radius. With the muscle's side memory (penetration recovery), a particle whose direction out
 /// of the bone flipped since the last iteration is pushed back out on its remembered side.
-/// Against spheres, the pairs muscle.boneLists[bone.slot] holds for the muscle's tree epoch and
-/// the bone's placement are tested, else listed like collideMuscles; the field is traversed.
-void collideMuscleBone(MuscleState& muscle, const BoneState& bone, TreeTraversalStack& stack,
-                       ContactLog& log);
+/// Against spheres, the pairs trees.boneLists[bone.slot] holds for the muscle's tree epoch and
+/// the bone's placement are tested, else listed like collideMuscles (an overflow counted in
+/// trees.candidateOverflows); the field is traversed. The pushes go into `contact`.
+void collideMuscleBone(const MuscleSettings& settings, const ParticleState& particles,
+                       TreeState& trees, ContactState& contact, const BoneState& bone,
+                       TreeTraversalStack& stack, ContactLog& log);
 
 /// Forgets the bone sides penetration recovery remembers (after a rollback: the remembered
 /// sides belong to positions that no longer exist).
@@ -145,13 +158,15 @@ inline btVector3 withoutInto(const btVector3& v, const btVector3& normal) {
 /// (when `sliding`, MuscleSystemDef::slidingContacts; else all of it: previous = position,
 /// velocities zeroed when the integrator `hasVelocities`); clears the pushes. A particle two bones
 /// press from opposite sides (pinched: no room between them) is moved to equal overlaps and out
-/// sideways where the bones leave a way out; muscle.pinched counts such particles.
-void applyPushes(MuscleState& muscle, bool hasVelocities, bool sliding);
+/// sideways where the bones leave a way out; contact.pinched counts such particles.
+void applyPushes(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                 bool hasVelocities, bool sliding);
 
 /// After applyPushes, for an integrator that holds contacts: every particle the response just
 /// pushed (recordPushes: pushRounds[i] == contactRound) moves back along its push by `slop` times
 /// its radius (at most the push), x and x(t−dt) alike, so that it rests that much inside its
 /// contact and the next iteration finds the contact again (persistent contacts).
-void leaveContactSlop(MuscleState& muscle, btScalar slop);
+void leaveContactSlop(const MuscleSettings& settings, const ContactState& contact,
+                      const ResidualState& residual, ParticleState& particles, btScalar slop);
 
 }  // namespace fibremss

@@ -41,56 +41,58 @@ btDbvtVolume grown(const btDbvtVolume& box, btScalar margin) {
 
 /// How far a particle may have left its leaf's bounds since the tree's refit: the collision
 /// response's pushes, at most about two radii.
-btScalar leafSlack(const MuscleState& muscle) {
-  return 2 * muscle.meanRadius;
+btScalar leafSlack(const ParticleState& particles) {
+  return 2 * particles.meanRadius;
 }
 
-/// The response of particle i of `muscle` to `contact` with `body`; returns the impulse the
+/// The response of particle i (of `mass` [kg]) to `contact` with `body`; returns the impulse the
 /// particle received [N·s].
-btVector3 respond(MuscleState& muscle, uint32_t i, const ContactBodyState& body,
+btVector3 respond(btScalar mass, ParticleState& particles, uint32_t i, const ContactBodyState& body,
                   const ShapeContact& contact, btScalar dt, bool hasVelocities) {
   const btVector3& n = contact.normal;
   const btVector3 surface = body.linear + body.angular.cross(contact.point - body.centre);
-  const btScalar mass = muscle.settings->particleMass;
-  btVector3 moved = muscle.positions[i] - muscle.previous[i];
+  btVector3 moved = particles.positions[i] - particles.previous[i];
   const btScalar approach = (moved - surface * dt).dot(n);
   if (approach < 0) moved -= n * approach;
   btVector3 impulse = n * (approach < 0 ? -mass * approach / dt : btScalar(0));
   if (hasVelocities) {
-    btVector3& v = muscle.velocities[i];
+    btVector3& v = particles.velocities[i];
     const btScalar into = (v - surface).dot(n);
     impulse = n * (into < 0 ? -mass * into : btScalar(0));
     if (into < 0) v -= n * into;
   }
-  muscle.positions[i] += n * contact.depth;
-  muscle.previous[i] = muscle.positions[i] - moved;
+  particles.positions[i] += n * contact.depth;
+  particles.previous[i] = particles.positions[i] - moved;
   return impulse;
 }
 
-/// Adds what touching particle i of `muscle` holds of a body to `sum`: the part of its net force
-/// that presses into the body along the contact normal `n` (none pulls), and k/3·n·nᵀ.
-void addSupport(const MuscleState& muscle, uint32_t i, const btVector3& n, BodyImpulse& sum) {
-  sum.support -= n * std::max<btScalar>(-muscle.forces[i].dot(n), 0);
-  const btVector3 kn = n * muscle.contactStiffness[i];
+/// Adds what touching particle i holds of a body to `sum`: the part of its net force that presses
+/// into the body along the contact normal `n` (none pulls), and k/3·n·nᵀ.
+void addSupport(const ParticleState& particles, const InteractionState& interaction, uint32_t i,
+                const btVector3& n, BodyImpulse& sum) {
+  sum.support -= n * std::max<btScalar>(-particles.forces[i].dot(n), 0);
+  const btVector3 kn = n * interaction.contactStiffness[i];
   sum.stiffness += btMatrix3x3(kn * n.x(), kn * n.y(), kn * n.z());
 }
 
 /// Calls onContact(i, contact) for every free boundary particle of `muscle` whose sphere
 /// overlaps `shape` placed at `transform` (none for a shape ShapeContact does not handle).
 template <typename OnContact>
-void forShapeContacts(const MuscleState& muscle, const btCollisionShape& shape,
+void forShapeContacts(const CollidingMuscle& muscle, const btCollisionShape& shape,
                       const btTransform& transform, TreeTraversalStack& stack,
                       OnContact&& onContact) {
-  if (!touchableShape(shape) || muscle.tree.empty()) return;
+  const SphereTree& tree = muscle.trees.tree;
+  if (!touchableShape(shape) || tree.empty()) return;
   btVector3 lower, upper;
   shape.getAabb(transform, lower, upper);
-  const btDbvtVolume box = grown(btDbvtVolume::FromMM(lower, upper), leafSlack(muscle));
-  if (!boundsOverlap(muscle.tree.bounds(0), box)) return;
-  const MuscleSettings& settings = *muscle.settings;
-  forLeavesIn(muscle.tree, box, stack, [&](uint32_t i) {
+  const btDbvtVolume box = grown(btDbvtVolume::FromMM(lower, upper), leafSlack(muscle.particles));
+  if (!boundsOverlap(tree.bounds(0), box)) return;
+  const MuscleSettings& settings = muscle.settings;
+  const std::vector<btVector3>& positions = muscle.particles.positions;
+  forLeavesIn(tree, box, stack, [&](uint32_t i) {
     ShapeContact contact;
     if (!settings.isFixed(i) &&
-        sphereShapeContact(shape, transform, muscle.positions[i], settings.radii[i], contact))
+        sphereShapeContact(shape, transform, positions[i], settings.radii[i], contact))
       onContact(i, contact);
   });
 }
@@ -143,61 +145,65 @@ void prepareInteraction(const MuscleSettings& settings, InteractionState& intera
   }
 }
 
-void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies, btScalar dt,
-                   bool hasVelocities, TreeTraversalStack& stack) {
-  const MuscleSettings& settings = *muscle.settings;
+void collideBodies(const MuscleSettings& settings, const TreeState& trees, ParticleState& particles,
+                   InteractionState& interaction, std::span<const ContactBodyState> bodies,
+                   btScalar dt, bool hasVelocities, TreeTraversalStack& stack) {
+  const SphereTree& tree = trees.tree;
   for (size_t k = 0; k < bodies.size(); ++k) {
-    BodyImpulse& sum = muscle.bodyImpulses[k];
+    BodyImpulse& sum = interaction.bodyImpulses[k];
     sum = BodyImpulse{};
     const ContactBodyState& body = bodies[k];
-    if (!body.touchable || muscle.tree.empty()) continue;
-    const btDbvtVolume box = grown(body.bounds, leafSlack(muscle));
-    if (!boundsOverlap(muscle.tree.bounds(0), box)) continue;
+    if (!body.touchable || tree.empty()) continue;
+    const btDbvtVolume box = grown(body.bounds, leafSlack(particles));
+    if (!boundsOverlap(tree.bounds(0), box)) continue;
     const btCollisionShape& shape = *body.body->getCollisionShape();
-    forLeavesIn(muscle.tree, box, stack, [&](uint32_t i) {
+    forLeavesIn(tree, box, stack, [&](uint32_t i) {
       if (settings.isFixed(i)) return;
       ShapeContact contact;
-      if (!sphereShapeContact(shape, body.transform, muscle.positions[i], settings.radii[i],
+      if (!sphereShapeContact(shape, body.transform, particles.positions[i], settings.radii[i],
                               contact))
         return;
-      const btVector3 impulse = respond(muscle, i, body, contact, dt, hasVelocities);
+      const btVector3 impulse =
+          respond(settings.particleMass, particles, i, body, contact, dt, hasVelocities);
       sum.linear -= impulse;
       sum.angular -= (contact.point - body.centre).cross(impulse);
       ++sum.contacts;
-      addSupport(muscle, i, contact.normal, sum);
+      addSupport(particles, interaction, i, contact.normal, sum);
     });
   }
 }
 
-void addHookeWrench(const MuscleState& muscle, const btCollisionObject& body,
-                    const btTransform& transform, const btVector3& centre,
-                    TreeTraversalStack& stack, ContactWrench& wrench) {
+void addHookeWrench(const CollidingMuscle& muscle, const InteractionState& interaction,
+                    const btCollisionObject& body, const btTransform& transform,
+                    const btVector3& centre, TreeTraversalStack& stack, ContactWrench& wrench) {
   const btCollisionShape* shape = body.getCollisionShape();
-  if (!shape || muscle.contactStiffness.empty()) return;
+  const std::vector<btScalar>& stiffness = interaction.contactStiffness;
+  if (!shape || stiffness.empty()) return;
   forShapeContacts(muscle, *shape, transform, stack, [&](uint32_t i, const ShapeContact& contact) {
-    const btVector3 force = contact.normal * (-muscle.contactStiffness[i] * contact.depth);
+    const btVector3 force = contact.normal * (-stiffness[i] * contact.depth);
     wrench.force += force;
     wrench.torque += (contact.point - centre).cross(force);
     ++wrench.contacts;
   });
 }
 
-btScalar deepestOverlap(const MuscleState& muscle, const btCollisionShape& shape,
+btScalar deepestOverlap(const CollidingMuscle& muscle, const btCollisionShape& shape,
                         const btTransform& transform, TreeTraversalStack& stack) {
   btScalar deepest = 0;
   forShapeContacts(muscle, shape, transform, stack, [&](uint32_t i, const ShapeContact& contact) {
-    deepest = std::max(deepest, contact.depth / muscle.settings->radii[i]);
+    deepest = std::max(deepest, contact.depth / muscle.settings.radii[i]);
   });
   return deepest;
 }
 
-void addExternalForces(const MuscleState& muscle, const btVector3& gravity,
+void addExternalForces(const MuscleSettings& settings, const ParticleState& particles,
+                       const InteractionState& interaction, const btVector3& gravity,
                        std::span<btVector3> forces) {
-  const bool held = !muscle.externalForces.empty();
+  const std::vector<btVector3>& external = interaction.externalForces;
+  const bool held = !external.empty();
   if (!held && gravity.isZero()) return;
-  const btVector3 weight = gravity * muscle.settings->particleMass;
-  for (uint32_t i : muscle.freeParticles)
-    forces[i] += held ? weight + muscle.externalForces[i] : weight;
+  const btVector3 weight = gravity * settings.particleMass;
+  for (uint32_t i : particles.freeParticles) forces[i] += held ? weight + external[i] : weight;
 }
 
 }  // namespace fibremss

@@ -49,24 +49,27 @@ void prepareInteraction(const MuscleSettings& settings, InteractionState& intera
 /// The contact stage of one iteration of one muscle (after the collision response): every free
 /// boundary particle overlapping a body is moved out of it and loses its velocity into the body
 /// relative to the body's surface; what it lost (m·Δv over the iteration's `dt`) goes into
-/// muscle.bodyImpulses, negated, with its moment. `stack` owns the traversal stack.
-void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies, btScalar dt,
-                   bool hasVelocities, TreeTraversalStack& stack);
+/// interaction.bodyImpulses, negated, with its moment. `stack` owns the traversal stack.
+void collideBodies(const MuscleSettings& settings, const TreeState& trees, ParticleState& particles,
+                   InteractionState& interaction, std::span<const ContactBodyState> bodies,
+                   btScalar dt, bool hasVelocities, TreeTraversalStack& stack);
 
 /// Adds the Hooke term of contactWrench for one muscle: every free boundary particle sphere the
 /// body's shape overlaps at `transform` pushes it with contactStiffness·depth along the contact
 /// normal (its moment about `centre`).
-void addHookeWrench(const MuscleState& muscle, const btCollisionObject& body,
-                    const btTransform& transform, const btVector3& centre,
-                    TreeTraversalStack& stack, ContactWrench& wrench);
+void addHookeWrench(const CollidingMuscle& muscle, const InteractionState& interaction,
+                    const btCollisionObject& body, const btTransform& transform,
+                    const btVector3& centre, TreeTraversalStack& stack, ContactWrench& wrench);
 
 /// The deepest overlap of `shape` placed at `transform` with a free boundary particle sphere of
 /// the muscle, a share of that particle's radius [1] (0: none).
-btScalar deepestOverlap(const MuscleState& muscle, const btCollisionShape& shape,
+btScalar deepestOverlap(const CollidingMuscle& muscle, const btCollisionShape& shape,
                         const btTransform& transform, TreeTraversalStack& stack);
 
-/// Adds m·gravity and the muscle's external forces to `forces` of its free particles.
-void addExternalForces(const MuscleState& muscle, const btVector3& gravity,
+/// Adds m·gravity and the muscle's external forces (interaction.externalForces) to `forces` of its
+/// free particles.
+void addExternalForces(const MuscleSettings& settings, const ParticleState& particles,
+                       const InteractionState& interaction, const btVector3& gravity,
                        std::span<btVector3> forces);
 
 }  // namespace fibremss

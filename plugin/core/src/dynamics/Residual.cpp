@@ -82,39 +82,41 @@ void recordPushes(const MuscleSettings& settings, const ContactState& contact,
   }
 }
 
-btVector3 contactNormal(const MuscleState& muscle, uint32_t i) {
-  const uint32_t round = muscle.contactRound;
-  if (round == 0 || muscle.pushRounds[i] != round) return btVector3(0, 0, 0);
-  return unitOrZero(muscle.lastPushes[i]);
+btVector3 contactNormal(const ContactState& contact, const ResidualState& residual, uint32_t i) {
+  const uint32_t round = contact.contactRound;
+  if (round == 0 || residual.pushRounds[i] != round) return btVector3(0, 0, 0);
+  return unitOrZero(residual.lastPushes[i]);
 }
 
-void muscleForceResidual(MuscleState& muscle, const btVector3& gravity) {
-  const MuscleSettings& settings = *muscle.settings;
-  std::vector<btVector3>& r = muscle.residual;
-  springForces(settings, muscle.positions, r);
-  addLocalVolumeForces(settings, muscle.positions, r);
-  addEnclosedVolumeForces(settings, muscle.positions, r);
-  addExternalForces(muscle, gravity, r);
+void muscleForceResidual(const MuscleSettings& settings, const ParticleState& particles,
+                         const InteractionState& interaction, ResidualState& residual,
+                         const btVector3& gravity) {
+  std::vector<btVector3>& r = residual.residual;
+  springForces(settings, particles.positions, r);
+  addLocalVolumeForces(settings, particles.positions, r);
+  addEnclosedVolumeForces(settings, particles.positions, r);
+  addExternalForces(settings, particles, interaction, gravity, r);
   for (uint32_t i : settings.fixedParticles) r[i].setZero();
 }
 
-SpringForceResult springForces(MuscleState& muscle) {
-  return springForces(*muscle.settings, muscle.positions, muscle.forces);
+SpringForceResult springForces(const MuscleSettings& settings, ParticleState& particles) {
+  return springForces(settings, particles.positions, particles.forces);
 }
 
-ResidualSums residualSums(const MuscleState& muscle) {
+ResidualSums residualSums(const ParticleState& particles, const ContactState& contact,
+                          const ResidualState& residual) {
   ResidualSums sums;
-  for (uint32_t i : muscle.freeParticles) {
-    if (!contactNormal(muscle, i).isZero()) ++sums.contactParticles;
-    const double force = muscle.residual[i].length();
-    const btScalar k = muscle.residualStiffness[i];
+  for (uint32_t i : particles.freeParticles) {
+    if (!contactNormal(contact, residual, i).isZero()) ++sums.contactParticles;
+    const double force = residual.residual[i].length();
+    const btScalar k = residual.residualStiffness[i];
     const double displacement = k > 0 ? force / k : 0;
     sums.forceSquares += force * force;
     sums.displacementSquares += displacement * displacement;
     sums.maxForce = std::max(sums.maxForce, force);
     sums.maxDisplacement = std::max(sums.maxDisplacement, displacement);
   }
-  sums.particles = muscle.freeParticles.size();
+  sums.particles = particles.freeParticles.size();
   return sums;
 }
 

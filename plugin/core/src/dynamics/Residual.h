@@ -15,7 +15,8 @@
 namespace fibremss {
 
 struct ContactState;
-struct MuscleState;
+struct InteractionState;
+struct ParticleState;
 struct ResidualState;
 
 /// k_i of every particle [N/m]: a third of the trace of its 3×3 diagonal block of the energy's
@@ -53,18 +54,22 @@ inline btVector3 unitOrZero(const btVector3& v) {
 /// The unit direction of the push the last response gave particle i (pushRounds[i] ==
 /// contactRound: recorded and not since superseded), or zero when that response did not push it.
 /// A contact there holds the part of the particle's force into it (withoutInto).
-btVector3 contactNormal(const MuscleState& muscle, uint32_t i);
+btVector3 contactNormal(const ContactState& contact, const ResidualState& residual, uint32_t i);
 
-/// Fills muscle.residual with the model's net force at muscle.positions (ForceResidual: springs
-/// on fastestSpringKernel in one pass, every volume term, m·gravity and external forces), before
-/// the contacts' reactions (addContactReactions); attached particles get 0. No allocation.
-void muscleForceResidual(MuscleState& muscle, const btVector3& gravity);
+/// Fills residual.residual with the model's net force at the particles' positions
+/// (ForceResidual: springs on fastestSpringKernel in one pass, every volume term, m·gravity and
+/// external forces), before the contacts' reactions (addContactReactions); attached particles
+/// get 0. No allocation.
+void muscleForceResidual(const MuscleSettings& settings, const ParticleState& particles,
+                         const InteractionState& interaction, ResidualState& residual,
+                         const btVector3& gravity);
 
-/// The muscle's spring forces at its positions, into muscle.forces.
-SpringForceResult springForces(MuscleState& muscle);
+/// The muscle's spring forces at its positions, into particles.forces.
+SpringForceResult springForces(const MuscleSettings& settings, ParticleState& particles);
 
-/// The sums of muscle.residual over the free particles (contactParticles: those with a
+/// The sums of residual.residual over the free particles (contactParticles: those with a
 /// contactNormal), in one fixed order.
-ResidualSums residualSums(const MuscleState& muscle);
+ResidualSums residualSums(const ParticleState& particles, const ContactState& contact,
+                          const ResidualState& residual);
 
 }  // namespace fibremss

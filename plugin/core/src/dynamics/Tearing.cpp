@@ -55,10 +55,9 @@ bool acrossPieces(const TearState& tear, std::span<const uint32_t> p) {
 /// Breaks the springs beyond the limit, in their order, but for a particle's last spring: a
 /// particle whose springs all passed the limit at once stays with the piece of the one that comes
 /// last, not a loose fragment of its own. Returns how many broke.
-size_t breakSprings(MuscleState& muscle) {
-  TearState& tear = muscle.tear;
+size_t breakSprings(const ParticleState& particles, TearState& tear) {
   const MuscleSettings& settings = *tear.torn;
-  const btVector3* x = muscle.positions.data();
+  const btVector3* x = particles.positions.data();
   size_t broken = 0;
   for (size_t s = 0; s < settings.springs.size(); ++s) {
     const Spring& spring = settings.springs[s];
@@ -66,29 +65,30 @@ size_t breakSprings(MuscleState& muscle) {
     if (spring.a == spring.b || !(x[spring.a].distance2(x[spring.b]) > longest * longest) ||
         tear.springCounts[spring.a] == 1 || tear.springCounts[spring.b] == 1)
       continue;
-    breakSpring(muscle, s);
+    breakSpring(tear, s);
     ++broken;
   }
   return broken;
 }
 
 /// Whether a volume term's particles `p` have an edge beyond the muscle's breakStretch.
-bool stretchedTerm(const MuscleState& muscle, std::span<const uint32_t> p, const void*) {
-  const MuscleSettings& settings = *muscle.settings;
+bool stretchedTerm(const ParticleState& particles, const TearState& tear,
+                   std::span<const uint32_t> p, const void*) {
+  const MuscleSettings& settings = *tear.torn;
   return anyTermEdge(p, [&](uint32_t i, uint32_t j) {
-    return beyond(settings, muscle.positions.data(), settings.breakStretch, i, j);
+    return beyond(settings, particles.positions.data(), settings.breakStretch, i, j);
   });
 }
 
 /// Whether a volume term's particles `p` lie in more than one piece.
-bool termAcrossPieces(const MuscleState& muscle, std::span<const uint32_t> p, const void*) {
-  return acrossPieces(muscle.tear, p);
+bool termAcrossPieces(const ParticleState&, const TearState& tear, std::span<const uint32_t> p,
+                      const void*) {
+  return acrossPieces(tear, p);
 }
 
 }  // namespace
 
-void breakSpring(MuscleState& muscle, size_t s) {
-  TearState& tear = muscle.tear;
+void breakSpring(TearState& tear, size_t s) {
   MuscleSettings& settings = *tear.torn;
   Spring& spring = settings.springs[s];
   --tear.springCounts[spring.a];
@@ -101,11 +101,13 @@ void breakSpring(MuscleState& muscle, size_t s) {
   blocks.restLength[lane] = blocks.stiffness[lane] = 0;
 }
 
-size_t breakVolumeTerms(MuscleState& muscle, TermTest breaks, const void* context) {
-  MuscleSettings& settings = *muscle.tear.torn;
+size_t breakVolumeTerms(const ParticleState& particles, TearState& tear, TermTest breaks,
+                        const void* context) {
+  MuscleSettings& settings = *tear.torn;
   size_t broken = 0;
   for (size_t k = 0; k < settings.fanRestGradient.size(); ++k) {
-    if (settings.fanRestGradient[k] == 0 || !breaks(muscle, fanParticles(settings, k), context))
+    if (settings.fanRestGradient[k] == 0 ||
+        !breaks(particles, tear, fanParticles(settings, k), context))
       continue;
     settings.fanRestGradient[k] = 0;
     ++broken;
@@ -113,23 +115,21 @@ size_t breakVolumeTerms(MuscleState& muscle, TermTest breaks, const void* contex
   for (size_t k = 0; k < settings.tetRestGradient.size(); ++k) {
     const std::span<const uint32_t> p(settings.tetParticles.data() + 4 * k, 4);
     // A tetrahedron is the fan (p0, p1, p2, p3) of one.
-    if (settings.tetRestGradient[k] != 0 && breaks(muscle, p, context))
+    if (settings.tetRestGradient[k] != 0 && breaks(particles, tear, p, context))
       settings.tetRestGradient[k] = 0;
   }
   return broken;
 }
 
-void separatePieces(MuscleState& muscle) {
-  TearState& tear = muscle.tear;
+void separatePieces(const ParticleState& particles, TearState& tear) {
   tear.pieces = countPieces(*tear.torn, tear);
-  tear.brokenVolumeTerms += breakVolumeTerms(muscle, termAcrossPieces, nullptr);
+  tear.brokenVolumeTerms += breakVolumeTerms(particles, tear, termAcrossPieces, nullptr);
 }
 
-void prepareTearing(MuscleState& muscle, bool cuttable) {
-  if (muscle.tear.torn || !(cuttable || muscle.settings->breakStretch > 0)) return;
-  TearState& tear = muscle.tear;
-  tear.torn = std::make_shared<MuscleSettings>(*muscle.settings);
-  muscle.settings = tear.torn;
+void prepareTearing(std::shared_ptr<const MuscleSettings>& shared, TearState& tear, bool cuttable) {
+  if (tear.torn || !(cuttable || shared->breakStretch > 0)) return;
+  tear.torn = std::make_shared<MuscleSettings>(*shared);
+  shared = tear.torn;
   const MuscleSettings& settings = *tear.torn;
   const size_t n = settings.particleCount();
   tear.pieceOf.resize(n);
@@ -161,33 +161,31 @@ void prepareTearing(MuscleState& muscle, bool cuttable) {
   tear.pieces = countPieces(settings, tear);
 }
 
-bool breakStretched(MuscleState& muscle) {
-  TearState& tear = muscle.tear;
+bool breakStretched(const ParticleState& particles, TearState& tear) {
   if (!tear.torn || !(tear.torn->breakStretch > 0)) return false;
-  const size_t springs = breakSprings(muscle);
-  const size_t volumeTerms = breakVolumeTerms(muscle, stretchedTerm, nullptr);
+  const size_t springs = breakSprings(particles, tear);
+  const size_t volumeTerms = breakVolumeTerms(particles, tear, stretchedTerm, nullptr);
   if (springs + volumeTerms == 0) return false;
   tear.brokenSprings += springs;
   tear.brokenVolumeTerms += volumeTerms;
-  separatePieces(muscle);
+  separatePieces(particles, tear);
   return true;
 }
 
-bool piecesSpread(MuscleState& muscle, double factor) {
-  TearState& tear = muscle.tear;
-  const MuscleSettings& settings = *muscle.settings;
+bool piecesSpread(const MuscleSettings& settings, const ParticleState& particles, TearState& tear,
+                  double factor) {
   const size_t n = settings.particleCount();
   for (uint32_t i = 0; i < n; ++i) {
     const uint32_t r = tear.pieceOf[i];
     if (r == i) {
-      tear.pieceLower[r] = tear.pieceUpper[r] = muscle.positions[i];
+      tear.pieceLower[r] = tear.pieceUpper[r] = particles.positions[i];
       tear.restLower[r] = tear.restUpper[r] = settings.restPositions[i];
     }
   }
   for (uint32_t i = 0; i < n; ++i) {
     const uint32_t r = tear.pieceOf[i];
-    tear.pieceLower[r].setMin(muscle.positions[i]);
-    tear.pieceUpper[r].setMax(muscle.positions[i]);
+    tear.pieceLower[r].setMin(particles.positions[i]);
+    tear.pieceUpper[r].setMax(particles.positions[i]);
     tear.restLower[r].setMin(settings.restPositions[i]);
     tear.restUpper[r].setMax(settings.restPositions[i]);
   }

@@ -55,15 +55,16 @@ btScalar rungeKuttaLimit(int order, double lambda, double gamma, double start) {
 /// at a time, from `dt`: largestSafeTimeStep's operations in its order with exact square roots
 /// and divisions, so each lane holds its value bit for bit (and a minimum does not depend on
 /// order).
-btScalar adaptiveTimeStepSse(const MuscleState& muscle, size_t begin, size_t count,
-                             btScalar inversePreviousDt, bool centred, btScalar dt) {
-  const uint32_t* indices = muscle.freeParticles.data();
-  const btVector3* f = muscle.forces.data();
-  const btVector3* x = muscle.positions.data();
-  const btVector3* previous = muscle.previous.data();
-  const btScalar* radii = muscle.stepRadius.data();
-  const __m128 mass = _mm_set1_ps(muscle.settings->particleMass);
-  const __m128 damping = _mm_set1_ps(muscle.settings->damping);
+btScalar adaptiveTimeStepSse(const MuscleSettings& settings, const ParticleState& particles,
+                             size_t begin, size_t count, btScalar inversePreviousDt, bool centred,
+                             btScalar dt) {
+  const uint32_t* indices = particles.freeParticles.data();
+  const btVector3* f = particles.forces.data();
+  const btVector3* x = particles.positions.data();
+  const btVector3* previous = particles.previous.data();
+  const btScalar* radii = particles.stepRadius.data();
+  const __m128 mass = _mm_set1_ps(settings.particleMass);
+  const __m128 damping = _mm_set1_ps(settings.damping);
   const __m128 half = _mm_set1_ps(btScalar(0.5));  // x·0.5 rounds as x/2
   const __m128 two = _mm_set1_ps(2), four = _mm_set1_ps(4);
   const __m128 inverseDt = _mm_set1_ps(inversePreviousDt);
@@ -111,16 +112,17 @@ FIBREMSS_AVX2_PASS __m256 stepPair(const btVector3* x, const btVector3* previous
 
 /// adaptiveTimeStepSse eight particles at a time over [0, count), count a multiple of 8: the
 /// same operations per lane (AVX2 without FMA), so the same bits.
-FIBREMSS_AVX2_PASS btScalar adaptiveTimeStepAvx2(const MuscleState& muscle, size_t count,
+FIBREMSS_AVX2_PASS btScalar adaptiveTimeStepAvx2(const MuscleSettings& settings,
+                                                 const ParticleState& particles, size_t count,
                                                  btScalar inversePreviousDt, bool centred,
                                                  btScalar dt) {
-  const uint32_t* indices = muscle.freeParticles.data();
-  const btVector3* f = muscle.forces.data();
-  const btVector3* x = muscle.positions.data();
-  const btVector3* previous = muscle.previous.data();
-  const btScalar* radii = muscle.stepRadius.data();
-  const __m256 mass = _mm256_set1_ps(muscle.settings->particleMass);
-  const __m256 damping = _mm256_set1_ps(muscle.settings->damping);
+  const uint32_t* indices = particles.freeParticles.data();
+  const btVector3* f = particles.forces.data();
+  const btVector3* x = particles.positions.data();
+  const btVector3* previous = particles.previous.data();
+  const btScalar* radii = particles.stepRadius.data();
+  const __m256 mass = _mm256_set1_ps(settings.particleMass);
+  const __m256 damping = _mm256_set1_ps(settings.damping);
   const __m256 half = _mm256_set1_ps(btScalar(0.5));  // x·0.5 rounds as x/2
   const __m256 two = _mm256_set1_ps(2), four = _mm256_set1_ps(4);
   const __m256 inverseDt = _mm256_set1_ps(inversePreviousDt);
@@ -177,36 +179,36 @@ btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, bt
   return denominator > 0 ? 2 * mr / denominator : kInfinity;
 }
 
-btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt) {
-  return adaptiveTimeStep(muscle, previousDt, fastestSpringKernel());
+btScalar adaptiveTimeStep(const MuscleSettings& settings, const ParticleState& particles,
+                          bool centred, btScalar previousDt) {
+  return adaptiveTimeStep(settings, particles, centred, previousDt, fastestSpringKernel());
 }
 
-btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt,
-                          [[maybe_unused]] SpringKernel kernel) {
-  const MuscleSettings& settings = *muscle.settings;
+btScalar adaptiveTimeStep(const MuscleSettings& settings, const ParticleState& particles,
+                          bool centred, btScalar previousDt, [[maybe_unused]] SpringKernel kernel) {
   const btScalar inversePreviousDt = previousDt > 0 ? 1 / previousDt : 0;
-  const bool centred = muscle.preparedFor == Integrator::Verlet;
-  btScalar dt = muscle.stableTimeStep;
+  btScalar dt = particles.stableTimeStep;
   size_t k = 0;
 #if FIBREMSS_AVX2_PARTICLES
   if (kernel == SpringKernel::avx2) {
-    k = muscle.freeParticles.size() & ~size_t{7};
-    dt = adaptiveTimeStepAvx2(muscle, k, inversePreviousDt, centred, dt);
+    k = particles.freeParticles.size() & ~size_t{7};
+    dt = adaptiveTimeStepAvx2(settings, particles, k, inversePreviousDt, centred, dt);
   }
 #endif
 #if FIBREMSS_SSE_PARTICLES
   if (kernel != SpringKernel::scalar) {
     const size_t begin = k;
-    k = muscle.freeParticles.size() & ~size_t{3};
-    dt = adaptiveTimeStepSse(muscle, begin, k, inversePreviousDt, centred, dt);
+    k = particles.freeParticles.size() & ~size_t{3};
+    dt = adaptiveTimeStepSse(settings, particles, begin, k, inversePreviousDt, centred, dt);
   }
 #endif
-  for (; k < muscle.freeParticles.size(); ++k) {
-    const uint32_t i = muscle.freeParticles[k];
-    const btScalar force = muscle.forces[i].length();
-    const btScalar speed = (muscle.positions[i] - muscle.previous[i]).length() * inversePreviousDt;
-    dt = std::min(dt, largestSafeTimeStep(force, speed, muscle.stepRadius[i], settings.particleMass,
-                                          settings.damping, centred));
+  for (; k < particles.freeParticles.size(); ++k) {
+    const uint32_t i = particles.freeParticles[k];
+    const btScalar force = particles.forces[i].length();
+    const btScalar speed =
+        (particles.positions[i] - particles.previous[i]).length() * inversePreviousDt;
+    dt = std::min(dt, largestSafeTimeStep(force, speed, particles.stepRadius[i],
+                                          settings.particleMass, settings.damping, centred));
   }
   return dt;
 }

@@ -20,14 +20,16 @@ btScalar largestSafeTimeStep(btScalar force, btScalar speed, btScalar radius, bt
 /// The minimum of largestSafeTimeStep over the free particles of a muscle, r being a particle's
 /// radius (boundary) or the muscle's mean radius (inner particles, which never collide but
 /// should not outrun their neighbours either), speed = |x − x_prev| / previousDt, with centred
-/// damping when the muscle is prepared for Verlet; also capped by the muscle's stability bound.
-/// Float builds with SSE2 take four particles at a time (AVX2: eight), each bound bit for bit
-/// the scalar one, so every kernel gives the same dt. Runs on the spring kernel's instruction
-/// set (fastestSpringKernel).
-btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt);
+/// damping when `centred` (the muscle is prepared for Verlet); also capped by the muscle's
+/// stability bound (ParticleState::stableTimeStep). Float builds with SSE2 take four particles at
+/// a time (AVX2: eight), each bound bit for bit the scalar one, so every kernel gives the same
+/// dt. Runs on the spring kernel's instruction set (fastestSpringKernel).
+btScalar adaptiveTimeStep(const MuscleSettings& settings, const ParticleState& particles,
+                          bool centred, btScalar previousDt);
 
 /// adaptiveTimeStep on the instruction set of `kernel`, which must be available (tests compare).
-btScalar adaptiveTimeStep(const MuscleState& muscle, btScalar previousDt, SpringKernel kernel);
+btScalar adaptiveTimeStep(const MuscleSettings& settings, const ParticleState& particles,
+                          bool centred, btScalar previousDt, SpringKernel kernel);
 
 /// The largest dt for which `kind` is stable for every particle of the settings, times a safety
 /// factor. The spring stiffness is bounded by Gershgorin (eigenvalues ω² of K/m in [0, 2·Σk/m]);

@@ -14,13 +14,14 @@
 namespace fibremss {
 
 void TimeIntegrator::prepare(MuscleState& muscle) const {
-  muscle.workspace = makeWorkspace(muscle);
+  muscle.workspace = makeWorkspace(*muscle.settings, muscle);
   muscle.stableTimeStep = stableTimeStep(*muscle.settings, kind());
   muscle.preparedFor = kind();
   muscle.prepared = true;
 }
 
-std::unique_ptr<IntegratorWorkspace> TimeIntegrator::makeWorkspace(const MuscleState&) const {
+std::unique_ptr<IntegratorWorkspace> TimeIntegrator::makeWorkspace(const MuscleSettings&,
+                                                                   const ParticleState&) const {
   return nullptr;
 }
 

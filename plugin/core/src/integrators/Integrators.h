@@ -30,8 +30,8 @@ class TimeIntegrator {
   /// Advances the free particles of `muscle` by dt; `previousDt` is the step that led from
   /// `previous` to `positions`. `def`: the step's solver settings (implicit solves,
   /// constraint passes).
-  virtual IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
-                                    btScalar previousDt) const = 0;
+  virtual IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
+                                    btScalar dt, btScalar previousDt) const = 0;
   /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs and sets the
   /// muscle's stability bound for it; called when the muscle is added and when the integrator
   /// changes, never inside the iterations.
@@ -46,13 +46,17 @@ class TimeIntegrator {
   /// push out, contactNormal): the response then records its pushes in every iteration and
   /// leaves each contact a slop deep so that it persists (leaveContactSlop).
   virtual bool holdsContacts(const MuscleSystemDef&) const { return false; }
-  /// Brings `muscle`'s workspace up to date, without allocating, after springs or volume terms of
-  /// its settings broke (Tearing.h); an integrator that reads them every iteration needs nothing.
-  virtual void springsChanged(MuscleState&) const {}
+  /// Brings a muscle's `workspace` up to date, without allocating, after springs or volume terms
+  /// of its `settings` broke (Tearing.h); an integrator that reads them every iteration needs
+  /// nothing.
+  virtual void springsChanged(const MuscleSettings&, const ParticleState&,
+                              IntegratorWorkspace*) const {}
 
  protected:
-  /// The workspace advance() needs for `muscle`, or null when it needs none.
-  virtual std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const;
+  /// The workspace advance() needs for a muscle (its settings, its particles), or null when it
+  /// needs none.
+  virtual std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleSettings& settings,
+                                                             const ParticleState& particles) const;
 };
 
 /// The integrator for a kind (one shared stateless instance per kind; thread-safe: all

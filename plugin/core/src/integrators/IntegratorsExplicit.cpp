@@ -28,14 +28,14 @@ btVector3 acceleration(const btVector3& force, const btVector3& velocity, btScal
 /// four at a time into four double partial sums (one long chain of additions would bound the
 /// loop), so it differs from the particle-order sum in the last bits only, the same for any
 /// thread count. Returns how many particles it moved.
-size_t advanceVerletVector(MuscleState& muscle, btScalar keep, btScalar forceScale,
+size_t advanceVerletVector(ParticleState& particles, btScalar keep, btScalar forceScale,
                            double& displacement) {
 #if FIBREMSS_SSE_PARTICLES
-  const size_t count = muscle.freeParticles.size() & ~size_t{3};
-  const uint32_t* indices = muscle.freeParticles.data();
-  btVector3* x = muscle.positions.data();
-  btVector3* previous = muscle.previous.data();
-  const btVector3* f = muscle.forces.data();
+  const size_t count = particles.freeParticles.size() & ~size_t{3};
+  const uint32_t* indices = particles.freeParticles.data();
+  btVector3* x = particles.positions.data();
+  btVector3* previous = particles.previous.data();
+  const btVector3* f = particles.forces.data();
   const __m128 keepAll = _mm_set1_ps(keep), scaleAll = _mm_set1_ps(forceScale);
   const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
   __m128d low = _mm_setzero_pd(), high = _mm_setzero_pd();  // four partial sums of lengths
@@ -72,17 +72,18 @@ size_t advanceVerletVector(MuscleState& muscle, btScalar keep, btScalar forceSca
 /// adaptive dt would raise the velocity and pump energy in.
 class VerletIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef&, btScalar dt,
+  IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef&, btScalar dt,
                             btScalar previousDt) const override {
-    const MuscleSettings& settings = *muscle.settings;
+    const MuscleSettings& settings = muscle.settings;
     const btScalar gamma = settings.damping * dt / (2 * settings.particleMass);
     const btScalar forceScale = dt * dt / (settings.particleMass * (1 + gamma));
     const btScalar keep = (1 - gamma) / (1 + gamma) * dt / previousDt;
     IntegrationResult result;
-    for (size_t k = advanceVerletVector(muscle, keep, forceScale, result.displacement);
-         k < muscle.freeParticles.size(); ++k) {
-      const uint32_t i = muscle.freeParticles[k];
-      result.displacement += heavyBallStep(muscle, i, muscle.forces[i], keep, forceScale);
+    for (size_t k = advanceVerletVector(muscle.particles, keep, forceScale, result.displacement);
+         k < muscle.particles.freeParticles.size(); ++k) {
+      const uint32_t i = muscle.particles.freeParticles[k];
+      result.displacement +=
+          heavyBallStep(muscle.particles, i, muscle.particles.forces[i], keep, forceScale);
     }
     result.finite = std::isfinite(result.displacement);
     return result;
@@ -94,17 +95,17 @@ class VerletIntegrator final : public TimeIntegrator {
 /// Semi-implicit (symplectic) Euler: v += dt/m·(F − c·v); x += dt·v.
 class SemiImplicitEulerIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef&, btScalar dt,
+  IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef&, btScalar dt,
                             btScalar) const override {
-    const MuscleSettings& settings = *muscle.settings;
+    const MuscleSettings& settings = muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     IntegrationResult result;
-    for (uint32_t i : muscle.freeParticles) {
-      btVector3& v = muscle.velocities[i];
-      v += acceleration(muscle.forces[i], v, settings.damping, inverseMass) * dt;
+    for (uint32_t i : muscle.particles.freeParticles) {
+      btVector3& v = muscle.particles.velocities[i];
+      v += acceleration(muscle.particles.forces[i], v, settings.damping, inverseMass) * dt;
       const btVector3 step = v * dt;
-      muscle.previous[i] = muscle.positions[i];
-      muscle.positions[i] += step;
+      muscle.particles.previous[i] = muscle.particles.positions[i];
+      muscle.particles.positions[i] += step;
       result.displacement += step.length();
     }
     result.finite = std::isfinite(result.displacement);
@@ -133,58 +134,60 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
                        std::span<const btScalar> weights)
       : kind_(kind), offsets_(offsets), weights_(weights) {}
 
-  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+  IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef& def, btScalar dt,
                             btScalar) const override {
-    const MuscleSettings& settings = *muscle.settings;
+    const MuscleSettings& settings = muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     const btScalar damping = settings.damping;
     IntegrationResult result;
     if (weights_.size() == 1) {  // explicit Euler: x += dt·v; v += dt·a(x, v)
-      for (uint32_t i : muscle.freeParticles) {
-        btVector3& v = muscle.velocities[i];
+      for (uint32_t i : muscle.particles.freeParticles) {
+        btVector3& v = muscle.particles.velocities[i];
         const btVector3 step = v * dt;
-        v += acceleration(muscle.forces[i], v, damping, inverseMass) * dt;
-        muscle.previous[i] = muscle.positions[i];
-        muscle.positions[i] += step;
+        v += acceleration(muscle.particles.forces[i], v, damping, inverseMass) * dt;
+        muscle.particles.previous[i] = muscle.particles.positions[i];
+        muscle.particles.positions[i] += step;
         result.displacement += step.length();
       }
       result.finite = std::isfinite(result.displacement);
       return result;
     }
     auto& stage = static_cast<StageWorkspace&>(*muscle.workspace);
-    std::copy(muscle.positions.begin(), muscle.positions.end(), stage.positions.begin());
+    std::copy(muscle.particles.positions.begin(), muscle.particles.positions.end(),
+              stage.positions.begin());
     const btScalar firstOffset = offsets_[0] * dt;
-    for (uint32_t i : muscle.freeParticles) {
-      const btVector3 v = muscle.velocities[i];
-      const btVector3 a = acceleration(muscle.forces[i], v, damping, inverseMass);
+    for (uint32_t i : muscle.particles.freeParticles) {
+      const btVector3 v = muscle.particles.velocities[i];
+      const btVector3 a = acceleration(muscle.particles.forces[i], v, damping, inverseMass);
       stage.positionSum[i] = v * weights_[0];
       stage.velocitySum[i] = a * weights_[0];
-      stage.positions[i] = muscle.positions[i] + v * firstOffset;
+      stage.positions[i] = muscle.particles.positions[i] + v * firstOffset;
       stage.velocities[i] = v + a * firstOffset;
     }
     for (size_t s = 1; s < weights_.size(); ++s) {
       springForces(settings, stage.positions, stage.forces);
       addLocalVolumeForces(settings, stage.positions, stage.forces);
       addEnclosedVolumeForces(settings, stage.positions, stage.forces);
-      addExternalForces(muscle, def.gravity, stage.forces);
+      addExternalForces(muscle.settings, muscle.particles, muscle.interaction, def.gravity,
+                        stage.forces);
       const btScalar weight = weights_[s];
       const bool last = s + 1 == weights_.size();
       const btScalar offset = last ? 0 : offsets_[s] * dt;
-      for (uint32_t i : muscle.freeParticles) {
+      for (uint32_t i : muscle.particles.freeParticles) {
         const btVector3 v = stage.velocities[i];
         const btVector3 a = acceleration(stage.forces[i], v, damping, inverseMass);
         stage.positionSum[i] += v * weight;
         stage.velocitySum[i] += a * weight;
         if (last) continue;
-        stage.positions[i] = muscle.positions[i] + v * offset;
-        stage.velocities[i] = muscle.velocities[i] + a * offset;
+        stage.positions[i] = muscle.particles.positions[i] + v * offset;
+        stage.velocities[i] = muscle.particles.velocities[i] + a * offset;
       }
     }
-    for (uint32_t i : muscle.freeParticles) {
+    for (uint32_t i : muscle.particles.freeParticles) {
       const btVector3 step = stage.positionSum[i] * dt;
-      muscle.previous[i] = muscle.positions[i];
-      muscle.positions[i] += step;
-      muscle.velocities[i] += stage.velocitySum[i] * dt;
+      muscle.particles.previous[i] = muscle.particles.positions[i];
+      muscle.particles.positions[i] += step;
+      muscle.particles.velocities[i] += stage.velocitySum[i] * dt;
       result.displacement += step.length();
     }
     result.finite = std::isfinite(result.displacement);
@@ -194,10 +197,11 @@ class RungeKuttaIntegrator final : public TimeIntegrator {
   Integrator kind() const override { return kind_; }
 
  protected:
-  std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const override {
+  std::unique_ptr<IntegratorWorkspace> makeWorkspace(
+      const MuscleSettings&, const ParticleState& particles) const override {
     if (weights_.size() == 1) return nullptr;
     auto stage = std::make_unique<StageWorkspace>();
-    const size_t n = muscle.positions.size();
+    const size_t n = particles.positions.size();
     for (auto* buffer : {&stage->positions, &stage->velocities, &stage->forces, &stage->positionSum,
                          &stage->velocitySum})
       buffer->assign(n, btVector3(0, 0, 0));

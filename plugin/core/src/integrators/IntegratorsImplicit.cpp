@@ -103,11 +103,11 @@ void addRankOne(const ImplicitWorkspace& w, std::span<const uint32_t> particles,
 }
 
 /// out = A·in, A the springs' matrix plus the volume terms' products; allocates nothing.
-void multiply(const ImplicitWorkspace& w, const MuscleState& muscle, const Vector& in,
+void multiply(const ImplicitWorkspace& w, const IntegratedMuscle& muscle, const Vector& in,
               Vector& out) {
   out.noalias() = w.matrix * in;
   if (w.volumeScale == 0) return;
-  const MuscleSettings& settings = *muscle.settings;
+  const MuscleSettings& settings = muscle.settings;
   for (size_t k = 0; k < w.fanWeights.size(); ++k) {
     const btVector3* g = w.fanGradients.data() + settings.fanOffsets[k];
     addRankOne(
@@ -115,7 +115,7 @@ void multiply(const ImplicitWorkspace& w, const MuscleState& muscle, const Vecto
         w.fanWeights[k], in, out);
   }
   if (w.enclosedWeight > 0) {
-    const std::vector<uint32_t>& free = muscle.freeParticles;
+    const std::vector<uint32_t>& free = muscle.particles.freeParticles;
     addRankOne(
         w, free, [&](size_t v) -> const btVector3& { return w.enclosedGradient[free[v]]; },
         w.enclosedWeight, in, out);
@@ -124,8 +124,8 @@ void multiply(const ImplicitWorkspace& w, const MuscleState& muscle, const Vecto
 
 /// Jacobi-preconditioned conjugate gradients on A·x = b from the guess in `solution`: stops
 /// at |r| ≤ tolerance·|b| or after `cap` iterations; allocates nothing.
-void conjugateGradient(ImplicitWorkspace& w, const MuscleState& muscle, double tolerance, int cap,
-                       IntegrationResult& result) {
+void conjugateGradient(ImplicitWorkspace& w, const IntegratedMuscle& muscle, double tolerance,
+                       int cap, IntegrationResult& result) {
   const double bound = tolerance * w.rhs.norm();
   multiply(w, muscle, w.solution, w.product);
   w.residual = w.rhs - w.product;
@@ -175,10 +175,10 @@ class ImplicitIntegrator final : public TimeIntegrator {
  public:
   explicit ImplicitIntegrator(Integrator kind) : kind_(kind) {}
 
-  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+  IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef& def, btScalar dt,
                             btScalar previousDt) const override {
     auto& w = static_cast<ImplicitWorkspace&>(*muscle.workspace);
-    const MuscleSettings& settings = *muscle.settings;
+    const MuscleSettings& settings = muscle.settings;
     const double m = settings.particleMass;
     const double c = settings.damping;
     const double h = dt;
@@ -191,14 +191,14 @@ class ImplicitIntegrator final : public TimeIntegrator {
     const double theta = midpoint ? 0.5 + std::min(0.5, h / (kThetaScale * w.explicitLimit)) : 1;
     const Newton newton{midpoint ? m + c * theta * h : m + c * beta, midpoint ? h : beta,
                         midpoint ? theta * theta * h : beta};
-    const std::vector<uint32_t>& free = muscle.freeParticles;
+    const std::vector<uint32_t>& free = muscle.particles.freeParticles;
     if (kind_ == Integrator::Bdf2) followVelocityHistory(w, muscle, def);
     for (size_t k = 0; k < free.size(); ++k) {
       const uint32_t i = free[k];
-      const btVector3 x = muscle.positions[i];
-      const btVector3 v = muscle.velocities[i];
+      const btVector3 x = muscle.particles.positions[i];
+      const btVector3 v = muscle.particles.velocities[i];
       const btVector3 offset = midpoint ? v * btScalar(theta * (1 - theta) * h)
-                                        : (x - muscle.previous[i]) * btScalar(a2);
+                                        : (x - muscle.particles.previous[i]) * btScalar(a2);
       for (int j = 0; j < 3; ++j) {
         const size_t r = 3 * k + j;
         w.known[r] = midpoint ? (m - c * (1 - theta) * h) * v[j]
@@ -217,15 +217,17 @@ class ImplicitIntegrator final : public TimeIntegrator {
       const btVector3 next(static_cast<btScalar>(w.solution[3 * k]),
                            static_cast<btScalar>(w.solution[3 * k + 1]),
                            static_cast<btScalar>(w.solution[3 * k + 2]));
-      const btVector3 x = muscle.positions[i];
+      const btVector3 x = muscle.particles.positions[i];
       const btVector3 target =
-          midpoint ? x + (muscle.velocities[i] * btScalar(1 - theta) + next * btScalar(theta)) * dt
-                   : x + (x - muscle.previous[i]) * btScalar(a2) + next * btScalar(beta);
-      w.previousVelocities[k] = muscle.velocities[i];
+          midpoint ? x + (muscle.particles.velocities[i] * btScalar(1 - theta) +
+                          next * btScalar(theta)) *
+                             dt
+                   : x + (x - muscle.particles.previous[i]) * btScalar(a2) + next * btScalar(beta);
+      w.previousVelocities[k] = muscle.particles.velocities[i];
       w.writtenVelocities[k] = next;
-      muscle.velocities[i] = next;
-      muscle.previous[i] = x;
-      muscle.positions[i] = target;
+      muscle.particles.velocities[i] = next;
+      muscle.particles.previous[i] = x;
+      muscle.particles.positions[i] = target;
       result.displacement += (target - x).length();
     }
     w.history = true;
@@ -236,13 +238,13 @@ class ImplicitIntegrator final : public TimeIntegrator {
   Integrator kind() const override { return kind_; }
 
  protected:
-  std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const override {
-    const MuscleSettings& settings = *muscle.settings;
+  std::unique_ptr<IntegratorWorkspace> makeWorkspace(
+      const MuscleSettings& settings, const ParticleState& particles) const override {
     auto w = std::make_unique<ImplicitWorkspace>();
     w->rows.assign(settings.particleCount(), kFixedRow);
-    for (size_t k = 0; k < muscle.freeParticles.size(); ++k)
-      w->rows[muscle.freeParticles[k]] = static_cast<uint32_t>(3 * k);
-    const auto size = static_cast<Eigen::Index>(3 * muscle.freeParticles.size());
+    for (size_t k = 0; k < particles.freeParticles.size(); ++k)
+      w->rows[particles.freeParticles[k]] = static_cast<uint32_t>(3 * k);
+    const auto size = static_cast<Eigen::Index>(3 * particles.freeParticles.size());
 
     std::vector<Eigen::Triplet<double>> entries;
     const auto addPattern = [&](uint32_t row, uint32_t column) {
@@ -250,7 +252,7 @@ class ImplicitIntegrator final : public TimeIntegrator {
         for (uint32_t i = 0; i < 3; ++i)
           entries.emplace_back(static_cast<int>(row + i), static_cast<int>(column + j), 0.0);
     };
-    for (uint32_t i : muscle.freeParticles) addPattern(w->rows[i], w->rows[i]);
+    for (uint32_t i : particles.freeParticles) addPattern(w->rows[i], w->rows[i]);
     for (const Spring& spring : settings.springs)
       if (w->rows[spring.a] != kFixedRow && w->rows[spring.b] != kFixedRow) {
         addPattern(w->rows[spring.a], w->rows[spring.b]);
@@ -263,8 +265,8 @@ class ImplicitIntegrator final : public TimeIntegrator {
     const auto blockColumns = [&](uint32_t row, uint32_t column, int32_t* out) {
       for (uint32_t j = 0; j < 3; ++j) out[j] = valueIndex(w->matrix, row, column + j);
     };
-    w->diagonalBlocks.resize(muscle.freeParticles.size());
-    for (size_t k = 0; k < muscle.freeParticles.size(); ++k)
+    w->diagonalBlocks.resize(particles.freeParticles.size());
+    for (size_t k = 0; k < particles.freeParticles.size(); ++k)
       blockColumns(static_cast<uint32_t>(3 * k), static_cast<uint32_t>(3 * k),
                    w->diagonalBlocks[k].data());
     w->springBlocks.assign(settings.springs.size(), {-1, -1, -1, -1, -1, -1});
@@ -283,8 +285,8 @@ class ImplicitIntegrator final : public TimeIntegrator {
     if (!settings.enclosedFaces.empty())
       w->enclosedGradient.assign(settings.particleCount(), btVector3(0, 0, 0));
     w->explicitLimit = stableTimeStep(settings, Integrator::Verlet);
-    w->previousVelocities.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
-    w->writtenVelocities.assign(muscle.freeParticles.size(), btVector3(0, 0, 0));
+    w->previousVelocities.assign(particles.freeParticles.size(), btVector3(0, 0, 0));
+    w->writtenVelocities.assign(particles.freeParticles.size(), btVector3(0, 0, 0));
     return w;
   }
 
@@ -292,15 +294,15 @@ class ImplicitIntegrator final : public TimeIntegrator {
   /// The Newton step from v′₀ in w.solution, linearized at the muscle's positions (= p + σ·v′₀)
   /// with their forces: refills A, forms b = e + φ·F + (A − d·I)·v′₀, solves A·v′ = b into
   /// w.solution from w.guess.
-  static void newtonStep(ImplicitWorkspace& w, const MuscleState& muscle, const Newton& newton,
+  static void newtonStep(ImplicitWorkspace& w, const IntegratedMuscle& muscle, const Newton& newton,
                          const MuscleSystemDef& def, IntegrationResult& result) {
     fill(w, muscle, newton.diagonal, newton.phi * newton.sigma, def.diagonalJacobian);
     multiply(w, muscle, w.solution, w.product);
-    const std::vector<uint32_t>& free = muscle.freeParticles;
+    const std::vector<uint32_t>& free = muscle.particles.freeParticles;
     for (size_t k = 0; k < free.size(); ++k)
       for (int j = 0; j < 3; ++j) {
         const size_t r = 3 * k + j;
-        w.rhs[r] = w.known[r] + newton.phi * muscle.forces[free[k]][j] + w.product[r] -
+        w.rhs[r] = w.known[r] + newton.phi * muscle.particles.forces[free[k]][j] + w.product[r] -
                    newton.diagonal * w.solution[r];
       }
     w.solution = w.guess;
@@ -311,17 +313,17 @@ class ImplicitIntegrator final : public TimeIntegrator {
   /// stays; turned by the bones' pre-transform (the same turn of the written velocity gives the
   /// present one bit for bit), it turns alike; anything else (a contact zeroed it, a rollback
   /// or preparation restored another) drops the history: v(t−dt′) = v, so v̂ = v.
-  static void followVelocityHistory(ImplicitWorkspace& w, const MuscleState& muscle,
+  static void followVelocityHistory(ImplicitWorkspace& w, const IntegratedMuscle& muscle,
                                     const MuscleSystemDef& def) {
-    const MuscleSettings& settings = *muscle.settings;
-    for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
-      const uint32_t i = muscle.freeParticles[k];
-      const btVector3& v = muscle.velocities[i];
+    const MuscleSettings& settings = muscle.settings;
+    for (size_t k = 0; k < muscle.particles.freeParticles.size(); ++k) {
+      const uint32_t i = muscle.particles.freeParticles[k];
+      const btVector3& v = muscle.particles.velocities[i];
       if (v == w.writtenVelocities[k]) continue;
-      if (pretransformDirection(settings, muscle.boneDeltas, i, w.writtenVelocities[k],
+      if (pretransformDirection(settings, muscle.particles.boneDeltas, i, w.writtenVelocities[k],
                                 def.blendedPretransform, def.pretransformBlend) == v)
         w.previousVelocities[k] =
-            pretransformDirection(settings, muscle.boneDeltas, i, w.previousVelocities[k],
+            pretransformDirection(settings, muscle.particles.boneDeltas, i, w.previousVelocities[k],
                                   def.blendedPretransform, def.pretransformBlend);
       else
         w.previousVelocities[k] = v;
@@ -331,10 +333,10 @@ class ImplicitIntegrator final : public TimeIntegrator {
   /// Refills A = diagonal·I + stiffnessScale·K at the muscle's positions (only K's diagonal
   /// entries when `diagonalOnly`, seed 002's approximation: the volume terms' then go into the
   /// matrix, else they multiply as rank-one products) and the preconditioner D⁻¹.
-  static void fill(ImplicitWorkspace& w, const MuscleState& muscle, double diagonal,
+  static void fill(ImplicitWorkspace& w, const IntegratedMuscle& muscle, double diagonal,
                    double stiffnessScale, bool diagonalOnly) {
-    const MuscleSettings& settings = *muscle.settings;
-    const std::vector<btVector3>& positions = muscle.positions;
+    const MuscleSettings& settings = muscle.settings;
+    const std::vector<btVector3>& positions = muscle.particles.positions;
     double* values = w.matrix.valuePtr();
     std::fill(values, values + w.matrix.nonZeros(), 0.0);
     for (const auto& block : w.diagonalBlocks)
@@ -392,7 +394,7 @@ class ImplicitIntegrator final : public TimeIntegrator {
         addDiagonal(p[v], w.fanGradients[settings.fanOffsets[k] + v], w.fanWeights[k]);
     }
     if (w.enclosedWeight > 0)
-      for (uint32_t i : muscle.freeParticles)
+      for (uint32_t i : muscle.particles.freeParticles)
         addDiagonal(i, w.enclosedGradient[i], w.enclosedWeight);
     w.inverseDiagonal = w.inverseDiagonal.cwiseInverse();
   }

@@ -6,12 +6,12 @@ namespace fibremss {
 
 /// The heavy-ball step of free particle i: x⁺ = x + (x − x⁻)·keep + push·scale, x⁻ ← x (Verlet's
 /// scalar path, the projective step). Returns |x⁺ − x| [m].
-inline btScalar heavyBallStep(MuscleState& muscle, uint32_t i, const btVector3& push, btScalar keep,
-                              btScalar scale) {
-  const btVector3 x = muscle.positions[i];
-  const btVector3 step = (x - muscle.previous[i]) * keep + push * scale;
-  muscle.previous[i] = x;
-  muscle.positions[i] = x + step;
+inline btScalar heavyBallStep(ParticleState& particles, uint32_t i, const btVector3& push,
+                              btScalar keep, btScalar scale) {
+  const btVector3 x = particles.positions[i];
+  const btVector3 step = (x - particles.previous[i]) * keep + push * scale;
+  particles.previous[i] = x;
+  particles.positions[i] = x + step;
   return step.length();
 }
 

@@ -38,16 +38,16 @@ class PositionBasedIntegrator final : public TimeIntegrator {
  public:
   explicit PositionBasedIntegrator(bool compliant) : compliant_(compliant) {}
 
-  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar dt,
+  IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef& def, btScalar dt,
                             btScalar previousDt) const override {
-    const MuscleSettings& settings = *muscle.settings;
+    const MuscleSettings& settings = muscle.settings;
     const btScalar inverseMass = 1 / settings.particleMass;
     const btScalar keep =
         std::max(btScalar(0), 1 - settings.damping * dt * inverseMass) * dt / previousDt;
-    for (uint32_t i : muscle.freeParticles) {
-      const btVector3 x = muscle.positions[i];
-      muscle.positions[i] += (x - muscle.previous[i]) * keep;
-      muscle.previous[i] = x;
+    for (uint32_t i : muscle.particles.freeParticles) {
+      const btVector3 x = muscle.particles.positions[i];
+      muscle.particles.positions[i] += (x - muscle.particles.previous[i]) * keep;
+      muscle.particles.previous[i] = x;
     }
     auto& w = static_cast<ProjectionWorkspace&>(*muscle.workspace);
     std::fill(w.lambda.begin(), w.lambda.end(), btScalar(0));
@@ -60,7 +60,8 @@ class PositionBasedIntegrator final : public TimeIntegrator {
         const Spring& spring = settings.springs[s];
         const btScalar wa = settings.isFixed(spring.a) ? 0 : inverseMass;
         const btScalar wb = settings.isFixed(spring.b) ? 0 : inverseMass;
-        const btVector3 d = muscle.positions[spring.b] - muscle.positions[spring.a];
+        const btVector3 d =
+            muscle.particles.positions[spring.b] - muscle.particles.positions[spring.a];
         const btScalar length = d.length();
         const btScalar compliance = lambda ? inverseDt2 / spring.stiffness : 0;
         const btScalar denominator = wa + wb + compliance;
@@ -72,12 +73,13 @@ class PositionBasedIntegrator final : public TimeIntegrator {
         w.corrections[spring.a] -= move * wa;
         w.corrections[spring.b] += move * wb;
       }
-      for (uint32_t i : muscle.freeParticles)
-        muscle.positions[i] += w.corrections[i] * w.weights[i];
+      for (uint32_t i : muscle.particles.freeParticles)
+        muscle.particles.positions[i] += w.corrections[i] * w.weights[i];
     }
     IntegrationResult result;
-    for (uint32_t i : muscle.freeParticles)
-      result.displacement += (muscle.positions[i] - muscle.previous[i]).length();
+    for (uint32_t i : muscle.particles.freeParticles)
+      result.displacement +=
+          (muscle.particles.positions[i] - muscle.particles.previous[i]).length();
     result.finite = std::isfinite(result.displacement);
     return result;
   }
@@ -85,8 +87,8 @@ class PositionBasedIntegrator final : public TimeIntegrator {
   Integrator kind() const override { return compliant_ ? Integrator::Xpbd : Integrator::Pbd; }
 
  protected:
-  std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const override {
-    const MuscleSettings& settings = *muscle.settings;
+  std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleSettings& settings,
+                                                     const ParticleState&) const override {
     auto w = std::make_unique<ProjectionWorkspace>();
     if (compliant_) w->lambda.assign(settings.springs.size(), 0);
     w->corrections.assign(settings.particleCount(), btVector3(0, 0, 0));

@@ -148,12 +148,14 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<int>& rows, si
 /// Puts the particles the last response pushed into W (with `contactWeight` times their diagonal
 /// entry, MuscleSystemDef::projectiveContactWeight) and takes out those kContactHold
 /// iterations without a push (clearing the flags it reads). Returns whether W changed.
-bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWeight) {
+bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double contactWeight) {
   bool changed = false;
   ProjectiveFactor& factor = w.factor;
-  for (size_t k = 0; k < muscle.freeParticles.size(); ++k) {
+  const std::vector<uint32_t>& free = muscle.particles.freeParticles;
+  std::vector<uint8_t>& pushedLast = muscle.contact.pushedLast;
+  for (size_t k = 0; k < free.size(); ++k) {
     const int row = factor.row(k);
-    uint8_t& pushed = muscle.pushedLast[muscle.freeParticles[k]];
+    uint8_t& pushed = pushedLast[free[k]];
     const bool held = factor.weight(row) > 0;
     w.pushed[row] = pushed;
     if (pushed) {
@@ -172,9 +174,9 @@ bool holdContacts(MuscleState& muscle, ProjectiveWorkspace& w, double contactWei
 }
 
 /// The mean spring rest length of `muscle` [m], 0 without springs.
-double meanRestLength(const MuscleState& muscle) {
-  const size_t springs = muscle.settings->springs.size();
-  return springs == 0 ? 0 : muscle.restLengthSum / static_cast<double>(springs);
+double meanRestLength(const IntegratedMuscle& muscle) {
+  const size_t springs = muscle.settings.springs.size();
+  return springs == 0 ? 0 : muscle.particles.restLengthSum / static_cast<double>(springs);
 }
 
 /// The square of the rounding a particle's force may carry at `x` [N²], `stiffness` its diagonal
@@ -200,9 +202,10 @@ double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
 /// next. Rows the last response pushed are left out of the pair: a projection's move is not the
 /// forces' answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells
 /// tore).
-void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uint32_t>& free,
+void recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
                 const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
                 const std::vector<uint8_t>& pushedRows, int size) {
+  const std::vector<btVector3>& positions = muscle.particles.positions;
   if (h.hasLast && size > 0) {
     const int slot = (h.newest + 1) % size;
     std::vector<btVector3>& s = h.steps[slot];
@@ -212,7 +215,7 @@ void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uin
     for (size_t k = 0; k < free.size(); ++k) {
       const int row = factor.row(k);
       const bool pushed = pushedRows[row] != 0;
-      const btVector3& x = muscle.positions[free[k]];
+      const btVector3& x = positions[free[k]];
       s[row] = pushed ? btVector3(0, 0, 0) : x - h.lastPositions[row];
       y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
       if (!pushed) noise += forceNoise(factor.matrixDiagonal(row), x, restLength);
@@ -228,8 +231,7 @@ void recordPair(StepHistory& h, const MuscleState& muscle, const std::vector<uin
       h.restart();
     }
   }
-  for (size_t k = 0; k < free.size(); ++k)
-    h.lastPositions[factor.row(k)] = muscle.positions[free[k]];
+  for (size_t k = 0; k < free.size(); ++k) h.lastPositions[factor.row(k)] = positions[free[k]];
   h.lastForces = forces;
   h.hasLast = true;
 }
@@ -254,8 +256,8 @@ void twoLoop(StepHistory& h, const ProjectiveFactor& factor, std::vector<btVecto
 /// than an L-BFGS step may (the pairs learnt from float noise near the equilibrium, or from a
 /// state the contacts keep changing). real-hip-gait tore without the bound (three muscles frozen
 /// at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
-bool movesTooFar(const MuscleState& muscle, const std::vector<btVector3>& step) {
-  if (muscle.settings->springs.empty()) return false;
+bool movesTooFar(const IntegratedMuscle& muscle, const std::vector<btVector3>& step) {
+  if (muscle.settings.springs.empty()) return false;
   const auto limit = static_cast<btScalar>(meanRestLength(muscle));
   return std::any_of(step.begin(), step.end(),
                      [&](const btVector3& d) { return d.length2() > limit * limit; });
@@ -264,14 +266,15 @@ bool movesTooFar(const MuscleState& muscle, const std::vector<btVector3>& step) 
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
 /// or moves a particle too far (movesTooFar) is replaced by the plain projective one and the
 /// history restarts.
-IntegrationResult quasiNewtonStep(MuscleState& muscle, const MuscleSystemDef& def,
+IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
-  const std::vector<uint32_t>& free = muscle.freeParticles;
+  ParticleState& particles = muscle.particles;
+  const std::vector<uint32_t>& free = particles.freeParticles;
   const int size = def.projectiveHistory;
   StepHistory& h = w.history;
-  if (muscle.bonesMoving || h.size != size) h.restart();
+  if (particles.bonesMoving || h.size != size) h.restart();
   h.size = size;
-  recordPair(h, muscle, free, w.factor, w.forces, w.pushed, muscle.bonesMoving ? 0 : size);
+  recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
   w.solution = w.forces;
   twoLoop(h, w.factor, w.solution, size);
   if (h.count > 0 && (!(dot(w.solution, w.forces) > 0) || movesTooFar(muscle, w.solution))) {
@@ -281,7 +284,7 @@ IntegrationResult quasiNewtonStep(MuscleState& muscle, const MuscleSystemDef& de
   }
   IntegrationResult result;
   for (size_t k = 0; k < free.size(); ++k)
-    result.displacement += heavyBallStep(muscle, free[k], w.solution[w.factor.row(k)], 0, 1);
+    result.displacement += heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], 0, 1);
   result.finite = std::isfinite(result.displacement);
   return result;
 }
@@ -290,16 +293,19 @@ IntegrationResult quasiNewtonStep(MuscleState& muscle, const MuscleSystemDef& de
 /// or, with a history, x⁺ = x + H·F(x), H L-BFGS's inverse Hessian from (A + W)⁻¹.
 class ProjectiveIntegrator final : public TimeIntegrator {
  public:
-  IntegrationResult advance(MuscleState& muscle, const MuscleSystemDef& def, btScalar,
+  IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef& def, btScalar,
                             btScalar) const override {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
     if (holdContacts(muscle, w, def.projectiveContactWeight)) w.factor.update();
-    const std::vector<uint32_t>& free = muscle.freeParticles;
+    ParticleState& particles = muscle.particles;
+    const std::vector<uint32_t>& free = particles.freeParticles;
     // With pair reactions the step added the contacts' reactions to the forces already.
     const bool held = holdsContacts(def) && !def.pairReactions;
     for (size_t k = 0; k < free.size(); ++k) {
-      const btVector3& force = muscle.forces[free[k]];
-      w.forces[w.factor.row(k)] = held ? withoutInto(force, contactNormal(muscle, free[k])) : force;
+      const btVector3& force = particles.forces[free[k]];
+      w.forces[w.factor.row(k)] =
+          held ? withoutInto(force, contactNormal(muscle.contact, muscle.residual, free[k]))
+               : force;
     }
     if (def.projectiveHistory > 0) return quasiNewtonStep(muscle, def, w);
     w.solution = w.forces;
@@ -309,7 +315,7 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     IntegrationResult result;
     for (size_t k = 0; k < free.size(); ++k)
       result.displacement +=
-          heavyBallStep(muscle, free[k], w.solution[w.factor.row(k)], omega - 1, omega);
+          heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], omega - 1, omega);
     result.finite = std::isfinite(result.displacement);
     return result;
   }
@@ -319,10 +325,11 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   Integrator kind() const override { return Integrator::Projective; }
   /// A anew over its pattern (a broken spring or volume term adds zeros) and factored anew; the
   /// L-BFGS pairs, learnt from the old forces, forgotten.
-  void springsChanged(MuscleState& muscle) const override {
-    auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
+  void springsChanged(const MuscleSettings& settings, const ParticleState& particles,
+                      IntegratorWorkspace* workspace) const override {
+    auto& w = static_cast<ProjectiveWorkspace&>(*workspace);
     w.factor.clearMatrix();
-    matrixEntries(*muscle.settings, w.rows, muscle.freeParticles.size(),
+    matrixEntries(settings, w.rows, particles.freeParticles.size(),
                   [&](int i, int j, double value) { w.factor.addToMatrix(i, j, value); });
     w.factor.refactorAll();
     w.history.restart();
@@ -330,9 +337,10 @@ class ProjectiveIntegrator final : public TimeIntegrator {
   }
 
  protected:
-  std::unique_ptr<IntegratorWorkspace> makeWorkspace(const MuscleState& muscle) const override {
-    std::vector<int> rows = freeRows(*muscle.settings, muscle.freeParticles);
-    const Matrix lowerA = assemble(*muscle.settings, rows, muscle.freeParticles.size());
+  std::unique_ptr<IntegratorWorkspace> makeWorkspace(
+      const MuscleSettings& settings, const ParticleState& particles) const override {
+    std::vector<int> rows = freeRows(settings, particles.freeParticles);
+    const Matrix lowerA = assemble(settings, rows, particles.freeParticles.size());
     return std::make_unique<ProjectiveWorkspace>(std::move(rows), lowerA);
   }
 };

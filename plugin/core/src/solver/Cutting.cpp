@@ -44,9 +44,10 @@ bool crossesSweep(const Sweep& sweep, const btVector3& p, const btVector3& q) {
 }
 
 /// Whether an edge of the volume term on particles `p` crosses the sweep `context`.
-bool termCrossed(const MuscleState& muscle, std::span<const uint32_t> p, const void* context) {
+bool termCrossed(const ParticleState& particles, const TearState&, std::span<const uint32_t> p,
+                 const void* context) {
   const Sweep& sweep = *static_cast<const Sweep*>(context);
-  const btVector3* x = muscle.positions.data();
+  const btVector3* x = particles.positions.data();
   return anyTermEdge(p, [&](uint32_t i, uint32_t j) { return crossesSweep(sweep, x[i], x[j]); });
 }
 
@@ -64,14 +65,14 @@ bool cutBySweep(MuscleState& muscle, const BladeState& blade) {
   for (size_t s = 0; s < springs.size(); ++s) {
     if (springs[s].a == springs[s].b || !crossesSweep(sweep, x[springs[s].a], x[springs[s].b]))
       continue;
-    breakSpring(muscle, s);
+    breakSpring(tear, s);
     ++cut;
   }
-  const size_t volumeTerms = breakVolumeTerms(muscle, termCrossed, &sweep);
+  const size_t volumeTerms = breakVolumeTerms(muscle, tear, termCrossed, &sweep);
   if (cut + volumeTerms == 0) return false;
   tear.cutSprings += cut;
   tear.brokenVolumeTerms += volumeTerms;
-  separatePieces(muscle);
+  separatePieces(muscle, tear);
   return true;
 }
 

@@ -171,13 +171,14 @@ void addInitialNoise(const MuscleSystemDef& def, uint32_t added, MuscleState& st
 void addCandidateLists(Slots<MuscleState>& muscles, const Slots<BoneState>& bones,
                        MuscleState& added) {
   added.boneLists.resize(bones.states.size());
-  for (uint32_t slot : bones.order) added.boneLists[slot] = boneList(added, *bones.states[slot]);
+  for (uint32_t slot : bones.order)
+    added.boneLists[slot] = boneList(*added.settings, added, *bones.states[slot]);
   added.muscleLists.resize(muscles.states.size());
   for (uint32_t slot : muscles.order) {
     MuscleState& earlier = *muscles.states[slot];
     if (&earlier == &added) continue;
     earlier.muscleLists.resize(muscles.states.size());
-    earlier.muscleLists[added.slot] = muscleList(earlier, added);
+    earlier.muscleLists[added.slot] = muscleList(earlier.colliding(), added.colliding());
   }
 }
 }  // namespace
@@ -243,7 +244,7 @@ BoneHandle MuscleSystem::addBone(std::shared_ptr<const BoneSettings> settings,
   for (uint32_t slot : impl_->muscles.order) {
     MuscleState& muscle = *impl_->muscles.states[slot];
     muscle.boneLists.resize(impl_->bones.states.size());
-    muscle.boneLists[handle.index] = boneList(muscle, bone);
+    muscle.boneLists[handle.index] = boneList(*muscle.settings, muscle, bone);
   }
   return handle;
 }
@@ -285,7 +286,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   state->settings = settings;
   if (!impl_->blades.empty() && s.enclosedModulus > 0)
     throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
-  prepareTearing(*state, !impl_->blades.empty());
+  prepareTearing(state->settings, state->tear, !impl_->blades.empty());
   impl_->resolveBones(*state);
   impl_->placeAtBones(*state);
   ++impl_->musclesAdded;
@@ -293,7 +294,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     addInitialNoise(impl_->definition, impl_->musclesAdded, *state);
   // Before the tree: btDbvt's build breaks on non-finite or huge bounds.
   checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
-  buildTree(*state, impl_->definition.rebuildEveryStep);
+  buildTree(*state->settings, *state, *state, impl_->definition.rebuildEveryStep);
   ensurePrepared(integratorFor(impl_->definition.integrator), *state);
   const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
   if (!s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
@@ -352,7 +353,10 @@ BladeHandle MuscleSystem::addBlade(const btVector3& from, const btVector3& to,
   for (uint32_t slot : impl_->muscles.order)
     if (impl_->muscles.states[slot]->settings->enclosedModulus > 0)
       throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
-  for (uint32_t slot : impl_->muscles.order) prepareTearing(*impl_->muscles.states[slot], true);
+  for (uint32_t slot : impl_->muscles.order) {
+    MuscleState& state = *impl_->muscles.states[slot];
+    prepareTearing(state.settings, state.tear, true);
+  }
   impl_->blades.push_back({from, to, transform, transform, transform});
   return {uint32_t(impl_->blades.size() - 1)};
 }
@@ -428,7 +432,7 @@ void MuscleSystem::setPositions(MuscleHandle muscle, std::span<const btVector3> 
   std::copy(positions.begin(), positions.end(), state.previous.begin());
   std::fill(state.velocities.begin(), state.velocities.end(), btVector3(0, 0, 0));
   forgetBoneSides(state);
-  rebuildTree(state);
+  rebuildTree(*state.settings, state, state);
   impl_->deform(state);
 }
 

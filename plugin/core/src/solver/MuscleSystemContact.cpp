@@ -39,12 +39,15 @@ void MuscleSystem::Impl::collideBodies(btScalar dt) {
   if (contactBodies.empty()) return;
   // Without muscle or bone collision, collide() refitted no tree.
   if (!definition.muscleMuscle && !definition.muscleBone)
-    forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) { refitTree(state); });
+    forEachMuscle("refit", [](MuscleState& state, uint32_t, unsigned) {
+      refitTree(*state.settings, state, state);
+    });
   if (duration > 0)
     for (ContactBodyState& body : contactBodies) moveContactBody(body, dt);
   const bool velocities = integratorFor(definition.integrator).usesVelocities();
   forEachMuscle("contact bodies", [&](MuscleState& state, uint32_t, unsigned thread) {
-    fibremss::collideBodies(state, contactBodies, dt, velocities, scratch[thread].stack);
+    fibremss::collideBodies(*state.settings, state, state, state, contactBodies, dt, velocities,
+                            scratch[thread].stack);
   });
   // In insertion order: the same sums for every thread count.
   for (size_t k = 0; k < contactBodies.size(); ++k) {
@@ -130,7 +133,8 @@ ContactWrench MuscleSystem::contactWrench(const btCollisionObject& body,
   for (uint32_t slot : impl.muscles.order) {
     const MuscleState& state = *impl.muscles.states[slot];
     if (!state.frozen)
-      addHookeWrench(state, body, transform, transform.getOrigin(), impl.queryStack, wrench);
+      addHookeWrench(state.colliding(), state, body, transform, transform.getOrigin(),
+                     impl.queryStack, wrench);
   }
   return wrench;
 }

@@ -93,7 +93,7 @@ MuscleHealth checkMuscle(MuscleState& muscle) {
   const MuscleSettings& settings = *muscle.settings;
   // Written so that a NaN extent counts as spread too.
   health.spread = muscle.tear.pieces > 1
-                      ? piecesSpread(muscle, kTornSpread)
+                      ? piecesSpread(settings, muscle, muscle.tear, kTornSpread)
                       : !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
   if (settings.springs.empty()) return health;
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
@@ -255,9 +255,11 @@ void MuscleSystem::Impl::breakMuscles() {
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) continue;
-    bool changed = breakStretched(state);
+    bool changed = breakStretched(state, state.tear);
     for (const BladeState& blade : blades) changed = cutBySweep(state, blade) || changed;
-    if (changed && state.prepared) integratorFor(state.preparedFor).springsChanged(state);
+    if (changed && state.prepared)
+      integratorFor(state.preparedFor)
+          .springsChanged(*state.settings, state, state.workspace.get());
   }
   for (BladeState& blade : blades) {
     blade.before = blade.last;
@@ -316,11 +318,12 @@ void MuscleSystem::Impl::guardedStep() {
     state.pinched = state.pinchedInStep = 0;
     if (definition.muscleBone && state.bonesMoving)
       for (int round = 0; round < kFrozenRounds; ++round) {
-        refitTree(state);
+        refitTree(*state.settings, state, state);
         for (uint32_t slot : bones.order)
-          collideMuscleBone(state, *bones.states[slot], thread.stack, thread.contacts);
+          collideMuscleBone(*state.settings, state, state, state, *bones.states[slot], thread.stack,
+                            thread.contacts);
         recordPushes(*state.settings, state, state);
-        applyPushes(state, velocities, definition.slidingContacts);
+        applyPushes(*state.settings, state, state, velocities, definition.slidingContacts);
       }
     thread.contacts.clear();
     deform(state);

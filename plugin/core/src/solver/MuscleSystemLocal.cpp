@@ -117,18 +117,19 @@ void MuscleSystem::Impl::localIteration(MuscleState& state, const TimeIntegrator
   result.forces = addSpringForces(settings, state.positions, state.forces, state.regionSprings);
   addLocalVolumeForces(settings, state.positions, state.forces, state.regionFans);
   addEnclosedVolumeForces(settings, state.positions, state.forces);
-  addExternalForces(state, definition.gravity, state.forces);
-  const IntegrationResult integration = integrator.advance(state, definition, dt, lastDt);
+  addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
+  const IntegrationResult integration =
+      integrator.advance(state.integrated(), definition, dt, lastDt);
   const int passes = result.forces.nearLimit > 0 ? kIterationStrainPasses : 0;
   result.displacement = limitStrain(settings, state, state, passes) > 0 ? freeDisplacement(state)
                                                                         : integration.displacement;
   result.finite = integration.finite;
-  if (definition.muscleMuscle || definition.muscleBone) refitTree(state);
+  if (definition.muscleMuscle || definition.muscleBone) refitTree(*state.settings, state, state);
   if (definition.muscleBone)
     for (uint32_t slot : bones.order) {
       skipMeshOutside(state, *bones.states[slot]);
-      collideMuscleBone(state, *bones.states[slot], scratch[thread].stack,
-                        scratch[thread].contacts);
+      collideMuscleBone(*state.settings, state, state, state, *bones.states[slot],
+                        scratch[thread].stack, scratch[thread].contacts);
     }
   dropPushesOutside(state);
   respond(state, true);

@@ -327,7 +327,10 @@ void MuscleSystem::Impl::collideMusclePairs() {
       pairTasks.size(),
       [&](size_t k, unsigned thread) {
         MusclePairTask& pair = pairTasks[k];
-        collideMuscles(*muscles.states[pair.a], *muscles.states[pair.b], scratch[thread].stack,
+        MuscleState& first = *muscles.states[pair.a];
+        const MuscleState& second = *muscles.states[pair.b];
+        collideMuscles(first.colliding(), second.colliding(),
+                       candidateList(first.muscleLists, pair.b), scratch[thread].stack,
                        scratch[thread].contacts, pair.contacts);
       },
       "muscle pairs");
@@ -338,8 +341,11 @@ void MuscleSystem::Impl::pushMusclePairs(MuscleState& state, uint32_t slot,
                                          TreeTraversalStack& stack) {
   for (uint32_t k : musclePairs[slot]) {
     const MusclePairTask& pair = pairTasks[k];
-    pushMuscleContacts(*muscles.states[pair.a], *muscles.states[pair.b], pair.a == slot, stack,
-                       pair.contacts);
+    const bool onFirst = pair.a == slot;
+    if (pushMuscleContacts(muscles.states[pair.a]->colliding(), muscles.states[pair.b]->colliding(),
+                           onFirst, state, stack, pair.contacts) &&
+        onFirst)
+      ++state.candidateOverflows;
   }
 }
 
@@ -364,8 +370,8 @@ void MuscleSystem::Impl::collide() {
     const Clock::time_point boneStart = Clock::now();
     if (definition.muscleBone)
       for (uint32_t boneSlot : bones.order)
-        collideMuscleBone(state, *bones.states[boneSlot], scratch[thread].stack,
-                          scratch[thread].contacts);
+        collideMuscleBone(*state.settings, state, state, state, *bones.states[boneSlot],
+                          scratch[thread].stack, scratch[thread].contacts);
     result.pushesMs =
         millisecondsSince(pushesStart) - (result.boneMs = millisecondsSince(boneStart));
   });
@@ -389,8 +395,9 @@ void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
   const TimeIntegrator& integrator = integratorFor(definition.integrator);
   const bool holds = integrator.holdsContacts(definition);
   if (record || holds) recordPushes(*state.settings, state, state);
-  applyPushes(state, integrator.usesVelocities(), definition.slidingContacts);
-  if (holds) leaveContactSlop(state, kContactSlop);
+  applyPushes(*state.settings, state, state, integrator.usesVelocities(),
+              definition.slidingContacts);
+  if (holds) leaveContactSlop(*state.settings, state, state, state, kContactSlop);
 }
 
 void MuscleSystem::Impl::applyResponse() {
@@ -456,8 +463,10 @@ void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult&
   result.forces.exploded = result.forces.overstretched > 0;
   if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
     result.volumeMs = 0;
-  addExternalForces(state, definition.gravity, state.forces);
-  if (stepSettings.adaptiveTimeStep) result.safeTimeStep = adaptiveTimeStep(state, previousDt);
+  addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
+  if (stepSettings.adaptiveTimeStep)
+    result.safeTimeStep =
+        adaptiveTimeStep(*state.settings, state, state.centredDamping(), previousDt);
   result.forcesMs += millisecondsSince(start);
 }
 
@@ -513,7 +522,8 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
   forEachMuscle("integrate and refit", [&](MuscleState& state, uint32_t slot, unsigned) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
-    const IntegrationResult integration = integrator.advance(state, definition, dt, lastDt);
+    const IntegrationResult integration =
+        integrator.advance(state.integrated(), definition, dt, lastDt);
     // The projection runs where the forces found a spring near the limit. The iteration's
     // displacement is the projection's end's when it moved particles: at a limited equilibrium
     // the two cancel, as the stop rules expect.
@@ -523,7 +533,7 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
                               : integration.displacement;
     result.finite = integration.finite;
     const Clock::time_point refitStart = Clock::now();
-    if (refit) refitTree(state);
+    if (refit) refitTree(*state.settings, state, state);
     result.refitMs = millisecondsSince(refitStart);
     result.integrateMs = millisecondsSince(integrateStart) - result.refitMs;
   });
@@ -597,7 +607,8 @@ ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
   // Every muscle's forces: a contact pair's reaction depends on both muscles'.
   const std::vector<uint32_t>& all = muscles.order;
   const auto task = [&](size_t k, unsigned) {
-    muscleForceResidual(*muscles.states[all[k]], definition.gravity);
+    MuscleState& state = *muscles.states[all[k]];
+    muscleForceResidual(*state.settings, state, state, state, definition.gravity);
   };
   if (pool) {
     pool->run(all.size(), task, "residual");
@@ -606,7 +617,10 @@ ResidualSums MuscleSystem::Impl::residualOf(std::span<const uint32_t> slots) {
   }
   addContactReactions(&MuscleState::residual, all);
   ResidualSums total;
-  for (uint32_t slot : slots) total.add(residuals[slot] = residualSums(*muscles.states[slot]));
+  for (uint32_t slot : slots) {
+    const MuscleState& state = *muscles.states[slot];
+    total.add(residuals[slot] = residualSums(state, state, state));
+  }
   return total;
 }
 
@@ -671,7 +685,7 @@ void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
       placeAtBones(state);
-      rebuildTree(state);
+      rebuildTree(*state.settings, state, state);
     });
 }
 

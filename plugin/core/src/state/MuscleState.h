@@ -50,12 +50,6 @@ struct BoneState {
   btTransform goodCurrent = btTransform::getIdentity();  ///< `current` at the step's start (guard)
 };
 
-/// Scratch an integrator keeps per muscle (Jacobian structure, CG vectors, stage buffers);
-/// made by TimeIntegrator::prepare, never state a rollback must restore.
-struct IntegratorWorkspace {
-  virtual ~IntegratorWorkspace() = default;
-};
-
 /// A muscle's particles as every iteration reads and writes them (the hot part), structure of
 /// arrays, size particleCount() unless said otherwise.
 struct ParticleState {
@@ -141,6 +135,20 @@ struct TreeState {
   size_t candidateOverflows = 0;  ///< listings or pair contact records that overflowed, unsummed
 };
 
+/// A muscle as the stages that test its spheres against others read it (CollisionPairs.h,
+/// BodyContacts.h): its settings, positions and sphere tree (MuscleState::colliding).
+struct CollidingMuscle {
+  const MuscleSettings& settings;  ///< radii [m], fixed and boundary particles
+  const ParticleState& particles;  ///< positions [m], mean radius [m]
+  const TreeState& trees;          ///< sphere tree, snapshot [m] and reach [m]
+};
+
+/// Scratch an integrator keeps per muscle (Jacobian structure, CG vectors, stage buffers);
+/// made by TimeIntegrator::prepare, never state a rollback must restore.
+struct IntegratorWorkspace {
+  virtual ~IntegratorWorkspace() = default;
+};
+
 /// A muscle's forces pass in chunks (ForceChunks.h): one task per chunk; the task that finishes
 /// the muscle's last chunk adds the chunks' buffers to `forces` in chunk order.
 struct ChunkState {
@@ -186,6 +194,18 @@ struct ResidualState {
   void init(size_t n, std::vector<btScalar> stiffness);
 };
 
+/// A muscle as an integrator's step reads and writes it (Integrators.h): its settings and the
+/// parts of its state the integrators use (MuscleState::integrated).
+struct IntegratedMuscle {
+  const MuscleSettings& settings;  ///< springs, particle mass [kg], damping [N·s/m]
+  ParticleState& particles;  ///< positions [m], previous [m], velocities [m/s], forces [N], bones
+  /// pushedLast, which the projective integrator reads and clears; contactRound
+  ContactState& contact;
+  const ResidualState& residual;        ///< the pushes of the last response [m] (contactNormal)
+  const InteractionState& interaction;  ///< forces held on particles [N]
+  IntegratorWorkspace* workspace;       ///< the integrator's scratch, or null
+};
+
 /// The local region of MuscleSystem::stepLocal in one muscle (MuscleSystem::setLocalRegion):
 /// the particles a local step moves and the springs and local volume terms whose forces it takes.
 /// Sized to the muscle's counts at its first gathering, so that gathering again does not allocate.
@@ -227,6 +247,13 @@ struct MuscleState : ParticleState,
   bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
   TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
+
+  /// Whether its steps take Verlet's centred damping (prepared for Verlet; adaptiveTimeStep).
+  bool centredDamping() const { return preparedFor == Integrator::Verlet; }
+  /// The muscle as an integrator steps it.
+  IntegratedMuscle integrated() { return {*settings, *this, *this, *this, *this, workspace.get()}; }
+  /// The muscle as the sphere tests read it.
+  CollidingMuscle colliding() const { return {*settings, *this, *this}; }
 };
 
 }  // namespace fibremss
