@@ -45,10 +45,18 @@ btScalar leafSlack(const MuscleState& muscle) {
   return 2 * muscle.meanRadius;
 }
 
-/// The response of particle i of `muscle` to `contact` with `body`; returns the impulse the
-/// particle received [N·s].
+/// The share of a touching particle's velocity along the contact normal that contact damping
+/// c' = `damping` × the muscle's c takes in an iteration of `dt` [1]: implicit, c'·dt/m over
+/// 1 + c'·dt/m.
+btScalar dampedShare(const MuscleSettings& settings, btScalar damping, btScalar dt) {
+  const btScalar rate = damping * settings.damping * dt / settings.particleMass;
+  return rate / (1 + rate);
+}
+
+/// The response of particle i of `muscle` to `contact` with `body`, its velocity along the normal
+/// then damped by the share `damped`; returns the impulse the particle received [N·s].
 btVector3 respond(MuscleState& muscle, uint32_t i, const ContactBodyState& body,
-                  const ShapeContact& contact, btScalar dt, bool hasVelocities) {
+                  const ShapeContact& contact, btScalar dt, bool hasVelocities, btScalar damped) {
   const btVector3& n = contact.normal;
   const btVector3 surface = body.linear + body.angular.cross(contact.point - body.centre);
   const btScalar mass = muscle.settings->particleMass;
@@ -61,7 +69,9 @@ btVector3 respond(MuscleState& muscle, uint32_t i, const ContactBodyState& body,
     const btScalar into = (v - surface).dot(n);
     impulse = n * (into < 0 ? -mass * into : btScalar(0));
     if (into < 0) v -= n * into;
+    v -= n * (v.dot(n) * damped);
   }
+  moved -= n * (moved.dot(n) * damped);
   muscle.positions[i] += n * contact.depth;
   muscle.previous[i] = muscle.positions[i] - moved;
   return impulse;
@@ -144,8 +154,9 @@ void prepareInteraction(const MuscleSettings& settings, InteractionState& intera
 }
 
 void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies, btScalar dt,
-                   bool hasVelocities, TreeTraversalStack& stack) {
+                   bool hasVelocities, btScalar damping, TreeTraversalStack& stack) {
   const MuscleSettings& settings = *muscle.settings;
+  const btScalar damped = dampedShare(settings, damping, dt);
   for (size_t k = 0; k < bodies.size(); ++k) {
     BodyImpulse& sum = muscle.bodyImpulses[k];
     sum = BodyImpulse{};
@@ -160,7 +171,7 @@ void collideBodies(MuscleState& muscle, std::span<const ContactBodyState> bodies
       if (!sphereShapeContact(shape, body.transform, muscle.positions[i], settings.radii[i],
                               contact))
         return;
-      const btVector3 impulse = respond(muscle, i, body, contact, dt, hasVelocities);
+      const btVector3 impulse = respond(muscle, i, body, contact, dt, hasVelocities, damped);
       sum.linear -= impulse;
       sum.angular -= (contact.point - body.centre).cross(impulse);
       ++sum.contacts;
