@@ -3,7 +3,7 @@
 // dents and recovers; momentum is conserved between a ball and a free muscle; a probe pressed
 // deeper feels more force; the dynamic time mode advances exactly Bullet's dt; without contact
 // bodies a step is bit-identical to the plain solver's; any thread count gives the same bits;
-// the contact path allocates nothing.
+// the contact path allocates nothing; contact damping takes a landing ball's impact.
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletCollision/CollisionShapes/btBoxShape.h>
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
@@ -11,6 +11,7 @@
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -37,8 +38,10 @@ constexpr btScalar kWidth = (kSide - 1) * kSpacing;
 constexpr btScalar kTop = (kLayers - 1) * kSpacing + kSpacing / 2;  // slab's upper surface [m]
 constexpr btScalar kBulletStep = btScalar(1.0 / 480);               // fixed Bullet step [s]
 
-MuscleSystemDef slabParameters(int threads = 1) {
+MuscleSystemDef slabParameters(int threads = 1,
+                               btScalar contactDamping = MuscleSystemDef{}.contactDamping) {
   MuscleSystemDef parameters = testing::verletDef();
+  parameters.contactDamping = contactDamping;
   parameters.stepSettings.timeStep = btScalar(5e-5);  // below the slab's stable dt (about 1e-4 s)
   parameters.stepSettings.iterations = 20;
   parameters.threads = threads;
@@ -75,8 +78,10 @@ struct SlabWorld {
   BoneHandle boneHandle;
   std::vector<MuscleHandle> muscles;
 
-  explicit SlabWorld(int slabs = 1, int threads = 1, btScalar kappa = 5)
-      : world(&dispatcher, &broadphase, &solver, &configuration, slabParameters(threads)) {
+  explicit SlabWorld(int slabs = 1, int threads = 1, btScalar kappa = 5,
+                     btScalar contactDamping = MuscleSystemDef{}.contactDamping)
+      : world(&dispatcher, &broadphase, &solver, &configuration,
+              slabParameters(threads, contactDamping)) {
     world.setGravity(btVector3(0, btScalar(-9.81), 0));
     WorldCoupling coupling;
     coupling.time = MuscleTime::Dynamic;
@@ -168,6 +173,33 @@ TEST(RigidContact, ABallDroppedOnAMuscleStopsOnItAndTheMuscleDentsAndRecovers) {
   f.step(240);
   EXPECT_NEAR(f.topHeight(slab, centre, centre, 1.5f * kSpacing), restTop, 5e-5f);
   EXPECT_EQ(f.world.bodyContact(&ball.body).contacts, 0u);
+}
+
+/// The fastest a 20 g ball dropped 10 mm on the slab moves up after it first touched it, over
+/// half a second of Dynamic steps [m/s], with the contact damping `contactDamping`.
+btScalar reboundSpeed(btScalar contactDamping) {
+  SlabWorld f(1, 1, 5, contactDamping);
+  f.step(20);  // the muscle at rest on its bone
+  const btScalar radius = 0.008f, centre = kWidth / 2;
+  Ball ball(radius, 0.02f, btVector3(centre, kTop + radius + 0.01f, centre));
+  f.world.addRigidBody(&ball.body);
+  bool touched = false;
+  btScalar fastestUp = 0;
+  for (int s = 0; s < 240; ++s) {
+    f.step();
+    touched = touched || f.world.bodyContact(&ball.body).contacts > 0;
+    if (touched) fastestUp = std::max(fastestUp, ball.body.getLinearVelocity().y());
+  }
+  f.world.removeRigidBody(&ball.body);
+  return fastestUp;
+}
+
+TEST(RigidContact, ContactDampingTakesALandingBallsImpact) {
+  // Particles touching the ball are damped along the contact normal: the muscle returns less of
+  // the impact, and the ball bounces back slower than from the muscle without contact damping.
+  const btScalar undamped = reboundSpeed(0);
+  ASSERT_GT(undamped, 0) << "the ball did not bounce without contact damping";
+  EXPECT_LT(reboundSpeed(MuscleSystemDef{}.contactDamping), undamped);
 }
 
 /// What a ball dropped on a muscle in a default world did: speeds [m/s] and heights [m].

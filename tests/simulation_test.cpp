@@ -171,7 +171,7 @@ TEST(Relaxation, ATimedStepKeepsEveryIterationWithinTheStableTimeStep) {
   // than the stable dt of fusiform's springs and volume term: that exploded at once (the embed
   // example in MuscleTime::Dynamic). The step takes more, shorter iterations instead.
   const LoadedScene scene = loadScene("fusiform", {"resolution=12", "integrator=verlet"});
-  ASSERT_GT(scene.muscles.at(0).parameters.springs.volumeStiffness, 0) << "on by default";
+  ASSERT_GT(volumeMultiple(scene.muscles.at(0).parameters.springs), 0) << "on by default";
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   MuscleSystemDef parameters = scene.simulation;
   parameters.stepSettings.iterations = 20;

@@ -2,10 +2,10 @@
 // fibremss`): a box-shaped muscle lying on a bone is built from its surface and fibres in code,
 // prepared and added to a Bullet world, and a 20 g ball falls onto it (20 mm by default). Bodies
 // that fall, bounce and rest on muscles want MuscleTime::Dynamic with a time integrator (Verlet):
-// muscles and bodies share one clock and exchange momentum, the muscle dents, the ball bounces
-// lower than it fell and comes to rest on it. Bullet steps at 240 Hz (four substeps a frame), so
-// that the ball moves less than a particle's radius a step.
-// Usage: fibremss_drop_ball [STEPS] [pose] [--drop MM] [--volume-stiffness V] [--may-leave].
+// muscles and bodies share one clock and exchange momentum, the muscle dents, the contact
+// damping takes the impact, the ball bounces lower than it fell and comes to rest on it. Bullet
+// steps at 240 Hz (four substeps a frame), so that the ball moves less than a particle's radius a
+// step. Usage: fibremss_drop_ball [STEPS] [pose] [--drop MM] [--volume-stiffness V] [--may-leave].
 // `pose` keeps the library's default coupling, MuscleTime::QuasiStaticPose with the projective
 // solver: it stops a body, holds its weight by the muscle's static reaction and never throws it,
 // but without friction a ball balanced on the crest of this narrow muscle may roll off. `--drop`

@@ -582,6 +582,8 @@ void readCollision(Fields& collision, double scale, MuscleSystemDef& def) {
   def.penetrationRecovery = collision.boolean("penetration_recovery", defaults.penetrationRecovery);
   def.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
   def.surfaceContact = collision.boolean("surface_contact", defaults.surfaceContact);
+  def.contactDamping =
+      btScalar(collision.number("contact_damping", defaults.contactDamping, 0, 1e6));
 }
 
 /// The top-level "analytic" object: which exact case the scene is, and its geometry (a

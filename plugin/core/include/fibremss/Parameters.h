@@ -50,10 +50,11 @@ struct SpringParameters {
   /// Local volume preservation: a bulk modulus K against each Delaunay tetrahedron's volume
   /// change (energy ½·K·(V − V0)²/V0 per tetrahedron), as a multiple of the spring network's
   /// Young's modulus E = Σk·L0² / 3V [1] (K in Pa = this × E; 0: off; < 0: the multiple
-  /// volumeMultipleFor(poissonRatio), volumeMultiple says which applies).
-  btScalar volumeStiffness = 4;
+  /// volumeMultipleFor(poissonRatio), the default: 6.27 at 0.485; volumeMultiple says which
+  /// applies).
+  btScalar volumeStiffness = -1;
   /// Poisson ratio of the spring network with its local volume terms when volumeStiffness < 0
-  /// [1], in [0.25, 0.5): muscle is nearly incompressible (about 0.49).
+  /// (the default) [1], in [0.25, 0.5): muscle is nearly incompressible (about 0.49).
   btScalar poissonRatio = btScalar(0.485);
   /// Whole-muscle volume preservation: a bulk modulus K against the change of the volume the
   /// muscle's interior tetrahedra enclose (energy ½·K·(V − V0)²/V0 per muscle, a pressure on the
@@ -269,6 +270,13 @@ struct MuscleSystemDef {
   /// surface (the layer between the boundary spheres and the surface squashed on the bone);
   /// false: the surface is the skin alone (method.md §7).
   bool surfaceContact = true;
+  /// Contact damping against rigid bodies (RigidContact.h): a free particle touching a body is
+  /// damped along the contact normal by this multiple of its muscle's damping coefficient c
+  /// (SpringParameters::damping) on top of c, in the frame c acts in [1] (0: none; an undamped
+  /// muscle has none). The springs and volume terms return most of a landing body's impact (a
+  /// ball dropped on a muscle in MuscleTime::Dynamic kept 80 % of its energy and bounced off);
+  /// with 4 it keeps 53 % and comes to rest (docs/contact.md).
+  btScalar contactDamping = 4;
 
   bool diagonalJacobian = false;    ///< implicit integrators: diagonal-only Jacobian (seed 002)
   btScalar solverTolerance = 1e-6;  ///< implicit integrators: CG relative residual

@@ -8,8 +8,9 @@
 // body's shape is moved out of it by the whole overlap (the body holds its pose during the step,
 // like a bone) and loses its velocity into the body relative to the body's surface (inelastic,
 // frictionless); the momentum it loses, m·Δv, is the impulse the body receives, and a dynamic
-// body's velocity takes it at once (so it slows within the step). Fixed particles do not touch
-// bodies (the bone they sit on collides with them in Bullet).
+// body's velocity takes it at once (so it slows within the step). Its velocity along the normal
+// is then damped (MuscleSystemDef::contactDamping), so that a body landing on a muscle loses its
+// impact. Fixed particles do not touch bodies (the bone they sit on collides with them in Bullet).
 #include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btScalar.h>
 #include <LinearMath/btTransform.h>

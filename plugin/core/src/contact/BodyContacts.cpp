@@ -45,10 +45,18 @@ btScalar leafSlack(const ParticleState& particles) {
   return 2 * particles.meanRadius;
 }
 
-/// The response of particle i (of `mass` [kg]) to `contact` with `body`; returns the impulse the
-/// particle received [N·s].
+/// The share of a touching particle's velocity along the contact normal that contact damping
+/// c' = `damping` × the muscle's c takes in an iteration of `dt` [1]: implicit, c'·dt/m over
+/// 1 + c'·dt/m.
+btScalar dampedShare(const MuscleSettings& settings, btScalar damping, btScalar dt) {
+  const btScalar rate = damping * settings.damping * dt / settings.particleMass;
+  return rate / (1 + rate);
+}
+
+/// The response of particle i (of `mass` [kg]) to `contact` with `body`, its velocity along the
+/// normal then damped by the share `damped`; returns the impulse the particle received [N·s].
 btVector3 respond(btScalar mass, ParticleState& particles, uint32_t i, const ContactBodyState& body,
-                  const ShapeContact& contact, btScalar dt, bool hasVelocities) {
+                  const ShapeContact& contact, btScalar dt, bool hasVelocities, btScalar damped) {
   const btVector3& n = contact.normal;
   const btVector3 surface = body.linear + body.angular.cross(contact.point - body.centre);
   btVector3 moved = particles.positions[i] - particles.previous[i];
@@ -60,7 +68,9 @@ btVector3 respond(btScalar mass, ParticleState& particles, uint32_t i, const Con
     const btScalar into = (v - surface).dot(n);
     impulse = n * (into < 0 ? -mass * into : btScalar(0));
     if (into < 0) v -= n * into;
+    v -= n * (v.dot(n) * damped);
   }
+  moved -= n * (moved.dot(n) * damped);
   particles.positions[i] += n * contact.depth;
   particles.previous[i] = particles.positions[i] - moved;
   return impulse;
@@ -147,8 +157,9 @@ void prepareInteraction(const MuscleSettings& settings, InteractionState& intera
 
 void collideBodies(const MuscleSettings& settings, const TreeState& trees, ParticleState& particles,
                    InteractionState& interaction, std::span<const ContactBodyState> bodies,
-                   btScalar dt, bool hasVelocities, TreeTraversalStack& stack) {
+                   btScalar dt, bool hasVelocities, btScalar damping, TreeTraversalStack& stack) {
   const SphereTree& tree = trees.tree;
+  const btScalar damped = dampedShare(settings, damping, dt);
   for (size_t k = 0; k < bodies.size(); ++k) {
     BodyImpulse& sum = interaction.bodyImpulses[k];
     sum = BodyImpulse{};
@@ -164,7 +175,7 @@ void collideBodies(const MuscleSettings& settings, const TreeState& trees, Parti
                               contact))
         return;
       const btVector3 impulse =
-          respond(settings.particleMass, particles, i, body, contact, dt, hasVelocities);
+          respond(settings.particleMass, particles, i, body, contact, dt, hasVelocities, damped);
       sum.linear -= impulse;
       sum.angular -= (contact.point - body.centre).cross(impulse);
       ++sum.contacts;

@@ -47,6 +47,9 @@ void checkDefinition(const MuscleSystemDef& def, const char* call) {
   if (!(def.initialNoise >= 0) || !(def.initialNoise <= kMaxCoordinate))
     throw InputError(call, "MuscleSystemDef::initialNoise",
                      "expected a displacement in [0, 1e6] m, got " + format(def.initialNoise));
+  if (!(def.contactDamping >= 0) || !(def.contactDamping <= kMaxCoordinate))
+    throw InputError(call, "MuscleSystemDef::contactDamping",
+                     "expected a multiple in [0, 1e6], got " + format(def.contactDamping));
 }
 
 void checkPoints(std::span<const btVector3> points, const std::string& call,

@@ -47,7 +47,7 @@ void MuscleSystem::Impl::collideBodies(btScalar dt) {
   const bool velocities = integratorFor(definition.integrator).usesVelocities();
   forEachMuscle("contact bodies", [&](MuscleState& state, uint32_t, unsigned thread) {
     fibremss::collideBodies(*state.settings, state, state, state, contactBodies, dt, velocities,
-                            scratch[thread].stack);
+                            definition.contactDamping, scratch[thread].stack);
   });
   // In insertion order: the same sums for every thread count.
   for (size_t k = 0; k < contactBodies.size(); ++k) {
