@@ -65,9 +65,8 @@ case "${1:-}" in
     # Only the fibremss tool, the Python module and their libraries: no tests, no benchmarks.
     stage configure cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DFIBREMSS_BUILD_TESTS=OFF
     stage build cmake --build build -j"$jobs" --target fibremss_cli fibremss_python
-    # The CalculiX reference of thigh13 takes far longer than this job (comparisons/README.md,
-    # "The main job"): it is used when the cache has it (`fibremss reference thigh13 --set
-    # resolution=20` computes it once), else the report says there is none and ranks nothing.
+    # thigh13's CalculiX reference takes hours of CPU (comparisons/README.md, "The main job"):
+    # the job takes it from scenes/references (shipped) or the cache, never solves it here.
     echo "setup: main job: fibremss compare thigh13 --set resolution=20"
     build/bin/fibremss compare thigh13 --set resolution=20 --reference-cached-only --out results/thigh13
     echo "setup: report in results/thigh13/report.md (plot: results/thigh13/speed_vs_error.png)"

@@ -80,10 +80,9 @@ void printTable(const Comparison& comparison) {
   }
   for (const std::string& line : gateLines(comparison.reference->gates))
     std::printf("reference gate: %s\n", line.c_str());
-  if (comparison.reference->gates.failed())
-    std::printf("the reference fails a gate: no ranking of the methods\n");
-  else if (!comparison.reference->gates.passed())
-    std::printf("the reference's gates were not computed: no ranking of the methods\n");
+  if (!comparison.reference->gates.passed())
+    std::printf("%s: no ranking of the methods\n",
+                comparison.reference->gates.whyNotPassed().c_str());
 }
 
 void compare(CompareArgs& args) {

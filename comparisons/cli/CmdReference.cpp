@@ -119,6 +119,14 @@ void shipStored(const std::string& dir, const std::string& key, const CalculixSo
               static_cast<uintmax_t>(std::filesystem::file_size(path)));
 }
 
+/// The failed solve a retry replaces, as a fresh machine needs it to find the retry: its
+/// failures and counts without its surfaces (only the retry's are compared).
+CalculixSolution failureRecord(CalculixSolution solution) {
+  for (std::vector<btVector3>& surface : solution.poseSurfaces) surface.clear();
+  solution.returnSurface.clear();
+  return solution;
+}
+
 /// Writes every stored solve of the reference (its own and its gates') to args.shipDir as
 /// shipped references (`<key>.ref.gz`) and records them in its manifest.json. A gate not solved
 /// yet is listed with `"shipped": false`, so the manifest still names every key of the scene.
@@ -144,8 +152,8 @@ void ship(const LoadedScene& scene, const PreparedScene& prepared, const Referen
       // The failed solve at default increments: how a fresh machine reaches its retry.
       if (!loadStoredSolution(cacheDir, cell.retryOf, solution))
         throw std::runtime_error("the failed solve " + cell.retryOf + " is not stored");
-      shipStored(args.shipDir, cell.retryOf, solution,
-                 cell.solve + ", failed at default increments");
+      shipStored(args.shipDir, cell.retryOf, failureRecord(solution),
+                 cell.solve + ", failed at default increments: its failures alone");
       shipped["retry_of"] = cell.retryOf;
     }
     solves.push_back(shipped);

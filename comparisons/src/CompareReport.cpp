@@ -406,11 +406,9 @@ std::vector<std::pair<std::string, std::string>> referenceNotes(const nlohmann::
   if (!summary.contains("reference")) return notes;
   const nlohmann::json gates = summary["reference"].value("gates", nlohmann::json::object());
   const ReferenceGates judged = gatesFromJson(gates);
-  if (judged.failed())
-    notes.emplace_back("the reference FAILS a gate: no ranking (report.md, Reference)", "#b00000");
-  else if (!judged.passed())
-    notes.emplace_back("the reference's gates were not computed: no ranking (report.md, Reference)",
-                       "#606060");
+  if (!judged.passed())
+    notes.emplace_back(judged.whyNotPassed() + ": no ranking (report.md, Reference)",
+                       judged.failed() ? "#b00000" : "#606060");
   if (!gates.value("excluded", std::string()).empty())
     notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");
   return notes;

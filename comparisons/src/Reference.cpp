@@ -311,6 +311,20 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
   return cells;
 }
 
+std::string ReferenceGates::whyNotPassed() const {
+  if (passed()) return "";
+  ReferenceGates gatesAlone = *this;  // the same gates with every pose solved
+  gatesAlone.failures.clear();
+  std::vector<std::string> why;
+  if (gatesAlone.failed()) why.push_back("the reference fails a gate");
+  if (!failures.empty()) why.push_back("ccx did not solve every pose of the reference");
+  if (!gatesAlone.failed() && !gatesAlone.passed())
+    why.push_back("the reference's gates were not computed");
+  std::string text = why.front();
+  for (size_t i = 1; i < why.size(); ++i) text += "; " + why[i];
+  return text;
+}
+
 std::string ccxFailureToRetry(const CalculixSolution& solution) {
   if (solution.interrupted || solution.hitMemoryLimit()) return "";
   for (size_t p = 0; p < solution.poseFailures.size(); ++p)

@@ -288,11 +288,9 @@ std::string whyNoReferenceRanking(const nlohmann::json& summary) {
            "reference` computes it)";
   const ReferenceGates gates = gatesFromJson(reference.value("gates", nlohmann::json::object()));
   if (gates.passed()) return "";
-  if (gates.failed())
-    return "the CalculiX reference fails a gate (section Reference): the methods' differences "
-           "are not shown to exceed its own uncertainty";
-  return "the CalculiX reference's gates were not computed (`--no-gates`, or a gate's solve did "
-         "not finish): its own uncertainty is unknown";
+  return gates.whyNotPassed() +
+         " (section Reference): the methods' differences are not shown to exceed the "
+         "reference's own uncertainty";
 }
 
 bool solvesEquilibriumModel(const nlohmann::json& run) {

@@ -13,8 +13,8 @@ namespace fibremss {
 ReferenceGates gatesFromJson(const nlohmann::json& gates);
 
 /// Why the summary's CalculiX reference cannot rank the methods, in a few words ("" when it can:
-/// it is there and every gate passed): none in the summary, not in the cache, a gate failed, or
-/// its gates were not computed.
+/// it is there and every gate passed): none in the summary, not in the cache, or
+/// ReferenceGates::whyNotPassed.
 std::string whyNoReferenceRanking(const nlohmann::json& summary);
 
 /// Whether the run solves the model the `equilibrium` run converged: the self-reference, the

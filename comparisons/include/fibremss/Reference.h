@@ -131,6 +131,9 @@ struct ReferenceGates {
            judgedAndFails(refinementMm, refinementPasses()) ||
            judgedAndFails(incrementsMm, incrementsPass()) || !failures.empty();
   }
+  /// Why nothing may be ranked against the reference ("" when passed()): that it fails a gate,
+  /// that ccx did not solve every pose, that its gates were not computed (those that apply).
+  std::string whyNotPassed() const;
 };
 
 /// A computed reference.
