@@ -989,14 +989,23 @@ std::string shortFusiform(const std::filesystem::path& dir) {
   return path.string();
 }
 
-TEST(CalculixRun, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibrium) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("ccx_increments_test");
-  const LoadedScene scene = loadScene(shortFusiform(dir.path()), {"resolution=6"});
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  CalculixDefinition definition;
-  definition.returnToRest = false;
+/// shortFusiform at resolution 6, prepared, in a directory of its own; ccx and tetgen needed.
+class ShortFusiform : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    REQUIRE_PROGRAM("ccx");
+    REQUIRE_PROGRAM("tetgen");
+    scene = loadScene(shortFusiform(dir.path()), {"resolution=6"});
+    prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+    definition.returnToRest = false;
+  }
+  TemporaryDirectory dir{"ccx_short_fusiform_test"};
+  LoadedScene scene;
+  PreparedScene prepared;
+  CalculixDefinition definition;  ///< the default without the return step (a gate's has none)
+};
+
+TEST_F(ShortFusiform, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibrium) {
   CalculixDefinition finer = definition;
   finer.incrementScale = 0.25;
   const std::filesystem::path coarseDir = dir.path() / "coarse", fineDir = dir.path() / "fine";
@@ -1099,14 +1108,7 @@ TEST(IncrementRule, BoundsOnlyTheMoveBeyondTheFrameTheAttachmentsMoveLeastIn) {
   EXPECT_NEAR(largest[IncrementRule::BoneFrame][1], 0.5, 1e-4);
 }
 
-TEST(CalculixRun, APoseLimitSolvesTheFirstPosesAsTheWholeSolveDoesAndNoMore) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("ccx_pose_limit_test");
-  const LoadedScene scene = loadScene(shortFusiform(dir.path()), {"resolution=6"});
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  CalculixDefinition definition;
-  definition.returnToRest = false;  // as a gate's
+TEST_F(ShortFusiform, APoseLimitSolvesTheFirstPosesAsTheWholeSolveDoesAndNoMore) {
   CalculixDefinition limited = definition;
   limited.poseLimit = 2;
   const std::filesystem::path wholeDir = dir.path() / "whole", limitedDir = dir.path() / "limited";
