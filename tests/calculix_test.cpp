@@ -583,7 +583,7 @@ TEST(ReferenceCache, EachGatesKeyIsTheReferencesWithOneChangeAndNoReturnStep) {
     CalculixDefinition reference;
     reference.incrementScale = scale;
     reference.contactSliding = ContactSliding::Small;
-    const GateDefinitions gates = gateDefinitions(reference);
+    const GateDefinitions gates = gateDefinitions(reference, 0);
     // The gates solved before the increment gate existed are built as they were, so their
     // cache entries stay valid: the reference without its return step, one thing changed.
     CalculixDefinition low = reference;
@@ -600,14 +600,65 @@ TEST(ReferenceCache, EachGatesKeyIsTheReferencesWithOneChangeAndNoReturnStep) {
     const std::set<std::string> keys{key(reference), key(low), key(high), key(finer),
                                      key(increments)};
     EXPECT_EQ(keys.size(), 5u) << "five solves, five cache entries";
+    // A reference ccx solved in part: each gate stops where it stopped, under a key of its own.
+    const GateDefinitions limited = gateDefinitions(reference, 2);
+    const std::pair<const CalculixDefinition*, const CalculixDefinition*> pairs[] = {
+        {&limited.attachmentLow, &gates.attachmentLow},
+        {&limited.attachmentHigh, &gates.attachmentHigh},
+        {&limited.increments, &gates.increments},
+        {&limited.finer, &gates.finer}};
+    for (const auto& [gate, unlimited] : pairs) {
+      EXPECT_EQ(gate->poseLimit, 2);
+      EXPECT_NE(key(*gate), key(*unlimited));
+      CalculixDefinition every = *gate;
+      every.poseLimit = 0;
+      EXPECT_EQ(key(every), key(*unlimited)) << "only the limit differs";
+    }
   }
   CalculixDefinition quadratic;
   quadratic.element = CalculixElement::C3D10;
-  const GateDefinitions gates = gateDefinitions(quadratic);
+  const GateDefinitions gates = gateDefinitions(quadratic, 0);
   EXPECT_EQ(gates.finer.mesher.refinement, 1) << "a C3D10 reference: the next mesh level";
   EXPECT_EQ(gates.refinedBy, "mesh level 1");
   EXPECT_EQ(gates.increments.element, CalculixElement::C3D10);
   EXPECT_EQ(gates.increments.mesher.refinement, 0);
+}
+
+TEST(ReferenceCache, APoseLimitIsInTheKeyOnlyWhereItDropsAPose) {
+  REQUIRE_PROGRAM("ccx");
+  const LoadedScene scene = loadScene("fusiform", {"resolution=6", "fibre_count=8"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ASSERT_EQ(scene.poseCount, 3);
+  const auto key = [&](int limit, const ContinuumCut& cut) {
+    CalculixDefinition definition;
+    definition.poseLimit = limit;
+    return referenceCacheKey(scene, prepared, definition, cut);
+  };
+  const ContinuumCut none, atPose2{2, 1.0, "no continuum equilibrium"};
+  for (const int every : {3, 5}) EXPECT_EQ(key(every, none), key(0, none)) << every;
+  EXPECT_NE(key(2, none), key(0, none));
+  EXPECT_NE(key(1, none), key(2, none));
+  EXPECT_EQ(key(2, atPose2), key(0, atPose2)) << "the cut drops pose 2 already";
+  EXPECT_NE(key(1, atPose2), key(0, atPose2));
+}
+
+TEST(ReferenceGates, StopWhereCcxStoppedTheReferenceButNotAtItsContinuumCut) {
+  const std::vector<btVector3> surface{{0, 0, 0}};
+  CalculixSolution solution;
+  solution.poseSurfaces.assign(4, surface);
+  solution.poseFailures.assign(4, "");
+  solution.returnFailure = "muscle m: *ERROR: increment size smaller than minimum";
+  EXPECT_EQ(gatePoseLimit(solution), 0) << "every pose solved (the gates have no return step)";
+  solution.poseSurfaces[2].clear();
+  solution.poseSurfaces[3].clear();
+  solution.cut = {2, 2.0, "no continuum equilibrium"};
+  EXPECT_EQ(gatePoseLimit(solution), 0) << "a cut is no failure: the gates keep their keys";
+  solution.cut = {};
+  solution.poseFailures[2] = solution.returnFailure;
+  EXPECT_EQ(gatePoseLimit(solution), 2);
+  solution.poseSurfaces.assign(4, {});
+  solution.poseFailures[0] = solution.returnFailure;
+  EXPECT_EQ(gatePoseLimit(solution), 1) << "pose 0 alone (0 would be every pose)";
 }
 
 /// The scene's continuum cut with its attachment distances × `scale`.
@@ -928,20 +979,33 @@ TEST(CalculixRun, AnInterruptedSolveWithoutAReturnStepReportsNoReturnFailure) {
   }
 }
 
-TEST(CalculixRun, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibrium) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("ccx_increments_test");
-  // The coarse fusiform whose lower bar moves 2 mm per pose (not 15): a few increments.
-  nlohmann::json json = nlohmann::json::parse(readText(coarseFusiform(dir.path())));
+/// The coarse fusiform whose lower bar moves 2 mm per pose (not 15): a few increments.
+std::string shortFusiform(const std::filesystem::path& dir) {
+  nlohmann::json json = nlohmann::json::parse(readText(coarseFusiform(dir)));
   for (int pose = 1; pose < 3; ++pose)
     json["bones"][1]["motion"]["keyframes"][pose]["translation"] = {0, -2 * pose, 0};
-  const std::filesystem::path path = dir.path() / "short-fusiform.json";
+  const std::filesystem::path path = dir / "short-fusiform.json";
   std::ofstream(path) << json.dump(2);
-  const LoadedScene scene = loadScene(path.string(), {"resolution=6"});
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  CalculixDefinition definition;
-  definition.returnToRest = false;
+  return path.string();
+}
+
+/// shortFusiform at resolution 6, prepared, in a directory of its own; ccx and tetgen needed.
+class ShortFusiform : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    REQUIRE_PROGRAM("ccx");
+    REQUIRE_PROGRAM("tetgen");
+    scene = loadScene(shortFusiform(dir.path()), {"resolution=6"});
+    prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+    definition.returnToRest = false;
+  }
+  TemporaryDirectory dir{"ccx_short_fusiform_test"};
+  LoadedScene scene;
+  PreparedScene prepared;
+  CalculixDefinition definition;  ///< the default without the return step (a gate's has none)
+};
+
+TEST_F(ShortFusiform, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquilibrium) {
   CalculixDefinition finer = definition;
   finer.incrementScale = 0.25;
   const std::filesystem::path coarseDir = dir.path() / "coarse", fineDir = dir.path() / "fine";
@@ -1042,6 +1106,75 @@ TEST(IncrementRule, BoundsOnlyTheMoveBeyondTheFrameTheAttachmentsMoveLeastIn) {
   // rigid carry (in either bar's frame the other's nodes move 2 mm).
   EXPECT_NEAR(largest[IncrementRule::World][1], 1 / std::sqrt(404.0), 1e-4);
   EXPECT_NEAR(largest[IncrementRule::BoneFrame][1], 0.5, 1e-4);
+}
+
+TEST_F(ShortFusiform, APoseLimitSolvesTheFirstPosesAsTheWholeSolveDoesAndNoMore) {
+  CalculixDefinition limited = definition;
+  limited.poseLimit = 2;
+  const std::filesystem::path wholeDir = dir.path() / "whole", limitedDir = dir.path() / "limited";
+  const CalculixSolution whole =
+      solveCalculixReference(scene, prepared, definition, {}, wholeDir.string());
+  const CalculixSolution first =
+      solveCalculixReference(scene, prepared, limited, {}, limitedDir.string());
+  ASSERT_EQ(whole.solvedPoses(), 3) << whole.poseFailures[1] << whole.poseFailures[2];
+  EXPECT_EQ(largestIncrements(limitedDir / "muscle0.inp").size(), 2u) << "two steps given to ccx";
+  EXPECT_EQ(first.solvedPoses(), 2) << first.poseFailures[1];
+  EXPECT_EQ(first.poseFailures, std::vector<std::string>(3, "")) << "pose 2 is no failure";
+  EXPECT_EQ(ccxFailureToRetry(first), "") << "nothing to retry";
+  for (size_t p = 0; p < 2; ++p) EXPECT_EQ(first.poseSurfaces[p], whole.poseSurfaces[p]) << p;
+}
+
+TEST(ReferenceCells, AReferenceCcxSolvedInPartListsItsGatesUpToItsLastSolvedPose) {
+  REQUIRE_PROGRAM("ccx");
+  TemporaryDirectory dir("reference_cells_limit_test");
+  const LoadedScene scene = loadScene(coarseFusiform(dir.path()), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ReferenceOptions options;
+  options.cacheDir = (dir.path() / "cache").string();
+  const CalculixDefinition reference = sceneDefinition(scene, options);
+  CalculixDefinition retry = reference;
+  retry.incrementScale *= kFinerIncrements;
+  // Stores a solve of `definition` that ccx failed from pose `failed` on (-1: none failed).
+  const auto store = [&](const CalculixDefinition& definition, int failed) {
+    CalculixSolution solution;
+    for (int p = 0; p < scene.poseCount; ++p) {
+      const bool solved = failed < 0 || p < failed;
+      solution.poseSurfaces.push_back(solved ? prepared.muscles[0]->restSurface.vertices
+                                             : std::vector<btVector3>());
+      solution.poseFailures.push_back(p == failed ? "muscle m: *ERROR: too many cutbacks" : "");
+    }
+    const std::string entry =
+        options.cacheDir + "/" + referenceCacheKey(scene, prepared, definition, {});
+    std::filesystem::create_directories(entry);
+    saveSolution(entry + "/surfaces.bin", solution);
+  };
+  // The gates' cells against those of `definitions`, in the listing's order.
+  const auto expectGates = [&](const std::vector<NamedReferenceCell>& cells,
+                               const GateDefinitions& definitions, int limit) {
+    ASSERT_EQ(cells.size(), 5u);
+    const CalculixDefinition* gates[] = {&definitions.attachmentLow, &definitions.attachmentHigh,
+                                         &definitions.increments, &definitions.finer};
+    for (size_t g = 0; g < 4; ++g) {
+      const NamedReferenceCell& cell = cells[g + 1];
+      EXPECT_EQ(cell.cell.definition.poseLimit, limit) << cell.solve;
+      EXPECT_EQ(cell.key, referenceCacheKey(scene, prepared, *gates[g], cell.cell.cut))
+          << cell.solve;
+    }
+  };
+  store(reference, 1);  // retried at finer increments, not solved yet: its gates over every pose
+  const std::vector<NamedReferenceCell> unknown = referenceCells(scene, prepared, options);
+  EXPECT_EQ(unknown[0].cell.definition.incrementScale, retry.incrementScale);
+  EXPECT_FALSE(unknown[0].stored);
+  expectGates(unknown, gateDefinitions(retry, 0), 0);
+  store(retry, 2);  // the retry stops at pose 2: its gates solve poses 0-1
+  const std::vector<NamedReferenceCell> limited = referenceCells(scene, prepared, options);
+  EXPECT_TRUE(limited[0].stored);
+  EXPECT_EQ(limited[0].key, unknown[0].key);
+  expectGates(limited, gateDefinitions(retry, 2), 2);
+  for (size_t c = 1; c < limited.size(); ++c) EXPECT_NE(limited[c].key, unknown[c].key);
+  store(retry, -1);  // the retry solves every pose: its gates too, under their keys
+  const std::vector<NamedReferenceCell> whole = referenceCells(scene, prepared, options);
+  for (size_t c = 0; c < whole.size(); ++c) EXPECT_EQ(whole[c].key, unknown[c].key);
 }
 
 TEST(ReferenceCells, InParallelOrAsCellsTheCacheHoldsWhatTheSerialSolveStores) {

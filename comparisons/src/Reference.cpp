@@ -207,9 +207,9 @@ std::vector<std::pair<std::string, CalculixDefinition>> gateSolves(const GateDef
 /// them in its order: the costliest solves first (one level finer), so that the last cells
 /// running are short ones.
 void solveGateCells(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
-                    const ReferenceOptions& options, const CalculixDefinition& reference) {
+                    const ReferenceOptions& options, const GateDefinitions& gates) {
   if (options.jobs <= 1 || options.cachedOnly) return;
-  const auto solves = gateSolves(gateDefinitions(reference));
+  const auto solves = gateSolves(gates);
   std::vector<ReferenceCell> cells;
   for (auto solve = solves.rbegin(); solve != solves.rend(); ++solve)
     for (size_t m = 0; m < prepared.muscles.size(); ++m)
@@ -221,7 +221,8 @@ void solveGateCells(const LoadedScene& scene, const PreparedScene& prepared, Sce
 /// The gate solves (gateDefinitions) against `base`, cheapest first.
 void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
                 const ReferenceOptions& options, const Solve& base, ReferenceGates& gates) {
-  const GateDefinitions definitions = gateDefinitions(base.definition);
+  const GateDefinitions definitions =
+      gateDefinitions(base.definition, gatePoseLimit(base.solution));
   gates.refinedBy = definitions.refinedBy;
   struct Gate {
     const CalculixDefinition* definition;
@@ -239,7 +240,7 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
                             &gates.incrementsPoses, &gates.incrementsScale},
                            {&solves[3].second, solves[3].first.c_str(), &gates.refinementMm,
                             &gates.refinementPoses, nullptr}};
-  solveGateCells(scene, prepared, cuts, options, base.definition);
+  solveGateCells(scene, prepared, cuts, options, definitions);
   for (const Gate& gate : variants) {
     Solve solve;
     if (options.cancel && options.cancel->load()) return;
@@ -262,21 +263,35 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
 struct NextSolve {
   CalculixDefinition definition;  ///< `definition`, or its retry at kFinerIncrements
   std::string retryOf;            ///< the key of the failed solve it retries; else ""
+  /// gatePoseLimit of that solve where it is stored [poses] (0: every pose, or not stored).
+  int gatePoseLimit = 0;
 };
 
-/// `definition`, or its retry at kFinerIncrements where it is stored (whole or as every
-/// muscle's part) with a pose ccx failed.
+/// The solution of `definition` stored whole (or shipped) or as every muscle's part, and its
+/// key; false where it is not stored.
+bool storedSolution(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
+                    const CalculixDefinition& definition, const std::string& cacheDir,
+                    std::string& key, CalculixSolution& solution) {
+  const ContinuumCut& cut = cuts.at(definition.attachmentScale);
+  key = referenceCacheKey(scene, prepared, definition, cut);
+  return loadStoredSolution(cacheDir, key, solution) ||
+         mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution);
+}
+
+/// `definition`, or its retry at kFinerIncrements where it is stored with a pose ccx failed;
+/// with the gate pose limit of the one chosen where that is stored.
 NextSolve storedRetry(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
                       const CalculixDefinition& definition, const std::string& cacheDir) {
-  const ContinuumCut& cut = cuts.at(definition.attachmentScale);
-  const std::string key = referenceCacheKey(scene, prepared, definition, cut);
+  std::string key;
   CalculixSolution solution;
-  const bool stored = loadStoredSolution(cacheDir, key, solution) ||
-                      mergeCalculixParts(scene, prepared, definition, cut, cacheDir, solution);
-  if (!stored || ccxFailureToRetry(solution).empty()) return {definition, ""};
-  CalculixDefinition finer = definition;
-  finer.incrementScale *= kFinerIncrements;
-  return {finer, key};
+  if (!storedSolution(scene, prepared, cuts, definition, cacheDir, key, solution))
+    return {definition, "", 0};
+  if (ccxFailureToRetry(solution).empty()) return {definition, "", gatePoseLimit(solution)};
+  NextSolve retry{definition, key, 0};
+  retry.definition.incrementScale *= kFinerIncrements;
+  if (storedSolution(scene, prepared, cuts, retry.definition, cacheDir, key, solution))
+    retry.gatePoseLimit = gatePoseLimit(solution);
+  return retry;
 }
 
 }  // namespace
@@ -294,7 +309,8 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
       storedRetry(scene, prepared, cuts, sceneDefinition(scene, options), cacheDir);
   std::vector<std::pair<std::string, NextSolve>> solves{{"reference", reference}};
   if (options.gates)
-    for (const auto& [name, gate] : gateSolves(gateDefinitions(reference.definition)))
+    for (const auto& [name, gate] :
+         gateSolves(gateDefinitions(reference.definition, reference.gatePoseLimit)))
       solves.emplace_back(name, storedRetry(scene, prepared, cuts, gate, cacheDir));
   std::vector<NamedReferenceCell> cells;
   for (const auto& [name, solve] : solves) {
@@ -362,7 +378,13 @@ double methodSpreadMm(const std::vector<RunMetrics>& runs) {
   return best.size() == 1 ? high : high - low;
 }
 
-GateDefinitions gateDefinitions(const CalculixDefinition& reference) {
+int gatePoseLimit(const CalculixSolution& reference) {
+  const auto failed = [](const std::string& failure) { return !failure.empty(); };
+  if (std::none_of(reference.poseFailures.begin(), reference.poseFailures.end(), failed)) return 0;
+  return std::max(reference.solvedPoses(), 1);
+}
+
+GateDefinitions gateDefinitions(const CalculixDefinition& reference, int poseLimit) {
   GateDefinitions gates{reference, reference, reference, reference, ""};
   gates.attachmentLow.attachmentScale *= 0.5f;
   gates.attachmentHigh.attachmentScale *= 1.5f;
@@ -375,8 +397,10 @@ GateDefinitions gateDefinitions(const CalculixDefinition& reference) {
     gates.refinedBy = "mesh level " + std::to_string(gates.finer.mesher.refinement);
   }
   for (CalculixDefinition* gate :
-       {&gates.attachmentLow, &gates.attachmentHigh, &gates.increments, &gates.finer})
+       {&gates.attachmentLow, &gates.attachmentHigh, &gates.increments, &gates.finer}) {
     gate->returnToRest = false;
+    gate->poseLimit = poseLimit;
+  }
   return gates;
 }
 

@@ -361,12 +361,12 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
                 : ccxFailure(base + ".log", status, definition.memoryLimitGiB);
 }
 
-/// The poses given to ccx: those before the continuum cut, else all of them.
-int solvedPoseCount(const LoadedScene& scene, const ContinuumCut& cut) {
-  return cut.pose >= 0 ? cut.pose : std::max(scene.poseCount, 1);
-}
-
 }  // namespace
+
+int ccxPoseCount(const LoadedScene& scene, const ContinuumCut& cut, int poseLimit) {
+  const int uncut = cut.pose >= 0 ? cut.pose : std::max(scene.poseCount, 1);
+  return poseLimit > 0 ? std::min(uncut, poseLimit) : uncut;
+}
 
 const char* toString(IncrementRule rule) {
   return rule == IncrementRule::BoneFrame ? "bone frame" : "world";
@@ -401,7 +401,8 @@ MuscleSolution solveCalculixMuscle(const LoadedScene& scene, const PreparedScene
   std::vector<MeshDistance> bones;
   for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
   const std::vector<int> steps =
-      stepPoses(scene, prepared.bones.size(), solvedPoseCount(scene, cut), definition.returnToRest);
+      stepPoses(scene, prepared.bones.size(), ccxPoseCount(scene, cut, definition.poseLimit),
+                definition.returnToRest);
   const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir, steps);
   MuscleSolution result;
   result.nodes = muscle.job.nodes.size();
@@ -436,7 +437,7 @@ CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const Prepar
                                           const std::vector<MuscleSolution>& muscles) {
   CalculixSolution solution;
   solution.cut = cut;
-  const int poses = solvedPoseCount(scene, cut);
+  const int poses = ccxPoseCount(scene, cut, definition.poseLimit);
   const int stepCount = static_cast<int>(
       stepPoses(scene, prepared.bones.size(), poses, definition.returnToRest).size());
   solution.poseSurfaces.assign(static_cast<size_t>(std::max(scene.poseCount, 1)), {});
@@ -473,7 +474,7 @@ CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const Prepar
   for (size_t p = 0; solution.interrupted && p <= solution.poseSurfaces.size(); ++p) {
     const bool pose = p < solution.poseSurfaces.size();
     std::string& why = pose ? solution.poseFailures[p] : solution.returnFailure;
-    const bool excluded = pose && static_cast<int>(p) >= poses;  // past the cut: not solved
+    const bool excluded = pose && static_cast<int>(p) >= poses;  // past the cut or limit
     const bool returns = pose || definition.returnToRest;        // a gate's solve has no return
     if (why.empty() && !excluded && returns) why = "interrupted";
     (pose ? solution.poseSurfaces[p] : solution.returnSurface).clear();

@@ -340,6 +340,12 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
     h.text("continuum cut");
     h.value(cut.pose);
   }
+  // A pose limit that drops poses: a gate of a partly solved reference (no other key changes).
+  if (const int given = ccxPoseCount(scene, cut, definition.poseLimit);
+      given < ccxPoseCount(scene, cut)) {
+    h.text("pose limit");
+    h.value(given);
+  }
   if (definition.incrementScale != 1) {  // finer increments (no other key changes)
     h.text("increment scale");
     h.value(definition.incrementScale);

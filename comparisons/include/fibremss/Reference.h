@@ -149,8 +149,9 @@ struct Reference {
 };
 
 /// The gates' solves, each the reference's definition (its increments and contact sliding
-/// included) with one thing changed and no return step: cheapest first, as solveGates runs
-/// them (each is cached as it ends, so a stopped run keeps the cheap ones).
+/// included) with one thing changed and no return step (the return gate is the reference's
+/// own solve): cheapest first, as solveGates runs them (each is cached as it ends, so a stopped
+/// run keeps the cheap ones).
 struct GateDefinitions {
   CalculixDefinition attachmentLow;   ///< attachment distance × 0.5
   CalculixDefinition attachmentHigh;  ///< attachment distance × 1.5
@@ -160,7 +161,15 @@ struct GateDefinitions {
   CalculixDefinition finer;
   std::string refinedBy;  ///< what "one level finer" is, in words
 };
-GateDefinitions gateDefinitions(const CalculixDefinition& reference);
+/// `poseLimit` (gatePoseLimit of the reference's solve) is every gate's
+/// CalculixDefinition::poseLimit: a gate compares the poses the reference solved, and solving
+/// those ccx failed in the reference would cost hours to compare none.
+GateDefinitions gateDefinitions(const CalculixDefinition& reference, int poseLimit);
+
+/// The poses a reference's gates solve: where ccx failed a pose of the reference, the poses it
+/// solved before it (at least pose 0); else 0 (every pose before the continuum cut: the cut is
+/// no failure and the gates' keys stay as they are).
+int gatePoseLimit(const CalculixSolution& reference);
 
 /// Solves (or finds in the cache) the reference and, with options.gates, its four gate
 /// variants (gateDefinitions); fills the metrics as runPoses does for the simulated methods.
@@ -171,8 +180,10 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
 /// them: the reference's muscles, then each gate's (attachment x0.5, x1.5, increments halved,
 /// one level finer). Each solve's definition is the one computeReference would solve given the
 /// cache: a solve stored with a pose ccx failed is replaced by its retry at kFinerIncrements,
-/// and the gates start from the reference's; where the reference is not stored yet, from its
-/// default increments (its retry, where needed, is left to the run that merges the cells).
+/// and the gates start from the reference's, limited to the poses it solved where it is stored
+/// with a pose ccx failed (gatePoseLimit); where the reference is not stored yet, from its
+/// default increments over every pose (its retry, where needed, is left to the run that merges
+/// the cells).
 struct NamedReferenceCell {
   std::string solve;    ///< "reference" or the gate's name
   std::string key;      ///< the solve's cache key

@@ -69,6 +69,10 @@ struct CalculixDefinition {
   /// Which move the 1 mm bound applies to. In the cache key only where it is BoneFrame (the
   /// world rule's entries keep their keys).
   IncrementRule incrementRule = IncrementRule::BoneFrame;
+  /// Poses given to ccx: at most this many leading ones (0: every pose before the continuum
+  /// cut). A gate of a reference that ccx solved only in part stops where the reference stopped
+  /// (comparisons' gateDefinitions). In the cache key only where it drops a pose.
+  int poseLimit = 0;
   std::string program = "ccx";  ///< the CalculiX executable (PATH is searched)
   /// Address-space limit of each ccx run [GiB] (0: none). A run that exceeds it fails its
   /// allocation and its poses are reported failed, naming the limit. Not in the cache key: it
@@ -97,6 +101,10 @@ struct ContinuumSamples {
 };
 
 ContinuumSamples sampleContinuum(const LoadedScene& scene);
+
+/// The poses given to ccx, counted from the first: those before the continuum cut (all without
+/// one), at most `poseLimit` where that is above 0 (CalculixDefinition::poseLimit).
+int ccxPoseCount(const LoadedScene& scene, const ContinuumCut& cut, int poseLimit = 0);
 
 /// Finds the first pose where two bones close across a muscle (ContinuumCut) at its samples,
 /// with each muscle's attachment distance × `attachmentScale` (the attachment gates' solves
@@ -164,10 +172,11 @@ struct MuscleSolution {
 
 /// Meshes muscle `m` and solves its poses with ccx in `workDir` (created; its .inp, .dat, .sta
 /// and logs are kept there, named muscle<m>.*). Poses from `cut.pose` on (findContinuumCut at
-/// the definition's attachment scale) are not given to ccx. Throws InputError for a muscle that
-/// tetgen cannot mesh or that has no material near any bone, unless the scene is a
-/// sphere-planes case: then the sphere is held by its symmetry (the node nearest its centre
-/// fixed, three nodes' equations against rigid rotation; no effect on the exact answer).
+/// the definition's attachment scale) and past its poseLimit are not given to ccx (ccxPoseCount;
+/// assembled, they are unsolved without a failure). Throws InputError for a muscle that tetgen
+/// cannot mesh or that has no material near any bone, unless the scene is a sphere-planes case:
+/// then the sphere is held by its symmetry (the node nearest its centre fixed, three nodes'
+/// equations against rigid rotation; no effect on the exact answer).
 MuscleSolution solveCalculixMuscle(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const ContinuumCut& cut, size_t m, const std::string& workDir,
