@@ -6,7 +6,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <climits>
+#include <cstdint>
 #include <cstring>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -27,23 +30,72 @@ namespace {
 
 /// What a run of a scene's poses left.
 struct Torn {
-  std::vector<btVector3> positions;  ///< the muscle's particles after the last step [m]
-  MuscleTear tear;                   ///< what tearing did
-  double worstRatio = 0;             ///< worstSharedSpring after any step
-  long allocations = 0;              ///< allocations in the steps after the first
-  size_t brokenWhileCounting = 0;    ///< springs broken in those steps
+  std::vector<btVector3> positions;        ///< the muscle's particles after the last step [m]
+  MuscleTear tear;                         ///< what tearing did
+  double worstRatio = 0;                   ///< worstSharedSpring after any step
+  long allocations = 0;                    ///< allocations in the steps after the first
+  size_t brokenWhileCounting = 0;          ///< springs broken in those steps
+  std::map<int64_t, unsigned> pieceBones;  ///< per piece at the end: the bones it holds (bits)
+  double farthestBreak = 0;                ///< the largest |rest y| of a broken spring's middle [m]
 };
 
+/// Per particle of `settings`: the smallest particle of its component of the unbroken springs but
+/// spring `skip`, or -1 for a particle with no unbroken spring.
+std::vector<int64_t> components(const MuscleSettings& settings, size_t skip = SIZE_MAX) {
+  std::vector<uint32_t> parent(settings.particleCount());
+  for (uint32_t i = 0; i < parent.size(); ++i) parent[i] = i;
+  const auto root = [&](uint32_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  std::vector<int64_t> component(parent.size(), -1);
+  for (size_t s = 0; s < settings.springs.size(); ++s) {
+    const Spring& spring = settings.springs[s];
+    if (spring.a == spring.b) continue;
+    component[spring.a] = component[spring.b] = 0;
+    if (s != skip)
+      parent[std::max(root(spring.a), root(spring.b))] = std::min(root(spring.a), root(spring.b));
+  }
+  for (uint32_t i = 0; i < parent.size(); ++i)
+    if (component[i] >= 0) component[i] = root(i);
+  return component;
+}
+
+/// Per component of the unbroken springs of `settings` but spring `skip` (by its smallest
+/// particle): the bones whose fixed particles it holds, as a bit set.
+std::map<int64_t, unsigned> bonesPerPiece(const MuscleSettings& settings, size_t skip = SIZE_MAX) {
+  const std::vector<int64_t> component = components(settings, skip);
+  std::map<int64_t, unsigned> bones;
+  for (const int64_t c : component)
+    if (c >= 0) bones[c] |= 0;
+  for (const uint32_t f : settings.fixedParticles)
+    if (component[f] >= 0) bones[component[f]] |= 1u << settings.fixedBone[f];
+  return bones;
+}
+
+/// Whether the unbroken springs of `settings` but spring `skip` leave a piece that holds no fixed
+/// particle.
+bool freesAPiece(const MuscleSettings& settings, size_t skip) {
+  const std::map<int64_t, unsigned> bones = bonesPerPiece(settings, skip);
+  return std::any_of(bones.begin(), bones.end(),
+                     [](const auto& piece) { return piece.second == 0; });
+}
+
 /// The largest l / L0 of the unbroken springs of `settings` at `x` that are not the last of one
-/// of their particles (a particle's last spring does not break).
+/// of their particles (a particle's last spring does not break) and whose break would free no
+/// piece that no bone holds (such a spring does not break either).
 double worstSharedSpring(const MuscleSettings& settings, std::span<const btVector3> x) {
   std::vector<int> counts(settings.particleCount(), 0);
   for (const Spring& spring : settings.springs)
     if (spring.a != spring.b) ++counts[spring.a], ++counts[spring.b];
   double worst = 0;
-  for (const Spring& spring : settings.springs)
-    if (spring.a != spring.b && counts[spring.a] > 1 && counts[spring.b] > 1)
-      worst = std::max(worst, double(x[spring.a].distance(x[spring.b]) / spring.restLength));
+  for (size_t s = 0; s < settings.springs.size(); ++s) {
+    const Spring& spring = settings.springs[s];
+    if (spring.a == spring.b || counts[spring.a] == 1 || counts[spring.b] == 1) continue;
+    const double ratio = x[spring.a].distance(x[spring.b]) / spring.restLength;
+    if (ratio > worst && (ratio <= settings.breakStretch || !freesAPiece(settings, s)))
+      worst = ratio;
+  }
   return worst;
 }
 
@@ -58,6 +110,7 @@ Torn run(const std::string& name, std::vector<std::string> overrides, int thread
   const std::vector<BoneHandle>& bones = handles.bones;
   const MuscleHandle muscle = handles.muscles[0];
   Torn torn;
+  const std::vector<Spring> intact = system.settings(muscle).springs;
   btAlignedAllocSetCustom(testing::countingAlloc, std::free);
   for (int pose = 0; pose < scene.poseCount; ++pose) {
     for (size_t b = 0; b < bones.size(); ++b)
@@ -78,6 +131,14 @@ Torn run(const std::string& name, std::vector<std::string> overrides, int thread
   const std::span<const btVector3> positions = system.positions(muscle);
   torn.positions.assign(positions.begin(), positions.end());
   torn.tear = system.tear(muscle);
+  const MuscleSettings& settings = system.settings(muscle);
+  torn.pieceBones = bonesPerPiece(settings);
+  for (size_t s = 0; s < intact.size(); ++s) {
+    const btVector3 middle =
+        (settings.restPositions[intact[s].a] + settings.restPositions[intact[s].b]) / 2;
+    if (settings.springs[s].a == settings.springs[s].b)
+      torn.farthestBreak = std::max(torn.farthestBreak, double(std::abs(middle.y())));
+  }
   return torn;
 }
 
@@ -91,6 +152,21 @@ TEST(Tear, NoSharedSpringEndsAStepBeyondTheThresholdAndTheNotchTearsApart) {
   EXPECT_GT(torn.tear.brokenVolumeTerms, 0u);
   EXPECT_LE(torn.worstRatio, 1.5);
   EXPECT_GE(torn.tear.pieces, 2u);
+}
+
+TEST(Tear, AtItsDefaultResolutionTheMuscleTearsAtTheNotchIntoOnePieceOnEachPlate) {
+  const Torn torn = run("tear", {});
+  RecordProperty("broken_springs", std::to_string(torn.tear.brokenSprings));
+  EXPECT_EQ(torn.tear.pieces, 2u);
+  // Plate-lower is bone 0, plate-upper bone 1: one piece holds each, none holds both or neither.
+  std::vector<unsigned> bones;
+  for (const auto& piece : torn.pieceBones) bones.push_back(piece.second);
+  std::sort(bones.begin(), bones.end());
+  EXPECT_EQ(bones, (std::vector<unsigned>{1u, 2u}));
+  // Every break within a spring's length (about 5 mm) of the notch (4 mm either side of the
+  // middle), none at the attachments 50 mm away.
+  EXPECT_LT(torn.farthestBreak, 0.01);
+  EXPECT_LE(torn.worstRatio, 1.5);
 }
 
 TEST(Tear, AThresholdNothingReachesChangesNoBit) {

@@ -445,6 +445,16 @@ TEST(Viewer, TheGrabPullsTheParticleUnderThePointerAlongTheViewPlane) {
   EXPECT_GT(rightmostMuscleColumn(after, row), rightmostMuscleColumn(before, row) + 3);
 }
 
+TEST(Viewer, TheBladeDrivenByThePointerAcrossTheBellyCutsItsSprings) {
+  TemporaryDirectory directory("fibremss_viewer_test");
+  // From 40 mm right of the axis to 40 mm left of it, across the 20 mm belly: the blade's edge,
+  // along the view direction, sweeps a plane across the muscle.
+  const PointerShots shots = pointerShots(directory, viewer::ToolMode::Blade, 40, -40);
+  RecordProperty("cut_springs", std::to_string(shots.touched.cutSprings));
+  EXPECT_GT(shots.touched.cutSprings, 0u) << "the panel showed no spring cut";
+  EXPECT_EQ(shots.undisturbed.cutSprings, 0u);
+}
+
 TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   const std::string cli = std::string(FIBREMSS_CLI) + " view ";
   EXPECT_EQ(runProcess(cli + "no-such-scene --screenshot /tmp/x.png").exitCode, 2);
@@ -457,7 +467,7 @@ TEST(Viewer, BadArgumentsAreInputErrorsBeforeAnyWindowOpens) {
   EXPECT_EQ(runProcess(cli + "fusiform --camera 1 --screenshot /tmp/x.png").exitCode, 2);
   // A scene stepped live plays without end: no picture to take after it.
   EXPECT_EQ(runProcess(cli + "fusiform --play --screenshot /tmp/x.png").exitCode, 2);
-  EXPECT_EQ(runProcess(cli + "fusiform --tool blade --screenshot /tmp/x.png").exitCode, 2);
+  EXPECT_EQ(runProcess(cli + "fusiform --tool scalpel --screenshot /tmp/x.png").exitCode, 2);
   EXPECT_EQ(runProcess(cli + "fusiform --drag 1,2,3 --screenshot /tmp/x.png").exitCode, 2);
 }
 

@@ -60,6 +60,7 @@ void view(ViewArgs& args) {
     throw InputError("--camera", "", "expected AZIMUTH,ELEVATION[,ZOOM] (degrees)");
   options.tool = args.tool == "grab"    ? viewer::ToolMode::Grab
                  : args.tool == "probe" ? viewer::ToolMode::Probe
+                 : args.tool == "blade" ? viewer::ToolMode::Blade
                                         : viewer::ToolMode::Camera;
   if (!args.drag.empty() && args.drag.size() != 4)
     throw InputError("--drag", "", "expected X0,Y0,X1,Y1 (pixels of the scene's view)");
@@ -136,8 +137,8 @@ void addViewCommand(CLI::App& app) {
   command
       ->add_option("--tool", args->tool,
                    "What the left button does at the start (T switches): turn the camera, grab "
-                   "a particle or drive a probe along the view plane")
-      ->check(oneOf({"camera", "grab", "probe"}))
+                   "a particle, drive a probe or a blade (which cuts) along the view plane")
+      ->check(oneOf({"camera", "grab", "probe", "blade"}))
       ->capture_default_str();
   command
       ->add_option("--drag", args->drag,

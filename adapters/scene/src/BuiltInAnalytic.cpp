@@ -15,8 +15,8 @@ constexpr double kPlateFace = kFreeHalf + kAttachment;  // plates' facing sides 
 constexpr double kPlateThickness = 10;
 constexpr double kNotch = kRadius / 2;  // the tear scene's radius at its middle [mm]
 constexpr double kNotchHalf = 4;        // the tear scene's notch: its half length along y [mm]
-constexpr double kTearShift = 5;        // the tear scene's move of each plate per pose [mm]
-constexpr int kTearPoses = 14;          // the tear scene's poses after the rest pose
+constexpr double kTearShift = 1;        // the tear scene's move of each plate per pose [mm]
+constexpr int kTearPoses = 40;          // the tear scene's poses after the rest pose
 constexpr double kTearStretch = 1.5;    // the tear scene's break_stretch [1]
 
 Json plate(double side) {

@@ -74,10 +74,12 @@ Playback LivePlayer::controls(const Snapshot& shown) {
   if (tool.engaged && tool.mode == ToolMode::Probe)
     ImGui::Text("  force on the probe %.4g N (%.3g, %.3g, %.3g), %zu contacts", f.length(), f.x(),
                 f.y(), f.z(), tool.contacts);
+  else if (tool.mode == ToolMode::Blade)
+    ImGui::Text("  springs cut %zu", tool.cutSprings);
   else if (tool.engaged)
     ImGui::Text("  pull on the particle %.4g N (%.3g, %.3g, %.3g)", f.length(), f.x(), f.y(),
                 f.z());
-  return {shown_.shownPose, pose, shown.steps, float(f.length())};
+  return {shown_.shownPose, pose, shown.steps, float(f.length()), tool.cutSprings};
 }
 
 void LivePlayer::timings(const Snapshot& shown) {

@@ -6,6 +6,10 @@
 namespace fibremss::viewer {
 namespace {
 
+/// How far the blade's edge reaches either way along the view direction from the view plane [m]:
+/// through every muscle of a scene.
+constexpr btScalar kBladeReach = 1;
+
 /// A UV sphere of `radius` [m] about the origin.
 ViewMesh sphereMesh(btScalar radius) {
   constexpr int kSlices = 16, kStacks = 10;
@@ -39,6 +43,8 @@ const char* toolName(ToolMode mode) {
       return "grab";
     case ToolMode::Probe:
       return "probe";
+    case ToolMode::Blade:
+      return "blade";
     case ToolMode::Camera:
       break;
   }
@@ -52,6 +58,8 @@ ToolMode nextTool(ToolMode mode) {
     case ToolMode::Grab:
       return ToolMode::Probe;
     case ToolMode::Probe:
+      return ToolMode::Blade;
+    case ToolMode::Blade:
       break;
   }
   return ToolMode::Camera;
@@ -94,6 +102,8 @@ ToolReading PointerTools::reading() const {
   reading.mode = mode_;
   reading.engaged = grabbed_.valid() || probeInWorld_;
   if (grabbed_.valid()) reading.force = pull_;
+  for (MuscleHandle muscle : muscles_)
+    reading.cutSprings += world_.muscleSystem().tear(muscle).cutSprings;
   if (!probeInWorld_) return reading;
   const ContactWrench wrench = world_.contactWrench(*probe_);
   reading.force = wrench.force;
@@ -107,6 +117,15 @@ void PointerTools::press(const PointerRay& ray) {
   if (mode_ == ToolMode::Probe) {
     if (!probeInWorld_) world_.addRigidBody(probe_.get());
     probeInWorld_ = true;
+    return;
+  }
+  if (mode_ == ToolMode::Blade) {
+    // A new blade where the pointer pressed: the last one stays where it was let go (a blade
+    // that does not move cuts nothing), so the pointer's jump between presses cuts nothing.
+    btTransform pose = btTransform::getIdentity();
+    pose.setOrigin(onPlane(ray));
+    blade_ = world_.muscleSystem().addBlade(-kBladeReach * planeNormal_, kBladeReach * planeNormal_,
+                                            pose);
     return;
   }
   // Grab: the free particle nearest the ray, within twice its radius of it.
@@ -139,6 +158,12 @@ void PointerTools::drag(const btVector3& target) {
     probe_->setWorldTransform(pose);
     probe_->setInterpolationWorldTransform(pose);
     probeMesh_.transform = pose;
+    return;
+  }
+  if (mode_ == ToolMode::Blade) {
+    btTransform pose = btTransform::getIdentity();
+    pose.setOrigin(target);
+    if (blade_.valid()) world_.muscleSystem().setBladeTransform(blade_, pose);
     return;
   }
   if (!grabbed_.valid()) return;

@@ -3,7 +3,9 @@
 // nearest its ray and pulls it towards the pointer along the view plane (a spring of the
 // particle's stiffness, an external force), or drives a probe, a kinematic sphere the muscles
 // collide with (two-way contact), along the view plane; the probe's force is the world's
-// contactWrench. Each mode is one branch of apply(): a blade is one more.
+// contactWrench; or drives a blade, an edge along the view direction through the pointer, along
+// the view plane: it cuts the muscles' springs it sweeps across. Each mode is one branch of
+// apply().
 #include <BulletCollision/CollisionShapes/btSphereShape.h>
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 
@@ -31,11 +33,12 @@ struct ToolReading {
   bool engaged = false;              ///< a particle is held, or the probe is in the scene
   btVector3 force{0, 0, 0};          ///< the muscles' force on the probe, or the grab's pull [N]
   size_t contacts = 0;               ///< particle spheres overlapping the probe
+  size_t cutSprings = 0;             ///< springs blades have cut in the muscles so far
 };
 
-/// "camera", "grab" or "probe".
+/// "camera", "grab", "probe" or "blade".
 const char* toolName(ToolMode mode);
-/// The mode after `mode` (camera, grab, probe, camera, ...: the T key).
+/// The mode after `mode` (camera, grab, probe, blade, camera, ...: the T key).
 ToolMode nextTool(ToolMode mode);
 
 class PointerTools {
@@ -76,6 +79,7 @@ class PointerTools {
   uint32_t grabbedParticle_ = 0;        ///< its index
   btScalar grabStiffness_ = 0;          ///< the pull per metre: Σ k of its springs [N/m]
   btVector3 pull_{0, 0, 0};             ///< the grab's pull on the particle [N]
+  BladeHandle blade_;                   ///< the blade of the last press (invalid: none yet)
 };
 
 }  // namespace fibremss::viewer

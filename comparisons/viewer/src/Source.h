@@ -23,10 +23,11 @@ struct Snapshot {
 
 /// What the panel's playback part showed, counted from 0 as everywhere in the viewer.
 struct Playback {
-  int counter = 0;      ///< the frame (a run) or pose (live) its text names
-  int slider = 0;       ///< its slider: the frame to show (a run) or the next pose (live)
-  int step = -1;        ///< the step its text names (-1: a run's frame not in its summary)
-  float toolForce = 0;  ///< |force| of the pointer's tool its text names [N]
+  int counter = 0;        ///< the frame (a run) or pose (live) its text names
+  int slider = 0;         ///< its slider: the frame to show (a run) or the next pose (live)
+  int step = -1;          ///< the step its text names (-1: a run's frame not in its summary)
+  float toolForce = 0;    ///< |force| of the pointer's tool its text names [N]
+  size_t cutSprings = 0;  ///< springs the blade cut, as its text names
 };
 
 /// What to draw besides the surfaces (through the world's btIDebugDraw when

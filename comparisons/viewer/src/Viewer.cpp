@@ -420,6 +420,7 @@ ViewerResult runWindow(Window& window, Session& session) {
   result.stepSamples = session.shown.stepMs.size();
   result.panelOverflow = session.panelOverflow;
   result.toolForce = session.playback.toolForce;
+  result.cutSprings = session.playback.cutSprings;
   return result;
 }
 

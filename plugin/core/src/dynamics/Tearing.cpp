@@ -66,9 +66,48 @@ size_t breakSprings(const ParticleState& particles, TearState& tear) {
         tear.springCounts[spring.a] == 1 || tear.springCounts[spring.b] == 1)
       continue;
     breakSpring(tear, s);
-    ++broken;
+    tear.passBroken[broken++] = uint32_t(s);
   }
   return broken;
+}
+
+/// Restores spring s of a muscle prepared for tearing as it was before anything broke.
+void restoreSpring(TearState& tear, size_t s) {
+  MuscleSettings& settings = *tear.torn;
+  const Spring& spring = settings.springs[s] = tear.intact->springs[s];
+  ++tear.springCounts[spring.a];
+  ++tear.springCounts[spring.b];
+  if (tear.springLanes.empty()) return;
+  const uint32_t lane = tear.springLanes[s];
+  const SpringBlocks& intact = tear.intact->springBlocks;
+  settings.springBlocks.b[lane] = intact.b[lane];
+  settings.springBlocks.restLength[lane] = intact.restLength[lane];
+  settings.springBlocks.stiffness[lane] = intact.stiffness[lane];
+}
+
+/// Restores, of the `broken` springs the last pass broke (in their order), each that links a piece
+/// holding no fixed particle to another piece, joining the two: a stretch tears a muscle apart
+/// between the bones that hold it, and a layer both of whose sides parted in the same step (at the
+/// narrowest section) stays with the side of its first such spring, not a free sliver. Nothing in
+/// a muscle with no fixed particle. Returns how many were restored (the pieces then recounted).
+size_t holdFreePieces(TearState& tear, size_t broken) {
+  const MuscleSettings& settings = *tear.torn;
+  if (settings.fixedParticles.empty()) return 0;
+  std::vector<uint32_t>& parent = tear.pieceOf;
+  std::fill(tear.pieceHeld.begin(), tear.pieceHeld.end(), uint8_t(0));
+  for (const uint32_t f : settings.fixedParticles) tear.pieceHeld[parent[f]] = 1;
+  size_t restored = 0;
+  for (size_t k = 0; k < broken; ++k) {
+    const Spring& spring = tear.intact->springs[tear.passBroken[k]];
+    const uint32_t a = root(parent, spring.a), b = root(parent, spring.b);
+    if (a == b || (tear.pieceHeld[a] && tear.pieceHeld[b])) continue;
+    restoreSpring(tear, tear.passBroken[k]);
+    join(parent, a, b);
+    tear.pieceHeld[std::min(a, b)] = tear.pieceHeld[a] | tear.pieceHeld[b];
+    ++restored;
+  }
+  if (restored > 0) tear.pieces = countPieces(settings, tear);
+  return restored;
 }
 
 /// Whether a volume term's particles `p` have an edge beyond the muscle's breakStretch.
@@ -128,6 +167,7 @@ void separatePieces(const ParticleState& particles, TearState& tear) {
 
 void prepareTearing(std::shared_ptr<const MuscleSettings>& shared, TearState& tear, bool cuttable) {
   if (tear.torn || !(cuttable || shared->breakStretch > 0)) return;
+  tear.intact = shared;
   tear.torn = std::make_shared<MuscleSettings>(*shared);
   shared = tear.torn;
   const MuscleSettings& settings = *tear.torn;
@@ -138,6 +178,8 @@ void prepareTearing(std::shared_ptr<const MuscleSettings>& shared, TearState& te
     ++tear.springCounts[spring.a];
     ++tear.springCounts[spring.b];
   }
+  tear.passBroken.resize(settings.springs.size());
+  tear.pieceHeld.resize(n);
   tear.pieceLower.resize(n);
   tear.pieceUpper.resize(n);
   tear.restLower.resize(n);
@@ -166,9 +208,10 @@ bool breakStretched(const ParticleState& particles, TearState& tear) {
   const size_t springs = breakSprings(particles, tear);
   const size_t volumeTerms = breakVolumeTerms(particles, tear, stretchedTerm, nullptr);
   if (springs + volumeTerms == 0) return false;
-  tear.brokenSprings += springs;
-  tear.brokenVolumeTerms += volumeTerms;
-  separatePieces(particles, tear);
+  tear.pieces = countPieces(*tear.torn, tear);
+  tear.brokenSprings += springs - holdFreePieces(tear, springs);
+  tear.brokenVolumeTerms +=
+      volumeTerms + breakVolumeTerms(particles, tear, termAcrossPieces, nullptr);
   return true;
 }
 

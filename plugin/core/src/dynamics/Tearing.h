@@ -50,7 +50,8 @@ bool anyTermEdge(std::span<const uint32_t> p, Test&& test) {
 void separatePieces(const ParticleState& particles, TearState& tear);
 
 /// Breaks the springs and volume terms of a tearing muscle beyond its breakStretch at its
-/// positions, then the volume terms across pieces; recounts its pieces when something broke.
+/// positions, but for springs whose break would leave a piece holding no fixed particle (restored),
+/// then the volume terms across pieces; recounts its pieces when something broke.
 /// Returns whether something broke (the integrator's workspace must then follow).
 bool breakStretched(const ParticleState& particles, TearState& tear);
 

@@ -18,6 +18,12 @@ struct TearState {
   /// The muscle's own copy of its settings, whose springs and volume terms break (null: the muscle
   /// does not tear; MuscleState::settings then is the shared one).
   std::shared_ptr<MuscleSettings> torn;
+  /// The muscle's settings before anything broke (restores a spring a tear must not break).
+  std::shared_ptr<const MuscleSettings> intact;
+  /// The springs the last tearing pass broke, in order (sized for all; the pass counts them).
+  std::vector<uint32_t> passBroken;
+  /// Per piece root: whether the piece holds a fixed particle (1) or not (0).
+  std::vector<uint8_t> pieceHeld;
   /// Per spring: its lane in torn->springBlocks (empty when the springs are not laid out).
   std::vector<uint32_t> springLanes;
   /// Per particle: its union-find parent, after counting the root of its piece.

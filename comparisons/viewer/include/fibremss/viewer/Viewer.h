@@ -13,10 +13,11 @@
 namespace fibremss::viewer {
 
 /// What the pointer's left button does in the scene (T cycles them in the window): turn the
-/// camera, grab a muscle particle and drag it along the view plane, or drive a probe (a sphere
-/// the muscles collide with) along the view plane. A scene stepped live only; a blade would be
-/// one more mode.
-enum class ToolMode { Camera, Grab, Probe };
+/// camera, grab a muscle particle and drag it along the view plane, drive a probe (a sphere the
+/// muscles collide with) along the view plane, or drive a blade (an edge along the view direction)
+/// along it, which cuts the springs it sweeps across (MuscleSystem::addBlade). A scene stepped
+/// live only.
+enum class ToolMode { Camera, Grab, Probe, Blade };
 
 /// One window frame of a scripted pointer (played instead of the mouse, one event per frame).
 struct PointerEvent {
@@ -71,6 +72,7 @@ struct ViewerResult {
   size_t stepSamples = 0;   ///< steps in the panel's step-time graph
   float panelOverflow = 0;  ///< how far the panel's widest line ran past its edge [px] (0: fits)
   float toolForce = 0;      ///< |force| on the probe (or the grab's pull) the panel showed [N]
+  size_t cutSprings = 0;    ///< springs the blade had cut in the muscles, as the panel showed
 };
 
 /// Opens the window and runs until it is closed (or, with a screenshot path, until the PNG is
