@@ -133,6 +133,41 @@ TEST(Scene, EverySolverSettingIsAKeyTheSimulationOrModelSectionReads) {
     EXPECT_TRUE(complete["simulation"].contains(key) || complete["model"].contains(key)) << key;
 }
 
+namespace {
+
+/// Every key of `value`'s objects, however deep, that `known` lacks.
+std::vector<std::string> keysMissingFrom(const Json& value, const std::vector<std::string>& known) {
+  std::vector<std::string> missing;
+  if (value.is_object())
+    for (const auto& item : value.items())
+      if (std::find(known.begin(), known.end(), item.key()) == known.end())
+        missing.push_back(item.key());
+  if (value.is_structured())
+    for (const Json& element : value)
+      for (std::string& key : keysMissingFrom(element, known)) missing.push_back(std::move(key));
+  return missing;
+}
+
+}  // namespace
+
+TEST(Scene, SceneKeysHoldEveryKeyOfTheCompleteSceneFiles) {
+  // Scenes from files read fields no built-in scene has (a surface's file, weld, fill_holes).
+  const std::vector<std::string> keys = fibremss::sceneKeys();
+  EXPECT_TRUE(std::is_sorted(keys.begin(), keys.end()));
+  EXPECT_EQ(std::adjacent_find(keys.begin(), keys.end()), keys.end());
+  std::vector<fs::path> files = {kFixtures / "files.json"};
+  for (const auto& entry : fs::directory_iterator(fs::path(FIBREMSS_SOURCE_DIR) / "scenes/json"))
+    if (entry.path().extension() == ".json") files.push_back(entry.path());
+  for (const fs::path& file : files) {
+    std::ifstream in(file);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (text.find("${data_dir}") != std::string::npos) continue;  // needs --set data_dir=...
+    EXPECT_EQ(keysMissingFrom(Json::parse(loadScene(file.string()).json), keys),
+              std::vector<std::string>{})
+        << file;
+  }
+}
+
 TEST(Scene, OverrideForms) {
   const std::string twoMuscles = R"({"muscles": [
     {"name": "a", "surface": {"generator": {"type": "ellipsoid", "radii": [0.03, 0.03, 0.03]}},

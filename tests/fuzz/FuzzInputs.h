@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/Scene.h"
 
 namespace fibremss::fuzz {
 
@@ -38,112 +39,11 @@ inline TriangleMesh meshFromBytes(std::string_view bytes) {
   return mesh;
 }
 
-/// The keys sceneJsonFromBytes writes: every scene field name.
-inline constexpr const char* kSceneKeys[] = {"name",
-                                             "units",
-                                             "bones",
-                                             "muscles",
-                                             "model",
-                                             "simulation",
-                                             "collision",
-                                             "outputs",
-                                             "mesh",
-                                             "surface",
-                                             "fibres",
-                                             "file",
-                                             "generator",
-                                             "type",
-                                             "transform",
-                                             "translation",
-                                             "rotation",
-                                             "quaternion",
-                                             "axis",
-                                             "angle_deg",
-                                             "motion",
-                                             "keyframes",
-                                             "label",
-                                             "pivot",
-                                             "start_deg",
-                                             "end_deg",
-                                             "step_deg",
-                                             "spheres",
-                                             "thinning",
-                                             "max_radius",
-                                             "resolution",
-                                             "fibre_count",
-                                             "attachment_distance",
-                                             "skin_neighbours",
-                                             "fibre_grid_columns",
-                                             "layout",
-                                             "neighbours",
-                                             "kappa",
-                                             "damping",
-                                             "damping_scale",
-                                             "density",
-                                             "integrator",
-                                             "time_step",
-                                             "dt",
-                                             "min_dt",
-                                             "stop",
-                                             "iterations",
-                                             "epsilon",
-                                             "budget_ms",
-                                             "seed",
-                                             "initial_noise",
-                                             "threads",
-                                             "on_failure",
-                                             "max_retries",
-                                             "frame_every",
-                                             "weld",
-                                             "fill_holes",
-                                             "analytic",
-                                             "blended_pretransform",
-                                             "contact_damping",
-                                             "deviation_epsilon",
-                                             "diagonal_jacobian",
-                                             "distance_field_cell",
-                                             "enclosed_volume_stiffness",
-                                             "fibre_stiffness_ratio",
-                                             "motion_fraction",
-                                             "muscle_bone",
-                                             "muscle_muscle",
-                                             "pair_reactions",
-                                             "particles",
-                                             "penetration_recovery",
-                                             "persistent_contacts",
-                                             "plate",
-                                             "poisson_ratio",
-                                             "projective_contact_weight",
-                                             "projective_rho",
-                                             "quantise_mm",
-                                             "quantise_strain",
-                                             "rebuild_every_step",
-                                             "reference",
-                                             "sliding_contacts",
-                                             "solver_tolerance",
-                                             "strain_limit",
-                                             "stretch",
-                                             "surface_contact",
-                                             "surfaces",
-                                             "tendon_fraction",
-                                             "tendon_stiffness",
-                                             "tolerance",
-                                             "twist_deg",
-                                             "volume_coarsening",
-                                             "volume_stiffness",
-                                             "poisson_ratio",
-                                             "size",
-                                             "radius",
-                                             "radii",
-                                             "divisions",
-                                             "sections",
-                                             "slices",
-                                             "caps",
-                                             "pattern",
-                                             "points",
-                                             "centre",
-                                             "data_dir",
-                                             "description"};
+/// The keys sceneJsonFromBytes writes: every scene field name, as the scene reader lists them.
+inline const std::vector<std::string>& sceneKeyTable() {
+  static const std::vector<std::string> keys = sceneKeys();
+  return keys;
+}
 /// The strings sceneJsonFromBytes writes: the scene's words and file names.
 inline constexpr const char* kSceneWords[] = {"m",
                                               "mm",
@@ -215,7 +115,7 @@ inline std::string sceneJsonFromBytes(std::string_view bytes) {
   auto startValue = [&] {
     if (!first.back()) json += ',';
     first.back() = false;
-    if (open.back() == '}') json += std::string("\"") + pick(kSceneKeys) + "\":";
+    if (open.back() == '}') json += "\"" + pick(sceneKeyTable()) + "\":";
   };
   while (at < bytes.size()) {
     const uint8_t op = next() % 16;

@@ -381,10 +381,10 @@ TEST(Guard, AMuscleSpreadFarBeyondItsSizeIsDivergingNotTorn) {
   // stays between its bones, a diverging one grows without bound.
   Rig rig(fixedStep(btScalar(0.5), FailurePolicy::Retry), {softMuscle()});
   MuscleState& state = *MuscleSystemAccess::impl(rig.system).muscles.states[rig.muscles[0].index];
-  EXPECT_FALSE(checkMuscle(state).spread);
-  EXPECT_FALSE(checkMuscle(state).failed());
+  EXPECT_FALSE(checkMuscle(*state.settings, state, state.tear).spread);
+  EXPECT_FALSE(checkMuscle(*state.settings, state, state.tear).failed());
   for (btVector3& x : state.positions) x *= btScalar(2 * kTornSpread);
-  const MuscleHealth grown = checkMuscle(state);
+  const MuscleHealth grown = checkMuscle(*state.settings, state, state.tear);
   EXPECT_TRUE(grown.spread);
   EXPECT_TRUE(grown.failed());  // its springs are beyond 3× as well
 }

@@ -216,6 +216,24 @@ void readMotion(Fields& motion, const Reader& reader, const TriangleMesh& mesh, 
   requirePosesWithinWorld(motion, type, result.poses);
 }
 
+/// A surface file as a scene names it: its path as written, its units and its repair.
+struct MeshFile {
+  std::string path;      ///< as written (${data_dir} and relative paths unresolved)
+  double scale = 1;      ///< metres per file unit
+  SurfaceRepair repair;  ///< welding distance [m] and holes to close
+};
+
+/// The fields of a surface read from a file (`scale`: metres per scene unit).
+MeshFile readMeshFile(Fields& source, double scale) {
+  MeshFile file;
+  file.path = source.text("file", "");
+  const std::string units = source.choice("units", scale == 1.0 ? "m" : "mm", {"m", "mm"});
+  file.scale = units == "mm" ? 1e-3 : 1.0;
+  file.repair.weld = source.number("weld", 0, 0, kInf) * scale;
+  file.repair.fillHoles = source.integer("fill_holes", 0, 0, 1000);
+  return file;
+}
+
 TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& reader,
                          std::optional<scene::Shape>& shape) {
   Fields source = owner.object(key);
@@ -224,13 +242,10 @@ TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& re
     owner.fail(key, "expected exactly one of {\"file\": PATH} or {\"generator\": {...}}");
   TriangleMesh mesh;
   if (hasFile) {
-    const std::string path = reader.resolve(source, "file", source.text("file", ""));
-    const std::string units = source.choice("units", reader.scale == 1.0 ? "m" : "mm", {"m", "mm"});
-    SurfaceRepair repair;
-    repair.weld = source.number("weld", 0, 0, kInf) * reader.scale;
-    repair.fillHoles = source.integer("fill_holes", 0, 0, 1000);
+    const MeshFile file = readMeshFile(source, reader.scale);
+    const std::string path = reader.resolve(source, "file", file.path);
     MeshReport report;
-    mesh = loadSurface(path, units == "mm" ? 1e-3 : 1.0, &report, repair);
+    mesh = loadSurface(path, file.scale, &report, file.repair);
     for (const auto& warning : report.warnings) reader.result->warnings.push_back(warning);
     if (report.weldedVertices + report.droppedTriangles + report.filledHoles > 0)
       reader.result->notes.push_back(path + ": repaired: " + std::to_string(report.weldedVertices) +
@@ -854,6 +869,26 @@ std::vector<SectionKeys> shorthandSections() {
       section("outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); }))};
 }
 
+/// Every key of `value`'s objects, however deep, into `keys`.
+void collectKeys(const Json& value, std::set<std::string>& keys) {
+  if (value.is_object())
+    for (const auto& item : value.items()) keys.insert(item.key());
+  if (value.is_structured())
+    for (const Json& element : value) collectKeys(element, keys);
+}
+
 }  // namespace scene
+
+std::vector<std::string> sceneKeys() {
+  std::set<std::string> keys;
+  for (const BuiltInScene& builtIn : builtInScenes())
+    scene::collectKeys(scene::parseJson(exportBuiltInScene(builtIn.name), builtIn.name), keys);
+  for (const scene::SectionKeys& section : scene::shorthandSections())
+    keys.insert(section.keys.begin(), section.keys.end());
+  for (const std::string& key :
+       scene::keysRead("file", [](scene::Fields& file) { readMeshFile(file, 1); }))
+    keys.insert(key);
+  return {keys.begin(), keys.end()};
+}
 
 }  // namespace fibremss

@@ -152,6 +152,11 @@ std::vector<BuiltInScene> builtInScenes();
 /// unknown name). Loading it again gives the same scene.
 std::string exportBuiltInScene(const std::string& name);
 
+/// Every key the scene reader reads, sorted, each once: the keys of every built-in scene with
+/// every default filled in, every key `--set` takes without its path and the fields of a surface
+/// read from a file (a fuzzer's dictionary of scene field names).
+std::vector<std::string> sceneKeys();
+
 /// Loads a scene by built-in name or .json path and applies `key=value` overrides
 /// (e.g. "resolution=40", "simulation.iterations=100"). Throws InputError naming the file
 /// and field for unknown fields, wrong types and bad values.

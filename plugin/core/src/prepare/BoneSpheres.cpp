@@ -65,6 +65,27 @@ Adjacency buildAdjacency(const TriangleMesh& mesh) {
   return adjacency;
 }
 
+/// The sphere of the vertex at `position` whose centre, `longest` [m] along `inward`, went through
+/// a thin part of the bone: where the inward ray leaves the bone (the vertex side is inside just
+/// below the surface) found by bisection, the centre half way there [m] and a radius that keeps
+/// the sphere's reach beyond the vertex's surface [m]. False when no such sphere lies inside the
+/// bone (within `tolerance` [m]), or the normal does not point out of the bone there.
+bool pullBack(const MeshDistance& distance, const btVector3& position, const btVector3& inward,
+              btScalar longest, btScalar tolerance, btVector3& centre, btScalar& radius) {
+  btScalar inside = btScalar(0.01), outside = 1;
+  if (distance.signedDistance(position + inward * (inside * longest)) > tolerance) return false;
+  for (int iteration = 0; iteration < 24; ++iteration) {
+    const btScalar middle = (inside + outside) / 2;
+    (distance.signedDistance(position + inward * (middle * longest)) <= tolerance ? inside
+                                                                                  : outside) =
+        middle;
+  }
+  const btScalar depth = inside * longest / 2;
+  centre = position + inward * depth;
+  radius = depth + (SIMDSQRT12 * 2 - 1) * longest;
+  return !(distance.signedDistance(centre) > tolerance);
+}
+
 }  // namespace
 
 BoneSphereReport makeBoneSpheres(const BoneInput& bone, const MeshDistance& distance,
@@ -115,24 +136,7 @@ BoneSphereReport makeBoneSpheres(const BoneInput& bone, const MeshDistance& dist
     // The centre must be inside or on the bone; 1e-4·Lmax absorbs rounding on flat parts.
     const btScalar tolerance = longest * btScalar(1e-4);
     if (distance.signedDistance(centre) > tolerance) {
-      // The offset went through a thin part: find where the inward ray leaves the bone (the
-      // root side is inside just below the surface) and put the centre half way there, with
-      // a radius that keeps the sphere's reach beyond the root surface.
-      btScalar inside = btScalar(0.01), outside = 1;
-      if (distance.signedDistance(position + inward * (inside * longest)) > tolerance) {
-        ++report.dropped;  // the normal does not point out of the bone here
-        continue;
-      }
-      for (int iteration = 0; iteration < 24; ++iteration) {
-        const btScalar middle = (inside + outside) / 2;
-        (distance.signedDistance(position + inward * (middle * longest)) <= tolerance ? inside
-                                                                                      : outside) =
-            middle;
-      }
-      const btScalar depth = inside * longest / 2;
-      centre = position + inward * depth;
-      radius = depth + (SIMDSQRT12 * 2 - 1) * longest;
-      if (distance.signedDistance(centre) > tolerance) {
+      if (!pullBack(distance, position, inward, longest, tolerance, centre, radius)) {
         ++report.dropped;
         continue;
       }

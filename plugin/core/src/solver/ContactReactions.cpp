@@ -18,21 +18,21 @@ namespace {
 constexpr int kReactionSweeps = 16;
 
 /// 1/k_i² of the residual's equivalent displacement [m²/N²]; 0 for a particle in no term.
-btScalar weight(const MuscleState& muscle, uint32_t i) {
+btScalar weight(const ResidualState& muscle, uint32_t i) {
   const btScalar k = muscle.residualStiffness[i];
   return k > 0 ? 1 / (k * k) : 0;
 }
 
 /// Whether pair task `pair` holds the contacts the muscles' last responses applied (and not a
 /// stale collision's).
-bool current(const MusclePairTask& pair, const MuscleState& a, const MuscleState& b) {
+bool current(const MusclePairTask& pair, const ContactState& a, const ContactState& b) {
   return a.contactRound == pair.roundA && b.contactRound == pair.roundB;
 }
 
 /// One Gauss–Seidel update of the reaction λ of muscle contact `c` (i of `a` pushed along +n, j
 /// of `b` along −n; kUnpushed: fixed, it takes any force), the forces `fa`, `fb` kept current.
-void relaxPair(const MuscleContact& c, MuscleState& a, MuscleState& b, std::vector<btVector3>& fa,
-               std::vector<btVector3>& fb, btScalar& lambda) {
+void relaxPair(const MuscleContact& c, const ResidualState& a, const ResidualState& b,
+               std::vector<btVector3>& fa, std::vector<btVector3>& fb, btScalar& lambda) {
   const btVector3 n = unitOrZero(c.push);
   if (n.isZero()) return;
   const btScalar wi = c.i == kUnpushed ? 0 : weight(a, c.i);

@@ -53,12 +53,11 @@ bool termCrossed(const ParticleState& particles, const TearState&, std::span<con
 
 }  // namespace
 
-bool cutBySweep(MuscleState& muscle, const BladeState& blade) {
+bool cutBySweep(const ParticleState& muscle, TearState& tear, const BladeState& blade) {
   const Sweep sweep{{blade.before * blade.from, blade.before * blade.to, blade.last * blade.from,
                      blade.last * blade.to, blade.target * blade.from, blade.target * blade.to}};
   const btVector3* c = sweep.corner;
   if (c[0] == c[4] && c[1] == c[5] && c[2] == c[4] && c[3] == c[5]) return false;
-  TearState& tear = muscle.tear;
   const std::vector<Spring>& springs = tear.torn->springs;
   const btVector3* x = muscle.positions.data();
   size_t cut = 0;

@@ -12,7 +12,8 @@
 
 namespace fibremss {
 
-struct MuscleState;
+struct ParticleState;
+struct TearState;
 
 /// A blade as a step sees it.
 struct BladeState {
@@ -23,10 +24,10 @@ struct BladeState {
   btTransform target = btTransform::getIdentity();  ///< to reach at the end of this step
 };
 
-/// Cuts the springs and volume terms of `muscle` (prepared for tearing) that cross the surface
-/// `blade` swept from its transform before last through its last to its target, and recounts the
-/// muscle's pieces when something was cut. Returns whether something was cut (the integrator's
-/// workspace must then follow).
-bool cutBySweep(MuscleState& muscle, const BladeState& blade);
+/// Cuts the springs and volume terms of a muscle (its `tear` prepared for tearing, its particles
+/// at `muscle`'s positions) that cross the surface `blade` swept from its transform before last
+/// through its last to its target, and recounts the muscle's pieces when something was cut.
+/// Returns whether something was cut (the integrator's workspace must then follow).
+bool cutBySweep(const ParticleState& muscle, TearState& tear, const BladeState& blade);
 
 }  // namespace fibremss

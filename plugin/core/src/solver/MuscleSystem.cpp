@@ -131,7 +131,7 @@ std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
 
 /// A muscle's step bounds: the mean boundary radius, each particle's r of eq 5.1, the stable
 /// time step and the springs' rest length sum.
-void setStepBounds(const MuscleSettings& s, MuscleState& state) {
+void setStepBounds(const MuscleSettings& s, ParticleState& particles) {
   const size_t n = s.particleCount();
   double radiusSum = 0;
   for (uint32_t p : s.boundaryParticles) radiusSum += s.radii[p];
@@ -142,26 +142,27 @@ void setStepBounds(const MuscleSettings& s, MuscleState& state) {
     for (const Spring& spring : s.springs) lengthSum += spring.restLength;
     radiusSum = s.springs.empty() ? 1e-3 : 0.5 * lengthSum / static_cast<double>(s.springs.size());
   }
-  state.meanRadius = static_cast<btScalar>(radiusSum);
-  state.stepRadius.resize(n);
-  const btScalar leastStepRadius = kLeastStepRadiusShare * state.meanRadius;
+  particles.meanRadius = static_cast<btScalar>(radiusSum);
+  particles.stepRadius.resize(n);
+  const btScalar leastStepRadius = kLeastStepRadiusShare * particles.meanRadius;
   for (uint32_t i = 0; i < n; ++i)
-    state.stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0 ? std::max(s.radii[i], leastStepRadius)
-                                                            : state.meanRadius;
-  state.stableTimeStep = stableTimeStep(s);
-  for (const Spring& spring : s.springs) state.restLengthSum += spring.restLength;
+    particles.stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0
+                                  ? std::max(s.radii[i], leastStepRadius)
+                                  : particles.meanRadius;
+  particles.stableTimeStep = stableTimeStep(s);
+  for (const Spring& spring : s.springs) particles.restLengthSum += spring.restLength;
 }
 
 /// Moves a muscle's free particles by uniform noise in ±def.initialNoise, seeded by the
 /// system's seed and the count of muscles added (`added`).
-void addInitialNoise(const MuscleSystemDef& def, uint32_t added, MuscleState& state) {
+void addInitialNoise(const MuscleSystemDef& def, uint32_t added, ParticleState& particles) {
   std::seed_seq seed{def.seed, added};
   std::mt19937 random(seed);
   std::uniform_real_distribution<btScalar> noise(-def.initialNoise, def.initialNoise);
-  for (uint32_t i : state.freeParticles) {
+  for (uint32_t i : particles.freeParticles) {
     const btVector3 offset(noise(random), noise(random), noise(random));
-    state.positions[i] += offset;
-    state.previous[i] = state.positions[i];
+    particles.positions[i] += offset;
+    particles.previous[i] = particles.positions[i];
   }
 }
 
@@ -192,21 +193,22 @@ MuscleSystem::MuscleSystem(const MuscleSystemDef& def) : impl_(std::make_unique<
 
 MuscleSystem::~MuscleSystem() = default;
 
-void MuscleSystem::Impl::deform(MuscleState& state) const {
-  if (state.surface.empty()) return;
-  deformSurface(*state.settings, state.positions, state.boneTransforms,
-                definition.blendedPretransform, definition.pretransformBlend, state.skin,
-                state.surface);
+void MuscleSystem::Impl::deform(const MuscleSettings& settings, ParticleState& particles) const {
+  if (particles.surface.empty()) return;
+  deformSurface(settings, particles.positions, particles.boneTransforms,
+                definition.blendedPretransform, definition.pretransformBlend, particles.skin,
+                particles.surface);
   if (!definition.surfaceContact) return;
-  measureLayer(*state.settings, state.positions, state.surface, state.skin);
+  measureLayer(settings, particles.positions, particles.surface, particles.skin);
   btVector3 lower, upper;
-  pointBounds(state.surface, lower, upper);
-  const btScalar reach = *std::max_element(state.skin.layer.begin(), state.skin.layer.end());
+  pointBounds(particles.surface, lower, upper);
+  const btScalar reach =
+      *std::max_element(particles.skin.layer.begin(), particles.skin.layer.end());
   const btVector3 margin(reach, reach, reach);
   for (uint32_t slot : bones.order) {
     const BoneState& bone = *bones.states[slot];
-    liftOutOfBone(*bone.mesh, bone.current, state.skin.layer, lower - margin, upper + margin,
-                  state.surface);
+    liftOutOfBone(*bone.mesh, bone.current, particles.skin.layer, lower - margin, upper + margin,
+                  particles.surface);
   }
 }
 
@@ -288,7 +290,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
     throw InputError(call, "", "a muscle that blades cut cannot keep an enclosed-volume term");
   prepareTearing(state->settings, state->tear, !impl_->blades.empty());
   impl_->resolveBones(*state);
-  impl_->placeAtBones(*state);
+  impl_->placeAtBones(s, *state);
   ++impl_->musclesAdded;
   if (impl_->definition.initialNoise > 0)
     addInitialNoise(impl_->definition, impl_->musclesAdded, *state);
@@ -301,7 +303,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount) {
     state->surface.resize(s.restSurface.vertices.size());
     prepareSkinFrames(s, state->skin);
-    impl_->deform(*state);
+    impl_->deform(s, *state);
   }
 
   size_t boundaryTotal = s.boundaryParticles.size();
@@ -433,7 +435,7 @@ void MuscleSystem::setPositions(MuscleHandle muscle, std::span<const btVector3> 
   std::fill(state.velocities.begin(), state.velocities.end(), btVector3(0, 0, 0));
   forgetBoneSides(state);
   rebuildTree(*state.settings, state, state);
-  impl_->deform(state);
+  impl_->deform(*state.settings, state);
 }
 
 const MuscleSettings& MuscleSystem::settings(MuscleHandle muscle) const {

@@ -86,14 +86,14 @@ void add(StepTiming& sum, const StepTiming& part) {
 
 }  // namespace
 
-MuscleHealth checkMuscle(MuscleState& muscle) {
+MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& muscle,
+                         TearState& tear) {
   MuscleHealth health;
   health.nan =
       !allFinite(muscle.positions) || !allFinite(muscle.previous) || !allFinite(muscle.velocities);
-  const MuscleSettings& settings = *muscle.settings;
   // Written so that a NaN extent counts as spread too.
-  health.spread = muscle.tear.pieces > 1
-                      ? piecesSpread(settings, muscle, muscle.tear, kTornSpread)
+  health.spread = tear.pieces > 1
+                      ? piecesSpread(settings, muscle, tear, kTornSpread)
                       : !(extent(muscle.positions) <= kTornSpread * extent(settings.restPositions));
   if (settings.springs.empty()) return health;
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
@@ -104,17 +104,17 @@ MuscleHealth checkMuscle(MuscleState& muscle) {
   return health;
 }
 
-void saveGoodState(MuscleState& muscle) {
-  std::copy(muscle.positions.begin(), muscle.positions.end(), muscle.goodPositions.begin());
-  std::copy(muscle.previous.begin(), muscle.previous.end(), muscle.goodPrevious.begin());
-  std::copy(muscle.velocities.begin(), muscle.velocities.end(), muscle.goodVelocities.begin());
+void saveGoodState(const ParticleState& muscle, GuardSnapshot& good) {
+  std::copy(muscle.positions.begin(), muscle.positions.end(), good.goodPositions.begin());
+  std::copy(muscle.previous.begin(), muscle.previous.end(), good.goodPrevious.begin());
+  std::copy(muscle.velocities.begin(), muscle.velocities.end(), good.goodVelocities.begin());
 }
 
-void restoreGoodState(MuscleState& muscle) {
-  std::copy(muscle.goodPositions.begin(), muscle.goodPositions.end(), muscle.positions.begin());
-  std::copy(muscle.goodPrevious.begin(), muscle.goodPrevious.end(), muscle.previous.begin());
-  std::copy(muscle.goodVelocities.begin(), muscle.goodVelocities.end(), muscle.velocities.begin());
-  forgetBoneSides(muscle);
+void restoreGoodState(const GuardSnapshot& good, ParticleState& muscle, ContactState& contact) {
+  std::copy(good.goodPositions.begin(), good.goodPositions.end(), muscle.positions.begin());
+  std::copy(good.goodPrevious.begin(), good.goodPrevious.end(), muscle.previous.begin());
+  std::copy(good.goodVelocities.begin(), good.goodVelocities.end(), muscle.velocities.begin());
+  forgetBoneSides(contact);
 }
 
 namespace {
@@ -136,7 +136,7 @@ struct GuardOutcome {
 /// carries the frozen muscles).
 void saveStepStart(Slots<MuscleState>& muscles, Slots<BoneState>& bones, bool muscleState) {
   if (muscleState)
-    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot]);
+    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot], *muscles.states[slot]);
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.goodLast = bone.last;
@@ -147,7 +147,10 @@ void saveStepStart(Slots<MuscleState>& muscles, Slots<BoneState>& bones, bool mu
 /// Back to the start of the step: every muscle, frozen ones included (theirs is unchanged),
 /// and the bones with their sphere trees.
 void rollBackStep(Slots<MuscleState>& muscles, Slots<BoneState>& bones) {
-  for (uint32_t slot : muscles.order) restoreGoodState(*muscles.states[slot]);
+  for (uint32_t slot : muscles.order) {
+    MuscleState& state = *muscles.states[slot];
+    restoreGoodState(state, state, state);
+  }
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.last = bone.goodLast;
@@ -181,7 +184,7 @@ size_t blameMuscles(Slots<MuscleState>& muscles, bool freeze, GuardOutcome& outc
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) continue;
-    const MuscleHealth health = checkMuscle(state);
+    const MuscleHealth health = checkMuscle(*state.settings, state, state.tear);
     if (!health.failed()) continue;
     if (!health.nan && !health.spread) {
       // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
@@ -256,7 +259,8 @@ void MuscleSystem::Impl::breakMuscles() {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) continue;
     bool changed = breakStretched(state, state.tear);
-    for (const BladeState& blade : blades) changed = cutBySweep(state, blade) || changed;
+    for (const BladeState& blade : blades)
+      changed = cutBySweep(state, state.tear, blade) || changed;
     if (changed && state.prepared)
       integratorFor(state.preparedFor)
           .springsChanged(*state.settings, state, state.workspace.get());
@@ -265,6 +269,28 @@ void MuscleSystem::Impl::breakMuscles() {
     blade.before = blade.last;
     blade.last = blade.target;
   }
+}
+
+// A frozen muscle rides with its bones (each one's motion over the whole step, from where it
+// started) and is pushed out of them.
+void MuscleSystem::Impl::carryFrozen(MuscleState& state) {
+  const bool velocities = integratorFor(definition.integrator).usesVelocities();
+  resolveBones(state);
+  followBones(state, BoneMotion::SinceStepStart);
+  // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
+  ThreadScratch& thread = scratch.front();
+  state.pinched = state.pinchedInStep = 0;
+  if (definition.muscleBone && state.bonesMoving)
+    for (int round = 0; round < kFrozenRounds; ++round) {
+      refitTree(*state.settings, state, state);
+      for (uint32_t slot : bones.order)
+        collideMuscleBone(*state.settings, state, state, state, *bones.states[slot], thread.stack,
+                          thread.contacts);
+      recordPushes(*state.settings, state, state);
+      applyPushes(*state.settings, state, state, velocities, definition.slidingContacts);
+    }
+  thread.contacts.clear();
+  deform(*state.settings, state);
 }
 
 void MuscleSystem::Impl::guardedStep() {
@@ -289,7 +315,8 @@ void MuscleSystem::Impl::guardedStep() {
     if (!stats.nan && !stats.exploded) break;
     if (stats.interrupted && rollback) {
       rollBack();
-      for (uint32_t slot : muscles.order) deform(*muscles.states[slot]);  // surfaces as restored
+      for (uint32_t slot : muscles.order)  // surfaces as restored
+        deform(*muscles.states[slot]->settings, *muscles.states[slot]);
       stats.nan = stats.exploded = false;
       break;
     }
@@ -307,27 +334,6 @@ void MuscleSystem::Impl::guardedStep() {
 
   breakMuscles();
 
-  // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
-  // started) and is pushed out of them.
-  const bool velocities = integratorFor(definition.integrator).usesVelocities();
-  const auto carryFrozen = [&](MuscleState& state) {
-    resolveBones(state);
-    followBones(state, BoneMotion::SinceStepStart);
-    // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
-    ThreadScratch& thread = scratch.front();
-    state.pinched = state.pinchedInStep = 0;
-    if (definition.muscleBone && state.bonesMoving)
-      for (int round = 0; round < kFrozenRounds; ++round) {
-        refitTree(*state.settings, state, state);
-        for (uint32_t slot : bones.order)
-          collideMuscleBone(*state.settings, state, state, state, *bones.states[slot], thread.stack,
-                            thread.contacts);
-        recordPushes(*state.settings, state, state);
-        applyPushes(*state.settings, state, state, velocities, definition.slidingContacts);
-      }
-    thread.contacts.clear();
-    deform(state);
-  };
   const BoneSummary boneSummary = summariseBones(bones);
   size_t frozen = 0, trappedParticles = 0, trappedMuscles = 0;
   for (uint32_t slot : muscles.order) {

@@ -27,11 +27,13 @@ constexpr double kTornSpread = 2;
 /// by more than the muscle's mean rest length: the 3× rule alone trips on springs of a few µm
 /// (converging fibre ends, jittered neighbours) whose stretch is harmless.
 /// A muscle torn into pieces (Tearing.h) is spread when one of its pieces is.
-MuscleHealth checkMuscle(MuscleState& muscle);
+MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& muscle,
+                         TearState& tear);
 
-/// Copies positions, previous and velocities of `muscle` into its good-state buffers.
-void saveGoodState(MuscleState& muscle);
-/// Restores positions, previous and velocities saved by saveGoodState.
-void restoreGoodState(MuscleState& muscle);
+/// Copies positions, previous and velocities of `muscle` into its good-state buffers `good`.
+void saveGoodState(const ParticleState& muscle, GuardSnapshot& good);
+/// Restores positions, previous and velocities saved by saveGoodState and forgets the sides of
+/// the bones the contact stage saw the particles on (they may have been lost in the step).
+void restoreGoodState(const GuardSnapshot& good, ParticleState& muscle, ContactState& contact);
 
 }  // namespace fibremss

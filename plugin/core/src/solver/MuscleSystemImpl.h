@@ -196,13 +196,23 @@ struct MuscleSystem::Impl {
   void gatherContacts();
 
   void resolveBones(MuscleState& state) const;
-  void placeAtBones(MuscleState& state) const;
-  void pretransform(MuscleState& state, bool rotateVelocities) const;
-  void movePretransformed(MuscleState& state, uint32_t i, bool rotateVelocities) const;
-  void pretransformDualQuaternions(MuscleState& state, bool rotateVelocities) const;
-  void followFixed(MuscleState& state) const;
+  /// The particles at rest moved by their pre-transform (fixed ones by their bone), at rest.
+  void placeAtBones(const MuscleSettings& settings, ParticleState& particles) const;
+  /// The free particles moved by their bones' motion of this iteration (velocities turned too
+  /// when `rotateVelocities`).
+  void pretransform(const MuscleSettings& settings, ParticleState& particles,
+                    bool rotateVelocities) const;
+  /// One free particle moved by its bones' motion of this iteration.
+  void movePretransformed(const MuscleSettings& settings, ParticleState& particles, uint32_t i,
+                          bool rotateVelocities) const;
+  /// pretransform's dual-quaternion blend, the bones' motions converted once.
+  void pretransformDualQuaternions(const MuscleSettings& settings, ParticleState& particles,
+                                   bool rotateVelocities) const;
+  /// The fixed particles on their bones (those of bones gone, `boneSlots` -1, left where they are).
+  void followFixed(const MuscleSettings& settings, std::span<const int32_t> boneSlots,
+                   ParticleState& particles) const;
   /// The muscle's output surface (if it has one): the skin, then surface contact.
-  void deform(MuscleState& state) const;
+  void deform(const MuscleSettings& settings, ParticleState& particles) const;
   void moveBones(btScalar share, bool arrive);
   /// The bone motion a muscle follows: this iteration's, or all of it since the step began (what
   /// carries a frozen muscle, which skipped the iterations).
@@ -237,7 +247,7 @@ struct MuscleSystem::Impl {
   void applyResponse();
   /// The muscle's force chunks for forceChunkWork and their buffers (allocates only when the
   /// work per chunk changed or the muscle is new).
-  void planChunks(MuscleState& state) const;
+  void planChunks(const MuscleSettings& settings, ChunkState& chunks) const;
   /// forceTasks of the active muscles, largest first.
   void orderForceTasks();
   /// The muscle's last response and this iteration's bone motion, timed into `result`.
@@ -284,6 +294,8 @@ struct MuscleSystem::Impl {
   /// workspaces up to date.
   void breakMuscles();
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
+  /// A muscle the guard froze carried with its bones over the whole step and pushed out of them.
+  void carryFrozen(MuscleState& state);
   /// Whether some bone's target differs from where it ended the last step.
   bool bonesMove() const;
   // Local steps (MuscleSystemLocal.cpp, MuscleSystem::stepLocal).

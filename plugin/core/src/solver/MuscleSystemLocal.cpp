@@ -28,74 +28,75 @@ void reach(RegionState& region, uint32_t i) {
 
 /// Sizes the muscle's region arrays for its settings (the first gathering, or new settings after
 /// a tear or a cut), or unmarks the last region's particles.
-void resetRegion(MuscleState& state) {
-  const MuscleSettings& settings = *state.settings;
-  if (state.regionSettings == &settings) {
-    for (uint32_t i : state.regionReach) state.regionMark[i] = 0;
+void resetRegion(const MuscleSettings& settings, RegionState& region) {
+  if (region.regionSettings == &settings) {
+    for (uint32_t i : region.regionReach) region.regionMark[i] = 0;
   } else {
     const size_t particles = settings.particleCount();
-    state.regionMark.assign(particles, 0);
-    state.regionParticles.reserve(particles);
-    state.regionReach.reserve(particles);
-    state.regionSprings.reserve(settings.springs.size());
-    state.regionFans.reserve(settings.fanInverseVolume.size());
-    state.regionSettings = &settings;
+    region.regionMark.assign(particles, 0);
+    region.regionParticles.reserve(particles);
+    region.regionReach.reserve(particles);
+    region.regionSprings.reserve(settings.springs.size());
+    region.regionFans.reserve(settings.fanInverseVolume.size());
+    region.regionSettings = &settings;
   }
-  state.regionParticles.clear();
-  state.regionReach.clear();
-  state.regionSprings.clear();
-  state.regionFans.clear();
+  region.regionParticles.clear();
+  region.regionReach.clear();
+  region.regionSprings.clear();
+  region.regionFans.clear();
 }
 
 /// The muscle's free particles within `radius` of `centre` (none for a radius < 0), the springs
 /// and fans with one of them, and the ring those reach.
-void gatherRegion(MuscleState& state, const btVector3& centre, btScalar radius) {
-  resetRegion(state);
-  const MuscleSettings& settings = *state.settings;
-  for (uint32_t i : state.freeParticles)
-    if (radius >= 0 && (state.positions[i] - centre).length2() <= radius * radius) {
-      state.regionMark[i] = kInRegion;
-      state.regionParticles.push_back(i);
-      state.regionReach.push_back(i);
+void gatherRegion(const MuscleSettings& settings, const ParticleState& particles,
+                  RegionState& region, const btVector3& centre, btScalar radius) {
+  resetRegion(settings, region);
+  for (uint32_t i : particles.freeParticles)
+    if (radius >= 0 && (particles.positions[i] - centre).length2() <= radius * radius) {
+      region.regionMark[i] = kInRegion;
+      region.regionParticles.push_back(i);
+      region.regionReach.push_back(i);
     }
   for (uint32_t s = 0; s < settings.springs.size(); ++s) {
     const Spring& spring = settings.springs[s];
-    if (state.regionMark[spring.a] != kInRegion && state.regionMark[spring.b] != kInRegion)
+    if (region.regionMark[spring.a] != kInRegion && region.regionMark[spring.b] != kInRegion)
       continue;
-    state.regionSprings.push_back(s);
-    reach(state, spring.a);
-    reach(state, spring.b);
+    region.regionSprings.push_back(s);
+    reach(region, spring.a);
+    reach(region, spring.b);
   }
   for (uint32_t k = 0; k < settings.fanInverseVolume.size(); ++k) {
     const std::span<const uint32_t> fan = fanParticles(settings, k);
     bool inside = false;
-    for (uint32_t i : fan) inside = inside || state.regionMark[i] == kInRegion;
+    for (uint32_t i : fan) inside = inside || region.regionMark[i] == kInRegion;
     if (!inside) continue;
-    state.regionFans.push_back(k);
-    for (uint32_t i : fan) reach(state, i);
+    region.regionFans.push_back(k);
+    for (uint32_t i : fan) reach(region, i);
   }
 }
 
 /// Marks the boundary particles outside the region as already visited in the coming
 /// collideMuscleBone call against a bone's true mesh (its next boneVisit), so that it queries
 /// the mesh for the region's particles only: the others would not move.
-void skipMeshOutside(MuscleState& state, const BoneState& bone) {
-  if (!bone.meshContact || state.meshVisits.empty()) return;
-  const uint32_t visit = state.boneVisit + 1;
-  for (uint32_t i : state.settings->boundaryParticles)
-    if (state.regionMark[i] != kInRegion) state.meshVisits[i] = visit;
+void skipMeshOutside(const MuscleSettings& settings, const RegionState& region,
+                     ContactState& contact, const BoneState& bone) {
+  if (!bone.meshContact || contact.meshVisits.empty()) return;
+  const uint32_t visit = contact.boneVisit + 1;
+  for (uint32_t i : settings.boundaryParticles)
+    if (region.regionMark[i] != kInRegion) contact.meshVisits[i] = visit;
 }
 
 /// Forgets the pushes of this iteration's collisions on particles outside the region: a local
 /// step moves none of them.
-void dropPushesOutside(MuscleState& state) {
-  for (uint32_t i : state.settings->boundaryParticles) {
-    if (state.pushCounts[i] == 0 || state.regionMark[i] == kInRegion) continue;
-    state.pushes[i].setZero();
-    state.pushCounts[i] = 0;
-    state.pinchBones[i] = -1;
-    state.firstBonePushes[i].setZero();
-    state.otherBonePushes[i].setZero();
+void dropPushesOutside(const MuscleSettings& settings, const RegionState& region,
+                       ContactState& contact) {
+  for (uint32_t i : settings.boundaryParticles) {
+    if (contact.pushCounts[i] == 0 || region.regionMark[i] == kInRegion) continue;
+    contact.pushes[i].setZero();
+    contact.pushCounts[i] = 0;
+    contact.pinchBones[i] = -1;
+    contact.firstBonePushes[i].setZero();
+    contact.otherBonePushes[i].setZero();
   }
 }
 
@@ -127,11 +128,11 @@ void MuscleSystem::Impl::localIteration(MuscleState& state, const TimeIntegrator
   if (definition.muscleMuscle || definition.muscleBone) refitTree(*state.settings, state, state);
   if (definition.muscleBone)
     for (uint32_t slot : bones.order) {
-      skipMeshOutside(state, *bones.states[slot]);
+      skipMeshOutside(settings, state, state, *bones.states[slot]);
       collideMuscleBone(*state.settings, state, state, state, *bones.states[slot],
                         scratch[thread].stack, scratch[thread].contacts);
     }
-  dropPushesOutside(state);
+  dropPushesOutside(settings, state, state);
   respond(state, true);
 }
 
@@ -141,7 +142,7 @@ void MuscleSystem::Impl::swapRegions(bool begin) {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     if (begin && state.regionSettings != state.settings.get())
-      gatherRegion(state, regionCentre, regionRadius);
+      gatherRegion(*state.settings, state, state, regionCentre, regionRadius);
     std::swap(state.freeParticles, state.regionParticles);
   }
 }
@@ -195,7 +196,10 @@ void MuscleSystem::setLocalRegion(const btVector3& centre, btScalar radius) {
   Impl& impl = *impl_;
   impl.regionCentre = centre;
   impl.regionRadius = radius;
-  for (uint32_t slot : impl.muscles.order) gatherRegion(*impl.muscles.states[slot], centre, radius);
+  for (uint32_t slot : impl.muscles.order) {
+    MuscleState& state = *impl.muscles.states[slot];
+    gatherRegion(*state.settings, state, state, centre, radius);
+  }
 }
 
 void MuscleSystem::stepLocal(btScalar duration) {

@@ -59,99 +59,102 @@ void MuscleSystem::Impl::resolveBones(MuscleState& state) const {
 }
 
 // Rest positions moved by their pre-transform (fixed ones by their bone); no velocity.
-void MuscleSystem::Impl::placeAtBones(MuscleState& state) const {
-  const MuscleSettings& settings = *state.settings;
+void MuscleSystem::Impl::placeAtBones(const MuscleSettings& settings,
+                                      ParticleState& particles) const {
   for (uint32_t i = 0; i < settings.particleCount(); ++i) {
-    const btTransform* fixed = settings.isFixed(i)
-                                   ? boneTransformOf(state.boneTransforms, settings.fixedBone[i])
-                                   : nullptr;
-    state.positions[i] =
+    const btTransform* fixed =
+        settings.isFixed(i) ? boneTransformOf(particles.boneTransforms, settings.fixedBone[i])
+                            : nullptr;
+    particles.positions[i] =
         fixed ? *fixed * settings.restPositions[i]
-              : pretransformPoint(settings, state.boneTransforms, i, settings.restPositions[i],
+              : pretransformPoint(settings, particles.boneTransforms, i, settings.restPositions[i],
                                   definition.blendedPretransform, definition.pretransformBlend);
-    state.previous[i] = state.positions[i];
-    state.velocities[i].setZero();
+    particles.previous[i] = particles.positions[i];
+    particles.velocities[i].setZero();
   }
 }
 
 // Moves free particles by their bones' motion in this iteration (blended, or the nearest
 // bone's), x and x(t−dt) alike, so the motion injects no velocity.
-void MuscleSystem::Impl::pretransform(MuscleState& state, bool rotateVelocities) const {
-  if (!state.bonesMoving) return;
-  const MuscleSettings& settings = *state.settings;
+void MuscleSystem::Impl::pretransform(const MuscleSettings& settings, ParticleState& particles,
+                                      bool rotateVelocities) const {
+  if (!particles.bonesMoving) return;
   const bool blended = definition.blendedPretransform;
   const PretransformBlend blend = definition.pretransformBlend;
   if (blended && !settings.blendWeight.empty() && blend == PretransformBlend::DualQuaternion)
-    return pretransformDualQuaternions(state, rotateVelocities);
+    return pretransformDualQuaternions(settings, particles, rotateVelocities);
 #if FIBREMSS_SSE_PRETRANSFORM
   // The common case (Verlet, blended, a few bones) with the transforms packed once.
-  const size_t count = state.boneDeltas.size();
+  const size_t count = particles.boneDeltas.size();
   if (blended && !settings.blendWeight.empty() && !rotateVelocities && count <= kPackedBones) {
     PackedTransform packed[kPackedBones];
-    for (size_t b = 0; b < count; ++b) packed[b] = packTransform(state.boneDeltas[b]);
+    for (size_t b = 0; b < count; ++b) packed[b] = packTransform(particles.boneDeltas[b]);
 #if FIBREMSS_AVX2_PARTICLES
     if (fastestSpringKernel() == SpringKernel::avx2)
-      return pretransformPackedAvx2(settings, packed, count, state.freeParticles,
-                                    state.positions.data(), state.previous.data());
+      return pretransformPackedAvx2(settings, packed, count, particles.freeParticles,
+                                    particles.positions.data(), particles.previous.data());
 #endif
-    for (uint32_t i : state.freeParticles)
-      pretransformPacked(settings, packed, count, i, state.positions[i], state.previous[i]);
+    for (uint32_t i : particles.freeParticles)
+      pretransformPacked(settings, packed, count, i, particles.positions[i], particles.previous[i]);
     return;
   }
 #endif
-  for (uint32_t i : state.freeParticles) movePretransformed(state, i, rotateVelocities);
+  for (uint32_t i : particles.freeParticles)
+    movePretransformed(settings, particles, i, rotateVelocities);
 }
 
 // One free particle's x, x(t−dt) and (rotateVelocities) velocity by pretransformPoint/Direction.
-void MuscleSystem::Impl::movePretransformed(MuscleState& state, uint32_t i,
+void MuscleSystem::Impl::movePretransformed(const MuscleSettings& settings,
+                                            ParticleState& particles, uint32_t i,
                                             bool rotateVelocities) const {
-  const MuscleSettings& settings = *state.settings;
   const bool blended = definition.blendedPretransform;
   const PretransformBlend blend = definition.pretransformBlend;
-  state.positions[i] =
-      pretransformPoint(settings, state.boneDeltas, i, state.positions[i], blended, blend);
-  state.previous[i] =
-      pretransformPoint(settings, state.boneDeltas, i, state.previous[i], blended, blend);
+  const std::vector<btTransform>& deltas = particles.boneDeltas;
+  particles.positions[i] =
+      pretransformPoint(settings, deltas, i, particles.positions[i], blended, blend);
+  particles.previous[i] =
+      pretransformPoint(settings, deltas, i, particles.previous[i], blended, blend);
   if (rotateVelocities)
-    state.velocities[i] =
-        pretransformDirection(settings, state.boneDeltas, i, state.velocities[i], blended, blend);
+    particles.velocities[i] =
+        pretransformDirection(settings, deltas, i, particles.velocities[i], blended, blend);
 }
 
 // The dual-quaternion pre-transform with the bones' motions converted once: one blend per
 // particle moves x, x(t−dt) and the velocity; particles on one bone take pretransformPoint's.
-void MuscleSystem::Impl::pretransformDualQuaternions(MuscleState& state,
+void MuscleSystem::Impl::pretransformDualQuaternions(const MuscleSettings& settings,
+                                                     ParticleState& particles,
                                                      bool rotateVelocities) const {
-  const MuscleSettings& settings = *state.settings;
-  for (size_t b = 0; b < state.boneDeltas.size(); ++b)
-    state.boneDualDeltas[b] = dualQuaternionOf(&state.boneDeltas[b]);
+  for (size_t b = 0; b < particles.boneDeltas.size(); ++b)
+    particles.boneDualDeltas[b] = dualQuaternionOf(&particles.boneDeltas[b]);
   const DualQuaternion identity = dualQuaternionOf(nullptr);
   const auto motionOf = [&](int32_t bone) -> const DualQuaternion& {
-    const DualQuaternion* motion = boneTransformOf(state.boneDualDeltas, bone);
+    const DualQuaternion* motion = boneTransformOf(particles.boneDualDeltas, bone);
     return motion ? *motion : identity;
   };
-  for (uint32_t i : state.freeParticles) {
+  for (uint32_t i : particles.freeParticles) {
     if (!blendsDualQuaternions(settings, i, PretransformBlend::DualQuaternion)) {
-      movePretransformed(state, i, rotateVelocities);
+      movePretransformed(settings, particles, i, rotateVelocities);
       continue;
     }
     const RigidMotion motion =
         blendDualQuaternions(motionOf(settings.blendBoneA[i]), motionOf(settings.blendBoneB[i]),
                              settings.blendWeight[i]);
-    state.positions[i] = moveRigidly(motion, state.positions[i]);
-    state.previous[i] = moveRigidly(motion, state.previous[i]);
+    particles.positions[i] = moveRigidly(motion, particles.positions[i]);
+    particles.previous[i] = moveRigidly(motion, particles.previous[i]);
     if (rotateVelocities)
-      state.velocities[i] = rotateByQuaternion(motion.rotation, state.velocities[i]);
+      particles.velocities[i] = rotateByQuaternion(motion.rotation, particles.velocities[i]);
   }
 }
 
 // Fixed particles sit exactly on their bone: x = T · rest.
-void MuscleSystem::Impl::followFixed(MuscleState& state) const {
-  const MuscleSettings& settings = *state.settings;
+void MuscleSystem::Impl::followFixed(const MuscleSettings& settings,
+                                     std::span<const int32_t> boneSlots,
+                                     ParticleState& particles) const {
   for (uint32_t i : settings.fixedParticles) {
     const int32_t b = settings.fixedBone[i];
-    if (b < 0 || state.boneSlots[b] < 0) continue;
-    state.previous[i] = state.positions[i];
-    state.positions[i] = state.boneTransforms[b] * settings.restPositions[i];
+    if (b < 0 || boneSlots[b] < 0) continue;
+    particles.previous[i] = particles.positions[i];
+    particles.positions[i] = particles.boneTransforms[b] * settings.restPositions[i];
   }
 }
 
@@ -170,7 +173,7 @@ void MuscleSystem::Impl::prepareWorkers() {
   const size_t slots = muscles.states.size();
   size_t chunks = 0;
   for (uint32_t slot : muscles.order) {
-    planChunks(*muscles.states[slot]);
+    planChunks(*muscles.states[slot]->settings, *muscles.states[slot]);
     chunks += muscles.states[slot]->forceChunks.size();
   }
   forceTasks.reserve(chunks);
@@ -192,24 +195,23 @@ void MuscleSystem::Impl::prepareWorkers() {
   boneContacts.reserve(boundary);
 }
 
-void MuscleSystem::Impl::planChunks(MuscleState& state) const {
-  if (state.chunkWork == forceChunkWork && !state.forceChunks.empty()) return;
-  const MuscleSettings& settings = *state.settings;
-  state.forceChunks = forceChunks(settings, fastestSpringKernel(), forceChunkWork);
-  state.chunkWork = forceChunkWork;
-  const size_t count = state.forceChunks.size();
-  state.chunkBase.assign(count, 0);
+void MuscleSystem::Impl::planChunks(const MuscleSettings& settings, ChunkState& chunks) const {
+  if (chunks.chunkWork == forceChunkWork && !chunks.forceChunks.empty()) return;
+  chunks.forceChunks = forceChunks(settings, fastestSpringKernel(), forceChunkWork);
+  chunks.chunkWork = forceChunkWork;
+  const size_t count = chunks.forceChunks.size();
+  chunks.chunkBase.assign(count, 0);
   size_t end = 0;  // of the last window in chunkForces
   for (size_t c = 1; c < count; ++c) {
-    const ForceChunk& chunk = state.forceChunks[c];
+    const ForceChunk& chunk = chunks.forceChunks[c];
     const size_t start = std::max<size_t>(end, chunk.lower);
-    state.chunkBase[c] = start - chunk.lower;
+    chunks.chunkBase[c] = start - chunk.lower;
     end = start + (chunk.upper - chunk.lower);
   }
-  state.chunkForces.assign(end, btVector3(0, 0, 0));
-  state.chunkSprings.assign(count, SpringForceResult{});
-  state.chunkMs.assign(count, 0);
-  state.chunkVolumeMs.assign(count, 0);
+  chunks.chunkForces.assign(end, btVector3(0, 0, 0));
+  chunks.chunkSprings.assign(count, SpringForceResult{});
+  chunks.chunkMs.assign(count, 0);
+  chunks.chunkVolumeMs.assign(count, 0);
 }
 
 void MuscleSystem::Impl::orderForceTasks() {
@@ -268,8 +270,8 @@ void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) cons
     state.bonesMoving = true;
   }
   state.treeFollowed = state.bonesMoving && !arrived;
-  pretransform(state, integratorFor(definition.integrator).usesVelocities());
-  followFixed(state);
+  pretransform(*state.settings, state, integratorFor(definition.integrator).usesVelocities());
+  followFixed(*state.settings, state.boneSlots, state);
 }
 
 // The share of a phase's wall time that `part` took: its thread time over all active muscles
@@ -684,7 +686,7 @@ void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   }
   if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
-      placeAtBones(state);
+      placeAtBones(*state.settings, state);
       rebuildTree(*state.settings, state, state);
     });
 }
@@ -704,7 +706,8 @@ void MuscleSystem::Impl::endIterations(bool arrived) {
 
 void MuscleSystem::Impl::outputSurfaces() {
   const Clock::time_point outputStart = Clock::now();
-  forEachMuscle("output", [this](MuscleState& state, uint32_t, unsigned) { deform(state); });
+  forEachMuscle("output",
+                [this](MuscleState& state, uint32_t, unsigned) { deform(*state.settings, state); });
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.last = bone.current = bone.target;
