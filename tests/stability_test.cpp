@@ -185,6 +185,21 @@ TEST(StabilityMatrix, HardCasesAtSmallResolution) {
   EXPECT_EQ(markdown.find("unavailable |") != std::string::npos, unavailable > 0);
 }
 
+// The default solver on pinch at 1 to 3 iterations per pose, without the strain limit (the
+// matrix's own settings): no spring beyond 3x at the end of any step. At 2 iterations per pose
+// the blades move 7 mm in one iteration, and the unbounded plain projective step stretched a
+// spring 2.44x before the contacts, which then burst it (step 1).
+TEST(StabilityMatrix, TheDefaultSolverHoldsPinchAtOneToThreeIterationsPerPose) {
+  for (int iterations = 1; iterations <= 3; ++iterations) {
+    StabilityOptions options;
+    options.overrides.push_back("iterations=" + std::to_string(iterations));
+    const auto cell = fibremss::runStabilityCell(fibremss::parseStabilityCase("pinch"),
+                                                 "projective", options.calibrationHigh, options);
+    EXPECT_EQ(cell.outcome, CellOutcome::Ok)
+        << iterations << " iterations: " << toString(cell.outcome) << "@" << cell.failedStep;
+  }
+}
+
 // With the volume term on (the default), Verlet at its measured stable step survives a hip
 // sweep, pinch and the tension spike. The term's stiffness is held at its rest value (G0/G) and
 // poorly shaped tetrahedra are softened: without that, sliver tetrahedra of gluteus medius flip

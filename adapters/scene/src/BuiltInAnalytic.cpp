@@ -77,9 +77,9 @@ Json cylinderStretchScene() {
   scene["bones"] = Json::array({bone("plate-lower", plate(-1), keyframes(down)),
                                 bone("plate-upper", plate(1), keyframes(up))});
   scene["analytic"] = analytic("cylinder-stretch", 1.1, 0);
-  // 20 iterations per pose: its ν and volume settle by 11 (effective ν 0.469 and +0.585 % at 20,
-  // 0.469 and +0.584 % at 30, 0.470 and +0.584 % at 400: the model's own ν, docs/decisions.md,
-  // "Volume terms"); at 8–10 ν is 0.455–0.464.
+  // 20 iterations per pose: its ν and volume have settled by then (effective ν 0.482 and +0.365 %
+  // at 20, 0.482 and +0.364 % at 30 and at 400: the model's own ν, docs/decisions.md, "Volume
+  // terms"); at 8, 10 and 11 ν is 0.465, 0.472 and 0.478.
   scene["simulation"]["iterations"] = 20;
   return scene;
 }
@@ -99,9 +99,9 @@ Json cylinderTwistScene() {
   // depend on the path, and the CalculiX reference solves 5 poses instead of 37 (FibreMSS's
   // last pose is the same within 0.1°: mid section 90.26° against 90.35° with 5° poses).
   scene["simulation"]["max_step_deg"] = 45;
-  // 26 iterations per pose (at least 23: one per 2° of a 45° turn): 0.271 mm RMS to CalculiX and
-  // the worst section 1.43° off the linear profile, against 0.264 mm and 0.96° at 30 and 0.290 mm
-  // and 1.87° at 23.
+  // 26 iterations per pose (at least 23: one per 2° of a 45° turn): 0.285 mm RMS to CalculiX and
+  // the worst section 0.984° off the linear profile, against 0.281 mm and 0.359° at 30 and 0.313
+  // mm and 1.78° at 23.
   scene["simulation"]["iterations"] = 26;
   return scene;
 }

@@ -252,20 +252,37 @@ void twoLoop(StepHistory& h, const ProjectiveFactor& factor, std::vector<btVecto
   }
 }
 
+/// The largest |d| over `step` [m].
+double longestMove(const std::vector<btVector3>& step) {
+  btScalar longest = 0;
+  for (const btVector3& d : step) longest = std::max(longest, d.length2());
+  return std::sqrt(double(longest));
+}
+
 /// Whether `step` moves some particle farther than the muscle's mean spring rest length: more
 /// than an L-BFGS step may (the pairs learnt from float noise near the equilibrium, or from a
 /// state the contacts keep changing). real-hip-gait tore without the bound (three muscles frozen
 /// at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
 bool movesTooFar(const IntegratedMuscle& muscle, const std::vector<btVector3>& step) {
-  if (muscle.settings.springs.empty()) return false;
-  const auto limit = static_cast<btScalar>(meanRestLength(muscle));
-  return std::any_of(step.begin(), step.end(),
-                     [&](const btVector3& d) { return d.length2() > limit * limit; });
+  return !muscle.settings.springs.empty() && longestMove(step) > meanRestLength(muscle);
+}
+
+/// Shortens `step` as a whole (its direction kept) so that no particle moves farther than the
+/// muscle's mean spring rest length. The plain projective step is unbounded where the volume
+/// terms' forces outrun their stand-in in A: in pinch's first iteration of a pose at 2 iterations
+/// per pose (the blades 7 mm on) it moved a particle 10.9 mm and stretched a spring from 1.09 to
+/// 2.44 × L0 before any contact (docs/decisions.md, "Solver").
+void boundStep(const IntegratedMuscle& muscle, std::vector<btVector3>& step) {
+  if (muscle.settings.springs.empty()) return;
+  const double longest = longestMove(step), limit = meanRestLength(muscle);
+  if (!(longest > limit)) return;
+  const auto scale = static_cast<btScalar>(limit / longest);
+  for (btVector3& d : step) d *= scale;
 }
 
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
-/// or moves a particle too far (movesTooFar) is replaced by the plain projective one and the
-/// history restarts.
+/// or moves a particle too far (movesTooFar) is replaced by the plain projective one, bounded
+/// (boundStep), and the history restarts.
 IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
   ParticleState& particles = muscle.particles;
@@ -282,6 +299,7 @@ IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSy
     w.solution = w.forces;
     w.factor.solveInPlace(w.solution.data());
   }
+  if (h.count == 0) boundStep(muscle, w.solution);  // an L-BFGS step kept is within the bound
   IntegrationResult result;
   for (size_t k = 0; k < free.size(); ++k)
     result.displacement += heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], 0, 1);
