@@ -1343,7 +1343,14 @@ TEST_F(CoarseReference, CompareReportsItsGatesAndRmsToIt) {
         << "the nearest surface point is never farther than the corresponding vertex";
     EXPECT_EQ(run["worst_muscle"], "fusiform");
     EXPECT_EQ(run["rms_to_reference_per_pose_mm"].size(), 3u);
+    ASSERT_EQ(run["muscles_to_reference"].size(), 1u);
+    const nlohmann::json& muscle = run["muscles_to_reference"][0];
+    EXPECT_EQ(muscle["muscle"], "fusiform");
+    EXPECT_EQ(muscle["per_pose_mm"], run["rms_to_reference_per_pose_mm"]) << "one muscle: all";
+    EXPECT_NEAR(muscle["rms_mm"].get<double>(), run["worst_muscle_rms_mm"].get<double>(), 1e-9);
   }
+  EXPECT_NE(readText(dir() / "compare/report.md").find("## RMS to the reference per pose"),
+            std::string::npos);
   const nlohmann::json& gates = summary["reference"]["gates"];
   EXPECT_TRUE(gates["spread_mm"].is_number());
   EXPECT_TRUE(gates["increments_mm"].is_number());

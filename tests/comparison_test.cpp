@@ -530,6 +530,33 @@ TEST(MusclesToEquilibrium, NamesTheWorstMuscleOverThePosesAndTheWorstMuscleAtAPo
   EXPECT_EQ(mismatched[1].worstPoseToEquilibrium, -1);
 }
 
+TEST(MergeAndReport, TablesEachRunsRmsToTheReferencePerPoseAndPerMuscle) {
+  RunMetrics reference, run;
+  reference.method = kReferenceMethod;
+  run.method = "fibremss";
+  run.rmsToReferenceMm = 2;
+  run.rmsToReferencePerPoseMm = {0, 1.5, 2.5};
+  run.musclesToReference = {{"vastus", 0.25, {0, 0.5, 0}}, {"gracilis", 7.5, {0, 2, 12.5}}};
+  nlohmann::json summary = madeSummary(2, 20);
+  summary["runs"] = {toJson(reference), toJson(run)};
+  const fs::path out = scratch("per_pose_and_muscle");
+  writeComparison(summary, out.string());
+  const std::string report = readFile(out / "report.md");
+  const size_t section = report.find("## RMS to the reference per pose and per muscle");
+  ASSERT_NE(section, std::string::npos) << report;
+  const std::string tables = report.substr(section, report.find("\n## ", section + 1) - section);
+  EXPECT_NE(tables.find("| fibremss | 0 | 1.5 | 2.5 |"), std::string::npos) << tables;
+  EXPECT_NE(tables.find("| gracilis | 7.5 |"), std::string::npos) << tables;
+  EXPECT_EQ(tables.find("| calculix |"), std::string::npos) << "not the reference itself";
+  EXPECT_EQ(runMetricsFromJson(toJson(run)).musclesToReference[1].perPoseMm,
+            run.musclesToReference[1].perPoseMm);
+
+  run.musclesToReference.resize(1);  // one muscle: its row would repeat the per-pose table
+  summary["runs"] = {toJson(reference), toJson(run)};
+  writeComparison(summary, out.string());
+  EXPECT_EQ(readFile(out / "report.md").find("| vastus |"), std::string::npos);
+}
+
 TEST(MergeAndReport, SaysWhenRmsToTheReferenceCoversFewerPosesThanTheRun) {
   // ccx did not solve the reference's pose 1 of 13: FibreMSS's RMS to it covers pose 0 only.
   nlohmann::json summary = madeSummary(2, 20);

@@ -995,6 +995,69 @@ std::string runLabel(const nlohmann::json& run) {
   return label;
 }
 
+/// The runs with an RMS to the reference per pose (the reference itself left out).
+std::vector<const nlohmann::json*> runsAgainstReference(const nlohmann::json& runs) {
+  std::vector<const nlohmann::json*> shown;
+  for (const auto& run : runs) {
+    const nlohmann::json& perPose = run.value("rms_to_reference_per_pose_mm", nlohmann::json());
+    if (runRole(run) != MethodRole::Reference && perPose.is_array() && !perPose.empty())
+      shown.push_back(&run);
+  }
+  return shown;
+}
+
+/// Rows of each run's RMS to the reference per pose.
+std::string referencePerPoseTable(const std::vector<const nlohmann::json*>& shown) {
+  size_t poses = 0;
+  for (const nlohmann::json* run : shown)
+    poses = std::max(poses, (*run)["rms_to_reference_per_pose_mm"].size());
+  std::ostringstream out;
+  out << "| run |";
+  for (size_t p = 0; p < poses; ++p) out << " pose " << p << " |";
+  out << "\n|---|";
+  for (size_t p = 0; p < poses; ++p) out << "---|";
+  for (const nlohmann::json* run : shown) {
+    const nlohmann::json& perPose = (*run)["rms_to_reference_per_pose_mm"];
+    out << "\n| " << runLabel(*run) << " |";
+    for (size_t p = 0; p < poses; ++p)
+      out << " " << (p < perPose.size() ? cell(perPose[p]) : "—") << " |";
+  }
+  return out.str() + "\n";
+}
+
+/// Rows of each muscle's RMS to the reference over the poses, a column per run.
+std::string referencePerMuscleTable(const std::vector<const nlohmann::json*>& shown) {
+  const nlohmann::json& first = shown.front()->value("muscles_to_reference", nlohmann::json());
+  std::ostringstream out;
+  out << "| muscle |";
+  for (const nlohmann::json* run : shown) out << " " << runLabel(*run) << " |";
+  out << "\n|---|";
+  for (size_t r = 0; r < shown.size(); ++r) out << "---|";
+  for (size_t m = 0; m < first.size(); ++m) {
+    out << "\n| " << first[m].value("muscle", std::string()) << " |";
+    for (const nlohmann::json* run : shown) {
+      const nlohmann::json& muscles = run->value("muscles_to_reference", nlohmann::json());
+      out << " " << (m < muscles.size() ? field(muscles[m], "rms_mm") : "—") << " |";
+    }
+  }
+  return out.str() + "\n";
+}
+
+/// Where each run's error to the reference lies: per pose and, with more than one muscle, per
+/// muscle ("" without a reference).
+std::string referenceBreakdown(const nlohmann::json& runs) {
+  const std::vector<const nlohmann::json*> shown = runsAgainstReference(runs);
+  if (shown.empty()) return "";
+  std::string out =
+      "\n## RMS to the reference per pose and per muscle\n\nEach run's surface vertex RMS to "
+      "the CalculiX reference [mm] at each pose both reached (— where either did not):\n\n" +
+      referencePerPoseTable(shown);
+  const nlohmann::json& muscles = shown.front()->value("muscles_to_reference", nlohmann::json());
+  if (muscles.is_array() && muscles.size() > 1)
+    out += "\nPer muscle, over those poses [mm]:\n\n" + referencePerMuscleTable(shown);
+  return out;
+}
+
 /// Per run that measured its muscles (FibreMSS), the per-muscle table: the worst muscle shows.
 std::string perMuscleReport(const nlohmann::json& runs) {
   std::string out;
@@ -1068,8 +1131,8 @@ std::string reportMarkdown(const nlohmann::json& summary, const std::vector<std:
          "calculix row is the reference itself (ms/step: its tetgen and ccx time per pose, "
          "iterations: Newton iterations). RMS to self-ref. is the distance to FibreMSS's own run "
          "at dt/8: FibreMSS's convergence, not any method's accuracy.\n"
-      << errorDecomposition(summary) << perMuscleReport(runs) << softBodyRatioReport(runs)
-      << analyticReport(runs) << equilibriumReport(runs);
+      << errorDecomposition(summary) << referenceBreakdown(runs) << perMuscleReport(runs)
+      << softBodyRatioReport(runs) << analyticReport(runs) << equilibriumReport(runs);
   const std::string coverageNote = referenceCoverageNote(runs);
   for (const std::string& plot : plots) {
     if (plot.size() > 4 && plot.substr(plot.size() - 4) == ".png") {

@@ -299,7 +299,7 @@ namespace {
 /// the whole surface's per pose into `perPose` (as rmsBetweenRuns takes it, so the worst pose
 /// indexes its worst value); false when they share no pose or the blocks do not split a surface.
 bool musclePoseRms(const RunMetrics& run, const RunMetrics& equilibrium,
-                   std::span<const SurfaceBlock> blocks, std::vector<MuscleToEquilibrium>& muscles,
+                   std::span<const SurfaceBlock> blocks, std::vector<MuscleRms>& muscles,
                    std::vector<double>& perPose) {
   size_t total = 0;
   for (const SurfaceBlock& block : blocks) total += block.vertices;
@@ -329,7 +329,7 @@ double rmsOf(const std::vector<double>& values) {
 /// `run`'s per-pose and per-muscle distances to `equilibrium` and their worst pose and muscle.
 void fillMuscles(RunMetrics& run, const RunMetrics& equilibrium,
                  std::span<const SurfaceBlock> blocks) {
-  std::vector<MuscleToEquilibrium> muscles(blocks.size());
+  std::vector<MuscleRms> muscles(blocks.size());
   std::vector<double> perPose;
   if (!musclePoseRms(run, equilibrium, blocks, muscles, perPose)) return;
   run.worstPoseToEquilibrium =
@@ -338,7 +338,7 @@ void fillMuscles(RunMetrics& run, const RunMetrics& equilibrium,
   run.worstMuscleRmsToEquilibriumMm = -1;
   run.worstMusclePoseToEquilibrium = {"", -1, -1.0};
   for (size_t m = 0; m < blocks.size(); ++m) {
-    MuscleToEquilibrium& muscle = muscles[m];
+    MuscleRms& muscle = muscles[m];
     muscle.muscle = blocks[m].muscle;
     muscle.rmsMm = rmsOf(muscle.perPoseMm);
     if (muscle.rmsMm > run.worstMuscleRmsToEquilibriumMm)
@@ -379,17 +379,16 @@ double shapeRmsMm(const TriangleMesh& a, const TriangleMesh& b) {
 
 namespace {
 
-/// Shape sum of squares and vertex sum of squares of one muscle at one pose.
-void addMusclePose(const TriangleMesh& rest, std::span<const btVector3> run,
-                   std::span<const btVector3> reference, double& shapeSquares, size_t& shapePoints,
-                   double& vertexSquares) {
+/// Adds one muscle at one pose to the shape sum of squares; returns its vertex RMS [mm].
+double addMusclePose(const TriangleMesh& rest, std::span<const btVector3> run,
+                     std::span<const btVector3> reference, double& shapeSquares,
+                     size_t& shapePoints) {
   TriangleMesh a{{run.begin(), run.end()}, rest.triangles};
   TriangleMesh b{{reference.begin(), reference.end()}, rest.triangles};
   const double shape = shapeRmsMm(a, b);
   shapeSquares += shape * shape * static_cast<double>(2 * run.size());
   shapePoints += 2 * run.size();
-  const double rms = rmsDistanceMm(run, reference);
-  vertexSquares += rms * rms * static_cast<double>(run.size());
+  return run.empty() ? 0.0 : rmsDistanceMm(run, reference);
 }
 
 }  // namespace
@@ -405,7 +404,7 @@ void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& pre
     run.rmsToReferencePerPoseMm.clear();
     double shapeSquares = 0, worst = -1;
     size_t shapePoints = 0;
-    std::vector<double> muscleSquares(prepared.muscles.size(), 0);
+    std::vector<MuscleRms> muscles(prepared.muscles.size());
     for (size_t p = 0; p < poses; ++p) {
       if (run.poseSurfaces[p].size() != reference.poseSurfaces[p].size()) return;
       run.rmsToReferencePerPoseMm.push_back(
@@ -414,24 +413,25 @@ void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& pre
       for (size_t m = 0; m < prepared.muscles.size(); ++m) {
         const TriangleMesh& rest = prepared.muscles[m]->restSurface;
         const size_t count = rest.vertices.size();
-        addMusclePose(rest, std::span(run.poseSurfaces[p]).subspan(offset, count),
-                      std::span(reference.poseSurfaces[p]).subspan(offset, count), shapeSquares,
-                      shapePoints, muscleSquares[m]);
+        muscles[m].perPoseMm.push_back(
+            addMusclePose(rest, std::span(run.poseSurfaces[p]).subspan(offset, count),
+                          std::span(reference.poseSurfaces[p]).subspan(offset, count), shapeSquares,
+                          shapePoints));
         offset += count;
       }
     }
     if (poses == 0 || shapePoints == 0) continue;
     run.shapeRmsToReferenceMm = std::sqrt(shapeSquares / static_cast<double>(shapePoints));
     for (size_t m = 0; m < prepared.muscles.size(); ++m) {
-      const size_t count = prepared.muscles[m]->restSurface.vertices.size();
-      const double rms =
-          count ? std::sqrt(muscleSquares[m] / static_cast<double>(count * poses)) : 0;
-      if (rms > worst) {
-        worst = rms;
-        run.worstMuscle = prepared.muscles[m]->name;
-        run.worstMuscleRmsMm = rms;
+      muscles[m].muscle = prepared.muscles[m]->name;
+      muscles[m].rmsMm = rmsOf(muscles[m].perPoseMm);
+      if (muscles[m].rmsMm > worst) {
+        worst = muscles[m].rmsMm;
+        run.worstMuscle = muscles[m].muscle;
+        run.worstMuscleRmsMm = worst;
       }
     }
+    run.musclesToReference = std::move(muscles);
   }
 }
 

@@ -30,17 +30,17 @@ double numberOr(const nlohmann::json& object, const char* key, double fallback) 
   return it->get<double>();
 }
 
-nlohmann::json toJson(const std::vector<MuscleToEquilibrium>& muscles) {
+nlohmann::json toJson(const std::vector<MuscleRms>& muscles) {
   nlohmann::json list = nlohmann::json::array();
-  for (const MuscleToEquilibrium& m : muscles)
+  for (const MuscleRms& m : muscles)
     list.push_back(
         {{"muscle", m.muscle}, {"rms_mm", number(m.rmsMm)}, {"per_pose_mm", numbers(m.perPoseMm)}});
   return list;
 }
 
-std::vector<MuscleToEquilibrium> musclesToEquilibriumFromJson(const nlohmann::json& object) {
-  std::vector<MuscleToEquilibrium> muscles;
-  if (auto list = object.find("muscles_to_equilibrium"); list != object.end() && list->is_array())
+std::vector<MuscleRms> musclesFromJson(const nlohmann::json& object, const char* key) {
+  std::vector<MuscleRms> muscles;
+  if (auto list = object.find(key); list != object.end() && list->is_array())
     for (const auto& m : *list)
       muscles.push_back({m.value("muscle", std::string()), numberOr(m, "rms_mm", RunMetrics::kNone),
                          numbersAt(m, "per_pose_mm")});
@@ -147,6 +147,7 @@ nlohmann::json toJson(const RunMetrics& m) {
       {"worst_muscle", m.worstMuscle},
       {"worst_muscle_rms_mm", number(m.worstMuscleRmsMm)},
       {"rms_to_reference_per_pose_mm", numbers(m.rmsToReferencePerPoseMm)},
+      {"muscles_to_reference", toJson(m.musclesToReference)},
       {"rms_to_self_reference_mm", number(m.rmsToSelfReferenceMm)},
       {"rms_to_equilibrium_mm", number(m.rmsToEquilibriumMm)},
       {"worst_pose_rms_to_equilibrium_mm", number(m.worstPoseRmsToEquilibriumMm)},
@@ -222,6 +223,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.worstMuscle = o.value("worst_muscle", m.worstMuscle);
   m.worstMuscleRmsMm = numberOr(o, "worst_muscle_rms_mm", m.worstMuscleRmsMm);
   m.rmsToReferencePerPoseMm = numbersAt(o, "rms_to_reference_per_pose_mm");
+  m.musclesToReference = musclesFromJson(o, "muscles_to_reference");
   m.rmsToSelfReferenceMm = numberOr(o, "rms_to_self_reference_mm", m.rmsToSelfReferenceMm);
   m.rmsToEquilibriumMm = numberOr(o, "rms_to_equilibrium_mm", m.rmsToEquilibriumMm);
   m.worstPoseRmsToEquilibriumMm =
@@ -233,7 +235,7 @@ RunMetrics runMetricsFromJson(const nlohmann::json& o) {
   m.worstMuscleRmsToEquilibriumMm =
       numberOr(o, "worst_muscle_rms_to_equilibrium_mm", m.worstMuscleRmsToEquilibriumMm);
   m.worstMusclePoseToEquilibrium = musclePoseRmsFromJson(o);
-  m.musclesToEquilibrium = musclesToEquilibriumFromJson(o);
+  m.musclesToEquilibrium = musclesFromJson(o, "muscles_to_equilibrium");
   m.rmsToFinerResolutionMm = numberOr(o, "rms_to_finer_resolution_mm", m.rmsToFinerResolutionMm);
   m.unconvergedPoses = o.value("unconverged_poses", m.unconvergedPoses);
   m.residualRmsMm = numberOr(o, "residual_rms_mm", m.residualRmsMm);

@@ -54,8 +54,9 @@ struct AnalyticMetrics {
   double volumeErrorPct() const { return std::abs(volumeChangePct - exactVolumeChangePct); }
 };
 
-/// One muscle's surface vertex RMS to the "equilibrium" run (compare's fillMusclesToEquilibrium).
-struct MuscleToEquilibrium {
+/// One muscle's surface vertex RMS to another surface: the CalculiX reference's or the
+/// "equilibrium" run's.
+struct MuscleRms {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
   std::string muscle;             ///< the muscle's name
   double rmsMm = kNone;           ///< over the poses both runs reached [mm]
@@ -105,7 +106,9 @@ struct RunMetrics {
   std::string worstMuscle;          ///< the muscle with the largest vertex RMS to the reference
   double worstMuscleRmsMm = kNone;  ///< its vertex RMS over all poses [mm]
   std::vector<double> rmsToReferencePerPoseMm;  ///< vertex RMS per pose both reached [mm]
-  double rmsToSelfReferenceMm = kNone;          ///< against FibreMSS at dt/8, 8× iterations
+  /// Per muscle (scene order): its vertex RMS to the reference, over the poses and per pose.
+  std::vector<MuscleRms> musclesToReference;
+  double rmsToSelfReferenceMm = kNone;  ///< against FibreMSS at dt/8, 8× iterations
   /// Against the "equilibrium" run (FibreMSS converged at every pose): RMS over the poses, and
   /// the worst pose's RMS.
   double rmsToEquilibriumMm = kNone;
@@ -114,7 +117,7 @@ struct RunMetrics {
   std::vector<double> rmsToEquilibriumPerPoseMm;  ///< vertex RMS per pose both reached [mm]
   int worstPoseToEquilibrium = -1;  ///< the pose of worstPoseRmsToEquilibriumMm (-1: none)
   /// Per muscle (scene order): its vertex RMS to the equilibrium run, over the poses and per pose.
-  std::vector<MuscleToEquilibrium> musclesToEquilibrium;
+  std::vector<MuscleRms> musclesToEquilibrium;
   std::string worstMuscleToEquilibrium;          ///< the muscle with the largest RMS over poses
   double worstMuscleRmsToEquilibriumMm = kNone;  ///< its RMS over the poses [mm]
   MusclePoseRms worstMusclePoseToEquilibrium;    ///< the farthest muscle at any single pose
