@@ -291,6 +291,7 @@ struct SoftBodyScene::Impl {
     body.m_cfg.kCHR = 1;  // rigid contact hardness
     body.m_cfg.kKHR = 1;  // kinematic contact hardness
     body.m_cfg.kSHR = 1;  // soft contact hardness
+    body.m_cfg.kDF = 0;   // frictionless, as FibreMSS's response and the CalculiX reference
     body.m_cfg.collisions = 0;
     if (definition.boneCollision) body.m_cfg.collisions |= btSoftBody::fCollision::SDF_RS;
     if (definition.softSoftCollision) {
