@@ -104,11 +104,12 @@ struct ContactState {
   std::vector<btVector3> otherBonePushes;  ///< Σ pushes of every other bone this iteration [m]
   size_t pinched = 0;        ///< particles caught between two bones in the last response
   size_t pinchedInStep = 0;  ///< most particles caught in one response of this step's attempt
-  /// Slot of the last bone that pushed each particle in this step's attempt (-1: none; cleared as
-  /// the attempt begins): a burst spring whose ends two bones pushed was torn by them.
+  /// Per particle, the bone (slot) that pushed it in the latest response of this step's attempt
+  /// that a bone pushed it in (of two in one response, the first: pinchBones; -1: none; cleared
+  /// as the attempt begins): a burst spring whose ends two bones pushed was torn by them.
   std::vector<int32_t> stepBones;
-  /// Burst springs whose ends two different bones pushed in this step's attempt, when the guard
-  /// kept it as torn by them (the guard's; cleared as the attempt begins).
+  /// Burst springs whose ends two different bones pushed, as the guard's check of this step's
+  /// attempt found them (0 until it checks; cleared as the attempt begins).
   size_t spannedInStep = 0;
   /// Caught in some step since the bones last stood still: the bones that tore it may still be
   /// carrying its torn halves apart (the guard's) [flag].
