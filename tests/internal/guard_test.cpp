@@ -7,6 +7,7 @@
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <memory>
@@ -381,12 +382,59 @@ TEST(Guard, AMuscleSpreadFarBeyondItsSizeIsDivergingNotTorn) {
   // stays between its bones, a diverging one grows without bound.
   Rig rig(fixedStep(btScalar(0.5), FailurePolicy::Retry), {softMuscle()});
   MuscleState& state = *MuscleSystemAccess::impl(rig.system).muscles.states[rig.muscles[0].index];
-  EXPECT_FALSE(checkMuscle(*state.settings, state, state.tear).spread);
-  EXPECT_FALSE(checkMuscle(*state.settings, state, state.tear).failed());
+  EXPECT_FALSE(checkMuscle(*state.settings, state, state, state.tear).spread);
+  EXPECT_FALSE(checkMuscle(*state.settings, state, state, state.tear).failed());
   for (btVector3& x : state.positions) x *= btScalar(2 * kTornSpread);
-  const MuscleHealth grown = checkMuscle(*state.settings, state, state.tear);
+  const MuscleHealth grown = checkMuscle(*state.settings, state, state, state.tear);
   EXPECT_TRUE(grown.spread);
   EXPECT_TRUE(grown.failed());  // its springs are beyond 3× as well
+}
+
+TEST(Guard, ABurstSpringIsTornByBonesOnlyWhenTwoBonesPushedItsEnds) {
+  // One particle 30 mm off its place bursts every spring it has (rest lengths up to 6.9 mm)
+  // without spreading the muscle; of those, only a spring whose ends different bones pushed in
+  // the step counts as spanned by them (its length is the bones' motion, not the solver's).
+  Rig rig(fixedStep(btScalar(0.5), FailurePolicy::Retry), {softMuscle()});
+  MuscleState& state = *MuscleSystemAccess::impl(rig.system).muscles.states[rig.muscles[0].index];
+  const Spring spring = state.settings->springs.front();
+  state.positions[spring.b] += btVector3(0, btScalar(0.03), 0);
+  const MuscleHealth burst = checkMuscle(*state.settings, state, state, state.tear);
+  ASSERT_GT(burst.explodedSprings, 1u);
+  ASSERT_FALSE(burst.spread);
+  const auto spanned = [&] {
+    return checkMuscle(*state.settings, state, state, state.tear).spannedSprings;
+  };
+  EXPECT_EQ(burst.spannedSprings, 0u);  // no bone pushed it
+  state.stepBones[spring.b] = 0;
+  EXPECT_EQ(spanned(), 0u);  // one end pushed, the other not
+  state.stepBones[spring.a] = 0;
+  EXPECT_EQ(spanned(), 0u);  // both ends pushed by the same bone
+  state.stepBones[spring.a] = 1;
+  EXPECT_EQ(spanned(), 1u);  // two bones: that spring alone
+}
+
+TEST(Guard, AMuscleTheNumericsBurstBetweenTwoBonesThatPushItStillFails) {
+  // The stiff grid between the two cubes moved 2 mm closer to it, each pushing the free particles
+  // next to it (x = ∓8 mm), at a dt that bursts it. The blow-up flings particles, so that a burst
+  // spring may end on both bones (and then counts as spanned), but the grid spreads beyond twice
+  // its size: the step fails as a numerical one, not kept as torn by the bones.
+  static const auto between = gridMuscle("between", 0, kStiff);
+  MuscleSystem system(fixedStep(kBursting, FailurePolicy::Report));
+  const std::vector<BoneHandle> bones{
+      system.addBone(cubeBone("left", btVector3(btScalar(-0.018), 0, 0))),
+      system.addBone(cubeBone("right", btVector3(btScalar(0.018), 0, 0)))};
+  const MuscleHandle muscle = system.addMuscle(between, bones);
+  system.step();
+  const StepStats& stats = system.lastStep();
+  MuscleState& state = *MuscleSystemAccess::impl(system).muscles.states[muscle.index];
+  ASSERT_NE(std::find(state.stepBones.begin(), state.stepBones.end(), 0), state.stepBones.end());
+  ASSERT_NE(std::find(state.stepBones.begin(), state.stepBones.end(), 1), state.stepBones.end());
+  const MuscleHealth health = checkMuscle(*state.settings, state, state, state.tear);
+  EXPECT_GT(health.explodedSprings, 0u);
+  EXPECT_TRUE(health.spread);
+  EXPECT_EQ(stats.trappedMuscles, 0u);
+  EXPECT_TRUE(stats.failed);
+  EXPECT_TRUE(sameHandle(stats.failedMuscle, muscle));
 }
 
 TEST(Guard, TheHostsBulletWorldKeepsRunningBesideABurstingMuscle) {

@@ -467,7 +467,7 @@ void applyPushes(const MuscleSettings& settings, ParticleState& particles, Conta
     btVector3 push = contact.pushes[i];
     if (contact.pinchBones[i] >= 0) {
       if (pinchPush(contact.firstBonePushes[i], contact.otherBonePushes[i], push)) ++pinched;
-      contact.pinchBones[i] = -1;
+      contact.stepBones[i] = std::exchange(contact.pinchBones[i], -1);
       contact.firstBonePushes[i].setZero();
       contact.otherBonePushes[i].setZero();
     }

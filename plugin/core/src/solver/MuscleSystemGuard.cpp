@@ -7,12 +7,13 @@
 // step; nothing throws, so a host's Bullet world keeps running. A step the cancel flag ended
 // (MuscleSystem::setCancelFlag) is not retried: a failed attempt is rolled back (unless Report)
 // and nothing is blamed or frozen. A muscle whose springs burst while two bones press some of its
-// particles from opposite sides (trapped: pinched in an iteration of the step, CollisionPairs.cpp),
-// not NaN nor spread far beyond its size, was torn by the bones, not by the numerics: its state is
-// kept; while the bones go on moving its tear may grow by kTearGrowth a step, and once they stand
-// still later steps fail it only for more burst springs than the trap left. A frozen muscle
-// rides with its bones (their motion over the step) and is pushed out of them, so it never ends
-// inside one.
+// particles from opposite sides (trapped: pinched in an iteration of the step, CollisionPairs.cpp,
+// or a burst spring whose two ends different bones pushed in the step: its length is the bones'
+// motion), not NaN nor spread far beyond its size, was torn by the bones, not by the numerics: its
+// state is kept; while the bones go on moving its tear may grow by kTearGrowth a step, and once
+// they stand still later steps fail it only for more burst springs than the trap left. A frozen
+// muscle rides with its bones (their motion over the step) and is pushed out of them, so it never
+// ends inside one.
 #include "MuscleSystemGuard.h"
 
 #include <algorithm>
@@ -87,7 +88,7 @@ void add(StepTiming& sum, const StepTiming& part) {
 }  // namespace
 
 MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& muscle,
-                         TearState& tear) {
+                         const ContactState& contact, TearState& tear) {
   MuscleHealth health;
   health.nan =
       !allFinite(muscle.positions) || !allFinite(muscle.previous) || !allFinite(muscle.velocities);
@@ -99,7 +100,10 @@ MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& mu
   const double floor = muscle.restLengthSum / static_cast<double>(settings.springs.size());
   for (const Spring& spring : settings.springs) {
     const double length = muscle.positions[spring.a].distance(muscle.positions[spring.b]);
-    if (springExploded(length, spring.restLength, floor)) ++health.explodedSprings;
+    if (!springExploded(length, spring.restLength, floor)) continue;
+    ++health.explodedSprings;
+    const int32_t boneA = contact.stepBones[spring.a], boneB = contact.stepBones[spring.b];
+    if (boneA >= 0 && boneB >= 0 && boneA != boneB) ++health.spannedSprings;
   }
   return health;
 }
@@ -184,15 +188,17 @@ size_t blameMuscles(Slots<MuscleState>& muscles, bool freeze, GuardOutcome& outc
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) continue;
-    const MuscleHealth health = checkMuscle(*state.settings, state, state.tear);
+    const MuscleHealth health = checkMuscle(*state.settings, state, state, state.tear);
     if (!health.failed()) continue;
     if (!health.nan && !health.spread) {
       // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
-      // Caught in any response of the step, or held since: the bones that tore it carry its
-      // halves on apart after the trap opens, so its tear may grow until they stand still.
+      // Caught in any response of the step (a particle pinched, or a burst spring stretched
+      // between two bones), or held since: the bones that tore it carry its halves on apart
+      // after the trap opens, so its tear may grow until they stand still.
+      state.spannedInStep = health.spannedSprings;
       const bool held = state.trapHeld &&
                         double(health.explodedSprings) <= kTearGrowth * double(state.tornSprings);
-      if (state.pinchedInStep > 0 || held) {
+      if (state.caughtInStep() || held) {
         state.tornSprings = std::max(state.tornSprings, health.explodedSprings);
         continue;
       }
@@ -279,7 +285,7 @@ void MuscleSystem::Impl::carryFrozen(MuscleState& state) {
   followBones(state, BoneMotion::SinceStepStart);
   // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
   ThreadScratch& thread = scratch.front();
-  state.pinched = state.pinchedInStep = 0;
+  state.pinched = state.pinchedInStep = state.spannedInStep = 0;
   if (definition.muscleBone && state.bonesMoving)
     for (int round = 0; round < kFrozenRounds; ++round) {
       refitTree(*state.settings, state, state);
@@ -343,7 +349,7 @@ void MuscleSystem::Impl::guardedStep() {
       carryFrozen(state);
     }
     trappedParticles += state.pinched;
-    state.trapHeld = state.pinchedInStep > 0 || (state.trapHeld && boneSummary.moved);
+    state.trapHeld = state.caughtInStep() || (state.trapHeld && boneSummary.moved);
     trappedMuscles += state.pinched > 0 ? 1 : 0;
   }
   stats.timing = outcome.spent;

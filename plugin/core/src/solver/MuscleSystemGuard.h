@@ -12,6 +12,9 @@ namespace fibremss {
 struct MuscleHealth {
   bool nan = false;            ///< a position, previous position or velocity is NaN or inf
   size_t explodedSprings = 0;  ///< springs counted as exploded (see checkMuscle)
+  /// Of those, the springs whose ends two different bones pushed in the step (ContactState::
+  /// stepBones): their length is the bones' motion, not the solver's.
+  size_t spannedSprings = 0;
   /// The particles' bounding box is more than kTornSpread times as large (diagonal) as at rest:
   /// diverging, not merely torn.
   bool spread = false;
@@ -26,9 +29,10 @@ constexpr double kTornSpread = 2;
 /// counts as exploded when it is longer than 3× its rest length and longer than its rest length
 /// by more than the muscle's mean rest length: the 3× rule alone trips on springs of a few µm
 /// (converging fibre ends, jittered neighbours) whose stretch is harmless.
-/// A muscle torn into pieces (Tearing.h) is spread when one of its pieces is.
+/// A muscle torn into pieces (Tearing.h) is spread when one of its pieces is. `contact` names the
+/// bones that pushed each particle in the step (spannedSprings).
 MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& muscle,
-                         TearState& tear);
+                         const ContactState& contact, TearState& tear);
 
 /// Copies positions, previous and velocities of `muscle` into its good-state buffers `good`.
 void saveGoodState(const ParticleState& muscle, GuardSnapshot& good);

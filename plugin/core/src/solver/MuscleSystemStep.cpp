@@ -682,7 +682,8 @@ void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, state);
     resolveBones(state);
-    state.pinchedInStep = 0;
+    state.pinchedInStep = state.spannedInStep = 0;
+    std::fill(state.stepBones.begin(), state.stepBones.end(), -1);
   }
   if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {

@@ -22,6 +22,7 @@ void ContactState::init(size_t n, bool meshContact, bool recovery) {
   pushCounts.assign(n, 0);
   pushedLast.assign(n, 0);
   pinchBones.assign(n, -1);
+  stepBones.assign(n, -1);
   firstBonePushes.assign(n, btVector3(0, 0, 0));
   otherBonePushes.assign(n, btVector3(0, 0, 0));
   if (meshContact) meshVisits.assign(n, 0);

@@ -104,10 +104,21 @@ struct ContactState {
   std::vector<btVector3> otherBonePushes;  ///< Σ pushes of every other bone this iteration [m]
   size_t pinched = 0;        ///< particles caught between two bones in the last response
   size_t pinchedInStep = 0;  ///< most particles caught in one response of this step's attempt
+  /// Per particle, the bone (slot) that pushed it in the latest response of this step's attempt
+  /// that a bone pushed it in (of two in one response, the first: pinchBones; -1: none; cleared
+  /// as the attempt begins): a burst spring whose ends two bones pushed was torn by them.
+  std::vector<int32_t> stepBones;
+  /// Burst springs whose ends two different bones pushed, as the guard's check of this step's
+  /// attempt found them (0 until it checks; cleared as the attempt begins).
+  size_t spannedInStep = 0;
   /// Caught in some step since the bones last stood still: the bones that tore it may still be
   /// carrying its torn halves apart (the guard's) [flag].
   bool trapHeld = false;
   size_t tornSprings = 0;  ///< most springs found burst while it was trapped (the guard's)
+
+  /// Whether bones caught it in this step's attempt: a particle pinched, or springs kept as torn
+  /// by two bones (spannedInStep).
+  bool caughtInStep() const { return pinchedInStep > 0 || spannedInStep > 0; }
 
   /// Sized for `n` particles with nothing pushed; the true-mesh visits with `meshContact`, the
   /// sides of penetration recovery with `recovery`.
