@@ -89,6 +89,33 @@ TEST(MeshDistance, ClosestMatchesBruteForceOnRandomPoints) {
   }
 }
 
+TEST(MeshDistance, ALimitedSearchFindsTheClosestPointWithinItOrNothing) {
+  const TriangleMesh mesh = sphereMesh({0.1f, -0.2f, 0.05f}, 0.05f, 3);
+  const MeshDistance distance(mesh);
+  std::mt19937 random(11);
+  std::uniform_real_distribution<btScalar> coordinate(-0.12f, 0.12f);
+  std::uniform_real_distribution<btScalar> share(0.2f, 2.0f);
+  int within = 0, beyond = 0;
+  for (int i = 0; i < 500; ++i) {
+    const btVector3 p = btVector3(0.1f, -0.2f, 0.05f) +
+                        btVector3(coordinate(random), coordinate(random), coordinate(random));
+    const MeshDistance::Closest anywhere = distance.closest(p);
+    const btScalar limit = anywhere.distance * share(random);
+    const MeshDistance::Closest limited = distance.closest(p, limit);
+    if (anywhere.distance < limit * btScalar(0.999)) {
+      ++within;
+      EXPECT_EQ(limited.triangle, anywhere.triangle) << "point " << i;
+      EXPECT_EQ(limited.distance, anywhere.distance) << "point " << i;
+      EXPECT_EQ(limited.inside, anywhere.inside) << "point " << i;
+    } else if (anywhere.distance > limit * btScalar(1.001)) {
+      ++beyond;
+      EXPECT_EQ(limited.triangle, UINT32_MAX) << "point " << i;
+    }
+  }
+  EXPECT_GT(within, 100);
+  EXPECT_GT(beyond, 100);
+}
+
 TEST(MeshDistance, SignedDistanceInsideAndOutsideOfClosedSphere) {
   const btVector3 centre(0.3f, 0.1f, -0.4f);
   const btScalar radius = 0.04f;

@@ -187,16 +187,25 @@ struct MeshDistance::Impl {
     }
   }
 
-  /// Nearest triangle point with squared distance <= limit2 (slot UINT32_MAX when none).
+  /// A node on the search's stack and its box's squared distance to the query point [m²].
+  struct Pending {
+    uint32_t node;
+    btScalar distance2;
+  };
+
+  /// Nearest triangle point with squared distance <= limit2 (slot UINT32_MAX when none). A node's
+  /// box distance is found once, when it is pushed, and held against the best distance again when
+  /// it is popped.
   Hit nearest(const btVector3& p, btScalar limit2) const {
     Hit best{limit2, btVector3(0, 0, 0), UINT32_MAX, Feature::Face};
     if (nodes.empty()) return best;
-    uint32_t stack[kMaxDepth];
+    Pending stack[kMaxDepth];
     int top = 0;
-    stack[top++] = 0;
+    stack[top++] = {0, boxDistance2(p, nodes[0].lower, nodes[0].upper)};
     while (top > 0) {
-      const Node& node = nodes[stack[--top]];
-      if (boxDistance2(p, node.lower, node.upper) > best.distance2) continue;
+      const Pending pending = stack[--top];
+      if (pending.distance2 > best.distance2) continue;
+      const Node& node = nodes[pending.node];
       if (node.count > 0) {
         for (uint32_t slot = node.first; slot < node.first + node.count; ++slot) {
           const TrianglePoint candidate =
@@ -207,16 +216,16 @@ struct MeshDistance::Impl {
         }
         continue;
       }
-      const uint32_t left = static_cast<uint32_t>(&node - nodes.data()) + 1, right = node.first;
+      const uint32_t left = pending.node + 1, right = node.first;
       const btScalar dl = boxDistance2(p, nodes[left].lower, nodes[left].upper);
       const btScalar dr = boxDistance2(p, nodes[right].lower, nodes[right].upper);
       // Push the farther child first so the nearer one is searched first and prunes more.
       if (dl <= dr) {
-        if (dr <= best.distance2) stack[top++] = right;
-        if (dl <= best.distance2) stack[top++] = left;
+        if (dr <= best.distance2) stack[top++] = {right, dr};
+        if (dl <= best.distance2) stack[top++] = {left, dl};
       } else {
-        if (dl <= best.distance2) stack[top++] = left;
-        if (dr <= best.distance2) stack[top++] = right;
+        if (dl <= best.distance2) stack[top++] = {left, dl};
+        if (dr <= best.distance2) stack[top++] = {right, dr};
       }
     }
     return best;

@@ -197,6 +197,51 @@ double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
   return sum;
 }
 
+/// A pair's products, each summed over the rows in order as dot() sums it (the same bits).
+struct PairProducts {
+  double curvature = 0;  ///< s·y [N·m]
+  double steps = 0;      ///< s·s [m²]
+  double changes = 0;    ///< y·y [N²]
+};
+
+/// The products of the pair s, y in one pass, which also keeps `forces` in `lastForces`.
+PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btVector3>& y,
+                          const std::vector<btVector3>& forces,
+                          std::vector<btVector3>& lastForces) {
+  PairProducts sums;
+  for (size_t r = 0; r < s.size(); ++r) {
+    sums.curvature += double(s[r].dot(y[r]));
+    sums.steps += double(s[r].dot(s[r]));
+    sums.changes += double(y[r].dot(y[r]));
+    lastForces[r] = forces[r];
+  }
+  return sums;
+}
+
+/// Writes the pair s = x − x_last, y = F_last − F by row (zero in the rows the last response
+/// pushed) and keeps x in lastPositions. Returns the square of the forces' rounding over the rows
+/// in the pair (forceNoise) [N²].
+double fillPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
+                const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+                const std::vector<uint8_t>& pushedRows, int slot) {
+  const std::vector<btVector3>& positions = muscle.particles.positions;
+  std::vector<btVector3>& s = h.steps[slot];
+  std::vector<btVector3>& y = h.changes[slot];
+  const double restLength = meanRestLength(muscle);
+  double noise = 0;
+  for (size_t k = 0; k < free.size(); ++k) {
+    const int row = factor.row(k);
+    const bool pushed = pushedRows[row] != 0;
+    const btVector3& x = positions[free[k]];
+    btVector3& last = h.lastPositions[row];
+    s[row] = pushed ? btVector3(0, 0, 0) : x - last;
+    y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
+    if (!pushed) noise += forceNoise(factor.matrixDiagonal(row), x, restLength);
+    last = x;
+  }
+  return noise;
+}
+
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
 /// curvature or no more than the forces' rounding can (forceNoise), and keeps x and F for the
 /// next. Rows the last response pushed are left out of the pair: a projection's move is not the
@@ -205,50 +250,69 @@ double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
 void recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
                 const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
                 const std::vector<uint8_t>& pushedRows, int size) {
-  const std::vector<btVector3>& positions = muscle.particles.positions;
-  if (h.hasLast && size > 0) {
-    const int slot = (h.newest + 1) % size;
-    std::vector<btVector3>& s = h.steps[slot];
-    std::vector<btVector3>& y = h.changes[slot];
-    const double restLength = meanRestLength(muscle);
-    double noise = 0;
-    for (size_t k = 0; k < free.size(); ++k) {
-      const int row = factor.row(k);
-      const bool pushed = pushedRows[row] != 0;
-      const btVector3& x = positions[free[k]];
-      s[row] = pushed ? btVector3(0, 0, 0) : x - h.lastPositions[row];
-      y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
-      if (!pushed) noise += forceNoise(factor.matrixDiagonal(row), x, restLength);
-    }
-    // y's rounding is both forces': √2·the noise of one.
-    const double curvature = dot(s, y), steps = dot(s, s);
-    if (curvature > 1e-12 * std::sqrt(steps * dot(y, y)) &&
-        curvature > std::sqrt(2 * steps * noise)) {
-      h.curvature[slot] = curvature;
-      h.newest = slot;
-      h.count = std::min(h.count + 1, size);
-    } else {
-      h.restart();
-    }
+  if (!(h.hasLast && size > 0)) {
+    const std::vector<btVector3>& positions = muscle.particles.positions;
+    for (size_t k = 0; k < free.size(); ++k) h.lastPositions[factor.row(k)] = positions[free[k]];
+    h.lastForces = forces;
+    h.hasLast = true;
+    return;
   }
-  for (size_t k = 0; k < free.size(); ++k) h.lastPositions[factor.row(k)] = positions[free[k]];
-  h.lastForces = forces;
-  h.hasLast = true;
+  const int slot = (h.newest + 1) % size;
+  const double noise = fillPair(h, muscle, free, factor, forces, pushedRows, slot);
+  const PairProducts p = pairProducts(h.steps[slot], h.changes[slot], forces, h.lastForces);
+  // y's rounding is both forces': √2·the noise of one.
+  if (p.curvature > 1e-12 * std::sqrt(p.steps * p.changes) &&
+      p.curvature > std::sqrt(2 * p.steps * noise)) {
+    h.curvature[slot] = p.curvature;
+    h.newest = slot;
+    h.count = std::min(h.count + 1, size);
+  } else {
+    h.restart();
+  }
 }
 
-/// L-BFGS's two-loop recursion: `solution` (holding F) becomes H·F, H the inverse Hessian its pairs
-/// and (A + W)⁻¹ estimate.
-void twoLoop(StepHistory& h, const ProjectiveFactor& factor, std::vector<btVector3>& q, int size) {
-  for (int n = 0, j = h.newest; n < h.count; ++n, j = (j + size - 1) % size) {
-    h.alpha[j] = dot(h.steps[j], q) / h.curvature[j];
+/// q += d·c, then Σ next·q over the rows as dot() sums it (0 without `next`): the recursion's
+/// update and its next product in one pass.
+double addThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& d, btScalar c,
+                  const std::vector<btVector3>* next) {
+  double sum = 0;
+  for (size_t k = 0; k < q.size(); ++k) {
+    q[k] += d[k] * c;
+    if (next) sum += double((*next)[k].dot(q[k]));
+  }
+  return sum;
+}
+
+/// q = F, then Σ next·q as dot() sums it (0 without `next`), in one pass.
+double copyThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& forces,
+                   const std::vector<btVector3>* next) {
+  double sum = 0;
+  for (size_t k = 0; k < q.size(); ++k) {
+    q[k] = forces[k];
+    if (next) sum += double((*next)[k].dot(q[k]));
+  }
+  return sum;
+}
+
+/// L-BFGS's two-loop recursion: `q` becomes H·F, H the inverse Hessian its pairs and (A + W)⁻¹
+/// estimate. Each update of q is fused with the next pair's product (q − y·a as q + y·(−a), the
+/// same bits).
+void twoLoop(StepHistory& h, const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+             std::vector<btVector3>& q, int size) {
+  const auto newer = [size](int j) { return (j + 1) % size; };
+  const auto older = [size](int j) { return (j + size - 1) % size; };
+  double product = copyThenDot(q, forces, h.count > 0 ? &h.steps[h.newest] : nullptr);
+  for (int n = 0, j = h.newest; n < h.count; ++n, j = older(j)) {
+    h.alpha[j] = product / h.curvature[j];
     const auto a = static_cast<btScalar>(h.alpha[j]);
-    for (size_t k = 0; k < q.size(); ++k) q[k] -= h.changes[j][k] * a;
+    product = addThenDot(q, h.changes[j], -a, n + 1 < h.count ? &h.steps[older(j)] : nullptr);
   }
   factor.solveInPlace(q.data());
-  for (int n = 0, j = (h.newest + size - h.count + 1) % size; n < h.count;
-       ++n, j = (j + 1) % size) {
-    const auto b = static_cast<btScalar>(h.alpha[j] - dot(h.changes[j], q) / h.curvature[j]);
-    for (size_t k = 0; k < q.size(); ++k) q[k] += h.steps[j][k] * b;
+  const int oldest = (h.newest + size - h.count + 1) % size;
+  product = h.count > 0 ? dot(h.changes[oldest], q) : 0;
+  for (int n = 0, j = oldest; n < h.count; ++n, j = newer(j)) {
+    const auto b = static_cast<btScalar>(h.alpha[j] - product / h.curvature[j]);
+    product = addThenDot(q, h.steps[j], b, n + 1 < h.count ? &h.changes[newer(j)] : nullptr);
   }
 }
 
@@ -259,12 +323,21 @@ double longestMove(const std::vector<btVector3>& step) {
   return std::sqrt(double(longest));
 }
 
-/// Whether `step` moves some particle farther than the muscle's mean spring rest length: more
-/// than an L-BFGS step may (the pairs learnt from float noise near the equilibrium, or from a
-/// state the contacts keep changing). real-hip-gait tore without the bound (three muscles frozen
-/// at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
-bool movesTooFar(const IntegratedMuscle& muscle, const std::vector<btVector3>& step) {
-  return !muscle.settings.springs.empty() && longestMove(step) > meanRestLength(muscle);
+/// Whether the L-BFGS step `step` is kept: it points down the forces (step·F > 0, summed as dot()
+/// sums it) and moves no particle farther than the muscle's mean spring rest length, more than an
+/// L-BFGS step may (the pairs learnt from float noise near the equilibrium, or from a state the
+/// contacts keep changing): both in one pass. real-hip-gait tore without the bound (three muscles
+/// frozen at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
+bool keepsStep(const IntegratedMuscle& muscle, const std::vector<btVector3>& step,
+               const std::vector<btVector3>& forces) {
+  double downhill = 0;
+  btScalar longest = 0;  // as longestMove() finds it
+  for (size_t k = 0; k < step.size(); ++k) {
+    downhill += double(step[k].dot(forces[k]));
+    longest = std::max(longest, step[k].length2());
+  }
+  return downhill > 0 && (muscle.settings.springs.empty() ||
+                          !(std::sqrt(double(longest)) > meanRestLength(muscle)));
 }
 
 /// Shortens `step` as a whole (its direction kept) so that no particle moves farther than the
@@ -281,7 +354,7 @@ void boundStep(const IntegratedMuscle& muscle, std::vector<btVector3>& step) {
 }
 
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
-/// or moves a particle too far (movesTooFar) is replaced by the plain projective one, bounded
+/// or moves a particle too far (keepsStep) is replaced by the plain projective one, bounded
 /// (boundStep), and the history restarts.
 IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
@@ -292,9 +365,8 @@ IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSy
   if (particles.bonesMoving || h.size != size) h.restart();
   h.size = size;
   recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
-  w.solution = w.forces;
-  twoLoop(h, w.factor, w.solution, size);
-  if (h.count > 0 && (!(dot(w.solution, w.forces) > 0) || movesTooFar(muscle, w.solution))) {
+  twoLoop(h, w.factor, w.forces, w.solution, size);
+  if (h.count > 0 && !keepsStep(muscle, w.solution, w.forces)) {
     h.restart();
     w.solution = w.forces;
     w.factor.solveInPlace(w.solution.data());
