@@ -150,27 +150,41 @@ void ImplicitSurface::Impl::enqueue(const std::array<int32_t, 3>& cell) {
   queue.push_back(cell);
 }
 
-bool ImplicitSurface::Impl::seedFrom(uint32_t p) {
-  const btVector3 direction = (toRest[p].transpose() * outward[p]).normalized();
-  const btScalar step = voxel / 2;
-  const int steps = int(2 * h / step) + 2;
+SeedRay ImplicitSurface::Impl::seedRay(uint32_t p) const {
+  SeedRay ray;
+  ray.start = positions[p];
+  ray.direction = (toRest[p].transpose() * outward[p]).normalized();
+  ray.step = voxel / 2;
+  ray.steps = int(2 * h / ray.step) + 2;
   // The step where the rest surface is expected: the particle's rest depth, mapped to now.
   const btScalar depth =
-      outward[p].length() / btMax((toRest[p] * direction).length(), SIMD_EPSILON);
-  const int expected = std::min(int(depth / step), steps - 1);
-  // From there alternately in and out: the first cell of a piece found, or one holding both signs.
-  for (int n = 0; n < 2 * steps; ++n) {
-    const int s = expected + (n % 2 ? (n + 1) / 2 : -(n / 2));
-    if (s < 0 || s >= steps) continue;
-    const btVector3 u = (positions[p] + direction * (step * btScalar(s)) - grid.origin) / voxel;
-    const std::array<int32_t, 3> cell{int32_t(u.x()), int32_t(u.y()), int32_t(u.z())};
-    if (!inGrid(cell)) continue;
-    if (table.at(grid.index(cell[0], cell[1], cell[2])).queued) return false;
-    if (mixed(cornerValues(cell))) {
+      outward[p].length() / btMax((toRest[p] * ray.direction).length(), SIMD_EPSILON);
+  ray.expected = std::min(int(depth / ray.step), ray.steps - 1);
+  return ray;
+}
+
+bool ImplicitSurface::Impl::probeCell(const SeedRay& ray, int n,
+                                      std::array<int32_t, 3>& cell) const {
+  const int s = ray.expected + (n % 2 ? (n + 1) / 2 : -(n / 2));
+  if (s < 0 || s >= ray.steps) return false;
+  const btVector3 u = (ray.start + ray.direction * (ray.step * btScalar(s)) - grid.origin) / voxel;
+  cell = {int32_t(u.x()), int32_t(u.y()), int32_t(u.z())};
+  return inGrid(cell);
+}
+
+bool ImplicitSurface::Impl::seedFrom(uint32_t p) {
+  const SeedRay ray = seedRay(p);
+  std::array<int32_t, 3> cell;
+  // A ray through a queued cell meets a surface already found: no field values needed.
+  for (int n = 0; n < 2 * ray.steps; ++n)
+    if (probeCell(ray, n, cell) && table.at(grid.index(cell[0], cell[1], cell[2])).queued)
+      return false;
+  // From the expected step alternately in and out: the first cell holding both signs.
+  for (int n = 0; n < 2 * ray.steps; ++n)
+    if (probeCell(ray, n, cell) && mixed(cornerValues(cell))) {
       enqueue(cell);
       return true;
     }
-  }
   return false;
 }
 

@@ -99,6 +99,16 @@ struct RestMap {
   btScalar weight = 0;        ///< W [1]
 };
 
+/// The ray along which a seed is searched beside a boundary particle: steps of `step` from
+/// `start` along `direction`, the rest surface expected at step `expected`.
+struct SeedRay {
+  btVector3 start{0, 0, 0};      ///< the particle [m]
+  btVector3 direction{1, 0, 0};  ///< outward, unit [1]
+  btScalar step = 0;             ///< [m]
+  int steps = 0;                 ///< steps along the ray
+  int expected = 0;              ///< the step nearest the expected surface
+};
+
 /// Open-addressing table of GridEntry, emptied by advancing the stamp (no clearing).
 class GridTable {
  public:
@@ -163,9 +173,14 @@ struct ImplicitSurface::Impl {
       if (cell[a] < 0 || cell[a] + 1 >= grid.dims[a]) return false;
     return true;
   }
+  /// The ray a seed beside boundary particle p is searched along.
+  SeedRay seedRay(uint32_t p) const;
+  /// The ray's n-th cell searched (its steps from the expected one alternately in and out), into
+  /// `cell`; false when that step is off the ray or the cell outside the grid.
+  bool probeCell(const SeedRay& ray, int n, std::array<int32_t, 3>& cell) const;
   /// Seeds the surface beside boundary particle p: the first cell holding both signs on the ray
   /// along its outward direction, searched from where its rest depth puts the surface. False
-  /// when none, or when the cell found was queued already.
+  /// when none, or when any cell on the ray was queued already (a surface found there).
   bool seedFrom(uint32_t p);
   /// Every boundary particle's seed, each marched before the next (its cells then queued).
   void seedAndMarch();
