@@ -80,10 +80,8 @@ struct ParticleCells {
 
 /// Per grid point of the extraction: its field value and the vertices on its 7 edges that go
 /// to a point above it (+x, +y, +x+y, +z, +x+z, +y+z, +x+y+z; indexed by the offset's bits − 1),
-/// and whether the cell it is the lower corner of was queued. Valid in the frame `stamp` names.
+/// and whether the cell it is the lower corner of was queued.
 struct GridEntry {
-  uint32_t key = UINT32_MAX;            ///< point index
-  uint32_t stamp = 0;                   ///< extraction that wrote it
   float value = 0;                      ///< field [m]
   bool known = false;                   ///< value computed
   bool queued = false;                  ///< its cell queued
@@ -109,17 +107,27 @@ struct SeedRay {
   int expected = 0;              ///< the step nearest the expected surface
 };
 
-/// Open-addressing table of GridEntry, emptied by advancing the stamp (no clearing).
+/// The extraction grid's entries in blocks of 4³ points, a block taken from a pool the first
+/// time an extraction reaches it (a cell's corners then mostly in one block); emptied by
+/// advancing the stamp (no clearing).
 class GridTable {
  public:
-  void begin();                 ///< a new extraction: every entry stale
-  GridEntry& at(uint32_t key);  ///< the entry, fresh if it was stale or missing
+  void begin(const GridFrame& grid);  ///< a new extraction over `grid`: every block stale
+  /// The entry of grid point (i, j, k), fresh if its block was stale.
+  GridEntry& at(int32_t i, int32_t j, int32_t k) {
+    const size_t b = size_t(i >> 2) + size_t(blocks_[0]) * size_t((j >> 2) + blocks_[1] * (k >> 2));
+    if (blockStamp_[b] != stamp_) take(b);
+    return entries_[blockSlot_[b] + size_t(i & 3) + 4 * size_t((j & 3) + 4 * (k & 3))];
+  }
 
  private:
-  void grow();
-  std::vector<GridEntry> entries_;
-  uint32_t stamp_ = 0;
-  size_t used_ = 0;
+  void take(size_t block);                  ///< gives the block a slot of fresh entries
+  std::array<int32_t, 3> blocks_{0, 0, 0};  ///< blocks per axis
+  std::vector<uint32_t> blockStamp_;        ///< per block: the extraction that took it
+  std::vector<uint32_t> blockSlot_;         ///< per block: its first entry in entries_
+  std::vector<GridEntry> entries_;          ///< 64 per slot taken, x fastest
+  uint32_t stamp_ = 0;                      ///< this extraction's stamp
+  size_t taken_ = 0;                        ///< entries taken this extraction
 };
 
 struct ImplicitSurface::Impl {
