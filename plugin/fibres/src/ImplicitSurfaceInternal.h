@@ -67,7 +67,7 @@ class RestDistanceGrid {
   std::vector<float> values_;               ///< 64 per computed block [m]
 };
 
-/// The particles binned into cells of the kernel radius (counting sort).
+/// The particles binned into cells (counting sort).
 struct ParticleCells {
   GridFrame frame;                ///< cells: frame points are their lower corners
   std::vector<uint32_t> start;    ///< per cell + 1: first entry in `order`
@@ -150,24 +150,24 @@ struct ImplicitSurface::Impl {
   /// cells.order.
   template <class Fn>
   void forNeighbours(const btVector3& x, Fn&& fn) const {
-    const btVector3 u = (x - cells.frame.origin) / h;
-    const btScalar inverseH2 = 1 / (h * h);
+    const btVector3 u = (x - cells.frame.origin) / cells.frame.spacing;
+    const btScalar reach = h / cells.frame.spacing, inverseH2 = 1 / (h * h);
     std::array<int32_t, 3> lo, hi;
     for (int a = 0; a < 3; ++a) {
-      const auto c = int32_t(std::floor(u[a]));
-      lo[a] = std::max(c - 1, 0);
-      hi[a] = std::min(c + 1, cells.frame.dims[a] - 1);
+      lo[a] = std::max(int32_t(std::floor(u[a] - reach)), 0);
+      hi[a] = std::min(int32_t(std::floor(u[a] + reach)), cells.frame.dims[a] - 1);
+      if (lo[a] > hi[a]) return;
     }
+    // The cells of a row along x hold consecutive entries: one range per row.
     for (int32_t k = lo[2]; k <= hi[2]; ++k)
-      for (int32_t j = lo[1]; j <= hi[1]; ++j)
-        for (int32_t i = lo[0]; i <= hi[0]; ++i) {
-          const uint32_t c = cells.frame.index(i, j, k);
-          for (uint32_t e = cells.start[c]; e < cells.start[c + 1]; ++e) {
-            const btVector3 d = x - cells.sorted[e];
-            const btScalar q = 1 - d.length2() * inverseH2;
-            if (q > 0) fn(e, d, q * q * q);
-          }
+      for (int32_t j = lo[1]; j <= hi[1]; ++j) {
+        const uint32_t end = cells.start[cells.frame.index(hi[0], j, k) + 1];
+        for (uint32_t e = cells.start[cells.frame.index(lo[0], j, k)]; e < end; ++e) {
+          const btVector3 d = x - cells.sorted[e];
+          const btScalar q = 1 - d.length2() * inverseH2;
+          if (q > 0) fn(e, d, q * q * q);
         }
+      }
   }
 
   // The extraction (ImplicitSurface.cpp).
