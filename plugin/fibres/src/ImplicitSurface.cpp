@@ -78,56 +78,35 @@ bool mixed(std::span<const float> values) {
   return inside && outside;
 }
 
-uint32_t hashKey(uint32_t key) {
-  return key * 2654435761u;
-}
-
 }  // namespace
 
-void GridTable::begin() {
-  if (entries_.empty()) entries_.resize(1 << 12);
+void GridTable::begin(const GridFrame& grid) {
+  for (int a = 0; a < 3; ++a) blocks_[a] = (grid.dims[a] + 3) / 4;
+  const size_t count = size_t(blocks_[0]) * size_t(blocks_[1]) * size_t(blocks_[2]);
+  if (blockStamp_.size() < count) {
+    blockStamp_.resize(count, 0);
+    blockSlot_.resize(count, 0);
+  }
   if (++stamp_ == 0) {  // wrapped: clear once
-    for (GridEntry& e : entries_) e.stamp = 0;
+    std::fill(blockStamp_.begin(), blockStamp_.end(), 0u);
     stamp_ = 1;
   }
-  used_ = 0;
+  taken_ = 0;
 }
 
-GridEntry& GridTable::at(uint32_t key) {
-  for (;;) {
-    const size_t mask = entries_.size() - 1;
-    size_t s = hashKey(key) & mask;
-    for (; entries_[s].stamp == stamp_; s = (s + 1) & mask)
-      if (entries_[s].key == key) return entries_[s];
-    // Missing: grow first when the table would pass half full (entries found never move it).
-    if (2 * (used_ + 1) > entries_.size()) {
-      grow();
-      continue;
-    }
-    GridEntry& e = entries_[s];
-    e = GridEntry{};
-    e.key = key;
-    e.stamp = stamp_;
-    e.edgeVertex.fill(-1);
-    ++used_;
-    return e;
-  }
-}
-
-void GridTable::grow() {
-  std::vector<GridEntry> old(entries_.size() * 2);
-  old.swap(entries_);
-  const size_t mask = entries_.size() - 1;
-  for (const GridEntry& e : old) {
-    if (e.stamp != stamp_) continue;
-    size_t s = hashKey(e.key) & mask;
-    while (entries_[s].stamp == stamp_) s = (s + 1) & mask;
-    entries_[s] = e;
-  }
+void GridTable::take(size_t block) {
+  constexpr size_t kPoints = 64;
+  if (entries_.size() < taken_ + kPoints) entries_.resize(std::max(2 * entries_.size(), kPoints));
+  GridEntry fresh;
+  fresh.edgeVertex.fill(-1);
+  std::fill_n(entries_.begin() + std::ptrdiff_t(taken_), kPoints, fresh);
+  blockStamp_[block] = stamp_;
+  blockSlot_[block] = uint32_t(taken_);
+  taken_ += kPoints;
 }
 
 float ImplicitSurface::Impl::valueAt(int32_t i, int32_t j, int32_t k) {
-  GridEntry& e = table.at(grid.index(i, j, k));
+  GridEntry& e = table.at(i, j, k);
   if (!e.known) {
     e.value = float(field(i, j, k));
     e.known = true;
@@ -144,33 +123,46 @@ std::array<float, 8> ImplicitSurface::Impl::cornerValues(const std::array<int32_
 
 void ImplicitSurface::Impl::enqueue(const std::array<int32_t, 3>& cell) {
   if (!inGrid(cell)) return;
-  GridEntry& e = table.at(grid.index(cell[0], cell[1], cell[2]));
+  GridEntry& e = table.at(cell[0], cell[1], cell[2]);
   if (e.queued) return;
   e.queued = true;
   queue.push_back(cell);
 }
 
-bool ImplicitSurface::Impl::seedFrom(uint32_t p) {
-  const btVector3 direction = (toRest[p].transpose() * outward[p]).normalized();
-  const btScalar step = voxel / 2;
-  const int steps = int(2 * h / step) + 2;
+SeedRay ImplicitSurface::Impl::seedRay(uint32_t p) const {
+  SeedRay ray;
+  ray.start = positions[p];
+  ray.direction = (toRest[p].transpose() * outward[p]).normalized();
+  ray.step = voxel / 2;
+  ray.steps = int(2 * h / ray.step) + 2;
   // The step where the rest surface is expected: the particle's rest depth, mapped to now.
   const btScalar depth =
-      outward[p].length() / btMax((toRest[p] * direction).length(), SIMD_EPSILON);
-  const int expected = std::min(int(depth / step), steps - 1);
-  // From there alternately in and out: the first cell of a piece found, or one holding both signs.
-  for (int n = 0; n < 2 * steps; ++n) {
-    const int s = expected + (n % 2 ? (n + 1) / 2 : -(n / 2));
-    if (s < 0 || s >= steps) continue;
-    const btVector3 u = (positions[p] + direction * (step * btScalar(s)) - grid.origin) / voxel;
-    const std::array<int32_t, 3> cell{int32_t(u.x()), int32_t(u.y()), int32_t(u.z())};
-    if (!inGrid(cell)) continue;
-    if (table.at(grid.index(cell[0], cell[1], cell[2])).queued) return false;
-    if (mixed(cornerValues(cell))) {
+      outward[p].length() / btMax((toRest[p] * ray.direction).length(), SIMD_EPSILON);
+  ray.expected = std::min(int(depth / ray.step), ray.steps - 1);
+  return ray;
+}
+
+bool ImplicitSurface::Impl::probeCell(const SeedRay& ray, int n,
+                                      std::array<int32_t, 3>& cell) const {
+  const int s = ray.expected + (n % 2 ? (n + 1) / 2 : -(n / 2));
+  if (s < 0 || s >= ray.steps) return false;
+  const btVector3 u = (ray.start + ray.direction * (ray.step * btScalar(s)) - grid.origin) / voxel;
+  cell = {int32_t(u.x()), int32_t(u.y()), int32_t(u.z())};
+  return inGrid(cell);
+}
+
+bool ImplicitSurface::Impl::seedFrom(uint32_t p) {
+  const SeedRay ray = seedRay(p);
+  std::array<int32_t, 3> cell;
+  // A ray through a queued cell meets a surface already found: no field values needed.
+  for (int n = 0; n < 2 * ray.steps; ++n)
+    if (probeCell(ray, n, cell) && table.at(cell[0], cell[1], cell[2]).queued) return false;
+  // From the expected step alternately in and out: the first cell holding both signs.
+  for (int n = 0; n < 2 * ray.steps; ++n)
+    if (probeCell(ray, n, cell) && mixed(cornerValues(cell))) {
       enqueue(cell);
       return true;
     }
-  }
   return false;
 }
 
@@ -222,7 +214,7 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
   std::array<GridEntry*, 8> corners;
   for (int c = 0; c < 8; ++c)
     corners[size_t(c)] =
-        &table.at(grid.index(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1)));
+        &table.at(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
   for (size_t t = 0; t < kTetrahedra.size(); ++t) {
     unsigned inside = 0;
     for (unsigned k = 0; k < 4; ++k) inside |= unsigned(values[size_t(kTetrahedra[t][k])] > 0) << k;
@@ -254,7 +246,7 @@ void ImplicitSurface::extract(std::span<const btVector3> positions,
   pointBounds(positions, lower, upper);
   s.grid = GridFrame::covering(lower, upper, s.voxel, s.h + 2 * s.voxel);
   s.beginMaps();
-  s.table.begin();
+  s.table.begin(s.grid);
   s.queue.clear();
   s.marched = 0;
   s.mesh.vertices.clear();

@@ -10,6 +10,9 @@ namespace fibremss {
 namespace {
 
 constexpr int32_t kBlock = 4;  ///< rest distance block side [points]
+/// Particle cells per kernel radius [1]: the cells searched around a point then hold 2.5³ h³ on
+/// average, against 3³ h³ with cells of h.
+constexpr btScalar kCellsPerKernel = 2;
 
 /// d·eᵀ.
 btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
@@ -237,7 +240,7 @@ void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
     const bool spans = m.determinant() > btScalar(1e-3) * scale * scale * scale;
     toRest[i] = spans ? restMoments[i] * m.inverse() : btMatrix3x3::getIdentity();
   }
-  cells.build(current, h);
+  cells.build(current, h / kCellsPerKernel);
   entryRest.resize(current.size());
   entryToRest.resize(current.size());
   for (size_t e = 0; e < cells.order.size(); ++e) {

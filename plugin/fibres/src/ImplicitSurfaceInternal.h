@@ -67,7 +67,7 @@ class RestDistanceGrid {
   std::vector<float> values_;               ///< 64 per computed block [m]
 };
 
-/// The particles binned into cells of the kernel radius (counting sort).
+/// The particles binned into cells (counting sort).
 struct ParticleCells {
   GridFrame frame;                ///< cells: frame points are their lower corners
   std::vector<uint32_t> start;    ///< per cell + 1: first entry in `order`
@@ -80,10 +80,8 @@ struct ParticleCells {
 
 /// Per grid point of the extraction: its field value and the vertices on its 7 edges that go
 /// to a point above it (+x, +y, +x+y, +z, +x+z, +y+z, +x+y+z; indexed by the offset's bits − 1),
-/// and whether the cell it is the lower corner of was queued. Valid in the frame `stamp` names.
+/// and whether the cell it is the lower corner of was queued.
 struct GridEntry {
-  uint32_t key = UINT32_MAX;            ///< point index
-  uint32_t stamp = 0;                   ///< extraction that wrote it
   float value = 0;                      ///< field [m]
   bool known = false;                   ///< value computed
   bool queued = false;                  ///< its cell queued
@@ -99,17 +97,37 @@ struct RestMap {
   btScalar weight = 0;        ///< W [1]
 };
 
-/// Open-addressing table of GridEntry, emptied by advancing the stamp (no clearing).
+/// The ray along which a seed is searched beside a boundary particle: steps of `step` from
+/// `start` along `direction`, the rest surface expected at step `expected`.
+struct SeedRay {
+  btVector3 start{0, 0, 0};      ///< the particle [m]
+  btVector3 direction{1, 0, 0};  ///< outward, unit [1]
+  btScalar step = 0;             ///< [m]
+  int steps = 0;                 ///< steps along the ray
+  int expected = 0;              ///< the step nearest the expected surface
+};
+
+/// The extraction grid's entries in blocks of 4³ points, a block taken from a pool the first
+/// time an extraction reaches it (a cell's corners then mostly in one block); emptied by
+/// advancing the stamp (no clearing).
 class GridTable {
  public:
-  void begin();                 ///< a new extraction: every entry stale
-  GridEntry& at(uint32_t key);  ///< the entry, fresh if it was stale or missing
+  void begin(const GridFrame& grid);  ///< a new extraction over `grid`: every block stale
+  /// The entry of grid point (i, j, k), fresh if its block was stale.
+  GridEntry& at(int32_t i, int32_t j, int32_t k) {
+    const size_t b = size_t(i >> 2) + size_t(blocks_[0]) * size_t((j >> 2) + blocks_[1] * (k >> 2));
+    if (blockStamp_[b] != stamp_) take(b);
+    return entries_[blockSlot_[b] + size_t(i & 3) + 4 * size_t((j & 3) + 4 * (k & 3))];
+  }
 
  private:
-  void grow();
-  std::vector<GridEntry> entries_;
-  uint32_t stamp_ = 0;
-  size_t used_ = 0;
+  void take(size_t block);                  ///< gives the block a slot of fresh entries
+  std::array<int32_t, 3> blocks_{0, 0, 0};  ///< blocks per axis
+  std::vector<uint32_t> blockStamp_;        ///< per block: the extraction that took it
+  std::vector<uint32_t> blockSlot_;         ///< per block: its first entry in entries_
+  std::vector<GridEntry> entries_;          ///< 64 per slot taken, x fastest
+  uint32_t stamp_ = 0;                      ///< this extraction's stamp
+  size_t taken_ = 0;                        ///< entries taken this extraction
 };
 
 struct ImplicitSurface::Impl {
@@ -132,24 +150,24 @@ struct ImplicitSurface::Impl {
   /// cells.order.
   template <class Fn>
   void forNeighbours(const btVector3& x, Fn&& fn) const {
-    const btVector3 u = (x - cells.frame.origin) / h;
-    const btScalar inverseH2 = 1 / (h * h);
+    const btVector3 u = (x - cells.frame.origin) / cells.frame.spacing;
+    const btScalar reach = h / cells.frame.spacing, inverseH2 = 1 / (h * h);
     std::array<int32_t, 3> lo, hi;
     for (int a = 0; a < 3; ++a) {
-      const auto c = int32_t(std::floor(u[a]));
-      lo[a] = std::max(c - 1, 0);
-      hi[a] = std::min(c + 1, cells.frame.dims[a] - 1);
+      lo[a] = std::max(int32_t(std::floor(u[a] - reach)), 0);
+      hi[a] = std::min(int32_t(std::floor(u[a] + reach)), cells.frame.dims[a] - 1);
+      if (lo[a] > hi[a]) return;
     }
+    // The cells of a row along x hold consecutive entries: one range per row.
     for (int32_t k = lo[2]; k <= hi[2]; ++k)
-      for (int32_t j = lo[1]; j <= hi[1]; ++j)
-        for (int32_t i = lo[0]; i <= hi[0]; ++i) {
-          const uint32_t c = cells.frame.index(i, j, k);
-          for (uint32_t e = cells.start[c]; e < cells.start[c + 1]; ++e) {
-            const btVector3 d = x - cells.sorted[e];
-            const btScalar q = 1 - d.length2() * inverseH2;
-            if (q > 0) fn(e, d, q * q * q);
-          }
+      for (int32_t j = lo[1]; j <= hi[1]; ++j) {
+        const uint32_t end = cells.start[cells.frame.index(hi[0], j, k) + 1];
+        for (uint32_t e = cells.start[cells.frame.index(lo[0], j, k)]; e < end; ++e) {
+          const btVector3 d = x - cells.sorted[e];
+          const btScalar q = 1 - d.length2() * inverseH2;
+          if (q > 0) fn(e, d, q * q * q);
         }
+      }
   }
 
   // The extraction (ImplicitSurface.cpp).
@@ -163,9 +181,14 @@ struct ImplicitSurface::Impl {
       if (cell[a] < 0 || cell[a] + 1 >= grid.dims[a]) return false;
     return true;
   }
+  /// The ray a seed beside boundary particle p is searched along.
+  SeedRay seedRay(uint32_t p) const;
+  /// The ray's n-th cell searched (its steps from the expected one alternately in and out), into
+  /// `cell`; false when that step is off the ray or the cell outside the grid.
+  bool probeCell(const SeedRay& ray, int n, std::array<int32_t, 3>& cell) const;
   /// Seeds the surface beside boundary particle p: the first cell holding both signs on the ray
   /// along its outward direction, searched from where its rest depth puts the surface. False
-  /// when none, or when the cell found was queued already.
+  /// when none, or when any cell on the ray was queued already (a surface found there).
   bool seedFrom(uint32_t p);
   /// Every boundary particle's seed, each marched before the next (its cells then queued).
   void seedAndMarch();
