@@ -100,8 +100,10 @@ void BenchScene::run(Part part) {
       break;
     case Part::MuscleMusclePairs:
       impl.collideMusclePairs();
-      for (uint32_t slot : impl.muscles.order)
-        impl.pushMusclePairs(*impl.muscles.states[slot], slot, impl.scratch[0].stack);
+      for (uint32_t slot : impl.muscles.order) {
+        MuscleState& state = *impl.muscles.states[slot];
+        impl.pushMusclePairs(state, state, slot, impl.scratch[0].stack);
+      }
       for (ThreadScratch& thread : impl.scratch) thread.contacts.clear();
       break;
     case Part::MuscleBonePairs:

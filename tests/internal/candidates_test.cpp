@@ -192,8 +192,9 @@ TEST(CandidateLists, TreesCarriedByBonesFindEveryContact) {
   size_t contacts = 0, skipped = 0;
   for (int k = 1; k <= kIterations; ++k) {
     impl.moveBones(btScalar(k) / kIterations, k == kIterations);
-    impl.forEachMuscle("follow bones",
-                       [&](MuscleState& state, uint32_t, unsigned) { impl.followBones(state); });
+    impl.forEachMuscle("follow bones", [&](MuscleState& state, uint32_t, unsigned) {
+      impl.followBones(*state.settings, state, state);
+    });
     for (size_t m = 0; m < order.size(); ++m) before[m] = impl.muscles.states[order[m]]->positions;
     const size_t exact = contactsOfEveryPair(impl);
     collideOnce(impl);

@@ -83,7 +83,7 @@ class Bench {
       if (!settings->isFixed(i)) state.freeParticles.push_back(i);
     parameters.solverTolerance = 1e-12;
     parameters.solverIterations = 200;
-    integrator_.prepare(state);
+    integrator_.prepare(*state.settings, state, state);
   }
   Bench(const Bench&) = delete;
   Bench& operator=(const Bench&) = delete;

@@ -13,11 +13,12 @@
 
 namespace fibremss {
 
-void TimeIntegrator::prepare(MuscleState& muscle) const {
-  muscle.workspace = makeWorkspace(*muscle.settings, muscle);
-  muscle.stableTimeStep = stableTimeStep(*muscle.settings, kind());
-  muscle.preparedFor = kind();
-  muscle.prepared = true;
+void TimeIntegrator::prepare(const MuscleSettings& settings, ParticleState& particles,
+                             IntegratorState& integration) const {
+  integration.workspace = makeWorkspace(settings, particles);
+  particles.stableTimeStep = stableTimeStep(settings, kind());
+  integration.preparedFor = kind();
+  integration.prepared = true;
 }
 
 std::unique_ptr<IntegratorWorkspace> TimeIntegrator::makeWorkspace(const MuscleSettings&,

@@ -32,10 +32,12 @@ class TimeIntegrator {
   /// constraint passes).
   virtual IntegrationResult advance(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                     btScalar dt, btScalar previousDt) const = 0;
-  /// Makes the per-muscle scratch (MuscleState::workspace) this integrator needs and sets the
-  /// muscle's stability bound for it; called when the muscle is added and when the integrator
+  /// Makes the per-muscle scratch (IntegratorState::workspace) this integrator needs for a
+  /// muscle's `settings` and `particles` and sets the muscle's stability bound for it
+  /// (ParticleState::stableTimeStep); called when the muscle is added and when the integrator
   /// changes, never inside the iterations.
-  void prepare(MuscleState& muscle) const;
+  void prepare(const MuscleSettings& settings, ParticleState& particles,
+               IntegratorState& integration) const;
   /// The kind this integrator implements.
   virtual Integrator kind() const = 0;
   /// Whether the integrator keeps explicit velocities (they are rotated by the pre-transform
@@ -60,7 +62,7 @@ class TimeIntegrator {
 };
 
 /// The integrator for a kind (one shared stateless instance per kind; thread-safe: all
-/// per-muscle data lives in MuscleState); InputError for a kind no source registered.
+/// per-muscle data lives in the muscle's state); InputError for a kind no source registered.
 const TimeIntegrator& integratorFor(Integrator kind);
 
 /// The name of a registered kind in scene files and on the command line, or null.
@@ -79,9 +81,11 @@ class IntegratorRegistration {
   IntegratorRegistration(const TimeIntegrator& integrator, const char* name);
 };
 
-/// Prepares `muscle` for `integrator` unless it already is.
-inline void ensurePrepared(const TimeIntegrator& integrator, MuscleState& muscle) {
-  if (!muscle.prepared || muscle.preparedFor != integrator.kind()) integrator.prepare(muscle);
+/// Prepares a muscle for `integrator` unless it already is (TimeIntegrator::prepare).
+inline void ensurePrepared(const TimeIntegrator& integrator, const MuscleSettings& settings,
+                           ParticleState& particles, IntegratorState& integration) {
+  if (!integration.prepared || integration.preparedFor != integrator.kind())
+    integrator.prepare(settings, particles, integration);
 }
 
 }  // namespace fibremss

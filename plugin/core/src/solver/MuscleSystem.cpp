@@ -117,9 +117,7 @@ std::unique_ptr<MuscleState> newMuscleState(const MuscleSettings& s,
                                             const MuscleSystemDef& def) {
   const size_t n = s.particleCount();
   auto state = std::make_unique<MuscleState>();
-  state->bones.assign(bones.begin(), bones.end());
-  state->boneSlots.assign(bones.size(), -1);
-  state->ParticleState::init(s, bones.size());
+  state->ParticleState::init(s, bones);
   state->GuardSnapshot::init(n);
   // Recovery follows the bones' distance fields: without them it has nothing to remember.
   state->ContactState::init(
@@ -166,20 +164,22 @@ void addInitialNoise(const MuscleSystemDef& def, uint32_t added, ParticleState& 
   }
 }
 
-/// Candidate lists of a muscle just added at slot added.slot, sized from the pairs at the
-/// placed positions: with every bone, and every earlier muscle with it (a reused slot's lists
-/// were another muscle's).
+/// Candidate lists of the muscle just added at `addedSlot` (its `settings`, `particles` and
+/// `trees`), sized from the pairs at the placed positions: with every bone, and every earlier
+/// muscle with it (a reused slot's lists were another muscle's).
 void addCandidateLists(Slots<MuscleState>& muscles, const Slots<BoneState>& bones,
-                       MuscleState& added) {
-  added.boneLists.resize(bones.states.size());
+                       const MuscleSettings& settings, const ParticleState& particles,
+                       TreeState& trees, uint32_t addedSlot) {
+  trees.boneLists.resize(bones.states.size());
   for (uint32_t slot : bones.order)
-    added.boneLists[slot] = boneList(*added.settings, added, *bones.states[slot]);
-  added.muscleLists.resize(muscles.states.size());
+    trees.boneLists[slot] = boneList(settings, trees, *bones.states[slot]);
+  trees.muscleLists.resize(muscles.states.size());
+  const CollidingMuscle added{settings, particles, trees};
   for (uint32_t slot : muscles.order) {
-    MuscleState& earlier = *muscles.states[slot];
-    if (&earlier == &added) continue;
+    if (slot == addedSlot) continue;
+    TreeState& earlier = *muscles.states[slot];
     earlier.muscleLists.resize(muscles.states.size());
-    earlier.muscleLists[added.slot] = muscleList(earlier.colliding(), added.colliding());
+    earlier.muscleLists[addedSlot] = muscleList(muscles.states[slot]->colliding(), added);
   }
 }
 }  // namespace
@@ -297,7 +297,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   // Before the tree: btDbvt's build breaks on non-finite or huge bounds.
   checkPoints(state->positions, call + " (placed on its bones, with initialNoise)", "particle");
   buildTree(*state->settings, *state, *state, impl_->definition.rebuildEveryStep);
-  ensurePrepared(integratorFor(impl_->definition.integrator), *state);
+  ensurePrepared(integratorFor(impl_->definition.integrator), s, *state, *state);
   const size_t skinCount = s.restSurface.vertices.size() * static_cast<size_t>(s.skinNeighbours);
   if (!s.restSurface.vertices.empty() && s.skinNeighbours > 0 &&
       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount) {
@@ -313,7 +313,7 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
   MuscleState& added = *state;
   const MuscleHandle handle = impl_->muscles.add<MuscleHandle>(std::move(state));
   added.slot = handle.index;
-  addCandidateLists(impl_->muscles, impl_->bones, added);
+  addCandidateLists(impl_->muscles, impl_->bones, s, added, added, added.slot);
   impl_->prepareWorkers();  // threads and their scratch start here, not in step()
   return handle;
 }

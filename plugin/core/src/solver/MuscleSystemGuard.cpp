@@ -279,24 +279,26 @@ void MuscleSystem::Impl::breakMuscles() {
 
 // A frozen muscle rides with its bones (each one's motion over the whole step, from where it
 // started) and is pushed out of them.
-void MuscleSystem::Impl::carryFrozen(MuscleState& state) {
+void MuscleSystem::Impl::carryFrozen(const MuscleSettings& settings, ParticleState& particles,
+                                     ContactState& contact, ResidualState& residual,
+                                     TreeState& trees) {
   const bool velocities = integratorFor(definition.integrator).usesVelocities();
-  resolveBones(state);
-  followBones(state, BoneMotion::SinceStepStart);
+  resolveBones(particles);
+  followBones(settings, particles, trees, BoneMotion::SinceStepStart);
   // The step's workers are idle now: the first thread's scratch is free; its log is not kept.
   ThreadScratch& thread = scratch.front();
-  state.pinched = state.pinchedInStep = state.spannedInStep = 0;
-  if (definition.muscleBone && state.bonesMoving)
+  contact.pinched = contact.pinchedInStep = contact.spannedInStep = 0;
+  if (definition.muscleBone && particles.bonesMoving)
     for (int round = 0; round < kFrozenRounds; ++round) {
-      refitTree(*state.settings, state, state);
+      refitTree(settings, particles, trees);
       for (uint32_t slot : bones.order)
-        collideMuscleBone(*state.settings, state, state, state, *bones.states[slot], thread.stack,
+        collideMuscleBone(settings, particles, trees, contact, *bones.states[slot], thread.stack,
                           thread.contacts);
-      recordPushes(*state.settings, state, state);
-      applyPushes(*state.settings, state, state, velocities, definition.slidingContacts);
+      recordPushes(settings, contact, residual);
+      applyPushes(settings, particles, contact, velocities, definition.slidingContacts);
     }
   thread.contacts.clear();
-  deform(*state.settings, state);
+  deform(settings, particles);
 }
 
 void MuscleSystem::Impl::guardedStep() {
@@ -346,7 +348,7 @@ void MuscleSystem::Impl::guardedStep() {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) {
       ++frozen;
-      carryFrozen(state);
+      carryFrozen(*state.settings, state, state, state, state);
     }
     trappedParticles += state.pinched;
     state.trapHeld = state.caughtInStep() || (state.trapHeld && boneSummary.moved);

@@ -195,7 +195,9 @@ struct MuscleSystem::Impl {
   /// Moves the contacts each thread logged into `contacts` (counts always; ends while room).
   void gatherContacts();
 
-  void resolveBones(MuscleState& state) const;
+  /// The muscle's bones resolved to slots for this step (`boneSlots`, -1 for a removed bone) and
+  /// their current transforms copied.
+  void resolveBones(ParticleState& particles) const;
   /// The particles at rest moved by their pre-transform (fixed ones by their bone), at rest.
   void placeAtBones(const MuscleSettings& settings, ParticleState& particles) const;
   /// The free particles moved by their bones' motion of this iteration (velocities turned too
@@ -217,8 +219,10 @@ struct MuscleSystem::Impl {
   /// The bone motion a muscle follows: this iteration's, or all of it since the step began (what
   /// carries a frozen muscle, which skipped the iterations).
   enum class BoneMotion { Iteration, SinceStepStart };
-  /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles.
-  void followBones(MuscleState& state, BoneMotion motion = BoneMotion::Iteration) const;
+  /// The muscle's bone transforms and deltas for `motion`, the pre-transform, the fixed particles;
+  /// the tree told that they followed bones still in motion (TreeState::treeFollowed).
+  void followBones(const MuscleSettings& settings, ParticleState& particles, TreeState& trees,
+                   BoneMotion motion = BoneMotion::Iteration) const;
   btScalar timeStep(const StepSize& size) const;
   using Clock = std::chrono::steady_clock;
   double distanceToEquilibrium(int settled);
@@ -237,11 +241,15 @@ struct MuscleSystem::Impl {
   /// the bone contacts of the muscles in `slots`. No allocation; one fixed order.
   void addContactReactions(std::vector<btVector3> MuscleState::*forces,
                            std::span<const uint32_t> slots);
-  void pushMusclePairs(MuscleState& state, uint32_t slot, TreeTraversalStack& stack);
+  /// The pushes of the pairs of the muscle at `slot` into its `contact`, in insertion order of its
+  /// partners; an overflow counted in its `trees`.
+  void pushMusclePairs(ContactState& contact, TreeState& trees, uint32_t slot,
+                       TreeTraversalStack& stack);
   void collide();
   /// The pushes of the last collide() on the muscle; `record` (or an integrator that holds
   /// contacts): kept for the force residual and the integrator (recordPushes).
-  void respond(MuscleState& state, bool record) const;
+  void respond(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+               ResidualState& residual, bool record) const;
   /// The pushes of the last collide() applied to every muscle and recorded for the force residual
   /// (after the last iteration, before a residual check, or with contact bodies every iteration).
   void applyResponse();
@@ -251,11 +259,15 @@ struct MuscleSystem::Impl {
   /// forceTasks of the active muscles, largest first.
   void orderForceTasks();
   /// The muscle's last response and this iteration's bone motion, timed into `result`.
-  void moveMuscle(MuscleState& state, MuscleIterationResult& result, bool bonesMove) const;
+  void moveMuscle(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                  ResidualState& residual, TreeState& trees, MuscleIterationResult& result,
+                  bool bonesMove) const;
   /// One chunk of a muscle's forces; the muscle's last chunk to finish runs finishForces.
   void forceTask(const ForceTask& task, bool bonesMove);
   /// The chunks' buffers added in chunk order, external forces, the muscle's eq 5.1 bound.
-  void finishForces(MuscleState& state, MuscleIterationResult& result);
+  void finishForces(const MuscleSettings& settings, ChunkState& chunks, ParticleState& particles,
+                    const InteractionState& interaction, const IntegratorState& integration,
+                    MuscleIterationResult& result);
   void forcesPhase(bool bonesMove);
   void integrateAndRefit(const TimeIntegrator& integrator, btScalar dt);
   /// The iteration's per-muscle results reduced in insertion order: displacement, NaN, the
@@ -295,7 +307,8 @@ struct MuscleSystem::Impl {
   void breakMuscles();
   void guardedStep();  ///< step() under the numerical guard (MuscleSystemGuard.cpp)
   /// A muscle the guard froze carried with its bones over the whole step and pushed out of them.
-  void carryFrozen(MuscleState& state);
+  void carryFrozen(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                   ResidualState& residual, TreeState& trees);
   /// Whether some bone's target differs from where it ended the last step.
   bool bonesMove() const;
   // Local steps (MuscleSystemLocal.cpp, MuscleSystem::stepLocal).

@@ -133,7 +133,7 @@ void MuscleSystem::Impl::localIteration(MuscleState& state, const TimeIntegrator
                         scratch[thread].stack, scratch[thread].contacts);
     }
   dropPushesOutside(settings, state, state);
-  respond(state, true);
+  respond(settings, state, state, state, true);
 }
 
 // Every active muscle's region gathered (again for new settings) and made its free particles

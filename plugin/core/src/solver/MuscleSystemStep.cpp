@@ -49,12 +49,11 @@ constexpr double kMaxTurnPerIteration = 2 * SIMD_PI / 180;
 
 }  // namespace
 
-// Maps the muscle's bone indices to slots (-1 for removed bones) and copies their transforms.
-void MuscleSystem::Impl::resolveBones(MuscleState& state) const {
-  for (size_t b = 0; b < state.bones.size(); ++b) {
-    const BoneState* bone = bones.find(state.bones[b]);
-    state.boneSlots[b] = bone ? static_cast<int32_t>(state.bones[b].index) : -1;
-    state.boneTransforms[b] = bone ? bone->current : btTransform::getIdentity();
+void MuscleSystem::Impl::resolveBones(ParticleState& particles) const {
+  for (size_t b = 0; b < particles.bones.size(); ++b) {
+    const BoneState* bone = bones.find(particles.bones[b]);
+    particles.boneSlots[b] = bone ? static_cast<int32_t>(particles.bones[b].index) : -1;
+    particles.boneTransforms[b] = bone ? bone->current : btTransform::getIdentity();
   }
 }
 
@@ -255,23 +254,24 @@ void MuscleSystem::Impl::moveBones(btScalar share, bool arrive) {
   }
 }
 
-void MuscleSystem::Impl::followBones(MuscleState& state, BoneMotion motion) const {
+void MuscleSystem::Impl::followBones(const MuscleSettings& settings, ParticleState& particles,
+                                     TreeState& trees, BoneMotion motion) const {
   const bool sinceStart = motion == BoneMotion::SinceStepStart;
-  state.bonesMoving = false;
+  particles.bonesMoving = false;
   bool arrived = true;
-  for (size_t b = 0; b < state.bones.size(); ++b) {
-    state.boneDeltas[b].setIdentity();
-    if (state.boneSlots[b] < 0) continue;
-    const BoneState& bone = *bones.states[state.boneSlots[b]];
-    state.boneTransforms[b] = bone.current;
+  for (size_t b = 0; b < particles.bones.size(); ++b) {
+    particles.boneDeltas[b].setIdentity();
+    if (particles.boneSlots[b] < 0) continue;
+    const BoneState& bone = *bones.states[particles.boneSlots[b]];
+    particles.boneTransforms[b] = bone.current;
     arrived = arrived && bone.current == bone.target;
     if (sinceStart ? bone.current == bone.goodLast : !bone.moving) continue;
-    state.boneDeltas[b] = sinceStart ? bone.current * bone.goodLast.inverse() : bone.delta;
-    state.bonesMoving = true;
+    particles.boneDeltas[b] = sinceStart ? bone.current * bone.goodLast.inverse() : bone.delta;
+    particles.bonesMoving = true;
   }
-  state.treeFollowed = state.bonesMoving && !arrived;
-  pretransform(*state.settings, state, integratorFor(definition.integrator).usesVelocities());
-  followFixed(*state.settings, state.boneSlots, state);
+  trees.treeFollowed = particles.bonesMoving && !arrived;
+  pretransform(settings, particles, integratorFor(definition.integrator).usesVelocities());
+  followFixed(settings, particles.boneSlots, particles);
 }
 
 // The share of a phase's wall time that `part` took: its thread time over all active muscles
@@ -338,16 +338,15 @@ void MuscleSystem::Impl::collideMusclePairs() {
       "muscle pairs");
 }
 
-// A muscle's share of its pairs' contacts, in insertion order of its partners.
-void MuscleSystem::Impl::pushMusclePairs(MuscleState& state, uint32_t slot,
+void MuscleSystem::Impl::pushMusclePairs(ContactState& contact, TreeState& trees, uint32_t slot,
                                          TreeTraversalStack& stack) {
   for (uint32_t k : musclePairs[slot]) {
     const MusclePairTask& pair = pairTasks[k];
     const bool onFirst = pair.a == slot;
     if (pushMuscleContacts(muscles.states[pair.a]->colliding(), muscles.states[pair.b]->colliding(),
-                           onFirst, state, stack, pair.contacts) &&
+                           onFirst, contact, stack, pair.contacts) &&
         onFirst)
-      ++state.candidateOverflows;
+      ++trees.candidateOverflows;
   }
 }
 
@@ -368,7 +367,7 @@ void MuscleSystem::Impl::collide() {
   forEachMuscle("pushes and bones", [&](MuscleState& state, uint32_t slot, unsigned thread) {
     MuscleIterationResult& result = results[slot];
     const Clock::time_point pushesStart = Clock::now();
-    if (definition.muscleMuscle) pushMusclePairs(state, slot, scratch[thread].stack);
+    if (definition.muscleMuscle) pushMusclePairs(state, state, slot, scratch[thread].stack);
     const Clock::time_point boneStart = Clock::now();
     if (definition.muscleBone)
       for (uint32_t boneSlot : bones.order)
@@ -392,32 +391,37 @@ void MuscleSystem::Impl::collide() {
 }
 
 // The pushes of the last collide() on a muscle (response), once.
-void MuscleSystem::Impl::respond(MuscleState& state, bool record) const {
+void MuscleSystem::Impl::respond(const MuscleSettings& settings, ParticleState& particles,
+                                 ContactState& contact, ResidualState& residual,
+                                 bool record) const {
   if (!pushesPending) return;
   const TimeIntegrator& integrator = integratorFor(definition.integrator);
   const bool holds = integrator.holdsContacts(definition);
-  if (record || holds) recordPushes(*state.settings, state, state);
-  applyPushes(*state.settings, state, state, integrator.usesVelocities(),
+  if (record || holds) recordPushes(settings, contact, residual);
+  applyPushes(settings, particles, contact, integrator.usesVelocities(),
               definition.slidingContacts);
-  if (holds) leaveContactSlop(*state.settings, state, state, state, kContactSlop);
+  if (holds) leaveContactSlop(settings, contact, residual, particles, kContactSlop);
 }
 
 void MuscleSystem::Impl::applyResponse() {
-  forEachMuscle("response",
-                [this](MuscleState& state, uint32_t, unsigned) { respond(state, true); });
+  forEachMuscle("response", [this](MuscleState& state, uint32_t, unsigned) {
+    respond(*state.settings, state, state, state, true);
+  });
   pushesPending = false;
 }
 
 // The last iteration's response, then this iteration's bone motion (timed as forces).
-void MuscleSystem::Impl::moveMuscle(MuscleState& state, MuscleIterationResult& result,
+void MuscleSystem::Impl::moveMuscle(const MuscleSettings& settings, ParticleState& particles,
+                                    ContactState& contact, ResidualState& residual,
+                                    TreeState& trees, MuscleIterationResult& result,
                                     bool bonesMove) const {
   const Clock::time_point start = Clock::now();
-  respond(state, false);
+  respond(settings, particles, contact, residual, false);
   const Clock::time_point followStart = Clock::now();
   if (bonesMove)
-    followBones(state);
+    followBones(settings, particles, trees);
   else
-    state.bonesMoving = false;
+    particles.bonesMoving = false;
   result.forcesMs += millisecondsSince(followStart);
   result.responseMs = millisecondsSince(start) - millisecondsSince(followStart);
 }
@@ -426,7 +430,8 @@ void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
   MuscleState& state = *muscles.states[task.slot];
   MuscleIterationResult& result = results[task.slot];
   const MuscleSettings& settings = *state.settings;
-  if (state.forceChunks.size() == 1) moveMuscle(state, result, bonesMove);  // whole: moved here
+  if (state.forceChunks.size() == 1)  // whole: moved here
+    moveMuscle(settings, state, state, state, state, result, bonesMove);
   const Clock::time_point start = Clock::now();
   const ForceChunk& chunk = state.forceChunks[task.chunk];
   std::span<btVector3> forces = state.forces;
@@ -442,33 +447,36 @@ void MuscleSystem::Impl::forceTask(const ForceTask& task, bool bonesMove) {
   if (task.chunk == 0) addEnclosedVolumeForces(settings, state.positions, forces);
   state.chunkVolumeMs[task.chunk] = millisecondsSince(volumeStart);
   state.chunkMs[task.chunk] = millisecondsSince(start);
-  if (state.chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1) finishForces(state, result);
+  if (state.chunksLeft.fetch_sub(1, std::memory_order_acq_rel) == 1)
+    finishForces(settings, state, state, state, state, result);
 }
 
-void MuscleSystem::Impl::finishForces(MuscleState& state, MuscleIterationResult& result) {
+void MuscleSystem::Impl::finishForces(const MuscleSettings& settings, ChunkState& chunks,
+                                      ParticleState& particles, const InteractionState& interaction,
+                                      const IntegratorState& integration,
+                                      MuscleIterationResult& result) {
   const Clock::time_point start = Clock::now();
   result.forces = SpringForceResult{};
   result.volumeMs = 0;
-  for (size_t c = 0; c < state.forceChunks.size(); ++c) {
+  for (size_t c = 0; c < chunks.forceChunks.size(); ++c) {
     if (c > 0) {
-      const ForceChunk& chunk = state.forceChunks[c];
+      const ForceChunk& chunk = chunks.forceChunks[c];
       const size_t count = chunk.upper - chunk.lower;
-      moveForces(std::span(state.forces).subspan(chunk.lower, count),
-                 std::span(state.chunkForces).subspan(state.chunkBase[c] + chunk.lower, count));
+      moveForces(std::span(particles.forces).subspan(chunk.lower, count),
+                 std::span(chunks.chunkForces).subspan(chunks.chunkBase[c] + chunk.lower, count));
     }
-    result.forces.deviation += state.chunkSprings[c].deviation;
-    result.forces.overstretched += state.chunkSprings[c].overstretched;
-    result.forces.nearLimit += state.chunkSprings[c].nearLimit;
-    result.forcesMs += state.chunkMs[c];
-    result.volumeMs += state.chunkVolumeMs[c];
+    result.forces.deviation += chunks.chunkSprings[c].deviation;
+    result.forces.overstretched += chunks.chunkSprings[c].overstretched;
+    result.forces.nearLimit += chunks.chunkSprings[c].nearLimit;
+    result.forcesMs += chunks.chunkMs[c];
+    result.volumeMs += chunks.chunkVolumeMs[c];
   }
   result.forces.exploded = result.forces.overstretched > 0;
-  if (state.settings->fanInverseVolume.empty() && state.settings->enclosedFaces.empty())
-    result.volumeMs = 0;
-  addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
+  if (settings.fanInverseVolume.empty() && settings.enclosedFaces.empty()) result.volumeMs = 0;
+  addExternalForces(settings, particles, interaction, definition.gravity, particles.forces);
   if (stepSettings.adaptiveTimeStep)
     result.safeTimeStep =
-        adaptiveTimeStep(*state.settings, state, state.centredDamping(), previousDt);
+        adaptiveTimeStep(settings, particles, integration.centredDamping(), previousDt);
   result.forcesMs += millisecondsSince(start);
 }
 
@@ -486,7 +494,8 @@ void MuscleSystem::Impl::forcesPhase(bool bonesMove) {
   }
   if (chunked)
     forEachMuscle("move chunked muscles", [&](MuscleState& state, uint32_t slot, unsigned) {
-      if (state.forceChunks.size() > 1) moveMuscle(state, results[slot], bonesMove);
+      if (state.forceChunks.size() > 1)
+        moveMuscle(*state.settings, state, state, state, state, results[slot], bonesMove);
     });
   pool->run(
       forceTasks.size(), [&](size_t k, unsigned) { forceTask(forceTasks[k], bonesMove); },
@@ -680,7 +689,7 @@ int MuscleSystem::Impl::planBoneMotion(const StepSize& size, int& cap) {
 void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
-    ensurePrepared(integrator, state);
+    ensurePrepared(integrator, *state.settings, state, state);
     resolveBones(state);
     state.pinchedInStep = state.spannedInStep = 0;
     std::fill(state.stepBones.begin(), state.stepBones.end(), -1);
@@ -699,7 +708,7 @@ void MuscleSystem::Impl::endIterations(bool arrived) {
   applyResponse();
   stats.timing.response += millisecondsSince(start);
   forEachMuscle("end", [this, arrived](MuscleState& state, uint32_t, unsigned) {
-    if (!arrived) followBones(state);
+    if (!arrived) followBones(*state.settings, state, state);
     // The response's pushes may have stretched springs held at the limit.
     limitStrain(*state.settings, state, state, kEndStrainPasses);
   });

@@ -4,11 +4,13 @@
 
 namespace fibremss {
 
-void ParticleState::init(const MuscleSettings& settings, size_t bones) {
+void ParticleState::init(const MuscleSettings& settings, std::span<const BoneHandle> handles) {
   const size_t n = settings.particleCount();
-  boneTransforms.assign(bones, btTransform::getIdentity());
-  boneDeltas.assign(bones, btTransform::getIdentity());
-  boneDualDeltas.assign(bones, dualQuaternionOf(nullptr));
+  bones.assign(handles.begin(), handles.end());
+  boneSlots.assign(handles.size(), -1);
+  boneTransforms.assign(handles.size(), btTransform::getIdentity());
+  boneDeltas.assign(handles.size(), btTransform::getIdentity());
+  boneDualDeltas.assign(handles.size(), dualQuaternionOf(nullptr));
   positions.resize(n);
   previous.resize(n);
   velocities.assign(n, btVector3(0, 0, 0));

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "InteractionState.h"
@@ -53,15 +54,17 @@ struct BoneState {
 /// A muscle's particles as every iteration reads and writes them (the hot part), structure of
 /// arrays, size particleCount() unless said otherwise.
 struct ParticleState {
-  std::vector<btVector3> positions;         ///< x(t) [m]
-  std::vector<btVector3> previous;          ///< x(t−dt) [m]
-  std::vector<btVector3> velocities;        ///< for velocity-based integrators [m/s]
-  std::vector<btVector3> forces;            ///< spring forces of this iteration [N]
-  std::vector<btScalar> stepRadius;         ///< eq 5.1's r [m]: own, ≥ meanRadius/10; inner: mean
-  std::vector<uint32_t> freeParticles;      ///< indices of particles that are not fixed
-  btScalar stableTimeStep = 0;              ///< largest dt for which damped Verlet stays stable [s]
-  btScalar meanRadius = 0;                  ///< mean boundary radius [m]
-  double restLengthSum = 0;                 ///< Σ L0 over the springs [m]
+  std::vector<btVector3> positions;     ///< x(t) [m]
+  std::vector<btVector3> previous;      ///< x(t−dt) [m]
+  std::vector<btVector3> velocities;    ///< for velocity-based integrators [m/s]
+  std::vector<btVector3> forces;        ///< spring forces of this iteration [N]
+  std::vector<btScalar> stepRadius;     ///< eq 5.1's r [m]: own, ≥ meanRadius/10; inner: mean
+  std::vector<uint32_t> freeParticles;  ///< indices of particles that are not fixed
+  btScalar stableTimeStep = 0;          ///< largest dt for which damped Verlet stays stable [s]
+  btScalar meanRadius = 0;              ///< mean boundary radius [m]
+  double restLengthSum = 0;             ///< Σ L0 over the springs [m]
+  std::vector<BoneHandle> bones;        ///< system handle of the settings' bone index i
+  std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
   std::vector<btTransform> boneTransforms;  ///< current transform of bones[i] (identity: gone)
   std::vector<btTransform> boneDeltas;      ///< motion of bones[i] in this iteration (identity)
   /// boneDeltas as dual quaternions, for PretransformBlend::DualQuaternion (rotation; [m])
@@ -70,9 +73,10 @@ struct ParticleState {
   std::vector<btVector3> surface;  ///< deformed surface vertices (output)
   SkinFrames skin;                 ///< local frames of the surface (empty: no surface)
 
-  /// Sized for `settings`' particles on `bones` bones: velocities and forces zero, every bone at
-  /// the identity, the free particles listed; positions still to be placed.
-  void init(const MuscleSettings& settings, size_t bones);
+  /// Sized for `settings`' particles on the bones of `handles` (their slots unresolved):
+  /// velocities and forces zero, every bone at the identity, the free particles listed; positions
+  /// still to be placed.
+  void init(const MuscleSettings& settings, std::span<const BoneHandle> handles);
 };
 
 /// A muscle's contact scratch: the pushes of this iteration's collision pairs and what the
@@ -160,6 +164,16 @@ struct IntegratorWorkspace {
   virtual ~IntegratorWorkspace() = default;
 };
 
+/// The integrator a muscle is prepared for and its scratch (TimeIntegrator::prepare).
+struct IntegratorState {
+  std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
+  Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
+  bool prepared = false;                           ///< workspace made for `preparedFor`
+
+  /// Whether its steps take Verlet's centred damping (prepared for Verlet; adaptiveTimeStep).
+  bool centredDamping() const { return preparedFor == Integrator::Verlet; }
+};
+
 /// A muscle's forces pass in chunks (ForceChunks.h): one task per chunk; the task that finishes
 /// the muscle's last chunk adds the chunks' buffers to `forces` in chunk order.
 struct ChunkState {
@@ -237,9 +251,8 @@ constexpr uint8_t kInRegion = 1;
 /// RegionState::regionMark of a particle a local step holds whose forces it takes.
 constexpr uint8_t kInRing = 2;
 
-/// A muscle: settings, its bones and slot, and the state a step changes in eight parts (stages
-/// that need one part can take it alone). Solver settings are not here: the step passes them to
-/// the stages.
+/// A muscle: settings and slot, and the state a step changes in nine parts (stages that need
+/// one part can take it alone). Solver settings are not here: the step passes them to the stages.
 struct MuscleState : ParticleState,
                      ChunkState,
                      ContactState,
@@ -247,20 +260,14 @@ struct MuscleState : ParticleState,
                      GuardSnapshot,
                      InteractionState,
                      ResidualState,
-                     RegionState {
+                     RegionState,
+                     IntegratorState {
   std::shared_ptr<const MuscleSettings> settings;  ///< shared, immutable
-  std::vector<BoneHandle> bones;                   ///< system handle of the settings' bone index i
-  std::vector<int32_t> boneSlots;  ///< bones[i] resolved to a bone slot for this step (-1: gone)
-  uint32_t slot = 0;               ///< the muscle's slot in its system (names it in pair lists)
-  std::unique_ptr<IntegratorWorkspace> workspace;  ///< the integrator's scratch, or null
-  Integrator preparedFor = Integrator::Verlet;     ///< the integrator `workspace` was made for
-  bool prepared = false;                           ///< workspace made for `preparedFor`
+  uint32_t slot = 0;        ///< the muscle's slot in its system (names it in pair lists)
   bool frozen = false;      ///< stopped by the numerical guard: skipped by every part of a step
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
   TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
 
-  /// Whether its steps take Verlet's centred damping (prepared for Verlet; adaptiveTimeStep).
-  bool centredDamping() const { return preparedFor == Integrator::Verlet; }
   /// The muscle as an integrator steps it.
   IntegratedMuscle integrated() { return {*settings, *this, *this, *this, *this, workspace.get()}; }
   /// The muscle as the sphere tests read it.
