@@ -256,6 +256,12 @@ bool solverSetting(const std::string& key) {
 
 }  // namespace
 
+std::string rankedPosesNote(const nlohmann::json& reference) {
+  const std::string text =
+      gatesFromJson(reference.value("gates", nlohmann::json::object())).rankedPosesText();
+  return text.empty() ? "" : "; " + text;
+}
+
 ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   ReferenceGates g;
   g.returnMm = number(gates, "return_mm");
@@ -274,6 +280,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
   g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());
+  g.stopped = gates.value("stopped", std::string());
   g.excluded = gates.value("excluded", std::string());
   return g;
 }
@@ -314,8 +321,9 @@ std::string verdictSection(const nlohmann::json& summary) {
                          "; no gate needed)",
                      runs, exact);
   if (why.empty())
-    out +=
-        verdictOn("Against the CalculiX reference (every gate passes)", runs, {kReferenceMeasure});
+    out += verdictOn("Against the CalculiX reference (every gate passes" +
+                         rankedPosesNote(summary["reference"]) + ")",
+                     runs, {kReferenceMeasure});
   else if (exact.empty())
     out += "**No accuracy ranking on this scene**: " + why +
            ". Nothing is ranked; the distances to FibreMSS's own runs (self-reference, "
