@@ -360,7 +360,7 @@ std::string ReferenceGates::whyNotPassed() const {
   gatesAlone.stopped.clear();
   std::vector<std::string> why;
   if (gatesAlone.failed()) why.push_back("the reference fails a gate");
-  if (!failures.empty()) why.push_back("ccx did not solve every pose of the reference");
+  if (!failures.empty()) why.push_back("ccx did not solve every pose the ranking needs");
   if (stoppedTooSoon())
     why.push_back("ccx stopped the reference at pose " + std::to_string(solvedPoses) + ", before " +
                   std::to_string(kMinRankedPoses) + " poses to rank over");
