@@ -589,16 +589,18 @@ std::string table1(const nlohmann::json& runs) {
   return out.str();
 }
 
-/// Each method family's best run by `key` (ascending), for the ranking.
+/// Each method family's best rankable run (over `rankedPoses`, rankable) by `key` (ascending),
+/// for the ranking.
 std::vector<std::pair<double, const nlohmann::json*>> bestPerFamily(const nlohmann::json& runs,
-                                                                    const char* key) {
+                                                                    const char* key,
+                                                                    int rankedPoses = 0) {
   std::map<std::string, std::pair<double, const nlohmann::json*>> best;
   for (const auto& run : runs) {
     const double error = number(run, key);
     const std::string method = text(run, "method");
-    const bool whole = !run.value("nan", false) && !run.value("exploded", false) &&
-                       !run.value("interrupted", false);
-    if (!std::isfinite(error) || roleOf(method) == MethodRole::Reference || !whole) continue;
+    if (!std::isfinite(error) || roleOf(method) == MethodRole::Reference ||
+        !rankable(run, rankedPoses))
+      continue;
     const std::string family = method.substr(0, method.find(':'));
     auto [it, added] = best.try_emplace(family, error, &run);
     if (!added && error < it->second.first) it->second = {error, &run};
@@ -680,10 +682,10 @@ std::string referenceSection(const nlohmann::json& summary) {
     return out.str();
   }
   out << "\n**Ranking** by each method's best RMS to the reference over the runs that finished "
-         "every pose"
+         "every pose it covers"
       << rankedPosesNote(reference) << " (the plot shows what each point costs):\n\n";
   int rank = 0;
-  for (const auto& [error, run] : bestPerFamily(summary["runs"], key))
+  for (const auto& [error, run] : bestPerFamily(summary["runs"], key, rankedPoses(reference)))
     out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " mm at "
         << cell(number(*run, "ms_per_step")) << " ms per pose (" << threadsText(*run) << ")\n";
   return out.str();
