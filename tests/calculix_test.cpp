@@ -538,6 +538,73 @@ TEST(ReferenceGates, ExcludedPosesAreNoFailureButAGateThatFailsStillBlocks) {
       << line;
 }
 
+/// Gates of a reference that ccx stopped at pose `stop` of 19 after its retry, each computed
+/// over the poses before it and passing.
+ReferenceGates stoppedAt(int stop) {
+  ReferenceGates gates;
+  gates.returnNotApplicable = "ccx stopped the reference at pose " + std::to_string(stop);
+  gates.refinementMm = gates.incrementsMm = 0.1;
+  gates.spreadMm = 0.6;
+  gates.poses = 19;
+  gates.solvedPoses = gates.refinementPoses = gates.incrementsPoses = gates.attachmentLowPoses =
+      gates.attachmentHighPoses = stop;
+  gates.stopped = "muscle iliacus: *ERROR: increment size smaller than minimum";
+  return gates;
+}
+
+TEST(ReferenceGates, WhereCcxStoppedTheReferenceTheyRankOverThePosesBeforeIt) {
+  ReferenceGates gates = stoppedAt(6);
+  EXPECT_TRUE(gates.passed()) << gates.whyNotPassed();
+  EXPECT_FALSE(gates.failed());
+  EXPECT_EQ(gates.rankedPoses(), 6);
+  EXPECT_EQ(gates.rankedPosesText(),
+            "ranked over poses 0\u20135 of 19: ccx did not solve pose 6 (muscle iliacus: *ERROR: "
+            "increment size smaller than minimum) or later");
+  const std::vector<std::string> lines = gateLines(gates);
+  EXPECT_NE(lines.back().find("ccx stopped the reference at pose 6 of 19, after its retry"),
+            std::string::npos)
+      << lines.back();
+  EXPECT_NE(lines.back().find("covers poses 0\u20135"), std::string::npos) << lines.back();
+  EXPECT_NE(lines.front().find("does not apply, not blocking: ccx stopped"), std::string::npos)
+      << lines.front();
+
+  // A gate fails over those poses, or a gate's solve failed a pose the reference solved.
+  gates.refinementMm = 0.25;
+  EXPECT_FALSE(gates.passed());
+  EXPECT_EQ(gates.whyNotPassed(), "the reference fails a gate");
+  EXPECT_EQ(gates.rankedPoses(), 0);
+  EXPECT_EQ(gates.rankedPosesText(), "");
+  gates.refinementMm = 0.1;
+  gates.failures = "one level finer pose 4: muscle iliacus: *ERROR: too many cutbacks";
+  EXPECT_FALSE(gates.passed());
+  EXPECT_EQ(gates.whyNotPassed(), "ccx did not solve every pose the ranking needs");
+  gates.failures.clear();
+  gates.refinementPoses = 4;  // a finer solve over fewer poses than the reference solved
+  EXPECT_FALSE(gates.passed());
+  gates.refinementPoses = 6;
+
+  // Gates not computed: said so, not that ccx's stop blocks.
+  gates.incrementsMm = RunMetrics::kNone;
+  EXPECT_EQ(gates.whyNotPassed(), "the reference's gates were not computed");
+}
+
+TEST(ReferenceGates, AStopInTheFirstPosedPoseRanksNothing) {
+  ReferenceGates gates = stoppedAt(2);
+  EXPECT_TRUE(gates.passed()) << "the first pose and one after it: " << gates.whyNotPassed();
+  gates = stoppedAt(1);
+  EXPECT_FALSE(gates.passed());
+  EXPECT_TRUE(gates.failed());
+  EXPECT_EQ(gates.whyNotPassed(),
+            "ccx stopped the reference at pose 1, before 2 poses to rank over");
+  EXPECT_NE(gateLines(gates).back().find("too few poses to rank over, no ranking"),
+            std::string::npos)
+      << gateLines(gates).back();
+  gates.incrementsMm = RunMetrics::kNone;
+  EXPECT_EQ(gates.whyNotPassed(),
+            "ccx stopped the reference at pose 1, before 2 poses to rank over; the reference's "
+            "gates were not computed");
+}
+
 TEST(ReferenceGates, IncrementsHalvedIsJudgedAsRefinementIsAndBlocksTheRanking) {
   // Every other gate passes: the increment gate alone decides.
   ReferenceGates gates;
@@ -1365,6 +1432,81 @@ TEST_F(CoarseReference, CompareReportsItsGatesAndRmsToIt) {
             std::string::npos)
       << report;
   EXPECT_EQ(report.find("nan |"), std::string::npos) << "tables print — for what does not apply";
+}
+
+TEST(ReferenceCommand, AReferenceCcxStoppedAfterItsRetryRanksOverThePosesBeforeTheStop) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("stopped_reference_test");
+  const std::string path = shortFusiform(dir.path());
+  const LoadedScene scene = loadScene(path, {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ReferenceOptions options;
+  options.cacheDir = (dir.path() / "cache").string();
+  CalculixDefinition reference = sceneDefinition(scene, options), retry = reference;
+  retry.incrementScale *= kFinerIncrements;
+  // ccx stands in stopping at pose 2 of 3 at both increments: the retry's poses 0-1 as ccx
+  // solves them, the default's failures alone (as thigh13's are shipped).
+  CalculixDefinition limited = retry;
+  limited.poseLimit = 2;
+  limited.returnToRest = false;
+  const ContinuumCut cut = cutOf(scene);
+  CalculixSolution stopped =
+      solveCalculixReference(scene, prepared, limited, cut, (dir.path() / "solve").string());
+  ASSERT_EQ(stopped.solvedPoses(), 2) << stopped.poseFailures[1];
+  stopped.poseFailures[2] = stopped.returnFailure =
+      "muscle fusiform: *ERROR: increment size smaller than minimum";
+  CalculixSolution failed = stopped;
+  failed.poseSurfaces.assign(failed.poseSurfaces.size(), {});
+  for (const auto& [definition, solution] : {std::pair{&reference, &failed}, {&retry, &stopped}}) {
+    const std::string entry =
+        options.cacheDir + "/" + referenceCacheKey(scene, prepared, *definition, cut);
+    std::filesystem::create_directories(entry);
+    saveSolution(entry + "/surfaces.bin", *solution);
+  }
+  // The gates are solved over poses 0-1; btSoftBody alone: the spread is its RMS.
+  const testing::ProcessResult result =
+      testing::runProcess(std::string(FIBREMSS_CLI) + " compare " + path +
+                          " --set resolution=6 --methods btsoftbody --no-fronts --cache " +
+                          options.cacheDir + " --out " + (dir.path() / "out").string() + " 2>&1");
+  ASSERT_EQ(result.exitCode, 0) << result.output;
+  const nlohmann::json summary = nlohmann::json::parse(readText(dir.path() / "out/summary.json"));
+  const nlohmann::json& gates = summary["reference"]["gates"];
+  EXPECT_EQ(gates["failures"], "") << "the stop is no failure";
+  EXPECT_EQ(gates["stopped"], stopped.poseFailures[2]);
+  EXPECT_NE(
+      gates["return_not_applicable"].get<std::string>().find("stopped the reference at pose 2"),
+      std::string::npos);
+  for (const char* poses : {"solved_poses", "refinement_poses", "increments_poses",
+                            "attachment_low_poses", "attachment_high_poses"})
+    EXPECT_EQ(gates[poses], 2) << poses;
+  const nlohmann::json& run = summary["runs"][1];
+  ASSERT_EQ(run["method"], "btsoftbody");
+  EXPECT_EQ(run["poses"], 3);
+  EXPECT_EQ(run["rms_to_reference_poses"], 2);
+  EXPECT_EQ(run["rms_to_reference_per_pose_mm"].size(), 2u);
+  EXPECT_EQ(run["muscles_to_reference"][0]["per_pose_mm"].size(), 2u);
+  // The gates decide, over poses 0-1: with one method the spread is its RMS, and the C3D10 and
+  // increment gates pass below a third of it (at resolution 6, C3D10 moves it more).
+  const double third = run["rms_to_reference_mm"].get<double>() / 3;
+  const bool passed =
+      gates["refinement_mm"].get<double>() < third && gates["increments_mm"].get<double>() < third;
+  EXPECT_EQ(gates["passed"], passed);
+  EXPECT_EQ(result.output.find("the reference fails a gate: no ranking") != std::string::npos,
+            !passed)
+      << "a gate, not ccx's stop, blocks it: " << result.output;
+  EXPECT_EQ(gates["ranked_poses"], passed ? 2 : 0);
+  const std::string report = readText(dir.path() / "out/report.md");
+  const std::string ranked =
+      "ranked over poses 0\u20131 of 3: ccx did not solve pose 2 (muscle fusiform: *ERROR: "
+      "increment size smaller than minimum) or later";
+  EXPECT_EQ(report.find(ranked) < report.find("## Reference"), passed) << report;
+  EXPECT_EQ(result.output.find("the methods are " + ranked) != std::string::npos, passed)
+      << result.output;
+  EXPECT_EQ(report.find("ccx did not solve every pose"), std::string::npos) << report;
+  EXPECT_NE(report.find("Poses solved: 2/3 (1 not solved: ccx stopped at pose 2, see below)"),
+            std::string::npos)
+      << report;
 }
 
 TEST(ReferenceCommand, ListsItsCellsAndRefusesACellItDoesNotHave) {

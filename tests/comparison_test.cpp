@@ -945,6 +945,68 @@ TEST(Verdict, SaysTheGatesWereNotComputedRatherThanThatTheyFail) {
   EXPECT_EQ(report.find("fails a gate"), std::string::npos) << report;
 }
 
+TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereverItRanks) {
+  // hip-pelvis-like: ccx solved poses 0-5 of 19 and stopped at pose 6 after its retry; every
+  // gate over those poses passes.
+  nlohmann::json summary = pinchLikeSummary();
+  const std::string why = "muscle iliacus: *ERROR: increment size smaller than minimum";
+  summary["reference"]["gates"] = {
+      {"return_not_applicable", "ccx stopped the reference at pose 6, before the motion's end"},
+      {"refinement_mm", 0.289},
+      {"increments_mm", 0.1},
+      {"spread_mm", 1.3},
+      {"poses", 19},
+      {"solved_poses", 6},
+      {"refinement_poses", 6},
+      {"increments_poses", 6},
+      {"stopped", why}};
+  summary["reference"]["poses"] = nlohmann::json::array();
+  for (int p = 0; p < 19; ++p)
+    summary["reference"]["poses"].push_back({{"solved", p < 6}, {"failure", p < 6 ? "" : why}});
+  // The FEM runs stopped on their time budget: `fem` after the ranked poses is ranked over them,
+  // `fem:substeps=75` before their end is not.
+  for (auto& run : summary["runs"]) {
+    const std::string method = run["method"];
+    if (method.rfind("fem", 0) == 0) run["interrupted"] = true;
+    run["rms_to_reference_poses"] = method == "fem:substeps=75" ? 3 : 6;
+  }
+  const fs::path out = scratch("stopped_reference");
+  writeComparison(summary, out.string());
+  const std::string report = readFile(out / "report.md");
+  const std::string ranked =
+      "ranked over poses 0\u20135 of 19: ccx did not solve pose 6 (" + why + ") or later";
+  EXPECT_NE(verdictOf(report).find("Against the CalculiX reference (every gate passes; " + ranked +
+                                   ")**: most accurate **btsoftbody:iterations=32**"),
+            std::string::npos)
+      << verdictOf(report);
+  EXPECT_NE(report.find("**Ranking** by each method's best RMS to the reference over the runs "
+                        "that finished every pose it covers; " +
+                        ranked),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("Poses solved: 6/19 (13 not solved: ccx stopped at pose 6, see below)"),
+            std::string::npos)
+      << report;
+  EXPECT_EQ(report.find("- pose 7 not solved"), std::string::npos) << "the stop is said once";
+  EXPECT_EQ(report.find("No ranking"), std::string::npos) << report;
+  const size_t start = report.find("**Ranking**");
+  const std::string ranking = report.substr(start, report.find("\n## ", start) - start);
+  EXPECT_NE(ranking.find(". fem: 2 mm"), std::string::npos) << ranking;
+  EXPECT_EQ(ranking.find("fem:substeps=75"), std::string::npos) << ranking;
+  EXPECT_NE(readFile(out / "speed_vs_error.gp").find(ranked), std::string::npos)
+      << "the plot's note";
+
+  // Stopped in the first posed pose: nothing to rank over.
+  summary["reference"]["gates"]["solved_poses"] =
+      summary["reference"]["gates"]["refinement_poses"] =
+          summary["reference"]["gates"]["increments_poses"] = 1;
+  writeComparison(summary, out.string());
+  EXPECT_NE(verdictOf(readFile(out / "report.md"))
+                .find("ccx stopped the reference at pose 1, before 2 poses to rank over"),
+            std::string::npos)
+      << verdictOf(readFile(out / "report.md"));
+}
+
 /// A cylinder-stretch run: effective ν and volume change [%] at its last pose.
 nlohmann::json stretchRun(const std::string& method, double ms, double nu, double volumePct) {
   RunMetrics run;

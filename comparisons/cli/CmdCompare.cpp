@@ -80,9 +80,11 @@ void printTable(const Comparison& comparison) {
   }
   for (const std::string& line : gateLines(comparison.reference->gates))
     std::printf("reference gate: %s\n", line.c_str());
-  if (!comparison.reference->gates.passed())
-    std::printf("%s: no ranking of the methods\n",
-                comparison.reference->gates.whyNotPassed().c_str());
+  const ReferenceGates& gates = comparison.reference->gates;
+  if (!gates.passed())
+    std::printf("%s: no ranking of the methods\n", gates.whyNotPassed().c_str());
+  else if (!gates.rankedPosesText().empty())
+    std::printf("the methods are %s\n", gates.rankedPosesText().c_str());
 }
 
 void compare(CompareArgs& args) {

@@ -409,6 +409,8 @@ std::vector<std::pair<std::string, std::string>> referenceNotes(const nlohmann::
   if (!judged.passed())
     notes.emplace_back(judged.whyNotPassed() + ": no ranking (report.md, Reference)",
                        judged.failed() ? "#b00000" : "#606060");
+  else if (!judged.stopped.empty())
+    notes.emplace_back(judged.rankedPosesText(), "#606060");
   if (!gates.value("excluded", std::string()).empty())
     notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");
   return notes;
@@ -587,16 +589,18 @@ std::string table1(const nlohmann::json& runs) {
   return out.str();
 }
 
-/// Each method family's best run by `key` (ascending), for the ranking.
+/// Each method family's best rankable run (over `rankedPoses`, rankable) by `key` (ascending),
+/// for the ranking.
 std::vector<std::pair<double, const nlohmann::json*>> bestPerFamily(const nlohmann::json& runs,
-                                                                    const char* key) {
+                                                                    const char* key,
+                                                                    int rankedPoses = 0) {
   std::map<std::string, std::pair<double, const nlohmann::json*>> best;
   for (const auto& run : runs) {
     const double error = number(run, key);
     const std::string method = text(run, "method");
-    const bool whole = !run.value("nan", false) && !run.value("exploded", false) &&
-                       !run.value("interrupted", false);
-    if (!std::isfinite(error) || roleOf(method) == MethodRole::Reference || !whole) continue;
+    if (!std::isfinite(error) || roleOf(method) == MethodRole::Reference ||
+        !rankable(run, rankedPoses))
+      continue;
     const std::string family = method.substr(0, method.find(':'));
     auto [it, added] = best.try_emplace(family, error, &run);
     if (!added && error < it->second.first) it->second = {error, &run};
@@ -606,6 +610,32 @@ std::vector<std::pair<double, const nlohmann::json*>> bestPerFamily(const nlohma
   std::sort(ranked.begin(), ranked.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
   return ranked;
+}
+
+/// The reference's poses for report.md: a line per pose ccx did not solve (those from where it
+/// stopped the reference and those past a continuum cut are said once, in the gates' lines),
+/// then "Poses solved: k/N" and how many of the others were excluded or not solved.
+std::string referencePoses(const nlohmann::json& reference, const ReferenceGates& gates) {
+  std::ostringstream out;
+  int solved = 0, poses = 0, excluded = 0, stopped = 0;
+  for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
+    ++poses;
+    if (pose.value("solved", false))
+      ++solved;
+    else if (!pose.value("excluded", std::string()).empty())
+      ++excluded;
+    else if (!gates.stopped.empty())
+      ++stopped;
+    else
+      out << "- pose " << poses - 1 << " not solved: " << pose.value("failure", std::string())
+          << "\n";
+  }
+  out << "Poses solved: " << solved << "/" << poses;
+  if (excluded > 0) out << " (" << excluded << " excluded: no continuum equilibrium, see below)";
+  if (stopped > 0)
+    out << " (" << stopped << " not solved: ccx stopped at pose " << gates.solvedPoses
+        << ", see below)";
+  return out.str();
 }
 
 /// The "Reference" section: what the reference is, its poses, gates, and the ranking or why
@@ -634,27 +664,13 @@ std::string referenceSection(const nlohmann::json& summary) {
     out << "**One problem for all:** the scene collides its muscles with each other and the "
            "reference does not, so every method below ran without muscle–muscle contact (`"
         << kNoMuscleContact << "`; btSoftBody without soft–soft collision).\n\n";
-  int solved = 0, poses = 0, excluded = 0;
-  for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
-    ++poses;
-    if (pose.value("solved", false))
-      ++solved;
-    else if (!pose.value("excluded", std::string()).empty())
-      ++excluded;  // said once, in the gates' "excluded" line
-    else
-      out << "- pose " << poses - 1 << " not solved: " << pose.value("failure", std::string())
-          << "\n";
-  }
-  out << "Poses solved: " << solved << "/" << poses
-      << (excluded > 0
-              ? " (" + std::to_string(excluded) + " excluded: no continuum equilibrium, see below)"
-              : std::string())
-      << " (" << (reference.value("from_cache", false) ? "from the cache" : "solved by this run")
-      << ", " << cell(reference.value("seconds", nlohmann::json())) << " s of tetgen and ccx; "
+  const ReferenceGates gates = gatesFromJson(reference.value("gates", nlohmann::json::object()));
+  out << referencePoses(reference, gates) << " ("
+      << (reference.value("from_cache", false) ? "from the cache" : "solved by this run") << ", "
+      << cell(reference.value("seconds", nlohmann::json())) << " s of tetgen and ccx; "
       << reference.value("newton_iterations", 0) << " Newton iterations in "
       << reference.value("increments", 0) << " increments; cache key "
       << reference.value("key", std::string()) << ").\n\nGates:\n\n";
-  const ReferenceGates gates = gatesFromJson(reference.value("gates", nlohmann::json::object()));
   for (const std::string& line : gateLines(gates)) out << "- " << line << "\n";
   const char* key = "rms_to_reference_mm";
   if (!gates.passed()) {
@@ -666,9 +682,10 @@ std::string referenceSection(const nlohmann::json& summary) {
     return out.str();
   }
   out << "\n**Ranking** by each method's best RMS to the reference over the runs that finished "
-         "every pose (the plot shows what each point costs):\n\n";
+         "every pose it covers"
+      << rankedPosesNote(reference) << " (the plot shows what each point costs):\n\n";
   int rank = 0;
-  for (const auto& [error, run] : bestPerFamily(summary["runs"], key))
+  for (const auto& [error, run] : bestPerFamily(summary["runs"], key, rankedPoses(reference)))
     out << ++rank << ". " << text(*run, "method") << ": " << cell(error) << " mm at "
         << cell(number(*run, "ms_per_step")) << " ms per pose (" << threadsText(*run) << ")\n";
   return out.str();

@@ -142,6 +142,32 @@ bool returnsToRest(const LoadedScene& scene) {
   return true;
 }
 
+/// The reference's own failures into `gates`. Where ccx stopped it at a pose after its retry
+/// at kFinerIncrements (not interrupted nor on its memory limit), the stop is `stopped`, not a
+/// failure, and the return gate does not apply (the motion's end was not reached); where the
+/// motion does not return to rest and ccx failed only the steps added back to it, the return
+/// gate does not apply; any other is a failure.
+void referenceFailures(const LoadedScene& scene, const CalculixSolution& solution, bool retried,
+                       ReferenceGates& gates) {
+  const size_t stop = static_cast<size_t>(solution.solvedPoses());
+  CalculixSolution failed = solution;  // what is left of its failures
+  if (retried && stop < solution.poseFailures.size() && !solution.poseFailures[stop].empty() &&
+      !ccxFailureToRetry(solution).empty()) {
+    gates.stopped = solution.poseFailures[stop];
+    gates.returnNotApplicable =
+        "ccx stopped the reference at pose " + std::to_string(stop) + ", before the motion's end";
+    failed.poseFailures.assign(solution.poseFailures.size(), "");
+    failed.returnFailure.clear();
+  } else if (solution.returnSurface.empty() && !solution.returnFailure.empty() &&
+             !returnsToRest(scene)) {
+    gates.returnNotApplicable =
+        "the motion does not return to rest, and ccx did not solve the steps added back to it (" +
+        solution.returnFailure + ")";
+    failed.returnFailure.clear();
+  }
+  gates.failures = failures(failed, "reference");
+}
+
 std::vector<btVector3> restSurfaces(const PreparedScene& prepared) {
   std::vector<btVector3> rest;
   for (const auto& muscle : prepared.muscles)
@@ -331,14 +357,27 @@ std::string ReferenceGates::whyNotPassed() const {
   if (passed()) return "";
   ReferenceGates gatesAlone = *this;  // the same gates with every pose solved
   gatesAlone.failures.clear();
+  gatesAlone.stopped.clear();
   std::vector<std::string> why;
   if (gatesAlone.failed()) why.push_back("the reference fails a gate");
-  if (!failures.empty()) why.push_back("ccx did not solve every pose of the reference");
+  if (!failures.empty()) why.push_back("ccx did not solve every pose the ranking needs");
+  if (stoppedTooSoon())
+    why.push_back("ccx stopped the reference at pose " + std::to_string(solvedPoses) + ", before " +
+                  std::to_string(kMinRankedPoses) + " poses to rank over");
   if (!gatesAlone.failed() && !gatesAlone.passed())
     why.push_back("the reference's gates were not computed");
   std::string text = why.front();
   for (size_t i = 1; i < why.size(); ++i) text += "; " + why[i];
   return text;
+}
+
+std::string ReferenceGates::rankedPosesText() const {
+  if (!passed() || solvedPoses >= poses) return "";
+  const std::string over = "ranked over poses 0\u2013" + std::to_string(solvedPoses - 1) + " of " +
+                           std::to_string(poses) + ": ";
+  if (stopped.empty()) return over + "the later ones have no continuum equilibrium";
+  return over + "ccx did not solve pose " + std::to_string(solvedPoses) + " (" + stopped +
+         ") or later";
 }
 
 std::string ccxFailureToRetry(const CalculixSolution& solution) {
@@ -435,16 +474,9 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   reference.fromCache = base.fromCache;
   const CalculixDefinition& definition = base.definition;
   const CalculixSolution& solution = reference.solution;
-  if (solution.returnSurface.empty() && !solution.returnFailure.empty() && !returnsToRest(scene)) {
-    reference.gates.returnNotApplicable =
-        "the motion does not return to rest, and ccx did not solve the steps added back to it (" +
-        solution.returnFailure + ")";
-    CalculixSolution forward = solution;
-    forward.returnFailure.clear();
-    reference.gates.failures = failures(forward, "reference");
-  } else {
-    reference.gates.failures = failures(solution, "reference");
-  }
+  referenceFailures(scene, solution,
+                    definition.incrementScale != resolved.definition.incrementScale,
+                    reference.gates);
   reference.gates.excluded = excludedPoses(solution);
   reference.gates.poses = static_cast<int>(solution.poseSurfaces.size());
   reference.gates.solvedPoses = solution.solvedPoses();
@@ -523,8 +555,10 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"attachment_low_poses", g.attachmentLowPoses},
             {"attachment_high_poses", g.attachmentHighPoses},
             {"failures", g.failures},
+            {"stopped", g.stopped},
             {"excluded", g.excluded},
-            {"passed", g.passed()}}},
+            {"passed", g.passed()},
+            {"ranked_poses", g.rankedPoses()}}},
           {"nodes", s.nodes},
           {"tetrahedra", s.elements},
           {"prescribed_nodes", s.prescribedNodes},
@@ -581,6 +615,14 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
   if (!g.excluded.empty())
     lines.push_back("excluded, not ccx failures (no RMS, gate or ranking covers them): " +
                     g.excluded);
+  if (!g.stopped.empty())
+    lines.push_back("ccx stopped the reference at pose " + std::to_string(g.solvedPoses) + " of " +
+                    std::to_string(g.poses) + ", after its retry at finer increments (" +
+                    g.stopped + "): " +
+                    (g.stoppedTooSoon() ? "too few poses to rank over, no ranking"
+                                        : "not a failure; every RMS, gate and ranking covers "
+                                          "poses 0\u2013" +
+                                              std::to_string(g.solvedPoses - 1)));
   if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
   return lines;
 }

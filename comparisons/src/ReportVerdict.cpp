@@ -28,12 +28,6 @@ std::string familyOf(const nlohmann::json& run) {
   return method.substr(0, method.find(':'));
 }
 
-/// A run that reached its last pose intact (a run stopped early is measured over fewer poses).
-bool whole(const nlohmann::json& run) {
-  return !run.value("nan", false) && !run.value("exploded", false) &&
-         !run.value("interrupted", false);
-}
-
 /// One accuracy measure: what it is called and the error it reads off a run (NaN: not measured).
 struct Measure {
   std::string name, unit;
@@ -92,15 +86,17 @@ struct Placed {
   bool operator<(const Placed& o) const { return std::tie(worst, sum) < std::tie(o.worst, o.sum); }
 };
 
-/// Every whole method run with all the measures, placed on each.
-std::vector<Placed> placedRuns(const nlohmann::json& runs, const std::vector<Measure>& measures) {
+/// Every rankable method run with all the measures (rankable over `rankedPoses`), placed on each.
+std::vector<Placed> placedRuns(const nlohmann::json& runs, const std::vector<Measure>& measures,
+                               int rankedPoses = 0) {
   std::vector<Placed> placed;
   for (const auto& run : runs) {
     Placed p{&run, {}};
     for (const Measure& m : measures) p.errors.push_back(m.error(run));
     const bool measured =
         std::all_of(p.errors.begin(), p.errors.end(), [](double e) { return std::isfinite(e); });
-    if (measured && whole(run) && runRole(run) != MethodRole::Reference) placed.push_back(p);
+    if (measured && rankable(run, rankedPoses) && runRole(run) != MethodRole::Reference)
+      placed.push_back(p);
   }
   for (Placed& p : placed)
     for (size_t m = 0; m < measures.size(); ++m) {
@@ -164,8 +160,8 @@ std::string msText(const nlohmann::json& run) {
 
 /// Two lines of the verdict on one basis: the most accurate run and the speed–accuracy front.
 std::string verdictOn(const std::string& basis, const nlohmann::json& runs,
-                      const std::vector<Measure>& measures) {
-  const std::vector<Placed> placed = placedRuns(runs, measures);
+                      const std::vector<Measure>& measures, int rankedPoses = 0) {
+  const std::vector<Placed> placed = placedRuns(runs, measures, rankedPoses);
   if (placed.empty())
     return "- **" + basis + "**: no run finished every pose with all its measures.\n";
   const Placed best = rankedFamilies(placed).front();
@@ -256,6 +252,16 @@ bool solverSetting(const std::string& key) {
 
 }  // namespace
 
+int rankedPoses(const nlohmann::json& reference) {
+  return gatesFromJson(reference.value("gates", nlohmann::json::object())).rankedPoses();
+}
+
+std::string rankedPosesNote(const nlohmann::json& reference) {
+  const std::string text =
+      gatesFromJson(reference.value("gates", nlohmann::json::object())).rankedPosesText();
+  return text.empty() ? "" : "; " + text;
+}
+
 ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   ReferenceGates g;
   g.returnMm = number(gates, "return_mm");
@@ -274,6 +280,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
   g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());
+  g.stopped = gates.value("stopped", std::string());
   g.excluded = gates.value("excluded", std::string());
   return g;
 }
@@ -314,8 +321,9 @@ std::string verdictSection(const nlohmann::json& summary) {
                          "; no gate needed)",
                      runs, exact);
   if (why.empty())
-    out +=
-        verdictOn("Against the CalculiX reference (every gate passes)", runs, {kReferenceMeasure});
+    out += verdictOn("Against the CalculiX reference (every gate passes" +
+                         rankedPosesNote(summary["reference"]) + ")",
+                     runs, {kReferenceMeasure}, rankedPoses(summary["reference"]));
   else if (exact.empty())
     out += "**No accuracy ranking on this scene**: " + why +
            ". Nothing is ranked; the distances to FibreMSS's own runs (self-reference, "

@@ -12,6 +12,13 @@ namespace fibremss {
 /// The gates as summary.json holds them (referenceJson's "gates").
 ReferenceGates gatesFromJson(const nlohmann::json& gates);
 
+/// The poses a ranking by a summary's reference covers (ReferenceGates::rankedPoses).
+int rankedPoses(const nlohmann::json& reference);
+
+/// "; ranked over poses 0–5 of 19: …" (ReferenceGates::rankedPosesText) for a summary's
+/// reference whose ranking covers fewer poses than the motion's; "" otherwise.
+std::string rankedPosesNote(const nlohmann::json& reference);
+
 /// Why the summary's CalculiX reference cannot rank the methods, in a few words ("" when it can:
 /// it is there and every gate passed): none in the summary, not in the cache, or
 /// ReferenceGates::whyNotPassed.

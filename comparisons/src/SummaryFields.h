@@ -26,4 +26,13 @@ inline MethodRole runRole(const nlohmann::json& run) {
   return roleOf(text(run, "method"));
 }
 
+/// Whether a run may be ranked: it reached its last pose intact, or it was stopped (its time
+/// budget) after every one of the `rankedPoses` a ranking by the reference covers (0: no such
+/// ranking), which its RMS to the reference then covers as every other run's does.
+inline bool rankable(const nlohmann::json& run, int rankedPoses) {
+  if (run.value("nan", false) || run.value("exploded", false)) return false;
+  return !run.value("interrupted", false) ||
+         (rankedPoses > 0 && number(run, "rms_to_reference_poses") >= rankedPoses);
+}
+
 }  // namespace fibremss

@@ -77,6 +77,10 @@ inline constexpr double kRefinementShareOfSpread = 1.0 / 3.0;
 /// fronts").
 inline constexpr double kIncrementGateFactor = 0.5;
 
+/// Poses a ranking needs at least: the first pose and one after it. A reference that ccx
+/// stops before its second pose (its first posed one) ranks nothing.
+inline constexpr int kMinRankedPoses = 2;
+
 /// The reference's gates. NaN where not computed.
 struct ReferenceGates {
   double returnMm = RunMetrics::kNone;  ///< RMS at rest after the motion, to the rest surface
@@ -99,7 +103,13 @@ struct ReferenceGates {
   /// Poses the reference itself solved: the refinement and increment gates pass only over all
   /// of them (a finer solve that stopped early has measured the easy poses alone).
   int solvedPoses = 0;
-  std::string failures;  ///< poses ccx did not finish, of the reference or a gate's solve
+  /// Poses ccx did not finish that block the ranking: of a gate's solve, or of the reference
+  /// where it did not stop as `stopped` says (interrupted, its memory limit, not retried yet).
+  std::string failures;
+  /// Why ccx stopped the reference at pose `solvedPoses` after its retry at kFinerIncrements
+  /// (ccx's reason there; "" : it did not stop). Not a failure where it solved at least
+  /// kMinRankedPoses poses: the gates, every RMS and the ranking cover the poses before it.
+  std::string stopped;
   /// Poses without a continuum equilibrium ("poses k to N-1 of N: why"; ContinuumCut): not
   /// solved, not failures; the RMS, the gates and the ranking cover the poses before them.
   std::string excluded;
@@ -115,12 +125,21 @@ struct ReferenceGates {
   }
   bool refinementPasses() const { return withinSpread(refinementMm, refinementPoses); }
   bool incrementsPass() const { return withinSpread(incrementsMm, incrementsPoses); }
+  /// ccx stopped the reference before kMinRankedPoses poses.
+  bool stoppedTooSoon() const { return !stopped.empty() && solvedPoses < kMinRankedPoses; }
   /// Every gate passed (the return gate where it applies) and every pose solved but those
-  /// excluded: rankings may be reported.
+  /// excluded and those from where ccx stopped the reference (at least kMinRankedPoses solved
+  /// before it): rankings may be reported.
   bool passed() const {
     return (returnPasses() || !returnNotApplicable.empty()) && refinementPasses() &&
-           incrementsPass() && failures.empty();
+           incrementsPass() && failures.empty() && !stoppedTooSoon();
   }
+  /// Poses the ranking covers, counted from the first: those the reference solved (0 where
+  /// nothing may be ranked).
+  int rankedPoses() const { return passed() ? solvedPoses : 0; }
+  /// "ranked over poses 0–5 of 19: ccx did not solve pose 6 (why) or later" where a ranking
+  /// covers fewer poses than the motion's (ccx stopped, or a continuum cut); "" otherwise.
+  std::string rankedPosesText() const;
   /// A gate computed and judged that does not pass, or a pose ccx did not solve. Neither this
   /// nor passed(): some gate was not computed (`--no-gates`, a stopped solve) or not judged.
   bool failed() const {
@@ -129,10 +148,11 @@ struct ReferenceGates {
     };
     return (!std::isnan(returnMm) && returnNotApplicable.empty() && !returnPasses()) ||
            judgedAndFails(refinementMm, refinementPasses()) ||
-           judgedAndFails(incrementsMm, incrementsPass()) || !failures.empty();
+           judgedAndFails(incrementsMm, incrementsPass()) || !failures.empty() || stoppedTooSoon();
   }
   /// Why nothing may be ranked against the reference ("" when passed()): that it fails a gate,
-  /// that ccx did not solve every pose, that its gates were not computed (those that apply).
+  /// that ccx failed a pose the ranking needs or stopped the reference too soon, that its gates
+  /// were not computed (those that apply).
   std::string whyNotPassed() const;
 };
 
