@@ -583,6 +583,21 @@ TEST(ReferenceGates, WhereCcxStoppedTheReferenceTheyRankOverThePosesBeforeIt) {
   EXPECT_FALSE(gates.passed());
   gates.refinementPoses = 6;
 
+  // A stated gate's solve that ccx stopped early: its figure covers fewer poses, and it is said,
+  // but the ranking does not wait on it.
+  gates.statedFailures =
+      "attachment distance x1.5 pose 2: muscle iliacus: *ERROR: increment "
+      "size smaller than minimum";
+  gates.attachmentHighPoses = 2;
+  EXPECT_TRUE(gates.passed()) << gates.whyNotPassed();
+  EXPECT_EQ(gates.rankedPoses(), 6);
+  const std::vector<std::string> stated = gateLines(gates);
+  EXPECT_TRUE(std::any_of(stated.begin(), stated.end(), [](const std::string& line) {
+    return line.find("stated gates") != std::string::npos &&
+           line.find("x1.5 pose 2") != std::string::npos;
+  }));
+  gates.statedFailures.clear();
+
   // Gates not computed: said so, not that ccx's stop blocks.
   gates.incrementsMm = RunMetrics::kNone;
   EXPECT_EQ(gates.whyNotPassed(), "the reference's gates were not computed");

@@ -280,6 +280,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.attachmentLowPoses = gates.value("attachment_low_poses", 0);
   g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());
+  g.statedFailures = gates.value("stated_failures", std::string());
   g.stopped = gates.value("stopped", std::string());
   g.excluded = gates.value("excluded", std::string());
   return g;

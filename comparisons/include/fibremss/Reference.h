@@ -103,9 +103,14 @@ struct ReferenceGates {
   /// Poses the reference itself solved: the refinement and increment gates pass only over all
   /// of them (a finer solve that stopped early has measured the easy poses alone).
   int solvedPoses = 0;
-  /// Poses ccx did not finish that block the ranking: of a gate's solve, or of the reference
-  /// where it did not stop as `stopped` says (interrupted, its memory limit, not retried yet).
+  /// Poses ccx did not finish that block the ranking: of a judged gate's solve (increments,
+  /// refinement), or of the reference where it did not stop as `stopped` says (interrupted, its
+  /// memory limit, not retried yet).
   std::string failures;
+  /// Poses ccx did not finish in a stated gate's solve (the attachment distance × 0.5 / × 1.5):
+  /// its figure covers the poses before them (attachmentLowPoses, attachmentHighPoses); they do
+  /// not block the ranking.
+  std::string statedFailures;
   /// Why ccx stopped the reference at pose `solvedPoses` after its retry at kFinerIncrements
   /// (ccx's reason there; "" : it did not stop). Not a failure where it solved at least
   /// kMinRankedPoses poses: the gates, every RMS and the ranking cover the poses before it.
