@@ -142,8 +142,17 @@ void ship(const LoadedScene& scene, const PreparedScene& prepared, const Referen
     if (!loadStoredSolution(cacheDir, cell.key, solution)) {
       if (cell.solve == "reference")
         throw std::runtime_error("the reference solve " + cell.key + " is not stored");
-      solves.push_back({{"solve", cell.solve}, {"key", cell.key}, {"shipped", false}});
+      nlohmann::ordered_json unsolved = {
+          {"solve", cell.solve}, {"key", cell.key}, {"shipped", false}};
       std::printf("not shipped: %s (%s), not solved\n", cell.key.c_str(), cell.solve.c_str());
+      if (!cell.retryOf.empty() && loadStoredSolution(cacheDir, cell.retryOf, solution)) {
+        // The failed solve whole (the poses before its failure are its figure until the retry
+        // is solved), through which a fresh machine reaches the retry's key.
+        shipStored(args.shipDir, cell.retryOf, solution,
+                   cell.solve + ", failed; its retry not solved");
+        unsolved["retry_of"] = cell.retryOf;
+      }
+      solves.push_back(unsolved);
       continue;
     }
     shipStored(args.shipDir, cell.key, solution, cell.solve);
