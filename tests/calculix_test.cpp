@@ -620,6 +620,40 @@ TEST(ReferenceGates, AStopInTheFirstPosedPoseRanksNothing) {
             "gates were not computed");
 }
 
+TEST(ReferenceGates, WhereAJudgedGatesSolveStoppedEarlierTheyRankOverThePosesItSolved) {
+  ReferenceGates gates = stoppedAt(6);
+  gates.refinementPoses = 2;  // one level finer: ccx did not solve pose 2
+  EXPECT_FALSE(gates.passed()) << "a finer solve over the easy poses alone, not said";
+  gates.gatedPoses = 2;
+  gates.gateStop =
+      "one level finer pose 2: muscle iliacus: *ERROR: increment size smaller than "
+      "minimum";
+  EXPECT_TRUE(gates.passed()) << gates.whyNotPassed();
+  EXPECT_EQ(gates.rankedPoses(), 2);
+  EXPECT_EQ(gates.rankedPosesText(),
+            "ranked over poses 0\u20131 of 19: no judged gate covers pose 2 or later (ccx did not "
+            "solve it in the one level finer pose 2: muscle iliacus: *ERROR: increment size "
+            "smaller than minimum)");
+  const std::vector<std::string> lines = gateLines(gates);
+  EXPECT_NE(lines.back().find("covers poses 0\u20131"), std::string::npos) << lines.back();
+  EXPECT_TRUE(std::none_of(lines.begin(), lines.end(), [](const std::string& line) {
+    return line.find("covers poses 0\u20135") != std::string::npos;
+  })) << "the reference's own stop no longer sets what the ranking covers";
+
+  // The gate it stopped still has to pass over the poses it solved.
+  gates.refinementMm = 0.25;
+  EXPECT_FALSE(gates.passed());
+  EXPECT_EQ(gates.whyNotPassed(), "the reference fails a gate");
+  gates.refinementMm = 0.1;
+
+  // Stopped in the first posed pose: nothing to rank over.
+  gates.gatedPoses = gates.refinementPoses = 1;
+  EXPECT_FALSE(gates.passed());
+  EXPECT_TRUE(gates.failed());
+  EXPECT_EQ(gates.whyNotPassed(),
+            "ccx stopped a judged gate's solve at pose 1, before 2 poses to rank over");
+}
+
 TEST(ReferenceGates, IncrementsHalvedIsJudgedAsRefinementIsAndBlocksTheRanking) {
   // Every other gate passes: the increment gate alone decides.
   ReferenceGates gates;

@@ -996,6 +996,24 @@ TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereve
   EXPECT_NE(readFile(out / "speed_vs_error.gp").find(ranked), std::string::npos)
       << "the plot's note";
 
+  // The one-level-finer solve stopped at pose 2: the ranking covers poses 0-1, read back from
+  // the summary's gates.
+  summary["reference"]["gates"]["refinement_poses"] = 2;
+  summary["reference"]["gates"]["gated_poses"] = 2;
+  summary["reference"]["gates"]["gate_stop"] = "one level finer pose 2: " + why;
+  writeComparison(summary, out.string());
+  const std::string gated = readFile(out / "report.md");
+  EXPECT_NE(verdictOf(gated).find("ranked over poses 0\u20131 of 19: no judged gate covers pose "
+                                  "2 or later (ccx did not solve it in the one level finer pose 2"),
+            std::string::npos)
+      << verdictOf(gated);
+  summary["reference"]["gates"].erase("gated_poses");
+  writeComparison(summary, out.string());
+  EXPECT_NE(verdictOf(readFile(out / "report.md")).find("the reference fails a gate"),
+            std::string::npos)
+      << "without the stop said, a finer solve over fewer poses fails its gate";
+  summary["reference"]["gates"]["refinement_poses"] = 6;
+
   // Stopped in the first posed pose: nothing to rank over.
   summary["reference"]["gates"]["solved_poses"] =
       summary["reference"]["gates"]["refinement_poses"] =

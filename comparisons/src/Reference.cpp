@@ -176,11 +176,11 @@ std::vector<btVector3> restSurfaces(const PreparedScene& prepared) {
   return rest;
 }
 
-/// The reference as a run: its solved poses' surfaces, penetration into the bones' true
-/// meshes (it has no contact), volume change at the last solved pose.
+/// The reference as a run: its solved poses' surfaces up to `gatedPoses`, penetration into the
+/// bones' true meshes (it has no contact), volume change at the last solved pose.
 RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepared,
-                            const CalculixSolution& solution,
-                            const CalculixDefinition& definition) {
+                            const CalculixSolution& solution, const CalculixDefinition& definition,
+                            int gatedPoses) {
   RunMetrics metrics;
   metrics.scene = scene.name;
   metrics.method = kReferenceMethod;
@@ -190,7 +190,7 @@ RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepa
   metrics.particles = solution.nodes;
   metrics.springs = solution.elements;
   metrics.poses = static_cast<int>(solution.poseSurfaces.size());
-  metrics.steps = solution.solvedPoses();
+  metrics.steps = std::min(solution.solvedPoses(), gatedPoses);
   metrics.iterations = solution.newtonIterations;
   metrics.wallSeconds = solution.seconds;
   if (metrics.steps > 0) metrics.msPerStep = 1000 * solution.seconds / metrics.poses;
@@ -244,20 +244,42 @@ void solveGateCells(const LoadedScene& scene, const PreparedScene& prepared, Sce
                      options.jobs);
 }
 
+/// A gate's solve and where its figures go.
+struct Gate {
+  const CalculixDefinition* definition;
+  const char* name;
+  double* mm;
+  int* poses;
+  double* scale;          ///< where to keep the increments it was solved at (nullptr: nowhere)
+  std::string* failures;  ///< where its unsolved poses go: blocking or stated (statedFailures)
+};
+
+/// Where ccx failed a pose the reference solved in a judged gate's solve (not interrupted nor
+/// on its memory limit), the gates stop there (ReferenceGates::gatedPoses, gateStop): the
+/// reference past it is not gated, and no RMS or ranking covers it. False (a failure) otherwise.
+bool stopsTheGates(const CalculixSolution& reference, const Solve& solve,
+                   const CalculixDefinition& asked, const Gate& gate, ReferenceGates& gates) {
+  const CalculixSolution& solution = solve.solution;
+  const int stop = solution.solvedPoses();
+  if (gate.failures != &gates.failures || stop >= reference.solvedPoses() ||
+      ccxFailureToRetry(solution).empty())
+    return false;
+  if (gates.gatedPoses >= 0 && gates.gatedPoses <= stop) return true;
+  gates.gatedPoses = stop;
+  gates.gateStop = std::string(gate.name) + " pose " + std::to_string(stop) + ": " +
+                   solution.poseFailures[static_cast<size_t>(stop)] +
+                   (solve.definition.incrementScale == asked.incrementScale
+                        ? " (its retry at finer increments not computed)"
+                        : "");
+  return true;
+}
+
 /// The gate solves (gateDefinitions) against `base`, cheapest first.
 void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
                 const ReferenceOptions& options, const Solve& base, ReferenceGates& gates) {
   const GateDefinitions definitions =
       gateDefinitions(base.definition, gatePoseLimit(base.solution));
   gates.refinedBy = definitions.refinedBy;
-  struct Gate {
-    const CalculixDefinition* definition;
-    const char* name;
-    double* mm;
-    int* poses;
-    double* scale;          ///< where to keep the increments it was solved at (nullptr: nowhere)
-    std::string* failures;  ///< where its unsolved poses go: blocking or stated (statedFailures)
-  };
   const auto solves = gateSolves(definitions);
   const Gate variants[] = {{&solves[0].second, solves[0].first.c_str(), &gates.attachmentLowMm,
                             &gates.attachmentLowPoses, nullptr, &gates.statedFailures},
@@ -277,8 +299,10 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
     *gate.poses = std::min(base.solution.solvedPoses(), solution.solvedPoses());
     // Retried at finer increments where ccx failed it: say what it was solved at.
     if (gate.scale) *gate.scale = solve.definition.incrementScale;
-    const std::string more = failures(solution, gate.name);
-    if (!more.empty()) *gate.failures += (gate.failures->empty() ? "" : "; ") + more;
+    if (!stopsTheGates(base.solution, solve, *gate.definition, gate, gates)) {
+      const std::string more = failures(solution, gate.name);
+      if (!more.empty()) *gate.failures += (gate.failures->empty() ? "" : "; ") + more;
+    }
     // With more material attached, its cut can come earlier (pinch x1.5: at pose 1).
     if (solution.cut.pose != base.solution.cut.pose)
       gates.excluded += (gates.excluded.empty() ? "" : "; ") + std::string(gate.name) + ": " +
@@ -359,11 +383,15 @@ std::string ReferenceGates::whyNotPassed() const {
   ReferenceGates gatesAlone = *this;  // the same gates with every pose solved
   gatesAlone.failures.clear();
   gatesAlone.stopped.clear();
+  gatesAlone.solvedPoses = gateablePoses();
+  gatesAlone.gatedPoses = -1;
   std::vector<std::string> why;
   if (gatesAlone.failed()) why.push_back("the reference fails a gate");
   if (!failures.empty()) why.push_back("ccx did not solve every pose the ranking needs");
   if (stoppedTooSoon())
-    why.push_back("ccx stopped the reference at pose " + std::to_string(solvedPoses) + ", before " +
+    why.push_back(std::string("ccx stopped ") +
+                  (gateablePoses() < solvedPoses ? "a judged gate's solve" : "the reference") +
+                  " at pose " + std::to_string(gateablePoses()) + ", before " +
                   std::to_string(kMinRankedPoses) + " poses to rank over");
   if (!gatesAlone.failed() && !gatesAlone.passed())
     why.push_back("the reference's gates were not computed");
@@ -373,9 +401,13 @@ std::string ReferenceGates::whyNotPassed() const {
 }
 
 std::string ReferenceGates::rankedPosesText() const {
-  if (!passed() || solvedPoses >= poses) return "";
-  const std::string over = "ranked over poses 0\u2013" + std::to_string(solvedPoses - 1) + " of " +
+  const int ranked = gateablePoses();
+  if (!passed() || ranked >= poses) return "";
+  const std::string over = "ranked over poses 0\u2013" + std::to_string(ranked - 1) + " of " +
                            std::to_string(poses) + ": ";
+  if (ranked < solvedPoses)
+    return over + "no judged gate covers pose " + std::to_string(ranked) +
+           " or later (ccx did not solve it in the " + gateStop + ")";
   if (stopped.empty()) return over + "the later ones have no continuum equilibrium";
   return over + "ccx did not solve pose " + std::to_string(solvedPoses) + " (" + stopped +
          ") or later";
@@ -485,7 +517,8 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
     reference.gates.returnMm = rmsDistanceMm(solution.returnSurface, restSurfaces(prepared));
   if (options.gates && !(options.cancel && options.cancel->load()))
     solveGates(scene, prepared, cuts, resolved, base, reference.gates);
-  reference.metrics = referenceMetrics(scene, prepared, solution, definition);
+  reference.metrics =
+      referenceMetrics(scene, prepared, solution, definition, reference.gates.gateablePoses());
   std::ostringstream description;
   description << "CalculiX (" << calculixVersion(definition.program)
               << ") static equilibrium per pose, "
@@ -558,6 +591,8 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"failures", g.failures},
             {"stated_failures", g.statedFailures},
             {"stopped", g.stopped},
+            {"gated_poses", g.gatedPoses},
+            {"gate_stop", g.gateStop},
             {"excluded", g.excluded},
             {"passed", g.passed()},
             {"ranked_poses", g.rankedPoses()}}},
@@ -600,7 +635,7 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
           " (passes when below a third of the spread between the methods: needs a comparison)");
     return " against a third of the methods' spread " + mm(g.spreadMm / 3) + ": " +
            (g.withinSpread(moved, compared) ? "passes"
-            : compared < g.solvedPoses      ? "FAILS (over fewer poses than the reference solved)"
+            : compared < g.gateablePoses()  ? "FAILS (over fewer poses than the reference solved)"
                                             : "FAILS");
   };
   lines.push_back("one level finer (" + (g.refinedBy.empty() ? "\u2014" : g.refinedBy) +
@@ -623,13 +658,20 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
     lines.push_back("excluded, not ccx failures (no RMS, gate or ranking covers them): " +
                     g.excluded);
   if (!g.stopped.empty())
-    lines.push_back("ccx stopped the reference at pose " + std::to_string(g.solvedPoses) + " of " +
-                    std::to_string(g.poses) + ", after its retry at finer increments (" +
-                    g.stopped + "): " +
-                    (g.stoppedTooSoon() ? "too few poses to rank over, no ranking"
-                                        : "not a failure; every RMS, gate and ranking covers "
-                                          "poses 0\u2013" +
-                                              std::to_string(g.solvedPoses - 1)));
+    lines.push_back(
+        "ccx stopped the reference at pose " + std::to_string(g.solvedPoses) + " of " +
+        std::to_string(g.poses) + ", after its retry at finer increments (" + g.stopped + "): " +
+        (g.solvedPoses < kMinRankedPoses ? std::string("too few poses to rank over, no ranking")
+         : g.gatedPoses >= 0             ? std::string("not a failure")
+                                         : "not a failure; every RMS, gate and ranking covers "
+                                           "poses 0\u2013" +
+                                   std::to_string(g.solvedPoses - 1)));
+  if (g.gatedPoses >= 0)
+    lines.push_back("a judged gate's solve stopped before the reference (" + g.gateStop + "): " +
+                    (g.gatedPoses < kMinRankedPoses
+                         ? std::string("too few poses to rank over, no ranking")
+                         : "every RMS, gate and ranking covers poses 0\u2013" +
+                               std::to_string(g.gatedPoses - 1)));
   if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
   return lines;
 }

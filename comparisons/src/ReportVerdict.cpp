@@ -282,6 +282,8 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.failures = gates.value("failures", std::string());
   g.statedFailures = gates.value("stated_failures", std::string());
   g.stopped = gates.value("stopped", std::string());
+  g.gatedPoses = gates.value("gated_poses", -1);
+  g.gateStop = gates.value("gate_stop", std::string());
   g.excluded = gates.value("excluded", std::string());
   return g;
 }

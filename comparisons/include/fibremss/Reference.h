@@ -2,6 +2,7 @@
 // The CalculiX reference as `reference` and `compare` use it: the cached solve, its gates
 // (return to rest, mesh refinement, increments halved, attachment distance ±50 %) and its
 // metrics as a run.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <functional>
@@ -100,9 +101,15 @@ struct ReferenceGates {
   /// over fewer poses than the motion's says so.
   int poses = 0;
   int refinementPoses = 0, incrementsPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
-  /// Poses the reference itself solved: the refinement and increment gates pass only over all
-  /// of them (a finer solve that stopped early has measured the easy poses alone).
+  /// Poses the reference itself solved.
   int solvedPoses = 0;
+  /// Poses the judged gates' solves (increments, refinement) solved where ccx failed a pose of
+  /// theirs the reference solved (their retry at finer increments failed or was not computed):
+  /// no judged gate vouches for the reference past them, so every RMS, gate and ranking covers
+  /// only these; -1 : no judged gate stopped before the reference.
+  int gatedPoses = -1;
+  /// Where gatedPoses is set: the gate's solve and ccx's reason at pose gatedPoses.
+  std::string gateStop;
   /// Poses ccx did not finish that block the ranking: of a judged gate's solve (increments,
   /// refinement), or of the reference where it did not stop as `stopped` says (interrupted, its
   /// memory limit, not retried yet).
@@ -123,27 +130,35 @@ struct ReferenceGates {
   double spreadMm = RunMetrics::kNone;
 
   bool returnPasses() const { return returnMm <= kReturnGateMm; }
+  /// Poses the gates may vouch for: those the reference solved, up to gatedPoses.
+  int gateablePoses() const {
+    return gatedPoses < 0 ? solvedPoses : std::min(solvedPoses, gatedPoses);
+  }
   /// Whether a solve that moved the reference by `mm` over `compared` poses passes: below a
-  /// third of the spread, over every pose the reference solved.
+  /// third of the spread, over every gateable pose (a finer solve that stopped early without
+  /// saying so has measured the easy poses alone).
   bool withinSpread(double mm, int compared) const {
-    return mm < kRefinementShareOfSpread * spreadMm && compared >= solvedPoses;
+    return mm < kRefinementShareOfSpread * spreadMm && compared >= gateablePoses();
   }
   bool refinementPasses() const { return withinSpread(refinementMm, refinementPoses); }
   bool incrementsPass() const { return withinSpread(incrementsMm, incrementsPoses); }
-  /// ccx stopped the reference before kMinRankedPoses poses.
-  bool stoppedTooSoon() const { return !stopped.empty() && solvedPoses < kMinRankedPoses; }
+  /// ccx stopped the reference, or a judged gate's solve, before kMinRankedPoses poses.
+  bool stoppedTooSoon() const {
+    return (!stopped.empty() || gatedPoses >= 0) && gateablePoses() < kMinRankedPoses;
+  }
   /// Every gate passed (the return gate where it applies) and every pose solved but those
-  /// excluded and those from where ccx stopped the reference (at least kMinRankedPoses solved
-  /// before it): rankings may be reported.
+  /// excluded and those from where ccx stopped the reference or a judged gate's solve (at least
+  /// kMinRankedPoses solved before it): rankings may be reported.
   bool passed() const {
     return (returnPasses() || !returnNotApplicable.empty()) && refinementPasses() &&
            incrementsPass() && failures.empty() && !stoppedTooSoon();
   }
-  /// Poses the ranking covers, counted from the first: those the reference solved (0 where
-  /// nothing may be ranked).
-  int rankedPoses() const { return passed() ? solvedPoses : 0; }
+  /// Poses the ranking covers, counted from the first: the gateable ones (0 where nothing may
+  /// be ranked).
+  int rankedPoses() const { return passed() ? gateablePoses() : 0; }
   /// "ranked over poses 0–5 of 19: ccx did not solve pose 6 (why) or later" where a ranking
-  /// covers fewer poses than the motion's (ccx stopped, or a continuum cut); "" otherwise.
+  /// covers fewer poses than the motion's (ccx stopped the reference or a judged gate's solve,
+  /// or a continuum cut); "" otherwise.
   std::string rankedPosesText() const;
   /// A gate computed and judged that does not pass, or a pose ccx did not solve. Neither this
   /// nor passed(): some gate was not computed (`--no-gates`, a stopped solve) or not judged.
