@@ -7,6 +7,7 @@
 #include <map>
 #include <sstream>
 
+#include "TextList.h"
 #include "fibremss/Analytic.h"
 #include "fibremss/Compare.h"
 #include "fibremss/Measures.h"
@@ -115,10 +116,9 @@ std::string failures(const CalculixSolution& solution, const std::string& what) 
   std::string text;
   for (size_t p = 0; p < solution.poseFailures.size(); ++p)
     if (!solution.poseFailures[p].empty())
-      text += (text.empty() ? "" : "; ") + what + " pose " + std::to_string(p) + ": " +
-              solution.poseFailures[p];
+      appendItem(text, what + " pose " + std::to_string(p) + ": " + solution.poseFailures[p]);
   if (!solution.returnFailure.empty())
-    text += (text.empty() ? "" : "; ") + what + " return to rest: " + solution.returnFailure;
+    appendItem(text, what + " return to rest: " + solution.returnFailure);
   return text;
 }
 
@@ -301,12 +301,11 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
     if (gate.scale) *gate.scale = solve.definition.incrementScale;
     if (!stopsTheGates(base.solution, solve, *gate.definition, gate, gates)) {
       const std::string more = failures(solution, gate.name);
-      if (!more.empty()) *gate.failures += (gate.failures->empty() ? "" : "; ") + more;
+      if (!more.empty()) appendItem(*gate.failures, more);
     }
     // With more material attached, its cut can come earlier (pinch x1.5: at pose 1).
     if (solution.cut.pose != base.solution.cut.pose)
-      gates.excluded += (gates.excluded.empty() ? "" : "; ") + std::string(gate.name) + ": " +
-                        excludedPoses(solution);
+      appendItem(gates.excluded, std::string(gate.name) + ": " + excludedPoses(solution));
   }
 }
 
@@ -395,8 +394,8 @@ std::string ReferenceGates::whyNotPassed() const {
                   std::to_string(kMinRankedPoses) + " poses to rank over");
   if (!gatesAlone.failed() && !gatesAlone.passed())
     why.push_back("the reference's gates were not computed");
-  std::string text = why.front();
-  for (size_t i = 1; i < why.size(); ++i) text += "; " + why[i];
+  std::string text;
+  for (const std::string& reason : why) appendItem(text, reason);
   return text;
 }
 

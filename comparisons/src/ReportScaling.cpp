@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "SummaryFields.h"
+#include "TextList.h"
 
 namespace fibremss {
 namespace {
@@ -96,7 +97,7 @@ std::optional<SoftBodyRatio> againstSoftBody(const nlohmann::json& runs,
     r.of = std::max(run.value("poses", 0), softBody.value("poses", 0));
     r.poses = std::min({run.value("steps", 0), softBody.value("steps", 0), r.of});
     for (const std::string& reason : {stopReason(run), stopReason(softBody)})
-      if (!reason.empty()) r.stopped += (r.stopped.empty() ? "" : "; ") + reason;
+      if (!reason.empty()) appendItem(r.stopped, reason);
     return r;
   }
   return std::nullopt;

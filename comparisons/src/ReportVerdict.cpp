@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "SummaryFields.h"
+#include "TextList.h"
 #include "fibremss/Methods.h"
 #include "fibremss/SolverSettings.h"
 
@@ -167,8 +168,8 @@ std::string verdictOn(const std::string& basis, const nlohmann::json& runs,
   const Placed best = rankedFamilies(placed).front();
   std::string front;
   for (const Placed& p : speedFront(placed))
-    front += (front.empty() ? "" : "; ") + text(*p.run, "method") + " (" + msText(*p.run) + ", " +
-             errorsText(measures, p.errors) + ")";
+    appendItem(front, text(*p.run, "method") + " (" + msText(*p.run) + ", " +
+                          errorsText(measures, p.errors) + ")");
   return "- **" + basis + "**: most accurate **" + text(*best.run, "method") + "** (" +
          errorsText(measures, best.errors) + ", " + msText(*best.run) +
          ").\n- Most accurate per millisecond (no other run is as fast and at least as accurate "
