@@ -160,8 +160,7 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
       }
 }
 
-const float* RestDistanceGrid::block(int32_t i, int32_t j, int32_t k) {
-  const int32_t bi = i / kBlock, bj = j / kBlock, bk = k / kBlock;
+const float* RestDistanceGrid::block(int32_t bi, int32_t bj, int32_t bk) {
   int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
   if (slot < 0) {
     slot = int32_t(values_.size() / (kBlock * kBlock * kBlock));
@@ -170,30 +169,28 @@ const float* RestDistanceGrid::block(int32_t i, int32_t j, int32_t k) {
   return values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
 }
 
-btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
-  return block(i, j, k)[i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock))];
-}
-
 btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
   const btVector3 u = (x - frame_.origin) / frame_.spacing;
-  std::array<int32_t, 3> base;
+  // Per axis: the cell's lower and upper points' blocks and places within them.
+  std::array<std::array<int32_t, 2>, 3> blockOf, placeIn;
   btScalar t[3];
-  bool oneBlock = true;  // the cell's 8 points in one block
+  unsigned crossing = 0;  // bit a: the cell's upper points along axis a lie in the next block
   for (int a = 0; a < 3; ++a) {
     if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
-    base[a] = int32_t(u[a]);
-    t[a] = u[a] - btScalar(base[a]);
-    oneBlock = oneBlock && base[a] % kBlock != kBlock - 1;
+    const auto base = int32_t(u[a]);
+    t[a] = u[a] - btScalar(base);
+    blockOf[a] = {base / kBlock, (base + 1) / kBlock};
+    placeIn[a] = {base % kBlock, (base + 1) % kBlock};
+    crossing |= unsigned(blockOf[a][0] != blockOf[a][1]) << a;
   }
-  const float* values = oneBlock ? block(base[0], base[1], base[2]) : nullptr;
-  const int32_t first =
-      base[0] % kBlock + kBlock * (base[1] % kBlock + kBlock * (base[2] % kBlock));
+  std::array<const float*, 8> values;  // per corner: its block's values
   btScalar sum = 0;
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+  for (unsigned c = 0; c < 8; ++c) {
+    const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    values[c] = (c & crossing) == c ? block(blockOf[0][dx], blockOf[1][dy], blockOf[2][dz])
+                                    : values[c & crossing];
     const btScalar w = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) * (dz ? t[2] : 1 - t[2]);
-    sum += w * (values ? values[first + dx + kBlock * (dy + kBlock * dz)]
-                       : value(base[0] + dx, base[1] + dy, base[2] + dz));
+    sum += w * values[c][placeIn[0][dx] + kBlock * (placeIn[1][dy] + kBlock * placeIn[2][dz])];
   }
   return sum;
 }

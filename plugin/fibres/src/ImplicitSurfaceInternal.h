@@ -54,9 +54,8 @@ class RestDistanceGrid {
   btScalar at(const btVector3& x, btScalar outsideValue);
 
  private:
-  /// The values of the block holding point (i, j, k), 4³ from its lower corner, x fastest.
-  const float* block(int32_t i, int32_t j, int32_t k);
-  btScalar value(int32_t i, int32_t j, int32_t k);
+  /// The values of block (bi, bj, bk), 4³ from its lower corner, x fastest.
+  const float* block(int32_t bi, int32_t bj, int32_t bk);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
 
   MeshDistance distance_;
