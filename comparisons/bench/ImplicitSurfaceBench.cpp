@@ -1,7 +1,9 @@
 // `fibremss_bench --implicit-surface R [ROUNDS]`: every thigh13 muscle's implicit surface
 // (ImplicitSurface.h) at rest: its distance to the skinned surface both ways (the skinned surface
 // at rest is the rest surface), its open edges and pieces, and the wall time of extracting them
-// all per frame with 1 and 2 threads, alternated, medians.
+// all per frame with 1 and 2 threads, alternated, medians; then posed: the scene stepped through
+// its first poses, the surfaces extracted after every step, and the last pose's extraction
+// timed as at rest.
 #include "ImplicitSurfaceBench.h"
 
 #include <algorithm>
@@ -13,6 +15,7 @@
 #include <vector>
 
 #include "fibremss/ImplicitSurface.h"
+#include "fibremss/MuscleSystem.h"
 #include "fibremss/Preparation.h"
 #include "fibremss/Scene.h"
 #include "fibremss/SceneSystem.h"
@@ -20,22 +23,61 @@
 namespace fibremss::bench {
 namespace {
 
+/// Steps of the posed frames, as `fibremss run thigh13 --steps 7`.
+constexpr int kPosedSteps = 7;
+
 double medianOf(std::vector<double> values) {
   std::sort(values.begin(), values.end());
   return values[values.size() / 2];
 }
 
-/// Sum and largest distance of the vertices of `from` to `to` [m], added to `sum`, `worst`.
-void addDistances(const TriangleMesh& from, const TriangleMesh& to, double& sum, double& worst) {
+/// The largest distance between two surfaces and where it is.
+struct Worst {
+  double distance = 0;        ///< [m]
+  btVector3 vertex{0, 0, 0};  ///< the vertex farthest from the other surface [m]
+  bool onSkinned = false;     ///< that vertex is the skinned surface's
+};
+
+/// Sum of the distances of the vertices of `from` to `to` [m], added to `sum`; the largest into
+/// `worst` when larger.
+void addDistances(const TriangleMesh& from, const TriangleMesh& to, bool fromSkinned, double& sum,
+                  Worst& worst) {
   const MeshDistance distance(to);
   for (const btVector3& v : from.vertices) {
     const double d = distance.closest(v).distance;
     sum += d;
-    worst = std::max(worst, d);
+    if (d > worst.distance) worst = {d, v, fromSkinned};
   }
 }
 
-/// Prints each muscle's distances, open edges and pieces, and the whole scene's.
+/// The distance from `x` to the muscle's nearest fixed particle at rest [m].
+double fixedDistance(const MuscleSettings& muscle, const btVector3& x) {
+  double nearest = SIMD_INFINITY;
+  for (uint32_t p : muscle.fixedParticles)
+    nearest = std::min(nearest, double((muscle.restPositions[p] - x).length()));
+  return nearest;
+}
+
+/// An FNV-1a hash of a mesh's vertex coordinates and triangles, bit for bit, continuing `hash`.
+uint64_t meshHash(const TriangleMesh& mesh, uint64_t hash) {
+  auto add = [&](const void* data, size_t bytes) {
+    for (size_t b = 0; b < bytes; ++b)
+      hash = (hash ^ static_cast<const unsigned char*>(data)[b]) * 1099511628211ull;
+  };
+  for (const btVector3& v : mesh.vertices) add(v.m_floats, 3 * sizeof(btScalar));
+  add(mesh.triangles.data(), mesh.triangles.size() * sizeof(mesh.triangles[0]));
+  return hash;
+}
+
+/// The hash of every surface's mesh in turn.
+uint64_t surfacesHash(const std::vector<ImplicitSurface>& surfaces) {
+  uint64_t hash = 14695981039346656037ull;
+  for (const ImplicitSurface& surface : surfaces) hash = meshHash(surface.mesh(), hash);
+  return hash;
+}
+
+/// Prints each muscle's distances (the worst vertex: whose, its distance from the nearest fixed
+/// particle), open edges and pieces, and the whole scene's.
 void accuracyReport(const PreparedScene& prepared, std::vector<ImplicitSurface>& surfaces) {
   double sum = 0, worst = 0;
   size_t count = 0, open = 0;
@@ -43,26 +85,29 @@ void accuracyReport(const PreparedScene& prepared, std::vector<ImplicitSurface>&
     const MuscleSettings& muscle = *prepared.muscles[m];
     surfaces[m].extract(muscle.restPositions);
     const TriangleMesh& mesh = surfaces[m].mesh();
-    double muscleSum = 0, muscleWorst = 0;
-    addDistances(mesh, muscle.restSurface, muscleSum, muscleWorst);
-    addDistances(muscle.restSurface, mesh, muscleSum, muscleWorst);
+    double muscleSum = 0;
+    Worst muscleWorst;
+    addDistances(mesh, muscle.restSurface, false, muscleSum, muscleWorst);
+    addDistances(muscle.restSurface, mesh, true, muscleSum, muscleWorst);
     const size_t vertices = mesh.vertices.size() + muscle.restSurface.vertices.size();
     const MeshTopology topology = meshTopology(mesh);
     std::printf(
-        "%-24s %7zu triangles, voxel %.2f mm, h %.2f mm: mean %.3f mm, worst %.3f mm, "
-        "open edges %zu, pieces %zu\n",
+        "%-24s %7zu triangles, voxel %.2f mm, h %.2f mm: mean %.3f mm, worst %.3f mm (a %s "
+        "vertex %.2f mm from a fixed particle), open edges %zu, pieces %zu\n",
         muscle.name.c_str(), mesh.triangles.size(), 1000 * surfaces[m].voxel(),
-        1000 * surfaces[m].kernelRadius(), 1000 * muscleSum / double(vertices), 1000 * muscleWorst,
-        topology.openEdges, topology.components);
+        1000 * surfaces[m].kernelRadius(), 1000 * muscleSum / double(vertices),
+        1000 * muscleWorst.distance, muscleWorst.onSkinned ? "skinned" : "implicit",
+        1000 * fixedDistance(muscle, muscleWorst.vertex), topology.openEdges, topology.components);
     sum += muscleSum;
     count += vertices;
-    worst = std::max(worst, muscleWorst);
+    worst = std::max(worst, muscleWorst.distance);
     open += topology.openEdges;
   }
   std::printf(
       "all muscles: mean %.3f mm, worst %.3f mm to the skinned surface (both ways), "
-      "open edges %zu\n",
-      1000 * sum / double(count), 1000 * worst, open);
+      "open edges %zu, meshes' hash %016llx\n",
+      1000 * sum / double(count), 1000 * worst, open,
+      static_cast<unsigned long long>(surfacesHash(surfaces)));
 }
 
 /// The process's CPU time [ms].
@@ -85,26 +130,20 @@ std::pair<double, double> frameMs(std::vector<ImplicitSurface*>& surfaces,
       cpuMs() - cpuStart};
 }
 
-}  // namespace
-
-int implicitSurfaceReport(int resolution, int rounds) {
-  const LoadedScene scene = loadScene("thigh13", {"resolution=" + std::to_string(resolution)});
-  const PreparedScene prepared = prepareScene(scene);
-  std::vector<ImplicitSurface> surfaces;
-  for (const auto& muscle : prepared.muscles) surfaces.emplace_back(muscle);
-  accuracyReport(prepared, surfaces);
-  std::vector<ImplicitSurface*> pointers;
+/// Every surface's pointer, positions and springs for extractSurfaces.
+struct Frame {
+  std::vector<ImplicitSurface*> surfaces;
   std::vector<std::span<const btVector3>> positions;
   std::vector<std::span<const Spring>> springs;
-  for (size_t m = 0; m < surfaces.size(); ++m) {
-    pointers.push_back(&surfaces[m]);
-    positions.push_back(prepared.muscles[m]->restPositions);
-    springs.push_back(prepared.muscles[m]->springs);
-  }
+};
+
+/// Medians over `rounds` alternated rounds of extracting `frame` on 1 and 2 threads, printed
+/// under `label` with the load.
+void timingReport(const char* label, Frame& frame, int rounds) {
   std::vector<double> one, two, cpuOne, cpuTwo;
   for (int round = 0; round < rounds; ++round) {
-    const auto [wallOne, cpuOneRound] = frameMs(pointers, positions, springs, 1);
-    const auto [wallTwo, cpuTwoRound] = frameMs(pointers, positions, springs, 2);
+    const auto [wallOne, cpuOneRound] = frameMs(frame.surfaces, frame.positions, frame.springs, 1);
+    const auto [wallTwo, cpuTwoRound] = frameMs(frame.surfaces, frame.positions, frame.springs, 2);
     one.push_back(wallOne);
     two.push_back(wallTwo);
     cpuOne.push_back(cpuOneRound);
@@ -114,10 +153,63 @@ int implicitSurfaceReport(int resolution, int rounds) {
   std::string load;
   std::getline(loadavg, load);
   std::printf(
-      "thigh13 R=%d, %d rounds, medians per frame: 1 thread %.2f ms (CPU %.2f ms), "
+      "%s, %d rounds, medians per frame: 1 thread %.2f ms (CPU %.2f ms), "
       "2 threads %.2f ms (CPU %.2f ms); load %s\n",
-      resolution, rounds, medianOf(one), medianOf(cpuOne), medianOf(two), medianOf(cpuTwo),
+      label, rounds, medianOf(one), medianOf(cpuOne), medianOf(two), medianOf(cpuTwo),
       load.c_str());
+}
+
+/// The scene stepped through its first `steps` poses (as `fibremss run`), every surface
+/// extracted after each step on 1 thread: CPU time per frame as it comes, pieces and open
+/// edges; then the last pose's extraction timed over `rounds` rounds.
+void posedReport(const LoadedScene& scene, const PreparedScene& prepared,
+                 std::vector<ImplicitSurface>& surfaces, int steps, int rounds) {
+  MuscleSystem system(scene.simulation);
+  const SceneHandles handles = addScene(system, prepared);
+  Frame frame;
+  for (size_t m = 0; m < surfaces.size(); ++m) frame.surfaces.push_back(&surfaces[m]);
+  for (int step = 0; step < steps; ++step) {
+    const int pose = std::min(step, scene.poseCount - 1);
+    for (size_t b = 0; b < handles.bones.size(); ++b)
+      system.setBoneTransform(handles.bones[b], scene.bonePose(b, pose));
+    system.step();
+    frame.positions.clear();
+    frame.springs.clear();
+    for (const MuscleHandle muscle : handles.muscles) {
+      frame.positions.push_back(system.positions(muscle));
+      frame.springs.push_back(system.settings(muscle).springs);
+    }
+    const double cpu = frameMs(frame.surfaces, frame.positions, frame.springs, 1).second;
+    size_t triangles = 0, open = 0, pieces = 0;
+    for (const ImplicitSurface& surface : surfaces) {
+      const MeshTopology topology = meshTopology(surface.mesh());
+      triangles += surface.mesh().triangles.size();
+      open += topology.openEdges;
+      pieces += topology.components;
+    }
+    std::printf("pose %d: CPU %.2f ms, %zu triangles, open edges %zu, pieces %zu, hash %016llx\n",
+                pose, cpu, triangles, open, pieces,
+                static_cast<unsigned long long>(surfacesHash(surfaces)));
+  }
+  timingReport(("thigh13 posed, pose " + std::to_string(steps - 1)).c_str(), frame, rounds);
+}
+
+}  // namespace
+
+int implicitSurfaceReport(int resolution, int rounds) {
+  const LoadedScene scene = loadScene("thigh13", {"resolution=" + std::to_string(resolution)});
+  const PreparedScene prepared = prepareScene(scene);
+  std::vector<ImplicitSurface> surfaces;
+  for (const auto& muscle : prepared.muscles) surfaces.emplace_back(muscle);
+  accuracyReport(prepared, surfaces);
+  Frame frame;
+  for (size_t m = 0; m < surfaces.size(); ++m) {
+    frame.surfaces.push_back(&surfaces[m]);
+    frame.positions.push_back(prepared.muscles[m]->restPositions);
+    frame.springs.push_back(prepared.muscles[m]->springs);
+  }
+  timingReport(("thigh13 R=" + std::to_string(resolution) + " at rest").c_str(), frame, rounds);
+  posedReport(scene, prepared, surfaces, kPosedSteps, rounds);
   return 0;
 }
 

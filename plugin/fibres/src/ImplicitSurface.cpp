@@ -62,20 +62,48 @@ TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
   return cut;
 }
 
-/// kCuts[t][inside]: cutOf(kTetrahedra[t], inside).
-const std::array<std::array<TetrahedronCut, 16>, 6> kCuts = [] {
-  std::array<std::array<TetrahedronCut, 16>, 6> cuts;
-  for (size_t t = 0; t < 6; ++t)
-    for (unsigned inside = 0; inside < 16; ++inside)
-      cuts[t][inside] = cutOf(kTetrahedra[t], inside);
+/// The surface's triangles in one cell for one set of inside corners (bit c: corner c), the
+/// six tetrahedra's cuts in order.
+struct CellCut {
+  int count = 0;  ///< triangles (0 to 12)
+  std::array<std::array<std::array<uint8_t, 2>, 3>, 12> edges{};
+};
+
+/// kCellCuts[inside]: the cell's triangles with the corners in bit set `inside` inside.
+const std::array<CellCut, 256> kCellCuts = [] {
+  std::array<CellCut, 256> cuts;
+  for (unsigned inside = 0; inside < 256; ++inside)
+    for (size_t t = 0; t < kTetrahedra.size(); ++t) {
+      unsigned tetInside = 0;
+      for (unsigned k = 0; k < 4; ++k) tetInside |= (inside >> kTetrahedra[t][k] & 1) << k;
+      const TetrahedronCut cut = cutOf(kTetrahedra[t], tetInside);
+      for (int n = 0; n < cut.count; ++n) {
+        auto& triangle = cuts[inside].edges[size_t(cuts[inside].count++)];
+        for (size_t k = 0; k < 3; ++k)
+          triangle[k] = {uint8_t(cut.edges[size_t(n)][k][0]), uint8_t(cut.edges[size_t(n)][k][1])};
+      }
+    }
   return cuts;
 }();
 
-/// Whether the values hold both signs (inside: > 0).
-bool mixed(std::span<const float> values) {
-  bool inside = false, outside = false;
-  for (float v : values) (v > 0 ? inside : outside) = true;
-  return inside && outside;
+/// The corners among `values` inside (value > 0), bit c for corner c.
+unsigned insideCorners(const std::array<float, 8>& values) {
+  unsigned inside = 0;
+  for (unsigned c = 0; c < 8; ++c) inside |= unsigned(values[c] > 0) << c;
+  return inside;
+}
+
+/// Whether the corners in `mask` hold both signs.
+bool mixed(unsigned inside, unsigned mask = 255) {
+  return (inside & mask) != 0 && (inside & mask) != mask;
+}
+
+/// The corners of the cell's face on side `side` of `axis`, as a bit set.
+constexpr unsigned faceCorners(int axis, int side) {
+  unsigned mask = 0;
+  for (int c = 0; c < 8; ++c)
+    if ((c >> axis & 1) == side) mask |= 1u << c;
+  return mask;
 }
 
 }  // namespace
@@ -105,20 +133,37 @@ void GridTable::take(size_t block) {
   taken_ += kPoints;
 }
 
-float ImplicitSurface::Impl::valueAt(int32_t i, int32_t j, int32_t k) {
-  GridEntry& e = table.at(i, j, k);
-  if (!e.known) {
-    e.value = float(field(i, j, k));
-    e.known = true;
+std::array<GridEntry*, 8> GridTable::corners(int32_t i, int32_t j, int32_t k) {
+  std::array<GridEntry*, 8> entries;
+  if ((i & 3) != 3 && (j & 3) != 3 && (k & 3) != 3) {  // the cell within one block
+    GridEntry* first = &at(i, j, k);
+    for (int c = 0; c < 8; ++c) entries[size_t(c)] = first + pointOf(c & 1, c >> 1 & 1, c >> 2 & 1);
+    return entries;
   }
-  return e.value;
+  // Every block taken before any pointer is made: a take may move the entries.
+  std::array<size_t, 8> blocks;
+  for (int c = 0; c < 8; ++c) {
+    blocks[size_t(c)] = blockOf(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1));
+    if (blockStamp_[blocks[size_t(c)]] != stamp_) take(blocks[size_t(c)]);
+  }
+  for (int c = 0; c < 8; ++c)
+    entries[size_t(c)] = &entries_[blockSlot_[blocks[size_t(c)]] +
+                                   pointOf(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1))];
+  return entries;
 }
 
-std::array<float, 8> ImplicitSurface::Impl::cornerValues(const std::array<int32_t, 3>& cell) {
-  std::array<float, 8> values;
-  for (int c = 0; c < 8; ++c)
-    values[c] = valueAt(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
-  return values;
+std::array<GridEntry*, 8> ImplicitSurface::Impl::cellCorners(const std::array<int32_t, 3>& cell,
+                                                             std::array<float, 8>& values) {
+  const std::array<GridEntry*, 8> corners = table.corners(cell[0], cell[1], cell[2]);
+  for (int c = 0; c < 8; ++c) {
+    GridEntry& e = *corners[size_t(c)];
+    if (!e.known) {
+      e.value = float(field(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1)));
+      e.known = true;
+    }
+    values[size_t(c)] = e.value;
+  }
+  return corners;
 }
 
 void ImplicitSurface::Impl::enqueue(const std::array<int32_t, 3>& cell) {
@@ -158,11 +203,15 @@ bool ImplicitSurface::Impl::seedFrom(uint32_t p) {
   for (int n = 0; n < 2 * ray.steps; ++n)
     if (probeCell(ray, n, cell) && table.at(cell[0], cell[1], cell[2]).queued) return false;
   // From the expected step alternately in and out: the first cell holding both signs.
-  for (int n = 0; n < 2 * ray.steps; ++n)
-    if (probeCell(ray, n, cell) && mixed(cornerValues(cell))) {
+  std::array<float, 8> values;
+  for (int n = 0; n < 2 * ray.steps; ++n) {
+    if (!probeCell(ray, n, cell)) continue;
+    cellCorners(cell, values);
+    if (mixed(insideCorners(values))) {
       enqueue(cell);
       return true;
     }
+  }
   return false;
 }
 
@@ -174,17 +223,15 @@ void ImplicitSurface::Impl::seedAndMarch() {
 void ImplicitSurface::Impl::march() {
   for (; marched < queue.size(); ++marched) {
     const std::array<int32_t, 3> cell = queue[marched];
-    const std::array<float, 8> values = cornerValues(cell);
-    if (!mixed(values)) continue;
-    polygonise(cell, values);
+    std::array<float, 8> values;
+    const std::array<GridEntry*, 8> corners = cellCorners(cell, values);
+    const unsigned inside = insideCorners(values);
+    if (!mixed(inside)) continue;
+    polygonise(cell, corners, values, inside);
     // Across each face whose corners hold both signs the surface goes on in the next cell.
     for (int axis = 0; axis < 3; ++axis)
       for (int side = 0; side < 2; ++side) {
-        std::array<float, 4> face;
-        int n = 0;
-        for (int c = 0; c < 8; ++c)
-          if ((c >> axis & 1) == side) face[n++] = values[c];
-        if (!mixed(face)) continue;
+        if (!mixed(inside, faceCorners(axis, side))) continue;
         std::array<int32_t, 3> next = cell;
         next[axis] += side ? 1 : -1;
         enqueue(next);
@@ -208,25 +255,16 @@ int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
 }
 
 void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
-                                       const std::array<float, 8>& values) {
-  // The corners' entries exist (their values are known): looking them up adds none, so the
-  // pointers stay valid.
-  std::array<GridEntry*, 8> corners;
-  for (int c = 0; c < 8; ++c)
-    corners[size_t(c)] =
-        &table.at(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
-  for (size_t t = 0; t < kTetrahedra.size(); ++t) {
-    unsigned inside = 0;
-    for (unsigned k = 0; k < 4; ++k) inside |= unsigned(values[size_t(kTetrahedra[t][k])] > 0) << k;
-    const TetrahedronCut& cut = kCuts[t][inside];
-    for (int n = 0; n < cut.count; ++n) {
-      std::array<uint32_t, 3> triangle;
-      for (size_t k = 0; k < 3; ++k) {
-        const auto [u, v] = cut.edges[size_t(n)][k];
-        triangle[k] = uint32_t(edgeVertex(cell, corners, u, v, values));
-      }
-      mesh.triangles.push_back(triangle);
+                                       const std::array<GridEntry*, 8>& corners,
+                                       const std::array<float, 8>& values, unsigned inside) {
+  const CellCut& cut = kCellCuts[inside];
+  for (int n = 0; n < cut.count; ++n) {
+    std::array<uint32_t, 3> triangle;
+    for (size_t k = 0; k < 3; ++k) {
+      const auto [u, v] = cut.edges[size_t(n)][k];
+      triangle[k] = uint32_t(edgeVertex(cell, corners, u, v, values));
     }
+    mesh.triangles.push_back(triangle);
   }
 }
 

@@ -1,7 +1,6 @@
 // The implicit surface's field (ImplicitSurface.h): the rest distance grid, the particles'
 // cells, the deformation of each particle's springs and the field itself.
 #include <algorithm>
-#include <bit>
 #include <cmath>
 
 #include "ImplicitSurfaceInternal.h"
@@ -13,6 +12,8 @@ constexpr int32_t kBlock = 4;  ///< rest distance block side [points]
 /// Particle cells per kernel radius [1]: the cells searched around a point then hold 2.5³ h³ on
 /// average, against 3³ h³ with cells of h.
 constexpr btScalar kCellsPerKernel = 2;
+/// Per set of odd axes (bit a: axis a): the share 1 / 2^(odd axes) of each coarse point around.
+constexpr std::array<btScalar, 8> kCornerShare{1, 0.5f, 0.5f, 0.25f, 0.5f, 0.25f, 0.25f, 0.125f};
 
 /// d·eᵀ.
 btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
@@ -21,22 +22,35 @@ btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
 }
 
 /// Per particle, over its springs (those with a = b broken): Σ outer(x_b − x_a, X_b − X_a)
-/// into `current`, Σ outer(X_b − X_a, X_b − X_a) into `rest`.
-void springMoments(std::span<const Spring> springs, std::span<const btVector3> positions,
-                   std::span<const btVector3> restPositions, std::vector<btMatrix3x3>& current,
-                   std::vector<btMatrix3x3>& rest) {
-  const btMatrix3x3 zero(0, 0, 0, 0, 0, 0, 0, 0, 0);
-  current.assign(positions.size(), zero);
-  rest.assign(positions.size(), zero);
+/// into `current`.
+void currentMoments(std::span<const Spring> springs, std::span<const btVector3> positions,
+                    std::span<const btVector3> restPositions, std::vector<btMatrix3x3>& current) {
+  current.assign(positions.size(), btMatrix3x3(0, 0, 0, 0, 0, 0, 0, 0, 0));
   for (const Spring& spring : springs) {
-    const btVector3 restEdge = restPositions[spring.b] - restPositions[spring.a];
-    const btMatrix3x3 m = outer(positions[spring.b] - positions[spring.a], restEdge);
-    const btMatrix3x3 r = outer(restEdge, restEdge);
+    const btMatrix3x3 m = outer(positions[spring.b] - positions[spring.a],
+                                restPositions[spring.b] - restPositions[spring.a]);
     current[spring.a] += m;
     current[spring.b] += m;
+  }
+}
+
+/// Per particle, over its springs (those with a = b broken): Σ outer(X_b − X_a, X_b − X_a)
+/// into `rest`.
+void restMomentsOf(std::span<const Spring> springs, std::span<const btVector3> restPositions,
+                   std::vector<btMatrix3x3>& rest) {
+  rest.assign(restPositions.size(), btMatrix3x3(0, 0, 0, 0, 0, 0, 0, 0, 0));
+  for (const Spring& spring : springs) {
+    const btVector3 restEdge = restPositions[spring.b] - restPositions[spring.a];
+    const btMatrix3x3 r = outer(restEdge, restEdge);
     rest[spring.a] += r;
     rest[spring.b] += r;
   }
+}
+
+/// Whether `springs` join the same particles as `whole`, spring for spring (none broken).
+bool sameSprings(std::span<const Spring> springs, std::span<const Spring> whole) {
+  return std::equal(springs.begin(), springs.end(), whole.begin(), whole.end(),
+                    [](const Spring& s, const Spring& w) { return s.a == w.a && s.b == w.b; });
 }
 
 /// The median rest length of the muscle's springs [m] (1 mm without springs).
@@ -146,8 +160,7 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
       }
 }
 
-const float* RestDistanceGrid::block(int32_t i, int32_t j, int32_t k) {
-  const int32_t bi = i / kBlock, bj = j / kBlock, bk = k / kBlock;
+const float* RestDistanceGrid::block(int32_t bi, int32_t bj, int32_t bk) {
   int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
   if (slot < 0) {
     slot = int32_t(values_.size() / (kBlock * kBlock * kBlock));
@@ -156,30 +169,28 @@ const float* RestDistanceGrid::block(int32_t i, int32_t j, int32_t k) {
   return values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
 }
 
-btScalar RestDistanceGrid::value(int32_t i, int32_t j, int32_t k) {
-  return block(i, j, k)[i % kBlock + kBlock * (j % kBlock + kBlock * (k % kBlock))];
-}
-
 btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
   const btVector3 u = (x - frame_.origin) / frame_.spacing;
-  std::array<int32_t, 3> base;
+  // Per axis: the cell's lower and upper points' blocks and places within them.
+  std::array<std::array<int32_t, 2>, 3> blockOf, placeIn;
   btScalar t[3];
-  bool oneBlock = true;  // the cell's 8 points in one block
+  unsigned crossing = 0;  // bit a: the cell's upper points along axis a lie in the next block
   for (int a = 0; a < 3; ++a) {
     if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
-    base[a] = int32_t(u[a]);
-    t[a] = u[a] - btScalar(base[a]);
-    oneBlock = oneBlock && base[a] % kBlock != kBlock - 1;
+    const auto base = int32_t(u[a]);
+    t[a] = u[a] - btScalar(base);
+    blockOf[a] = {base / kBlock, (base + 1) / kBlock};
+    placeIn[a] = {base % kBlock, (base + 1) % kBlock};
+    crossing |= unsigned(blockOf[a][0] != blockOf[a][1]) << a;
   }
-  const float* values = oneBlock ? block(base[0], base[1], base[2]) : nullptr;
-  const int32_t first =
-      base[0] % kBlock + kBlock * (base[1] % kBlock + kBlock * (base[2] % kBlock));
+  std::array<const float*, 8> values;  // per corner: its block's values
   btScalar sum = 0;
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+  for (unsigned c = 0; c < 8; ++c) {
+    const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    values[c] = (c & crossing) == c ? block(blockOf[0][dx], blockOf[1][dy], blockOf[2][dz])
+                                    : values[c & crossing];
     const btScalar w = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) * (dz ? t[2] : 1 - t[2]);
-    sum += w * (values ? values[first + dx + kBlock * (dy + kBlock * dz)]
-                       : value(base[0] + dx, base[1] + dy, base[2] + dz));
+    sum += w * values[c][placeIn[0][dx] + kBlock * (placeIn[1][dy] + kBlock * placeIn[2][dz])];
   }
   return sum;
 }
@@ -217,6 +228,7 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
     const btVector3 d = closest.point - muscle->restPositions[i];
     outward[i] = closest.inside ? d : -d;
   }
+  restMomentsOf(muscle->springs, muscle->restPositions, wholeRestMoments);
   measureRestCover();
 }
 
@@ -231,14 +243,17 @@ void ImplicitSurface::Impl::measureRestCover() {
 void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
                                           std::span<const Spring> springs) {
   positions = current;
-  springMoments(springs, current, muscle->restPositions, moments, restMoments);
+  currentMoments(springs, current, muscle->restPositions, moments);
+  const bool whole = sameSprings(springs, muscle->springs);
+  if (!whole) restMomentsOf(springs, muscle->restPositions, restMoments);
+  const std::vector<btMatrix3x3>& rests = whole ? wholeRestMoments : restMoments;
   toRest.resize(current.size());
   for (size_t i = 0; i < current.size(); ++i) {
     // F⁻¹ = R·M⁻¹ with M = Σ dx·dXᵀ, R = Σ dX·dXᵀ (F = M·R⁻¹).
     const btMatrix3x3& m = moments[i];
     const btScalar scale = (m[0][0] + m[1][1] + m[2][2]) / 3;
     const bool spans = m.determinant() > btScalar(1e-3) * scale * scale * scale;
-    toRest[i] = spans ? restMoments[i] * m.inverse() : btMatrix3x3::getIdentity();
+    toRest[i] = spans ? rests[i] * m.inverse() : btMatrix3x3::getIdentity();
   }
   cells.build(current, h / kCellsPerKernel);
   entryRest.resize(current.size());
@@ -300,7 +315,7 @@ btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
   // Along each axis where the index is odd the point lies halfway between two coarse points,
   // else on one: 2^(odd axes) corners, each of an equal share.
   const unsigned odd = unsigned(i & 1) | unsigned(j & 1) << 1 | unsigned(k & 1) << 2;
-  const btScalar share = btScalar(1) / btScalar(1 << std::popcount(odd));
+  const btScalar share = kCornerShare[odd];
   btVector3 offset(0, 0, 0);
   btScalar spread = 0, weight = 0;
   bool covered = true;  // every coarse point around has particles within h

@@ -54,9 +54,8 @@ class RestDistanceGrid {
   btScalar at(const btVector3& x, btScalar outsideValue);
 
  private:
-  /// The values of the block holding point (i, j, k), 4³ from its lower corner, x fastest.
-  const float* block(int32_t i, int32_t j, int32_t k);
-  btScalar value(int32_t i, int32_t j, int32_t k);
+  /// The values of block (bi, bj, bk), 4³ from its lower corner, x fastest.
+  const float* block(int32_t bi, int32_t bj, int32_t bk);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
 
   MeshDistance distance_;
@@ -115,12 +114,22 @@ class GridTable {
   void begin(const GridFrame& grid);  ///< a new extraction over `grid`: every block stale
   /// The entry of grid point (i, j, k), fresh if its block was stale.
   GridEntry& at(int32_t i, int32_t j, int32_t k) {
-    const size_t b = size_t(i >> 2) + size_t(blocks_[0]) * size_t((j >> 2) + blocks_[1] * (k >> 2));
+    const size_t b = blockOf(i, j, k);
     if (blockStamp_[b] != stamp_) take(b);
-    return entries_[blockSlot_[b] + size_t(i & 3) + 4 * size_t((j & 3) + 4 * (k & 3))];
+    return entries_[blockSlot_[b] + pointOf(i, j, k)];
   }
+  /// The entries of the cell's corners, corner c at (i, j, k) + (c & 1, c >> 1 & 1, c >> 2 & 1),
+  /// fresh where their blocks were stale: valid until the table takes another block.
+  std::array<GridEntry*, 8> corners(int32_t i, int32_t j, int32_t k);
 
  private:
+  size_t blockOf(int32_t i, int32_t j, int32_t k) const {
+    return size_t(i >> 2) + size_t(blocks_[0]) * size_t((j >> 2) + blocks_[1] * (k >> 2));
+  }
+  /// The point's entry within its block.
+  static size_t pointOf(int32_t i, int32_t j, int32_t k) {
+    return size_t(i & 3) + 4 * size_t((j & 3) + 4 * (k & 3));
+  }
   void take(size_t block);                  ///< gives the block a slot of fresh entries
   std::array<int32_t, 3> blocks_{0, 0, 0};  ///< blocks per axis
   std::vector<uint32_t> blockStamp_;        ///< per block: the extraction that took it
@@ -171,9 +180,10 @@ struct ImplicitSurface::Impl {
   }
 
   // The extraction (ImplicitSurface.cpp).
-  float valueAt(int32_t i, int32_t j, int32_t k);  ///< the field at a grid point, cached
-  /// The cell's corner values, corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1).
-  std::array<float, 8> cornerValues(const std::array<int32_t, 3>& cell);
+  /// The cell's corners' entries (corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1)), their
+  /// field values computed where not yet known and copied into `values`.
+  std::array<GridEntry*, 8> cellCorners(const std::array<int32_t, 3>& cell,
+                                        std::array<float, 8>& values);
   /// Queues `cell` once, when it lies inside the grid.
   void enqueue(const std::array<int32_t, 3>& cell);
   bool inGrid(const std::array<int32_t, 3>& cell) const {
@@ -194,7 +204,9 @@ struct ImplicitSurface::Impl {
   void seedAndMarch();
   /// Polygonises the queued cells from `marched` on, queueing the cells the surface goes on to.
   void march();
-  void polygonise(const std::array<int32_t, 3>& cell, const std::array<float, 8>& values);
+  /// The cell's triangles, its corners inside (value > 0) the bits of `inside`.
+  void polygonise(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
+                  const std::array<float, 8>& values, unsigned inside);
   /// The vertex on the cell's edge from corner u up to corner v, u ⊂ v (made once, kept in the
   /// entry of corner u among `corners`, the cell's).
   int32_t edgeVertex(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
@@ -217,6 +229,8 @@ struct ImplicitSurface::Impl {
   std::vector<btMatrix3x3> entryToRest;  ///< per entry of cells.order: its F⁻¹
   std::vector<btMatrix3x3> moments;      ///< scratch: Σ dx·dXᵀ over the unbroken springs [m²]
   std::vector<btMatrix3x3> restMoments;  ///< scratch: Σ dX·dXᵀ over the unbroken springs [m²]
+  /// Per particle Σ dX·dXᵀ over all the muscle's springs (none broken) [m²].
+  std::vector<btMatrix3x3> wholeRestMoments;
   ParticleCells cells;
   GridFrame grid;  ///< extraction grid
   GridTable table;
