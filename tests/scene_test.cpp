@@ -133,6 +133,22 @@ TEST(Scene, EverySolverSettingIsAKeyTheSimulationOrModelSectionReads) {
     EXPECT_TRUE(complete["simulation"].contains(key) || complete["model"].contains(key)) << key;
 }
 
+TEST(Scene, ReadmeHasARowForEveryKeyOfTheSettingsSections) {
+  // The settings' rows in Parameters.h give a key its reading, validation and shorthand; its
+  // meaning is its row in the section's table of scenes/README.md.
+  std::ifstream in(fs::path(FIBREMSS_SOURCE_DIR) / "scenes" / "README.md");
+  const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const Json complete = Json::parse(loadScene("fusiform").json);
+  for (const std::string section : {"model", "simulation", "collision", "outputs"}) {
+    const size_t start = readme.find(": `" + section + "`\n");
+    ASSERT_NE(start, std::string::npos) << section;
+    const std::string table = readme.substr(start, readme.find("\n## ", start) - start);
+    for (const auto& item : complete[section].items())
+      EXPECT_NE(table.find("\n| `" + item.key() + "` |"), std::string::npos)
+          << section << "." << item.key();
+  }
+}
+
 namespace {
 
 /// Every key of `value`'s objects, however deep, that `known` lacks.

@@ -6,6 +6,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <type_traits>
 
 #include "BuiltInScenes.h"
 #include "SceneAnatomy.h"
@@ -479,96 +480,62 @@ SpringParameters readModel(Fields& model) {
   return springs;
 }
 
-/// The keys that set how a step's iterations run and stop, not the model they solve
-/// (solverSettings): the "simulation" section's and the "model" section's damping, which slows the
-/// muscles' motion but not where they settle.
-const std::vector<std::string> kSolverSettings = {"integrator",
-                                                  "time_step",
-                                                  "dt",
-                                                  "min_dt",
-                                                  "stop",
-                                                  "iterations",
-                                                  "epsilon",
-                                                  "tolerance",
-                                                  "budget_ms",
-                                                  "deviation_epsilon",
-                                                  "motion_fraction",
-                                                  "threads",
-                                                  "damping",
-                                                  "damping_scale",
-                                                  "diagonal_jacobian",
-                                                  "solver_tolerance",
-                                                  "solver_iterations",
-                                                  "constraint_iterations",
-                                                  "projective_rho",
-                                                  "projective_contact_weight"};
+/// Reads, in place, each setting a visit…Settings function (Parameters.h) lists from one section
+/// of a scene in units of `scale` metres; a setting's value before is its default.
+class SettingReader {
+ public:
+  SettingReader(Fields& fields, double scale) : fields_(fields), scale_(scale) {}
 
-/// The "simulation" section; returns its max_step_deg (the largest bone turn of one step).
+  void operator()(const SettingKey& key, btScalar& value) const {
+    const double unit = key.length ? scale_ : 1;
+    value = btScalar(fields_.number(key.name, value / unit, key.lowest / unit, key.highest / unit,
+                                    key.lowestExcluded) *
+                     unit);
+  }
+  void operator()(const SettingKey& key, int& value) const {
+    value = fields_.integer(key.name, value, int(key.lowest), int(key.highest));
+  }
+  void operator()(const SettingKey& key, uint32_t& value) const {
+    const Json* given = fields_.raw(key.name);
+    const bool integral = given && (given->is_number_unsigned() ||
+                                    (given->is_number_integer() && given->get<long long>() >= 0));
+    if (given && (!integral || given->get<unsigned long long>() > key.highest))
+      fields_.fail(key.name, "expected an integer in [0, " +
+                                 std::to_string(static_cast<unsigned long long>(key.highest)) +
+                                 "], got " + scene::describe(*given));
+    if (given) value = uint32_t(given->get<unsigned long long>());
+    fields_.set(key.name, value);
+  }
+  void operator()(const SettingKey& key, bool& value) const {
+    if (!key.trueName) {
+      value = fields_.boolean(key.name, value);
+      return;
+    }
+    value = fields_.choice(key.name, value ? key.trueName : key.falseName,
+                           {key.trueName, key.falseName}) == key.trueName;
+  }
+  template <class Enum>
+  requires std::is_enum_v<Enum>
+  void operator()(const SettingKey& key, Enum& value) const {
+    fromString(fields_.choice(key.name, toString(value), namesOf<Enum>()), value);
+  }
+
+ private:
+  Fields& fields_;  ///< the section
+  double scale_;    ///< metres per scene unit
+};
+
+/// The "simulation" section into `def`, set anew; returns its max_step_deg (the largest bone turn
+/// of one step).
 double readSimulation(Fields& simulation, double scale, MuscleSystemDef& def) {
-  const MuscleSystemDef defaults;
-  const StepSettings stepDefaults;
-  StepSettings& step = def.stepSettings;
-  fromString(simulation.choice("integrator", toString(defaults.integrator), namesOf<Integrator>()),
-             def.integrator);
-  step.adaptiveTimeStep =
-      simulation.choice("time_step", stepDefaults.adaptiveTimeStep ? "adaptive" : "fixed",
-                        {"adaptive", "fixed"}) == "adaptive";
-  step.timeStep = btScalar(simulation.number("dt", stepDefaults.timeStep, 0, kInf, true));
-  step.minTimeStep = btScalar(simulation.number("min_dt", stepDefaults.minTimeStep, 0, kInf, true));
+  Integrator integrator = MuscleSystemDef{}.integrator;
+  fromString(simulation.choice("integrator", toString(integrator), namesOf<Integrator>()),
+             integrator);
+  def = defaultMuscleSystemDef(integrator);
+  visitSimulationSettings(def, SettingReader(simulation, scale));
+  const StepSettings& step = def.stepSettings;
   if (step.minTimeStep > step.timeStep)
     simulation.fail("min_dt", "must not exceed dt (" + std::to_string(step.timeStep) + " s)");
-  fromString(simulation.choice("stop", toString(stepDefaults.stopRule), namesOf<StopRule>()),
-             step.stopRule);
-  step.iterations =
-      simulation.integer("iterations", defaultIterations(def.integrator), 1, 100000000);
-  step.epsilon =
-      btScalar(simulation.number("epsilon", stepDefaults.epsilon / scale, 0, kInf, true) * scale);
-  step.budgetMs = btScalar(simulation.number("budget_ms", stepDefaults.budgetMs, 0, kInf, true));
-  step.deviationEpsilon = btScalar(
-      simulation.number("deviation_epsilon", stepDefaults.deviationEpsilon, 0, kInf, true));
-  step.tolerance = btScalar(
-      simulation.number("tolerance", stepDefaults.tolerance / scale, 0, kInf, true) * scale);
-  def.rebuildEveryStep = simulation.boolean("rebuild_every_step", defaults.rebuildEveryStep);
-  def.blendedPretransform =
-      simulation.boolean("blended_pretransform", defaults.blendedPretransform);
-  fromString(simulation.choice("pretransform_blend", toString(defaults.pretransformBlend),
-                               namesOf<PretransformBlend>()),
-             def.pretransformBlend);
-  step.motionFraction =
-      btScalar(simulation.number("motion_fraction", stepDefaults.motionFraction, 0, 1, true));
-  const Json* seed = simulation.raw("seed");
-  if (seed &&
-      !(seed->is_number_unsigned() || (seed->is_number_integer() && seed->get<long long>() >= 0)))
-    simulation.fail("seed",
-                    "expected an integer in [0, 4294967295], got " + scene::describe(*seed));
-  if (seed && seed->get<unsigned long long>() > 0xffffffffull)
-    simulation.fail("seed",
-                    "expected an integer in [0, 4294967295], got " + scene::describe(*seed));
-  def.seed = seed ? uint32_t(seed->get<unsigned long long>()) : defaults.seed;
-  simulation.set("seed", def.seed);
-  def.initialNoise =
-      btScalar(simulation.number("initial_noise", defaults.initialNoise / scale, 0, 1 / scale) *
-               scale);  // at most 1 m: more throws particles beyond any muscle
-  def.threads = simulation.integer("threads", defaults.threads, 0, 1024);
-  def.diagonalJacobian = simulation.boolean("diagonal_jacobian", defaults.diagonalJacobian);
-  def.solverTolerance =
-      btScalar(simulation.number("solver_tolerance", defaults.solverTolerance, 0, 1, true));
-  def.solverIterations =
-      simulation.integer("solver_iterations", defaults.solverIterations, 1, 100000);
-  def.constraintIterations =
-      simulation.integer("constraint_iterations", defaults.constraintIterations, 1, 100000);
-  def.projectiveRho =
-      btScalar(simulation.number("projective_rho", defaults.projectiveRho, 0, 0.999));
-  def.projectiveHistory = simulation.integer("projective_history", defaults.projectiveHistory, 0,
-                                             kMaxProjectiveHistory);
-  def.projectiveContactWeight = btScalar(
-      simulation.number("projective_contact_weight", defaults.projectiveContactWeight, 0.01, 1e4));
-  def.persistentContacts = simulation.boolean("persistent_contacts", defaults.persistentContacts);
-  def.pairReactions = simulation.boolean("pair_reactions", defaults.pairReactions);
-  fromString(
-      simulation.choice("on_failure", toString(defaults.onFailure), namesOf<FailurePolicy>()),
-      def.onFailure);
-  def.maxRetries = simulation.integer("max_retries", defaults.maxRetries, 0, 30);
   return simulation.number("max_step_deg", 5, 0, 180);
 }
 
@@ -585,20 +552,7 @@ void readOutputs(Fields& outputs, OutputSettings& settings) {
 }
 
 void readCollision(Fields& collision, double scale, MuscleSystemDef& def) {
-  const MuscleSystemDef defaults;
-  def.muscleMuscle = collision.boolean("muscle_muscle", defaults.muscleMuscle);
-  def.muscleBone = collision.boolean("muscle_bone", defaults.muscleBone);
-  fromString(collision.choice("bone_collision", toString(defaults.boneCollision),
-                              namesOf<BoneCollision>()),
-             def.boneCollision);
-  def.distanceFieldCell = btScalar(
-      collision.number("distance_field_cell", defaults.distanceFieldCell / scale, 0, kInf, true) *
-      scale);
-  def.penetrationRecovery = collision.boolean("penetration_recovery", defaults.penetrationRecovery);
-  def.slidingContacts = collision.boolean("sliding_contacts", defaults.slidingContacts);
-  def.surfaceContact = collision.boolean("surface_contact", defaults.surfaceContact);
-  def.contactDamping =
-      btScalar(collision.number("contact_damping", defaults.contactDamping, 0, 1e6));
+  visitCollisionSettings(def, SettingReader(collision, scale));
 }
 
 /// The top-level "analytic" object: which exact case the scene is, and its geometry (a
@@ -795,7 +749,16 @@ btTransform LoadedScene::bladePose(size_t blade, int pose) const {
 }
 
 const std::vector<std::string>& solverSettings() {
-  return kSolverSettings;
+  static const std::vector<std::string> keys = [] {
+    // The model's damping slows the muscles' motion but does not move where they settle.
+    std::vector<std::string> solver = {"integrator", "damping", "damping_scale"};
+    MuscleSystemDef def;
+    visitSimulationSettings(def, [&](const SettingKey& key, const auto&) {
+      if (key.solver) solver.push_back(key.name);
+    });
+    return solver;
+  }();
+  return keys;
 }
 
 std::string exportBuiltInScene(const std::string& name) {

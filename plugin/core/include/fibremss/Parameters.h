@@ -5,6 +5,7 @@
 #include <LinearMath/btVector3.h>
 
 #include <cstdint>
+#include <limits>
 #include <string>
 
 #include "fibremss/TaskScheduler.h"
@@ -322,6 +323,103 @@ inline MuscleSystemDef defaultMuscleSystemDef(Integrator integrator = Integrator
   def.integrator = integrator;
   def.stepSettings.iterations = defaultIterations(integrator);
   return def;
+}
+
+/// A setting's key in a section of a scene file (scenes/README.md says what each means): its
+/// name, the values it takes and what it sets. The scene loader reads, and `--set` takes, every
+/// key a visit…Settings function below lists, in its order; adding a setting's row there gives it
+/// its scene key.
+struct SettingKey {
+  const char* name = "";  ///< the key in its section
+  /// Smallest value taken [the setting's unit; metres for a length]
+  double lowest = -std::numeric_limits<double>::infinity();
+  /// Largest value taken [the setting's unit; metres for a length]
+  double highest = std::numeric_limits<double>::infinity();
+  bool lowestExcluded = false;  ///< `lowest` itself is not taken
+  bool length = false;          ///< a length: written in the scene's units, kept in metres
+  /// Sets how a step's iterations run and stop rather than the model they solve: a run differing
+  /// from a scene only in such keys solves the scene's own model.
+  bool solver = false;
+  const char* trueName = nullptr;   ///< a boolean written as a name: the one for true
+  const char* falseName = nullptr;  ///< a boolean written as a name: the one for false
+
+  /// This key with `lowest` excluded.
+  constexpr SettingKey open() const {
+    SettingKey key = *this;
+    key.lowestExcluded = true;
+    return key;
+  }
+  /// This key as a length.
+  constexpr SettingKey inMetres() const {
+    SettingKey key = *this;
+    key.length = true;
+    return key;
+  }
+  /// This key as one of the solver's.
+  constexpr SettingKey ofSolver() const {
+    SettingKey key = *this;
+    key.solver = true;
+    return key;
+  }
+  /// This key, a boolean, written as `whenTrue` or `whenFalse`.
+  constexpr SettingKey named(const char* whenTrue, const char* whenFalse) const {
+    SettingKey key = *this;
+    key.trueName = whenTrue;
+    key.falseName = whenFalse;
+    return key;
+  }
+};
+
+/// Calls visit(key, member) for each setting of `def` that a scene's "simulation" section sets,
+/// in the order a scene lists them, but the integrator: it comes first and sets their defaults
+/// (defaultMuscleSystemDef).
+template <class Visit>
+void visitSimulationSettings(MuscleSystemDef& def, Visit&& visit) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  StepSettings& step = def.stepSettings;
+  visit(SettingKey{"time_step"}.named("adaptive", "fixed").ofSolver(), step.adaptiveTimeStep);
+  visit(SettingKey{"dt", 0, kInf}.open().ofSolver(), step.timeStep);
+  visit(SettingKey{"min_dt", 0, kInf}.open().ofSolver(), step.minTimeStep);
+  visit(SettingKey{"stop"}.ofSolver(), step.stopRule);
+  visit(SettingKey{"iterations", 1, 100000000}.ofSolver(), step.iterations);
+  visit(SettingKey{"epsilon", 0, kInf}.open().inMetres().ofSolver(), step.epsilon);
+  visit(SettingKey{"budget_ms", 0, kInf}.open().ofSolver(), step.budgetMs);
+  visit(SettingKey{"deviation_epsilon", 0, kInf}.open().ofSolver(), step.deviationEpsilon);
+  visit(SettingKey{"tolerance", 0, kInf}.open().inMetres().ofSolver(), step.tolerance);
+  visit(SettingKey{"rebuild_every_step"}, def.rebuildEveryStep);
+  visit(SettingKey{"blended_pretransform"}, def.blendedPretransform);
+  visit(SettingKey{"pretransform_blend"}, def.pretransformBlend);
+  visit(SettingKey{"motion_fraction", 0, 1}.open().ofSolver(), step.motionFraction);
+  visit(SettingKey{"seed", 0, std::numeric_limits<uint32_t>::max()}, def.seed);
+  // At most 1 m: more throws particles beyond any muscle.
+  visit(SettingKey{"initial_noise", 0, 1}.inMetres(), def.initialNoise);
+  visit(SettingKey{"threads", 0, 1024}.ofSolver(), def.threads);
+  visit(SettingKey{"diagonal_jacobian"}.ofSolver(), def.diagonalJacobian);
+  visit(SettingKey{"solver_tolerance", 0, 1}.open().ofSolver(), def.solverTolerance);
+  visit(SettingKey{"solver_iterations", 1, 100000}.ofSolver(), def.solverIterations);
+  visit(SettingKey{"constraint_iterations", 1, 100000}.ofSolver(), def.constraintIterations);
+  visit(SettingKey{"projective_rho", 0, 0.999}.ofSolver(), def.projectiveRho);
+  visit(SettingKey{"projective_history", 0, kMaxProjectiveHistory}, def.projectiveHistory);
+  visit(SettingKey{"projective_contact_weight", 0.01, 1e4}.ofSolver(), def.projectiveContactWeight);
+  visit(SettingKey{"persistent_contacts"}, def.persistentContacts);
+  visit(SettingKey{"pair_reactions"}, def.pairReactions);
+  visit(SettingKey{"on_failure"}, def.onFailure);
+  visit(SettingKey{"max_retries", 0, 30}, def.maxRetries);
+}
+
+/// Calls visit(key, member) for each setting of `def` that a scene's "collision" section sets,
+/// in the order a scene lists them.
+template <class Visit>
+void visitCollisionSettings(MuscleSystemDef& def, Visit&& visit) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  visit(SettingKey{"muscle_muscle"}, def.muscleMuscle);
+  visit(SettingKey{"muscle_bone"}, def.muscleBone);
+  visit(SettingKey{"bone_collision"}, def.boneCollision);
+  visit(SettingKey{"distance_field_cell", 0, kInf}.open().inMetres(), def.distanceFieldCell);
+  visit(SettingKey{"penetration_recovery"}, def.penetrationRecovery);
+  visit(SettingKey{"sliding_contacts"}, def.slidingContacts);
+  visit(SettingKey{"surface_contact"}, def.surfaceContact);
+  visit(SettingKey{"contact_damping", 0, 1e6}, def.contactDamping);
 }
 
 const char* toString(SpringLayout layout);
