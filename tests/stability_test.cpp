@@ -73,10 +73,25 @@ TEST(EnergyCheck, GeometricGrowthFailsAtTheFirstValueAboveTheLimit) {
 
 TEST(EnergyCheck, QuartersRoundUp) {
   // 5 values: a last quarter of ceil(5/4) = 2, so index 3 belongs to it.
-  const std::vector<double> series{1, 1, 1, 50, 1};
+  const std::vector<double> series{1, 1, 1, 50, 5};
   const auto check = checkEnergy(series, 10, 0);
   EXPECT_FALSE(check.bounded);
   EXPECT_EQ(check.growthStep, 3);
+}
+
+TEST(EnergyCheck, ASpikeThatFallsBackToTheEarlierLevelIsATransient) {
+  // Before the last quarter (3 of 12 values) the largest is 3, the limit 30.
+  std::vector<double> series{1, 2, 3, 2, 2, 2, 1.5, 1.5, 2, 300, 40, 2};
+  EXPECT_TRUE(checkEnergy(series, 10, 0).bounded);
+  EXPECT_DOUBLE_EQ(checkEnergy(series, 10, 0).ratio, 100);
+  // Within the limit but above the earlier level: it has not come back.
+  series.back() = 20;
+  EXPECT_FALSE(checkEnergy(series, 10, 0).bounded);
+  EXPECT_EQ(checkEnergy(series, 10, 0).growthStep, 9);
+  // Back, then above the limit again at the end.
+  series = {1, 2, 3, 2, 2, 2, 1.5, 1.5, 300, 2, 40};
+  EXPECT_FALSE(checkEnergy(series, 10, 0).bounded);
+  EXPECT_EQ(checkEnergy(series, 10, 0).growthStep, 8);
 }
 
 TEST(EnergyCheck, FloorAcceptsGrowthFromRest) {

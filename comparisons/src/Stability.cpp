@@ -316,12 +316,14 @@ EnergyCheck checkEnergy(std::span<const double> series, double growthFactor, dou
   result.ratio =
       earlier > 0 ? last / earlier : (last > 0 ? std::numeric_limits<double>::infinity() : 0);
   const double limit = growthFactor * earlier + floor;
-  for (size_t i = lastStart; i < series.size(); ++i)
-    if (series[i] > limit) {
-      result.bounded = false;
-      result.growthStep = static_cast<int>(i);
-      break;
-    }
+  const auto above = [&](double e) { return e > limit; };
+  const auto first = std::find_if(series.begin() + lastStart, series.end(), above);
+  if (first == series.end()) return result;
+  // A rise that falls back to the earlier level and stays within the limit is a transient.
+  const auto latest = std::find_if(series.rbegin(), series.rend(), above).base();
+  if (std::any_of(latest, series.end(), [&](double e) { return e <= earlier; })) return result;
+  result.bounded = false;
+  result.growthStep = static_cast<int>(first - series.begin());
   return result;
 }
 

@@ -163,7 +163,10 @@ std::string stabilityMarkdown(const StabilityMatrix& matrix, const StabilityOpti
       << " × the largest E of the steps before it (driven scenes ramp their energy up while "
          "the motion builds; energy that peaks and settles passes) + ½·M·("
       << number(options.energyFloorSpeed * 1000)
-      << " mm/s)² (the floor keeps a run that starts at rest from failing on noise);\n"
+      << " mm/s)² (the floor keeps a run that starts at rest from failing on noise), unless E "
+         "comes back after its last step above that limit to at most the largest E before the "
+         "last quarter (a transient, such as a projective solve's late catch-up at a pose's "
+         "end);\n"
       << "- the run finishes within " << number(options.cellSeconds)
       << " s of wall time (`timeout`).\n";
   return out.str();

@@ -15,6 +15,7 @@
 
 #include "dynamics/TimeStep.h"
 #include "fibremss/BoneBody.h"
+#include "fibremss/Measures.h"
 #include "fibremss/MuscleSystem.h"
 #include "fibremss/MuscleWorld.h"
 #include "kernels/MuscleSystemPretransform.h"
@@ -377,47 +378,69 @@ TEST(Guard, AFrozenMuscleIsPushedOutOfABoneThatMovesIntoIt) {
   EXPECT_TRUE(allFinite(rig.positions(0)));
 }
 
+/// The guard's check of the muscle in `state` with the bones of `rig`'s system.
+MuscleHealth check(Rig& rig, MuscleState& state) {
+  return checkMuscle(*state.settings, state, state, state,
+                     MuscleSystemAccess::impl(rig.system).bones.states, state.tear);
+}
+
 TEST(Guard, AMuscleSpreadFarBeyondItsSizeIsDivergingNotTorn) {
   // The guard keeps a trapped muscle's burst springs only while it is not spread: a torn muscle
   // stays between its bones, a diverging one grows without bound.
   Rig rig(fixedStep(btScalar(0.5), FailurePolicy::Retry), {softMuscle()});
   MuscleState& state = *MuscleSystemAccess::impl(rig.system).muscles.states[rig.muscles[0].index];
-  EXPECT_FALSE(checkMuscle(*state.settings, state, state, state.tear).spread);
-  EXPECT_FALSE(checkMuscle(*state.settings, state, state, state.tear).failed());
+  EXPECT_FALSE(check(rig, state).spread);
+  EXPECT_FALSE(check(rig, state).failed());
   for (btVector3& x : state.positions) x *= btScalar(2 * kTornSpread);
-  const MuscleHealth grown = checkMuscle(*state.settings, state, state, state.tear);
+  const MuscleHealth grown = check(rig, state);
   EXPECT_TRUE(grown.spread);
   EXPECT_TRUE(grown.failed());  // its springs are beyond 3× as well
 }
 
-TEST(Guard, ABurstSpringIsTornByBonesOnlyWhenTwoBonesPushedItsEnds) {
+TEST(Guard, ABurstSpringIsTornByBonesOnlyWhenTwoBonesThatMovedApartPushedItsEnds) {
   // One particle 30 mm off its place bursts every spring it has (rest lengths up to 6.9 mm)
   // without spreading the muscle; of those, only a spring whose ends different bones pushed in
-  // the step counts as spanned by them (its length is the bones' motion, not the solver's).
+  // the step, and which grew by no more than those bones moved apart at its ends, counts as
+  // spanned by them (its length is the bones' motion, not the solver's).
   Rig rig(fixedStep(btScalar(0.5), FailurePolicy::Retry), {softMuscle()});
-  MuscleState& state = *MuscleSystemAccess::impl(rig.system).muscles.states[rig.muscles[0].index];
+  auto& impl = MuscleSystemAccess::impl(rig.system);
+  MuscleState& state = *impl.muscles.states[rig.muscles[0].index];
+  BoneState& left = *impl.bones.states[rig.bones[0].index];
+  BoneState& right = *impl.bones.states[rig.bones[1].index];
+  // The step starts here.
+  saveGoodState(state, state);
+  for (BoneState* bone : {&left, &right}) bone->goodCurrent = bone->current;
   const Spring spring = state.settings->springs.front();
-  state.positions[spring.b] += btVector3(0, btScalar(0.03), 0);
-  const MuscleHealth burst = checkMuscle(*state.settings, state, state, state.tear);
+  const btVector3 offset(0, btScalar(0.03), 0);
+  state.positions[spring.b] += offset;
+  const MuscleHealth burst = check(rig, state);
   ASSERT_GT(burst.explodedSprings, 1u);
   ASSERT_FALSE(burst.spread);
-  const auto spanned = [&] {
-    return checkMuscle(*state.settings, state, state, state.tear).spannedSprings;
-  };
   EXPECT_EQ(burst.spannedSprings, 0u);  // no bone pushed it
-  state.stepBones[spring.b] = 0;
-  EXPECT_EQ(spanned(), 0u);  // one end pushed, the other not
-  state.stepBones[spring.a] = 0;
-  EXPECT_EQ(spanned(), 0u);  // both ends pushed by the same bone
-  state.stepBones[spring.a] = 1;
-  EXPECT_EQ(spanned(), 1u);  // two bones: that spring alone
+  state.stepBones[spring.b] = static_cast<int32_t>(left.slot);
+  EXPECT_EQ(check(rig, state).spannedSprings, 0u);  // one end pushed, the other not
+  state.stepBones[spring.a] = static_cast<int32_t>(left.slot);
+  EXPECT_EQ(check(rig, state).spannedSprings, 0u);  // both ends pushed by the same bone
+  state.stepBones[spring.a] = static_cast<int32_t>(right.slot);
+  // Two bones, standing still: they explain no growth, the numerics burst it.
+  EXPECT_EQ(check(rig, state).spannedSprings, 0u);
+  // The two moved together: still no growth of theirs.
+  for (BoneState* bone : {&left, &right})
+    bone->current.setOrigin(bone->current.getOrigin() + offset);
+  EXPECT_EQ(check(rig, state).spannedSprings, 0u);
+  // The bone at b carried it off by the offset, the bone at a held still: that spring alone.
+  right.current = right.goodCurrent;
+  EXPECT_EQ(check(rig, state).spannedSprings, 1u);
+  // Half that way apart: less than the spring grew.
+  left.current.setOrigin(left.goodCurrent.getOrigin() + offset / 2);
+  EXPECT_EQ(check(rig, state).spannedSprings, 0u);
 }
 
 TEST(Guard, AMuscleTheNumericsBurstBetweenTwoBonesThatPushItStillFails) {
   // The stiff grid between the two cubes moved 2 mm closer to it, each pushing the free particles
-  // next to it (x = ∓8 mm), at a dt that bursts it. The blow-up flings particles, so that a burst
-  // spring may end on both bones (and then counts as spanned), but the grid spreads beyond twice
-  // its size: the step fails as a numerical one, not kept as torn by the bones.
+  // next to it (x = ∓8 mm), at a dt that bursts it. The blow-up flings particles, so that burst
+  // springs end on both bones; the bones stand still, so none is spanned by them, and the grid
+  // spreads beyond twice its size too: the step fails as a numerical one, not kept as torn.
   static const auto between = gridMuscle("between", 0, kStiff);
   MuscleSystem system(fixedStep(kBursting, FailurePolicy::Report));
   const std::vector<BoneHandle> bones{
@@ -426,11 +449,21 @@ TEST(Guard, AMuscleTheNumericsBurstBetweenTwoBonesThatPushItStillFails) {
   const MuscleHandle muscle = system.addMuscle(between, bones);
   system.step();
   const StepStats& stats = system.lastStep();
-  MuscleState& state = *MuscleSystemAccess::impl(system).muscles.states[muscle.index];
-  ASSERT_NE(std::find(state.stepBones.begin(), state.stepBones.end(), 0), state.stepBones.end());
-  ASSERT_NE(std::find(state.stepBones.begin(), state.stepBones.end(), 1), state.stepBones.end());
-  const MuscleHealth health = checkMuscle(*state.settings, state, state, state.tear);
+  auto& impl = MuscleSystemAccess::impl(system);
+  MuscleState& state = *impl.muscles.states[muscle.index];
+  const auto onTwoBones = [&](const Spring& spring) {
+    const int32_t a = state.stepBones[spring.a], b = state.stepBones[spring.b];
+    return a >= 0 && b >= 0 && a != b &&
+           springExploded(state.positions[spring.a].distance(state.positions[spring.b]),
+                          spring.restLength,
+                          state.restLengthSum / double(state.settings->springs.size()));
+  };
+  ASSERT_TRUE(
+      std::any_of(state.settings->springs.begin(), state.settings->springs.end(), onTwoBones));
+  const MuscleHealth health =
+      checkMuscle(*state.settings, state, state, state, impl.bones.states, state.tear);
   EXPECT_GT(health.explodedSprings, 0u);
+  EXPECT_EQ(health.spannedSprings, 0u);
   EXPECT_TRUE(health.spread);
   EXPECT_EQ(stats.trappedMuscles, 0u);
   EXPECT_TRUE(stats.failed);

@@ -42,11 +42,14 @@ enum class CellOutcome : uint8_t {
 };
 const char* toString(CellOutcome outcome);
 
-/// The energy criterion: the series is bounded unless the largest value of its last quarter
-/// (the last ceil(n/4) values) exceeds growthFactor × (the largest value before it) + floor.
-/// Driven scenes ramp their energy up while the motion builds (a hip sweep's muscles start to
-/// wrap), so the reference is every step before the last quarter, not only the first quarter:
-/// energy that peaks and settles passes, energy still climbing past all before it fails.
+/// The energy criterion: the series is bounded unless a value of its last quarter (the last
+/// ceil(n/4) values) exceeds the limit growthFactor × (the largest value before it) + floor and
+/// the series does not come back: no value after its last one above the limit is at or below
+/// that largest earlier value. Driven scenes ramp their energy up while the motion builds (a hip
+/// sweep's muscles start to wrap), so the reference is every step before the last quarter, not
+/// only the first quarter: energy that peaks and settles passes, energy still climbing past all
+/// before it fails; so does a spike that falls back to the earlier level (a projective solve's
+/// late catch-up at a pose's end, docs/decisions.md), not one that stays above it.
 /// Series shorter than 2 values are bounded; a non-finite value fails at its index.
 struct EnergyCheck {
   bool bounded = true;  ///< no growth

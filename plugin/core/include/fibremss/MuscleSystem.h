@@ -93,8 +93,9 @@ struct StepStats {
 
   // Bones closing on a muscle (pinch): particles two bones press from opposite sides.
   size_t trappedParticles = 0;  ///< such particles still caught in the last iteration
-  /// Muscles with trapped particles; springs such a muscle burst do not fail the step (unless it
-  /// has NaN or grew beyond twice its rest size): the bones tore it and no smaller dt opens the
+  /// Muscles with trapped particles, or with a burst spring whose ends two bones pushed in the
+  /// step and stretched by moving apart; springs such a muscle burst do not fail the step (unless
+  /// it has NaN or grew beyond twice its rest size): the bones tore it and no smaller dt opens the
   /// gap, so the guard keeps that state.
   size_t trappedMuscles = 0;
 

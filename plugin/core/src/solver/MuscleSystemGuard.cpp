@@ -8,10 +8,11 @@
 // (MuscleSystem::setCancelFlag) is not retried: a failed attempt is rolled back (unless Report)
 // and nothing is blamed or frozen. A muscle whose springs burst while two bones press some of its
 // particles from opposite sides (trapped: pinched in an iteration of the step, CollisionPairs.cpp,
-// or a burst spring whose two ends different bones pushed in the step: its length is the bones'
-// motion), not NaN nor spread far beyond its size, was torn by the bones, not by the numerics: its
-// state is kept; while the bones go on moving its tear may grow by kTearGrowth a step, and once
-// they stand still later steps fail it only for more burst springs than the trap left. A frozen
+// or a burst spring whose two ends different bones pushed in the step and that grew by no more
+// than they moved apart there: its length is the bones' motion), not NaN nor spread far beyond
+// its size, was torn by the bones, not by the numerics: its state is kept; while the bones go on
+// moving its tear may grow by kTearGrowth a step, and once they stand still later steps fail it
+// only for more burst springs than the trap left. A frozen
 // muscle rides with its bones (their motion over the step) and is pushed out of them, so it never
 // ends inside one.
 #include "MuscleSystemGuard.h"
@@ -85,10 +86,33 @@ void add(StepTiming& sum, const StepTiming& part) {
   sum.output += part.output;
 }
 
+/// How far bones `a` and `b` moved apart in the step so far at `atA` and `atB` (world, at the
+/// step's start) [m]: the length of the difference of their motions there.
+double boneSeparation(const BoneState& a, const BoneState& b, const btVector3& atA,
+                      const btVector3& atB) {
+  const btVector3 moveA = a.current * (a.goodCurrent.inverse() * atA) - atA;
+  const btVector3 moveB = b.current * (b.goodCurrent.inverse() * atB) - atB;
+  return double((moveA - moveB).length());
+}
+
+/// Whether `spring`, burst, was stretched by two bones: different bones pushed its ends in the
+/// step, and it grew since the step's start (`start`) by no more than they moved apart there.
+/// Two bones that hold still relative to each other explain no growth.
+bool spannedByBones(const Spring& spring, const ParticleState& muscle, const ContactState& contact,
+                    const GuardSnapshot& start, std::span<const std::unique_ptr<BoneState>> bones) {
+  const int32_t boneA = contact.stepBones[spring.a], boneB = contact.stepBones[spring.b];
+  if (boneA < 0 || boneB < 0 || boneA == boneB) return false;
+  const btVector3 &a = start.goodPositions[spring.a], &b = start.goodPositions[spring.b];
+  const double growth =
+      muscle.positions[spring.a].distance(muscle.positions[spring.b]) - double(a.distance(b));
+  return growth <= boneSeparation(*bones[size_t(boneA)], *bones[size_t(boneB)], a, b);
+}
+
 }  // namespace
 
 MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& muscle,
-                         const ContactState& contact, TearState& tear) {
+                         const ContactState& contact, const GuardSnapshot& start,
+                         std::span<const std::unique_ptr<BoneState>> bones, TearState& tear) {
   MuscleHealth health;
   health.nan =
       !allFinite(muscle.positions) || !allFinite(muscle.previous) || !allFinite(muscle.velocities);
@@ -102,8 +126,7 @@ MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& mu
     const double length = muscle.positions[spring.a].distance(muscle.positions[spring.b]);
     if (!springExploded(length, spring.restLength, floor)) continue;
     ++health.explodedSprings;
-    const int32_t boneA = contact.stepBones[spring.a], boneB = contact.stepBones[spring.b];
-    if (boneA >= 0 && boneB >= 0 && boneA != boneB) ++health.spannedSprings;
+    if (spannedByBones(spring, muscle, contact, start, bones)) ++health.spannedSprings;
   }
   return health;
 }
@@ -136,11 +159,10 @@ struct GuardOutcome {
 };
 
 /// Saves the state a step changes: every muscle's (frozen ones too, carried with their bones
-/// every step) when `muscleState`, and always the bones' transforms (their motion over the step
-/// carries the frozen muscles).
-void saveStepStart(Slots<MuscleState>& muscles, Slots<BoneState>& bones, bool muscleState) {
-  if (muscleState)
-    for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot], *muscles.states[slot]);
+/// every step; a report-only guard reads the positions to judge burst springs) and the bones'
+/// transforms (their motion over the step carries the frozen muscles).
+void saveStepStart(Slots<MuscleState>& muscles, Slots<BoneState>& bones) {
+  for (uint32_t slot : muscles.order) saveGoodState(*muscles.states[slot], *muscles.states[slot]);
   for (uint32_t slot : bones.order) {
     BoneState& bone = *bones.states[slot];
     bone.goodLast = bone.last;
@@ -182,13 +204,16 @@ BoneSummary summariseBones(const Slots<BoneState>& bones) {
 
 /// Attribution after a failed attempt: which muscles failed (frozen ones are out of the step and
 /// of the blame), each counted in its failures, the first in `outcome`, each frozen when
-/// `freeze`. A muscle torn by bones closing on it is kept. Returns how many were blamed.
-size_t blameMuscles(Slots<MuscleState>& muscles, bool freeze, GuardOutcome& outcome) {
+/// `freeze`. A muscle torn by bones closing on it (`bones`) is kept. Returns how many were
+/// blamed.
+size_t blameMuscles(Slots<MuscleState>& muscles, const Slots<BoneState>& bones, bool freeze,
+                    GuardOutcome& outcome) {
   size_t blamed = 0;
   for (uint32_t slot : muscles.order) {
     MuscleState& state = *muscles.states[slot];
     if (state.frozen) continue;
-    const MuscleHealth health = checkMuscle(*state.settings, state, state, state.tear);
+    const MuscleHealth health =
+        checkMuscle(*state.settings, state, state, state, bones.states, state.tear);
     if (!health.failed()) continue;
     if (!health.nan && !health.spread) {
       // Torn by bones closing on it: no smaller dt opens the gap; kept, reported as trapped.
@@ -306,7 +331,7 @@ void MuscleSystem::Impl::guardedStep() {
   const uint64_t number = stepCount++;
   const FailurePolicy policy = definition.onFailure;
   const bool rollback = policy != FailurePolicy::Report;
-  saveStepStart(muscles, bones, rollback);
+  saveStepStart(muscles, bones);
   const btScalar goodPreviousDt = previousDt;
   StepSize size = stepSize(0);
 
@@ -331,7 +356,7 @@ void MuscleSystem::Impl::guardedStep() {
     const bool retry = policy == FailurePolicy::Retry &&
                        outcome.retries < std::min(definition.maxRetries, kMaxHalvings);
     // Flagged, but no muscle fails the check (only tiny springs beyond 3×): the state is good.
-    if (blameMuscles(muscles, rollback && !retry, outcome) == 0) break;
+    if (blameMuscles(muscles, bones, rollback && !retry, outcome) == 0) break;
     if (!rollback) {
       outcome.failed = true;
       break;
@@ -352,7 +377,7 @@ void MuscleSystem::Impl::guardedStep() {
     }
     trappedParticles += state.pinched;
     state.trapHeld = state.caughtInStep() || (state.trapHeld && boneSummary.moved);
-    trappedMuscles += state.pinched > 0 ? 1 : 0;
+    trappedMuscles += state.pinched > 0 || state.spannedInStep > 0 ? 1 : 0;
   }
   stats.timing = outcome.spent;
   stats.timing.total = std::chrono::duration<double, std::milli>(Clock::now() - start).count();

@@ -3,6 +3,8 @@
 // last good state of a muscle (saved at the start of every step, restored after a failed one)
 // and the per-muscle check that attributes a failed step to the muscles that failed.
 #include <cstddef>
+#include <memory>
+#include <span>
 
 #include "state/MuscleState.h"
 
@@ -13,7 +15,8 @@ struct MuscleHealth {
   bool nan = false;            ///< a position, previous position or velocity is NaN or inf
   size_t explodedSprings = 0;  ///< springs counted as exploded (see checkMuscle)
   /// Of those, the springs whose ends two different bones pushed in the step (ContactState::
-  /// stepBones): their length is the bones' motion, not the solver's.
+  /// stepBones) and grew in it by no more than those bones moved apart at its ends: their length
+  /// is the bones' motion, not the solver's.
   size_t spannedSprings = 0;
   /// The particles' bounding box is more than kTornSpread times as large (diagonal) as at rest:
   /// diverging, not merely torn.
@@ -30,9 +33,11 @@ constexpr double kTornSpread = 2;
 /// by more than the muscle's mean rest length: the 3× rule alone trips on springs of a few µm
 /// (converging fibre ends, jittered neighbours) whose stretch is harmless.
 /// A muscle torn into pieces (Tearing.h) is spread when one of its pieces is. `contact` names the
-/// bones that pushed each particle in the step (spannedSprings).
+/// bones that pushed each particle in the step, `start` holds the positions at its start and
+/// `bones` (by slot) their transforms there and now (spannedSprings).
 MuscleHealth checkMuscle(const MuscleSettings& settings, const ParticleState& muscle,
-                         const ContactState& contact, TearState& tear);
+                         const ContactState& contact, const GuardSnapshot& start,
+                         std::span<const std::unique_ptr<BoneState>> bones, TearState& tear);
 
 /// Copies positions, previous and velocities of `muscle` into its good-state buffers `good`.
 void saveGoodState(const ParticleState& muscle, GuardSnapshot& good);

@@ -112,8 +112,9 @@ struct ContactState {
   /// that a bone pushed it in (of two in one response, the first: pinchBones; -1: none; cleared
   /// as the attempt begins): a burst spring whose ends two bones pushed was torn by them.
   std::vector<int32_t> stepBones;
-  /// Burst springs whose ends two different bones pushed, as the guard's check of this step's
-  /// attempt found them (0 until it checks; cleared as the attempt begins).
+  /// Burst springs whose ends two different bones pushed and moved apart by at least their
+  /// growth, as the guard's check of this step's attempt found them (0 until it checks; cleared
+  /// as the attempt begins).
   size_t spannedInStep = 0;
   /// Caught in some step since the bones last stood still: the bones that tore it may still be
   /// carrying its torn halves apart (the guard's) [flag].
