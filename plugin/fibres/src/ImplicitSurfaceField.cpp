@@ -9,6 +9,7 @@ namespace fibremss {
 namespace {
 
 constexpr int32_t kBlock = 4;  ///< rest distance block side [points]
+constexpr size_t kBlockValues = size_t(kBlock) * kBlock * kBlock;  ///< values per block
 /// Particle cells per kernel radius [1]: the cells searched around a point then hold 2.5³ h³ on
 /// average, against 3³ h³ with cells of h.
 constexpr btScalar kCellsPerKernel = 2;
@@ -149,8 +150,8 @@ RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame&
 }
 
 void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot) {
-  values_.resize(values_.size() + kBlock * kBlock * kBlock);
-  float* out = values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
+  values_.resize(values_.size() + kBlockValues);
+  float* out = values_.data() + size_t(slot) * kBlockValues;
   for (int32_t k = 0; k < kBlock; ++k)
     for (int32_t j = 0; j < kBlock; ++j)
       for (int32_t i = 0; i < kBlock; ++i) {
@@ -160,13 +161,13 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
       }
 }
 
-const float* RestDistanceGrid::block(int32_t bi, int32_t bj, int32_t bk) {
+int32_t RestDistanceGrid::slotOf(int32_t bi, int32_t bj, int32_t bk) {
   int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
   if (slot < 0) {
-    slot = int32_t(values_.size() / (kBlock * kBlock * kBlock));
+    slot = int32_t(values_.size() / kBlockValues);
     fillBlock(bi, bj, bk, slot);
   }
-  return values_.data() + size_t(slot) * kBlock * kBlock * kBlock;
+  return slot;
 }
 
 btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
@@ -183,14 +184,20 @@ btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
     placeIn[a] = {base % kBlock, (base + 1) % kBlock};
     crossing |= unsigned(blockOf[a][0] != blockOf[a][1]) << a;
   }
-  std::array<const float*, 8> values;  // per corner: its block's values
+  std::array<size_t, 8> first;  // per corner: its block's first value in values_
+  for (unsigned c = 0; c < 8; ++c) {
+    const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    first[c] = (c & crossing) != c
+                   ? first[c & crossing]
+                   : kBlockValues * size_t(slotOf(blockOf[0][dx], blockOf[1][dy], blockOf[2][dz]));
+  }
+  // Read only once every corner's block is filled: a fill may move values_.
   btScalar sum = 0;
   for (unsigned c = 0; c < 8; ++c) {
     const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    values[c] = (c & crossing) == c ? block(blockOf[0][dx], blockOf[1][dy], blockOf[2][dz])
-                                    : values[c & crossing];
     const btScalar w = (dx ? t[0] : 1 - t[0]) * (dy ? t[1] : 1 - t[1]) * (dz ? t[2] : 1 - t[2]);
-    sum += w * values[c][placeIn[0][dx] + kBlock * (placeIn[1][dy] + kBlock * placeIn[2][dz])];
+    const int32_t place = placeIn[0][dx] + kBlock * (placeIn[1][dy] + kBlock * placeIn[2][dz]);
+    sum += w * values_[first[c] + size_t(place)];
   }
   return sum;
 }

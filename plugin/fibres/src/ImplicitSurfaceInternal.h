@@ -54,8 +54,9 @@ class RestDistanceGrid {
   btScalar at(const btVector3& x, btScalar outsideValue);
 
  private:
-  /// The values of block (bi, bj, bk), 4³ from its lower corner, x fastest.
-  const float* block(int32_t bi, int32_t bj, int32_t bk);
+  /// The slot of block (bi, bj, bk)'s values (4³ from its lower corner, x fastest), filled
+  /// the first time; a fill may move every block's values.
+  int32_t slotOf(int32_t bi, int32_t bj, int32_t bk);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
 
   MeshDistance distance_;
