@@ -946,6 +946,8 @@ std::vector<CalculixDefinition> changedDefinitions(const CalculixDefinition& def
   d = definition;
   d.incrementScale = 0.25;
   variants.push_back(d);
+  d.muscleIncrementScales.assign(1, 1.0);  // a retry that kept its one muscle at x1
+  variants.push_back(d);
   d = definition;
   d.contactSliding = ContactSliding::Small;
   variants.push_back(d);
@@ -1339,6 +1341,189 @@ TEST(ReferenceCells, InParallelOrAsCellsTheCacheHoldsWhatTheSerialSolveStores) {
     EXPECT_EQ(files(name), files("serial")) << "the same entry";
     EXPECT_FALSE(std::filesystem::exists(cache(name) + "/" + key + ".parts"));
   }
+}
+
+TEST(ReferenceCache, ASolutionKeepingItsMusclesPartsIsVersion2InTheCacheAndShipped) {
+  TemporaryDirectory dir("reference_parts_test");
+  CalculixSolution solution;
+  solution.poseSurfaces = {{{1, 2, 3}, {4, 5, 6}}, {}};
+  solution.poseFailures = {"", "muscle b: *ERROR: too many cutbacks"};
+  MuscleSolution a, b;
+  a.stepSurfaces = {{{1, 2, 3}}, {{1, 2, 4}}};
+  a.nodes = 5;
+  a.increments = 3;
+  a.seconds = 1.5;
+  a.inputFile = "muscle0.inp";
+  b.failure = "*ERROR: too many cutbacks";
+  b.increments = 7;
+  const auto magic = [](const std::string& bytes) { return bytes.substr(0, 8); };
+  const std::string cached = (dir.path() / "s.bin").string();
+  const std::string shipped = (dir.path() / "s.ref.gz").string();
+  saveSolution(cached, solution);
+  EXPECT_EQ(magic(readText(cached)), "FMSSREF1") << "without parts: version 1, as before";
+  solution.muscles = {a, b};
+  saveSolution(cached, solution);
+  EXPECT_EQ(magic(readText(cached)), "FMSSREF2");
+  shipSolution(shipped, solution);
+  for (const bool ship : {false, true}) {
+    SCOPED_TRACE(ship ? "shipped" : "cached");
+    CalculixSolution back;
+    ASSERT_TRUE(ship ? loadShippedSolution(shipped, back) : loadSolution(cached, back));
+    EXPECT_EQ(back.poseFailures, solution.poseFailures);
+    ASSERT_EQ(back.muscles.size(), 2u);
+    EXPECT_EQ(back.muscles[0].stepSurfaces, a.stepSurfaces);
+    EXPECT_EQ(back.muscles[0].nodes, 5u);
+    EXPECT_EQ(back.muscles[0].seconds, 1.5);
+    EXPECT_EQ(back.muscles[0].inputFile, "muscle0.inp");
+    EXPECT_TRUE(back.muscles[0].solvedEveryStep());
+    EXPECT_EQ(back.muscles[1].failure, b.failure);
+    EXPECT_EQ(back.muscles[1].increments, 7);
+    EXPECT_FALSE(back.muscles[1].solvedEveryStep());
+  }
+}
+
+/// carriedFusiform with its second muscle (`beside`), loaded and prepared.
+class RetryPerMuscle : public ::testing::Test {
+ protected:
+  RetryPerMuscle()
+      : dir("retry_per_muscle_test"),
+        scene(loadScene(carriedFusiform(dir.path(), true), {"resolution=6"})),
+        prepared(prepareScene(scene.bones, scene.muscles, scene.simulation.seed)) {}
+  TemporaryDirectory dir;
+  LoadedScene scene;
+  PreparedScene prepared;
+};
+
+TEST_F(RetryPerMuscle, KeepsTheIncrementsOfTheMusclesTheFailedSolveSolvedUnderAKeyOfItsOwn) {
+  REQUIRE_PROGRAM("ccx");
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  const CalculixDefinition definition;
+  CalculixSolution failed;
+  failed.poseFailures = {"", "muscle beside: *ERROR: too many cutbacks"};
+  CalculixDefinition uniform = definition;
+  uniform.incrementScale *= kFinerIncrements;
+  const auto key = [&](const CalculixDefinition& d) {
+    return referenceCacheKey(scene, prepared, d, {});
+  };
+  EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform))
+      << "stored without its parts: every muscle solved again";
+  failed.muscles.resize(2);
+  failed.muscles[1].failure = "*ERROR: too many cutbacks";
+  const CalculixDefinition retry = retryDefinition(definition, failed);
+  EXPECT_EQ(retry.incrementScale, uniform.incrementScale);
+  EXPECT_EQ(retry.muscleIncrementScales, (std::vector<double>{1, kFinerIncrements}));
+  EXPECT_NE(key(retry), key(uniform)) << "a mixed retry is no uniform one";
+  EXPECT_NE(key(retry), key(definition));
+  EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 0), key(definition));
+  EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 1), "") << "solved again";
+  EXPECT_EQ(incrementsText(retry, prepared),
+            "x0.25 for beside only (" + prepared.muscles[0]->name + " at x1)");
+  EXPECT_EQ(gateDefinitions(retry, 0).increments.muscleIncrementScales,
+            (std::vector<double>{kIncrementGateFactor, kFinerIncrements * kIncrementGateFactor}));
+  failed.muscles[0].failure = "*ERROR: too many cutbacks";
+  EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform)) << "both failed";
+}
+
+/// A ccx that fails muscle1's job wherever the largest increment of a step after the first (the
+/// rest pose's, one increment) is above `bound`, as ccx fails a pose at too coarse increments,
+/// and runs ccx for every other; each job it is given is a line of `dir`/runs.log.
+std::string ccxFailingMuscle1Above(const std::filesystem::path& dir, double bound) {
+  const std::filesystem::path path = dir / "ccx-failing-muscle1";
+  std::ofstream(path) << "#!/bin/sh\n"
+                      << "[ -n \"$2\" ] && echo \"$2\" >> " << (dir / "runs.log") << "\n"
+                      << "if [ \"$2\" = muscle1 ] && awk -F', *' -v bound=" << bound
+                      << " '{if (p && ++n > 1 && $4 > bound) coarse = 1; p = ($0 == \"*STATIC\")} "
+                         "END {exit !coarse}' muscle1.inp; then\n"
+                      << "  echo ' *ERROR: increments too coarse for muscle1'; exit 201\n"
+                      << "fi\n"
+                      << "exec ccx \"$@\"\n";
+  std::filesystem::permissions(path, std::filesystem::perms::owner_exec,
+                               std::filesystem::perm_options::add);
+  return path.string();
+}
+
+/// Muscle `m`'s vertices of a surface of every muscle (prepared restSurface order).
+std::vector<btVector3> muscleVertices(const PreparedScene& prepared,
+                                      const std::vector<btVector3>& surface, size_t m) {
+  size_t first = 0;
+  for (size_t i = 0; i < m; ++i) first += prepared.muscles[i]->restSurface.vertices.size();
+  const size_t count = prepared.muscles[m]->restSurface.vertices.size();
+  if (surface.size() < first + count) return {};
+  return {surface.begin() + long(first), surface.begin() + long(first + count)};
+}
+
+TEST_F(RetryPerMuscle, SolvesAgainOnlyTheMuscleCcxFailedAndTakesTheOtherAsItWas) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  ReferenceOptions options;
+  options.cacheDir = (dir.path() / "cache").string();
+  options.gates = false;
+  // The lower bar's 2 mm beyond the carry: increments of at most 0.5 of the pose at the
+  // default, 0.125 at a quarter of it.
+  options.definition.program = ccxFailingMuscle1Above(dir.path(), 0.25);
+  const CalculixDefinition definition = sceneDefinition(scene, options);
+  const auto runs = [&] {
+    std::vector<std::string> jobs;
+    std::istringstream lines(readText(dir.path() / "runs.log"));
+    for (std::string line; std::getline(lines, line);) jobs.push_back(line);
+    std::filesystem::remove(dir.path() / "runs.log");
+    return jobs;
+  };
+  const CalculixSolution failed =
+      cachedCalculixReference(scene, prepared, definition, {}, options.cacheDir, {}, {}, nullptr);
+  ASSERT_EQ(runs(), (std::vector<std::string>{"muscle0", "muscle1"}));
+  ASSERT_EQ(failed.poseFailures[0], "muscle beside: *ERROR: increments too coarse for muscle1");
+  ASSERT_EQ(failed.muscles.size(), 2u) << "a failed solve keeps its muscles' parts";
+  ASSERT_TRUE(failed.muscles[0].solvedEveryStep()) << failed.muscles[0].failure;
+  const CalculixDefinition retry = retryDefinition(definition, failed);
+  const std::string retryKey = referenceCacheKey(scene, prepared, retry, {});
+  const std::vector<NamedReferenceCell> cells = referenceCells(scene, prepared, options);
+  ASSERT_EQ(cells.size(), 2u);
+  for (const NamedReferenceCell& cell : cells) EXPECT_EQ(cell.key, retryKey);
+  EXPECT_TRUE(cells[0].stored) << "kept from the failed solve: nothing to solve";
+  EXPECT_FALSE(cells[1].stored) << "the muscle ccx failed: its retry is to solve";
+
+  // As a batch engine solves the cells left to solve, then a run merges them from the cache.
+  EXPECT_TRUE(cachedCalculixMuscle(scene, prepared, cells[1].cell.definition, cells[1].cell.cut,
+                                   options.cacheDir, 1, {}, {}));
+  EXPECT_EQ(runs(), std::vector<std::string>{"muscle1"}) << "only the muscle ccx failed";
+  options.cachedOnly = true;
+  const Reference reference = computeReference(scene, prepared, options);
+  EXPECT_FALSE(reference.missing) << "merged with the muscle kept, without ccx";
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "runs.log"));
+  for (const char* file : {"muscle0.inp", "muscle0.dat", "muscle1.inp", "muscle1.dat"})
+    EXPECT_TRUE(std::filesystem::exists(options.cacheDir + "/" + retryKey + "/" + file)) << file;
+  EXPECT_EQ(reference.key, retryKey);
+  EXPECT_EQ(reference.increments,
+            "x0.25 for beside only (" + prepared.muscles[0]->name + " at x1)");
+  EXPECT_NE(reference.description.find("retried at increments x0.25 for beside only"),
+            std::string::npos)
+      << reference.description;
+  const CalculixSolution& mixed = reference.solution;
+  ASSERT_EQ(mixed.solvedPoses(), 2) << mixed.poseFailures[0] << mixed.poseFailures[1];
+  ASSERT_FALSE(mixed.returnSurface.empty()) << mixed.returnFailure;
+  EXPECT_TRUE(mixed.muscles.empty()) << "nothing failed: no parts kept";
+
+  CalculixDefinition uniform = definition;
+  uniform.incrementScale *= kFinerIncrements;
+  const CalculixSolution whole =
+      cachedCalculixReference(scene, prepared, uniform, {}, options.cacheDir, {}, {}, nullptr);
+  EXPECT_EQ(runs(), (std::vector<std::string>{"muscle0", "muscle1"})) << "its own key";
+  ASSERT_EQ(whole.solvedPoses(), 2);
+  const std::vector<std::vector<btVector3>>& kept = failed.muscles[0].stepSurfaces;
+  for (size_t p = 0; p < 2; ++p) {
+    EXPECT_EQ(muscleVertices(prepared, mixed.poseSurfaces[p], 1),
+              muscleVertices(prepared, whole.poseSurfaces[p], 1))
+        << "the muscle solved again, as the whole retry solves it: pose " << p;
+    EXPECT_EQ(muscleVertices(prepared, mixed.poseSurfaces[p], 0), kept[p])
+        << "the muscle kept, as the failed solve gave it: pose " << p;
+  }
+  EXPECT_EQ(muscleVertices(prepared, mixed.returnSurface, 1),
+            muscleVertices(prepared, whole.returnSurface, 1));
+  EXPECT_EQ(muscleVertices(prepared, mixed.returnSurface, 0), kept.back());
+  EXPECT_EQ(mixed.nodes, whole.nodes);
+  EXPECT_LT(mixed.increments, whole.increments) << "the muscle kept took the coarser ones";
 }
 
 TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {

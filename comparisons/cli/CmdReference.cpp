@@ -120,10 +120,12 @@ void shipStored(const std::string& dir, const std::string& key, const CalculixSo
 }
 
 /// The failed solve a retry replaces, as a fresh machine needs it to find the retry: its
-/// failures and counts without its surfaces (only the retry's are compared).
+/// failures and counts (its muscles' too: which ones the retry solved again is in its key)
+/// without its surfaces (only the retry's are compared).
 CalculixSolution failureRecord(CalculixSolution solution) {
   for (std::vector<btVector3>& surface : solution.poseSurfaces) surface.clear();
   solution.returnSurface.clear();
+  for (MuscleSolution& part : solution.muscles) part.stepSurfaces.clear();
   return solution;
 }
 

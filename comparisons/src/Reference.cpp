@@ -99,14 +99,10 @@ bool solveVariant(const LoadedScene& scene, const PreparedScene& prepared, Scene
   const std::string failure = ccxFailureToRetry(solve.solution);
   if (failure.empty() || (options.cancel && options.cancel->load())) return true;
   Solve finer;
-  finer.definition = definition;
-  finer.definition.incrementScale *= kFinerIncrements;
-  if (options.log) {
-    std::ostringstream line;
-    line << "reference (" << what << "): ccx failed (" << failure << "); again with increments x"
-         << finer.definition.incrementScale;
-    options.log(line.str());
-  }
+  finer.definition = retryDefinition(definition, solve.solution);
+  if (options.log)
+    options.log("reference (" + what + "): ccx failed (" + failure + "); again with increments " +
+                incrementsText(finer.definition, prepared));
   if (solveOnce(scene, prepared, cuts, options, what, finer)) solve = std::move(finer);
   return true;
 }
@@ -337,8 +333,7 @@ NextSolve storedRetry(const LoadedScene& scene, const PreparedScene& prepared, S
   if (!storedSolution(scene, prepared, cuts, definition, cacheDir, key, solution))
     return {definition, "", 0};
   if (ccxFailureToRetry(solution).empty()) return {definition, "", gatePoseLimit(solution)};
-  NextSolve retry{definition, key, 0};
-  retry.definition.incrementScale *= kFinerIncrements;
+  NextSolve retry{retryDefinition(definition, solution), key, 0};
   if (storedSolution(scene, prepared, cuts, retry.definition, cacheDir, key, solution))
     retry.gatePoseLimit = gatePoseLimit(solution);
   return retry;
@@ -366,13 +361,18 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
   for (const auto& [name, solve] : solves) {
     const ContinuumCut& cut = cuts.at(solve.definition.attachmentScale);
     const std::string key = referenceCacheKey(scene, prepared, solve.definition, cut);
-    for (size_t m = 0; m < prepared.muscles.size(); ++m)
+    for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+      // A muscle a retry keeps is taken from the failed solve: nothing to solve.
+      const std::string kept = keptPartKey(scene, prepared, solve.definition, cut, m);
+      MuscleSolution part;
       cells.push_back({name,
                        key,
                        prepared.muscles[m]->name,
                        {solve.definition, cut, m},
-                       referencePartStored(cacheDir, key, m),
+                       referencePartStored(cacheDir, key, m) ||
+                           (!kept.empty() && loadSolvedPart(cacheDir, kept, m, part)),
                        solve.retryOf});
+    }
   }
   return cells;
 }
@@ -410,6 +410,43 @@ std::string ReferenceGates::rankedPosesText() const {
   if (stopped.empty()) return over + "the later ones have no continuum equilibrium";
   return over + "ccx did not solve pose " + std::to_string(solvedPoses) + " (" + stopped +
          ") or later";
+}
+
+CalculixDefinition retryDefinition(const CalculixDefinition& definition,
+                                   const CalculixSolution& failed) {
+  CalculixDefinition retry = definition;
+  retry.incrementScale *= kFinerIncrements;
+  retry.muscleIncrementScales.clear();
+  bool kept = false;
+  for (size_t m = 0; m < failed.muscles.size(); ++m) {
+    const bool solved = failed.muscles[m].solvedEveryStep();
+    kept = kept || solved;
+    retry.muscleIncrementScales.push_back(definition.incrementScaleOf(m) *
+                                          (solved ? 1 : kFinerIncrements));
+  }
+  if (!kept) retry.muscleIncrementScales.clear();  // every muscle solved again: uniform
+  return retry;
+}
+
+std::string incrementsText(const CalculixDefinition& definition, const PreparedScene& prepared) {
+  std::ostringstream text;
+  text << "x" << definition.incrementScale;
+  if (definition.muscleIncrementScales.empty()) return text.str();
+  std::map<double, std::string> muscles;  // their names by scale
+  for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    std::string& names = muscles[definition.incrementScaleOf(m)];
+    names += (names.empty() ? "" : ", ") + prepared.muscles[m]->name;
+  }
+  text << " for " << muscles[definition.incrementScale] << " only (";
+  std::string others;
+  for (const auto& [scale, names] : muscles) {
+    if (scale == definition.incrementScale) continue;
+    std::ostringstream at;
+    at << names << " at x" << scale;
+    appendItem(others, at.str());
+  }
+  text << others << ")";
+  return text.str();
 }
 
 std::string ccxFailureToRetry(const CalculixSolution& solution) {
@@ -460,6 +497,7 @@ GateDefinitions gateDefinitions(const CalculixDefinition& reference, int poseLim
   gates.attachmentLow.attachmentScale *= 0.5f;
   gates.attachmentHigh.attachmentScale *= 1.5f;
   gates.increments.incrementScale *= kIncrementGateFactor;
+  for (double& scale : gates.increments.muscleIncrementScales) scale *= kIncrementGateFactor;
   if (gates.finer.element == CalculixElement::C3D4) {
     gates.finer.element = CalculixElement::C3D10;
     gates.refinedBy = "C3D10 on the same tetrahedra";
@@ -533,7 +571,10 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
                       ? "beyond the rigid motion of the bone frame it is least in"
                       : "in the world")
               << "); ";
-  if (definition.incrementScale != 1)
+  if (!definition.muscleIncrementScales.empty())
+    description << "retried at increments " << incrementsText(definition, prepared)
+                << " where ccx failed a pose of a muscle at its coarser increments; ";
+  else if (definition.incrementScale != 1)
     description << "increments x" << definition.incrementScale
                 << " (ccx failed a pose at the default 2.5 deg / 1 mm); ";
   if (definition.contactPenalty > 0)
@@ -543,6 +584,7 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   else
     description << "no contact";
   reference.description = description.str();
+  reference.increments = incrementsText(definition, prepared);
   return reference;
 }
 
@@ -595,6 +637,7 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"excluded", g.excluded},
             {"passed", g.passed()},
             {"ranked_poses", g.rankedPoses()}}},
+          {"increment_scales", reference.increments},
           {"nodes", s.nodes},
           {"tetrahedra", s.elements},
           {"prescribed_nodes", s.prescribedNodes},

@@ -361,6 +361,18 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
                 : ccxFailure(base + ".log", status, definition.memoryLimitGiB);
 }
 
+/// Where ccx failed a muscle's job (not interrupted), every part into solution.muscles, the
+/// failed ones without their surfaces (CalculixSolution::muscles).
+void keepParts(const std::vector<MuscleSolution>& muscles, CalculixSolution& solution) {
+  const auto failed = [](const MuscleSolution& m) { return !m.solvedEveryStep(); };
+  if (solution.interrupted || std::none_of(muscles.begin(), muscles.end(), failed)) return;
+  solution.muscles = muscles;
+  for (MuscleSolution& part : solution.muscles) {
+    part.inputFile = std::filesystem::path(part.inputFile).filename().string();
+    if (failed(part)) part.stepSurfaces.clear();
+  }
+}
+
 }  // namespace
 
 int ccxPoseCount(const LoadedScene& scene, const ContinuumCut& cut, int poseLimit) {
@@ -391,12 +403,20 @@ bool CalculixSolution::hitMemoryLimit() const {
   return named(returnFailure) || std::any_of(poseFailures.begin(), poseFailures.end(), named);
 }
 
+CalculixDefinition muscleDefinition(const CalculixDefinition& definition, size_t m) {
+  CalculixDefinition own = definition;
+  own.incrementScale = definition.incrementScaleOf(m);
+  own.muscleIncrementScales.clear();
+  return own;
+}
+
 MuscleSolution solveCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
-                                   const CalculixDefinition& definition, const ContinuumCut& cut,
+                                   const CalculixDefinition& mixed, const ContinuumCut& cut,
                                    size_t m, const std::string& workDir,
                                    const std::function<void(const ReferenceProgress&)>& progress,
                                    const std::atomic<bool>* cancel) {
   const auto start = Clock::now();
+  const CalculixDefinition definition = muscleDefinition(mixed, m);
   std::filesystem::create_directories(workDir);
   std::vector<MeshDistance> bones;
   for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
@@ -479,6 +499,7 @@ CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const Prepar
     if (why.empty() && !excluded && returns) why = "interrupted";
     (pose ? solution.poseSurfaces[p] : solution.returnSurface).clear();
   }
+  keepParts(muscles, solution);
   return solution;
 }
 

@@ -24,9 +24,13 @@
 namespace fibremss {
 namespace {
 
+// Version 2 of a solution (cache or shipped) is version 1 followed by its muscles' parts
+// (CalculixSolution::muscles); a solution without them is still written as version 1.
 constexpr char kMagic[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '1'};
+constexpr char kMagic2[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '2'};
 constexpr char kPartMagic[8] = {'F', 'M', 'S', 'S', 'P', 'R', 'T', '1'};
 constexpr char kShippedMagic[8] = {'F', 'M', 'S', 'S', 'S', 'H', 'P', '1'};
+constexpr char kShippedMagic2[8] = {'F', 'M', 'S', 'S', 'S', 'H', 'P', '2'};
 
 /// FNV-1a over everything fed to it.
 class Hasher {
@@ -172,26 +176,48 @@ SolveCounts readCounts(Reader& read) {
           read.value<double>()};
 }
 
-/// Reads the magic `expected` from `in`, else throws InputError naming what `path` is not.
-void expectMagic(std::istream& in, const std::string& path, const char (&expected)[8],
-                 const char* what) {
+/// Reads a magic from `in`: 1 where it is `first`, 2 where `second` (nullptr: none), else
+/// throws InputError naming what `path` is not.
+int expectMagic(std::istream& in, const std::string& path, const char (&first)[8], const char* what,
+                const char (*second)[8] = nullptr) {
   char magic[8];
   in.read(magic, sizeof magic);
-  if (!in || std::memcmp(magic, expected, sizeof magic) != 0)
-    throw InputError(path, "", std::string("not a ") + what);
+  if (in && std::memcmp(magic, first, sizeof magic) == 0) return 1;
+  if (in && second && std::memcmp(magic, *second, sizeof magic) == 0) return 2;
+  throw InputError(path, "", std::string("not a ") + what);
 }
 
-/// Writes a muscle's part (its input file by name alone) to `path` atomically.
+/// Writes a muscle's part (after a magic; its input file by name alone) in `precision`.
+void writePart(std::ostream& out, const MuscleSolution& part,
+               Precision precision = Precision::Double) {
+  const uint64_t steps = part.stepSurfaces.size();
+  out.write(reinterpret_cast<const char*>(&steps), sizeof steps);
+  for (const std::vector<btVector3>& surface : part.stepSurfaces)
+    writePoints(out, surface, precision);
+  writeText(out, part.failure);
+  writeCounts(out, std::tie(part.nodes, part.tetrahedra, part.prescribedNodes,
+                            part.newtonIterations, part.increments, part.seconds));
+  writeText(out, std::filesystem::path(part.inputFile).filename().string());
+}
+
+/// Reads what writePart wrote.
+MuscleSolution readPart(Reader& read, const std::string& path) {
+  MuscleSolution part;
+  const auto steps = read.value<uint64_t>();
+  if (steps > 1000000) throw InputError(path, "", "not a FibreMSS reference part");
+  for (uint64_t s = 0; s < steps; ++s) part.stepSurfaces.push_back(read.points());
+  part.failure = read.text();
+  std::tie(part.nodes, part.tetrahedra, part.prescribedNodes, part.newtonIterations,
+           part.increments, part.seconds) = readCounts(read);
+  part.inputFile = read.text();
+  return part;
+}
+
+/// Writes a muscle's part to `path` atomically.
 void savePart(const std::string& path, const MuscleSolution& part) {
   writeAtomically(path, [&](std::ostream& out) {
     out.write(kPartMagic, sizeof kPartMagic);
-    const uint64_t steps = part.stepSurfaces.size();
-    out.write(reinterpret_cast<const char*>(&steps), sizeof steps);
-    for (const std::vector<btVector3>& surface : part.stepSurfaces) writePoints(out, surface);
-    writeText(out, part.failure);
-    writeCounts(out, std::tie(part.nodes, part.tetrahedra, part.prescribedNodes,
-                              part.newtonIterations, part.increments, part.seconds));
-    writeText(out, std::filesystem::path(part.inputFile).filename().string());
+    writePart(out, part);
   });
 }
 
@@ -201,14 +227,7 @@ bool loadPart(const std::string& path, MuscleSolution& part) {
   if (!in) return false;
   Reader read(in, path);
   expectMagic(in, path, kPartMagic, "FibreMSS reference part file");
-  part = {};
-  const auto steps = read.value<uint64_t>();
-  if (steps > 1000000) throw InputError(path, "", "not a FibreMSS reference part file");
-  for (uint64_t s = 0; s < steps; ++s) part.stepSurfaces.push_back(read.points());
-  part.failure = read.text();
-  std::tie(part.nodes, part.tetrahedra, part.prescribedNodes, part.newtonIterations,
-           part.increments, part.seconds) = readCounts(read);
-  part.inputFile = read.text();
+  part = readPart(read, path);
   return true;
 }
 
@@ -231,10 +250,14 @@ void writeSolution(std::ostream& out, const CalculixSolution& solution, Precisio
   out.write(reinterpret_cast<const char*>(&cut), sizeof cut);
   out.write(reinterpret_cast<const char*>(&solution.cut.gapMm), sizeof solution.cut.gapMm);
   writeText(out, solution.cut.reason);
+  if (solution.muscles.empty()) return;  // version 1
+  const uint64_t muscles = solution.muscles.size();
+  out.write(reinterpret_cast<const char*>(&muscles), sizeof muscles);
+  for (const MuscleSolution& part : solution.muscles) writePart(out, part, precision);
 }
 
-/// Reads what writeSolution wrote.
-void readSolution(Reader& read, const std::string& path, CalculixSolution& solution) {
+/// Reads what writeSolution wrote, of `version` (its magic's).
+void readSolution(Reader& read, const std::string& path, int version, CalculixSolution& solution) {
   solution = {};
   const auto poses = read.value<uint64_t>();
   if (poses > 1000000) throw InputError(path, "", "not a FibreMSS reference cache file");
@@ -252,6 +275,10 @@ void readSolution(Reader& read, const std::string& path, CalculixSolution& solut
   solution.cut.pose = static_cast<int>(read.value<int64_t>());
   solution.cut.gapMm = read.value<double>();
   solution.cut.reason = read.text();
+  if (version < 2) return;
+  const auto muscles = read.value<uint64_t>();
+  if (muscles > 1000000) throw InputError(path, "", "not a FibreMSS reference cache file");
+  for (uint64_t m = 0; m < muscles; ++m) solution.muscles.push_back(readPart(read, path));
 }
 
 std::string entryDir(const std::string& cacheDir, const std::string& key) {
@@ -350,6 +377,11 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
     h.text("increment scale");
     h.value(definition.incrementScale);
   }
+  if (!definition.muscleIncrementScales.empty()) {  // per muscle (no other key changes)
+    h.text("muscle increment scales");
+    h.value(definition.muscleIncrementScales.size());
+    for (const double scale : definition.muscleIncrementScales) h.value(scale);
+  }
   // Increments bounded in the bone's frame (the world rule's entries keep their keys).
   if (definition.incrementRule != IncrementRule::World) {
     h.text("increment rule");
@@ -382,7 +414,7 @@ std::string defaultReferenceCacheDir() {
 
 void saveSolution(const std::string& path, const CalculixSolution& solution) {
   writeAtomically(path, [&](std::ostream& out) {
-    out.write(kMagic, sizeof kMagic);
+    out.write(solution.muscles.empty() ? kMagic : kMagic2, sizeof kMagic);
     writeSolution(out, solution, Precision::Double);
   });
 }
@@ -391,14 +423,14 @@ bool loadSolution(const std::string& path, CalculixSolution& solution) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return false;
   Reader read(in, path);
-  expectMagic(in, path, kMagic, "FibreMSS reference cache file");
-  readSolution(read, path, solution);
+  const int version = expectMagic(in, path, kMagic, "FibreMSS reference cache file", &kMagic2);
+  readSolution(read, path, version, solution);
   return true;
 }
 
 void shipSolution(const std::string& path, const CalculixSolution& solution) {
   std::ostringstream bytes;
-  bytes.write(kShippedMagic, sizeof kShippedMagic);
+  bytes.write(solution.muscles.empty() ? kShippedMagic : kShippedMagic2, sizeof kShippedMagic);
   CalculixSolution shipped = solution;
   shipped.inputFiles.clear();  // they name another machine's cache
   writeSolution(bytes, shipped, Precision::Float);
@@ -427,8 +459,9 @@ bool loadShippedSolution(const std::string& path, CalculixSolution& solution) {
                      "not a gzip file or truncated (zlib error " + std::to_string(error) + ")");
   std::istringstream bytes(data);
   Reader read(bytes, path, Precision::Float);
-  expectMagic(bytes, path, kShippedMagic, "FibreMSS shipped reference");
-  readSolution(read, path, solution);
+  const int version =
+      expectMagic(bytes, path, kShippedMagic, "FibreMSS shipped reference", &kShippedMagic2);
+  readSolution(read, path, version, solution);
   return true;
 }
 
@@ -479,6 +512,61 @@ bool referencePartStored(const std::string& cacheDir, const std::string& key, si
          std::filesystem::exists(referencePartDir(cacheDir, key, m) + "/part.bin");
 }
 
+bool loadSolvedPart(const std::string& cacheDir, const std::string& key, size_t m,
+                    MuscleSolution& part) {
+  CalculixSolution solution;
+  if (key.empty() || !loadStoredSolution(cacheDir, key, solution) || m >= solution.muscles.size())
+    return false;
+  part = std::move(solution.muscles[m]);
+  return part.solvedEveryStep() && !part.stepSurfaces.empty();
+}
+
+std::string keptPartKey(const LoadedScene& scene, const PreparedScene& prepared,
+                        const CalculixDefinition& definition, const ContinuumCut& cut, size_t m) {
+  if (definition.incrementScaleOf(m) == definition.incrementScale) return "";
+  return referenceCacheKey(scene, prepared, muscleDefinition(definition, m), cut);
+}
+
+namespace {
+/// Muscle `m`'s part of the solve whose key keptPartKey gives, into `work` as a solved part
+/// (with its .inp and ccx's files where they are in the cache); false where that solve does not
+/// keep it solved.
+bool takeKeptPart(const LoadedScene& scene, const PreparedScene& prepared,
+                  const CalculixDefinition& definition, const ContinuumCut& cut,
+                  const std::string& cacheDir, size_t m, const std::string& work,
+                  MuscleSolution& part) {
+  namespace fs = std::filesystem;
+  const std::string source = keptPartKey(scene, prepared, definition, cut, m);
+  if (source.empty() || !loadSolvedPart(cacheDir, source, m, part)) return false;
+  fs::create_directories(work);
+  const std::string stem = fs::path(part.inputFile).stem().string();
+  if (fs::is_directory(entryDir(cacheDir, source)))
+    for (const fs::directory_entry& file : fs::directory_iterator(entryDir(cacheDir, source)))
+      if (file.path().stem() == stem) fs::copy_file(file.path(), work / file.path().filename());
+  return true;
+}
+
+/// Muscle `m`'s part of the solve taken as takeKeptPart says into its part directory (as
+/// cachedCalculixMuscle stores one); false (nothing kept) where it cannot be taken.
+bool storeKeptPart(const LoadedScene& scene, const PreparedScene& prepared,
+                   const CalculixDefinition& definition, const ContinuumCut& cut,
+                   const std::string& cacheDir, size_t m) {
+  const std::string dir =
+      referencePartDir(cacheDir, referenceCacheKey(scene, prepared, definition, cut), m);
+  const std::string work = freshWorkDir(dir);
+  MuscleSolution part;
+  if (!solveIn(work, [&] {
+        return takeKeptPart(scene, prepared, definition, cut, cacheDir, m, work, part);
+      })) {
+    std::filesystem::remove_all(work);
+    return false;
+  }
+  savePart(work + "/part.bin", part);
+  storeWork(work, dir, dir + "/part.bin");
+  return true;
+}
+}  // namespace
+
 bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
                           const CalculixDefinition& definition, const ContinuumCut& cut,
                           const std::string& cacheDir, size_t m,
@@ -490,6 +578,7 @@ bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepare
   if (storedWhole(cacheDir, key)) return true;
   if (loadPart(dir + "/part.bin", part) && !part.hitMemoryLimit()) return true;
   std::filesystem::remove_all(dir);  // none, or one that hit the memory limit: solved again
+  if (storeKeptPart(scene, prepared, definition, cut, cacheDir, m)) return true;
   const std::string work = freshWorkDir(dir);
   part = solveIn(work, [&] {
     return solveCalculixMuscle(scene, prepared, definition, cut, m, work, progress, cancel);
@@ -509,8 +598,17 @@ bool mergeCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
   const std::string key = referenceCacheKey(scene, prepared, definition, cut);
   const std::string entry = entryDir(cacheDir, key);
   std::vector<MuscleSolution> parts(prepared.muscles.size());
+  const auto partFile = [&](size_t m) { return referencePartDir(cacheDir, key, m) + "/part.bin"; };
+  MuscleSolution kept;
+  for (size_t m = 0; m < parts.size(); ++m)  // each stored, or one a retry keeps (no ccx)
+    if (!std::filesystem::exists(partFile(m)) &&
+        !loadSolvedPart(cacheDir, keptPartKey(scene, prepared, definition, cut, m), m, kept))
+      return false;
   for (size_t m = 0; m < parts.size(); ++m) {
-    if (!loadPart(referencePartDir(cacheDir, key, m) + "/part.bin", parts[m])) return false;
+    if (!loadPart(partFile(m), parts[m]) &&
+        !(storeKeptPart(scene, prepared, definition, cut, cacheDir, m) &&
+          loadPart(partFile(m), parts[m])))
+      return false;
     parts[m].inputFile = entry + "/" + parts[m].inputFile;
   }
   const std::string work = freshWorkDir(entry);
@@ -575,7 +673,9 @@ CalculixSolution cachedCalculixReference(
   if (fromCache) *fromCache = found;
   if (found) return solution;
   if (solution.hitMemoryLimit()) std::filesystem::remove_all(entry);  // solved again
-  if (jobs > 1 || std::filesystem::exists(entry + ".parts")) {
+  // A solve with muscles at other increments takes those from the solve they were solved in.
+  if (jobs > 1 || std::filesystem::exists(entry + ".parts") ||
+      !definition.muscleIncrementScales.empty()) {
     std::vector<ReferenceCell> cells;
     for (size_t m = 0; m < prepared.muscles.size(); ++m) cells.push_back({definition, cut, m});
     solveCalculixCells(scene, prepared, cells, cacheDir, progress, cancel, jobs);

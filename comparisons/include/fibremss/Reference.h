@@ -47,7 +47,8 @@ std::string resolvedCacheDir(const ReferenceOptions& options);
 inline constexpr double kSpherePlanesContactPenalty = 5e6;
 
 /// Where ccx fails a pose or the return step of a solve (ccxFailureToRetry), it is done once more
-/// with its increments × this (CalculixDefinition::incrementScale; its own cache key). pinch
+/// with its increments × this (CalculixDefinition::incrementScale; its own cache key), only for
+/// the muscles ccx failed where the failed solve keeps its parts (retryDefinition). pinch
 /// with the attachment distance x0.5 ends on a NaN at 86 % of pose 1 with 1 mm increments and
 /// solves with 0.25 mm ones in 29 increments of 2–5 Newton iterations (comparisons/README.md).
 inline constexpr double kFinerIncrements = 0.25;
@@ -186,6 +187,7 @@ struct Reference {
   ReferenceGates gates;
   RunMetrics metrics;  ///< as a run ("calculix"): surfaces of the solved poses, volume, penetration
   std::string description;  ///< one sentence: element, ν, mesh, attachments, ccx version
+  std::string increments;   ///< the increments it was solved at (incrementsText)
 };
 
 /// The gates' solves, each the reference's definition (its increments and contact sliding
@@ -225,11 +227,13 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
 /// default increments over every pose (its retry, where needed, is left to the run that merges
 /// the cells).
 struct NamedReferenceCell {
-  std::string solve;    ///< "reference" or the gate's name
-  std::string key;      ///< the solve's cache key
-  std::string muscle;   ///< the muscle's name
-  ReferenceCell cell;   ///< what cachedCalculixMuscle solves
-  bool stored = false;  ///< the solve or this muscle's part of it is in the cache
+  std::string solve;   ///< "reference" or the gate's name
+  std::string key;     ///< the solve's cache key
+  std::string muscle;  ///< the muscle's name
+  ReferenceCell cell;  ///< what cachedCalculixMuscle solves
+  /// The solve or this muscle's part of it is in the cache, or a retry keeps this muscle from
+  /// the failed solve (retryDefinition) and that keeps its part: nothing to solve.
+  bool stored = false;
   /// Where the solve is a retry at kFinerIncrements: the key of the stored solve whose failed
   /// pose it retries (a fresh machine finds the retry through it); else "".
   std::string retryOf;
@@ -237,6 +241,20 @@ struct NamedReferenceCell {
 std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
                                                const PreparedScene& prepared,
                                                const ReferenceOptions& options);
+
+/// The retry of `definition`, whose solve `failed` had a pose ccx failed (ccxFailureToRetry):
+/// its increments × kFinerIncrements for the muscles ccx failed; where `failed` keeps its
+/// muscles' parts (CalculixSolution::muscles) and some solved every step, those keep their
+/// increments (CalculixDefinition::muscleIncrementScales) and their parts are taken from
+/// `failed` as they are, not solved again. Its cache key says which muscle was solved at which
+/// increments, so a mixed retry never shares the key of one of every muscle at the finer ones.
+/// A failed solve stored without its parts (before they were kept) is retried whole.
+CalculixDefinition retryDefinition(const CalculixDefinition& definition,
+                                   const CalculixSolution& failed);
+
+/// The increments `definition` solves at, × the default 2.5° / 1 mm: "x0.25", or per muscle
+/// "x0.25 for iliacus only (psoas, gluteal at x1)".
+std::string incrementsText(const CalculixDefinition& definition, const PreparedScene& prepared);
 
 /// What a solve is retried at kFinerIncrements for: the first pose ccx failed ("pose k: why"),
 /// else its failed return step ("return to rest: why"); "" when none failed, or when it was
@@ -253,8 +271,8 @@ double methodSpreadMm(const std::vector<RunMetrics>& runs);
 
 /// {"key", "cache_entry", "missing": true} when it was not in the cache (cachedOnly), else
 /// {"key", "cache_entry", "from_cache", "description", "poses": [{"solved", "failure"}...],
-/// "gates": {...}, "nodes", "tetrahedra", "prescribed_nodes", "newton_iterations",
-/// "increments", "seconds"} (NaN written as null).
+/// "gates": {...}, "increment_scales" (Reference::increments), "nodes", "tetrahedra",
+/// "prescribed_nodes", "newton_iterations", "increments", "seconds"} (NaN written as null).
 nlohmann::json referenceJson(const Reference& reference);
 
 /// The gates as lines of text, one per gate: value, bound and verdict ("—" where a value is

@@ -66,6 +66,11 @@ struct CalculixDefinition {
   /// first (pinch with the attachment distance x0.5: a 10.9 m correction at 86 % of pose 1,
   /// then "matrix found to be singular"). In the cache key only where it is not 1.
   double incrementScale = 1;
+  /// Per muscle, the incrementScale its job is solved at, where the muscles differ (empty:
+  /// every muscle at incrementScale): a retry at finer increments of the muscles ccx failed in
+  /// a solve, the others as that solve gave them (comparisons' retryDefinition). In the cache
+  /// key only where it is not empty.
+  std::vector<double> muscleIncrementScales;
   /// Which move the 1 mm bound applies to. In the cache key only where it is BoneFrame (the
   /// world rule's entries keep their keys).
   IncrementRule incrementRule = IncrementRule::BoneFrame;
@@ -78,7 +83,16 @@ struct CalculixDefinition {
   /// allocation and its poses are reported failed, naming the limit. Not in the cache key: it
   /// changes whether a solve finishes, never its result.
   double memoryLimitGiB = defaultCalculixMemoryGiB();
+
+  /// The incrementScale muscle `m`'s job is solved at.
+  double incrementScaleOf(size_t m) const {
+    return m < muscleIncrementScales.size() ? muscleIncrementScales[m] : incrementScale;
+  }
 };
+
+/// The definition muscle `m` of `definition` is solved at, as a solve of every muscle at it:
+/// its incrementScale that muscle's, without per-muscle scales.
+CalculixDefinition muscleDefinition(const CalculixDefinition& definition, size_t m);
 
 /// Where the motion leaves no static continuum equilibrium. Two bones close across a muscle:
 /// some point of the muscle's rest volume lies d_a from one bone and d_b from another with
@@ -123,32 +137,6 @@ struct ReferenceProgress {
   double seconds = 0;  ///< since the solve started
 };
 
-/// The reference's result: per pose, all muscles' surface vertices (prepared restSurface order,
-/// muscle after muscle), or why ccx did not give that pose.
-struct CalculixSolution {
-  std::vector<std::vector<btVector3>> poseSurfaces;  ///< per pose; empty where it failed
-  std::vector<std::string> poseFailures;             ///< per pose: "" or the reason
-  std::vector<btVector3> returnSurface;  ///< after the step back to rest (empty: none / failed)
-  std::string returnFailure;             ///< "" or why the return step failed
-  size_t nodes = 0;                      ///< mesh nodes of all muscles (midside included)
-  size_t elements = 0;                   ///< tetrahedra of all muscles
-  size_t prescribedNodes = 0;            ///< nodes moved with a bone
-  long newtonIterations = 0;             ///< summed over all increments (from ccx's .sta)
-  long increments = 0;                   ///< increments ccx took over all steps
-  double seconds = 0;                    ///< wall time of tetgen and ccx
-  std::vector<std::string> inputFiles;   ///< the .inp files, one per muscle
-  bool interrupted = false;              ///< cancelled before the end
-  /// Poses from cut.pose on are not solved (no continuum equilibrium: not a ccx failure; their
-  /// poseFailures stay ""); the return step starts from the last pose before it.
-  ContinuumCut cut;
-
-  /// Poses solved, counted from the first (a failed pose ends the run of solved ones).
-  int solvedPoses() const;
-  /// Whether a ccx run failed an allocation under its memory limit (a failure names the
-  /// limit): the cache solves such a key again instead of giving it back.
-  bool hitMemoryLimit() const;
-};
-
 /// One muscle's share of a reference solve: its own ccx job (muscles have no contact with each
 /// other in the reference, so each is solved on its own and the muscles of a solve can run at
 /// once, as separate ccx processes).
@@ -167,6 +155,39 @@ struct MuscleSolution {
   bool interrupted = false;    ///< cancelled before the end
 
   /// Whether its ccx run failed an allocation under its memory limit (solved again).
+  bool hitMemoryLimit() const;
+  /// Whether ccx finished every step of its job (not interrupted).
+  bool solvedEveryStep() const { return failure.empty() && !interrupted; }
+};
+
+/// The reference's result: per pose, all muscles' surface vertices (prepared restSurface order,
+/// muscle after muscle), or why ccx did not give that pose.
+struct CalculixSolution {
+  std::vector<std::vector<btVector3>> poseSurfaces;  ///< per pose; empty where it failed
+  std::vector<std::string> poseFailures;             ///< per pose: "" or the reason
+  std::vector<btVector3> returnSurface;  ///< after the step back to rest (empty: none / failed)
+  std::string returnFailure;             ///< "" or why the return step failed
+  size_t nodes = 0;                      ///< mesh nodes of all muscles (midside included)
+  size_t elements = 0;                   ///< tetrahedra of all muscles
+  size_t prescribedNodes = 0;            ///< nodes moved with a bone
+  long newtonIterations = 0;             ///< summed over all increments (from ccx's .sta)
+  long increments = 0;                   ///< increments ccx took over all steps
+  double seconds = 0;                    ///< wall time of tetgen and ccx
+  std::vector<std::string> inputFiles;   ///< the .inp files, one per muscle
+  bool interrupted = false;              ///< cancelled before the end
+  /// Poses from cut.pose on are not solved (no continuum equilibrium: not a ccx failure; their
+  /// poseFailures stay ""); the return step starts from the last pose before it.
+  ContinuumCut cut;
+  /// Where ccx failed a muscle's job (not interrupted): every muscle's part in muscle order,
+  /// those that solved every step with their step surfaces, the others without; empty
+  /// otherwise. A retry at finer increments takes the solved ones as they are and solves only
+  /// the others again (comparisons' retryDefinition). Stored with the solution.
+  std::vector<MuscleSolution> muscles;
+
+  /// Poses solved, counted from the first (a failed pose ends the run of solved ones).
+  int solvedPoses() const;
+  /// Whether a ccx run failed an allocation under its memory limit (a failure names the
+  /// limit): the cache solves such a key again instead of giving it back.
   bool hitMemoryLimit() const;
 };
 

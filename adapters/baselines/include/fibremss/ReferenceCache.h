@@ -24,8 +24,9 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
 /// "/reference".
 std::string defaultReferenceCacheDir();
 
-/// Writes the solution (binary, all poses, failures and counts) to `path` atomically (a
-/// temporary file renamed). Throws std::runtime_error when it cannot be written.
+/// Writes the solution (binary, all poses, failures and counts; its muscles' parts where it
+/// keeps them, as version 2, else version 1) to `path` atomically (a temporary file renamed).
+/// Throws std::runtime_error when it cannot be written.
 void saveSolution(const std::string& path, const CalculixSolution& solution);
 
 /// Reads what saveSolution wrote; false when `path` does not exist. Throws InputError when it
@@ -34,7 +35,8 @@ bool loadSolution(const std::string& path, CalculixSolution& solution);
 
 /// Writes `solution` as a shipped reference to `path` (`<key>.ref.gz` in a directory of
 /// shippedReferenceDirs): gzip-compressed, positions as floats (about 10⁻⁵ mm on a muscle of
-/// 0.5 m), without the names of its .inp files; atomically. Throws std::runtime_error when it
+/// 0.5 m), without the names of its .inp files; its muscles' parts where it keeps them (as
+/// version 2, as saveSolution); atomically. Throws std::runtime_error when it
 /// cannot be written.
 void shipSolution(const std::string& path, const CalculixSolution& solution);
 
@@ -63,7 +65,8 @@ bool loadStoredSolution(const std::string& cacheDir, const std::string& key,
 /// stored (removed when interrupted), so that processes solving the same key at once never
 /// share ccx's files; when another one stored it first, its solution is returned. Either way
 /// the entry holds the same files and solution. `fromCache` (may be null) tells whether it came
-/// from the cache.
+/// from the cache. A definition with per-muscle increments is solved as parts (so that muscles
+/// at other increments are taken as cachedCalculixMuscle says).
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const ContinuumCut& cut, const std::string& cacheDir,
@@ -77,10 +80,23 @@ std::string referencePartDir(const std::string& cacheDir, const std::string& key
 /// of it.
 bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m);
 
+/// Muscle `m`'s part of the solve `key` stored whole (loadStoredSolution) where that solve keeps
+/// its muscles' parts (CalculixSolution::muscles) and muscle `m` solved every step; else false.
+bool loadSolvedPart(const std::string& cacheDir, const std::string& key, size_t m,
+                    MuscleSolution& part);
+
+/// Where muscle `m` of `definition` is at other increments than the solve's own
+/// (CalculixDefinition::muscleIncrementScales): the key of the solve of every muscle at its
+/// (muscleDefinition), from which cachedCalculixMuscle takes its part; else "".
+std::string keptPartKey(const LoadedScene& scene, const PreparedScene& prepared,
+                        const CalculixDefinition& definition, const ContinuumCut& cut, size_t m);
+
 /// Solves muscle `m` of the solve (solveCalculixMuscle) into its part directory (through
 /// `<part>.solving-<pid>/`, as a whole solve), unless the solve or that part is stored already
 /// (true: nothing to do) or it was interrupted (false; nothing kept). A part that hit the
-/// memory limit is solved again. One cell of a reference for a batch engine.
+/// memory limit is solved again. A muscle at other increments than the solve's is taken,
+/// without ccx, from the solve keptPartKey names where that keeps it solved (loadSolvedPart;
+/// its files too where they are in the cache). One cell of a reference for a batch engine.
 bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
                           const CalculixDefinition& definition, const ContinuumCut& cut,
                           const std::string& cacheDir, size_t m,
