@@ -1382,48 +1382,6 @@ TEST(ReferenceCache, ASolutionKeepingItsMusclesPartsIsVersion2InTheCacheAndShipp
   }
 }
 
-/// carriedFusiform with its second muscle (`beside`), loaded and prepared.
-class RetryPerMuscle : public ::testing::Test {
- protected:
-  RetryPerMuscle()
-      : dir("retry_per_muscle_test"),
-        scene(loadScene(carriedFusiform(dir.path(), true), {"resolution=6"})),
-        prepared(prepareScene(scene.bones, scene.muscles, scene.simulation.seed)) {}
-  TemporaryDirectory dir;
-  LoadedScene scene;
-  PreparedScene prepared;
-};
-
-TEST_F(RetryPerMuscle, KeepsTheIncrementsOfTheMusclesTheFailedSolveSolvedUnderAKeyOfItsOwn) {
-  REQUIRE_PROGRAM("ccx");
-  ASSERT_EQ(prepared.muscles.size(), 2u);
-  const CalculixDefinition definition;
-  CalculixSolution failed;
-  failed.poseFailures = {"", "muscle beside: *ERROR: too many cutbacks"};
-  CalculixDefinition uniform = definition;
-  uniform.incrementScale *= kFinerIncrements;
-  const auto key = [&](const CalculixDefinition& d) {
-    return referenceCacheKey(scene, prepared, d, {});
-  };
-  EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform))
-      << "stored without its parts: every muscle solved again";
-  failed.muscles.resize(2);
-  failed.muscles[1].failure = "*ERROR: too many cutbacks";
-  const CalculixDefinition retry = retryDefinition(definition, failed);
-  EXPECT_EQ(retry.incrementScale, uniform.incrementScale);
-  EXPECT_EQ(retry.muscleIncrementScales, (std::vector<double>{1, kFinerIncrements}));
-  EXPECT_NE(key(retry), key(uniform)) << "a mixed retry is no uniform one";
-  EXPECT_NE(key(retry), key(definition));
-  EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 0), key(definition));
-  EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 1), "") << "solved again";
-  EXPECT_EQ(incrementsText(retry, prepared),
-            "x0.25 for beside only (" + prepared.muscles[0]->name + " at x1)");
-  EXPECT_EQ(gateDefinitions(retry, 0).increments.muscleIncrementScales,
-            (std::vector<double>{kIncrementGateFactor, kFinerIncrements * kIncrementGateFactor}));
-  failed.muscles[0].failure = "*ERROR: too many cutbacks";
-  EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform)) << "both failed";
-}
-
 /// A ccx that fails muscle1's job wherever the largest increment of a step after the first (the
 /// rest pose's, one increment) is above `bound`, as ccx fails a pose at too coarse increments,
 /// and runs ccx for every other; each job it is given is a line of `dir`/runs.log.
@@ -1452,26 +1410,84 @@ std::vector<btVector3> muscleVertices(const PreparedScene& prepared,
   return {surface.begin() + long(first), surface.begin() + long(first + count)};
 }
 
-TEST_F(RetryPerMuscle, SolvesAgainOnlyTheMuscleCcxFailedAndTakesTheOtherAsItWas) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  ASSERT_EQ(prepared.muscles.size(), 2u);
-  ReferenceOptions options;
-  options.cacheDir = (dir.path() / "cache").string();
-  options.gates = false;
-  // The lower bar's 2 mm beyond the carry: increments of at most 0.5 of the pose at the
-  // default, 0.125 at a quarter of it.
-  options.definition.program = ccxFailingMuscle1Above(dir.path(), 0.25);
-  const CalculixDefinition definition = sceneDefinition(scene, options);
-  const auto runs = [&] {
+/// carriedFusiform with its second muscle (`beside`), loaded and prepared; options of a
+/// reference without gates in a cache of its own, solved by ccxFailingMuscle1Above.
+class RetryPerMuscle : public ::testing::Test {
+ protected:
+  RetryPerMuscle()
+      : dir("retry_per_muscle_test"),
+        scene(loadScene(carriedFusiform(dir.path(), true), {"resolution=6"})),
+        prepared(prepareScene(scene.bones, scene.muscles, scene.simulation.seed)) {
+    options.cacheDir = (dir.path() / "cache").string();
+    options.gates = false;
+    // The lower bar's 2 mm beyond the carry: increments of at most 0.5 of the pose at the
+    // default, 0.125 at a quarter of it.
+    options.definition.program = ccxFailingMuscle1Above(dir.path(), 0.25);
+  }
+  /// The jobs ccx was given since the last call.
+  std::vector<std::string> runs() const {
     std::vector<std::string> jobs;
     std::istringstream lines(readText(dir.path() / "runs.log"));
     for (std::string line; std::getline(lines, line);) jobs.push_back(line);
     std::filesystem::remove(dir.path() / "runs.log");
     return jobs;
+  }
+  /// The solve of `definition` through the cache, which ccx fails in muscle1.
+  CalculixSolution failedSolve(const CalculixDefinition& definition) const {
+    return cachedCalculixReference(scene, prepared, definition, {}, options.cacheDir, {}, {},
+                                   nullptr);
+  }
+  TemporaryDirectory dir;
+  LoadedScene scene;
+  PreparedScene prepared;
+  ReferenceOptions options;
+};
+
+TEST_F(RetryPerMuscle, KeepsTheIncrementsOfTheMusclesTheFailedSolveSolvedUnderAKeyOfItsOwn) {
+  REQUIRE_PROGRAM("ccx");
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  const CalculixDefinition definition;
+  CalculixSolution failed;
+  failed.poseFailures = {"", "muscle beside: *ERROR: too many cutbacks"};
+  CalculixDefinition uniform = definition;
+  uniform.incrementScale *= kFinerIncrements;
+  const auto key = [&](const CalculixDefinition& d) {
+    return referenceCacheKey(scene, prepared, d, {});
   };
-  const CalculixSolution failed =
-      cachedCalculixReference(scene, prepared, definition, {}, options.cacheDir, {}, {}, nullptr);
+  EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform))
+      << "stored without its parts: every muscle solved again";
+  failed.muscles.resize(2);
+  failed.muscles[1].failure = "*ERROR: too many cutbacks";
+  const CalculixDefinition retry = retryDefinition(definition, failed);
+  EXPECT_EQ(retry.incrementScale, uniform.incrementScale);
+  EXPECT_EQ(retry.muscleIncrementScales, (std::vector<double>{1, kFinerIncrements}));
+  EXPECT_NE(key(retry), key(uniform)) << "a mixed retry is no uniform one";
+  EXPECT_NE(key(retry), key(definition));
+  EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 0), key(definition));
+  EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 1), "") << "solved again";
+  EXPECT_EQ(incrementsText(retry, prepared),
+            "x0.25 for beside only (" + prepared.muscles[0]->name + " at x1)");
+  const CalculixDefinition halved = gateDefinitions(retry, 0).increments;
+  EXPECT_EQ(halved.muscleIncrementScales,
+            (std::vector<double>{kIncrementGateFactor, kFinerIncrements * kIncrementGateFactor}));
+  ReferenceGates gates;
+  gates.incrementsScale = halved.incrementScale;
+  gates.incrementsPerMuscle = incrementsText(halved, prepared);
+  EXPECT_NE(gateLines(gates)[2].find("increments halved (x0.125 for beside only (" +
+                                     prepared.muscles[0]->name +
+                                     " at x0.5) of the default 2.5 deg / 1 mm)"),
+            std::string::npos)
+      << gateLines(gates)[2];
+  failed.muscles[0].failure = "*ERROR: too many cutbacks";
+  EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform)) << "both failed";
+}
+
+TEST_F(RetryPerMuscle, SolvesAgainOnlyTheMuscleCcxFailedAndTakesTheOtherAsItWas) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  const CalculixDefinition definition = sceneDefinition(scene, options);
+  const CalculixSolution failed = failedSolve(definition);
   ASSERT_EQ(runs(), (std::vector<std::string>{"muscle0", "muscle1"}));
   ASSERT_EQ(failed.poseFailures[0], "muscle beside: *ERROR: increments too coarse for muscle1");
   ASSERT_EQ(failed.muscles.size(), 2u) << "a failed solve keeps its muscles' parts";
@@ -1524,6 +1540,47 @@ TEST_F(RetryPerMuscle, SolvesAgainOnlyTheMuscleCcxFailedAndTakesTheOtherAsItWas)
   EXPECT_EQ(muscleVertices(prepared, mixed.returnSurface, 0), kept.back());
   EXPECT_EQ(mixed.nodes, whole.nodes);
   EXPECT_LT(mixed.increments, whole.increments) << "the muscle kept took the coarser ones";
+}
+
+TEST_F(RetryPerMuscle, ASolveStoredWithoutItsMusclesPartsReadsThemFromItsCcxFiles) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  const CalculixDefinition definition = sceneDefinition(scene, options);
+  const CalculixSolution failed = failedSolve(definition);
+  ASSERT_EQ(failed.muscles.size(), 2u);
+  const std::string stored =
+      options.cacheDir + "/" + referenceCacheKey(scene, prepared, definition, {}) + "/surfaces.bin";
+  const auto storedWithoutParts = [&] {  // as a solve stored before they were kept
+    CalculixSolution old = failed;
+    old.muscles.clear();
+    saveSolution(stored, old);
+    CalculixSolution back;
+    EXPECT_TRUE(loadSolution(stored, back));
+    return back;
+  };
+  CalculixSolution solution = storedWithoutParts();
+  EXPECT_TRUE(retryDefinition(definition, solution).muscleIncrementScales.empty())
+      << "without parts: retried whole";
+  ASSERT_TRUE(recoverCalculixParts(scene, prepared, definition, {}, options.cacheDir, solution));
+  ASSERT_EQ(solution.muscles.size(), 2u);
+  EXPECT_EQ(solution.muscles[0].stepSurfaces, failed.muscles[0].stepSurfaces);
+  EXPECT_EQ(solution.muscles[0].increments, failed.muscles[0].increments);
+  EXPECT_EQ(solution.muscles[0].nodes, failed.muscles[0].nodes);
+  EXPECT_FALSE(solution.muscles[1].solvedEveryStep());
+  EXPECT_EQ(readText(stored).substr(0, 8), "FMSSREF2") << "its entry keeps them now";
+  EXPECT_FALSE(recoverCalculixParts(scene, prepared, definition, {}, options.cacheDir, solution))
+      << "kept already";
+  const std::vector<NamedReferenceCell> cells = referenceCells(scene, prepared, options);
+  ASSERT_EQ(cells.size(), 2u);
+  EXPECT_TRUE(cells[0].stored && !cells[1].stored) << "only the muscle ccx failed to solve";
+  EXPECT_EQ(runs(), (std::vector<std::string>{"muscle0", "muscle1"})) << "ccx ran only at first";
+
+  // A .inp that is not what the scene gives now: its files are not read as its parts.
+  std::ofstream(options.cacheDir + "/" + cells[0].retryOf + "/muscle0.inp", std::ios::app)
+      << "** changed\n";
+  solution = storedWithoutParts();
+  EXPECT_FALSE(recoverCalculixParts(scene, prepared, definition, {}, options.cacheDir, solution));
+  EXPECT_TRUE(solution.muscles.empty());
 }
 
 TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {

@@ -98,6 +98,8 @@ bool solveVariant(const LoadedScene& scene, const PreparedScene& prepared, Scene
   if (!solveOnce(scene, prepared, cuts, options, what, solve)) return false;
   const std::string failure = ccxFailureToRetry(solve.solution);
   if (failure.empty() || (options.cancel && options.cancel->load())) return true;
+  recoverCalculixParts(scene, prepared, definition, cuts.at(definition.attachmentScale),
+                       options.cacheDir, solve.solution);  // stored before parts were kept
   Solve finer;
   finer.definition = retryDefinition(definition, solve.solution);
   if (options.log)
@@ -295,6 +297,8 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
     *gate.poses = std::min(base.solution.solvedPoses(), solution.solvedPoses());
     // Retried at finer increments where ccx failed it: say what it was solved at.
     if (gate.scale) *gate.scale = solve.definition.incrementScale;
+    if (gate.scale && !solve.definition.muscleIncrementScales.empty())
+      gates.incrementsPerMuscle = incrementsText(solve.definition, prepared);
     if (!stopsTheGates(base.solution, solve, *gate.definition, gate, gates)) {
       const std::string more = failures(solution, gate.name);
       if (!more.empty()) appendItem(*gate.failures, more);
@@ -333,6 +337,8 @@ NextSolve storedRetry(const LoadedScene& scene, const PreparedScene& prepared, S
   if (!storedSolution(scene, prepared, cuts, definition, cacheDir, key, solution))
     return {definition, "", 0};
   if (ccxFailureToRetry(solution).empty()) return {definition, "", gatePoseLimit(solution)};
+  recoverCalculixParts(scene, prepared, definition, cuts.at(definition.attachmentScale), cacheDir,
+                       solution);  // stored before parts were kept
   NextSolve retry{retryDefinition(definition, solution), key, 0};
   if (storedSolution(scene, prepared, cuts, retry.definition, cacheDir, key, solution))
     retry.gatePoseLimit = gatePoseLimit(solution);
@@ -620,6 +626,7 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"refinement_passes", g.refinementPasses()},
             {"increments_mm", number(g.incrementsMm)},
             {"increments_scale", number(g.incrementsScale)},
+            {"increments_per_muscle", g.incrementsPerMuscle},
             {"increments_passes", g.incrementsPass()},
             {"attachment_low_mm", number(g.attachmentLowMm)},
             {"attachment_high_mm", number(g.attachmentHighMm)},
@@ -684,9 +691,11 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
                   "): moves it " + mm(g.refinementMm) + " RMS" + over(g.refinementPoses) +
                   verdict(g.refinementMm, g.refinementPoses));
   char scale[64] = "\u2014";
-  if (!std::isnan(g.incrementsScale))
-    std::snprintf(scale, sizeof scale, "x%g of the default 2.5 deg / 1 mm", g.incrementsScale);
-  lines.push_back(std::string("increments halved (") + scale + "): moves it " + mm(g.incrementsMm) +
+  if (!std::isnan(g.incrementsScale)) std::snprintf(scale, sizeof scale, "x%g", g.incrementsScale);
+  const std::string increments =
+      (g.incrementsPerMuscle.empty() ? std::string(scale) : g.incrementsPerMuscle) +
+      (std::isnan(g.incrementsScale) ? "" : " of the default 2.5 deg / 1 mm");
+  lines.push_back("increments halved (" + increments + "): moves it " + mm(g.incrementsMm) +
                   " RMS" + over(g.incrementsPoses) + verdict(g.incrementsMm, g.incrementsPoses));
   lines.push_back("attachment distance x0.5 / x1.5: moves it " + mm(g.attachmentLowMm) +
                   over(g.attachmentLowPoses) + " / " + mm(g.attachmentHighMm) +

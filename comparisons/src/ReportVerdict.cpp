@@ -271,6 +271,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.refinedBy = gates.value("refined_by", std::string());
   g.incrementsMm = number(gates, "increments_mm");
   g.incrementsScale = number(gates, "increments_scale");
+  g.incrementsPerMuscle = gates.value("increments_per_muscle", std::string());
   g.incrementsPoses = gates.value("increments_poses", 0);
   g.attachmentLowMm = number(gates, "attachment_low_mm");
   g.attachmentHighMm = number(gates, "attachment_high_mm");

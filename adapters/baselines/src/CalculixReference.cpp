@@ -4,8 +4,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 
 #include "fibremss/Error.h"
@@ -318,6 +320,11 @@ std::string ccxFailure(const std::string& logPath, int status, double memoryLimi
   return error;
 }
 
+void readMuscleResult(const MuscleJob& muscle, const CalculixDefinition& definition,
+                      const std::string& base, int status,
+                      std::vector<std::vector<btVector3>>& stepSurfaces, std::string& failure,
+                      StaSummary& sta);
+
 /// Runs one muscle's job; per step the surface positions (empty where ccx gave none) and the
 /// reason of a failure.
 void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
@@ -336,6 +343,16 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
       {definition.program, "-i", muscle.stem}, workDir, base + ".log",
       [&] { return poll(readSta(base + ".sta").stepsDone); },
       static_cast<uint64_t>(definition.memoryLimitGiB * (1ull << 30)));
+  readMuscleResult(muscle, definition, base, status, stepSurfaces, failure, sta);
+}
+
+/// What ccx left of the muscle's job at `base` (its .sta, .dat and .log) and exited with
+/// (`status`): per step the surface positions (empty where ccx gave none), the reason of a
+/// failure and the .sta's counts.
+void readMuscleResult(const MuscleJob& muscle, const CalculixDefinition& definition,
+                      const std::string& base, int status,
+                      std::vector<std::vector<btVector3>>& stepSurfaces, std::string& failure,
+                      StaSummary& sta) {
   sta = readSta(base + ".sta");
   std::ifstream dat(base + ".dat");
   const std::vector<CalculixTable> tables = readCalculixDat(dat, base + ".dat");
@@ -359,6 +376,24 @@ void solveMuscle(const MuscleJob& muscle, const CalculixDefinition& definition,
   failure = static_cast<int>(ends.size()) == steps
                 ? ""
                 : ccxFailure(base + ".log", status, definition.memoryLimitGiB);
+}
+
+/// Muscle `m`'s job under `definition` (one increment scale) as ccx is given it, its mesh made by
+/// tetgen in `workDir` (created); its counts into `part`.
+MuscleJob jobOf(const LoadedScene& scene, const PreparedScene& prepared,
+                const CalculixDefinition& definition, const ContinuumCut& cut, size_t m,
+                const std::string& workDir, MuscleSolution& part) {
+  std::filesystem::create_directories(workDir);
+  std::vector<MeshDistance> bones;
+  for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
+  const std::vector<int> steps =
+      stepPoses(scene, prepared.bones.size(), ccxPoseCount(scene, cut, definition.poseLimit),
+                definition.returnToRest);
+  MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir, steps);
+  part.nodes = muscle.job.nodes.size();
+  part.tetrahedra = muscle.tetrahedra;
+  part.prescribedNodes = muscle.attachedNodes;
+  return muscle;
 }
 
 /// Where ccx failed a muscle's job (not interrupted), every part into solution.muscles, the
@@ -417,19 +452,10 @@ MuscleSolution solveCalculixMuscle(const LoadedScene& scene, const PreparedScene
                                    const std::atomic<bool>* cancel) {
   const auto start = Clock::now();
   const CalculixDefinition definition = muscleDefinition(mixed, m);
-  std::filesystem::create_directories(workDir);
-  std::vector<MeshDistance> bones;
-  for (const auto& bone : prepared.bones) bones.emplace_back(bone->mesh);
-  const std::vector<int> steps =
-      stepPoses(scene, prepared.bones.size(), ccxPoseCount(scene, cut, definition.poseLimit),
-                definition.returnToRest);
-  const MuscleJob muscle = muscleJob(scene, prepared, m, bones, definition, workDir, steps);
   MuscleSolution result;
-  result.nodes = muscle.job.nodes.size();
-  result.tetrahedra = muscle.tetrahedra;
-  result.prescribedNodes = muscle.attachedNodes;
+  const MuscleJob muscle = jobOf(scene, prepared, definition, cut, m, workDir, result);
   result.inputFile = workDir + "/" + muscle.stem + ".inp";
-  const int stepCount = static_cast<int>(steps.size());
+  const int stepCount = static_cast<int>(muscle.job.steps.size());
   int reported = -1;
   const auto poll = [&](int done) {
     if (progress && done != reported) {
@@ -449,6 +475,33 @@ MuscleSolution solveCalculixMuscle(const LoadedScene& scene, const PreparedScene
   if (result.interrupted) result.failure = "interrupted";
   result.seconds = secondsSince(start);
   return result;
+}
+
+bool readSolvedMuscle(const LoadedScene& scene, const PreparedScene& prepared,
+                      const CalculixDefinition& mixed, const ContinuumCut& cut, size_t m,
+                      const std::string& solvedDir, const std::string& workDir,
+                      MuscleSolution& part) {
+  const CalculixDefinition definition = muscleDefinition(mixed, m);
+  MuscleSolution read;
+  const MuscleJob muscle = jobOf(scene, prepared, definition, cut, m, workDir, read);
+  std::ostringstream input;
+  writeCalculixInput(input, muscle.job);
+  const std::string base = solvedDir + "/" + muscle.stem;
+  std::ifstream solved(base + ".inp");
+  const std::string solvedInput((std::istreambuf_iterator<char>(solved)),
+                                std::istreambuf_iterator<char>());
+  if (!solved || input.str() != solvedInput) return false;  // not the job ccx solved
+  part = read;
+  part.inputFile = muscle.stem + ".inp";
+  StaSummary sta;
+  readMuscleResult(muscle, definition, base, -1, part.stepSurfaces, part.failure, sta);
+  part.increments = sta.increments;
+  part.newtonIterations = sta.iterations;
+  std::ifstream log(base + ".log");
+  for (std::string line; std::getline(log, line);)
+    if (const size_t at = line.find("Total CalculiX Time:"); at != std::string::npos)
+      part.seconds = std::atof(line.c_str() + at + 20);
+  return true;
 }
 
 CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const PreparedScene& prepared,

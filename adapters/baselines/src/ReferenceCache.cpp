@@ -5,6 +5,7 @@
 #include <unistd.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <cstdio>
@@ -519,6 +520,35 @@ bool loadSolvedPart(const std::string& cacheDir, const std::string& key, size_t 
     return false;
   part = std::move(solution.muscles[m]);
   return part.solvedEveryStep() && !part.stepSurfaces.empty();
+}
+
+bool recoverCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
+                          const CalculixDefinition& definition, const ContinuumCut& cut,
+                          const std::string& cacheDir, CalculixSolution& solution) {
+  const auto failed = [](const std::string& failure) { return !failure.empty(); };
+  if (!solution.muscles.empty() || solution.interrupted ||
+      (solution.returnFailure.empty() &&
+       std::none_of(solution.poseFailures.begin(), solution.poseFailures.end(), failed)))
+    return false;
+  const std::string entry = entryDir(cacheDir, referenceCacheKey(scene, prepared, definition, cut));
+  if (!std::filesystem::exists(entry + "/surfaces.bin")) return false;  // shipped: no ccx files
+  const std::string work = freshWorkDir(entry + ".reading");
+  std::vector<MuscleSolution> parts(prepared.muscles.size());
+  bool read = true;
+  for (size_t m = 0; m < parts.size() && read; ++m)
+    read = solveIn(work, [&] {
+      return readSolvedMuscle(scene, prepared, definition, cut, m, entry, work, parts[m]);
+    });
+  std::filesystem::remove_all(work);
+  if (!read) return false;
+  const CalculixSolution again = assembleCalculixSolution(scene, prepared, definition, cut, parts);
+  // The parts read give back what the solve stored, or they are not its.
+  if (again.muscles.empty() || again.poseSurfaces != solution.poseSurfaces ||
+      again.returnSurface != solution.returnSurface)
+    return false;
+  solution.muscles = again.muscles;
+  saveSolution(entry + "/surfaces.bin", solution);
+  return true;
 }
 
 std::string keptPartKey(const LoadedScene& scene, const PreparedScene& prepared,

@@ -96,6 +96,10 @@ struct ReferenceGates {
   /// That solve's increment bounds × the default ones (2.5° / 1 mm; CalculixDefinition::
   /// incrementScale): 0.5 for a reference at the default, 0.125 for one retried at 0.25.
   double incrementsScale = RunMetrics::kNone;
+  /// Where that solve's muscles are at different increments (its reference retried for some
+  /// muscles only): its increments per muscle (incrementsText: "x0.0625 for iliacus only
+  /// (psoas, gluteal at x0.25)"); "" otherwise.
+  std::string incrementsPerMuscle;
   double attachmentLowMm = RunMetrics::kNone;   ///< RMS with the attachment distance × 0.5
   double attachmentHighMm = RunMetrics::kNone;  ///< RMS with it × 1.5
   /// Poses each gate compared (both solves solved them) of the reference's `poses`: a gate

@@ -204,6 +204,16 @@ MuscleSolution solveCalculixMuscle(
     const std::function<void(const ReferenceProgress&)>& progress = {},
     const std::atomic<bool>* cancel = nullptr);
 
+/// Muscle `m`'s part as ccx left it in `solvedDir` (a solve's directory: its muscle<m>.inp,
+/// .dat, .sta and .log), without ccx: its mesh made again by tetgen in `workDir`; false (nothing
+/// read) where the input made again is not the one ccx solved there. Its seconds are ccx's own
+/// ("Total CalculiX Time" in its log; tetgen's not counted, 0 where ccx did not end); where ccx
+/// failed it and its log names no error, its failure says "exit -1".
+bool readSolvedMuscle(const LoadedScene& scene, const PreparedScene& prepared,
+                      const CalculixDefinition& definition, const ContinuumCut& cut, size_t m,
+                      const std::string& solvedDir, const std::string& workDir,
+                      MuscleSolution& part);
+
 /// The solution of the muscles' parts, in muscle order (fewer than the scene's muscles: a solve
 /// interrupted after them). A pose ccx does not finish for a muscle is reported in poseFailures
 /// (with ccx's last error line), never dropped; the solution's `cut` is `cut`; its seconds are

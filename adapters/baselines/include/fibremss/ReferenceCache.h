@@ -85,6 +85,16 @@ bool referencePartStored(const std::string& cacheDir, const std::string& key, si
 bool loadSolvedPart(const std::string& cacheDir, const std::string& key, size_t m,
                     MuscleSolution& part);
 
+/// Where the solve of `definition` is stored in the cache (with its ccx files) with a pose or
+/// return step ccx failed but without its muscles' parts (stored before they were kept): reads
+/// them from its ccx files (readSolvedMuscle: tetgen, no ccx), into `solution` and its entry's
+/// surfaces.bin, so that its retry solves again only the muscles ccx failed. False (nothing
+/// changed) where it keeps its parts already, is not such a solve, is shipped, or its files do
+/// not give back the solution it stored.
+bool recoverCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
+                          const CalculixDefinition& definition, const ContinuumCut& cut,
+                          const std::string& cacheDir, CalculixSolution& solution);
+
 /// Where muscle `m` of `definition` is at other increments than the solve's own
 /// (CalculixDefinition::muscleIncrementScales): the key of the solve of every muscle at its
 /// (muscleDefinition), from which cachedCalculixMuscle takes its part; else "".
