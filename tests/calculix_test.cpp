@@ -1574,6 +1574,13 @@ TEST_F(RetryPerMuscle, ASolveStoredWithoutItsMusclesPartsReadsThemFromItsCcxFile
   ASSERT_EQ(cells.size(), 2u);
   EXPECT_TRUE(cells[0].stored && !cells[1].stored) << "only the muscle ccx failed to solve";
   EXPECT_EQ(runs(), (std::vector<std::string>{"muscle0", "muscle1"})) << "ccx ran only at first";
+  // A retry of every muscle stored already (solved before retries kept muscles) is taken.
+  const CalculixDefinition whole = retryDefinition(definition, CalculixSolution{});
+  const std::string wholeKey = referenceCacheKey(scene, prepared, whole, {});
+  std::filesystem::create_directories(options.cacheDir + "/" + wholeKey);
+  saveSolution(options.cacheDir + "/" + wholeKey + "/surfaces.bin", failed);
+  EXPECT_EQ(referenceCells(scene, prepared, options)[0].key, wholeKey);
+  std::filesystem::remove_all(options.cacheDir + "/" + wholeKey);
 
   // A .inp that is not what the scene gives now: its files are not read as its parts.
   std::ofstream(options.cacheDir + "/" + cells[0].retryOf + "/muscle0.inp", std::ios::app)

@@ -87,6 +87,22 @@ bool solveOnce(const LoadedScene& scene, const PreparedScene& prepared, SceneCut
   return true;
 }
 
+/// The retry of `definition`, whose solve `failed` had a pose ccx failed: every muscle at
+/// kFinerIncrements where that solve is stored (whole, or a muscle's part: solved before a
+/// retry kept muscles), so that none is solved again; else retryDefinition, with the parts of a
+/// failed solve cached before they were kept read from its ccx files (recoverCalculixParts).
+CalculixDefinition retryFor(const LoadedScene& scene, const PreparedScene& prepared,
+                            SceneCuts& cuts, const CalculixDefinition& definition,
+                            const std::string& cacheDir, CalculixSolution& failed) {
+  const ContinuumCut& cut = cuts.at(definition.attachmentScale);
+  const CalculixDefinition whole = retryDefinition(definition, CalculixSolution{});
+  const std::string key = referenceCacheKey(scene, prepared, whole, cut);
+  for (size_t m = 0; m < prepared.muscles.size(); ++m)
+    if (referencePartStored(cacheDir, key, m)) return whole;
+  recoverCalculixParts(scene, prepared, definition, cut, cacheDir, failed);
+  return retryDefinition(definition, failed);
+}
+
 /// solveOnce of `definition`, and where ccx failed a pose or the return step
 /// (ccxFailureToRetry), once more at kFinerIncrements of its increments (kept when that solve is
 /// found or solved; with options.cachedOnly and not in the cache, the first solve's failures
@@ -98,10 +114,8 @@ bool solveVariant(const LoadedScene& scene, const PreparedScene& prepared, Scene
   if (!solveOnce(scene, prepared, cuts, options, what, solve)) return false;
   const std::string failure = ccxFailureToRetry(solve.solution);
   if (failure.empty() || (options.cancel && options.cancel->load())) return true;
-  recoverCalculixParts(scene, prepared, definition, cuts.at(definition.attachmentScale),
-                       options.cacheDir, solve.solution);  // stored before parts were kept
   Solve finer;
-  finer.definition = retryDefinition(definition, solve.solution);
+  finer.definition = retryFor(scene, prepared, cuts, definition, options.cacheDir, solve.solution);
   if (options.log)
     options.log("reference (" + what + "): ccx failed (" + failure + "); again with increments " +
                 incrementsText(finer.definition, prepared));
@@ -337,9 +351,7 @@ NextSolve storedRetry(const LoadedScene& scene, const PreparedScene& prepared, S
   if (!storedSolution(scene, prepared, cuts, definition, cacheDir, key, solution))
     return {definition, "", 0};
   if (ccxFailureToRetry(solution).empty()) return {definition, "", gatePoseLimit(solution)};
-  recoverCalculixParts(scene, prepared, definition, cuts.at(definition.attachmentScale), cacheDir,
-                       solution);  // stored before parts were kept
-  NextSolve retry{retryDefinition(definition, solution), key, 0};
+  NextSolve retry{retryFor(scene, prepared, cuts, definition, cacheDir, solution), key, 0};
   if (storedSolution(scene, prepared, cuts, retry.definition, cacheDir, key, solution))
     retry.gatePoseLimit = gatePoseLimit(solution);
   return retry;

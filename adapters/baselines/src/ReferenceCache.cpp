@@ -547,7 +547,8 @@ bool recoverCalculixParts(const LoadedScene& scene, const PreparedScene& prepare
       again.returnSurface != solution.returnSurface)
     return false;
   solution.muscles = again.muscles;
-  saveSolution(entry + "/surfaces.bin", solution);
+  saveSolution(work + ".bin", solution);  // this process's own, then in place
+  std::filesystem::rename(work + ".bin", entry + "/surfaces.bin");
   return true;
 }
 
