@@ -1478,7 +1478,16 @@ TEST_F(RetryPerMuscle, KeepsTheIncrementsOfTheMusclesTheFailedSolveSolvedUnderAK
                                      " at x0.5) of the default 2.5 deg / 1 mm)"),
             std::string::npos)
       << gateLines(gates)[2];
+  // A retry of a mixed solve (a gate's of a mixed reference): each muscle ccx failed finer
+  // than it was, the solve's own increments the finest of them.
+  const CalculixDefinition again = retryDefinition(retry, failed);
+  EXPECT_EQ(again.muscleIncrementScales,
+            (std::vector<double>{1, kFinerIncrements * kFinerIncrements}));
+  EXPECT_EQ(again.incrementScale, kFinerIncrements * kFinerIncrements);
   failed.muscles[0].failure = "*ERROR: too many cutbacks";
+  failed.muscles[1].failure.clear();
+  EXPECT_EQ(key(retryDefinition(retry, failed)), key(uniform)) << "every muscle at x0.25";
+  failed.muscles[1].failure = "*ERROR: too many cutbacks";
   EXPECT_EQ(key(retryDefinition(definition, failed)), key(uniform)) << "both failed";
 }
 

@@ -435,14 +435,15 @@ CalculixDefinition retryDefinition(const CalculixDefinition& definition,
   CalculixDefinition retry = definition;
   retry.incrementScale *= kFinerIncrements;
   retry.muscleIncrementScales.clear();
-  bool kept = false;
-  for (size_t m = 0; m < failed.muscles.size(); ++m) {
-    const bool solved = failed.muscles[m].solvedEveryStep();
-    kept = kept || solved;
-    retry.muscleIncrementScales.push_back(definition.incrementScaleOf(m) *
-                                          (solved ? 1 : kFinerIncrements));
-  }
-  if (!kept) retry.muscleIncrementScales.clear();  // every muscle solved again: uniform
+  for (size_t m = 0; m < failed.muscles.size(); ++m)
+    retry.muscleIncrementScales.push_back(
+        definition.incrementScaleOf(m) *
+        (failed.muscles[m].solvedEveryStep() ? 1 : kFinerIncrements));
+  std::vector<double>& scales = retry.muscleIncrementScales;
+  if (scales.empty()) return retry;  // stored without its parts: every muscle again
+  const auto [finest, coarsest] = std::minmax_element(scales.begin(), scales.end());
+  retry.incrementScale = *finest;            // the solve's own: the finest any muscle is solved at
+  if (*finest == *coarsest) scales.clear();  // one scale for every muscle: a uniform solve
   return retry;
 }
 

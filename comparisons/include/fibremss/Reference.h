@@ -249,8 +249,9 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
 /// The retry of `definition`, whose solve `failed` had a pose ccx failed (ccxFailureToRetry):
 /// its increments × kFinerIncrements for the muscles ccx failed; where `failed` keeps its
 /// muscles' parts (CalculixSolution::muscles) and some solved every step, those keep their
-/// increments (CalculixDefinition::muscleIncrementScales) and their parts are taken from
-/// `failed` as they are, not solved again. Its cache key says which muscle was solved at which
+/// increments (CalculixDefinition::muscleIncrementScales; incrementScale the finest of them, and
+/// no per-muscle scales where every muscle ends at one) and their parts are taken from `failed`
+/// as they are, not solved again. Its cache key says which muscle was solved at which
 /// increments, so a mixed retry never shares the key of one of every muscle at the finer ones.
 /// A failed solve stored without its parts (before they were kept) is retried whole.
 CalculixDefinition retryDefinition(const CalculixDefinition& definition,
