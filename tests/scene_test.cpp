@@ -249,6 +249,19 @@ TEST(Scene, OverrideForms) {
   EXPECT_NE(error.problem().find("sweep"), std::string::npos) << error.what();
 }
 
+TEST(Scene, AKeyThatMayBeAutoSaysWhatAutoTakesAndTheNumbersItTakes) {
+  const InputError error = errorOf([] {
+    loadScene(
+        writeScene("volume-auto.json", sphereScene(R"(, "model": {"volume_stiffness": "lots"})")));
+  });
+  EXPECT_EQ(error.where(), "model.volume_stiffness");
+  const std::string what = error.what();
+  EXPECT_NE(what.find("\"auto\" (from poisson_ratio)"), std::string::npos) << what;
+  EXPECT_NE(what.find("a number in [0, 1e+06]"), std::string::npos) << what;
+  // A number out of its range is refused as any other key's.
+  EXPECT_EQ(errorOf([] { loadScene("fusiform", {"damping=-1"}); }).where(), "model.damping");
+}
+
 TEST(Scene, ErrorsNameFieldAndFile) {
   struct Case {
     std::string file, text, where;

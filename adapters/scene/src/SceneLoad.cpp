@@ -371,8 +371,9 @@ class SettingReader {
     } else if (!given || given->is_number()) {
       (*this)(key, setting.value);
     } else {
-      fields_.fail(key.name, std::string("expected \"auto\" (") + setting.meaning +
-                                 ") or a number, got " + scene::describe(*given));
+      fields_.fail(key.name, std::string("expected \"auto\" (") + setting.meaning + ") or " +
+                                 scene::numberRange(key.lowest, key.highest, key.lowestExcluded) +
+                                 ", got " + scene::describe(*given));
     }
   }
   void operator()(const SettingKey& key, const scene::Derived& setting) const {
