@@ -5,11 +5,11 @@
 #include "fibremss/ImplicitSurface.h"
 
 #include <algorithm>
-#include <atomic>
 #include <numeric>
-#include <thread>
+#include <string>
 
 #include "ImplicitSurfaceInternal.h"
+#include "fibremss/Error.h"
 
 namespace fibremss {
 namespace {
@@ -319,22 +319,31 @@ btScalar ImplicitSurface::kernelRadius() const {
 
 void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
                      std::span<const std::span<const btVector3>> positions,
-                     std::span<const std::span<const Spring>> springs, unsigned threads) {
+                     std::span<const std::span<const Spring>> springs, TaskPool& pool) {
+  if (positions.size() != surfaces.size() || springs.size() != surfaces.size())
+    throw InputError("extractSurfaces", "",
+                     std::to_string(surfaces.size()) + " surfaces, " +
+                         std::to_string(positions.size()) + " positions, " +
+                         std::to_string(springs.size()) +
+                         " springs; expected one each per surface");
+  // One task per surface, never two on one: a surface's grids and scratch are its task's alone.
+  for (size_t a = 0; a < surfaces.size(); ++a)
+    for (size_t b = 0; b < a; ++b)
+      if (surfaces[a] == surfaces[b])
+        throw InputError(
+            "extractSurfaces", "surfaces[" + std::to_string(a) + "]",
+            "the same surface as surfaces[" + std::to_string(b) + "]; expected distinct surfaces");
   // Largest first, so the threads finish close together.
   std::vector<size_t> order(surfaces.size());
   std::iota(order.begin(), order.end(), size_t(0));
   std::stable_sort(order.begin(), order.end(),
                    [&](size_t a, size_t b) { return positions[a].size() > positions[b].size(); });
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t n; (n = next.fetch_add(1)) < order.size();)
-      surfaces[order[n]]->extract(positions[order[n]], springs[order[n]]);
-  };
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < std::min<size_t>(threads, order.size()); ++t) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
+  pool.run(
+      order.size(),
+      [&](size_t n, unsigned) {
+        surfaces[order[n]]->extract(positions[order[n]], springs[order[n]]);
+      },
+      "implicit surfaces");
 }
 
 MeshTopology meshTopology(const TriangleMesh& mesh) {

@@ -23,6 +23,7 @@
 
 #include "fibremss/Geometry.h"
 #include "fibremss/MuscleSettings.h"
+#include "fibremss/TaskPool.h"
 
 namespace fibremss {
 
@@ -74,12 +75,14 @@ class ImplicitSurface {
   std::unique_ptr<Impl> impl_;
 };
 
-/// extract() of every surface, surfaces[i] from positions[i] and springs[i], on `threads`
-/// threads of its own (0: the machine's hardware threads); each surface on one thread, so the
-/// result is the same for any count.
+/// extract() of every surface, surfaces[i] from positions[i] and springs[i], as tasks of
+/// `pool` (its own threads or the host's scheduler it was made with), largest first; each
+/// surface one task, so the result is the same for any thread count. The surfaces must be
+/// distinct objects (a surface's state is its task's alone): InputError otherwise, or when
+/// the spans' sizes differ.
 void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
                      std::span<const std::span<const btVector3>> positions,
-                     std::span<const std::span<const Spring>> springs, unsigned threads);
+                     std::span<const std::span<const Spring>> springs, TaskPool& pool);
 
 /// The edges of `mesh` not shared by exactly two triangles, and its connected components
 /// (triangles joined by an edge).
