@@ -5,6 +5,7 @@
 #include "fibremss/ImplicitSurface.h"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 #include <string>
 
@@ -85,6 +86,9 @@ const std::array<CellCut, 256> kCellCuts = [] {
     }
   return cuts;
 }();
+
+/// A piece of a surface enclosing fewer grid cells than this is dropped (Impl::dropSpecks).
+constexpr double kSmallestPieceCells = 2;
 
 /// The corners among `values` inside (value > 0), bit c for corner c.
 unsigned insideCorners(const std::array<float, 8>& values) {
@@ -239,6 +243,47 @@ void ImplicitSurface::Impl::march() {
   }
 }
 
+uint32_t ImplicitSurface::Impl::pieceRoot(uint32_t v) {
+  while (pieceOf[v] != v) v = pieceOf[v] = pieceOf[pieceOf[v]];
+  return v;
+}
+
+void ImplicitSurface::Impl::dropSpecks() {
+  const size_t count = mesh.vertices.size();
+  pieceOf.resize(count);
+  std::iota(pieceOf.begin(), pieceOf.end(), 0u);
+  for (const std::array<uint32_t, 3>& t : mesh.triangles) {
+    pieceOf[pieceRoot(t[1])] = pieceRoot(t[0]);
+    pieceOf[pieceRoot(t[2])] = pieceRoot(t[0]);
+  }
+  // Each piece's enclosed volume (signed: a hollow's is negative), from the grid's origin.
+  pieceVolume.assign(count, 0);
+  for (const std::array<uint32_t, 3>& t : mesh.triangles) {
+    const btVector3 a = mesh.vertices[t[0]] - grid.origin, b = mesh.vertices[t[1]] - grid.origin,
+                    c = mesh.vertices[t[2]] - grid.origin;
+    pieceVolume[pieceRoot(t[0])] += double(a.dot(b.cross(c))) / 6;
+  }
+  uint32_t largest = 0;
+  for (uint32_t v = 0; v < count; ++v)
+    if (std::abs(pieceVolume[v]) > std::abs(pieceVolume[largest])) largest = v;
+  const double smallest = kSmallestPieceCells * double(voxel) * double(voxel) * double(voxel);
+  vertexKept.resize(count);
+  int32_t kept = 0;
+  for (uint32_t v = 0; v < count; ++v) {
+    const uint32_t root = pieceRoot(v);
+    const bool keep = root == largest || std::abs(pieceVolume[root]) >= smallest;
+    vertexKept[v] = keep ? kept : -1;
+    if (keep) mesh.vertices[size_t(kept++)] = mesh.vertices[v];
+  }
+  mesh.vertices.resize(size_t(kept));
+  size_t triangles = 0;
+  for (const std::array<uint32_t, 3>& t : mesh.triangles)
+    if (vertexKept[t[0]] >= 0)
+      mesh.triangles[triangles++] = {uint32_t(vertexKept[t[0]]), uint32_t(vertexKept[t[1]]),
+                                     uint32_t(vertexKept[t[2]])};
+  mesh.triangles.resize(triangles);
+}
+
 int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
                                           const std::array<GridEntry*, 8>& corners, int u, int v,
                                           const std::array<float, 8>& values) {
@@ -290,6 +335,7 @@ void ImplicitSurface::extract(std::span<const btVector3> positions,
   s.mesh.vertices.clear();
   s.mesh.triangles.clear();
   s.seedAndMarch();
+  s.dropSpecks();
 }
 
 const TriangleMesh& ImplicitSurface::mesh() const {
