@@ -256,6 +256,9 @@ void ImplicitSurface::Impl::dropSpecks() {
     pieceOf[pieceRoot(t[1])] = pieceRoot(t[0]);
     pieceOf[pieceRoot(t[2])] = pieceRoot(t[0]);
   }
+  uint32_t roots = 0;  // pieces
+  for (uint32_t v = 0; v < count; ++v) roots += pieceOf[v] == v;
+  if (roots <= 1) return;
   // Each piece's enclosed volume (signed: a hollow's is negative), from the grid's origin.
   pieceVolume.assign(count, 0);
   for (const std::array<uint32_t, 3>& t : mesh.triangles) {
