@@ -253,8 +253,9 @@ void ImplicitSurface::Impl::dropSpecks() {
   pieceOf.resize(count);
   std::iota(pieceOf.begin(), pieceOf.end(), 0u);
   for (const std::array<uint32_t, 3>& t : mesh.triangles) {
-    pieceOf[pieceRoot(t[1])] = pieceRoot(t[0]);
-    pieceOf[pieceRoot(t[2])] = pieceRoot(t[0]);
+    const uint32_t root = pieceRoot(t[0]);  // stays a root: the others join it
+    pieceOf[pieceRoot(t[1])] = root;
+    pieceOf[pieceRoot(t[2])] = root;
   }
   uint32_t roots = 0;  // pieces
   for (uint32_t v = 0; v < count; ++v) roots += pieceOf[v] == v;
