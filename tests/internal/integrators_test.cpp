@@ -654,7 +654,7 @@ double rmsDistance(const std::vector<btVector3>& a, const std::vector<btVector3>
 
 /// The largest |z_i − zRef_i| over x, y, z (zRef from Eigen in double, particle order) relative
 /// to the largest |zRef_i|; z in the factor's row order.
-double factorSolveError(const ProjectiveFactor& factor, const Eigen::SparseMatrix<double>& lower,
+double factorSolveError(ProjectiveFactor& factor, const Eigen::SparseMatrix<double>& lower,
                         const Eigen::MatrixX3d& b) {
   const Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> reference(lower);
   const Eigen::MatrixX3d expected = reference.solve(b);

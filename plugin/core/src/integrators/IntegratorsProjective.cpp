@@ -297,7 +297,7 @@ double copyThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& forc
 /// L-BFGS's two-loop recursion: `q` becomes H·F, H the inverse Hessian its pairs and (A + W)⁻¹
 /// estimate. Each update of q is fused with the next pair's product (q − y·a as q + y·(−a), the
 /// same bits).
-void twoLoop(StepHistory& h, const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+void twoLoop(StepHistory& h, ProjectiveFactor& factor, const std::vector<btVector3>& forces,
              std::vector<btVector3>& q, int size) {
   const auto newer = [size](int j) { return (j + 1) % size; };
   const auto older = [size](int j) { return (j + size - 1) % size; };

@@ -60,6 +60,10 @@ FIBREMSS_AVX2_PASS void rotateAvx2(const Rotation& r, int begin, int end, const 
 /// bits, the same everywhere.
 constexpr double kUpdateCost = 1.5;
 
+/// Values past L's last entry in solveValues_ (zero): the AVX2 solve reads eight from its last
+/// pair's first.
+constexpr size_t kSolvePadding = 8;
+
 }  // namespace
 
 ProjectiveFactor::ProjectiveFactor(const Matrix& lowerA) {
@@ -123,8 +127,9 @@ void ProjectiveFactor::analyse(const Matrix& upper) {
   }
   weights_.assign(n, 0);
   lower_.assign(rows_.size(), 0);
-  solveValues_.assign(rows_.size(), 0);
+  solveValues_.assign(rows_.size() + kSolvePadding, 0);
   shareSolveRows();
+  solveGathered_.assign(n, btVector3(0, 0, 0));
   scatter_.assign(n, 0);
   pattern_.assign(n, 0);
   stale_.assign(n, 1);
@@ -133,22 +138,26 @@ void ProjectiveFactor::analyse(const Matrix& upper) {
   changedBy_.reserve(n);
 }
 
-/// solveRows_ and solveRowStart_ from the pattern: a column whose parent is the next column and
-/// which has one entry more reads the next column's rows, its predecessor's list one further on.
+/// solveRows_, solveRowStart_ and solveRuns_ from the pattern: a column whose parent is the next
+/// column and which has one entry more reads the next column's rows, its predecessor's list one
+/// further on, in its predecessor's run.
 void ProjectiveFactor::shareSolveRows() {
   const auto n = static_cast<int>(size());
   solveRowStart_.assign(n, 0);
   solveRows_.clear();
+  solveRuns_.clear();
   for (int j = 0; j < n; ++j) {
     const int count = columnStart_[j + 1] - columnStart_[j];
     if (j > 0 && parent_[j - 1] == j && columnStart_[j] - columnStart_[j - 1] == count + 1) {
       solveRowStart_[j] = solveRowStart_[j - 1] + 1;
       continue;
     }
+    solveRuns_.push_back(j);
     solveRowStart_[j] = static_cast<int>(solveRows_.size());
     for (int p = columnStart_[j] + 1; p < columnStart_[j + 1]; ++p)
       solveRows_.push_back(static_cast<uint32_t>(rows_[p]) * uint32_t(sizeof(btVector3)));
   }
+  solveRuns_.push_back(n);
 }
 
 void ProjectiveFactor::setWeight(int row, double weight) {
@@ -317,6 +326,8 @@ struct SolveFactor {
   const uint32_t* rows;
   const int* rowStart;
   int n;
+  const int* runs;  ///< each run's first column, then n (ProjectiveFactor's solveRuns_)
+  int runCount;
 
   SolveColumn column(int j) const {
     return {values[start[j]], values + start[j] + 1, rows + rowStart[j],
@@ -363,52 +374,119 @@ void solveLanes(const SolveFactor factor, btVector3* x) {
 #endif
 
 #if FIBREMSS_AVX2_PARTICLES
-/// Entries p and p + 1's values, each in all four lanes of its half: [v_p ×4, v_{p+1} ×4].
+/// Entries p and p + 1's values, each in all four lanes of its half: [v_p ×4, v_{p+1} ×4]. Reads
+/// eight values from `values` (solveValues_ is padded).
 FIBREMSS_AVX2_PASS inline __m256 valuePair(const btScalar* values) {
-  const __m128 both = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(values)));
-  return _mm256_permutevar8x32_ps(_mm256_castps128_ps256(both),
+  return _mm256_permutevar8x32_ps(_mm256_loadu_ps(values),
                                   _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1));
 }
 
-/// solveLanes with AVX2, two entries of a column per instruction (low half entry p, high half
-/// p + 1): the same products and differences per lane in the same order, so the same bits (the
-/// backward pass's halves are solveLanes' even and odd sums).
-FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x) {
-  const int n = factor.n;
-  for (int j = 0; j < n; ++j) {
-    const SolveColumn c = factor.column(j);
-    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(c.inverse));
+/// v in both halves.
+FIBREMSS_AVX2_PASS inline __m256 twice(__m128 v) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(v), v, 1);
+}
+
+/// The forward pass inside the run of columns [first, last]: each column scaled by its inverted
+/// diagonal and taken from the run's rows below it, which are the next rows (two per
+/// instruction, read and written in place).
+FIBREMSS_AVX2_PASS void forwardRun(const SolveFactor& factor, btVector3* x, int first, int last) {
+  for (int j = first; j <= last; ++j) {
+    const btScalar* values = factor.values + factor.start[j];
+    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(values[0]));
     _mm_store_ps(x[j].m_floats, xj);
-    const __m256 both = _mm256_insertf128_ps(_mm256_castps128_ps256(xj), xj, 1);
-    int p = 0;
+    const __m256 both = twice(xj);
+    int r = j + 1;
 #pragma GCC unroll 4
-    for (; p + 1 < c.count; p += 2) {  // x(row) − xj·L(row, j)
-      btVector3& a = at(x, c.rows[p]);
-      btVector3& b = at(x, c.rows[p + 1]);
-      const __m256 next =
-          _mm256_sub_ps(loadPair(a, b), _mm256_mul_ps(both, valuePair(c.values + p)));
-      _mm_store_ps(a.m_floats, _mm256_castps256_ps128(next));
-      _mm_store_ps(b.m_floats, _mm256_extractf128_ps(next, 1));
+    for (; r < last; r += 2) {  // x(r, r + 1) − xj·L(r .. r + 1, j)
+      float* a = x[r].m_floats;
+      _mm256_storeu_ps(
+          a, _mm256_sub_ps(_mm256_loadu_ps(a), _mm256_mul_ps(both, valuePair(values + r - j))));
     }
-    if (p < c.count) {
-      float* a = at(x, c.rows[p]).m_floats;
-      _mm_store_ps(a, _mm_sub_ps(_mm_load_ps(a), _mm_mul_ps(xj, _mm_set1_ps(c.values[p]))));
-    }
+    if (r == last)
+      _mm_store_ps(x[r].m_floats,
+                   _mm_sub_ps(loadVector(x[r]), _mm_mul_ps(xj, _mm_set1_ps(values[r - j]))));
   }
-  for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
+}
+
+/// The forward pass of the run [first, last]'s columns c .. c + B − 1 (solved) on the rows below
+/// the run, which they share: each pair of rows read and written once for the B columns, taken
+/// from them in column order.
+template <int B>
+FIBREMSS_AVX2_PASS void forwardBelow(const SolveFactor& factor, btVector3* x, int last, int c) {
+  const SolveColumn below = factor.column(last);
+  __m256 both[B];
+  const btScalar* values[B];
+  for (int b = 0; b < B; ++b) {
+    both[b] = twice(loadVector(x[c + b]));
+    values[b] = factor.values + factor.start[c + b] + 1 + (last - c - b);
+  }
+  int m = 0;
+  for (; m + 1 < below.count; m += 2) {
+    btVector3& a = at(x, below.rows[m]);
+    btVector3& d = at(x, below.rows[m + 1]);
+    __m256 next = loadPair(a, d);
+#pragma GCC unroll 8
+    for (int b = 0; b < B; ++b)
+      next = _mm256_sub_ps(next, _mm256_mul_ps(both[b], valuePair(values[b] + m)));
+    _mm_store_ps(a.m_floats, _mm256_castps256_ps128(next));
+    _mm_store_ps(d.m_floats, _mm256_extractf128_ps(next, 1));
+  }
+  if (m < below.count) {
+    float* a = at(x, below.rows[m]).m_floats;
+    __m128 next = _mm_load_ps(a);
+    for (int b = 0; b < B; ++b)
+      next =
+          _mm_sub_ps(next, _mm_mul_ps(_mm256_castps256_ps128(both[b]), _mm_set1_ps(values[b][m])));
+    _mm_store_ps(a, next);
+  }
+}
+
+/// The backward pass of the run [first, last], column `last` down to `first`: each column's
+/// entries summed as solveLanes sums them (even entries in the low half, odd in the high), its
+/// rows read from `gathered`, which holds x at the rows of column `first` in its order (the rows
+/// below the run gathered first, each solved row of the run added as it is solved).
+FIBREMSS_AVX2_PASS void backwardRun(const SolveFactor& factor, btVector3* x, int first, int last,
+                                    btVector3* gathered) {
+  const SolveColumn below = factor.column(last);
+  btVector3* tail = gathered + (last - first);
+  for (int m = 0; m < below.count; ++m) tail[m] = at(x, below.rows[m]);
+  for (int j = last; j >= first; --j) {
     const SolveColumn c = factor.column(j);
+    const btVector3* rows = gathered + (j - first);
     __m256 sums = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
     int p = 0;
 #pragma GCC unroll 4
     for (; p + 1 < c.count; p += 2)
-      sums = _mm256_sub_ps(sums, _mm256_mul_ps(loadPair(at(x, c.rows[p]), at(x, c.rows[p + 1])),
-                                               valuePair(c.values + p)));
+      sums = _mm256_sub_ps(
+          sums, _mm256_mul_ps(_mm256_loadu_ps(rows[p].m_floats), valuePair(c.values + p)));
     __m128 sum = _mm256_castps256_ps128(sums);
     if (p < c.count)
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
-    _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, _mm256_extractf128_ps(sums, 1)),
-                                           _mm_set1_ps(c.inverse)));
+      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(rows[p]), _mm_set1_ps(c.values[p])));
+    const __m128 xj =
+        _mm_mul_ps(_mm_add_ps(sum, _mm256_extractf128_ps(sums, 1)), _mm_set1_ps(c.inverse));
+    _mm_store_ps(x[j].m_floats, xj);
+    if (j > first) _mm_store_ps(gathered[j - first - 1].m_floats, xj);
   }
+}
+
+/// solveLanes with AVX2 by runs of columns that share their rows (SolveFactor::runs), two entries
+/// per instruction (low half entry p, high half p + 1): per row the same products and
+/// differences in the same order, so the same bits. The forward pass takes each pair of rows
+/// below a run from up to eight of its columns at once; the backward pass gathers the rows below a
+/// run once for all its columns.
+FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
+                                       btVector3* gathered) {
+  for (int r = 0; r < factor.runCount; ++r) {
+    const int first = factor.runs[r], last = factor.runs[r + 1] - 1;
+    forwardRun(factor, x, first, last);
+    int c = first;
+    for (; c + 8 <= last + 1; c += 8) forwardBelow<8>(factor, x, last, c);
+    if (c + 4 <= last + 1) forwardBelow<4>(factor, x, last, c), c += 4;
+    if (c + 2 <= last + 1) forwardBelow<2>(factor, x, last, c), c += 2;
+    if (c <= last) forwardBelow<1>(factor, x, last, c);
+  }
+  for (int r = factor.runCount - 1; r >= 0; --r)
+    backwardRun(factor, x, factor.runs[r], factor.runs[r + 1] - 1, gathered);
 }
 #endif
 
@@ -428,11 +506,17 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x) {
 // Measured against a supernodal solve (runs of columns with one pattern, their rows below gathered
 // once, four rows in the lanes): 14 % fewer instructions, 12 % more CPU time (docs/decisions.md,
 // "Solver").
-void ProjectiveFactor::solveInPlace(btVector3* x) const {
-  const SolveFactor factor{columnStart_.data(), solveValues_.data(), solveRows_.data(),
-                           solveRowStart_.data(), static_cast<int>(size())};
+void ProjectiveFactor::solveInPlace(btVector3* x) {
+  const SolveFactor factor{columnStart_.data(),
+                           solveValues_.data(),
+                           solveRows_.data(),
+                           solveRowStart_.data(),
+                           static_cast<int>(size()),
+                           solveRuns_.data(),
+                           static_cast<int>(solveRuns_.size()) - 1};
 #if FIBREMSS_AVX2_PARTICLES
-  if (fastestSpringKernel() == SpringKernel::avx2) return solveLanesAvx2(factor, x);
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return solveLanesAvx2(factor, x, solveGathered_.data());
 #endif
 #if FIBREMSS_SSE_PARTICLES
   solveLanes(factor, x);
