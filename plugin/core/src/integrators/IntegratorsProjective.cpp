@@ -30,6 +30,8 @@
 #include "ProjectiveFactor.h"
 #include "collision/CollisionPairs.h"
 #include "dynamics/Residual.h"
+#include "kernels/ParticleSimd.h"
+#include "kernels/SpringForces.h"
 #include "kernels/VolumeForces.h"
 
 namespace fibremss {
@@ -271,10 +273,45 @@ void recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vecto
   }
 }
 
+#if FIBREMSS_AVX2_PARTICLES
+/// Row k's and row k + 1's dots of the products `p` (two rows, one per half) added to `sum` in
+/// row order, each summed as btVector3::dot sums it: (x + y) + z.
+FIBREMSS_AVX2_PASS inline double addDots(double sum, __m256 p) {
+  const __m256 dots =
+      _mm256_add_ps(_mm256_add_ps(p, _mm256_movehdup_ps(p)), _mm256_unpackhi_ps(p, p));
+  sum += double(_mm256_cvtss_f32(dots));
+  return sum + double(_mm_cvtss_f32(_mm256_extractf128_ps(dots, 1)));
+}
+
+/// addThenDot two rows per instruction: per lane the scalar code's products and sums (the w
+/// lanes too, which no product reads), so the same bits.
+FIBREMSS_AVX2_PASS double addThenDotAvx2(btVector3* q, const btVector3* d, btScalar c,
+                                         const btVector3* next, size_t rows) {
+  const __m256 scale = _mm256_set1_ps(c);
+  double sum = 0;
+  size_t k = 0;
+  for (; k + 1 < rows; k += 2) {
+    const __m256 updated = _mm256_add_ps(_mm256_loadu_ps(q[k].m_floats),
+                                         _mm256_mul_ps(_mm256_loadu_ps(d[k].m_floats), scale));
+    _mm256_storeu_ps(q[k].m_floats, updated);
+    if (next) sum = addDots(sum, _mm256_mul_ps(_mm256_loadu_ps(next[k].m_floats), updated));
+  }
+  if (k < rows) {
+    q[k] += d[k] * c;
+    if (next) sum += double(next[k].dot(q[k]));
+  }
+  return sum;
+}
+#endif
+
 /// q += d·c, then Σ next·q over the rows as dot() sums it (0 without `next`): the recursion's
 /// update and its next product in one pass.
 double addThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& d, btScalar c,
                   const std::vector<btVector3>* next) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return addThenDotAvx2(q.data(), d.data(), c, next ? next->data() : nullptr, q.size());
+#endif
   double sum = 0;
   for (size_t k = 0; k < q.size(); ++k) {
     q[k] += d[k] * c;
