@@ -449,7 +449,11 @@ FIBREMSS_AVX2_PASS void backwardRun(const SolveFactor& factor, btVector3* x, int
                                     btVector3* gathered) {
   const SolveColumn below = factor.column(last);
   btVector3* tail = gathered + (last - first);
-  for (int m = 0; m < below.count; ++m) tail[m] = at(x, below.rows[m]);
+  int m = 0;
+#pragma GCC unroll 4
+  for (; m + 1 < below.count; m += 2)
+    _mm256_storeu_ps(tail[m].m_floats, loadPair(at(x, below.rows[m]), at(x, below.rows[m + 1])));
+  if (m < below.count) tail[m] = at(x, below.rows[m]);
   for (int j = last; j >= first; --j) {
     const SolveColumn c = factor.column(j);
     const btVector3* rows = gathered + (j - first);
