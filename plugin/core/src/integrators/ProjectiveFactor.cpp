@@ -510,7 +510,7 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
 // Measured against a supernodal solve (runs of columns with one pattern, their rows below gathered
 // once, four rows in the lanes): 14 % fewer instructions, 12 % more CPU time (docs/decisions.md,
 // "Solver").
-void ProjectiveFactor::solveInPlace(btVector3* x) {
+void ProjectiveFactor::solveInPlace(btVector3* x, SpringKernel kernel) {
   const SolveFactor factor{columnStart_.data(),
                            solveValues_.data(),
                            solveRows_.data(),
@@ -519,8 +519,9 @@ void ProjectiveFactor::solveInPlace(btVector3* x) {
                            solveRuns_.data(),
                            static_cast<int>(solveRuns_.size()) - 1};
 #if FIBREMSS_AVX2_PARTICLES
-  if (fastestSpringKernel() == SpringKernel::avx2)
-    return solveLanesAvx2(factor, x, solveGathered_.data());
+  if (kernel == SpringKernel::avx2) return solveLanesAvx2(factor, x, solveGathered_.data());
+#else
+  (void)kernel;
 #endif
 #if FIBREMSS_SSE_PARTICLES
   solveLanes(factor, x);

@@ -15,6 +15,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "kernels/SpringForces.h"
+
 namespace fibremss {
 
 /// L of P·(A + W)·Pᵀ and what keeps it up to date without allocating. A + W acts alike on x, y
@@ -47,8 +49,9 @@ class ProjectiveFactor {
   /// Factors P·(A + W)·Pᵀ anew from A's entries as added and W, without allocating.
   void refactorAll();
   /// Solves L·Lᵀ·z = b in place for the three coordinates of `x` together (indexed by row),
-  /// using the factor's own scratch (one solve at a time).
-  void solveInPlace(btVector3* x);
+  /// using the factor's own scratch (one solve at a time): with AVX2 if `kernel` is avx2, else
+  /// with SSE where the build has it (the same bits either way), else in scalar code.
+  void solveInPlace(btVector3* x, SpringKernel kernel = fastestSpringKernel());
 
  private:
   void analyse(const Eigen::SparseMatrix<double>& upper);
