@@ -503,13 +503,13 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
 // the rows come from the shared lists (solveRows_), which stay in cache: cylinder-twist's solve
 // reads 0.86 MB instead of 1.48 MB with a row offset beside each value (a simulated 1 MB L2 misses
 // 1.78 M lines over its 130 solves against 3.98 M). The forward pass takes a column's entries two
-// at a time (its rows differ, so the order of their loads and stores does not matter); with AVX2
-// (solveLanesAvx2) two per instruction, the loops unrolled four times: cylinder-twist's 130
-// solves 260.9 M instructions, against 302.5 M not unrolled, 268.5 M unrolled twice and 395.3 M
-// with SSE over value–offset pairs.
-// Measured against a supernodal solve (runs of columns with one pattern, their rows below gathered
-// once, four rows in the lanes): 14 % fewer instructions, 12 % more CPU time (docs/decisions.md,
-// "Solver").
+// at a time (its rows differ, so the order of their loads and stores does not matter). With AVX2
+// (solveLanesAvx2) two per instruction and by runs: a pair of rows below a run is read and
+// written once per eight of its columns, and the rows below a run are gathered once for the
+// backward pass of all its columns. cylinder-twist's 130 solves: 166.3 M instructions, against
+// 260.9 M column by column (302.5 M not unrolled, 395.3 M with SSE over value–offset pairs).
+// A supernodal solve with four rows in the lanes (other sums, other bits) took 14 % fewer
+// instructions than column by column but 12 % more CPU time (docs/decisions.md, "Solver").
 void ProjectiveFactor::solveInPlace(btVector3* x, SpringKernel kernel) {
   const SolveFactor factor{columnStart_.data(),
                            solveValues_.data(),
