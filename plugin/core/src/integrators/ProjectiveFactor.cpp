@@ -359,16 +359,14 @@ void solveLanes(const SolveFactor factor, btVector3* x) {
   }
   for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
     const SolveColumn c = factor.column(j);
-    __m128 sum = loadVector(x[j]), odd = _mm_setzero_ps();
+    const auto entry = [&](int p) {
+      return _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p]));
+    };
+    __m128 sums[4] = {loadVector(x[j]), _mm_setzero_ps(), _mm_setzero_ps(), _mm_setzero_ps()};
     int p = 0;
-    for (; p + 1 < c.count; p += 2) {
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
-      odd = _mm_sub_ps(odd,
-                       _mm_mul_ps(loadVector(at(x, c.rows[p + 1])), _mm_set1_ps(c.values[p + 1])));
-    }
-    if (p < c.count)
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
-    _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, odd), _mm_set1_ps(c.inverse)));
+    for (; p < c.count; ++p) sums[p % 4] = _mm_sub_ps(sums[p % 4], entry(p));
+    const __m128 sum = _mm_add_ps(_mm_add_ps(sums[0], sums[2]), _mm_add_ps(sums[1], sums[3]));
+    _mm_store_ps(x[j].m_floats, _mm_mul_ps(sum, _mm_set1_ps(c.inverse)));
   }
 }
 #endif
@@ -441,8 +439,13 @@ FIBREMSS_AVX2_PASS void forwardBelow(const SolveFactor& factor, btVector3* x, in
   }
 }
 
+/// Entries p and p + 1's products with their rows' x, read from `rows` in the column's order.
+FIBREMSS_AVX2_PASS inline __m256 products(const btVector3* rows, const btScalar* values, int p) {
+  return _mm256_mul_ps(_mm256_loadu_ps(rows[p].m_floats), valuePair(values + p));
+}
+
 /// The backward pass of the run [first, last], column `last` down to `first`: each column's
-/// entries summed as solveLanes sums them (even entries in the low half, odd in the high), its
+/// entries summed as solveLanes sums them (`front` entries 0 and 1 modulo 4, `back` 2 and 3), its
 /// rows read from `gathered`, which holds x at the rows of column `first` in its order (the rows
 /// below the run gathered first, each solved row of the run added as it is solved).
 FIBREMSS_AVX2_PASS void backwardRun(const SolveFactor& factor, btVector3* x, int first, int last,
@@ -457,25 +460,33 @@ FIBREMSS_AVX2_PASS void backwardRun(const SolveFactor& factor, btVector3* x, int
   for (int j = last; j >= first; --j) {
     const SolveColumn c = factor.column(j);
     const btVector3* rows = gathered + (j - first);
-    __m256 sums = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
+    __m256 front = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
+    __m256 back = _mm256_setzero_ps();
     int p = 0;
-#pragma GCC unroll 4
-    for (; p + 1 < c.count; p += 2)
-      sums = _mm256_sub_ps(
-          sums, _mm256_mul_ps(_mm256_loadu_ps(rows[p].m_floats), valuePair(c.values + p)));
-    __m128 sum = _mm256_castps256_ps128(sums);
-    if (p < c.count)
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(rows[p]), _mm_set1_ps(c.values[p])));
+#pragma GCC unroll 2
+    for (; p + 3 < c.count; p += 4) {
+      front = _mm256_sub_ps(front, products(rows, c.values, p));
+      back = _mm256_sub_ps(back, products(rows, c.values, p + 2));
+    }
+    if (p + 1 < c.count) front = _mm256_sub_ps(front, products(rows, c.values, p)), p += 2;
+    if (p < c.count) {  // one entry: its sum's lanes, the other half less 0
+      const __m256 single = _mm256_insertf128_ps(
+          _mm256_setzero_ps(), _mm_mul_ps(loadVector(rows[p]), _mm_set1_ps(c.values[p])), 0);
+      (p % 4 == 0 ? front : back) = _mm256_sub_ps(p % 4 == 0 ? front : back, single);
+    }
+    const __m256 halves = _mm256_add_ps(front, back);
     const __m128 xj =
-        _mm_mul_ps(_mm_add_ps(sum, _mm256_extractf128_ps(sums, 1)), _mm_set1_ps(c.inverse));
+        _mm_mul_ps(_mm_add_ps(_mm256_castps256_ps128(halves), _mm256_extractf128_ps(halves, 1)),
+                   _mm_set1_ps(c.inverse));
     _mm_store_ps(x[j].m_floats, xj);
     if (j > first) _mm_store_ps(gathered[j - first - 1].m_floats, xj);
   }
 }
 
 /// solveLanes with AVX2 by runs of columns that share their rows (SolveFactor::runs), two entries
-/// per instruction (low half entry p, high half p + 1): per row the same products and
-/// differences in the same order, so the same bits. The forward pass takes each pair of rows
+/// per instruction (low half entry p, high half p + 1; the backward pass's two registers entries
+/// 0, 1 and 2, 3 modulo 4): per row the same products and differences in the same order, so the
+/// same bits. The forward pass takes each pair of rows
 /// below a run from up to eight of its columns at once; the backward pass gathers the rows below a
 /// run once for all its columns.
 FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
@@ -497,19 +508,21 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
 }  // namespace
 
 // With SSE each entry is one vector product and difference over x, y, z (and w, which stays 0;
-// the scalar code's operations per lane, same bits), and the backward pass sums a column's odd
-// and even entries apart (two chains of dependent subtractions instead of one: CPU samples on
-// thigh13 R=40, 358 -> 283 in the integrator). The values stream alone (4 bytes per entry) and
-// the rows come from the shared lists (solveRows_), which stay in cache: cylinder-twist's solve
-// reads 0.86 MB instead of 1.48 MB with a row offset beside each value (a simulated 1 MB L2 misses
-// 1.78 M lines over its 130 solves against 3.98 M). The forward pass takes a column's entries two
-// at a time (its rows differ, so the order of their loads and stores does not matter). With AVX2
-// (solveLanesAvx2) two per instruction and by runs: a pair of rows below a run is read and
-// written once per eight of its columns, and the rows below a run are gathered once for the
-// backward pass of all its columns. cylinder-twist's 130 solves: 166.3 M instructions, against
-// 260.9 M column by column (302.5 M not unrolled, 395.3 M with SSE over value–offset pairs).
-// A supernodal solve with four rows in the lanes (other sums, other bits) took 14 % fewer
-// instructions than column by column but 12 % more CPU time (docs/decisions.md, "Solver").
+// the scalar code's operations per lane), and the backward pass sums a column's entries in four
+// chains by their index modulo 4, added as (0 + 2) + (1 + 3) (one chain of dependent
+// subtractions is slower: two chains against one, CPU samples on thigh13 R=40, 358 -> 283 in the
+// integrator; four against two, cylinder-twist's task-clock 1.06x less, docs/performance.md). The
+// values stream alone (4 bytes per entry) and the rows come from the shared lists (solveRows_),
+// which stay in cache: cylinder-twist's solve reads 0.86 MB instead of 1.48 MB with a row offset
+// beside each value (a simulated 1 MB L2 misses 1.78 M lines over its 130 solves against 3.98 M).
+// The forward pass takes a column's entries two at a time (its rows differ, so the order of their
+// loads and stores does not matter). With AVX2 (solveLanesAvx2) two per instruction and by runs: a
+// pair of rows below a run is read and written once per eight of its columns, and the rows below a
+// run are gathered once for the backward pass of all its columns. cylinder-twist's 130 solves:
+// 166.3 M instructions, against 260.9 M column by column (302.5 M not unrolled, 395.3 M with SSE
+// over value–offset pairs). A supernodal solve with four rows in the lanes (other sums, other bits)
+// took 14 % fewer instructions than column by column but 12 % more CPU time (docs/decisions.md,
+// "Solver").
 void ProjectiveFactor::solveInPlace(btVector3* x, SpringKernel kernel) {
   const SolveFactor factor{columnStart_.data(),
                            solveValues_.data(),
