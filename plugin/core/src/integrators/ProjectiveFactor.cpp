@@ -362,10 +362,21 @@ void solveLanes(const SolveFactor factor, btVector3* x) {
     const auto entry = [&](int p) {
       return _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p]));
     };
-    __m128 sums[4] = {loadVector(x[j]), _mm_setzero_ps(), _mm_setzero_ps(), _mm_setzero_ps()};
+    __m128 s0 = loadVector(x[j]), s1 = _mm_setzero_ps(), s2 = s1, s3 = s1;
     int p = 0;
-    for (; p < c.count; ++p) sums[p % 4] = _mm_sub_ps(sums[p % 4], entry(p));
-    const __m128 sum = _mm_add_ps(_mm_add_ps(sums[0], sums[2]), _mm_add_ps(sums[1], sums[3]));
+    for (; p + 3 < c.count; p += 4) {
+      s0 = _mm_sub_ps(s0, entry(p));
+      s1 = _mm_sub_ps(s1, entry(p + 1));
+      s2 = _mm_sub_ps(s2, entry(p + 2));
+      s3 = _mm_sub_ps(s3, entry(p + 3));
+    }
+    if (p + 1 < c.count) {
+      s0 = _mm_sub_ps(s0, entry(p));
+      s1 = _mm_sub_ps(s1, entry(p + 1));
+      p += 2;
+    }
+    if (p < c.count) (p % 4 == 0 ? s0 : s2) = _mm_sub_ps(p % 4 == 0 ? s0 : s2, entry(p));
+    const __m128 sum = _mm_add_ps(_mm_add_ps(s0, s2), _mm_add_ps(s1, s3));
     _mm_store_ps(x[j].m_floats, _mm_mul_ps(sum, _mm_set1_ps(c.inverse)));
   }
 }
