@@ -84,7 +84,7 @@ TEST(AnalyticMeasure, HomogeneousStretchReadsBackItsPoissonRatioAndVolume) {
   EXPECT_GT(m.exactPoissonRatio, 0.45);  // the scene's ν = 0.49 continuum
 }
 
-TEST(AnalyticMeasure, ExactTorsionHasNoRotationErrorKeepsRadiusAndVolume) {
+TEST(AnalyticMeasure, ExactTorsionHasNoRotationErrorNorDistanceKeepsRadiusAndVolume) {
   const LoadedScene scene = loadScene("cylinder-twist");
   const AnalyticCase& c = scene.analytic;
   const TriangleMesh& rest = scene.muscles[0].surface;
@@ -99,12 +99,18 @@ TEST(AnalyticMeasure, ExactTorsionHasNoRotationErrorKeepsRadiusAndVolume) {
   EXPECT_LT(m.rotationErrorDeg, 0.01);
   EXPECT_NEAR(m.midRadiusRatio, 1, 1e-4);
   EXPECT_NEAR(m.volumeChangePct, 0, 0.5);  // the faceted surface's own change under the twist
+  EXPECT_LT(m.exactTorsionRmsMm, 1e-3);
+  // Every vertex 0.2 mm along the axis off the exact torsion: 0.2 mm RMS.
+  std::vector<btVector3> shifted = twisted;
+  for (btVector3& p : shifted) p += axis * btScalar(2e-4);
+  EXPECT_NEAR(measureAnalytic(c, rest, shifted).exactTorsionRmsMm, 0.2, 1e-3);
   // A section that lags is seen: half the twist everywhere puts the 90 % section 72° off.
   const auto half = deformed(rest, [&](const btVector3& p) {
     const double t = std::clamp(double((p - c.axisStart).dot(axis)) / length, 0.0, 1.0);
     return quatRotate(btQuaternion(axis, btScalar(t * c.twistDeg * M_PI / 360)), p);
   });
   EXPECT_NEAR(measureAnalytic(c, rest, half).rotationErrorDeg, 81, 0.5);
+  EXPECT_GT(measureAnalytic(c, rest, half).exactTorsionRmsMm, 1);
 }
 
 TEST(AnalyticScenes, SpherePlanesNamesItsPlateAndClosesIn) {

@@ -134,16 +134,23 @@ TEST(Scene, EverySolverSettingIsAKeyTheSimulationOrModelSectionReads) {
 }
 
 TEST(Scene, ReadmeHasARowForEveryKeyOfTheSettingsSections) {
-  // The settings' rows in Parameters.h give a key its reading, validation and shorthand; its
-  // meaning is its row in the section's table of scenes/README.md.
+  // A key's row in its section's table (Parameters.h for the simulation and collision sections,
+  // SceneSettings.h for the model's and a muscle's) gives it its reading, validation and
+  // shorthand; its meaning is its row in the section's table of scenes/README.md.
   std::ifstream in(fs::path(FIBREMSS_SOURCE_DIR) / "scenes" / "README.md");
   const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const Json complete = Json::parse(loadScene("fusiform").json);
-  for (const std::string section : {"model", "simulation", "collision", "outputs"}) {
+  ASSERT_FALSE(complete["muscles"].empty());
+  const std::pair<std::string, Json> sections[] = {{"model", complete["model"]},
+                                                   {"simulation", complete["simulation"]},
+                                                   {"collision", complete["collision"]},
+                                                   {"outputs", complete["outputs"]},
+                                                   {"muscles[i]", complete["muscles"][0]}};
+  for (const auto& [section, keys] : sections) {
     const size_t start = readme.find(": `" + section + "`\n");
     ASSERT_NE(start, std::string::npos) << section;
     const std::string table = readme.substr(start, readme.find("\n## ", start) - start);
-    for (const auto& item : complete[section].items())
+    for (const auto& item : keys.items())
       EXPECT_NE(table.find("\n| `" + item.key() + "` |"), std::string::npos)
           << section << "." << item.key();
   }
@@ -240,6 +247,19 @@ TEST(Scene, OverrideForms) {
   // A sweep shorthand on a scene without a sweep is an error rather than silently ignored.
   error = errorOf([&] { loadScene(path, {"step_deg=5"}); });
   EXPECT_NE(error.problem().find("sweep"), std::string::npos) << error.what();
+}
+
+TEST(Scene, AKeyThatMayBeAutoSaysWhatAutoTakesAndTheNumbersItTakes) {
+  const InputError error = errorOf([] {
+    loadScene(
+        writeScene("volume-auto.json", sphereScene(R"(, "model": {"volume_stiffness": "lots"})")));
+  });
+  EXPECT_EQ(error.where(), "model.volume_stiffness");
+  const std::string what = error.what();
+  EXPECT_NE(what.find("\"auto\" (from poisson_ratio)"), std::string::npos) << what;
+  EXPECT_NE(what.find("a number in [0, 1e+06]"), std::string::npos) << what;
+  // A number out of its range is refused as any other key's.
+  EXPECT_EQ(errorOf([] { loadScene("fusiform", {"damping=-1"}); }).where(), "model.damping");
 }
 
 TEST(Scene, ErrorsNameFieldAndFile) {
@@ -648,6 +668,21 @@ TEST(SetShorthands, EveryKeyOfASettingsSectionIsSetWithoutItsSection) {
       EXPECT_EQ(nlohmann::json::parse(scene.json)[section][item.key()], item.value())
           << section << "." << item.key();
     }
+  }
+}
+
+TEST(SetShorthands, EveryMuscleSettingIsSetOnEveryMuscle) {
+  // Every key of a muscle but those read around its settings' table.
+  const std::vector<std::string> notSettings = {"name", "surface", "fibres", "origin", "insertion"};
+  const Json complete = Json::parse(loadScene("hip-flexion").json);
+  ASSERT_GT(complete["muscles"].size(), 1u);
+  for (const auto& item : complete["muscles"][0].items()) {
+    if (std::find(notSettings.begin(), notSettings.end(), item.key()) != notSettings.end())
+      continue;
+    const Json value = item.value();
+    const Json muscles =
+        Json::parse(loadScene("hip-flexion", {item.key() + "=" + value.dump()}).json)["muscles"];
+    for (const Json& muscle : muscles) EXPECT_EQ(muscle[item.key()], value) << item.key();
   }
 }
 

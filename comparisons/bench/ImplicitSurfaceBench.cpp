@@ -117,14 +117,14 @@ double cpuMs() {
   return 1e3 * double(t.tv_sec) + 1e-6 * double(t.tv_nsec);
 }
 
-/// Wall and CPU time of extracting every surface from `positions` on `threads` threads [ms].
+/// Wall and CPU time of extracting every surface from `positions` on `pool` [ms].
 std::pair<double, double> frameMs(std::vector<ImplicitSurface*>& surfaces,
                                   const std::vector<std::span<const btVector3>>& positions,
                                   const std::vector<std::span<const Spring>>& springs,
-                                  unsigned threads) {
+                                  TaskPool& pool) {
   const auto start = std::chrono::steady_clock::now();
   const double cpuStart = cpuMs();
-  extractSurfaces(surfaces, positions, springs, threads);
+  extractSurfaces(surfaces, positions, springs, pool);
   return {
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count(),
       cpuMs() - cpuStart};
@@ -141,9 +141,12 @@ struct Frame {
 /// under `label` with the load.
 void timingReport(const char* label, Frame& frame, int rounds) {
   std::vector<double> one, two, cpuOne, cpuTwo;
+  TaskPool onePool(1), twoPool(2);
   for (int round = 0; round < rounds; ++round) {
-    const auto [wallOne, cpuOneRound] = frameMs(frame.surfaces, frame.positions, frame.springs, 1);
-    const auto [wallTwo, cpuTwoRound] = frameMs(frame.surfaces, frame.positions, frame.springs, 2);
+    const auto [wallOne, cpuOneRound] =
+        frameMs(frame.surfaces, frame.positions, frame.springs, onePool);
+    const auto [wallTwo, cpuTwoRound] =
+        frameMs(frame.surfaces, frame.positions, frame.springs, twoPool);
     one.push_back(wallOne);
     two.push_back(wallTwo);
     cpuOne.push_back(cpuOneRound);
@@ -168,6 +171,7 @@ void posedReport(const LoadedScene& scene, const PreparedScene& prepared,
   const SceneHandles handles = addScene(system, prepared);
   Frame frame;
   for (size_t m = 0; m < surfaces.size(); ++m) frame.surfaces.push_back(&surfaces[m]);
+  TaskPool serial(1);
   for (int step = 0; step < steps; ++step) {
     const int pose = std::min(step, scene.poseCount - 1);
     for (size_t b = 0; b < handles.bones.size(); ++b)
@@ -179,7 +183,7 @@ void posedReport(const LoadedScene& scene, const PreparedScene& prepared,
       frame.positions.push_back(system.positions(muscle));
       frame.springs.push_back(system.settings(muscle).springs);
     }
-    const double cpu = frameMs(frame.surfaces, frame.positions, frame.springs, 1).second;
+    const double cpu = frameMs(frame.surfaces, frame.positions, frame.springs, serial).second;
     size_t triangles = 0, open = 0, pieces = 0;
     for (const ImplicitSurface& surface : surfaces) {
       const MeshTopology topology = meshTopology(surface.mesh());

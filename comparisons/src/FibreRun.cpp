@@ -356,8 +356,7 @@ class FibreRunner {
     }
     if (!options.outDir.empty() && frameEvery_ > 0)
       frames_ = std::make_unique<FrameWriter>(options.outDir, scene.outputs, scene.unitScale,
-                                              FrameFormats{options.vtkFrames, options.gltfFrames},
-                                              system_.threads());
+                                              FrameFormats{options.vtkFrames, options.gltfFrames});
   }
 
   /// Runs the steps until the last, a failure the policy does not go on from, or a cancel.

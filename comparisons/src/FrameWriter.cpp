@@ -84,19 +84,20 @@ void particleSpringStrain(const MuscleSettings& muscle, std::span<const btVector
 }
 
 FrameWriter::FrameWriter(const std::string& outDir, const OutputSettings& settings,
-                         double unitScale, FrameFormats formats, unsigned threads)
+                         double unitScale, FrameFormats formats)
     : outDir_(outDir),
       settings_(settings),
       formats_(formats),
       sceneUnitsPerMetre_(btScalar(1.0 / unitScale)),
       lengthStep_(powerOfTwoStep(settings.quantiseMm / 1000 / unitScale)),
-      strainStep_(powerOfTwoStep(settings.quantiseStrain)),
-      threads_(threads) {}
+      strainStep_(powerOfTwoStep(settings.quantiseStrain)) {}
 
 void FrameWriter::extractImplicit(const MuscleSystem& system, std::span<const MuscleHandle> muscles,
                                   const PreparedScene& prepared) {
-  if (implicit_.empty())
+  if (implicit_.empty()) {
     for (size_t m = 0; m < muscles.size(); ++m) implicit_.emplace_back(prepared.muscles[m]);
+    pool_ = std::make_unique<TaskPool>(system.threads(), system.definition().scheduler);
+  }
   const auto start = std::chrono::steady_clock::now();
   std::vector<ImplicitSurface*> surfaces;
   std::vector<std::span<const btVector3>> positions;
@@ -106,7 +107,7 @@ void FrameWriter::extractImplicit(const MuscleSystem& system, std::span<const Mu
     positions.push_back(system.positions(muscles[m]));
     springs.push_back(system.settings(muscles[m]).springs);
   }
-  extractSurfaces(surfaces, positions, springs, threads_);
+  extractSurfaces(surfaces, positions, springs, *pool_);
   implicitMs_.push_back(
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
 }

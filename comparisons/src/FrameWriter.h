@@ -2,6 +2,7 @@
 // Internal to FibreRun: the frames of a run (muscle surfaces and particles with the arrays to
 // colour by, bones written only when they moved, run.pvd) and the per-particle fields they
 // carry.
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -47,11 +48,12 @@ struct FrameFormats {
 /// run.pvd listing them all at their simulated times. glTF: one .glb per frame with every
 /// muscle's deformed surface and every bone where it is, and run.glb animating them all. With
 /// OutputSettings::implicitSurface the muscle surface is the implicit one, extracted at each
-/// frame on `threads` threads (its topology changes from frame to frame: no run.glb).
+/// frame on the writer's task pool, with the system's threads or on its host scheduler (its
+/// topology changes from frame to frame: no run.glb).
 class FrameWriter {
  public:
   FrameWriter(const std::string& outDir, const OutputSettings& settings, double unitScale,
-              FrameFormats formats = {}, unsigned threads = 1);
+              FrameFormats formats = {});
 
   /// One frame. `surfaceDepthsMm[m]`: depth of muscle m's surface vertices in the bones [mm].
   void write(const FrameInfo& info, const MuscleSystem& system,
@@ -98,7 +100,7 @@ class FrameWriter {
   std::vector<std::string> boneFiles_;      ///< per bone, the file of its latest placement
   std::vector<btTransform> boneWrittenAt_;  ///< per bone, the transform that file shows
   std::vector<float> stretch_, strain_;     ///< per particle (scratch)
-  unsigned threads_;                        ///< threads extracting the implicit surfaces
+  std::unique_ptr<TaskPool> pool_;          ///< extracts the implicit surfaces (first frame on)
   std::vector<ImplicitSurface> implicit_;   ///< per muscle, with implicitSurface
   std::vector<double> implicitMs_;          ///< per frame: their extraction's wall time [ms]
   int frames_ = 0;

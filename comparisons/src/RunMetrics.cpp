@@ -77,7 +77,8 @@ nlohmann::json toJson(const AnalyticMetrics& a) {
           {"exact_mid_radius_ratio", number(a.exactMidRadiusRatio)},
           {"mid_rotation_deg", number(a.midRotationDeg)},
           {"exact_mid_rotation_deg", number(a.exactMidRotationDeg)},
-          {"rotation_error_deg", number(a.rotationErrorDeg)}};
+          {"rotation_error_deg", number(a.rotationErrorDeg)},
+          {"exact_torsion_rms_mm", number(a.exactTorsionRmsMm)}};
 }
 
 AnalyticMetrics analyticFromJson(const nlohmann::json& o) {
@@ -93,6 +94,7 @@ AnalyticMetrics analyticFromJson(const nlohmann::json& o) {
   a.midRotationDeg = numberOr(o, "mid_rotation_deg", a.midRotationDeg);
   a.exactMidRotationDeg = numberOr(o, "exact_mid_rotation_deg", a.exactMidRotationDeg);
   a.rotationErrorDeg = numberOr(o, "rotation_error_deg", a.rotationErrorDeg);
+  a.exactTorsionRmsMm = numberOr(o, "exact_torsion_rms_mm", a.exactTorsionRmsMm);
   if (auto contact = o.find("contact"); contact != o.end() && contact->is_array())
     for (const auto& c : *contact) {
       ContactPose pose;

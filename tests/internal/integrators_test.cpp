@@ -654,7 +654,7 @@ double rmsDistance(const std::vector<btVector3>& a, const std::vector<btVector3>
 
 /// The largest |z_i − zRef_i| over x, y, z (zRef from Eigen in double, particle order) relative
 /// to the largest |zRef_i|; z in the factor's row order.
-double factorSolveError(const ProjectiveFactor& factor, const Eigen::SparseMatrix<double>& lower,
+double factorSolveError(ProjectiveFactor& factor, const Eigen::SparseMatrix<double>& lower,
                         const Eigen::MatrixX3d& b) {
   const Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> reference(lower);
   const Eigen::MatrixX3d expected = reference.solve(b);
@@ -748,6 +748,59 @@ TEST(ProjectiveFactor, SolvesThroughColumnsThatShareTheirRows) {
   }
   factor.update();
   EXPECT_LT(factorSolveError(factor, withWeights, b), 1e-4);
+}
+
+/// The Laplacian of a grid of side³ particles, each tied to its six neighbours (stiffness 1 to
+/// 1.4), plus 0.05 on the diagonal: a pattern like a muscle's, whose factor has runs of columns
+/// of every length with many rows below them.
+Eigen::SparseMatrix<double> gridLaplacian(int side) {
+  std::vector<Eigen::Triplet<double>> entries;
+  const auto index = [side](int i, int j, int k) { return (i * side + j) * side + k; };
+  for (int i = 0; i < side; ++i)
+    for (int j = 0; j < side; ++j)
+      for (int k = 0; k < side; ++k) {
+        const int a = index(i, j, k);
+        entries.emplace_back(a, a, 0.05);
+        for (const int b :
+             {i + 1 < side ? index(i + 1, j, k) : -1, j + 1 < side ? index(i, j + 1, k) : -1,
+              k + 1 < side ? index(i, j, k + 1) : -1}) {
+          if (b < 0) continue;
+          const double stiffness = 1 + 0.1 * ((a * 7 + b) % 5);
+          entries.emplace_back(a, a, stiffness);
+          entries.emplace_back(b, b, stiffness);
+          entries.emplace_back(b, a, -stiffness);
+        }
+      }
+  Eigen::SparseMatrix<double> lower(side * side * side, side * side * side);
+  lower.setFromTriplets(entries.begin(), entries.end());
+  return lower;
+}
+
+TEST(ProjectiveFactor, SolvesWithTheSameBitsOnSseAndAvx2) {
+  // The AVX2 solve takes a run's columns in blocks of 8, 4, 2 and 1 onto the rows below it and
+  // gathers those rows for the backward pass; per row it must subtract the same products in the
+  // same order as the SSE solve, to the bit.
+  if (!springKernelAvailable(SpringKernel::avx2) || !springKernelAvailable(SpringKernel::sse2))
+    GTEST_SKIP() << "needs SSE2 and AVX2";
+  const Eigen::SparseMatrix<double> lower = gridLaplacian(9);
+  Eigen::MatrixX3d b(lower.rows(), 3);
+  for (int i = 0; i < lower.rows(); ++i)
+    for (int c = 0; c < 3; ++c) b(i, c) = std::cos(0.3 * i + 2.0 * c);
+  ProjectiveFactor factor(lower);
+  std::vector<btVector3> sse(factor.size());
+  for (size_t k = 0; k < factor.size(); ++k)
+    sse[factor.row(k)] = btVector3(static_cast<btScalar>(b(k, 0)), static_cast<btScalar>(b(k, 1)),
+                                   static_cast<btScalar>(b(k, 2)));
+  const std::vector<btVector3> input = sse;
+  std::vector<btVector3> avx2 = sse;
+  factor.solveInPlace(sse.data(), SpringKernel::sse2);
+  factor.solveInPlace(avx2.data(), SpringKernel::avx2);
+  EXPECT_NE(bits(sse[0][0]), bits(input[0][0]));  // solved
+  EXPECT_LT(factorSolveError(factor, lower, b), 1e-4);
+  size_t differing = 0;
+  for (size_t r = 0; r < factor.size(); ++r)
+    for (int c = 0; c < 3; ++c) differing += bits(sse[r][c]) != bits(avx2[r][c]);
+  EXPECT_EQ(differing, 0u);
 }
 
 TEST(ProjectiveFactor, RefusesAMatrixThatIsNotPositiveDefinite) {

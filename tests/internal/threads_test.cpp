@@ -31,6 +31,7 @@
 #include "kernels/VolumeForces.h"
 #include "solver/MuscleSystemAccess.h"
 #include "support/AllocationCounter.h"
+#include "support/BackwardsScheduler.h"
 #include "support/BoxMuscle.h"
 #include "support/ThighSteps.h"
 
@@ -152,20 +153,6 @@ TEST(Threads, TheProjectiveSolversContactsGiveTheSameBits) {
 
 namespace {
 
-/// A host scheduler that runs every task at once, on the calling thread, from the last index to
-/// the first (worker indices 0, 1, 2 in turn): the reverse of the pool's order on one thread.
-TaskScheduler backwards() {
-  TaskScheduler scheduler;
-  scheduler.enqueueTask = [](TaskCallback task, uint32_t count, uint32_t, void* context,
-                             void*) -> void* {
-    for (uint32_t k = count; k-- > 0;) task(k, k + 1, k % 3, context);
-    return nullptr;  // done: nothing to finish
-  };
-  scheduler.finishTask = [](void*, void*) {};
-  scheduler.workerCount = 3;
-  return scheduler;
-}
-
 /// The first two muscles of thigh13 stepped as simulate() does with `threads` threads (0: on
 /// backwards(), reported as 0 threads), their forces passes split into chunks of about `chunkWork`
 /// (resolution 8 gives about 1 000 springs and 500 tetrahedra per muscle); checks that each has
@@ -173,7 +160,7 @@ TaskScheduler backwards() {
 Outcome simulateChunked(int threads, size_t chunkWork, bool chunked) {
   LoadedScene scene;
   const PreparedScene& prepared = fibremss::testing::preparedThigh(scene);
-  if (threads == 0) scene.simulation.scheduler = backwards();
+  if (threads == 0) scene.simulation.scheduler = fibremss::testing::backwards();
   return fibremss::testing::stepThroughPoses(
       scene, prepared, {prepared.muscles[0], prepared.muscles[1]}, std::max(threads, 1),
       [&](MuscleSystem& system, const std::vector<MuscleHandle>& handles) {

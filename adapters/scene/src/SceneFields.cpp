@@ -18,18 +18,6 @@ std::string formatNumber(double value) {
   return out.str();
 }
 
-std::string range(double lowest, double highest, bool lowestExcluded) {
-  const double inf = std::numeric_limits<double>::infinity();
-  const bool hasLow = lowest > -inf, hasHigh = highest < inf;
-  if (hasLow && hasHigh)
-    return std::string("a number in ") + (lowestExcluded ? "(" : "[") + formatNumber(lowest) +
-           ", " + formatNumber(highest) + "]";
-  if (hasLow)
-    return std::string("a number ") + (lowestExcluded ? "> " : ">= ") + formatNumber(lowest);
-  if (hasHigh) return "a number <= " + formatNumber(highest);
-  return "a number";
-}
-
 /// Why `text` is no valid UTF-8 ("" when it is), as the JSON writer finds it.
 std::string utf8Problem(const std::string& text) {
   try {
@@ -42,6 +30,18 @@ std::string utf8Problem(const std::string& text) {
 }
 
 }  // namespace
+
+std::string numberRange(double lowest, double highest, bool lowestExcluded) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const bool hasLow = lowest > -inf, hasHigh = highest < inf;
+  if (hasLow && hasHigh)
+    return std::string("a number in ") + (lowestExcluded ? "(" : "[") + formatNumber(lowest) +
+           ", " + formatNumber(highest) + "]";
+  if (hasLow)
+    return std::string("a number ") + (lowestExcluded ? "> " : ">= ") + formatNumber(lowest);
+  if (hasHigh) return "a number <= " + formatNumber(highest);
+  return "a number";
+}
 
 std::string joinPath(const std::string& path, const std::string& key) {
   return path.empty() ? key : path + "." + key;
@@ -168,13 +168,14 @@ double Fields::number(const std::string& key, double fallback, double lowest, do
   double result = fallback;
   if (value) {
     if (!value->is_number())
-      fail(key, "expected " + range(lowest, highest, lowestExcluded) + ", got " + describe(*value));
+      fail(key, "expected " + numberRange(lowest, highest, lowestExcluded) + ", got " +
+                    describe(*value));
     result = value->get<double>();
   }
   const bool tooLow = lowestExcluded ? !(result > lowest) : !(result >= lowest);
   if (!std::isfinite(result) || tooLow || result > highest)
-    fail(key,
-         "expected " + range(lowest, highest, lowestExcluded) + ", got " + formatNumber(result));
+    fail(key, "expected " + numberRange(lowest, highest, lowestExcluded) + ", got " +
+                  formatNumber(result));
   // The solver stores btScalar: 1e-46 would become 0 and 1e39 inf in float.
   constexpr double kLargest = std::numeric_limits<btScalar>::max();
   constexpr double kSmallest = std::numeric_limits<btScalar>::min();

@@ -17,6 +17,9 @@ using Json = nlohmann::ordered_json;
 constexpr size_t kMaxTextBytes = 4096;
 constexpr size_t kMaxNameBytes = 256;
 
+/// The numbers in a range as an error message says it expects them ("a number in [0, 1]").
+std::string numberRange(double lowest, double highest, bool lowestExcluded);
+
 /// "muscles[2]" + "resolution" -> "muscles[2].resolution".
 std::string joinPath(const std::string& path, const std::string& key);
 

@@ -1,5 +1,6 @@
 // Scene JSON -> LoadedScene: validation with defaults, units, files and generators, motions.
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -12,6 +13,7 @@
 #include "SceneAnatomy.h"
 #include "SceneFields.h"
 #include "SceneMotion.h"
+#include "SceneSettings.h"
 #include "SceneShapes.h"
 #include "SceneTool.h"
 #include "SceneValidation.h"
@@ -31,9 +33,6 @@ namespace fs = std::filesystem;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kDegrees = M_PI / 180;
-/// A scene's muscles have tendons unless they say otherwise: 10 % of each fibre at each
-/// attached end (MuscleParameters::tendonFraction).
-constexpr double kTendonFraction = 0.1;
 /// The attachment distance of a muscle that declares its areas and gives none, in sample steps
 /// ΔL (fibre length over resolution − 1) [1]: a fibre's last particle lies up to one step
 /// before the fibre's end, and the half step beyond reaches fibres that end a little short of
@@ -264,13 +263,6 @@ TriangleMesh readSurface(Fields& owner, const std::string& key, const Reader& re
   return mesh;
 }
 
-/// A muscle's `free_end`: the ends that may hold no fixed particle (default: neither).
-FreeEnds readFreeEnds(Fields& muscle) {
-  static const std::vector<std::string> names{"none", "origin", "insertion", "both"};
-  const std::string name = muscle.choice("free_end", names.front(), names);
-  return static_cast<FreeEnds>(std::find(names.begin(), names.end(), name) - names.begin());
-}
-
 /// The median over the fibres of their length over `resolution` − 1: the step between a
 /// fibre's sampled particles [m].
 double medianSampleStep(const FibreSet& fibres, int resolution) {
@@ -320,175 +312,26 @@ BoneInput readBone(Fields& bone, size_t index, const Reader& reader, BoneMotion&
   return input;
 }
 
-/// A muscle's `fibres` (a file or a generator) into input.fibres, fibreGridColumns and
-/// mergeConverging; returns the fibre file's path (empty when generated).
-std::string readFibres(Fields& muscle, const Reader& reader, int fibreCount, bool lattice,
-                       const std::optional<scene::DeclaredAreas>& declared,
-                       const std::optional<scene::Shape>& shape, int gridColumns,
-                       MuscleInput& input) {
-  Fields fibres = muscle.object("fibres");
-  const bool hasFile = fibres.has("file"), hasGenerator = fibres.has("generator");
-  if (hasFile == hasGenerator)
-    muscle.fail("fibres", "expected exactly one of {\"file\": PATH} or {\"generator\": {...}}");
-  std::string path;  // empty: generated
-  if (hasFile) {
-    path = reader.resolve(fibres, "file", fibres.text("file", ""));
-    FibreSet all = loadFibres(path, reader.scale);
-    if (all.fibreCount() > size_t(fibreCount)) {
-      reader.result->warnings.push_back(path + ": using " + std::to_string(fibreCount) + " of " +
-                                        std::to_string(all.fibreCount()) +
-                                        " fibres, evenly spaced (fibre_count)");
-      input.fibres = selectFibres(all, size_t(fibreCount));
-    } else {
-      if (all.fibreCount() < size_t(fibreCount))
-        reader.result->warnings.push_back(path + ": has " + std::to_string(all.fibreCount()) +
-                                          " fibres, fewer than fibre_count " +
-                                          std::to_string(fibreCount) + "; using all");
-      input.fibres = std::move(all);
-    }
-    input.fibreGridColumns = gridColumns;
-    // Measured fibres converge into tendons as generated ones do (632-1026 pairs
-    // closer than 0.5 mm in a real set): near-coincident particles merge whatever the source.
-    input.mergeConverging = true;
-  } else {
-    Fields generator = fibres.object("generator");
-    int columns = 0;
-    input.mergeConverging =
-        scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount, reader.scale,
-                                     *reader.result, input.fibres, declared ? &*declared : nullptr);
-    if (!input.mergeConverging)
-      input.fibres = scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount,
-                                           lattice, &columns);
-    input.fibreGridColumns = gridColumns > 0 ? gridColumns : columns;
-    fibres.set("generator", generator.finish());
-  }
-  muscle.set("fibres", fibres.finish());
-  return path;
+/// `value` as the shortest decimal that reads back as it (0.1, not 0.10000000149011612 for a
+/// float): a default as the complete scene writes it.
+double shortestDecimal(btScalar value) {
+  char text[64];
+  char* end = std::to_chars(text, text + sizeof text, value).ptr;
+  const double decimal = std::strtod(std::string(text, end).c_str(), nullptr);
+  return btScalar(decimal) == value ? decimal : double(value);
 }
 
-/// The fields of a muscle that `--set KEY=VALUE` sets on every muscle (the others take a path:
-/// muscles.NAME.KEY).
-const std::vector<std::string> kMuscleShorthands = {
-    "resolution",       "fibre_count", "attachment_distance", "skin_neighbours", "tendon_fraction",
-    "tendon_stiffness", "free_end"};
-
-MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
-                       const SpringParameters& springs) {
-  MuscleInput input;
-  input.name = muscle.text("name", "muscle" + std::to_string(index), scene::kMaxNameBytes);
-  std::optional<scene::Shape> shape;
-  input.surface = readSurface(muscle, "surface", reader, shape);
-  const int fibreCount = muscle.integer("fibre_count", 64, 1, 1000000);
-  input.parameters.resolution = muscle.integer("resolution", 40, 2, 100000);
-  input.parameters.skinNeighbours = muscle.integer("skin_neighbours", 3, 1, 64);
-  input.parameters.tendonFraction =
-      btScalar(muscle.number("tendon_fraction", kTendonFraction, 0, 0.5));
-  input.parameters.tendonStiffness =
-      btScalar(muscle.number("tendon_stiffness", MuscleParameters{}.tendonStiffness, 1, 1e4));
-  input.parameters.freeEnds = readFreeEnds(muscle);
-  const std::optional<scene::DeclaredAreas> declared = scene::readDeclaredAttachments(
-      muscle, input.name, input.surface, reader.scale, *reader.result, input.attachments);
-  input.parameters.springs = springs;
-  const int gridColumns = muscle.integer("fibre_grid_columns", 0, 0, 1000000);
-  const bool lattice =
-      springs.layout == SpringLayout::Lattice6 || springs.layout == SpringLayout::Lattice26;
-
-  const std::string path =
-      readFibres(muscle, reader, fibreCount, lattice, declared, shape, gridColumns, input);
-  const double fallback =
-      declared ? kAttachmentSteps * medianSampleStep(input.fibres, input.parameters.resolution)
-               : kAttachmentDistance;
-  input.parameters.attachmentDistance = btScalar(
-      muscle.number("attachment_distance", fallback / reader.scale, 0, kInf) * reader.scale);
-  if (!path.empty())
-    for (auto& warning : checkFibres(input.fibres, input.surface, path,
-                                     std::max<double>(input.parameters.attachmentDistance, 1e-3)))
-      reader.result->warnings.push_back(std::move(warning));
-  if (lattice && input.fibreGridColumns <= 0)
-    muscle.fail("fibre_grid_columns",
-                "the lattice spring layouts need fibres on a grid: set fibre_grid_columns for "
-                "fibres from a file, or use a generator");
-  if (input.fibreGridColumns > 0 && input.fibres.fibreCount() % input.fibreGridColumns != 0)
-    muscle.fail("fibre_grid_columns", std::to_string(input.fibres.fibreCount()) +
-                                          " fibres do not form rows of " +
-                                          std::to_string(input.fibreGridColumns));
-  return input;
-}
-
-/// `volume_stiffness` (a multiple, or "auto": the one of `poisson_ratio`) and `poisson_ratio`;
-/// a Poisson ratio given without a multiple sets it.
-void readVolumeStiffness(Fields& model, SpringParameters& springs) {
-  const bool ratioGiven = model.raw("poisson_ratio") != nullptr;
-  springs.poissonRatio = btScalar(model.number("poisson_ratio", springs.poissonRatio, 0.25, 0.499));
-  const Json* multiple = model.raw("volume_stiffness");
-  const bool automatic = multiple ? multiple->is_string() && multiple->get<std::string>() == "auto"
-                                  : ratioGiven || springs.volumeStiffness < 0;
-  if (automatic) {
-    springs.volumeStiffness = -1;
-    model.set("volume_stiffness", "auto");
-  } else if (!multiple || multiple->is_number()) {
-    springs.volumeStiffness =
-        btScalar(model.number("volume_stiffness", springs.volumeStiffness, 0, 1e6));
-  } else {
-    model.fail("volume_stiffness",
-               "expected \"auto\" (from poisson_ratio) or a number in [0, "
-               "1e6], got " +
-                   scene::describe(*multiple));
-  }
-}
-
-SpringParameters readModel(Fields& model) {
-  SpringParameters springs;
-  const std::string layout =
-      model.choice("layout", toString(springs.layout), namesOf<SpringLayout>());
-  fromString(layout, springs.layout);
-  springs.neighbours = model.integer("neighbours", springs.neighbours, 1, 1000);
-  springs.kappa = btScalar(model.number("kappa", springs.kappa, 0, kInf, true));
-  fromString(
-      model.choice("spring_stiffness", toString(springs.stiffness), namesOf<SpringStiffness>()),
-      springs.stiffness);
-  const Json* damping = model.raw("damping");
-  if (!damping || (damping->is_string() && damping->get<std::string>() == "auto")) {
-    model.set("damping", "auto");
-  } else if (damping->is_number() && damping->get<double>() >= 0 &&
-             std::isfinite(damping->get<double>())) {
-    springs.damping = btScalar(damping->get<double>());
-    model.set("damping", *damping);
-  } else {
-    model.fail("damping", "expected \"auto\" (Zeleny's estimate) or a number >= 0 [N·s/m], got " +
-                              scene::describe(*damping));
-  }
-  springs.dampingScale = btScalar(model.number("damping_scale", springs.dampingScale, 0, kInf));
-  springs.density = btScalar(model.number("density", springs.density, 0, kInf, true));
-  readVolumeStiffness(model, springs);
-  springs.enclosedVolumeStiffness =
-      btScalar(model.number("enclosed_volume_stiffness", springs.enclosedVolumeStiffness, 0, 1e6));
-  springs.volumeCoarsening =
-      btScalar(model.number("volume_coarsening", springs.volumeCoarsening, 1, 100));
-  springs.fibreStiffnessRatio =
-      btScalar(model.number("fibre_stiffness_ratio", springs.fibreStiffnessRatio, 0, 1e3, true));
-  springs.strainLimit = btScalar(model.number("strain_limit", springs.strainLimit, 0, 1e3));
-  if (springs.strainLimit > 0 && springs.strainLimit <= 1)
-    model.fail("strain_limit", "expected 0 (no limit) or a ratio > 1 of current to rest length");
-  springs.breakStretch = btScalar(model.number("break_stretch", springs.breakStretch, 0, 1e3));
-  if (springs.breakStretch > 0 &&
-      (springs.breakStretch <= 1 ||
-       (springs.strainLimit > 0 && springs.breakStretch >= springs.strainLimit)))
-    model.fail("break_stretch",
-               "expected 0 (no tearing) or a ratio > 1 of current to rest length, below "
-               "strain_limit when that is set");
-  return springs;
-}
-
-/// Reads, in place, each setting a visit…Settings function (Parameters.h) lists from one section
-/// of a scene in units of `scale` metres; a setting's value before is its default.
+/// Reads, in place, each setting a visit…Settings function (Parameters.h, SceneSettings.h) lists
+/// from one section of a scene in units of `scale` metres; a setting's value before is its
+/// default.
 class SettingReader {
  public:
   SettingReader(Fields& fields, double scale) : fields_(fields), scale_(scale) {}
 
   void operator()(const SettingKey& key, btScalar& value) const {
     const double unit = key.length ? scale_ : 1;
-    value = btScalar(fields_.number(key.name, value / unit, key.lowest / unit, key.highest / unit,
+    const double fallback = key.length ? value / unit : shortestDecimal(value);
+    value = btScalar(fields_.number(key.name, fallback, key.lowest / unit, key.highest / unit,
                                     key.lowestExcluded) *
                      unit);
   }
@@ -520,10 +363,131 @@ class SettingReader {
     fromString(fields_.choice(key.name, toString(value), namesOf<Enum>()), value);
   }
 
+  void operator()(const SettingKey& key, const scene::OrAuto& setting) const {
+    const Json* given = fields_.raw(key.name);
+    if (given ? *given == "auto" : setting.value < 0) {
+      setting.value = -1;
+      fields_.set(key.name, "auto");
+    } else if (!given || given->is_number()) {
+      (*this)(key, setting.value);
+    } else {
+      fields_.fail(key.name, std::string("expected \"auto\" (") + setting.meaning + ") or " +
+                                 scene::numberRange(key.lowest, key.highest, key.lowestExcluded) +
+                                 ", got " + scene::describe(*given));
+    }
+  }
+  void operator()(const SettingKey& key, const scene::Derived& setting) const {
+    if (fields_.has(key.name)) return (*this)(key, setting.value);
+    fields_.raw(key.name);
+    fields_.set(key.name, nullptr);  // its place: the loader records the value it works out
+    setting.value = -1;
+  }
+
  private:
   Fields& fields_;  ///< the section
   double scale_;    ///< metres per scene unit
 };
+
+/// A muscle's `fibres` (a file or a generator) into input.fibres, fibreGridColumns (when the
+/// scene gives none) and mergeConverging; returns the fibre file's path (empty when generated).
+std::string readFibres(Fields& muscle, const Reader& reader, int fibreCount, bool lattice,
+                       const std::optional<scene::DeclaredAreas>& declared,
+                       const std::optional<scene::Shape>& shape, MuscleInput& input) {
+  Fields fibres = muscle.object("fibres");
+  const bool hasFile = fibres.has("file"), hasGenerator = fibres.has("generator");
+  if (hasFile == hasGenerator)
+    muscle.fail("fibres", "expected exactly one of {\"file\": PATH} or {\"generator\": {...}}");
+  std::string path;  // empty: generated
+  if (hasFile) {
+    path = reader.resolve(fibres, "file", fibres.text("file", ""));
+    FibreSet all = loadFibres(path, reader.scale);
+    if (all.fibreCount() > size_t(fibreCount)) {
+      reader.result->warnings.push_back(path + ": using " + std::to_string(fibreCount) + " of " +
+                                        std::to_string(all.fibreCount()) +
+                                        " fibres, evenly spaced (fibre_count)");
+      input.fibres = selectFibres(all, size_t(fibreCount));
+    } else {
+      if (all.fibreCount() < size_t(fibreCount))
+        reader.result->warnings.push_back(path + ": has " + std::to_string(all.fibreCount()) +
+                                          " fibres, fewer than fibre_count " +
+                                          std::to_string(fibreCount) + "; using all");
+      input.fibres = std::move(all);
+    }
+    // Measured fibres converge into tendons as generated ones do (632-1026 pairs
+    // closer than 0.5 mm in a real set): near-coincident particles merge whatever the source.
+    input.mergeConverging = true;
+  } else {
+    Fields generator = fibres.object("generator");
+    int columns = 0;
+    input.mergeConverging =
+        scene::generateSurfaceFibres(generator, input.name, input.surface, fibreCount, reader.scale,
+                                     *reader.result, input.fibres, declared ? &*declared : nullptr);
+    if (!input.mergeConverging)
+      input.fibres = scene::generateFibres(generator, shape ? &*shape : nullptr, fibreCount,
+                                           lattice, &columns);
+    if (input.fibreGridColumns <= 0) input.fibreGridColumns = columns;
+    fibres.set("generator", generator.finish());
+  }
+  muscle.set("fibres", fibres.finish());
+  return path;
+}
+
+/// The attachment distance of a muscle that gives none [m]: kAttachmentSteps sample steps with
+/// declared areas, else kAttachmentDistance.
+double fallbackAttachmentDistance(const MuscleInput& input, bool declared) {
+  return declared ? kAttachmentSteps * medianSampleStep(input.fibres, input.parameters.resolution)
+                  : kAttachmentDistance;
+}
+
+/// Refuses fibres that do not form the grid a lattice spring layout needs.
+void requireFibreGrid(Fields& muscle, const MuscleInput& input, bool lattice) {
+  if (lattice && input.fibreGridColumns <= 0)
+    muscle.fail("fibre_grid_columns",
+                "the lattice spring layouts need fibres on a grid: set fibre_grid_columns for "
+                "fibres from a file, or use a generator");
+  if (input.fibreGridColumns > 0 && input.fibres.fibreCount() % input.fibreGridColumns != 0)
+    muscle.fail("fibre_grid_columns", std::to_string(input.fibres.fibreCount()) +
+                                          " fibres do not form rows of " +
+                                          std::to_string(input.fibreGridColumns));
+}
+
+MuscleInput readMuscle(Fields& muscle, size_t index, const Reader& reader,
+                       const SpringParameters& springs) {
+  scene::MuscleSection section;
+  MuscleInput& input = section.input;
+  input.name = muscle.text("name", "muscle" + std::to_string(index), scene::kMaxNameBytes);
+  std::optional<scene::Shape> shape;
+  input.surface = readSurface(muscle, "surface", reader, shape);
+  scene::visitMuscleSettings(section, SettingReader(muscle, reader.scale));
+  const std::optional<scene::DeclaredAreas> declared = scene::readDeclaredAttachments(
+      muscle, input.name, input.surface, reader.scale, *reader.result, input.attachments);
+  input.parameters.springs = springs;
+  const bool lattice =
+      springs.layout == SpringLayout::Lattice6 || springs.layout == SpringLayout::Lattice26;
+
+  const std::string path =
+      readFibres(muscle, reader, section.fibreCount, lattice, declared, shape, input);
+  if (input.parameters.attachmentDistance < 0) {
+    const double distance = fallbackAttachmentDistance(input, declared.has_value()) / reader.scale;
+    input.parameters.attachmentDistance = btScalar(distance * reader.scale);
+    muscle.set("attachment_distance", distance);
+  }
+  if (!path.empty())
+    for (auto& warning : checkFibres(input.fibres, input.surface, path,
+                                     std::max<double>(input.parameters.attachmentDistance, 1e-3)))
+      reader.result->warnings.push_back(std::move(warning));
+  requireFibreGrid(muscle, input, lattice);
+  return input;
+}
+
+/// The "model" section (lengths in units of `scale` metres).
+SpringParameters readModel(Fields& model, double scale) {
+  SpringParameters springs;
+  scene::visitModelSettings(springs, SettingReader(model, scale));
+  scene::checkModelSettings(
+      springs, [&](const char* key, const std::string& what) { model.fail(key, what); });
+  return springs;
+}
 
 /// The "simulation" section into `def`, set anew; returns its max_step_deg (the largest bone turn
 /// of one step).
@@ -678,7 +642,7 @@ LoadedScene readScene(const Json& raw, const std::string& source, const fs::path
 
   // The model first: its spring layout decides the fibre patterns of generated muscles.
   Fields model = root.object("model");
-  const SpringParameters springs = readModel(model);
+  const SpringParameters springs = readModel(model, reader.scale);
 
   Json completeBones = readBones(root, reader, result);
   Json completeBlades = readBlades(root, reader, result);
@@ -750,12 +714,14 @@ btTransform LoadedScene::bladePose(size_t blade, int pose) const {
 
 const std::vector<std::string>& solverSettings() {
   static const std::vector<std::string> keys = [] {
-    // The model's damping slows the muscles' motion but does not move where they settle.
-    std::vector<std::string> solver = {"integrator", "damping", "damping_scale"};
-    MuscleSystemDef def;
-    visitSimulationSettings(def, [&](const SettingKey& key, const auto&) {
+    std::vector<std::string> solver = {"integrator"};
+    const auto collect = [&](const SettingKey& key, const auto&) {
       if (key.solver) solver.push_back(key.name);
-    });
+    };
+    SpringParameters springs;
+    scene::visitModelSettings(springs, collect);
+    MuscleSystemDef def;
+    visitSimulationSettings(def, collect);
     return solver;
   }();
   return keys;
@@ -815,6 +781,15 @@ std::vector<std::string> keysRead(const char* section, Read read) {
   return keys;
 }
 
+/// The keys of a muscle's settings (visitMuscleSettings), in their order.
+std::vector<std::string> muscleSettingKeys() {
+  MuscleSection muscle;
+  std::vector<std::string> keys;
+  visitMuscleSettings(muscle,
+                      [&](const SettingKey& key, const auto&) { keys.push_back(key.name); });
+  return keys;
+}
+
 std::vector<SectionKeys> shorthandSections() {
   MuscleSystemDef def;
   OutputSettings outputs;
@@ -823,10 +798,10 @@ std::vector<SectionKeys> shorthandSections() {
   };
   return {
       {ShorthandTarget::TopLevel, "", kTopLevelShorthands},
-      {ShorthandTarget::Muscles, "", kMuscleShorthands},
+      {ShorthandTarget::Muscles, "", muscleSettingKeys()},
       {ShorthandTarget::BoneSpheres, "", keysRead("spheres", [](Fields& f) { readSpheres(f, 1); })},
       {ShorthandTarget::Sweeps, "", kSweepShorthands},
-      section("model", keysRead("model", [](Fields& f) { readModel(f); })),
+      section("model", keysRead("model", [](Fields& f) { readModel(f, 1); })),
       section("simulation", keysRead("simulation", [&](Fields& f) { readSimulation(f, 1, def); })),
       section("collision", keysRead("collision", [&](Fields& f) { readCollision(f, 1, def); })),
       section("outputs", keysRead("outputs", [&](Fields& f) { readOutputs(f, outputs); }))};

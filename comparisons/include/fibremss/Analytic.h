@@ -24,8 +24,8 @@ AnalyticMetrics exactAnalytic(const AnalyticCase& analytic, const TriangleMesh& 
 /// beside the exact answers. Sections are the rest vertices within 1 mm of a station on the
 /// axis; their radius is the mean distance from the rest axis, their rotation error the mean
 /// angle each vertex turned about it beyond the exact torsion at its own rest place along the
-/// axis (the mid-section's rotation is the exact one plus that error). Empty type when the
-/// case is "none".
+/// axis (the mid-section's rotation is the exact one plus that error); a twist also the vertex
+/// RMS to the exact torsion of `rest`. Empty type when the case is "none".
 AnalyticMetrics measureAnalytic(const AnalyticCase& analytic, const TriangleMesh& rest,
                                 std::span<const btVector3> deformed);
 

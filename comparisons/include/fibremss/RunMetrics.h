@@ -46,7 +46,10 @@ struct AnalyticMetrics {
   double exactMidRadiusRatio = kNone;   ///< exact
   double midRotationDeg = kNone;        ///< twist: rotation of the mid-section about the axis [°]
   double exactMidRotationDeg = kNone;   ///< exact (half the end's twist)
-  double rotationErrorDeg = kNone;   ///< twist: largest |rotation − exact| over 9 sections [°]
+  double rotationErrorDeg = kNone;  ///< twist: largest |rotation − exact| over 9 sections [°]
+  /// twist: the surface's vertex RMS to the exact torsion of the rest surface (each vertex
+  /// turned by the twist at its rest place along the axis) [mm]
+  double exactTorsionRmsMm = kNone;
   std::vector<ContactPose> contact;  ///< sphere-planes: per pose (step) measured
 
   /// |volume change − exact| [percentage points]: the measure methods are ranked by on an

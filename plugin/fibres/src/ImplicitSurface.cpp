@@ -5,11 +5,12 @@
 #include "fibremss/ImplicitSurface.h"
 
 #include <algorithm>
-#include <atomic>
+#include <cmath>
 #include <numeric>
-#include <thread>
+#include <string>
 
 #include "ImplicitSurfaceInternal.h"
+#include "fibremss/Error.h"
 
 namespace fibremss {
 namespace {
@@ -85,6 +86,9 @@ const std::array<CellCut, 256> kCellCuts = [] {
     }
   return cuts;
 }();
+
+/// A piece of a surface enclosing fewer grid cells than this is dropped (Impl::dropSpecks).
+constexpr double kSmallestPieceCells = 2;
 
 /// The corners among `values` inside (value > 0), bit c for corner c.
 unsigned insideCorners(const std::array<float, 8>& values) {
@@ -239,6 +243,51 @@ void ImplicitSurface::Impl::march() {
   }
 }
 
+uint32_t ImplicitSurface::Impl::pieceRoot(uint32_t v) {
+  while (pieceOf[v] != v) v = pieceOf[v] = pieceOf[pieceOf[v]];
+  return v;
+}
+
+void ImplicitSurface::Impl::dropSpecks() {
+  const size_t count = mesh.vertices.size();
+  pieceOf.resize(count);
+  std::iota(pieceOf.begin(), pieceOf.end(), 0u);
+  for (const std::array<uint32_t, 3>& t : mesh.triangles) {
+    const uint32_t root = pieceRoot(t[0]);  // stays a root: the others join it
+    pieceOf[pieceRoot(t[1])] = root;
+    pieceOf[pieceRoot(t[2])] = root;
+  }
+  uint32_t roots = 0;  // pieces
+  for (uint32_t v = 0; v < count; ++v) roots += pieceOf[v] == v;
+  if (roots <= 1) return;
+  // Each piece's enclosed volume (signed: a hollow's is negative), from the grid's origin.
+  pieceVolume.assign(count, 0);
+  for (const std::array<uint32_t, 3>& t : mesh.triangles) {
+    const btVector3 a = mesh.vertices[t[0]] - grid.origin, b = mesh.vertices[t[1]] - grid.origin,
+                    c = mesh.vertices[t[2]] - grid.origin;
+    pieceVolume[pieceRoot(t[0])] += double(a.dot(b.cross(c))) / 6;
+  }
+  uint32_t largest = 0;
+  for (uint32_t v = 0; v < count; ++v)
+    if (std::abs(pieceVolume[v]) > std::abs(pieceVolume[largest])) largest = v;
+  const double smallest = kSmallestPieceCells * double(voxel) * double(voxel) * double(voxel);
+  vertexKept.resize(count);
+  int32_t kept = 0;
+  for (uint32_t v = 0; v < count; ++v) {
+    const uint32_t root = pieceRoot(v);
+    const bool keep = root == largest || std::abs(pieceVolume[root]) >= smallest;
+    vertexKept[v] = keep ? kept : -1;
+    if (keep) mesh.vertices[size_t(kept++)] = mesh.vertices[v];
+  }
+  mesh.vertices.resize(size_t(kept));
+  size_t triangles = 0;
+  for (const std::array<uint32_t, 3>& t : mesh.triangles)
+    if (vertexKept[t[0]] >= 0)
+      mesh.triangles[triangles++] = {uint32_t(vertexKept[t[0]]), uint32_t(vertexKept[t[1]]),
+                                     uint32_t(vertexKept[t[2]])};
+  mesh.triangles.resize(triangles);
+}
+
 int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
                                           const std::array<GridEntry*, 8>& corners, int u, int v,
                                           const std::array<float, 8>& values) {
@@ -290,6 +339,7 @@ void ImplicitSurface::extract(std::span<const btVector3> positions,
   s.mesh.vertices.clear();
   s.mesh.triangles.clear();
   s.seedAndMarch();
+  s.dropSpecks();
 }
 
 const TriangleMesh& ImplicitSurface::mesh() const {
@@ -319,22 +369,31 @@ btScalar ImplicitSurface::kernelRadius() const {
 
 void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
                      std::span<const std::span<const btVector3>> positions,
-                     std::span<const std::span<const Spring>> springs, unsigned threads) {
+                     std::span<const std::span<const Spring>> springs, TaskPool& pool) {
+  if (positions.size() != surfaces.size() || springs.size() != surfaces.size())
+    throw InputError("extractSurfaces", "",
+                     std::to_string(surfaces.size()) + " surfaces, " +
+                         std::to_string(positions.size()) + " positions, " +
+                         std::to_string(springs.size()) +
+                         " springs; expected one each per surface");
+  // One task per surface, never two on one: a surface's grids and scratch are its task's alone.
+  for (size_t a = 0; a < surfaces.size(); ++a)
+    for (size_t b = 0; b < a; ++b)
+      if (surfaces[a] == surfaces[b])
+        throw InputError(
+            "extractSurfaces", "surfaces[" + std::to_string(a) + "]",
+            "the same surface as surfaces[" + std::to_string(b) + "]; expected distinct surfaces");
   // Largest first, so the threads finish close together.
   std::vector<size_t> order(surfaces.size());
   std::iota(order.begin(), order.end(), size_t(0));
   std::stable_sort(order.begin(), order.end(),
                    [&](size_t a, size_t b) { return positions[a].size() > positions[b].size(); });
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t n; (n = next.fetch_add(1)) < order.size();)
-      surfaces[order[n]]->extract(positions[order[n]], springs[order[n]]);
-  };
-  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < std::min<size_t>(threads, order.size()); ++t) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
+  pool.run(
+      order.size(),
+      [&](size_t n, unsigned) {
+        surfaces[order[n]]->extract(positions[order[n]], springs[order[n]]);
+      },
+      "implicit surfaces");
 }
 
 MeshTopology meshTopology(const TriangleMesh& mesh) {

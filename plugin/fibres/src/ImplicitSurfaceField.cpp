@@ -252,6 +252,7 @@ void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
   positions = current;
   currentMoments(springs, current, muscle->restPositions, moments);
   const bool whole = sameSprings(springs, muscle->springs);
+  spreadWeight = whole ? 0 : settings.spreadWeight;
   if (!whole) restMomentsOf(springs, muscle->restPositions, restMoments);
   const std::vector<btMatrix3x3>& rests = whole ? wholeRestMoments : restMoments;
   toRest.resize(current.size());
@@ -347,7 +348,7 @@ btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
   }
   btScalar value = -h;
   if (weight > 0) {
-    const btScalar distance = rest.at(x + offset, h) - settings.spreadWeight * spread;
+    const btScalar distance = rest.at(x + offset, h) - spreadWeight * spread;
     value = std::min(distance, h * (weight / kappa - 1));
   }
   for (const SurfaceDent& dent : dents) {

@@ -205,6 +205,12 @@ struct ImplicitSurface::Impl {
   void seedAndMarch();
   /// Polygonises the queued cells from `marched` on, queueing the cells the surface goes on to.
   void march();
+  /// Drops the mesh's pieces (vertices joined by triangles) that enclose less than
+  /// kSmallestPieceCells grid cells, the largest piece always kept: beads of a part thinner than
+  /// a cell (a tendon's pointed end), which the grid's points meet only here and there.
+  void dropSpecks();
+  /// The piece vertex v belongs to (union-find over pieceOf, halving the paths).
+  uint32_t pieceRoot(uint32_t v);
   /// The cell's triangles, its corners inside (value > 0) the bits of `inside`.
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
                   const std::array<float, 8>& values, unsigned inside);
@@ -225,6 +231,9 @@ struct ImplicitSurface::Impl {
 
   // Per extraction.
   std::span<const btVector3> positions;  ///< the particles
+  /// λ: settings.spreadWeight where a spring is broken, else 0 (particles that cannot part
+  /// open no surface: their spread is the error of their affine maps where they deform) [1].
+  btScalar spreadWeight = 0;
   std::vector<btMatrix3x3> toRest;       ///< per particle F⁻¹ (identity when degenerate)
   std::vector<btVector3> entryRest;      ///< per entry of cells.order: its rest position [m]
   std::vector<btMatrix3x3> entryToRest;  ///< per entry of cells.order: its F⁻¹
@@ -240,6 +249,9 @@ struct ImplicitSurface::Impl {
   uint32_t mapStamp = 0;                      ///< this extraction's stamp of `maps`
   std::vector<std::array<int32_t, 3>> queue;  ///< cells to polygonise
   size_t marched = 0;                         ///< queue entries polygonised
+  std::vector<uint32_t> pieceOf;              ///< scratch per vertex: union-find parent
+  std::vector<double> pieceVolume;            ///< scratch per root vertex: its piece's volume [m³]
+  std::vector<int32_t> vertexKept;            ///< scratch per vertex: its new index, −1 dropped
   TriangleMesh mesh;
 };
 

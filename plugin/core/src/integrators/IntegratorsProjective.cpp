@@ -30,6 +30,8 @@
 #include "ProjectiveFactor.h"
 #include "collision/CollisionPairs.h"
 #include "dynamics/Residual.h"
+#include "kernels/ParticleSimd.h"
+#include "kernels/SpringForces.h"
 #include "kernels/VolumeForces.h"
 
 namespace fibremss {
@@ -191,7 +193,39 @@ double forceNoise(double stiffness, const btVector3& x, double restLength) {
          (double(x.length2()) + restLength * restLength);
 }
 
+#if FIBREMSS_AVX2_PARTICLES
+/// The dots of two rows' products `p` (one row per half) in lanes 0 and 4, each summed as
+/// btVector3::dot sums it: (x + y) + z.
+FIBREMSS_AVX2_PASS inline __m256 rowDots(__m256 p) {
+  return _mm256_add_ps(_mm256_add_ps(p, _mm256_movehdup_ps(p)), _mm256_unpackhi_ps(p, p));
+}
+
+/// Row k's and row k + 1's dots of the products `p` (rowDots) added to `sum` in row order.
+FIBREMSS_AVX2_PASS inline double addDots(double sum, __m256 p) {
+  const __m256 dots = rowDots(p);
+  sum += double(_mm256_cvtss_f32(dots));
+  return sum + double(_mm_cvtss_f32(_mm256_extractf128_ps(dots, 1)));
+}
+
+/// Two rows of `v` (one per half).
+FIBREMSS_AVX2_PASS inline __m256 rowPair(const btVector3* v, size_t k) {
+  return _mm256_loadu_ps(v[k].m_floats);
+}
+
+/// dot() two rows per instruction (the same bits).
+FIBREMSS_AVX2_PASS double dotAvx2(const btVector3* a, const btVector3* b, size_t rows) {
+  double sum = 0;
+  size_t k = 0;
+  for (; k + 1 < rows; k += 2) sum = addDots(sum, _mm256_mul_ps(rowPair(a, k), rowPair(b, k)));
+  if (k < rows) sum += double(a[k].dot(b[k]));
+  return sum;
+}
+#endif
+
 double dot(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2) return dotAvx2(a.data(), b.data(), a.size());
+#endif
   double sum = 0;
   for (size_t k = 0; k < a.size(); ++k) sum += double(a[k].dot(b[k]));
   return sum;
@@ -204,10 +238,38 @@ struct PairProducts {
   double changes = 0;    ///< y·y [N²]
 };
 
+#if FIBREMSS_AVX2_PARTICLES
+/// pairProducts two rows per instruction (the same bits).
+FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVector3* y,
+                                                 const btVector3* forces, btVector3* lastForces,
+                                                 size_t rows) {
+  PairProducts sums;
+  size_t r = 0;
+  for (; r + 1 < rows; r += 2) {
+    const __m256 step = rowPair(s, r), change = rowPair(y, r);
+    sums.curvature = addDots(sums.curvature, _mm256_mul_ps(step, change));
+    sums.steps = addDots(sums.steps, _mm256_mul_ps(step, step));
+    sums.changes = addDots(sums.changes, _mm256_mul_ps(change, change));
+    _mm256_storeu_ps(lastForces[r].m_floats, rowPair(forces, r));
+  }
+  if (r < rows) {
+    sums.curvature += double(s[r].dot(y[r]));
+    sums.steps += double(s[r].dot(s[r]));
+    sums.changes += double(y[r].dot(y[r]));
+    lastForces[r] = forces[r];
+  }
+  return sums;
+}
+#endif
+
 /// The products of the pair s, y in one pass, which also keeps `forces` in `lastForces`.
 PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btVector3>& y,
                           const std::vector<btVector3>& forces,
                           std::vector<btVector3>& lastForces) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return pairProductsAvx2(s.data(), y.data(), forces.data(), lastForces.data(), s.size());
+#endif
   PairProducts sums;
   for (size_t r = 0; r < s.size(); ++r) {
     sums.curvature += double(s[r].dot(y[r]));
@@ -271,10 +333,35 @@ void recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vecto
   }
 }
 
+#if FIBREMSS_AVX2_PARTICLES
+/// addThenDot two rows per instruction: per lane the scalar code's products and sums (the w
+/// lanes too, which no product reads), so the same bits.
+FIBREMSS_AVX2_PASS double addThenDotAvx2(btVector3* q, const btVector3* d, btScalar c,
+                                         const btVector3* next, size_t rows) {
+  const __m256 scale = _mm256_set1_ps(c);
+  double sum = 0;
+  size_t k = 0;
+  for (; k + 1 < rows; k += 2) {
+    const __m256 updated = _mm256_add_ps(rowPair(q, k), _mm256_mul_ps(rowPair(d, k), scale));
+    _mm256_storeu_ps(q[k].m_floats, updated);
+    if (next) sum = addDots(sum, _mm256_mul_ps(rowPair(next, k), updated));
+  }
+  if (k < rows) {
+    q[k] += d[k] * c;
+    if (next) sum += double(next[k].dot(q[k]));
+  }
+  return sum;
+}
+#endif
+
 /// q += d·c, then Σ next·q over the rows as dot() sums it (0 without `next`): the recursion's
 /// update and its next product in one pass.
 double addThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& d, btScalar c,
                   const std::vector<btVector3>* next) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return addThenDotAvx2(q.data(), d.data(), c, next ? next->data() : nullptr, q.size());
+#endif
   double sum = 0;
   for (size_t k = 0; k < q.size(); ++k) {
     q[k] += d[k] * c;
@@ -283,9 +370,32 @@ double addThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& d, bt
   return sum;
 }
 
+#if FIBREMSS_AVX2_PARTICLES
+/// copyThenDot two rows per instruction (the same bits).
+FIBREMSS_AVX2_PASS double copyThenDotAvx2(btVector3* q, const btVector3* forces,
+                                          const btVector3* next, size_t rows) {
+  double sum = 0;
+  size_t k = 0;
+  for (; k + 1 < rows; k += 2) {
+    const __m256 f = rowPair(forces, k);
+    _mm256_storeu_ps(q[k].m_floats, f);
+    if (next) sum = addDots(sum, _mm256_mul_ps(rowPair(next, k), f));
+  }
+  if (k < rows) {
+    q[k] = forces[k];
+    if (next) sum += double(next[k].dot(q[k]));
+  }
+  return sum;
+}
+#endif
+
 /// q = F, then Σ next·q as dot() sums it (0 without `next`), in one pass.
 double copyThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& forces,
                    const std::vector<btVector3>* next) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return copyThenDotAvx2(q.data(), forces.data(), next ? next->data() : nullptr, q.size());
+#endif
   double sum = 0;
   for (size_t k = 0; k < q.size(); ++k) {
     q[k] = forces[k];
@@ -297,7 +407,7 @@ double copyThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& forc
 /// L-BFGS's two-loop recursion: `q` becomes H·F, H the inverse Hessian its pairs and (A + W)⁻¹
 /// estimate. Each update of q is fused with the next pair's product (q − y·a as q + y·(−a), the
 /// same bits).
-void twoLoop(StepHistory& h, const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+void twoLoop(StepHistory& h, ProjectiveFactor& factor, const std::vector<btVector3>& forces,
              std::vector<btVector3>& q, int size) {
   const auto newer = [size](int j) { return (j + 1) % size; };
   const auto older = [size](int j) { return (j + size - 1) % size; };
@@ -323,21 +433,57 @@ double longestMove(const std::vector<btVector3>& step) {
   return std::sqrt(double(longest));
 }
 
-/// Whether the L-BFGS step `step` is kept: it points down the forces (step·F > 0, summed as dot()
-/// sums it) and moves no particle farther than the muscle's mean spring rest length, more than an
-/// L-BFGS step may (the pairs learnt from float noise near the equilibrium, or from a state the
-/// contacts keep changing): both in one pass. real-hip-gait tore without the bound (three muscles
+/// Σ step·F over the rows as dot() sums it, and the largest |d|² over `step` as longestMove()
+/// finds it.
+struct StepSums {
+  double downhill = 0;   ///< [N·m]
+  btScalar longest = 0;  ///< [m²]
+};
+
+#if FIBREMSS_AVX2_PARTICLES
+/// stepSums two rows per instruction (the same bits).
+FIBREMSS_AVX2_PASS StepSums stepSumsAvx2(const btVector3* step, const btVector3* forces,
+                                         size_t rows) {
+  StepSums sums;
+  size_t k = 0;
+  for (; k + 1 < rows; k += 2) {
+    const __m256 d = rowPair(step, k);
+    sums.downhill = addDots(sums.downhill, _mm256_mul_ps(d, rowPair(forces, k)));
+    const __m256 lengths = rowDots(_mm256_mul_ps(d, d));
+    sums.longest = std::max(sums.longest, _mm256_cvtss_f32(lengths));
+    sums.longest = std::max(sums.longest, _mm_cvtss_f32(_mm256_extractf128_ps(lengths, 1)));
+  }
+  if (k < rows) {
+    sums.downhill += double(step[k].dot(forces[k]));
+    sums.longest = std::max(sums.longest, step[k].length2());
+  }
+  return sums;
+}
+#endif
+
+StepSums stepSums(const std::vector<btVector3>& step, const std::vector<btVector3>& forces) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return stepSumsAvx2(step.data(), forces.data(), step.size());
+#endif
+  StepSums sums;
+  for (size_t k = 0; k < step.size(); ++k) {
+    sums.downhill += double(step[k].dot(forces[k]));
+    sums.longest = std::max(sums.longest, step[k].length2());
+  }
+  return sums;
+}
+
+/// Whether the L-BFGS step `step` is kept: it points down the forces (step·F > 0) and moves no
+/// particle farther than the muscle's mean spring rest length, more than an L-BFGS step may (the
+/// pairs learnt from float noise near the equilibrium, or from a state the contacts keep
+/// changing): both in one pass (stepSums). real-hip-gait tore without the bound (three muscles
 /// frozen at 70 iterations per pose) and runs with it; fusiform and the cylinders never reach it.
 bool keepsStep(const IntegratedMuscle& muscle, const std::vector<btVector3>& step,
                const std::vector<btVector3>& forces) {
-  double downhill = 0;
-  btScalar longest = 0;  // as longestMove() finds it
-  for (size_t k = 0; k < step.size(); ++k) {
-    downhill += double(step[k].dot(forces[k]));
-    longest = std::max(longest, step[k].length2());
-  }
-  return downhill > 0 && (muscle.settings.springs.empty() ||
-                          !(std::sqrt(double(longest)) > meanRestLength(muscle)));
+  const StepSums sums = stepSums(step, forces);
+  return sums.downhill > 0 && (muscle.settings.springs.empty() ||
+                               !(std::sqrt(double(sums.longest)) > meanRestLength(muscle)));
 }
 
 /// Shortens `step` as a whole (its direction kept) so that no particle moves farther than the

@@ -60,6 +60,10 @@ FIBREMSS_AVX2_PASS void rotateAvx2(const Rotation& r, int begin, int end, const 
 /// bits, the same everywhere.
 constexpr double kUpdateCost = 1.5;
 
+/// Values past L's last entry in solveValues_ (zero): the AVX2 solve reads eight from its last
+/// pair's first.
+constexpr size_t kSolvePadding = 8;
+
 }  // namespace
 
 ProjectiveFactor::ProjectiveFactor(const Matrix& lowerA) {
@@ -123,8 +127,9 @@ void ProjectiveFactor::analyse(const Matrix& upper) {
   }
   weights_.assign(n, 0);
   lower_.assign(rows_.size(), 0);
-  solveValues_.assign(rows_.size(), 0);
+  solveValues_.assign(rows_.size() + kSolvePadding, 0);
   shareSolveRows();
+  solveGathered_.assign(n, btVector3(0, 0, 0));
   scatter_.assign(n, 0);
   pattern_.assign(n, 0);
   stale_.assign(n, 1);
@@ -133,22 +138,26 @@ void ProjectiveFactor::analyse(const Matrix& upper) {
   changedBy_.reserve(n);
 }
 
-/// solveRows_ and solveRowStart_ from the pattern: a column whose parent is the next column and
-/// which has one entry more reads the next column's rows, its predecessor's list one further on.
+/// solveRows_, solveRowStart_ and solveRuns_ from the pattern: a column whose parent is the next
+/// column and which has one entry more reads the next column's rows, its predecessor's list one
+/// further on, in its predecessor's run.
 void ProjectiveFactor::shareSolveRows() {
   const auto n = static_cast<int>(size());
   solveRowStart_.assign(n, 0);
   solveRows_.clear();
+  solveRuns_.clear();
   for (int j = 0; j < n; ++j) {
     const int count = columnStart_[j + 1] - columnStart_[j];
     if (j > 0 && parent_[j - 1] == j && columnStart_[j] - columnStart_[j - 1] == count + 1) {
       solveRowStart_[j] = solveRowStart_[j - 1] + 1;
       continue;
     }
+    solveRuns_.push_back(j);
     solveRowStart_[j] = static_cast<int>(solveRows_.size());
     for (int p = columnStart_[j] + 1; p < columnStart_[j + 1]; ++p)
       solveRows_.push_back(static_cast<uint32_t>(rows_[p]) * uint32_t(sizeof(btVector3)));
   }
+  solveRuns_.push_back(n);
 }
 
 void ProjectiveFactor::setWeight(int row, double weight) {
@@ -317,6 +326,8 @@ struct SolveFactor {
   const uint32_t* rows;
   const int* rowStart;
   int n;
+  const int* runs;  ///< each run's first column, then n (ProjectiveFactor's solveRuns_)
+  int runCount;
 
   SolveColumn column(int j) const {
     return {values[start[j]], values + start[j] + 1, rows + rowStart[j],
@@ -348,91 +359,193 @@ void solveLanes(const SolveFactor factor, btVector3* x) {
   }
   for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
     const SolveColumn c = factor.column(j);
-    __m128 sum = loadVector(x[j]), odd = _mm_setzero_ps();
+    const auto entry = [&](int p) {
+      return _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p]));
+    };
+    __m128 s0 = loadVector(x[j]), s1 = _mm_setzero_ps(), s2 = s1, s3 = s1;
     int p = 0;
-    for (; p + 1 < c.count; p += 2) {
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
-      odd = _mm_sub_ps(odd,
-                       _mm_mul_ps(loadVector(at(x, c.rows[p + 1])), _mm_set1_ps(c.values[p + 1])));
+    for (; p + 3 < c.count; p += 4) {
+      s0 = _mm_sub_ps(s0, entry(p));
+      s1 = _mm_sub_ps(s1, entry(p + 1));
+      s2 = _mm_sub_ps(s2, entry(p + 2));
+      s3 = _mm_sub_ps(s3, entry(p + 3));
     }
-    if (p < c.count)
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
-    _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, odd), _mm_set1_ps(c.inverse)));
+    if (p + 1 < c.count) {
+      s0 = _mm_sub_ps(s0, entry(p));
+      s1 = _mm_sub_ps(s1, entry(p + 1));
+      p += 2;
+    }
+    if (p < c.count) (p % 4 == 0 ? s0 : s2) = _mm_sub_ps(p % 4 == 0 ? s0 : s2, entry(p));
+    const __m128 sum = _mm_add_ps(_mm_add_ps(s0, s2), _mm_add_ps(s1, s3));
+    _mm_store_ps(x[j].m_floats, _mm_mul_ps(sum, _mm_set1_ps(c.inverse)));
   }
 }
 #endif
 
 #if FIBREMSS_AVX2_PARTICLES
-/// Entries p and p + 1's values, each in all four lanes of its half: [v_p ×4, v_{p+1} ×4].
+/// Entries p and p + 1's values, each in all four lanes of its half: [v_p ×4, v_{p+1} ×4]. Reads
+/// eight values from `values` (solveValues_ is padded).
 FIBREMSS_AVX2_PASS inline __m256 valuePair(const btScalar* values) {
-  const __m128 both = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(values)));
-  return _mm256_permutevar8x32_ps(_mm256_castps128_ps256(both),
+  return _mm256_permutevar8x32_ps(_mm256_loadu_ps(values),
                                   _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1));
 }
 
-/// solveLanes with AVX2, two entries of a column per instruction (low half entry p, high half
-/// p + 1): the same products and differences per lane in the same order, so the same bits (the
-/// backward pass's halves are solveLanes' even and odd sums).
-FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x) {
-  const int n = factor.n;
-  for (int j = 0; j < n; ++j) {
-    const SolveColumn c = factor.column(j);
-    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(c.inverse));
+/// v in both halves.
+FIBREMSS_AVX2_PASS inline __m256 twice(__m128 v) {
+  return _mm256_insertf128_ps(_mm256_castps128_ps256(v), v, 1);
+}
+
+/// The forward pass inside the run of columns [first, last]: each column scaled by its inverted
+/// diagonal and taken from the run's rows below it, which are the next rows (two per
+/// instruction, read and written in place).
+FIBREMSS_AVX2_PASS void forwardRun(const SolveFactor& factor, btVector3* x, int first, int last) {
+  for (int j = first; j <= last; ++j) {
+    const btScalar* values = factor.values + factor.start[j];
+    const __m128 xj = _mm_mul_ps(loadVector(x[j]), _mm_set1_ps(values[0]));
     _mm_store_ps(x[j].m_floats, xj);
-    const __m256 both = _mm256_insertf128_ps(_mm256_castps128_ps256(xj), xj, 1);
-    int p = 0;
+    const __m256 both = twice(xj);
+    int r = j + 1;
 #pragma GCC unroll 4
-    for (; p + 1 < c.count; p += 2) {  // x(row) − xj·L(row, j)
-      btVector3& a = at(x, c.rows[p]);
-      btVector3& b = at(x, c.rows[p + 1]);
-      const __m256 next =
-          _mm256_sub_ps(loadPair(a, b), _mm256_mul_ps(both, valuePair(c.values + p)));
-      _mm_store_ps(a.m_floats, _mm256_castps256_ps128(next));
-      _mm_store_ps(b.m_floats, _mm256_extractf128_ps(next, 1));
+    for (; r < last; r += 2) {  // x(r, r + 1) − xj·L(r .. r + 1, j)
+      float* a = x[r].m_floats;
+      _mm256_storeu_ps(
+          a, _mm256_sub_ps(_mm256_loadu_ps(a), _mm256_mul_ps(both, valuePair(values + r - j))));
     }
-    if (p < c.count) {
-      float* a = at(x, c.rows[p]).m_floats;
-      _mm_store_ps(a, _mm_sub_ps(_mm_load_ps(a), _mm_mul_ps(xj, _mm_set1_ps(c.values[p]))));
-    }
+    if (r == last)
+      _mm_store_ps(x[r].m_floats,
+                   _mm_sub_ps(loadVector(x[r]), _mm_mul_ps(xj, _mm_set1_ps(values[r - j]))));
   }
-  for (int j = n - 1; j >= 0; --j) {  // sum − L(row, j)·z(row)
+}
+
+/// The forward pass of the run [first, last]'s columns c .. c + B − 1 (solved) on the rows below
+/// the run, which they share: each pair of rows read and written once for the B columns, taken
+/// from them in column order.
+template <int B>
+FIBREMSS_AVX2_PASS void forwardBelow(const SolveFactor& factor, btVector3* x, int last, int c) {
+  const SolveColumn below = factor.column(last);
+  __m256 both[B];
+  const btScalar* values[B];
+  for (int b = 0; b < B; ++b) {
+    both[b] = twice(loadVector(x[c + b]));
+    values[b] = factor.values + factor.start[c + b] + 1 + (last - c - b);
+  }
+  int m = 0;
+  for (; m + 1 < below.count; m += 2) {
+    btVector3& a = at(x, below.rows[m]);
+    btVector3& d = at(x, below.rows[m + 1]);
+    __m256 next = loadPair(a, d);
+#pragma GCC unroll 8
+    for (int b = 0; b < B; ++b)
+      next = _mm256_sub_ps(next, _mm256_mul_ps(both[b], valuePair(values[b] + m)));
+    _mm_store_ps(a.m_floats, _mm256_castps256_ps128(next));
+    _mm_store_ps(d.m_floats, _mm256_extractf128_ps(next, 1));
+  }
+  if (m < below.count) {
+    float* a = at(x, below.rows[m]).m_floats;
+    __m128 next = _mm_load_ps(a);
+    for (int b = 0; b < B; ++b)
+      next =
+          _mm_sub_ps(next, _mm_mul_ps(_mm256_castps256_ps128(both[b]), _mm_set1_ps(values[b][m])));
+    _mm_store_ps(a, next);
+  }
+}
+
+/// Entries p and p + 1's products with their rows' x, read from `rows` in the column's order.
+FIBREMSS_AVX2_PASS inline __m256 products(const btVector3* rows, const btScalar* values, int p) {
+  return _mm256_mul_ps(_mm256_loadu_ps(rows[p].m_floats), valuePair(values + p));
+}
+
+/// The backward pass of the run [first, last], column `last` down to `first`: each column's
+/// entries summed as solveLanes sums them (`front` entries 0 and 1 modulo 4, `back` 2 and 3), its
+/// rows read from `gathered`, which holds x at the rows of column `first` in its order (the rows
+/// below the run gathered first, each solved row of the run added as it is solved).
+FIBREMSS_AVX2_PASS void backwardRun(const SolveFactor& factor, btVector3* x, int first, int last,
+                                    btVector3* gathered) {
+  const SolveColumn below = factor.column(last);
+  btVector3* tail = gathered + (last - first);
+  int m = 0;
+#pragma GCC unroll 4
+  for (; m + 1 < below.count; m += 2)
+    _mm256_storeu_ps(tail[m].m_floats, loadPair(at(x, below.rows[m]), at(x, below.rows[m + 1])));
+  if (m < below.count) tail[m] = at(x, below.rows[m]);
+  for (int j = last; j >= first; --j) {
     const SolveColumn c = factor.column(j);
-    __m256 sums = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
+    const btVector3* rows = gathered + (j - first);
+    __m256 front = _mm256_insertf128_ps(_mm256_setzero_ps(), loadVector(x[j]), 0);
+    __m256 back = _mm256_setzero_ps();
     int p = 0;
-#pragma GCC unroll 4
-    for (; p + 1 < c.count; p += 2)
-      sums = _mm256_sub_ps(sums, _mm256_mul_ps(loadPair(at(x, c.rows[p]), at(x, c.rows[p + 1])),
-                                               valuePair(c.values + p)));
-    __m128 sum = _mm256_castps256_ps128(sums);
-    if (p < c.count)
-      sum = _mm_sub_ps(sum, _mm_mul_ps(loadVector(at(x, c.rows[p])), _mm_set1_ps(c.values[p])));
-    _mm_store_ps(x[j].m_floats, _mm_mul_ps(_mm_add_ps(sum, _mm256_extractf128_ps(sums, 1)),
-                                           _mm_set1_ps(c.inverse)));
+#pragma GCC unroll 2
+    for (; p + 3 < c.count; p += 4) {
+      front = _mm256_sub_ps(front, products(rows, c.values, p));
+      back = _mm256_sub_ps(back, products(rows, c.values, p + 2));
+    }
+    if (p + 1 < c.count) front = _mm256_sub_ps(front, products(rows, c.values, p)), p += 2;
+    if (p < c.count) {  // one entry: its sum's lanes, the other half less 0
+      const __m256 single = _mm256_insertf128_ps(
+          _mm256_setzero_ps(), _mm_mul_ps(loadVector(rows[p]), _mm_set1_ps(c.values[p])), 0);
+      (p % 4 == 0 ? front : back) = _mm256_sub_ps(p % 4 == 0 ? front : back, single);
+    }
+    const __m256 halves = _mm256_add_ps(front, back);
+    const __m128 xj =
+        _mm_mul_ps(_mm_add_ps(_mm256_castps256_ps128(halves), _mm256_extractf128_ps(halves, 1)),
+                   _mm_set1_ps(c.inverse));
+    _mm_store_ps(x[j].m_floats, xj);
+    if (j > first) _mm_store_ps(gathered[j - first - 1].m_floats, xj);
   }
+}
+
+/// solveLanes with AVX2 by runs of columns that share their rows (SolveFactor::runs), two entries
+/// per instruction (low half entry p, high half p + 1; the backward pass's two registers entries
+/// 0, 1 and 2, 3 modulo 4): per row the same products and differences in the same order, so the
+/// same bits. The forward pass takes each pair of rows
+/// below a run from up to eight of its columns at once; the backward pass gathers the rows below a
+/// run once for all its columns.
+FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
+                                       btVector3* gathered) {
+  for (int r = 0; r < factor.runCount; ++r) {
+    const int first = factor.runs[r], last = factor.runs[r + 1] - 1;
+    forwardRun(factor, x, first, last);
+    int c = first;
+    for (; c + 8 <= last + 1; c += 8) forwardBelow<8>(factor, x, last, c);
+    if (c + 4 <= last + 1) forwardBelow<4>(factor, x, last, c), c += 4;
+    if (c + 2 <= last + 1) forwardBelow<2>(factor, x, last, c), c += 2;
+    if (c <= last) forwardBelow<1>(factor, x, last, c);
+  }
+  for (int r = factor.runCount - 1; r >= 0; --r)
+    backwardRun(factor, x, factor.runs[r], factor.runs[r + 1] - 1, gathered);
 }
 #endif
 
 }  // namespace
 
 // With SSE each entry is one vector product and difference over x, y, z (and w, which stays 0;
-// the scalar code's operations per lane, same bits), and the backward pass sums a column's odd
-// and even entries apart (two chains of dependent subtractions instead of one: CPU samples on
-// thigh13 R=40, 358 -> 283 in the integrator). The values stream alone (4 bytes per entry) and
-// the rows come from the shared lists (solveRows_), which stay in cache: cylinder-twist's solve
-// reads 0.86 MB instead of 1.48 MB with a row offset beside each value (a simulated 1 MB L2 misses
-// 1.78 M lines over its 130 solves against 3.98 M). The forward pass takes a column's entries two
-// at a time (its rows differ, so the order of their loads and stores does not matter); with AVX2
-// (solveLanesAvx2) two per instruction, the loops unrolled four times: cylinder-twist's 130
-// solves 260.9 M instructions, against 302.5 M not unrolled, 268.5 M unrolled twice and 395.3 M
-// with SSE over value–offset pairs.
-// Measured against a supernodal solve (runs of columns with one pattern, their rows below gathered
-// once, four rows in the lanes): 14 % fewer instructions, 12 % more CPU time (docs/decisions.md,
+// the scalar code's operations per lane), and the backward pass sums a column's entries in four
+// chains by their index modulo 4, added as (0 + 2) + (1 + 3) (one chain of dependent
+// subtractions is slower: two chains against one, CPU samples on thigh13 R=40, 358 -> 283 in the
+// integrator; four against two, cylinder-twist's task-clock 1.06x less, docs/performance.md). The
+// values stream alone (4 bytes per entry) and the rows come from the shared lists (solveRows_),
+// which stay in cache: cylinder-twist's solve reads 0.86 MB instead of 1.48 MB with a row offset
+// beside each value (a simulated 1 MB L2 misses 1.78 M lines over its 130 solves against 3.98 M).
+// The forward pass takes a column's entries two at a time (its rows differ, so the order of their
+// loads and stores does not matter). With AVX2 (solveLanesAvx2) two per instruction and by runs: a
+// pair of rows below a run is read and written once per eight of its columns, and the rows below a
+// run are gathered once for the backward pass of all its columns. cylinder-twist's 130 solves:
+// 166.3 M instructions, against 260.9 M column by column (302.5 M not unrolled, 395.3 M with SSE
+// over value–offset pairs). A supernodal solve with four rows in the lanes (other sums, other bits)
+// took 14 % fewer instructions than column by column but 12 % more CPU time (docs/decisions.md,
 // "Solver").
-void ProjectiveFactor::solveInPlace(btVector3* x) const {
-  const SolveFactor factor{columnStart_.data(), solveValues_.data(), solveRows_.data(),
-                           solveRowStart_.data(), static_cast<int>(size())};
+void ProjectiveFactor::solveInPlace(btVector3* x, SpringKernel kernel) {
+  const SolveFactor factor{columnStart_.data(),
+                           solveValues_.data(),
+                           solveRows_.data(),
+                           solveRowStart_.data(),
+                           static_cast<int>(size()),
+                           solveRuns_.data(),
+                           static_cast<int>(solveRuns_.size()) - 1};
 #if FIBREMSS_AVX2_PARTICLES
-  if (fastestSpringKernel() == SpringKernel::avx2) return solveLanesAvx2(factor, x);
+  if (kernel == SpringKernel::avx2) return solveLanesAvx2(factor, x, solveGathered_.data());
+#else
+  (void)kernel;
 #endif
 #if FIBREMSS_SSE_PARTICLES
   solveLanes(factor, x);

@@ -15,6 +15,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "kernels/SpringForces.h"
+
 namespace fibremss {
 
 /// L of P·(A + W)·Pᵀ and what keeps it up to date without allocating. A + W acts alike on x, y
@@ -46,8 +48,10 @@ class ProjectiveFactor {
   void addToMatrix(int k, int l, double value);
   /// Factors P·(A + W)·Pᵀ anew from A's entries as added and W, without allocating.
   void refactorAll();
-  /// Solves L·Lᵀ·z = b in place for the three coordinates of `x` together (indexed by row).
-  void solveInPlace(btVector3* x) const;
+  /// Solves L·Lᵀ·z = b in place for the three coordinates of `x` together (indexed by row),
+  /// using the factor's own scratch (one solve at a time): with AVX2 if `kernel` is avx2, else
+  /// with SSE where the build has it (the same bits either way), else in scalar code.
+  void solveInPlace(btVector3* x, SpringKernel kernel = fastestSpringKernel());
 
  private:
   void analyse(const Eigen::SparseMatrix<double>& upper);
@@ -81,6 +85,10 @@ class ProjectiveFactor {
   /// cylinder-twist's 184 708 entries).
   std::vector<uint32_t> solveRows_;
   std::vector<int> solveRowStart_;  ///< column j: its first row below the diagonal in solveRows_
+  /// The first column of each run of columns that read one list of rows, then size(): the runs'
+  /// columns after the first are the rows just below the first's diagonal.
+  std::vector<int> solveRuns_;
+  std::vector<btVector3> solveGathered_;  ///< the solve's copy of x at one run's rows [per row]
   // Scratch of a new factor or an update (sized once).
   std::vector<double> scatter_;  ///< row k of L being formed, or an update's vector (zero between)
   std::vector<int> tags_;        ///< the row that last visited each column

@@ -6,13 +6,17 @@
 //   f(x) = min( D(X̄) − λ·σ,  h·(W / κ − 1) ) − dents
 // X̄ the w-weighted mean of the X_j and σ their spread, W = Σ w_j, D the signed distance to the
 // rest surface (positive inside), F_j the deformation of particle j's springs (as the skin's),
-// κ half the smallest W on the rest surface. At rest every X_j is x, so the surface is the rest
-// surface; where particles part (a tear, a cut) their rest positions disagree (σ) and the
-// particles' cover thins (W), and the surface opens. Extracted by marching tetrahedra on a
-// sparse grid, from seeds beside the boundary particles across every cell face the surface
-// crosses: a closed surface (every edge shared by two triangles). The sums over the particles
-// (X̄, σ, W) are taken at every second grid point and interpolated between them (X̄ exactly
-// where the particles share one affine map back to rest, as at rest); D at every grid point.
+// κ half the smallest W on the rest surface, λ 0 while no spring of the muscle is broken. At rest
+// every X_j is x, so the surface is the rest surface; where particles part (a tear, a cut) their
+// rest positions disagree (σ) and the particles' cover thins (W), and the surface opens; where
+// they only deform, σ is the error of their affine maps, which opens nothing. Extracted by
+// marching tetrahedra on a sparse grid, from seeds beside the boundary particles across every
+// cell face the surface crosses: a closed surface (every edge shared by two triangles), less the
+// pieces but the largest that enclose under two grid cells (beads of a part thinner than a cell,
+// such as a tendon's pointed end, which the grid's points meet only here and there). The sums over
+// the particles (X̄, σ, W) are taken at every second grid point and interpolated between them (X̄
+// exactly where the particles share one affine map back to rest, as at rest); D at every grid
+// point.
 #include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btVector3.h>
 
@@ -23,6 +27,7 @@
 
 #include "fibremss/Geometry.h"
 #include "fibremss/MuscleSettings.h"
+#include "fibremss/TaskPool.h"
 
 namespace fibremss {
 
@@ -35,7 +40,8 @@ struct ImplicitSurfaceSettings {
   /// muscle thinner than a few of its cells loses its distance between them.
   btScalar restVoxelRatio = btScalar(0.5);
   btScalar kernelFactor = btScalar(2);  ///< h per median spring rest length [1]
-  btScalar spreadWeight = btScalar(2);  ///< λ: how much the X_j's spread opens the surface [1]
+  /// λ: how much the X_j's spread opens the surface of a muscle with broken springs [1]
+  btScalar spreadWeight = btScalar(2);
 };
 
 /// A local negative field, such as a tool pressing on the surface: the field drops by
@@ -74,12 +80,14 @@ class ImplicitSurface {
   std::unique_ptr<Impl> impl_;
 };
 
-/// extract() of every surface, surfaces[i] from positions[i] and springs[i], on `threads`
-/// threads of its own (0: the machine's hardware threads); each surface on one thread, so the
-/// result is the same for any count.
+/// extract() of every surface, surfaces[i] from positions[i] and springs[i], as tasks of
+/// `pool` (its own threads or the host's scheduler it was made with), largest first; each
+/// surface one task, so the result is the same for any thread count. The surfaces must be
+/// distinct objects (a surface's state is its task's alone): InputError otherwise, or when
+/// the spans' sizes differ.
 void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
                      std::span<const std::span<const btVector3>> positions,
-                     std::span<const std::span<const Spring>> springs, unsigned threads);
+                     std::span<const std::span<const Spring>> springs, TaskPool& pool);
 
 /// The edges of `mesh` not shared by exactly two triangles, and its connected components
 /// (triangles joined by an edge).
