@@ -90,6 +90,12 @@ const std::array<CellCut, 256> kCellCuts = [] {
 /// A piece of a surface enclosing fewer grid cells than this is dropped (Impl::dropSpecks).
 constexpr double kSmallestPieceCells = 2;
 
+/// The union-find root of `v` in `parent`, halving the path on the way.
+uint32_t rootOf(std::vector<uint32_t>& parent, uint32_t v) {
+  while (parent[v] != v) v = parent[v] = parent[parent[v]];
+  return v;
+}
+
 /// The corners among `values` inside (value > 0), bit c for corner c.
 unsigned insideCorners(const std::array<float, 8>& values) {
   unsigned inside = 0;
@@ -243,19 +249,14 @@ void ImplicitSurface::Impl::march() {
   }
 }
 
-uint32_t ImplicitSurface::Impl::pieceRoot(uint32_t v) {
-  while (pieceOf[v] != v) v = pieceOf[v] = pieceOf[pieceOf[v]];
-  return v;
-}
-
 void ImplicitSurface::Impl::dropSpecks() {
   const size_t count = mesh.vertices.size();
   pieceOf.resize(count);
   std::iota(pieceOf.begin(), pieceOf.end(), 0u);
   for (const std::array<uint32_t, 3>& t : mesh.triangles) {
-    const uint32_t root = pieceRoot(t[0]);  // stays a root: the others join it
-    pieceOf[pieceRoot(t[1])] = root;
-    pieceOf[pieceRoot(t[2])] = root;
+    const uint32_t root = rootOf(pieceOf, t[0]);  // stays a root: the others join it
+    pieceOf[rootOf(pieceOf, t[1])] = root;
+    pieceOf[rootOf(pieceOf, t[2])] = root;
   }
   uint32_t roots = 0;  // pieces
   for (uint32_t v = 0; v < count; ++v) roots += pieceOf[v] == v;
@@ -265,7 +266,7 @@ void ImplicitSurface::Impl::dropSpecks() {
   for (const std::array<uint32_t, 3>& t : mesh.triangles) {
     const btVector3 a = mesh.vertices[t[0]] - grid.origin, b = mesh.vertices[t[1]] - grid.origin,
                     c = mesh.vertices[t[2]] - grid.origin;
-    pieceVolume[pieceRoot(t[0])] += double(a.dot(b.cross(c))) / 6;
+    pieceVolume[rootOf(pieceOf, t[0])] += double(a.dot(b.cross(c))) / 6;
   }
   uint32_t largest = 0;
   for (uint32_t v = 0; v < count; ++v)
@@ -274,7 +275,7 @@ void ImplicitSurface::Impl::dropSpecks() {
   vertexKept.resize(count);
   int32_t kept = 0;
   for (uint32_t v = 0; v < count; ++v) {
-    const uint32_t root = pieceRoot(v);
+    const uint32_t root = rootOf(pieceOf, v);
     const bool keep = root == largest || std::abs(pieceVolume[root]) >= smallest;
     vertexKept[v] = keep ? kept : -1;
     if (keep) mesh.vertices[size_t(kept++)] = mesh.vertices[v];
@@ -406,17 +407,13 @@ MeshTopology meshTopology(const TriangleMesh& mesh) {
   std::sort(edges.begin(), edges.end());
   std::vector<uint32_t> parent(mesh.triangles.size());
   std::iota(parent.begin(), parent.end(), 0u);
-  auto root = [&](uint32_t t) {
-    while (parent[t] != t) t = parent[t] = parent[parent[t]];
-    return t;
-  };
   MeshTopology topology;
   for (size_t i = 0, j; i < edges.size(); i = j) {
     for (j = i; j < edges.size() && edges[j].first == edges[i].first; ++j)
-      parent[root(edges[j].second)] = root(edges[i].second);
+      parent[rootOf(parent, edges[j].second)] = rootOf(parent, edges[i].second);
     if (j - i != 2) ++topology.openEdges;
   }
-  for (uint32_t t = 0; t < parent.size(); ++t) topology.components += root(t) == t;
+  for (uint32_t t = 0; t < parent.size(); ++t) topology.components += rootOf(parent, t) == t;
   return topology;
 }
 

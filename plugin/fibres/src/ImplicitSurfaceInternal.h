@@ -209,8 +209,6 @@ struct ImplicitSurface::Impl {
   /// kSmallestPieceCells grid cells, the largest piece always kept: beads of a part thinner than
   /// a cell (a tendon's pointed end), which the grid's points meet only here and there.
   void dropSpecks();
-  /// The piece vertex v belongs to (union-find over pieceOf, halving the paths).
-  uint32_t pieceRoot(uint32_t v);
   /// The cell's triangles, its corners inside (value > 0) the bits of `inside`.
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
                   const std::array<float, 8>& values, unsigned inside);
