@@ -54,6 +54,12 @@ double wrapDegrees(double angle) {
   return angle <= 0 ? angle + 180 : angle - 180;
 }
 
+/// The exact torsion's turn of a rest point `along` the axis of free length `length` [°]: none
+/// before the free length, all of the twist past it.
+double exactTurnDeg(const AnalyticCase& analytic, double along, double length) {
+  return analytic.twistDeg * std::clamp(along / length, 0.0, 1.0);
+}
+
 /// One section of the surface at fraction t of the free length: mean radius at rest and now
 /// (from the rest axis), and how far its vertices turned about the axis beyond the exact
 /// torsion at each one's own place along the axis (angles unwrapped towards it).
@@ -76,7 +82,7 @@ Section measureSection(const AnalyticCase& analytic, const TriangleMesh& rest,
     const btVector3 p = deformed[i] - start;
     const btVector3 r = p - axis * p.dot(axis);
     if (r0.length2() <= 0 || r.length2() <= 0) continue;
-    const double exact = analytic.twistDeg * std::clamp(along / length, 0.0, 1.0);
+    const double exact = exactTurnDeg(analytic, along, length);
     const double turned = std::atan2(double(axis.dot(r0.cross(r))), double(r0.dot(r))) * kDegrees;
     error += wrapDegrees(turned - exact);
     restRadius += r0.length();
@@ -94,15 +100,13 @@ double exactTorsionRmsMm(const AnalyticCase& analytic, const TriangleMesh& rest,
   const btVector3 start = analytic.axisStart;
   const double length = start.distance(analytic.axisEnd);
   const btVector3 axis = (analytic.axisEnd - start) / btScalar(length);
-  double sum = 0;
-  for (size_t i = 0; i < rest.vertices.size(); ++i) {
+  std::vector<btVector3> exact(rest.vertices.size());
+  for (size_t i = 0; i < exact.size(); ++i) {
     const btVector3 p0 = rest.vertices[i] - start;
-    const double t = std::clamp(double(p0.dot(axis)) / length, 0.0, 1.0);
-    const btVector3 exact =
-        start + quatRotate(btQuaternion(axis, btScalar(t * analytic.twistDeg / kDegrees)), p0);
-    sum += double((deformed[i] - exact).length2());
+    const double turn = exactTurnDeg(analytic, double(p0.dot(axis)), length);
+    exact[i] = start + quatRotate(btQuaternion(axis, btScalar(turn / kDegrees)), p0);
   }
-  return rest.vertices.empty() ? NAN : 1000 * std::sqrt(sum / double(rest.vertices.size()));
+  return rmsDistanceMm(deformed, exact);
 }
 
 }  // namespace
