@@ -605,6 +605,20 @@ TEST(Attachments, AnEndWithNoFixedParticleIsAnErrorUnlessDeclaredFree) {
             "muscles[0].free_end");
 }
 
+TEST(Attachments, AMuscleDeeperInABoneThanTheAttachmentDistanceNamesTheDistance) {
+  // The cylinder's flat ends reach 1.5 mm into the plates, along its fibres: below that, the
+  // particles inside are pushed out onto one point of the plate's face.
+  const auto prepare = [](const std::string& distance) {
+    const LoadedScene scene = loadScene("cylinder-twist", {"attachment_distance=" + distance});
+    fibremss::prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  };
+  const InputError shallow = errorOf([&] { prepare("1.2"); });
+  EXPECT_EQ(shallow.where(), "attachment_distance") << shallow.what();
+  EXPECT_NE(shallow.problem().find("deepest particle: 1.5 mm"), std::string::npos)
+      << shallow.what();
+  EXPECT_NO_THROW(prepare("1.6"));
+}
+
 TEST(Attachments, CheckWarnsWhenNothingIsFixedToABoneThatMovesAway) {
   // The insertion names the fixed bone: nothing is fixed to the moving one the fibres end at
   // (nor, the insertion declared free, anything at the insertion).

@@ -404,6 +404,31 @@ MuscleSettings sampleMuscle(const MuscleInput& input, size_t index, size_t boneC
   return muscle;
 }
 
+/// Two particles of one fibre that the push out of the bones put on the same point (a muscle
+/// reaching into a bone deeper than the attachment distance, along its fibres) are an InputError
+/// naming attachment_distance, not the zero-length spring the springs would find next.
+void requireDistinctPushedParticles(const MuscleInput& input, const MuscleSettings& muscle,
+                                    const MusclePreparationReport& report) {
+  const auto deepest =
+      std::max_element(report.pushedOutOfBonesDepth.begin(), report.pushedOutOfBonesDepth.end());
+  if (deepest == report.pushedOutOfBonesDepth.end() || !(*deepest > 0)) return;
+  for (size_t f = 0; f < muscle.fibreCount(); ++f)
+    for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k) {
+      const uint32_t a = muscle.fibreParticles[k - 1], b = muscle.fibreParticles[k];
+      if (a == b || muscle.restPositions[a] != muscle.restPositions[b]) continue;
+      throw InputError(
+          detail::muscleSource(input), "attachment_distance",
+          "particles " + std::to_string(a) + " and " + std::to_string(b) + " of fibre " +
+              std::to_string(f) + " lie inside a bone deeper than the attachment distance (" +
+              mm(input.parameters.attachmentDistance) +
+              ") and were pushed out onto the same point; raise attachment_distance above the "
+              "muscle's depth in the bone (the deepest particle: " +
+              mm(*deepest) +
+              ") so that the bone fixes them where they lie, or move the muscle "
+              "out of the bone");
+    }
+}
+
 /// The second stage: rest-pose overlaps moved out (free particles deep in a bone, particles
 /// inside an earlier muscle, surface vertices inside a bone), then near-coincident particles
 /// merged. `surfaces` holds every muscle's surface distance tree.
@@ -445,6 +470,7 @@ void separateMuscle(const MuscleInput& input, size_t index, const std::vector<Bo
     report.mergeDistance = margin;
     report.mergedParticles = detail::mergeCloseParticles(muscle, report.mergeDistance);
   }
+  requireDistinctPushedParticles(input, muscle, report);
 }
 
 /// Σ k·L0² over the springs [N·m]: the network's modulus times 3V.
