@@ -54,10 +54,13 @@ class HapticTool {
   const btRigidBody& tool() const { return tool_; }
 
  private:
-  MuscleSystem& system_;             ///< the muscles the tool touches
-  btRigidBody& tool_;                ///< the kinematic tool body
-  btScalar tickTime_;                ///< simulated time per tick [s]
-  HapticRegion region_;              ///< which particles the ticks move
+  MuscleSystem& system_;  ///< the muscles the tool touches
+  btRigidBody& tool_;     ///< the kinematic tool body
+  btScalar tickTime_;     ///< simulated time per tick [s]
+  HapticRegion region_;   ///< which particles the ticks move
+  /// The system's solver is the quasi-static one (projective): its whole ticks settle the far
+  /// field and each is followed by a local tick.
+  bool quasiStatic_;
   long ticks_ = 0;                   ///< ticks taken
   long wholeTicks_ = 0;              ///< ticks that stepped the whole muscles
   btVector3 regionCentre_{0, 0, 0};  ///< the tool's centre where the region was gathered [m]
