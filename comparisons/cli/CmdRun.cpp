@@ -260,6 +260,7 @@ void runToolTicks(const RunArgs& args, const LoadedScene& scene, const PreparedS
        {{"ticks", result.ticks.size()},
         {"tick_ms", scene.tool.tickTime * 1e3},
         {"threads", result.threads},
+        {"integrator", toString(scene.simulation.integrator)},
         {"whole_every", scene.tool.wholeEvery},
         {"whole_ticks", result.wholeTicks},
         {"wall_seconds", result.wallSeconds},

@@ -7,9 +7,12 @@
 // and reads the tool's force with MuscleSystem::contactWrench at the new pose: the tick's mean
 // reaction (the momentum the touching particles lost to the tool over the tick) plus the Hooke
 // term of what still overlaps. With HapticRegion::wholeEvery > 1 most ticks step only the
-// muscles' particles near the tool (MuscleSystem::stepLocal), the whole muscles every
-// wholeEvery-th tick: a fraction of the cost, the force continuous, but the far field advances
-// wholeEvery times slower than the tool (docs/contact.md, "Local ticks").
+// muscles' particles near the tool (MuscleSystem::stepLocal, Verlet), the whole muscles every
+// wholeEvery-th tick. With a time integrator the far field then advances wholeEvery times
+// slower than the tool (docs/contact.md, "Local ticks"); with the projective solver a whole tick
+// settles the whole muscles towards their static equilibrium with the tool at its new pose (the
+// system's iterations per step), a far field that keeps up with a slow tool, and a local tick
+// follows it, whose force the tick returns (docs/contact.md, "A quasi-static far field").
 #include <BulletDynamics/Dynamics/btRigidBody.h>
 #include <LinearMath/btTransform.h>
 
@@ -21,8 +24,9 @@ namespace fibremss {
 /// Which particles a HapticTool's ticks move.
 struct HapticRegion {
   /// Every wholeEvery-th tick (the first, then every wholeEvery) steps the whole muscles
-  /// (MuscleSystem::step(duration)); the ticks between step only the region around the tool
-  /// (MuscleSystem::stepLocal). 1: every tick whole [ticks].
+  /// (MuscleSystem::step(duration); with the projective solver followed by a local step); the
+  /// ticks between step only the region around the tool (MuscleSystem::stepLocal). 1: every
+  /// tick whole [ticks].
   int wholeEvery = 1;
   /// The region holds the free particles within the tool's bounding sphere grown by this [m].
   btScalar margin = btScalar(0.01);
@@ -54,10 +58,13 @@ class HapticTool {
   const btRigidBody& tool() const { return tool_; }
 
  private:
-  MuscleSystem& system_;             ///< the muscles the tool touches
-  btRigidBody& tool_;                ///< the kinematic tool body
-  btScalar tickTime_;                ///< simulated time per tick [s]
-  HapticRegion region_;              ///< which particles the ticks move
+  MuscleSystem& system_;  ///< the muscles the tool touches
+  btRigidBody& tool_;     ///< the kinematic tool body
+  btScalar tickTime_;     ///< simulated time per tick [s]
+  HapticRegion region_;   ///< which particles the ticks move
+  /// The system's solver is the quasi-static one (projective): its whole ticks settle the far
+  /// field and each is followed by a local tick.
+  bool quasiStatic_;
   long ticks_ = 0;                   ///< ticks taken
   long wholeTicks_ = 0;              ///< ticks that stepped the whole muscles
   btVector3 regionCentre_{0, 0, 0};  ///< the tool's centre where the region was gathered [m]

@@ -220,13 +220,15 @@ class MuscleSystem {
   void setLocalRegion(const btVector3& centre, btScalar radius);
   /// step(duration) in which only the local region's particles move (setLocalRegion; none
   /// gathered: none moves): per muscle (one task each) the region's springs and volume terms on
-  /// the scalar kernel, the muscle's enclosed volume, the integration, the pushes of the bones on
+  /// the scalar kernel, the muscle's enclosed volume, Verlet's integration (whatever the
+  /// definition's integrator, in as many iterations as Verlet's stable time step needs; after a
+  /// whole step of another integrator the region starts at rest), the pushes of the bones on
   /// the region; then the contact bodies, which the caller keeps inside the region (HapticTool
   /// does). Every other particle keeps its position, the muscles' surfaces stay as the last
-  /// step left them, and muscle pairs do not collide. A step in which a bone moves, with
-  /// rebuildEveryStep, or with an integrator other than Verlet runs as step(duration). The
-  /// numerical guard and the contact bodies' results as step(duration); no allocation (but a
-  /// muscle's first gathering). InputError for a duration that is not finite and > 0.
+  /// step left them, and muscle pairs do not collide. A step in which a bone moves, or with
+  /// rebuildEveryStep, runs as step(duration). The numerical guard and the contact bodies'
+  /// results as step(duration); no allocation (but a muscle's first gathering). InputError for
+  /// a duration that is not finite and > 0.
   void stepLocal(btScalar duration);
   /// A flag the steps poll after every iteration (null: none, the default): once it reads true,
   /// the running step ends there and reports StepStats::interrupted, so a long step (a large

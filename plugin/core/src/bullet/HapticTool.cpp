@@ -12,7 +12,11 @@ namespace fibremss {
 
 HapticTool::HapticTool(MuscleSystem& system, btRigidBody& tool, btScalar tickTime,
                        const HapticRegion& region)
-    : system_(system), tool_(tool), tickTime_(tickTime), region_(region) {
+    : system_(system),
+      tool_(tool),
+      tickTime_(tickTime),
+      region_(region),
+      quasiStatic_(system.definition().integrator == Integrator::Projective) {
   if (!tool.isKinematicObject())
     throw InputError(
         "HapticTool", "tool",
@@ -49,11 +53,13 @@ ContactWrench HapticTool::tick(const btTransform& pose) {
 }
 
 void HapticTool::advance(const btTransform& pose) {
-  if (ticks_ % region_.wholeEvery == 0) {
+  const bool whole = ticks_ % region_.wholeEvery == 0;
+  if (whole) {
     system_.step(tickTime_);
     ++wholeTicks_;
-    return;
   }
+  // A whole tick of the quasi-static solver settles the far field; a local tick follows it.
+  if (whole && !quasiStatic_) return;
   btVector3 centre;
   btScalar radius;
   tool_.getCollisionShape()->getBoundingSphere(centre, radius);

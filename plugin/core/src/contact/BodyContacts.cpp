@@ -156,8 +156,9 @@ void prepareInteraction(const MuscleSettings& settings, InteractionState& intera
 }
 
 void collideBodies(const MuscleSettings& settings, const TreeState& trees, ParticleState& particles,
-                   InteractionState& interaction, std::span<const ContactBodyState> bodies,
-                   btScalar dt, bool hasVelocities, btScalar damping, TreeTraversalStack& stack) {
+                   ContactState& contact, InteractionState& interaction,
+                   std::span<const ContactBodyState> bodies, btScalar dt, bool hasVelocities,
+                   btScalar damping, TreeTraversalStack& stack) {
   const SphereTree& tree = trees.tree;
   const btScalar damped = dampedShare(settings, damping, dt);
   for (size_t k = 0; k < bodies.size(); ++k) {
@@ -170,16 +171,17 @@ void collideBodies(const MuscleSettings& settings, const TreeState& trees, Parti
     const btCollisionShape& shape = *body.body->getCollisionShape();
     forLeavesIn(tree, box, stack, [&](uint32_t i) {
       if (settings.isFixed(i)) return;
-      ShapeContact contact;
+      ShapeContact touch;
       if (!sphereShapeContact(shape, body.transform, particles.positions[i], settings.radii[i],
-                              contact))
+                              touch))
         return;
       const btVector3 impulse =
-          respond(settings.particleMass, particles, i, body, contact, dt, hasVelocities, damped);
+          respond(settings.particleMass, particles, i, body, touch, dt, hasVelocities, damped);
+      contact.pushedLast[i] = 1;
       sum.linear -= impulse;
-      sum.angular -= (contact.point - body.centre).cross(impulse);
+      sum.angular -= (touch.point - body.centre).cross(impulse);
       ++sum.contacts;
-      addSupport(particles, interaction, i, contact.normal, sum);
+      addSupport(particles, interaction, i, touch.normal, sum);
     });
   }
 }

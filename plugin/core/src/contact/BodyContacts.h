@@ -50,11 +50,13 @@ void prepareInteraction(const MuscleSettings& settings, InteractionState& intera
 /// boundary particle overlapping a body is moved out of it and loses its velocity into the body
 /// relative to the body's surface; what it lost (m·Δv over the iteration's `dt`) goes into
 /// interaction.bodyImpulses, negated, with its moment. Then its velocity along the contact normal
-/// is damped by `damping` times the muscle's damping coefficient (MuscleSystemDef::contactDamping).
-/// `stack` owns the traversal stack.
+/// is damped by `damping` times the muscle's damping coefficient (MuscleSystemDef::contactDamping),
+/// and it is marked pushed (contact.pushedLast: the projective solver holds it, as a bone's
+/// push). `stack` owns the traversal stack.
 void collideBodies(const MuscleSettings& settings, const TreeState& trees, ParticleState& particles,
-                   InteractionState& interaction, std::span<const ContactBodyState> bodies,
-                   btScalar dt, bool hasVelocities, btScalar damping, TreeTraversalStack& stack);
+                   ContactState& contact, InteractionState& interaction,
+                   std::span<const ContactBodyState> bodies, btScalar dt, bool hasVelocities,
+                   btScalar damping, TreeTraversalStack& stack);
 
 /// Adds the Hooke term of contactWrench for one muscle: every free boundary particle sphere the
 /// body's shape overlaps at `transform` pushes it with contactStiffness·depth along the contact

@@ -147,7 +147,7 @@ void setStepBounds(const MuscleSettings& s, ParticleState& particles) {
     particles.stepRadius[i] = s.isBoundary(i) && s.radii[i] > 0
                                   ? std::max(s.radii[i], leastStepRadius)
                                   : particles.meanRadius;
-  particles.stableTimeStep = stableTimeStep(s);
+  particles.stableTimeStep = particles.verletTimeStep = stableTimeStep(s);
   for (const Spring& spring : s.springs) particles.restLengthSum += spring.restLength;
 }
 

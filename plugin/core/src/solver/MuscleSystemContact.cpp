@@ -46,8 +46,8 @@ void MuscleSystem::Impl::collideBodies(btScalar dt) {
     for (ContactBodyState& body : contactBodies) moveContactBody(body, dt);
   const bool velocities = integratorFor(definition.integrator).usesVelocities();
   forEachMuscle("contact bodies", [&](MuscleState& state, uint32_t, unsigned thread) {
-    fibremss::collideBodies(*state.settings, state, state, state, contactBodies, dt, velocities,
-                            definition.contactDamping, scratch[thread].stack);
+    fibremss::collideBodies(*state.settings, state, state, state, state, contactBodies, dt,
+                            velocities, definition.contactDamping, scratch[thread].stack);
   });
   // In insertion order: the same sums for every thread count.
   for (size_t k = 0; k < contactBodies.size(); ++k) {

@@ -268,12 +268,14 @@ StepSize MuscleSystem::Impl::stepSize(int halvings) const {
   if (!(duration > 0)) return smallerSteps(stepSettings, halvings);
   // k = max(iterations, ⌈duration / dt⌉) iterations of duration / k, dt the smaller of
   // timeStep and every muscle's stable dt (springs and volume term: an exact step has no
-  // adaptive bound).
+  // adaptive bound), Verlet's in a local step.
   StepSettings exact = stepSettings;
   btScalar bound = stepSettings.timeStep;
-  for (uint32_t slot : muscles.order)
-    if (!muscles.states[slot]->frozen)
-      bound = std::min(bound, muscles.states[slot]->stableTimeStep);
+  for (uint32_t slot : muscles.order) {
+    const MuscleState& state = *muscles.states[slot];
+    if (!state.frozen)
+      bound = std::min(bound, localStepping ? state.verletTimeStep : state.stableTimeStep);
+  }
   const double split = std::ceil(double(duration) / double(bound));
   const bool shortened = split > kMaxExactIterations;
   exact.iterations = std::max(stepSettings.iterations, int(std::min(split, kMaxExactIterations)));

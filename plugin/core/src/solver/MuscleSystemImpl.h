@@ -166,8 +166,11 @@ struct MuscleSystem::Impl {
   std::vector<BodyContact> bodyResults;         ///< what each received in the last step
   mutable TreeTraversalStack queryStack;        ///< contactWrench's traversal stack
   bool localStepping = false;                   ///< the running guardedStep is stepLocal's
-  btVector3 regionCentre{0, 0, 0};              ///< setLocalRegion's centre [m]
-  btScalar regionRadius = -1;                   ///< setLocalRegion's radius (< 0: none) [m]
+  /// The last step was a whole one with an integrator other than Verlet: the next local step
+  /// starts its region at rest (x(t−dt) = x), the other integrator's x(t−dt) no Verlet velocity.
+  bool localFromRest = false;
+  btVector3 regionCentre{0, 0, 0};  ///< setLocalRegion's centre [m]
+  btScalar regionRadius = -1;       ///< setLocalRegion's radius (< 0: none) [m]
 
   MuscleState& muscle(MuscleHandle handle) const {
     MuscleState* state = muscles.find(handle);
@@ -282,7 +285,9 @@ struct MuscleSystem::Impl {
   /// Places the bones at their targets for rebuildEveryStep, or, when a bone moves, the
   /// iterations that move the bones (raising `cap` for a turning bone): 0 when none moves.
   int planBoneMotion(const StepSize& size, int& cap);
-  /// Each active muscle prepared for `integrator` and its bones resolved; with
+  /// Each active muscle's bones resolved for the step and its step counts cleared.
+  void resolveMuscles();
+  /// Each active muscle prepared for `integrator` and resolved (resolveMuscles); with
   /// rebuildEveryStep placed at its bones from rest.
   void beginMuscles(const TimeIntegrator& integrator);
   /// After the last iteration: bones still in motion jump to their targets and the muscles

@@ -137,26 +137,31 @@ void MuscleSystem::Impl::localIteration(MuscleState& state, const TimeIntegrator
 }
 
 // Every active muscle's region gathered (again for new settings) and made its free particles
-// for the step (`begin`), or its free particles given back.
+// for the step (`begin`; at rest after another integrator's whole step), or its free particles
+// given back.
 void MuscleSystem::Impl::swapRegions(bool begin) {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     if (begin && state.regionSettings != state.settings.get())
       gatherRegion(*state.settings, state, state, regionCentre, regionRadius);
     std::swap(state.freeParticles, state.regionParticles);
+    if (begin && localFromRest)
+      for (uint32_t i : state.freeParticles) state.previous[i] = state.positions[i];
   }
+  if (!begin) localFromRest = false;
 }
 
 void MuscleSystem::Impl::localStep(const StepSize& size) {
-  const TimeIntegrator& integrator = integratorFor(definition.integrator);
+  // Local steps are Verlet's whatever the system's integrator: its workspace (a factor) stays
+  // prepared for the whole steps; Verlet needs none.
+  const TimeIntegrator& integrator = integratorFor(Integrator::Verlet);
   readBoneTargets();
-  if (definition.rebuildEveryStep || bonesMove() || integrator.kind() != Integrator::Verlet)
-    return step(size);
+  if (definition.rebuildEveryStep || bonesMove()) return step(size);
   const Clock::time_point stepStart = Clock::now();
   stats = StepStats{};
   prepareWorkers();
   sortActive();
-  beginMuscles(integrator);
+  resolveMuscles();
   beginBodyContacts();
   swapRegions(true);
   int iteration = 0;

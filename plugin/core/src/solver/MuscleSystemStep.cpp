@@ -686,14 +686,20 @@ int MuscleSystem::Impl::planBoneMotion(const StepSize& size, int& cap) {
   return std::clamp(static_cast<int>(std::lround(stepSettings.motionFraction * cap)), 1, cap);
 }
 
-void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
+void MuscleSystem::Impl::resolveMuscles() {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
-    ensurePrepared(integrator, *state.settings, state, state);
     resolveBones(state);
     state.pinchedInStep = state.spannedInStep = 0;
     std::fill(state.stepBones.begin(), state.stepBones.end(), -1);
   }
+}
+
+void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
+  for (uint32_t slot : active)
+    ensurePrepared(integrator, *muscles.states[slot]->settings, *muscles.states[slot],
+                   *muscles.states[slot]);
+  resolveMuscles();
   if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
       placeAtBones(*state.settings, state);
@@ -768,6 +774,7 @@ void MuscleSystem::Impl::step(const StepSize& size) {
   stats.iterations = iteration;
   endBodyContacts();
   outputSurfaces();
+  localFromRest = integrator.kind() != Integrator::Verlet;
   stats.timing.total = millisecondsSince(stepStart);
 }
 

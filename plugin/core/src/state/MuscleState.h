@@ -60,7 +60,8 @@ struct ParticleState {
   std::vector<btVector3> forces;        ///< spring forces of this iteration [N]
   std::vector<btScalar> stepRadius;     ///< eq 5.1's r [m]: own, ≥ meanRadius/10; inner: mean
   std::vector<uint32_t> freeParticles;  ///< indices of particles that are not fixed
-  btScalar stableTimeStep = 0;          ///< largest dt for which damped Verlet stays stable [s]
+  btScalar stableTimeStep = 0;          ///< largest dt for which its integrator stays stable [s]
+  btScalar verletTimeStep = 0;          ///< largest dt for which damped Verlet stays stable [s]
   btScalar meanRadius = 0;              ///< mean boundary radius [m]
   double restLengthSum = 0;             ///< Σ L0 over the springs [m]
   std::vector<BoneHandle> bones;        ///< system handle of the settings' bone index i
