@@ -64,10 +64,25 @@ TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
 }
 
 /// The surface's triangles in one cell for one set of inside corners (bit c: corner c), the
-/// six tetrahedra's cuts in order.
+/// six tetrahedra's cuts in order: the distinct edges their vertices lie on, in the order the
+/// triangles first use them, and each triangle's edges among those.
 struct CellCut {
-  int count = 0;  ///< triangles (0 to 12)
-  std::array<std::array<std::array<uint8_t, 2>, 3>, 12> edges{};
+  int count = 0;      ///< triangles (0 to 12)
+  int edgeCount = 0;  ///< distinct edges (at most the cell's 19: 12 sides, 6 face diagonals, 1)
+  std::array<std::array<uint8_t, 2>, 19> edges{};      ///< corner pairs (u, v), u ⊂ v
+  std::array<std::array<uint8_t, 3>, 12> triangles{};  ///< per triangle: its vertices' edges
+
+  /// Adds a triangle whose vertices lie on the edges `triangle` (corner pairs).
+  void add(const std::array<std::array<int, 2>, 3>& triangle) {
+    for (size_t k = 0; k < 3; ++k) {
+      const std::array<uint8_t, 2> edge{uint8_t(triangle[k][0]), uint8_t(triangle[k][1])};
+      int e = 0;
+      while (e < edgeCount && edges[size_t(e)] != edge) ++e;
+      if (e == edgeCount) edges[size_t(edgeCount++)] = edge;
+      triangles[size_t(count)][k] = uint8_t(e);
+    }
+    ++count;
+  }
 };
 
 /// kCellCuts[inside]: the cell's triangles with the corners in bit set `inside` inside.
@@ -78,11 +93,7 @@ const std::array<CellCut, 256> kCellCuts = [] {
       unsigned tetInside = 0;
       for (unsigned k = 0; k < 4; ++k) tetInside |= (inside >> kTetrahedra[t][k] & 1) << k;
       const TetrahedronCut cut = cutOf(kTetrahedra[t], tetInside);
-      for (int n = 0; n < cut.count; ++n) {
-        auto& triangle = cuts[inside].edges[size_t(cuts[inside].count++)];
-        for (size_t k = 0; k < 3; ++k)
-          triangle[k] = {uint8_t(cut.edges[size_t(n)][k][0]), uint8_t(cut.edges[size_t(n)][k][1])};
-      }
+      for (int n = 0; n < cut.count; ++n) cuts[inside].add(cut.edges[size_t(n)]);
     }
   return cuts;
 }();
@@ -308,13 +319,14 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
                                        const std::array<GridEntry*, 8>& corners,
                                        const std::array<float, 8>& values, unsigned inside) {
   const CellCut& cut = kCellCuts[inside];
+  std::array<uint32_t, 19> vertices;  // per distinct edge of the cut
+  for (int e = 0; e < cut.edgeCount; ++e) {
+    const auto [u, v] = cut.edges[size_t(e)];
+    vertices[size_t(e)] = uint32_t(edgeVertex(cell, corners, u, v, values));
+  }
   for (int n = 0; n < cut.count; ++n) {
-    std::array<uint32_t, 3> triangle;
-    for (size_t k = 0; k < 3; ++k) {
-      const auto [u, v] = cut.edges[size_t(n)][k];
-      triangle[k] = uint32_t(edgeVertex(cell, corners, u, v, values));
-    }
-    mesh.triangles.push_back(triangle);
+    const std::array<uint8_t, 3>& t = cut.triangles[size_t(n)];
+    mesh.triangles.push_back({vertices[t[0]], vertices[t[1]], vertices[t[2]]});
   }
 }
 
