@@ -63,6 +63,12 @@ TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
   return cut;
 }
 
+/// The union-find root of `v` in `parent`, halving the path on the way.
+uint32_t rootOf(std::vector<uint32_t>& parent, uint32_t v) {
+  while (parent[v] != v) v = parent[v] = parent[parent[v]];
+  return v;
+}
+
 /// The surface's triangles in one cell for one set of inside corners (bit c: corner c), the
 /// six tetrahedra's cuts in order: the distinct edges their vertices lie on, in the order the
 /// triangles first use them, and each triangle's edges among those.
@@ -71,6 +77,9 @@ struct CellCut {
   int edgeCount = 0;  ///< distinct edges (at most the cell's 19: 12 sides, 6 face diagonals, 1)
   std::array<std::array<uint8_t, 2>, 19> edges{};      ///< corner pairs (u, v), u ⊂ v
   std::array<std::array<uint8_t, 3>, 12> triangles{};  ///< per triangle: its vertices' edges
+  /// Per edge: the first edge of the triangles joined to it through shared edges, −1 for that
+  /// first edge itself.
+  std::array<int8_t, 19> joined{};
 
   /// Adds a triangle whose vertices lie on the edges `triangle` (corner pairs).
   void add(const std::array<std::array<int, 2>, 3>& triangle) {
@@ -82,6 +91,21 @@ struct CellCut {
       triangles[size_t(count)][k] = uint8_t(e);
     }
     ++count;
+  }
+  /// Sets `joined` once every triangle is added.
+  void join() {
+    std::vector<uint32_t> parent(static_cast<size_t>(edgeCount));
+    std::iota(parent.begin(), parent.end(), 0u);
+    for (int n = 0; n < count; ++n)
+      for (size_t k = 1; k < 3; ++k) {
+        const uint32_t a = rootOf(parent, triangles[size_t(n)][0]),
+                       b = rootOf(parent, triangles[size_t(n)][k]);
+        parent[std::max(a, b)] = std::min(a, b);  // the root stays the first edge
+      }
+    for (uint32_t e = 0; e < uint32_t(edgeCount); ++e) {
+      const uint32_t first = rootOf(parent, e);
+      joined[e] = first == e ? int8_t(-1) : int8_t(first);
+    }
   }
 };
 
@@ -95,17 +119,12 @@ const std::array<CellCut, 256> kCellCuts = [] {
       const TetrahedronCut cut = cutOf(kTetrahedra[t], tetInside);
       for (int n = 0; n < cut.count; ++n) cuts[inside].add(cut.edges[size_t(n)]);
     }
+  for (CellCut& cut : cuts) cut.join();
   return cuts;
 }();
 
 /// A piece of a surface enclosing fewer grid cells than this is dropped (Impl::dropSpecks).
 constexpr double kSmallestPieceCells = 2;
-
-/// The union-find root of `v` in `parent`, halving the path on the way.
-uint32_t rootOf(std::vector<uint32_t>& parent, uint32_t v) {
-  while (parent[v] != v) v = parent[v] = parent[parent[v]];
-  return v;
-}
 
 /// The corners among `values` inside (value > 0), bit c for corner c.
 unsigned insideCorners(const std::array<float, 8>& values) {
@@ -261,15 +280,8 @@ void ImplicitSurface::Impl::march() {
 }
 
 void ImplicitSurface::Impl::dropSpecks() {
-  const size_t count = mesh.vertices.size();
-  pieceOf.resize(count);
-  std::iota(pieceOf.begin(), pieceOf.end(), 0u);
-  for (const std::array<uint32_t, 3>& t : mesh.triangles) {
-    const uint32_t root = rootOf(pieceOf, t[0]);  // stays a root: the others join it
-    pieceOf[rootOf(pieceOf, t[1])] = root;
-    pieceOf[rootOf(pieceOf, t[2])] = root;
-  }
-  uint32_t roots = 0;  // pieces
+  const size_t count = mesh.vertices.size();  // pieceOf joined by polygonise
+  uint32_t roots = 0;                         // pieces
   for (uint32_t v = 0; v < count; ++v) roots += pieceOf[v] == v;
   if (roots <= 1) return;
   // Each piece's enclosed volume (signed: a hollow's is negative), from the grid's origin.
@@ -311,6 +323,7 @@ int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
     const btScalar t = btScalar(values[u] / (values[u] - values[v]));
     vertex = int32_t(mesh.vertices.size());
     mesh.vertices.push_back(corner(u) + (corner(v) - corner(u)) * t);
+    pieceOf.push_back(uint32_t(vertex));
   }
   return vertex;
 }
@@ -319,10 +332,18 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
                                        const std::array<GridEntry*, 8>& corners,
                                        const std::array<float, 8>& values, unsigned inside) {
   const CellCut& cut = kCellCuts[inside];
-  std::array<uint32_t, 19> vertices;  // per distinct edge of the cut
+  std::array<uint32_t, 19> vertices;                 // per distinct edge of the cut
+  const auto made = uint32_t(mesh.vertices.size());  // vertices from here on are this cell's
   for (int e = 0; e < cut.edgeCount; ++e) {
     const auto [u, v] = cut.edges[size_t(e)];
     vertices[size_t(e)] = uint32_t(edgeVertex(cell, corners, u, v, values));
+  }
+  // Each vertex joins the piece of its triangles' first vertex: one made here is still a root.
+  for (int e = 0; e < cut.edgeCount; ++e) {
+    if (cut.joined[size_t(e)] < 0) continue;
+    const uint32_t root = rootOf(pieceOf, vertices[size_t(cut.joined[size_t(e)])]),
+                   vertex = vertices[size_t(e)];
+    pieceOf[vertex >= made ? vertex : rootOf(pieceOf, vertex)] = root;
   }
   for (int n = 0; n < cut.count; ++n) {
     const std::array<uint8_t, 3>& t = cut.triangles[size_t(n)];
@@ -351,6 +372,7 @@ void ImplicitSurface::extract(std::span<const btVector3> positions,
   s.marched = 0;
   s.mesh.vertices.clear();
   s.mesh.triangles.clear();
+  s.pieceOf.clear();
   s.seedAndMarch();
   s.dropSpecks();
 }

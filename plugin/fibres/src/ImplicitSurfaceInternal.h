@@ -277,7 +277,8 @@ struct ImplicitSurface::Impl {
   uint32_t mapStamp = 0;                      ///< this extraction's stamp of `maps`
   std::vector<std::array<int32_t, 3>> queue;  ///< cells to polygonise
   size_t marched = 0;                         ///< queue entries polygonised
-  std::vector<uint32_t> pieceOf;              ///< scratch per vertex: union-find parent
+  /// Per vertex: its union-find parent, vertices joined by triangles (the mesh's pieces).
+  std::vector<uint32_t> pieceOf;
   std::vector<double> pieceVolume;  ///< scratch per root vertex: its piece's volume [m³]
   std::vector<int32_t> vertexKept;  ///< scratch per vertex: its new index, −1 dropped
   TriangleMesh mesh;
