@@ -2,7 +2,6 @@
 // cells, the deformation of each particle's springs and the field itself.
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 #include "ImplicitSurfaceInternal.h"
 
@@ -17,25 +16,35 @@ constexpr btScalar kCellsPerKernel = 2;
 /// Per set of odd axes (bit a: axis a): the share 1 / 2^(odd axes) of each coarse point around.
 constexpr std::array<btScalar, 8> kCornerShare{1, 0.5f, 0.5f, 0.25f, 0.5f, 0.25f, 0.25f, 0.125f};
 
-/// Per particle, over its springs (those with a = b broken): Σ (u_b − u_a)·(X_b − X_a)ᵀ into
-/// `sums`, u the `points` (the current positions, or the rest positions X themselves), each row
-/// four lanes at a time.
-void springMoments(std::span<const Spring> springs, std::span<const btVector3> points,
-                   std::span<const btVector3> restPositions, std::vector<btMatrix3x3>& sums) {
-  sums.assign(points.size(), btMatrix3x3(0, 0, 0, 0, 0, 0, 0, 0, 0));
+/// d·eᵀ.
+btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
+  return btMatrix3x3(d.x() * e.x(), d.x() * e.y(), d.x() * e.z(), d.y() * e.x(), d.y() * e.y(),
+                     d.y() * e.z(), d.z() * e.x(), d.z() * e.y(), d.z() * e.z());
+}
+
+/// Per particle, over its springs (those with a = b broken): Σ outer(x_b − x_a, X_b − X_a)
+/// into `current`.
+void currentMoments(std::span<const Spring> springs, std::span<const btVector3> positions,
+                    std::span<const btVector3> restPositions, std::vector<btMatrix3x3>& current) {
+  current.assign(positions.size(), btMatrix3x3(0, 0, 0, 0, 0, 0, 0, 0, 0));
   for (const Spring& spring : springs) {
-    const btVector3 d = points[spring.b] - points[spring.a],
-                    e = restPositions[spring.b] - restPositions[spring.a];
-    const Lanes restEdge{e.x(), e.y(), e.z(), 0};
-    for (int r = 0; r < 3; ++r) {
-      const Lanes row = d[r] * restEdge;
-      for (btMatrix3x3* sum : {&sums[spring.a], &sums[spring.b]}) {
-        Lanes lanes;
-        std::memcpy(&lanes, (*sum)[r].m_floats, sizeof lanes);
-        lanes += row;
-        std::memcpy((*sum)[r].m_floats, &lanes, sizeof lanes);
-      }
-    }
+    const btMatrix3x3 m = outer(positions[spring.b] - positions[spring.a],
+                                restPositions[spring.b] - restPositions[spring.a]);
+    current[spring.a] += m;
+    current[spring.b] += m;
+  }
+}
+
+/// Per particle, over its springs (those with a = b broken): Σ outer(X_b − X_a, X_b − X_a)
+/// into `rest`.
+void restMomentsOf(std::span<const Spring> springs, std::span<const btVector3> restPositions,
+                   std::vector<btMatrix3x3>& rest) {
+  rest.assign(restPositions.size(), btMatrix3x3(0, 0, 0, 0, 0, 0, 0, 0, 0));
+  for (const Spring& spring : springs) {
+    const btVector3 restEdge = restPositions[spring.b] - restPositions[spring.a];
+    const btMatrix3x3 r = outer(restEdge, restEdge);
+    rest[spring.a] += r;
+    rest[spring.b] += r;
   }
 }
 
@@ -229,7 +238,7 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
     const btVector3 d = closest.point - muscle->restPositions[i];
     outward[i] = closest.inside ? d : -d;
   }
-  springMoments(muscle->springs, muscle->restPositions, muscle->restPositions, wholeRestMoments);
+  restMomentsOf(muscle->springs, muscle->restPositions, wholeRestMoments);
   measureRestCover();
 }
 
@@ -244,10 +253,10 @@ void ImplicitSurface::Impl::measureRestCover() {
 void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
                                           std::span<const Spring> springs) {
   positions = current;
-  springMoments(springs, current, muscle->restPositions, moments);
+  currentMoments(springs, current, muscle->restPositions, moments);
   const bool whole = sameSprings(springs, muscle->springs);
   spreadWeight = whole ? 0 : settings.spreadWeight;
-  if (!whole) springMoments(springs, muscle->restPositions, muscle->restPositions, restMoments);
+  if (!whole) restMomentsOf(springs, muscle->restPositions, restMoments);
   const std::vector<btMatrix3x3>& rests = whole ? wholeRestMoments : restMoments;
   toRest.resize(current.size());
   for (size_t i = 0; i < current.size(); ++i) {
@@ -264,10 +273,10 @@ void ImplicitSurface::Impl::prepareFrames(std::span<const btVector3> current,
     const btVector3& restPosition = muscle->restPositions[cells.order[e]];
     const btMatrix3x3& inverse = toRest[cells.order[e]];
     for (size_t a = 0; a < 3; ++a) {
-      entries.set(EntryLanes::kX + a, e, p[int(a)]);
-      entries.set(EntryLanes::kRestX + a, e, restPosition[int(a)]);
+      entries.array(EntryLanes::kX + a)[e] = p[int(a)];
+      entries.array(EntryLanes::kRestX + a)[e] = restPosition[int(a)];
       for (size_t b = 0; b < 3; ++b)
-        entries.set(EntryLanes::kToRest + 3 * a + b, e, inverse[int(a)][int(b)]);
+        entries.array(EntryLanes::kToRest + 3 * a + b)[e] = inverse[int(a)][int(b)];
     }
   }
 }
@@ -280,22 +289,21 @@ btScalar ImplicitSurface::Impl::coverage(const btVector3& x) const {
 }
 
 RestMap ImplicitSurface::Impl::restMap(const btVector3& x) const {
-  // A packet of four entries at a time, the lanes outside the row weighed 0.
+  // Four entries at a time, the lanes past a row's end weighed 0.
   const LaneMask lane{0, 1, 2, 3};
   const float inverseH2 = 1 / (h * h);
   Lanes weight{}, offsetX{}, offsetY{}, offsetZ{}, spread{};  // Σ w, Σ w·(X_j − x), Σ w·|X_j − x|²
   forNeighbourRows(x, [&](uint32_t begin, uint32_t end) {
-    for (uint32_t p = begin / 4; begin < end && 4 * p < end; ++p) {
-      const Lanes* at = entries.packet(p);
-      const auto first = int32_t(begin) - int32_t(4 * p), last = int32_t(end) - int32_t(4 * p);
-      const Lanes dx = x.x() - at[EntryLanes::kX], dy = x.y() - at[EntryLanes::kY],
-                  dz = x.z() - at[EntryLanes::kZ];
+    for (uint32_t e = begin; e < end; e += 4) {
+      auto at = [&](size_t a) { return entries.load(a, e); };
+      const Lanes dx = x.x() - at(EntryLanes::kX), dy = x.y() - at(EntryLanes::kY),
+                  dz = x.z() - at(EntryLanes::kZ);
       const Lanes q = 1 - (dx * dx + dy * dy + dz * dz) * inverseH2;
-      const LaneMask take = (q > 0) & (lane >= first) & (lane < last);
+      const LaneMask take = (q > 0) & (lane < int32_t(end - e));
       const Lanes w = Lanes(LaneMask(q * q * q) & take);
       auto mapped = [&](size_t a) {  // X_j − x along axis a: P_j + F_j⁻¹ (x − p_j) − x
         const size_t row = EntryLanes::kToRest + 3 * a;
-        return at[EntryLanes::kRestX + a] + (at[row] * dx + at[row + 1] * dy + at[row + 2] * dz) -
+        return at(EntryLanes::kRestX + a) + (at(row) * dx + at(row + 1) * dy + at(row + 2) * dz) -
                x[int(a)];
       };
       const Lanes mx = mapped(0), my = mapped(1), mz = mapped(2);

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "fibremss/ImplicitSurface.h"
@@ -102,23 +103,26 @@ using Lanes = float __attribute__((vector_size(16)));
 using LaneMask = int32_t __attribute__((vector_size(16)));
 
 /// Per entry of ParticleCells::order: its particle's current position p, rest position P and
-/// F⁻¹ (row after row), in packets of four entries: per packet one Lanes per coordinate.
+/// F⁻¹ (row after row), one array of floats per coordinate, read four entries at a time.
 class EntryLanes {
  public:
   enum Array : size_t { kX, kY, kZ, kRestX, kRestY, kRestZ, kToRest, kArrays = kToRest + 9 };
-  /// Room for `count` entries, the last packet's lanes past them 0.
+  /// Room for `count` entries per array, and 3 more (the lanes read past a row's last entry).
   void resize(size_t count) {
-    const size_t size = (count / 4 + 1) * kArrays;
-    if (packets_.size() != size) packets_.assign(size, Lanes{});
+    stride_ = count + 3;
+    if (values_.size() != kArrays * stride_) values_.assign(kArrays * stride_, 0);
   }
-  void set(size_t a, size_t entry, float value) {
-    packets_[entry / 4 * kArrays + a][entry % 4] = value;
+  float* array(size_t a) { return values_.data() + a * stride_; }
+  /// Entries e to e + 3 of array a.
+  Lanes load(size_t a, size_t e) const {
+    Lanes v;
+    std::memcpy(&v, values_.data() + a * stride_ + e, sizeof v);
+    return v;
   }
-  /// Packet p's coordinates, Array after Array.
-  const Lanes* packet(size_t p) const { return packets_.data() + p * kArrays; }
 
  private:
-  std::vector<Lanes> packets_;  ///< kArrays per packet
+  size_t stride_ = 0;          ///< floats per array
+  std::vector<float> values_;  ///< kArrays arrays of stride_ floats
 };
 
 /// The ray along which a seed is searched beside a boundary particle: steps of `step` from
