@@ -312,19 +312,15 @@ void ImplicitSurface::Impl::dropSpecks() {
   mesh.triangles.resize(triangles);
 }
 
-int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
-                                          const std::array<GridEntry*, 8>& corners, int u, int v,
+uint32_t ImplicitSurface::Impl::newVertex(const std::array<int32_t, 3>& cell, int u, int v,
                                           const std::array<float, 8>& values) {
-  int32_t& vertex = corners[size_t(u)]->edgeVertex[size_t((u ^ v) - 1)];
-  if (vertex < 0) {
-    auto corner = [&](int c) {
-      return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
-    };
-    const btScalar t = btScalar(values[u] / (values[u] - values[v]));
-    vertex = int32_t(mesh.vertices.size());
-    mesh.vertices.push_back(corner(u) + (corner(v) - corner(u)) * t);
-    pieceOf.push_back(uint32_t(vertex));
-  }
+  auto corner = [&](int c) {
+    return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
+  };
+  const btScalar t = btScalar(values[u] / (values[u] - values[v]));
+  const auto vertex = uint32_t(mesh.vertices.size());
+  mesh.vertices.push_back(corner(u) + (corner(v) - corner(u)) * t);
+  pieceOf.push_back(vertex);
   return vertex;
 }
 
@@ -336,7 +332,10 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
   const auto made = uint32_t(mesh.vertices.size());  // vertices from here on are this cell's
   for (int e = 0; e < cut.edgeCount; ++e) {
     const auto [u, v] = cut.edges[size_t(e)];
-    vertices[size_t(e)] = uint32_t(edgeVertex(cell, corners, u, v, values));
+    // Made once, kept in the entry of corner u (the edge goes up from it).
+    int32_t& vertex = corners[u]->edgeVertex[size_t((u ^ v) - 1)];
+    if (vertex < 0) vertex = int32_t(newVertex(cell, u, v, values));
+    vertices[size_t(e)] = uint32_t(vertex);
   }
   // Each vertex joins the piece of its triangles' first vertex: one made here is still a root.
   for (int e = 0; e < cut.edgeCount; ++e) {

@@ -247,10 +247,9 @@ struct ImplicitSurface::Impl {
   /// The cell's triangles, its corners inside (value > 0) the bits of `inside`.
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
                   const std::array<float, 8>& values, unsigned inside);
-  /// The vertex on the cell's edge from corner u up to corner v, u ⊂ v (made once, kept in the
-  /// entry of corner u among `corners`, the cell's).
-  int32_t edgeVertex(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
-                     int u, int v, const std::array<float, 8>& values);
+  /// A new vertex where the field crosses zero on the cell's edge from corner u to corner v.
+  uint32_t newVertex(const std::array<int32_t, 3>& cell, int u, int v,
+                     const std::array<float, 8>& values);
 
   std::shared_ptr<const MuscleSettings> muscle;
   ImplicitSurfaceSettings settings;
