@@ -178,10 +178,11 @@ btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
   unsigned crossing = 0;  // bit a: the cell's upper points along axis a lie in the next block
   for (int a = 0; a < 3; ++a) {
     if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
-    const auto base = int32_t(u[a]);
+    const auto base = uint32_t(u[a]);  // unsigned: its division by the block side a shift
+    const auto side = uint32_t(kBlock);
     t[a] = u[a] - btScalar(base);
-    blockOf[a] = {base / kBlock, (base + 1) / kBlock};
-    placeIn[a] = {base % kBlock, (base + 1) % kBlock};
+    blockOf[a] = {int32_t(base / side), int32_t((base + 1) / side)};
+    placeIn[a] = {int32_t(base % side), int32_t((base + 1) % side)};
     crossing |= unsigned(blockOf[a][0] != blockOf[a][1]) << a;
   }
   std::array<size_t, 8> first;  // per corner: its block's first value in values_
@@ -355,8 +356,8 @@ btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
   bool covered = true;  // every coarse point around has particles within h
   for (unsigned c = 0; c < 8; ++c) {
     if ((c & odd) != c) continue;
-    const RestMap& map =
-        coarseMap(i / 2 + int32_t(c & 1), j / 2 + int32_t(c >> 1 & 1), k / 2 + int32_t(c >> 2 & 1));
+    const RestMap& map = coarseMap((i >> 1) + int32_t(c & 1), (j >> 1) + int32_t(c >> 1 & 1),
+                                   (k >> 1) + int32_t(c >> 2 & 1));
     covered = covered && map.weight > 0;
     offset += map.offset;
     spread += map.spread;
