@@ -98,6 +98,13 @@ struct RestMap {
   btScalar weight = 0;        ///< W [1]
 };
 
+/// Inlined into its caller, whose target (an instruction set it is compiled for) it then takes.
+#if defined(__GNUC__)
+#define FIBREMSS_INLINED __attribute__((always_inline))
+#else
+#define FIBREMSS_INLINED
+#endif
+
 /// Four floats, one per lane (the compiler's vector extension: SIMD where the target has it).
 using Lanes = float __attribute__((vector_size(16)));
 using LaneMask = int32_t __attribute__((vector_size(16)));
@@ -187,7 +194,7 @@ struct ImplicitSurface::Impl {
   /// fn(begin, end) for each row of particle cells within h of x along every axis: the
   /// entries [begin, end) of cells.order (the cells of a row along x hold consecutive entries).
   template <class Fn>
-  void forNeighbourRows(const btVector3& x, Fn&& fn) const {
+  FIBREMSS_INLINED void forNeighbourRows(const btVector3& x, Fn&& fn) const {
     const btVector3 u = (x - cells.frame.origin) / cells.frame.spacing;
     const btScalar reach = h / cells.frame.spacing;
     std::array<int32_t, 3> lo, hi;
