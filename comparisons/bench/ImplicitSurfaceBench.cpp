@@ -1,16 +1,19 @@
 // `fibremss_bench --implicit-surface R [ROUNDS]`: every thigh13 muscle's implicit surface
 // (ImplicitSurface.h) at rest: its distance to the skinned surface both ways (the skinned surface
 // at rest is the rest surface), its open edges and pieces, and the wall time of extracting them
-// all per frame with 1 and 2 threads, alternated, medians; then posed: the scene stepped through
-// its first poses, the surfaces extracted after every step, and the last pose's extraction
-// timed as at rest.
+// all per frame with 1 and 2 threads, alternated, medians, and each muscle's alone with the wall
+// time on 2 idle cores that the pool's schedule of those gives; then posed: the scene stepped
+// through its first poses, the surfaces extracted after every step, and the last pose's
+// extraction timed as at rest.
 #include "ImplicitSurfaceBench.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <ctime>
 #include <fstream>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -137,6 +140,40 @@ struct Frame {
   std::vector<std::span<const Spring>> springs;
 };
 
+/// This thread's CPU time [ms].
+double threadCpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return 1e3 * double(t.tv_sec) + 1e-6 * double(t.tv_nsec);
+}
+
+/// Each surface's extraction alone on this thread, its CPU time's median over `rounds`, and the
+/// wall time of a frame on 2 idle cores that these times give: extractSurfaces hands the
+/// surfaces out largest first (by particles), each to the thread that is free first.
+void scheduleReport(const Frame& frame, int rounds) {
+  std::vector<std::vector<double>> times(frame.surfaces.size());
+  for (int round = 0; round < rounds; ++round)
+    for (size_t m = 0; m < frame.surfaces.size(); ++m) {
+      const double start = threadCpuMs();
+      frame.surfaces[m]->extract(frame.positions[m], frame.springs[m]);
+      times[m].push_back(threadCpuMs() - start);
+    }
+  std::vector<double> ms;
+  for (const std::vector<double>& t : times) ms.push_back(medianOf(t));
+  std::vector<size_t> order(ms.size());
+  for (size_t m = 0; m < order.size(); ++m) order[m] = m;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return frame.positions[a].size() > frame.positions[b].size();
+  });
+  std::array<double, 2> busy{0, 0};  // per thread: when it is free [ms]
+  for (size_t m : order) *std::min_element(busy.begin(), busy.end()) += ms[m];
+  std::printf(
+      "  each muscle alone on 1 thread, medians: %.2f to %.2f ms (sum %.2f ms); the 2-thread "
+      "schedule of these: %.2f ms\n",
+      *std::min_element(ms.begin(), ms.end()), *std::max_element(ms.begin(), ms.end()),
+      std::accumulate(ms.begin(), ms.end(), 0.0), std::max(busy[0], busy[1]));
+}
+
 /// Medians over `rounds` alternated rounds of extracting `frame` on 1 and 2 threads, printed
 /// under `label` with the load.
 void timingReport(const char* label, Frame& frame, int rounds) {
@@ -160,6 +197,7 @@ void timingReport(const char* label, Frame& frame, int rounds) {
       "2 threads %.2f ms (CPU %.2f ms); load %s\n",
       label, rounds, medianOf(one), medianOf(cpuOne), medianOf(two), medianOf(cpuTwo),
       load.c_str());
+  scheduleReport(frame, rounds);
 }
 
 /// The scene stepped through its first `steps` poses (as `fibremss run`), every surface

@@ -63,11 +63,50 @@ TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
   return cut;
 }
 
+/// The union-find root of `v` in `parent`, halving the path on the way.
+uint32_t rootOf(std::vector<uint32_t>& parent, uint32_t v) {
+  while (parent[v] != v) v = parent[v] = parent[parent[v]];
+  return v;
+}
+
 /// The surface's triangles in one cell for one set of inside corners (bit c: corner c), the
-/// six tetrahedra's cuts in order.
+/// six tetrahedra's cuts in order: the distinct edges their vertices lie on, in the order the
+/// triangles first use them, and each triangle's edges among those.
 struct CellCut {
-  int count = 0;  ///< triangles (0 to 12)
-  std::array<std::array<std::array<uint8_t, 2>, 3>, 12> edges{};
+  int count = 0;      ///< triangles (0 to 12)
+  int edgeCount = 0;  ///< distinct edges (at most the cell's 19: 12 sides, 6 face diagonals, 1)
+  std::array<std::array<uint8_t, 2>, 19> edges{};      ///< corner pairs (u, v), u ⊂ v
+  std::array<std::array<uint8_t, 3>, 12> triangles{};  ///< per triangle: its vertices' edges
+  /// Per edge: the first edge of the triangles joined to it through shared edges, −1 for that
+  /// first edge itself.
+  std::array<int8_t, 19> joined{};
+
+  /// Adds a triangle whose vertices lie on the edges `triangle` (corner pairs).
+  void add(const std::array<std::array<int, 2>, 3>& triangle) {
+    for (size_t k = 0; k < 3; ++k) {
+      const std::array<uint8_t, 2> edge{uint8_t(triangle[k][0]), uint8_t(triangle[k][1])};
+      int e = 0;
+      while (e < edgeCount && edges[size_t(e)] != edge) ++e;
+      if (e == edgeCount) edges[size_t(edgeCount++)] = edge;
+      triangles[size_t(count)][k] = uint8_t(e);
+    }
+    ++count;
+  }
+  /// Sets `joined` once every triangle is added.
+  void join() {
+    std::vector<uint32_t> parent(static_cast<size_t>(edgeCount));
+    std::iota(parent.begin(), parent.end(), 0u);
+    for (int n = 0; n < count; ++n)
+      for (size_t k = 1; k < 3; ++k) {
+        const uint32_t a = rootOf(parent, triangles[size_t(n)][0]),
+                       b = rootOf(parent, triangles[size_t(n)][k]);
+        parent[std::max(a, b)] = std::min(a, b);  // the root stays the first edge
+      }
+    for (uint32_t e = 0; e < uint32_t(edgeCount); ++e) {
+      const uint32_t first = rootOf(parent, e);
+      joined[e] = first == e ? int8_t(-1) : int8_t(first);
+    }
+  }
 };
 
 /// kCellCuts[inside]: the cell's triangles with the corners in bit set `inside` inside.
@@ -78,23 +117,14 @@ const std::array<CellCut, 256> kCellCuts = [] {
       unsigned tetInside = 0;
       for (unsigned k = 0; k < 4; ++k) tetInside |= (inside >> kTetrahedra[t][k] & 1) << k;
       const TetrahedronCut cut = cutOf(kTetrahedra[t], tetInside);
-      for (int n = 0; n < cut.count; ++n) {
-        auto& triangle = cuts[inside].edges[size_t(cuts[inside].count++)];
-        for (size_t k = 0; k < 3; ++k)
-          triangle[k] = {uint8_t(cut.edges[size_t(n)][k][0]), uint8_t(cut.edges[size_t(n)][k][1])};
-      }
+      for (int n = 0; n < cut.count; ++n) cuts[inside].add(cut.edges[size_t(n)]);
     }
+  for (CellCut& cut : cuts) cut.join();
   return cuts;
 }();
 
 /// A piece of a surface enclosing fewer grid cells than this is dropped (Impl::dropSpecks).
 constexpr double kSmallestPieceCells = 2;
-
-/// The union-find root of `v` in `parent`, halving the path on the way.
-uint32_t rootOf(std::vector<uint32_t>& parent, uint32_t v) {
-  while (parent[v] != v) v = parent[v] = parent[parent[v]];
-  return v;
-}
 
 /// The corners among `values` inside (value > 0), bit c for corner c.
 unsigned insideCorners(const std::array<float, 8>& values) {
@@ -250,15 +280,8 @@ void ImplicitSurface::Impl::march() {
 }
 
 void ImplicitSurface::Impl::dropSpecks() {
-  const size_t count = mesh.vertices.size();
-  pieceOf.resize(count);
-  std::iota(pieceOf.begin(), pieceOf.end(), 0u);
-  for (const std::array<uint32_t, 3>& t : mesh.triangles) {
-    const uint32_t root = rootOf(pieceOf, t[0]);  // stays a root: the others join it
-    pieceOf[rootOf(pieceOf, t[1])] = root;
-    pieceOf[rootOf(pieceOf, t[2])] = root;
-  }
-  uint32_t roots = 0;  // pieces
+  const size_t count = mesh.vertices.size();  // pieceOf joined by polygonise
+  uint32_t roots = 0;                         // pieces
   for (uint32_t v = 0; v < count; ++v) roots += pieceOf[v] == v;
   if (roots <= 1) return;
   // Each piece's enclosed volume (signed: a hollow's is negative), from the grid's origin.
@@ -289,18 +312,15 @@ void ImplicitSurface::Impl::dropSpecks() {
   mesh.triangles.resize(triangles);
 }
 
-int32_t ImplicitSurface::Impl::edgeVertex(const std::array<int32_t, 3>& cell,
-                                          const std::array<GridEntry*, 8>& corners, int u, int v,
+uint32_t ImplicitSurface::Impl::newVertex(const std::array<int32_t, 3>& cell, int u, int v,
                                           const std::array<float, 8>& values) {
-  int32_t& vertex = corners[size_t(u)]->edgeVertex[size_t((u ^ v) - 1)];
-  if (vertex < 0) {
-    auto corner = [&](int c) {
-      return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
-    };
-    const btScalar t = btScalar(values[u] / (values[u] - values[v]));
-    vertex = int32_t(mesh.vertices.size());
-    mesh.vertices.push_back(corner(u) + (corner(v) - corner(u)) * t);
-  }
+  auto corner = [&](int c) {
+    return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
+  };
+  const btScalar t = btScalar(values[u] / (values[u] - values[v]));
+  const auto vertex = uint32_t(mesh.vertices.size());
+  mesh.vertices.push_back(corner(u) + (corner(v) - corner(u)) * t);
+  pieceOf.push_back(vertex);
   return vertex;
 }
 
@@ -308,13 +328,25 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
                                        const std::array<GridEntry*, 8>& corners,
                                        const std::array<float, 8>& values, unsigned inside) {
   const CellCut& cut = kCellCuts[inside];
+  std::array<uint32_t, 19> vertices;                 // per distinct edge of the cut
+  const auto made = uint32_t(mesh.vertices.size());  // vertices from here on are this cell's
+  for (int e = 0; e < cut.edgeCount; ++e) {
+    const auto [u, v] = cut.edges[size_t(e)];
+    // Made once, kept in the entry of corner u (the edge goes up from it).
+    int32_t& vertex = corners[u]->edgeVertex[size_t((u ^ v) - 1)];
+    if (vertex < 0) vertex = int32_t(newVertex(cell, u, v, values));
+    vertices[size_t(e)] = uint32_t(vertex);
+  }
+  // Each vertex joins the piece of its triangles' first vertex: one made here is still a root.
+  for (int e = 0; e < cut.edgeCount; ++e) {
+    if (cut.joined[size_t(e)] < 0) continue;
+    const uint32_t root = rootOf(pieceOf, vertices[size_t(cut.joined[size_t(e)])]),
+                   vertex = vertices[size_t(e)];
+    pieceOf[vertex >= made ? vertex : rootOf(pieceOf, vertex)] = root;
+  }
   for (int n = 0; n < cut.count; ++n) {
-    std::array<uint32_t, 3> triangle;
-    for (size_t k = 0; k < 3; ++k) {
-      const auto [u, v] = cut.edges[size_t(n)][k];
-      triangle[k] = uint32_t(edgeVertex(cell, corners, u, v, values));
-    }
-    mesh.triangles.push_back(triangle);
+    const std::array<uint8_t, 3>& t = cut.triangles[size_t(n)];
+    mesh.triangles.push_back({vertices[t[0]], vertices[t[1]], vertices[t[2]]});
   }
 }
 
@@ -339,6 +371,7 @@ void ImplicitSurface::extract(std::span<const btVector3> positions,
   s.marched = 0;
   s.mesh.vertices.clear();
   s.mesh.triangles.clear();
+  s.pieceOf.clear();
   s.seedAndMarch();
   s.dropSpecks();
 }

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "fibremss/ImplicitSurface.h"
@@ -97,6 +98,40 @@ struct RestMap {
   btScalar weight = 0;        ///< W [1]
 };
 
+/// Inlined into its caller, whose target (an instruction set it is compiled for) it then takes.
+#if defined(__GNUC__)
+#define FIBREMSS_INLINED __attribute__((always_inline))
+#else
+#define FIBREMSS_INLINED
+#endif
+
+/// Four floats, one per lane (the compiler's vector extension: SIMD where the target has it).
+using Lanes = float __attribute__((vector_size(16)));
+using LaneMask = int32_t __attribute__((vector_size(16)));
+
+/// Per entry of ParticleCells::order: its particle's current position p, rest position P and
+/// F⁻¹ (row after row), one array of floats per coordinate, read four entries at a time.
+class EntryLanes {
+ public:
+  enum Array : size_t { kX, kY, kZ, kRestX, kRestY, kRestZ, kToRest, kArrays = kToRest + 9 };
+  /// Room for `count` entries per array, and 3 more (the lanes read past a row's last entry).
+  void resize(size_t count) {
+    stride_ = count + 3;
+    if (values_.size() != kArrays * stride_) values_.assign(kArrays * stride_, 0);
+  }
+  float* array(size_t a) { return values_.data() + a * stride_; }
+  /// Entries e to e + 3 of array a.
+  Lanes load(size_t a, size_t e) const {
+    Lanes v;
+    std::memcpy(&v, values_.data() + a * stride_ + e, sizeof v);
+    return v;
+  }
+
+ private:
+  size_t stride_ = 0;          ///< floats per array
+  std::vector<float> values_;  ///< kArrays arrays of stride_ floats
+};
+
 /// The ray along which a seed is searched beside a boundary particle: steps of `step` from
 /// `start` along `direction`, the rest surface expected at step `expected`.
 struct SeedRay {
@@ -156,28 +191,35 @@ struct ImplicitSurface::Impl {
   btScalar field(int32_t i, int32_t j, int32_t k);
   btScalar coverage(const btVector3& x) const;
   void measureRestCover();
-  /// fn(entry, x − p, w) for every particle binned in `cells` within h of x, by its entry in
-  /// cells.order.
+  /// fn(begin, end) for each row of particle cells within h of x along every axis: the
+  /// entries [begin, end) of cells.order (the cells of a row along x hold consecutive entries).
   template <class Fn>
-  void forNeighbours(const btVector3& x, Fn&& fn) const {
+  FIBREMSS_INLINED void forNeighbourRows(const btVector3& x, Fn&& fn) const {
     const btVector3 u = (x - cells.frame.origin) / cells.frame.spacing;
-    const btScalar reach = h / cells.frame.spacing, inverseH2 = 1 / (h * h);
+    const btScalar reach = h / cells.frame.spacing;
     std::array<int32_t, 3> lo, hi;
     for (int a = 0; a < 3; ++a) {
       lo[a] = std::max(int32_t(std::floor(u[a] - reach)), 0);
       hi[a] = std::min(int32_t(std::floor(u[a] + reach)), cells.frame.dims[a] - 1);
       if (lo[a] > hi[a]) return;
     }
-    // The cells of a row along x hold consecutive entries: one range per row.
     for (int32_t k = lo[2]; k <= hi[2]; ++k)
-      for (int32_t j = lo[1]; j <= hi[1]; ++j) {
-        const uint32_t end = cells.start[cells.frame.index(hi[0], j, k) + 1];
-        for (uint32_t e = cells.start[cells.frame.index(lo[0], j, k)]; e < end; ++e) {
-          const btVector3 d = x - cells.sorted[e];
-          const btScalar q = 1 - d.length2() * inverseH2;
-          if (q > 0) fn(e, d, q * q * q);
-        }
+      for (int32_t j = lo[1]; j <= hi[1]; ++j)
+        fn(cells.start[cells.frame.index(lo[0], j, k)],
+           cells.start[cells.frame.index(hi[0], j, k) + 1]);
+  }
+  /// fn(entry, x − p, w) for every particle binned in `cells` within h of x, by its entry in
+  /// cells.order.
+  template <class Fn>
+  void forNeighbours(const btVector3& x, Fn&& fn) const {
+    const btScalar inverseH2 = 1 / (h * h);
+    forNeighbourRows(x, [&](uint32_t begin, uint32_t end) {
+      for (uint32_t e = begin; e < end; ++e) {
+        const btVector3 d = x - cells.sorted[e];
+        const btScalar q = 1 - d.length2() * inverseH2;
+        if (q > 0) fn(e, d, q * q * q);
       }
+    });
   }
 
   // The extraction (ImplicitSurface.cpp).
@@ -212,10 +254,9 @@ struct ImplicitSurface::Impl {
   /// The cell's triangles, its corners inside (value > 0) the bits of `inside`.
   void polygonise(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
                   const std::array<float, 8>& values, unsigned inside);
-  /// The vertex on the cell's edge from corner u up to corner v, u ⊂ v (made once, kept in the
-  /// entry of corner u among `corners`, the cell's).
-  int32_t edgeVertex(const std::array<int32_t, 3>& cell, const std::array<GridEntry*, 8>& corners,
-                     int u, int v, const std::array<float, 8>& values);
+  /// A new vertex where the field crosses zero on the cell's edge from corner u to corner v.
+  uint32_t newVertex(const std::array<int32_t, 3>& cell, int u, int v,
+                     const std::array<float, 8>& values);
 
   std::shared_ptr<const MuscleSettings> muscle;
   ImplicitSurfaceSettings settings;
@@ -233,8 +274,7 @@ struct ImplicitSurface::Impl {
   /// open no surface: their spread is the error of their affine maps where they deform) [1].
   btScalar spreadWeight = 0;
   std::vector<btMatrix3x3> toRest;       ///< per particle F⁻¹ (identity when degenerate)
-  std::vector<btVector3> entryRest;      ///< per entry of cells.order: its rest position [m]
-  std::vector<btMatrix3x3> entryToRest;  ///< per entry of cells.order: its F⁻¹
+  EntryLanes entries;                    ///< per entry of cells.order: p, P and F⁻¹
   std::vector<btMatrix3x3> moments;      ///< scratch: Σ dx·dXᵀ over the unbroken springs [m²]
   std::vector<btMatrix3x3> restMoments;  ///< scratch: Σ dX·dXᵀ over the unbroken springs [m²]
   /// Per particle Σ dX·dXᵀ over all the muscle's springs (none broken) [m²].
@@ -247,9 +287,10 @@ struct ImplicitSurface::Impl {
   uint32_t mapStamp = 0;                      ///< this extraction's stamp of `maps`
   std::vector<std::array<int32_t, 3>> queue;  ///< cells to polygonise
   size_t marched = 0;                         ///< queue entries polygonised
-  std::vector<uint32_t> pieceOf;              ///< scratch per vertex: union-find parent
-  std::vector<double> pieceVolume;            ///< scratch per root vertex: its piece's volume [m³]
-  std::vector<int32_t> vertexKept;            ///< scratch per vertex: its new index, −1 dropped
+  /// Per vertex: its union-find parent, vertices joined by triangles (the mesh's pieces).
+  std::vector<uint32_t> pieceOf;
+  std::vector<double> pieceVolume;  ///< scratch per root vertex: its piece's volume [m³]
+  std::vector<int32_t> vertexKept;  ///< scratch per vertex: its new index, −1 dropped
   TriangleMesh mesh;
 };
 
