@@ -67,6 +67,7 @@ struct StepHistory {
   std::vector<btVector3> lastPositions;          ///< x at the last iteration's forces [m]
   std::vector<btVector3> lastForces;             ///< the forces F there [N]
   bool hasLast = false;                          ///< lastPositions/lastForces hold an iteration
+  bool tookPairs = false;  ///< the last iteration's step was H·F with pairs (not the plain one)
 
   /// Forgets every pair (the next iteration is the plain projective step).
   void restart() { count = 0; }
@@ -183,10 +184,9 @@ double meanRestLength(const IntegratedMuscle& muscle) {
 
 /// The square of the rounding a particle's force may carry at `x` [N²], `stiffness` its diagonal
 /// entry of A [N/m]: each spring force k·(|x_b − x_a| − L0) rounds by about k·ε·(|x| + L0), ε
-/// btScalar's epsilon. A curvature pair whose s·y this rounding can reach (|s|·|y's rounding|)
-/// measures nothing: with such pairs at rest (the double build, a box carried rigidly by its bone)
-/// the L-BFGS step moved particles 1.5 mm off their bone while every spring was exact. Forces at
-/// the rounding level move a particle by about its |s| at most through a pair that passes.
+/// btScalar's epsilon. A curvature pair whose s·y this rounding can reach measures nothing: with
+/// such pairs at rest (the double build, a box carried rigidly by its bone) the L-BFGS step moved
+/// particles 1.5 mm off their bone while every spring was exact (aboveRounding).
 double forceNoise(double stiffness, const btVector3& x, double restLength) {
   constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
   return kEpsilon * kEpsilon * stiffness * stiffness *
@@ -236,6 +236,7 @@ struct PairProducts {
   double curvature = 0;  ///< s·y [N·m]
   double steps = 0;      ///< s·s [m²]
   double changes = 0;    ///< y·y [N²]
+  double descent = 0;    ///< s·F_last, the step along the forces it was taken on [N·m]
 };
 
 #if FIBREMSS_AVX2_PARTICLES
@@ -250,19 +251,22 @@ FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVec
     sums.curvature = addDots(sums.curvature, _mm256_mul_ps(step, change));
     sums.steps = addDots(sums.steps, _mm256_mul_ps(step, step));
     sums.changes = addDots(sums.changes, _mm256_mul_ps(change, change));
+    sums.descent = addDots(sums.descent, _mm256_mul_ps(step, rowPair(lastForces, r)));
     _mm256_storeu_ps(lastForces[r].m_floats, rowPair(forces, r));
   }
   if (r < rows) {
     sums.curvature += double(s[r].dot(y[r]));
     sums.steps += double(s[r].dot(s[r]));
     sums.changes += double(y[r].dot(y[r]));
+    sums.descent += double(s[r].dot(lastForces[r]));
     lastForces[r] = forces[r];
   }
   return sums;
 }
 #endif
 
-/// The products of the pair s, y in one pass, which also keeps `forces` in `lastForces`.
+/// The products of the pair s, y and of s with the forces `lastForces` it was taken on, in one
+/// pass, which also keeps `forces` in `lastForces`.
 PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btVector3>& y,
                           const std::vector<btVector3>& forces,
                           std::vector<btVector3>& lastForces) {
@@ -275,62 +279,99 @@ PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btV
     sums.curvature += double(s[r].dot(y[r]));
     sums.steps += double(s[r].dot(s[r]));
     sums.changes += double(y[r].dot(y[r]));
+    sums.descent += double(s[r].dot(lastForces[r]));
     lastForces[r] = forces[r];
   }
   return sums;
 }
 
+/// What the rounding of floats can put into a pair, summed over its rows (fillPair).
+struct PairRounding {
+  double curvature = 0;  ///< Σ |s_row|²·(forceNoise of the row), s·y's rounding squared [N²·m²]
+  double positions = 0;  ///< Σ |x_row|², over ε² the positions' own rounding squared [m²]
+};
+
 /// Writes the pair s = x − x_last, y = F_last − F by row (zero in the rows the last response
-/// pushed) and keeps x in lastPositions. Returns the square of the forces' rounding over the rows
-/// in the pair (forceNoise) [N²].
-double fillPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
-                const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
-                const std::vector<uint8_t>& pushedRows, int slot) {
+/// pushed) and keeps x in lastPositions. Returns what rounding can put into the pair.
+PairRounding fillPair(StepHistory& h, const IntegratedMuscle& muscle,
+                      const std::vector<uint32_t>& free, const ProjectiveFactor& factor,
+                      const std::vector<btVector3>& forces, const std::vector<uint8_t>& pushedRows,
+                      int slot) {
   const std::vector<btVector3>& positions = muscle.particles.positions;
   std::vector<btVector3>& s = h.steps[slot];
   std::vector<btVector3>& y = h.changes[slot];
   const double restLength = meanRestLength(muscle);
-  double noise = 0;
+  PairRounding rounding;
   for (size_t k = 0; k < free.size(); ++k) {
     const int row = factor.row(k);
-    const bool pushed = pushedRows[row] != 0;
     const btVector3& x = positions[free[k]];
     btVector3& last = h.lastPositions[row];
-    s[row] = pushed ? btVector3(0, 0, 0) : x - last;
-    y[row] = pushed ? btVector3(0, 0, 0) : h.lastForces[row] - forces[row];
-    if (!pushed) noise += forceNoise(factor.matrixDiagonal(row), x, restLength);
+    if (pushedRows[row] != 0) {
+      s[row] = y[row] = btVector3(0, 0, 0);
+    } else {
+      s[row] = x - last;
+      y[row] = h.lastForces[row] - forces[row];
+      const double noise = forceNoise(factor.matrixDiagonal(row), x, restLength);
+      rounding.curvature += double(s[row].length2()) * noise;
+      rounding.positions += double(x.length2());
+    }
     last = x;
   }
-  return noise;
+  return rounding;
+}
+
+/// Whether the pair `p` measures more than rounding (`r`): its s·y above three times the likely
+/// share of the forces' rounding, √(2·Σ |s_row|²·ε_y,row²) (rounding independent from row to row,
+/// y's both forces'), and its step above ten times the positions' rounding. The bound |s|·|ε_y|
+/// (all the rows' rounding along s) refused every pair once the bones stopped in cylinder-twist's
+/// poses at 400 and 1 000 iterations: the plain step alone left them 0.506 and 0.121 mm from the
+/// converged state (docs/decisions.md, "Solver").
+bool aboveRounding(const PairProducts& p, const PairRounding& r) {
+  constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
+  return p.curvature > 3 * std::sqrt(2 * r.curvature) &&
+         p.steps > 100 * kEpsilon * kEpsilon * r.positions;
+}
+
+/// The share of the last step, one of L-BFGS, that stays: 1 when it lowered the energy, whose
+/// change along the step, −∫F·ds, the trapezoid rule on the forces at both ends puts at
+/// −s·(F_last + F)/2 = −s·F_last + s·y/2; else the minimum along s of the quadratic that the pair
+/// measures, s·F_last / s·y (0 without positive curvature). The rule needs no energy: the volume
+/// terms have none to sum (their G0/G factor), and near an equilibrium a sum of the energy in
+/// floats rounds away the change a step makes, where the forces still carry it.
+double keptShare(const PairProducts& p) {
+  if (p.curvature < 2 * p.descent) return 1;
+  return p.curvature > 0 ? std::max(0.0, p.descent / p.curvature) : 0;
 }
 
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
-/// curvature or no more than the forces' rounding can (forceNoise), and keeps x and F for the
-/// next. Rows the last response pushed are left out of the pair: a projection's move is not the
-/// forces' answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells
-/// tore).
-void recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
-                const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
-                const std::vector<uint8_t>& pushedRows, int size) {
+/// curvature or no more than rounding can (aboveRounding), and keeps x and F for the next. Rows
+/// the last response pushed are left out of the pair: a projection's move is not the forces'
+/// answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells tore).
+/// Returns the share of the last step that stays (keptShare; 1 after a plain step): below 1 the
+/// pair is left out, for the caller to take the rest of the step back.
+double recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
+                  const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+                  const std::vector<uint8_t>& pushedRows, int size) {
   if (!(h.hasLast && size > 0)) {
     const std::vector<btVector3>& positions = muscle.particles.positions;
     for (size_t k = 0; k < free.size(); ++k) h.lastPositions[factor.row(k)] = positions[free[k]];
     h.lastForces = forces;
     h.hasLast = true;
-    return;
+    return 1;
   }
   const int slot = (h.newest + 1) % size;
-  const double noise = fillPair(h, muscle, free, factor, forces, pushedRows, slot);
+  const PairRounding rounding = fillPair(h, muscle, free, factor, forces, pushedRows, slot);
   const PairProducts p = pairProducts(h.steps[slot], h.changes[slot], forces, h.lastForces);
-  // y's rounding is both forces': √2·the noise of one.
-  if (p.curvature > 1e-12 * std::sqrt(p.steps * p.changes) &&
-      p.curvature > std::sqrt(2 * p.steps * noise)) {
+  const double share = h.tookPairs ? keptShare(p) : 1;
+  if (share < 1) return share;
+  if (p.curvature > 1e-12 * std::sqrt(p.steps * p.changes) && aboveRounding(p, rounding)) {
     h.curvature[slot] = p.curvature;
     h.newest = slot;
     h.count = std::min(h.count + 1, size);
   } else {
     h.restart();
   }
+  return 1;
 }
 
 #if FIBREMSS_AVX2_PARTICLES
@@ -499,9 +540,21 @@ void boundStep(const IntegratedMuscle& muscle, std::vector<btVector3>& step) {
   for (btVector3& d : step) d *= scale;
 }
 
+/// Takes back all but `share` of the last step, as the pair in `slot` measured it (the rows the
+/// response pushed since, zero in s, stay where it put them): the step into w.solution is
+/// (share − 1)·s. The pairs start anew, and the next iteration takes the plain step from there.
+void takeBack(StepHistory& h, std::vector<btVector3>& solution, int slot, double share) {
+  const auto back = static_cast<btScalar>(share - 1);
+  const std::vector<btVector3>& s = h.steps[slot];
+  for (size_t r = 0; r < solution.size(); ++r) solution[r] = s[r] * back;
+  h.restart();
+  h.hasLast = false;
+}
+
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
 /// or moves a particle too far (keepsStep) is replaced by the plain projective one, bounded
-/// (boundStep), and the history restarts.
+/// (boundStep), and the history restarts. An L-BFGS step that raised the energy (recordPair) is
+/// taken back to the pair's minimum along it instead (takeBack).
 IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
   ParticleState& particles = muscle.particles;
@@ -510,14 +563,21 @@ IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSy
   StepHistory& h = w.history;
   if (particles.bonesMoving || h.size != size) h.restart();
   h.size = size;
-  recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
-  twoLoop(h, w.factor, w.forces, w.solution, size);
-  if (h.count > 0 && !keepsStep(muscle, w.solution, w.forces)) {
-    h.restart();
-    w.solution = w.forces;
-    w.factor.solveInPlace(w.solution.data());
+  const int slot = (h.newest + 1) % size;
+  const double share =
+      recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
+  if (share < 1) {
+    takeBack(h, w.solution, slot, share);
+  } else {
+    twoLoop(h, w.factor, w.forces, w.solution, size);
+    if (h.count > 0 && !keepsStep(muscle, w.solution, w.forces)) {
+      h.restart();
+      w.solution = w.forces;
+      w.factor.solveInPlace(w.solution.data());
+    }
+    if (h.count == 0) boundStep(muscle, w.solution);  // an L-BFGS step kept is within the bound
   }
-  if (h.count == 0) boundStep(muscle, w.solution);  // an L-BFGS step kept is within the bound
+  h.tookPairs = h.count > 0;
   IntegrationResult result;
   for (size_t k = 0; k < free.size(); ++k)
     result.displacement += heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], 0, 1);
