@@ -242,8 +242,7 @@ struct PairProducts {
 #if FIBREMSS_AVX2_PARTICLES
 /// pairProducts two rows per instruction (the same bits).
 FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVector3* y,
-                                                 const btVector3* forces, btVector3* lastForces,
-                                                 size_t rows) {
+                                                 const btVector3* lastForces, size_t rows) {
   PairProducts sums;
   size_t r = 0;
   for (; r + 1 < rows; r += 2) {
@@ -252,27 +251,24 @@ FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVec
     sums.steps = addDots(sums.steps, _mm256_mul_ps(step, step));
     sums.changes = addDots(sums.changes, _mm256_mul_ps(change, change));
     sums.descent = addDots(sums.descent, _mm256_mul_ps(step, rowPair(lastForces, r)));
-    _mm256_storeu_ps(lastForces[r].m_floats, rowPair(forces, r));
   }
   if (r < rows) {
     sums.curvature += double(s[r].dot(y[r]));
     sums.steps += double(s[r].dot(s[r]));
     sums.changes += double(y[r].dot(y[r]));
     sums.descent += double(s[r].dot(lastForces[r]));
-    lastForces[r] = forces[r];
   }
   return sums;
 }
 #endif
 
 /// The products of the pair s, y and of s with the forces `lastForces` it was taken on, in one
-/// pass, which also keeps `forces` in `lastForces`.
+/// pass.
 PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btVector3>& y,
-                          const std::vector<btVector3>& forces,
-                          std::vector<btVector3>& lastForces) {
+                          const std::vector<btVector3>& lastForces) {
 #if FIBREMSS_AVX2_PARTICLES
   if (fastestSpringKernel() == SpringKernel::avx2)
-    return pairProductsAvx2(s.data(), y.data(), forces.data(), lastForces.data(), s.size());
+    return pairProductsAvx2(s.data(), y.data(), lastForces.data(), s.size());
 #endif
   PairProducts sums;
   for (size_t r = 0; r < s.size(); ++r) {
@@ -280,15 +276,16 @@ PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btV
     sums.steps += double(s[r].dot(s[r]));
     sums.changes += double(y[r].dot(y[r]));
     sums.descent += double(s[r].dot(lastForces[r]));
-    lastForces[r] = forces[r];
   }
   return sums;
 }
 
 /// What the rounding of floats can put into a pair, summed over its rows (fillPair).
 struct PairRounding {
+  double forces = 0;     ///< Σ forceNoise over the rows, the forces' rounding squared [N²]
   double curvature = 0;  ///< Σ |s_row|²·(forceNoise of the row), s·y's rounding squared [N²·m²]
   double positions = 0;  ///< Σ |x_row|², over ε² the positions' own rounding squared [m²]
+  bool pushed = false;   ///< some row was left out, its particle pushed by the last response
 };
 
 /// Writes the pair s = x − x_last, y = F_last − F by row (zero in the rows the last response
@@ -308,10 +305,12 @@ PairRounding fillPair(StepHistory& h, const IntegratedMuscle& muscle,
     btVector3& last = h.lastPositions[row];
     if (pushedRows[row] != 0) {
       s[row] = y[row] = btVector3(0, 0, 0);
+      rounding.pushed = true;
     } else {
       s[row] = x - last;
       y[row] = h.lastForces[row] - forces[row];
       const double noise = forceNoise(factor.matrixDiagonal(row), x, restLength);
+      rounding.forces += noise;
       rounding.curvature += double(s[row].length2()) * noise;
       rounding.positions += double(x.length2());
     }
@@ -325,8 +324,12 @@ PairRounding fillPair(StepHistory& h, const IntegratedMuscle& muscle,
 /// y's both forces'), and its step above ten times the positions' rounding. The bound |s|·|ε_y|
 /// (all the rows' rounding along s) refused every pair once the bones stopped in cylinder-twist's
 /// poses at 400 and 1 000 iterations: the plain step alone left them 0.506 and 0.121 mm from the
-/// converged state (docs/decisions.md, "Solver").
+/// converged state. A pair across a push keeps that bound: its other rows hold the force change
+/// the push made, which no rounding covers (with the likely share there too, the hard-case matrix
+/// at 200 iterations per pose failed a hip-extension cell; docs/decisions.md, "Solver").
 bool aboveRounding(const PairProducts& p, const PairRounding& r) {
+  // y's rounding is both forces': √2·the noise of one.
+  if (r.pushed) return p.curvature > std::sqrt(2 * p.steps * r.forces);
   constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
   return p.curvature > 3 * std::sqrt(2 * r.curvature) &&
          p.steps > 100 * kEpsilon * kEpsilon * r.positions;
@@ -344,7 +347,8 @@ double keptShare(const PairProducts& p) {
 }
 
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
-/// curvature or no more than rounding can (aboveRounding), and keeps x and F for the next. Rows
+/// curvature or no more than rounding can (aboveRounding), and keeps x for the next (twoLoop keeps
+/// F). Rows
 /// the last response pushed are left out of the pair: a projection's move is not the forces'
 /// answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells tore).
 /// Returns the share of the last step that stays (keptShare; 1 after a plain step): below 1 the
@@ -355,13 +359,12 @@ double recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vec
   if (!(h.hasLast && size > 0)) {
     const std::vector<btVector3>& positions = muscle.particles.positions;
     for (size_t k = 0; k < free.size(); ++k) h.lastPositions[factor.row(k)] = positions[free[k]];
-    h.lastForces = forces;
     h.hasLast = true;
     return 1;
   }
   const int slot = (h.newest + 1) % size;
   const PairRounding rounding = fillPair(h, muscle, free, factor, forces, pushedRows, slot);
-  const PairProducts p = pairProducts(h.steps[slot], h.changes[slot], forces, h.lastForces);
+  const PairProducts p = pairProducts(h.steps[slot], h.changes[slot], h.lastForces);
   const double share = h.tookPairs ? keptShare(p) : 1;
   if (share < 1) return share;
   if (p.curvature > 1e-12 * std::sqrt(p.steps * p.changes) && aboveRounding(p, rounding)) {
@@ -413,46 +416,48 @@ double addThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& d, bt
 
 #if FIBREMSS_AVX2_PARTICLES
 /// copyThenDot two rows per instruction (the same bits).
-FIBREMSS_AVX2_PASS double copyThenDotAvx2(btVector3* q, const btVector3* forces,
+FIBREMSS_AVX2_PASS double copyThenDotAvx2(btVector3* q, btVector3* kept, const btVector3* forces,
                                           const btVector3* next, size_t rows) {
   double sum = 0;
   size_t k = 0;
   for (; k + 1 < rows; k += 2) {
     const __m256 f = rowPair(forces, k);
     _mm256_storeu_ps(q[k].m_floats, f);
+    _mm256_storeu_ps(kept[k].m_floats, f);
     if (next) sum = addDots(sum, _mm256_mul_ps(rowPair(next, k), f));
   }
   if (k < rows) {
-    q[k] = forces[k];
+    q[k] = kept[k] = forces[k];
     if (next) sum += double(next[k].dot(q[k]));
   }
   return sum;
 }
 #endif
 
-/// q = F, then Σ next·q as dot() sums it (0 without `next`), in one pass.
-double copyThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& forces,
-                   const std::vector<btVector3>* next) {
+/// q = `kept` = F, then Σ next·q as dot() sums it (0 without `next`), in one pass.
+double copyThenDot(std::vector<btVector3>& q, std::vector<btVector3>& kept,
+                   const std::vector<btVector3>& forces, const std::vector<btVector3>* next) {
 #if FIBREMSS_AVX2_PARTICLES
   if (fastestSpringKernel() == SpringKernel::avx2)
-    return copyThenDotAvx2(q.data(), forces.data(), next ? next->data() : nullptr, q.size());
+    return copyThenDotAvx2(q.data(), kept.data(), forces.data(), next ? next->data() : nullptr,
+                           q.size());
 #endif
   double sum = 0;
   for (size_t k = 0; k < q.size(); ++k) {
-    q[k] = forces[k];
+    q[k] = kept[k] = forces[k];
     if (next) sum += double((*next)[k].dot(q[k]));
   }
   return sum;
 }
 
 /// L-BFGS's two-loop recursion: `q` becomes H·F, H the inverse Hessian its pairs and (A + W)⁻¹
-/// estimate. Each update of q is fused with the next pair's product (q − y·a as q + y·(−a), the
-/// same bits).
+/// estimate, and F is kept in h.lastForces for the next pair. Each update of q is fused with the
+/// next pair's product (q − y·a as q + y·(−a), the same bits).
 void twoLoop(StepHistory& h, ProjectiveFactor& factor, const std::vector<btVector3>& forces,
              std::vector<btVector3>& q, int size) {
   const auto newer = [size](int j) { return (j + 1) % size; };
   const auto older = [size](int j) { return (j + size - 1) % size; };
-  double product = copyThenDot(q, forces, h.count > 0 ? &h.steps[h.newest] : nullptr);
+  double product = copyThenDot(q, h.lastForces, forces, h.count > 0 ? &h.steps[h.newest] : nullptr);
   for (int n = 0, j = h.newest; n < h.count; ++n, j = older(j)) {
     h.alpha[j] = product / h.curvature[j];
     const auto a = static_cast<btScalar>(h.alpha[j]);
@@ -540,13 +545,23 @@ void boundStep(const IntegratedMuscle& muscle, std::vector<btVector3>& step) {
   for (btVector3& d : step) d *= scale;
 }
 
-/// Takes back all but `share` of the last step, as the pair in `slot` measured it (the rows the
-/// response pushed since, zero in s, stay where it put them): the step into w.solution is
-/// (share − 1)·s. The pairs start anew, and the next iteration takes the plain step from there.
-void takeBack(StepHistory& h, std::vector<btVector3>& solution, int slot, double share) {
-  const auto back = static_cast<btScalar>(share - 1);
+/// Replaces the last step, one of L-BFGS that raised the energy, by `share` of it (the rows the
+/// response pushed since, zero in s, stay where it put them) and the plain projective step from
+/// there, on the forces the pair puts there, (1 − share)·F_last + share·F (exact for a quadratic);
+/// bounded (boundStep). Into w.solution; the pairs start anew. Taking the whole step back and the
+/// plain step from where it began threw away the progress of steps that overshot (hip-extension
+/// at 200 iterations per pose failed the energy criterion); `share` of the step alone, without the
+/// plain one, left a ball dropped on a muscle jittering (docs/decisions.md, "Solver").
+void stepFromShare(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, int slot, double share) {
+  StepHistory& h = w.history;
+  const auto kept = static_cast<btScalar>(share), rest = static_cast<btScalar>(1 - share);
+  for (size_t r = 0; r < w.solution.size(); ++r)
+    w.solution[r] = h.lastForces[r] * rest + w.forces[r] * kept;
+  w.factor.solveInPlace(w.solution.data());
+  boundStep(muscle, w.solution);
   const std::vector<btVector3>& s = h.steps[slot];
-  for (size_t r = 0; r < solution.size(); ++r) solution[r] = s[r] * back;
+  const auto back = static_cast<btScalar>(share - 1);
+  for (size_t r = 0; r < w.solution.size(); ++r) w.solution[r] += s[r] * back;
   h.restart();
   h.hasLast = false;
 }
@@ -554,7 +569,7 @@ void takeBack(StepHistory& h, std::vector<btVector3>& solution, int slot, double
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
 /// or moves a particle too far (keepsStep) is replaced by the plain projective one, bounded
 /// (boundStep), and the history restarts. An L-BFGS step that raised the energy (recordPair) is
-/// taken back to the pair's minimum along it instead (takeBack).
+/// taken back to the pair's minimum along it, and the plain step taken from there (stepFromShare).
 IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
   ParticleState& particles = muscle.particles;
@@ -567,7 +582,7 @@ IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSy
   const double share =
       recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
   if (share < 1) {
-    takeBack(h, w.solution, slot, share);
+    stepFromShare(muscle, w, slot, share);
   } else {
     twoLoop(h, w.factor, w.forces, w.solution, size);
     if (h.count > 0 && !keepsStep(muscle, w.solution, w.forces)) {
