@@ -348,11 +348,10 @@ double keptShare(const PairProducts& p) {
 
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
 /// curvature or no more than rounding can (aboveRounding), and keeps x for the next (twoLoop keeps
-/// F). Rows
-/// the last response pushed are left out of the pair: a projection's move is not the forces'
-/// answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells tore).
-/// Returns the share of the last step that stays (keptShare; 1 after a plain step): below 1 the
-/// pair is left out, for the caller to take the rest of the step back.
+/// F). Rows the last response pushed are left out of the pair: a projection's move is not the
+/// forces' answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells
+/// tore). Returns the share of the last step that stays (keptShare; 1 after a plain step): below 1
+/// the pair is left out, for the caller to take the rest of the step back.
 double recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
                   const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
                   const std::vector<uint8_t>& pushedRows, int size) {
