@@ -67,7 +67,6 @@ struct StepHistory {
   std::vector<btVector3> lastPositions;          ///< x at the last iteration's forces [m]
   std::vector<btVector3> lastForces;             ///< the forces F there [N]
   bool hasLast = false;                          ///< lastPositions/lastForces hold an iteration
-  bool tookPairs = false;  ///< the last iteration's step was H·F with pairs (not the plain one)
 
   /// Forgets every pair (the next iteration is the plain projective step).
   void restart() { count = 0; }
@@ -236,13 +235,13 @@ struct PairProducts {
   double curvature = 0;  ///< s·y [N·m]
   double steps = 0;      ///< s·s [m²]
   double changes = 0;    ///< y·y [N²]
-  double descent = 0;    ///< s·F_last, the step along the forces it was taken on [N·m]
 };
 
 #if FIBREMSS_AVX2_PARTICLES
 /// pairProducts two rows per instruction (the same bits).
 FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVector3* y,
-                                                 const btVector3* lastForces, size_t rows) {
+                                                 const btVector3* forces, btVector3* lastForces,
+                                                 size_t rows) {
   PairProducts sums;
   size_t r = 0;
   for (; r + 1 < rows; r += 2) {
@@ -250,32 +249,32 @@ FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVec
     sums.curvature = addDots(sums.curvature, _mm256_mul_ps(step, change));
     sums.steps = addDots(sums.steps, _mm256_mul_ps(step, step));
     sums.changes = addDots(sums.changes, _mm256_mul_ps(change, change));
-    sums.descent = addDots(sums.descent, _mm256_mul_ps(step, rowPair(lastForces, r)));
+    _mm256_storeu_ps(lastForces[r].m_floats, rowPair(forces, r));
   }
   if (r < rows) {
     sums.curvature += double(s[r].dot(y[r]));
     sums.steps += double(s[r].dot(s[r]));
     sums.changes += double(y[r].dot(y[r]));
-    sums.descent += double(s[r].dot(lastForces[r]));
+    lastForces[r] = forces[r];
   }
   return sums;
 }
 #endif
 
-/// The products of the pair s, y and of s with the forces `lastForces` it was taken on, in one
-/// pass.
+/// The products of the pair s, y in one pass, which also keeps `forces` in `lastForces`.
 PairProducts pairProducts(const std::vector<btVector3>& s, const std::vector<btVector3>& y,
-                          const std::vector<btVector3>& lastForces) {
+                          const std::vector<btVector3>& forces,
+                          std::vector<btVector3>& lastForces) {
 #if FIBREMSS_AVX2_PARTICLES
   if (fastestSpringKernel() == SpringKernel::avx2)
-    return pairProductsAvx2(s.data(), y.data(), lastForces.data(), s.size());
+    return pairProductsAvx2(s.data(), y.data(), forces.data(), lastForces.data(), s.size());
 #endif
   PairProducts sums;
   for (size_t r = 0; r < s.size(); ++r) {
     sums.curvature += double(s[r].dot(y[r]));
     sums.steps += double(s[r].dot(s[r]));
     sums.changes += double(y[r].dot(y[r]));
-    sums.descent += double(s[r].dot(lastForces[r]));
+    lastForces[r] = forces[r];
   }
   return sums;
 }
@@ -335,37 +334,23 @@ bool aboveRounding(const PairProducts& p, const PairRounding& r) {
          p.steps > 100 * kEpsilon * kEpsilon * r.positions;
 }
 
-/// The share of the last step, one of L-BFGS, that stays: 1 when it lowered the energy, whose
-/// change along the step, −∫F·ds, the trapezoid rule on the forces at both ends puts at
-/// −s·(F_last + F)/2 = −s·F_last + s·y/2; else the minimum along s of the quadratic that the pair
-/// measures, s·F_last / s·y (0 without positive curvature). The rule needs no energy: the volume
-/// terms have none to sum (their G0/G factor), and near an equilibrium a sum of the energy in
-/// floats rounds away the change a step makes, where the forces still carry it.
-double keptShare(const PairProducts& p) {
-  if (p.curvature < 2 * p.descent) return 1;
-  return p.curvature > 0 ? std::max(0.0, p.descent / p.curvature) : 0;
-}
-
 /// Adds the pair from the last iteration to this one (x, F by row) unless it shows no positive
-/// curvature or no more than rounding can (aboveRounding), and keeps x for the next (twoLoop keeps
-/// F). Rows the last response pushed are left out of the pair: a projection's move is not the
-/// forces' answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells
-/// tore). Returns the share of the last step that stays (keptShare; 1 after a plain step): below 1
-/// the pair is left out, for the caller to take the rest of the step back.
-double recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
-                  const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
-                  const std::vector<uint8_t>& pushedRows, int size) {
+/// curvature or no more than rounding can (aboveRounding), and keeps x and F for the next. Rows
+/// the last response pushed are left out of the pair: a projection's move is not the forces'
+/// answer to the step (with them in, the hard-case matrix's hip-extension and pinch cells tore).
+void recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vector<uint32_t>& free,
+                const ProjectiveFactor& factor, const std::vector<btVector3>& forces,
+                const std::vector<uint8_t>& pushedRows, int size) {
   if (!(h.hasLast && size > 0)) {
     const std::vector<btVector3>& positions = muscle.particles.positions;
     for (size_t k = 0; k < free.size(); ++k) h.lastPositions[factor.row(k)] = positions[free[k]];
+    h.lastForces = forces;
     h.hasLast = true;
-    return 1;
+    return;
   }
   const int slot = (h.newest + 1) % size;
   const PairRounding rounding = fillPair(h, muscle, free, factor, forces, pushedRows, slot);
-  const PairProducts p = pairProducts(h.steps[slot], h.changes[slot], h.lastForces);
-  const double share = h.tookPairs ? keptShare(p) : 1;
-  if (share < 1) return share;
+  const PairProducts p = pairProducts(h.steps[slot], h.changes[slot], forces, h.lastForces);
   if (p.curvature > 1e-12 * std::sqrt(p.steps * p.changes) && aboveRounding(p, rounding)) {
     h.curvature[slot] = p.curvature;
     h.newest = slot;
@@ -373,7 +358,6 @@ double recordPair(StepHistory& h, const IntegratedMuscle& muscle, const std::vec
   } else {
     h.restart();
   }
-  return 1;
 }
 
 #if FIBREMSS_AVX2_PARTICLES
@@ -415,48 +399,46 @@ double addThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& d, bt
 
 #if FIBREMSS_AVX2_PARTICLES
 /// copyThenDot two rows per instruction (the same bits).
-FIBREMSS_AVX2_PASS double copyThenDotAvx2(btVector3* q, btVector3* kept, const btVector3* forces,
+FIBREMSS_AVX2_PASS double copyThenDotAvx2(btVector3* q, const btVector3* forces,
                                           const btVector3* next, size_t rows) {
   double sum = 0;
   size_t k = 0;
   for (; k + 1 < rows; k += 2) {
     const __m256 f = rowPair(forces, k);
     _mm256_storeu_ps(q[k].m_floats, f);
-    _mm256_storeu_ps(kept[k].m_floats, f);
     if (next) sum = addDots(sum, _mm256_mul_ps(rowPair(next, k), f));
   }
   if (k < rows) {
-    q[k] = kept[k] = forces[k];
+    q[k] = forces[k];
     if (next) sum += double(next[k].dot(q[k]));
   }
   return sum;
 }
 #endif
 
-/// q = `kept` = F, then Σ next·q as dot() sums it (0 without `next`), in one pass.
-double copyThenDot(std::vector<btVector3>& q, std::vector<btVector3>& kept,
-                   const std::vector<btVector3>& forces, const std::vector<btVector3>* next) {
+/// q = F, then Σ next·q as dot() sums it (0 without `next`), in one pass.
+double copyThenDot(std::vector<btVector3>& q, const std::vector<btVector3>& forces,
+                   const std::vector<btVector3>* next) {
 #if FIBREMSS_AVX2_PARTICLES
   if (fastestSpringKernel() == SpringKernel::avx2)
-    return copyThenDotAvx2(q.data(), kept.data(), forces.data(), next ? next->data() : nullptr,
-                           q.size());
+    return copyThenDotAvx2(q.data(), forces.data(), next ? next->data() : nullptr, q.size());
 #endif
   double sum = 0;
   for (size_t k = 0; k < q.size(); ++k) {
-    q[k] = kept[k] = forces[k];
+    q[k] = forces[k];
     if (next) sum += double((*next)[k].dot(q[k]));
   }
   return sum;
 }
 
 /// L-BFGS's two-loop recursion: `q` becomes H·F, H the inverse Hessian its pairs and (A + W)⁻¹
-/// estimate, and F is kept in h.lastForces for the next pair. Each update of q is fused with the
-/// next pair's product (q − y·a as q + y·(−a), the same bits).
+/// estimate. Each update of q is fused with the next pair's product (q − y·a as q + y·(−a), the
+/// same bits).
 void twoLoop(StepHistory& h, ProjectiveFactor& factor, const std::vector<btVector3>& forces,
              std::vector<btVector3>& q, int size) {
   const auto newer = [size](int j) { return (j + 1) % size; };
   const auto older = [size](int j) { return (j + size - 1) % size; };
-  double product = copyThenDot(q, h.lastForces, forces, h.count > 0 ? &h.steps[h.newest] : nullptr);
+  double product = copyThenDot(q, forces, h.count > 0 ? &h.steps[h.newest] : nullptr);
   for (int n = 0, j = h.newest; n < h.count; ++n, j = older(j)) {
     h.alpha[j] = product / h.curvature[j];
     const auto a = static_cast<btScalar>(h.alpha[j]);
@@ -544,31 +526,9 @@ void boundStep(const IntegratedMuscle& muscle, std::vector<btVector3>& step) {
   for (btVector3& d : step) d *= scale;
 }
 
-/// Replaces the last step, one of L-BFGS that raised the energy, by `share` of it (the rows the
-/// response pushed since, zero in s, stay where it put them) and the plain projective step from
-/// there, on the forces the pair puts there, (1 − share)·F_last + share·F (exact for a quadratic);
-/// bounded (boundStep). Into w.solution; the pairs start anew. Taking the whole step back and the
-/// plain step from where it began threw away the progress of steps that overshot (hip-extension
-/// at 200 iterations per pose failed the energy criterion); `share` of the step alone, without the
-/// plain one, left a ball dropped on a muscle jittering (docs/decisions.md, "Solver").
-void stepFromShare(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, int slot, double share) {
-  StepHistory& h = w.history;
-  const auto kept = static_cast<btScalar>(share), rest = static_cast<btScalar>(1 - share);
-  for (size_t r = 0; r < w.solution.size(); ++r)
-    w.solution[r] = h.lastForces[r] * rest + w.forces[r] * kept;
-  w.factor.solveInPlace(w.solution.data());
-  boundStep(muscle, w.solution);
-  const std::vector<btVector3>& s = h.steps[slot];
-  const auto back = static_cast<btScalar>(share - 1);
-  for (size_t r = 0; r < w.solution.size(); ++r) w.solution[r] += s[r] * back;
-  h.restart();
-  h.hasLast = false;
-}
-
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
 /// or moves a particle too far (keepsStep) is replaced by the plain projective one, bounded
-/// (boundStep), and the history restarts. An L-BFGS step that raised the energy (recordPair) is
-/// taken back to the pair's minimum along it, and the plain step taken from there (stepFromShare).
+/// (boundStep), and the history restarts.
 IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSystemDef& def,
                                   ProjectiveWorkspace& w) {
   ParticleState& particles = muscle.particles;
@@ -577,21 +537,14 @@ IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSy
   StepHistory& h = w.history;
   if (particles.bonesMoving || h.size != size) h.restart();
   h.size = size;
-  const int slot = (h.newest + 1) % size;
-  const double share =
-      recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
-  if (share < 1) {
-    stepFromShare(muscle, w, slot, share);
-  } else {
-    twoLoop(h, w.factor, w.forces, w.solution, size);
-    if (h.count > 0 && !keepsStep(muscle, w.solution, w.forces)) {
-      h.restart();
-      w.solution = w.forces;
-      w.factor.solveInPlace(w.solution.data());
-    }
-    if (h.count == 0) boundStep(muscle, w.solution);  // an L-BFGS step kept is within the bound
+  recordPair(h, muscle, free, w.factor, w.forces, w.pushed, particles.bonesMoving ? 0 : size);
+  twoLoop(h, w.factor, w.forces, w.solution, size);
+  if (h.count > 0 && !keepsStep(muscle, w.solution, w.forces)) {
+    h.restart();
+    w.solution = w.forces;
+    w.factor.solveInPlace(w.solution.data());
   }
-  h.tookPairs = h.count > 0;
+  if (h.count == 0) boundStep(muscle, w.solution);  // an L-BFGS step kept is within the bound
   IntegrationResult result;
   for (size_t k = 0; k < free.size(); ++k)
     result.displacement += heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], 0, 1);
