@@ -353,10 +353,10 @@ TEST(DefaultSolver, TurnsTheTwistedCylindersSectionsInItsIterations) {
 }
 
 // More iterations per pose end nearer the equilibrium: once the bones stop, the L-BFGS pairs are
-// learnt wherever they measure more than the forces' rounding, and a step that raised the energy
-// is taken back. With a worst-case bound on that rounding every pair of the poses' settling
-// iterations was refused at 400 iterations per pose, and the plain steps alone ended them with a
-// larger force residual than 100 iterations do (at the scene's own sampling).
+// learnt wherever they measure more than the forces' rounding is likely to. With a worst-case
+// bound on that rounding every pair of the poses' settling iterations was refused at 400
+// iterations per pose, and the plain steps alone ended them with a larger force residual than
+// 100 iterations do (at the scene's own sampling).
 TEST(DefaultSolver, MoreIterationsPerPoseLowerTheTwistsForceResidual) {
   const RunMetrics fewer = sceneRun("cylinder-twist", {"iterations=100"});
   const RunMetrics more = sceneRun("cylinder-twist", {"iterations=400"});
