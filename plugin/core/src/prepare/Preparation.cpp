@@ -30,6 +30,8 @@ enum RandomStream : uint32_t { kFibreJitter = 1, kSphereThinning = 2 };
 /// Particles of different fibres closer than this share of the median sample spacing merge when
 /// the input asks for it (lattice layouts excepted: their springs follow the grid's indices).
 constexpr btScalar kMergeFraction = btScalar(0.25);
+/// Particles of one fibre closer than this fraction of the median sample spacing coincide.
+constexpr btScalar kCoincidentFraction = btScalar(1e-6);
 /// Surface vertices inside a bone at rest move this share of the spacing beyond its surface.
 constexpr btScalar kSurfaceMarginFraction = btScalar(0.01);
 
@@ -404,18 +406,21 @@ MuscleSettings sampleMuscle(const MuscleInput& input, size_t index, size_t boneC
   return muscle;
 }
 
-/// Two particles of one fibre that the push out of the bones put on the same point (a muscle
-/// reaching into a bone deeper than the attachment distance, along its fibres) are an InputError
-/// naming attachment_distance, not the zero-length spring the springs would find next.
+/// Two particles of one fibre that the push out of the bones put on the same point, up to
+/// `tolerance` [m] (a muscle reaching into a bone deeper than the attachment distance, along its
+/// fibres) are an InputError naming attachment_distance, not the zero-length (or, in double,
+/// rounding-length) spring the springs would make of them.
 void requireDistinctPushedParticles(const MuscleInput& input, const MuscleSettings& muscle,
-                                    const MusclePreparationReport& report) {
+                                    const MusclePreparationReport& report, btScalar tolerance) {
   const auto deepest =
       std::max_element(report.pushedOutOfBonesDepth.begin(), report.pushedOutOfBonesDepth.end());
   if (deepest == report.pushedOutOfBonesDepth.end() || !(*deepest > 0)) return;
   for (size_t f = 0; f < muscle.fibreCount(); ++f)
     for (uint32_t k = muscle.fibreOffsets[f] + 1; k < muscle.fibreOffsets[f + 1]; ++k) {
       const uint32_t a = muscle.fibreParticles[k - 1], b = muscle.fibreParticles[k];
-      if (a == b || muscle.restPositions[a] != muscle.restPositions[b]) continue;
+      if (a == b ||
+          muscle.restPositions[a].distance2(muscle.restPositions[b]) > tolerance * tolerance)
+        continue;
       throw InputError(
           detail::muscleSource(input), "attachment_distance",
           "particles " + std::to_string(a) + " and " + std::to_string(b) + " of fibre " +
@@ -470,7 +475,7 @@ void separateMuscle(const MuscleInput& input, size_t index, const std::vector<Bo
     report.mergeDistance = margin;
     report.mergedParticles = detail::mergeCloseParticles(muscle, report.mergeDistance);
   }
-  requireDistinctPushedParticles(input, muscle, report);
+  requireDistinctPushedParticles(input, muscle, report, kCoincidentFraction * spacing);
 }
 
 /// Σ k·L0² over the springs [N·m]: the network's modulus times 3V.
