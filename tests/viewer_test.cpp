@@ -363,6 +363,24 @@ TEST(ViewerColourBar, EveryArrayStatesWhatItMeasures) {
   EXPECT_EQ(viewer::unitOf("fibre_stretch", "mm"), "current / rest length along the fibres");
 }
 
+TEST(ViewerColourBar, AStretchRangeIsSymmetricInItsLogarithmAndStaysAboveZero) {
+  // The tear scene stretches its cylinder far past 2 before it parts: a range symmetric about
+  // 1 in the stretch itself would reach below 0, where no stretch can lie.
+  TemporaryDirectory directory("fibremss_view_stretch_test");
+  const std::filesystem::path out = directory.path() / "run";
+  ASSERT_EQ(runProcess(std::string(FIBREMSS_CLI) + " run tear --out " + out.string() +
+                       " > /dev/null 2>&1")
+                .exitCode,
+            0);
+  viewer::ViewerOptions options = screenshotOptions((directory.path() / "tear.png").string(), 40);
+  options.runDir = out.string();
+  options.colourBy = "fibre_stretch";
+  const viewer::ViewerResult result = viewer::runViewer(options);
+  EXPECT_GT(result.colourHigh, 2.0f);
+  EXPECT_GT(result.colourLow, 0.0f);
+  EXPECT_NEAR(result.colourLow * result.colourHigh, 1.0f, 1e-5f);
+}
+
 /// The probe's colour (RenderSettings::toolColour), lit: green above red and blue.
 bool isToolColour(const std::array<int, 3>& c) {
   return c[1] > c[0] + 40 && c[1] > c[2] + 40;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -39,6 +40,24 @@ Rgb interpolate(std::span<const Rgb> colours, float t) {
   return c;
 }
 
+/// The range of stretches `values` symmetric in their logarithm about 1, holding 98 % of them:
+/// a stretch of 16 and a shortening to 1/16 are as far from grey, and the low end stays above 0.
+Range logSymmetricRange(std::vector<float>& values) {
+  for (float& v : values) v = v > 0 ? std::abs(std::log(v)) : std::numeric_limits<float>::max();
+  auto percentile = values.begin() + static_cast<long>(0.98 * double(values.size() - 1));
+  std::nth_element(values.begin(), percentile, values.end());
+  const float half = std::clamp(*percentile, 1e-3f, 20.0f);
+  return {std::exp(-half), std::exp(half)};
+}
+
+/// Where `value` lies on the diverging map over `range`: 0.5 (grey) at 1, the range's ends at 0
+/// and 1, linear on each side of 1 (so also for a range not symmetric about 1).
+float divergingPosition(float value, const Range& range) {
+  if (range.low < 1 && value < 1) return 0.5f * (value - range.low) / (1 - range.low);
+  if (range.high > 1 && value >= 1) return 0.5f + 0.5f * (value - 1) / (range.high - 1);
+  return (value - range.low) / (range.high - range.low);
+}
+
 }  // namespace
 
 Range arrayRange(const ViewFrame& frame, const std::string& array, Range& extremes) {
@@ -50,13 +69,7 @@ Range arrayRange(const ViewFrame& frame, const std::string& array, Range& extrem
   if (values.empty()) return extremes = {};
   const auto [low, high] = std::minmax_element(values.begin(), values.end());
   extremes = {*low, *high};
-  if (isStretch(array)) {
-    for (float& v : values) v = std::abs(v - 1);
-    auto percentile = values.begin() + static_cast<long>(0.98 * double(values.size() - 1));
-    std::nth_element(values.begin(), percentile, values.end());
-    const float half = std::max(*percentile, 1e-3f);
-    return {1 - half, 1 + half};
-  }
+  if (isStretch(array)) return logSymmetricRange(values);
   const auto at = [&values](double fraction) {
     auto it = values.begin() + static_cast<long>(fraction * double(values.size() - 1));
     std::nth_element(values.begin(), it, values.end());
@@ -72,8 +85,8 @@ Rgb colourOf(const std::string& array, float value, const Range& range) {
     const long index = std::lround(std::max(value, 0.0f));
     return kPalette[static_cast<size_t>(index) % kPalette.size()];
   }
-  const float t = (value - range.low) / (range.high - range.low);
-  return isStretch(array) ? interpolate(kDiverging, t) : interpolate(kSequential, t);
+  if (isStretch(array)) return interpolate(kDiverging, divergingPosition(value, range));
+  return interpolate(kSequential, (value - range.low) / (range.high - range.low));
 }
 
 }  // namespace fibremss::viewer

@@ -1,7 +1,8 @@
 #pragma once
 // How the viewer colours muscles by an array: "muscle_id" by a palette of distinct colours,
 // "fibre_stretch" (and any array with "stretch" in its name) by a diverging blue-grey-red
-// map centred on 1, everything else by a sequential dark-blue-to-yellow map.
+// map with grey at 1 (linear on each side of 1), everything else by a sequential
+// dark-blue-to-yellow map.
 #include <array>
 #include <string>
 
@@ -19,8 +20,9 @@ struct Range {
 
 /// The range of `array` over every muscle of the frame that holds 98 % of the values (a few
 /// outliers, e.g. at tendon ends, would leave the rest one pale colour); for a stretch,
-/// symmetric about 1; up to the largest value when 98 % of them are equal (e.g. penetration).
-/// `extremes` receives the true smallest and largest value.
+/// symmetric in its logarithm about 1 (from 1/s to s, never below 0); up to the largest value when
+/// 98 % of them are equal (e.g. penetration). `extremes` receives the true smallest and largest
+/// value.
 Range arrayRange(const ViewFrame& frame, const std::string& array, Range& extremes);
 /// The colour of `value` of `array` in `range`.
 Rgb colourOf(const std::string& array, float value, const Range& range);

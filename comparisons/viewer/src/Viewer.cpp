@@ -421,6 +421,8 @@ ViewerResult runWindow(Window& window, Session& session) {
   result.panelOverflow = session.panelOverflow;
   result.toolForce = session.playback.toolForce;
   result.cutSprings = session.playback.cutSprings;
+  result.colourLow = session.render.range.low;
+  result.colourHigh = session.render.range.high;
   return result;
 }
 

@@ -73,6 +73,8 @@ struct ViewerResult {
   float panelOverflow = 0;  ///< how far the panel's widest line ran past its edge [px] (0: fits)
   float toolForce = 0;      ///< |force| on the probe (or the grab's pull) the panel showed [N]
   size_t cutSprings = 0;    ///< springs the blade had cut in the muscles, as the panel showed
+  float colourLow = 0;      ///< the value the colour bar's first colour stood for (its unit)
+  float colourHigh = 0;     ///< the value its last colour stood for (its unit)
 };
 
 /// Opens the window and runs until it is closed (or, with a screenshot path, until the PNG is
