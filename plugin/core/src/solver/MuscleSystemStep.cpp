@@ -696,9 +696,11 @@ void MuscleSystem::Impl::resolveMuscles() {
 }
 
 void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
-  for (uint32_t slot : active)
-    ensurePrepared(integrator, *muscles.states[slot]->settings, *muscles.states[slot],
-                   *muscles.states[slot]);
+  for (uint32_t slot : active) {
+    MuscleState& state = *muscles.states[slot];
+    ensurePrepared(integrator, *state.settings, state, state);
+    state.movingContacts = duration > 0;
+  }
   resolveMuscles();
   if (definition.rebuildEveryStep)
     forEachMuscle("rebuild", [this](MuscleState& state, uint32_t, unsigned) {
