@@ -128,15 +128,15 @@ TEST_F(ProbeScene, TheForceIsZeroBeforeContactAndPressesTheProbeBackInContact) {
     EXPECT_GT(result->peakForce, 0);
   }
   // Held 8 mm deep and sliding: the muscle pushes the probe back up (+z) every tick, and never
-  // pulls it down. The quasi-static far field gives way more near the muscle's end, where the
-  // whole ticks' force falls below a tenth of its peak: there it may let go of the probe.
+  // pulls it down; the quasi-static far field keeps the probe in contact to the slide's end too,
+  // where the whole ticks' force falls to a few hundredths of its peak.
   for (size_t t = 0; t < whole.ticks.size(); ++t) {
     const std::string& phase = scene_->tool.phase(int(t) + 1);
     if (phase != "hold" && phase != "slide") continue;
     EXPECT_GT(whole.ticks[t].force.z(), 0) << "tick " << t + 1 << " (" << phase << ")";
     const btScalar far = run(1).ticks[t].force.z();
     EXPECT_GE(far, 0) << "tick " << t + 1 << " (" << phase << ")";
-    if (whole.ticks[t].force.length() > 0.1 * whole.peakForce) {
+    if (whole.ticks[t].force.length() > 0.02 * whole.peakForce) {
       EXPECT_GT(far, 0) << "tick " << t + 1 << " (" << phase << ")";
     }
   }

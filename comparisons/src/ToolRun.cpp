@@ -65,11 +65,11 @@ ToolRunResult runTool(const LoadedScene& scene, const PreparedScene& prepared, i
     pose.setOrigin(script.position(tick));
     const ContactWrench wrench = tool.tick(pose);
     result.failed = result.failed || system.lastStep().failed;
-    result.iterations += system.lastStep().iterations;
     result.ticks[t] = {tick * script.tickTime, pose.getOrigin(), wrench.force, wrench.contacts};
   }
   result.cpuSeconds = double(std::clock() - cpuStart) / CLOCKS_PER_SEC;
   result.wholeTicks = tool.wholeTicks();
+  result.iterations = tool.iterations();
   result.wallSeconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.ticksPerSecond =

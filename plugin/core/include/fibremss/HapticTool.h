@@ -55,6 +55,9 @@ class HapticTool {
   btScalar tickTime() const { return tickTime_; }  ///< simulated time per tick [s]
   long ticks() const { return ticks_; }            ///< ticks taken
   long wholeTicks() const { return wholeTicks_; }  ///< ticks that stepped the whole muscles
+  /// Solver iterations of the ticks taken: the whole steps' and the local steps' (a whole tick of
+  /// the quasi-static solver runs both).
+  long iterations() const { return iterations_; }
   const btRigidBody& tool() const { return tool_; }
 
  private:
@@ -67,6 +70,7 @@ class HapticTool {
   bool quasiStatic_;
   long ticks_ = 0;                   ///< ticks taken
   long wholeTicks_ = 0;              ///< ticks that stepped the whole muscles
+  long iterations_ = 0;              ///< solver iterations of the ticks taken
   btVector3 regionCentre_{0, 0, 0};  ///< the tool's centre where the region was gathered [m]
   bool gathered_ = false;            ///< a region was gathered
   /// Steps the muscles by a tick: whole, or the region around the tool at `pose`.

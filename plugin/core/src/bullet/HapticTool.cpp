@@ -57,6 +57,7 @@ void HapticTool::advance(const btTransform& pose) {
   if (whole) {
     system_.step(tickTime_);
     ++wholeTicks_;
+    iterations_ += system_.lastStep().iterations;
   }
   // A whole tick of the quasi-static solver settles the far field; a local tick follows it.
   if (whole && !quasiStatic_) return;
@@ -70,6 +71,7 @@ void HapticTool::advance(const btTransform& pose) {
     gathered_ = true;
   }
   system_.stepLocal(tickTime_);
+  iterations_ += system_.lastStep().iterations;
 }
 
 }  // namespace fibremss

@@ -48,6 +48,12 @@ constexpr double kVolumeWeight = 1.5;
 /// thigh13 at resolution 20, 10 iterations per pose: a hold of 1 000 refactors in 156 of 1 690
 /// muscle-iterations, a hold of 10 in 634, at the same distance to Verlet's equilibrium run.
 constexpr uint16_t kContactHold = 1000;
+/// kContactHold in a duration step (ContactState::movingContacts): a particle leaves W at the
+/// first iteration without a push. The haptic probe's far field (2 iterations every 4th tick)
+/// held the particles its tool and bed had pushed for 1 000 iterations, the whole run: the
+/// muscle stayed where the tool had pressed it and let go of the tool for the slide's last 94
+/// ticks; leaving at once, 14 (docs/decisions.md, "The probe's far field lets go").
+constexpr uint16_t kMovingContactHold = 0;
 
 /// The last iterations' steps s = x⁺ − x and force changes y = F − F⁺ by row, newest last in a
 /// ring (MuscleSystemDef::projectiveHistory): L-BFGS's pairs.
@@ -149,12 +155,14 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<int>& rows, si
 
 /// Puts the particles the last response pushed into W (with `contactWeight` times their diagonal
 /// entry, MuscleSystemDef::projectiveContactWeight) and takes out those kContactHold
-/// iterations without a push (clearing the flags it reads). Returns whether W changed.
+/// (kMovingContactHold in a duration step) iterations without a push (clearing the flags it
+/// reads). Returns whether W changed.
 bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double contactWeight) {
   bool changed = false;
   ProjectiveFactor& factor = w.factor;
   const std::vector<uint32_t>& free = muscle.particles.freeParticles;
   std::vector<uint8_t>& pushedLast = muscle.contact.pushedLast;
+  const uint16_t hold = muscle.contact.movingContacts ? kMovingContactHold : kContactHold;
   for (size_t k = 0; k < free.size(); ++k) {
     const int row = factor.row(k);
     uint8_t& pushed = pushedLast[free[k]];
@@ -165,7 +173,7 @@ bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double
       w.idle[row] = 0;
       if (held) continue;
       factor.setWeight(row, contactWeight * factor.matrixDiagonal(row));
-    } else if (held && ++w.idle[row] > kContactHold) {
+    } else if (held && ++w.idle[row] > hold) {
       factor.setWeight(row, 0);
     } else {
       continue;

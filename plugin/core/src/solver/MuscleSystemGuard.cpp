@@ -335,12 +335,16 @@ void MuscleSystem::Impl::guardedStep() {
   const bool rollback = policy != FailurePolicy::Report;
   saveStepStart(muscles, bones);
   const btScalar goodPreviousDt = previousDt;
+  // A local step after another integrator's whole step starts its region at rest; a repeated
+  // attempt must too (the first attempt's end cleared the flag).
+  const bool goodLocalFromRest = localFromRest;
   StepSize size = stepSize(0);
 
   GuardOutcome outcome;
   const auto rollBack = [&] {
     rollBackStep(muscles, bones);
     previousDt = goodPreviousDt;
+    localFromRest = goodLocalFromRest;
     outcome.rolledBack = true;
   };
   while (true) {

@@ -699,6 +699,7 @@ void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, *state.settings, state, state);
+    state.movingContacts = duration > 0;
   }
   resolveMuscles();
   if (definition.rebuildEveryStep)

@@ -88,6 +88,10 @@ struct ContactState {
   /// 1 for a particle the last response pushed, until the projective integrator reads it (it
   /// clears every flag it reads; other integrators leave them set) [flag].
   std::vector<uint8_t> pushedLast;
+  /// The running step is a duration step (MuscleSystem::step(duration)): the contacts move with
+  /// time, and the projective integrator holds a pushed particle only until an iteration without
+  /// a push (kMovingContactHold) [flag].
+  bool movingContacts = false;
 
   /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
   /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).
