@@ -1,6 +1,7 @@
 // The implicit surface's field (ImplicitSurface.h): the rest distance grid, the particles'
 // cells, the deformation of each particle's springs and the field itself.
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "ImplicitSurfaceInternal.h"
@@ -298,21 +299,21 @@ RestMap
 ImplicitSurface::Impl::restMap(const btVector3& x) const {
   // Four entries at a time, the lanes past a row's end weighed 0.
   const LaneMask lane{0, 1, 2, 3};
-  const float inverseH2 = float(1 / (h * h)), px = float(x.x()), py = float(x.y()),
-              pz = float(x.z());
+  const float inverseH2 = float(1 / (h * h));
+  const std::array<float, 3> point{float(x.x()), float(x.y()), float(x.z())};
   Lanes weight{}, offsetX{}, offsetY{}, offsetZ{}, spread{};  // Σ w, Σ w·(X_j − x), Σ w·|X_j − x|²
   forNeighbourRows(x, [&](uint32_t begin, uint32_t end) FIBREMSS_INLINED {
     for (uint32_t e = begin; e < end; e += 4) {
       auto at = [&](size_t a) { return entries.load(a, e); };
-      const Lanes dx = px - at(EntryLanes::kX), dy = py - at(EntryLanes::kY),
-                  dz = pz - at(EntryLanes::kZ);
+      const Lanes dx = point[0] - at(EntryLanes::kX), dy = point[1] - at(EntryLanes::kY),
+                  dz = point[2] - at(EntryLanes::kZ);
       const Lanes q = 1 - (dx * dx + dy * dy + dz * dz) * inverseH2;
       const LaneMask take = (q > 0) & (lane < int32_t(end - e));
       const Lanes w = Lanes(LaneMask(q * q * q) & take);
       auto mapped = [&](size_t a) {  // X_j − x along axis a: P_j + F_j⁻¹ (x − p_j) − x
         const size_t row = EntryLanes::kToRest + 3 * a;
         return at(EntryLanes::kRestX + a) + (at(row) * dx + at(row + 1) * dy + at(row + 2) * dz) -
-               float(x[int(a)]);
+               point[a];
       };
       const Lanes mx = mapped(0), my = mapped(1), mz = mapped(2);
       weight += w;
