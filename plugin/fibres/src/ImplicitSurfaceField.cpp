@@ -123,11 +123,11 @@ RayParity::RayParity(const TriangleMesh& surface) : surface_(surface) {
     forBuckets(surface.triangles[t], [&](size_t b) { triangles_[fill[b]++] = t; });
 }
 
-bool RayParity::inside(const btVector3& p) const {
+void RayParity::crossings(const btVector3& p, std::vector<btScalar>& xs) const {
+  xs.clear();
   const auto j = int32_t((p.y() - lower_.y()) / cell_), k = int32_t((p.z() - lower_.z()) / cell_);
-  if (p.y() < lower_.y() || p.z() < lower_.z() || j >= dims_[0] || k >= dims_[1]) return false;
+  if (p.y() < lower_.y() || p.z() < lower_.z() || j >= dims_[0] || k >= dims_[1]) return;
   const size_t b = size_t(j) + size_t(dims_[0]) * size_t(k);
-  bool odd = false;
   for (uint32_t e = start_[b]; e < start_[b + 1]; ++e) {
     const auto& t = surface_.triangles[triangles_[e]];
     const btVector3 &a = surface_.vertices[t[0]], &u = surface_.vertices[t[1]],
@@ -138,10 +138,8 @@ bool RayParity::inside(const btVector3& p) const {
     const btScalar s1 = ((p.y() - a.y()) * (v.z() - a.z()) - (v.y() - a.y()) * (p.z() - a.z())) / d;
     const btScalar s2 = ((u.y() - a.y()) * (p.z() - a.z()) - (p.y() - a.y()) * (u.z() - a.z())) / d;
     if (s1 < 0 || s2 < 0 || s1 + s2 >= 1) continue;
-    const btScalar x = a.x() + s1 * (u.x() - a.x()) + s2 * (v.x() - a.x());
-    if (x > p.x()) odd = !odd;
+    xs.push_back(a.x() + s1 * (u.x() - a.x()) + s2 * (v.x() - a.x()));
   }
-  return odd;
 }
 
 RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame)
@@ -151,15 +149,24 @@ RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame&
 }
 
 void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot) {
-  values_.resize(values_.size() + kBlockValues);
-  float* out = values_.data() + size_t(slot) * kBlockValues;
+  std::array<btVector3, kBlockValues> points;  // x fastest: a row of kBlock after another
   for (int32_t k = 0; k < kBlock; ++k)
     for (int32_t j = 0; j < kBlock; ++j)
-      for (int32_t i = 0; i < kBlock; ++i) {
-        const btVector3 p = frame_.point(bi * kBlock + i, bj * kBlock + j, bk * kBlock + k);
-        const btScalar distance = distance_.closest(p).distance;
-        *out++ = float(parity_.inside(p) ? distance : -distance);
-      }
+      for (int32_t i = 0; i < kBlock; ++i)
+        points[size_t(i + kBlock * (j + kBlock * k))] =
+            frame_.point(bi * kBlock + i, bj * kBlock + j, bk * kBlock + k);
+  const btScalar half = frame_.spacing * btScalar(kBlock - 1) / 2;
+  std::array<btScalar, kBlockValues> distances;
+  distance_.distances(
+      frame_.point(bi * kBlock, bj * kBlock, bk * kBlock) + btVector3(half, half, half), points,
+      distances);
+  values_.resize(values_.size() + kBlockValues);
+  float* out = values_.data() + size_t(slot) * kBlockValues;
+  for (size_t row = 0; row < kBlockValues; row += kBlock) {
+    parity_.crossings(points[row], crossings_);
+    for (size_t n = row; n < row + kBlock; ++n)
+      out[n] = float(RayParity::inside(points[n].x(), crossings_) ? distances[n] : -distances[n]);
+  }
 }
 
 int32_t RestDistanceGrid::slotOf(int32_t bi, int32_t bj, int32_t bk) {

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <vector>
 
+#include "ClusterDistance.h"
 #include "fibremss/ImplicitSurface.h"
 
 namespace fibremss {
@@ -35,7 +36,13 @@ struct GridFrame {
 class RayParity {
  public:
   explicit RayParity(const TriangleMesh& surface);
-  bool inside(const btVector3& p) const;
+  /// The x of the surface's crossings of the ray along +x through p's y and z, into `xs` (in
+  /// the surface's order): the ray of every point with those y and z.
+  void crossings(const btVector3& p, std::vector<btScalar>& xs) const;
+  /// Whether the point at x on a ray lies inside: an odd count of the ray's crossings beyond x.
+  static bool inside(btScalar x, std::span<const btScalar> xs) {
+    return std::count_if(xs.begin(), xs.end(), [x](btScalar c) { return c > x; }) % 2 != 0;
+  }
 
  private:
   const TriangleMesh& surface_;
@@ -47,7 +54,8 @@ class RayParity {
 };
 
 /// The rest surface's signed distance (positive inside) on a grid, each block of 4³ points
-/// computed the first time a lookup reaches it.
+/// computed the first time a lookup reaches it: its distances searched among the triangles that
+/// can be nearest to any of its points (ClusterDistance), its signs from one ray per row.
 class RestDistanceGrid {
  public:
   RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame);
@@ -60,9 +68,10 @@ class RestDistanceGrid {
   int32_t slotOf(int32_t bi, int32_t bj, int32_t bk);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
 
-  MeshDistance distance_;
+  ClusterDistance distance_;
   RayParity parity_;
   GridFrame frame_;
+  std::vector<btScalar> crossings_;         ///< scratch: a row's ray's crossings [m]
   std::array<int32_t, 3> blocks_{0, 0, 0};  ///< blocks per axis
   std::vector<int32_t> blockSlot_;          ///< per block: its values' slot, −1 not yet
   std::vector<float> values_;               ///< 64 per computed block [m]

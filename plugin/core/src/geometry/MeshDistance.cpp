@@ -7,51 +7,12 @@
 #include <unordered_map>
 
 #include "fibremss/Geometry.h"
+#include "fibremss/TrianglePoint.h"
 
 namespace fibremss {
 namespace {
 
-/// Which part of a triangle a closest point lies on; the edge i runs from corner i to i+1.
-enum class Feature : uint8_t { Vertex0, Vertex1, Vertex2, Edge0, Edge1, Edge2, Face };
-
-struct TrianglePoint {
-  btVector3 point;
-  Feature feature;
-};
-
-/// Exact closest point on triangle abc (Voronoi regions of corners, edges and face).
-TrianglePoint closestOnTriangle(const btVector3& p, const btVector3& a, const btVector3& b,
-                                const btVector3& c) {
-  const btVector3 ab = b - a, ac = c - a, ap = p - a;
-  const btScalar d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return {a, Feature::Vertex0};
-  const btVector3 bp = p - b;
-  const btScalar d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return {b, Feature::Vertex1};
-  const btScalar vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return {a + ab * (d1 / (d1 - d3)), Feature::Edge0};
-  const btVector3 cp = p - c;
-  const btScalar d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return {c, Feature::Vertex2};
-  const btScalar vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return {a + ac * (d2 / (d2 - d6)), Feature::Edge2};
-  const btScalar va = d3 * d6 - d5 * d4;
-  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0)
-    return {b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), Feature::Edge1};
-  const btScalar sum = va + vb + vc;
-  if (sum > 0) return {a + ab * (vb / sum) + ac * (vc / sum), Feature::Face};
-  // Degenerate (zero-area) triangle that slipped through the tests above: nearest corner.
-  const btScalar da = ap.length2(), db = bp.length2(), dc = cp.length2();
-  if (da <= db && da <= dc) return {a, Feature::Vertex0};
-  return db <= dc ? TrianglePoint{b, Feature::Vertex1} : TrianglePoint{c, Feature::Vertex2};
-}
-
-inline btScalar boxDistance2(const btVector3& p, const btVector3& lower, const btVector3& upper) {
-  btVector3 outside = lower - p;
-  outside.setMax(p - upper);
-  outside.setMax(btVector3(0, 0, 0));
-  return outside.length2();
-}
+using Feature = TriangleFeature;
 
 constexpr uint32_t kLeafSize = 4;
 constexpr int kMaxDepth = 64;
