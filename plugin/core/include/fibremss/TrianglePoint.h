@@ -10,9 +10,10 @@ namespace fibremss {
 /// Which part of a triangle a closest point lies on; the edge i runs from corner i to i+1.
 enum class TriangleFeature : uint8_t { Vertex0, Vertex1, Vertex2, Edge0, Edge1, Edge2, Face };
 
+/// A triangle's closest point to a query point, and where on the triangle it lies.
 struct TrianglePoint {
-  btVector3 point;
-  TriangleFeature feature;
+  btVector3 point;          ///< the closest point [the triangle's unit, m in FibreMSS]
+  TriangleFeature feature;  ///< the corner, edge or face it lies on
 };
 
 /// Exact closest point on triangle abc (Voronoi regions of corners, edges and face).
