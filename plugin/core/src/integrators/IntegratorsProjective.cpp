@@ -160,20 +160,26 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<int>& rows, si
 bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double contactWeight) {
   bool changed = false;
   ProjectiveFactor& factor = w.factor;
-  const std::vector<uint32_t>& free = muscle.particles.freeParticles;
-  std::vector<uint8_t>& pushedLast = muscle.contact.pushedLast;
+  // Raw arrays: a store through uint8_t* may alias any vector's members, which the compiler
+  // would then read again for every particle.
+  const uint32_t* free = muscle.particles.freeParticles.data();
+  const size_t count = muscle.particles.freeParticles.size();
+  const int* rows = factor.rows();
+  uint8_t* pushedLast = muscle.contact.pushedLast.data();
+  uint8_t* pushedRows = w.pushed.data();
+  uint16_t* idle = w.idle.data();
   const uint16_t hold = muscle.contact.movingContacts ? kMovingContactHold : kContactHold;
-  for (size_t k = 0; k < free.size(); ++k) {
-    const int row = factor.row(k);
+  for (size_t k = 0; k < count; ++k) {
+    const int row = rows[k];
     uint8_t& pushed = pushedLast[free[k]];
     const bool held = factor.weight(row) > 0;
-    w.pushed[row] = pushed;
+    pushedRows[row] = pushed;
     if (pushed) {
       pushed = 0;
-      w.idle[row] = 0;
+      idle[row] = 0;
       if (held) continue;
       factor.setWeight(row, contactWeight * factor.matrixDiagonal(row));
-    } else if (held && ++w.idle[row] > hold) {
+    } else if (held && ++idle[row] > hold) {
       factor.setWeight(row, 0);
     } else {
       continue;
@@ -181,6 +187,22 @@ bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double
     changed = true;
   }
   return changed;
+}
+
+/// w.forces by row: each free particle's force, less the part into its contact where the step
+/// holds the contacts (`held`, withoutInto).
+void gatherForces(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, bool held) {
+  const std::vector<uint32_t>& free = muscle.particles.freeParticles;
+  const btVector3* forces = muscle.particles.forces.data();
+  const int* rows = w.factor.rows();
+  btVector3* gathered = w.forces.data();
+  if (!held) {
+    for (size_t k = 0; k < free.size(); ++k) gathered[rows[k]] = forces[free[k]];
+    return;
+  }
+  for (size_t k = 0; k < free.size(); ++k)
+    gathered[rows[k]] =
+        withoutInto(forces[free[k]], contactNormal(muscle.contact, muscle.residual, free[k]));
 }
 
 /// The mean spring rest length of `muscle` [m], 0 without springs.
@@ -295,34 +317,125 @@ struct PairRounding {
   bool pushed = false;   ///< some row was left out, its particle pushed by the last response
 };
 
+/// The arrays fillPair reads (by free particle k or by row) and writes (by row).
+struct PairRows {
+  const btVector3* positions;   ///< x by particle [m]
+  const uint32_t* free;         ///< the particle of k
+  const int* rows;              ///< the row of k (ProjectiveFactor::rows)
+  const double* diagonal;       ///< A's diagonal by row [N/m]
+  const uint8_t* pushed;        ///< 1 where the last response pushed the row's particle
+  const btVector3* forces;      ///< F [N]
+  const btVector3* lastForces;  ///< F at the last iteration [N]
+  btVector3* lastPositions;     ///< x at the last iteration [m], becomes x
+  btVector3* steps;             ///< s [m]
+  btVector3* changes;           ///< y [N]
+  double restLength;            ///< the muscle's mean spring rest length [m]
+};
+
+/// fillPair's work for free particle k: its row of s and y, its share of the rounding.
+void fillRow(const PairRows& p, size_t k, PairRounding& rounding) {
+  const int row = p.rows[k];
+  const btVector3& x = p.positions[p.free[k]];
+  btVector3& last = p.lastPositions[row];
+  if (p.pushed[row] != 0) {
+    p.steps[row] = p.changes[row] = btVector3(0, 0, 0);
+    rounding.pushed = true;
+  } else {
+    const btVector3 s = p.steps[row] = x - last;
+    p.changes[row] = p.lastForces[row] - p.forces[row];
+    const double noise = forceNoise(p.diagonal[row], x, p.restLength);
+    rounding.forces += noise;
+    rounding.curvature += double(s.length2()) * noise;
+    rounding.positions += double(x.length2());
+  }
+  last = x;
+}
+
+#if FIBREMSS_AVX2_PARTICLES
+/// The x, y and z lanes of each half.
+FIBREMSS_AVX2_PASS inline __m256 xyzLanes() {
+  return _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
+}
+
+/// v's halves stored into rows a and b.
+FIBREMSS_AVX2_PASS inline void storePair(btVector3* rows, int a, int b, __m256 v) {
+  _mm_storeu_ps(rows[a].m_floats, _mm256_castps256_ps128(v));
+  _mm_storeu_ps(rows[b].m_floats, _mm256_extractf128_ps(v, 1));
+}
+
+/// Lanes 0 and 4 of `v` (rowDots' two dots) as doubles.
+FIBREMSS_AVX2_PASS inline __m128d dotPair(__m256 v) {
+  return _mm_cvtps_pd(_mm_unpacklo_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1)));
+}
+
+/// `sum` plus v's low lane, then its high lane.
+FIBREMSS_AVX2_PASS inline double addLanes(double sum, __m128d v) {
+  sum += _mm_cvtsd_f64(v);
+  return sum + _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
+}
+
+/// fillPair two particles per instruction: per lane fillRow's differences (w set to 0, as
+/// btVector3's arithmetic sets it), its products in doubles, and its sums in k's order, so the
+/// same bits. A pair with a pushed row goes through fillRow.
+FIBREMSS_AVX2_PASS PairRounding fillPairAvx2(const PairRows& p, size_t count) {
+  constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
+  const __m256 xyz = xyzLanes();
+  const __m128d epsilonSquare = _mm_set1_pd(kEpsilon * kEpsilon);
+  const __m128d restSquare = _mm_set1_pd(p.restLength * p.restLength);
+  PairRounding rounding;
+  size_t k = 0;
+  for (; k + 1 < count; k += 2) {
+    const int a = p.rows[k], b = p.rows[k + 1];
+    if ((p.pushed[a] | p.pushed[b]) != 0) {
+      fillRow(p, k, rounding);
+      fillRow(p, k + 1, rounding);
+      continue;
+    }
+    const __m256 x = loadPair(p.positions[p.free[k]], p.positions[p.free[k + 1]]);
+    const __m256 s =
+        _mm256_and_ps(_mm256_sub_ps(x, loadPair(p.lastPositions[a], p.lastPositions[b])), xyz);
+    const __m256 y = _mm256_and_ps(_mm256_sub_ps(loadPair(p.lastForces[a], p.lastForces[b]),
+                                                 loadPair(p.forces[a], p.forces[b])),
+                                   xyz);
+    storePair(p.steps, a, b, s);
+    storePair(p.changes, a, b, y);
+    storePair(p.lastPositions, a, b, x);
+    const __m128d positions = dotPair(rowDots(_mm256_mul_ps(x, x)));
+    const __m128d stiffness = _mm_setr_pd(p.diagonal[a], p.diagonal[b]);
+    const __m128d noise = _mm_mul_pd(_mm_mul_pd(_mm_mul_pd(epsilonSquare, stiffness), stiffness),
+                                     _mm_add_pd(positions, restSquare));
+    rounding.forces = addLanes(rounding.forces, noise);
+    rounding.curvature =
+        addLanes(rounding.curvature, _mm_mul_pd(dotPair(rowDots(_mm256_mul_ps(s, s))), noise));
+    rounding.positions = addLanes(rounding.positions, positions);
+  }
+  if (k < count) fillRow(p, k, rounding);
+  return rounding;
+}
+#endif
+
 /// Writes the pair s = x − x_last, y = F_last − F by row (zero in the rows the last response
 /// pushed) and keeps x in lastPositions. Returns what rounding can put into the pair.
 PairRounding fillPair(StepHistory& h, const IntegratedMuscle& muscle,
                       const std::vector<uint32_t>& free, const ProjectiveFactor& factor,
                       const std::vector<btVector3>& forces, const std::vector<uint8_t>& pushedRows,
                       int slot) {
-  const std::vector<btVector3>& positions = muscle.particles.positions;
-  std::vector<btVector3>& s = h.steps[slot];
-  std::vector<btVector3>& y = h.changes[slot];
-  const double restLength = meanRestLength(muscle);
+  const PairRows p{muscle.particles.positions.data(),
+                   free.data(),
+                   factor.rows(),
+                   factor.matrixDiagonals(),
+                   pushedRows.data(),
+                   forces.data(),
+                   h.lastForces.data(),
+                   h.lastPositions.data(),
+                   h.steps[slot].data(),
+                   h.changes[slot].data(),
+                   meanRestLength(muscle)};
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2) return fillPairAvx2(p, free.size());
+#endif
   PairRounding rounding;
-  for (size_t k = 0; k < free.size(); ++k) {
-    const int row = factor.row(k);
-    const btVector3& x = positions[free[k]];
-    btVector3& last = h.lastPositions[row];
-    if (pushedRows[row] != 0) {
-      s[row] = y[row] = btVector3(0, 0, 0);
-      rounding.pushed = true;
-    } else {
-      s[row] = x - last;
-      y[row] = h.lastForces[row] - forces[row];
-      const double noise = forceNoise(factor.matrixDiagonal(row), x, restLength);
-      rounding.forces += noise;
-      rounding.curvature += double(s[row].length2()) * noise;
-      rounding.positions += double(x.length2());
-    }
-    last = x;
-  }
+  for (size_t k = 0; k < free.size(); ++k) fillRow(p, k, rounding);
   return rounding;
 }
 
@@ -534,6 +647,53 @@ void boundStep(const IntegratedMuscle& muscle, std::vector<btVector3>& step) {
   for (btVector3& d : step) d *= scale;
 }
 
+#if FIBREMSS_AVX2_PARTICLES
+/// moveParticles two particles per instruction: per lane heavyBallStep's products and sums (w
+/// set to 0, as btVector3's arithmetic sets it), the lengths summed in k's order: the same bits.
+FIBREMSS_AVX2_PASS double moveParticlesAvx2(ParticleState& particles, const int* rows,
+                                            const btVector3* solution, btScalar keep,
+                                            btScalar scale) {
+  const uint32_t* free = particles.freeParticles.data();
+  const size_t count = particles.freeParticles.size();
+  btVector3* positions = particles.positions.data();
+  btVector3* previous = particles.previous.data();
+  const __m256 xyz = xyzLanes(), keepAll = _mm256_set1_ps(keep), scaleAll = _mm256_set1_ps(scale);
+  double displacement = 0;
+  size_t k = 0;
+  for (; k + 1 < count; k += 2) {
+    const auto a = static_cast<int>(free[k]), b = static_cast<int>(free[k + 1]);
+    const __m256 x = loadPair(positions[a], positions[b]);
+    const __m256 push = loadPair(solution[rows[k]], solution[rows[k + 1]]);
+    const __m256 step = _mm256_and_ps(
+        _mm256_add_ps(_mm256_mul_ps(_mm256_sub_ps(x, loadPair(previous[a], previous[b])), keepAll),
+                      _mm256_mul_ps(push, scaleAll)),
+        xyz);
+    storePair(previous, a, b, x);
+    storePair(positions, a, b, _mm256_and_ps(_mm256_add_ps(x, step), xyz));
+    const __m256 lengths = _mm256_sqrt_ps(rowDots(_mm256_mul_ps(step, step)));
+    displacement += double(_mm256_cvtss_f32(lengths));
+    displacement += double(_mm_cvtss_f32(_mm256_extractf128_ps(lengths, 1)));
+  }
+  if (k < count) displacement += heavyBallStep(particles, free[k], solution[rows[k]], keep, scale);
+  return displacement;
+}
+#endif
+
+/// Every free particle k moved by heavyBallStep with row k of `solution` as its push. Returns the
+/// sum of their moves in k's order [m].
+double moveParticles(ParticleState& particles, const ProjectiveFactor& factor,
+                     const std::vector<btVector3>& solution, btScalar keep, btScalar scale) {
+#if FIBREMSS_AVX2_PARTICLES
+  if (fastestSpringKernel() == SpringKernel::avx2)
+    return moveParticlesAvx2(particles, factor.rows(), solution.data(), keep, scale);
+#endif
+  const std::vector<uint32_t>& free = particles.freeParticles;
+  double displacement = 0;
+  for (size_t k = 0; k < free.size(); ++k)
+    displacement += heavyBallStep(particles, free[k], solution[factor.row(k)], keep, scale);
+  return displacement;
+}
+
 /// x⁺ = x + H·F(x) with F in w.forces; a step that does not point down the forces (H·F·F ≤ 0)
 /// or moves a particle too far (keepsStep) is replaced by the plain projective one, bounded
 /// (boundStep), and the history restarts.
@@ -554,8 +714,7 @@ IntegrationResult quasiNewtonStep(const IntegratedMuscle& muscle, const MuscleSy
   }
   if (h.count == 0) boundStep(muscle, w.solution);  // an L-BFGS step kept is within the bound
   IntegrationResult result;
-  for (size_t k = 0; k < free.size(); ++k)
-    result.displacement += heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], 0, 1);
+  result.displacement = moveParticles(particles, w.factor, w.solution, 0, 1);
   result.finite = std::isfinite(result.displacement);
   return result;
 }
@@ -569,24 +728,15 @@ class ProjectiveIntegrator final : public TimeIntegrator {
     auto& w = static_cast<ProjectiveWorkspace&>(*muscle.workspace);
     if (holdContacts(muscle, w, def.projectiveContactWeight)) w.factor.update();
     ParticleState& particles = muscle.particles;
-    const std::vector<uint32_t>& free = particles.freeParticles;
     // With pair reactions the step added the contacts' reactions to the forces already.
-    const bool held = holdsContacts(def) && !def.pairReactions;
-    for (size_t k = 0; k < free.size(); ++k) {
-      const btVector3& force = particles.forces[free[k]];
-      w.forces[w.factor.row(k)] =
-          held ? withoutInto(force, contactNormal(muscle.contact, muscle.residual, free[k]))
-               : force;
-    }
+    gatherForces(muscle, w, holdsContacts(def) && !def.pairReactions);
     if (def.projectiveHistory > 0) return quasiNewtonStep(muscle, def, w);
     w.solution = w.forces;
     w.factor.solveInPlace(w.solution.data());
     const double rho = def.projectiveRho;
     const auto omega = static_cast<btScalar>(2 / (1 + std::sqrt(1 - rho * rho)));
     IntegrationResult result;
-    for (size_t k = 0; k < free.size(); ++k)
-      result.displacement +=
-          heavyBallStep(particles, free[k], w.solution[w.factor.row(k)], omega - 1, omega);
+    result.displacement = moveParticles(particles, w.factor, w.solution, omega - 1, omega);
     result.finite = std::isfinite(result.displacement);
     return result;
   }

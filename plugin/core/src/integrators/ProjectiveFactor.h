@@ -31,8 +31,12 @@ class ProjectiveFactor {
   size_t size() const { return order_.size(); }
   /// The row P·k of L that free particle k is solved in.
   int row(size_t k) const { return order_[k]; }
+  /// row(k) for every free particle k, in k's order.
+  const int* rows() const { return order_.data(); }
   /// A's diagonal entry in `row` of P·A·Pᵀ [N/m].
   double matrixDiagonal(int row) const { return diagonal_[row]; }
+  /// matrixDiagonal(row) for every row, in row order [N/m].
+  const double* matrixDiagonals() const { return diagonal_.data(); }
   /// W's entry in `row` [N/m].
   double weight(int row) const { return weights_[row]; }
   /// Sets W's entry in `row` [N/m], at most once per row between updates (the change lists are
