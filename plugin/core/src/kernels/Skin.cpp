@@ -3,29 +3,52 @@
 #include <algorithm>
 #include <cmath>
 
+#include "ParticleSimd.h"
 #include "fibremss/Pretransform.h"
 
 namespace fibremss {
 namespace {
 
+#if !FIBREMSS_SSE_PARTICLES
 /// d·Dᵀ.
 btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
   return btMatrix3x3(d.x() * e.x(), d.x() * e.y(), d.x() * e.z(), d.y() * e.x(), d.y() * e.y(),
                      d.y() * e.z(), d.z() * e.x(), d.z() * e.y(), d.z() * e.z());
 }
+#endif
+
+#if FIBREMSS_SSE_PARTICLES
+/// `rows` added to m's rows.
+inline void addRows(btMatrix3x3& m, const __m128 (&rows)[3]) {
+  for (int i = 0; i < 3; ++i)
+    _mm_store_ps(m[i].m_floats, _mm_add_ps(_mm_load_ps(m[i].m_floats), rows[i]));
+}
+#endif
 
 /// Σ over the springs with a used end of outer(x_b − x_a, X_b − X_a), into that end's entry of
-/// `sums` (which starts at zero).
+/// `sums` (which starts at zero). With SSE a row of the outer product per instruction (each
+/// entry's product and sum as btMatrix3x3's, w kept 0): the same bits.
 void sumMoments(const MuscleSettings& settings, std::span<const btVector3> positions,
                 std::span<const uint8_t> used, std::span<btMatrix3x3> sums) {
   for (btMatrix3x3& m : sums) m.setValue(0, 0, 0, 0, 0, 0, 0, 0, 0);
   const std::span<const btVector3> rest = settings.restPositions;
   for (const Spring& spring : settings.springs) {
     if (!used[spring.a] && !used[spring.b]) continue;
+#if FIBREMSS_SSE_PARTICLES
+    const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+    const __m128 d = _mm_sub_ps(loadVector(positions[spring.b]), loadVector(positions[spring.a]));
+    const __m128 e = _mm_sub_ps(loadVector(rest[spring.b]), loadVector(rest[spring.a]));
+    const __m128 rows[3] = {_mm_and_ps(_mm_mul_ps(_mm_shuffle_ps(d, d, 0x00), e), xyz),
+                            _mm_and_ps(_mm_mul_ps(_mm_shuffle_ps(d, d, 0x55), e), xyz),
+                            _mm_and_ps(_mm_mul_ps(_mm_shuffle_ps(d, d, 0xaa), e), xyz)};
+    if (used[spring.a]) addRows(sums[spring.a], rows);
+    if (used[spring.b]) addRows(sums[spring.b], rows);
+#else
     const btMatrix3x3 m =
         outer(positions[spring.b] - positions[spring.a], rest[spring.b] - rest[spring.a]);
     if (used[spring.a]) sums[spring.a] += m;
     if (used[spring.b]) sums[spring.b] += m;
+#endif
   }
 }
 
