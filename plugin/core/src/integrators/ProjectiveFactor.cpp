@@ -507,9 +507,31 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
     forwardRun(factor, x, first, last);
     int c = first;
     for (; c + 8 <= last + 1; c += 8) forwardBelow<8>(factor, x, last, c);
-    if (c + 4 <= last + 1) forwardBelow<4>(factor, x, last, c), c += 4;
-    if (c + 2 <= last + 1) forwardBelow<2>(factor, x, last, c), c += 2;
-    if (c <= last) forwardBelow<1>(factor, x, last, c);
+    switch (last + 1 - c) {  // the run's last columns in one sweep
+      case 7:
+        forwardBelow<7>(factor, x, last, c);
+        break;
+      case 6:
+        forwardBelow<6>(factor, x, last, c);
+        break;
+      case 5:
+        forwardBelow<5>(factor, x, last, c);
+        break;
+      case 4:
+        forwardBelow<4>(factor, x, last, c);
+        break;
+      case 3:
+        forwardBelow<3>(factor, x, last, c);
+        break;
+      case 2:
+        forwardBelow<2>(factor, x, last, c);
+        break;
+      case 1:
+        forwardBelow<1>(factor, x, last, c);
+        break;
+      default:
+        break;
+    }
   }
   for (int r = factor.runCount - 1; r >= 0; --r)
     backwardRun(factor, x, factor.runs[r], factor.runs[r + 1] - 1, gathered);
