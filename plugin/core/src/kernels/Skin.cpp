@@ -18,6 +18,14 @@ btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
 #endif
 
 #if FIBREMSS_SSE_PARTICLES
+/// m·u as btMatrix3x3's product gives it (each row's dot with u summed (x + y) + z), w 0.
+inline __m128 transform(const btMatrix3x3& m, __m128 u) {
+  __m128 r0 = _mm_mul_ps(loadVector(m[0]), u), r1 = _mm_mul_ps(loadVector(m[1]), u);
+  __m128 r2 = _mm_mul_ps(loadVector(m[2]), u), r3 = _mm_setzero_ps();
+  _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+  return _mm_add_ps(_mm_add_ps(r0, r1), r2);
+}
+
 /// `rows` added to m's rows.
 inline void addRows(btMatrix3x3& m, const __m128 (&rows)[3]) {
   for (int i = 0; i < 3; ++i)
@@ -66,6 +74,39 @@ btMatrix3x3 boneRotation(const MuscleSettings& settings,
                      columns[2].y(), columns[0].z(), columns[1].z(), columns[2].z());
 }
 
+/// Each surface vertex v from its particles p (weights w) and their deformations F_p:
+/// Σ w·(x_p + F_p·(v − p)). With SSE a vector per instruction, each sum and product as
+/// btVector3's and btMatrix3x3's: the same bits.
+void bindSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
+                 std::span<const btMatrix3x3> deformations, std::span<btVector3> surface) {
+  const auto& rest = settings.restSurface.vertices;
+  const size_t n = static_cast<size_t>(settings.skinNeighbours);
+  for (size_t v = 0; v < rest.size(); ++v) {
+#if FIBREMSS_SSE_PARTICLES
+    const __m128 vertex = loadVector(rest[v]);
+    __m128 moved = _mm_setzero_ps();
+    for (size_t j = v * n; j < (v + 1) * n; ++j) {
+      const uint32_t particle = settings.skinParticles[j];
+      const __m128 offset = transform(
+          deformations[particle], _mm_sub_ps(vertex, loadVector(settings.restPositions[particle])));
+      moved = _mm_add_ps(moved, _mm_mul_ps(_mm_add_ps(loadVector(positions[particle]), offset),
+                                           _mm_set1_ps(settings.skinWeights[j])));
+    }
+    _mm_store_ps(surface[v].m_floats,
+                 _mm_and_ps(moved, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0))));
+#else
+    btVector3 moved(0, 0, 0);
+    for (size_t j = v * n; j < (v + 1) * n; ++j) {
+      const uint32_t particle = settings.skinParticles[j];
+      const btVector3 offset =
+          deformations[particle] * (rest[v] - settings.restPositions[particle]);
+      moved += (positions[particle] + offset) * settings.skinWeights[j];
+    }
+    surface[v] = moved;
+#endif
+  }
+}
+
 }  // namespace
 
 void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames) {
@@ -100,18 +141,7 @@ void deformSurface(const MuscleSettings& settings, std::span<const btVector3> po
                                  ? deformation
                                  : boneRotation(settings, boneTransforms, i, blended, blend);
   }
-  const auto& rest = settings.restSurface.vertices;
-  const size_t n = static_cast<size_t>(settings.skinNeighbours);
-  for (size_t v = 0; v < rest.size(); ++v) {
-    btVector3 moved(0, 0, 0);
-    for (size_t j = v * n; j < (v + 1) * n; ++j) {
-      const uint32_t particle = settings.skinParticles[j];
-      const btVector3 offset =
-          frames.deformations[particle] * (rest[v] - settings.restPositions[particle]);
-      moved += (positions[particle] + offset) * settings.skinWeights[j];
-    }
-    surface[v] = moved;
-  }
+  bindSurface(settings, positions, frames.deformations, surface);
 }
 
 void measureLayer(const MuscleSettings& settings, std::span<const btVector3> positions,
