@@ -160,26 +160,20 @@ Matrix assemble(const MuscleSettings& settings, const std::vector<int>& rows, si
 bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double contactWeight) {
   bool changed = false;
   ProjectiveFactor& factor = w.factor;
-  // Raw arrays: a store through uint8_t* may alias any vector's members, which the compiler
-  // would then read again for every particle.
-  const uint32_t* free = muscle.particles.freeParticles.data();
-  const size_t count = muscle.particles.freeParticles.size();
-  const int* rows = factor.rows();
-  uint8_t* pushedLast = muscle.contact.pushedLast.data();
-  uint8_t* pushedRows = w.pushed.data();
-  uint16_t* idle = w.idle.data();
+  const std::vector<uint32_t>& free = muscle.particles.freeParticles;
+  std::vector<uint8_t>& pushedLast = muscle.contact.pushedLast;
   const uint16_t hold = muscle.contact.movingContacts ? kMovingContactHold : kContactHold;
-  for (size_t k = 0; k < count; ++k) {
-    const int row = rows[k];
+  for (size_t k = 0; k < free.size(); ++k) {
+    const int row = factor.row(k);
     uint8_t& pushed = pushedLast[free[k]];
     const bool held = factor.weight(row) > 0;
-    pushedRows[row] = pushed;
+    w.pushed[row] = pushed;
     if (pushed) {
       pushed = 0;
-      idle[row] = 0;
+      w.idle[row] = 0;
       if (held) continue;
       factor.setWeight(row, contactWeight * factor.matrixDiagonal(row));
-    } else if (held && ++idle[row] > hold) {
+    } else if (held && ++w.idle[row] > hold) {
       factor.setWeight(row, 0);
     } else {
       continue;
@@ -268,26 +262,43 @@ struct PairProducts {
 };
 
 #if FIBREMSS_AVX2_PARTICLES
-/// pairProducts two rows per instruction (the same bits).
+/// The dots of the products p1, p2 and p3 of two rows (one row per half), each summed as
+/// btVector3::dot sums it, as doubles: row k's [p1, p2, p3, p3] in `low`, row k + 1's in `high`.
+FIBREMSS_AVX2_PASS inline void threeDots(__m256 p1, __m256 p2, __m256 p3, __m256d& low,
+                                         __m256d& high) {
+  const __m256 a = _mm256_unpacklo_ps(p1, p2), b = _mm256_unpackhi_ps(p1, p2);
+  const __m256 c = _mm256_unpacklo_ps(p3, p3), d = _mm256_unpackhi_ps(p3, p3);
+  const __m256 x = _mm256_shuffle_ps(a, c, 0x44), y = _mm256_shuffle_ps(a, c, 0xee);
+  const __m256 dots = _mm256_add_ps(_mm256_add_ps(x, y), _mm256_shuffle_ps(b, d, 0x44));
+  low = _mm256_cvtps_pd(_mm256_castps256_ps128(dots));
+  high = _mm256_cvtps_pd(_mm256_extractf128_ps(dots, 1));
+}
+
+/// pairProducts two rows per instruction, the three sums side by side in one register (each
+/// lane its own sum in row order): the same bits.
 FIBREMSS_AVX2_PASS PairProducts pairProductsAvx2(const btVector3* s, const btVector3* y,
                                                  const btVector3* forces, btVector3* lastForces,
                                                  size_t rows) {
-  PairProducts sums;
+  __m256d sums = _mm256_setzero_pd();  // s·y, s·s, y·y (and y·y again)
   size_t r = 0;
   for (; r + 1 < rows; r += 2) {
     const __m256 step = rowPair(s, r), change = rowPair(y, r);
-    sums.curvature = addDots(sums.curvature, _mm256_mul_ps(step, change));
-    sums.steps = addDots(sums.steps, _mm256_mul_ps(step, step));
-    sums.changes = addDots(sums.changes, _mm256_mul_ps(change, change));
+    __m256d low, high;
+    threeDots(_mm256_mul_ps(step, change), _mm256_mul_ps(step, step), _mm256_mul_ps(change, change),
+              low, high);
+    sums = _mm256_add_pd(_mm256_add_pd(sums, low), high);
     _mm256_storeu_ps(lastForces[r].m_floats, rowPair(forces, r));
   }
+  alignas(32) double lanes[4];
+  _mm256_store_pd(lanes, sums);
+  PairProducts products{lanes[0], lanes[1], lanes[2]};
   if (r < rows) {
-    sums.curvature += double(s[r].dot(y[r]));
-    sums.steps += double(s[r].dot(s[r]));
-    sums.changes += double(y[r].dot(y[r]));
+    products.curvature += double(s[r].dot(y[r]));
+    products.steps += double(s[r].dot(s[r]));
+    products.changes += double(y[r].dot(y[r]));
     lastForces[r] = forces[r];
   }
-  return sums;
+  return products;
 }
 #endif
 
