@@ -22,6 +22,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "dynamics/StrainLimit.h"
 #include "dynamics/TimeStep.h"
 #include "fibremss/Error.h"
 #include "fibremss/MuscleSystem.h"
@@ -29,6 +30,7 @@
 #include "kernels/SpringForces.h"
 #include "solver/MuscleSystemAccess.h"
 #include "support/AllocationCounter.h"
+#include "support/GridMuscle.h"
 #include "support/SolverFixtures.h"
 #include "support/ThighSteps.h"
 
@@ -542,6 +544,58 @@ TEST(AdaptiveStep, EveryParticlesBoundIsTheReferencesBitForBit) {
   }
   EXPECT_GT(finite, bounds / 4);   // roots taken
   EXPECT_LT(finite, bounds - 40);  // and bounds that hold for every dt
+}
+
+/// The grid muscle's particles (GridMuscle.h) with the free ones moved by up to 40 % of the
+/// spacing at random (`seed`), none pushed.
+void scatterGrid(const MuscleSettings& settings, unsigned seed, ParticleState& particles,
+                 ContactState& contact) {
+  std::mt19937 random(seed);
+  std::uniform_real_distribution<float> offset(-0.0016f, 0.0016f);
+  particles.positions = settings.restPositions;
+  for (uint32_t i = 0; i < settings.particleCount(); ++i)
+    if (!settings.isFixed(i))
+      particles.positions[i] += btVector3(offset(random), offset(random), offset(random));
+  contact.pushedLast.assign(settings.particleCount(), 0);
+}
+
+TEST(StrainLimit, EveryKernelShortensTheSameSpringsToTheSameBits) {
+  // Some of the grid's springs beyond a limit of 1.3 (free–free, free–fixed and fixed–fixed ones,
+  // in blocks of eight with and without one, and in the tail after the last eight), shortened in
+  // up to four passes on each kernel against the scalar one, bit for bit.
+  auto settings = std::make_shared<MuscleSettings>(*testing::gridMuscle());
+  settings->strainLimit = btScalar(1.3);
+  for (unsigned seed = 1; seed <= 20; ++seed) {
+    ParticleState reference;
+    ContactState referenceContact;
+    scatterGrid(*settings, seed, reference, referenceContact);
+    size_t quietBlocks = 0;
+    for (size_t first = 0; first + 8 <= settings->springs.size(); first += 8) {
+      bool beyond = false;
+      for (size_t s = first; s < first + 8; ++s) {
+        const Spring& spring = settings->springs[s];
+        beyond = beyond || reference.positions[spring.a].distance(reference.positions[spring.b]) >
+                               settings->strainLimit * spring.restLength;
+      }
+      quietBlocks += !beyond;
+    }
+    EXPECT_GT(quietBlocks, 0u) << "seed " << seed;
+    const size_t shortened =
+        limitStrain(*settings, reference, referenceContact, 4, SpringKernel::scalar);
+    EXPECT_GT(shortened, 0u) << "seed " << seed;
+    for (SpringKernel kernel : availableKernels()) {
+      ParticleState particles;
+      ContactState contact;
+      scatterGrid(*settings, seed, particles, contact);
+      EXPECT_EQ(limitStrain(*settings, particles, contact, 4, kernel), shortened);
+      for (uint32_t i = 0; i < settings->particleCount(); ++i) {
+        for (int axis = 0; axis < 3; ++axis)
+          EXPECT_EQ(bits(particles.positions[i][axis]), bits(reference.positions[i][axis]))
+              << "seed " << seed << " particle " << i << " kernel " << springKernelName(kernel);
+        EXPECT_EQ(contact.pushedLast[i], referenceContact.pushedLast[i]);
+      }
+    }
+  }
 }
 
 TEST(AdaptiveStep, ThighStatesGiveTheReferencesBoundsBitForBit) {

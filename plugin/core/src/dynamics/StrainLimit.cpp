@@ -88,12 +88,13 @@ FIBREMSS_AVX2_PASS size_t projectionPassAvx2(const MuscleSettings& settings, btV
 /// are tested at once and only those from the first beyond the limit taken one by one: the pass
 /// moves nothing before it, so the same positions as spring by spring.
 size_t projectionPass(const MuscleSettings& settings, ParticleState& particles,
-                      ContactState& contact, btScalar limit) {
+                      ContactState& contact, btScalar limit, SpringKernel kernel) {
   btVector3* x = particles.positions.data();
   uint8_t* pushed = contact.pushedLast.data();
 #if FIBREMSS_AVX2_PARTICLES
-  if (fastestSpringKernel() == SpringKernel::avx2)
-    return projectionPassAvx2(settings, x, pushed, limit);
+  if (kernel == SpringKernel::avx2) return projectionPassAvx2(settings, x, pushed, limit);
+#else
+  (void)kernel;
 #endif
   return projectRange(settings, x, pushed, limit, 0, settings.springs.size());
 }
@@ -102,10 +103,15 @@ size_t projectionPass(const MuscleSettings& settings, ParticleState& particles,
 
 size_t limitStrain(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
                    int passes) {
+  return limitStrain(settings, particles, contact, passes, fastestSpringKernel());
+}
+
+size_t limitStrain(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                   int passes, SpringKernel kernel) {
   if (!(settings.strainLimit > 0)) return 0;
   size_t shortened = 0;
   for (int pass = 0; pass < passes; ++pass) {
-    const size_t count = projectionPass(settings, particles, contact, settings.strainLimit);
+    const size_t count = projectionPass(settings, particles, contact, settings.strainLimit, kernel);
     if (count == 0) break;
     shortened += count;
   }

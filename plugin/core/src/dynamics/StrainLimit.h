@@ -4,6 +4,8 @@
 // an iteration or a step longer than MuscleSettings::strainLimit times its rest length.
 #include <cstddef>
 
+#include "kernels/SpringForces.h"
+
 namespace fibremss {
 
 struct ContactState;
@@ -20,6 +22,10 @@ struct ParticleState;
 /// `contact`'s pushedLast.
 size_t limitStrain(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
                    int passes);
+/// limitStrain on `kernel`'s instruction set (AVX2 tests eight springs at once; every kernel
+/// gives the same positions). The other runs on fastestSpringKernel().
+size_t limitStrain(const MuscleSettings& settings, ParticleState& particles, ContactState& contact,
+                   int passes, SpringKernel kernel);
 
 /// Passes of limitStrain after each integration of a muscle whose forces found a spring near the
 /// limit (SpringForceResult::nearLimit; none otherwise) [passes]: one. A spring a pass leaves
