@@ -450,6 +450,13 @@ FIBREMSS_AVX2_PASS void forwardBelow(const SolveFactor& factor, btVector3* x, in
   }
 }
 
+/// forwardBelow of the run's last `count` (0 to 7) columns from c, in one sweep.
+template <int... B>
+FIBREMSS_AVX2_PASS inline void forwardLast(const SolveFactor& factor, btVector3* x, int last, int c,
+                                           int count, std::integer_sequence<int, B...>) {
+  ((count == B + 1 ? forwardBelow<B + 1>(factor, x, last, c) : void()), ...);
+}
+
 /// Entries p and p + 1's products with their rows' x, read from `rows` in the column's order.
 FIBREMSS_AVX2_PASS inline __m256 products(const btVector3* rows, const btScalar* values, int p) {
   return _mm256_mul_ps(_mm256_loadu_ps(rows[p].m_floats), valuePair(values + p));
@@ -507,31 +514,7 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
     forwardRun(factor, x, first, last);
     int c = first;
     for (; c + 8 <= last + 1; c += 8) forwardBelow<8>(factor, x, last, c);
-    switch (last + 1 - c) {  // the run's last columns in one sweep
-      case 7:
-        forwardBelow<7>(factor, x, last, c);
-        break;
-      case 6:
-        forwardBelow<6>(factor, x, last, c);
-        break;
-      case 5:
-        forwardBelow<5>(factor, x, last, c);
-        break;
-      case 4:
-        forwardBelow<4>(factor, x, last, c);
-        break;
-      case 3:
-        forwardBelow<3>(factor, x, last, c);
-        break;
-      case 2:
-        forwardBelow<2>(factor, x, last, c);
-        break;
-      case 1:
-        forwardBelow<1>(factor, x, last, c);
-        break;
-      default:
-        break;
-    }
+    forwardLast(factor, x, last, c, last + 1 - c, std::make_integer_sequence<int, 7>());
   }
   for (int r = factor.runCount - 1; r >= 0; --r)
     backwardRun(factor, x, factor.runs[r], factor.runs[r + 1] - 1, gathered);
