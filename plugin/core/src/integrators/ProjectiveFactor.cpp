@@ -535,10 +535,11 @@ FIBREMSS_AVX2_PASS void solveLanesAvx2(const SolveFactor factor, btVector3* x,
 // loads and stores does not matter). With AVX2 (solveLanesAvx2) two per instruction and by runs: a
 // pair of rows below a run is read and written once per eight of its columns, and the rows below a
 // run are gathered once for the backward pass of all its columns. cylinder-twist's 130 solves:
-// 162.4 M instructions with the backward sums in four chains (166.3 M in two), against 260.9 M
-// column by column (302.5 M not unrolled, 395.3 M with SSE over value–offset pairs). A supernodal
-// solve with four rows in the lanes (other sums, other bits) took 14 % fewer instructions than
-// column by column but 12 % more CPU time (docs/decisions.md, "Solver").
+// 159.2 M instructions (162.4 M before a run's last columns took one sweep, 166.3 M with the
+// backward sums in two chains), against 260.9 M column by column (302.5 M not unrolled, 395.3 M
+// with SSE over value–offset pairs). A supernodal solve with four rows in the lanes (other sums,
+// other bits) took 14 % fewer instructions than column by column but 12 % more CPU time
+// (docs/decisions.md, "Solver").
 void ProjectiveFactor::solveInPlace(btVector3* x, SpringKernel kernel) {
   const SolveFactor factor{columnStart_.data(),
                            solveValues_.data(),
