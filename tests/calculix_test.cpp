@@ -2128,6 +2128,81 @@ TEST(ShippedReference, IsCompressedFloatsAndReadsBackWithinTheirPrecision) {
   EXPECT_THROW(loadShippedSolution(shipped, back), InputError) << "truncated";
 }
 
+/// A muscle-like surface of `vertices` points [m], moved by `offset` [m] along a smooth field.
+std::vector<btVector3> smoothSurface(int vertices, double phase, double offset) {
+  std::vector<btVector3> surface;
+  for (int i = 0; i < vertices; ++i)
+    surface.emplace_back(btScalar(0.02 * std::cos(0.01 * i + phase) + offset * std::sin(0.03 * i)),
+                         btScalar(0.02 * std::sin(0.01 * i + phase)),
+                         btScalar(0.3 + 1e-4 * i + offset * std::cos(0.02 * i)));
+  return surface;
+}
+
+std::vector<btVector3> joined(const std::vector<btVector3>& a, const std::vector<btVector3>& b) {
+  std::vector<btVector3> both = a;
+  both.insert(both.end(), b.begin(), b.end());
+  return both;
+}
+
+TEST(ShippedReference, AGateIsStoredAgainstItsReferenceWithinHalfAQuantum) {
+  TemporaryDirectory dir("shipped_gate_test");
+  const std::string baseKey = "00000000000000ab";
+  const std::string basePath = (dir.path() / (baseKey + ".ref.gz")).string();
+  CalculixSolution reference;  // two muscles of 1 000 and 400 vertices, three poses
+  for (int p = 0; p < 3; ++p) {
+    reference.poseSurfaces.push_back(joined(smoothSurface(1000, p, 0), smoothSurface(400, -p, 0)));
+    reference.poseFailures.push_back("");
+  }
+  shipSolution(basePath, reference);
+  ShippedBase base{baseKey, {}, {1000, 400}};
+  ASSERT_TRUE(loadShippedSolution(basePath, base.solution));
+
+  CalculixSolution gate;  // poses 0-1 moved 0.4 mm, pose 2 by less than a quantum; a failed part
+  const double moves[3] = {4e-4, 4e-4, 3e-9};
+  for (int p = 0; p < 3; ++p) {
+    gate.poseSurfaces.push_back(
+        joined(smoothSurface(1000, p, moves[p]), smoothSurface(400, -p, moves[p])));
+    gate.poseFailures.push_back("");
+  }
+  gate.muscles.resize(2);
+  for (int p = 0; p < 3; ++p) gate.muscles[0].stepSurfaces.push_back(smoothSurface(1000, p, 2e-4));
+  gate.muscles[1].failure = "*ERROR";
+  gate.increments = 7;
+  const std::string compact = (dir.path() / "gate.ref.gz").string();
+  const std::string floats = (dir.path() / "floats.ref.gz").string();
+  shipSolution(compact, gate, &base);
+  shipSolution(floats, gate);
+  EXPECT_LT(std::filesystem::file_size(compact), std::filesystem::file_size(floats) / 2)
+      << "differences from the reference, not floats";
+
+  CalculixSolution back, old;
+  ASSERT_TRUE(loadShippedSolution(compact, back));
+  ASSERT_TRUE(loadShippedSolution(floats, old)) << "a gate shipped as floats is still read";
+  EXPECT_EQ(back.poseFailures, gate.poseFailures);
+  EXPECT_EQ(back.increments, 7);
+  EXPECT_EQ(back.returnSurface.size(), 0u);
+  ASSERT_EQ(back.muscles.size(), 2u);
+  EXPECT_EQ(back.muscles[1].failure, "*ERROR");
+  EXPECT_TRUE(back.muscles[1].stepSurfaces.empty());
+  std::vector<std::pair<std::vector<btVector3>, std::vector<btVector3>>> surfaces;  // read, shipped
+  for (size_t p = 0; p < 3; ++p) surfaces.push_back({back.poseSurfaces[p], gate.poseSurfaces[p]});
+  for (size_t s = 0; s < 3; ++s)
+    surfaces.push_back({back.muscles[0].stepSurfaces[s], gate.muscles[0].stepSurfaces[s]});
+  for (const auto& [read, shipped] : surfaces) {
+    ASSERT_EQ(read.size(), shipped.size());
+    for (size_t v = 0; v < read.size(); ++v)
+      for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(read[v][c], shipped[v][c], kShippedGateQuantum / 2 + 1e-7);
+  }
+  for (size_t v = 0; v < back.poseSurfaces[2].size(); ++v)
+    for (int c = 0; c < 3; ++c)
+      ASSERT_EQ(float(back.poseSurfaces[2][v][c]), float(old.poseSurfaces[2][v][c]))
+          << "within a quantum of its reference: the floats exactly";
+
+  std::filesystem::remove(basePath);
+  EXPECT_THROW(loadShippedSolution(compact, back), InputError) << "its reference is not beside it";
+}
+
 TEST(ReferenceCommand, ShipsItsSolvesAndAnEmptyCacheFindsThemThere) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");

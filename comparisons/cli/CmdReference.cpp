@@ -110,11 +110,11 @@ void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry)
   std::filesystem::rename(path + ".partial", path);
 }
 
-/// Writes `solution` to `dir/<key>.ref.gz` and says so.
+/// Writes `solution` to `dir/<key>.ref.gz` (against `base` where not null) and says so.
 void shipStored(const std::string& dir, const std::string& key, const CalculixSolution& solution,
-                const std::string& what) {
+                const std::string& what, const ShippedBase* base = nullptr) {
   const std::string path = dir + "/" + key + ".ref.gz";
-  shipSolution(path, solution);
+  shipSolution(path, solution, base);
   std::printf("shipped %s (%s): %ju bytes\n", path.c_str(), what.c_str(),
               static_cast<uintmax_t>(std::filesystem::file_size(path)));
 }
@@ -129,15 +129,28 @@ CalculixSolution failureRecord(CalculixSolution solution) {
   return solution;
 }
 
+/// The reference's solve as shipped to `dir` under `key`, against which its gates are stored.
+ShippedBase shippedBase(const PreparedScene& prepared, const std::string& dir,
+                        const std::string& key) {
+  ShippedBase base{key, {}, {}};
+  if (!loadShippedSolution(dir + "/" + key + ".ref.gz", base.solution))
+    throw std::runtime_error("the reference " + key + " was not shipped to " + dir);
+  for (const auto& muscle : prepared.muscles)
+    base.muscleVertices.push_back(muscle->restSurface.vertices.size());
+  return base;
+}
+
 /// Writes every stored solve of the reference (its own and its gates') to args.shipDir as
-/// shipped references (`<key>.ref.gz`) and records them in its manifest.json. A gate not solved
-/// yet is listed with `"shipped": false`, so the manifest still names every key of the scene.
+/// shipped references (`<key>.ref.gz`; the gates' against the reference's) and records them in
+/// its manifest.json. A gate not solved yet is listed with `"shipped": false`, so the manifest
+/// still names every key of the scene.
 void ship(const LoadedScene& scene, const PreparedScene& prepared, const ReferenceArgs& args) {
   const std::string cacheDir = resolvedCacheDir(args.options);
   std::filesystem::create_directories(args.shipDir);
   ReferenceOptions withGates = args.options;
   withGates.gates = true;
   nlohmann::ordered_json solves = nlohmann::ordered_json::array();
+  std::unique_ptr<ShippedBase> base;  // the reference's, once shipped (its cell comes first)
   for (const NamedReferenceCell& cell : referenceCells(scene, prepared, withGates)) {
     if (cell.cell.muscle != 0) continue;  // a cell per muscle, a file per solve
     CalculixSolution solution;
@@ -151,23 +164,24 @@ void ship(const LoadedScene& scene, const PreparedScene& prepared, const Referen
         // The failed solve whole (the poses before its failure are its figure until the retry
         // is solved), through which a fresh machine reaches the retry's key.
         shipStored(args.shipDir, cell.retryOf, solution,
-                   cell.solve + ", failed; its retry not solved");
+                   cell.solve + ", failed; its retry not solved", base.get());
         unsolved["retry_of"] = cell.retryOf;
       }
       solves.push_back(unsolved);
       continue;
     }
-    shipStored(args.shipDir, cell.key, solution, cell.solve);
+    shipStored(args.shipDir, cell.key, solution, cell.solve, base.get());
     nlohmann::ordered_json shipped = {{"solve", cell.solve}, {"key", cell.key}};
     if (!cell.retryOf.empty()) {
       // The failed solve at default increments: how a fresh machine reaches its retry.
       if (!loadStoredSolution(cacheDir, cell.retryOf, solution))
         throw std::runtime_error("the failed solve " + cell.retryOf + " is not stored");
       shipStored(args.shipDir, cell.retryOf, failureRecord(solution),
-                 cell.solve + ", failed at default increments: its failures alone");
+                 cell.solve + ", failed at default increments: its failures alone", base.get());
       shipped["retry_of"] = cell.retryOf;
     }
     solves.push_back(shipped);
+    if (!base) base = std::make_unique<ShippedBase>(shippedBase(prepared, args.shipDir, cell.key));
   }
   updateManifest(args.shipDir,
                  {{"scene", scene.name}, {"set", args.scene.overrides}, {"solves", solves}});

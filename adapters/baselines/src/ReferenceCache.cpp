@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -14,24 +15,29 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <mutex>
 #include <sstream>
 #include <thread>
 #include <tuple>
 #include <type_traits>
 
+#include "SurfaceDeltas.h"
 #include "fibremss/Error.h"
 
 namespace fibremss {
 namespace {
 
 // Version 2 of a solution (cache or shipped) is version 1 followed by its muscles' parts
-// (CalculixSolution::muscles); a solution without them is still written as version 1.
+// (CalculixSolution::muscles); a solution without them is still written as version 1. Version 3
+// of a shipped one (a gate's) names the solve shipped beside it that its surfaces are stored
+// against (SurfaceDeltas), then holds version 1 or 2 of it.
 constexpr char kMagic[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '1'};
 constexpr char kMagic2[8] = {'F', 'M', 'S', 'S', 'R', 'E', 'F', '2'};
 constexpr char kPartMagic[8] = {'F', 'M', 'S', 'S', 'P', 'R', 'T', '1'};
 constexpr char kShippedMagic[8] = {'F', 'M', 'S', 'S', 'S', 'H', 'P', '1'};
 constexpr char kShippedMagic2[8] = {'F', 'M', 'S', 'S', 'S', 'H', 'P', '2'};
+constexpr char kShippedMagic3[8] = {'F', 'M', 'S', 'S', 'S', 'H', 'P', '3'};
 
 /// FNV-1a over everything fed to it.
 class Hasher {
@@ -74,11 +80,18 @@ class Hasher {
 };
 
 /// How a store holds positions: doubles in the cache, floats in a shipped reference (about
-/// 10⁻⁵ mm on a muscle of 0.5 m, far below the gates' 0.1 mm).
+/// 10⁻⁵ mm on a muscle of 0.5 m, far below the gates' 0.1 mm), differences from earlier
+/// surfaces in a shipped gate (`deltas`: SurfaceDeltas).
 enum class Precision { Double, Float };
+struct Positions {
+  Precision precision = Precision::Double;
+  SurfaceDeltas* deltas = nullptr;  ///< where not null, it stores them
+};
 
 void writePoints(std::ostream& out, const std::vector<btVector3>& points,
-                 Precision precision = Precision::Double) {
+                 const Positions& positions = {}) {
+  if (positions.deltas) return positions.deltas->write(out, points);
+  const Precision precision = positions.precision;
   const uint64_t count = points.size();
   out.write(reinterpret_cast<const char*>(&count), sizeof count);
   for (const btVector3& p : points) {
@@ -101,8 +114,8 @@ void writeText(std::ostream& out, const std::string& text) {
 /// Reads from the stream or throws InputError naming the file.
 class Reader {
  public:
-  Reader(std::istream& in, const std::string& path, Precision precision = Precision::Double)
-      : in_(in), path_(path), precision_(precision) {}
+  Reader(std::istream& in, const std::string& path, const Positions& positions = {})
+      : in_(in), path_(path), positions_(positions) {}
   template <typename T>
   T value() {
     T v{};
@@ -119,11 +132,12 @@ class Reader {
     return s;
   }
   std::vector<btVector3> points() {
+    if (positions_.deltas) return positions_.deltas->read(in_, path_);
     const uint64_t count = value<uint64_t>();
     if (count > (1ull << 32)) throw InputError(path_, "", "not a reference cache file");
     std::vector<btVector3> points(count);
     for (btVector3& p : points) {
-      if (precision_ == Precision::Float) {
+      if (positions_.precision == Precision::Float) {
         const auto xyz = value<std::array<float, 3>>();
         p.setValue(btScalar(xyz[0]), btScalar(xyz[1]), btScalar(xyz[2]));
       } else {
@@ -139,7 +153,7 @@ class Reader {
  private:
   std::istream& in_;
   const std::string& path_;
-  Precision precision_;
+  Positions positions_;
 };
 
 /// Writes what `write(out)` puts in a stream to `path` atomically (a temporary file renamed).
@@ -177,24 +191,26 @@ SolveCounts readCounts(Reader& read) {
           read.value<double>()};
 }
 
-/// Reads a magic from `in`: 1 where it is `first`, 2 where `second` (nullptr: none), else
-/// throws InputError naming what `path` is not.
-int expectMagic(std::istream& in, const std::string& path, const char (&first)[8], const char* what,
-                const char (*second)[8] = nullptr) {
+/// Reads a magic from `in`: its place in `magics` counted from 1, else throws InputError naming
+/// what `path` is not.
+int expectMagic(std::istream& in, const std::string& path,
+                std::initializer_list<const char*> magics, const char* what) {
   char magic[8];
   in.read(magic, sizeof magic);
-  if (in && std::memcmp(magic, first, sizeof magic) == 0) return 1;
-  if (in && second && std::memcmp(magic, *second, sizeof magic) == 0) return 2;
+  int version = 1;
+  for (const char* expected : magics) {
+    if (in && std::memcmp(magic, expected, sizeof magic) == 0) return version;
+    ++version;
+  }
   throw InputError(path, "", std::string("not a ") + what);
 }
 
 /// Writes a muscle's part (after a magic; its input file by name alone) in `precision`.
-void writePart(std::ostream& out, const MuscleSolution& part,
-               Precision precision = Precision::Double) {
+void writePart(std::ostream& out, const MuscleSolution& part, const Positions& positions = {}) {
   const uint64_t steps = part.stepSurfaces.size();
   out.write(reinterpret_cast<const char*>(&steps), sizeof steps);
   for (const std::vector<btVector3>& surface : part.stepSurfaces)
-    writePoints(out, surface, precision);
+    writePoints(out, surface, positions);
   writeText(out, part.failure);
   writeCounts(out, std::tie(part.nodes, part.tetrahedra, part.prescribedNodes,
                             part.newtonIterations, part.increments, part.seconds));
@@ -227,21 +243,22 @@ bool loadPart(const std::string& path, MuscleSolution& part) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return false;
   Reader read(in, path);
-  expectMagic(in, path, kPartMagic, "FibreMSS reference part file");
+  expectMagic(in, path, {kPartMagic}, "FibreMSS reference part file");
   part = readPart(read, path);
   return true;
 }
 
-/// Writes a solution (after its magic) in `precision`.
-void writeSolution(std::ostream& out, const CalculixSolution& solution, Precision precision) {
+/// Writes a solution (after its magic) with its positions as `positions` says.
+void writeSolution(std::ostream& out, const CalculixSolution& solution,
+                   const Positions& positions) {
   const uint64_t poses = solution.poseSurfaces.size();
   out.write(reinterpret_cast<const char*>(&poses), sizeof poses);
   for (size_t p = 0; p < poses; ++p) {
     writeText(out, solution.poseFailures[p]);
-    writePoints(out, solution.poseSurfaces[p], precision);
+    writePoints(out, solution.poseSurfaces[p], positions);
   }
   writeText(out, solution.returnFailure);
-  writePoints(out, solution.returnSurface, precision);
+  writePoints(out, solution.returnSurface, positions);
   writeCounts(out, std::tie(solution.nodes, solution.elements, solution.prescribedNodes,
                             solution.newtonIterations, solution.increments, solution.seconds));
   writeText(out, std::to_string(solution.inputFiles.size()));
@@ -254,7 +271,7 @@ void writeSolution(std::ostream& out, const CalculixSolution& solution, Precisio
   if (solution.muscles.empty()) return;  // version 1
   const uint64_t muscles = solution.muscles.size();
   out.write(reinterpret_cast<const char*>(&muscles), sizeof muscles);
-  for (const MuscleSolution& part : solution.muscles) writePart(out, part, precision);
+  for (const MuscleSolution& part : solution.muscles) writePart(out, part, positions);
 }
 
 /// Reads what writeSolution wrote, of `version` (its magic's).
@@ -416,7 +433,7 @@ std::string defaultReferenceCacheDir() {
 void saveSolution(const std::string& path, const CalculixSolution& solution) {
   writeAtomically(path, [&](std::ostream& out) {
     out.write(solution.muscles.empty() ? kMagic : kMagic2, sizeof kMagic);
-    writeSolution(out, solution, Precision::Double);
+    writeSolution(out, solution, {Precision::Double});
   });
 }
 
@@ -424,17 +441,32 @@ bool loadSolution(const std::string& path, CalculixSolution& solution) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return false;
   Reader read(in, path);
-  const int version = expectMagic(in, path, kMagic, "FibreMSS reference cache file", &kMagic2);
+  const int version = expectMagic(in, path, {kMagic, kMagic2}, "FibreMSS reference cache file");
   readSolution(read, path, version, solution);
   return true;
 }
 
-void shipSolution(const std::string& path, const CalculixSolution& solution) {
+void shipSolution(const std::string& path, const CalculixSolution& solution,
+                  const ShippedBase* base) {
   std::ostringstream bytes;
-  bytes.write(solution.muscles.empty() ? kShippedMagic : kShippedMagic2, sizeof kShippedMagic);
   CalculixSolution shipped = solution;
   shipped.inputFiles.clear();  // they name another machine's cache
-  writeSolution(bytes, shipped, Precision::Float);
+  const char* version = solution.muscles.empty() ? kShippedMagic : kShippedMagic2;
+  if (!base) {
+    bytes.write(version, sizeof kShippedMagic);
+    writeSolution(bytes, shipped, {Precision::Float});
+  } else {
+    bytes.write(kShippedMagic3, sizeof kShippedMagic3);
+    writeText(bytes, base->key);
+    bytes.write(version, sizeof kShippedMagic);
+    const std::vector<uint64_t> vertices(base->muscleVertices.begin(), base->muscleVertices.end());
+    const uint64_t muscles = vertices.size();
+    bytes.write(reinterpret_cast<const char*>(&muscles), sizeof muscles);
+    bytes.write(reinterpret_cast<const char*>(vertices.data()),
+                std::streamsize(muscles * sizeof(uint64_t)));
+    SurfaceDeltas deltas(base->solution, vertices);
+    writeSolution(bytes, shipped, {Precision::Float, &deltas});
+  }
   const std::string data = bytes.str(), temporary = path + ".partial";
   gzFile out = gzopen(temporary.c_str(), "wb9");
   const bool written = out && gzwrite(out, data.data(), static_cast<unsigned>(data.size())) ==
@@ -444,11 +476,14 @@ void shipSolution(const std::string& path, const CalculixSolution& solution) {
   std::filesystem::rename(temporary, path);
 }
 
-bool loadShippedSolution(const std::string& path, CalculixSolution& solution) {
+namespace {
+
+/// The bytes of the gzip file `path`; false when it does not exist. Throws InputError when it is
+/// not gzip or truncated.
+bool gunzip(const std::string& path, std::string& data) {
   if (!std::filesystem::exists(path)) return false;
   gzFile in = gzopen(path.c_str(), "rb");
   if (!in) throw InputError(path, "", "cannot be opened");
-  std::string data;
   char buffer[1 << 16];
   int got;
   while ((got = gzread(in, buffer, sizeof buffer)) > 0) data.append(buffer, size_t(got));
@@ -458,12 +493,59 @@ bool loadShippedSolution(const std::string& path, CalculixSolution& solution) {
   if (got < 0)
     throw InputError(path, "",
                      "not a gzip file or truncated (zlib error " + std::to_string(error) + ")");
-  std::istringstream bytes(data);
-  Reader read(bytes, path, Precision::Float);
+  return true;
+}
+
+bool isKey(const std::string& key) {
+  return key.size() == 16 && std::all_of(key.begin(), key.end(), [](char c) {
+           return std::isxdigit(static_cast<unsigned char>(c));
+         });
+}
+
+bool readShipped(const std::string& path, CalculixSolution& solution, bool againstBase);
+
+/// The rest of a shipped gate (version 3) after its magic: its base read from beside `path`.
+void readShippedDeltas(std::istream& bytes, const std::string& path, CalculixSolution& solution) {
+  Reader header(bytes, path);
+  const std::string key = header.text();
+  if (!isKey(key)) throw InputError(path, "", "not a FibreMSS shipped reference");
+  CalculixSolution base;
+  if (!readShipped((std::filesystem::path(path).parent_path() / (key + ".ref.gz")).string(), base,
+                   false))
+    throw InputError(path, "",
+                     "the solve it is stored against, " + key + ".ref.gz, is not beside it");
   const int version =
-      expectMagic(bytes, path, kShippedMagic, "FibreMSS shipped reference", &kShippedMagic2);
+      expectMagic(bytes, path, {kShippedMagic, kShippedMagic2}, "FibreMSS shipped reference");
+  std::vector<uint64_t> vertices(header.value<uint64_t>());
+  if (vertices.size() > 1000000) throw InputError(path, "", "not a FibreMSS shipped reference");
+  for (uint64_t& count : vertices) count = header.value<uint64_t>();
+  SurfaceDeltas deltas(base, std::move(vertices));
+  Reader read(bytes, path, {Precision::Float, &deltas});
+  readSolution(read, path, version, solution);
+}
+
+/// loadShippedSolution; a gate (version 3) only where `againstBase` (a base is none).
+bool readShipped(const std::string& path, CalculixSolution& solution, bool againstBase) {
+  std::string data;
+  if (!gunzip(path, data)) return false;
+  std::istringstream bytes(data);
+  const int version = expectMagic(bytes, path, {kShippedMagic, kShippedMagic2, kShippedMagic3},
+                                  "FibreMSS shipped reference");
+  if (version == 3 && !againstBase)
+    throw InputError(path, "", "a shipped gate, not the solve a gate is stored against");
+  if (version == 3) {
+    readShippedDeltas(bytes, path, solution);
+    return true;
+  }
+  Reader read(bytes, path, {Precision::Float});
   readSolution(read, path, version, solution);
   return true;
+}
+
+}  // namespace
+
+bool loadShippedSolution(const std::string& path, CalculixSolution& solution) {
+  return readShipped(path, solution, true);
 }
 
 std::vector<std::string> shippedReferenceDirs() {

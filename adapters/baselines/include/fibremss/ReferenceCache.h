@@ -33,15 +33,31 @@ void saveSolution(const std::string& path, const CalculixSolution& solution);
 /// is not such a file (truncated, other format).
 bool loadSolution(const std::string& path, CalculixSolution& solution);
 
-/// Writes `solution` as a shipped reference to `path` (`<key>.ref.gz` in a directory of
-/// shippedReferenceDirs): gzip-compressed, positions as floats (about 10⁻⁵ mm on a muscle of
-/// 0.5 m), without the names of its .inp files; its muscles' parts where it keeps them (as
-/// version 2, as saveSolution); atomically. Throws std::runtime_error when it
-/// cannot be written.
-void shipSolution(const std::string& path, const CalculixSolution& solution);
+/// The quantum of a shipped gate's surfaces where they are stored in quanta (shipSolution) [m]:
+/// 1 µm, far below the gates' 0.1 mm.
+constexpr double kShippedGateQuantum = 1e-6;
 
-/// Reads what shipSolution wrote; false when `path` does not exist. Throws InputError when it
-/// is not such a file (not gzip, truncated, other format).
+/// The solve a shipped gate is stored against: its reference's, shipped in the same directory.
+struct ShippedBase {
+  std::string key;                     ///< its key: `<key>.ref.gz` beside the gate
+  CalculixSolution solution;           ///< as loadShippedSolution reads that file back
+  std::vector<size_t> muscleVertices;  ///< each muscle's surface vertex count, in muscle order
+};
+
+/// Writes `solution` as a shipped reference to `path` (`<key>.ref.gz` in a directory of
+/// shippedReferenceDirs): gzip-compressed, without the names of its .inp files; its muscles'
+/// parts where it keeps them (as version 2, as saveSolution); atomically. Positions as floats
+/// (about 10⁻⁵ mm on a muscle of 0.5 m); with a `base` (a gate's, version 3), each surface as
+/// its difference from the nearest surface of its size the reader already has (the base's,
+/// whole or one muscle's part, or one before it in the file): in float ulps, exactly as the
+/// floats, where it lies within a quantum of it, else in quanta of kShippedGateQuantum (within half
+/// a quantum and a float's rounding). Throws std::runtime_error when it cannot be written.
+void shipSolution(const std::string& path, const CalculixSolution& solution,
+                  const ShippedBase* base = nullptr);
+
+/// Reads what shipSolution wrote (a gate's base from the same directory); false when `path`
+/// does not exist. Throws InputError when it is not such a file (not gzip, truncated, other
+/// format, a gate whose base is not beside it).
 bool loadShippedSolution(const std::string& path, CalculixSolution& solution);
 
 /// Where shipped references (solves computed once and kept with FibreMSS, scenes/references)
