@@ -177,7 +177,7 @@ void ship(const LoadedScene& scene, const PreparedScene& prepared, const Referen
       if (!loadStoredSolution(cacheDir, cell.retryOf, solution))
         throw std::runtime_error("the failed solve " + cell.retryOf + " is not stored");
       shipStored(args.shipDir, cell.retryOf, failureRecord(solution),
-                 cell.solve + ", failed at default increments: its failures alone", base.get());
+                 cell.solve + ", failed at default increments: its failures alone");
       shipped["retry_of"] = cell.retryOf;
     }
     solves.push_back(shipped);
