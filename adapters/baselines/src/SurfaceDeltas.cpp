@@ -65,6 +65,16 @@ float fromQuanta(float base, int64_t k) {
   return float(double(base) + double(k) * kShippedGateQuantum);
 }
 
+/// The coordinate `delta` from `base` in `unit`, as the reader gives it back; throws InputError
+/// naming `path` where ulps leave the floats.
+float decoded(float base, int64_t delta, Unit unit, const std::string& path) {
+  if (unit == Unit::Quanta) return fromQuanta(base, delta);
+  const auto bits = int64_t(uint64_t(ordered(base)) + uint64_t(delta));  // wraps, never overflows
+  if (bits > 0x7fffffff || bits < -0x7fffffff)
+    throw InputError(path, "", "not a FibreMSS shipped reference");
+  return fromOrdered(bits);
+}
+
 template <typename T>
 T readValue(std::istream& in, const std::string& path) {
   T v{};
@@ -153,7 +163,7 @@ void SurfaceDeltas::write(std::ostream& out, const std::vector<btVector3>& point
     const float b = coordinate(from, i);
     const int64_t delta = exact ? ordered(target[i]) - ordered(b) : quanta(target[i], b);
     writeVarint(bytes, zigzag(delta - std::exchange(previous[i % 3], delta)));
-    back[i / 3][int(i % 3)] = btScalar(exact ? target[i] : fromQuanta(b, delta));
+    back[i / 3][int(i % 3)] = btScalar(decoded(b, delta, unit, ""));
   }
   out.write(bytes.data(), std::streamsize(bytes.size()));
   remember(std::move(back));
@@ -171,12 +181,10 @@ std::vector<btVector3> SurfaceDeltas::read(std::istream& in, const std::string& 
   int64_t previous[3] = {0, 0, 0};
   for (size_t i = 0; i < count * 3; ++i) {
     const float b = coordinate(from, i);
-    const int64_t delta = previous[i % 3] += unzigzag(readVarint(in, path));
-    const int64_t bits = ordered(b) + delta;
-    if (unit == Unit::Ulps && (bits > 0x7fffffff || bits < -0x7fffffff))
-      throw InputError(path, "", "not a FibreMSS shipped reference");
-    points[i / 3][int(i % 3)] =
-        btScalar(unit == Unit::Ulps ? fromOrdered(bits) : fromQuanta(b, delta));
+    const auto delta =
+        int64_t(uint64_t(previous[i % 3]) + uint64_t(unzigzag(readVarint(in, path))));
+    previous[i % 3] = delta;
+    points[i / 3][int(i % 3)] = btScalar(decoded(b, delta, unit, path));
   }
   remember(points);
   return points;
