@@ -182,6 +182,32 @@ TEST(ImplicitSurface, EveryThigh13MuscleIsClosedAndTheSameForOneThreadTwoAndAHos
   }
 }
 
+// Where a muscle's rest surface reaches farther from its particles than the kernel radius its
+// median springs give (thigh13's adductors and semimembranosus), h grows to cover it: W > 0 on
+// the whole rest surface, so the field's cover term cuts nothing there and no implicit vertex
+// dips into the muscle; every one lies within a grid cell of the rest surface. With h from the
+// springs alone those surfaces dipped up to a cell and a half (adductor longus 3.5 mm, its cell
+// 2.0 mm).
+TEST(ImplicitSurface, Thigh13MusclesCoveredThinlyByTheirParticlesDoNotDipIntoTheMuscle) {
+  const LoadedScene scene = loadScene("thigh13", {"resolution=20"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ImplicitSurfaceSettings springsAlone;
+  springsAlone.coverMargin = 0;
+  size_t widened = 0;
+  for (const auto& muscle : prepared.muscles) {
+    ImplicitSurface surface(muscle);
+    if (surface.kernelRadius() <= ImplicitSurface(muscle, springsAlone).kernelRadius()) continue;
+    ++widened;
+    SCOPED_TRACE(muscle->name);
+    surface.extract(muscle->restPositions);
+    const auto [mean, worst] = distances(surface.mesh(), muscle->restSurface);
+    RecordProperty(muscle->name + "_worst_mm", std::to_string(1000 * worst));
+    EXPECT_LE(worst, surface.voxel());
+    EXPECT_EQ(meshTopology(surface.mesh()).openEdges, 0u);
+  }
+  EXPECT_GE(widened, 1u);
+}
+
 // Posed, no spring of thigh13 breaks: each muscle's surface stays one closed piece at every pose
 // (the spread of the particles' maps where they deform near their attachments opened pieces
 // off, and the tendons' pointed ends left beads of less than a grid cell).

@@ -77,11 +77,46 @@ btScalar lengthUnit(const MuscleSettings& muscle, const ImplicitSurfaceSettings&
   return medianSpringLength(muscle) * (settings.voxel > 0 ? 1 : settings.voxelFactor);
 }
 
-GridFrame restFrame(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings) {
+/// The distance from x to the nearest of the rest particles, the boundary particles searched
+/// first; once one lies within `reach`, that one's distance (the nearest's is no larger) [m].
+btScalar nearestRestParticle(const MuscleSettings& muscle, const btVector3& x, btScalar reach) {
+  btScalar nearest2 = SIMD_INFINITY;
+  const btScalar reach2 = reach * reach;
+  for (uint32_t p : muscle.boundaryParticles) {
+    nearest2 = std::min(nearest2, (muscle.restPositions[p] - x).length2());
+    if (nearest2 <= reach2) return btSqrt(nearest2);
+  }
+  for (const btVector3& p : muscle.restPositions) nearest2 = std::min(nearest2, (p - x).length2());
+  return btSqrt(nearest2);
+}
+
+/// The rest surface's largest distance to its nearest rest particle, over its vertices and its
+/// triangles' centroids [m].
+btScalar restCoverReach(const MuscleSettings& muscle) {
+  const TriangleMesh& surface = muscle.restSurface;
+  btScalar largest = 0;
+  auto take = [&](const btVector3& x) {
+    largest = std::max(largest, nearestRestParticle(muscle, x, largest));
+  };
+  for (const btVector3& v : surface.vertices) take(v);
+  for (const std::array<uint32_t, 3>& t : surface.triangles)
+    take((surface.vertices[t[0]] + surface.vertices[t[1]] + surface.vertices[t[2]]) / 3);
+  return largest;
+}
+
+/// h: kernelFactor median spring lengths, or more where the rest surface reaches farther from
+/// the particles (coverMargin).
+btScalar kernelRadiusOf(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings) {
+  const btScalar h = medianSpringLength(muscle) * settings.kernelFactor;
+  if (settings.coverMargin <= 0 || muscle.restPositions.empty()) return h;
+  return std::max(h, settings.coverMargin * restCoverReach(muscle));
+}
+
+GridFrame restFrame(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings,
+                    btScalar h) {
   btVector3 lower, upper;
   restBounds(muscle, lower, upper);
   const btScalar voxel = settings.voxel > 0 ? settings.voxel : lengthUnit(muscle, settings);
-  const btScalar h = medianSpringLength(muscle) * settings.kernelFactor;
   return GridFrame::covering(lower, upper, voxel * settings.restVoxelRatio, h + 2 * voxel);
 }
 
@@ -238,8 +273,8 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
     : muscle(std::move(muscleIn)),
       settings(settingsIn),
       voxel(settings.voxel > 0 ? settings.voxel : lengthUnit(*muscle, settings)),
-      h(medianSpringLength(*muscle) * settings.kernelFactor),
-      rest(muscle->restSurface, restFrame(*muscle, settings)) {
+      h(kernelRadiusOf(*muscle, settings)),
+      rest(muscle->restSurface, restFrame(*muscle, settings, h)) {
   MeshDistance distance(muscle->restSurface);
   outward.assign(muscle->particleCount(), btVector3(0, 0, 0));
   for (uint32_t i : muscle->boundaryParticles) {

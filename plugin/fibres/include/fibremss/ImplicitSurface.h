@@ -40,6 +40,9 @@ struct ImplicitSurfaceSettings {
   /// muscle thinner than a few of its cells loses its distance between them.
   btScalar restVoxelRatio = btScalar(0.5);
   btScalar kernelFactor = btScalar(2);  ///< h per median spring rest length [1]
+  /// h at least this times the rest surface's largest distance to its nearest rest particle, so
+  /// that the particles cover the whole rest surface (W > 0 on it) [1]; 0: kernelFactor alone.
+  btScalar coverMargin = btScalar(1.2);
   /// λ: how much the X_j's spread opens the surface of a muscle with broken springs [1]
   btScalar spreadWeight = btScalar(2);
 };
