@@ -198,7 +198,8 @@ std::array<GridEntry*, 8> ImplicitSurface::Impl::cellCorners(const std::array<in
   for (int c = 0; c < 8; ++c) {
     GridEntry& e = *corners[size_t(c)];
     if (!e.known) {
-      e.value = float(field(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1)));
+      e.value = float(
+          field(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1), e.thickened));
       e.known = true;
     }
     values[size_t(c)] = e.value;
@@ -312,6 +313,10 @@ void ImplicitSurface::Impl::dropSpecks() {
   mesh.triangles.resize(triangles);
 }
 
+void ImplicitSurface::Impl::thin() {
+  for (uint32_t v : thickVertices) mesh.vertices[v] += thinningStep(mesh.vertices[v]);
+}
+
 uint32_t ImplicitSurface::Impl::newVertex(const std::array<int32_t, 3>& cell, int u, int v,
                                           const std::array<float, 8>& values) {
   auto corner = [&](int c) {
@@ -334,7 +339,10 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
     const auto [u, v] = cut.edges[size_t(e)];
     // Made once, kept in the entry of corner u (the edge goes up from it).
     int32_t& vertex = corners[u]->edgeVertex[size_t((u ^ v) - 1)];
-    if (vertex < 0) vertex = int32_t(newVertex(cell, u, v, values));
+    if (vertex < 0) {
+      vertex = int32_t(newVertex(cell, u, v, values));
+      if (corners[u]->thickened || corners[v]->thickened) thickVertices.push_back(uint32_t(vertex));
+    }
     vertices[size_t(e)] = uint32_t(vertex);
   }
   // Each vertex joins the piece of its triangles' first vertex: one made here is still a root.
@@ -357,23 +365,38 @@ ImplicitSurface::~ImplicitSurface() = default;
 ImplicitSurface::ImplicitSurface(ImplicitSurface&&) noexcept = default;
 ImplicitSurface& ImplicitSurface::operator=(ImplicitSurface&&) noexcept = default;
 
+void ImplicitSurface::Impl::extract(std::span<const btVector3> current,
+                                    std::span<const Spring> springs) {
+  prepareFrames(current, springs.empty() ? std::span<const Spring>(muscle->springs) : springs);
+  btVector3 lower, upper;
+  pointBounds(current, lower, upper);
+  grid = GridFrame::covering(lower, upper, voxel, h + 2 * voxel);
+  beginMaps();
+  table.begin(grid);
+  queue.clear();
+  marched = 0;
+  mesh.vertices.clear();
+  mesh.triangles.clear();
+  pieceOf.clear();
+  thickVertices.clear();
+  seedAndMarch();
+  thin();
+  dropSpecks();
+}
+
+void ImplicitSurface::Impl::markRestErrors() {
+  extract(muscle->restPositions, {});
+  const MeshDistance distance(muscle->restSurface);
+  const btScalar tolerance = settings.snapTolerance * voxel;
+  for (const btVector3& v : mesh.vertices)
+    if (distance.closest(v).distance > tolerance) rest.keepNearest(v, voxel);
+  mesh.vertices.clear();  // no surface until the first extract()
+  mesh.triangles.clear();
+}
+
 void ImplicitSurface::extract(std::span<const btVector3> positions,
                               std::span<const Spring> springs) {
-  Impl& s = *impl_;
-  s.prepareFrames(positions,
-                  springs.empty() ? std::span<const Spring>(s.muscle->springs) : springs);
-  btVector3 lower, upper;
-  pointBounds(positions, lower, upper);
-  s.grid = GridFrame::covering(lower, upper, s.voxel, s.h + 2 * s.voxel);
-  s.beginMaps();
-  s.table.begin(s.grid);
-  s.queue.clear();
-  s.marched = 0;
-  s.mesh.vertices.clear();
-  s.mesh.triangles.clear();
-  s.pieceOf.clear();
-  s.seedAndMarch();
-  s.dropSpecks();
+  impl_->extract(positions, springs);
 }
 
 const TriangleMesh& ImplicitSurface::mesh() const {

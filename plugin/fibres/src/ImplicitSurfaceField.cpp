@@ -14,6 +14,9 @@ constexpr size_t kBlockValues = size_t(kBlock) * kBlock * kBlock;  ///< values p
 /// Particle cells per kernel radius [1]: the cells searched around a point then hold 2.5³ h³ on
 /// average, against 3³ h³ with cells of h.
 constexpr btScalar kCellsPerKernel = 2;
+/// A vertex is taken for one of the thickened rest surface when the thickened distance at its
+/// rest point lies within this many grid spacings of zero [1].
+constexpr btScalar kOnThickened = btScalar(0.5);
 /// Per set of odd axes (bit a: axis a): the share 1 / 2^(odd axes) of each coarse point around.
 constexpr std::array<btScalar, 8> kCornerShare{1, 0.5f, 0.5f, 0.25f, 0.5f, 0.25f, 0.25f, 0.125f};
 
@@ -112,6 +115,17 @@ btScalar kernelRadiusOf(const MuscleSettings& muscle, const ImplicitSurfaceSetti
   return std::max(h, settings.coverMargin * restCoverReach(muscle));
 }
 
+/// The thickening beside the muscle's fixed particles (ImplicitSurfaceSettings::tipThickening).
+Thickening thickeningOf(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings,
+                        btScalar voxel) {
+  Thickening thickening;
+  if (settings.tipThickening <= 0) return thickening;
+  for (uint32_t p : muscle.fixedParticles) thickening.tips.push_back(muscle.restPositions[p]);
+  thickening.thickness = settings.tipThickening * voxel;
+  thickening.reach = settings.tipReach * voxel;
+  return thickening;
+}
+
 GridFrame restFrame(const MuscleSettings& muscle, const ImplicitSurfaceSettings& settings,
                     btScalar h) {
   btVector3 lower, upper;
@@ -177,8 +191,25 @@ void RayParity::crossings(const btVector3& p, std::vector<btScalar>& xs) const {
   }
 }
 
-RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame)
-    : distance_(surface), parity_(surface), frame_(frame) {
+btScalar Thickening::nearest(const btVector3& x) const {
+  btScalar nearest2 = SIMD_INFINITY;
+  for (const btVector3& tip : tips) nearest2 = std::min(nearest2, (tip - x).length2());
+  return btSqrt(nearest2);
+}
+
+btScalar Thickening::at(btScalar nearest) const {
+  if (!(nearest < 2 * reach)) return 0;
+  const btScalar s = btMax(nearest / reach - 1, btScalar(0));  // 0 to 1 as it fades
+  return thickness * (1 - s * s * (3 - 2 * s));
+}
+
+RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame,
+                                   Thickening thickening)
+    : distance_(surface),
+      closest_(surface),
+      parity_(surface),
+      frame_(frame),
+      thickening_(std::move(thickening)) {
   for (int a = 0; a < 3; ++a) blocks_[a] = (frame.dims[a] + kBlock - 1) / kBlock;
   blockSlot_.assign(size_t(blocks_[0]) * blocks_[1] * blocks_[2], -1);
 }
@@ -197,11 +228,47 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
       distances);
   values_.resize(values_.size() + kBlockValues);
   float* out = values_.data() + size_t(slot) * kBlockValues;
+  bool thickened = false;  // a point of the block thickened: its nearest points are kept
   for (size_t row = 0; row < kBlockValues; row += kBlock) {
     parity_.crossings(points[row], crossings_);
-    for (size_t n = row; n < row + kBlock; ++n)
-      out[n] = float(RayParity::inside(points[n].x(), crossings_) ? distances[n] : -distances[n]);
+    for (size_t n = row; n < row + kBlock; ++n) {
+      const btScalar nearest =
+          thickening_.tips.empty() ? SIMD_INFINITY : thickening_.nearest(points[n]);
+      const btScalar thickness = thickening_.at(nearest);
+      thickened = thickened || thickness > 0;
+      const btScalar d =
+          RayParity::inside(points[n].x(), crossings_) ? distances[n] : -distances[n];
+      out[n] = float(d + thickness);
+    }
   }
+  slotNearest_.push_back(-1);
+  if (thickened) fillNearest(bi, bj, bk, slot);
+}
+
+void RestDistanceGrid::fillNearest(int32_t bi, int32_t bj, int32_t bk, int32_t slot) {
+  slotNearest_[size_t(slot)] = int32_t(nearest_.size());
+  for (int32_t k = 0; k < kBlock; ++k)
+    for (int32_t j = 0; j < kBlock; ++j)
+      for (int32_t i = 0; i < kBlock; ++i)
+        nearest_.push_back(
+            closest_.closest(frame_.point(bi * kBlock + i, bj * kBlock + j, bk * kBlock + k))
+                .point);
+}
+
+void RestDistanceGrid::keepNearest(const btVector3& x, btScalar reach) {
+  std::array<int32_t, 3> lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    const btScalar u = (x[a] - frame_.origin[a]) / frame_.spacing;
+    lo[size_t(a)] = std::max(int32_t(std::floor(u - reach / frame_.spacing)) / kBlock, 0);
+    hi[size_t(a)] = std::min((int32_t(std::floor(u + reach / frame_.spacing)) + 1) / kBlock,
+                             blocks_[size_t(a)] - 1);
+  }
+  for (int32_t bk = lo[2]; bk <= hi[2]; ++bk)
+    for (int32_t bj = lo[1]; bj <= hi[1]; ++bj)
+      for (int32_t bi = lo[0]; bi <= hi[0]; ++bi) {
+        const int32_t slot = slotOf(bi, bj, bk);
+        if (slotNearest_[size_t(slot)] < 0) fillNearest(bi, bj, bk, slot);
+      }
 }
 
 int32_t RestDistanceGrid::slotOf(int32_t bi, int32_t bj, int32_t bk) {
@@ -213,40 +280,59 @@ int32_t RestDistanceGrid::slotOf(int32_t bi, int32_t bj, int32_t bk) {
   return slot;
 }
 
-btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue) {
+bool RestDistanceGrid::cellOf(const btVector3& x, RestCell& cell) {
   const btVector3 u = (x - frame_.origin) / frame_.spacing;
   // Per axis: the cell's lower and upper points' blocks and places within them.
   std::array<std::array<int32_t, 2>, 3> blockOf, placeIn;
-  btScalar t[3];
   unsigned crossing = 0;  // bit a: the cell's upper points along axis a lie in the next block
   for (int a = 0; a < 3; ++a) {
-    if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return -outsideValue;
+    if (!(u[a] >= 0 && u[a] < btScalar(frame_.dims[a] - 1))) return false;
     const auto base = uint32_t(u[a]);  // unsigned: its division by the block side a shift
     const auto side = uint32_t(kBlock);
-    t[a] = u[a] - btScalar(base);
+    cell.t[size_t(a)] = u[a] - btScalar(base);
     blockOf[a] = {int32_t(base / side), int32_t((base + 1) / side)};
     placeIn[a] = {int32_t(base % side), int32_t((base + 1) % side)};
     crossing |= unsigned(blockOf[a][0] != blockOf[a][1]) << a;
   }
-  std::array<size_t, 8> first;  // per corner: its block's first value in values_
   for (unsigned c = 0; c < 8; ++c) {
     const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    first[c] = (c & crossing) != c
-                   ? first[c & crossing]
-                   : kBlockValues * size_t(slotOf(blockOf[0][dx], blockOf[1][dy], blockOf[2][dz]));
+    cell.slot[c] = (c & crossing) != c ? cell.slot[c & crossing]
+                                       : slotOf(blockOf[0][dx], blockOf[1][dy], blockOf[2][dz]);
+    cell.place[c] = placeIn[0][dx] + kBlock * (placeIn[1][dy] + kBlock * placeIn[2][dz]);
   }
-  // Read only once every corner's block is filled: a fill may move values_.
+  return true;
+}
+
+btScalar RestDistanceGrid::at(const btVector3& x, btScalar outsideValue, bool& thickened) {
+  RestCell cell;
+  thickened = false;
+  if (!cellOf(x, cell)) return -outsideValue;
   std::array<btScalar, 8> v;
-  for (unsigned c = 0; c < 8; ++c) {
-    const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const int32_t place = placeIn[0][dx] + kBlock * (placeIn[1][dy] + kBlock * placeIn[2][dz]);
-    v[c] = values_[first[c] + size_t(place)];
+  for (size_t c = 0; c < 8; ++c) {
+    v[c] = values_[kBlockValues * size_t(cell.slot[c]) + size_t(cell.place[c])];
+    thickened = thickened || slotNearest_[size_t(cell.slot[c])] >= 0;
   }
   // Along x, then y, then z.
   auto lerp = [](btScalar a, btScalar b, btScalar s) { return a + (b - a) * s; };
-  const btScalar lower = lerp(lerp(v[0], v[1], t[0]), lerp(v[2], v[3], t[0]), t[1]);
-  const btScalar upper = lerp(lerp(v[4], v[5], t[0]), lerp(v[6], v[7], t[0]), t[1]);
-  return lerp(lower, upper, t[2]);
+  const btScalar lower = lerp(lerp(v[0], v[1], cell.t[0]), lerp(v[2], v[3], cell.t[0]), cell.t[1]);
+  const btScalar upper = lerp(lerp(v[4], v[5], cell.t[0]), lerp(v[6], v[7], cell.t[0]), cell.t[1]);
+  return lerp(lower, upper, cell.t[2]);
+}
+
+bool RestDistanceGrid::closestAt(const btVector3& x, btVector3& closest, btScalar& value) {
+  RestCell cell;
+  if (!cellOf(x, cell)) return false;
+  closest.setZero();
+  value = 0;
+  for (unsigned c = 0; c < 8; ++c) {
+    const int32_t first = slotNearest_[size_t(cell.slot[c])];
+    if (first < 0) return false;
+    btScalar w = 1;
+    for (size_t a = 0; a < 3; ++a) w *= (c >> a & 1) != 0 ? cell.t[a] : 1 - cell.t[a];
+    closest += nearest_[size_t(first + cell.place[c])] * w;
+    value += values_[kBlockValues * size_t(cell.slot[c]) + size_t(cell.place[c])] * w;
+  }
+  return true;
 }
 
 void ParticleCells::build(std::span<const btVector3> positions, btScalar cellSize) {
@@ -274,7 +360,8 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
       settings(settingsIn),
       voxel(settings.voxel > 0 ? settings.voxel : lengthUnit(*muscle, settings)),
       h(kernelRadiusOf(*muscle, settings)),
-      rest(muscle->restSurface, restFrame(*muscle, settings, h)) {
+      rest(muscle->restSurface, restFrame(*muscle, settings, h),
+           thickeningOf(*muscle, settings, voxel)) {
   MeshDistance distance(muscle->restSurface);
   outward.assign(muscle->particleCount(), btVector3(0, 0, 0));
   for (uint32_t i : muscle->boundaryParticles) {
@@ -284,6 +371,7 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
   }
   restMomentsOf(muscle->springs, muscle->restPositions, wholeRestMoments);
   measureRestCover();
+  if (settings.snapTolerance > 0) markRestErrors();
 }
 
 void ImplicitSurface::Impl::measureRestCover() {
@@ -396,7 +484,7 @@ const RestMap& ImplicitSurface::Impl::coarseMap(int32_t i, int32_t j, int32_t k)
   return map;
 }
 
-btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
+btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k, bool& thickened) {
   // Along each axis where the index is odd the point lies halfway between two coarse points,
   // else on one: 2^(odd axes) corners, each of an equal share.
   const unsigned odd = unsigned(i & 1) | unsigned(j & 1) << 1 | unsigned(k & 1) << 2;
@@ -424,15 +512,75 @@ btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k) {
     weight = map.weight;
   }
   btScalar value = -h;
+  thickened = false;
   if (weight > 0) {
-    const btScalar distance = rest.at(x + offset, h) - spreadWeight * spread;
+    const btScalar distance = rest.at(x + offset, h, thickened) - spreadWeight * spread;
     value = std::min(distance, h * (weight / kappa - 1));
   }
   for (const SurfaceDent& dent : dents) {
     const btScalar q = 1 - (x - dent.centre).length2() / (dent.radius * dent.radius);
-    if (q > 0) value -= dent.depth * q * q * q;
+    // A dented vertex is not thinned: the dent takes the thickening off, wholly at its centre.
+    if (q > 0) value -= dent.depth * q * q * q + q * rest.thickeningAt(x + offset);
   }
   return value;
+}
+
+bool ImplicitSurface::Impl::mapAt(const btVector3& x, btVector3& offset, btMatrix3x3& derivative) {
+  const btVector3 u = (x - coarse.origin) / coarse.spacing;
+  std::array<int32_t, 3> base;
+  std::array<btScalar, 3> t;
+  for (size_t a = 0; a < 3; ++a) {
+    base[a] = std::clamp(int32_t(u[int(a)]), 0, coarse.dims[a] - 2);
+    t[a] = u[int(a)] - btScalar(base[a]);
+  }
+  std::array<const RestMap*, 8> around;
+  for (unsigned c = 0; c < 8; ++c) {
+    around[c] = &coarseMap(base[0] + int32_t(c & 1), base[1] + int32_t(c >> 1 & 1),
+                           base[2] + int32_t(c >> 2 & 1));
+    if (around[c]->weight == 0) {  // the interpolation would mix in an empty map: x's own
+      const RestMap own = restMap(x);
+      offset = own.offset;
+      derivative = btMatrix3x3::getIdentity();
+      return own.weight > 0;
+    }
+  }
+  // Trilinear along x, then y, then z, each stage's derivatives along the axes before it.
+  std::array<btVector3, 4> alongX, slopeX;
+  for (size_t q = 0; q < 4; ++q) {
+    slopeX[q] = around[2 * q + 1]->offset - around[2 * q]->offset;
+    alongX[q] = around[2 * q]->offset + slopeX[q] * t[0];
+  }
+  const std::array<btVector3, 2> alongY{alongX[0] + (alongX[1] - alongX[0]) * t[1],
+                                        alongX[2] + (alongX[3] - alongX[2]) * t[1]},
+      slopeYX{slopeX[0] + (slopeX[1] - slopeX[0]) * t[1],
+              slopeX[2] + (slopeX[3] - slopeX[2]) * t[1]},
+      slopeY{alongX[1] - alongX[0], alongX[3] - alongX[2]};
+  offset = alongY[0] + (alongY[1] - alongY[0]) * t[2];
+  const btVector3 dx = (slopeYX[0] + (slopeYX[1] - slopeYX[0]) * t[2]) / coarse.spacing,
+                  dy = (slopeY[0] + (slopeY[1] - slopeY[0]) * t[2]) / coarse.spacing,
+                  dz = (alongY[1] - alongY[0]) / coarse.spacing;
+  derivative = btMatrix3x3(1 + dx.x(), dy.x(), dz.x(), dx.y(), 1 + dy.y(), dz.y(), dx.z(), dy.z(),
+                           1 + dz.z());
+  return true;
+}
+
+btVector3 ImplicitSurface::Impl::thinningStep(const btVector3& x) {
+  for (const SurfaceDent& dent : dents)  // the dent, not the rest surface, places it
+    if ((x - dent.centre).length2() < dent.radius * dent.radius) return btVector3(0, 0, 0);
+  btVector3 offset;
+  btMatrix3x3 derivative;
+  if (!mapAt(x, offset, derivative)) return btVector3(0, 0, 0);
+  btVector3 closest;
+  btScalar value;
+  // Only a vertex of the thickened rest surface: not one a dent, the cover or the spread placed.
+  if (!rest.closestAt(x + offset, closest, value) || !(std::abs(value) < kOnThickened * voxel))
+    return btVector3(0, 0, 0);
+  const btVector3 step = closest - (x + offset);  // at rest
+  const btScalar largest = btScalar(1.5) * settings.tipThickening * voxel;
+  if (step.length2() > largest * largest) return btVector3(0, 0, 0);
+  const btScalar determinant = derivative.determinant();
+  if (!(std::abs(determinant) > btScalar(1e-6))) return btVector3(0, 0, 0);
+  return derivative.inverse() * step;
 }
 
 }  // namespace fibremss

@@ -53,28 +53,71 @@ class RayParity {
   std::vector<uint32_t> triangles_;    ///< triangles whose yz bounds meet each bucket
 };
 
+/// Where the rest surface is thickened: by `thickness` within `reach` of a tip point (the
+/// attachments' fixed particles at rest, beside which the tendons end in points thinner than a
+/// grid cell), fading out (smoothly) over the next `reach`.
+struct Thickening {
+  std::vector<btVector3> tips;  ///< [m]
+  btScalar thickness = 0;       ///< [m]
+  btScalar reach = 0;           ///< [m]
+
+  /// The distance from rest point x to the nearest tip [m].
+  btScalar nearest(const btVector3& x) const;
+  btScalar at(btScalar nearest) const;  ///< the thickening at `nearest` from a tip [m]
+};
+
+/// A point's cell of the rest distance grid: its corners' blocks' slots and their places in
+/// them (corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1)), and the point's place in the cell
+/// along each axis [0, 1).
+struct RestCell {
+  std::array<int32_t, 8> slot{};   ///< per corner: its block's slot
+  std::array<int32_t, 8> place{};  ///< per corner: its place in its block
+  std::array<btScalar, 3> t{};     ///< [1]
+};
+
 /// The rest surface's signed distance (positive inside) on a grid, each block of 4³ points
 /// computed the first time a lookup reaches it: its distances searched among the triangles that
-/// can be nearest to any of its points (ClusterDistance), its signs from one ray per row.
+/// can be nearest to any of its points (ClusterDistance), its signs from one ray per row; plus
+/// the thickening where there is one.
 class RestDistanceGrid {
  public:
-  RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame);
-  /// Trilinear in the grid; outside the grid −outsideValue.
-  btScalar at(const btVector3& x, btScalar outsideValue);
+  RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame, Thickening thickening);
+  /// D + thickening, trilinear in the grid; outside the grid −outsideValue. `thickened`: a
+  /// block of the point's cell holds a thickened point.
+  btScalar at(const btVector3& x, btScalar outsideValue, bool& thickened);
+  /// The thickening at rest point x [m].
+  btScalar thickeningAt(const btVector3& x) const {
+    return thickening_.tips.empty() ? 0 : thickening_.at(thickening_.nearest(x));
+  }
+  /// The blocks within `reach` of x keep their points' nearest rest surface points (closestAt).
+  void keepNearest(const btVector3& x, btScalar reach);
+  /// The rest surface's point nearest to x, trilinear between the grid points' nearest, and
+  /// D + thickening there: false outside the grid or where a corner's block keeps none.
+  bool closestAt(const btVector3& x, btVector3& closest, btScalar& value);
 
  private:
   /// The slot of block (bi, bj, bk)'s values (4³ from its lower corner, x fastest), filled
   /// the first time; a fill may move every block's values.
   int32_t slotOf(int32_t bi, int32_t bj, int32_t bk);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
+  /// Block (bi, bj, bk)'s points' nearest rest surface points into nearest_, its slot's entry.
+  void fillNearest(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
+  /// x's cell, every corner's block filled: false outside the grid.
+  bool cellOf(const btVector3& x, RestCell& cell);
 
   ClusterDistance distance_;
+  MeshDistance closest_;  ///< the nearest points of the blocks the thickening reaches
   RayParity parity_;
   GridFrame frame_;
+  Thickening thickening_;
   std::vector<btScalar> crossings_;         ///< scratch: a row's ray's crossings [m]
   std::array<int32_t, 3> blocks_{0, 0, 0};  ///< blocks per axis
   std::vector<int32_t> blockSlot_;          ///< per block: its values' slot, −1 not yet
-  std::vector<float> values_;               ///< 64 per computed block [m]
+  std::vector<float> values_;               ///< 64 per computed block: D + thickening [m]
+  /// Per slot: the first of its points' nearest rest surface points in nearest_, −1 where the
+  /// block lies beyond the thickening's reach.
+  std::vector<int32_t> slotNearest_;
+  std::vector<btVector3> nearest_;  ///< 64 per block the thickening reaches [m]
 };
 
 /// The particles binned into cells (counting sort).
@@ -95,6 +138,7 @@ struct GridEntry {
   float value = 0;                      ///< field [m]
   bool known = false;                   ///< value computed
   bool queued = false;                  ///< its cell queued
+  bool thickened = false;               ///< its rest point's cell thickened
   std::array<int32_t, 7> edgeVertex{};  ///< vertex index per edge, −1 none
 };
 
@@ -197,7 +241,19 @@ struct ImplicitSurface::Impl {
   const RestMap& coarseMap(int32_t i, int32_t j, int32_t k);
   /// The field at extraction grid point (i, j, k): the map interpolated (trilinear) between the
   /// coarse points around it, which is exact at rest (where X̄ − x = 0 everywhere), then D.
-  btScalar field(int32_t i, int32_t j, int32_t k);
+  btScalar field(int32_t i, int32_t j, int32_t k, bool& thickened);
+  /// The map back to rest at x interpolated (trilinear) between the coarse points around it
+  /// and its derivative ∂X̄/∂x; at x itself, the derivative I, where one has no particle within
+  /// h: false where x has none.
+  bool mapAt(const btVector3& x, btVector3& offset, btMatrix3x3& derivative);
+  /// The step that takes vertex x, made where the thickened rest surface crosses a cell's
+  /// edge, onto the rest surface mapped to now: Newton's steps on D at rest, mapped through
+  /// (∂X̄/∂x)⁻¹; none where the step would be longer than the thickening (a vertex the field's
+  /// cover or spread placed).
+  btVector3 thinningStep(const btVector3& x);
+  /// The vertices on the edges of a corner whose rest point's cell keeps nearest points (beside
+  /// the tips and where the rest extraction erred) moved onto the rest surface (thinningStep).
+  void thin();
   btScalar coverage(const btVector3& x) const;
   void measureRestCover();
   /// fn(begin, end) for each row of particle cells within h of x along every axis: the
@@ -232,6 +288,12 @@ struct ImplicitSurface::Impl {
   }
 
   // The extraction (ImplicitSurface.cpp).
+  /// The surface of the particles at `current` into `mesh` (ImplicitSurface::extract).
+  void extract(std::span<const btVector3> current, std::span<const Spring> springs);
+  /// Once, at rest: around the extracted vertices farther than snapTolerance from the rest
+  /// surface, the rest distance grid keeps its points' nearest rest surface points, so that the
+  /// vertices made there are moved onto the rest surface as at the tips (thin).
+  void markRestErrors();
   /// The cell's corners' entries (corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1)), their
   /// field values computed where not yet known and copied into `values`.
   std::array<GridEntry*, 8> cellCorners(const std::array<int32_t, 3>& cell,
@@ -272,7 +334,7 @@ struct ImplicitSurface::Impl {
   btScalar voxel = 0;     ///< extraction grid spacing [m]
   btScalar h = 0;         ///< kernel radius [m]
   btScalar kappa = 0;     ///< κ: half the smallest W on the rest surface [1]
-  RestDistanceGrid rest;  ///< D
+  RestDistanceGrid rest;  ///< D, thickened at the tips
   /// Per boundary particle: from it to the nearest rest surface point, made to point outward [m].
   std::vector<btVector3> outward;
   std::vector<SurfaceDent> dents;
@@ -298,8 +360,9 @@ struct ImplicitSurface::Impl {
   size_t marched = 0;                         ///< queue entries polygonised
   /// Per vertex: its union-find parent, vertices joined by triangles (the mesh's pieces).
   std::vector<uint32_t> pieceOf;
-  std::vector<double> pieceVolume;  ///< scratch per root vertex: its piece's volume [m³]
-  std::vector<int32_t> vertexKept;  ///< scratch per vertex: its new index, −1 dropped
+  std::vector<uint32_t> thickVertices;  ///< vertices on an edge from a thickened corner
+  std::vector<double> pieceVolume;      ///< scratch per root vertex: its piece's volume [m³]
+  std::vector<int32_t> vertexKept;      ///< scratch per vertex: its new index, −1 dropped
   TriangleMesh mesh;
 };
 

@@ -12,11 +12,15 @@
 // they only deform, σ is the error of their affine maps, which opens nothing. Extracted by
 // marching tetrahedra on a sparse grid, from seeds beside the boundary particles across every
 // cell face the surface crosses: a closed surface (every edge shared by two triangles), less the
-// pieces but the largest that enclose under two grid cells (beads of a part thinner than a cell,
-// such as a tendon's pointed end, which the grid's points meet only here and there). The sums over
-// the particles (X̄, σ, W) are taken at every second grid point and interpolated between them (X̄
-// exactly where the particles share one affine map back to rest, as at rest); D at every grid
-// point.
+// pieces but the largest that enclose under two grid cells (beads of a part thinner than a cell).
+// The sums over the particles (X̄, σ, W) are taken at every second grid point and interpolated
+// between them (X̄ exactly where the particles share one affine map back to rest, as at rest); D
+// at every grid point. h is widened where the rest surface reaches farther from the particles
+// (coverMargin), so that W > 0 on all of it. Beside the fixed particles, where the tendons end in
+// points thinner than a cell, D is thickened (tipThickening) so that the grid's points meet them,
+// and each vertex made there is moved onto the rest surface (its rest point's nearest rest
+// surface point, mapped back to now through the derivative of the interpolated map); so are
+// the vertices where the surface extracted at rest erred (snapTolerance).
 #include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btVector3.h>
 
@@ -43,6 +47,16 @@ struct ImplicitSurfaceSettings {
   /// h at least this times the rest surface's largest distance to its nearest rest particle, so
   /// that the particles cover the whole rest surface (W > 0 on it) [1]; 0: kernelFactor alone.
   btScalar coverMargin = btScalar(1.2);
+  /// The rest surface thickened by this many grid spacings beside the attachments' fixed
+  /// particles, so that the grid's points meet the tendons' pointed ends (thinner than a cell);
+  /// the vertices made there are moved back onto the rest surface [1]. 0: none.
+  btScalar tipThickening = btScalar(0.75);
+  /// How far from a fixed particle the thickening is whole, then fades out over as far again
+  /// [grid spacings].
+  btScalar tipReach = 1;
+  /// Where the surface extracted at rest lies farther than this many grid spacings from the
+  /// rest surface, its vertices are moved onto it as at the tips [1]; 0: only at the tips.
+  btScalar snapTolerance = btScalar(0.25);
   /// λ: how much the X_j's spread opens the surface of a muscle with broken springs [1]
   btScalar spreadWeight = btScalar(2);
 };
