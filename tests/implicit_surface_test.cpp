@@ -1,7 +1,8 @@
 // The implicit surface (ImplicitSurface.h): closed (every edge shared by two triangles) on
 // fusiform at rest and on the `tear` scene once torn, where it falls into pieces; on average
-// within 1 mm of the skinned surface at rest, both ways, and nowhere farther than a grid cell
-// (the pointed ends of the tendons, thinner than a cell, are lost); the rest surface moved with
+// within 1 mm of the skinned surface at rest, both ways, and nowhere farther than a grid cell;
+// every thigh13 muscle at rest nowhere farther than a cell of its rest distance grid (the
+// tendons' pointed ends met, the thinly covered parts not dipping in); the rest surface moved with
 // the muscle when it moves as a rigid body (the map back to rest interpolated between every
 // second grid point is exact there); dented by a negative field; the same for one thread and
 // two, on one muscle and on thigh13's thirteen (and on a host's scheduler); one surface twice in
