@@ -384,7 +384,18 @@ void ImplicitSurface::Impl::extract(std::span<const btVector3> current,
   dropSpecks();
 }
 
+void ImplicitSurface::Impl::thickenMissedTips() {
+  extract(muscle->restPositions, {});
+  const MeshDistance distance(mesh);
+  const btScalar tolerance = settings.snapTolerance * voxel;
+  std::vector<btVector3> missed;
+  for (const btVector3& v : muscle->restSurface.vertices)
+    if (distance.closest(v).distance > tolerance) missed.push_back(v);
+  if (!missed.empty()) rest.thickenAlso(missed);
+}
+
 void ImplicitSurface::Impl::markRestErrors() {
+  if (settings.tipThickening > 0) thickenMissedTips();
   extract(muscle->restPositions, {});
   const MeshDistance distance(muscle->restSurface);
   const btScalar tolerance = settings.snapTolerance * voxel;

@@ -255,6 +255,14 @@ void RestDistanceGrid::fillNearest(int32_t bi, int32_t bj, int32_t bk, int32_t s
                 .point);
 }
 
+void RestDistanceGrid::thickenAlso(std::span<const btVector3> tips) {
+  thickening_.tips.insert(thickening_.tips.end(), tips.begin(), tips.end());
+  std::fill(blockSlot_.begin(), blockSlot_.end(), -1);
+  values_.clear();
+  slotNearest_.clear();
+  nearest_.clear();
+}
+
 void RestDistanceGrid::keepNearest(const btVector3& x, btScalar reach) {
   std::array<int32_t, 3> lo, hi;
   for (int a = 0; a < 3; ++a) {

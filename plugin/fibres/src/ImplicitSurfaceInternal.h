@@ -85,6 +85,8 @@ class RestDistanceGrid {
   /// D + thickening, trilinear in the grid; outside the grid −outsideValue. `thickened`: a
   /// block of the point's cell holds a thickened point.
   btScalar at(const btVector3& x, btScalar outsideValue, bool& thickened);
+  /// `tips` thickened about too: every block computed again as it is reached.
+  void thickenAlso(std::span<const btVector3> tips);
   /// The thickening at rest point x [m].
   btScalar thickeningAt(const btVector3& x) const {
     return thickening_.tips.empty() ? 0 : thickening_.at(thickening_.nearest(x));
@@ -294,6 +296,10 @@ struct ImplicitSurface::Impl {
   /// surface, the rest distance grid keeps its points' nearest rest surface points, so that the
   /// vertices made there are moved onto the rest surface as at the tips (thin).
   void markRestErrors();
+  /// Once, at rest, before markRestErrors: the rest surface's vertices farther than
+  /// snapTolerance from the surface extracted at rest (tendons' ends beyond the fixed
+  /// particles' reach) thickened about too.
+  void thickenMissedTips();
   /// The cell's corners' entries (corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1)), their
   /// field values computed where not yet known and copied into `values`.
   std::array<GridEntry*, 8> cellCorners(const std::array<int32_t, 3>& cell,
