@@ -37,7 +37,7 @@ size_t advanceVerletVector(ParticleState& particles, btScalar keep, btScalar for
   btVector3* previous = particles.previous.data();
   const btVector3* f = particles.forces.data();
   const __m128 keepAll = _mm_set1_ps(keep), scaleAll = _mm_set1_ps(forceScale);
-  const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+  const __m128 xyz = xyzMask();
   __m128d low = _mm_setzero_pd(), high = _mm_setzero_pd();  // four partial sums of lengths
   for (size_t k = 0; k < count; k += 4) {
     __m128 steps[4];

@@ -363,11 +363,6 @@ void fillRow(const PairRows& p, size_t k, PairRounding& rounding) {
 }
 
 #if FIBREMSS_AVX2_PARTICLES
-/// The x, y and z lanes of each half.
-FIBREMSS_AVX2_PASS inline __m256 xyzLanes() {
-  return _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
-}
-
 /// v's halves stored into rows a and b.
 FIBREMSS_AVX2_PASS inline void storePair(btVector3* rows, int a, int b, __m256 v) {
   _mm_storeu_ps(rows[a].m_floats, _mm256_castps256_ps128(v));
@@ -390,7 +385,7 @@ FIBREMSS_AVX2_PASS inline double addLanes(double sum, __m128d v) {
 /// same bits. A pair with a pushed row goes through fillRow.
 FIBREMSS_AVX2_PASS PairRounding fillPairAvx2(const PairRows& p, size_t count) {
   constexpr double kEpsilon = std::numeric_limits<btScalar>::epsilon();
-  const __m256 xyz = xyzLanes();
+  const __m256 xyz = xyzMask8();
   const __m128d epsilonSquare = _mm_set1_pd(kEpsilon * kEpsilon);
   const __m128d restSquare = _mm_set1_pd(p.restLength * p.restLength);
   PairRounding rounding;
@@ -668,7 +663,7 @@ FIBREMSS_AVX2_PASS double moveParticlesAvx2(ParticleState& particles, const int*
   const size_t count = particles.freeParticles.size();
   btVector3* positions = particles.positions.data();
   btVector3* previous = particles.previous.data();
-  const __m256 xyz = xyzLanes(), keepAll = _mm256_set1_ps(keep), scaleAll = _mm256_set1_ps(scale);
+  const __m256 xyz = xyzMask8(), keepAll = _mm256_set1_ps(keep), scaleAll = _mm256_set1_ps(scale);
   double displacement = 0;
   size_t k = 0;
   for (; k + 1 < count; k += 2) {

@@ -70,7 +70,7 @@ inline void pretransformPacked(const MuscleSettings& settings, const PackedTrans
   const bool useA = a >= 0 && static_cast<size_t>(a) < count && w < 1;
   const bool useB = b >= 0 && static_cast<size_t>(b) < count && w > 0;
   const __m128 shareA = _mm_set1_ps(1 - w), shareB = _mm_set1_ps(w);
-  const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+  const __m128 xyz = xyzMask();
   for (btVector3* point : {&x, &y}) {
     const __m128 p = _mm_load_ps(point->m_floats);
     __m128 moved = p;
@@ -111,7 +111,7 @@ FIBREMSS_AVX2_PASS inline void pretransformPackedAvx2(const MuscleSettings& sett
     for (int c = 0; c < 3; ++c) pairs[b].columns[c] = _mm256_broadcast_ps(&packed[b].columns[c]);
     pairs[b].origin = _mm256_broadcast_ps(&packed[b].origin);
   }
-  const __m256 xyz = _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
+  const __m256 xyz = xyzMask8();
   for (uint32_t i : particles) {
     const btScalar w = settings.blendWeight[i];
     const int32_t a = settings.blendBoneA[i], b = settings.blendBoneB[i];

@@ -42,12 +42,23 @@ inline __m128 squaredLengths(__m128 v0, __m128 v1, __m128 v2, __m128 v3) {
 inline __m128 loadVector(const btVector3& v) {
   return _mm_load_ps(v.m_floats);
 }
+
+/// A mask of the x, y and z lanes: and-ed with a vector, it sets w to 0 as btVector3's
+/// arithmetic does.
+inline __m128 xyzMask() {
+  return _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+}
 #endif
 
 #if FIBREMSS_AVX2_PARTICLES
 /// Vectors v and w in the low and high half of one register.
 FIBREMSS_AVX2_PASS inline __m256 loadPair(const btVector3& v, const btVector3& w) {
   return _mm256_insertf128_ps(_mm256_castps128_ps256(loadVector(v)), loadVector(w), 1);
+}
+
+/// xyzMask in each half.
+FIBREMSS_AVX2_PASS inline __m256 xyzMask8() {
+  return _mm256_castsi256_ps(_mm256_setr_epi32(-1, -1, -1, 0, -1, -1, -1, 0));
 }
 
 /// The vector `offset` bytes after `base` plus `force`, stored back: a VEX load-add and a store

@@ -43,7 +43,7 @@ void sumMoments(const MuscleSettings& settings, std::span<const btVector3> posit
   for (const Spring& spring : settings.springs) {
     if (!used[spring.a] && !used[spring.b]) continue;
 #if FIBREMSS_SSE_PARTICLES
-    const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+    const __m128 xyz = xyzMask();
     const __m128 d = _mm_sub_ps(loadVector(positions[spring.b]), loadVector(positions[spring.a]));
     const __m128 e = _mm_sub_ps(loadVector(rest[spring.b]), loadVector(rest[spring.a]));
     const __m128 rows[3] = {_mm_and_ps(_mm_mul_ps(_mm_shuffle_ps(d, d, 0x00), e), xyz),
@@ -92,8 +92,7 @@ void bindSurface(const MuscleSettings& settings, std::span<const btVector3> posi
       moved = _mm_add_ps(moved, _mm_mul_ps(_mm_add_ps(loadVector(positions[particle]), offset),
                                            _mm_set1_ps(settings.skinWeights[j])));
     }
-    _mm_store_ps(surface[v].m_floats,
-                 _mm_and_ps(moved, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0))));
+    _mm_store_ps(surface[v].m_floats, _mm_and_ps(moved, xyzMask()));
 #else
     btVector3 moved(0, 0, 0);
     for (size_t j = v * n; j < (v + 1) * n; ++j) {
