@@ -459,7 +459,7 @@ void shipSolution(const std::string& path, const CalculixSolution& solution,
     bytes.write(kShippedMagic3, sizeof kShippedMagic3);
     writeText(bytes, base->key);
     bytes.write(version, sizeof kShippedMagic);
-    const std::vector<uint64_t> vertices(base->muscleVertices.begin(), base->muscleVertices.end());
+    const std::vector<uint64_t>& vertices = base->muscleVertices;
     const uint64_t muscles = vertices.size();
     bytes.write(reinterpret_cast<const char*>(&muscles), sizeof muscles);
     bytes.write(reinterpret_cast<const char*>(vertices.data()),

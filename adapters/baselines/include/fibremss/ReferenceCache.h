@@ -4,6 +4,7 @@
 // surfaces, the attachment rule, the material, element, mesher settings, the ccx version), in
 // its own directory beside the .inp files it was solved from.
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -39,9 +40,9 @@ constexpr double kShippedGateQuantum = 1e-6;
 
 /// The solve a shipped gate is stored against: its reference's, shipped in the same directory.
 struct ShippedBase {
-  std::string key;                     ///< its key: `<key>.ref.gz` beside the gate
-  CalculixSolution solution;           ///< as loadShippedSolution reads that file back
-  std::vector<size_t> muscleVertices;  ///< each muscle's surface vertex count, in muscle order
+  std::string key;                       ///< its key: `<key>.ref.gz` beside the gate
+  CalculixSolution solution;             ///< as loadShippedSolution reads that file back
+  std::vector<uint64_t> muscleVertices;  ///< each muscle's surface vertex count, in muscle order
 };
 
 /// Writes `solution` as a shipped reference to `path` (`<key>.ref.gz` in a directory of
