@@ -25,6 +25,8 @@ class ClusterDistance {
   /// keeps them fewest.
   void distances(const btVector3& centre, std::span<const btVector3> points,
                  std::span<btScalar> distances);
+  /// Closest points on the surface, one point at a time.
+  const MeshDistance& surfaceDistance() const { return distance_; }
 
  private:
   /// A triangle that can be nearest to a point of the cluster: a lower bound of its distance

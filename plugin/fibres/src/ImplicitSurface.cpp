@@ -397,7 +397,7 @@ void ImplicitSurface::Impl::thickenMissedTips() {
 void ImplicitSurface::Impl::markRestErrors() {
   if (settings.tipThickening > 0) thickenMissedTips();
   extract(muscle->restPositions, {});
-  const MeshDistance distance(muscle->restSurface);
+  const MeshDistance& distance = rest.surfaceDistance();
   const btScalar tolerance = settings.snapTolerance * voxel;
   for (const btVector3& v : mesh.vertices)
     if (distance.closest(v).distance > tolerance) rest.keepNearest(v, voxel);

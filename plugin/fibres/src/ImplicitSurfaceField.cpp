@@ -205,11 +205,7 @@ btScalar Thickening::at(btScalar nearest) const {
 
 RestDistanceGrid::RestDistanceGrid(const TriangleMesh& surface, const GridFrame& frame,
                                    Thickening thickening)
-    : distance_(surface),
-      closest_(surface),
-      parity_(surface),
-      frame_(frame),
-      thickening_(std::move(thickening)) {
+    : distance_(surface), parity_(surface), frame_(frame), thickening_(std::move(thickening)) {
   for (int a = 0; a < 3; ++a) blocks_[a] = (frame.dims[a] + kBlock - 1) / kBlock;
   blockSlot_.assign(size_t(blocks_[0]) * blocks_[1] * blocks_[2], -1);
 }
@@ -232,9 +228,7 @@ void RestDistanceGrid::fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slo
   for (size_t row = 0; row < kBlockValues; row += kBlock) {
     parity_.crossings(points[row], crossings_);
     for (size_t n = row; n < row + kBlock; ++n) {
-      const btScalar nearest =
-          thickening_.tips.empty() ? SIMD_INFINITY : thickening_.nearest(points[n]);
-      const btScalar thickness = thickening_.at(nearest);
+      const btScalar thickness = thickeningAt(points[n]);
       thickened = thickened || thickness > 0;
       const btScalar d =
           RayParity::inside(points[n].x(), crossings_) ? distances[n] : -distances[n];
@@ -251,7 +245,8 @@ void RestDistanceGrid::fillNearest(int32_t bi, int32_t bj, int32_t bk, int32_t s
     for (int32_t j = 0; j < kBlock; ++j)
       for (int32_t i = 0; i < kBlock; ++i)
         nearest_.push_back(
-            closest_.closest(frame_.point(bi * kBlock + i, bj * kBlock + j, bk * kBlock + k))
+            distance_.surfaceDistance()
+                .closest(frame_.point(bi * kBlock + i, bj * kBlock + j, bk * kBlock + k))
                 .point);
 }
 
@@ -370,7 +365,7 @@ ImplicitSurface::Impl::Impl(std::shared_ptr<const MuscleSettings> muscleIn,
       h(kernelRadiusOf(*muscle, settings)),
       rest(muscle->restSurface, restFrame(*muscle, settings, h),
            thickeningOf(*muscle, settings, voxel)) {
-  MeshDistance distance(muscle->restSurface);
+  const MeshDistance& distance = rest.surfaceDistance();
   outward.assign(muscle->particleCount(), btVector3(0, 0, 0));
   for (uint32_t i : muscle->boundaryParticles) {
     const MeshDistance::Closest closest = distance.closest(muscle->restPositions[i]);

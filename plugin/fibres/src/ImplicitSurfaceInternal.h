@@ -96,6 +96,8 @@ class RestDistanceGrid {
   /// The rest surface's point nearest to x, trilinear between the grid points' nearest, and
   /// D + thickening there: false outside the grid or where a corner's block keeps none.
   bool closestAt(const btVector3& x, btVector3& closest, btScalar& value);
+  /// Closest points on the rest surface, one point at a time.
+  const MeshDistance& surfaceDistance() const { return distance_.surfaceDistance(); }
 
  private:
   /// The slot of block (bi, bj, bk)'s values (4³ from its lower corner, x fastest), filled
@@ -108,7 +110,6 @@ class RestDistanceGrid {
   bool cellOf(const btVector3& x, RestCell& cell);
 
   ClusterDistance distance_;
-  MeshDistance closest_;  ///< the nearest points of the blocks the thickening reaches
   RayParity parity_;
   GridFrame frame_;
   Thickening thickening_;
