@@ -314,7 +314,32 @@ void ImplicitSurface::Impl::dropSpecks() {
 }
 
 void ImplicitSurface::Impl::thin() {
-  for (uint32_t v : thickVertices) mesh.vertices[v] += thinningStep(mesh.vertices[v]);
+  const AnchorPick none{-1, voxel * voxel, btVector3(0, 0, 0)};  // reach: a grid spacing
+  std::fill(picks.begin(), picks.end(), none);
+  for (uint32_t v : thickVertices) {
+    const btVector3 x = mesh.vertices[v];
+    btVector3 step, onRest;
+    if (!thinningStep(x, step, onRest)) continue;
+    mesh.vertices[v] = x + step;
+    for (uint32_t a : anchors.near(onRest)) {
+      const btScalar distance2 = (anchors.points[a] - onRest).length2();
+      if (distance2 < picks[a].distance2) picks[a] = {int32_t(v), distance2, x};
+    }
+  }
+  pinToAnchors();
+}
+
+void ImplicitSurface::Impl::pinToAnchors() {
+  if (picks.empty()) return;
+  pinned.assign(mesh.vertices.size(), 0);
+  for (size_t a = 0; a < picks.size(); ++a) {
+    const AnchorPick& pick = picks[a];
+    if (pick.vertex < 0 || pinned[size_t(pick.vertex)]) continue;  // one anchor per vertex
+    btVector3 step;
+    if (!mappedStep(pick.before, anchors.points[a], step)) continue;
+    mesh.vertices[size_t(pick.vertex)] = pick.before + step;
+    pinned[size_t(pick.vertex)] = 1;
+  }
 }
 
 uint32_t ImplicitSurface::Impl::newVertex(const std::array<int32_t, 3>& cell, int u, int v,
@@ -384,14 +409,26 @@ void ImplicitSurface::Impl::extract(std::span<const btVector3> current,
   dropSpecks();
 }
 
-void ImplicitSurface::Impl::thickenMissedTips() {
+std::vector<btVector3> ImplicitSurface::Impl::missedRestVertices() {
   extract(muscle->restPositions, {});
   const MeshDistance distance(mesh);
   const btScalar tolerance = settings.snapTolerance * voxel;
   std::vector<btVector3> missed;
   for (const btVector3& v : muscle->restSurface.vertices)
     if (distance.closest(v).distance > tolerance) missed.push_back(v);
+  return missed;
+}
+
+void ImplicitSurface::Impl::thickenMissedTips() {
+  const std::vector<btVector3> missed = missedRestVertices();
   if (!missed.empty()) rest.thickenAlso(missed);
+}
+
+void ImplicitSurface::Impl::findAnchors() {
+  std::vector<btVector3> missed = missedRestVertices();
+  for (const btVector3& v : missed) rest.keepNearest(v, voxel);
+  anchors.build(std::move(missed), voxel);
+  picks.resize(anchors.points.size());
 }
 
 void ImplicitSurface::Impl::markRestErrors() {
@@ -401,6 +438,7 @@ void ImplicitSurface::Impl::markRestErrors() {
   const btScalar tolerance = settings.snapTolerance * voxel;
   for (const btVector3& v : mesh.vertices)
     if (distance.closest(v).distance > tolerance) rest.keepNearest(v, voxel);
+  if (settings.tipThickening > 0) findAnchors();
   mesh.vertices.clear();  // no surface until the first extract()
   mesh.triangles.clear();
 }

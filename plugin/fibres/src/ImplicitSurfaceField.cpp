@@ -20,6 +20,14 @@ constexpr btScalar kOnThickened = btScalar(0.5);
 /// Per set of odd axes (bit a: axis a): the share 1 / 2^(odd axes) of each coarse point around.
 constexpr std::array<btScalar, 8> kCornerShare{1, 0.5f, 0.5f, 0.25f, 0.5f, 0.25f, 0.25f, 0.125f};
 
+/// A step at rest mapped to now through the inverse of the map's derivative: false where the
+/// derivative is singular.
+bool mappedToNow(const btMatrix3x3& derivative, const btVector3& restStep, btVector3& step) {
+  if (!(std::abs(derivative.determinant()) > btScalar(1e-6))) return false;
+  step = derivative.inverse() * restStep;
+  return true;
+}
+
 /// d·eᵀ.
 btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
   return btMatrix3x3(d.x() * e.x(), d.x() * e.y(), d.x() * e.z(), d.y() * e.x(), d.y() * e.y(),
@@ -567,23 +575,60 @@ bool ImplicitSurface::Impl::mapAt(const btVector3& x, btVector3& offset, btMatri
   return true;
 }
 
-btVector3 ImplicitSurface::Impl::thinningStep(const btVector3& x) {
+bool ImplicitSurface::Impl::thinningStep(const btVector3& x, btVector3& step, btVector3& onRest) {
   for (const SurfaceDent& dent : dents)  // the dent, not the rest surface, places it
-    if ((x - dent.centre).length2() < dent.radius * dent.radius) return btVector3(0, 0, 0);
+    if ((x - dent.centre).length2() < dent.radius * dent.radius) return false;
   btVector3 offset;
   btMatrix3x3 derivative;
-  if (!mapAt(x, offset, derivative)) return btVector3(0, 0, 0);
-  btVector3 closest;
+  if (!mapAt(x, offset, derivative)) return false;
   btScalar value;
   // Only a vertex of the thickened rest surface: not one a dent, the cover or the spread placed.
-  if (!rest.closestAt(x + offset, closest, value) || !(std::abs(value) < kOnThickened * voxel))
-    return btVector3(0, 0, 0);
-  const btVector3 step = closest - (x + offset);  // at rest
+  if (!rest.closestAt(x + offset, onRest, value) || !(std::abs(value) < kOnThickened * voxel))
+    return false;
+  const btVector3 restStep = onRest - (x + offset);
   const btScalar largest = btScalar(1.5) * settings.tipThickening * voxel;
-  if (step.length2() > largest * largest) return btVector3(0, 0, 0);
-  const btScalar determinant = derivative.determinant();
-  if (!(std::abs(determinant) > btScalar(1e-6))) return btVector3(0, 0, 0);
-  return derivative.inverse() * step;
+  return restStep.length2() <= largest * largest && mappedToNow(derivative, restStep, step);
+}
+
+bool ImplicitSurface::Impl::mappedStep(const btVector3& x, const btVector3& target,
+                                       btVector3& step) {
+  btVector3 offset;
+  btMatrix3x3 derivative;
+  return mapAt(x, offset, derivative) && mappedToNow(derivative, target - (x + offset), step);
+}
+
+void RestAnchors::build(std::vector<btVector3> anchors, btScalar reach) {
+  points = std::move(anchors);
+  start.clear();
+  listed.clear();
+  if (points.empty()) return;
+  btVector3 lower, upper;
+  pointBounds(points, lower, upper);
+  frame = GridFrame::covering(lower, upper, reach, reach);
+  start.assign(size_t(frame.dims[0]) * frame.dims[1] * frame.dims[2] + 1, 0);
+  // Two passes over each anchor's cells within reach: count, then fill.
+  auto forCells = [&](const btVector3& p, auto&& fn) {
+    const btVector3 lo = (p - frame.origin) / reach - btVector3(1, 1, 1),
+                    hi = (p - frame.origin) / reach + btVector3(1, 1, 1);
+    for (auto k = int32_t(lo.z()); k <= int32_t(hi.z()); ++k)
+      for (auto j = int32_t(lo.y()); j <= int32_t(hi.y()); ++j)
+        for (auto i = int32_t(lo.x()); i <= int32_t(hi.x()); ++i) fn(frame.index(i, j, k));
+  };
+  for (const btVector3& p : points) forCells(p, [&](uint32_t c) { ++start[c + 1]; });
+  for (size_t c = 0; c + 1 < start.size(); ++c) start[c + 1] += start[c];
+  listed.resize(start.back());
+  std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+  for (uint32_t a = 0; a < points.size(); ++a)
+    forCells(points[a], [&](uint32_t c) { listed[fill[c]++] = a; });
+}
+
+std::span<const uint32_t> RestAnchors::near(const btVector3& x) const {
+  if (points.empty()) return {};
+  const btVector3 u = (x - frame.origin) / frame.spacing;
+  for (int a = 0; a < 3; ++a)
+    if (!(u[a] >= 0 && u[a] < btScalar(frame.dims[a]))) return {};
+  const uint32_t c = frame.index(int32_t(u.x()), int32_t(u.y()), int32_t(u.z()));
+  return {listed.data() + start[c], start[c + 1] - start[c]};
 }
 
 }  // namespace fibremss

@@ -123,6 +123,28 @@ class RestDistanceGrid {
   std::vector<btVector3> nearest_;  ///< 64 per block the thickening reaches [m]
 };
 
+/// Rest points the surface is pinned to: the rest surface's vertices that the surface extracted
+/// at rest misses (concave pits and creases, which no vertex moved to its nearest rest surface
+/// point from outside reaches). Each is listed in every cell of `frame` within `reach` of it, so
+/// that one cell holds every anchor within reach of its points.
+struct RestAnchors {
+  std::vector<btVector3> points;  ///< [m]
+  GridFrame frame;                ///< cells of side `reach`: frame points their lower corners
+  std::vector<uint32_t> start;    ///< per cell + 1: first entry in `listed`
+  std::vector<uint32_t> listed;   ///< anchor indices, cell after cell
+
+  void build(std::vector<btVector3> anchors, btScalar reach);
+  /// The anchors listed in x's cell (every one within reach of x among them).
+  std::span<const uint32_t> near(const btVector3& x) const;
+};
+
+/// Per anchor, in one extraction: the moved vertex whose rest point lies nearest it.
+struct AnchorPick {
+  int32_t vertex = -1;        ///< −1: none within reach
+  btScalar distance2 = 0;     ///< its rest point's squared distance to the anchor [m²]
+  btVector3 before{0, 0, 0};  ///< the vertex where the march made it [m]
+};
+
 /// The particles binned into cells (counting sort).
 struct ParticleCells {
   GridFrame frame;                ///< cells: frame points are their lower corners
@@ -250,13 +272,20 @@ struct ImplicitSurface::Impl {
   /// h: false where x has none.
   bool mapAt(const btVector3& x, btVector3& offset, btMatrix3x3& derivative);
   /// The step that takes vertex x, made where the thickened rest surface crosses a cell's
-  /// edge, onto the rest surface mapped to now: Newton's steps on D at rest, mapped through
-  /// (∂X̄/∂x)⁻¹; none where the step would be longer than the thickening (a vertex the field's
-  /// cover or spread placed).
-  btVector3 thinningStep(const btVector3& x);
+  /// edge, onto the rest surface mapped to now: from its rest point to that point's nearest rest
+  /// surface point, mapped through (∂X̄/∂x)⁻¹, into `step`, and that nearest point into `onRest`;
+  /// false (none) where the step would be longer than the thickening (a vertex the field's cover
+  /// or spread placed) or under a dent.
+  bool thinningStep(const btVector3& x, btVector3& step, btVector3& onRest);
+  /// The step that takes x's rest point to `target` at rest, mapped to now as in thinningStep;
+  /// false where x has no map or its derivative is singular.
+  bool mappedStep(const btVector3& x, const btVector3& target, btVector3& step);
   /// The vertices on the edges of a corner whose rest point's cell keeps nearest points (beside
-  /// the tips and where the rest extraction erred) moved onto the rest surface (thinningStep).
+  /// the tips and where the rest extraction erred) moved onto the rest surface (thinningStep),
+  /// then each anchor's nearest of them onto the anchor (pinToAnchors).
   void thin();
+  /// Each anchor's picked vertex moved onto it (mapped to now), a vertex to one anchor at most.
+  void pinToAnchors();
   btScalar coverage(const btVector3& x) const;
   void measureRestCover();
   /// fn(begin, end) for each row of particle cells within h of x along every axis: the
@@ -297,6 +326,13 @@ struct ImplicitSurface::Impl {
   /// surface, the rest distance grid keeps its points' nearest rest surface points, so that the
   /// vertices made there are moved onto the rest surface as at the tips (thin).
   void markRestErrors();
+  /// The surface extracted at rest (its vertices moved as they stand), and the rest surface's
+  /// vertices farther than snapTolerance from it.
+  std::vector<btVector3> missedRestVertices();
+  /// Once, at rest, at the end of markRestErrors: the rest surface's vertices that the surface
+  /// extracted at rest (its vertices moved) misses by more than snapTolerance become anchors,
+  /// the blocks around them keeping their nearest points.
+  void findAnchors();
   /// Once, at rest, before markRestErrors: the rest surface's vertices farther than
   /// snapTolerance from the surface extracted at rest (tendons' ends beyond the fixed
   /// particles' reach) thickened about too.
@@ -368,6 +404,9 @@ struct ImplicitSurface::Impl {
   /// Per vertex: its union-find parent, vertices joined by triangles (the mesh's pieces).
   std::vector<uint32_t> pieceOf;
   std::vector<uint32_t> thickVertices;  ///< vertices on an edge from a thickened corner
+  RestAnchors anchors;                  ///< rest points the surface is pinned to
+  std::vector<AnchorPick> picks;        ///< per anchor: its vertex in this extraction
+  std::vector<uint8_t> pinned;          ///< scratch per vertex: moved onto an anchor
   std::vector<double> pieceVolume;      ///< scratch per root vertex: its piece's volume [m³]
   std::vector<int32_t> vertexKept;      ///< scratch per vertex: its new index, −1 dropped
   TriangleMesh mesh;
