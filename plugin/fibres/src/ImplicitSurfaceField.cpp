@@ -128,9 +128,11 @@ Thickening thickeningOf(const MuscleSettings& muscle, const ImplicitSurfaceSetti
                         btScalar voxel) {
   Thickening thickening;
   if (settings.tipThickening <= 0) return thickening;
-  for (uint32_t p : muscle.fixedParticles) thickening.tips.push_back(muscle.restPositions[p]);
   thickening.thickness = settings.tipThickening * voxel;
   thickening.reach = settings.tipReach * voxel;
+  std::vector<btVector3> tips;
+  for (uint32_t p : muscle.fixedParticles) tips.push_back(muscle.restPositions[p]);
+  thickening.setTips(std::move(tips));
   return thickening;
 }
 
@@ -201,7 +203,7 @@ void RayParity::crossings(const btVector3& p, std::vector<btScalar>& xs) const {
 
 btScalar Thickening::nearest(const btVector3& x) const {
   btScalar nearest2 = SIMD_INFINITY;
-  for (const btVector3& tip : tips) nearest2 = std::min(nearest2, (tip - x).length2());
+  for (uint32_t t : tips.near(x)) nearest2 = std::min(nearest2, (tips.points[t] - x).length2());
   return btSqrt(nearest2);
 }
 
@@ -259,7 +261,9 @@ void RestDistanceGrid::fillNearest(int32_t bi, int32_t bj, int32_t bk, int32_t s
 }
 
 void RestDistanceGrid::thickenAlso(std::span<const btVector3> tips) {
-  thickening_.tips.insert(thickening_.tips.end(), tips.begin(), tips.end());
+  std::vector<btVector3> all = thickening_.tips.points;
+  all.insert(all.end(), tips.begin(), tips.end());
+  thickening_.setTips(std::move(all));
   std::fill(blockSlot_.begin(), blockSlot_.end(), -1);
   values_.clear();
   slotNearest_.clear();
@@ -597,16 +601,16 @@ bool ImplicitSurface::Impl::mappedStep(const btVector3& x, const btVector3& targ
   return mapAt(x, offset, derivative) && mappedToNow(derivative, target - (x + offset), step);
 }
 
-void RestAnchors::build(std::vector<btVector3> anchors, btScalar reach) {
-  points = std::move(anchors);
+void PointCells::build(std::vector<btVector3> pointsIn, btScalar reach) {
+  points = std::move(pointsIn);
   start.clear();
   listed.clear();
-  if (points.empty()) return;
+  if (points.empty() || !(reach > 0)) return;  // none listed
   btVector3 lower, upper;
   pointBounds(points, lower, upper);
   frame = GridFrame::covering(lower, upper, reach, reach);
   start.assign(size_t(frame.dims[0]) * frame.dims[1] * frame.dims[2] + 1, 0);
-  // Two passes over each anchor's cells within reach: count, then fill.
+  // Two passes over each point's cells within reach: count, then fill.
   auto forCells = [&](const btVector3& p, auto&& fn) {
     const btVector3 lo = (p - frame.origin) / reach - btVector3(1, 1, 1),
                     hi = (p - frame.origin) / reach + btVector3(1, 1, 1);
@@ -622,8 +626,8 @@ void RestAnchors::build(std::vector<btVector3> anchors, btScalar reach) {
     forCells(points[a], [&](uint32_t c) { listed[fill[c]++] = a; });
 }
 
-std::span<const uint32_t> RestAnchors::near(const btVector3& x) const {
-  if (points.empty()) return {};
+std::span<const uint32_t> PointCells::near(const btVector3& x) const {
+  if (start.empty()) return {};
   const btVector3 u = (x - frame.origin) / frame.spacing;
   for (int a = 0; a < 3; ++a)
     if (!(u[a] >= 0 && u[a] < btScalar(frame.dims[a]))) return {};

@@ -53,15 +53,30 @@ class RayParity {
   std::vector<uint32_t> triangles_;    ///< triangles whose yz bounds meet each bucket
 };
 
+/// Points, each listed in every cell of `frame` within `reach` of it, so that the list of a
+/// point's cell holds every point within reach of it (and some farther).
+struct PointCells {
+  std::vector<btVector3> points;  ///< [m]
+  GridFrame frame;                ///< cells of side `reach`: frame points their lower corners
+  std::vector<uint32_t> start;    ///< per cell + 1: first entry in `listed`
+  std::vector<uint32_t> listed;   ///< indices in `points`, cell after cell
+
+  void build(std::vector<btVector3> points, btScalar reach);
+  /// The points listed in x's cell: none where x lies beyond reach of every point.
+  std::span<const uint32_t> near(const btVector3& x) const;
+};
+
 /// Where the rest surface is thickened: by `thickness` within `reach` of a tip point (the
 /// attachments' fixed particles at rest, beside which the tendons end in points thinner than a
 /// grid cell), fading out (smoothly) over the next `reach`.
 struct Thickening {
-  std::vector<btVector3> tips;  ///< [m]
-  btScalar thickness = 0;       ///< [m]
-  btScalar reach = 0;           ///< [m]
+  PointCells tips;         ///< [m], listed within 2·reach (beyond, no thickening)
+  btScalar thickness = 0;  ///< [m]
+  btScalar reach = 0;      ///< [m]
 
-  /// The distance from rest point x to the nearest tip [m].
+  void setTips(std::vector<btVector3> points) { tips.build(std::move(points), 2 * reach); }
+  /// The distance from rest point x to the nearest tip, where one lies within 2·reach; else
+  /// that or more (infinite where none is listed) [m].
   btScalar nearest(const btVector3& x) const;
   btScalar at(btScalar nearest) const;  ///< the thickening at `nearest` from a tip [m]
 };
@@ -89,7 +104,7 @@ class RestDistanceGrid {
   void thickenAlso(std::span<const btVector3> tips);
   /// The thickening at rest point x [m].
   btScalar thickeningAt(const btVector3& x) const {
-    return thickening_.tips.empty() ? 0 : thickening_.at(thickening_.nearest(x));
+    return thickening_.tips.points.empty() ? 0 : thickening_.at(thickening_.nearest(x));
   }
   /// The blocks within `reach` of x keep their points' nearest rest surface points (closestAt).
   void keepNearest(const btVector3& x, btScalar reach);
@@ -121,21 +136,6 @@ class RestDistanceGrid {
   /// block lies beyond the thickening's reach.
   std::vector<int32_t> slotNearest_;
   std::vector<btVector3> nearest_;  ///< 64 per block the thickening reaches [m]
-};
-
-/// Rest points the surface is pinned to: the rest surface's vertices that the surface extracted
-/// at rest misses (concave pits and creases, which no vertex moved to its nearest rest surface
-/// point from outside reaches). Each is listed in every cell of `frame` within `reach` of it, so
-/// that one cell holds every anchor within reach of its points.
-struct RestAnchors {
-  std::vector<btVector3> points;  ///< [m]
-  GridFrame frame;                ///< cells of side `reach`: frame points their lower corners
-  std::vector<uint32_t> start;    ///< per cell + 1: first entry in `listed`
-  std::vector<uint32_t> listed;   ///< anchor indices, cell after cell
-
-  void build(std::vector<btVector3> anchors, btScalar reach);
-  /// The anchors listed in x's cell (every one within reach of x among them).
-  std::span<const uint32_t> near(const btVector3& x) const;
 };
 
 /// Per anchor, in one extraction: the moved vertex whose rest point lies nearest it.
@@ -404,11 +404,14 @@ struct ImplicitSurface::Impl {
   /// Per vertex: its union-find parent, vertices joined by triangles (the mesh's pieces).
   std::vector<uint32_t> pieceOf;
   std::vector<uint32_t> thickVertices;  ///< vertices on an edge from a thickened corner
-  RestAnchors anchors;                  ///< rest points the surface is pinned to
-  std::vector<AnchorPick> picks;        ///< per anchor: its vertex in this extraction
-  std::vector<uint8_t> pinned;          ///< scratch per vertex: moved onto an anchor
-  std::vector<double> pieceVolume;      ///< scratch per root vertex: its piece's volume [m³]
-  std::vector<int32_t> vertexKept;      ///< scratch per vertex: its new index, −1 dropped
+  /// Rest points the surface is pinned to: the rest surface's vertices the surface extracted at
+  /// rest misses (pits, which no vertex moved to its nearest rest surface point reaches), listed
+  /// within a grid spacing.
+  PointCells anchors;
+  std::vector<AnchorPick> picks;    ///< per anchor: its vertex in this extraction
+  std::vector<uint8_t> pinned;      ///< scratch per vertex: moved onto an anchor
+  std::vector<double> pieceVolume;  ///< scratch per root vertex: its piece's volume [m³]
+  std::vector<int32_t> vertexKept;  ///< scratch per vertex: its new index, −1 dropped
   TriangleMesh mesh;
 };
 
