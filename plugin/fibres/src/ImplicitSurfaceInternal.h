@@ -62,7 +62,7 @@ struct PointCells {
   std::vector<uint32_t> listed;   ///< indices in `points`, cell after cell
 
   void build(std::vector<btVector3> points, btScalar reach);
-  /// The points listed in x's cell: none where x lies beyond reach of every point.
+  /// The points listed in x's cell, every point within reach of x among them.
   std::span<const uint32_t> near(const btVector3& x) const;
 };
 
@@ -138,10 +138,11 @@ class RestDistanceGrid {
   std::vector<btVector3> nearest_;  ///< 64 per block the thickening reaches [m]
 };
 
-/// Per anchor, in one extraction: the moved vertex whose rest point lies nearest it.
+/// Per anchor, in one extraction: the moved vertex whose nearest rest surface point (where
+/// thinningStep moves it) lies nearest the anchor.
 struct AnchorPick {
   int32_t vertex = -1;        ///< −1: none within reach
-  btScalar distance2 = 0;     ///< its rest point's squared distance to the anchor [m²]
+  btScalar distance2 = 0;     ///< that point's squared distance to the anchor [m²]
   btVector3 before{0, 0, 0};  ///< the vertex where the march made it [m]
 };
 

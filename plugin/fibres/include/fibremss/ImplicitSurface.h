@@ -20,7 +20,10 @@
 // points thinner than a cell, D is thickened (tipThickening) so that the grid's points meet them,
 // and each vertex made there is moved onto the rest surface (its rest point's nearest rest
 // surface point, mapped back to now through the derivative of the interpolated map); so are
-// the vertices where the surface extracted at rest erred (snapTolerance).
+// the vertices where the surface extracted at rest erred (snapTolerance). The rest surface's
+// vertices that the surface so extracted at rest still misses (pits, which no vertex moved to its
+// nearest rest surface point reaches) are anchors: each takes the moved vertex whose rest point
+// lies nearest it (within a cell), mapped back to now likewise.
 #include <LinearMath/btMatrix3x3.h>
 #include <LinearMath/btVector3.h>
 
@@ -55,7 +58,9 @@ struct ImplicitSurfaceSettings {
   /// [grid spacings].
   btScalar tipReach = 1;
   /// Where the surface extracted at rest lies farther than this many grid spacings from the
-  /// rest surface, its vertices are moved onto it as at the tips [1]; 0: only at the tips.
+  /// rest surface, its vertices are moved onto it as at the tips, and the rest surface's vertices
+  /// it then still misses by more are anchors, each pinning its nearest moved vertex [1]; 0: only
+  /// at the tips, no anchors.
   btScalar snapTolerance = btScalar(0.25);
   /// λ: how much the X_j's spread opens the surface of a muscle with broken springs [1]
   btScalar spreadWeight = btScalar(2);
