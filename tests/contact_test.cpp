@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <memory>
 #include <random>
 #include <string>
@@ -211,21 +212,39 @@ TEST(Pinch, AMuscleKeptForASpringTheBladesStretchIsReportedTrapped) {
   EXPECT_GT(keptForSprings, 0u);
 }
 
+/// pinch (with the `overrides` of its scene's settings, its system's definition `configure`d)
+/// stepped to pose 1: the scene, its preparation and the muscle's surface there.
+struct PinchAtPoseOne {
+  LoadedScene scene;
+  PreparedScene prepared;
+  std::vector<btVector3> surface;
+};
+
+PinchAtPoseOne pinchAtPoseOne(const std::vector<std::string>& overrides,
+                              const std::function<void(MuscleSystemDef&)>& configure) {
+  PinchAtPoseOne run;
+  run.scene = loadScene("pinch", overrides);
+  run.prepared = prepareScene(run.scene.bones, run.scene.muscles, run.scene.simulation.seed);
+  MuscleSystemDef def = run.scene.simulation;
+  configure(def);
+  MuscleSystem system(def);
+  const SceneHandles handles = addScene(system, run.prepared);
+  for (int pose = 0; pose <= 1; ++pose) stepToPose(system, handles, run.scene, pose);
+  const auto surface = system.surface(handles.muscles[0]);
+  run.surface.assign(surface.begin(), surface.end());
+  return run;
+}
+
 /// Mean gap [mm] at pinch's pose 1 between blade A's bottom face (y = 12 mm at rest, 7 mm lower
 /// at pose 1) and the part of the muscle's surface that face cuts off its rest shape: the vertices
 /// under the face (z > 1 mm, x from −50 to 20 mm) whose rest height is above it. A continuum
 /// pressed by the face lies on it (gap 0).
 double gapUnderBladeA(BoneCollision detection) {
-  const LoadedScene scene = loadScene("pinch", {});
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  MuscleSystemDef def = scene.simulation;
-  def.boneCollision = detection;
-  MuscleSystem system(def);
-  const SceneHandles handles = addScene(system, prepared);
-  for (int pose = 0; pose <= 1; ++pose) stepToPose(system, handles, scene, pose);
+  const PinchAtPoseOne run =
+      pinchAtPoseOne({}, [&](MuscleSystemDef& def) { def.boneCollision = detection; });
   const btScalar face = btScalar(0.012 - 0.007);
-  const std::vector<btVector3>& rest = prepared.muscles[0]->restSurface.vertices;
-  const auto surface = system.surface(handles.muscles[0]);
+  const std::vector<btVector3>& rest = run.prepared.muscles[0]->restSurface.vertices;
+  const std::vector<btVector3>& surface = run.surface;
   double sum = 0;
   size_t count = 0;
   for (size_t v = 0; v < rest.size(); ++v) {
@@ -250,6 +269,40 @@ TEST(Pinch, TheMuscleLiesOnBladeAsFaceAtPoseOne) {
   EXPECT_LT(mesh, 2.5);
   EXPECT_LT(sharp, 2.5);
   EXPECT_GT(spheres, mesh + 1);
+}
+
+/// The depth of pinch's skinned surface in the blades at pose 1 (resolution 12, 300 iterations
+/// per pose; the skin alone, without the surface-contact stage that would lift it out of them),
+/// with or without the surface push.
+Penetration skinInBladesAtPoseOne(bool surfacePush) {
+  const PinchAtPoseOne run =
+      pinchAtPoseOne({"resolution=12", "iterations=300", "surface_contact=false"},
+                     [&](MuscleSystemDef& def) { def.surfacePush = surfacePush; });
+  std::vector<MeshDistance> meshes;
+  std::vector<btTransform> transforms;
+  for (size_t b = 0; b < run.prepared.bones.size(); ++b) {
+    meshes.emplace_back(run.prepared.bones[b]->mesh);
+    transforms.push_back(run.scene.bonePose(b, 1));
+  }
+  std::vector<const MeshDistance*> meshPointers;
+  for (const MeshDistance& mesh : meshes) meshPointers.push_back(&mesh);
+  return measurePenetration(run.surface, meshPointers, transforms);
+}
+
+TEST(Pinch, TheSurfacePushKeepsTheSkinnedSurfaceOutOfTheBlades) {
+  // The particles' spheres rest on the blades' faces, and the skinned surface beyond them passes
+  // through the blades; with the surface push its vertices in a blade push their particles out
+  // until the surface rests on the blade.
+  const Penetration spheres = skinInBladesAtPoseOne(false);
+  const Penetration pushed = skinInBladesAtPoseOne(true);
+  RecordProperty("spheres_max_mm", std::to_string(spheres.maxMm));
+  RecordProperty("spheres_mean_mm", std::to_string(spheres.meanMm));
+  RecordProperty("spheres_penetrating", std::to_string(spheres.penetrating));
+  RecordProperty("pushed_max_mm", std::to_string(pushed.maxMm));
+  RecordProperty("pushed_mean_mm", std::to_string(pushed.meanMm));
+  RecordProperty("pushed_penetrating", std::to_string(pushed.penetrating));
+  EXPECT_GT(spheres.maxMm, 0.5);
+  EXPECT_LT(pushed.maxMm, 0.2);
 }
 
 /// Two plates of bone spheres (radius 2 mm, 2 mm apart: a face flat to 0.27 mm; the lower one

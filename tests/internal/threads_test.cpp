@@ -153,6 +153,38 @@ TEST(Threads, TheProjectiveSolversContactsGiveTheSameBits) {
 
 namespace {
 
+/// hip-pelvis at resolution 8 (three muscles pressed on the pelvis from the first poses),
+/// prepared once, with the surface push.
+const PreparedScene& preparedHipPelvis(LoadedScene& scene) {
+  static LoadedScene loaded = loadScene("hip-pelvis", {"resolution=8", "surface_push=true"});
+  static const PreparedScene prepared =
+      prepareScene(loaded.bones, loaded.muscles, loaded.simulation.seed);
+  scene = loaded;
+  return prepared;
+}
+
+}  // namespace
+
+// The surface push runs in each muscle's own bone contact: the same bits for any thread count;
+// and it moves the muscles (it ran).
+TEST(Threads, TheSurfacePushGivesTheSameBits) {
+  const auto run = [](int threads, bool push) {
+    LoadedScene scene;
+    const PreparedScene& prepared = preparedHipPelvis(scene);
+    scene.simulation.surfacePush = push;
+    return fibremss::testing::stepThroughPoses(scene, prepared, prepared.muscles, threads);
+  };
+  const Outcome one = run(1, true);
+  const Outcome off = run(1, false);
+  size_t moved = 0;
+  for (size_t m = 0; m < one.positions.size(); ++m)
+    moved += sameBits(one.positions[m], off.positions[m]) ? 0 : 1;
+  EXPECT_GT(moved, 0u);
+  for (int threads : {2, 3}) expectSameBits(one, run(threads, true), threads);
+}
+
+namespace {
+
 /// The first two muscles of thigh13 stepped as simulate() does with `threads` threads (0: on
 /// backwards(), reported as 0 threads), their forces passes split into chunks of about `chunkWork`
 /// (resolution 8 gives about 1 000 springs and 500 tetrahedra per muscle); checks that each has
@@ -471,6 +503,21 @@ TEST(Allocation, StepAllocatesNothing) {
         }
   }
   btAlignedAllocSetCustom(nullptr, nullptr);
+}
+
+// With the surface push (hip-pelvis' muscles pressed on the pelvis) a step allocates nothing.
+TEST(Allocation, StepsWithTheSurfacePushAllocateNothing) {
+  LoadedScene scene;
+  const PreparedScene& prepared = preparedHipPelvis(scene);
+  btAlignedAllocSetCustom(testing::countingAlloc, std::free);
+  testing::allocationCount = 0;
+  const testing::StepOutcome outcome = testing::stepThroughPoses(
+      scene, prepared, prepared.muscles, 1,
+      [](MuscleSystem&, const std::vector<MuscleHandle>&) { testing::countingArmed = true; },
+      [] { testing::countingArmed = false; });
+  btAlignedAllocSetCustom(nullptr, nullptr);
+  EXPECT_GT(outcome.contacts, 0u);
+  EXPECT_EQ(testing::allocationCount.load(), 0);
 }
 
 }  // namespace

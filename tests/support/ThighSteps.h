@@ -31,11 +31,12 @@ struct StepOutcome {
 
 /// Two steps through the first poses, 20 iterations each, with `threads` threads: the prepared
 /// bones and the given muscles; `before` (if set) sees the system and the muscles' handles
-/// before the first step.
+/// before the first step, `after` (if set) right after the last.
 inline StepOutcome stepThroughPoses(
     const LoadedScene& scene, const PreparedScene& prepared,
     const std::vector<std::shared_ptr<const MuscleSettings>>& muscles, int threads,
-    const std::function<void(MuscleSystem&, const std::vector<MuscleHandle>&)>& before = {}) {
+    const std::function<void(MuscleSystem&, const std::vector<MuscleHandle>&)>& before = {},
+    const std::function<void()>& after = {}) {
   MuscleSystemDef parameters = scene.simulation;
   parameters.threads = threads;
   parameters.stepSettings.iterations = 20;
@@ -50,6 +51,7 @@ inline StepOutcome stepThroughPoses(
       system.setBoneTransform(bones[b], scene.bonePose(b, pose % scene.poseCount));
     system.step();
   }
+  if (after) after();
   StepOutcome outcome;
   for (MuscleHandle handle : handles) {
     const auto x = system.positions(handle);

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <utility>
 
+#include "SurfacePush.h"
 #include "geometry/SurfaceContact.h"
 
 namespace fibremss {
@@ -215,14 +216,18 @@ bool meshPush(const MeshDistance& mesh, const btVector3& p, btScalar radius, btS
 
 /// BoneCollision::Mesh and SharpMesh: pushes free particle i, which a bone sphere found, until its
 /// sphere just touches the bone's true mesh; once per bone and iteration
-/// (ContactState::meshVisits). `reach`: where the closest point is looked for first [m].
+/// (ContactState::meshVisits). `reach`: where the closest point is looked for first [m]. With the
+/// surface push, lists i as found and pushes only its centre out (radius 0).
 void pushOutOfMesh(const PairSpheres& muscle, ContactState& contact, const BoneState& bone,
                    uint32_t i, btScalar reach, ContactLog& log) {
   if (std::exchange(contact.meshVisits[i], contact.boneVisit) == contact.boneVisit) return;
+  SurfacePushState& surface = contact.surfacePush;
+  if (surface.enabled()) surface.found[surface.foundCount++] = i;
   const btVector3& position = muscle.positions[i];
+  const btScalar radius = surface.enabled() ? 0 : muscle.settings.radii[i];
   btVector3 push, point;
-  if (!meshPush(bone.mesh->distance, bone.current.invXform(position), muscle.settings.radii[i],
-                reach, bone.sharpEdges, push, point))
+  if (!meshPush(bone.mesh->distance, bone.current.invXform(position), radius, reach,
+                bone.sharpEdges, push, point))
     return;
   addBonePush(contact, i, bone.slot, bone.current.getBasis() * push);
   log.add(position, bone.current * point);
@@ -248,6 +253,21 @@ void testBonePair(const PairSpheres& muscle, ContactState& contact, const BoneSt
   }
   addBonePush(contact, i, bone.slot, direction * depth);
   log.add(position, centre);
+}
+
+/// The surface push of the bone visit that just found its particles (spreadSurfacePush), added
+/// as the bone's pushes.
+void pushSurface(const MuscleSettings& settings, const ParticleState& particles,
+                 ContactState& contact, const BoneState& bone, ContactLog& log) {
+  SurfacePushState& surface = contact.surfacePush;
+  spreadSurfacePush(settings, particles, surface, bone, contact.boneVisit, log);
+  for (size_t k = 0; k < surface.spreadCount; ++k) {
+    const uint32_t p = surface.spreadParticles[k];
+    addBonePush(contact, p, bone.slot, surface.spread[p]);
+    surface.spread[p].setZero();
+    surface.spreadWeights[p] = 0;
+  }
+  surface.foundCount = 0;
 }
 
 /// Calls onPair(i, j) for the leaf pairs of two muscle trees (not both particles fixed; nothing
@@ -452,6 +472,8 @@ void collideMuscleBone(const MuscleSettings& settings, const ParticleState& part
   if (testCandidates(candidateList(trees.boneLists, bone.slot), trees.tree.epoch(),
                      bone.tree.placement(), trees.treeReach == 0, test, traverse))
     ++trees.candidateOverflows;
+  if (bone.meshContact && contact.surfacePush.enabled())
+    pushSurface(settings, particles, contact, bone, log);
 }
 
 void forgetBoneSides(ContactState& contact) {

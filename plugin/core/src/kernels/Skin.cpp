@@ -9,13 +9,11 @@
 namespace fibremss {
 namespace {
 
-#if !FIBREMSS_SSE_PARTICLES
 /// d·Dᵀ.
 btMatrix3x3 outer(const btVector3& d, const btVector3& e) {
   return btMatrix3x3(d.x() * e.x(), d.x() * e.y(), d.x() * e.z(), d.y() * e.x(), d.y() * e.y(),
                      d.y() * e.z(), d.z() * e.x(), d.z() * e.y(), d.z() * e.z());
 }
-#endif
 
 #if FIBREMSS_SSE_PARTICLES
 /// m·u as btMatrix3x3's product gives it (each row's dot with u summed (x + y) + z), w 0.
@@ -74,6 +72,17 @@ btMatrix3x3 boneRotation(const MuscleSettings& settings,
                      columns[2].y(), columns[0].z(), columns[1].z(), columns[2].z());
 }
 
+/// Particle i's F from its spring moment Σ dx·dXᵀ: moment·(Σ dX·dXᵀ)⁻¹, or its bone rotation
+/// where it has no frame or F is inverted (deformSurface).
+btMatrix3x3 frameOf(const MuscleSettings& settings, std::span<const btTransform> boneTransforms,
+                    bool blended, PretransformBlend blend, const SkinFrames& frames, uint32_t i,
+                    const btMatrix3x3& moment) {
+  const btMatrix3x3 deformation = moment * frames.restInverse[i];
+  return frames.hasFrame[i] && deformation.determinant() > 0
+             ? deformation
+             : boneRotation(settings, boneTransforms, i, blended, blend);
+}
+
 /// Each surface vertex v from its particles p (weights w) and their deformations F_p:
 /// Σ w·(x_p + F_p·(v − p)). With SSE a vector per instruction, each sum and product as
 /// btVector3's and btMatrix3x3's: the same bits.
@@ -94,19 +103,39 @@ void bindSurface(const MuscleSettings& settings, std::span<const btVector3> posi
     }
     _mm_store_ps(surface[v].m_floats, _mm_and_ps(moved, xyzMask()));
 #else
-    btVector3 moved(0, 0, 0);
-    for (size_t j = v * n; j < (v + 1) * n; ++j) {
-      const uint32_t particle = settings.skinParticles[j];
-      const btVector3 offset =
-          deformations[particle] * (rest[v] - settings.restPositions[particle]);
-      moved += (positions[particle] + offset) * settings.skinWeights[j];
-    }
-    surface[v] = moved;
+    surface[v] = skinnedVertex(settings, positions, deformations, v);
 #endif
   }
 }
 
 }  // namespace
+
+btVector3 skinnedVertex(const MuscleSettings& settings, std::span<const btVector3> positions,
+                        std::span<const btMatrix3x3> deformations, size_t v) {
+  const btVector3& vertex = settings.restSurface.vertices[v];
+  const size_t n = static_cast<size_t>(settings.skinNeighbours);
+  btVector3 moved(0, 0, 0);
+  for (size_t j = v * n; j < (v + 1) * n; ++j) {
+    const uint32_t particle = settings.skinParticles[j];
+    const btVector3 offset = deformations[particle] * (vertex - settings.restPositions[particle]);
+    moved += (positions[particle] + offset) * settings.skinWeights[j];
+  }
+  return moved;
+}
+
+btMatrix3x3 particleDeformation(const MuscleSettings& settings,
+                                std::span<const btVector3> positions,
+                                std::span<const btTransform> boneTransforms, bool blended,
+                                PretransformBlend blend, const SkinFrames& frames, uint32_t i,
+                                std::span<const uint32_t> springs) {
+  btMatrix3x3 moment(0, 0, 0, 0, 0, 0, 0, 0, 0);
+  const std::span<const btVector3> rest = settings.restPositions;
+  for (uint32_t s : springs) {
+    const Spring& spring = settings.springs[s];
+    moment += outer(positions[spring.b] - positions[spring.a], rest[spring.b] - rest[spring.a]);
+  }
+  return frameOf(settings, boneTransforms, blended, blend, frames, i, moment);
+}
 
 void prepareSkinFrames(const MuscleSettings& settings, SkinFrames& frames) {
   const size_t n = settings.particleCount();
@@ -133,13 +162,10 @@ void deformSurface(const MuscleSettings& settings, std::span<const btVector3> po
                    std::span<const btTransform> boneTransforms, bool blended,
                    PretransformBlend blend, SkinFrames& frames, std::span<btVector3> surface) {
   sumMoments(settings, positions, frames.used, frames.moments);
-  for (uint32_t i = 0; i < frames.used.size(); ++i) {
-    if (!frames.used[i]) continue;
-    const btMatrix3x3 deformation = frames.moments[i] * frames.restInverse[i];
-    frames.deformations[i] = frames.hasFrame[i] && deformation.determinant() > 0
-                                 ? deformation
-                                 : boneRotation(settings, boneTransforms, i, blended, blend);
-  }
+  for (uint32_t i = 0; i < frames.used.size(); ++i)
+    if (frames.used[i])
+      frames.deformations[i] =
+          frameOf(settings, boneTransforms, blended, blend, frames, i, frames.moments[i]);
   bindSurface(settings, positions, frames.deformations, surface);
 }
 

@@ -42,6 +42,20 @@ void deformSurface(const MuscleSettings& settings, std::span<const btVector3> po
                    std::span<const btTransform> boneTransforms, bool blended,
                    PretransformBlend blend, SkinFrames& frames, std::span<btVector3> surface);
 
+/// Vertex v of deformSurface's surface from the particles' `deformations` (F_p, indexed by
+/// particle; only v's particles are read).
+btVector3 skinnedVertex(const MuscleSettings& settings, std::span<const btVector3> positions,
+                        std::span<const btMatrix3x3> deformations, size_t v);
+
+/// F_p of particle i as deformSurface takes it, from the settings' springs `springs` (the
+/// indices of those with an end at i, in the springs' order; a broken spring, a == b, adds
+/// nothing), with `frames` from prepareSkinFrames.
+btMatrix3x3 particleDeformation(const MuscleSettings& settings,
+                                std::span<const btVector3> positions,
+                                std::span<const btTransform> boneTransforms, bool blended,
+                                PretransformBlend blend, const SkinFrames& frames, uint32_t i,
+                                std::span<const uint32_t> springs);
+
 /// frames.layer from the deformed `surface` (deformSurface's) and the particles it binds; only
 /// the surface-contact stage reads it.
 void measureLayer(const MuscleSettings& settings, std::span<const btVector3> positions,

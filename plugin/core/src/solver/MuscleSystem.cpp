@@ -9,6 +9,7 @@
 
 #include "MuscleSystemChecks.h"
 #include "MuscleSystemImpl.h"
+#include "collision/SurfacePush.h"
 #include "dynamics/Residual.h"
 #include "dynamics/Tearing.h"
 #include "dynamics/TimeStep.h"
@@ -303,6 +304,9 @@ MuscleHandle MuscleSystem::addMuscle(std::shared_ptr<const MuscleSettings> setti
       s.skinParticles.size() == skinCount && s.skinWeights.size() == skinCount) {
     state->surface.resize(s.restSurface.vertices.size());
     prepareSkinFrames(s, state->skin);
+    const MuscleSystemDef& def = impl_->definition;
+    if (def.surfacePush && !state->meshVisits.empty())
+      prepareSurfacePush(s, def.blendedPretransform, def.pretransformBlend, state->surfacePush);
     impl_->deform(s, *state);
   }
 

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "InteractionState.h"
+#include "SurfacePushState.h"
 #include "TearState.h"
 #include "fibremss/MuscleSettings.h"
 #include "fibremss/MuscleSystem.h"
@@ -104,6 +105,9 @@ struct ContactState {
   /// when off.
   std::vector<uint32_t> meshVisits;
   uint32_t boneVisit = 0;  ///< collideMuscleBone calls on the muscle so far (meshVisits)
+  /// MuscleSystemDef::surfacePush: the skinned surface pushed out of the bones' true meshes
+  /// (empty when off).
+  SurfacePushState surfacePush;
 
   /// Pinch (CollisionPairs.cpp): this iteration's bone pushes of each particle split into the
   /// first bone's and the others', to tell a particle two bones push opposite ways. Slot of the
