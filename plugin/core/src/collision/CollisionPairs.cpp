@@ -191,11 +191,13 @@ btVector3 faceNormal(const TriangleMesh& mesh, uint32_t triangle) {
 /// inside alike; `point` is that closest point. With `sharp` edges, from outside, to the radius in
 /// front of the plane of the face at that point that p lies farthest in front of
 /// (MeshDistance::frontFace). The closest point is looked for within `reach` first (nothing
-/// there: anywhere). False when the sphere clears the mesh.
+/// there: anywhere). False when the sphere clears the mesh. `clearance`: p's distance from the
+/// mesh, 0 inside.
 bool meshPush(const MeshDistance& mesh, const btVector3& p, btScalar radius, btScalar reach,
-              bool sharp, btVector3& push, btVector3& point) {
+              bool sharp, btVector3& push, btVector3& point, btScalar& clearance) {
   MeshDistance::Closest closest = mesh.closest(p, reach);
   if (closest.triangle == UINT32_MAX) closest = mesh.closest(p);
+  clearance = closest.inside ? 0 : closest.distance;
   if (closest.triangle == UINT32_MAX || (!closest.inside && closest.distance >= radius))
     return false;
   point = closest.point;
@@ -222,13 +224,17 @@ void pushOutOfMesh(const PairSpheres& muscle, ContactState& contact, const BoneS
                    uint32_t i, btScalar reach, ContactLog& log) {
   if (std::exchange(contact.meshVisits[i], contact.boneVisit) == contact.boneVisit) return;
   SurfacePushState& surface = contact.surfacePush;
-  if (surface.enabled()) surface.found[surface.foundCount++] = i;
   const btVector3& position = muscle.positions[i];
   const btScalar radius = surface.enabled() ? 0 : muscle.settings.radii[i];
   btVector3 push, point;
-  if (!meshPush(bone.mesh->distance, bone.current.invXform(position), radius, reach,
-                bone.sharpEdges, push, point))
-    return;
+  btScalar clearance;
+  const bool pushed = meshPush(bone.mesh->distance, bone.current.invXform(position), radius, reach,
+                               bone.sharpEdges, push, point, clearance);
+  if (surface.enabled()) {
+    surface.found[surface.foundCount++] = i;
+    surface.clearances[i] = clearance;
+  }
+  if (!pushed) return;
   addBonePush(contact, i, bone.slot, bone.current.getBasis() * push);
   log.add(position, bone.current * point);
 }

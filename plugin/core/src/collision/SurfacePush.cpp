@@ -1,5 +1,7 @@
 #include "SurfacePush.h"
 
+#include <LinearMath/btAabbUtil2.h>
+
 #include <algorithm>
 #include <utility>
 
@@ -71,6 +73,24 @@ void spread(const MuscleSettings& settings, SurfacePushState& surface, size_t v,
   }
 }
 
+/// Whether vertex v, which binds found particle p, lies inside the bone's mesh (`toBone`: world
+/// to bone frame): `vertex` skinned, `point` the mesh's closest point (world frame).
+bool insideMesh(const MuscleSettings& settings, const ParticleState& particles,
+                SurfacePushState& surface, const BoneState& bone, const btTransform& toBone,
+                uint32_t p, uint32_t v, uint32_t visit, btVector3& vertex, btVector3& point) {
+  btScalar reach;
+  vertex = skinned(settings, particles, surface, v, visit, reach);
+  // In the ball round p that the mesh leaves free, or out of the mesh's bounds: outside.
+  const btScalar clearance = surface.clearances[p];
+  if (vertex.distance2(particles.positions[p]) < clearance * clearance) return false;
+  const btVector3 local = toBone * vertex;
+  if (!TestPointAgainstAabb2(bone.mesh->lower, bone.mesh->upper, local)) return false;
+  const MeshDistance::Closest closest = bone.mesh->distance.closest(local, reach);
+  if (!closest.inside) return false;
+  point = bone.current * closest.point;
+  return true;
+}
+
 }  // namespace
 
 void prepareSurfacePush(const MuscleSettings& settings, bool blended, PretransformBlend blend,
@@ -92,6 +112,7 @@ void prepareSurfacePush(const MuscleSettings& settings, bool blended, Pretransfo
   surface.blended = blended;
   surface.blend = blend;
   surface.found.assign(n, 0);
+  surface.clearances.assign(n, 0);
   surface.foundCount = 0;
   surface.vertexVisits.assign(vertices, 0);
   surface.frameVisits.assign(n, 0);
@@ -107,17 +128,14 @@ void spreadSurfacePush(const MuscleSettings& settings, const ParticleState& part
                        ContactLog& log) {
   surface.spreadCount = 0;
   const btTransform toBone = bone.current.inverse();
-  const MeshDistance& mesh = bone.mesh->distance;
   for (size_t k = 0; k < surface.foundCount; ++k) {
     const uint32_t p = surface.found[k];
     for (uint32_t e = surface.vertexOffsets[p]; e < surface.vertexOffsets[p + 1]; ++e) {
       const uint32_t v = surface.particleVertices[e];
       if (std::exchange(surface.vertexVisits[v], visit) == visit) continue;
-      btScalar reach;
-      const btVector3 vertex = skinned(settings, particles, surface, v, visit, reach);
-      const MeshDistance::Closest closest = mesh.closest(toBone * vertex, reach);
-      if (!closest.inside) continue;
-      const btVector3 point = bone.current * closest.point;
+      btVector3 vertex, point;
+      if (!insideMesh(settings, particles, surface, bone, toBone, p, v, visit, vertex, point))
+        continue;
       spread(settings, surface, v, point - vertex);
       log.add(vertex, point);
     }

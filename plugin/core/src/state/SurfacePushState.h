@@ -26,7 +26,10 @@ struct SurfacePushState {
   /// Particles the bone spheres found near the bone of the running bone visit, in the order
   /// found (capacity: every particle).
   std::vector<uint32_t> found;
-  size_t foundCount = 0;                  ///< entries of `found` in use
+  size_t foundCount = 0;  ///< entries of `found` in use
+  /// Per particle, valid while it is in `found`: its centre's distance from the bone's mesh (0
+  /// inside) [m]; nothing of the mesh lies nearer.
+  std::vector<btScalar> clearances;
   std::vector<uint32_t> vertexVisits;     ///< per vertex: the bone visit that last tested it
   std::vector<uint32_t> frameVisits;      ///< per particle: the bone visit of `deformations`
   std::vector<btMatrix3x3> deformations;  ///< per particle: its F in that visit [1]
