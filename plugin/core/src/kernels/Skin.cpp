@@ -89,9 +89,9 @@ btMatrix3x3 frameOf(const MuscleSettings& settings, std::span<const btTransform>
 void bindSurface(const MuscleSettings& settings, std::span<const btVector3> positions,
                  std::span<const btMatrix3x3> deformations, std::span<btVector3> surface) {
   const auto& rest = settings.restSurface.vertices;
+#if FIBREMSS_SSE_PARTICLES
   const size_t n = static_cast<size_t>(settings.skinNeighbours);
   for (size_t v = 0; v < rest.size(); ++v) {
-#if FIBREMSS_SSE_PARTICLES
     const __m128 vertex = loadVector(rest[v]);
     __m128 moved = _mm_setzero_ps();
     for (size_t j = v * n; j < (v + 1) * n; ++j) {
@@ -102,10 +102,11 @@ void bindSurface(const MuscleSettings& settings, std::span<const btVector3> posi
                                            _mm_set1_ps(settings.skinWeights[j])));
     }
     _mm_store_ps(surface[v].m_floats, _mm_and_ps(moved, xyzMask()));
+  }
 #else
+  for (size_t v = 0; v < rest.size(); ++v)
     surface[v] = skinnedVertex(settings, positions, deformations, v);
 #endif
-  }
 }
 
 }  // namespace
