@@ -14,6 +14,9 @@ namespace {
 /// much: a vertex that mostly follows fixed particles does not throw its free ones far.
 constexpr btScalar kLeastFreeWeight = btScalar(0.5);
 
+/// Relative slack of a vertex's depth bound from its particle's clearance (insideMesh) [1].
+constexpr btScalar kReachSlack = btScalar(1e-3);
+
 /// CSR lists `offsets` / `items` of the pairs (key, item) `forEach` gives, keys below `keys`,
 /// items in the order given.
 template <typename ForEach>
@@ -74,15 +77,19 @@ void spread(const MuscleSettings& settings, SurfacePushState& surface, size_t v,
 }
 
 /// Whether vertex v, which binds found particle p, lies inside the bone's mesh (`toBone`: world
-/// to bone frame): `vertex` skinned, `point` the mesh's closest point (world frame).
+/// to bone frame): `vertex` skinned, `point` the mesh's closest point (world frame). A vertex out
+/// of the mesh's bounds is outside without a query.
 bool insideMesh(const MuscleSettings& settings, const ParticleState& particles,
                 SurfacePushState& surface, const BoneState& bone, const btTransform& toBone,
                 uint32_t p, uint32_t v, uint32_t visit, btVector3& vertex, btVector3& point) {
   btScalar reach;
   vertex = skinned(settings, particles, surface, v, visit, reach);
-  // In the ball round p that the mesh leaves free, or out of the mesh's bounds: outside.
-  const btScalar clearance = surface.clearances[p];
-  if (vertex.distance2(particles.positions[p]) < clearance * clearance) return false;
+  // From p, clear of the mesh by its clearance, the way to v crosses the surface no nearer v
+  // than |v − p| − clearance: no deeper (≤ 0: in the ball round p the mesh leaves free). With a
+  // slack for rounding: the bound is exact where v lies straight behind a face p is in front of.
+  const btScalar distance = vertex.distance(particles.positions[p]);
+  reach = std::min(reach, distance * (1 + kReachSlack) - surface.clearances[p]);
+  if (!(reach > 0)) return false;
   const btVector3 local = toBone * vertex;
   if (!TestPointAgainstAabb2(bone.mesh->lower, bone.mesh->upper, local)) return false;
   const MeshDistance::Closest closest = bone.mesh->distance.closest(local, reach);
