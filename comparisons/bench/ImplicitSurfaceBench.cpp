@@ -149,7 +149,7 @@ double threadCpuMs() {
 
 /// Each surface's extraction alone on this thread, its CPU time's median over `rounds`, and the
 /// wall time of a frame on 2 idle cores that these times give: extractSurfaces hands the
-/// surfaces out largest first (by particles), each to the thread that is free first.
+/// surfaces out in extractionOrder, each to the thread that is free first.
 void scheduleReport(const Frame& frame, int rounds) {
   std::vector<std::vector<double>> times(frame.surfaces.size());
   for (int round = 0; round < rounds; ++round)
@@ -160,13 +160,9 @@ void scheduleReport(const Frame& frame, int rounds) {
     }
   std::vector<double> ms;
   for (const std::vector<double>& t : times) ms.push_back(medianOf(t));
-  std::vector<size_t> order(ms.size());
-  for (size_t m = 0; m < order.size(); ++m) order[m] = m;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return frame.positions[a].size() > frame.positions[b].size();
-  });
   std::array<double, 2> busy{0, 0};  // per thread: when it is free [ms]
-  for (size_t m : order) *std::min_element(busy.begin(), busy.end()) += ms[m];
+  for (size_t m : extractionOrder(frame.surfaces, frame.positions))
+    *std::min_element(busy.begin(), busy.end()) += ms[m];
   std::printf(
       "  each muscle alone on 1 thread, medians: %.2f to %.2f ms (sum %.2f ms); the 2-thread "
       "schedule of these: %.2f ms\n",

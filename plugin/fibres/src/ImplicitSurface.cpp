@@ -473,6 +473,18 @@ btScalar ImplicitSurface::kernelRadius() const {
   return impl_->h;
 }
 
+std::vector<size_t> extractionOrder(std::span<ImplicitSurface* const> surfaces,
+                                    std::span<const std::span<const btVector3>> positions) {
+  const auto size = [&](size_t a) {
+    return std::pair(surfaces[a]->mesh().triangles.size(), positions[a].size());
+  };
+  std::vector<size_t> order(surfaces.size());
+  std::iota(order.begin(), order.end(), size_t(0));
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return size(a) > size(b); });
+  return order;
+}
+
 void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
                      std::span<const std::span<const btVector3>> positions,
                      std::span<const std::span<const Spring>> springs, TaskPool& pool) {
@@ -489,11 +501,7 @@ void extractSurfaces(std::span<ImplicitSurface* const> surfaces,
         throw InputError(
             "extractSurfaces", "surfaces[" + std::to_string(a) + "]",
             "the same surface as surfaces[" + std::to_string(b) + "]; expected distinct surfaces");
-  // Largest first, so the threads finish close together.
-  std::vector<size_t> order(surfaces.size());
-  std::iota(order.begin(), order.end(), size_t(0));
-  std::stable_sort(order.begin(), order.end(),
-                   [&](size_t a, size_t b) { return positions[a].size() > positions[b].size(); });
+  const std::vector<size_t> order = extractionOrder(surfaces, positions);
   pool.run(
       order.size(),
       [&](size_t n, unsigned) {

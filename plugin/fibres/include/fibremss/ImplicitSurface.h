@@ -102,8 +102,14 @@ class ImplicitSurface {
   std::unique_ptr<Impl> impl_;
 };
 
+/// The order extractSurfaces hands the surfaces out in: largest first, by the triangles of each
+/// surface's last mesh, then by its particles (before a first extraction, by particles alone),
+/// so that the threads finish close together; ties in the given order.
+std::vector<size_t> extractionOrder(std::span<ImplicitSurface* const> surfaces,
+                                    std::span<const std::span<const btVector3>> positions);
+
 /// extract() of every surface, surfaces[i] from positions[i] and springs[i], as tasks of
-/// `pool` (its own threads or the host's scheduler it was made with), largest first; each
+/// `pool` (its own threads or the host's scheduler it was made with), in extractionOrder; each
 /// surface one task, so the result is the same for any thread count. The surfaces must be
 /// distinct objects (a surface's state is its task's alone): InputError otherwise, or when
 /// the spans' sizes differ.
