@@ -93,6 +93,19 @@ struct PinchRun {
   bool frozenOrFailed = false;  ///< the guard froze the muscle or left a failure
 };
 
+/// A prepared scene's bone meshes, and pointers to them as Measures.h takes them.
+struct BoneMeshes {
+  explicit BoneMeshes(const PreparedScene& prepared) {
+    for (const auto& bone : prepared.bones) meshes.emplace_back(bone->mesh);
+    for (const MeshDistance& mesh : meshes) pointers.push_back(&mesh);
+  }
+  BoneMeshes(const BoneMeshes&) = delete;  // `pointers` point into `meshes`
+  BoneMeshes& operator=(const BoneMeshes&) = delete;
+
+  std::vector<MeshDistance> meshes;
+  std::vector<const MeshDistance*> pointers;
+};
+
 PinchRun runPinch() {
   // Springs only: with the volume term the torn muscle's springs stay beyond 3× in every retry
   // of Verlet and the guard freezes it (an open shortfall of the volume term). Verlet: its
@@ -103,13 +116,8 @@ PinchRun runPinch() {
   const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
   MuscleSystem system(scene.simulation);
   std::vector<BoneHandle> bones;
-  std::vector<MeshDistance> meshes;
-  for (const auto& bone : prepared.bones) {
-    bones.push_back(system.addBone(bone));
-    meshes.emplace_back(bone->mesh);
-  }
-  std::vector<const MeshDistance*> meshPointers;
-  for (const MeshDistance& mesh : meshes) meshPointers.push_back(&mesh);
+  for (const auto& bone : prepared.bones) bones.push_back(system.addBone(bone));
+  const BoneMeshes meshes(prepared);
   EXPECT_EQ(prepared.muscles.size(), 1u);
   const MuscleHandle muscle = system.addMuscle(prepared.muscles[0], bones);
   PinchRun run;
@@ -131,7 +139,7 @@ PinchRun runPinch() {
     for (const btVector3& x : positions) run.finite = run.finite && std::isfinite(x.length2());
     for (const btVector3& v : surface) run.finite = run.finite && std::isfinite(v.length2());
     if (!run.finite) break;
-    run.lastSurfaceMm = measurePenetration(surface, meshPointers, transforms).maxMm;
+    run.lastSurfaceMm = measurePenetration(surface, meshes.pointers, transforms).maxMm;
   }
   return run;
 }
@@ -278,15 +286,11 @@ Penetration skinInBladesAtPoseOne(bool surfacePush) {
   const PinchAtPoseOne run =
       pinchAtPoseOne({"resolution=12", "iterations=300", "surface_contact=false"},
                      [&](MuscleSystemDef& def) { def.surfacePush = surfacePush; });
-  std::vector<MeshDistance> meshes;
+  const BoneMeshes meshes(run.prepared);
   std::vector<btTransform> transforms;
-  for (size_t b = 0; b < run.prepared.bones.size(); ++b) {
-    meshes.emplace_back(run.prepared.bones[b]->mesh);
+  for (size_t b = 0; b < run.prepared.bones.size(); ++b)
     transforms.push_back(run.scene.bonePose(b, 1));
-  }
-  std::vector<const MeshDistance*> meshPointers;
-  for (const MeshDistance& mesh : meshes) meshPointers.push_back(&mesh);
-  return measurePenetration(run.surface, meshPointers, transforms);
+  return measurePenetration(run.surface, meshes.pointers, transforms);
 }
 
 TEST(Pinch, TheSurfacePushKeepsTheSkinnedSurfaceOutOfTheBlades) {
