@@ -22,6 +22,7 @@
 #include <tuple>
 #include <type_traits>
 
+#include "CacheRead.h"
 #include "SurfaceDeltas.h"
 #include "fibremss/Error.h"
 
@@ -118,17 +119,14 @@ class Reader {
       : in_(in), path_(path), positions_(positions) {}
   template <typename T>
   T value() {
-    T v{};
-    in_.read(reinterpret_cast<char*>(&v), sizeof v);
-    if (!in_) throw InputError(path_, "", "truncated reference cache file");
-    return v;
+    return readValue<T>(in_, path_);
   }
   std::string text() {
     const uint64_t size = value<uint64_t>();
     if (size > (1u << 20)) throw InputError(path_, "", "not a reference cache file");
     std::string s(size, '\0');
     in_.read(s.data(), static_cast<std::streamsize>(size));
-    if (!in_) throw InputError(path_, "", "truncated reference cache file");
+    checkRead(in_, path_);
     return s;
   }
   std::vector<btVector3> points() {

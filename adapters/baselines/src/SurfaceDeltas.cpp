@@ -6,6 +6,7 @@
 #include <numeric>
 #include <utility>
 
+#include "CacheRead.h"
 #include "fibremss/Error.h"
 
 namespace fibremss {
@@ -73,14 +74,6 @@ float decoded(float base, int64_t delta, Unit unit, const std::string& path) {
   if (bits > 0x7fffffff || bits < -0x7fffffff)
     throw InputError(path, "", "not a FibreMSS shipped reference");
   return fromOrdered(bits);
-}
-
-template <typename T>
-T readValue(std::istream& in, const std::string& path) {
-  T v{};
-  in.read(reinterpret_cast<char*>(&v), sizeof v);
-  if (!in) throw InputError(path, "", "truncated reference cache file");
-  return v;
 }
 
 /// Coordinate i of points (x, y, z of point i / 3), 0 where there are none.
