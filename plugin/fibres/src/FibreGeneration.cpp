@@ -11,6 +11,7 @@
 #include <unordered_map>
 
 #include "fibremss/Error.h"
+#include "fibremss/UnionFind.h"
 
 namespace fibremss {
 namespace {
@@ -105,10 +106,7 @@ void keepEndPatches(const TriangleMesh& surface, std::vector<uint32_t>& ids,
   const auto& V = surface.vertices;
   std::vector<uint32_t> parent(V.size());
   std::iota(parent.begin(), parent.end(), 0u);
-  auto root = [&](uint32_t v) {
-    while (parent[v] != v) v = parent[v] = parent[parent[v]];
-    return v;
-  };
+  const auto root = [&](uint32_t v) { return unionFindRoot(parent, v); };
   std::vector<char> in(V.size(), 0);
   for (uint32_t i : ids) in[i] = 1;
   for (const auto& t : surface.triangles)

@@ -3,37 +3,23 @@
 #include <algorithm>
 #include <span>
 
+#include "fibremss/UnionFind.h"
 #include "kernels/VolumeForces.h"
 #include "state/MuscleState.h"
 
 namespace fibremss {
 namespace {
 
-/// The union-find root of particle i, halving the path on the way.
-uint32_t root(std::vector<uint32_t>& parent, uint32_t i) {
-  while (parent[i] != i) {
-    parent[i] = parent[parent[i]];
-    i = parent[i];
-  }
-  return i;
-}
-
-/// Joins the pieces of i and j under the smaller root (the same roots in every run).
-void join(std::vector<uint32_t>& parent, uint32_t i, uint32_t j) {
-  const uint32_t a = root(parent, i), b = root(parent, j);
-  if (a < b) parent[b] = a;
-  if (b < a) parent[a] = b;
-}
-
 /// Counts the components of the unbroken springs among the particles that had a spring at
 /// rest, leaving each particle's root (its piece's smallest particle) in pieceOf.
 size_t countPieces(const MuscleSettings& settings, TearState& tear) {
   std::vector<uint32_t>& parent = tear.pieceOf;
   for (uint32_t i = 0; i < parent.size(); ++i) parent[i] = i;
-  for (const Spring& spring : settings.springs) join(parent, spring.a, spring.b);
+  for (const Spring& spring : settings.springs) unionFindJoin(parent, spring.a, spring.b);
   size_t pieces = 0;
   for (uint32_t i = 0; i < parent.size(); ++i) {
-    parent[i] = root(parent, i);  // a root is smaller than its other particles: final already
+    // A root is smaller than its other particles: final already.
+    parent[i] = unionFindRoot(parent, i);
     pieces += parent[i] == i && tear.springCounts[i] > 0 ? 1 : 0;
   }
   return pieces;
@@ -99,10 +85,10 @@ size_t holdFreePieces(TearState& tear, size_t broken) {
   size_t restored = 0;
   for (size_t k = 0; k < broken; ++k) {
     const Spring& spring = tear.intact->springs[tear.passBroken[k]];
-    const uint32_t a = root(parent, spring.a), b = root(parent, spring.b);
+    const uint32_t a = unionFindRoot(parent, spring.a), b = unionFindRoot(parent, spring.b);
     if (a == b || (tear.pieceHeld[a] && tear.pieceHeld[b])) continue;
     restoreSpring(tear, tear.passBroken[k]);
-    join(parent, a, b);
+    unionFindJoin(parent, a, b);
     tear.pieceHeld[std::min(a, b)] = tear.pieceHeld[a] | tear.pieceHeld[b];
     ++restored;
   }
