@@ -89,7 +89,7 @@ void BenchScene::run(Part part) {
       break;
     case Part::Integration:
       for (uint32_t slot : impl.muscles.order)
-        integrator.advance(impl.muscles.states[slot]->integrated(), def, dt_, impl.previousDt);
+        integrator.advance(impl.muscles.states[slot]->integrated(false), def, dt_, impl.previousDt);
       impl.previousDt = dt_;
       break;
     case Part::TreeRefit:

@@ -48,7 +48,7 @@ constexpr double kVolumeWeight = 1.5;
 /// thigh13 at resolution 20, 10 iterations per pose: a hold of 1 000 refactors in 156 of 1 690
 /// muscle-iterations, a hold of 10 in 634, at the same distance to Verlet's equilibrium run.
 constexpr uint16_t kContactHold = 1000;
-/// kContactHold in a duration step (ContactState::movingContacts): a particle leaves W at the
+/// kContactHold in a duration step (IntegratedMuscle::movingContacts): a particle leaves W at the
 /// first iteration without a push. The haptic probe's far field (2 iterations every 4th tick)
 /// held the particles its tool and bed had pushed for 1 000 iterations, the whole run: the
 /// muscle stayed where the tool had pressed it and let go of the tool for the slide's last 94
@@ -162,7 +162,7 @@ bool holdContacts(const IntegratedMuscle& muscle, ProjectiveWorkspace& w, double
   ProjectiveFactor& factor = w.factor;
   const std::vector<uint32_t>& free = muscle.particles.freeParticles;
   std::vector<uint8_t>& pushedLast = muscle.contact.pushedLast;
-  const uint16_t hold = muscle.contact.movingContacts ? kMovingContactHold : kContactHold;
+  const uint16_t hold = muscle.movingContacts ? kMovingContactHold : kContactHold;
   for (size_t k = 0; k < free.size(); ++k) {
     const int row = factor.row(k);
     uint8_t& pushed = pushedLast[free[k]];

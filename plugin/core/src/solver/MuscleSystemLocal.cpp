@@ -120,7 +120,7 @@ void MuscleSystem::Impl::localIteration(MuscleState& state, const TimeIntegrator
   addEnclosedVolumeForces(settings, state.positions, state.forces);
   addExternalForces(*state.settings, state, state, definition.gravity, state.forces);
   const IntegrationResult integration =
-      integrator.advance(state.integrated(), definition, dt, lastDt);
+      integrator.advance(state.integrated(duration > 0), definition, dt, lastDt);
   const int passes = result.forces.nearLimit > 0 ? kIterationStrainPasses : 0;
   result.displacement = limitStrain(settings, state, state, passes) > 0 ? freeDisplacement(state)
                                                                         : integration.displacement;

@@ -534,7 +534,7 @@ void MuscleSystem::Impl::integrateAndRefit(const TimeIntegrator& integrator, btS
     MuscleIterationResult& result = results[slot];
     const Clock::time_point integrateStart = Clock::now();
     const IntegrationResult integration =
-        integrator.advance(state.integrated(), definition, dt, lastDt);
+        integrator.advance(state.integrated(duration > 0), definition, dt, lastDt);
     // The projection runs where the forces found a spring near the limit. The iteration's
     // displacement is the projection's end's when it moved particles: at a limited equilibrium
     // the two cancel, as the stop rules expect.
@@ -699,7 +699,6 @@ void MuscleSystem::Impl::beginMuscles(const TimeIntegrator& integrator) {
   for (uint32_t slot : active) {
     MuscleState& state = *muscles.states[slot];
     ensurePrepared(integrator, *state.settings, state, state);
-    state.movingContacts = duration > 0;
   }
   resolveMuscles();
   if (definition.rebuildEveryStep)

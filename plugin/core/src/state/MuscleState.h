@@ -89,10 +89,6 @@ struct ContactState {
   /// 1 for a particle the last response pushed, until the projective integrator reads it (it
   /// clears every flag it reads; other integrators leave them set) [flag].
   std::vector<uint8_t> pushedLast;
-  /// The running step is a duration step (MuscleSystem::step(duration)): the contacts move with
-  /// time, and the projective integrator holds a pushed particle only until an iteration without
-  /// a push (kMovingContactHold) [flag].
-  bool movingContacts = false;
 
   /// Penetration recovery (seed 001 eq 1), empty when off: the bone slot whose field last saw
   /// the particle near (-1: none) and the unit direction out of that bone there (bone frame).
@@ -239,6 +235,10 @@ struct IntegratedMuscle {
   const ResidualState& residual;        ///< the pushes of the last response [m] (contactNormal)
   const InteractionState& interaction;  ///< forces held on particles [N]
   IntegratorWorkspace* workspace;       ///< the integrator's scratch, or null
+  /// The running step is a duration step (MuscleSystem::step(duration)): the contacts move with
+  /// time, and the projective integrator holds a pushed particle only until an iteration without
+  /// a push (kMovingContactHold) [flag].
+  bool movingContacts;
 };
 
 /// The local region of MuscleSystem::stepLocal in one muscle (MuscleSystem::setLocalRegion):
@@ -278,8 +278,11 @@ struct MuscleState : ParticleState,
   MuscleFailures failures;  ///< attempts of steps the guard found this muscle failing
   TearState tear;           ///< its own settings and pieces when it tears (TearState.h)
 
-  /// The muscle as an integrator steps it.
-  IntegratedMuscle integrated() { return {*settings, *this, *this, *this, *this, workspace.get()}; }
+  /// The muscle as an integrator steps it in a step whose contacts move with time or not
+  /// (IntegratedMuscle::movingContacts).
+  IntegratedMuscle integrated(bool movingContacts) {
+    return {*settings, *this, *this, *this, *this, workspace.get(), movingContacts};
+  }
   /// The muscle as the sphere tests read it.
   CollidingMuscle colliding() const { return {*settings, *this, *this}; }
 };
