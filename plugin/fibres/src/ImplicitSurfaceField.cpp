@@ -309,6 +309,16 @@ bool RestDistanceGrid::cellOf(const btVector3& x, RestCell& cell) {
     placeIn[a] = {int32_t(base % side), int32_t((base + 1) % side)};
     crossing |= unsigned(blockOf[a][0] != blockOf[a][1]) << a;
   }
+  if (crossing == 0) {  // the cell within one block: its corners' places one step apart
+    const int32_t slot = slotOf(blockOf[0][0], blockOf[1][0], blockOf[2][0]);
+    const int32_t place = placeIn[0][0] + kBlock * (placeIn[1][0] + kBlock * placeIn[2][0]);
+    for (unsigned c = 0; c < 8; ++c) {
+      cell.slot[c] = slot;
+      cell.place[c] =
+          place + int32_t(c & 1) + kBlock * (int32_t(c >> 1 & 1) + kBlock * int32_t(c >> 2));
+    }
+    return true;
+  }
   for (unsigned c = 0; c < 8; ++c) {
     const unsigned dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
     cell.slot[c] = (c & crossing) != c ? cell.slot[c & crossing]
@@ -454,6 +464,8 @@ ImplicitSurface::Impl::restMap(const btVector3& x) const {
                   dz = point[2] - at(EntryLanes::kZ);
       const Lanes q = 1 - (dx * dx + dy * dy + dz * dz) * inverseH2;
       const LaneMask take = (q > 0) & (lane < int32_t(end - e));
+      // No lane within h: each would add a weight of 0 (and the sums are never −0).
+      if ((take[0] | take[1] | take[2] | take[3]) == 0) continue;
       const Lanes w = Lanes(LaneMask(q * q * q) & take);
       auto mapped = [&](size_t a) {  // X_j − x along axis a: P_j + F_j⁻¹ (x − p_j) − x
         const size_t row = EntryLanes::kToRest + 3 * a;
