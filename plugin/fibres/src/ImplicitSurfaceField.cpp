@@ -286,12 +286,9 @@ void RestDistanceGrid::keepNearest(const btVector3& x, btScalar reach) {
       }
 }
 
-int32_t RestDistanceGrid::slotOf(int32_t bi, int32_t bj, int32_t bk) {
-  int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
-  if (slot < 0) {
-    slot = int32_t(values_.size() / kBlockValues);
-    fillBlock(bi, bj, bk, slot);
-  }
+int32_t RestDistanceGrid::filledSlot(int32_t bi, int32_t bj, int32_t bk) {
+  const auto slot = int32_t(values_.size() / kBlockValues);
+  fillBlock(bi, bj, bk, slot);
   return slot;
 }
 
@@ -465,7 +462,7 @@ ImplicitSurface::Impl::restMap(const btVector3& x) const {
       const Lanes q = 1 - (dx * dx + dy * dy + dz * dz) * inverseH2;
       const LaneMask take = (q > 0) & (lane < int32_t(end - e));
       // No lane within h: each would add a weight of 0 (and the sums are never −0).
-      if ((take[0] | take[1] | take[2] | take[3]) == 0) continue;
+      if (!anyLane(take)) continue;
       const Lanes w = Lanes(LaneMask(q * q * q) & take);
       auto mapped = [&](size_t a) {  // X_j − x along axis a: P_j + F_j⁻¹ (x − p_j) − x
         const size_t row = EntryLanes::kToRest + 3 * a;
@@ -502,13 +499,9 @@ void ImplicitSurface::Impl::beginMaps() {
   }
 }
 
-const RestMap& ImplicitSurface::Impl::coarseMap(int32_t i, int32_t j, int32_t k) {
-  RestMap& map = maps[coarse.index(i, j, k)];
-  if (map.stamp != mapStamp) {
-    map = restMap(coarse.point(i, j, k));
-    map.stamp = mapStamp;
-  }
-  return map;
+void ImplicitSurface::Impl::fillCoarseMap(int32_t i, int32_t j, int32_t k, RestMap& map) const {
+  map = restMap(coarse.point(i, j, k));
+  map.stamp = mapStamp;
 }
 
 btScalar ImplicitSurface::Impl::field(int32_t i, int32_t j, int32_t k, bool& thickened) {

@@ -7,6 +7,9 @@
 #include <cstdint>
 #include <cstring>
 #include <vector>
+#if defined(__SSE__)
+#include <xmmintrin.h>
+#endif
 
 #include "ClusterDistance.h"
 #include "fibremss/ImplicitSurface.h"
@@ -117,7 +120,13 @@ class RestDistanceGrid {
  private:
   /// The slot of block (bi, bj, bk)'s values (4³ from its lower corner, x fastest), filled
   /// the first time; a fill may move every block's values.
-  int32_t slotOf(int32_t bi, int32_t bj, int32_t bk);
+  int32_t slotOf(int32_t bi, int32_t bj, int32_t bk) {
+    int32_t& slot = blockSlot_[size_t(bi) + size_t(blocks_[0]) * (bj + size_t(blocks_[1]) * bk)];
+    if (slot < 0) slot = filledSlot(bi, bj, bk);
+    return slot;
+  }
+  /// Block (bi, bj, bk)'s values filled into a new slot, that slot.
+  int32_t filledSlot(int32_t bi, int32_t bj, int32_t bk);
   void fillBlock(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
   /// Block (bi, bj, bk)'s points' nearest rest surface points into nearest_, its slot's entry.
   void fillNearest(int32_t bi, int32_t bj, int32_t bk, int32_t slot);
@@ -187,6 +196,15 @@ struct RestMap {
 /// Four floats, one per lane (the compiler's vector extension: SIMD where the target has it).
 using Lanes = float __attribute__((vector_size(16)));
 using LaneMask = int32_t __attribute__((vector_size(16)));
+
+/// Whether any lane of `mask` is set (its sign bit: a comparison's true sets all bits).
+FIBREMSS_INLINED inline bool anyLane(const LaneMask& mask) {
+#if defined(__SSE__)
+  return _mm_movemask_ps(__m128(mask)) != 0;  // one instruction, not a lane at a time
+#else
+  return (mask[0] | mask[1] | mask[2] | mask[3]) < 0;
+#endif
+}
 
 /// Per entry of ParticleCells::order: its particle's current position p, rest position P and
 /// F⁻¹ (row after row), one array of floats per coordinate, read four entries at a time.
@@ -264,7 +282,13 @@ struct ImplicitSurface::Impl {
   /// A new extraction's coarse grid over `grid`, every map stale.
   void beginMaps();
   /// The map at point (i, j, k) of the coarse grid (every second extraction grid point), cached.
-  const RestMap& coarseMap(int32_t i, int32_t j, int32_t k);
+  const RestMap& coarseMap(int32_t i, int32_t j, int32_t k) {
+    RestMap& map = maps[coarse.index(i, j, k)];
+    if (map.stamp != mapStamp) fillCoarseMap(i, j, k, map);
+    return map;
+  }
+  /// `map`, coarse point (i, j, k)'s, computed for this extraction.
+  void fillCoarseMap(int32_t i, int32_t j, int32_t k, RestMap& map) const;
   /// The field at extraction grid point (i, j, k): the map interpolated (trilinear) between the
   /// coarse points around it, which is exact at rest (where X̄ − x = 0 everywhere), then D.
   btScalar field(int32_t i, int32_t j, int32_t k, bool& thickened);
