@@ -342,8 +342,8 @@ void ImplicitSurface::Impl::pinToAnchors() {
   }
 }
 
-uint32_t ImplicitSurface::Impl::newVertex(const std::array<int32_t, 3>& cell, int u, int v,
-                                          const std::array<float, 8>& values) {
+inline uint32_t ImplicitSurface::Impl::newVertex(const std::array<int32_t, 3>& cell, int u, int v,
+                                                 const std::array<float, 8>& values) {
   auto corner = [&](int c) {
     return grid.point(cell[0] + (c & 1), cell[1] + (c >> 1 & 1), cell[2] + (c >> 2 & 1));
   };
