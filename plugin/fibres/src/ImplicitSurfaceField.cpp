@@ -461,8 +461,6 @@ ImplicitSurface::Impl::restMap(const btVector3& x) const {
                   dz = point[2] - at(EntryLanes::kZ);
       const Lanes q = 1 - (dx * dx + dy * dy + dz * dz) * inverseH2;
       const LaneMask take = (q > 0) & (lane < int32_t(end - e));
-      // No lane within h: each would add a weight of 0 (and the sums are never −0).
-      if (!anyLane(take)) continue;
       const Lanes w = Lanes(LaneMask(q * q * q) & take);
       auto mapped = [&](size_t a) {  // X_j − x along axis a: P_j + F_j⁻¹ (x − p_j) − x
         const size_t row = EntryLanes::kToRest + 3 * a;

@@ -7,9 +7,6 @@
 #include <cstdint>
 #include <cstring>
 #include <vector>
-#if defined(__SSE__)
-#include <xmmintrin.h>
-#endif
 
 #include "ClusterDistance.h"
 #include "fibremss/ImplicitSurface.h"
@@ -196,15 +193,6 @@ struct RestMap {
 /// Four floats, one per lane (the compiler's vector extension: SIMD where the target has it).
 using Lanes = float __attribute__((vector_size(16)));
 using LaneMask = int32_t __attribute__((vector_size(16)));
-
-/// Whether any lane of `mask` is set (its sign bit: a comparison's true sets all bits).
-FIBREMSS_INLINED inline bool anyLane(const LaneMask& mask) {
-#if defined(__SSE__)
-  return _mm_movemask_ps(__m128(mask)) != 0;  // one instruction, not a lane at a time
-#else
-  return (mask[0] | mask[1] | mask[2] | mask[3]) < 0;
-#endif
-}
 
 /// Per entry of ParticleCells::order: its particle's current position p, rest position P and
 /// F⁻¹ (row after row), one array of floats per coordinate, read four entries at a time.
