@@ -11,6 +11,7 @@
 
 #include "ImplicitSurfaceInternal.h"
 #include "fibremss/Error.h"
+#include "fibremss/UnionFind.h"
 
 namespace fibremss {
 namespace {
@@ -63,12 +64,6 @@ TetrahedronCut cutOf(const std::array<int, 4>& tet, unsigned inside) {
   return cut;
 }
 
-/// The union-find root of `v` in `parent`, halving the path on the way.
-uint32_t rootOf(std::vector<uint32_t>& parent, uint32_t v) {
-  while (parent[v] != v) v = parent[v] = parent[parent[v]];
-  return v;
-}
-
 /// The surface's triangles in one cell for one set of inside corners (bit c: corner c), the
 /// six tetrahedra's cuts in order: the distinct edges their vertices lie on, in the order the
 /// triangles first use them, and each triangle's edges among those.
@@ -97,13 +92,10 @@ struct CellCut {
     std::vector<uint32_t> parent(static_cast<size_t>(edgeCount));
     std::iota(parent.begin(), parent.end(), 0u);
     for (int n = 0; n < count; ++n)
-      for (size_t k = 1; k < 3; ++k) {
-        const uint32_t a = rootOf(parent, triangles[size_t(n)][0]),
-                       b = rootOf(parent, triangles[size_t(n)][k]);
-        parent[std::max(a, b)] = std::min(a, b);  // the root stays the first edge
-      }
+      for (size_t k = 1; k < 3; ++k)  // the root stays the first edge
+        unionFindJoin(parent, triangles[size_t(n)][0], triangles[size_t(n)][k]);
     for (uint32_t e = 0; e < uint32_t(edgeCount); ++e) {
-      const uint32_t first = rootOf(parent, e);
+      const uint32_t first = unionFindRoot(parent, e);
       joined[e] = first == e ? int8_t(-1) : int8_t(first);
     }
   }
@@ -290,7 +282,7 @@ void ImplicitSurface::Impl::dropSpecks() {
   for (const std::array<uint32_t, 3>& t : mesh.triangles) {
     const btVector3 a = mesh.vertices[t[0]] - grid.origin, b = mesh.vertices[t[1]] - grid.origin,
                     c = mesh.vertices[t[2]] - grid.origin;
-    pieceVolume[rootOf(pieceOf, t[0])] += double(a.dot(b.cross(c))) / 6;
+    pieceVolume[unionFindRoot(pieceOf, t[0])] += double(a.dot(b.cross(c))) / 6;
   }
   uint32_t largest = 0;
   for (uint32_t v = 0; v < count; ++v)
@@ -299,7 +291,7 @@ void ImplicitSurface::Impl::dropSpecks() {
   vertexKept.resize(count);
   int32_t kept = 0;
   for (uint32_t v = 0; v < count; ++v) {
-    const uint32_t root = rootOf(pieceOf, v);
+    const uint32_t root = unionFindRoot(pieceOf, v);
     const bool keep = root == largest || std::abs(pieceVolume[root]) >= smallest;
     vertexKept[v] = keep ? kept : -1;
     if (keep) mesh.vertices[size_t(kept++)] = mesh.vertices[v];
@@ -373,9 +365,9 @@ void ImplicitSurface::Impl::polygonise(const std::array<int32_t, 3>& cell,
   // Each vertex joins the piece of its triangles' first vertex: one made here is still a root.
   for (int e = 0; e < cut.edgeCount; ++e) {
     if (cut.joined[size_t(e)] < 0) continue;
-    const uint32_t root = rootOf(pieceOf, vertices[size_t(cut.joined[size_t(e)])]),
+    const uint32_t root = unionFindRoot(pieceOf, vertices[size_t(cut.joined[size_t(e)])]),
                    vertex = vertices[size_t(e)];
-    pieceOf[vertex >= made ? vertex : rootOf(pieceOf, vertex)] = root;
+    pieceOf[vertex >= made ? vertex : unionFindRoot(pieceOf, vertex)] = root;
   }
   for (int n = 0; n < cut.count; ++n) {
     const std::array<uint8_t, 3>& t = cut.triangles[size_t(n)];
@@ -523,10 +515,10 @@ MeshTopology meshTopology(const TriangleMesh& mesh) {
   MeshTopology topology;
   for (size_t i = 0, j; i < edges.size(); i = j) {
     for (j = i; j < edges.size() && edges[j].first == edges[i].first; ++j)
-      parent[rootOf(parent, edges[j].second)] = rootOf(parent, edges[i].second);
+      parent[unionFindRoot(parent, edges[j].second)] = unionFindRoot(parent, edges[i].second);
     if (j - i != 2) ++topology.openEdges;
   }
-  for (uint32_t t = 0; t < parent.size(); ++t) topology.components += rootOf(parent, t) == t;
+  for (uint32_t t = 0; t < parent.size(); ++t) topology.components += unionFindRoot(parent, t) == t;
   return topology;
 }
 
