@@ -515,7 +515,7 @@ MeshTopology meshTopology(const TriangleMesh& mesh) {
   MeshTopology topology;
   for (size_t i = 0, j; i < edges.size(); i = j) {
     for (j = i; j < edges.size() && edges[j].first == edges[i].first; ++j)
-      parent[unionFindRoot(parent, edges[j].second)] = unionFindRoot(parent, edges[i].second);
+      unionFindJoin(parent, edges[j].second, edges[i].second);
     if (j - i != 2) ++topology.openEdges;
   }
   for (uint32_t t = 0; t < parent.size(); ++t) topology.components += unionFindRoot(parent, t) == t;
