@@ -654,6 +654,40 @@ TEST(ReferenceGates, WhereAJudgedGatesSolveStoppedEarlierTheyRankOverThePosesItS
             "ccx stopped a judged gate's solve at pose 1, before 2 poses to rank over");
 }
 
+TEST(ReferenceGates, AJudgedGatesStopOfOneMuscleLimitsThatMuscleAlone) {
+  ReferenceGates gates = stoppedAt(6);
+  gates.limited = {{1, "beside", 2, "increments halved",
+                    "muscle beside: *ERROR: increment size smaller than minimum"}};
+  EXPECT_TRUE(gates.passed()) << gates.whyNotPassed();
+  EXPECT_EQ(gates.rankedPoses(), 6) << "the muscles not limited keep every gateable pose";
+  EXPECT_EQ(gates.coveredPoses(0), 6);
+  EXPECT_EQ(gates.coveredPoses(1), 2);
+  const std::string limited =
+      "beside over poses 0\u20131: ccx did not solve its pose 2 in the increments halved solve "
+      "(muscle beside: *ERROR: increment size smaller than minimum)";
+  EXPECT_EQ(gates.rankedPosesText(),
+            "ranked over poses 0\u20135 of 19: ccx did not solve pose 6 (muscle iliacus: *ERROR: "
+            "increment size smaller than minimum) or later; " +
+                limited);
+  const std::vector<std::string> lines = gateLines(gates);
+  EXPECT_NE(lines.back().find("covers " + limited + "; every other muscle over poses 0\u20135"),
+            std::string::npos)
+      << lines.back();
+
+  // Over every pose of the motion, the limited muscle is still said.
+  gates.poses = 6;
+  EXPECT_EQ(gates.rankedPosesText(), "ranked over poses 0\u20135 of 6; " + limited);
+
+  // Stopped in its first posed pose: left out of every figure, the others still ranked.
+  gates.limited.front().poses = 1;
+  EXPECT_EQ(gates.coveredPoses(1), 0);
+  EXPECT_EQ(gates.rankedPoses(), 6);
+  EXPECT_NE(gates.limitedText().find("beside left out of every figure (fewer than 2 poses): ccx "
+                                     "did not solve its pose 1"),
+            std::string::npos)
+      << gates.limitedText();
+}
+
 TEST(ReferenceGates, IncrementsHalvedIsJudgedAsRefinementIsAndBlocksTheRanking) {
   // Every other gate passes: the increment gate alone decides.
   ReferenceGates gates;
@@ -1157,7 +1191,22 @@ TEST_F(ShortFusiform, AQuarterOfTheIncrementsTakesFourTimesAsManyToTheSameEquili
     EXPECT_EQ(statics[step][0], statics[step][3]) << step;
   }
   // The same hyperelastic equilibrium (frictionless contact: no path dependence) either way.
-  EXPECT_LT(rmsBetweenSolutions(coarse, fine), 1e-3) << "mm";
+  const size_t vertices[] = {prepared.muscles[0]->restSurface.vertices.size()};
+  const int covered[] = {3};
+  int compared = 0;
+  EXPECT_LT(rmsBetweenSolutions(coarse, fine, vertices, covered, &compared), 1e-3) << "mm";
+  EXPECT_EQ(compared, 3);
+}
+
+/// Adds a second muscle, `beside`, to a fusiform scene's JSON: the first's, 40 mm beside it and
+/// half its radii.
+void addBeside(nlohmann::json& json) {
+  nlohmann::json beside = json["muscles"][0];
+  beside["name"] = "beside";
+  for (nlohmann::json& point : beside["surface"]["generator"]["points"]) point[0] = 40;
+  for (nlohmann::json& radius : beside["surface"]["generator"]["radii"])
+    radius = radius.get<double>() / 2;
+  json["muscles"].push_back(beside);
 }
 
 /// The coarse fusiform with both bars carried 20 mm sideways in its one pose, the lower one 2 mm
@@ -1172,14 +1221,7 @@ std::string carriedFusiform(const std::filesystem::path& dir, bool twice) {
                       {"quaternion", {0, 0, 0, 1}}});
     json["bones"][b]["motion"] = {{"type", "keyframes"}, {"keyframes", keys}};
   }
-  if (twice) {
-    nlohmann::json beside = json["muscles"][0];
-    beside["name"] = "beside";
-    for (nlohmann::json& point : beside["surface"]["generator"]["points"]) point[0] = 40;
-    for (nlohmann::json& radius : beside["surface"]["generator"]["radii"])
-      radius = radius.get<double>() / 2;
-    json["muscles"].push_back(beside);
-  }
+  if (twice) addBeside(json);
   const std::filesystem::path path = dir / (twice ? "carried-twice.json" : "carried.json");
   std::ofstream(path) << json.dump(2);
   return path.string();
@@ -1814,6 +1856,91 @@ TEST(ReferenceCommand, AReferenceCcxStoppedAfterItsRetryRanksOverThePosesBeforeT
   EXPECT_NE(report.find("Poses solved: 2/3 (1 not solved: ccx stopped at pose 2, see below)"),
             std::string::npos)
       << report;
+}
+
+/// Both muscles' rest surfaces, the first moved `a` mm along x, the second `b` mm.
+std::vector<btVector3> shiftedRest(const PreparedScene& prepared, double a, double b) {
+  std::vector<btVector3> surface;
+  for (size_t m = 0; m < prepared.muscles.size(); ++m)
+    for (const btVector3& vertex : prepared.muscles[m]->restSurface.vertices)
+      surface.push_back(vertex + btVector3(btScalar(1e-3 * (m == 0 ? a : b)), 0, 0));
+  return surface;
+}
+
+TEST(ReferenceGates, AJudgedGateStoppingOneMuscleOfTwoKeepsTheOthersPosesInEveryRms) {
+  REQUIRE_PROGRAM("ccx");
+  TemporaryDirectory dir("limited_muscle_test");
+  nlohmann::json json = nlohmann::json::parse(readText(shortFusiform(dir.path())));
+  addBeside(json);
+  std::ofstream(dir.path() / "twice.json") << json.dump(2);
+  const LoadedScene scene = loadScene((dir.path() / "twice.json").string(), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  ASSERT_EQ(scene.poseCount, 3);
+  ReferenceOptions options;
+  options.cacheDir = (dir.path() / "cache").string();
+  options.cachedOnly = true;
+  // Solutions stand in for ccx's: the reference at rest in every pose; increments halved moves
+  // the first muscle 1 mm and `beside` 3 mm, and stops `beside` at pose 2 (its retry not
+  // computed) while the first muscle solves every pose (its part); one level finer moves both
+  // 0.5 mm.
+  CalculixSolution reference, halved, finer;
+  reference.poseSurfaces.assign(3, shiftedRest(prepared, 0, 0));
+  reference.poseFailures.assign(3, "");
+  reference.returnSurface = shiftedRest(prepared, 0, 0);
+  halved.poseSurfaces = {shiftedRest(prepared, 1, 3), shiftedRest(prepared, 1, 3), {}};
+  halved.poseFailures = {"", "", "muscle beside: *ERROR: increment size smaller than minimum"};
+  halved.muscles.resize(2);
+  halved.muscles[0].stepSurfaces.assign(3,
+                                        muscleVertices(prepared, shiftedRest(prepared, 1, 3), 0));
+  halved.muscles[1].failure = "*ERROR: increment size smaller than minimum";
+  finer.poseSurfaces.assign(3, shiftedRest(prepared, 0.5, 0.5));
+  finer.poseFailures.assign(3, "");
+  const CalculixDefinition definition = sceneDefinition(scene, options);
+  const GateDefinitions gates = gateDefinitions(definition, gatePoseLimit(reference));
+  for (const auto& [solve, solution] :
+       {std::pair{&definition, &reference}, {&gates.increments, &halved}, {&gates.finer, &finer}}) {
+    const std::string entry =
+        options.cacheDir + "/" + referenceCacheKey(scene, prepared, *solve, cutOf(scene));
+    std::filesystem::create_directories(entry);
+    saveSolution(entry + "/surfaces.bin", *solution);
+  }
+  const Reference computed = computeReference(scene, prepared, options);
+  ASSERT_FALSE(computed.missing);
+  const ReferenceGates& g = computed.gates;
+  EXPECT_EQ(g.gatedPoses, -1) << "the first muscle's poses are not stopped";
+  ASSERT_EQ(g.limited.size(), 1u);
+  EXPECT_EQ(g.limited[0].name, "beside");
+  EXPECT_EQ(g.limited[0].poses, 2);
+  EXPECT_EQ(g.limited[0].solve, "increments halved");
+  EXPECT_NE(g.limited[0].why.find("its retry at finer increments not computed"), std::string::npos);
+  EXPECT_EQ(g.failures, "");
+  // The gates' RMS: the first muscle over poses 0-2, `beside` over 0-1.
+  const double first = double(prepared.muscles[0]->restSurface.vertices.size()),
+               second = double(prepared.muscles[1]->restSurface.vertices.size());
+  EXPECT_EQ(g.incrementsPoses, 3);
+  EXPECT_NEAR(g.incrementsMm, std::sqrt((3 * first + 2 * second * 9) / (3 * first + 2 * second)),
+              1e-3);
+  EXPECT_EQ(g.refinementPoses, 3);
+  EXPECT_NEAR(g.refinementMm, 0.5, 1e-3);
+
+  // A run's RMS to the reference leaves `beside` out from pose 2 on: there it is 10 mm off.
+  std::vector<RunMetrics> runs{computed.metrics, RunMetrics{}};
+  runs[1].method = "fibremss";
+  runs[1].poseSurfaces = {shiftedRest(prepared, 1, 0), shiftedRest(prepared, 1, 0),
+                          shiftedRest(prepared, 1, 10)};
+  fillRms(runs);
+  fillReferenceShapes(runs, prepared);
+  const RunMetrics& run = runs[1];
+  EXPECT_EQ(run.rmsToReferencePoses, 3);
+  EXPECT_NEAR(run.rmsToReferenceMm, std::sqrt(3 * first / (3 * first + 2 * second)), 1e-3);
+  ASSERT_EQ(run.rmsToReferencePerPoseMm.size(), 3u);
+  EXPECT_NEAR(run.rmsToReferencePerPoseMm[2], 1.0, 1e-3) << "the first muscle's alone";
+  ASSERT_EQ(run.musclesToReference.size(), 2u);
+  EXPECT_EQ(run.musclesToReference[0].perPoseMm.size(), 3u);
+  EXPECT_EQ(run.musclesToReference[1].perPoseMm.size(), 2u);
+  EXPECT_NEAR(run.musclesToReference[1].rmsMm, 0.0, 1e-3);
+  EXPECT_EQ(run.worstMuscle, prepared.muscles[0]->name);
 }
 
 TEST(ReferenceCommand, ListsItsCellsAndRefusesACellItDoesNotHave) {

@@ -996,6 +996,24 @@ TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereve
   EXPECT_NE(readFile(out / "speed_vs_error.gp").find(ranked), std::string::npos)
       << "the plot's note";
 
+  // The one-level-finer solve stopped one muscle alone at pose 2: the others keep poses 0-5,
+  // and wherever it ranks the limited muscle is named with its poses, read back from the gates.
+  summary["reference"]["gates"]["limited_muscles"] = {{{"muscle", "psoas"},
+                                                       {"index", 1},
+                                                       {"poses", 2},
+                                                       {"solve", "one level finer"},
+                                                       {"why", "muscle psoas: ccx stopped"}}};
+  writeComparison(summary, out.string());
+  const std::string limited = readFile(out / "report.md");
+  const std::string muscle =
+      ranked +
+      "; psoas over poses 0\u20131: ccx did not solve its pose 2 in the one level finer solve "
+      "(muscle psoas: ccx stopped)";
+  EXPECT_NE(verdictOf(limited).find(muscle + ")**: most accurate"), std::string::npos)
+      << verdictOf(limited);
+  EXPECT_NE(limited.find("finished every pose it covers; " + muscle), std::string::npos) << limited;
+  summary["reference"]["gates"].erase("limited_muscles");
+
   // The one-level-finer solve stopped at pose 2: the ranking covers poses 0-1, read back from
   // the summary's gates.
   summary["reference"]["gates"]["refinement_poses"] = 2;

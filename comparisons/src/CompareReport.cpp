@@ -1042,16 +1042,23 @@ std::string referencePerPoseTable(const std::vector<const nlohmann::json*>& show
   return out.str() + "\n";
 }
 
-/// Rows of each muscle's RMS to the reference over the poses, a column per run.
+/// Rows of each muscle's RMS to the reference over the poses, a column per run; a muscle over
+/// fewer poses than the first run's (one the gates limit: ReferenceGates::limited) says which.
 std::string referencePerMuscleTable(const std::vector<const nlohmann::json*>& shown) {
   const nlohmann::json& first = shown.front()->value("muscles_to_reference", nlohmann::json());
+  const size_t poses = (*shown.front())["rms_to_reference_per_pose_mm"].size();
+  const auto over = [&](const nlohmann::json& muscle) {
+    const size_t own = muscle.value("per_pose_mm", nlohmann::json::array()).size();
+    if (own >= poses) return std::string();
+    return own == 0 ? std::string(" (no pose)") : " (poses 0\u2013" + std::to_string(own - 1) + ")";
+  };
   std::ostringstream out;
   out << "| muscle |";
   for (const nlohmann::json* run : shown) out << " " << runLabel(*run) << " |";
   out << "\n|---|";
   for (size_t r = 0; r < shown.size(); ++r) out << "---|";
   for (size_t m = 0; m < first.size(); ++m) {
-    out << "\n| " << first[m].value("muscle", std::string()) << " |";
+    out << "\n| " << first[m].value("muscle", std::string()) << over(first[m]) << " |";
     for (const nlohmann::json* run : shown) {
       const nlohmann::json& muscles = run->value("muscles_to_reference", nlohmann::json());
       out << " " << (m < muscles.size() ? field(muscles[m], "rms_mm") : "—") << " |";
@@ -1071,7 +1078,10 @@ std::string referenceBreakdown(const nlohmann::json& runs) {
       referencePerPoseTable(shown);
   const nlohmann::json& muscles = shown.front()->value("muscles_to_reference", nlohmann::json());
   if (muscles.is_array() && muscles.size() > 1)
-    out += "\nPer muscle, over those poses [mm]:\n\n" + referencePerMuscleTable(shown);
+    out +=
+        "\nPer muscle, over those poses (a muscle the reference's gates cover over fewer "
+        "says which) [mm]:\n\n" +
+        referencePerMuscleTable(shown);
   return out;
 }
 

@@ -218,19 +218,65 @@ int sharedPoses(const RunMetrics& a, const RunMetrics& b) {
   return static_cast<int>(std::min(a.poseSurfaces.size(), b.poseSurfaces.size()));
 }
 
+namespace {
+
+/// Whether the vertices from `first` count at pose `p` between the runs: no surface limit of
+/// either (RunMetrics::surfaceLimits) that starts there ends before `p`.
+bool counts(const RunMetrics& a, const RunMetrics& b, size_t first, size_t p) {
+  for (const RunMetrics* run : {&a, &b})
+    for (const SurfaceLimit& limit : run->surfaceLimits)
+      if (limit.first == first && static_cast<int>(p) >= limit.poses) return false;
+  return true;
+}
+
+/// The vertex RMS between the runs at pose `p` over the vertices that count there [mm] (NaN
+/// where none), their number into `counted`.
+double poseRmsMm(const RunMetrics& a, const RunMetrics& b, size_t p, size_t& counted) {
+  const std::span<const btVector3> from = a.poseSurfaces[p], to = b.poseSurfaces[p];
+  std::vector<std::pair<size_t, size_t>> left;  // [first, end) not counted at p
+  for (const RunMetrics* run : {&a, &b})
+    for (const SurfaceLimit& limit : run->surfaceLimits)
+      if (static_cast<int>(p) >= limit.poses)
+        left.emplace_back(limit.first, limit.first + limit.count);
+  counted = from.size();
+  if (left.empty()) return rmsDistanceMm(from, to);
+  std::sort(left.begin(), left.end());
+  double squares = 0;
+  size_t next = 0;
+  counted = 0;
+  const auto add = [&](size_t end) {
+    if (end <= next) return;
+    const double rms = rmsDistanceMm(from.subspan(next, end - next), to.subspan(next, end - next));
+    squares += rms * rms * static_cast<double>(end - next);
+    counted += end - next;
+  };
+  for (const auto& [first, end] : left) {
+    add(std::min(first, from.size()));
+    next = std::max(next, end);
+  }
+  add(from.size());
+  return counted ? std::sqrt(squares / static_cast<double>(counted)) : RunMetrics::kNone;
+}
+
+}  // namespace
+
 double rmsBetweenRuns(const RunMetrics& a, const RunMetrics& b, double* worstPose) {
   const size_t poses = static_cast<size_t>(sharedPoses(a, b));
   if (worstPose) *worstPose = RunMetrics::kNone;
   if (poses == 0) return RunMetrics::kNone;
   double sum = 0, worst = 0;
+  size_t counted = 0;
   for (size_t p = 0; p < poses; ++p) {
     if (a.poseSurfaces[p].size() != b.poseSurfaces[p].size()) return RunMetrics::kNone;
-    const double rms = rmsDistanceMm(a.poseSurfaces[p], b.poseSurfaces[p]);
-    sum += rms * rms;
+    size_t vertices = 0;
+    const double rms = poseRmsMm(a, b, p, vertices);
+    if (vertices == 0) continue;
+    sum += rms * rms * static_cast<double>(vertices);
+    counted += vertices;
     worst = std::max(worst, rms);
   }
   if (worstPose) *worstPose = worst;
-  return std::sqrt(sum / static_cast<double>(poses));
+  return counted ? std::sqrt(sum / static_cast<double>(counted)) : RunMetrics::kNone;
 }
 
 MuscleSystemDef equilibriumSettings(const MuscleSystemDef& simulation, int cap) {
@@ -310,17 +356,20 @@ bool musclePoseRms(const RunMetrics& run, const RunMetrics& equilibrium,
     size_t offset = 0;
     for (size_t m = 0; m < blocks.size(); ++m) {
       const size_t count = blocks[m].vertices;
-      muscles[m].perPoseMm.push_back(
-          count ? rmsDistanceMm(a.subspan(offset, count), b.subspan(offset, count)) : 0.0);
+      if (counts(run, equilibrium, offset, p))
+        muscles[m].perPoseMm.push_back(
+            count ? rmsDistanceMm(a.subspan(offset, count), b.subspan(offset, count)) : 0.0);
       offset += count;
     }
-    perPose.push_back(rmsDistanceMm(a, b));
+    size_t counted = 0;
+    perPose.push_back(poseRmsMm(run, equilibrium, p, counted));
   }
   return poses > 0;
 }
 
-/// Root mean square of `values` (each one pose's RMS over the same vertices).
+/// Root mean square of `values` (each one pose's RMS over the same vertices; NaN for none).
 double rmsOf(const std::vector<double>& values) {
+  if (values.empty()) return RunMetrics::kNone;
   double squares = 0;
   for (double v : values) squares += v * v;
   return std::sqrt(squares / static_cast<double>(values.size()));
@@ -407,16 +456,17 @@ void fillReferenceShapes(std::vector<RunMetrics>& runs, const PreparedScene& pre
     std::vector<MuscleRms> muscles(prepared.muscles.size());
     for (size_t p = 0; p < poses; ++p) {
       if (run.poseSurfaces[p].size() != reference.poseSurfaces[p].size()) return;
-      run.rmsToReferencePerPoseMm.push_back(
-          rmsDistanceMm(run.poseSurfaces[p], reference.poseSurfaces[p]));
+      size_t counted = 0;
+      run.rmsToReferencePerPoseMm.push_back(poseRmsMm(run, reference, p, counted));
       size_t offset = 0;
       for (size_t m = 0; m < prepared.muscles.size(); ++m) {
         const TriangleMesh& rest = prepared.muscles[m]->restSurface;
         const size_t count = rest.vertices.size();
-        muscles[m].perPoseMm.push_back(
-            addMusclePose(rest, std::span(run.poseSurfaces[p]).subspan(offset, count),
-                          std::span(reference.poseSurfaces[p]).subspan(offset, count), shapeSquares,
-                          shapePoints));
+        if (counts(run, reference, offset, p))
+          muscles[m].perPoseMm.push_back(
+              addMusclePose(rest, std::span(run.poseSurfaces[p]).subspan(offset, count),
+                            std::span(reference.poseSurfaces[p]).subspan(offset, count),
+                            shapeSquares, shapePoints));
         offset += count;
       }
     }

@@ -188,11 +188,33 @@ std::vector<btVector3> restSurfaces(const PreparedScene& prepared) {
   return rest;
 }
 
-/// The reference as a run: its solved poses' surfaces up to `gatedPoses`, penetration into the
-/// bones' true meshes (it has no contact), volume change at the last solved pose.
+/// Each muscle's surface vertices, in scene order (a pose surface's muscles, one after another).
+std::vector<size_t> muscleVertices(const PreparedScene& prepared) {
+  std::vector<size_t> vertices;
+  for (const auto& muscle : prepared.muscles)
+    vertices.push_back(muscle->restSurface.vertices.size());
+  return vertices;
+}
+
+/// The vertices of the muscles `gates` cover over fewer than `poses` (ReferenceGates::limited):
+/// no RMS counts them from their covered poses on.
+std::vector<SurfaceLimit> surfaceLimits(const PreparedScene& prepared, const ReferenceGates& gates,
+                                        int poses) {
+  std::vector<SurfaceLimit> limits;
+  size_t first = 0;
+  const std::vector<size_t> vertices = muscleVertices(prepared);
+  for (size_t m = 0; m < vertices.size(); first += vertices[m++])
+    if (gates.coveredPoses(m) < poses)
+      limits.push_back({first, vertices[m], gates.coveredPoses(m)});
+  return limits;
+}
+
+/// The reference as a run: its solved poses' surfaces up to the gateable ones, the muscles the
+/// gates cover over fewer poses limited to those (RunMetrics::surfaceLimits), penetration into
+/// the bones' true meshes (it has no contact), volume change at the last of those poses.
 RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepared,
                             const CalculixSolution& solution, const CalculixDefinition& definition,
-                            int gatedPoses) {
+                            const ReferenceGates& gates) {
   RunMetrics metrics;
   metrics.scene = scene.name;
   metrics.method = kReferenceMethod;
@@ -202,7 +224,8 @@ RunMetrics referenceMetrics(const LoadedScene& scene, const PreparedScene& prepa
   metrics.particles = solution.nodes;
   metrics.springs = solution.elements;
   metrics.poses = static_cast<int>(solution.poseSurfaces.size());
-  metrics.steps = std::min(solution.solvedPoses(), gatedPoses);
+  metrics.steps = std::min(solution.solvedPoses(), gates.gateablePoses());
+  metrics.surfaceLimits = surfaceLimits(prepared, gates, metrics.steps);
   metrics.iterations = solution.newtonIterations;
   metrics.wallSeconds = solution.seconds;
   if (metrics.steps > 0) metrics.msPerStep = 1000 * solution.seconds / metrics.poses;
@@ -266,24 +289,100 @@ struct Gate {
   std::string* failures;  ///< where its unsolved poses go: blocking or stated (statedFailures)
 };
 
-/// Where ccx failed a pose the reference solved in a judged gate's solve (not interrupted nor
-/// on its memory limit), the gates stop there (ReferenceGates::gatedPoses, gateStop): the
-/// reference past it is not gated, and no RMS or ranking covers it. False (a failure) otherwise.
-bool stopsTheGates(const CalculixSolution& reference, const Solve& solve,
-                   const CalculixDefinition& asked, const Gate& gate, ReferenceGates& gates) {
-  const CalculixSolution& solution = solve.solution;
-  const int stop = solution.solvedPoses();
-  if (gate.failures != &gates.failures || stop >= reference.solvedPoses() ||
-      ccxFailureToRetry(solution).empty())
-    return false;
-  if (gates.gatedPoses >= 0 && gates.gatedPoses <= stop) return true;
-  gates.gatedPoses = stop;
-  gates.gateStop = std::string(gate.name) + " pose " + std::to_string(stop) + ": " +
-                   solution.poseFailures[static_cast<size_t>(stop)] +
-                   (solve.definition.incrementScale == asked.incrementScale
-                        ? " (its retry at finer increments not computed)"
-                        : "");
+/// Muscle `m`'s surface at pose `p` in `solution` (its `count` vertices from `first` in a pose's
+/// surface): its share of the pose's, or where another muscle failed the pose, its part's
+/// (CalculixSolution::muscles); empty where neither has it.
+std::span<const btVector3> muscleSurface(const CalculixSolution& solution, size_t m, size_t first,
+                                         size_t count, size_t p) {
+  if (!solution.poseSurfaces[p].empty())
+    return std::span(solution.poseSurfaces[p]).subspan(first, count);
+  if (m < solution.muscles.size() && p < solution.muscles[m].stepSurfaces.size())
+    return solution.muscles[m].stepSurfaces[p];
+  return {};
+}
+
+/// Adds pose `p`'s squared vertex distances [mm²] between `a` and `b` over the muscles covered
+/// there (rmsBetweenSolutions) to `squares` and their count to `counted`; false (nothing added)
+/// where no muscle is covered or either lacks the surface of one that is.
+bool addPoseSquares(const CalculixSolution& a, const CalculixSolution& b,
+                    std::span<const size_t> vertices, std::span<const int> covered, size_t p,
+                    double& squares, size_t& counted) {
+  double poseSquares = 0;
+  size_t poseCounted = 0, first = 0;
+  for (size_t m = 0; m < vertices.size(); first += vertices[m++]) {
+    if (static_cast<int>(p) >= covered[m]) continue;
+    const std::span<const btVector3> from = muscleSurface(a, m, first, vertices[m], p),
+                                     to = muscleSurface(b, m, first, vertices[m], p);
+    if (from.empty() || to.empty()) return false;
+    const double rms = rmsDistanceMm(from, to);
+    poseSquares += rms * rms * static_cast<double>(from.size());
+    poseCounted += from.size();
+  }
+  if (poseCounted == 0) return false;
+  squares += poseSquares;
+  counted += poseCounted;
   return true;
+}
+
+using LimitedMuscle = ReferenceGates::LimitedMuscle;
+
+/// Where ccx failed a pose the reference solved in a judged gate's solve (not interrupted nor on
+/// its memory limit), each muscle it did not solve up to there stops there: `stops` (per muscle,
+/// the earliest of the judged solves'; poses -1 where none) takes the stop, its solve and ccx's
+/// reason. False (a failure) otherwise.
+bool stopsTheGates(const CalculixSolution& reference, const Solve& solve,
+                   const CalculixDefinition& asked, const std::string& name,
+                   const PreparedScene& prepared, std::vector<LimitedMuscle>& stops) {
+  const CalculixSolution& solution = solve.solution;
+  if (solution.solvedPoses() >= reference.solvedPoses() || ccxFailureToRetry(solution).empty())
+    return false;
+  const std::vector<size_t> vertices = muscleVertices(prepared);
+  size_t first = 0;
+  for (size_t m = 0; m < vertices.size(); first += vertices[m++]) {
+    int stop = 0;
+    while (stop < reference.solvedPoses() &&
+           !muscleSurface(solution, m, first, vertices[m], static_cast<size_t>(stop)).empty())
+      ++stop;
+    if (stop >= reference.solvedPoses() || (stops[m].poses >= 0 && stops[m].poses <= stop))
+      continue;
+    const std::string& failure = m < solution.muscles.size() ? solution.muscles[m].failure : "";
+    const std::string why = failure.empty()
+                                ? solution.poseFailures[static_cast<size_t>(stop)]
+                                : "muscle " + prepared.muscles[m]->name + ": " + failure;
+    stops[m] = {m, prepared.muscles[m]->name, stop, name,
+                why + (solve.definition.incrementScale == asked.incrementScale
+                           ? " (its retry at finer increments not computed)"
+                           : "")};
+  }
+  return true;
+}
+
+/// The judged gates' stops (`stops`, per muscle) as what the gates cover: where every muscle
+/// stopped, the gates stop at the latest (gatedPoses, gateStop); the muscles stopped before the
+/// gateable poses are limited to their own.
+void limitGates(const std::vector<LimitedMuscle>& stops, ReferenceGates& gates) {
+  const auto stopped = [](const LimitedMuscle& stop) { return stop.poses >= 0; };
+  if (!stops.empty() && std::all_of(stops.begin(), stops.end(), stopped)) {
+    const LimitedMuscle& latest = *std::max_element(
+        stops.begin(), stops.end(),
+        [](const LimitedMuscle& a, const LimitedMuscle& b) { return a.poses < b.poses; });
+    gates.gatedPoses = latest.poses;
+    gates.gateStop = latest.solve + " pose " + std::to_string(latest.poses) + ": " + latest.why;
+  }
+  for (const LimitedMuscle& stop : stops)
+    if (stopped(stop) && stop.poses < gates.gateablePoses()) gates.limited.push_back(stop);
+}
+
+/// Each solved gate's RMS against `base` and the poses it compared, over what the gates cover
+/// (ReferenceGates::coveredPoses: the judged solves' stops are known).
+void gateFigures(const CalculixSolution& base,
+                 const std::vector<std::pair<const Gate*, Solve>>& solved,
+                 const PreparedScene& prepared, ReferenceGates& gates) {
+  const std::vector<size_t> vertices = muscleVertices(prepared);
+  std::vector<int> covered;
+  for (size_t m = 0; m < vertices.size(); ++m) covered.push_back(gates.coveredPoses(m));
+  for (const auto& [gate, solve] : solved)
+    *gate->mm = rmsBetweenSolutions(base, solve.solution, vertices, covered, gate->poses);
 }
 
 /// The gate solves (gateDefinitions) against `base`, cheapest first.
@@ -302,25 +401,30 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
                            {&solves[3].second, solves[3].first.c_str(), &gates.refinementMm,
                             &gates.refinementPoses, nullptr, &gates.failures}};
   solveGateCells(scene, prepared, cuts, options, definitions);
+  std::vector<LimitedMuscle> stops(prepared.muscles.size(), {0, "", -1, "", ""});
+  std::vector<std::pair<const Gate*, Solve>> solved;
   for (const Gate& gate : variants) {
     Solve solve;
-    if (options.cancel && options.cancel->load()) return;
+    if (options.cancel && options.cancel->load()) break;
     if (!solveVariant(scene, prepared, cuts, *gate.definition, options, gate.name, solve)) continue;
     const CalculixSolution& solution = solve.solution;
-    *gate.mm = rmsBetweenSolutions(base.solution, solution);
-    *gate.poses = std::min(base.solution.solvedPoses(), solution.solvedPoses());
     // Retried at finer increments where ccx failed it: say what it was solved at.
     if (gate.scale) *gate.scale = solve.definition.incrementScale;
     if (gate.scale && !solve.definition.muscleIncrementScales.empty())
       gates.incrementsPerMuscle = incrementsText(solve.definition, prepared);
-    if (!stopsTheGates(base.solution, solve, *gate.definition, gate, gates)) {
+    const bool judged = gate.failures == &gates.failures;
+    if (!judged ||
+        !stopsTheGates(base.solution, solve, *gate.definition, gate.name, prepared, stops)) {
       const std::string more = failures(solution, gate.name);
       if (!more.empty()) appendItem(*gate.failures, more);
     }
     // With more material attached, its cut can come earlier (pinch x1.5: at pose 1).
     if (solution.cut.pose != base.solution.cut.pose)
       appendItem(gates.excluded, std::string(gate.name) + ": " + excludedPoses(solution));
+    solved.emplace_back(&gate, std::move(solve));
   }
+  limitGates(stops, gates);
+  gateFigures(base.solution, solved, prepared, gates);
 }
 
 /// What computeReference solves next for `definition`.
@@ -417,17 +521,41 @@ std::string ReferenceGates::whyNotPassed() const {
   return text;
 }
 
+int ReferenceGates::coveredPoses(size_t m) const {
+  for (const LimitedMuscle& muscle : limited)
+    if (muscle.muscle == m)
+      return muscle.poses < kMinRankedPoses ? 0 : std::min(muscle.poses, gateablePoses());
+  return gateablePoses();
+}
+
+std::string ReferenceGates::limitedText() const {
+  std::string text;
+  for (const LimitedMuscle& muscle : limited)
+    appendItem(text, muscle.name +
+                         (muscle.poses < kMinRankedPoses
+                              ? " left out of every figure (fewer than " +
+                                    std::to_string(kMinRankedPoses) + " poses)"
+                              : " over poses 0\u2013" + std::to_string(muscle.poses - 1)) +
+                         ": ccx did not solve its pose " + std::to_string(muscle.poses) +
+                         " in the " + muscle.solve + " solve (" + muscle.why + ")");
+  return text;
+}
+
 std::string ReferenceGates::rankedPosesText() const {
   const int ranked = gateablePoses();
-  if (!passed() || ranked >= poses) return "";
-  const std::string over = "ranked over poses 0\u2013" + std::to_string(ranked - 1) + " of " +
-                           std::to_string(poses) + ": ";
-  if (ranked < solvedPoses)
-    return over + "no judged gate covers pose " + std::to_string(ranked) +
-           " or later (ccx did not solve it in the " + gateStop + ")";
-  if (stopped.empty()) return over + "the later ones have no continuum equilibrium";
-  return over + "ccx did not solve pose " + std::to_string(solvedPoses) + " (" + stopped +
-         ") or later";
+  if (!passed() || (ranked >= poses && limited.empty())) return "";
+  const auto fewer = [&]() -> std::string {
+    if (ranked < solvedPoses)
+      return "no judged gate covers pose " + std::to_string(ranked) +
+             " or later (ccx did not solve it in the " + gateStop + ")";
+    if (stopped.empty()) return "the later ones have no continuum equilibrium";
+    return "ccx did not solve pose " + std::to_string(solvedPoses) + " (" + stopped + ") or later";
+  };
+  std::string text =
+      "ranked over poses 0\u2013" + std::to_string(ranked - 1) + " of " + std::to_string(poses);
+  if (ranked < poses) text += ": " + fewer();
+  if (!limited.empty()) text += "; " + limitedText();
+  return text;
 }
 
 CalculixDefinition retryDefinition(const CalculixDefinition& definition,
@@ -477,15 +605,16 @@ std::string ccxFailureToRetry(const CalculixSolution& solution) {
   return "";
 }
 
-double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b) {
-  const size_t poses = static_cast<size_t>(std::min(a.solvedPoses(), b.solvedPoses()));
-  if (poses == 0) return RunMetrics::kNone;
-  double sum = 0;
-  for (size_t p = 0; p < poses; ++p) {
-    const double rms = rmsDistanceMm(a.poseSurfaces[p], b.poseSurfaces[p]);
-    sum += rms * rms;
-  }
-  return std::sqrt(sum / static_cast<double>(poses));
+double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b,
+                           std::span<const size_t> vertices, std::span<const int> covered,
+                           int* compared) {
+  double squares = 0;
+  size_t counted = 0;
+  int poses = 0;
+  for (size_t p = 0; p < std::min(a.poseSurfaces.size(), b.poseSurfaces.size()); ++p, ++poses)
+    if (!addPoseSquares(a, b, vertices, covered, p, squares, counted)) break;
+  if (compared) *compared = poses;
+  return counted ? std::sqrt(squares / static_cast<double>(counted)) : RunMetrics::kNone;
 }
 
 double methodSpreadMm(const std::vector<RunMetrics>& runs) {
@@ -573,8 +702,7 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
     reference.gates.returnMm = rmsDistanceMm(solution.returnSurface, restSurfaces(prepared));
   if (options.gates && !(options.cancel && options.cancel->load()))
     solveGates(scene, prepared, cuts, resolved, base, reference.gates);
-  reference.metrics =
-      referenceMetrics(scene, prepared, solution, definition, reference.gates.gateablePoses());
+  reference.metrics = referenceMetrics(scene, prepared, solution, definition, reference.gates);
   std::ostringstream description;
   description << "CalculiX (" << calculixVersion(definition.program)
               << ") static equilibrium per pose, "
@@ -606,6 +734,22 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
   reference.increments = incrementsText(definition, prepared);
   return reference;
 }
+
+namespace {
+
+/// The limited muscles as [{"muscle", "index", "poses", "solve", "why"}...].
+nlohmann::json limitedJson(const std::vector<ReferenceGates::LimitedMuscle>& limited) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const ReferenceGates::LimitedMuscle& muscle : limited)
+    list.push_back({{"muscle", muscle.name},
+                    {"index", muscle.muscle},
+                    {"poses", muscle.poses},
+                    {"solve", muscle.solve},
+                    {"why", muscle.why}});
+  return list;
+}
+
+}  // namespace
 
 nlohmann::json referenceJson(const Reference& reference) {
   if (reference.missing)
@@ -654,6 +798,7 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"stopped", g.stopped},
             {"gated_poses", g.gatedPoses},
             {"gate_stop", g.gateStop},
+            {"limited_muscles", limitedJson(g.limited)},
             {"excluded", g.excluded},
             {"passed", g.passed()},
             {"ranked_poses", g.rankedPoses()}}},
@@ -736,6 +881,12 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
                          ? std::string("too few poses to rank over, no ranking")
                          : "every RMS, gate and ranking covers poses 0\u2013" +
                                std::to_string(g.gatedPoses - 1)));
+  if (!g.limited.empty())
+    lines.push_back(
+        "judged gates' solves stopped some muscles before the others (each muscle is its own ccx "
+        "problem): every RMS, gate and ranking covers " +
+        g.limitedText() + "; every other muscle over poses 0\u2013" +
+        std::to_string(g.gateablePoses() - 1));
   if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
   return lines;
 }

@@ -286,6 +286,10 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.stopped = gates.value("stopped", std::string());
   g.gatedPoses = gates.value("gated_poses", -1);
   g.gateStop = gates.value("gate_stop", std::string());
+  for (const auto& muscle : gates.value("limited_muscles", nlohmann::json::array()))
+    g.limited.push_back({muscle.value("index", size_t{0}), muscle.value("muscle", std::string()),
+                         muscle.value("poses", 0), muscle.value("solve", std::string()),
+                         muscle.value("why", std::string())});
   g.excluded = gates.value("excluded", std::string());
   return g;
 }

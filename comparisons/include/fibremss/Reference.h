@@ -7,7 +7,9 @@
 #include <cmath>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "fibremss/ReferenceCache.h"
 #include "fibremss/RunMetrics.h"
@@ -108,13 +110,27 @@ struct ReferenceGates {
   int refinementPoses = 0, incrementsPoses = 0, attachmentLowPoses = 0, attachmentHighPoses = 0;
   /// Poses the reference itself solved.
   int solvedPoses = 0;
-  /// Poses the judged gates' solves (increments, refinement) solved where ccx failed a pose of
-  /// theirs the reference solved (their retry at finer increments failed or was not computed):
-  /// no judged gate vouches for the reference past them, so every RMS, gate and ranking covers
-  /// only these; -1 : no judged gate stopped before the reference.
+  /// Where ccx failed a pose the reference solved in the judged gates' solves (increments,
+  /// refinement; their retry at finer increments failed or was not computed) for every muscle:
+  /// the latest of the muscles' stops (each the earliest of its judged solves'). No judged gate
+  /// vouches for the reference past it, so every RMS, gate and ranking covers only these poses;
+  /// -1 : some muscle was not stopped before the reference (or none was).
   int gatedPoses = -1;
   /// Where gatedPoses is set: the gate's solve and ccx's reason at pose gatedPoses.
   std::string gateStop;
+  /// A muscle a judged gate's solve stopped before gateablePoses(): each muscle is its own ccx
+  /// problem, so the stop says nothing of the others.
+  struct LimitedMuscle {
+    size_t muscle = 0;  ///< its index (scene order)
+    std::string name;   ///< its name
+    int poses = 0;      ///< poses that solve solved of it, counted from the first
+    std::string solve;  ///< the gate's solve ("increments halved", "one level finer")
+    std::string why;    ///< ccx's reason at pose `poses` ("muscle …: …")
+  };
+  /// The muscles judged gates' solves stopped before gateablePoses(), in scene order: every RMS,
+  /// gate and ranking covers each over its own poses (coveredPoses), the other muscles over
+  /// gateablePoses().
+  std::vector<LimitedMuscle> limited;
   /// Poses ccx did not finish that block the ranking: of a judged gate's solve (increments,
   /// refinement), or of the reference where it did not stop as `stopped` says (interrupted, its
   /// memory limit, not retried yet).
@@ -139,6 +155,10 @@ struct ReferenceGates {
   int gateablePoses() const {
     return gatedPoses < 0 ? solvedPoses : std::min(solvedPoses, gatedPoses);
   }
+  /// Poses every RMS, gate and ranking covers of muscle `m`: gateablePoses(), or a limited
+  /// muscle's own poses; none (0) where those are fewer than kMinRankedPoses (left out of every
+  /// figure).
+  int coveredPoses(size_t m) const;
   /// Whether a solve that moved the reference by `mm` over `compared` poses passes: below a
   /// third of the spread, over every gateable pose (a finer solve that stopped early without
   /// saying so has measured the easy poses alone).
@@ -158,13 +178,18 @@ struct ReferenceGates {
     return (returnPasses() || !returnNotApplicable.empty()) && refinementPasses() &&
            incrementsPass() && failures.empty() && !stoppedTooSoon();
   }
-  /// Poses the ranking covers, counted from the first: the gateable ones (0 where nothing may
-  /// be ranked).
+  /// Poses the ranking covers for the muscles not limited, counted from the first: the
+  /// gateable ones (0 where nothing may be ranked).
   int rankedPoses() const { return passed() ? gateablePoses() : 0; }
   /// "ranked over poses 0–5 of 19: ccx did not solve pose 6 (why) or later" where a ranking
   /// covers fewer poses than the motion's (ccx stopped the reference or a judged gate's solve,
-  /// or a continuum cut); "" otherwise.
+  /// or a continuum cut), followed by each limited muscle's poses and why ("(iliacus over poses
+  /// 0–1: ccx did not solve its pose 2 in the one level finer solve: …)"); "" otherwise.
   std::string rankedPosesText() const;
+  /// Each limited muscle's poses and why: "iliacus over poses 0–1: ccx did not solve its pose 2
+  /// in the one level finer solve (why)" ("left out of every figure" below kMinRankedPoses),
+  /// joined by "; "; "" where none is limited.
+  std::string limitedText() const;
   /// A gate computed and judged that does not pass, or a pose ccx did not solve. Neither this
   /// nor passed(): some gate was not computed (`--no-gates`, a stopped solve) or not judged.
   bool failed() const {
@@ -266,8 +291,14 @@ std::string incrementsText(const CalculixDefinition& definition, const PreparedS
 /// interrupted or stopped on its memory limit (which finer increments do not mend).
 std::string ccxFailureToRetry(const CalculixSolution& solution);
 
-/// RMS over the poses both solved of two solutions' surfaces [mm] (NaN if none shared).
-double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b);
+/// RMS between two solutions' surfaces [mm] over the (muscle, pose) pairs covered: muscle m
+/// (its `vertices[m]` after the previous muscles') over its first `covered[m]` poses, up to the
+/// poses where both have the surface of every muscle covered there (a muscle's from its part
+/// where another muscle failed the pose: CalculixSolution::muscles), their count into `compared`
+/// where given. NaN where none.
+double rmsBetweenSolutions(const CalculixSolution& a, const CalculixSolution& b,
+                           std::span<const size_t> vertices, std::span<const int> covered,
+                           int* compared = nullptr);
 
 /// The spread between methods: per method family (the name before ':' and the cost suffix
 /// '@'), its best RMS to the reference; the spread is the largest minus the smallest of those,

@@ -74,6 +74,13 @@ struct MusclePoseRms {
   double rmsMm = kNone;  ///< its RMS [mm]
 };
 
+/// Vertices of a run's pose surfaces that count over fewer poses than it has (one muscle's).
+struct SurfaceLimit {
+  size_t first = 0;  ///< the first of them in a pose's surface
+  size_t count = 0;  ///< how many
+  int poses = 0;     ///< the poses they count over, counted from the first
+};
+
 /// One run's results. NaN marks a metric that does not apply or was not measured.
 struct RunMetrics {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
@@ -166,6 +173,10 @@ struct RunMetrics {
   /// Per pose, the surface vertices of all muscles concatenated (for RMS between methods);
   /// a NaN or exploded pose is left out.
   std::vector<std::vector<btVector3>> poseSurfaces;
+  /// The reference: the muscles a judged gate's solve stopped before the others
+  /// (ReferenceGates::limited); no RMS counts their vertices from their `poses` on. Empty: every
+  /// vertex of every pose counts.
+  std::vector<SurfaceLimit> surfaceLimits;
 };
 
 /// JSON object with the summary keys (snake_case; NaN written as null; no poseSurfaces).
