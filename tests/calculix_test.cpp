@@ -670,7 +670,9 @@ TEST(ReferenceGates, AJudgedGatesStopOfOneMuscleLimitsThatMuscleAlone) {
             "increment size smaller than minimum) or later; " +
                 limited);
   const std::vector<std::string> lines = gateLines(gates);
-  EXPECT_NE(lines.back().find("covers " + limited + "; every other muscle over poses 0\u20135"),
+  EXPECT_NE(lines.back().find("ranking follows): " + limited +
+                              "; every other muscle over poses "
+                              "0\u20135"),
             std::string::npos)
       << lines.back();
 

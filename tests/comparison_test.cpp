@@ -945,11 +945,14 @@ TEST(Verdict, SaysTheGatesWereNotComputedRatherThanThatTheyFail) {
   EXPECT_EQ(report.find("fails a gate"), std::string::npos) << report;
 }
 
-TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereverItRanks) {
-  // hip-pelvis-like: ccx solved poses 0-5 of 19 and stopped at pose 6 after its retry; every
-  // gate over those poses passes.
+/// Why ccx stopped stoppedReferenceSummary's reference at pose 6.
+const std::string kStopWhy = "muscle iliacus: *ERROR: increment size smaller than minimum";
+
+/// hip-pelvis-like: ccx solved poses 0-5 of 19 and stopped at pose 6 after its retry (kStopWhy);
+/// every gate over those poses passes.
+nlohmann::json stoppedReferenceSummary() {
   nlohmann::json summary = pinchLikeSummary();
-  const std::string why = "muscle iliacus: *ERROR: increment size smaller than minimum";
+  const std::string& why = kStopWhy;
   summary["reference"]["gates"] = {
       {"return_not_applicable", "ccx stopped the reference at pose 6, before the motion's end"},
       {"refinement_mm", 0.289},
@@ -963,6 +966,38 @@ TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereve
   summary["reference"]["poses"] = nlohmann::json::array();
   for (int p = 0; p < 19; ++p)
     summary["reference"]["poses"].push_back({{"solved", p < 6}, {"failure", p < 6 ? "" : why}});
+  return summary;
+}
+
+TEST(Verdict, NamesAMuscleAJudgedGatesSolveStoppedAloneWhereverItRanks) {
+  // The one-level-finer solve stopped one muscle alone at pose 2: the others keep poses 0-5, and
+  // wherever it ranks the limited muscle is named with its poses, read back from the gates.
+  nlohmann::json summary = stoppedReferenceSummary();
+  for (auto& run : summary["runs"]) run["rms_to_reference_poses"] = 6;
+  const fs::path out = scratch("limited_muscle");
+  const std::string ranked =
+      "ranked over poses 0\u20135 of 19: ccx did not solve pose 6 (" + kStopWhy + ") or later";
+  summary["reference"]["gates"]["limited_muscles"] = {{{"muscle", "psoas"},
+                                                       {"index", 1},
+                                                       {"poses", 2},
+                                                       {"solve", "one level finer"},
+                                                       {"why", "muscle psoas: ccx stopped"}}};
+  writeComparison(summary, out.string());
+  const std::string limited = readFile(out / "report.md");
+  const std::string muscle =
+      ranked +
+      "; psoas over poses 0\u20131: ccx did not solve its pose 2 in the one level finer solve "
+      "(muscle psoas: ccx stopped)";
+  EXPECT_NE(verdictOf(limited).find(muscle + ")**: most accurate"), std::string::npos)
+      << verdictOf(limited);
+  EXPECT_NE(limited.find("finished every pose it covers; " + muscle), std::string::npos) << limited;
+  EXPECT_NE(readFile(out / "speed_vs_error.gp").find(muscle), std::string::npos)
+      << "the plot's note";
+}
+
+TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereverItRanks) {
+  nlohmann::json summary = stoppedReferenceSummary();
+  const std::string& why = kStopWhy;
   // The FEM runs stopped on their time budget: `fem` after the ranked poses is ranked over them,
   // `fem:substeps=75` before their end is not.
   for (auto& run : summary["runs"]) {
@@ -995,24 +1030,6 @@ TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereve
   EXPECT_EQ(ranking.find("fem:substeps=75"), std::string::npos) << ranking;
   EXPECT_NE(readFile(out / "speed_vs_error.gp").find(ranked), std::string::npos)
       << "the plot's note";
-
-  // The one-level-finer solve stopped one muscle alone at pose 2: the others keep poses 0-5,
-  // and wherever it ranks the limited muscle is named with its poses, read back from the gates.
-  summary["reference"]["gates"]["limited_muscles"] = {{{"muscle", "psoas"},
-                                                       {"index", 1},
-                                                       {"poses", 2},
-                                                       {"solve", "one level finer"},
-                                                       {"why", "muscle psoas: ccx stopped"}}};
-  writeComparison(summary, out.string());
-  const std::string limited = readFile(out / "report.md");
-  const std::string muscle =
-      ranked +
-      "; psoas over poses 0\u20131: ccx did not solve its pose 2 in the one level finer solve "
-      "(muscle psoas: ccx stopped)";
-  EXPECT_NE(verdictOf(limited).find(muscle + ")**: most accurate"), std::string::npos)
-      << verdictOf(limited);
-  EXPECT_NE(limited.find("finished every pose it covers; " + muscle), std::string::npos) << limited;
-  summary["reference"]["gates"].erase("limited_muscles");
 
   // The one-level-finer solve stopped at pose 2: the ranking covers poses 0-1, read back from
   // the summary's gates.

@@ -400,7 +400,8 @@ nlohmann::json fibreRunsOnly(const nlohmann::json& runs) {
 }
 
 /// The notes on the reference along the top of the speed–error plot: a gate that fails (red),
-/// gates not computed, poses excluded.
+/// gates not computed, the poses ranked where ccx stopped the reference or a muscle, poses
+/// excluded.
 std::vector<std::pair<std::string, std::string>> referenceNotes(const nlohmann::json& summary) {
   std::vector<std::pair<std::string, std::string>> notes;
   if (!summary.contains("reference")) return notes;
@@ -409,7 +410,7 @@ std::vector<std::pair<std::string, std::string>> referenceNotes(const nlohmann::
   if (!judged.passed())
     notes.emplace_back(judged.whyNotPassed() + ": no ranking (report.md, Reference)",
                        judged.failed() ? "#b00000" : "#606060");
-  else if (!judged.stopped.empty())
+  else if (!judged.stopped.empty() || !judged.limited.empty())
     notes.emplace_back(judged.rankedPosesText(), "#606060");
   if (!gates.value("excluded", std::string()).empty())
     notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");

@@ -884,7 +884,7 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
   if (!g.limited.empty())
     lines.push_back(
         "judged gates' solves stopped some muscles before the others (each muscle is its own ccx "
-        "problem): every RMS, gate and ranking covers " +
+        "problem; every RMS, gate and ranking follows): " +
         g.limitedText() + "; every other muscle over poses 0\u2013" +
         std::to_string(g.gateablePoses() - 1));
   if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
