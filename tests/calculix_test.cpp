@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -911,6 +912,102 @@ TEST(ReferenceOptions, ContactSlidingIsTheScenesUnlessGiven) {
   EXPECT_EQ(sceneDefinition(pinch, options).contactSliding, ContactSliding::Finite)
       << "the command line's choice stands";
   EXPECT_THROW(loadScene("pinch", {"reference.contact_sliding=large"}), InputError);
+}
+
+/// A muscle's job as the reference writes it (its .inp): every node, and which of the muscle's
+/// own (those its elements use; the bones' obstacle nodes follow them) are prescribed.
+struct WrittenJob {
+  std::vector<btVector3> nodes;
+  size_t muscleNodes = 0;
+  std::vector<bool> prescribed;
+};
+
+WrittenJob readWrittenJob(const std::filesystem::path& inp) {
+  WrittenJob job;
+  std::ifstream in(inp);
+  std::string section;
+  std::set<uint32_t> moved;
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("**", 0) == 0) continue;
+    if (line[0] == '*') {
+      section = line;
+      continue;
+    }
+    std::replace(line.begin(), line.end(), ',', ' ');
+    std::istringstream row(line);
+    if (section == "*NODE, NSET=NALL") {
+      long id = 0;
+      float x = 0, y = 0, z = 0;
+      row >> id >> x >> y >> z;
+      job.nodes.emplace_back(x, y, z);
+    } else if (section.rfind("*ELEMENT, TYPE=C3D4, ELSET=EALL", 0) == 0) {
+      size_t id = 0, element = 0;
+      for (row >> element; row >> id;) job.muscleNodes = std::max(job.muscleNodes, id);
+    } else if (section == "*NSET, NSET=NMOVED") {
+      for (uint32_t id = 0; row >> id;) moved.insert(id - 1);
+    }
+  }
+  job.prescribed.assign(job.muscleNodes, false);
+  for (uint32_t n : moved)
+    if (n < job.muscleNodes) job.prescribed[n] = true;
+  return job;
+}
+
+/// hip-pelvis declares its muscles' origin and insertion; iliacus's belly passes the femoral
+/// head within the attachment distance. The reference fixes the nodes the areas' rule takes
+/// (scenes/README.md, "Declared attachments"; a surface node where preparation put its vertex)
+/// and those inside a bone at rest, and leaves the belly free, none of it inside a bone.
+TEST(ReferenceAttachments, ADeclaredMusclesBellyIsFreeAndOutsideTheBonesAtRest) {
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_declared_test");
+  const LoadedScene scene = loadScene("hip-pelvis", {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  const ReferenceOptions options;
+  CalculixDefinition definition = sceneDefinition(scene, options);
+  definition.program = "true";  // the input is written, nothing solves it
+  const MuscleSolution part =
+      solveCalculixMuscle(scene, prepared, definition, ContinuumCut{}, 0, dir.path().string());
+  const WrittenJob job = readWrittenJob(part.inputFile);
+  const MuscleInput& iliacus = scene.muscles[0];
+  const std::vector<btVector3>& surface = prepared.muscles[0]->restSurface.vertices;
+  const btScalar attachment = iliacus.parameters.attachmentDistance;
+  std::vector<MeshDistance> bones;
+  for (const BoneInput& bone : scene.bones) bones.emplace_back(bone.mesh);
+  const auto nearest = [](const btVector3& p, const std::vector<btVector3>& points) {
+    btScalar best = std::numeric_limits<btScalar>::infinity();
+    for (const btVector3& q : points) best = std::min(best, p.distance(q));
+    return best;
+  };
+  ASSERT_EQ(iliacus.attachments.size(), 2u);
+  std::array<size_t, 2> fixedByArea{0, 0};
+  size_t freeNearBone = 0;
+  for (size_t n = 0; n < job.muscleNodes; ++n) {
+    const btVector3& x = job.nodes[n];
+    btScalar toBone = std::numeric_limits<btScalar>::infinity();
+    for (const MeshDistance& bone : bones) toBone = std::min(toBone, bone.signedDistance(x));
+    if (!job.prescribed[n]) {
+      EXPECT_GT(toBone, -1e-5f) << "free node " << n << " inside a bone at rest";
+      if (toBone < attachment) ++freeNearBone;
+      continue;
+    }
+    const btVector3& at = n < surface.size() ? surface[n] : x;  // where the rule sees it
+    const btScalar toSurface = nearest(at, surface);
+    bool inArea = toBone < 0;
+
+    for (size_t a = 0; a < 2; ++a) {
+      std::vector<btVector3> area;
+      for (uint32_t v : iliacus.attachments[a].surfaceVertices) area.push_back(surface[v]);
+      const bool in = nearest(at, area) - toSurface <= attachment;
+      fixedByArea[a] += in;
+      inArea = inArea || in;
+    }
+    EXPECT_TRUE(inArea) << "node " << n << " fixed outside both declared areas and the bones";
+  }
+  EXPECT_GT(fixedByArea[0], 0u) << "the origin holds nodes";
+  EXPECT_GT(fixedByArea[1], 0u) << "the insertion holds nodes";
+  EXPECT_GT(freeNearBone, 0u) << "the belly passes a bone within the attachment distance";
+  EXPECT_EQ(size_t(std::count(job.prescribed.begin(), job.prescribed.end(), true)),
+            part.prescribedNodes);
 }
 
 TEST(ReferenceCache, StoresAndReadsBackASolution) {

@@ -9,7 +9,9 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <utility>
 
+#include "fibremss/DeclaredAreas.h"
 #include "fibremss/Error.h"
 
 namespace fibremss {
@@ -54,6 +56,71 @@ void attach(const std::vector<btVector3>& nodes, const std::vector<MeshDistance>
       attached.push_back(static_cast<uint32_t>(n));
       boneOf.push_back(nearest);
     }
+  }
+}
+
+/// The bones' distance trees as declaredAreaBones takes them.
+std::vector<const MeshDistance*> trees(const std::vector<MeshDistance>& bones) {
+  std::vector<const MeshDistance*> pointers;
+  for (const MeshDistance& bone : bones) pointers.push_back(&bone);
+  return pointers;
+}
+
+/// Per vertex of `surface`, whether it lies in an area's end sunk in a bone: the vertices
+/// `fixed` marks and those joined to them by edges through vertices inside a bone.
+std::vector<bool> sunkEnds(const TriangleMesh& surface, const std::vector<MeshDistance>& bones,
+                           std::vector<bool> fixed) {
+  std::vector<bool> inside(surface.vertices.size(), false);
+  for (size_t v = 0; v < inside.size(); ++v)
+    for (const MeshDistance& bone : bones)
+      inside[v] = inside[v] || bone.signedDistance(surface.vertices[v]) < 0;
+  for (bool grown = true; grown;) {
+    grown = false;
+    for (const auto& t : surface.triangles)
+      for (int i = 0; i < 3; ++i) {
+        const uint32_t from = t[size_t(i)], to = t[size_t((i + 1) % 3)];
+        for (const auto& [a, b] : {std::pair{from, to}, std::pair{to, from}})
+          if (fixed[a] && !fixed[b] && inside[b]) grown = fixed[b] = true;
+      }
+  }
+  return fixed;
+}
+
+/// The surface a muscle that declares its areas is meshed as: as prepared (its free part moved
+/// out of the bones), but its areas' ends as loaded (sunkEnds from the vertices the areas fix,
+/// declaredAreaBones at `distance`): moved out, the ends sunk in their bones fold the surface
+/// onto itself (tetgen refuses it); fixed, they may stay inside.
+TriangleMesh declaredSurface(const MuscleInput& input, const MuscleSettings& muscle,
+                             const std::vector<MeshDistance>& bones, btScalar distance) {
+  const std::vector<btVector3>& prepared = muscle.restSurface.vertices;
+  const std::vector<int32_t> fixedTo =
+      declaredAreaBones(input.attachments, distance, prepared, trees(bones), prepared);
+  std::vector<bool> fixed(prepared.size());
+  for (size_t v = 0; v < prepared.size(); ++v) fixed[v] = fixedTo[v] >= 0;
+  const std::vector<bool> sunk = sunkEnds(input.surface, bones, std::move(fixed));
+  TriangleMesh surface = muscle.restSurface;
+  for (size_t v = 0; v < prepared.size(); ++v)
+    if (sunk[v]) surface.vertices[v] = input.surface.vertices[v];
+  return surface;
+}
+
+/// Nodes the muscle's declared areas fix (declaredAreaBones at `distance`; a surface node where
+/// its vertex was prepared), each with its bone, and the free nodes that lie inside a bone at
+/// rest (next to an area's end sunk in it), each with that bone.
+void attachDeclared(const MuscleInput& input, const MuscleSettings& muscle,
+                    const std::vector<btVector3>& nodes, const std::vector<MeshDistance>& bones,
+                    btScalar distance, std::vector<uint32_t>& attached, std::vector<int>& boneOf) {
+  std::vector<btVector3> at = nodes;
+  std::copy(muscle.restSurface.vertices.begin(), muscle.restSurface.vertices.end(), at.begin());
+  const std::vector<int32_t> fixedTo =
+      declaredAreaBones(input.attachments, distance, muscle.restSurface.vertices, trees(bones), at);
+  for (size_t n = 0; n < nodes.size(); ++n) {
+    int bone = fixedTo[n];
+    for (size_t b = 0; bone < 0 && b < bones.size(); ++b)
+      if (bones[b].signedDistance(nodes[n]) < 0) bone = static_cast<int>(b);
+    if (bone < 0) continue;
+    attached.push_back(static_cast<uint32_t>(n));
+    boneOf.push_back(bone);
   }
 }
 
@@ -216,23 +283,31 @@ void addBoneContact(MuscleJob& result, const LoadedScene& scene, const PreparedS
   contact.sliding = definition.contactSliding;
 }
 
-/// Meshes the muscle's surface as loaded (preparation's push out of the bones makes the
-/// prepared surface self-intersect where it overlapped a bone), attaches nodes within the
-/// attachment distance of a bone and prescribes their displacement per step: the first
-/// step to its pose of `steps` (stepPoses).
+/// Meshes the muscle's surface and attaches its nodes, and prescribes their displacement per
+/// step: the first step to its pose of `steps` (stepPoses). A muscle that declares its areas
+/// (MuscleInput::attachments) is meshed as prepared (preparation moved its surface out of the
+/// bones, so no free node starts inside one) and attached by the areas' rule
+/// (declaredAreaBones): its belly is free and meets the bones through contact. Any other is
+/// meshed as loaded (preparation's push out of the bones makes the prepared surface
+/// self-intersect where it overlapped a bone) and attached wherever within the attachment
+/// distance of a bone (attach).
 MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, size_t m,
                     const std::vector<MeshDistance>& bones, const CalculixDefinition& definition,
                     const std::string& workDir, const std::vector<int>& steps) {
   const MuscleSettings& muscle = *prepared.muscles[m];
-  const TriangleMesh& loaded = scene.muscles[m].surface;
-  if (loaded.vertices.size() != muscle.restSurface.vertices.size()) {
+  const MuscleInput& input = scene.muscles[m];
+  const bool declared = !input.attachments.empty();
+  if (input.surface.vertices.size() != muscle.restSurface.vertices.size()) {
     throw InputError("muscles[" + std::to_string(m) + "]", muscle.name,
                      "the prepared surface has other vertices than the loaded one");
   }
+  const btScalar distance = input.parameters.attachmentDistance * definition.attachmentScale;
+  const TriangleMesh meshed =
+      declared ? declaredSurface(input, muscle, bones, distance) : input.surface;
   MuscleJob result;
   result.stem = "muscle" + std::to_string(m);
-  const TetMesh mesh = tetgenMesh(loaded, definition.mesher, workDir, result.stem);
-  result.surfaceVertices = loaded.vertices.size();
+  const TetMesh mesh = tetgenMesh(meshed, definition.mesher, workDir, result.stem);
+  result.surfaceVertices = meshed.vertices.size();
   result.tetrahedra = mesh.tetrahedra.size();
   CalculixJob& job = result.job;
   job.title = "muscle " + muscle.name + " of scene " + scene.name;
@@ -240,10 +315,11 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
   job.material = definition.material;
   job.initialIncrement = definition.initialIncrement;
   setElements(job, mesh);
-  const btScalar distance =
-      scene.muscles[m].parameters.attachmentDistance * definition.attachmentScale;
   std::vector<int> boneOf;
-  attach(job.nodes, bones, distance, job.prescribed, boneOf);
+  if (declared)
+    attachDeclared(input, muscle, job.nodes, bones, distance, job.prescribed, boneOf);
+  else
+    attach(job.nodes, bones, distance, job.prescribed, boneOf);
   const bool symmetric = job.prescribed.empty() && scene.analytic.type == "sphere-planes";
   if (job.prescribed.empty() && !symmetric) {
     throw InputError("muscles[" + std::to_string(m) + "]", muscle.name,
@@ -261,9 +337,9 @@ MuscleJob muscleJob(const LoadedScene& scene, const PreparedScene& prepared, siz
   job.maximumIncrements = maximumIncrements(scene, prepared.bones.size(), steps, job, definition);
   // Prescribed nodes are ascending: the surface vertices among them come first.
   result.movedPositions.resize(steps.size());
-  for (size_t i = 0; i < job.prescribed.size() && job.prescribed[i] < loaded.vertices.size(); ++i) {
+  for (size_t i = 0; i < job.prescribed.size() && job.prescribed[i] < meshed.vertices.size(); ++i) {
     const uint32_t v = job.prescribed[i];
-    if (muscle.restSurface.vertices[v] == loaded.vertices[v]) continue;
+    if (muscle.restSurface.vertices[v] == meshed.vertices[v]) continue;
     result.moved.push_back(v);
     for (size_t s = 0; s < steps.size(); ++s)
       result.movedPositions[s].push_back(

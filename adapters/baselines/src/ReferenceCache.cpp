@@ -64,6 +64,10 @@ class Hasher {
       value(p.z());
     }
   }
+  void ids(const std::vector<uint32_t>& ids) {
+    value(ids.size());
+    if (!ids.empty()) bytes(ids.data(), ids.size() * sizeof(ids[0]));
+  }
   void mesh(const TriangleMesh& mesh) {
     points(mesh.vertices);
     value(mesh.triangles.size());
@@ -368,6 +372,15 @@ std::string referenceCacheKey(const LoadedScene& scene, const PreparedScene& pre
     h.mesh(prepared.muscles[m]->restSurface);
     h.value(scene.muscles[m].parameters.attachmentDistance);
   }
+  // A muscle's declared areas: meshed as prepared and attached by them (scenes without declared
+  // areas keep their keys).
+  for (size_t m = 0; m < scene.muscles.size(); ++m)
+    for (const DeclaredAttachment& area : scene.muscles[m].attachments) {
+      h.text("declared area");
+      h.value(m);
+      h.ids(area.surfaceVertices);
+      h.ids(area.bones);
+    }
   h.value(definition.material.youngsModulus);
   h.value(definition.material.poissonRatio);
   h.value(definition.element);

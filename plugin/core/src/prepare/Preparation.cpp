@@ -14,9 +14,11 @@
 #include <optional>
 #include <system_error>
 #include <thread>
+#include <utility>
 
 #include "PreparationInternal.h"
 #include "PreparationReorder.h"
+#include "fibremss/DeclaredAreas.h"
 #include "fibremss/Error.h"
 #include "fibremss/TaskPool.h"
 
@@ -197,15 +199,18 @@ std::string join(const std::vector<std::string>& parts) {
 }
 
 /// A muscle's declared attachment areas (MuscleInput::attachments): which bone, if any, fixes a
-/// particle.
+/// particle (declaredAreaBones).
 class DeclaredAreas {
  public:
-  DeclaredAreas(const MuscleInput& input, const MuscleSettings& muscle,
-                const std::vector<BoneShape>& bones)
-      : input_(input), bones_(bones), surface_(muscle.restSurface.vertices) {
-    for (const DeclaredAttachment& area : input.attachments) {
+  DeclaredAreas(const std::vector<DeclaredAttachment>& areas, btScalar attachmentDistance,
+                const std::vector<btVector3>& surface, std::vector<const MeshDistance*> bones)
+      : declared_(areas),
+        attachment_(attachmentDistance),
+        bones_(std::move(bones)),
+        surface_(surface) {
+    for (const DeclaredAttachment& area : areas) {
       std::vector<btVector3> points;
-      for (uint32_t v : area.surfaceVertices) points.push_back(muscle.restSurface.vertices[v]);
+      for (uint32_t v : area.surfaceVertices) points.push_back(surface[v]);
       areaPoints_.push_back(std::move(points));
     }
     for (const auto& points : areaPoints_) areas_.push_back(std::make_unique<KdTree>(points));
@@ -215,14 +220,13 @@ class DeclaredAreas {
   /// The bone that fixes particle position `p` (-1: free): the nearest bone of the areas it
   /// belongs to.
   int32_t boneFor(const btVector3& p) {
-    const btScalar attachment = input_.parameters.attachmentDistance;
     const btScalar toSurface = nearestDistance(surface_, p);
     int32_t best = -1, bestArea = -1;
-    btScalar bestDistance = attachment;
+    btScalar bestDistance = attachment_;
     for (size_t a = 0; a < areas_.size(); ++a) {
-      if (nearestDistance(*areas_[a], p) - toSurface > attachment) continue;
-      for (uint32_t b : input_.attachments[a].bones) {
-        const btScalar d = bones_[b].distance->closest(p, bestDistance).distance;
+      if (nearestDistance(*areas_[a], p) - toSurface > attachment_) continue;
+      for (uint32_t b : declared_[a].bones) {
+        const btScalar d = bones_[b]->closest(p, bestDistance).distance;
         if (d < bestDistance) {
           bestDistance = d;
           best = static_cast<int32_t>(b);
@@ -234,16 +238,16 @@ class DeclaredAreas {
     return best;
   }
 
-  /// A warning per area that fixed no particle.
-  void warnEmpty(const std::vector<BoneInput>& boneInputs,
+  /// A warning per area of `input` that fixed no particle.
+  void warnEmpty(const MuscleInput& input, const std::vector<BoneInput>& boneInputs,
                  std::vector<std::string>& warnings) const {
     for (size_t a = 0; a < areas_.size(); ++a) {
       if (fixedCount_[a] > 0) continue;
-      const DeclaredAttachment& area = input_.attachments[a];
+      const DeclaredAttachment& area = declared_[a];
       std::string names;
       for (uint32_t b : area.bones)
         names += (names.empty() ? "'" : ", '") + boneInputs[b].name + "'";
-      warnings.push_back(detail::muscleSource(input_) + ": the " + area.name +
+      warnings.push_back(detail::muscleSource(input) + ": the " + area.name +
                          " fixes no particle: none lies within the attachment distance of " +
                          names +
                          " where the area meets the surface (raise attachment_distance "
@@ -260,13 +264,21 @@ class DeclaredAreas {
     return std::sqrt(distance2);
   }
 
-  const MuscleInput& input_;
-  const std::vector<BoneShape>& bones_;
+  const std::vector<DeclaredAttachment>& declared_;
+  btScalar attachment_;
+  std::vector<const MeshDistance*> bones_;
   KdTree surface_;
   std::vector<std::vector<btVector3>> areaPoints_;  ///< per area, its vertices (trees' storage)
   std::vector<std::unique_ptr<KdTree>> areas_;
   std::vector<size_t> fixedCount_;  ///< per area, particles it fixed
 };
+
+/// The bones' distance trees in the bones' order.
+std::vector<const MeshDistance*> distances(const std::vector<BoneShape>& bones) {
+  std::vector<const MeshDistance*> trees;
+  for (const BoneShape& bone : bones) trees.push_back(bone.distance.get());
+  return trees;
+}
 
 /// Whether some fibre holds a fixed particle in its first half (the origin) and in its last half
 /// (the insertion).
@@ -329,7 +341,8 @@ size_t attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bon
   muscle.fixedParticles.clear();
   if (bones.empty()) return 0;
   std::optional<DeclaredAreas> declared;
-  if (!input.attachments.empty()) declared.emplace(input, muscle, bones);
+  if (!input.attachments.empty())
+    declared.emplace(input.attachments, attachment, muscle.restSurface.vertices, distances(bones));
   std::vector<std::pair<btScalar, uint32_t>> order;
   std::vector<size_t> insideCount(bones.size(), 0);
   for (uint32_t i = 0; i < n; ++i) {
@@ -355,7 +368,7 @@ size_t attachToBones(const MuscleInput& input, const std::vector<BoneShape>& bon
                          "' at rest that preparation could not move out (they lie inside "
                          "another body too); collisions push them when they can");
   requireFixedEnds(input, muscle);
-  if (declared) declared->warnEmpty(boneInputs, warnings);
+  if (declared) declared->warnEmpty(input, boneInputs, warnings);
   return looseFibreEnds(input, bones, muscle, order);
 }
 
@@ -457,7 +470,9 @@ void separateMuscle(const MuscleInput& input, size_t index, const std::vector<Bo
             .count;
   // Declared areas as attachToBones will see them (on the surface as moved out).
   std::optional<DeclaredAreas> declared;
-  if (!input.attachments.empty()) declared.emplace(input, muscle, bones);
+  if (!input.attachments.empty())
+    declared.emplace(input.attachments, input.parameters.attachmentDistance,
+                     muscle.restSurface.vertices, distances(bones));
   for (size_t b = 0; b < bones.size(); ++b) {
     // Particles within the attachment distance that the bone fixes may stay inside it.
     const btScalar depth = mayFix(input, b) ? input.parameters.attachmentDistance : btScalar(0);
@@ -665,6 +680,18 @@ PreparedScene prepareScene(const std::vector<BoneInput>& bones,
   scene.report.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return scene;
+}
+
+std::vector<int32_t> declaredAreaBones(const std::vector<DeclaredAttachment>& areas,
+                                       btScalar attachmentDistance,
+                                       const std::vector<btVector3>& restSurface,
+                                       const std::vector<const MeshDistance*>& bones,
+                                       const std::vector<btVector3>& points) {
+  DeclaredAreas declared(areas, attachmentDistance, restSurface, bones);
+  std::vector<int32_t> fixedTo;
+  fixedTo.reserve(points.size());
+  for (const btVector3& p : points) fixedTo.push_back(declared.boneFor(p));
+  return fixedTo;
 }
 
 }  // namespace fibremss
