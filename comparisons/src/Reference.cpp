@@ -135,6 +135,13 @@ std::string failures(const CalculixSolution& solution, const std::string& what) 
 }
 
 /// "poses k to N-1 of N: why" for the poses past the solution's continuum cut; "" if none.
+/// Whether a muscle of the scene declares its attachment areas (the reference then fixes only
+/// their nodes of it).
+bool declaresAreas(const LoadedScene& scene) {
+  return std::any_of(scene.muscles.begin(), scene.muscles.end(),
+                     [](const MuscleInput& muscle) { return !muscle.attachments.empty(); });
+}
+
 std::string excludedPoses(const CalculixSolution& solution) {
   const int cut = solution.cut.pose, poses = static_cast<int>(solution.poseSurfaces.size());
   if (cut < 0) return "";
@@ -712,7 +719,9 @@ Reference computeReference(const LoadedScene& scene, const PreparedScene& prepar
               << " mesh of each muscle's surface (level " << definition.mesher.refinement << "; "
               << solution.nodes << " nodes, " << solution.elements
               << " tetrahedra), material within " << definition.attachmentScale
-              << "x the attachment distance of a bone moves with it (" << solution.prescribedNodes
+              << "x the attachment distance of a bone moves with it ("
+              << (declaresAreas(scene) ? "of a muscle that declares its areas, theirs only; " : "")
+              << solution.prescribedNodes
               << " nodes); increments of at most 2.5 deg and 1 mm of attached move ("
               << (definition.incrementRule == IncrementRule::BoneFrame
                       ? "beyond the rigid motion of the bone frame it is least in"
