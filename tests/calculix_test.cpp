@@ -731,20 +731,23 @@ TEST(ReferenceCache, EachGatesKeyIsTheReferencesWithOneChangeAndNoReturnStep) {
     return referenceCacheKey(scene, prepared, d, {});
   };
   // At the default increments, and where the reference was solved only when retried finer.
+  CalculixDefinition asked;
+  asked.contactSliding = ContactSliding::Small;
   for (const double scale : {1.0, kFinerIncrements}) {
     SCOPED_TRACE(scale);
-    CalculixDefinition reference;
+    CalculixDefinition reference = asked;
     reference.incrementScale = scale;
-    reference.contactSliding = ContactSliding::Small;
-    const GateDefinitions gates = gateDefinitions(reference, 0);
+    const GateDefinitions gates = gateDefinitions(reference, asked, 0);
     // The gates solved before the increment gate existed are built as they were, so their
-    // cache entries stay valid: the reference without its return step, one thing changed.
+    // cache entries stay valid: the reference without its return step, one thing changed; the
+    // finer one from the asked increments, not the retry's.
     CalculixDefinition low = reference;
     low.returnToRest = false;
     CalculixDefinition high = low, finer = low, increments = low;
     low.attachmentScale = 0.5f;
     high.attachmentScale = 1.5f;
     finer.element = CalculixElement::C3D10;
+    finer.incrementScale = asked.incrementScale;
     increments.incrementScale = scale * kIncrementGateFactor;
     EXPECT_EQ(key(gates.attachmentLow), key(low));
     EXPECT_EQ(key(gates.attachmentHigh), key(high));
@@ -754,7 +757,7 @@ TEST(ReferenceCache, EachGatesKeyIsTheReferencesWithOneChangeAndNoReturnStep) {
                                      key(increments)};
     EXPECT_EQ(keys.size(), 5u) << "five solves, five cache entries";
     // A reference ccx solved in part: each gate stops where it stopped, under a key of its own.
-    const GateDefinitions limited = gateDefinitions(reference, 2);
+    const GateDefinitions limited = gateDefinitions(reference, asked, 2);
     const std::pair<const CalculixDefinition*, const CalculixDefinition*> pairs[] = {
         {&limited.attachmentLow, &gates.attachmentLow},
         {&limited.attachmentHigh, &gates.attachmentHigh},
@@ -770,7 +773,7 @@ TEST(ReferenceCache, EachGatesKeyIsTheReferencesWithOneChangeAndNoReturnStep) {
   }
   CalculixDefinition quadratic;
   quadratic.element = CalculixElement::C3D10;
-  const GateDefinitions gates = gateDefinitions(quadratic, 0);
+  const GateDefinitions gates = gateDefinitions(quadratic, quadratic, 0);
   EXPECT_EQ(gates.finer.mesher.refinement, 1) << "a C3D10 reference: the next mesh level";
   EXPECT_EQ(gates.refinedBy, "mesh level 1");
   EXPECT_EQ(gates.increments.element, CalculixElement::C3D10);
@@ -1424,12 +1427,16 @@ TEST(ReferenceCells, AReferenceCcxSolvedInPartListsItsGatesUpToItsLastSolvedPose
   const std::vector<NamedReferenceCell> unknown = referenceCells(scene, prepared, options);
   EXPECT_EQ(unknown[0].cell.definition.incrementScale, retry.incrementScale);
   EXPECT_FALSE(unknown[0].stored);
-  expectGates(unknown, gateDefinitions(retry, 0), 0);
+  expectGates(unknown, gateDefinitions(retry, reference, 0), 0);
+  EXPECT_EQ(unknown[3].cell.definition.incrementScale, retry.incrementScale * kIncrementGateFactor)
+      << "increments halved from the retry's";
+  EXPECT_EQ(unknown[4].cell.definition.incrementScale, reference.incrementScale)
+      << "one level finer from the asked increments";
   store(retry, 2);  // the retry stops at pose 2: its gates solve poses 0-1
   const std::vector<NamedReferenceCell> limited = referenceCells(scene, prepared, options);
   EXPECT_TRUE(limited[0].stored);
   EXPECT_EQ(limited[0].key, unknown[0].key);
-  expectGates(limited, gateDefinitions(retry, 2), 2);
+  expectGates(limited, gateDefinitions(retry, reference, 2), 2);
   for (size_t c = 1; c < limited.size(); ++c) EXPECT_NE(limited[c].key, unknown[c].key);
   store(retry, -1);  // the retry solves every pose: its gates too, under their keys
   const std::vector<NamedReferenceCell> whole = referenceCells(scene, prepared, options);
@@ -1608,7 +1615,7 @@ TEST_F(RetryPerMuscle, KeepsTheIncrementsOfTheMusclesTheFailedSolveSolvedUnderAK
   EXPECT_EQ(keptPartKey(scene, prepared, retry, {}, 1), "") << "solved again";
   EXPECT_EQ(incrementsText(retry, prepared),
             "x0.25 for beside only (" + prepared.muscles[0]->name + " at x1)");
-  const CalculixDefinition halved = gateDefinitions(retry, 0).increments;
+  const CalculixDefinition halved = gateDefinitions(retry, definition, 0).increments;
   EXPECT_EQ(halved.muscleIncrementScales,
             (std::vector<double>{kIncrementGateFactor, kFinerIncrements * kIncrementGateFactor}));
   ReferenceGates gates;
@@ -1996,7 +2003,7 @@ TEST(ReferenceGates, AJudgedGateStoppingOneMuscleOfTwoKeepsTheOthersPosesInEvery
   finer.poseSurfaces.assign(3, shiftedRest(prepared, 0.5, 0.5));
   finer.poseFailures.assign(3, "");
   const CalculixDefinition definition = sceneDefinition(scene, options);
-  const GateDefinitions gates = gateDefinitions(definition, gatePoseLimit(reference));
+  const GateDefinitions gates = gateDefinitions(definition, definition, gatePoseLimit(reference));
   for (const auto& [solve, solution] :
        {std::pair{&definition, &reference}, {&gates.increments, &halved}, {&gates.finer, &finer}}) {
     const std::string entry =

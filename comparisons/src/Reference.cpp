@@ -392,11 +392,21 @@ void gateFigures(const CalculixSolution& base,
     *gate->mm = rmsBetweenSolutions(base, solve.solution, vertices, covered, gate->poses);
 }
 
+/// `refinedBy`, with the increments the finer gate's solve took where they are not the
+/// reference's (it starts from the asked ones: gateDefinitions).
+std::string refinedText(const std::string& refinedBy, const CalculixDefinition& finer,
+                        const CalculixDefinition& reference, const PreparedScene& prepared) {
+  const std::string increments = incrementsText(finer, prepared);
+  const std::string references = incrementsText(reference, prepared);
+  if (increments == references) return refinedBy;
+  return refinedBy + ", increments " + increments + " (the reference's " + references + ")";
+}
+
 /// The gate solves (gateDefinitions) against `base`, cheapest first.
 void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCuts& cuts,
                 const ReferenceOptions& options, const Solve& base, ReferenceGates& gates) {
   const GateDefinitions definitions =
-      gateDefinitions(base.definition, gatePoseLimit(base.solution));
+      gateDefinitions(base.definition, options.definition, gatePoseLimit(base.solution));
   gates.refinedBy = definitions.refinedBy;
   const auto solves = gateSolves(definitions);
   const Gate variants[] = {{&solves[0].second, solves[0].first.c_str(), &gates.attachmentLowMm,
@@ -416,6 +426,9 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
     if (!solveVariant(scene, prepared, cuts, *gate.definition, options, gate.name, solve)) continue;
     const CalculixSolution& solution = solve.solution;
     // Retried at finer increments where ccx failed it: say what it was solved at.
+    if (&gate == &variants[3])
+      gates.refinedBy =
+          refinedText(definitions.refinedBy, solve.definition, base.definition, prepared);
     if (gate.scale) *gate.scale = solve.definition.incrementScale;
     if (gate.scale && !solve.definition.muscleIncrementScales.empty())
       gates.incrementsPerMuscle = incrementsText(solve.definition, prepared);
@@ -479,12 +492,12 @@ std::vector<NamedReferenceCell> referenceCells(const LoadedScene& scene,
                                                const ReferenceOptions& options) {
   const std::string cacheDir = resolvedCacheDir(options);
   SceneCuts cuts(scene, prepared);
-  const NextSolve reference =
-      storedRetry(scene, prepared, cuts, sceneDefinition(scene, options), cacheDir);
+  const CalculixDefinition asked = sceneDefinition(scene, options);
+  const NextSolve reference = storedRetry(scene, prepared, cuts, asked, cacheDir);
   std::vector<std::pair<std::string, NextSolve>> solves{{"reference", reference}};
   if (options.gates)
     for (const auto& [name, gate] :
-         gateSolves(gateDefinitions(reference.definition, reference.gatePoseLimit)))
+         gateSolves(gateDefinitions(reference.definition, asked, reference.gatePoseLimit)))
       solves.emplace_back(name, storedRetry(scene, prepared, cuts, gate, cacheDir));
   std::vector<NamedReferenceCell> cells;
   for (const auto& [name, solve] : solves) {
@@ -647,8 +660,11 @@ int gatePoseLimit(const CalculixSolution& reference) {
   return std::max(reference.solvedPoses(), 1);
 }
 
-GateDefinitions gateDefinitions(const CalculixDefinition& reference, int poseLimit) {
+GateDefinitions gateDefinitions(const CalculixDefinition& reference,
+                                const CalculixDefinition& asked, int poseLimit) {
   GateDefinitions gates{reference, reference, reference, reference, ""};
+  gates.finer.incrementScale = asked.incrementScale;
+  gates.finer.muscleIncrementScales = asked.muscleIncrementScales;
   gates.attachmentLow.attachmentScale *= 0.5f;
   gates.attachmentHigh.attachmentScale *= 1.5f;
   gates.increments.incrementScale *= kIncrementGateFactor;

@@ -92,7 +92,9 @@ struct ReferenceGates {
   /// rest and ccx did not solve the steps the reference adds back to it.
   std::string returnNotApplicable;
   double refinementMm = RunMetrics::kNone;  ///< RMS one level finer against the reference
-  std::string refinedBy;  ///< what "one level finer" was (quadratic elements or the next level)
+  /// What "one level finer" was (quadratic elements or the next level), with its increments
+  /// where they are not the reference's.
+  std::string refinedBy;
   /// RMS with every increment bound × kIncrementGateFactor against the reference [mm].
   double incrementsMm = RunMetrics::kNone;
   /// That solve's increment bounds × the default ones (2.5° / 1 mm; CalculixDefinition::
@@ -228,14 +230,20 @@ struct GateDefinitions {
   CalculixDefinition attachmentHigh;  ///< attachment distance × 1.5
   CalculixDefinition increments;      ///< every increment bound × kIncrementGateFactor
   /// One level finer: C3D4 made quadratic (C3D10) on the same tetrahedra, or for a C3D10
-  /// reference the next mesh level.
+  /// reference the next mesh level; from the asked increments, not the reference's retried
+  /// ones (like any solve, retried at kFinerIncrements for the muscles ccx fails). Its solve
+  /// costs 6–8× the reference's per increment, and the increments gate shows where the path
+  /// matters; from a retry's it would cost 4× more (comparisons/README.md, "Gates").
   CalculixDefinition finer;
   std::string refinedBy;  ///< what "one level finer" is, in words
 };
+/// The gates of the reference solved as `reference`, asked as `asked` (sceneDefinition: they
+/// differ where ccx failed the asked increments and the reference is their retry).
 /// `poseLimit` (gatePoseLimit of the reference's solve) is every gate's
 /// CalculixDefinition::poseLimit: a gate compares the poses the reference solved, and solving
 /// those ccx failed in the reference would cost hours to compare none.
-GateDefinitions gateDefinitions(const CalculixDefinition& reference, int poseLimit);
+GateDefinitions gateDefinitions(const CalculixDefinition& reference,
+                                const CalculixDefinition& asked, int poseLimit);
 
 /// The poses a reference's gates solve: where ccx failed a pose of the reference, the poses it
 /// solved before it (at least pose 0); else 0 (every pose before the continuum cut: the cut is
