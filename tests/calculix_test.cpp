@@ -2483,6 +2483,159 @@ TEST(ReferenceCommand, ShipsItsSolvesAndAnEmptyCacheFindsThemThere) {
       << "shipped again: the scene's entry replaced, not added";
 }
 
+TEST(ShippedReference, ACellsPartIsStoredAgainstItsReferenceBesideItAsAGateIs) {
+  TemporaryDirectory dir("shipped_part_test");
+  const std::string baseKey = "00000000000000cd";
+  CalculixSolution reference;  // two muscles of 1 000 and 400 vertices, two poses
+  for (int p = 0; p < 2; ++p) {
+    reference.poseSurfaces.push_back(joined(smoothSurface(1000, p, 0), smoothSurface(400, -p, 0)));
+    reference.poseFailures.push_back("");
+  }
+  const std::string basePath = (dir.path() / (baseKey + ".ref.gz")).string();
+  shipSolution(basePath, reference);
+  ShippedBase base{baseKey, {}, {1000, 400}};
+  ASSERT_TRUE(loadShippedSolution(basePath, base.solution));
+  MuscleSolution part;  // the second muscle of a gate: moved 0.3 mm in each pose
+  for (int p = 0; p < 2; ++p) part.stepSurfaces.push_back(smoothSurface(400, -p, 3e-4));
+  part.nodes = 120;
+  part.increments = 9;
+  part.seconds = 4.5;
+  part.inputFile = "/another/machine/muscle1.inp";
+  const std::string compact = (dir.path() / shippedPartName("00000000000000ef", 1)).string();
+  const std::string floats = (dir.path() / "floats.ref.gz").string();
+  EXPECT_EQ(std::filesystem::path(compact).filename(), "00000000000000ef.m1.ref.gz");
+  shipPart(compact, part, &base);
+  shipPart(floats, part);
+  EXPECT_LT(std::filesystem::file_size(compact), std::filesystem::file_size(floats) / 2)
+      << "differences from the reference, not floats";
+  for (const std::string& path : {compact, floats}) {
+    SCOPED_TRACE(path);
+    MuscleSolution back;
+    ASSERT_TRUE(loadShippedPart(path, back));
+    EXPECT_EQ(back.nodes, 120u);
+    EXPECT_EQ(back.increments, 9);
+    EXPECT_EQ(back.seconds, 4.5);
+    EXPECT_EQ(back.inputFile, "") << "its files stay on the machine that solved it";
+    EXPECT_TRUE(back.solvedEveryStep());
+    ASSERT_EQ(back.stepSurfaces.size(), 2u);
+    for (size_t s = 0; s < 2; ++s) {
+      ASSERT_EQ(back.stepSurfaces[s].size(), 400u);
+      for (size_t v = 0; v < 400; ++v)
+        for (int c = 0; c < 3; ++c)
+          ASSERT_NEAR(back.stepSurfaces[s][v][c], part.stepSurfaces[s][v][c],
+                      kShippedGateQuantum / 2 + 1e-7);
+    }
+  }
+  CalculixSolution solution;
+  MuscleSolution notAPart;
+  EXPECT_THROW(loadShippedSolution(compact, solution), InputError) << "a part, not a solve";
+  EXPECT_THROW(loadShippedPart(basePath, notAPart), InputError) << "a solve, not a part";
+  EXPECT_FALSE(loadShippedPart((dir.path() / "absent.ref.gz").string(), notAPart));
+  std::filesystem::remove(basePath);
+  EXPECT_THROW(loadShippedPart(compact, notAPart), InputError) << "its reference is not beside it";
+}
+
+/// Each cell's "stored" or "to solve" in the output of `fibremss reference --cells` (its lines
+/// of tab-separated columns; the log's are not).
+std::vector<std::string> cellStates(const std::string& output) {
+  std::vector<std::string> states;
+  std::istringstream lines(output);
+  for (std::string line; std::getline(lines, line);)
+    if (line.find('\t') != std::string::npos) states.push_back(line.substr(line.rfind('\t') + 1));
+  return states;
+}
+
+/// `merged`'s failures, counts and surfaces are `whole`'s, the surfaces within a float's rounding.
+void expectTheSameSolutionWithinFloats(const CalculixSolution& merged,
+                                       const CalculixSolution& whole) {
+  EXPECT_EQ(merged.poseFailures, whole.poseFailures);
+  EXPECT_EQ(merged.nodes, whole.nodes);
+  EXPECT_EQ(merged.increments, whole.increments);
+  ASSERT_EQ(merged.poseSurfaces.size(), whole.poseSurfaces.size());
+  for (size_t p = 0; p < whole.poseSurfaces.size(); ++p) {
+    ASSERT_EQ(merged.poseSurfaces[p].size(), whole.poseSurfaces[p].size());
+    EXPECT_LT(rmsDistanceMm(merged.poseSurfaces[p], whole.poseSurfaces[p]), 1e-4) << p;
+  }
+  ASSERT_EQ(merged.returnSurface.size(), whole.returnSurface.size());
+  EXPECT_LT(rmsDistanceMm(merged.returnSurface, whole.returnSurface), 1e-4);
+}
+
+TEST(ReferenceCommand, ShipsTheCellsOfASolveNotStoredWholeAndTheNextMachineSolvesTheRest) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_ship_cells_test");
+  const std::string scene = carriedFusiform(dir.path(), true);  // two muscles
+  const std::filesystem::path shipped = dir.path() / "shipped";
+  const auto reference = [&](const std::string& cache, const std::string& extra) {
+    return testing::runProcess("FIBREMSS_REFERENCES=" + shipped.string() + " " + FIBREMSS_CLI +
+                               " reference " + scene + " --set resolution=6 --no-gates --cache " +
+                               (dir.path() / cache).string() + " --out " +
+                               (dir.path() / ("out-" + cache)).string() + " " + extra + " 2>&1");
+  };
+  const auto manifest = [&] {
+    return nlohmann::json::parse(readText(shipped / "manifest.json"))[0]["solves"][0];
+  };
+  // One machine solves the second muscle's cell of the reference and ships it.
+  ASSERT_EQ(reference("first", "--cell 1").exitCode, 0);
+  const auto partly = reference("first", "--reference-cached-only --ship " + shipped.string());
+  ASSERT_EQ(partly.exitCode, 0) << partly.output;
+  const nlohmann::json entry = manifest();
+  const std::string key = entry["key"];
+  EXPECT_EQ(entry["solve"], "reference");
+  EXPECT_EQ(entry["shipped"], false);
+  EXPECT_EQ(entry["parts"], nlohmann::json::array({1}));
+  EXPECT_TRUE(std::filesystem::exists(shipped / (key + ".m1.ref.gz")));
+  EXPECT_FALSE(std::filesystem::exists(shipped / (key + ".m0.ref.gz")));
+  EXPECT_FALSE(std::filesystem::exists(shipped / (key + ".ref.gz")));
+
+  // The next one, its cache empty, finds that cell shipped and solves the other.
+  const auto cells = reference("second", "--cells");
+  ASSERT_EQ(cells.exitCode, 0) << cells.output;
+  EXPECT_EQ(cellStates(cells.output), (std::vector<std::string>{"to solve", "stored"}));
+  const auto found = reference("second", "--cell 1");
+  ASSERT_EQ(found.exitCode, 0) << found.output;
+  EXPECT_NE(found.output.find("was stored"), std::string::npos) << found.output;
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "second")) << "nothing solved";
+  ASSERT_EQ(reference("second", "--cell 0").exitCode, 0);
+  const auto merged = reference("second", "--reference-cached-only");
+  ASSERT_EQ(merged.exitCode, 0) << merged.output;
+  EXPECT_EQ(merged.output.find("not in the cache"), std::string::npos) << merged.output;
+  // A run that solves what is missing takes the shipped cell too.
+  const auto solved = reference("third", "");
+  ASSERT_EQ(solved.exitCode, 0) << solved.output;
+  for (const char* cache : {"second", "third"}) {
+    SCOPED_TRACE(cache);
+    const std::filesystem::path entryDir = dir.path() / cache / key;
+    EXPECT_TRUE(std::filesystem::exists(entryDir / "muscle0.inp"));
+    EXPECT_FALSE(std::filesystem::exists(entryDir / "muscle1.inp")) << "shipped: not solved here";
+  }
+
+  // The same solve merged from the first machine's cache alone.
+  ASSERT_EQ(reference("first", "--cell 0").exitCode, 0);
+  ASSERT_EQ(reference("first", "--reference-cached-only").exitCode, 0);
+  const auto stored = [&](const char* cache) {
+    CalculixSolution solution;
+    EXPECT_TRUE(loadSolution((dir.path() / cache / key / "surfaces.bin").string(), solution));
+    return solution;
+  };
+  const CalculixSolution whole = stored("first");
+  ASSERT_EQ(whole.solvedPoses(), 2) << whole.poseFailures[1];
+  ASSERT_FALSE(whole.returnSurface.empty()) << whole.returnFailure;
+  for (const char* cache : {"second", "third"}) {
+    SCOPED_TRACE(cache);
+    const CalculixSolution withShipped = stored(cache);
+    expectTheSameSolutionWithinFloats(withShipped, whole);
+    EXPECT_EQ(withShipped.inputFiles.size(), 1u) << "the shipped cell's files are not here";
+  }
+
+  // Shipped whole, the solve's cells are no longer shipped on their own.
+  const auto again = reference("second", "--reference-cached-only --ship " + shipped.string());
+  ASSERT_EQ(again.exitCode, 0) << again.output;
+  EXPECT_EQ(manifest(), (nlohmann::json{{"solve", "reference"}, {"key", key}}));
+  EXPECT_TRUE(std::filesystem::exists(shipped / (key + ".ref.gz")));
+  EXPECT_FALSE(std::filesystem::exists(shipped / (key + ".m1.ref.gz"))) << "stale: removed";
+}
+
 TEST(ReferenceCommand, TheMethodsAReferenceRanksGoWithoutTheMuscleContactItLacks) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");
@@ -2536,10 +2689,13 @@ TEST(ShippedReference, EveryShippedSolveStillHasTheKeyItsSceneGivesToday) {
     for (const NamedReferenceCell& cell : referenceCells(scene, prepared, options))
       if (cell.cell.muscle == 0) keys.push_back(cell.key);
     std::vector<std::string> named, shipped, failed;
+    std::vector<std::pair<std::string, size_t>> parts;  // a solve's key, a muscle
     for (const nlohmann::json& solve : entry["solves"]) {
       named.push_back(solve["key"]);
       if (solve.value("shipped", true)) shipped.push_back(solve["key"]);
       if (solve.contains("retry_of")) failed.push_back(solve["retry_of"]);
+      for (const nlohmann::json& m : solve.value("parts", nlohmann::json::array()))
+        parts.emplace_back(solve["key"], m.get<size_t>());
     }
     EXPECT_EQ(keys, named) << "the scene or the reference changed: recompute it as "
                               "scenes/references/README.md says";
@@ -2555,6 +2711,15 @@ TEST(ShippedReference, EveryShippedSolveStillHasTheKeyItsSceneGivesToday) {
       ASSERT_TRUE(loadShippedSolution((dir / (key + ".ref.gz")).string(), solution)) << key;
       EXPECT_FALSE(ccxFailureToRetry(solution).empty())
           << key << ": a retried solve keeps the failure through which a run finds its retry";
+    }
+    for (const auto& [key, m] : parts) {  // a cell of a solve not shipped whole, under its key
+      const std::string file = shippedPartName(key, m);
+      listed.insert(file);
+      ASSERT_LT(m, prepared.muscles.size()) << file;
+      MuscleSolution part;
+      ASSERT_TRUE(loadShippedPart((dir / file).string(), part)) << file;
+      for (const std::vector<btVector3>& surface : part.stepSurfaces)  // the steps it solved
+        EXPECT_EQ(surface.size(), prepared.muscles[m]->restSurface.vertices.size()) << file;
     }
   }
   for (const auto& file : std::filesystem::directory_iterator(dir))

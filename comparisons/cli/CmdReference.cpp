@@ -81,28 +81,32 @@ void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry)
     manifest = nlohmann::ordered_json::parse(in, nullptr, false);
     if (!manifest.is_array()) throw InputError(path, "", "expected a JSON array of shipped scenes");
   }
-  const auto keys = [](const nlohmann::ordered_json& shipped) {
+  const auto files = [](const nlohmann::ordered_json& shipped) {
     std::set<std::string> found;
     if (shipped.contains("solves"))
       for (const auto& solve : shipped.at("solves")) {
-        found.insert(solve.value("key", ""));
-        if (solve.contains("retry_of")) found.insert(solve.at("retry_of").get<std::string>());
+        const std::string key = solve.value("key", "");
+        found.insert(key + ".ref.gz");
+        if (solve.contains("retry_of"))
+          found.insert(solve.at("retry_of").get<std::string>() + ".ref.gz");
+        for (const auto& m : solve.value("parts", nlohmann::ordered_json::array()))
+          found.insert(shippedPartName(key, m.get<size_t>()));
       }
     return found;
   };
-  std::set<std::string> kept;  // the keys of the entry replaced, then those only it named
+  std::set<std::string> kept;  // the files of the entry replaced, then those only it named
   nlohmann::ordered_json updated = nlohmann::ordered_json::array();
   for (const auto& other : manifest) {
     if (other.value("scene", std::string()) == entry.at("scene") && other.contains("set") &&
         other.at("set") == entry.at("set"))
-      kept.merge(keys(other));
+      kept.merge(files(other));
     else
       updated.push_back(other);
   }
   updated.push_back(entry);
   for (const auto& other : updated)
-    for (const std::string& key : keys(other)) kept.erase(key);
-  for (const std::string& stale : kept) std::filesystem::remove(dir + "/" + stale + ".ref.gz");
+    for (const std::string& file : files(other)) kept.erase(file);
+  for (const std::string& stale : kept) std::filesystem::remove(dir + "/" + stale);
   std::ofstream out(path + ".partial");
   out << updated.dump(2) << "\n";
   if (!out) throw std::runtime_error("cannot write " + path);
@@ -110,13 +114,36 @@ void updateManifest(const std::string& dir, const nlohmann::ordered_json& entry)
   std::filesystem::rename(path + ".partial", path);
 }
 
+/// Says that `path` was shipped, what it holds and its size.
+void sayShipped(const std::string& path, const std::string& what) {
+  std::printf("shipped %s (%s): %ju bytes\n", path.c_str(), what.c_str(),
+              static_cast<uintmax_t>(std::filesystem::file_size(path)));
+}
+
 /// Writes `solution` to `dir/<key>.ref.gz` (against `base` where not null) and says so.
 void shipStored(const std::string& dir, const std::string& key, const CalculixSolution& solution,
                 const std::string& what, const ShippedBase* base = nullptr) {
   const std::string path = dir + "/" + key + ".ref.gz";
   shipSolution(path, solution, base);
-  std::printf("shipped %s (%s): %ju bytes\n", path.c_str(), what.c_str(),
-              static_cast<uintmax_t>(std::filesystem::file_size(path)));
+  sayShipped(path, what);
+}
+
+/// Writes each muscle's part of the solve `key` stored alone (a cell solved into the cache, or
+/// shipped before: loadStoredPart) to `dir/<key>.m<M>.ref.gz` (against `base` where not null)
+/// and says so; the muscles shipped, as the manifest lists them.
+nlohmann::ordered_json shipParts(const PreparedScene& prepared, const std::string& cacheDir,
+                                 const std::string& dir, const std::string& key,
+                                 const std::string& what, const ShippedBase* base) {
+  nlohmann::ordered_json shipped = nlohmann::ordered_json::array();
+  for (size_t m = 0; m < prepared.muscles.size(); ++m) {
+    MuscleSolution part;
+    if (!loadStoredPart(cacheDir, key, m, part) || part.hitMemoryLimit()) continue;
+    const std::string path = dir + "/" + shippedPartName(key, m);
+    shipPart(path, part, base);
+    sayShipped(path, what + ", " + prepared.muscles[m]->name + "'s part");
+    shipped.push_back(m);
+  }
+  return shipped;
 }
 
 /// The failed solve a retry replaces, as a fresh machine needs it to find the retry: its
@@ -140,10 +167,36 @@ ShippedBase shippedBase(const PreparedScene& prepared, const std::string& dir,
   return base;
 }
 
+/// The manifest entry of a solve not stored whole (`"shipped": false`), with the parts of it
+/// that are stored alone shipped to `dir` (shipParts, `"parts"`) and, where it is the retry of a
+/// failed solve that is stored, that solve whole (`"retry_of"`). Throws where the reference's
+/// solve has no part stored.
+nlohmann::ordered_json shipUnsolved(const PreparedScene& prepared, const std::string& cacheDir,
+                                    const std::string& dir, const NamedReferenceCell& cell,
+                                    const ShippedBase* base) {
+  nlohmann::ordered_json unsolved = {{"solve", cell.solve}, {"key", cell.key}, {"shipped", false}};
+  const nlohmann::ordered_json parts =
+      shipParts(prepared, cacheDir, dir, cell.key, cell.solve, base);
+  if (parts.empty() && cell.solve == "reference")
+    throw std::runtime_error("the reference solve " + cell.key + " is not stored");
+  std::printf("not shipped whole: %s (%s), %zu of %zu muscles' cells shipped\n", cell.key.c_str(),
+              cell.solve.c_str(), parts.size(), prepared.muscles.size());
+  if (!parts.empty()) unsolved["parts"] = parts;
+  CalculixSolution failed;
+  if (!cell.retryOf.empty() && loadStoredSolution(cacheDir, cell.retryOf, failed)) {
+    // The failed solve whole (the poses before its failure are its figure until the retry is
+    // solved), through which a fresh machine reaches the retry's key.
+    shipStored(dir, cell.retryOf, failed, cell.solve + ", failed; its retry not solved", base);
+    unsolved["retry_of"] = cell.retryOf;
+  }
+  return unsolved;
+}
+
 /// Writes every stored solve of the reference (its own and its gates') to args.shipDir as
 /// shipped references (`<key>.ref.gz`; the gates' against the reference's) and records them in
-/// its manifest.json. A gate not solved yet is listed with `"shipped": false`, so the manifest
-/// still names every key of the scene.
+/// its manifest.json. A solve not stored whole is listed with `"shipped": false`, so the
+/// manifest still names every key of the scene, and its muscles' parts solved so far are
+/// shipped (shipUnsolved).
 void ship(const LoadedScene& scene, const PreparedScene& prepared, const ReferenceArgs& args) {
   const std::string cacheDir = resolvedCacheDir(args.options);
   std::filesystem::create_directories(args.shipDir);
@@ -155,19 +208,7 @@ void ship(const LoadedScene& scene, const PreparedScene& prepared, const Referen
     if (cell.cell.muscle != 0) continue;  // a cell per muscle, a file per solve
     CalculixSolution solution;
     if (!loadStoredSolution(cacheDir, cell.key, solution)) {
-      if (cell.solve == "reference")
-        throw std::runtime_error("the reference solve " + cell.key + " is not stored");
-      nlohmann::ordered_json unsolved = {
-          {"solve", cell.solve}, {"key", cell.key}, {"shipped", false}};
-      std::printf("not shipped: %s (%s), not solved\n", cell.key.c_str(), cell.solve.c_str());
-      if (!cell.retryOf.empty() && loadStoredSolution(cacheDir, cell.retryOf, solution)) {
-        // The failed solve whole (the poses before its failure are its figure until the retry
-        // is solved), through which a fresh machine reaches the retry's key.
-        shipStored(args.shipDir, cell.retryOf, solution,
-                   cell.solve + ", failed; its retry not solved", base.get());
-        unsolved["retry_of"] = cell.retryOf;
-      }
-      solves.push_back(unsolved);
+      solves.push_back(shipUnsolved(prepared, cacheDir, args.shipDir, cell, base.get()));
       continue;
     }
     shipStored(args.shipDir, cell.key, solution, cell.solve, base.get());
@@ -259,7 +300,8 @@ void addReferenceCommand(CLI::App& app) {
                    "Also write the reference's solves (its own and its gates') to this "
                    "directory as shipped references, `<key>.ref.gz`, listed in its "
                    "manifest.json (scenes/references: found by every later run with an "
-                   "empty cache)")
+                   "empty cache); of a solve not stored whole, its cells stored so far, "
+                   "`<key>.m<M>.ref.gz`")
       ->excludes("--cells")
       ->excludes("--cell");
   command->callback([args] { reference(*args); });

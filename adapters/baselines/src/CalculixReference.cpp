@@ -598,7 +598,7 @@ CalculixSolution assembleCalculixSolution(const LoadedScene& scene, const Prepar
     solution.nodes += muscle.nodes;
     solution.elements += muscle.tetrahedra;
     solution.prescribedNodes += muscle.prescribedNodes;
-    solution.inputFiles.push_back(muscle.inputFile);
+    if (!muscle.inputFile.empty()) solution.inputFiles.push_back(muscle.inputFile);  // shipped
     solution.increments += muscle.increments;
     solution.newtonIterations += muscle.newtonIterations;
     solution.seconds += muscle.seconds;

@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
+#include <memory>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -338,17 +339,19 @@ auto solveIn(const std::string& work, Solve&& solve) {
   }
 }
 
-/// Copies every file of the parts (but their part.bin) into `work`, as a whole solve leaves them.
-void copyPartFiles(const std::string& cacheDir, const std::string& key, size_t muscles,
-                   const std::string& work) {
+/// Copies every file of the parts (but their part.bin) into `work`, as a whole solve leaves them;
+/// a part without an input file (shipped) has none.
+void copyPartFiles(const std::string& cacheDir, const std::string& key,
+                   const std::vector<MuscleSolution>& parts, const std::string& work) {
   namespace fs = std::filesystem;
   fs::create_directories(work);
-  for (size_t m = 0; m < muscles; ++m)
-    for (const fs::directory_entry& file :
-         fs::directory_iterator(referencePartDir(cacheDir, key, m)))
-      if (file.path().filename() != "part.bin")
-        fs::copy_file(file.path(), work / file.path().filename(),
-                      fs::copy_options::overwrite_existing);
+  for (size_t m = 0; m < parts.size(); ++m)
+    if (!parts[m].inputFile.empty())
+      for (const fs::directory_entry& file :
+           fs::directory_iterator(referencePartDir(cacheDir, key, m)))
+        if (file.path().filename() != "part.bin")
+          fs::copy_file(file.path(), work / file.path().filename(),
+                        fs::copy_options::overwrite_existing);
 }
 
 }  // namespace
@@ -457,34 +460,61 @@ bool loadSolution(const std::string& path, CalculixSolution& solution) {
   return true;
 }
 
-void shipSolution(const std::string& path, const CalculixSolution& solution,
-                  const ShippedBase* base) {
-  std::ostringstream bytes;
-  CalculixSolution shipped = solution;
-  shipped.inputFiles.clear();  // they name another machine's cache
-  const char* version = solution.muscles.empty() ? kShippedMagic : kShippedMagic2;
-  if (!base) {
-    bytes.write(version, sizeof kShippedMagic);
-    writeSolution(bytes, shipped, {Precision::Float});
-  } else {
-    bytes.write(kShippedMagic3, sizeof kShippedMagic3);
-    writeText(bytes, base->key);
-    bytes.write(version, sizeof kShippedMagic);
-    const std::vector<uint64_t>& vertices = base->muscleVertices;
-    const uint64_t muscles = vertices.size();
-    bytes.write(reinterpret_cast<const char*>(&muscles), sizeof muscles);
-    bytes.write(reinterpret_cast<const char*>(vertices.data()),
-                std::streamsize(muscles * sizeof(uint64_t)));
-    SurfaceDeltas deltas(base->solution, vertices);
-    writeSolution(bytes, shipped, {Precision::Float, &deltas});
-  }
-  const std::string data = bytes.str(), temporary = path + ".partial";
+namespace {
+
+/// Writes `data` gzip-compressed to `path` atomically.
+void writeGzip(const std::string& path, const std::string& data) {
+  const std::string temporary = path + ".partial";
   gzFile out = gzopen(temporary.c_str(), "wb9");
   const bool written = out && gzwrite(out, data.data(), static_cast<unsigned>(data.size())) ==
                                   static_cast<int>(data.size());
   if (!(out && gzclose(out) == Z_OK && written))
     throw std::runtime_error("cannot write " + temporary);
   std::filesystem::rename(temporary, path);
+}
+
+/// Writes a shipped file to `path`: `magic`, then what `write(out, positions)` writes, its
+/// positions as floats; with a `base`, after kShippedMagic3 and the base's key, and its
+/// positions as differences from the base's surfaces (SurfaceDeltas).
+template <typename Write>
+void shipFile(const std::string& path, const char* magic, const ShippedBase* base, Write&& write) {
+  std::ostringstream bytes;
+  if (!base) {
+    bytes.write(magic, sizeof kShippedMagic);
+    write(bytes, Positions{Precision::Float});
+    return writeGzip(path, bytes.str());
+  }
+  bytes.write(kShippedMagic3, sizeof kShippedMagic3);
+  writeText(bytes, base->key);
+  bytes.write(magic, sizeof kShippedMagic);
+  const std::vector<uint64_t>& vertices = base->muscleVertices;
+  const uint64_t muscles = vertices.size();
+  bytes.write(reinterpret_cast<const char*>(&muscles), sizeof muscles);
+  bytes.write(reinterpret_cast<const char*>(vertices.data()),
+              std::streamsize(muscles * sizeof(uint64_t)));
+  SurfaceDeltas deltas(base->solution, vertices);
+  write(bytes, Positions{Precision::Float, &deltas});
+  writeGzip(path, bytes.str());
+}
+
+}  // namespace
+
+void shipSolution(const std::string& path, const CalculixSolution& solution,
+                  const ShippedBase* base) {
+  CalculixSolution shipped = solution;
+  shipped.inputFiles.clear();  // they name another machine's cache
+  shipFile(path, solution.muscles.empty() ? kShippedMagic : kShippedMagic2, base,
+           [&](std::ostream& out, const Positions& positions) {
+             writeSolution(out, shipped, positions);
+           });
+}
+
+void shipPart(const std::string& path, const MuscleSolution& part, const ShippedBase* base) {
+  MuscleSolution shipped = part;
+  shipped.inputFile.clear();  // its files stay on the machine that solved it
+  shipFile(path, kPartMagic, base, [&](std::ostream& out, const Positions& positions) {
+    writePart(out, shipped, positions);
+  });
 }
 
 namespace {
@@ -515,48 +545,74 @@ bool isKey(const std::string& key) {
 
 bool readShipped(const std::string& path, CalculixSolution& solution, bool againstBase);
 
-/// The rest of a shipped gate (version 3) after its magic: its base read from beside `path`.
-void readShippedDeltas(std::istream& bytes, const std::string& path, CalculixSolution& solution) {
+/// The differences a shipped file of version 3 holds its surfaces as, after its magic: its base
+/// read from beside `path`; `version`: the place in `magics` of the magic after the base's key.
+std::unique_ptr<SurfaceDeltas> readShippedBase(std::istream& bytes, const std::string& path,
+                                               std::initializer_list<const char*> magics,
+                                               const char* what, int& version) {
   Reader header(bytes, path);
   const std::string key = header.text();
-  if (!isKey(key)) throw InputError(path, "", "not a FibreMSS shipped reference");
+  if (!isKey(key)) throw InputError(path, "", std::string("not a ") + what);
   CalculixSolution base;
   if (!readShipped((std::filesystem::path(path).parent_path() / (key + ".ref.gz")).string(), base,
                    false))
     throw InputError(path, "",
                      "the solve it is stored against, " + key + ".ref.gz, is not beside it");
-  const int version =
-      expectMagic(bytes, path, {kShippedMagic, kShippedMagic2}, "FibreMSS shipped reference");
+  version = expectMagic(bytes, path, magics, what);
   std::vector<uint64_t> vertices(header.value<uint64_t>());
-  if (vertices.size() > 1000000) throw InputError(path, "", "not a FibreMSS shipped reference");
+  if (vertices.size() > 1000000) throw InputError(path, "", std::string("not a ") + what);
   for (uint64_t& count : vertices) count = header.value<uint64_t>();
-  SurfaceDeltas deltas(base, std::move(vertices));
-  Reader read(bytes, path, {Precision::Float, &deltas});
-  readSolution(read, path, version, solution);
+  return std::make_unique<SurfaceDeltas>(base, std::move(vertices));
+}
+
+/// Reads a file shipFile wrote: `read(reader, version)` after its magic, one of `magics`
+/// (`version`: its place counted from 1), against its base only where `againstBase`; false
+/// when `path` does not exist. Throws InputError naming what `path` is not.
+template <typename Read>
+bool readShippedFile(const std::string& path, std::initializer_list<const char*> magics,
+                     const char* what, bool againstBase, Read&& read) {
+  std::string data;
+  if (!gunzip(path, data)) return false;
+  std::istringstream bytes(data);
+  if (data.compare(0, sizeof kShippedMagic3, kShippedMagic3, sizeof kShippedMagic3) != 0) {
+    const int version = expectMagic(bytes, path, magics, what);
+    Reader reader(bytes, path, {Precision::Float});
+    read(reader, version);
+    return true;
+  }
+  if (!againstBase)
+    throw InputError(path, "", "a shipped gate, not the solve a gate is stored against");
+  bytes.seekg(sizeof kShippedMagic3);
+  int version = 0;
+  const std::unique_ptr<SurfaceDeltas> deltas = readShippedBase(bytes, path, magics, what, version);
+  Reader reader(bytes, path, {Precision::Float, deltas.get()});
+  read(reader, version);
+  return true;
 }
 
 /// loadShippedSolution; a gate (version 3) only where `againstBase` (a base is none).
 bool readShipped(const std::string& path, CalculixSolution& solution, bool againstBase) {
-  std::string data;
-  if (!gunzip(path, data)) return false;
-  std::istringstream bytes(data);
-  const int version = expectMagic(bytes, path, {kShippedMagic, kShippedMagic2, kShippedMagic3},
-                                  "FibreMSS shipped reference");
-  if (version == 3 && !againstBase)
-    throw InputError(path, "", "a shipped gate, not the solve a gate is stored against");
-  if (version == 3) {
-    readShippedDeltas(bytes, path, solution);
-    return true;
-  }
-  Reader read(bytes, path, {Precision::Float});
-  readSolution(read, path, version, solution);
-  return true;
+  return readShippedFile(
+      path, {kShippedMagic, kShippedMagic2}, "FibreMSS shipped reference", againstBase,
+      [&](Reader& read, int version) { readSolution(read, path, version, solution); });
+}
+
+/// The first of shippedReferenceDirs' `<dir>/<name>` that exists; "" when none does.
+std::string shippedFilePath(const std::string& name) {
+  for (const std::string& dir : shippedReferenceDirs())
+    if (const std::string path = dir + "/" + name; std::filesystem::exists(path)) return path;
+  return "";
 }
 
 }  // namespace
 
 bool loadShippedSolution(const std::string& path, CalculixSolution& solution) {
   return readShipped(path, solution, true);
+}
+
+bool loadShippedPart(const std::string& path, MuscleSolution& part) {
+  return readShippedFile(path, {kPartMagic}, "FibreMSS shipped reference part", true,
+                         [&](Reader& read, int) { part = readPart(read, path); });
 }
 
 std::vector<std::string> shippedReferenceDirs() {
@@ -573,10 +629,11 @@ std::vector<std::string> shippedReferenceDirs() {
 }
 
 std::string shippedReferencePath(const std::string& key) {
-  for (const std::string& dir : shippedReferenceDirs())
-    if (const std::string path = dir + "/" + key + ".ref.gz"; std::filesystem::exists(path))
-      return path;
-  return "";
+  return shippedFilePath(key + ".ref.gz");
+}
+
+std::string shippedPartName(const std::string& key, size_t m) {
+  return key + ".m" + std::to_string(m) + ".ref.gz";
 }
 
 bool loadStoredSolution(const std::string& cacheDir, const std::string& key,
@@ -595,6 +652,19 @@ bool storedWhole(const std::string& cacheDir, const std::string& key) {
   return std::filesystem::exists(entryDir(cacheDir, key) + "/surfaces.bin") ||
          !shippedReferencePath(key).empty();
 }
+
+/// Whether muscle `m`'s part of the solve `key` is stored alone: in the cache or shipped.
+bool partStored(const std::string& cacheDir, const std::string& key, size_t m) {
+  return std::filesystem::exists(referencePartDir(cacheDir, key, m) + "/part.bin") ||
+         !shippedFilePath(shippedPartName(key, m)).empty();
+}
+
+/// Whether a part of the solve `key`, of `muscles`, is shipped alone.
+bool anyPartShipped(const std::string& key, size_t muscles) {
+  for (size_t m = 0; m < muscles; ++m)
+    if (!shippedFilePath(shippedPartName(key, m)).empty()) return true;
+  return false;
+}
 }  // namespace
 
 std::string referencePartDir(const std::string& cacheDir, const std::string& key, size_t m) {
@@ -602,8 +672,14 @@ std::string referencePartDir(const std::string& cacheDir, const std::string& key
 }
 
 bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m) {
-  return storedWhole(cacheDir, key) ||
-         std::filesystem::exists(referencePartDir(cacheDir, key, m) + "/part.bin");
+  return storedWhole(cacheDir, key) || partStored(cacheDir, key, m);
+}
+
+bool loadStoredPart(const std::string& cacheDir, const std::string& key, size_t m,
+                    MuscleSolution& part) {
+  if (loadPart(referencePartDir(cacheDir, key, m) + "/part.bin", part)) return true;
+  const std::string shipped = shippedFilePath(shippedPartName(key, m));
+  return !shipped.empty() && loadShippedPart(shipped, part);
 }
 
 bool loadSolvedPart(const std::string& cacheDir, const std::string& key, size_t m,
@@ -667,6 +743,8 @@ bool takeKeptPart(const LoadedScene& scene, const PreparedScene& prepared,
   if (fs::is_directory(entryDir(cacheDir, source)))
     for (const fs::directory_entry& file : fs::directory_iterator(entryDir(cacheDir, source)))
       if (file.path().stem() == stem) fs::copy_file(file.path(), work / file.path().filename());
+  if (!fs::exists(work / fs::path(part.inputFile).filename()))
+    part.inputFile.clear();  // taken from a shipped solve: no files
   return true;
 }
 
@@ -700,7 +778,7 @@ bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepare
   const std::string dir = referencePartDir(cacheDir, key, m);
   MuscleSolution part;
   if (storedWhole(cacheDir, key)) return true;
-  if (loadPart(dir + "/part.bin", part) && !part.hitMemoryLimit()) return true;
+  if (loadStoredPart(cacheDir, key, m, part) && !part.hitMemoryLimit()) return true;
   std::filesystem::remove_all(dir);  // none, or one that hit the memory limit: solved again
   if (storeKeptPart(scene, prepared, definition, cut, cacheDir, m)) return true;
   const std::string work = freshWorkDir(dir);
@@ -725,19 +803,19 @@ bool mergeCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
   const auto partFile = [&](size_t m) { return referencePartDir(cacheDir, key, m) + "/part.bin"; };
   MuscleSolution kept;
   for (size_t m = 0; m < parts.size(); ++m)  // each stored, or one a retry keeps (no ccx)
-    if (!std::filesystem::exists(partFile(m)) &&
+    if (!partStored(cacheDir, key, m) &&
         !loadSolvedPart(cacheDir, keptPartKey(scene, prepared, definition, cut, m), m, kept))
       return false;
   for (size_t m = 0; m < parts.size(); ++m) {
-    if (!loadPart(partFile(m), parts[m]) &&
+    if (!loadStoredPart(cacheDir, key, m, parts[m]) &&
         !(storeKeptPart(scene, prepared, definition, cut, cacheDir, m) &&
           loadPart(partFile(m), parts[m])))
       return false;
-    parts[m].inputFile = entry + "/" + parts[m].inputFile;
+    if (!parts[m].inputFile.empty()) parts[m].inputFile = entry + "/" + parts[m].inputFile;
   }
   const std::string work = freshWorkDir(entry);
   try {
-    copyPartFiles(cacheDir, key, parts.size(), work);
+    copyPartFiles(cacheDir, key, parts, work);
   } catch (const std::filesystem::filesystem_error&) {  // another process merged them first
     std::error_code ignored;
     std::filesystem::remove_all(work, ignored);
@@ -799,7 +877,7 @@ CalculixSolution cachedCalculixReference(
   if (solution.hitMemoryLimit()) std::filesystem::remove_all(entry);  // solved again
   // A solve with muscles at other increments takes those from the solve they were solved in.
   if (jobs > 1 || std::filesystem::exists(entry + ".parts") ||
-      !definition.muscleIncrementScales.empty()) {
+      anyPartShipped(key, prepared.muscles.size()) || !definition.muscleIncrementScales.empty()) {
     std::vector<ReferenceCell> cells;
     for (size_t m = 0; m < prepared.muscles.size(); ++m) cells.push_back({definition, cut, m});
     solveCalculixCells(scene, prepared, cells, cacheDir, progress, cancel, jobs);

@@ -151,7 +151,7 @@ struct MuscleSolution {
   long newtonIterations = 0;   ///< summed over its increments (ccx's .sta)
   long increments = 0;         ///< increments ccx took over its steps
   double seconds = 0;          ///< wall time of its tetgen and ccx runs [s]
-  std::string inputFile;       ///< its .inp
+  std::string inputFile;       ///< its .inp ("" : shipped, solved elsewhere)
   bool interrupted = false;    ///< cancelled before the end
 
   /// Whether its ccx run failed an allocation under its memory limit (solved again).
@@ -173,7 +173,7 @@ struct CalculixSolution {
   long newtonIterations = 0;             ///< summed over all increments (from ccx's .sta)
   long increments = 0;                   ///< increments ccx took over all steps
   double seconds = 0;                    ///< wall time of tetgen and ccx
-  std::vector<std::string> inputFiles;   ///< the .inp files, one per muscle
+  std::vector<std::string> inputFiles;   ///< the .inp files, one per muscle solved on this machine
   bool interrupted = false;              ///< cancelled before the end
   /// Poses from cut.pose on are not solved (no continuum equilibrium: not a ccx failure; their
   /// poseFailures stay ""); the return step starts from the last pose before it.

@@ -61,6 +61,20 @@ void shipSolution(const std::string& path, const CalculixSolution& solution,
 /// format, a gate whose base is not beside it).
 bool loadShippedSolution(const std::string& path, CalculixSolution& solution);
 
+/// Writes muscle `m`'s part of a solve (a cell stored alone, cachedCalculixMuscle) as a shipped
+/// file to `path` (`<key>.m<m>.ref.gz`, shippedPartName): as shipSolution writes a solve, its
+/// step surfaces as floats or against `base`, without the name of its .inp file (its ccx files
+/// stay on the machine that solved it). Throws std::runtime_error when it cannot be written.
+void shipPart(const std::string& path, const MuscleSolution& part,
+              const ShippedBase* base = nullptr);
+
+/// Reads what shipPart wrote (its base from the same directory); false when `path` does not
+/// exist. Throws InputError when it is not such a file.
+bool loadShippedPart(const std::string& path, MuscleSolution& part);
+
+/// The name of muscle `m`'s part of the solve `key` shipped alone: `<key>.m<m>.ref.gz`.
+std::string shippedPartName(const std::string& key, size_t m);
+
 /// Where shipped references (solves computed once and kept with FibreMSS, scenes/references)
 /// are looked for, in this order: $FIBREMSS_REFERENCES, the source tree's scenes/references,
 /// share/fibremss/references of the install the library was loaded from.
@@ -76,14 +90,14 @@ bool loadStoredSolution(const std::string& cacheDir, const std::string& key,
                         CalculixSolution& solution, std::string* shippedFrom = nullptr);
 
 /// The solution stored under the key in `cacheDir/<key>/` or shipped (loadStoredSolution); else,
-/// where muscles of it were solved as parts (cachedCalculixMuscle) or `jobs` > 1, its parts, the
-/// missing ones solved `jobs` at a time, merged into `<key>/` (mergeCalculixParts); else solved
-/// (solveCalculixReference) in `cacheDir/<key>.solving-<pid>/`, which becomes `<key>/` once
-/// stored (removed when interrupted), so that processes solving the same key at once never
-/// share ccx's files; when another one stored it first, its solution is returned. Either way
-/// the entry holds the same files and solution. `fromCache` (may be null) tells whether it came
-/// from the cache. A definition with per-muscle increments is solved as parts (so that muscles
-/// at other increments are taken as cachedCalculixMuscle says).
+/// where muscles of it were solved as parts (cachedCalculixMuscle; or shipped, shipPart) or
+/// `jobs` > 1, its parts, the missing ones solved `jobs` at a time, merged into `<key>/`
+/// (mergeCalculixParts); else solved (solveCalculixReference) in `cacheDir/<key>.solving-<pid>/`,
+/// which becomes `<key>/` once stored (removed when interrupted), so that processes solving the
+/// same key at once never share ccx's files; when another one stored it first, its solution is
+/// returned. Either way the entry holds the same files and solution. `fromCache` (may be null)
+/// tells whether it came from the cache. A definition with per-muscle increments is solved as parts
+/// (so that muscles at other increments are taken as cachedCalculixMuscle says).
 CalculixSolution cachedCalculixReference(
     const LoadedScene& scene, const PreparedScene& prepared, const CalculixDefinition& definition,
     const ContinuumCut& cut, const std::string& cacheDir,
@@ -94,8 +108,13 @@ CalculixSolution cachedCalculixReference(
 std::string referencePartDir(const std::string& cacheDir, const std::string& key, size_t m);
 
 /// Whether the solve `key` is stored whole (`<key>/surfaces.bin`, or shipped) or muscle `m`'s part
-/// of it.
+/// of it (in the cache, or shipped: loadStoredPart).
 bool referencePartStored(const std::string& cacheDir, const std::string& key, size_t m);
+
+/// Muscle `m`'s part of the solve `key` stored alone: the cache's (referencePartDir), else shipped
+/// (shippedPartName in shippedReferenceDirs, without input file); false when neither exists.
+bool loadStoredPart(const std::string& cacheDir, const std::string& key, size_t m,
+                    MuscleSolution& part);
 
 /// Muscle `m`'s part of the solve `key` stored whole (loadStoredSolution) where that solve keeps
 /// its muscles' parts (CalculixSolution::muscles) and muscle `m` solved every step; else false.
@@ -120,10 +139,11 @@ std::string keptPartKey(const LoadedScene& scene, const PreparedScene& prepared,
 
 /// Solves muscle `m` of the solve (solveCalculixMuscle) into its part directory (through
 /// `<part>.solving-<pid>/`, as a whole solve), unless the solve or that part is stored already
-/// (true: nothing to do) or it was interrupted (false; nothing kept). A part that hit the
-/// memory limit is solved again. A muscle at other increments than the solve's is taken,
-/// without ccx, from the solve keptPartKey names where that keeps it solved (loadSolvedPart;
-/// its files too where they are in the cache). One cell of a reference for a batch engine.
+/// (in the cache or shipped: true, nothing to do) or it was interrupted (false; nothing kept).
+/// A part that hit the memory limit is solved again. A muscle at other increments than the
+/// solve's is taken, without ccx, from the solve keptPartKey names where that keeps it solved
+/// (loadSolvedPart; its files too where they are in the cache). One cell of a reference for a
+/// batch engine.
 bool cachedCalculixMuscle(const LoadedScene& scene, const PreparedScene& prepared,
                           const CalculixDefinition& definition, const ContinuumCut& cut,
                           const std::string& cacheDir, size_t m,
@@ -147,8 +167,9 @@ void solveCalculixCells(const LoadedScene& scene, const PreparedScene& prepared,
                         const std::atomic<bool>* cancel, int jobs);
 
 /// Merges the solve's parts into its entry `cacheDir/<key>/` (their files and one
-/// surfaces.bin, as a whole solve stores them) once every muscle's part is stored, and removes
-/// the parts; false (nothing changed) while one is missing. The solution is the serial
+/// surfaces.bin, as a whole solve stores them) once every muscle's part is stored (in the
+/// cache, or shipped: loadStoredPart; a shipped part brings no files), and removes the cache's
+/// parts; false (nothing changed) while one is missing. The solution is the serial
 /// solve's (its seconds, the parts' summed, are measured times).
 bool mergeCalculixParts(const LoadedScene& scene, const PreparedScene& prepared,
                         const CalculixDefinition& definition, const ContinuumCut& cut,
