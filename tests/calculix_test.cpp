@@ -1747,6 +1747,37 @@ TEST_F(RetryPerMuscle, ASolveStoredWithoutItsMusclesPartsReadsThemFromItsCcxFile
   EXPECT_TRUE(solution.muscles.empty());
 }
 
+TEST_F(RetryPerMuscle, AMuscleKeptFromAShippedFailedSolveBringsNoFilesItDoesNotHave) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  const CalculixDefinition definition = sceneDefinition(scene, options);
+  const CalculixSolution failed = failedSolve(definition);
+  ASSERT_EQ(runs(), (std::vector<std::string>{"muscle0", "muscle1"}));
+  // Another machine: the failed solve shipped, its cache empty.
+  const std::filesystem::path shipped = dir.path() / "shipped";
+  std::filesystem::create_directories(shipped);
+  shipSolution(
+      (shipped / (referenceCacheKey(scene, prepared, definition, {}) + ".ref.gz")).string(),
+      failed);
+  setenv("FIBREMSS_REFERENCES", shipped.c_str(), 1);
+  options.cacheDir = (dir.path() / "empty").string();
+  const std::vector<NamedReferenceCell> cells = referenceCells(scene, prepared, options);
+  ASSERT_EQ(cells.size(), 2u);
+  EXPECT_TRUE(cells[0].stored) << "kept from the shipped failed solve";
+  EXPECT_TRUE(cachedCalculixMuscle(scene, prepared, cells[1].cell.definition, cells[1].cell.cut,
+                                   options.cacheDir, 1, {}, {}));
+  EXPECT_EQ(runs(), std::vector<std::string>{"muscle1"});
+  options.cachedOnly = true;
+  const Reference reference = computeReference(scene, prepared, options);
+  unsetenv("FIBREMSS_REFERENCES");
+  ASSERT_FALSE(reference.missing);
+  EXPECT_EQ(reference.key, cells[1].key);
+  ASSERT_EQ(reference.solution.solvedPoses(), 2);
+  EXPECT_EQ(reference.solution.inputFiles.size(), 1u) << "the muscle solved here";
+  for (const std::string& file : reference.solution.inputFiles)
+    EXPECT_TRUE(std::filesystem::exists(file)) << file << ": named, not there";
+}
+
 TEST(CalculixRun, ASphereBetweenClosingPlatesTouchesThemOverHertzsRadius) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");
