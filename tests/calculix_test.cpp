@@ -2352,6 +2352,21 @@ TEST(ReferenceCommand, ASolveThatFailsLeavesNoWorkInTheCacheAndNoResult) {
         << entry.path() << " left in the cache";
 }
 
+/// `merged`'s failures, counts and surfaces are `whole`'s, the surfaces within a float's rounding.
+void expectTheSameSolutionWithinFloats(const CalculixSolution& merged,
+                                       const CalculixSolution& whole) {
+  EXPECT_EQ(merged.poseFailures, whole.poseFailures);
+  EXPECT_EQ(merged.nodes, whole.nodes);
+  EXPECT_EQ(merged.increments, whole.increments);
+  ASSERT_EQ(merged.poseSurfaces.size(), whole.poseSurfaces.size());
+  for (size_t p = 0; p < whole.poseSurfaces.size(); ++p) {
+    ASSERT_EQ(merged.poseSurfaces[p].size(), whole.poseSurfaces[p].size());
+    EXPECT_LT(rmsDistanceMm(merged.poseSurfaces[p], whole.poseSurfaces[p]), 1e-4) << p;
+  }
+  ASSERT_EQ(merged.returnSurface.size(), whole.returnSurface.size());
+  EXPECT_LT(rmsDistanceMm(merged.returnSurface, whole.returnSurface), 1e-4);
+}
+
 TEST(ShippedReference, IsCompressedFloatsAndReadsBackWithinTheirPrecision) {
   TemporaryDirectory dir("shipped_reference_test");
   CalculixSolution solution;
@@ -2376,10 +2391,7 @@ TEST(ShippedReference, IsCompressedFloatsAndReadsBackWithinTheirPrecision) {
   CalculixSolution back;
   ASSERT_TRUE(loadShippedSolution(shipped, back));
   ASSERT_EQ(back.poseSurfaces.size(), 3u);
-  for (size_t p = 0; p < 3; ++p)
-    EXPECT_LT(rmsDistanceMm(back.poseSurfaces[p], solution.poseSurfaces[p]), 1e-4);
-  EXPECT_LT(rmsDistanceMm(back.returnSurface, solution.returnSurface), 1e-4);
-  EXPECT_EQ(back.poseFailures, solution.poseFailures);
+  expectTheSameSolutionWithinFloats(back, solution);
   EXPECT_EQ(back.nodes, 11u);
   EXPECT_EQ(back.increments, 9);
   EXPECT_EQ(back.seconds, 2.5);
@@ -2574,21 +2586,6 @@ std::vector<std::string> cellStates(const std::string& output) {
   for (std::string line; std::getline(lines, line);)
     if (line.find('\t') != std::string::npos) states.push_back(line.substr(line.rfind('\t') + 1));
   return states;
-}
-
-/// `merged`'s failures, counts and surfaces are `whole`'s, the surfaces within a float's rounding.
-void expectTheSameSolutionWithinFloats(const CalculixSolution& merged,
-                                       const CalculixSolution& whole) {
-  EXPECT_EQ(merged.poseFailures, whole.poseFailures);
-  EXPECT_EQ(merged.nodes, whole.nodes);
-  EXPECT_EQ(merged.increments, whole.increments);
-  ASSERT_EQ(merged.poseSurfaces.size(), whole.poseSurfaces.size());
-  for (size_t p = 0; p < whole.poseSurfaces.size(); ++p) {
-    ASSERT_EQ(merged.poseSurfaces[p].size(), whole.poseSurfaces[p].size());
-    EXPECT_LT(rmsDistanceMm(merged.poseSurfaces[p], whole.poseSurfaces[p]), 1e-4) << p;
-  }
-  ASSERT_EQ(merged.returnSurface.size(), whole.returnSurface.size());
-  EXPECT_LT(rmsDistanceMm(merged.returnSurface, whole.returnSurface), 1e-4);
 }
 
 TEST(ReferenceCommand, ShipsTheCellsOfASolveNotStoredWholeAndTheNextMachineSolvesTheRest) {
