@@ -1443,6 +1443,40 @@ TEST(ReferenceCells, AReferenceCcxSolvedInPartListsItsGatesUpToItsLastSolvedPose
   for (size_t c = 0; c < whole.size(); ++c) EXPECT_EQ(whole[c].key, unknown[c].key);
 }
 
+TEST(ReferenceCells, AGateNotStoredIsNamedWithHowManyOfItsMusclesCellsAre) {
+  REQUIRE_PROGRAM("ccx");
+  REQUIRE_PROGRAM("tetgen");
+  TemporaryDirectory dir("reference_cells_not_computed_test");
+  const LoadedScene scene = loadScene(carriedFusiform(dir.path(), true), {"resolution=6"});
+  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+  ASSERT_EQ(prepared.muscles.size(), 2u);
+  ReferenceOptions options;
+  options.cacheDir = (dir.path() / "cache").string();
+  cachedCalculixReference(scene, prepared, sceneDefinition(scene, options), {}, options.cacheDir,
+                          {}, {}, nullptr);
+  // The second muscle's cell of the increments-halved gate, as a batch engine solves it.
+  const std::vector<NamedReferenceCell> cells = referenceCells(scene, prepared, options);
+  const auto halved = std::ranges::find_if(cells, [](const NamedReferenceCell& cell) {
+    return cell.solve == "increments halved" && cell.cell.muscle == 1;
+  });
+  ASSERT_NE(halved, cells.end());
+  ASSERT_TRUE(cachedCalculixMuscle(scene, prepared, halved->cell.definition, halved->cell.cut,
+                                   options.cacheDir, 1, {}, {}));
+  options.cachedOnly = true;
+  const Reference reference = computeReference(scene, prepared, options);
+  ASSERT_FALSE(reference.missing);
+  const std::string expected =
+      "attachment distance x0.5; attachment distance x1.5; increments halved: 1 of 2 muscles' "
+      "cells stored; one level finer";
+  EXPECT_EQ(reference.gates.notComputed, expected);
+  EXPECT_EQ(reference.gates.whyNotPassed(),
+            "the reference's gates were not computed (" + expected + ")");
+  EXPECT_EQ(referenceJson(reference)["gates"]["not_computed"], expected);
+  const std::vector<std::string> lines = gateLines(reference.gates);
+  EXPECT_NE(lines.back().find("`--cells` lists their cells): " + expected), std::string::npos)
+      << lines.back();
+}
+
 TEST(ReferenceCells, InParallelOrAsCellsTheCacheHoldsWhatTheSerialSolveStores) {
   REQUIRE_PROGRAM("ccx");
   REQUIRE_PROGRAM("tetgen");

@@ -286,6 +286,16 @@ void solveGateCells(const LoadedScene& scene, const PreparedScene& prepared, Sce
                      options.jobs);
 }
 
+/// ": k of M muscles' cells stored" for the solve `key` of M muscles of which k are stored as
+/// cells (in the cache or shipped); "" where none is.
+std::string storedCellsText(const std::string& cacheDir, const std::string& key, size_t muscles) {
+  size_t stored = 0;
+  for (size_t m = 0; m < muscles; ++m) stored += referencePartStored(cacheDir, key, m) ? 1 : 0;
+  if (stored == 0) return "";
+  return ": " + std::to_string(stored) + " of " + std::to_string(muscles) +
+         " muscles' cells stored";
+}
+
 /// A gate's solve and where its figures go.
 struct Gate {
   const CalculixDefinition* definition;
@@ -423,7 +433,11 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
   for (const Gate& gate : variants) {
     Solve solve;
     if (options.cancel && options.cancel->load()) break;
-    if (!solveVariant(scene, prepared, cuts, *gate.definition, options, gate.name, solve)) continue;
+    if (!solveVariant(scene, prepared, cuts, *gate.definition, options, gate.name, solve)) {
+      appendItem(gates.notComputed,
+                 gate.name + storedCellsText(options.cacheDir, solve.key, prepared.muscles.size()));
+      continue;
+    }
     const CalculixSolution& solution = solve.solution;
     // Retried at finer increments where ccx failed it: say what it was solved at.
     if (&gate == &variants[3])
@@ -535,7 +549,8 @@ std::string ReferenceGates::whyNotPassed() const {
                   " at pose " + std::to_string(gateablePoses()) + ", before " +
                   std::to_string(kMinRankedPoses) + " poses to rank over");
   if (!gatesAlone.failed() && !gatesAlone.passed())
-    why.push_back("the reference's gates were not computed");
+    why.push_back("the reference's gates were not computed" +
+                  (notComputed.empty() ? std::string() : " (" + notComputed + ")"));
   std::string text;
   for (const std::string& reason : why) appendItem(text, reason);
   return text;
@@ -820,6 +835,7 @@ nlohmann::json referenceJson(const Reference& reference) {
             {"attachment_high_poses", g.attachmentHighPoses},
             {"failures", g.failures},
             {"stated_failures", g.statedFailures},
+            {"not_computed", g.notComputed},
             {"stopped", g.stopped},
             {"gated_poses", g.gatedPoses},
             {"gate_stop", g.gateStop},
@@ -835,6 +851,48 @@ nlohmann::json referenceJson(const Reference& reference) {
           {"increments", s.increments},
           {"seconds", s.seconds}};
 }
+
+namespace {
+/// gateLines' lines on what limits the gates: poses ccx did not solve, excluded or stopped, and
+/// the gates not computed.
+void addGateLimits(const ReferenceGates& g, std::vector<std::string>& lines) {
+  if (!g.statedFailures.empty())
+    lines.push_back(
+        "ccx did not solve (stated gates: their figures cover the poses before, no "
+        "ranking waits on them): " +
+        g.statedFailures);
+  if (!g.excluded.empty())
+    lines.push_back("excluded, not ccx failures (no RMS, gate or ranking covers them): " +
+                    g.excluded);
+  if (!g.stopped.empty())
+    lines.push_back(
+        "ccx stopped the reference at pose " + std::to_string(g.solvedPoses) + " of " +
+        std::to_string(g.poses) + ", after its retry at finer increments (" + g.stopped + "): " +
+        (g.solvedPoses < kMinRankedPoses ? std::string("too few poses to rank over, no ranking")
+         : g.gatedPoses >= 0             ? std::string("not a failure")
+                                         : "not a failure; every RMS, gate and ranking covers "
+                                           "poses 0\u2013" +
+                                   std::to_string(g.solvedPoses - 1)));
+  if (g.gatedPoses >= 0)
+    lines.push_back("a judged gate's solve stopped before the reference (" + g.gateStop + "): " +
+                    (g.gatedPoses < kMinRankedPoses
+                         ? std::string("too few poses to rank over, no ranking")
+                         : "every RMS, gate and ranking covers poses 0\u2013" +
+                               std::to_string(g.gatedPoses - 1)));
+  if (!g.limited.empty())
+    lines.push_back(
+        "judged gates' solves stopped some muscles before the others (each muscle is its own ccx "
+        "problem; every RMS, gate and ranking follows): " +
+        g.limitedText() + "; every other muscle over poses 0\u2013" +
+        std::to_string(g.gateablePoses() - 1));
+  if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
+  if (!g.notComputed.empty())
+    lines.push_back(
+        "not computed, their solves not stored (`fibremss reference` with the scene's "
+        "overrides solves them; its `--cells` lists their cells): " +
+        g.notComputed);
+}
+}  // namespace
 
 std::vector<std::string> gateLines(const ReferenceGates& g) {
   const auto mm = [](double v) {
@@ -883,36 +941,7 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
   lines.push_back("attachment distance x0.5 / x1.5: moves it " + mm(g.attachmentLowMm) +
                   over(g.attachmentLowPoses) + " / " + mm(g.attachmentHighMm) +
                   over(g.attachmentHighPoses) + " RMS (stated, not a pass/fail gate)");
-  if (!g.statedFailures.empty())
-    lines.push_back(
-        "ccx did not solve (stated gates: their figures cover the poses before, no "
-        "ranking waits on them): " +
-        g.statedFailures);
-  if (!g.excluded.empty())
-    lines.push_back("excluded, not ccx failures (no RMS, gate or ranking covers them): " +
-                    g.excluded);
-  if (!g.stopped.empty())
-    lines.push_back(
-        "ccx stopped the reference at pose " + std::to_string(g.solvedPoses) + " of " +
-        std::to_string(g.poses) + ", after its retry at finer increments (" + g.stopped + "): " +
-        (g.solvedPoses < kMinRankedPoses ? std::string("too few poses to rank over, no ranking")
-         : g.gatedPoses >= 0             ? std::string("not a failure")
-                                         : "not a failure; every RMS, gate and ranking covers "
-                                           "poses 0\u2013" +
-                                   std::to_string(g.solvedPoses - 1)));
-  if (g.gatedPoses >= 0)
-    lines.push_back("a judged gate's solve stopped before the reference (" + g.gateStop + "): " +
-                    (g.gatedPoses < kMinRankedPoses
-                         ? std::string("too few poses to rank over, no ranking")
-                         : "every RMS, gate and ranking covers poses 0\u2013" +
-                               std::to_string(g.gatedPoses - 1)));
-  if (!g.limited.empty())
-    lines.push_back(
-        "judged gates' solves stopped some muscles before the others (each muscle is its own ccx "
-        "problem; every RMS, gate and ranking follows): " +
-        g.limitedText() + "; every other muscle over poses 0\u2013" +
-        std::to_string(g.gateablePoses() - 1));
-  if (!g.failures.empty()) lines.push_back("ccx did not solve: " + g.failures);
+  addGateLimits(g, lines);
   return lines;
 }
 

@@ -283,6 +283,7 @@ ReferenceGates gatesFromJson(const nlohmann::json& gates) {
   g.attachmentHighPoses = gates.value("attachment_high_poses", 0);
   g.failures = gates.value("failures", std::string());
   g.statedFailures = gates.value("stated_failures", std::string());
+  g.notComputed = gates.value("not_computed", std::string());
   g.stopped = gates.value("stopped", std::string());
   g.gatedPoses = gates.value("gated_poses", -1);
   g.gateStop = gates.value("gate_stop", std::string());

@@ -145,6 +145,10 @@ struct ReferenceGates {
   /// (ccx's reason there; "" : it did not stop). Not a failure where it solved at least
   /// kMinRankedPoses poses: the gates, every RMS and the ranking cover the poses before it.
   std::string stopped;
+  /// The gates whose solve is not stored (`--reference-cached-only`), in the listing's order,
+  /// each with how many of its muscles' cells are where some are ("one level finer: 4 of 13
+  /// muscles' cells stored"); "" where every gate was found or solved.
+  std::string notComputed;
   /// Poses without a continuum equilibrium ("poses k to N-1 of N: why"; ContinuumCut): not
   /// solved, not failures; the RMS, the gates and the ranking cover the poses before them.
   std::string excluded;
@@ -204,7 +208,7 @@ struct ReferenceGates {
   }
   /// Why nothing may be ranked against the reference ("" when passed()): that it fails a gate,
   /// that ccx failed a pose the ranking needs or stopped the reference too soon, that its gates
-  /// were not computed (those that apply).
+  /// were not computed (those that apply, and notComputed).
   std::string whyNotPassed() const;
 };
 
