@@ -302,7 +302,10 @@ struct Gate {
   const char* name;
   double* mm;
   int* poses;
-  double* scale;          ///< where to keep the increments it was solved at (nullptr: nowhere)
+  double* scale;  ///< where to keep the increments it was solved at (nullptr: nowhere)
+  /// Where to say what it was solved at, where not at its reference's increments (the finer
+  /// gate: ReferenceGates::refinedBy; nullptr: nowhere).
+  std::string* refinedBy;
   std::string* failures;  ///< where its unsolved poses go: blocking or stated (statedFailures)
 };
 
@@ -419,14 +422,15 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
       gateDefinitions(base.definition, options.definition, gatePoseLimit(base.solution));
   gates.refinedBy = definitions.refinedBy;
   const auto solves = gateSolves(definitions);
-  const Gate variants[] = {{&solves[0].second, solves[0].first.c_str(), &gates.attachmentLowMm,
-                            &gates.attachmentLowPoses, nullptr, &gates.statedFailures},
-                           {&solves[1].second, solves[1].first.c_str(), &gates.attachmentHighMm,
-                            &gates.attachmentHighPoses, nullptr, &gates.statedFailures},
-                           {&solves[2].second, solves[2].first.c_str(), &gates.incrementsMm,
-                            &gates.incrementsPoses, &gates.incrementsScale, &gates.failures},
-                           {&solves[3].second, solves[3].first.c_str(), &gates.refinementMm,
-                            &gates.refinementPoses, nullptr, &gates.failures}};
+  const Gate variants[] = {
+      {&solves[0].second, solves[0].first.c_str(), &gates.attachmentLowMm,
+       &gates.attachmentLowPoses, nullptr, nullptr, &gates.statedFailures},
+      {&solves[1].second, solves[1].first.c_str(), &gates.attachmentHighMm,
+       &gates.attachmentHighPoses, nullptr, nullptr, &gates.statedFailures},
+      {&solves[2].second, solves[2].first.c_str(), &gates.incrementsMm, &gates.incrementsPoses,
+       &gates.incrementsScale, nullptr, &gates.failures},
+      {&solves[3].second, solves[3].first.c_str(), &gates.refinementMm, &gates.refinementPoses,
+       nullptr, &gates.refinedBy, &gates.failures}};
   solveGateCells(scene, prepared, cuts, options, definitions);
   std::vector<LimitedMuscle> stops(prepared.muscles.size(), {0, "", -1, "", ""});
   std::vector<std::pair<const Gate*, Solve>> solved;
@@ -440,8 +444,8 @@ void solveGates(const LoadedScene& scene, const PreparedScene& prepared, SceneCu
     }
     const CalculixSolution& solution = solve.solution;
     // Retried at finer increments where ccx failed it: say what it was solved at.
-    if (&gate == &variants[3])
-      gates.refinedBy =
+    if (gate.refinedBy)
+      *gate.refinedBy =
           refinedText(definitions.refinedBy, solve.definition, base.definition, prepared);
     if (gate.scale) *gate.scale = solve.definition.incrementScale;
     if (gate.scale && !solve.definition.muscleIncrementScales.empty())
