@@ -943,6 +943,19 @@ TEST(Verdict, SaysTheGatesWereNotComputedRatherThanThatTheyFail) {
   EXPECT_NE(verdictOf(report).find("ccx did not solve every pose"), std::string::npos) << report;
   EXPECT_NE(verdictOf(report).find("gates were not computed"), std::string::npos) << report;
   EXPECT_EQ(report.find("fails a gate"), std::string::npos) << report;
+
+  // A gate's cells partly stored: the verdict says which gate and how far it is.
+  summary["reference"]["gates"] = {
+      {"return_mm", 1e-6},
+      {"spread_mm", 1.3},
+      {"solved_poses", 2},
+      {"not_computed", "one level finer: 2 of 13 muscles' cells stored"}};
+  writeComparison(summary, out.string());
+  report = readFile(out / "report.md");
+  EXPECT_NE(verdictOf(report).find("gates were not computed (one level finer: 2 of 13 muscles' "
+                                   "cells stored)"),
+            std::string::npos)
+      << report;
 }
 
 /// Why ccx stopped stoppedReferenceSummary's reference at pose 6.
