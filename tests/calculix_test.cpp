@@ -1443,13 +1443,23 @@ TEST(ReferenceCells, AReferenceCcxSolvedInPartListsItsGatesUpToItsLastSolvedPose
   for (size_t c = 0; c < whole.size(); ++c) EXPECT_EQ(whole[c].key, unknown[c].key);
 }
 
-TEST(ReferenceCells, AGateNotStoredIsNamedWithHowManyOfItsMusclesCellsAre) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("reference_cells_not_computed_test");
-  const LoadedScene scene = loadScene(carriedFusiform(dir.path(), true), {"resolution=6"});
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  ASSERT_EQ(prepared.muscles.size(), 2u);
+/// Two muscles carried by their bones (carriedFusiform) at resolution 6: every solve of it is
+/// two cells.
+class CarriedPair : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    REQUIRE_PROGRAM("ccx");
+    REQUIRE_PROGRAM("tetgen");
+    scene = loadScene(carriedFusiform(dir.path(), true), {"resolution=6"});
+    prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
+    ASSERT_EQ(prepared.muscles.size(), 2u);
+  }
+  TemporaryDirectory dir{"ccx_carried_pair_test"};
+  LoadedScene scene;
+  PreparedScene prepared;
+};
+
+TEST_F(CarriedPair, AGateNotStoredIsNamedWithHowManyOfItsMusclesCellsAre) {
   ReferenceOptions options;
   options.cacheDir = (dir.path() / "cache").string();
   cachedCalculixReference(scene, prepared, sceneDefinition(scene, options), {}, options.cacheDir,
@@ -1477,13 +1487,7 @@ TEST(ReferenceCells, AGateNotStoredIsNamedWithHowManyOfItsMusclesCellsAre) {
       << lines.back();
 }
 
-TEST(ReferenceCells, InParallelOrAsCellsTheCacheHoldsWhatTheSerialSolveStores) {
-  REQUIRE_PROGRAM("ccx");
-  REQUIRE_PROGRAM("tetgen");
-  TemporaryDirectory dir("ccx_cells_test");
-  const LoadedScene scene = loadScene(carriedFusiform(dir.path(), true), {"resolution=6"});
-  const PreparedScene prepared = prepareScene(scene.bones, scene.muscles, scene.simulation.seed);
-  ASSERT_EQ(prepared.muscles.size(), 2u);
+TEST_F(CarriedPair, InParallelOrAsCellsTheCacheHoldsWhatTheSerialSolveStores) {
   const CalculixDefinition definition;
   const std::string key = referenceCacheKey(scene, prepared, definition, {});
   const auto cache = [&](const char* name) { return (dir.path() / name).string(); };
