@@ -569,10 +569,19 @@ TEST(ReferenceGates, WhereCcxStoppedTheReferenceTheyRankOverThePosesBeforeIt) {
   EXPECT_NE(lines.front().find("does not apply, not blocking: ccx stopped"), std::string::npos)
       << lines.front();
 
-  // A gate fails over those poses, or a gate's solve failed a pose the reference solved.
+  // A gate fails over those poses, or a gate's solve failed a pose the reference solved. The
+  // verdict names each gate that fails, with its figure and bound.
   gates.refinementMm = 0.25;
   EXPECT_FALSE(gates.passed());
-  EXPECT_EQ(gates.whyNotPassed(), "the reference fails a gate");
+  EXPECT_EQ(gates.whyNotPassed(),
+            "the reference fails a gate (one level finer 0.25 mm against a third of the methods' "
+            "spread 0.2 mm)");
+  gates.incrementsMm = 0.3;
+  EXPECT_EQ(gates.whyNotPassed(),
+            "the reference fails a gate (one level finer 0.25 mm against a third of the methods' "
+            "spread 0.2 mm and increments halved 0.3 mm against a third of the methods' spread "
+            "0.2 mm)");
+  gates.incrementsMm = 0.1;
   EXPECT_EQ(gates.rankedPoses(), 0);
   EXPECT_EQ(gates.rankedPosesText(), "");
   gates.refinementMm = 0.1;
@@ -644,7 +653,9 @@ TEST(ReferenceGates, WhereAJudgedGatesSolveStoppedEarlierTheyRankOverThePosesItS
   // The gate it stopped still has to pass over the poses it solved.
   gates.refinementMm = 0.25;
   EXPECT_FALSE(gates.passed());
-  EXPECT_EQ(gates.whyNotPassed(), "the reference fails a gate");
+  EXPECT_EQ(gates.whyNotPassed(),
+            "the reference fails a gate (one level finer 0.25 mm against a third of the methods' "
+            "spread 0.2 mm)");
   gates.refinementMm = 0.1;
 
   // Stopped in the first posed pose: nothing to rank over.
@@ -2016,8 +2027,7 @@ TEST(ReferenceCommand, AReferenceCcxStoppedAfterItsRetryRanksOverThePosesBeforeT
   const bool passed =
       gates["refinement_mm"].get<double>() < third && gates["increments_mm"].get<double>() < third;
   EXPECT_EQ(gates["passed"], passed);
-  EXPECT_EQ(result.output.find("the reference fails a gate: no ranking") != std::string::npos,
-            !passed)
+  EXPECT_EQ(result.output.find("the reference fails a gate (") != std::string::npos, !passed)
       << "a gate, not ccx's stop, blocks it: " << result.output;
   EXPECT_EQ(gates["ranked_poses"], passed ? 2 : 0);
   const std::string report = readText(dir.path() / "out/report.md");
