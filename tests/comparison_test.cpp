@@ -1008,6 +1008,27 @@ TEST(Verdict, NamesAMuscleAJudgedGatesSolveStoppedAloneWhereverItRanks) {
       << "the plot's note";
 }
 
+TEST(MergeAndReport, ThePlotSaysPosesAreCutOnlyWhereTheReferenceItselfIsCut) {
+  // ccx stopped the reference at pose 6 and a gate's solve (attachment x1.5) has a continuum cut
+  // of its own: the gate's cut is no reason for the reference's unsolved poses.
+  nlohmann::json summary = stoppedReferenceSummary();
+  summary["reference"]["gates"]["excluded"] =
+      "attachment distance x1.5: poses 5 to 18 of 19: no continuum equilibrium";
+  const fs::path out = scratch("gate_cut");
+  writeComparison(summary, out.string());
+  const std::string cut = "poses (the others: no continuum equilibrium";
+  EXPECT_EQ(readFile(out / "speed_vs_error.gp").find(cut), std::string::npos);
+
+  // The reference's own cut from pose 6: said.
+  for (int p = 6; p < 19; ++p)
+    summary["reference"]["poses"][p] = {
+        {"solved", false}, {"failure", ""}, {"excluded", "no continuum equilibrium"}};
+  summary["reference"]["gates"].erase("stopped");
+  writeComparison(summary, out.string());
+  EXPECT_NE(readFile(out / "speed_vs_error.gp").find("reference: 6/19 " + cut), std::string::npos)
+      << readFile(out / "speed_vs_error.gp");
+}
+
 TEST(Verdict, RanksOverThePosesBeforeWhereCcxStoppedTheReferenceAndSaysSoWhereverItRanks) {
   nlohmann::json summary = stoppedReferenceSummary();
   const std::string& why = kStopWhy;

@@ -91,14 +91,16 @@ std::string referenceCoverageNote(const nlohmann::json& runs) {
          "the whole motion's.\n";
 }
 
-/// "reference: k/N poses (the others have no continuum equilibrium: the bones close across the
-/// muscle)" for the plot of a reference with excluded poses.
+/// "reference: k/N poses (the others: no continuum equilibrium, …)" for the plot of a reference
+/// whose own poses are excluded (its continuum cut; a gate's cut is the gate's); "" otherwise.
 std::string referencePosesLabel(const nlohmann::json& reference) {
-  int solved = 0, poses = 0;
+  int solved = 0, poses = 0, excluded = 0;
   for (const auto& pose : reference.value("poses", nlohmann::json::array())) {
     ++poses;
     solved += pose.value("solved", false) ? 1 : 0;
+    excluded += pose.value("excluded", std::string()).empty() ? 0 : 1;
   }
+  if (excluded == 0) return "";
   return "reference: " + std::to_string(solved) + "/" + std::to_string(poses) +
          " poses (the others: no continuum equilibrium, the bones close across the muscle)";
 }
@@ -412,8 +414,8 @@ std::vector<std::pair<std::string, std::string>> referenceNotes(const nlohmann::
                        judged.failed() ? "#b00000" : "#606060");
   else if (!judged.stopped.empty() || !judged.limited.empty())
     notes.emplace_back(judged.rankedPosesText(), "#606060");
-  if (!gates.value("excluded", std::string()).empty())
-    notes.emplace_back(referencePosesLabel(summary["reference"]), "#606060");
+  if (const std::string cut = referencePosesLabel(summary["reference"]); !cut.empty())
+    notes.emplace_back(cut, "#606060");
   return notes;
 }
 
