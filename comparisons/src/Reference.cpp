@@ -547,17 +547,21 @@ std::string mmText(double v) {
   return text;
 }
 
+/// " against a third of the methods' spread 1.48 mm": the bound a judged gate is held to.
+std::string spreadBoundText(const ReferenceGates& g) {
+  return " against a third of the methods' spread " + mmText(kRefinementShareOfSpread * g.spreadMm);
+}
+
 /// The gates computed and judged that `g` fails, each with its figure and bound, joined by
 /// " and ": "one level finer 2.07 mm against a third of the methods' spread 1.48 mm".
 std::string failedGatesText(const ReferenceGates& g) {
   std::string text;
   const auto add = [&](const std::string& item) { text += (text.empty() ? "" : " and ") + item; };
-  if (!std::isnan(g.returnMm) && g.returnNotApplicable.empty() && !g.returnPasses())
+  if (g.returnFails())
     add("return to rest " + mmText(g.returnMm) + " against its bound " + mmText(kReturnGateMm));
   const auto judged = [&](const char* name, double mm, int compared) {
-    if (std::isnan(mm) || std::isnan(g.spreadMm) || g.withinSpread(mm, compared)) return;
-    add(name + (" " + mmText(mm)) + " against a third of the methods' spread " +
-        mmText(g.spreadMm * kRefinementShareOfSpread) +
+    if (!g.judgedAndFails(mm, compared)) return;
+    add(name + (" " + mmText(mm)) + spreadBoundText(g) +
         (compared < g.gateablePoses() ? " (over fewer poses than the reference solved)" : ""));
   };
   judged("one level finer", g.refinementMm, g.refinementPoses);
@@ -952,7 +956,7 @@ std::vector<std::string> gateLines(const ReferenceGates& g) {
     if (std::isnan(g.spreadMm))
       return std::string(
           " (passes when below a third of the spread between the methods: needs a comparison)");
-    return " against a third of the methods' spread " + mmText(g.spreadMm / 3) + ": " +
+    return spreadBoundText(g) + ": " +
            (g.withinSpread(moved, compared) ? "passes"
             : compared < g.gateablePoses()  ? "FAILS (over fewer poses than the reference solved)"
                                             : "FAILS");

@@ -196,15 +196,20 @@ struct ReferenceGates {
   /// in the one level finer solve (why)" ("left out of every figure" below kMinRankedPoses),
   /// joined by "; "; "" where none is limited.
   std::string limitedText() const;
+  /// The return gate computed, applying, and above its bound.
+  bool returnFails() const {
+    return !std::isnan(returnMm) && returnNotApplicable.empty() && !returnPasses();
+  }
+  /// A gate judged against the spread (both known) that moved the reference by `mm` over
+  /// `compared` poses and does not pass (withinSpread).
+  bool judgedAndFails(double mm, int compared) const {
+    return !std::isnan(mm) && !std::isnan(spreadMm) && !withinSpread(mm, compared);
+  }
   /// A gate computed and judged that does not pass, or a pose ccx did not solve. Neither this
   /// nor passed(): some gate was not computed (`--no-gates`, a stopped solve) or not judged.
   bool failed() const {
-    const auto judgedAndFails = [&](double mm, bool passes) {
-      return !std::isnan(mm) && !std::isnan(spreadMm) && !passes;
-    };
-    return (!std::isnan(returnMm) && returnNotApplicable.empty() && !returnPasses()) ||
-           judgedAndFails(refinementMm, refinementPasses()) ||
-           judgedAndFails(incrementsMm, incrementsPass()) || !failures.empty() || stoppedTooSoon();
+    return returnFails() || judgedAndFails(refinementMm, refinementPoses) ||
+           judgedAndFails(incrementsMm, incrementsPoses) || !failures.empty() || stoppedTooSoon();
   }
   /// Why nothing may be ranked against the reference ("" when passed()): that it fails a gate,
   /// that ccx failed a pose the ranking needs or stopped the reference too soon, that its gates
